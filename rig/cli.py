@@ -1,0 +1,89 @@
+"""Command-line interface: ``rig`` (console script) and ``python -m rig``.
+
+The CLI is a thin layer: every command calls a function that the tests also call directly.
+Sub-command groups live in :mod:`rig.commands` (one module per group) and are imported lazily, so
+``rig --help`` stays fast and a broken optional piece cannot stop the others from loading.
+
+User mistakes (bad files, bad options, missing ports) are reported as one line on stderr,
+``rig: error: <what is wrong>``, with exit status 2; no traceback. ``RIG_DEBUG=1`` shows it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+import click
+
+from rig import __version__
+
+# name -> (module, attribute, one-line help). Imported only when the command is used.
+_COMMANDS: dict[str, tuple[str, str, str]] = {
+    "demo": ("rig.commands.demo", "demo", "Run the main job on the simulated rig (no hardware needed)."),
+    "constraint": ("rig.commands.constraint", "constraint", "Validate and inspect joint-constraint files."),
+    "dataset": ("rig.commands.dataset", "dataset", "Generate training datasets (thesis ch. 3-4)."),
+}
+
+
+class _LazyGroup(click.Group):
+    def list_commands(self, ctx):
+        return sorted(_COMMANDS)
+
+    def get_command(self, ctx, name):
+        if name not in _COMMANDS:
+            return None
+        module, attr, _ = _COMMANDS[name]
+        return getattr(importlib.import_module(module), attr)
+
+    def format_commands(self, ctx, formatter):
+        rows = [(name, _COMMANDS[name][2]) for name in self.list_commands(ctx)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="rig")
+def cli() -> None:
+    """Learn patient-specific joint limits and enforce them on a servo limb."""
+
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """Exception types that mean "the user gave something wrong", shown without a traceback."""
+    from models.errors import ModelsError
+    from rig.errors import RigError
+
+    kinds: list[type[BaseException]] = [ModelsError, RigError, FileNotFoundError, PermissionError,
+                                        IsADirectoryError]
+    try:
+        from firmware_protocol.errors import ProtocolError
+
+        kinds.append(ProtocolError)
+    except ImportError:  # pragma: no cover - protocol package not built yet
+        pass
+    return tuple(kinds)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point; exits with 0 on success, 2 on a user error, 130 on Ctrl-C."""
+    try:
+        cli.main(args=argv, prog_name="rig", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("rig: aborted", err=True)
+        sys.exit(130)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        sys.exit(130)
+    except user_errors() as exc:
+        if os.environ.get("RIG_DEBUG"):
+            raise
+        msg = str(exc) or type(exc).__name__
+        if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in msg:
+            msg = f"{exc.filename}: {msg}"
+        click.echo(f"rig: error: {msg}", err=True)
+        sys.exit(2)
+    sys.exit(0)
