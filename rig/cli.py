@@ -23,6 +23,7 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
     "demo": ("rig.commands.demo", "demo", "Run the main job on the simulated rig (no hardware needed)."),
     "constraint": ("rig.commands.constraint", "constraint", "Validate and inspect joint-constraint files."),
     "dataset": ("rig.commands.dataset", "dataset", "Generate training datasets (thesis ch. 3-4)."),
+    "sim": ("rig.commands.sim", "sim", "Run a simulated servo chain or IMU on a pseudo-terminal."),
 }
 
 
