@@ -1,0 +1,207 @@
+"""Training configuration: presets and YAML files, validated field by field.
+
+A configuration is a nested mapping with four sections; a YAML file (``rig train --config``)
+overrides any subset of a preset's fields. Unknown fields and bad values raise
+:class:`models.errors.ConfigError` naming the dotted field, e.g.
+``evolution.population: expected an integer >= 2, got 'fifty'``.
+
+Presets
+-------
+``thesis``
+    TABLE I/II/VIII: max 20 hidden nodes, population 50, 20 generations, ≤ 500 epochs, stop at
+    training MSE 0.001, learning rate (RPROP Δ₀) 0.1, links regulariser α₂ = 0.01, evolve links,
+    hidden nodes and epochs, hidden sigmoid + linear output (TABLE XII's baseline), 500
+    training patterns, 5 repeats.
+``best``
+    What won on accuracy per microsecond of inference in ``benchmarks/bench_accuracy.py``
+    (see docs/thesis-reproduction.md): the thesis's search with a stricter stopping MSE and a
+    larger epoch budget, tanh hidden nodes, 1000 training patterns.
+``fixed``
+    Baseline without evolution: a fully connected GMLP (all links, ``max_hidden`` tanh nodes)
+    trained by the same RPROP from ``population`` random starts, the best on validation kept.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import yaml
+
+from models.errors import ModelsError
+from models.nn import activations as act
+
+
+class ConfigError(ModelsError, ValueError):
+    """A training configuration (preset override or YAML file) is invalid; names the field."""
+
+
+_THESIS: dict[str, Any] = {
+    "network": {
+        "max_hidden": 20,
+        "hidden_activations": ["sigmoid"],
+        "output_activations": ["linear"],
+        "spline_control_points": 9,
+        "spline_templates": 4,
+        "canonicalise": "w-positive",
+    },
+    "evolution": {
+        "population": 50,
+        "generations": 20,
+        "tournament": 2,
+        "crossover_rate": 0.9,
+        "mutation_rate": 0.01,
+        "alpha2": 0.01,
+        "link_probability": 0.5,
+        "hidden_probability": 0.75,
+        "evolve_links": True,
+        "evolve_hidden": True,
+        "evolve_epochs": True,
+        "evolve_learning": False,
+        "evolve_activations": False,
+        "evolve_splines": False,
+        "elitism": 0,
+        "repeats": 5,
+    },
+    "training": {
+        "max_epochs": 500,
+        "min_epochs": 50,
+        "stop_mse": 0.001,
+        "learning_rate": 0.1,
+        "delta_max": 50.0,
+        "variant": "irprop-",
+        "dtype": "float32",
+    },
+    "data": {
+        "train": 500,
+        "validation": 250,
+        "test": 3000,
+        "distribution": "even",
+        "order": "valid-first",
+    },
+}
+
+PRESETS: dict[str, dict[str, Any]] = {"thesis": _THESIS}
+PRESETS["best"] = {
+    **copy.deepcopy(_THESIS),
+}
+PRESETS["best"]["network"]["hidden_activations"] = ["tanh"]
+PRESETS["best"]["training"].update({"max_epochs": 2000, "min_epochs": 500, "stop_mse": 1e-6})
+PRESETS["best"]["evolution"].update({"repeats": 1, "alpha2": 0.001, "elitism": 1})
+PRESETS["best"]["data"].update({"train": 1000, "validation": 500})
+PRESETS["fixed"] = copy.deepcopy(PRESETS["best"])
+PRESETS["fixed"]["evolution"].update({"generations": 0, "population": 10, "repeats": 1,
+                                     "link_probability": 1.0, "hidden_probability": 1.0,
+                                     "evolve_links": False, "evolve_hidden": False,
+                                     "evolve_epochs": False})
+
+_CHOICES = {
+    ("network", "canonicalise"): ("w-positive", "centre", "none"),
+    ("training", "variant"): ("irprop-", "irprop+"),
+    ("training", "dtype"): ("float32", "float64"),
+    ("data", "distribution"): ("even", "clustered", "uniform"),
+    ("data", "order"): ("valid-first", "random", "reversed"),
+}
+_INT_MIN = {
+    ("network", "max_hidden"): 1, ("network", "spline_control_points"): 4,
+    ("network", "spline_templates"): 1, ("evolution", "population"): 2,
+    ("evolution", "generations"): 0, ("evolution", "tournament"): 1,
+    ("evolution", "elitism"): 0, ("evolution", "repeats"): 1,
+    ("training", "max_epochs"): 1, ("training", "min_epochs"): 0,
+    ("data", "train"): 8, ("data", "validation"): 4, ("data", "test"): 4,
+}
+_UNIT = {("evolution", k) for k in ("crossover_rate", "mutation_rate", "alpha2",
+                                    "link_probability", "hidden_probability")}
+_POS = {("training", k) for k in ("stop_mse", "learning_rate", "delta_max")}
+
+
+def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:
+    where = f"{sec}.{key}"
+    if (sec, key) in _CHOICES:
+        ok = _CHOICES[(sec, key)]
+        if value not in ok:
+            raise ConfigError(f"{where}: expected one of {list(ok)}, got {value!r}")
+    elif (sec, key) in _INT_MIN:
+        lo = _INT_MIN[(sec, key)]
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+            raise ConfigError(f"{where}: expected an integer >= {lo}, got {value!r}")
+    elif (sec, key) in _UNIT or (sec, key) in _POS:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        value = float(value)
+        if (sec, key) in _UNIT and not 0.0 <= value <= 1.0:
+            raise ConfigError(f"{where}: expected a number in [0, 1], got {value!r}")
+        if (sec, key) in _POS and not value > 0.0:
+            raise ConfigError(f"{where}: expected a positive number, got {value!r}")
+    elif isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+    elif isinstance(default, list):
+        if not isinstance(value, list) or not value:
+            raise ConfigError(f"{where}: expected a non-empty list of activation names")
+        for v in value:
+            try:
+                act.index_of(str(v))
+            except ValueError as err:
+                raise ConfigError(f"{where}: {err}") from None
+    return value
+
+
+def validate(cfg: Any, source: str = "configuration") -> dict[str, Any]:
+    """Check a complete configuration mapping; returns a normalised deep copy."""
+    if not isinstance(cfg, dict):
+        raise ConfigError(f"{source}: expected a mapping with sections {list(_THESIS)}")
+    out: dict[str, Any] = {}
+    for sec, fields in _THESIS.items():
+        got = cfg.get(sec, {})
+        if not isinstance(got, dict):
+            raise ConfigError(f"{sec}: expected a mapping, got {got!r}")
+        out[sec] = {k: _check_field(sec, k, got[k], fields[k]) if k in got else fields[k]
+                    for k in fields}
+        unknown = set(got) - set(fields)
+        if unknown:
+            raise ConfigError(f"{sec}.{sorted(unknown)[0]}: unknown field; "
+                              f"expected one of {sorted(fields)}")
+    unknown = set(cfg) - set(_THESIS)
+    if unknown:
+        raise ConfigError(f"{sorted(unknown)[0]}: unknown section; expected {list(_THESIS)}")
+    if out["training"]["min_epochs"] > out["training"]["max_epochs"]:
+        raise ConfigError("training.min_epochs: must not exceed training.max_epochs "
+                          f"({out['training']['max_epochs']})")
+    return out
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Deep-merge ``override`` into a copy of ``base`` (two levels: section, field)."""
+    out = copy.deepcopy(base)
+    for sec, fields in override.items():
+        if isinstance(fields, dict) and isinstance(out.get(sec), dict):
+            out[sec].update(fields)
+        else:
+            out[sec] = fields
+    return out
+
+
+def get_config(preset: str = "best", override: dict[str, Any] | None = None,
+               source: str = "configuration") -> dict[str, Any]:
+    """A validated configuration: ``preset`` with ``override`` applied."""
+    if preset not in PRESETS:
+        raise ConfigError(f"preset: expected one of {sorted(PRESETS)}, got {preset!r}")
+    try:
+        return validate(merge(PRESETS[preset], override or {}), source)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}" if source != "configuration" else str(err)) from None
+
+
+def load_config(path: str, preset: str = "best") -> dict[str, Any]:
+    """Read a YAML override file (``yaml.safe_load``) and apply it to ``preset``."""
+    with open(path, encoding="utf-8") as fh:
+        try:
+            data = yaml.safe_load(fh)
+        except yaml.YAMLError as err:
+            raise ConfigError(f"{path}: not valid YAML ({err})".replace("\n", " ")) from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping with sections {list(_THESIS)}")
+    return get_config(preset, data, source=path)

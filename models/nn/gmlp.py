@@ -1,0 +1,289 @@
+"""Generalised multi-layer perceptron (GMLP), stacked so that a whole population runs at once.
+
+Structure (thesis ch. 2 and 4, "GMLP"): ``I`` inputs, up to ``H`` hidden nodes, ``O`` outputs;
+every lower node may feed every higher node except within a layer — input→hidden,
+input→output and hidden→output — and one bias node feeds every hidden and output node. A
+boolean mask per connection switches links on and off (the evolved topology); a hidden node with
+no enabled links is absent. Each hidden and output node has its own activation
+(:mod:`models.nn.activations`).
+
+With ``x̃ = [x, 1]`` (input plus bias, shape ``I + 1``) the forward pass of one network is::
+
+    z_h = x̃ W1                       W1 : (I + 1, H)      masked by M1
+    h   = f_h(z_h)                                         per-node activation
+    z_o = [h, x̃] W2                  W2 : (H + I + 1, O)  masked by M2
+    y   = f_o(z_o)
+
+and for P networks the same with a leading population axis (``W1 : (P, I + 1, H)``) — one
+``np.matmul`` per layer for the whole population. The gradient of ``SSE = Σ (y - t)²`` (RPROP
+only uses its sign, so the factor 2 and the mean are dropped) is the usual back-propagation::
+
+    δ_o = (y - t) f_o'(z_o)           ∂SSE/∂W2 = [h, x̃]ᵀ δ_o
+    δ_h = (δ_o W2[:H]ᵀ) f_h'(z_h)      ∂SSE/∂W1 = x̃ᵀ δ_h
+
+The deployed network (:class:`GMLP`) also owns the *hemisphere canonicalisation* of its input
+(``q ← sign(q·r) q`` for a reference quaternion ``r``, so that ``q`` and ``-q`` give the same
+correction) and normalises its output to a unit quaternion; the ONNX export reproduces both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from models.nn import activations as act
+
+
+def activate(
+    z: np.ndarray, kinds: np.ndarray, coef: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Apply per-node activations to stacked pre-activations.
+
+    Parameters
+    ----------
+    z : (P, N, H) float
+        Pre-activations.
+    kinds : (P, H) int
+        Activation index of every node of every network.
+    coef : (P, T, K - 1, 4) float or None
+        Spline template coefficients; needed only if a spline index occurs.
+
+    Returns
+    -------
+    value, derivative : (P, N, H)
+    """
+    present = np.unique(kinds)
+    if len(present) == 1 and present[0] < act.SPLINE0:
+        return act.apply(int(present[0]), z)
+    y = np.zeros_like(z)
+    dy = np.zeros_like(z)
+    plain = present[present < act.SPLINE0]
+    for k in plain:
+        m = (kinds == k)[:, None, :]
+        yk, dk = act.apply(int(k), z)
+        np.copyto(y, yk, where=m)
+        np.copyto(dy, dk, where=m)
+    if len(plain) < len(present):
+        if coef is None:
+            raise ValueError("spline activation without spline templates")
+        m = (kinds >= act.SPLINE0)[:, None, :]
+        yk, dk = act.spline_apply(z, coef.astype(z.dtype, copy=False), kinds - act.SPLINE0)
+        np.copyto(y, yk, where=m)
+        np.copyto(dy, dk, where=m)
+    return y, dy
+
+
+@dataclass
+class PopulationSpec:
+    """Topology of P networks padded to a common size.
+
+    Attributes
+    ----------
+    mask1 : (P, I + 1, H) bool
+        Enabled input→hidden links; the last row is the hidden biases.
+    mask2 : (P, H + I + 1, O) bool
+        Enabled hidden→output and input→output links; the last row is the output biases.
+    act_hidden : (P, H) int
+    act_out : (P, O) int
+    spline : (P, T, K) float or None
+        Control values of each network's spline templates.
+    """
+
+    mask1: np.ndarray
+    mask2: np.ndarray
+    act_hidden: np.ndarray
+    act_out: np.ndarray
+    spline: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        """``(P, I, H, O)``."""
+        p, i1, h = self.mask1.shape
+        return p, i1 - 1, h, self.mask2.shape[2]
+
+    @property
+    def n_weights(self) -> int:
+        _, i, h, o = self.shape
+        return (i + 1) * h + (h + i + 1) * o
+
+    def flat_mask(self) -> np.ndarray:
+        """(P, n_weights) bool, the layout of the flat parameter vector."""
+        p = self.shape[0]
+        return np.concatenate((self.mask1.reshape(p, -1), self.mask2.reshape(p, -1)), axis=1)
+
+    def coefficients(self) -> np.ndarray | None:
+        return None if self.spline is None else act.spline_coefficients(self.spline)
+
+    def subset(self, idx: np.ndarray) -> PopulationSpec:
+        return PopulationSpec(
+            self.mask1[idx], self.mask2[idx], self.act_hidden[idx], self.act_out[idx],
+            None if self.spline is None else self.spline[idx],
+        )
+
+
+def split_params(theta: np.ndarray, i: int, h: int, o: int) -> tuple[np.ndarray, np.ndarray]:
+    """Views ``W1 (P, I + 1, H)`` and ``W2 (P, H + I + 1, O)`` of flat parameters ``(P, n)``."""
+    p = theta.shape[0]
+    n1 = (i + 1) * h
+    return theta[:, :n1].reshape(p, i + 1, h), theta[:, n1:].reshape(p, h + i + 1, o)
+
+
+def init_params(spec: PopulationSpec, rng: np.random.Generator, dtype=np.float64) -> np.ndarray:
+    """Random masked weights, uniform in ±1/√fan-in (fan-in counted over enabled links)."""
+    p, i, h, o = spec.shape
+    theta = rng.uniform(-1.0, 1.0, (p, spec.n_weights))
+    w1, w2 = split_params(theta, i, h, o)
+    fan1 = np.maximum(spec.mask1.sum(axis=1, keepdims=True), 1)
+    fan2 = np.maximum(spec.mask2.sum(axis=1, keepdims=True), 1)
+    w1 *= spec.mask1 / np.sqrt(fan1)
+    w2 *= spec.mask2 / np.sqrt(fan2)
+    return theta.astype(dtype)
+
+
+def with_bias(x: np.ndarray) -> np.ndarray:
+    """``[x, 1]``: (N, I) → (N, I + 1)."""
+    return np.concatenate((x, np.ones((len(x), 1), dtype=x.dtype)), axis=1)
+
+
+def forward(
+    theta: np.ndarray, spec: PopulationSpec, xb: np.ndarray, coef: np.ndarray | None = None,
+    *, need_grad: bool = True,
+):
+    """Stacked forward pass.
+
+    Parameters
+    ----------
+    theta : (P, n_weights) float
+        Flat parameters (masked entries are zero).
+    spec : PopulationSpec
+    xb : (N, I + 1) float
+        Inputs with the bias column (:func:`with_bias`).
+    coef : (P, T, K - 1, 4) or None
+        Spline coefficients (computed from ``spec`` when None).
+
+    Returns
+    -------
+    y : (P, N, O)
+        Network outputs.
+    cache : tuple
+        What :func:`backward` needs (None if ``need_grad`` is False).
+    """
+    p, i, h, o = spec.shape
+    if coef is None:
+        coef = spec.coefficients()
+    w1, w2 = split_params(theta, i, h, o)
+    zh = np.matmul(xb, w1)  # (P, N, H)
+    hh, dh = activate(zh, spec.act_hidden, coef)
+    a = np.concatenate((hh, np.broadcast_to(xb, (p, *xb.shape))), axis=2)
+    zo = np.matmul(a, w2)
+    y, dy = activate(zo, spec.act_out, coef)
+    return y, ((a, dh, dy, w2) if need_grad else None)
+
+
+def backward(err: np.ndarray, cache, spec: PopulationSpec, xb: np.ndarray) -> np.ndarray:
+    """Gradient of ``Σ err²/2`` w.r.t. the flat parameters, masked; ``err = y - t`` (P, N, O)."""
+    a, dh, dy, w2 = cache
+    p, _, h, _ = spec.shape
+    do = err * dy
+    g2 = np.matmul(a.transpose(0, 2, 1), do)  # (P, H + I + 1, O)
+    dhid = np.matmul(do, w2[:, :h, :].transpose(0, 2, 1)) * dh  # (P, N, H)
+    g1 = np.matmul(xb.T, dhid)  # (P, I + 1, H)
+    g = np.concatenate((g1.reshape(p, -1), g2.reshape(p, -1)), axis=1)
+    return g
+
+
+@dataclass
+class GMLP:
+    """One trained network, ready to correct orientations.
+
+    Attributes
+    ----------
+    w1 : (I + 1, H) float64
+        Input(+bias)→hidden weights, disabled links zero; only enabled hidden nodes are kept.
+    w2 : (H + I + 1, O) float64
+        Hidden, input(+bias)→output weights.
+    act_hidden : (H,) int
+    act_out : (O,) int
+    spline : (T, K) float64 or None
+        Spline template control values.
+    canonical_ref : (4,) float64 or None
+        Reference quaternion ``r`` of the input hemisphere canonicalisation ``q ← sign(q·r) q``
+        (``sign(0) = +1``); None disables it.
+    info : dict
+        Provenance (preset, genome summary, epochs, …), JSON-serialisable.
+    """
+
+    w1: np.ndarray
+    w2: np.ndarray
+    act_hidden: np.ndarray
+    act_out: np.ndarray
+    spline: np.ndarray | None = None
+    canonical_ref: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_inputs(self) -> int:
+        return self.w1.shape[0] - 1
+
+    @property
+    def n_hidden(self) -> int:
+        return self.w1.shape[1]
+
+    @property
+    def n_links(self) -> int:
+        """Enabled connections, biases included (non-zero weights)."""
+        return int(np.count_nonzero(self.w1) + np.count_nonzero(self.w2))
+
+    @classmethod
+    def from_population(cls, theta: np.ndarray, spec: PopulationSpec, k: int, **kw) -> GMLP:
+        """Extract network ``k``, dropping hidden nodes that have no enabled link."""
+        _, i, h, o = spec.shape
+        w1, w2 = split_params(np.asarray(theta, dtype=np.float64), i, h, o)
+        w1 = w1[k] * spec.mask1[k]
+        w2 = w2[k] * spec.mask2[k]
+        used = spec.mask1[k][:i].any(axis=0) & spec.mask2[k][:h].any(axis=1)
+        keep = np.flatnonzero(used)
+        w2_new = np.concatenate((w2[keep], w2[h:]), axis=0)
+        spline = None if spec.spline is None else np.asarray(spec.spline[k], dtype=np.float64)
+        return cls(
+            w1=w1[:, keep].copy(), w2=w2_new, act_hidden=spec.act_hidden[k][keep].copy(),
+            act_out=spec.act_out[k].copy(), spline=spline, **kw,
+        )
+
+    def canonicalise(self, q: np.ndarray) -> np.ndarray:
+        """Hemisphere canonicalisation of raw quaternions (N, 4) → (N, 4)."""
+        if self.canonical_ref is None:
+            return q
+        s = np.where(q @ self.canonical_ref >= 0.0, 1.0, -1.0)
+        return q * s[:, None]
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        """Raw network output (N, O) for already canonicalised inputs (N, I), float64."""
+        x = np.asarray(x, dtype=np.float64)
+        coef = None if self.spline is None else act.spline_coefficients(self.spline)[None]
+        spec = PopulationSpec(
+            np.ones((1, *self.w1.shape), bool), np.ones((1, *self.w2.shape), bool),
+            self.act_hidden[None], self.act_out[None], None,
+        )
+        theta = np.concatenate((self.w1.reshape(1, -1), self.w2.reshape(1, -1)), axis=1)
+        y, _ = forward(theta, spec, with_bias(x), coef, need_grad=False)
+        return y[0]
+
+    def predict(self, orientation: np.ndarray) -> np.ndarray:
+        """Unit corrective quaternions for raw orientations.
+
+        Parameters
+        ----------
+        orientation : (N, 4) or (4,) float, scalar-first, either sign
+
+        Returns
+        -------
+        (N, 4) or (4,) float64, unit; ``corrected = multiply(correction, orientation)``.
+        """
+        q = np.asarray(orientation, dtype=np.float64)
+        single = q.ndim == 1
+        q = q.reshape(-1, 4)
+        y = self.forward(self.canonicalise(q))
+        y = y / np.maximum(np.linalg.norm(y, axis=1, keepdims=True), 1e-12)
+        return y[0] if single else y
