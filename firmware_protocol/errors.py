@@ -5,7 +5,7 @@ Hierarchy::
     ProtocolError (ValueError)
      +-- FramingError            no complete, well-formed frame (bad header, length, stuffing)
      +-- ChecksumError           CRC mismatch; carries ``received`` and ``computed``
-     +-- PacketError             a well-framed packet with wrong content; carries ``actual``, ``expected``
+     +-- PacketError             well-framed but wrong content; carries ``actual``, ``expected``
 
 Parsers raise only these types, whatever bytes they are fed. A Dynamixel status packet's alert
 bit is *not* an exception (the instruction still ran): it is a flag on the decoded status.

@@ -3,10 +3,10 @@
 Hierarchy::
 
     ModelsError
-     +-- QuaternionError (ValueError)      bad orientation input: shape, NaN/inf, zero or non-unit norm
-     +-- ConstraintError (ValueError)      a constraint file or definition is invalid; names the field
+     +-- QuaternionError (ValueError)      bad orientation: shape, NaN/inf, zero or non-unit norm
+     +-- ConstraintError (ValueError)      invalid constraint file or definition; names the field
      +-- DatasetError (ValueError)         a dataset file or request is invalid
-     +-- ModelFileError (ValueError)       a model file is missing, not ONNX, or not what was expected
+     +-- ModelFileError (ValueError)       model file missing, not ONNX, or not what was expected
 
 Every message names what is wrong and, where it helps, what was expected, so that the CLI can
 show it as one line.

@@ -241,7 +241,7 @@ def from_two_vectors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if np.any(anti):
         q = q.copy()
         perp = _perpendicular(a[anti] if a.ndim > 1 else a)
-        q[anti] = np.concatenate((np.zeros(perp.shape[:-1] + (1,)), perp), axis=-1)
+        q[anti] = np.concatenate((np.zeros((*perp.shape[:-1], 1)), perp), axis=-1)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 

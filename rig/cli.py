@@ -20,8 +20,16 @@ from rig import __version__
 
 # name -> (module, attribute, one-line help). Imported only when the command is used.
 _COMMANDS: dict[str, tuple[str, str, str]] = {
-    "demo": ("rig.commands.demo", "demo", "Run the main job on the simulated rig (no hardware needed)."),
-    "constraint": ("rig.commands.constraint", "constraint", "Validate and inspect joint-constraint files."),
+    "demo": (
+        "rig.commands.demo",
+        "demo",
+        "Run the main job on the simulated rig (no hardware needed).",
+    ),
+    "constraint": (
+        "rig.commands.constraint",
+        "constraint",
+        "Validate and inspect joint-constraint files.",
+    ),
     "dataset": ("rig.commands.dataset", "dataset", "Generate training datasets (thesis ch. 3-4)."),
     "sim": ("rig.commands.sim", "sim", "Run a simulated servo chain or IMU on a pseudo-terminal."),
 }
@@ -54,8 +62,13 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from models.errors import ModelsError
     from rig.errors import RigError
 
-    kinds: list[type[BaseException]] = [ModelsError, RigError, FileNotFoundError, PermissionError,
-                                        IsADirectoryError]
+    kinds: list[type[BaseException]] = [
+        ModelsError,
+        RigError,
+        FileNotFoundError,
+        PermissionError,
+        IsADirectoryError,
+    ]
     try:
         from firmware_protocol.errors import ProtocolError
 

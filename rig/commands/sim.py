@@ -10,8 +10,16 @@ import importlib
 import click
 
 _SIMS = {
-    "servos": ("rig.commands.sim_servos", "servos", "Simulated Dynamixel Protocol 2.0 servo chain."),
-    "imu": ("rig.commands.sim_imu", "imu", "Simulated IMU (BNO055 UART or the rig stream protocol)."),
+    "servos": (
+        "rig.commands.sim_servos",
+        "servos",
+        "Simulated Dynamixel Protocol 2.0 servo chain.",
+    ),
+    "imu": (
+        "rig.commands.sim_imu",
+        "imu",
+        "Simulated IMU (BNO055 UART or the rig stream protocol).",
+    ),
 }
 
 
