@@ -1,0 +1,113 @@
+"""Accuracy metrics of learned corrective constraints.
+
+For orientations ``q`` (N, 4), the exact correction ``c*`` (oracle) and a learned correction
+``ĉ`` (unit), with the limb axis ``X`` (:data:`models.quaternion.LIMB_AXIS`):
+
+- **MSE** — mean over patterns and the 4 components of ``(ĉ - c*)²`` (thesis's output MSE).
+- **3-D error** (thesis's "Pythagorean" error) — ``e = |R(c* ⊗ q) X - R(ĉ ⊗ q) X|``, the distance
+  between the unit-limb endpoints corrected by the ideal and the learned correction; its maximum
+  is 2, so it is reported as ``100 e / 2`` percent. The thesis also counts the patterns above 2 %
+  and above 7.5 %.
+- **Angular error** — angle (degrees) between the learned corrected limb direction and the limb
+  direction of the exact projection (``oracle.project``); equals the 3-D error in angle form.
+- **Violation** — how far outside the boundary the learned corrected orientation lies,
+  ``max(0, oracle.signed_distance(ĉ ⊗ q))`` in degrees (thesis 9.2.2's proposed
+  distance-to-boundary metric, which is fair at the correctional discontinuities).
+- **Identity error** — rotation angle (degrees) of ``ĉ`` on valid inputs, where the exact
+  correction is the identity.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from models import quaternion as quat
+
+
+def mse(pred: np.ndarray, target: np.ndarray) -> float:
+    """Mean squared error over all entries of (N, 4) arrays."""
+    d = np.asarray(pred, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    return float(np.mean(d * d))
+
+
+def endpoint_error(q: np.ndarray, ideal: np.ndarray, learned: np.ndarray) -> np.ndarray:
+    """(N,) distance in [0, 2] between unit-limb endpoints corrected by ``ideal`` / ``learned``."""
+    a = quat.limb_direction(quat.multiply(ideal, q))
+    b = quat.limb_direction(quat.multiply(learned, q))
+    return np.linalg.norm(a - b, axis=-1)
+
+
+def three_d_error_percent(q: np.ndarray, ideal: np.ndarray, learned: np.ndarray) -> np.ndarray:
+    """(N,) thesis 3-D error in percent of its maximum 2.0."""
+    return 50.0 * endpoint_error(q, ideal, learned)
+
+
+def angular_error_deg(q: np.ndarray, learned: np.ndarray, projected: np.ndarray) -> np.ndarray:
+    """(N,) degrees between the learned corrected limb and the exactly projected limb."""
+    a = quat.limb_direction(quat.multiply(learned, q))
+    b = quat.limb_direction(projected)
+    return np.degrees(quat.angle_between(a, b))
+
+
+def violation_deg(oracle, corrected: np.ndarray) -> np.ndarray:
+    """(N,) degrees by which ``corrected`` orientations lie outside the boundary (0 inside)."""
+    return np.degrees(np.maximum(oracle.signed_distance(corrected), 0.0))
+
+
+def identity_error_deg(learned: np.ndarray) -> np.ndarray:
+    """(N,) rotation angle in degrees of corrections that should be the identity."""
+    return np.degrees(quat.angle(learned))
+
+
+def evaluate(
+    predict: Callable[[np.ndarray], np.ndarray], oracle, q: np.ndarray
+) -> dict[str, float]:
+    """All metrics of a learned correction on orientations ``q``.
+
+    Parameters
+    ----------
+    predict : callable
+        ``(N, 4) raw orientations → (N, 4) unit corrections`` (network, ONNX session, …).
+    oracle : object
+        Exact constraint with ``correction``, ``project``, ``signed_distance``, ``is_valid``
+        (:class:`models.oracle.ConstraintOracle`).
+    q : (N, 4) float
+        Held-out orientations (unit, either sign).
+
+    Returns
+    -------
+    dict of float
+        ``mse``, ``mean_3d_error_pct``, ``max_3d_error_pct``, ``frac_above_2pct``,
+        ``frac_above_7_5pct``, ``mean_angular_error_deg``, ``p99_angular_error_deg``,
+        ``frac_invalid_violating_1deg`` (invalid inputs whose corrected limb is > 1° outside),
+        ``mean_violation_deg``, ``max_violation_deg``, ``mean_identity_error_deg``,
+        ``max_identity_error_deg``, ``n``.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    ideal = quat.canonical(oracle.correction(q))
+    learned = np.asarray(predict(q), dtype=np.float64)
+    learned = learned / np.linalg.norm(learned, axis=1, keepdims=True)
+    valid = np.asarray(oracle.is_valid(q), dtype=bool)
+    e3 = three_d_error_percent(q, ideal, learned)
+    ang = angular_error_deg(q, learned, oracle.project(q))
+    corrected = quat.multiply(learned, q)
+    viol = violation_deg(oracle, corrected)
+    ident = identity_error_deg(learned[valid]) if valid.any() else np.zeros(1)
+    inv = ~valid
+    return {
+        "n": float(len(q)),
+        "mse": mse(quat.canonical(learned), ideal),
+        "mean_3d_error_pct": float(e3.mean()),
+        "max_3d_error_pct": float(e3.max()),
+        "frac_above_2pct": float(np.mean(e3 > 2.0)),
+        "frac_above_7_5pct": float(np.mean(e3 > 7.5)),
+        "mean_angular_error_deg": float(ang.mean()),
+        "p99_angular_error_deg": float(np.percentile(ang, 99)),
+        "frac_invalid_violating_1deg": float(np.mean(viol[inv] > 1.0)) if inv.any() else 0.0,
+        "mean_violation_deg": float(viol.mean()),
+        "max_violation_deg": float(viol.max()),
+        "mean_identity_error_deg": float(ident.mean()),
+        "max_identity_error_deg": float(ident.max()),
+    }

@@ -1,0 +1,353 @@
+"""ONNX export of trained GMLPs and the low-latency runtime the live loop uses.
+
+The exported graph (opset 17, float32) is the whole correction, so callers feed raw sensor
+quaternions::
+
+    orientation [N, 4]  (w, x, y, z), either sign
+      │  s = +1 if orientation·r ≥ 0 else -1;  x = s · orientation    hemisphere canonicalisation
+      │  for each activation kind k:  h_k = f_k(x W1[:, k] + b1[k])     hidden nodes grouped by kind
+      │  y = Σ_k h_k W2[k] + x W_io + b_o;  y ← f_o(y)                  input→output shortcut links
+      ▼  correction = y / max(|y|, 1e-12)                               unit quaternion
+    correction [N, 4]   corrected = correction ⊗ orientation
+
+Spline activations are evaluated in-graph: ``u = clip((z - z₀)/h, 0, S - ε)``, segment
+``Gather`` of the Catmull-Rom coefficient tables (:mod:`models.nn.activations`), Horner form.
+
+Metadata (``metadata_props``): ``jointlimits.format``, ``jointlimits.constraint`` (the constraint
+YAML), ``jointlimits.constraint_sha256``, ``jointlimits.training_data_sha256``,
+``jointlimits.metrics`` (JSON), ``jointlimits.network`` (JSON summary), ``jointlimits.version``.
+
+:class:`CorrectionModel` refuses a file that is not ONNX, has other input/output names or
+shapes, or whose constraint differs from the one the caller expects
+(:class:`models.errors.ModelFileError`). No pickle anywhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import yaml
+from onnx import TensorProto, helper, numpy_helper
+
+from models.errors import ModelFileError
+from models.nn import activations as act
+from models.nn.gmlp import GMLP
+
+FORMAT = "jointlimits-correction/1"
+INPUT = "orientation"
+OUTPUT = "correction"
+OPSET = 17
+
+
+def package_version() -> str:
+    """Installed version of the ``jointlimits-rig`` distribution."""
+    try:
+        from importlib.metadata import version
+
+        return version("jointlimits-rig")
+    except Exception:  # not installed (source checkout)
+        return "0.0.0+unknown"
+
+
+def data_sha256(*arrays: np.ndarray) -> str:
+    """SHA-256 of arrays as contiguous float64 (the training-data fingerprint)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+class _Graph:
+    def __init__(self):
+        self.nodes: list = []
+        self.inits: list = []
+        self._n = 0
+
+    def name(self, stem: str) -> str:
+        self._n += 1
+        return f"{stem}_{self._n}"
+
+    def const(self, value, stem="c", dtype=np.float32) -> str:
+        n = self.name(stem)
+        self.inits.append(numpy_helper.from_array(np.asarray(value, dtype=dtype), n))
+        return n
+
+    def op(self, op_type: str, inputs: list[str], stem: str | None = None, out=None, **attrs):
+        out = out or self.name(stem or op_type.lower())
+        self.nodes.append(helper.make_node(op_type, inputs, [out], **attrs))
+        return out
+
+
+def _activation(g: _Graph, kind: int, z: str, templates: np.ndarray | None = None,
+                coef: np.ndarray | None = None) -> str:
+    if kind == 0:
+        return z
+    if kind == 1:
+        return g.op("Sigmoid", [z])
+    if kind == 2:
+        return g.op("Tanh", [z])
+    if kind == 3:
+        return g.op("Exp", [g.op("Neg", [g.op("Mul", [z, z])])])
+    if kind == 4:
+        return g.op("Sin", [z])
+    if kind == 5:
+        return g.op("Relu", [z])
+    if kind == 6:
+        return g.op("LeakyRelu", [z], alpha=act.LEAKY_SLOPE)
+    if kind == 7:
+        return g.op("Clip", [z, g.const(-1.0), g.const(1.0)])
+    # spline: templates (n,) per node, coef (T, S, 4)
+    t_, s_, _ = coef.shape
+    lo, hi = act.SENSITIVITY
+    h = (hi - lo) / s_
+    u = g.op("Add", [g.op("Mul", [z, g.const(1.0 / h)]), g.const(-lo / h)])
+    u = g.op("Clip", [u, g.const(0.0), g.const(s_ - act.SEG_EPS)])
+    seg = g.op("Floor", [u])
+    t = g.op("Sub", [u, seg])
+    idx = g.op("Add", [g.op("Cast", [seg], to=TensorProto.INT64),
+                       g.const((templates * s_)[None, :], dtype=np.int64)])
+    flat = coef.reshape(t_ * s_, 4)
+    a, b, c, d = (g.op("Gather", [g.const(flat[:, j]), idx]) for j in range(4))
+    y = g.op("Add", [g.op("Mul", [a, t]), b])
+    y = g.op("Add", [g.op("Mul", [y, t]), c])
+    return g.op("Add", [g.op("Mul", [y, t]), d])
+
+
+def to_onnx(
+    network: GMLP,
+    *,
+    constraint_yaml: str,
+    training_data_sha256: str = "",
+    metrics: dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> onnx.ModelProto:
+    """Build the ONNX model of a trained network (see module docstring for the graph)."""
+    g = _Graph()
+    i, h = network.n_inputs, network.n_hidden
+    x = INPUT
+    if network.canonical_ref is not None:
+        d = g.op("MatMul", [INPUT, g.const(np.asarray(network.canonical_ref).reshape(4, 1))])
+        s = g.op("Where", [g.op("GreaterOrEqual", [d, g.const(0.0)]), g.const(1.0),
+                           g.const(-1.0)])
+        x = g.op("Mul", [INPUT, s], stem="canonical")
+    coef = None if network.spline is None else act.spline_coefficients(network.spline)
+    w1, w2 = network.w1, network.w2
+    terms = [g.op("Gemm", [x, g.const(w2[h:h + i]), g.const(w2[h + i])], stem="shortcut")]
+    kinds = network.act_hidden
+    plain = sorted({int(k) for k in kinds if k < act.SPLINE0})
+    groups = [(k, np.flatnonzero(kinds == k)) for k in plain]
+    if (kinds >= act.SPLINE0).any():
+        groups.append((act.SPLINE0, np.flatnonzero(kinds >= act.SPLINE0)))
+    for k, cols in groups:
+        z = g.op("Gemm", [x, g.const(w1[:i, cols]), g.const(w1[i, cols])], stem="hidden")
+        hk = _activation(g, k, z, kinds[cols] - act.SPLINE0, coef)
+        terms.append(g.op("MatMul", [hk, g.const(w2[cols])]))
+    y = terms[0] if len(terms) == 1 else g.op("Sum", terms, stem="output")
+    outk = network.act_out
+    if (outk != 0).any():
+        parts = []
+        for k in sorted({int(v) for v in outk}):
+            sel = (outk == k) if k < act.SPLINE0 else (outk >= act.SPLINE0)
+            if k >= act.SPLINE0 and any(p[0] >= act.SPLINE0 for p in parts):
+                continue
+            fk = _activation(g, k, y, np.where(outk >= act.SPLINE0, outk - act.SPLINE0, 0),
+                             coef)
+            parts.append((k, g.op("Mul", [fk, g.const(sel.astype(np.float32)[None, :])])))
+        y = g.op("Sum", [p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
+    n = g.op("ReduceL2", [y], axes=[1], keepdims=1)
+    n = g.op("Max", [n, g.const(1e-12)])
+    g.op("Div", [y, n], out=OUTPUT)
+    graph = helper.make_graph(
+        g.nodes, "jointlimits_correction",
+        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", 4])],
+        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", 4])],
+        g.inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
+                              producer_name="jointlimits-rig", producer_version=package_version())
+    model.ir_version = 8
+    model.doc_string = ("Corrective joint constraint: corrected = correction ⊗ orientation "
+                        "(scalar-first w, x, y, z; Hamilton product).")
+    meta = {
+        "jointlimits.format": FORMAT,
+        "jointlimits.constraint": constraint_yaml,
+        "jointlimits.constraint_sha256": hashlib.sha256(constraint_yaml.encode()).hexdigest(),
+        "jointlimits.training_data_sha256": training_data_sha256,
+        "jointlimits.metrics": json.dumps(metrics or {}, sort_keys=True),
+        "jointlimits.network": json.dumps({**network.info, **(extra or {})}, sort_keys=True,
+                                          default=str),
+        "jointlimits.version": package_version(),
+    }
+    onnx.helper.set_model_props(model, meta)
+    onnx.checker.check_model(model)
+    return model
+
+
+def export_onnx(network: GMLP, path: str | Path, **kw) -> Path:
+    """Write :func:`to_onnx` to ``path`` (parents created); returns the path."""
+    path = Path(path)
+    model = to_onnx(network, **kw)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(model.SerializeToString())
+    return path
+
+
+def _as_constraint_dict(c) -> Any:
+    if c is None:
+        return None
+    if hasattr(c, "to_yaml"):
+        return yaml.safe_load(c.to_yaml())
+    if isinstance(c, str):
+        return yaml.safe_load(c)
+    return c
+
+
+class CorrectionModel:
+    """An exported correction model run by onnxruntime, tuned for latency.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.onnx`` file written by :func:`export_onnx`.
+    expected_constraint : JointConstraint, YAML str, dict or None
+        If given, the model's embedded constraint must equal it.
+
+    Raises
+    ------
+    ModelFileError
+        Missing file, not ONNX, wrong input/output names or shapes, not one of ours, or a
+        different constraint.
+    """
+
+    def __init__(self, path: str | Path, expected_constraint=None):
+        import onnxruntime as ort
+
+        self.path = Path(path)
+        try:
+            raw = self.path.read_bytes()
+        except OSError as err:
+            raise ModelFileError(f"{path}: cannot read model file ({err.strerror})") from None
+        try:
+            model = onnx.load_model_from_string(raw)
+            onnx.checker.check_model(model)
+        except Exception as err:  # protobuf raises various types
+            raise ModelFileError(f"{path}: not an ONNX model ({type(err).__name__})") from None
+        self._check_io(model)
+        self.metadata = {p.key: p.value for p in model.metadata_props}
+        if self.metadata.get("jointlimits.format") != FORMAT:
+            got = self.metadata.get("jointlimits.format")
+            raise ModelFileError(f"{path}: not a jointlimits correction model (metadata "
+                                 f"jointlimits.format is {got!r}, expected {FORMAT!r})")
+        self.constraint_yaml = self.metadata.get("jointlimits.constraint", "")
+        if expected_constraint is not None:
+            self.check_constraint(expected_constraint)
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = 1
+        opts.inter_op_num_threads = 1
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        self.session = ort.InferenceSession(raw, sess_options=opts,
+                                            providers=["CPUExecutionProvider"])
+        self._one = np.zeros((1, 4), dtype=np.float32)
+        self._run = self.session._sess.run  # skips the Python-side checks of session.run
+        self._outs = [OUTPUT]
+        self._feed = {INPUT: self._one}
+        self._ro = None
+
+    def _check_io(self, model: onnx.ModelProto) -> None:
+        def describe(vs):
+            out = []
+            for v in vs:
+                dims = [d.dim_param or d.dim_value for d in v.type.tensor_type.shape.dim]
+                out.append((v.name, v.type.tensor_type.elem_type, dims))
+            return out
+
+        ins = [v for v in model.graph.input
+               if v.name not in {i.name for i in model.graph.initializer}]
+        got_in, got_out = describe(ins), describe(model.graph.output)
+        ok = (len(got_in) == 1 and len(got_out) == 1
+              and got_in[0][0] == INPUT and got_out[0][0] == OUTPUT
+              and got_in[0][1] == TensorProto.FLOAT and got_out[0][1] == TensorProto.FLOAT
+              and len(got_in[0][2]) == 2 and got_in[0][2][1] == 4
+              and len(got_out[0][2]) == 2 and got_out[0][2][1] == 4)
+        if not ok:
+            raise ModelFileError(
+                f"{self.path}: expected input '{INPUT}' float32 [N, 4] and output '{OUTPUT}' "
+                f"float32 [N, 4], got inputs {[(n, d) for n, _, d in got_in]} and outputs "
+                f"{[(n, d) for n, _, d in got_out]}")
+
+    def check_constraint(self, expected) -> None:
+        """Raise :class:`ModelFileError` unless the embedded constraint equals ``expected``."""
+        try:
+            mine = yaml.safe_load(self.constraint_yaml)
+        except yaml.YAMLError:
+            mine = None
+        if hasattr(expected, "to_yaml"):  # a JointConstraint: compare limits, ignore the name
+            try:
+                from models.constraint import loads_constraint
+
+                same = loads_constraint(self.constraint_yaml) == expected
+            except Exception:  # unparsable embedded constraint: not the same
+                same = False
+        else:
+            same = mine == _as_constraint_dict(expected)
+        if not same:
+            name = (mine or {}).get("name", "?") if isinstance(mine, dict) else "?"
+            raise ModelFileError(
+                f"{self.path}: model was trained for a different constraint (embedded "
+                f"constraint {name!r} differs from the expected one); retrain with "
+                "`rig train` for this constraint file")
+
+    @property
+    def metrics(self) -> dict[str, float]:
+        return json.loads(self.metadata.get("jointlimits.metrics", "{}"))
+
+    @property
+    def network_info(self) -> dict[str, Any]:
+        return json.loads(self.metadata.get("jointlimits.network", "{}"))
+
+    def correction(self, orientation: np.ndarray) -> np.ndarray:
+        """Batched corrections.
+
+        Parameters
+        ----------
+        orientation : (N, 4) or (4,) float, raw scalar-first quaternions (either sign)
+
+        Returns
+        -------
+        (N, 4) or (4,) float32, unit corrective quaternions.
+        """
+        q = np.ascontiguousarray(orientation, dtype=np.float32)
+        single = q.ndim == 1
+        out = self._run(self._outs, {INPUT: q.reshape(-1, 4)}, self._ro)[0]
+        return out[0] if single else out
+
+    def correct_one(self, w: float, x: float, y: float, z: float) -> np.ndarray:
+        """The cheap single-orientation path: (4,) float32 correction of one quaternion.
+
+        Reuses one preallocated input buffer; the returned array is fresh.
+        """
+        one = self._one[0]
+        one[0] = w
+        one[1] = x
+        one[2] = y
+        one[3] = z
+        return self._run(self._outs, self._feed, self._ro)[0][0]
+
+    def corrected(self, orientation: np.ndarray) -> np.ndarray:
+        """``correction ⊗ orientation`` (N, 4) float64, keeping the input's sign."""
+        from models.quaternion import multiply
+
+        q = np.asarray(orientation, dtype=np.float64)
+        return multiply(self.correction(q).astype(np.float64), q)
+
+
+def load_model(path: str | Path, expected_constraint=None) -> CorrectionModel:
+    """Open an exported model (see :class:`CorrectionModel`)."""
+    return CorrectionModel(path, expected_constraint)
