@@ -1,0 +1,607 @@
+"""Simulated IMUs on pseudo-terminals: a BNO055 on its UART, and a multi-IMU stream device.
+
+Both serve real bytes on the master side of a pseudo-terminal; ``serial.Serial(sim.port)``
+(pyserial, unchanged) opens the slave exactly as it opens a USB-UART. A background thread waits
+with ``select`` on the master and a shutdown pipe — no busy sleeps — and answers requests; the
+stream device also wakes at its sample deadlines. Orientations come from a
+:class:`~rig.sim.limb.SimulatedLimb` (ground truth available through :attr:`limb`).
+
+:class:`Bno055Simulator`
+    Register reads and writes as the chip answers them (:mod:`firmware_protocol.imu.bno055`):
+    CHIP_ID 0xA0, ``OPR_MODE`` rules (fusion data only in fusion modes, configuration registers
+    writable only in CONFIG mode, otherwise ``EE 05``), invalid addresses ``EE 04``, bad start
+    bytes ``EE 06``, a partial request left for ``char_timeout_s`` ``EE 0A``; calibration status
+    rising while fusing; data registers refreshed at the fusion rate (100 Hz by default, like
+    the chip); ``SYS_TRIGGER`` bit 5 resets; ``UNIT_SEL`` (rate and Euler units) and axis remap
+    honoured.
+:class:`StreamImuSimulator`
+    The rig stream protocol (:mod:`firmware_protocol.imu.stream`, ``SPEC.md``): IDENTIFY, START,
+    STOP, SET_RATE, SET_SENSORS answered with ACK/NAK; SAMPLE frames at the set rate for the
+    active sensors, timestamped on the exact sample grid of the device clock (µs since the
+    simulator started).
+
+Both are context managers with an idempotent :meth:`close`; ``close`` re-raises an exception
+that stopped the server thread, so a test sees simulator bugs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from firmware_protocol.errors import ChecksumError, FramingError, PacketError
+from firmware_protocol.imu import bno055 as B
+from firmware_protocol.imu import stream as S
+from models import quaternion as Q
+from rig.sim.limb import Measurement, SimulatedLimb
+
+__all__ = ["Bno055Simulator", "StreamImuSimulator"]
+
+
+class _PtyServer:
+    """Pseudo-terminal plus a server thread; subclasses implement ``_on_bytes`` / ``_on_timer``."""
+
+    _thread_name = "imu-sim"
+
+    def __init__(self, clock: Callable[[], float]) -> None:
+        self._clock = clock
+        master, slave = os.openpty()
+        try:
+            tty.setraw(slave)  # no echo, no line discipline: the host's bytes reach us verbatim
+            os.set_blocking(master, False)
+            self.port: str = os.ttyname(slave)
+        except BaseException:
+            os.close(master)
+            os.close(slave)
+            raise
+        self._master, self._slave = master, slave
+        self._wake_r, self._wake_w = os.pipe()
+        self._lock = threading.RLock()
+        self._closed = False
+        self._error: BaseException | None = None
+        self.bytes_dropped = 0
+        """Output bytes lost because the host did not read (pty buffer full), like a UART."""
+        self._thread = threading.Thread(target=self._run, name=f"{self._thread_name} {self.port}",
+                                        daemon=True)
+
+    def _start(self) -> None:
+        self._thread.start()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        """Stop the server thread and close the pseudo-terminal; safe to call twice.
+
+        Raises
+        ------
+        RuntimeError
+            The server thread had died of an exception (chained), reported once.
+        """
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+        if self._thread.is_alive() or self._thread.ident is not None:
+            self._thread.join()
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise RuntimeError(f"simulator on {self.port} stopped: {err!r}") from err
+
+    def _wake(self) -> None:
+        """Make the server thread re-evaluate its timer (after a state change from outside)."""
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"w")
+
+    def _run(self) -> None:
+        try:
+            while True:
+                deadline = self._timer_deadline()
+                timeout = None if deadline is None else max(0.0, deadline - self._clock())
+                ready, _, _ = select.select([self._master, self._wake_r], [], [], timeout)
+                if self._wake_r in ready:
+                    os.read(self._wake_r, 64)
+                    if self._closed:
+                        return
+                if self._master in ready:
+                    try:
+                        data = os.read(self._master, 4096)
+                    except BlockingIOError:
+                        data = b""
+                    if data:
+                        with self._lock:
+                            self._on_bytes(data, self._clock())
+                with self._lock:
+                    self._on_timer(self._clock())
+        except BaseException as err:  # surfaced by close()
+            self._error = err
+
+    def _send(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(self._master, view)
+            except BlockingIOError:
+                self.bytes_dropped += len(view)
+                return
+            view = view[n:]
+
+    # hooks -----------------------------------------------------------------------------------
+    def _on_bytes(self, data: bytes, now: float) -> None:
+        raise NotImplementedError
+
+    def _timer_deadline(self) -> float | None:
+        return None
+
+    def _on_timer(self, now: float) -> None:
+        return None
+
+
+# ---------------------------------------------------------------------------------------------
+# BNO055
+
+_READ_ONLY = frozenset(range(0x00, 0x07)) | frozenset(range(0x08, 0x3B))
+_ANY_MODE = frozenset({B.Register.PAGE_ID, B.Register.OPR_MODE, B.Register.SYS_TRIGGER})
+_LAST_PAGE0 = 0x6A
+_GYRO_MODES = frozenset({B.OperationMode.GYROONLY, B.OperationMode.ACCGYRO,
+                         B.OperationMode.MAGGYRO, B.OperationMode.AMG, B.OperationMode.IMU,
+                         B.OperationMode.NDOF_FMC_OFF, B.OperationMode.NDOF})
+
+
+def _page0_defaults() -> bytearray:
+    regs = bytearray(0x80)
+    regs[B.Register.CHIP_ID] = B.CHIP_ID_VALUE
+    regs[B.Register.ACC_ID] = 0xFB
+    regs[B.Register.MAG_ID] = 0x32
+    regs[B.Register.GYR_ID] = 0x0F
+    regs[B.Register.SW_REV_ID_LSB] = 0x11
+    regs[B.Register.SW_REV_ID_MSB] = 0x03
+    regs[B.Register.BL_REV_ID] = 0x15
+    regs[B.Register.TEMP] = 25
+    regs[B.Register.ST_RESULT] = 0x0F
+    regs[B.Register.UNIT_SEL] = 0x80
+    regs[B.Register.AXIS_MAP_CONFIG] = 0x24
+    regs[B.Register.AXIS_MAP_SIGN] = 0x00
+    return regs
+
+
+def _axis_remap(config: int, sign: int) -> np.ndarray | None:
+    """Matrix ``M`` with ``v_remapped = M v`` for AXIS_MAP_CONFIG/SIGN; None if invalid."""
+    src = [(config >> (2 * k)) & 3 for k in range(3)]  # remapped X, Y, Z take these axes
+    if sorted(src) != [0, 1, 2]:
+        return None
+    m = np.zeros((3, 3))
+    for k, s in enumerate(src):
+        m[k, s] = -1.0 if sign & (4 >> k) else 1.0
+    return m
+
+
+class Bno055Simulator(_PtyServer):
+    """One BNO055 in UART mode, on a pseudo-terminal.
+
+    Parameters
+    ----------
+    limb : SimulatedLimb, optional
+        Motion source; default ``SimulatedLimb(sensors=2, seed=seed)``.
+    sensor : int, optional
+        Which of the limb's sensors this chip is (default 1, the upper-arm sensor, or 0 if the
+        limb has one sensor).
+    rate_hz : float
+        Fusion output rate: data registers change at this rate (the chip's is 100 Hz).
+    char_timeout_s : float
+        Inter-character timeout after which a partial request is answered ``EE 0A``.
+    clock : callable
+        Monotonic seconds; tests may pass a manual clock to make time-dependent answers
+        (calibration progress, motion) deterministic.
+    seed : int, optional
+        Seed of the default limb.
+
+    Attributes
+    ----------
+    port : str
+        The ``/dev/pts/N`` to open with pyserial.
+    limb : SimulatedLimb
+    last : Measurement or None
+        The measurement behind the data registers last read (ground truth in ``last.truth``).
+    """
+
+    _thread_name = "bno055-sim"
+
+    def __init__(
+        self,
+        limb: SimulatedLimb | None = None,
+        *,
+        sensor: int | None = None,
+        rate_hz: float = 100.0,
+        char_timeout_s: float = 0.1,
+        clock: Callable[[], float] = time.monotonic,
+        seed: int | None = 0,
+    ) -> None:
+        self.limb = limb if limb is not None else SimulatedLimb(sensors=2, seed=seed)
+        self.sensor = sensor if sensor is not None else min(1, self.limb.n_sensors - 1)
+        if not 0 <= self.sensor < self.limb.n_sensors:
+            raise ValueError(
+                f"sensor {self.sensor} not on the limb ({self.limb.n_sensors} sensors)")
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
+        self.rate_hz = float(rate_hz)
+        self.char_timeout_s = float(char_timeout_s)
+        super().__init__(clock)
+        self._t0 = clock()
+        self._decoder = B.RequestDecoder()
+        self._last_rx = self._t0
+        self._page1 = bytearray(0x80)
+        self._reset(self._t0)
+        self.last: Measurement | None = None
+        self._last_index = -1
+        self._start()
+
+    # state --------------------------------------------------------------------------------
+    def _reset(self, now: float) -> None:
+        self._regs = _page0_defaults()
+        self._page1[:] = bytes(0x80)
+        self._page1[B.Register.PAGE_ID] = 1
+        self._fusing_since: float | None = None
+        self._fused = 0.0  # seconds spent in fusion modes before _fusing_since
+
+    @property
+    def mode(self) -> B.OperationMode:
+        """Current operation mode."""
+        return B.OperationMode(self._regs[B.Register.OPR_MODE] & 0x0F)
+
+    def _fusion_elapsed(self, now: float) -> float:
+        extra = 0.0 if self._fusing_since is None else now - self._fusing_since
+        return self._fused + extra
+
+    def _refresh(self, now: float) -> None:
+        regs = self._regs
+        mode = self.mode
+        index = math.floor((now - self._t0) * self.rate_hz)
+        if index != self._last_index:
+            self._last_index = index
+            self.last = self.limb.measure(index / self.rate_hz,
+                                          calibration_elapsed_s=self._fusion_elapsed(now))
+        m = self.last
+        assert m is not None
+        q = m.quaternions[self.sensor]
+        gyro = m.gyro[self.sensor]
+        remap = _axis_remap(regs[B.Register.AXIS_MAP_CONFIG], regs[B.Register.AXIS_MAP_SIGN])
+        if remap is not None:
+            gyro = remap @ gyro
+            if np.linalg.det(remap) > 0:  # a proper rotation: the sensor axes are re-labelled
+                # v_remapped = M v, so q_world_remapped = q_world_sensor ⊗ quat(Mᵀ)
+                q = Q.multiply(q, Q.from_rotation(Rotation.from_matrix(remap.T)))
+        unit = regs[B.Register.UNIT_SEL]
+        zero6, zero8 = bytes(6), bytes(8)
+        if mode in _GYRO_MODES:
+            if unit & 0x02:
+                regs[0x14:0x1A] = B.encode_vector(gyro, 900.0)
+            else:
+                regs[0x14:0x1A] = B.encode_vector(np.degrees(gyro), 16.0)
+        else:
+            regs[0x14:0x1A] = zero6
+        if mode in B.FUSION_MODES:
+            regs[0x20:0x28] = B.encode_quaternion(q)
+            regs[0x1A:0x20] = B.encode_vector(_euler(q, radians=bool(unit & 0x04)),
+                                              900.0 if unit & 0x04 else 16.0)
+            regs[B.Register.CALIB_STAT] = int(m.calibration[self.sensor])
+            regs[B.Register.SYS_STATUS] = 5
+        else:
+            regs[0x20:0x28] = zero8
+            regs[0x1A:0x20] = zero6
+            regs[B.Register.CALIB_STAT] = 0
+            regs[B.Register.SYS_STATUS] = 0 if mode == B.OperationMode.CONFIG else 6
+
+    # protocol -----------------------------------------------------------------------------
+    def _on_bytes(self, data: bytes, now: float) -> None:
+        self._last_rx = now
+        self._decoder.feed(data)
+        while True:
+            try:
+                req = self._decoder.next()
+            except B.Bno055FramingError as err:
+                self._send(B.encode_status(err.status))
+                continue
+            if req is None:
+                return
+            if isinstance(req, B.ReadRequest):
+                self._send(self._read(req, now))
+            else:
+                self._send(self._write(req, now))
+
+    def _timer_deadline(self) -> float | None:
+        return self._last_rx + self.char_timeout_s if self._decoder.buffered else None
+
+    def _on_timer(self, now: float) -> None:
+        if self._decoder.buffered and now >= self._last_rx + self.char_timeout_s:
+            self._decoder.expire()
+            self._send(B.encode_status(B.Status.RECEIVE_CHARACTER_TIMEOUT))
+
+    def _page(self) -> bytearray:
+        return self._page1 if self._regs[B.Register.PAGE_ID] == 1 else self._regs
+
+    def _read(self, req: B.ReadRequest, now: float) -> bytes:
+        end = req.register + req.length
+        if end > 0x80:
+            return B.encode_status(B.Status.REGMAP_INVALID_ADDRESS)
+        page = self._page()
+        if page is self._regs and req.register < 0x3B and end > 0x08:
+            self._refresh(now)
+        return B.encode_read_response(page[req.register:end])
+
+    def _write(self, req: B.WriteRequest, now: float) -> bytes:
+        regs = self._regs
+        config = self.mode == B.OperationMode.CONFIG
+        end = req.register + len(req.data)
+        if self._page() is self._page1:
+            if end > 0x80:
+                return B.encode_status(B.Status.REGMAP_INVALID_ADDRESS)
+            if any(a != B.Register.PAGE_ID for a in range(req.register, end)) and not config:
+                return B.encode_status(B.Status.REGMAP_WRITE_DISABLED)
+            for a, v in zip(range(req.register, end), req.data, strict=True):
+                if a == B.Register.PAGE_ID:
+                    if v > 1:
+                        return B.encode_status(B.Status.WRITE_FAIL)
+                    regs[a] = v
+                else:
+                    self._page1[a] = v
+            return B.encode_status(B.Status.WRITE_SUCCESS)
+        if end - 1 > _LAST_PAGE0:
+            return B.encode_status(B.Status.REGMAP_INVALID_ADDRESS)
+        for a, v in zip(range(req.register, end), req.data, strict=True):
+            if a in _READ_ONLY or a == 0x3C:
+                return B.encode_status(B.Status.REGMAP_WRITE_DISABLED)
+            if a not in _ANY_MODE and not config:
+                return B.encode_status(B.Status.REGMAP_WRITE_DISABLED)
+            if a == B.Register.OPR_MODE and (v & 0x0F) > B.OperationMode.NDOF:
+                return B.encode_status(B.Status.WRITE_FAIL)
+            if a == B.Register.PAGE_ID and v > 1:
+                return B.encode_status(B.Status.WRITE_FAIL)
+        reset = False
+        for a, v in zip(range(req.register, end), req.data, strict=True):
+            if a == B.Register.OPR_MODE:
+                self._set_mode(v & 0x0F, now)
+            elif a == B.Register.SYS_TRIGGER:
+                reset = bool(v & 0x20)
+                regs[a] = v & 0x80  # self-test and interrupt-reset bits read back as 0
+            else:
+                regs[a] = v
+        if reset:
+            self._reset(now)
+        return B.encode_status(B.Status.WRITE_SUCCESS)
+
+    def _set_mode(self, mode: int, now: float) -> None:
+        fusing = mode in B.FUSION_MODES
+        if self._fusing_since is not None and not fusing:
+            self._fused += now - self._fusing_since
+            self._fusing_since = None
+        elif self._fusing_since is None and fusing:
+            self._fusing_since = now
+        self._regs[B.Register.OPR_MODE] = mode
+        self._last_index = -1  # the next read samples afresh
+
+
+def _euler(q: np.ndarray, radians: bool) -> tuple[float, float, float]:
+    """(heading, roll, pitch) as the register order; heading clockwise from north in [0, 360)
+    (or [0, 2π)), roll and pitch from the intrinsic Z-Y-X decomposition."""
+    yaw, pitch, roll = Q.to_rotation(q).as_euler("ZYX")
+    heading = (-yaw) % (2.0 * math.pi)
+    if radians:
+        return (heading, roll, pitch)
+    return (math.degrees(heading), math.degrees(roll), math.degrees(pitch))
+
+
+# ---------------------------------------------------------------------------------------------
+# stream protocol
+
+
+class StreamImuSimulator(_PtyServer):
+    """A microcontroller streaming several IMUs with the rig stream protocol, on a pty.
+
+    Parameters
+    ----------
+    limb : SimulatedLimb, optional
+        Motion source; default ``SimulatedLimb(sensors=sensors, seed=seed)``. Sensor ``i`` of
+        the protocol is ``limb.mounts[i]``.
+    sensors : int
+        Sensors present when ``limb`` is not given (1..16).
+    rate_hz : int
+        Initial sample rate (settable with SET_RATE within ``min_rate_hz..max_rate_hz``).
+    min_rate_hz, max_rate_hz : int
+        Rates the device accepts; others are refused with NAK BAD_ARGUMENT.
+    serial : int
+        Device serial number reported by IDENTIFY.
+    clock : callable
+        Monotonic seconds; the device clock is ``clock() - clock_at_start`` in microseconds.
+    seed : int, optional
+
+    Attributes
+    ----------
+    port : str
+    limb : SimulatedLimb
+        Ground truth: ``limb.truth(timestamp_us / 1e6)`` for a SAMPLE's timestamp.
+    samples_sent, samples_skipped : int
+        Samples streamed, and samples not sent because the thread fell more than 0.1 s behind.
+    """
+
+    _thread_name = "stream-imu-sim"
+    FIRMWARE_VERSION = 0x0100
+
+    def __init__(
+        self,
+        limb: SimulatedLimb | None = None,
+        *,
+        sensors: int = 4,
+        rate_hz: int = 100,
+        min_rate_hz: int = 10,
+        max_rate_hz: int = 400,
+        serial: int = 0x5157_0001,
+        clock: Callable[[], float] = time.monotonic,
+        seed: int | None = 0,
+    ) -> None:
+        if limb is None:
+            if not 1 <= sensors <= S.MAX_SENSORS:
+                raise ValueError(f"sensors must be 1..{S.MAX_SENSORS}, got {sensors}")
+            limb = SimulatedLimb(sensors=sensors, seed=seed)
+        if limb.n_sensors > S.MAX_SENSORS:
+            raise ValueError(f"the stream protocol carries at most {S.MAX_SENSORS} sensors")
+        if not 1 <= min_rate_hz <= rate_hz <= max_rate_hz <= 0xFFFF:
+            raise ValueError(
+                f"need 1 <= min_rate_hz <= rate_hz <= max_rate_hz <= 65535, got "
+                f"{min_rate_hz}, {rate_hz}, {max_rate_hz}")
+        self.limb = limb
+        self.min_rate_hz, self.max_rate_hz = int(min_rate_hz), int(max_rate_hz)
+        self.rate_hz = int(rate_hz)
+        self.serial = int(serial)
+        self.present_mask = (1 << limb.n_sensors) - 1
+        self.active_mask = self.present_mask
+        self.streaming = False
+        self.samples_sent = 0
+        self.samples_skipped = 0
+        self.commands_received = 0
+        self.frames_rejected = 0
+        super().__init__(clock)
+        self._t0 = clock()
+        self._decoder = S.StreamDecoder(track_sequence=False)
+        self._tx_seq = 0
+        self._next_sample: float | None = None  # device time (s) of the next sample slot
+        self._grid_base = 0.0  # device time of sample 0 of the current rate
+        self._grid_k = 0
+        self._start()
+
+    def device_time_us(self, now: float | None = None) -> int:
+        """The device clock, microseconds since the simulator started (not wrapped)."""
+        return round(((self._clock() if now is None else now) - self._t0) * 1e6)
+
+    def _seq(self) -> int:
+        seq = self._tx_seq
+        self._tx_seq = (seq + 1) & 0xFFFF
+        return seq
+
+    def identity(self) -> S.Identity:
+        """What IDENTIFY reports now."""
+        return S.Identity(
+            protocol_major=S.PROTOCOL_MAJOR, protocol_minor=S.PROTOCOL_MINOR,
+            firmware_version=self.FIRMWARE_VERSION, serial=self.serial,
+            max_sensors=S.MAX_SENSORS, streaming=self.streaming,
+            present_mask=self.present_mask, active_mask=self.active_mask,
+            rate_hz=self.rate_hz, min_rate_hz=self.min_rate_hz, max_rate_hz=self.max_rate_hz,
+        )
+
+    # protocol -----------------------------------------------------------------------------
+    def _on_bytes(self, data: bytes, now: float) -> None:
+        self._decoder.feed(data)
+        while True:
+            try:
+                frame = self._decoder.next()
+            except PacketError as err:
+                # CRC was good, so the header is trustworthy: refuse by name
+                self.frames_rejected += 1
+                seq, ftype = getattr(err, "seq", None), getattr(err, "frame_type", None)
+                if seq is not None and ftype is not None:
+                    code = getattr(err, "code", S.ErrorCode.BAD_LENGTH)
+                    self._send(S.encode_nak(self._seq(), seq, ftype, code))
+                continue
+            except (FramingError, ChecksumError):
+                self.frames_rejected += 1  # nothing trustworthy to answer to
+                continue
+            if frame is None:
+                return
+            self.commands_received += 1
+            self._command(frame, now)
+
+    def _command(self, frame, now: float) -> None:
+        if not isinstance(frame, S.Command):
+            ftype = frame.type if isinstance(frame, S.UnknownFrame) else _frame_type(frame)
+            self._send(S.encode_nak(self._seq(), frame.seq, ftype, S.ErrorCode.UNKNOWN_COMMAND))
+            return
+        cmd, value = frame.command, frame.value
+        nak = None
+        data = b""
+        if cmd == S.CommandType.IDENTIFY:
+            data = S.encode_identity(self.identity())
+        elif cmd == S.CommandType.START:
+            if not self.streaming:
+                self.streaming = True
+                self._grid_base, self._grid_k = now - self._t0, 0
+                self._next_sample = self._grid_base
+        elif cmd == S.CommandType.STOP:
+            self.streaming = False
+            self._next_sample = None
+        elif cmd == S.CommandType.SET_RATE:
+            assert value is not None
+            if self.min_rate_hz <= value <= self.max_rate_hz:
+                self.rate_hz = value
+                if self._next_sample is not None:
+                    self._grid_base, self._grid_k = self._next_sample, 0
+            else:
+                nak = S.ErrorCode.BAD_ARGUMENT
+        elif cmd == S.CommandType.SET_SENSORS:
+            assert value is not None
+            if value == 0 or value & ~self.present_mask:
+                nak = S.ErrorCode.BAD_ARGUMENT
+            else:
+                self.active_mask = value
+        if nak is None:
+            self._send(S.encode_ack(self._seq(), frame.seq, cmd, data))
+        else:
+            self._send(S.encode_nak(self._seq(), frame.seq, cmd, nak))
+
+    def _timer_deadline(self) -> float | None:
+        if self._next_sample is None:
+            return None
+        return self._t0 + self._next_sample
+
+    def _on_timer(self, now: float) -> None:
+        if self._next_sample is None:
+            return
+        t_now = now - self._t0
+        rate = self.rate_hz
+        if t_now - self._next_sample > 0.1:  # fell far behind: skip, as firmware would
+            missed = int((t_now - self._next_sample) * rate)
+            self.samples_skipped += missed
+            self._grid_k += missed
+            self._next_sample = self._grid_base + self._grid_k / rate
+        active = [i for i in range(self.limb.n_sensors) if self.active_mask >> i & 1]
+        out = bytearray()
+        while self._next_sample <= t_now:
+            t = self._next_sample
+            m = self.limb.measure(t)
+            readings = [
+                (i, int(m.calibration[i]), 0, m.quaternions[i].tolist()) for i in active
+            ]
+            out += S.encode_sample(self._seq(), round(t * 1e6), readings)
+            self.samples_sent += 1
+            self._grid_k += 1
+            self._next_sample = self._grid_base + self._grid_k / rate
+        if out:
+            self._send(bytes(out))
+
+
+def _frame_type(frame) -> int:
+    if isinstance(frame, S.Sample):
+        return S.FrameType.SAMPLE
+    if isinstance(frame, S.Ack):
+        return S.FrameType.ACK
+    return S.FrameType.NAK

@@ -1,0 +1,515 @@
+"""A simulated human shoulder carrying orientation sensors: ground truth plus a sensor error model.
+
+Frames and quaternions (scalar-first, Hamilton, conventions of :mod:`models.quaternion`)
+---------------------------------------------------------------------------------------
+- **world** — the sensors' earth frame (BNO055 fusion output): Z up, heading from magnetic north.
+- **thorax** — the parent segment. ``thorax(t)`` is the thorax relative to world: a fixed
+  ``world_from_thorax`` (default: heading 35°, and a 90° pitch so that the limb axis +X hangs
+  down at the identity joint orientation) times a slow postural sway of ±``sway_deg``.
+- **limb** — the upper arm, long axis +X. ``joint(t)`` is the limb relative to the thorax: the
+  ground truth that calibration must recover.
+- **sensor i** — strapped on the thorax (``segment="thorax"``) or the limb with a fixed mounting
+  rotation ``mount`` (sensor relative to segment). Its true orientation relative to world is::
+
+      q_world_sensor = thorax(t) ⊗ [joint(t) ⊗] mount
+
+Motion
+------
+The swing direction is a 2-D excursion ``s(t)`` in the tangent plane at the centre ``c`` of the
+range of motion (exponential map: ``d = cos|s| c + sin|s| ŝ``), the twist ``φ(t)`` an excursion
+about the middle of the twist range; both are sums of sinusoids with seeded random frequencies
+(0.03-0.3 Hz) and phases, so the motion is smooth, closed-form and evaluable at any time. Each
+axis's RMS is ``excursion`` times the reach of the range (cone radius, or the largest
+centre-to-vertex angle of a polygon; half the twist range), so with ``excursion = 1`` about a third
+of the time the raw motion lies outside the range; ``range_.project`` then puts it on the nearest
+boundary point, and the limb slides **along the limit** — the motion a boundary recording needs.
+
+``range_`` is anything with ``project(q: (N, 4)) -> (N, 4)``: a
+:class:`models.oracle.ConstraintOracle` (:meth:`SimulatedLimb.from_constraint`), or the
+self-contained :class:`ConeRange` used when no constraint file is given.
+
+Sensor errors (per sensor, :class:`NoiseModel`)
+-----------------------------------------------
+``q_measured = E_world(t) ⊗ q_world_sensor(t) ⊗ exp(n)``, quantised by the protocol, with
+
+- ``n ~ N(0, white_deg²)`` per axis, sensor frame, independent per sample;
+- ``E_world = exp(e(t) + h(t) ẑ)``: ``e`` an Ornstein-Uhlenbeck process (gyro-bias drift that the
+  fusion keeps bounded: heading std ``drift_heading_deg``, tilt std ``drift_tilt_deg``,
+  correlation time ``drift_time_s``), exact discretisation ``e ← a e + √(1-a²) σ ξ``,
+  ``a = exp(-Δt/τ)``; ``h`` the sum of magnetic disturbances: Poisson events (rate
+  ``disturbance_rate_hz``) of peak ``N(0, disturbance_deg²)`` shaped ``sin²(π u)`` over
+  ``u ∈ [0, 1]`` of a duration uniform in ``disturbance_duration_s``;
+- the gyroscope reads the true sensor-frame angular rate plus a constant bias
+  ``N(0, gyro_bias_dps²)`` and white noise ``N(0, gyro_noise_dps²)``;
+- the calibration status (``CALIB_STAT`` byte) rises from 0 to 3 per component at seeded times
+  spread over ``calibration_time_s``; during a disturbance of more than 3° the magnetometer
+  (and so the system) status drops to 1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from models import quaternion as Q
+
+__all__ = [
+    "ConeRange",
+    "LimbState",
+    "Measurement",
+    "NoiseModel",
+    "RangeOfMotion",
+    "SensorMount",
+    "SimulatedLimb",
+    "default_mounts",
+]
+
+_Z = np.array([0.0, 0.0, 1.0])
+_Y = np.array([0.0, 1.0, 0.0])
+
+
+class RangeOfMotion(Protocol):
+    """What the limb needs of a joint range: the nearest valid orientation."""
+
+    def project(self, q: np.ndarray) -> np.ndarray:  # pragma: no cover - protocol
+        """Nearest valid orientations, ``(N, 4) -> (N, 4)``, limb relative to thorax."""
+        ...
+
+
+def _exp_map(rotvec: np.ndarray) -> np.ndarray:
+    """Quaternion of rotation vectors ``(..., 3)`` (radians, axis × angle)."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    theta = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    half = 0.5 * theta
+    # sin(θ/2)/θ, with its limit 1/2 at θ = 0
+    k = np.where(theta > 1e-12, np.sin(half) / np.where(theta > 1e-12, theta, 1.0), 0.5)
+    return np.concatenate((np.cos(half), k * rotvec), axis=-1)
+
+
+def _tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    u = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
+    u /= np.linalg.norm(u)
+    return u, np.cross(c, u)
+
+
+@dataclass(frozen=True)
+class ConeRange:
+    """A cone swing limit and a twist interval, with an exact ``project``.
+
+    Parameters
+    ----------
+    centre : (3,) array_like
+        Cone axis in the thorax frame (normalised).
+    radius_deg : float
+        Cone half-angle, degrees, in (0, 180).
+    twist_deg : (float, float)
+        Twist interval about the limb axis, degrees.
+    limb_axis : (3,) array_like
+        Limb long axis in the limb frame.
+    """
+
+    centre: Sequence[float] = (1.0, 0.0, 0.0)
+    radius_deg: float = 60.0
+    twist_deg: tuple[float, float] = (-45.0, 45.0)
+    limb_axis: Sequence[float] = (1.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.radius_deg < 180.0:
+            raise ValueError(f"radius_deg must be in (0, 180), got {self.radius_deg}")
+        lo, hi = self.twist_deg
+        if not -180.0 <= lo <= hi <= 180.0:
+            raise ValueError(f"twist_deg must satisfy -180 <= min <= max <= 180, got {lo}, {hi}")
+
+    def project(self, q: np.ndarray) -> np.ndarray:
+        """Nearest orientation inside the cone and twist interval; ``(N, 4) -> (N, 4)``."""
+        q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+        a = Q.check_vectors(self.limb_axis)
+        c = Q.check_vectors(self.centre)
+        d = Q.rotate(q, a)
+        theta = Q.angle_between(d, c)
+        r = math.radians(self.radius_deg)
+        out = q.copy()
+        far = theta > r
+        if far.any():
+            # rotate d about c × d back onto the cone: the great-circle move to the boundary
+            axis = np.cross(c, d[far])
+            n = np.linalg.norm(axis, axis=1, keepdims=True)
+            axis = np.where(n > 1e-12, axis / np.where(n > 1e-12, n, 1.0), _tangent_basis(c)[0])
+            delta = Q.from_axis_angle(axis, r - theta[far])
+            out[far] = Q.multiply(delta, q[far])
+        phi = Q.twist_angle(out, a)
+        lo, hi = (math.radians(v) for v in self.twist_deg)
+        clamped = np.clip(phi, lo, hi)
+        fix = clamped != phi
+        if fix.any():
+            out[fix] = Q.multiply(out[fix], Q.from_axis_angle(a, clamped[fix] - phi[fix]))
+        return out
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Sensor error parameters (see the module docstring). Angles in degrees, times in seconds."""
+
+    white_deg: float = 0.3
+    drift_heading_deg: float = 2.0
+    drift_tilt_deg: float = 0.3
+    drift_time_s: float = 30.0
+    disturbance_rate_hz: float = 1.0 / 30.0
+    disturbance_deg: float = 8.0
+    disturbance_duration_s: tuple[float, float] = (1.0, 4.0)
+    gyro_bias_dps: float = 0.2
+    gyro_noise_dps: float = 0.1
+    calibration_time_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("white_deg", "drift_heading_deg", "drift_tilt_deg", "disturbance_rate_hz",
+                     "disturbance_deg", "gyro_bias_dps", "gyro_noise_dps", "calibration_time_s"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if not self.drift_time_s > 0.0:
+            raise ValueError(f"drift_time_s must be > 0, got {self.drift_time_s!r}")
+        lo, hi = self.disturbance_duration_s
+        if not 0.0 < lo <= hi:
+            raise ValueError(f"disturbance_duration_s must be 0 < min <= max, got {lo}, {hi}")
+
+    @classmethod
+    def ideal(cls) -> NoiseModel:
+        """No errors at all, calibrated from the start: measured == truth (up to quantisation)."""
+        return cls(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
+                   disturbance_rate_hz=0.0, gyro_bias_dps=0.0, gyro_noise_dps=0.0,
+                   calibration_time_s=0.0)
+
+
+@dataclass(frozen=True)
+class SensorMount:
+    """Where a sensor sits: ``segment`` is ``"thorax"`` or ``"limb"``; ``mount`` (4,) is the
+    sensor frame relative to the segment frame."""
+
+    segment: str
+    mount: tuple[float, float, float, float]
+
+    def __post_init__(self) -> None:
+        if self.segment not in ("thorax", "limb"):
+            raise ValueError(f"segment must be 'thorax' or 'limb', got {self.segment!r}")
+
+
+def default_mounts(n: int, rng: np.random.Generator) -> list[SensorMount]:
+    """Sensor 0 on the thorax, sensor 1 on the limb's lateral side, further limb sensors at
+    seeded random mountings (all different from the identity, as straps are in practice)."""
+    if n < 1:
+        raise ValueError(f"need at least one sensor, got {n}")
+    mounts = [SensorMount("thorax", tuple(Q.from_axis_angle(_Z, math.radians(-90.0))))]
+    tilt = Q.multiply(Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), math.radians(90.0)),
+                      Q.from_axis_angle(_Y, math.radians(7.0)))
+    mounts.append(SensorMount("limb", tuple(tilt)))
+    for q in Q.random_quaternions(max(0, n - 2), rng):
+        mounts.append(SensorMount("limb", tuple(Q.canonical(q))))
+    return mounts[:n]
+
+
+@dataclass(frozen=True)
+class LimbState:
+    """Ground truth at times ``t`` (N,).
+
+    Attributes
+    ----------
+    t : (N,) float64, seconds since the simulation started
+    joint : (N, 4) float64, limb relative to thorax
+    thorax : (N, 4) float64, thorax relative to world
+    sensors : (N, S, 4) float64, each sensor relative to world (error-free)
+    """
+
+    t: np.ndarray
+    joint: np.ndarray
+    thorax: np.ndarray
+    sensors: np.ndarray
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """What the sensors report at one instant ``t`` (seconds).
+
+    Attributes
+    ----------
+    quaternions : (S, 4) float64, unit, sensor relative to world, with errors
+    gyro : (S, 3) float64, rad/s, sensor frame
+    calibration : (S,) int, ``CALIB_STAT`` bytes
+    truth : LimbState with N = 1
+    """
+
+    t: float
+    quaternions: np.ndarray
+    gyro: np.ndarray
+    calibration: np.ndarray
+    truth: LimbState
+
+
+@dataclass
+class _SensorErrors:
+    drift: np.ndarray  # (3,) rad, world frame
+    bias: np.ndarray  # (3,) rad/s
+    calib_times: np.ndarray  # (3,) s, full calibration of gyr, acc, mag
+    events: list[tuple[float, float, float]] = field(default_factory=list)  # start, dur, peak
+    next_event: float = math.inf
+
+
+class SimulatedLimb:
+    """Shoulder motion, sensor placement and sensor errors; seeded and reproducible.
+
+    Parameters
+    ----------
+    range_ : RangeOfMotion, optional
+        Joint range; default ``ConeRange()`` (60° cone about +X, twist ±45°).
+    centre : (3,) array_like, optional
+        Centre of the motion (thorax frame); default: the cone centre / polygon interior of
+        ``range_`` when it has one, else the limb axis.
+    reach_deg : float, optional
+        Angular reach of the range from ``centre``; default from ``range_`` or 60°.
+    twist_deg : (float, float), optional
+        Twist interval the motion explores; default from ``range_`` or (-45, 45).
+    excursion : float
+        RMS of the raw motion relative to the reach (1.0: outside the range ~1/3 of the time).
+    speed : float
+        Multiplies all motion frequencies (1.0: 0.03-0.3 Hz components).
+    sensors : int or sequence of SensorMount
+        Number of sensors (placed by :func:`default_mounts`) or explicit mountings.
+    noise : NoiseModel
+    world_from_thorax : (4,) array_like, optional
+        Fixed part of the thorax orientation relative to world.
+    sway_deg : float
+        Amplitude of the thorax's postural sway.
+    seed : int or numpy Generator
+        Seeds motion, mountings and errors.
+    """
+
+    def __init__(
+        self,
+        range_: RangeOfMotion | None = None,
+        *,
+        centre: Sequence[float] | None = None,
+        reach_deg: float | None = None,
+        twist_deg: tuple[float, float] | None = None,
+        excursion: float = 1.0,
+        speed: float = 1.0,
+        sensors: int | Sequence[SensorMount] = 2,
+        noise: NoiseModel | None = None,
+        world_from_thorax: Sequence[float] | None = None,
+        sway_deg: float = 2.0,
+        seed: int | np.random.Generator | None = 0,
+    ) -> None:
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.range_ = range_ if range_ is not None else ConeRange()
+        self.noise = noise if noise is not None else NoiseModel()
+        if not excursion > 0 or not speed > 0:
+            raise ValueError("excursion and speed must be > 0")
+        axis = getattr(self.range_, "limb_axis", None)
+        if axis is None:
+            axis = getattr(getattr(self.range_, "constraint", None), "limb_axis", Q.LIMB_AXIS)
+        self.limb_axis = Q.check_vectors(axis)
+        c_default, reach_default, twist_default = _describe_range(self.range_)
+        self.centre = Q.check_vectors(centre if centre is not None else
+                                      (c_default if c_default is not None else self.limb_axis))
+        self.reach = math.radians(reach_deg if reach_deg is not None else reach_default)
+        tw = twist_deg if twist_deg is not None else twist_default
+        self.twist_centre = math.radians(0.5 * (tw[0] + tw[1]))
+        self.twist_half = math.radians(max(0.5 * (tw[1] - tw[0]), 5.0))
+        self.excursion = float(excursion)
+        self._u, self._v = _tangent_basis(self.centre)
+        # (axis, component) sinusoids: swing u, swing v, twist, sway x, sway y
+        self._freq = rng.uniform(0.03, 0.3, size=(5, 4)) * speed
+        self._phase = rng.uniform(0.0, 2.0 * math.pi, size=(5, 4))
+        w = rng.uniform(0.5, 1.0, size=(5, 4))
+        # RMS of Σ a sin(...) is sqrt(Σ a²/2): scale so every axis has unit RMS
+        self._amp = w * np.sqrt(2.0 / np.sum(w**2, axis=1, keepdims=True))
+        self._sway = math.radians(sway_deg)
+        if world_from_thorax is None:
+            world_from_thorax = Q.multiply(Q.from_axis_angle(_Z, math.radians(35.0)),
+                                           Q.from_axis_angle(_Y, math.radians(90.0)))
+        self.world_from_thorax = Q.check_quaternions(world_from_thorax, name="world_from_thorax")
+        self.mounts = (default_mounts(sensors, rng) if isinstance(sensors, int)
+                       else list(sensors))
+        if not self.mounts:
+            raise ValueError("need at least one sensor")
+        self._mount_q = Q.check_quaternions(np.array([m.mount for m in self.mounts]),
+                                            normalize=True, name="mount")
+        self._on_limb = np.array([m.segment == "limb" for m in self.mounts])
+        self._rng = rng
+        self._last_t: float | None = None
+        nz = self.noise
+        self._errors = []
+        for _ in self.mounts:
+            e = _SensorErrors(
+                drift=rng.standard_normal(3) * np.radians(
+                    [nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg]),
+                bias=rng.standard_normal(3) * math.radians(nz.gyro_bias_dps),
+                calib_times=nz.calibration_time_s * rng.uniform(0.2, 1.0, size=3),
+            )
+            e.next_event = self._draw_event_gap()
+            self._errors.append(e)
+
+    @classmethod
+    def from_constraint(cls, constraint, **kwargs) -> SimulatedLimb:
+        """A limb whose range of motion is a :class:`models.constraint.JointConstraint`
+        (projected with :class:`models.oracle.ConstraintOracle`)."""
+        from models.oracle import ConstraintOracle
+
+        return cls(_OracleRange(ConstraintOracle(constraint), constraint), **kwargs)
+
+    @property
+    def n_sensors(self) -> int:
+        return len(self.mounts)
+
+    # -- ground truth ---------------------------------------------------------------------
+    def _series(self, row: int, t: np.ndarray) -> np.ndarray:
+        arg = 2.0 * math.pi * self._freq[row] * t[:, None] + self._phase[row]
+        return np.sin(arg) @ self._amp[row]
+
+    def raw_joint(self, t) -> np.ndarray:
+        """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds, before projection."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        sigma = self.excursion * self.reach / math.sqrt(2.0)
+        su = sigma * self._series(0, t)
+        sv = sigma * self._series(1, t)
+        ang = np.hypot(su, sv)
+        safe = np.where(ang > 1e-12, ang, 1.0)
+        dirn = (su[:, None] * self._u + sv[:, None] * self._v) / safe[:, None]
+        d = np.cos(ang)[:, None] * self.centre + np.sin(ang)[:, None] * dirn
+        swing = Q.from_two_vectors(self.limb_axis, d)
+        phi = self.twist_centre + self.excursion * self.twist_half * self._series(2, t)
+        return Q.multiply(swing, Q.from_axis_angle(self.limb_axis, phi))
+
+    def joint(self, t) -> np.ndarray:
+        """Joint orientation (N, 4), limb relative to thorax, inside the range of motion."""
+        q = np.asarray(self.range_.project(self.raw_joint(t)), dtype=np.float64).reshape(-1, 4)
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+    def thorax(self, t) -> np.ndarray:
+        """Thorax relative to world (N, 4) at times ``t`` (N,)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        sway = np.stack((self._sway * self._series(3, t), self._sway * self._series(4, t),
+                         np.zeros_like(t)), axis=-1)
+        return Q.multiply(self.world_from_thorax, _exp_map(sway))
+
+    def truth(self, t) -> LimbState:
+        """Error-free state at times ``t`` (scalar or (N,), seconds)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        joint = self.joint(t)
+        thorax = self.thorax(t)
+        segment = np.where(self._on_limb[None, :, None], Q.multiply(thorax, joint)[:, None, :],
+                           thorax[:, None, :])
+        sensors = Q.multiply(segment, self._mount_q[None, :, :])
+        return LimbState(t=t, joint=joint, thorax=thorax, sensors=sensors)
+
+    # -- measurements ---------------------------------------------------------------------
+    def _draw_event_gap(self) -> float:
+        rate = self.noise.disturbance_rate_hz
+        return float(self._rng.exponential(1.0 / rate)) if rate > 0 else math.inf
+
+    def measure(self, t: float, calibration_elapsed_s: float | None = None) -> Measurement:
+        """Sensor outputs at time ``t`` (seconds; calls must not go back in time).
+
+        Parameters
+        ----------
+        t : float
+            Simulation time, seconds.
+        calibration_elapsed_s : float, optional
+            Time the sensors have been fusing (calibration progress); default ``t``.
+        """
+        t = float(t)
+        if self._last_t is not None and t < self._last_t:
+            raise ValueError(f"measure() went back in time: {t} < {self._last_t}")
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        self._last_t = t
+        nz = self.noise
+        ts = np.array([t, t + 1e-3])
+        truth = self.truth(ts)
+        q_true = truth.sensors[0]
+        # sensor-frame angular rate from q(t)* ⊗ q(t + 1 ms)
+        rel = Q.multiply(Q.conjugate(q_true), truth.sensors[1])
+        rel *= np.where(rel[:, :1] < 0, -1.0, 1.0)
+        gyro = 2.0 * rel[:, 1:] / 1e-3
+        elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
+        s = self.n_sensors
+        out_q = np.empty((s, 4))
+        calib = np.empty(s, dtype=np.int64)
+        a = math.exp(-dt / nz.drift_time_s)
+        sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
+        rng = self._rng
+        for i, err in enumerate(self._errors):
+            if dt > 0:
+                err.drift = a * err.drift + math.sqrt(1.0 - a * a) * sig * rng.standard_normal(3)
+            heading = self._disturbance(err, t)
+            e_world = _exp_map(err.drift + heading * _Z)
+            white = _exp_map(rng.standard_normal(3) * math.radians(nz.white_deg))
+            q = Q.multiply(Q.multiply(e_world, q_true[i]), white)
+            out_q[i] = Q.canonical(q / np.linalg.norm(q))
+            gyro[i] += err.bias + rng.standard_normal(3) * math.radians(nz.gyro_noise_dps)
+            calib[i] = _calibration_byte(err.calib_times, elapsed, abs(heading) > math.radians(3))
+        return Measurement(t=t, quaternions=out_q, gyro=gyro, calibration=calib,
+                           truth=LimbState(truth.t[:1], truth.joint[:1], truth.thorax[:1],
+                                           truth.sensors[:1]))
+
+    def _disturbance(self, err: _SensorErrors, t: float) -> float:
+        nz = self.noise
+        while err.next_event <= t:
+            dur = float(self._rng.uniform(*nz.disturbance_duration_s))
+            peak = float(self._rng.standard_normal()) * math.radians(nz.disturbance_deg)
+            err.events.append((err.next_event, dur, peak))
+            err.next_event += self._draw_event_gap()
+        total = 0.0
+        keep = []
+        for start, dur, peak in err.events:
+            u = (t - start) / dur
+            if u < 1.0:
+                keep.append((start, dur, peak))
+                if u >= 0.0:
+                    total += peak * math.sin(math.pi * u) ** 2
+        err.events = keep
+        return total
+
+
+def _calibration_byte(times: np.ndarray, elapsed: float, disturbed: bool) -> int:
+    levels = []
+    for tc in times:
+        levels.append(3 if tc <= 0 else min(3, int(4.0 * elapsed / tc)))
+    gyr, acc, mag = levels
+    if disturbed:
+        mag = min(mag, 1)
+    system = min(gyr, acc, mag)
+    return (system << 6) | (gyr << 4) | (acc << 2) | mag
+
+
+def _describe_range(range_) -> tuple[np.ndarray | None, float, tuple[float, float]]:
+    """Centre, reach (deg) and twist interval (deg) of a range, from whatever it exposes."""
+    if isinstance(range_, ConeRange):
+        return np.asarray(range_.centre, float), range_.radius_deg, tuple(range_.twist_deg)
+    constraint = getattr(range_, "constraint", None)
+    centre, reach, twist = None, 60.0, (-45.0, 45.0)
+    if constraint is not None:
+        swing = getattr(constraint, "swing", None)
+        if getattr(swing, "radius_deg", None) is not None:
+            centre, reach = np.asarray(swing.centre, float), float(swing.radius_deg)
+        elif getattr(swing, "interior", None) is not None:
+            centre = Q.check_vectors(swing.interior)
+            verts = Q.check_vectors(swing.vertices)
+            reach = float(np.degrees(np.max(Q.angle_between(verts, centre))))
+        tw = getattr(constraint, "twist", None)
+        if tw is not None:
+            twist = (float(tw.min_deg), float(tw.max_deg))
+    return centre, reach, twist
+
+
+class _OracleRange:
+    """Adapts a :class:`models.oracle.ConstraintOracle` (keeps the constraint for its extents)."""
+
+    def __init__(self, oracle, constraint) -> None:
+        self.oracle = oracle
+        self.constraint = constraint
+        self.limb_axis = np.asarray(constraint.limb_axis, dtype=np.float64)
+
+    def project(self, q: np.ndarray) -> np.ndarray:
+        return self.oracle.project(q, normalize=True)
