@@ -471,6 +471,7 @@ class _PolygonSolver:
     #: finest grid and the candidate count below which refining stops paying
     MAX_GRID = 128
     TARGET_CANDIDATES = 6.0
+    MAX_BUILD_PAIRS = 4_000_000
 
     def _cell_index(self, p: np.ndarray, G: int | None = None) -> np.ndarray:
         G = self.G if G is None else G
@@ -495,7 +496,11 @@ class _PolygonSolver:
         while True:
             ptr, edges = self._refine(G, ptr, edges)
             mean = (ptr[-1]) / (len(ptr) - 1)
-            if G >= self.MAX_GRID or mean <= self.TARGET_CANDIDATES or G * 2 * G * 2 * 6 > 4e5:
+            if (
+                G >= self.MAX_GRID
+                or mean <= self.TARGET_CANDIDATES
+                or 4 * len(edges) > self.MAX_BUILD_PAIRS  # the next level would cost too much
+            ):
                 break
             # subdivide: child (i, j) at 2G inherits the list of parent (i // 2, j // 2) at G
             G2 = 2 * G
