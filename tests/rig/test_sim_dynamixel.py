@@ -1,0 +1,506 @@
+"""The simulated servo chain, driven by the official ROBOTIS ``dynamixel_sdk`` unchanged.
+
+Tests synchronise on replies (every SDK call blocks until the status packet or its timeout);
+nothing here sleeps. Motion tests use a manual clock so positions are exact.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import dynamixel_sdk.port_handler
+import pytest
+from dynamixel_sdk import (
+    COMM_RX_CORRUPT,
+    COMM_RX_TIMEOUT,
+    COMM_SUCCESS,
+    GroupBulkRead,
+    GroupBulkWrite,
+    GroupSyncRead,
+    GroupSyncWrite,
+    PacketHandler,
+    PortHandler,
+)
+
+from firmware_protocol.dynamixel import ErrorCode, instructions
+from rig.errors import RigConfigError
+from rig.sim.dynamixel import ACCEL_UNIT, VELOCITY_UNIT, start_servo_bus
+
+# X-series control table addresses (e-Manual)
+RETURN_DELAY, OPERATING_MODE, MAX_POS, MIN_POS = 9, 11, 48, 52
+TORQUE, LED, SRL, HW_ERROR = 64, 65, 68, 70
+POS_P_GAIN, GOAL_VELOCITY, PROFILE_ACC, PROFILE_VEL = 84, 104, 108, 112
+GOAL_POS, MOVING, PRESENT_POS, PRESENT_TEMP = 116, 122, 132, 146
+
+ALERT = 0x80
+
+
+class ManualClock:
+    """Simulated time that only moves when the test says so."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def le(value: int, size: int) -> list[int]:
+    return list((value & ((1 << 8 * size) - 1)).to_bytes(size, "little"))
+
+
+def signed32(value: int) -> int:
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+@pytest.fixture(autouse=True)
+def tolerant_sdk_timeouts(monkeypatch):
+    """Packet timeout ~100 ms instead of ~34 ms: the suite shares a loaded 2-CPU machine.
+
+    ``LATENCY_TIMER`` is the SDK's knob for the USB adapter's latency (16 ms by default);
+    replies that should come are not then lost to scheduling jitter, and timeout tests stay
+    quick.
+    """
+    monkeypatch.setattr(dynamixel_sdk.port_handler, "LATENCY_TIMER", 50)
+
+
+@pytest.fixture
+def clock():
+    return ManualClock()
+
+
+@pytest.fixture
+def bus(clock):
+    with start_servo_bus([1, 2, 3], "XM430-W350", return_delay_us=0, clock=clock) as b:
+        yield b
+
+
+@pytest.fixture
+def sdk(bus):
+    port = PortHandler(bus.port)
+    assert port.openPort()
+    yield port, PacketHandler(2.0)
+    port.closePort()
+
+
+# ---------------------------------------------------------------------------- basics
+
+
+def test_port_is_a_pty_and_close_is_idempotent():
+    bus = start_servo_bus([1])
+    assert bus.port.startswith("/dev/pts/")
+    bus.close()
+    bus.close()
+    assert bus.closed
+
+
+def test_ping_reports_model_numbers_of_a_mixed_chain():
+    with start_servo_bus([(1, "XM430-W350"), (2, "XL430-W250"), (3, "XC330-M288")]) as bus:
+        port = PortHandler(bus.port)
+        assert port.openPort()
+        try:
+            ph = PacketHandler(2.0)
+            assert ph.ping(port, 1) == (1020, COMM_SUCCESS, 0)
+            assert ph.ping(port, 2) == (1060, COMM_SUCCESS, 0)
+            assert ph.ping(port, 3) == (1240, COMM_SUCCESS, 0)
+            assert ph.ping(port, 4)[1] == COMM_RX_TIMEOUT
+        finally:
+            port.closePort()
+
+
+def test_broadcast_ping(sdk):
+    port, ph = sdk
+    found, result = ph.broadcastPing(port)
+    assert result == COMM_SUCCESS
+    assert found == {1: [1020, 48], 2: [1020, 48], 3: [1020, 48]}
+
+
+def test_read_write_1_2_4_byte_items(sdk):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 2, LED, 1) == (COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 2, LED) == (1, COMM_SUCCESS, 0)
+    assert ph.write2ByteTxRx(port, 2, POS_P_GAIN, 1234) == (COMM_SUCCESS, 0)
+    assert ph.read2ByteTxRx(port, 2, POS_P_GAIN) == (1234, COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 2, PROFILE_VEL, 300) == (COMM_SUCCESS, 0)
+    assert ph.read4ByteTxRx(port, 2, PROFILE_VEL) == (300, COMM_SUCCESS, 0)
+    assert ph.read2ByteTxRx(port, 2, 0) == (1020, COMM_SUCCESS, 0)  # model number
+    # the other servos are untouched
+    assert ph.read1ByteTxRx(port, 1, LED) == (0, COMM_SUCCESS, 0)
+
+
+def test_sync_read_and_sync_write_three_servos(sdk, bus, clock):
+    port, ph = sdk
+    for i in (1, 2, 3):
+        assert ph.write1ByteTxRx(port, i, TORQUE, 1) == (COMM_SUCCESS, 0)
+    writer = GroupSyncWrite(port, ph, GOAL_POS, 4)
+    for i, goal in zip((1, 2, 3), (1000, 2000, 3000), strict=True):
+        assert writer.addParam(i, le(goal, 4))
+    assert writer.txPacket() == COMM_SUCCESS
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS  # a broadcast has no reply: sync on a ping
+    clock.t += 10.0
+    reader = GroupSyncRead(port, ph, PRESENT_POS, 4)
+    for i in (1, 2, 3):
+        assert reader.addParam(i)
+    assert reader.txRxPacket() == COMM_SUCCESS
+    assert [reader.getData(i, PRESENT_POS, 4) for i in (1, 2, 3)] == [1000, 2000, 3000]
+    # fast sync read: one status packet for all three
+    clock.t += 1.0
+    assert reader.fastSyncRead() == COMM_SUCCESS
+    assert [reader.getData(i, PRESENT_POS, 4) for i in (1, 2, 3)] == [1000, 2000, 3000]
+
+
+def test_bulk_read_and_bulk_write(sdk):
+    port, ph = sdk
+    writer = GroupBulkWrite(port, ph)
+    assert writer.addParam(1, LED, 1, [1])
+    assert writer.addParam(2, PROFILE_VEL, 4, le(77, 4))
+    assert writer.addParam(3, POS_P_GAIN, 2, le(900, 2))
+    assert writer.txPacket() == COMM_SUCCESS
+    reader = GroupBulkRead(port, ph)
+    assert reader.addParam(1, LED, 1)
+    assert reader.addParam(2, PROFILE_VEL, 4)
+    assert reader.addParam(3, POS_P_GAIN, 2)
+    assert reader.txRxPacket() == COMM_SUCCESS
+    assert reader.getData(1, LED, 1) == 1
+    assert reader.getData(2, PROFILE_VEL, 4) == 77
+    assert reader.getData(3, POS_P_GAIN, 2) == 900
+    assert reader.fastBulkRead() == COMM_SUCCESS
+    assert reader.getData(2, PROFILE_VEL, 4) == 77
+    assert reader.getData(3, POS_P_GAIN, 2) == 900
+
+
+def test_reg_write_then_action(sdk):
+    port, ph = sdk
+    assert ph.regWriteTxRx(port, 1, LED, 1, [1]) == (COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 1, LED)[0] == 0
+    assert ph.read1ByteTxRx(port, 1, 69)[0] == 1  # Registered Instruction
+    assert ph.action(port, 1) == COMM_SUCCESS
+    assert ph.read1ByteTxRx(port, 1, LED)[0] == 1
+    # ACTION without a registered write: instruction error (the SDK's action() never reads
+    # the status, so receive it with the SDK's own rxPacket)
+    port.clearPort()
+    port.writePort(instructions.action(1).encode())
+    port.setPacketTimeout(11)
+    reply, result = ph.rxPacket(port, False)
+    assert result == COMM_SUCCESS and reply[8] == ErrorCode.INSTRUCTION
+
+
+def _raw(packet: bytes) -> list[int]:
+    """An SDK tx buffer for an already-encoded packet (the SDK recomputes header and CRC)."""
+    return list(packet)
+
+
+def test_factory_reset_keeps_id_and_baud_with_option_2(sdk):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 3, RETURN_DELAY, 100) == (COMM_SUCCESS, 0)
+    assert ph.factoryReset(port, 3, 0x02) == (COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 3, RETURN_DELAY) == (250, COMM_SUCCESS, 0)
+
+
+# ---------------------------------------------------------------------------- errors
+
+
+def test_error_codes(sdk):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    # EEPROM while torque is on
+    assert ph.write1ByteTxRx(port, 1, OPERATING_MODE, 4) == (COMM_SUCCESS, ErrorCode.ACCESS)
+    # read-only item
+    assert ph.write4ByteTxRx(port, 1, PRESENT_POS, 5) == (COMM_SUCCESS, ErrorCode.ACCESS)
+    # reserved gap and beyond the table
+    assert ph.write1ByteTxRx(port, 1, 14, 1) == (COMM_SUCCESS, ErrorCode.ACCESS)
+    assert ph.write1ByteTxRx(port, 1, 700, 1) == (COMM_SUCCESS, ErrorCode.ACCESS)
+    assert ph.read4ByteTxRx(port, 1, 700) == (0, COMM_SUCCESS, ErrorCode.ACCESS)
+    # half of a 4-byte item
+    assert ph.write2ByteTxRx(port, 1, GOAL_POS, 5) == (COMM_SUCCESS, ErrorCode.DATA_LENGTH)
+    # value outside the item's range
+    assert ph.write1ByteTxRx(port, 1, SRL, 3) == (COMM_SUCCESS, ErrorCode.DATA_RANGE)
+    # goal beyond its limit (Velocity Limit, default 200)
+    assert ph.write4ByteTxRx(port, 1, GOAL_VELOCITY, 500) == (COMM_SUCCESS, ErrorCode.DATA_LIMIT)
+    # unknown instruction
+    _, result, error = ph.txRxPacket(port, _raw(instructions.InstructionPacket(1, 0x7F).encode()))
+    assert (result, error) == (COMM_SUCCESS, ErrorCode.INSTRUCTION)
+    # nothing was applied
+    assert ph.read1ByteTxRx(port, 1, OPERATING_MODE)[0] == 3
+    # EEPROM is writable once torque is off
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 0) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, OPERATING_MODE, 4) == (COMM_SUCCESS, 0)
+
+
+def test_hardware_error_sets_alert_drops_torque_and_reboot_clears_it(sdk, bus):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
+    bus.raise_hardware_error(2, "overload")
+    value, result, error = ph.read1ByteTxRx(port, 2, HW_ERROR)
+    assert (value, result, error) == (0x20, COMM_SUCCESS, ALERT)  # alert, not a failure
+    assert ph.read1ByteTxRx(port, 2, TORQUE) == (0, COMM_SUCCESS, ALERT)
+    assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, ALERT)
+    assert ph.read1ByteTxRx(port, 2, TORQUE)[0] == 0  # refused until reboot
+    assert ph.ping(port, 1) == (1020, COMM_SUCCESS, 0)  # other servos unaffected
+    assert ph.reboot(port, 2) == (COMM_SUCCESS, ALERT)  # the reply precedes the reboot
+    assert ph.read1ByteTxRx(port, 2, HW_ERROR) == (0, COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
+
+
+def test_overheating_from_temperature(sdk, bus):
+    port, ph = sdk
+    bus.set_temperature(3, 85.0)  # XM430 limit 80 °C
+    assert ph.read1ByteTxRx(port, 3, PRESENT_TEMP) == (85, COMM_SUCCESS, ALERT)
+    assert ph.read1ByteTxRx(port, 3, HW_ERROR)[0] == 0x04
+
+
+def test_status_return_level(sdk):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 1, SRL, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, LED, 1)[0] == COMM_RX_TIMEOUT  # applied, no reply
+    assert ph.read1ByteTxRx(port, 1, LED) == (1, COMM_SUCCESS, 0)
+    ph.write1ByteTxOnly(port, 1, SRL, 0)
+    assert ph.read1ByteTxRx(port, 1, LED)[1] == COMM_RX_TIMEOUT
+    assert ph.ping(port, 1) == (1020, COMM_SUCCESS, 0)
+
+
+# ---------------------------------------------------------------------------- motion
+
+
+def test_trapezoidal_profile(sdk, clock):
+    port, ph = sdk
+    pv, pa = 100, 20  # 0.229 rpm and 214.577 rev/min² units
+    assert ph.write4ByteTxRx(port, 1, PROFILE_ACC, pa) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 1, PROFILE_VEL, pv) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    start, goal = 2048, 3048
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, goal) == (COMM_SUCCESS, 0)
+    v, a = pv * VELOCITY_UNIT, pa * ACCEL_UNIT
+    t_ramp = v / a
+    t_total = (goal - start) / v + t_ramp  # trapezoid: cruise distance / v + one ramp
+
+    def position_after(dt: float) -> int:
+        clock.t += dt
+        value, result, _ = ph.read4ByteTxRx(port, 1, PRESENT_POS)
+        assert result == COMM_SUCCESS
+        return signed32(value)
+
+    half_ramp = position_after(t_ramp / 2)
+    assert half_ramp == pytest.approx(start + 0.5 * a * (t_ramp / 2) ** 2, abs=3)
+    assert ph.read1ByteTxRx(port, 1, MOVING)[0] == 1
+    mid = position_after(t_total / 2 - t_ramp / 2)
+    assert mid == pytest.approx((start + goal) / 2, abs=3)
+    assert position_after(t_total / 2 + 0.05) == goal
+    assert ph.read1ByteTxRx(port, 1, MOVING)[0] == 0
+
+
+def test_goal_is_clamped_to_position_limits(sdk, clock):
+    port, ph = sdk
+    assert ph.write4ByteTxRx(port, 1, MAX_POS, 2500) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 1, MIN_POS, 1500) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 4000) == (COMM_SUCCESS, 0)
+    clock.t += 5.0
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == 2500
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 10) == (COMM_SUCCESS, 0)
+    clock.t += 5.0
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == 1500
+
+
+def test_back_drive_with_torque_off_then_hold(sdk, bus, clock):
+    port, ph = sdk
+    for ticks in (2100, 1500, 900):
+        bus.set_hand(1, ticks)
+        clock.t += 0.1
+        assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == ticks
+    # torque on: the limb holds where the clinician left it
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    bus.set_hand(1, 3000)  # pushing against an energised servo does nothing
+    clock.t += 1.0
+    assert ph.read4ByteTxRx(port, 1, GOAL_POS)[0] == 900
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == 900
+
+
+def test_velocity_mode(sdk, clock):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 2, OPERATING_MODE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 2, GOAL_VELOCITY, 50) == (COMM_SUCCESS, 0)
+    clock.t += 1.0
+    expected = 2048 + 50 * VELOCITY_UNIT
+    assert signed32(ph.read4ByteTxRx(port, 2, PRESENT_POS)[0]) == pytest.approx(expected, abs=2)
+    assert signed32(ph.read4ByteTxRx(port, 2, 128)[0]) == 50  # present velocity
+
+
+def test_encoder_noise_is_seeded():
+    def readings(seed: int) -> list[int]:
+        with start_servo_bus([1], noise_ticks=2.0, seed=seed) as bus:
+            port = PortHandler(bus.port)
+            assert port.openPort()
+            try:
+                ph = PacketHandler(2.0)
+                return [ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] for _ in range(20)]
+            finally:
+                port.closePort()
+
+    first, again, other = readings(7), readings(7), readings(8)
+    assert first == again != other
+    assert len(set(first)) > 1
+    assert all(abs(signed32(v) - 2048) < 12 for v in first)
+
+
+# ---------------------------------------------------------------------------- timing
+
+
+def test_return_delay_time_delays_the_reply():
+    with start_servo_bus([1], return_delay_us=508) as bus:
+        port = PortHandler(bus.port)
+        assert port.openPort()
+        try:
+            ph = PacketHandler(2.0)
+            t0 = port.getCurrentTime()
+            assert ph.ping(port, 1)[1] == COMM_SUCCESS
+            assert port.getCurrentTime() - t0 >= 0.5  # ms: never earlier than the delay
+        finally:
+            port.closePort()
+
+
+def test_servos_only_answer_at_their_baud_rate(sdk):
+    port, ph = sdk
+    assert port.setBaudRate(57600)
+    assert ph.ping(port, 1)[1] == COMM_RX_TIMEOUT
+    assert port.setBaudRate(1_000_000)
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+
+
+# ---------------------------------------------------------------------------- faults
+
+
+def test_dropped_response_is_a_timeout(sdk, bus):
+    port, ph = sdk
+    bus.drop_responses(1)
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[1] == COMM_RX_TIMEOUT
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[1] == COMM_SUCCESS
+
+
+def test_corrupted_crc_is_rx_corrupt(sdk, bus):
+    port, ph = sdk
+    bus.corrupt_responses(1)
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[1] == COMM_RX_CORRUPT
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+
+
+def test_truncated_response_is_rx_corrupt(sdk, bus):
+    port, ph = sdk
+    bus.truncate_responses(keep=9)
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[1] == COMM_RX_CORRUPT
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+
+
+def test_late_response_times_out_and_short_delay_does_not(sdk, bus):
+    port, ph = sdk
+    bus.delay_responses(0.3)  # beyond the SDK's packet timeout
+    assert ph.ping(port, 1)[1] == COMM_RX_TIMEOUT
+    bus.delay_responses(0.005)
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS  # the stale late reply was cancelled
+
+
+def test_unplug_and_replug(sdk, bus):
+    port, ph = sdk
+    bus.unplug([2])
+    reader = GroupSyncRead(port, ph, PRESENT_POS, 4)
+    for i in (1, 2, 3):
+        reader.addParam(i)
+    assert reader.txRxPacket() == COMM_RX_TIMEOUT
+    assert ph.ping(port, 3)[1] == COMM_SUCCESS
+    bus.unplug()
+    assert ph.ping(port, 3)[1] == COMM_RX_TIMEOUT
+    bus.replug()
+    assert reader.txRxPacket() == COMM_SUCCESS
+
+
+def test_adapter_disconnect_fails_the_port_like_a_usb_unplug(bus):
+    port = PortHandler(bus.port)
+    assert port.openPort()
+    ph = PacketHandler(2.0)
+    try:
+        assert ph.ping(port, 1)[1] == COMM_SUCCESS
+        bus.disconnect()
+        with pytest.raises(OSError):  # termios.error / SerialException: EIO
+            try:
+                ph.ping(port, 1)
+            except Exception as err:  # termios.error is not an OSError subclass
+                raise OSError(str(err)) from err
+    finally:
+        port.is_using = False
+        port.closePort()
+    new_port = bus.reconnect()
+    port = PortHandler(new_port)
+    assert port.openPort()
+    try:
+        assert ph.ping(port, 1)[1] == COMM_SUCCESS
+    finally:
+        port.closePort()
+
+
+# ---------------------------------------------------------------------------- configuration
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"ids": [1, 1]}, "distinct"),
+    ({"ids": [300]}, "0..252"),
+    ({"ids": [1], "model": "XQ999"}, "unknown Dynamixel model"),
+    ({"ids": [1], "baud_rate": 12345}, "baud rate"),
+    ({"ids": []}, "at least one"),
+])
+def test_bad_configuration_is_a_config_error(kwargs, match):
+    with pytest.raises(RigConfigError, match=match):
+        start_servo_bus(**kwargs)
+
+
+# ---------------------------------------------------------------------------- CLI
+
+
+def test_cli_prints_port_serves_and_exits_cleanly_on_sigterm():
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
+                             "--model", "XM430-W350", "--baud", "1000000"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    try:
+        port_name = proc.stdout.readline().strip()
+        assert port_name.startswith("/dev/pts/"), proc.stderr.read()
+        port = PortHandler(port_name)
+        assert port.openPort()
+        try:
+            ph = PacketHandler(2.0)
+            assert ph.ping(port, 3) == (1020, COMM_SUCCESS, 0)
+        finally:
+            port.closePort()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
+
+
+@pytest.mark.parametrize("args", [["--model", "XQ999"], ["--ids", "1,x"], ["--ids", "1,1"],
+                                  ["--baud", "12345"]])
+def test_cli_bad_option_is_one_line_error(args):
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(root))
+    done = subprocess.run([sys.executable, "-m", "rig", "sim", "servos", *args],
+                          capture_output=True, text=True, env=env, timeout=30)
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr
+    assert done.stdout == ""
+    assert len([line for line in done.stderr.splitlines() if "rror" in line]) == 1
+
+
+def test_math_sanity_of_units():
+    # 1 unit of Profile Velocity is 0.229 rev/min = 15.63 ticks/s
+    assert math.isclose(VELOCITY_UNIT, 0.229 * 4096 / 60)
