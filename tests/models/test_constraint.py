@@ -1,0 +1,151 @@
+"""Constraint file format: parsing, validation errors that name the field, round trips."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from models.constraint import JointConstraint, dump_constraint, load_constraint, loads_constraint
+from models.errors import ConstraintError
+
+MINIMAL = """
+name: right-shoulder-example
+limb_axis: [1, 0, 0]
+swing:
+  cone: {centre: [1, 0, 0], radius_deg: 45}
+twist: {min_deg: -60, max_deg: 60}
+"""
+
+SQUARE = """
+name: square
+swing:
+  polygon:
+    vertices: [[1, 0.5, 0.5], [1, -0.5, 0.5], [1, -0.5, -0.5], [1, 0.5, -0.5]]
+    interior: [1, 0, 0]
+"""
+
+
+def test_minimal_form_loads():
+    c = loads_constraint(MINIMAL)
+    assert c.name == "right-shoulder-example"
+    assert c.swing.radius_deg == 45
+    assert (c.twist.min_deg, c.twist.max_deg) == (-60, 60)
+    np.testing.assert_array_equal(c.limb_axis, [1, 0, 0])
+
+
+def test_limb_axis_defaults_to_x_and_twist_is_optional():
+    c = loads_constraint("swing: {cone: {centre: [0, 2, 0], radius_deg: 30}}")
+    np.testing.assert_array_equal(c.limb_axis, [1, 0, 0])
+    np.testing.assert_allclose(c.swing.centre, [0, 1, 0])  # normalised on load
+    assert c.twist is None
+
+
+@pytest.mark.parametrize("text", [MINIMAL, SQUARE])
+def test_yaml_round_trip(text, tmp_path):
+    c = loads_constraint(text)
+    path = tmp_path / "c.yaml"
+    dump_constraint(c, path)
+    again = load_constraint(path)
+    assert again == c
+    assert again.name == c.name
+
+
+def test_provenance_is_kept():
+    c = loads_constraint(MINIMAL + "source: {patient: P-007, session: 3}\n")
+    assert c.extra["source"]["patient"] == "P-007"
+    assert "P-007" in c.to_yaml()
+
+
+@pytest.mark.parametrize(
+    "text, field, message",
+    [
+        (
+            "swing: {cone: {centre: [1, 0, 0], radius_deg: 0}}",
+            "swing.cone.radius_deg",
+            r"\(0, 180\)",
+        ),
+        ("swing: {cone: {centre: [1, 0, 0], radius_deg: 180}}", "swing.cone.radius_deg", "180"),
+        ("swing: {cone: {centre: [1, 0, 0], radius_deg: -5}}", "swing.cone.radius_deg", "-5"),
+        ("swing: {cone: {centre: [1, 0, 0], radius_deg: .nan}}", "swing.cone.radius_deg", "finite"),
+        ("swing: {cone: {centre: [0, 0, 0], radius_deg: 30}}", "swing.cone.centre", "zero vector"),
+        ("swing: {cone: {centre: [1, 0], radius_deg: 30}}", "swing.cone.centre", "3-vector"),
+        ("swing: {cone: {centre: [1, 0, 0]}}", "swing.cone", "missing 'radius_deg'"),
+        (
+            "swing: {cone: {centre: [1, 0, 0], radius_deg: 30, colour: red}}",
+            "swing.cone",
+            "unknown",
+        ),
+        ("swing: {sphere: {}}", "swing", "exactly one of"),
+        (MINIMAL.replace("min_deg: -60", "min_deg: 70"), "twist", "greater than max_deg"),
+        (MINIMAL.replace("max_deg: 60", "max_deg: 200"), "twist.max_deg", r"\[-180, 180\]"),
+        (MINIMAL.replace("max_deg: 60", "max_deg: sixty"), "twist.max_deg", "expected a number"),
+        ("name: x", None, "needs a 'swing' limit"),
+        ("- 1\n- 2", None, "expected a mapping"),
+        ("name: ''\nswing: {cone: {centre: [1,0,0], radius_deg: 3}}", "name", "non-empty"),
+    ],
+)
+def test_invalid_definitions_name_the_field(text, field, message):
+    with pytest.raises(ConstraintError, match=message) as info:
+        loads_constraint(text, source="c.yaml")
+    assert info.value.field == field
+    assert str(info.value).startswith("c.yaml: ")
+
+
+def _poly(vertices, interior=(1, 0, 0)):
+    return {"name": "p", "swing": {"polygon": {"vertices": vertices, "interior": list(interior)}}}
+
+
+@pytest.mark.parametrize(
+    "vertices, interior, message",
+    [
+        ([[1, 0.5, 0.5], [1, -0.5, 0.5]], (1, 0, 0), "at least 3"),
+        ([[1, 0.5, 0.5], [1, 0.5, 0.5], [1, -0.5, -0.5]], (1, 0, 0), "coincide"),
+        ([[1, 0, 0], [-1, 0, 0], [0, 1, 0]], (0, 0, 1), "antipodal"),
+        ([[1, 0, 0], [0, 1, 0], [-1, 0.01, 0], [0, -1, 0]], (0, 0, 1), "great circle"),
+        # a bow tie: edges 0-1 and 2-3 cross
+        (
+            [[1, 0.5, 0.5], [1, -0.5, -0.5], [1, 0.5, -0.5], [1, -0.5, 0.5]],
+            (1, 0.3, 0),
+            "intersects",
+        ),
+        ([[1, 0.5, 0.5], [1, -0.5, 0.5], [1, -0.5, -0.5], [1, 0.5, -0.5]], (1, 0.5, 0), "boundary"),
+        ([[1, 0.5, 0.5], [1, -0.5, 0.5], [1, "a", -0.5]], (1, 0, 0), r"vertices\[2\]"),
+    ],
+)
+def test_degenerate_polygons_are_rejected(vertices, interior, message):
+    with pytest.raises(ConstraintError, match=message):
+        JointConstraint.from_dict(_poly(vertices, interior))
+
+
+def test_overlapping_collinear_edges_are_rejected():
+    # the boundary doubles back along the equator: edges 1-2 and 3-4 overlap
+    verts = [[0, 0, 1], [1, 0, 0], [0.8, 0.6, 0], [0.9, 0.43589, 0], [0.6, 0.8, 0], [0, 1, 0.2]]
+    with pytest.raises(ConstraintError, match="intersects"):
+        JointConstraint.from_dict(_poly(verts, (0.5, 0.5, 0.6)))
+
+
+def test_concave_polygon_is_accepted():
+    verts = [[1, 0.5, 0.5], [1, 0.0, 0.1], [1, -0.5, 0.5], [1, -0.5, -0.5], [1, 0.5, -0.5]]
+    c = JointConstraint.from_dict(_poly(verts, (1, 0, -0.2)))
+    assert len(c.swing.vertices) == 5
+
+
+def test_malformed_yaml_names_line(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: x\nswing: {cone: {centre: [1, 0, 0], radius_deg: 45}\n")
+    with pytest.raises(ConstraintError, match=r"bad.yaml: not valid YAML at line \d+"):
+        load_constraint(path)
+
+
+def test_missing_file_and_directory(tmp_path):
+    with pytest.raises(ConstraintError, match="file not found"):
+        load_constraint(tmp_path / "nope.yaml")
+    with pytest.raises(ConstraintError, match="directory"):
+        load_constraint(tmp_path)
+
+
+def test_yaml_tags_are_not_executed(tmp_path):
+    path = tmp_path / "evil.yaml"
+    path.write_text("!!python/object/apply:os.system ['echo hacked']\n")
+    with pytest.raises(ConstraintError, match="not valid YAML"):
+        load_constraint(path)

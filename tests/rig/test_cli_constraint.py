@@ -1,0 +1,69 @@
+"""``rig constraint check``: summary on success, one-line errors and exit 2 on bad files."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from rig.cli import main
+
+GOOD = (
+    "name: demo\n"
+    "swing: {cone: {centre: [1, 0, 0], radius_deg: 60}}\n"
+    "twist: {min_deg: -45, max_deg: 45}\n"
+)
+
+
+def run(argv, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    out, err = capsys.readouterr()
+    return info.value.code, out, err
+
+
+def test_check_summarises_a_good_file(tmp_path, capsys):
+    path = tmp_path / "good.yaml"
+    path.write_text(GOOD)
+    code, out, err = run(["constraint", "check", str(path), "--samples", "20000"], capsys)
+    assert code == 0, err
+    assert "OK" in out and "radius 60 deg" in out and "-45 .. 45 deg" in out
+    # valid fraction of a 60° cone with ±45° twist: (1 - cos 60°)/2 * 90/360 = 6.25 %
+    frac = float(out.split("valid")[1].split("%")[0])
+    assert abs(frac - 6.25) < 0.6
+
+
+@pytest.mark.parametrize(
+    "content, expected",
+    [
+        ("swing: {cone: {centre: [1, 0, 0], radius_deg: 200}}", "swing.cone.radius_deg"),
+        ("twist: {min_deg: 10, max_deg: -10}", "twist: min_deg (10) is greater"),
+        ("swing: [", "not valid YAML"),
+    ],
+)
+def test_check_reports_bad_files_in_one_line(tmp_path, capsys, content, expected):
+    path = tmp_path / "bad.yaml"
+    path.write_text(content)
+    code, _, err = run(["constraint", "check", str(path)], capsys)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("rig: error: ")
+    assert str(path) in err and expected in err
+    assert "Traceback" not in err
+
+
+def test_check_missing_file(tmp_path, capsys):
+    code, _, err = run(["constraint", "check", str(tmp_path / "none.yaml")], capsys)
+    assert code == 2 and "file not found" in err
+
+
+def test_entry_points_report_version_and_help():
+    for argv in (["--version"], ["--help"], ["constraint", "--help"]):
+        r = subprocess.run(
+            [sys.executable, "-m", "rig", *argv], capture_output=True, text=True, timeout=60
+        )
+        assert r.returncode == 0, r.stderr
+    r = subprocess.run(
+        [sys.executable, "-m", "rig", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert r.stdout.startswith("rig, version ")
