@@ -42,6 +42,7 @@ reports sequence gaps.
 from __future__ import annotations
 
 import enum
+import math
 import struct
 import zlib
 from collections.abc import Iterable, Sequence
@@ -357,7 +358,10 @@ def encode_frame(frame_type: int, seq: int, payload: bytes = b"") -> bytes:
 
 
 def quantize_quaternion(q: Sequence[float]) -> tuple[int, int, int, int]:
-    """int16 components of a scalar-first quaternion at 2**-14 per LSB (rounded, saturated)."""
+    """int16 components of a scalar-first quaternion at 2**-14 per LSB.
+
+    Rounded to nearest with ties away from zero (as the C encoder), then saturated.
+    """
     if len(q) != 4:
         raise ValueError(f"a quaternion has 4 components (w, x, y, z), got {len(q)}")
     out = []
@@ -365,7 +369,9 @@ def quantize_quaternion(q: Sequence[float]) -> tuple[int, int, int, int]:
         c = float(c)
         if c != c:
             raise ValueError("cannot encode a NaN quaternion component")
-        out.append(max(-32768, min(32767, round(c * QUATERNION_SCALE))))
+        scaled = c * QUATERNION_SCALE
+        raw = math.floor(scaled + 0.5) if scaled >= 0 else -math.floor(-scaled + 0.5)
+        out.append(max(-32768, min(32767, raw)))
     return (out[0], out[1], out[2], out[3])
 
 
