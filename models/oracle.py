@@ -413,7 +413,7 @@ class _PolygonSolver:
         self.vertex_normal = n_in + np.roll(n_in, 1, axis=0)
         # one row per edge, gathered once per (point, edge) pair: g | t0 | t1 | v0 | v1
         self._table = np.ascontiguousarray(
-            np.concatenate((self.g, self.t0, self.t1, self.v0, self.v1), axis=1)
+            np.stack((self.g, self.t0, self.t1, self.v0, self.v1), 1)
         )
 
     # -- per (point, edge) pair ----------------------------------------------------------------
@@ -425,20 +425,17 @@ class _PolygonSolver:
         of the angle to the edge's great circle, signed by the geometric normal) and
         ``end_is_1`` (when an end is nearest: is it the edge's second vertex).
         """
-        t = self._table[e]
-        px, py, pz = p[:, 0], p[:, 1], p[:, 2]
-
-        def dot(k):
-            return px * t[:, k] + py * t[:, k + 1] + pz * t[:, k + 2]
-
-        s = dot(0)
-        in_arc = (dot(3) >= 0.0) & (dot(6) >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
+        t = self._table[e]  # (K, 5, 3): g, t0, t1, v0, v1 of each pair's edge
+        dots = np.einsum("kij,kj->ki", t[:, :3], p)
+        s = dots[:, 0]
+        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
         s2 = s * s
         key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
-        k0 = (px - t[:, 9]) ** 2 + (py - t[:, 10]) ** 2 + (pz - t[:, 11]) ** 2
-        k1 = (px - t[:, 12]) ** 2 + (py - t[:, 13]) ** 2 + (pz - t[:, 14]) ** 2
-        end_is_1 = k1 < k0
-        key = np.where(in_arc, key_in, np.minimum(k0, k1))
+        # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
+        diff = t[:, 3:] - p[:, None, :]
+        k01 = np.einsum("kij,kij->ki", diff, diff)
+        end_is_1 = k01[:, 1] < k01[:, 0]
+        key = np.where(in_arc, key_in, np.minimum(k01[:, 0], k01[:, 1]))
         return key, in_arc, s, end_is_1
 
     def _finish(self, p, e, key, in_arc, s, end_is_1, need_point):
