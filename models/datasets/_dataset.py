@@ -267,6 +267,14 @@ def load_dataset(path: str | Path) -> Dataset:
     if path.is_dir():
         raise DatasetError(f"{where}: is a directory, not a dataset file")
     try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as err:
+        raise DatasetError(f"{where}: cannot read ({err.strerror or err})") from err
+    if magic != b"PK\x03\x04":
+        what = "an empty file" if not magic else f"starts with {magic!r}"
+        raise DatasetError(f"{where}: not a dataset file (expected an .npz archive; {what})")
+    try:
         npz = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
         raise DatasetError(f"{where}: not a dataset file (.npz archive): {err}") from err
