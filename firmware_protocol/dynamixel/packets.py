@@ -290,6 +290,15 @@ class StreamDecoder:
         self.dropped += len(self._buf)
         self._buf.clear()
 
+    def skip_frame(self) -> None:
+        """Give up on the incomplete frame at the front and resynchronise on the next header.
+
+        A receiver calls this after an inter-byte timeout: a corrupted length field would
+        otherwise make it wait for bytes that never come.
+        """
+        start = self._buf.find(HEADER)
+        self._discard(len(self._buf) if start < 0 else start + 3)
+
     def _discard(self, n: int) -> None:
         del self._buf[:n]
         self.dropped += n

@@ -30,6 +30,7 @@ What is modelled
   raised when the temperature set by :meth:`DynamixelBus.set_temperature` exceeds the
   Temperature Limit.
 * Packets with a bad CRC are ignored (no reply). A new instruction cancels replies not yet sent.
+  A half-received packet is abandoned after :data:`PACKET_TIMEOUT` without bytes.
 
 Fault injection
 ---------------
@@ -81,6 +82,9 @@ TICKS_PER_REV = 4096
 VELOCITY_UNIT = 0.229 * TICKS_PER_REV / 60.0  # ticks/s per Profile/Present Velocity unit
 ACCEL_UNIT = 214.577 * TICKS_PER_REV / 3600.0  # ticks/s² per Profile Acceleration unit
 _STEP = 0.001  # integration step, s
+PACKET_TIMEOUT = 0.02
+"""Inter-byte timeout after which a servo abandons a half-received packet, s (modelling
+choice: the e-Manual does not publish the firmware's value)."""
 
 HARDWARE_ERRORS = {
     "input_voltage": 0x01,
@@ -440,6 +444,7 @@ class DynamixelBus:
         self._lock = threading.RLock()
         self._faults = _Faults()
         self._decoder = StreamDecoder()
+        self._last_rx = 0.0
         self._outbox: list[tuple[float, bytes]] = []
         self._closed = False
         self._stop = False
@@ -622,6 +627,9 @@ class DynamixelBus:
                     return
                 master = self._master
                 due = self._outbox[0][0] if self._outbox else None
+                if self._decoder.pending:  # a partial frame: give up on it after a while
+                    stale = self._last_rx + PACKET_TIMEOUT
+                    due = stale if due is None else min(due, stale)
             timeout = None if due is None else max(0.0, due - time.monotonic())
             fds = [self._wake_r] + ([master] if master >= 0 else [])
             try:
@@ -641,6 +649,14 @@ class DynamixelBus:
                 if data:
                     self._on_bytes(data, time.monotonic())
             self._flush_outbox()
+            self._expire_partial()
+
+    def _expire_partial(self) -> None:
+        with self._lock:
+            if self._decoder.pending and time.monotonic() - self._last_rx >= PACKET_TIMEOUT:
+                self._decoder.skip_frame()
+                self._last_rx = time.monotonic()
+                self._drain(self._last_rx)
 
     def _flush_outbox(self) -> None:
         with self._lock:
@@ -654,7 +670,12 @@ class DynamixelBus:
 
     def _on_bytes(self, data: bytes, t_rx: float) -> None:
         with self._lock:
+            self._last_rx = t_rx
             self._decoder.feed(data)
+            self._drain(t_rx)
+
+    def _drain(self, t_rx: float) -> None:
+        with self._lock:
             while True:
                 try:
                     packet = self._decoder.next_packet()

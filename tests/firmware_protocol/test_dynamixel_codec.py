@@ -327,3 +327,12 @@ def test_fuzz_seeded_mutations_are_detected():
         except ProtocolError:
             detected += 1
     assert detected == 2000  # CRC-16 catches every single-bit error
+
+
+def test_stream_skip_frame_abandons_a_stalled_frame():
+    dec = StreamDecoder()
+    good = encode_instruction(1, Instruction.PING)
+    dec.feed(h("FF FF FD 00 01 F4 01 03") + good)  # length 500: waits for more bytes
+    assert dec.next_packet() is None
+    dec.skip_frame()  # inter-byte timeout
+    assert list(dec) == [decode_packet(good)]

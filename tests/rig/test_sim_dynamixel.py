@@ -504,3 +504,13 @@ def test_cli_bad_option_is_one_line_error(args):
 def test_math_sanity_of_units():
     # 1 unit of Profile Velocity is 0.229 rev/min = 15.63 ticks/s
     assert math.isclose(VELOCITY_UNIT, 0.229 * 4096 / 60)
+
+
+def test_line_noise_and_a_half_packet_do_not_wedge_the_bus(sdk):
+    port, ph = sdk
+    port.writePort(b"\x13\x37\xff\xff")  # noise before an instruction: resync on the header
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+    # a header whose length promises 500 bytes that never come: the servo gives up on it
+    # after its inter-byte timeout and then reads the ping that followed
+    port.writePort(bytes.fromhex("FF FF FD 00 01 F4 01 03"))
+    assert ph.ping(port, 2)[1] == COMM_SUCCESS

@@ -1,0 +1,130 @@
+"""Control-loop cycle time through the real ``dynamixel_sdk`` against the simulated chain.
+
+One cycle = GroupSyncRead of Present Position (3 servos, 4 bytes) + GroupSyncWrite of Goal
+Position, as a position-control loop does. Prints median / p99 cycle time and the achievable
+rate for several configurations:
+
+* ``thread``  - simulator in this process (a background thread: shares the GIL with the SDK's
+  busy-polling receive loop);
+* ``process`` - simulator in a child process (``rig sim servos``), as in real use;
+
+each with the e-Manual default Return Delay Time (500 µs) and with 0, and with normal vs fast
+sync read. Wire time at the bus baud rate is modelled. Figures, never assertions.
+
+Run: ``python benchmarks/bench_dxl_loop.py [--cycles 2000] [--runs 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from dynamixel_sdk import (  # noqa: E402
+    COMM_SUCCESS,
+    GroupSyncRead,
+    GroupSyncWrite,
+    PacketHandler,
+    PortHandler,
+)
+
+from rig.sim.dynamixel import start_servo_bus  # noqa: E402
+
+IDS = (1, 2, 3)
+TORQUE, RETURN_DELAY, GOAL_POS, PRESENT_POS = 64, 9, 116, 132
+
+
+def run_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
+    """Cycle times in seconds; raises if any exchange fails."""
+    port = PortHandler(port_name)
+    if not port.openPort():
+        raise RuntimeError(f"cannot open {port_name}")
+    try:
+        ph = PacketHandler(2.0)
+        for i in IDS:
+            result, error = ph.write1ByteTxRx(port, i, TORQUE, 1)
+            if result != COMM_SUCCESS or error:
+                raise RuntimeError(f"torque on id {i}: {ph.getTxRxResult(result)} error {error}")
+        reader = GroupSyncRead(port, ph, PRESENT_POS, 4)
+        writer = GroupSyncWrite(port, ph, GOAL_POS, 4)
+        for i in IDS:
+            reader.addParam(i)
+            writer.addParam(i, [0, 8, 0, 0])
+        times = []
+        failures = 0
+        for k in range(cycles):
+            t0 = time.perf_counter()
+            result = reader.fastSyncRead() if fast else reader.txRxPacket()
+            if result != COMM_SUCCESS:
+                failures += 1
+            positions = [reader.getData(i, PRESENT_POS, 4) for i in IDS]
+            goal = 2048 + (k % 200) - 100
+            for i, _ in zip(IDS, positions, strict=True):
+                writer.changeParam(i, list(goal.to_bytes(4, "little")))
+            writer.txPacket()
+            times.append(time.perf_counter() - t0)
+        if failures:
+            print(f"    ({failures} failed reads)")
+        return times
+    finally:
+        port.closePort()
+
+
+def summarise(label: str, runs: list[list[float]]) -> None:
+    medians = [statistics.median(r) for r in runs]
+    p99s = [sorted(r)[int(0.99 * (len(r) - 1))] for r in runs]
+    med = statistics.median(medians)
+    print(f"{label:<44} median {med * 1e3:6.3f} ms  p99 {statistics.median(p99s) * 1e3:6.3f} ms"
+          f"  -> {1.0 / med:7.0f} Hz   (run medians: "
+          f"{', '.join(f'{m * 1e3:.3f}' for m in medians)} ms)")
+
+
+def in_thread(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[float]]:
+    out = []
+    for _ in range(runs):
+        with start_servo_bus(IDS, return_delay_us=delay_us) as bus:
+            out.append(run_loop(bus.port, cycles, fast))
+    return out
+
+
+def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[float]]:
+    out = []
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    for _ in range(runs):
+        proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
+                                 "--return-delay-us", str(delay_us)],
+                                stdout=subprocess.PIPE, text=True, env=env)
+        try:
+            port_name = proc.stdout.readline().strip()
+            out.append(run_loop(port_name, cycles, fast))
+        finally:
+            proc.terminate()
+            proc.wait()
+            proc.stdout.close()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=2000)
+    parser.add_argument("--runs", type=int, default=3)
+    args = parser.parse_args()
+    print(f"3-servo sync read (Present Position) + sync write (Goal Position), 1 Mbps, "
+          f"{args.cycles} cycles x {args.runs} runs")
+    for where, fn in (("process", in_process), ("thread", in_thread)):
+        for delay in (0, 500):
+            for fast in (False, True):
+                kind = "fast" if fast else "normal"
+                label = f"{where}, return delay {delay} us, {kind} sync read"
+                summarise(label, fn(args.cycles, args.runs, delay, fast))
+
+
+if __name__ == "__main__":
+    main()
