@@ -15,7 +15,7 @@ from rig.errors import RigConfigError
 
 
 def parse_ids(text: str) -> list[int]:
-    """``"1,2,3"`` or ``"1-3"`` -> ``[1, 2, 3]``; raises ``click.BadParameter`` on nonsense."""
+    """``"1,2,3"`` or ``"1-3"`` -> ``[1, 2, 3]``; raises :class:`RigConfigError` on nonsense."""
     ids: list[int] = []
     try:
         for part in text.split(","):
@@ -26,12 +26,12 @@ def parse_ids(text: str) -> list[int]:
             else:
                 ids.append(int(part))
     except ValueError:
-        raise click.BadParameter(f"{text!r} is not a list of servo ids such as 1,2,3",
-                                 param_hint="--ids") from None
+        raise RigConfigError(f"--ids: {text!r} is not a list of servo ids such as 1,2,3") \
+            from None
     if not ids or any(not 0 <= i <= 252 for i in ids):
-        raise click.BadParameter(f"servo ids must be 0..252, got {text!r}", param_hint="--ids")
+        raise RigConfigError(f"--ids: servo ids must be 0..252, got {text!r}")
     if len(set(ids)) != len(ids):
-        raise click.BadParameter(f"servo ids must be distinct, got {text!r}", param_hint="--ids")
+        raise RigConfigError(f"--ids: servo ids must be distinct, got {text!r}")
     return ids
 
 
@@ -61,8 +61,9 @@ def servos(ids: str, model: str, baud_rate: int, return_delay_us: int | None,
             bus = start_servo_bus(id_list, model, baud_rate=baud_rate,
                                   return_delay_us=return_delay_us, noise_ticks=noise_ticks,
                                   seed=seed)
-        except RigConfigError as err:
-            raise click.BadParameter(str(err)) from None
+        except RigConfigError as err:  # unknown model or baud rate: name the option
+            option = "--model" if "model" in str(err) else "--baud"
+            raise RigConfigError(f"{option}: {err}") from None
         with bus:
             click.echo(bus.port)
             click.get_text_stream("stdout").flush()

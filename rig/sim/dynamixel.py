@@ -524,7 +524,10 @@ class DynamixelBus:
 
     # ------------------------------------------------------------------ python API
     def servo(self, dxl_id: int) -> SimServo:
-        """The simulated servo created with ID ``dxl_id``."""
+        """The simulated servo whose ID is now ``dxl_id`` (or, failing that, was at creation)."""
+        for servo in self.servos.values():
+            if servo.id == dxl_id:
+                return servo
         try:
             return self.servos[dxl_id]
         except KeyError:
@@ -724,7 +727,8 @@ class DynamixelBus:
         listeners = self._listeners()
         if not listeners:
             return
-        wire = (len(pkt.encode()) * 10.0 / listeners[0].baud_rate) if self.model_wire_time else 0.0
+        size = 10 + len(pkt.params)  # header, id, length, instruction, CRC (stuffing ignored)
+        wire = size * 10.0 / listeners[0].baud_rate if self.model_wire_time else 0.0
         t = t_rx + wire
         inst = pkt.instruction
         if inst in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ, Instruction.BULK_READ,
