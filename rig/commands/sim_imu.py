@@ -37,9 +37,6 @@ def build_simulator(protocol: str, rate: int, sensors: int, constraint: str | No
     RigConfigError
         Incompatible options, or a constraint file that cannot be used.
     """
-    from rig.sim.imu import Bno055Simulator, StreamImuSimulator
-    from rig.sim.limb import SimulatedLimb
-
     if not _MIN_RATE <= rate <= _MAX_RATE:
         raise RigConfigError(f"--rate {rate}: must be {_MIN_RATE}..{_MAX_RATE} Hz")
     if protocol == "bno055" and sensors != 1:
@@ -47,6 +44,9 @@ def build_simulator(protocol: str, rate: int, sensors: int, constraint: str | No
             f"--sensors {sensors}: a BNO055 UART serves one sensor; use --protocol stream")
     if not 1 <= sensors <= 16:
         raise RigConfigError(f"--sensors {sensors}: must be 1..16")
+    from rig.sim.imu import Bno055Simulator, StreamImuSimulator
+    from rig.sim.limb import SimulatedLimb
+
     n_limb = 2 if protocol == "bno055" else sensors
     if constraint is not None:
         try:

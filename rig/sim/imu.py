@@ -118,7 +118,7 @@ class _PtyServer:
         try:
             while True:
                 deadline = self._timer_deadline()
-                timeout = None if deadline is None else max(0.0, deadline - self._clock())
+                timeout = None if deadline is None else max(0.0, deadline - self._timer_clock())
                 ready, _, _ = select.select([self._master, self._wake_r], [], [], timeout)
                 if self._wake_r in ready:
                     os.read(self._wake_r, 64)
@@ -133,7 +133,7 @@ class _PtyServer:
                         with self._lock:
                             self._on_bytes(data, self._clock())
                 with self._lock:
-                    self._on_timer(self._clock())
+                    self._on_timer(self._timer_clock())
         except BaseException as err:  # surfaced by close()
             self._error = err
 
@@ -150,6 +150,10 @@ class _PtyServer:
     # hooks -----------------------------------------------------------------------------------
     def _on_bytes(self, data: bytes, now: float) -> None:
         raise NotImplementedError
+
+    def _timer_clock(self) -> float:
+        """Clock of :meth:`_timer_deadline` and :meth:`_on_timer` (default: the device clock)."""
+        return self._clock()
 
     def _timer_deadline(self) -> float | None:
         return None
@@ -210,7 +214,8 @@ class Bno055Simulator(_PtyServer):
     rate_hz : float
         Fusion output rate: data registers change at this rate (the chip's is 100 Hz).
     char_timeout_s : float
-        Inter-character timeout after which a partial request is answered ``EE 0A``.
+        Inter-character timeout (real seconds, whatever ``clock`` is) after which a partial
+        request is answered ``EE 0A``.
     clock : callable
         Monotonic seconds; tests may pass a manual clock to make time-dependent answers
         (calibration progress, motion) deterministic.
@@ -250,7 +255,7 @@ class Bno055Simulator(_PtyServer):
         super().__init__(clock)
         self._t0 = clock()
         self._decoder = B.RequestDecoder()
-        self._last_rx = self._t0
+        self._last_rx = time.monotonic()
         self._page1 = bytearray(0x80)
         self._reset(self._t0)
         self.last: Measurement | None = None
@@ -315,7 +320,7 @@ class Bno055Simulator(_PtyServer):
 
     # protocol -----------------------------------------------------------------------------
     def _on_bytes(self, data: bytes, now: float) -> None:
-        self._last_rx = now
+        self._last_rx = time.monotonic()
         self._decoder.feed(data)
         while True:
             try:
@@ -329,6 +334,9 @@ class Bno055Simulator(_PtyServer):
                 self._send(self._read(req, now))
             else:
                 self._send(self._write(req, now))
+
+    def _timer_clock(self) -> float:
+        return time.monotonic()  # the inter-character timeout is a link timer: real time
 
     def _timer_deadline(self) -> float | None:
         return self._last_rx + self.char_timeout_s if self._decoder.buffered else None

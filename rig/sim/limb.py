@@ -123,12 +123,14 @@ class ConeRange:
         lo, hi = self.twist_deg
         if not -180.0 <= lo <= hi <= 180.0:
             raise ValueError(f"twist_deg must satisfy -180 <= min <= max <= 180, got {lo}, {hi}")
+        # unit vectors, validated once (frozen dataclass: cache through object.__setattr__)
+        object.__setattr__(self, "_a", Q.check_vectors(self.limb_axis))
+        object.__setattr__(self, "_c", Q.check_vectors(self.centre))
 
     def project(self, q: np.ndarray) -> np.ndarray:
         """Nearest orientation inside the cone and twist interval; ``(N, 4) -> (N, 4)``."""
         q = np.atleast_2d(np.asarray(q, dtype=np.float64))
-        a = Q.check_vectors(self.limb_axis)
-        c = Q.check_vectors(self.centre)
+        a, c = self._a, self._c
         d = Q.rotate(q, a)
         theta = Q.angle_between(d, c)
         r = math.radians(self.radius_deg)
@@ -250,8 +252,6 @@ class Measurement:
 
 @dataclass
 class _SensorErrors:
-    drift: np.ndarray  # (3,) rad, world frame
-    bias: np.ndarray  # (3,) rad/s
     calib_times: np.ndarray  # (3,) s, full calibration of gyr, acc, mag
     events: list[tuple[float, float, float]] = field(default_factory=list)  # start, dur, peak
     next_event: float = math.inf
@@ -340,14 +340,13 @@ class SimulatedLimb:
         self._rng = rng
         self._last_t: float | None = None
         nz = self.noise
+        n = len(self.mounts)
+        self._drift = rng.standard_normal((n, 3)) * np.radians(
+            [nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])  # rad, world frame
+        self._bias = rng.standard_normal((n, 3)) * math.radians(nz.gyro_bias_dps)  # rad/s
         self._errors = []
-        for _ in self.mounts:
-            e = _SensorErrors(
-                drift=rng.standard_normal(3) * np.radians(
-                    [nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg]),
-                bias=rng.standard_normal(3) * math.radians(nz.gyro_bias_dps),
-                calib_times=nz.calibration_time_s * rng.uniform(0.2, 1.0, size=3),
-            )
+        for _ in range(n):
+            e = _SensorErrors(calib_times=nz.calibration_time_s * rng.uniform(0.2, 1.0, size=3))
             e.next_event = self._draw_event_gap()
             self._errors.append(e)
 
@@ -434,21 +433,21 @@ class SimulatedLimb:
         gyro = 2.0 * rel[:, 1:] / 1e-3
         elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
         s = self.n_sensors
-        out_q = np.empty((s, 4))
-        calib = np.empty(s, dtype=np.int64)
-        a = math.exp(-dt / nz.drift_time_s)
-        sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
         rng = self._rng
-        for i, err in enumerate(self._errors):
-            if dt > 0:
-                err.drift = a * err.drift + math.sqrt(1.0 - a * a) * sig * rng.standard_normal(3)
-            heading = self._disturbance(err, t)
-            e_world = _exp_map(err.drift + heading * _Z)
-            white = _exp_map(rng.standard_normal(3) * math.radians(nz.white_deg))
-            q = Q.multiply(Q.multiply(e_world, q_true[i]), white)
-            out_q[i] = Q.canonical(q / np.linalg.norm(q))
-            gyro[i] += err.bias + rng.standard_normal(3) * math.radians(nz.gyro_noise_dps)
-            calib[i] = _calibration_byte(err.calib_times, elapsed, abs(heading) > math.radians(3))
+        sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
+        if dt > 0:
+            a = math.exp(-dt / nz.drift_time_s)
+            self._drift = a * self._drift + math.sqrt(1.0 - a * a) * sig * rng.standard_normal(
+                (s, 3))
+        heading = np.array([self._disturbance(err, t) for err in self._errors])
+        e_world = _exp_map(self._drift + heading[:, None] * _Z)
+        white = _exp_map(rng.standard_normal((s, 3)) * math.radians(nz.white_deg))
+        q = Q.multiply(Q.multiply(e_world, q_true), white)
+        out_q = Q.canonical(q / np.linalg.norm(q, axis=1, keepdims=True))
+        gyro += self._bias + rng.standard_normal((s, 3)) * math.radians(nz.gyro_noise_dps)
+        disturbed = np.abs(heading) > math.radians(3.0)
+        calib = np.array([_calibration_byte(err.calib_times, elapsed, bool(d))
+                          for err, d in zip(self._errors, disturbed, strict=True)])
         return Measurement(t=t, quaternions=out_q, gyro=gyro, calibration=calib,
                            truth=LimbState(truth.t[:1], truth.joint[:1], truth.thorax[:1],
                                            truth.sensors[:1]))

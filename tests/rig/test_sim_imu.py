@@ -1,0 +1,538 @@
+"""Simulated IMUs: the limb model, pyserial against both simulators, and ``rig sim imu``.
+
+Every exchange synchronises on the device's replies (serial reads with a deadline), never on
+sleeps. Simulator time that matters (calibration progress, BNO055 sample instants) runs on a
+manual clock where a test depends on it.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from firmware_protocol.imu import bno055 as B
+from firmware_protocol.imu import stream as S
+from models import quaternion as Q
+from rig.sim.imu import Bno055Simulator, StreamImuSimulator
+from rig.sim.limb import ConeRange, NoiseModel, SensorMount, SimulatedLimb
+
+QUIET = NoiseModel(disturbance_rate_hz=0.0, calibration_time_s=0.5)
+
+
+class ManualClock:
+    """A clock the test advances; the simulator thread only reads it."""
+
+    def __init__(self, t: float = 1000.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.degrees(Q.angle(Q.multiply(np.asarray(a), Q.conjugate(np.asarray(b)))))
+
+
+# -- limb model (no pty) ------------------------------------------------------------------
+
+
+def test_limb_is_reproducible():
+    a, b = SimulatedLimb(sensors=3, seed=5), SimulatedLimb(sensors=3, seed=5)
+    t = np.linspace(0.0, 10.0, 50)
+    np.testing.assert_array_equal(a.truth(t).sensors, b.truth(t).sensors)
+    for ti in t:
+        np.testing.assert_array_equal(a.measure(ti).quaternions, b.measure(ti).quaternions)
+    assert not np.allclose(SimulatedLimb(seed=6).joint(t), a.joint(t))
+
+
+def test_limb_sweeps_to_and_along_the_cone_limit():
+    rom = ConeRange(centre=(1, 0, 0), radius_deg=50.0, twist_deg=(-30.0, 40.0))
+    limb = SimulatedLimb(rom, seed=2)
+    t = np.arange(0.0, 120.0, 0.02)
+    q = limb.joint(t)
+    swing = np.degrees(Q.angle_between(Q.rotate(q, Q.LIMB_AXIS), limb.centre))
+    twist = np.degrees(Q.twist_angle(q))
+    assert swing.max() <= 50.0 + 1e-6 and swing.max() > 49.99
+    assert 0.1 < np.mean(swing > 49.99) < 0.6  # a good part of the time on the limit
+    assert twist.min() >= -30.0 - 1e-6 and twist.max() <= 40.0 + 1e-6
+    assert np.mean(twist > 39.99) > 0.05 and np.mean(twist < -29.99) > 0.05
+    # smooth, human-like: peak angular speed below 400 °/s
+    step = _angle_deg(q[1:], q[:-1]) / 0.02
+    assert step.max() < 400.0
+
+
+def test_limb_with_constraint_oracle():
+    constraint_mod = pytest.importorskip("models.constraint")
+    oracle_mod = pytest.importorskip("models.oracle")
+    c = constraint_mod.JointConstraint.polygon(
+        [[0.6, 0.8, 0.0], [0.6, 0.0, 0.8], [0.6, -0.8, 0.0], [0.8, 0.0, -0.6]],
+        interior=[1, 0, 0], twist=(-20, 50))
+    limb = SimulatedLimb.from_constraint(c, seed=4)
+    q = limb.joint(np.arange(0.0, 60.0, 0.05))
+    oracle = oracle_mod.ConstraintOracle(c)
+    assert oracle.is_valid(q, normalize=True).all()
+    dist = oracle.signed_distance(q, normalize=True)
+    assert np.mean(dist > -1e-6) > 0.1  # reaches the boundary
+
+
+def test_sensor_quaternions_compose_frames():
+    limb = SimulatedLimb(sensors=[SensorMount("thorax", (1.0, 0, 0, 0)),
+                                  SensorMount("limb", tuple(Q.from_axis_angle(
+                                      np.array([0, 0, 1.0]), 0.3)))], seed=1)
+    st = limb.truth(np.linspace(0, 5, 20))
+    thorax, arm = st.sensors[:, 0], st.sensors[:, 1]
+    mount = np.asarray(limb.mounts[1].mount)
+    joint = Q.multiply(Q.conjugate(thorax), Q.multiply(arm, Q.conjugate(mount)))
+    assert _angle_deg(joint, st.joint).max() < 1e-6
+    # world differs from thorax: the default has a heading and a 90° pitch
+    assert _angle_deg(st.thorax, Q.IDENTITY).min() > 45.0
+
+
+def test_ideal_sensors_equal_truth_and_gyro_is_the_rate():
+    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=3)
+    m0, m1 = limb.measure(1.0), limb.measure(1.001)
+    assert _angle_deg(m0.quaternions, m0.truth.sensors[0]).max() < 1e-6
+    assert list(m0.calibration) == [0xFF, 0xFF]
+    rel = Q.multiply(Q.conjugate(m0.truth.sensors[0]), m1.truth.sensors[0])
+    rate = 2.0 * rel[:, 1:] / 0.001 * np.sign(rel[:, :1])
+    np.testing.assert_allclose(m0.gyro, rate, atol=0.02)
+
+
+def test_noise_model_statistics():
+    white = NoiseModel(white_deg=0.5, drift_heading_deg=0.0, drift_tilt_deg=0.0,
+                       disturbance_rate_hz=0.0, calibration_time_s=0.0)
+    limb = SimulatedLimb(sensors=4, noise=white, seed=8)
+    err = np.concatenate([_angle_deg(m.quaternions, m.truth.sensors[0])
+                          for m in (limb.measure(k * 0.01) for k in range(150))])
+    # |n| of a 3-D Gaussian with σ per axis has RMS σ√3
+    assert abs(np.sqrt(np.mean(err**2)) - 0.5 * math.sqrt(3)) < 0.1
+    drift = NoiseModel(white_deg=0.0, drift_heading_deg=3.0, drift_tilt_deg=0.0,
+                       drift_time_s=5.0, disturbance_rate_hz=0.0)
+    limb = SimulatedLimb(sensors=4, noise=drift, seed=9)
+    heading = []
+    for k in range(500):
+        m = limb.measure(k * 0.5)
+        e = Q.canonical(Q.multiply(m.quaternions, Q.conjugate(m.truth.sensors[0])))  # world
+        assert np.abs(e[:, 1:3]).max() < 1e-9  # heading only: about world Z
+        heading.append(np.degrees(2 * np.arctan2(e[:, 3], e[:, 0])))
+    heading = np.array(heading)
+    assert 2.0 < heading.std() < 4.0  # stationary std 3°
+    lag1 = np.mean([np.corrcoef(h[:-1], h[1:])[0, 1] for h in heading.T])
+    assert 0.8 < lag1 < 0.97  # slowly wandering: exp(-0.5 / 5) = 0.905
+
+
+def test_magnetic_disturbances_are_transient_and_drop_mag_calibration():
+    noise = NoiseModel(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
+                       disturbance_rate_hz=0.5, disturbance_deg=20.0, calibration_time_s=0.0)
+    limb = SimulatedLimb(sensors=4, noise=noise, seed=10)
+    errs, mags = [], []
+    for k in range(600):
+        m = limb.measure(k * 0.05)
+        errs.append(_angle_deg(m.quaternions, m.truth.sensors[0]))
+        mags.append(m.calibration & 3)
+    errs, mags = np.concatenate(errs), np.concatenate(mags)
+    assert errs.max() > 10.0 and np.mean(errs < 0.5) > 0.05  # large but transient
+    assert set(mags[errs > 5.0]) == {1} and set(mags[errs < 0.01]) == {3}
+
+
+def test_calibration_rises_over_time():
+    limb = SimulatedLimb(sensors=2, noise=NoiseModel(calibration_time_s=4.0,
+                                                     disturbance_rate_hz=0), seed=11)
+    stat = [limb.measure(t).calibration for t in np.arange(0.0, 5.0, 0.1)]
+    sys_levels = np.array([s >> 6 for s in stat])
+    assert (sys_levels[0] == 0).all() and (sys_levels[-1] == 3).all()
+    assert (np.diff(sys_levels, axis=0) >= 0).all()
+
+
+def test_bad_limb_arguments():
+    with pytest.raises(ValueError):
+        ConeRange(radius_deg=0)
+    with pytest.raises(ValueError):
+        SimulatedLimb(sensors=0)
+    with pytest.raises(ValueError):
+        NoiseModel(white_deg=-1)
+    limb = SimulatedLimb()
+    limb.measure(1.0)
+    with pytest.raises(ValueError, match="back in time"):
+        limb.measure(0.5)
+
+
+# -- BNO055 over pyserial -----------------------------------------------------------------
+
+
+def _xfer(ser: serial.Serial, request: bytes):
+    """Send one request, read one complete response (deadline 2 s)."""
+    ser.write(request)
+    dec = B.ResponseDecoder()
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        dec.feed(ser.read(1))
+        resp = dec.next()
+        if resp is not None:
+            return resp
+    raise AssertionError(f"no response to {request.hex(' ')}")
+
+
+def _read(ser, reg, n):
+    resp = _xfer(ser, B.encode_read(reg, n))
+    assert isinstance(resp, B.ReadResponse), resp
+    return resp.data
+
+
+def _write(ser, reg, data) -> int:
+    resp = _xfer(ser, B.encode_write(reg, bytes(data)))
+    assert isinstance(resp, B.StatusResponse)
+    return resp.status
+
+
+@pytest.fixture
+def bno():
+    clock = ManualClock()
+    limb = SimulatedLimb(sensors=2, noise=QUIET, seed=21)
+    with Bno055Simulator(limb, clock=clock, char_timeout_s=0.05) as sim, \
+            serial.Serial(sim.port, 115200, timeout=0.5) as ser:
+        yield sim, ser, clock
+
+
+def test_bno055_published_exchanges_over_pty(bno):
+    sim, ser, _ = bno
+    ser.write(bytes.fromhex("AA 01 00 01"))
+    assert ser.read(3) == bytes.fromhex("BB 01 A0")
+    ser.write(bytes.fromhex("AA 00 3D 01 0C"))
+    assert ser.read(2) == bytes.fromhex("EE 01")
+    assert sim.mode == B.OperationMode.NDOF
+
+
+def test_bno055_modes_gate_data_and_config_writes(bno):
+    sim, ser, clock = bno
+    assert _read(ser, B.Register.OPR_MODE, 1) == b"\x00"
+    assert _read(ser, B.Register.QUA_DATA, 8) == bytes(8)  # no fusion in CONFIG
+    assert _read(ser, B.Register.SYS_STATUS, 1) == b"\x00"
+    assert _write(ser, B.Register.UNIT_SEL, [0x80]) == B.Status.WRITE_SUCCESS
+    assert _write(ser, B.Register.AXIS_MAP_CONFIG, [0x24, 0x00]) == B.Status.WRITE_SUCCESS
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == B.Status.WRITE_SUCCESS
+    assert _read(ser, B.Register.SYS_STATUS, 1) == b"\x05"
+    assert _write(ser, B.Register.UNIT_SEL, [0x00]) == B.Status.REGMAP_WRITE_DISABLED
+    assert _write(ser, B.Register.PWR_MODE, [0x00]) == B.Status.REGMAP_WRITE_DISABLED
+    assert _write(ser, B.Register.CHIP_ID, [0x00]) == B.Status.REGMAP_WRITE_DISABLED
+    assert _write(ser, B.Register.OPR_MODE, [0x0D]) == B.Status.WRITE_FAIL
+    assert _write(ser, 0x6B, [0x00]) == B.Status.REGMAP_INVALID_ADDRESS
+    assert _xfer(ser, B.encode_read(0x7F, 2)) == B.StatusResponse(B.Status.REGMAP_INVALID_ADDRESS)
+    for k in range(5):
+        clock.t += 0.013
+        q = np.array(B.decode_quaternion(_read(ser, B.Register.QUA_DATA, 8)))
+        assert abs(np.linalg.norm(q) - 1.0) < 3e-4
+        truth = sim.last.truth.sensors[0, sim.sensor]
+        assert _angle_deg(q, truth) < 12.0, k  # white 0.3°, drift σ 2° heading
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.AMG]) == B.Status.WRITE_SUCCESS
+    assert _read(ser, B.Register.QUA_DATA, 8) == bytes(8)  # not a fusion mode
+    assert _read(ser, B.Register.SYS_STATUS, 1) == b"\x06"
+
+
+def test_bno055_quaternion_matches_truth_without_noise():
+    clock = ManualClock()
+    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=22)
+    with Bno055Simulator(limb, clock=clock, rate_hz=100) as sim, \
+            serial.Serial(sim.port, timeout=0.5) as ser:
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
+        for k in range(20):
+            clock.t += 0.0371
+            q = B.decode_quaternion(_read(ser, B.Register.QUA_DATA, 8))
+            expected_t = math.floor((clock.t - 1000.0) * 100) / 100
+            assert sim.last.t == pytest.approx(expected_t)  # fusion output on the 100 Hz grid
+            truth = limb.truth(expected_t).sensors[0, 1]
+            assert _angle_deg(q, truth) < 0.02, k  # quantisation only
+        # Euler (16 LSB/°) and gyro agree with the quaternion / truth
+        h, r, p = B.decode_vector(_read(ser, B.Register.EUL_DATA, 6), 16.0)
+        rot = Q.to_rotation(sim.last.quaternions[1])
+        yaw, pitch, roll = np.degrees(rot.as_euler("ZYX"))
+        assert (h - (-yaw) % 360 + 180) % 360 - 180 == pytest.approx(0, abs=0.1)
+        assert (r, p) == (pytest.approx(roll, abs=0.1), pytest.approx(pitch, abs=0.1))
+        gyro = np.radians(B.decode_vector(_read(ser, B.Register.GYR_DATA, 6), 16.0))
+        np.testing.assert_allclose(gyro, sim.last.gyro[1], atol=0.01)
+        # radians units, then an axis remap (X<->Y swapped, Z negated: a proper rotation)
+        assert _write(ser, B.Register.OPR_MODE, [0]) == 1
+        assert _write(ser, B.Register.UNIT_SEL, [0x06]) == 1
+        assert _write(ser, B.Register.AXIS_MAP_CONFIG, [0x21, 0x01]) == 1
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
+        clock.t += 0.05
+        q = np.array(B.decode_quaternion(_read(ser, B.Register.QUA_DATA, 8)))
+        gyro = np.array(B.decode_vector(_read(ser, B.Register.GYR_DATA, 6), 900.0))
+        g0 = sim.last.gyro[1]
+        np.testing.assert_allclose(gyro, [g0[1], g0[0], -g0[2]], atol=0.01)
+        m = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1.0]])  # v_new = M v_old
+        v_new = np.array([0.3, -0.2, 0.9])
+        np.testing.assert_allclose(Q.rotate(q, v_new), Q.rotate(sim.last.quaternions[1],
+                                                                m.T @ v_new), atol=1e-3)
+
+
+def test_bno055_framing_errors_and_character_timeout(bno):
+    _, ser, _ = bno
+    ser.write(b"\x42")
+    assert ser.read(2) == bytes.fromhex("EE 06")
+    ser.write(bytes.fromhex("AA 01 00 00"))
+    assert ser.read(2) == bytes.fromhex("EE 09")
+    ser.write(bytes.fromhex("AA 01 00 90"))
+    assert ser.read(2) == bytes.fromhex("EE 08")
+    ser.write(bytes.fromhex("AA 00 3D 01"))  # data byte never comes
+    assert ser.read(2) == bytes.fromhex("EE 0A")
+    assert _read(ser, 0, 1) == b"\xa0"  # and the chip still answers
+
+
+def test_bno055_calibration_rises_while_fusing(bno):
+    _, ser, clock = bno
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
+    first = B.CalibrationStatus.from_byte(_read(ser, B.Register.CALIB_STAT, 1)[0])
+    assert first.system == 0
+    clock.t += 0.6  # QUIET calibrates within 0.5 s of fusion
+    assert _read(ser, B.Register.CALIB_STAT, 1) == b"\xff"
+    # time in CONFIG does not count; a reset starts calibration over
+    assert _write(ser, B.Register.SYS_TRIGGER, [0x20]) == 1
+    assert _read(ser, B.Register.OPR_MODE, 1) == b"\x00"
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
+    assert _read(ser, B.Register.CALIB_STAT, 1)[0] >> 6 == 0
+
+
+def test_bno055_pages(bno):
+    _, ser, _ = bno
+    assert _write(ser, B.Register.PAGE_ID, [1]) == 1
+    assert _read(ser, B.Register.PAGE_ID, 1) == b"\x01"
+    assert _read(ser, 0x00, 1) == b"\x00"  # page 1 has no CHIP_ID
+    assert _write(ser, B.Register.PAGE_ID, [2]) == B.Status.WRITE_FAIL
+    assert _write(ser, B.Register.PAGE_ID, [0]) == 1
+    assert _read(ser, 0x00, 7) == bytes.fromhex("A0 FB 32 0F 11 03 15")
+
+
+def test_simulator_close_is_idempotent_and_reports_thread_errors():
+    sim = Bno055Simulator(seed=1)
+    sim.close()
+    sim.close()
+    assert sim.closed
+
+    class Broken(SimulatedLimb):
+        def measure(self, t, calibration_elapsed_s=None):
+            raise ZeroDivisionError("boom")
+
+    sim = Bno055Simulator(Broken(), char_timeout_s=0.05)
+    with serial.Serial(sim.port, timeout=0.3) as ser:
+        ser.write(B.encode_write(B.Register.OPR_MODE, [0x0C]))
+        assert ser.read(2) == bytes.fromhex("EE 01")
+        ser.write(B.encode_read(B.Register.QUA_DATA, 8))
+        assert ser.read(10) == b""  # the server died
+    with pytest.raises(RuntimeError, match="boom"):
+        sim.close()
+    sim.close()
+
+
+# -- stream device over pyserial ----------------------------------------------------------
+
+
+class StreamHost:
+    """Minimal host: sends commands, waits for the matching ACK/NAK, keeps the samples."""
+
+    def __init__(self, ser: serial.Serial) -> None:
+        self.ser = ser
+        self.dec = S.StreamDecoder()
+        self.seq = 0
+        self.samples: list[S.Sample] = []
+        self.frames: list = []
+
+    def _pump(self) -> None:
+        self.dec.feed(self.ser.read(max(1, self.ser.in_waiting)))
+        for item in self.dec.drain():
+            self.frames.append(item)
+            if isinstance(item, S.Sample):
+                self.samples.append(item)
+
+    def send(self, wire: bytes):
+        """Send raw bytes that end in a command with ``self.seq - 1``; return its reply."""
+        self.ser.write(wire)
+        want = (self.seq - 1) & 0xFFFF
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            start = len(self.frames)
+            self._pump()
+            for f in self.frames[start:]:
+                if isinstance(f, S.Ack | S.Nak) and f.command_seq == want:
+                    return f
+        raise AssertionError(f"no reply to command seq {want}")
+
+    def command(self, kind: S.CommandType, value: int | None = None):
+        wire = S.encode_command(self.seq, kind, value)
+        self.seq = (self.seq + 1) & 0xFFFF
+        return self.send(wire)
+
+    def wait_samples(self, n: int, timeout: float = 5.0) -> list[S.Sample]:
+        deadline = time.monotonic() + timeout
+        while len(self.samples) < n:
+            assert time.monotonic() < deadline, f"only {len(self.samples)} of {n} samples"
+            self._pump()
+        return self.samples
+
+
+@pytest.fixture
+def stream():
+    limb = SimulatedLimb(sensors=4, noise=QUIET, seed=31)
+    with StreamImuSimulator(limb, rate_hz=100) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        yield sim, StreamHost(ser)
+
+
+def test_stream_identify(stream):
+    sim, host = stream
+    ack = host.command(S.CommandType.IDENTIFY)
+    assert isinstance(ack, S.Ack) and ack.command == S.CommandType.IDENTIFY
+    assert ack.identity == S.Identity(1, 0, 0x0100, sim.serial, 16, False, 0x000F, 0x000F, 100,
+                                      10, 400)
+
+
+@pytest.mark.parametrize("rate", [100, 400])
+def test_stream_samples_at_requested_rate(stream, rate):
+    sim, host = stream
+    assert isinstance(host.command(S.CommandType.SET_RATE, rate), S.Ack)
+    t0 = time.monotonic()
+    assert isinstance(host.command(S.CommandType.START), S.Ack)
+    n = rate // 2  # half a second of data
+    samples = host.wait_samples(n)[:n]
+    wall = time.monotonic() - t0
+    assert host.dec.gaps == 0 and host.dec.errors == 0
+    seqs = [s.seq for s in samples]
+    assert seqs == [(seqs[0] + k) & 0xFFFF for k in range(n)]
+    ts = np.array([s.timestamp_us for s in samples], dtype=np.int64)
+    assert np.abs(np.diff(ts) - 1e6 / rate).max() <= 1.0  # exact sample grid
+    assert wall < 5 * n / rate  # streams in real time (loose: CI machines are slow)
+    for s in samples[:: max(1, n // 25)]:
+        assert [r.sensor_id for r in s.readings] == [0, 1, 2, 3]
+        q = np.array([r.quaternion for r in s.readings])
+        assert np.abs(np.linalg.norm(q, axis=1) - 1.0).max() < 3e-4
+        truth = sim.limb.truth(s.timestamp_us / 1e6).sensors[0]
+        assert _angle_deg(q, truth).max() < 12.0  # white 0.3°, drift σ 2° heading, tilt 0.3°
+    host.command(S.CommandType.STOP)
+
+
+def test_stream_commands_and_refusals(stream):
+    sim, host = stream
+    nak = host.command(S.CommandType.SET_RATE, 5)
+    assert nak == S.Nak(nak.seq, 0, S.CommandType.SET_RATE, S.ErrorCode.BAD_ARGUMENT)
+    assert host.command(S.CommandType.SET_SENSORS, 0x10).error == S.ErrorCode.BAD_ARGUMENT
+    assert host.command(S.CommandType.SET_SENSORS, 0).error == S.ErrorCode.BAD_ARGUMENT
+    assert isinstance(host.command(S.CommandType.SET_SENSORS, 0b0101), S.Ack)
+    # unknown command type, wrong length, other major version, device->host type
+    host.seq += 1
+    assert host.send(S.encode_frame(0x9F, host.seq - 1)).error == S.ErrorCode.UNKNOWN_COMMAND
+    host.seq += 1
+    assert host.send(S.encode_frame(S.CommandType.STOP, host.seq - 1, b"\x00")).error == \
+        S.ErrorCode.BAD_LENGTH
+    host.seq += 1
+    body = bytearray([2, S.CommandType.START]) + (host.seq - 1).to_bytes(2, "little")
+    body += S.crc32(body).to_bytes(4, "little")
+    from firmware_protocol.imu import cobs
+
+    assert host.send(cobs.encode(bytes(body)) + b"\x00").error == \
+        S.ErrorCode.UNSUPPORTED_VERSION
+    host.seq += 1
+    assert host.send(S.encode_sample(host.seq - 1, 0, [])).error == S.ErrorCode.UNKNOWN_COMMAND
+    # garbage (with and without delimiters) before a command costs nothing but itself
+    host.seq += 1
+    reply = host.send(b"\x00\x13\x37\x00\xff\xfe" + b"\x00"
+                      + S.encode_command(host.seq - 1, S.CommandType.START))
+    assert isinstance(reply, S.Ack) and reply.command == S.CommandType.START
+    samples = host.wait_samples(3)
+    assert [r.sensor_id for r in samples[0].readings] == [0, 2]
+    assert sim.frames_rejected >= 1
+    # STOP: the next frame after its ACK is the IDENTIFY reply, no sample in between
+    stop = host.command(S.CommandType.STOP)
+    start = host.frames.index(stop) + 1
+    ident = host.command(S.CommandType.IDENTIFY)
+    assert host.frames[start:] == [ident]
+    assert ident.identity.streaming is False and ident.identity.active_mask == 0b0101
+
+
+def test_stream_sequence_numbers_wrap(stream):
+    sim, host = stream
+    sim._tx_seq = 0xFFFD  # as if the device had been running for a while
+    host.command(S.CommandType.START)
+    samples = host.wait_samples(6)
+    assert [s.seq for s in samples[:5]] == [0xFFFE, 0xFFFF, 0, 1, 2]
+    assert host.dec.gaps == 0
+    host.command(S.CommandType.STOP)
+
+
+# -- CLI ----------------------------------------------------------------------------------
+
+
+def _run_cli(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "rig", "sim", "imu", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.parametrize("protocol", ["bno055", "stream"])
+def test_cli_serves_until_sigterm(protocol, tmp_path):
+    cfile = tmp_path / "shoulder.yaml"
+    cfile.write_text("name: test\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 40}\n"
+                     "twist: {min_deg: -30, max_deg: 30}\n")
+    proc = _run_cli("--protocol", protocol, "--rate", "200", "--seed", "3",
+                    "--constraint", str(cfile))
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/pts/"), proc.stderr.read() if not port else port
+        with serial.Serial(port, timeout=0.05) as ser:
+            if protocol == "bno055":
+                assert _read(ser, 0, 1) == b"\xa0"
+            else:
+                host = StreamHost(ser)
+                assert host.command(S.CommandType.IDENTIFY).identity.rate_hz == 200
+                host.command(S.CommandType.START)
+                host.wait_samples(5)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert out == "" and err == ""
+
+
+def test_cli_sigint_also_exits_zero():
+    proc = _run_cli("--protocol", "stream")
+    try:
+        assert proc.stdout.readline().startswith("/dev/pts/")
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [(["--protocol", "spi"], "--protocol"), (["--rate", "50"], "--rate"),
+     (["--rate", "fast"], "--rate"), (["--protocol", "bno055", "--sensors", "2"], "--sensors"),
+     (["--sensors", "17"], "--sensors"), (["--constraint", "/no/such/file.yaml"], "file.yaml")],
+)
+def test_cli_bad_options_one_line(args, needle, capsys):
+    from rig.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["sim", "imu", *args])
+    out, err = capsys.readouterr()
+    assert info.value.code == 2
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1 and needle in err, err
+
+
+def test_cli_bad_option_in_a_real_process_has_no_traceback():
+    proc = _run_cli("--rate", "1000")
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 2 and out == ""
+    assert err == "rig: error: --rate 1000: must be 100..400 Hz\n"
