@@ -261,8 +261,8 @@ def sphere_vector_dataset(
     Dataset
         ``inputs`` (n, 3) unit V; ``targets`` (n, 3) ``O = V' − V`` (zero when valid).
     """
-    v, b, _, regions, meta = _sphere("sphere-vector", n, rng, centre, radius_deg, band_deg)
-    return Dataset(v, b - v, meta, regions)
+    v, b, dist, regions, meta = _sphere("sphere-vector", n, rng, centre, radius_deg, band_deg)
+    return Dataset(v, np.where((dist > 0.0)[:, None], b - v, 0.0), meta, regions)  # eq. 56
 
 
 def sphere_quaternion_dataset(
@@ -283,5 +283,6 @@ def sphere_quaternion_dataset(
         ``inputs`` (n, 3) unit V; ``targets`` (n, 4) ``Qo`` scalar-first, parent frame,
         ``w >= 0``, identity when valid; ``rotate(Qo, V)`` lies on the circle.
     """
-    v, b, _, regions, meta = _sphere("sphere-quaternion", n, rng, centre, radius_deg, band_deg)
-    return Dataset(v, Q.from_two_vectors(v, b), meta, regions)
+    v, b, dist, regions, meta = _sphere("sphere-quaternion", n, rng, centre, radius_deg, band_deg)
+    qo = np.where((dist > 0.0)[:, None], Q.from_two_vectors(v, b), Q.IDENTITY)  # exact identity
+    return Dataset(v, qo, meta, regions)
