@@ -215,10 +215,10 @@ class ConstraintOracle:
             invalid = invalid or phi < lo - BOUNDARY_TOLERANCE or phi > hi + BOUNDARY_TOLERANCE
         if invalid:
             c = _mul1(proj, (qt[0], -qt[1], -qt[2], -qt[3]))
-            cn = math.sqrt(sum(v * v for v in c))
+            cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
             sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
             corr = tuple(sign * v / cn for v in c)
-            pn = math.sqrt(sum(v * v for v in proj))
+            pn = math.sqrt(proj[0] ** 2 + proj[1] ** 2 + proj[2] ** 2 + proj[3] ** 2)
             proj = tuple(v / pn for v in proj)
             distance = 2.0 * math.atan2(
                 math.sqrt(corr[1] ** 2 + corr[2] ** 2 + corr[3] ** 2), abs(corr[0])
@@ -332,7 +332,7 @@ def _two_vectors1(a, b):
     if w < 1e-12:  # antiparallel: same rule as models.quaternion.from_two_vectors
         return (0.0, *Q._perpendicular(np.array(a)).tolist())
     q = (w, a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-    n = math.sqrt(sum(c * c for c in q))
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
