@@ -32,6 +32,8 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
     ),
     "dataset": ("rig.commands.dataset", "dataset", "Generate training datasets (thesis ch. 3-4)."),
     "sim": ("rig.commands.sim", "sim", "Run a simulated servo chain or IMU on a pseudo-terminal."),
+    "train": ("rig.commands.train", "train", "Train a corrective-constraint network, export ONNX."),
+    "evaluate": ("rig.commands.train", "evaluate", "Metrics of an ONNX model on held-out data."),
 }
 
 

@@ -53,6 +53,8 @@ SPLINE0 = len(NAMES)
 LEAKY_SLOPE = 0.1
 SENSITIVITY = (-5.0, 5.0)  # thesis TABLE IX
 ACTIVATION_RANGE = (-1.0, 1.0)  # thesis TABLE IX
+#: Keeps the last segment index in range (float32-representable below any segment count).
+SEG_EPS = 1e-5
 
 
 def index_of(name: str) -> int:
@@ -137,7 +139,7 @@ def spline_apply(
     h = (hi - lo) / s_
     u = (z - lo) * (1.0 / h)
     inside = (u >= 0) & (u < s_)
-    u = np.clip(u, 0.0, s_ - 1e-6)
+    u = np.clip(u, 0.0, s_ - SEG_EPS)
     seg = u.astype(np.int64)
     t = (u - seg).astype(z.dtype)
     flat = coef.reshape(p_ * t_ * s_, 4)
