@@ -74,7 +74,39 @@ def _constraint(constraint: str | None, shape: str | None, radius: str | None, c
     )
 
 
-def make_dataset(
+#: library argument name -> the option that sets it, to name options in error messages
+_OPTION_OF = {
+    "n": "--n",
+    "radius_deg": "--cone-radius",
+    "centre": "--cone-centre",
+    "band_deg": "--band-deg",
+    "band": "--band-deg",
+    "distribution": "--distribution",
+    "order": "--order",
+    "hemisphere": "--hemisphere",
+    "lower": "--lower",
+    "upper": "--upper",
+    "radius": "--radius",
+    "fractions": "--split",
+}
+
+
+def make_dataset(**options: Any) -> list[tuple[Path, Any]]:
+    """Generate, optionally split, and save; returns ``[(path, Dataset), ...]`` written.
+
+    Takes the ``rig dataset make`` options as strings (see :func:`_make`). A
+    :class:`DatasetError` about a library argument is re-labelled with the option's name.
+    """
+    try:
+        return _make(**options)
+    except DatasetError as err:
+        name, sep, rest = str(err).partition(": ")
+        if sep and name in _OPTION_OF:
+            raise DatasetError(f"{_OPTION_OF[name]}: {rest}") from err
+        raise
+
+
+def _make(
     *,
     kind: str,
     out: str | None,
@@ -94,7 +126,6 @@ def make_dataset(
     seed: str | None = None,
     split: str | None = None,
 ) -> list[tuple[Path, Any]]:
-    """Generate, optionally split, and save; returns ``[(path, Dataset), ...]`` written."""
     from models import datasets as D
 
     if kind not in KINDS:

@@ -435,6 +435,12 @@ def test_corrupt_and_wrong_files_are_named(tmp_path):
     assert zipfile.is_zipfile(good)
 
 
+def test_save_to_a_missing_folder_names_the_file(tmp_path):
+    target = tmp_path / "no" / "such" / "d.npz"
+    with pytest.raises(DatasetError, match=re.escape(str(target))):
+        interval_dataset(5, 0).save(target)
+
+
 def test_dataset_validation():
     with pytest.raises(DatasetError, match="targets"):
         Dataset(np.zeros((3, 4)), np.zeros((2, 4)))

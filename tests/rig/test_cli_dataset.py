@@ -65,15 +65,18 @@ def test_make_each_kind(tmp_path, capsys, args, kind, dims):
 @pytest.mark.parametrize(
     ("args", "word"),
     [
-        (["--cone-radius", "200", "--n", "10"], "radius_deg"),
+        (["--cone-radius", "200", "--n", "10"], "--cone-radius: must be in (0, 180)"),
         (["--cone-radius", "20", "--n", "abc"], "--n"),
-        (["--cone-radius", "20", "--n", "0"], "n: must be > 0"),
+        (["--cone-radius", "20", "--n", "0"], "--n: must be > 0"),
         (["--shape", "banana", "--n", "10"], "banana"),
         (["--shape", "small", "--cone-radius", "20", "--n", "10"], "only one constraint"),
         (["--n", "10"], "needs a constraint"),
-        (["--cone-radius", "20", "--n", "10", "--distribution", "lumpy"], "distribution"),
+        (
+            ["--cone-radius", "20", "--n", "10", "--distribution", "lumpy"],
+            "--distribution: unknown",
+        ),
         (["--cone-radius", "20", "--n", "10", "--split", "0.5,x"], "--split"),
-        (["--cone-radius", "20", "--n", "10", "--split", "0.5,0.6"], "fractions"),
+        (["--cone-radius", "20", "--n", "10", "--split", "0.5,0.6"], "--split: expected"),
         (["--kind", "cube", "--n", "10"], "--kind"),
         (["--kind", "ball2", "--n", "10", "--twist"], "--twist"),
         (["--constraint", "/nonexistent/c.yaml", "--n", "10"], "/nonexistent/c.yaml"),
