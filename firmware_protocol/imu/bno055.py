@@ -445,9 +445,9 @@ class RequestDecoder(_StreamBuffer):
     Feed bytes as they arrive with :meth:`feed`, then call :meth:`next` until it returns None.
     Each call either returns one request, returns None (more bytes needed), or consumes one bad
     unit and raises :class:`Bno055FramingError` carrying the status a BNO055 answers; the next
-    call carries on after it. A byte that is not 0xAA where a request should start is one bad
-    unit (``WRONG_START_BYTE``). A request left incomplete is dropped by :meth:`expire` (the
-    chip's ``RECEIVE_CHARACTER_TIMEOUT``).
+    call carries on after it. A run of bytes other than 0xAA where a request should start is
+    one bad unit (``WRONG_START_BYTE``; one reply per run, not per byte). A request left
+    incomplete is dropped by :meth:`expire` (the chip's ``RECEIVE_CHARACTER_TIMEOUT``).
     """
 
     def next(self) -> WriteRequest | ReadRequest | None:
@@ -456,9 +456,13 @@ class RequestDecoder(_StreamBuffer):
         if avail == 0:
             return None
         if buf[pos] != START:
-            self._pos = pos + 1
+            # one error per run of garbage, not per byte: a noisy line must not flood replies
+            end = buf.find(START, pos + 1)
+            end = len(buf) if end < 0 else end
+            self._pos = end
             raise Bno055FramingError(
-                f"expected start byte 0xAA, got 0x{buf[pos]:02X}", Status.WRONG_START_BYTE
+                f"expected start byte 0xAA, got 0x{buf[pos]:02X} ({end - pos} byte(s) skipped)",
+                Status.WRONG_START_BYTE,
             )
         if avail < 2:
             return None

@@ -343,3 +343,23 @@ def test_fuzz_mutated_frames(wire, edits, truncate):
     dec.feed(bytes(buf) + b"\x00" + _sample(9))
     items = _drain_all(dec)
     assert items and getattr(items[-1], "seq", None) == 9
+
+
+@settings(max_examples=400)
+@given(_frames, st.lists(st.tuples(st.integers(0, 300), st.integers(0, 255)), min_size=1,
+                         max_size=3), st.integers(0, 40))
+def test_fuzz_mutated_bodies_with_valid_crc(wire, edits, cut):
+    """Behind a good CRC, every field check raises only PacketError (FrameContentError)."""
+    body = bytearray(cobs.decode(wire[:-1])[:-4])
+    for pos, value in edits:
+        body[pos % len(body)] = value
+    del body[len(body) - min(cut, len(body) - 1):]
+    body += S.crc32(body).to_bytes(4, "little")
+    try:
+        frame = S.decode_body(bytes(body))
+    except S.FrameContentError as err:
+        assert err.seq == int.from_bytes(body[2:4], "little") or len(body) < 8
+    except (FramingError, PacketError):
+        pass
+    else:
+        assert frame.seq == int.from_bytes(body[2:4], "little")
