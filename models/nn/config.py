@@ -126,6 +126,11 @@ def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(f"{where}: expected an integer >= {lo}, got {value!r}")
     elif (sec, key) in _UNIT or (sec, key) in _POS:
+        if isinstance(value, str):  # YAML 1.1 reads 1e-4 (no dot) as a string
+            try:
+                value = float(value)
+            except ValueError:
+                pass
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
         value = float(value)

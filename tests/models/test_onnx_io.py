@@ -1,0 +1,127 @@
+"""ONNX export: parity with numpy, in-graph canonicalisation, metadata, refusals."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import onnx
+import pytest
+from onnx import TensorProto, helper
+
+from models import quaternion as quat
+from models.errors import ModelFileError
+from models.nn.gmlp import GMLP, PopulationSpec, init_params
+from models.onnx_io import export_onnx, load_model, to_onnx
+
+CONSTRAINT = "name: c45\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 45}\n"
+
+
+def _net(rng, kinds, out_kinds, h=7, ref=(1.0, 0.0, 0.0, 0.0), scale=2.0):
+    spec = PopulationSpec(rng.random((1, 5, h)) < 0.8, rng.random((1, h + 5, 4)) < 0.8,
+                          rng.choice(kinds, (1, h)), rng.choice(out_kinds, (1, 4)),
+                          rng.uniform(-1, 1, (1, 4, 9)))
+    spec.mask2[:, -1] = True
+    theta = init_params(spec, rng) * scale
+    return GMLP.from_population(theta, spec, 0,
+                                canonical_ref=None if ref is None else np.asarray(ref))
+
+
+@pytest.mark.parametrize(("kinds", "out_kinds", "ref"), [
+    ([2], [0], (1.0, 0.0, 0.0, 0.0)),
+    ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], [0, 1, 2, 8, 9], (0.5, 0.5, -0.5, 0.5)),
+    ([6], [0], None),
+])
+def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref):
+    rng = np.random.default_rng(len(kinds))
+    net = _net(rng, kinds, out_kinds, ref=ref)
+    path = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=CONSTRAINT,
+                       training_data_sha256="ab" * 32, metrics={"mse": 1e-4})
+    model = load_model(path, expected_constraint=CONSTRAINT)
+    q = quat.random_quaternions(10_000, rng)
+    got = model.correction(q)
+    assert got.dtype == np.float32 and got.shape == (10_000, 4)
+    np.testing.assert_allclose(got, net.predict(q), atol=1e-5)
+    if ref is not None:
+        np.testing.assert_allclose(model.correction(-q), got, atol=1e-6)
+    np.testing.assert_allclose(model.correct_one(*q[3]), got[3], atol=1e-6)
+    np.testing.assert_allclose(model.correction(q[3]), got[3], atol=1e-6)
+
+
+def test_metadata(tmp_path):
+    net = _net(np.random.default_rng(0), [2], [0])
+    net.info["hidden"] = net.n_hidden
+    path = export_onnx(net, tmp_path / "sub" / "m.onnx", constraint_yaml=CONSTRAINT,
+                       training_data_sha256="cd" * 32, metrics={"mse": 2e-5})
+    m = load_model(path)
+    assert m.constraint_yaml == CONSTRAINT
+    assert m.metrics == {"mse": 2e-5}
+    assert m.network_info["hidden"] == net.n_hidden
+    assert m.metadata["jointlimits.training_data_sha256"] == "cd" * 32
+    assert m.metadata["jointlimits.version"]
+    corrected = m.corrected(quat.random_quaternions(5, np.random.default_rng(1)))
+    np.testing.assert_allclose(np.linalg.norm(corrected, axis=1), 1.0, atol=1e-6)
+
+
+def test_refuses_non_onnx(tmp_path):
+    p = tmp_path / "x.onnx"
+    p.write_text("name: not a model\n")
+    with pytest.raises(ModelFileError, match="not an ONNX model"):
+        load_model(p)
+    with pytest.raises(ModelFileError, match="cannot read"):
+        load_model(tmp_path / "missing.onnx")
+
+
+def test_refuses_other_io(tmp_path):
+    graph = helper.make_graph(
+        [helper.make_node("Identity", ["q"], ["out"])], "g",
+        [helper.make_tensor_value_info("q", TensorProto.FLOAT, ["N", 4])],
+        [helper.make_tensor_value_info("out", TensorProto.FLOAT, ["N", 4])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    p = tmp_path / "other.onnx"
+    onnx.save(model, p)
+    with pytest.raises(ModelFileError, match="expected input 'orientation'"):
+        load_model(p)
+    graph = helper.make_graph(
+        [helper.make_node("Identity", ["orientation"], ["correction"])], "g",
+        [helper.make_tensor_value_info("orientation", TensorProto.FLOAT, ["N", 3])],
+        [helper.make_tensor_value_info("correction", TensorProto.FLOAT, ["N", 3])])
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), p)
+    with pytest.raises(ModelFileError, match=r"\[N, 4\]"):
+        load_model(p)
+    graph = helper.make_graph(
+        [helper.make_node("Identity", ["orientation"], ["correction"])], "g",
+        [helper.make_tensor_value_info("orientation", TensorProto.FLOAT, ["N", 4])],
+        [helper.make_tensor_value_info("correction", TensorProto.FLOAT, ["N", 4])])
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), p)
+    with pytest.raises(ModelFileError, match="not a jointlimits correction model"):
+        load_model(p)
+
+
+def test_refuses_other_constraint(tmp_path):
+    net = _net(np.random.default_rng(0), [2], [0])
+    p = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=CONSTRAINT)
+    other = CONSTRAINT.replace("45", "50")
+    with pytest.raises(ModelFileError, match="different constraint"):
+        load_model(p, expected_constraint=other)
+    load_model(p, expected_constraint={"name": "c45", "swing": {"cone": {
+        "centre": [1, 0, 0], "radius_deg": 45}}})
+
+
+def test_constraint_objects_compare_by_limits(tmp_path):
+    from models.constraint import JointConstraint
+
+    c = JointConstraint.cone([1, 0, 0], 45, name="a")
+    net = _net(np.random.default_rng(0), [2], [0])
+    p = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=c.to_yaml())
+    load_model(p, expected_constraint=JointConstraint.cone([1, 0, 0], 45, name="b"))
+    with pytest.raises(ModelFileError, match="different constraint"):
+        load_model(p, expected_constraint=JointConstraint.cone([0, 1, 0], 45))
+
+
+def test_graph_is_valid_onnx_without_pickle():
+    net = _net(np.random.default_rng(5), [8, 9], [0])
+    model = to_onnx(net, constraint_yaml=CONSTRAINT, metrics={"a": 1.0})
+    onnx.checker.check_model(model, full_check=True)
+    props = {p.key: p.value for p in model.metadata_props}
+    assert json.loads(props["jointlimits.metrics"]) == {"a": 1.0}
