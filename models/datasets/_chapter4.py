@@ -103,6 +103,7 @@ CLUSTERED_BAND_DEG = 5.0
 
 _MAX_ROUNDS = 60
 _MAX_BATCH = 400_000
+_GIVE_UP = 2_000_000  # candidates tried without a single hit: the region is empty
 _X = np.array([1.0, 0.0, 0.0])
 
 
@@ -218,13 +219,14 @@ class _Sampler:
     def region(self, k: int, count: int, band: float) -> np.ndarray:
         """``count`` orientations whose oracle region is ``k`` (rejection by batches)."""
         parts: list[np.ndarray] = []
-        have, rate = 0, 1.0
+        have, rate, tried = 0, 1.0, 0
         for _ in range(_MAX_ROUNDS):
-            if have >= count:
+            if have >= count or (have == 0 and tried >= _GIVE_UP):
                 break
             need = count - have
             m = int(min(_MAX_BATCH, max(64, math.ceil(1.25 * need / max(rate, 1e-4)))))
             q = self._propose(k, m, band)
+            tried += m
             res = self.oracle.evaluate(q)
             hit = q[label_regions(res.valid, res.distance, band) == k]
             rate = max(len(hit), 0.5) / m
@@ -301,6 +303,11 @@ def quaternion_dataset(
         raise DatasetError(
             "constraint: no orientation of the requested kind is valid "
             "(twist limits exclude zero twist? use twist=True)"
+        )
+    if not sampler.depth_out > 1e-6:
+        raise DatasetError(
+            "constraint: no orientation of the requested kind is invalid "
+            "(a twist-only constraint needs twist=True)"
         )
     band = min(math.radians(requested), sampler.depth_in / 2, sampler.depth_out / 2)
     if distribution == "uniform":

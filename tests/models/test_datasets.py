@@ -148,6 +148,15 @@ def test_twist_inputs_and_twist_limits():
         quaternion_dataset(bad, 100, 0, twist=False)  # zero twist is never valid
 
 
+def test_twist_only_constraint():
+    c = JointConstraint.from_dict({"name": "tw", "twist": {"min_deg": -30, "max_deg": 45}})
+    ds = quaternion_dataset(c, 400, 1, twist=True)
+    assert list(np.bincount(ds.regions)) == [100] * 4
+    np.testing.assert_allclose(ds.targets, ConstraintOracle(c).correction(ds.inputs), atol=1e-12)
+    with pytest.raises(DatasetError, match="invalid"):
+        quaternion_dataset(c, 400, 1)  # twist-free inputs are all valid here
+
+
 def test_hemisphere_rules():
     c = cone_constraint((0, 1, 0), 120)
     amb = quaternion_dataset(c, 2000, 9, hemisphere="ambiguous")
