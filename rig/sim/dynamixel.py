@@ -131,6 +131,9 @@ class SimServo:
         if not 0 <= dxl_id <= 252:
             raise ValueError(f"servo id must be 0..252, got {dxl_id}")
         self.table: ControlTable = load_control_table(model)
+        # name -> (first byte, one past last, signed, size): the hot path of get/_set
+        self._fields = {n: (it.address, it.end, it.signed, it.size)
+                        for n, it in self.table.items.items()}
         self.mem = self.table.default_memory()
         self._baud_index = _baud_index(baud_rate)
         self._set("ID", dxl_id)
@@ -156,13 +159,14 @@ class SimServo:
     # ------------------------------------------------------------------ memory helpers
     def get(self, name: str) -> int:
         """Current value of control-table item ``name``."""
-        item = self.table[name]
-        return item.decode(bytes(self.mem[item.address:item.end]))
+        start, end, signed, _ = self._fields[name]
+        return int.from_bytes(self.mem[start:end], "little", signed=signed)
 
     def _set(self, name: str, value: int) -> None:
-        item = self.table.items.get(name)
-        if item is not None:
-            self.mem[item.address:item.end] = item.encode(int(value))
+        field = self._fields.get(name)
+        if field is not None:
+            start, end, _, size = field
+            self.mem[start:end] = (int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
 
     @property
     def id(self) -> int:
