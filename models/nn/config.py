@@ -78,6 +78,7 @@ _THESIS: dict[str, Any] = {
         "test": 3000,
         "distribution": "even",
         "order": "valid-first",
+        "hemisphere": "w-positive",
     },
 }
 
@@ -101,6 +102,7 @@ _CHOICES = {
     ("training", "dtype"): ("float32", "float64"),
     ("data", "distribution"): ("even", "clustered", "uniform"),
     ("data", "order"): ("valid-first", "random", "reversed"),
+    ("data", "hemisphere"): ("ambiguous", "centre", "w-positive"),
 }
 _INT_MIN = {
     ("network", "max_hidden"): 1, ("network", "spline_control_points"): 4,

@@ -97,15 +97,21 @@ def _zone_sample(constraint, oracle, n, rng, distribution) -> np.ndarray:
 
 def training_patterns(constraint, n: int, rng: np.random.Generator, *,
                       distribution: str = "even", order: str = "valid-first",
+                      hemisphere: str = "w-positive",
                       oracle=None) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` patterns (inputs (n, 4), exact corrections (n, 4), ``w ≥ 0``) of a constraint."""
+    """``n`` patterns (inputs (n, 4), exact corrections (n, 4), ``w ≥ 0``) of a constraint.
+
+    ``hemisphere`` is the input sign rule of :func:`models.datasets.quaternion_dataset`
+    (``ambiguous``, ``centre``, ``w-positive``); the built-in fallback sampler supports
+    ``w-positive`` only (its inputs are twist-free with ``w ≥ 0``).
+    """
     try:
         from models.datasets import quaternion_dataset
     except ImportError:
         quaternion_dataset = None
     if quaternion_dataset is not None:
         ds = quaternion_dataset(constraint, n, rng, distribution=distribution, order=order,
-                                hemisphere="w-positive", twist=False)
+                                hemisphere=hemisphere, twist=False)
         return np.asarray(ds.inputs, np.float64), quat.canonical(np.asarray(ds.targets))
     oracle = oracle or _oracle(constraint)
     sw = constraint.swing
@@ -158,12 +164,12 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     ref = canonical_reference(constraint, config["network"]["canonicalise"])
     n = dc["train"] + dc["validation"]
     q, t = training_patterns(constraint, n, rng, distribution=dc["distribution"],
-                             order=dc["order"], oracle=oracle)
+                             order=dc["order"], hemisphere=dc["hemisphere"], oracle=oracle)
     x = canonicalise(q, ref)
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
     qt, _ = training_patterns(constraint, dc["test"], rng, distribution=dc["distribution"],
-                              order="random", oracle=oracle)
+                              order="random", hemisphere="ambiguous", oracle=oracle)
     metrics = M.evaluate(res.network.predict, oracle, qt)
     metrics.update({"hidden": res.network.n_hidden, "links": res.network.n_links,
                     "val_mse": res.val_mse, "train_mse": res.train_mse,

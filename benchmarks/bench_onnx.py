@@ -1,0 +1,92 @@
+"""Inference speed of exported correction models through onnxruntime, in-process.
+
+    python benchmarks/bench_onnx.py [--model MODEL.onnx] [--calls 20000]
+
+Without ``--model`` it exports two 20-hidden-node networks (leaky ReLU as in the ``best``
+preset, sigmoid as in the thesis preset) with random weights — latency does not depend on the
+weights. Prints the median single-orientation latency (``CorrectionModel.correct_one`` and a
+(1, 4) ``correction`` call) and batched throughput. Never asserts on time.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_v] = "1"
+
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from models import quaternion as quat  # noqa: E402
+from models.nn import activations as act  # noqa: E402
+from models.nn.gmlp import GMLP, PopulationSpec, init_params  # noqa: E402
+from models.onnx_io import export_onnx, load_model  # noqa: E402
+
+
+def _network(kind: str, rng) -> GMLP:
+    h = 20
+    spec = PopulationSpec(np.ones((1, 5, h), bool), np.ones((1, h + 5, 4), bool),
+                          np.full((1, h), act.index_of(kind)), np.zeros((1, 4), int))
+    return GMLP.from_population(init_params(spec, rng), spec, 0,
+                                canonical_ref=np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def bench(path: Path, calls: int) -> None:
+    m = load_model(path)
+    rng = np.random.default_rng(0)
+    qs = quat.random_quaternions(calls, rng)
+    rows = [tuple(map(float, r)) for r in qs]
+    for r in rows[:2000]:
+        m.correct_one(*r)
+    lat = []
+    for r in rows:
+        t0 = time.perf_counter_ns()
+        m.correct_one(*r)
+        lat.append(time.perf_counter_ns() - t0)
+    q1 = qs[:1].astype(np.float32)
+    lat2 = []
+    for _ in range(calls):
+        t0 = time.perf_counter_ns()
+        m.correction(q1)
+        lat2.append(time.perf_counter_ns() - t0)
+    print(f"  single orientation: correct_one median {statistics.median(lat) / 1e3:.2f} µs "
+          f"(p99 {np.percentile(lat, 99) / 1e3:.2f} µs); correction((1, 4)) median "
+          f"{statistics.median(lat2) / 1e3:.2f} µs")
+    big = quat.random_quaternions(1_000_000, rng).astype(np.float32)
+    for n in (1_000, 10_000, 100_000, 1_000_000):
+        x = big[:n]
+        m.correction(x)
+        reps = max(3, 2_000_000 // n)
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            m.correction(x)
+        dt = (time.perf_counter() - t0) / reps
+        print(f"  batch {n:>9,}: {n / dt / 1e6:6.2f} M orientations/s")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", type=Path)
+    ap.add_argument("--calls", type=int, default=20_000)
+    args = ap.parse_args()
+    if args.model:
+        print(args.model)
+        bench(args.model, args.calls)
+        return
+    rng = np.random.default_rng(1)
+    with tempfile.TemporaryDirectory() as d:
+        for kind in ("leaky_relu", "sigmoid"):
+            p = export_onnx(_network(kind, rng), Path(d) / f"{kind}.onnx",
+                            constraint_yaml="name: bench\n")
+            print(f"20 hidden {kind} + linear output, canonicalisation + normalisation in-graph")
+            bench(p, args.calls)
+
+
+if __name__ == "__main__":
+    main()
