@@ -34,6 +34,7 @@ import threading
 import time
 import tty
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -45,6 +46,8 @@ from models import quaternion as Q
 from rig.sim.limb import Measurement, SimulatedLimb
 
 __all__ = ["Bno055Simulator", "StreamImuSimulator"]
+
+_Server = TypeVar("_Server", bound="_PtyServer")
 
 
 class _PtyServer:
@@ -76,7 +79,7 @@ class _PtyServer:
     def _start(self) -> None:
         self._thread.start()
 
-    def __enter__(self):
+    def __enter__(self: _Server) -> _Server:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -440,6 +443,10 @@ class StreamImuSimulator(_PtyServer):
         Rates the device accepts; others are refused with NAK BAD_ARGUMENT.
     serial : int
         Device serial number reported by IDENTIFY.
+    timestamp_offset_us : int
+        Device clock at simulator start, microseconds: ``2**32 - 10**6`` makes the u32
+        timestamps wrap one second in. Ground truth of a SAMPLE is
+        ``limb.truth((unwrapped_timestamp_us - timestamp_offset_us) / 1e6)``.
     clock : callable
         Monotonic seconds; the device clock is ``clock() - clock_at_start`` in microseconds.
     seed : int, optional
@@ -465,6 +472,7 @@ class StreamImuSimulator(_PtyServer):
         min_rate_hz: int = 10,
         max_rate_hz: int = 400,
         serial: int = 0x5157_0001,
+        timestamp_offset_us: int = 0,
         clock: Callable[[], float] = time.monotonic,
         seed: int | None = 0,
     ) -> None:
@@ -482,6 +490,7 @@ class StreamImuSimulator(_PtyServer):
         self.min_rate_hz, self.max_rate_hz = int(min_rate_hz), int(max_rate_hz)
         self.rate_hz = int(rate_hz)
         self.serial = int(serial)
+        self.timestamp_offset_us = int(timestamp_offset_us)
         self.present_mask = (1 << limb.n_sensors) - 1
         self.active_mask = self.present_mask
         self.streaming = False
@@ -493,14 +502,16 @@ class StreamImuSimulator(_PtyServer):
         self._t0 = clock()
         self._decoder = S.StreamDecoder(track_sequence=False)
         self._tx_seq = 0
+        self._send(b"\x00")  # SPEC §3.1: a delimiter after power-up
         self._next_sample: float | None = None  # device time (s) of the next sample slot
         self._grid_base = 0.0  # device time of sample 0 of the current rate
         self._grid_k = 0
         self._start()
 
     def device_time_us(self, now: float | None = None) -> int:
-        """The device clock, microseconds since the simulator started (not wrapped)."""
-        return round(((self._clock() if now is None else now) - self._t0) * 1e6)
+        """The device clock in microseconds, not wrapped (SAMPLEs carry it modulo 2**32)."""
+        t = (self._clock() if now is None else now) - self._t0
+        return round(t * 1e6) + self.timestamp_offset_us
 
     def _seq(self) -> int:
         seq = self._tx_seq
@@ -599,7 +610,8 @@ class StreamImuSimulator(_PtyServer):
             readings = [
                 (i, int(m.calibration[i]), 0, m.quaternions[i].tolist()) for i in active
             ]
-            out += S.encode_sample(self._seq(), round(t * 1e6), readings)
+            ts = round(t * 1e6) + self.timestamp_offset_us
+            out += S.encode_sample(self._seq(), ts, readings)
             self.samples_sent += 1
             self._grid_k += 1
             self._next_sample = self._grid_base + self._grid_k / rate

@@ -210,6 +210,38 @@ def test_bno055_published_exchanges_over_pty(bno):
     assert sim.mode == B.OperationMode.NDOF
 
 
+def _bno055_session(ser: serial.Serial) -> None:
+    """Back-to-back body: runs on the simulator, and on a real BNO055 (``RIG_IMU_PORT``)."""
+    assert _read(ser, B.Register.CHIP_ID, 1) == bytes([B.CHIP_ID_VALUE])
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.CONFIG]) == B.Status.WRITE_SUCCESS
+    assert _read(ser, B.Register.OPR_MODE, 1)[0] & 0x0F == B.OperationMode.CONFIG
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == B.Status.WRITE_SUCCESS
+    deadline = time.monotonic() + 2.0  # a real chip needs ~7 ms, then its first fusion output
+    while True:
+        q = np.array(B.decode_quaternion(_read(ser, B.Register.QUA_DATA, 8)))
+        if q.any() or time.monotonic() > deadline:
+            break
+    assert abs(np.linalg.norm(q) - 1.0) < 2e-3
+    B.CalibrationStatus.from_byte(_read(ser, B.Register.CALIB_STAT, 1)[0])
+    assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.CONFIG]) == B.Status.WRITE_SUCCESS
+
+
+def test_bno055_session_on_simulator():
+    with Bno055Simulator(seed=3) as sim, serial.Serial(sim.port, 115200, timeout=0.5) as ser:
+        _bno055_session(ser)
+
+
+@pytest.mark.hardware
+def test_bno055_session_on_hardware():
+    import os
+
+    port = os.environ.get("RIG_IMU_PORT")
+    if not port or os.environ.get("RIG_IMU_PROTOCOL", "bno055") != "bno055":
+        pytest.skip("RIG_IMU_PORT does not name a BNO055 UART (RIG_IMU_PROTOCOL=bno055)")
+    with serial.Serial(port, 115200, timeout=0.5) as ser:
+        _bno055_session(ser)
+
+
 def test_bno055_modes_gate_data_and_config_writes(bno):
     sim, ser, clock = bno
     assert _read(ser, B.Register.OPR_MODE, 1) == b"\x00"
@@ -463,6 +495,38 @@ def test_stream_sequence_numbers_wrap(stream):
     assert [s.seq for s in samples[:5]] == [0xFFFE, 0xFFFF, 0, 1, 2]
     assert host.dec.gaps == 0
     host.command(S.CommandType.STOP)
+
+
+def test_stream_rate_change_while_streaming(stream):
+    _, host = stream
+    host.command(S.CommandType.START)
+    host.wait_samples(3)
+    ack = host.command(S.CommandType.SET_RATE, 400)
+    host.wait_samples(len(host.samples) + 6)
+    after = [f for f in host.frames[host.frames.index(ack) + 1:] if isinstance(f, S.Sample)]
+    assert len(after) >= 6
+    ts = np.diff([s.timestamp_us for s in after])
+    assert (ts == 2500).all(), ts
+    host.command(S.CommandType.STOP)
+
+
+def test_stream_timestamps_wrap_and_unwrap():
+    limb = SimulatedLimb(sensors=1, noise=NoiseModel.ideal(), seed=5)
+    offset = 2**32 - 100_000  # wraps 0.1 s after the start
+    with StreamImuSimulator(limb, rate_hz=400, timestamp_offset_us=offset) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        host = StreamHost(ser)
+        host.command(S.CommandType.START)
+        samples = host.wait_samples(120)
+        host.command(S.CommandType.STOP)
+    raw = [s.timestamp_us for s in samples]
+    assert max(raw) > 2**32 - 5000 and min(raw) < 5000  # wrapped
+    unwrap = S.TimestampUnwrapper()
+    full = np.array([unwrap(t) for t in raw])
+    assert (np.diff(full) == 2500).all()
+    for s, t in zip(samples[::20], full[::20], strict=True):
+        truth = limb.truth((t - offset) / 1e6).sensors[0, 0]
+        assert _angle_deg(s.readings[0].quaternion, truth) < 0.02
 
 
 # -- CLI ----------------------------------------------------------------------------------
