@@ -168,8 +168,11 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     x = canonicalise(q, ref)
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
+    # raw sensor quaternions come with either sign; without in-graph canonicalisation the
+    # network only knows the training data's hemisphere rule, so test with that rule
+    test_hemi = dc["hemisphere"] if ref is None else "ambiguous"
     qt, _ = training_patterns(constraint, dc["test"], rng, distribution=dc["distribution"],
-                              order="random", hemisphere="ambiguous", oracle=oracle)
+                              order="random", hemisphere=test_hemi, oracle=oracle)
     metrics = M.evaluate(res.network.predict, oracle, qt)
     metrics.update({"hidden": res.network.n_hidden, "links": res.network.n_links,
                     "val_mse": res.val_mse, "train_mse": res.train_mse,
