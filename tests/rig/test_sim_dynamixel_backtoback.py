@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 
+import dynamixel_sdk.port_handler
 import pytest
 from dynamixel_sdk import (
     COMM_RX_TIMEOUT,
@@ -32,6 +33,13 @@ def _signed(value: int) -> int:
 
 def _hardware_ids() -> list[int]:
     return [int(i) for i in os.environ.get("RIG_DXL_IDS", "1").split(",")]
+
+
+@pytest.fixture(autouse=True)
+def tolerant_sdk_timeouts(monkeypatch):
+    """~100 ms packet timeout (SDK default ~34 ms) so a loaded test machine does not lose
+    replies; also a sane value for a U2D2 whose latency timer is left at 16 ms."""
+    monkeypatch.setattr(dynamixel_sdk.port_handler, "LATENCY_TIMER", 50)
 
 
 @pytest.fixture(params=["sim", pytest.param("hardware", marks=pytest.mark.hardware)])
