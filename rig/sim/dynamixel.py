@@ -29,8 +29,20 @@ What is modelled
   torque-on; every status packet carries the alert bit; REBOOT clears them. Overheating is
   raised when the temperature set by :meth:`DynamixelBus.set_temperature` exceeds the
   Temperature Limit.
+* REBOOT answers first, then clears RAM to defaults and the hardware errors (a servo that
+  overheated is taken to have cooled down). FACTORY_RESET (refused with torque on) restores
+  EEPROM defaults too, so option 0xFF moves the servo to ID 1 at 57600 bps as hardware does.
+* Errors: undefined address or beyond the table / read-only item / EEPROM with torque on ->
+  access (7); a write covering part of an item or of length 0 -> data length (5); a value out of
+  the item's range -> data range (4); Goal Velocity/PWM/Current beyond its limit item -> data
+  limit (6); unknown instruction or ACTION without REG_WRITE -> instruction (2).
 * Packets with a bad CRC are ignored (no reply). A new instruction cancels replies not yet sent.
   A half-received packet is abandoned after :data:`PACKET_TIMEOUT` without bytes.
+
+Not modelled: Protocol 1.0, indirect address mapping (the indirect block is plain RAM),
+Secondary ID, Bus Watchdog, Drive Mode, Homing Offset, current and PWM control (the shaft
+stays put), the control-table backup instruction. In a sync/bulk read an absent servo is
+skipped and the next one answers straight after the previous reply.
 
 Fault injection
 ---------------
@@ -148,7 +160,7 @@ class SimServo:
         self.pos = float(position)
         self.vel = 0.0  # ticks/s
         self.target = float(position)
-        self.hand: float | None = None
+        self.hand: float | Callable[[float], float] | None = None
         self.hardware_error = 0
         self.temperature = float(self.get("Present Temperature"))
         self.registered: tuple[int, bytes] | None = None
@@ -212,8 +224,9 @@ class SimServo:
         self.last_t = now
         if not self.torque:
             if self.hand is not None:
-                self.vel = (self.hand - self.pos) / dt if dt > 1e-4 else 0.0
-                self.pos = self.hand
+                hand = float(self.hand(now)) if callable(self.hand) else self.hand
+                self.vel = (hand - self.pos) / dt if dt > 1e-4 else 0.0
+                self.pos = hand
             else:
                 self.vel = 0.0
             return
@@ -538,15 +551,23 @@ class DynamixelBus:
             raise KeyError(f"no simulated servo with id {dxl_id}; ids: {sorted(self.servos)}") \
                 from None
 
-    def set_hand(self, dxl_id: int, position: float | None) -> None:
-        """Move the limb by hand: with torque off, Present Position follows ``position`` (ticks).
+    def set_hand(self, dxl_id: int,
+                 position: float | Callable[[float], float] | None) -> None:
+        """Move the limb by hand: with torque off, Present Position follows ``position``.
 
-        ``None`` lets go (the shaft stays where it is).
+        Parameters
+        ----------
+        dxl_id : int
+            Servo ID.
+        position : float, callable or None
+            Ticks; or a function of the simulated time (s) returning ticks, for a continuous
+            movement (a clinician sweeping the limb while it records); ``None`` lets go (the
+            shaft stays where it is).
         """
         with self._lock:
             servo = self.servo(dxl_id)
             servo.advance(self.clock())
-            servo.hand = None if position is None else float(position)
+            servo.hand = position if position is None or callable(position) else float(position)
 
     def position(self, dxl_id: int) -> float:
         """True (noise-free) shaft position in ticks, advanced to now."""

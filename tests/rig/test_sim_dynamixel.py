@@ -330,6 +330,16 @@ def test_back_drive_with_torque_off_then_hold(sdk, bus, clock):
     assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == 900
 
 
+def test_hand_can_follow_a_function_of_time(sdk, bus, clock):
+    port, ph = sdk
+    bus.set_hand(2, lambda t: 2048 + 100 * (t - 100.0))  # 100 ticks/s sweep
+    clock.t += 1.0
+    assert ph.read4ByteTxRx(port, 2, PRESENT_POS)[0] == 2148
+    clock.t += 1.0
+    assert ph.read4ByteTxRx(port, 2, PRESENT_POS)[0] == 2248
+    assert signed32(ph.read4ByteTxRx(port, 2, 128)[0]) == round(100 / VELOCITY_UNIT)
+
+
 def test_velocity_mode(sdk, clock):
     port, ph = sdk
     assert ph.write1ByteTxRx(port, 2, OPERATING_MODE, 1) == (COMM_SUCCESS, 0)
