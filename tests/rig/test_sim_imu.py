@@ -437,8 +437,12 @@ def test_stream_samples_at_requested_rate(stream, rate):
     assert host.dec.gaps == 0 and host.dec.errors == 0
     seqs = [s.seq for s in samples]
     assert seqs == [(seqs[0] + k) & 0xFFFF for k in range(n)]
-    ts = np.array([s.timestamp_us for s in samples], dtype=np.int64)
-    assert np.abs(np.diff(ts) - 1e6 / rate).max() <= 1.0  # exact sample grid
+    period = 1_000_000 // rate
+    steps = np.diff(np.array([s.timestamp_us for s in samples], dtype=np.int64))
+    assert (steps % period == 0).all() and (steps > 0).all()  # exact sample grid
+    # a starved simulator skips samples older than 100 ms (SPEC §8): counted, and rare
+    assert int(np.sum(steps // period - 1)) <= sim.samples_skipped
+    assert np.mean(steps == period) > 0.9
     assert wall < 5 * n / rate  # streams in real time (loose: CI machines are slow)
     for s in samples[:: max(1, n // 25)]:
         assert [r.sensor_id for r in s.readings] == [0, 1, 2, 3]
@@ -506,7 +510,7 @@ def test_stream_rate_change_while_streaming(stream):
     after = [f for f in host.frames[host.frames.index(ack) + 1:] if isinstance(f, S.Sample)]
     assert len(after) >= 6
     ts = np.diff([s.timestamp_us for s in after])
-    assert (ts == 2500).all(), ts
+    assert (ts % 2500 == 0).all() and (ts > 0).all(), ts  # 400 Hz grid (skips if starved)
     host.command(S.CommandType.STOP)
 
 
@@ -523,7 +527,7 @@ def test_stream_timestamps_wrap_and_unwrap():
     assert max(raw) > 2**32 - 5000 and min(raw) < 5000  # wrapped
     unwrap = S.TimestampUnwrapper()
     full = np.array([unwrap(t) for t in raw])
-    assert (np.diff(full) == 2500).all()
+    assert (np.diff(full) % 2500 == 0).all() and (np.diff(full) > 0).all()
     for s, t in zip(samples[::20], full[::20], strict=True):
         truth = limb.truth((t - offset) / 1e6).sensors[0, 0]
         assert _angle_deg(s.readings[0].quaternion, truth) < 0.02
