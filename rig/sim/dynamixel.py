@@ -20,8 +20,8 @@ What is modelled
   (0.229 rev/min units) and Profile Acceleration (214.577 rev/min² units), 0 meaning
   "unlimited" (Velocity Limit / instantaneous); mode 3 clamps the goal to the Min/Max Position
   Limit. Velocity mode (1) ramps to Goal Velocity. Integrated lazily on a clock that defaults
-  to ``time.monotonic``. Drive Mode (time-based profile, reverse direction) and Homing Offset
-  are stored but not applied.
+  to ``time.monotonic``. Drive Mode bit 2 selects the time-based profile (Profile Velocity =
+  move time, Profile Acceleration = ramp time, both ms).
 * Torque off: the limb is back-drivable; Present Position follows :meth:`DynamixelBus.set_hand`.
   Torque on: Goal Position is set to Present Position first (so the limb holds still).
 * Encoder noise: Gaussian, ``noise_ticks`` standard deviation, seeded.
@@ -40,9 +40,9 @@ What is modelled
   A half-received packet is abandoned after :data:`PACKET_TIMEOUT` without bytes.
 
 Not modelled: Protocol 1.0, indirect address mapping (the indirect block is plain RAM),
-Secondary ID, Bus Watchdog, Drive Mode, Homing Offset, current and PWM control (the shaft
-stays put), the control-table backup instruction. In a sync/bulk read an absent servo is
-skipped and the next one answers straight after the previous reply.
+Secondary ID, Bus Watchdog, reverse direction (Drive Mode bit 0), Homing Offset, current and
+PWM control (the shaft stays put), the control-table backup instruction. In a sync/bulk read
+an absent servo is skipped and the next one answers straight after the previous reply.
 
 Fault injection
 ---------------
@@ -164,6 +164,7 @@ class SimServo:
         self.hardware_error = 0
         self.temperature = float(self.get("Present Temperature"))
         self.registered: tuple[int, bytes] | None = None
+        self._time_profile: tuple[float, float] | None = None
         self.plugged = True
         self.last_t: float | None = None
         self.boot_t = 0.0
@@ -205,6 +206,9 @@ class SimServo:
         return float(self.get("Min Position Limit")), float(self.get("Max Position Limit"))
 
     def _profile(self) -> tuple[float, float]:
+        """(max velocity ticks/s, acceleration ticks/s²) of the current move."""
+        if self._time_profile is not None:
+            return self._time_profile
         pv = self.get("Profile Velocity")
         pa = self.get("Profile Acceleration")
         vlim = self.get("Velocity Limit") or 1023
@@ -380,6 +384,15 @@ class SimServo:
             lo, hi = self._limits()
             goal = min(max(goal, lo), hi)
         self.target = goal
+        self._time_profile = None
+        if self.get("Drive Mode") & 0x04:
+            # time-based profile (Drive Mode bit 2): Profile Velocity is the time to reach the
+            # goal and Profile Acceleration the ramp time, both ms; the ramp is at most half
+            total = self.get("Profile Velocity") / 1000.0
+            ramp = min(self.get("Profile Acceleration") / 1000.0, total / 2.0)
+            if total > 0:
+                v = abs(goal - self.pos) / (total - ramp)
+                self._time_profile = (v, v / ramp if ramp > 0 else math.inf)
 
     def reboot(self) -> None:
         """REBOOT: RAM back to defaults, hardware errors cleared, torque off."""

@@ -303,6 +303,22 @@ def test_trapezoidal_profile(sdk, clock):
     assert ph.read1ByteTxRx(port, 1, MOVING)[0] == 0
 
 
+def test_time_based_profile(sdk, clock):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 1, 10, 0x04) == (COMM_SUCCESS, 0)  # Drive Mode: time-based
+    assert ph.write4ByteTxRx(port, 1, PROFILE_VEL, 2000) == (COMM_SUCCESS, 0)  # 2 s move
+    assert ph.write4ByteTxRx(port, 1, PROFILE_ACC, 500) == (COMM_SUCCESS, 0)  # 0.5 s ramps
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 2048 + 1500) == (COMM_SUCCESS, 0)
+    clock.t += 1.0  # halfway in time is halfway in distance (symmetric trapezoid)
+    assert signed32(ph.read4ByteTxRx(port, 1, PRESENT_POS)[0]) == pytest.approx(2048 + 750, abs=3)
+    clock.t += 0.9  # 0.1 s before the end: 0.5 * a * 0.1² = 10 ticks to go
+    assert ph.read1ByteTxRx(port, 1, MOVING)[0] == 1
+    assert signed32(ph.read4ByteTxRx(port, 1, PRESENT_POS)[0]) == pytest.approx(3548 - 10, abs=3)
+    clock.t += 0.11
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POS)[0] == 2048 + 1500
+
+
 def test_goal_is_clamped_to_position_limits(sdk, clock):
     port, ph = sdk
     assert ph.write4ByteTxRx(port, 1, MAX_POS, 2500) == (COMM_SUCCESS, 0)
