@@ -66,6 +66,7 @@ import termios
 import threading
 import time
 import tty
+import urllib.parse
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
@@ -88,7 +89,7 @@ from firmware_protocol.dynamixel.packets import (
 from firmware_protocol.errors import ProtocolError
 from rig.errors import RigConfigError
 
-__all__ = ["HARDWARE_ERRORS", "DynamixelBus", "SimServo", "start_servo_bus"]
+__all__ = ["HARDWARE_ERRORS", "DynamixelBus", "SimServo", "bus_from_url", "start_servo_bus"]
 
 TICKS_PER_REV = 4096
 VELOCITY_UNIT = 0.229 * TICKS_PER_REV / 60.0  # ticks/s per Profile/Present Velocity unit
@@ -946,3 +947,48 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
         return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time)
     except ValueError as err:
         raise RigConfigError(str(err)) from err
+
+
+def bus_from_url(url: str, **overrides: object) -> DynamixelBus:
+    """Start a simulated chain described by a port string.
+
+    ``sim://dynamixel?ids=1,2,3&model=XM430-W350&baud=1000000&return_delay_us=0&noise=0.5&seed=1``
+    (every query key optional: one XM430-W350 with ID 1 at 1 Mbps). This is the seam where a
+    port string chooses the simulator instead of ``/dev/ttyUSB0``.
+
+    Parameters
+    ----------
+    url : str
+        ``sim://dynamixel`` URL.
+    **overrides
+        Keyword arguments of :func:`start_servo_bus` that win over the URL (e.g. ``clock``).
+
+    Raises
+    ------
+    RigConfigError
+        Not a ``sim://dynamixel`` URL, unknown key or bad value.
+    """
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != "sim" or parts.netloc not in ("dynamixel", "dxl"):
+        raise RigConfigError(f"{url!r} is not a simulated servo bus URL "
+                             f"(expected sim://dynamixel?ids=1,2,3&model=XM430-W350)")
+    query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
+    known = {"ids", "model", "baud", "return_delay_us", "noise", "seed"}
+    unknown = set(query) - known
+    if unknown:
+        raise RigConfigError(f"{url!r}: unknown key(s) {', '.join(sorted(unknown))}; "
+                             f"known: {', '.join(sorted(known))}")
+    one = {k: v[-1] for k, v in query.items()}
+    try:
+        kwargs: dict[str, object] = {
+            "ids": [int(i) for i in one.get("ids", "1").split(",")],
+            "model": one.get("model", "XM430-W350"),
+            "baud_rate": int(one.get("baud", "1000000")),
+            "return_delay_us": int(one["return_delay_us"]) if "return_delay_us" in one else None,
+            "noise_ticks": float(one.get("noise", "0")),
+            "seed": int(one.get("seed", "0")),
+        }
+    except ValueError as err:
+        raise RigConfigError(f"{url!r}: {err}") from err
+    kwargs.update(overrides)
+    return start_servo_bus(**kwargs)  # type: ignore[arg-type]

@@ -29,7 +29,7 @@ from dynamixel_sdk import (
 
 from firmware_protocol.dynamixel import ErrorCode, instructions
 from rig.errors import RigConfigError
-from rig.sim.dynamixel import ACCEL_UNIT, VELOCITY_UNIT, start_servo_bus
+from rig.sim.dynamixel import ACCEL_UNIT, VELOCITY_UNIT, bus_from_url, start_servo_bus
 
 # X-series control table addresses (e-Manual)
 RETURN_DELAY, OPERATING_MODE, MAX_POS, MIN_POS = 9, 11, 48, 52
@@ -492,6 +492,19 @@ def test_adapter_disconnect_fails_the_port_like_a_usb_unplug(bus):
 def test_bad_configuration_is_a_config_error(kwargs, match):
     with pytest.raises(RigConfigError, match=match):
         start_servo_bus(**kwargs)
+
+
+def test_port_string_chooses_the_simulator():
+    with bus_from_url("sim://dynamixel?ids=4,5&model=XL430-W250&return_delay_us=0") as bus:
+        port = PortHandler(bus.port)
+        assert port.openPort()
+        try:
+            assert PacketHandler(2.0).ping(port, 5) == (1060, COMM_SUCCESS, 0)
+        finally:
+            port.closePort()
+    for bad in ("/dev/ttyUSB0", "sim://imu", "sim://dynamixel?idz=1", "sim://dynamixel?ids=a"):
+        with pytest.raises(RigConfigError):
+            bus_from_url(bad)
 
 
 # ---------------------------------------------------------------------------- CLI
