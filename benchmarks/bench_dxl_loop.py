@@ -11,7 +11,7 @@ rate for several configurations:
 each with the e-Manual default Return Delay Time (500 µs) and with 0, and with normal vs fast
 sync read. Wire time at the bus baud rate is modelled. Figures, never assertions.
 
-Run: ``python benchmarks/bench_dxl_loop.py [--cycles 2000] [--runs 3]``.
+Run: ``python benchmarks/bench_dxl_loop.py [--cycles 1000] [--runs 3]``.
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[f
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cycles", type=int, default=2000)
+    parser.add_argument("--cycles", type=int, default=1000)
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args()
     print(f"3-servo sync read (Present Position) + sync write (Goal Position), 1 Mbps, "
