@@ -65,12 +65,15 @@ def experiments() -> list[dict]:
                                     "network": {"canonicalise": "none"}}})
     for s in SHAPES:
         ex.append({"group": "irregular", "name": s, "shape": s, "override": {}})
+    same = ("regular", "cone X 45°")  # the thesis preset's defaults: one set of runs
     for o in ("valid-first", "random", "reversed"):
         ex.append({"group": "order", "name": o, "cone": (AXES["X"], 45),
-                   "override": {"data": {"order": o}}})
+                   "override": {"data": {"order": o}},
+                   **({"alias": same} if o == "valid-first" else {})})
     for d in ("even", "clustered"):
         ex.append({"group": "distribution", "name": d, "cone": (AXES["X"], 45),
-                   "override": {"data": {"distribution": d}}})
+                   "override": {"data": {"distribution": d}},
+                   **({"alias": same} if d == "even" else {})})
     evolved = ["sigmoid", "tanh", "gaussian", "sine", "linear"]
     acts = {
         "spline/linear": ({"hidden_activations": ["spline0", "spline1", "spline2", "spline3"],
@@ -86,7 +89,8 @@ def experiments() -> list[dict]:
     }
     for name, (net, evo) in acts.items():
         ex.append({"group": "activation", "name": name, "cone": (AXES["X"], 45),
-                   "override": {"network": net, "evolution": evo}})
+                   "override": {"network": net, "evolution": evo},
+                   **({"alias": same} if name == "sigmoid/linear" else {})})
     for target in ("cone", "original"):
         for k in ("linear", "poly", "rbf", "sigmoid"):
             for feat in ("quaternion", "direction"):
@@ -237,6 +241,16 @@ def report(results: list[dict], cmd: str, commit: str, elapsed: float) -> str:
     return "\n".join(L) + "\n"
 
 
+def _with_aliases(done: list[dict], aliases: list[dict]) -> list[dict]:
+    """Add copies of the runs of identical configurations under their other names."""
+    out = [r for r in done if (r["group"], r["name"]) not in
+           {(a["group"], a["name"]) for a in aliases}]
+    for a in aliases:
+        out += [{**r, "group": a["group"], "name": a["name"]} for r in done
+                if (r["group"], r["name"]) == a["alias"]]
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
@@ -258,8 +272,10 @@ def main(argv=None) -> None:
     if args.resume and jsonl.exists():
         done = [json.loads(line) for line in jsonl.read_text().splitlines() if line.strip()]
     have = {(r["group"], r["name"], r["seed"]) for r in done}
-    jobs = [(e, s) for e in exps for s in range(args.repeats)
-            if (e["group"], e["name"], s) not in have]
+    # seeds outermost: if the run is cut short every experiment has its first repeats
+    jobs = [(e, s) for s in range(args.repeats) for e in exps
+            if "alias" not in e and (e["group"], e["name"], s) not in have]
+    aliases = [e for e in exps if "alias" in e]
     cmd = "python " + " ".join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])])
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
@@ -280,8 +296,10 @@ def main(argv=None) -> None:
             print(f"[{k}/{len(jobs)}] {e['group']:<12} {e['name']:<28} seed {s}  "
                   f"{res.get('mean_3d_error_pct', res.get('accuracy', 0)):.4g}  "
                   f"{res['seconds']:.1f} s", flush=True)
-            args.out.write_text(report(done, cmd, commit, time.perf_counter() - t0))
-    args.out.write_text(report(done, cmd, commit, time.perf_counter() - t0))
+            args.out.write_text(report(_with_aliases(done, aliases), cmd, commit,
+                                       time.perf_counter() - t0))
+    args.out.write_text(report(_with_aliases(done, aliases), cmd, commit,
+                               time.perf_counter() - t0))
     print(f"wrote {args.out}")
 
 

@@ -76,11 +76,18 @@ def apply(kind: int, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if kind == 0:
         return z, np.ones_like(z)
     if kind == 1:
-        y = 0.5 * (1.0 + np.tanh(0.5 * z))  # overflow-free sigmoid
-        return y, y * (1.0 - y)
+        y = np.multiply(z, 0.5)
+        np.tanh(y, out=y)  # overflow-free sigmoid: (1 + tanh(z/2)) / 2
+        y *= 0.5
+        y += 0.5
+        dy = np.subtract(1.0, y)
+        dy *= y
+        return y, dy
     if kind == 2:
         y = np.tanh(z)
-        return y, 1.0 - y * y
+        dy = np.multiply(y, y)
+        np.subtract(1.0, dy, out=dy)
+        return y, dy
     if kind == 3:
         y = np.exp(-z * z)
         return y, -2.0 * z * y

@@ -169,28 +169,35 @@ def forward(
     cache : tuple
         What :func:`backward` needs (None if ``need_grad`` is False).
     """
-    p, i, h, o = spec.shape
+    _, i, h, o = spec.shape
     if coef is None:
         coef = spec.coefficients()
     w1, w2 = split_params(theta, i, h, o)
     zh = np.matmul(xb, w1)  # (P, N, H)
     hh, dh = activate(zh, spec.act_hidden, coef)
-    a = np.concatenate((hh, np.broadcast_to(xb, (p, *xb.shape))), axis=2)
-    zo = np.matmul(a, w2)
-    y, dy = activate(zo, spec.act_out, coef)
-    return y, ((a, dh, dy, w2) if need_grad else None)
+    zo = np.matmul(hh, w2[:, :h])
+    zo += np.matmul(xb, w2[:, h:])  # input→output shortcuts and output biases
+    if not spec.act_out.any():  # all outputs linear (the usual case): no derivative needed
+        y, dy = zo, None
+    else:
+        y, dy = activate(zo, spec.act_out, coef)
+    return y, ((hh, dh, dy, w2) if need_grad else None)
 
 
 def backward(err: np.ndarray, cache, spec: PopulationSpec, xb: np.ndarray) -> np.ndarray:
-    """Gradient of ``Σ err²/2`` w.r.t. the flat parameters, masked; ``err = y - t`` (P, N, O)."""
-    a, dh, dy, w2 = cache
+    """Gradient of ``Σ err²/2`` w.r.t. the flat parameters; ``err = y - t`` (P, N, O).
+
+    Returns (P, n_weights); entries of disabled links are not zeroed (the trainer masks).
+    """
+    hh, dh, dy, w2 = cache
     p, _, h, _ = spec.shape
-    do = err * dy
-    g2 = np.matmul(a.transpose(0, 2, 1), do)  # (P, H + I + 1, O)
-    dhid = np.matmul(do, w2[:, :h, :].transpose(0, 2, 1)) * dh  # (P, N, H)
+    do = err if dy is None else err * dy
+    g2h = np.matmul(hh.transpose(0, 2, 1), do)  # (P, H, O)
+    g2x = np.matmul(xb.T, do)  # (P, I + 1, O)
+    dhid = np.matmul(do, w2[:, :h, :].transpose(0, 2, 1))  # (P, N, H)
+    dhid *= dh
     g1 = np.matmul(xb.T, dhid)  # (P, I + 1, H)
-    g = np.concatenate((g1.reshape(p, -1), g2.reshape(p, -1)), axis=1)
-    return g
+    return np.concatenate((g1.reshape(p, -1), g2h.reshape(p, -1), g2x.reshape(p, -1)), axis=1)
 
 
 @dataclass

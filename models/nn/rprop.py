@@ -106,7 +106,7 @@ def train_population(
     coef = None if coef is None else coef.astype(dtype)
     mask = sub.flat_mask().astype(dtype)
     th = np.asarray(theta, dtype=dtype) * mask
-    step = np.broadcast_to(delta0[:, None], th.shape).astype(dtype)
+    step = np.broadcast_to(np.minimum(delta0, delta_max)[:, None], th.shape).astype(dtype)
     gprev = np.zeros_like(th)
     dw = np.zeros_like(th)
     eprev = np.full(p, np.inf)
@@ -134,17 +134,20 @@ def train_population(
             eprev, dmax, mse = eprev[keep], dmax[keep], mse[keep]
             y, cache = forward(th, sub, xb, coef)
             err = y - t
-        g = backward(err, cache, sub, xb) * mask
+        g = backward(err, cache, sub, xb)
+        g *= mask
         s = g * gprev
         pos = s > 0
         neg = s < 0
-        step = np.where(pos, np.minimum(step * ETA_PLUS, dmax), step)
-        step = np.where(neg, np.maximum(step * ETA_MINUS, DELTA_MIN), step)
+        step *= np.where(pos, ETA_PLUS, np.where(neg, ETA_MINUS, 1.0)).astype(dtype)
+        np.clip(step, DELTA_MIN, dmax, out=step)  # Δ₀ ≤ Δmax, so only changed steps clip
         if plus:
             rose = (mse > eprev)[:, None] & neg
             th += np.where(rose, dw, 0.0)  # undo the previous step (weight backtracking)
-        g = np.where(neg, 0.0, g)
-        dw = -np.sign(g) * step
+        g[neg] = 0.0
+        dw = np.sign(g)
+        dw *= step
+        np.negative(dw, out=dw)
         th += dw
         gprev = g
         eprev = mse
