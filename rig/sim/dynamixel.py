@@ -467,6 +467,8 @@ class DynamixelBus:
     def __init__(self, servos: Sequence[SimServo], *, clock: Callable[[], float] = time.monotonic,
                  model_wire_time: bool = True):
         ids = [s.id for s in servos]
+        if not ids:
+            raise ValueError("a servo bus needs at least one servo")
         if len(set(ids)) != len(ids):
             raise ValueError(f"servo ids must be distinct, got {ids}")
         self.servos: dict[int, SimServo] = {s.id: s for s in servos}
@@ -499,14 +501,21 @@ class DynamixelBus:
     # ------------------------------------------------------------------ lifecycle
     def _open_pty(self) -> None:
         master, slave = os.openpty()
-        tty.setraw(slave)
-        attrs = termios.tcgetattr(slave)
-        speed = next((k for k, v in _SPEEDS.items() if v == 1_000_000), attrs[4])
-        attrs[4] = attrs[5] = speed
-        termios.tcsetattr(slave, termios.TCSANOW, attrs)
-        os.set_blocking(master, False)
+        try:
+            tty.setraw(slave)
+            # start the line at the servos' rate, as an adapter left configured for them
+            baud = next(iter(self.servos.values())).baud_rate
+            attrs = termios.tcgetattr(slave)
+            speed = next((k for k, v in _SPEEDS.items() if v == baud), attrs[4])
+            attrs[4] = attrs[5] = speed
+            termios.tcsetattr(slave, termios.TCSANOW, attrs)
+            os.set_blocking(master, False)
+            self.port = os.ttyname(slave)
+        except BaseException:
+            os.close(master)
+            os.close(slave)
+            raise
         self._master, self._slave = master, slave
-        self.port = os.ttyname(slave)
 
     def _close_pty(self) -> None:
         for fd in (self._master, self._slave):
