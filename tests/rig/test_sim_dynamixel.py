@@ -552,7 +552,8 @@ def test_port_string_chooses_the_simulator():
 # ---------------------------------------------------------------------------- CLI
 
 
-def test_cli_prints_port_serves_and_exits_cleanly_on_sigterm():
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum):
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
@@ -568,7 +569,7 @@ def test_cli_prints_port_serves_and_exits_cleanly_on_sigterm():
             assert ph.ping(port, 3) == (1020, COMM_SUCCESS, 0)
         finally:
             port.closePort()
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signum)
         assert proc.wait(timeout=10) == 0
     finally:
         if proc.poll() is None:
