@@ -1,0 +1,140 @@
+"""Accuracy and inference cost of the presets, activations, and what the targets take.
+
+    python benchmarks/bench_accuracy.py [--only presets,activations,capacity] [--seeds 1]
+        [--quick]
+
+Every model is trained by :func:`models.nn.train.train_correction`, exported to ONNX and
+*evaluated through onnxruntime* (the deployed artefact) on 3000 fresh held-out orientations of
+the training distribution (even) and on 3000 uniformly distributed limb directions. Latency is
+the median single-orientation ``CorrectionModel.correct_one`` call. Prints Markdown tables.
+Never asserts on time.
+
+- ``presets``: ``best``, ``fixed``, ``thesis`` (one repeat) on a regular boundary (45° cone
+  about +X) and an irregular one (the 'original' shape).
+- ``activations``: hidden activation under the ``best`` training regime (fixed topology, 20
+  nodes, 2000 epochs), same two constraints.
+- ``capacity``: what lower errors cost — 40 and 80 hidden nodes, 2000 patterns, 3000 epochs.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_v] = "1"
+
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from models import metrics as M  # noqa: E402
+from models.constraint import JointConstraint  # noqa: E402
+from models.nn.config import get_config  # noqa: E402
+from models.nn.train import _oracle, train_correction, training_patterns  # noqa: E402
+from models.onnx_io import export_onnx, load_model  # noqa: E402
+from models.shapes import load_shape  # noqa: E402
+
+
+def constraints():
+    return {"cone X 45°": JointConstraint.cone([1, 0, 0], 45, name="cone45"),
+            "original": load_shape("original")}
+
+
+def latency_us(model, n=5000) -> float:
+    rng = np.random.default_rng(0)
+    rows = [tuple(map(float, r)) for r in rng.standard_normal((n, 4))]
+    for r in rows[:500]:
+        model.correct_one(*r)
+    ts = []
+    for r in rows:
+        t0 = time.perf_counter_ns()
+        model.correct_one(*r)
+        ts.append(time.perf_counter_ns() - t0)
+    return statistics.median(ts) / 1e3
+
+
+def run(label, c, preset, override, seed, quick) -> dict:
+    if quick:
+        override = {**override, "evolution": {**override.get("evolution", {}),
+                                              "population": 4, "generations": 1},
+                    "training": {**override.get("training", {}), "max_epochs": 50,
+                                 "min_epochs": 10},
+                    "data": {"train": 200, "validation": 100, "test": 300}}
+    cfg = get_config(preset, override)
+    t0 = time.perf_counter()
+    m = train_correction(c, cfg, np.random.default_rng(seed))
+    train_s = time.perf_counter() - t0
+    oracle = _oracle(c)
+    with tempfile.TemporaryDirectory() as d:
+        p = export_onnx(m.network, Path(d) / "m.onnx", constraint_yaml=c.to_yaml(),
+                        training_data_sha256=m.data_sha256, metrics=m.metrics)
+        model = load_model(p, expected_constraint=c)
+        rng = np.random.default_rng(10_000 + seed)
+        n = 300 if quick else 3000
+        q_even, _ = training_patterns(c, n, rng, distribution="even", order="random",
+                                      hemisphere="ambiguous", oracle=oracle)
+        q_uni, _ = training_patterns(c, n, rng, distribution="uniform", order="random",
+                                     hemisphere="ambiguous", oracle=oracle)
+        even = M.evaluate(model.correction, oracle, q_even)
+        uni = M.evaluate(model.correction, oracle, q_uni)
+        us = latency_us(model, 1000 if quick else 5000)
+    return {"label": label, "even": even, "uniform": uni, "us": us, "train_s": train_s,
+            "hidden": m.network.n_hidden, "links": m.network.n_links}
+
+
+def table(rows) -> None:
+    print("| model | constraint | mean 3-D % (even) | max 3-D % | MSE | invalid > 1° out | "
+          "mean identity err ° | mean 3-D % (uniform) | hidden / links | train s | µs |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for cname, r in rows:
+        e, u = r["even"], r["uniform"]
+        print(f"| {r['label']} | {cname} | {e['mean_3d_error_pct']:.3f} | "
+              f"{e['max_3d_error_pct']:.2f} | {e['mse']:.2e} | "
+              f"{100 * e['frac_invalid_violating_1deg']:.1f} % | "
+              f"{e['mean_identity_error_deg']:.3f} | {u['mean_3d_error_pct']:.3f} | "
+              f"{r['hidden']} / {r['links']} | {r['train_s']:.1f} | {r['us']:.1f} |", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", default="presets,activations,capacity")
+    ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    groups = args.only.split(",")
+    cs = constraints()
+    plans = []
+    if "presets" in groups:
+        for preset in ("best", "fixed", "thesis"):
+            over = {"evolution": {"repeats": 1}} if preset == "thesis" else {}
+            plans.append((f"preset {preset}", preset, over))
+    if "activations" in groups:
+        for a in ("relu", "tanh", "sigmoid", "hardtanh"):
+            plans.append((f"best regime, {a}", "best", {"network": {"hidden_activations": [a]}}))
+        plans.append(("best regime, leaky_relu+tanh mix", "best",
+                      {"network": {"hidden_activations": ["leaky_relu", "tanh"]},
+                       "evolution": {"evolve_activations": True}}))
+    if "capacity" in groups:
+        for h in (40, 80):
+            plans.append((f"leaky_relu, {h} hidden, 2000 patterns, 3000 epochs", "best",
+                          {"network": {"max_hidden": h},
+                           "training": {"max_epochs": 3000, "min_epochs": 3000},
+                           "data": {"train": 2000}}))
+    rows = []
+    for label, preset, over in plans:
+        for cname, c in cs.items():
+            for seed in range(args.seeds):
+                r = run(label, c, preset, over, seed, args.quick)
+                rows.append((cname, r))
+                e3 = r["even"]["mean_3d_error_pct"]
+                print(f"# {label} / {cname} / seed {seed}: 3-D {e3:.3f} %, "
+                      f"{r['train_s']:.1f} s", flush=True)
+    table(rows)
+
+
+if __name__ == "__main__":
+    main()
