@@ -630,8 +630,20 @@ class DynamixelBus:
         with self._lock:
             self._faults.truncate, self._faults.truncate_keep = count, keep
 
-    def unplug(self, ids: Iterable[int] | None = None) -> None:
-        """Pull the bus cable (``ids`` None) or individual servos: they stop answering."""
+    def unplug(self, ids: Iterable[int] | None = None, *, adapter: bool = False) -> None:
+        """Unplug something; the client sees what it would see on hardware.
+
+        Parameters
+        ----------
+        ids : iterable of int, optional
+            Servos whose cable is pulled: they stop answering. ``None``: the bus cable between
+            adapter and chain, so nobody answers (timeouts, the port stays open).
+        adapter : bool, default False
+            Unplug the USB adapter itself instead (:meth:`disconnect`): the pty goes away.
+        """
+        if adapter:
+            self.disconnect()
+            return
         with self._lock:
             if ids is None:
                 self._faults.bus_unplugged = True
@@ -639,14 +651,21 @@ class DynamixelBus:
                 for i in ids:
                     self.servo(i).plugged = False
 
-    def replug(self, ids: Iterable[int] | None = None) -> None:
-        """Undo :meth:`unplug` (``None``: the bus cable and every servo)."""
+    def replug(self, ids: Iterable[int] | None = None, *, adapter: bool = False) -> str:
+        """Undo :meth:`unplug` (``ids`` None: the bus cable and every servo).
+
+        With ``adapter=True`` the adapter is plugged back (:meth:`reconnect`): a new pty.
+        Returns the port path, which changes only after an adapter replug.
+        """
+        if adapter:
+            return self.reconnect()
         with self._lock:
             if ids is None:
                 self._faults.bus_unplugged = False
                 ids = list(self.servos)
             for i in ids:
                 self.servo(i).plugged = True
+            return self.port
 
     def disconnect(self) -> None:
         """Unplug the USB adapter: the pty goes away and the client's port fails with EIO."""

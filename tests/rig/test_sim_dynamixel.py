@@ -503,7 +503,7 @@ def test_adapter_disconnect_fails_the_port_like_a_usb_unplug(bus):
     ph = PacketHandler(2.0)
     try:
         assert ph.ping(port, 1)[1] == COMM_SUCCESS
-        bus.disconnect()
+        bus.unplug(adapter=True)
         with pytest.raises(OSError):  # termios.error / SerialException: EIO
             try:
                 ph.ping(port, 1)
@@ -512,7 +512,8 @@ def test_adapter_disconnect_fails_the_port_like_a_usb_unplug(bus):
     finally:
         port.is_using = False
         port.closePort()
-    new_port = bus.reconnect()
+    new_port = bus.replug(adapter=True)
+    assert new_port == bus.port
     port = PortHandler(new_port)
     assert port.openPort()
     try:
