@@ -30,7 +30,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterable, Mapping, Sequence
 
-from firmware_protocol.dynamixel.framing import BROADCAST_ID, HEADER, crc16
+from firmware_protocol.dynamixel.framing import BROADCAST_ID, HEADER, MAX_ID, crc16
 from firmware_protocol.dynamixel.packets import (
     STATUS,
     Instruction,
@@ -50,8 +50,8 @@ def _u16(value: int, what: str) -> bytes:
 
 
 def _id(value: int) -> int:
-    if not 0 <= value <= 0xFD:
-        raise ValueError(f"device id must be 0..253, got {value}")
+    if not 0 <= value <= MAX_ID:
+        raise ValueError(f"device id must be 0..{MAX_ID}, got {value}")
     return value
 
 
