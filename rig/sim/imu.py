@@ -2,8 +2,8 @@
 
 Both serve real bytes on the master side of a pseudo-terminal; ``serial.Serial(sim.port)``
 (pyserial, unchanged) opens the slave exactly as it opens a USB-UART. A background thread waits
-with ``select`` on the master and a shutdown pipe — no busy sleeps — and answers requests; the
-stream device also wakes at its sample deadlines. Orientations come from a
+with ``poll`` on the master and a shutdown pipe — no busy sleeps — and answers requests; the
+stream device also wakes at its sample deadlines (``poll`` timeout). Orientations come from a
 :class:`~rig.sim.limb.SimulatedLimb` (ground truth available through :attr:`limb`).
 
 :class:`Bno055Simulator`
@@ -112,17 +112,18 @@ class _PtyServer:
             err, self._error = self._error, None
             raise RuntimeError(f"simulator on {self.port} stopped: {err!r}") from err
 
-    def _wake(self) -> None:
-        """Make the server thread re-evaluate its timer (after a state change from outside)."""
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"w")
-
     def _run(self) -> None:
+        poller = select.poll()
+        poller.register(self._master, select.POLLIN)
+        poller.register(self._wake_r, select.POLLIN)
         try:
             while True:
                 deadline = self._timer_deadline()
-                timeout = None if deadline is None else max(0.0, deadline - self._timer_clock())
-                ready, _, _ = select.select([self._master, self._wake_r], [], [], timeout)
+                if deadline is None:
+                    timeout_ms = None
+                else:  # rounded up: waking early would spin until the deadline
+                    timeout_ms = max(0, math.ceil((deadline - self._timer_clock()) * 1000.0))
+                ready = {fd for fd, _ in poller.poll(timeout_ms)}
                 if self._wake_r in ready:
                     os.read(self._wake_r, 64)
                     if self._closed:
