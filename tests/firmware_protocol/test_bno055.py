@@ -9,7 +9,9 @@ from hypothesis import strategies as st
 from firmware_protocol.errors import FramingError, PacketError, ProtocolError
 from firmware_protocol.imu import bno055 as B
 
-# Datasheet BST-BNO055-DS000, section 4.7 (UART protocol) and table 4-8 (status codes).
+# Datasheet BST-BNO055-DS000, section 4.7 (UART protocol) and table 4-8 (status codes): the
+# CHIP_ID read and the OPR_MODE write are the datasheet's own examples; the others apply the
+# same published layouts to the registers the rig uses.
 PUBLISHED = [
     # (what, host bytes, chip bytes, decoded response)
     ("read CHIP_ID", "AA 01 00 01", "BB 01 A0", B.ReadResponse(b"\xa0")),
