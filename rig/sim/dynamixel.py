@@ -111,6 +111,8 @@ HARDWARE_ERRORS = {
 _READS = frozenset({Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ,
                     Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ})
 
+_FD_SETSIZE = 1024  # glibc's select() limit on fd numbers
+
 _SPEEDS = {getattr(termios, n): int(n[1:]) for n in dir(termios)
            if n.startswith("B") and n[1:].isdigit()}
 
@@ -420,6 +422,21 @@ class SimServo:
         self.reboot()
 
 
+def _wait_readable(fds: list[int], timeout: float | None) -> list[int]:
+    """The fds of ``fds`` that are readable within ``timeout`` seconds (None: no limit).
+
+    ``select`` for its microsecond timeout (return delays are tens of µs); ``poll`` (1 ms
+    resolution, rounded up) when an fd number is beyond ``FD_SETSIZE``, which select refuses.
+    """
+    if max(fds) < _FD_SETSIZE:
+        return select.select(fds, [], [], timeout)[0]
+    poller = select.poll()
+    for fd in fds:
+        poller.register(fd, select.POLLIN)
+    ms = None if timeout is None else math.ceil(timeout * 1000.0)
+    return [fd for fd, events in poller.poll(ms) if events & (select.POLLIN | select.POLLHUP)]
+
+
 def _baud_index(baud_rate: int) -> int:
     for index, rate in BAUD_RATES.items():
         if rate == baud_rate:
@@ -703,8 +720,8 @@ class DynamixelBus:
             timeout = None if due is None else max(0.0, due - time.monotonic())
             fds = [self._wake_r] + ([master] if master >= 0 else [])
             try:
-                ready, _, _ = select.select(fds, [], [], timeout)
-            except (OSError, ValueError):  # fd closed under us by disconnect()
+                ready = _wait_readable(fds, timeout)
+            except OSError:  # fd closed under us by disconnect(): re-read the state
                 continue
             if self._wake_r in ready:
                 with contextlib.suppress(OSError):

@@ -522,6 +522,30 @@ def test_adapter_disconnect_fails_the_port_like_a_usb_unplug(bus):
         port.closePort()
 
 
+def test_serves_when_fd_numbers_exceed_fd_setsize():
+    """A process with many open files: select() cannot take fd >= 1024, poll() takes over."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft < 1200:
+        pytest.skip(f"RLIMIT_NOFILE {soft} too low to open fds beyond 1024")
+    null = os.open(os.devnull, os.O_RDONLY)
+    filler = [os.dup(null) for _ in range(1100)]
+    try:
+        bus = start_servo_bus([1], return_delay_us=0)
+    finally:
+        for fd in [*filler, null]:  # free low numbers: pyserial's own select() needs one
+            os.close(fd)
+    with bus:
+        assert bus._master >= 1024
+        port = PortHandler(bus.port)
+        assert port.openPort()
+        try:
+            assert PacketHandler(2.0).ping(port, 1) == (1020, COMM_SUCCESS, 0)
+        finally:
+            port.closePort()
+
+
 # ---------------------------------------------------------------------------- configuration
 
 
