@@ -474,6 +474,11 @@ class DynamixelBus:
         Path of the pty slave to open with ``PortHandler`` / pyserial.
     servos : dict of int to SimServo
         By ID at creation (IDs written later keep their original key).
+    instructions_seen, replies_sent : int
+        Counters of decoded instruction packets and of status packets written.
+    internal_errors : list of str
+        Exceptions raised while handling an instruction (simulator bugs; the packet is then
+        unanswered and the bus keeps serving). Empty in a healthy run.
 
     Examples
     --------
@@ -505,6 +510,7 @@ class DynamixelBus:
         self.port = ""
         self.replies_sent = 0
         self.instructions_seen = 0
+        self.internal_errors: list[str] = []
         try:
             self._open_pty()
         except BaseException:
@@ -773,7 +779,10 @@ class DynamixelBus:
                 if isinstance(packet, InstructionPacket):
                     self._outbox.clear()  # a new instruction pre-empts unsent replies
                     self.instructions_seen += 1
-                    self._dispatch(packet, t_rx)
+                    try:
+                        self._dispatch(packet, t_rx)
+                    except Exception as err:  # a simulator bug must not kill the bus
+                        self.internal_errors.append(f"{packet!r}: {type(err).__name__}: {err}")
 
     # ------------------------------------------------------------------ instruction handling
     def _listeners(self) -> list[SimServo]:
