@@ -61,9 +61,11 @@ def servos(ids: str, model: str, baud_rate: int, return_delay_us: int | None,
             bus = start_servo_bus(id_list, model, baud_rate=baud_rate,
                                   return_delay_us=return_delay_us, noise_ticks=noise_ticks,
                                   seed=seed)
-        except RigConfigError as err:  # unknown model or baud rate: name the option
-            option = "--model" if "model" in str(err) else "--baud"
-            raise RigConfigError(f"{option}: {err}") from None
+        except RigConfigError as err:  # name the option the message is about
+            text = str(err)
+            option = ("--model" if "model" in text else
+                      "--return-delay-us" if "return delay" in text else "--baud")
+            raise RigConfigError(f"{option}: {text}") from None
         with bus:
             click.echo(bus.port)
             click.get_text_stream("stdout").flush()

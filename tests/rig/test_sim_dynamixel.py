@@ -607,7 +607,8 @@ def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum):
 
 
 @pytest.mark.parametrize("args", [["--model", "XQ999"], ["--ids", "1,x"], ["--ids", "1,1"],
-                                  ["--ids", "300"], ["--baud", "12345"]])
+                                  ["--ids", "300"], ["--baud", "12345"],
+                                  ["--return-delay-us", "600"]])
 def test_cli_bad_option_is_one_line_error(args):
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, PYTHONPATH=str(root))
@@ -616,7 +617,7 @@ def test_cli_bad_option_is_one_line_error(args):
     assert done.returncode == 2
     assert done.stdout == ""
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("rig: error: --"), done.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"rig: error: {args[0]}: "), done.stderr
 
 
 def test_math_sanity_of_units():
