@@ -3,7 +3,9 @@
 The bus is served on a pseudo-terminal: :attr:`DynamixelBus.port` (``/dev/pts/N``) is opened by
 ``dynamixel_sdk.PortHandler`` (or plain pyserial) exactly like ``/dev/ttyUSB0``. Bytes are
 Protocol 2.0 (see :mod:`firmware_protocol.dynamixel`); one background thread waits on the pty
-master and a wake-up pipe with ``select`` and answers instruction packets.
+master and a wake-up pipe with ``select`` (``poll`` if fd numbers pass FD_SETSIZE) and answers
+instruction packets. Also reachable as a port string: ``sim://dynamixel?ids=1,2,3``
+(:func:`bus_from_url`).
 
 What is modelled
 ----------------
@@ -50,7 +52,8 @@ Fault injection
 :meth:`~DynamixelBus.delay_responses`, :meth:`~DynamixelBus.truncate_responses`,
 :meth:`~DynamixelBus.raise_hardware_error`, :meth:`~DynamixelBus.unplug` /
 :meth:`~DynamixelBus.replug` (servos stop answering, adapter present) and
-:meth:`~DynamixelBus.disconnect` / :meth:`~DynamixelBus.reconnect` (the adapter itself goes
+:meth:`~DynamixelBus.disconnect` / :meth:`~DynamixelBus.reconnect`, also
+``unplug(adapter=True)`` / ``replug(adapter=True)`` (the adapter itself goes
 away: the pty master is closed, the client's port fails with an I/O error; reconnecting opens a
 new pty, so :attr:`~DynamixelBus.port` changes).
 """
