@@ -89,8 +89,13 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(130)
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
+    except click.UsageError as exc:
+        # one line, like every other user mistake: "rig sim imu: Invalid value for '--rate' ..."
+        where = exc.ctx.command_path if exc.ctx is not None else "rig"
+        click.echo(f"rig: error: {where}: {exc.format_message()} (see --help)", err=True)
+        sys.exit(2)
     except click.ClickException as exc:
-        exc.show()
+        click.echo(f"rig: error: {exc.format_message()}", err=True)
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
         sys.exit(130)

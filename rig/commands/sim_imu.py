@@ -19,16 +19,6 @@ from rig.errors import RigConfigError
 _MIN_RATE, _MAX_RATE = 100, 400
 
 
-class _OneLineErrors(click.Command):
-    """Report option errors as :class:`RigConfigError`: one line, no usage block."""
-
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-        try:
-            return super().parse_args(ctx, args)
-        except click.UsageError as err:
-            raise RigConfigError(f"rig sim imu: {err.format_message()}") from err
-
-
 def build_simulator(protocol: str, rate: int, sensors: int, constraint: str | None, seed: int):
     """The simulator ``rig sim imu`` runs (started; the caller closes it).
 
@@ -63,7 +53,7 @@ def build_simulator(protocol: str, rate: int, sensors: int, constraint: str | No
                               max_rate_hz=max(400, rate))
 
 
-@click.command("imu", cls=_OneLineErrors)
+@click.command("imu")
 @click.option("--protocol", type=click.Choice(["bno055", "stream"]), default="stream",
               show_default=True, help="Wire protocol: BNO055 UART registers or the rig stream.")
 @click.option("--rate", type=int, default=100, show_default=True,
