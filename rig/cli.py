@@ -10,13 +10,13 @@ User mistakes (bad files, bad options, missing ports) are reported as one line o
 
 from __future__ import annotations
 
-import importlib
 import os
 import sys
 
 import click
 
 from rig import __version__
+from rig.commands._lazy import lazy_group_class
 
 # name -> (module, attribute, one-line help). Imported only when the command is used.
 _COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -37,23 +37,9 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
-class _LazyGroup(click.Group):
-    def list_commands(self, ctx):
-        return sorted(_COMMANDS)
-
-    def get_command(self, ctx, name):
-        if name not in _COMMANDS:
-            return None
-        module, attr, _ = _COMMANDS[name]
-        return getattr(importlib.import_module(module), attr)
-
-    def format_commands(self, ctx, formatter):
-        rows = [(name, _COMMANDS[name][2]) for name in self.list_commands(ctx)]
-        with formatter.section("Commands"):
-            formatter.write_dl(rows)
-
-
-@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(
+    cls=lazy_group_class(_COMMANDS), context_settings={"help_option_names": ["-h", "--help"]}
+)
 @click.version_option(__version__, "--version", prog_name="rig")
 def cli() -> None:
     """Learn patient-specific joint limits and enforce them on a servo limb."""

@@ -5,9 +5,9 @@ Each simulator prints its port path as the first line on stdout, then runs until
 
 from __future__ import annotations
 
-import importlib
-
 import click
+
+from rig.commands._lazy import lazy_group_class
 
 _SIMS = {
     "servos": (
@@ -23,21 +23,6 @@ _SIMS = {
 }
 
 
-class _SimGroup(click.Group):
-    def list_commands(self, ctx):
-        return sorted(_SIMS)
-
-    def get_command(self, ctx, name):
-        if name not in _SIMS:
-            return None
-        module, attr, _ = _SIMS[name]
-        return getattr(importlib.import_module(module), attr)
-
-    def format_commands(self, ctx, formatter):
-        with formatter.section("Simulators"):
-            formatter.write_dl([(n, _SIMS[n][2]) for n in self.list_commands(ctx)])
-
-
-@click.group(cls=_SimGroup)
+@click.group(cls=lazy_group_class(_SIMS, "Simulators"))
 def sim() -> None:
     """Run a simulated device on a pseudo-terminal (no hardware needed)."""
