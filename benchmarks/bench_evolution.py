@@ -7,7 +7,8 @@ once (stacked tensors). The thesis needed 16-18 h per experiment (Java, Pentium 
     python benchmarks/bench_evolution.py [--runs 3] [--quick]
 
 Prints the median of ``--runs`` seeds for a regular boundary (45° cone about +X) and for the
-irregular 'original' shape, and the float32 / float64 comparison. Never asserts on time.
+irregular 'original' shape, and the float32 / float64 comparison: wall time and the process's
+CPU time (the honest one-core figure on a shared machine). Never asserts on time.
 """
 
 from __future__ import annotations
@@ -40,9 +41,10 @@ def one_run(constraint, seed: int, dtype: str, quick: bool) -> tuple[float, dict
                              hemisphere=dc["hemisphere"])
     x = canonicalise(q, canonical_reference(constraint, cfg["network"]["canonicalise"]))
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = evolve(cfg, xtr, ttr, xva, tva, rng)
-    return time.perf_counter() - t0, {"val_mse": res.val_mse, "hidden": res.network.n_hidden}
+    return time.perf_counter() - t0, {"val_mse": res.val_mse, "hidden": res.network.n_hidden,
+                                      "cpu": time.process_time() - c0}
 
 
 def main() -> None:
@@ -61,8 +63,11 @@ def main() -> None:
             runs = args.runs if dtype == "float32" else 1
             times, infos = zip(*(one_run(c, s, dtype, args.quick) for s in range(runs)),
                                strict=True)
-            print(f"  {name:<24} {dtype}: median {statistics.median(times):6.2f} s "
-                  f"(runs {', '.join(f'{t:.2f}' for t in times)}); best val MSE "
+            cpu = [i["cpu"] for i in infos]
+            print(f"  {name:<24} {dtype}: wall median {statistics.median(times):6.2f} s "
+                  f"(runs {', '.join(f'{t:.2f}' for t in times)}), CPU median "
+                  f"{statistics.median(cpu):6.2f} s (runs {', '.join(f'{t:.2f}' for t in cpu)}); "
+                  "best val MSE "
                   f"{statistics.median(i['val_mse'] for i in infos):.2e}, hidden "
                   f"{statistics.median(i['hidden'] for i in infos):.0f}")
 
