@@ -9,7 +9,8 @@ Presets
 -------
 ``thesis``
     TABLE I/II/VIII: max 20 hidden nodes, population 50, 20 generations, ≤ 500 epochs, stop at
-    training MSE 0.001, learning rate (RPROP Δ₀) 0.1, links regulariser α₂ = 0.01, evolve links,
+    training MSE 0.001 (SNNS convention, SSE / patterns; our ``stop_mse`` is per output
+    component, so 0.00025), learning rate (RPROP Δ₀) 0.1, links regulariser α₂ = 0.01, evolve links,
     hidden nodes and epochs, hidden sigmoid + linear output (TABLE XII's baseline), 500
     training patterns, 5 repeats.
 ``best``
@@ -23,7 +24,7 @@ Presets
     0.52 % in 13 s.
 ``fixed``
     The thesis's baseline without evolution: a fully connected GMLP (20 sigmoid hidden nodes,
-    linear outputs) with the thesis's training settings (≤ 500 epochs, stop MSE 0.001,
+    linear outputs) with the thesis's training settings (≤ 500 epochs, stop MSE 0.001 SNNS,
     Δ₀ 0.1), best of 10 random starts.
 """
 
@@ -72,7 +73,9 @@ _THESIS: dict[str, Any] = {
     "training": {
         "max_epochs": 500,
         "min_epochs": 50,
-        "stop_mse": 0.001,
+        # thesis: "stop at MSE 0.001" in SNNS's convention (NetGEN trained with SNNS), where
+        # MSE = SSE / patterns, summed over the 4 outputs: 0.001 / 4 per output component
+        "stop_mse": 0.00025,
         "learning_rate": 0.1,
         "delta_max": 50.0,
         "variant": "irprop-",
