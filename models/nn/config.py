@@ -88,6 +88,7 @@ _THESIS: dict[str, Any] = {
         "distribution": "even",
         "order": "valid-first",
         "hemisphere": "w-positive",
+        "overshoot_deg": 0.0,
     },
 }
 
@@ -126,6 +127,7 @@ _INT_MIN = {
 _UNIT = {("evolution", k) for k in ("crossover_rate", "mutation_rate", "alpha2",
                                     "link_probability", "hidden_probability")}
 _POS = {("training", k) for k in ("stop_mse", "learning_rate", "delta_max")}
+_NONNEG = {("data", "overshoot_deg")}
 
 
 def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:
@@ -138,7 +140,7 @@ def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:
         lo = _INT_MIN[(sec, key)]
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(f"{where}: expected an integer >= {lo}, got {value!r}")
-    elif (sec, key) in _UNIT or (sec, key) in _POS:
+    elif (sec, key) in _UNIT or (sec, key) in _POS or (sec, key) in _NONNEG:
         if isinstance(value, str):  # YAML 1.1 reads 1e-4 (no dot) as a string
             try:
                 value = float(value)
@@ -151,6 +153,8 @@ def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:
             raise ConfigError(f"{where}: expected a number in [0, 1], got {value!r}")
         if (sec, key) in _POS and not value > 0.0:
             raise ConfigError(f"{where}: expected a positive number, got {value!r}")
+        if (sec, key) in _NONNEG and not 0.0 <= value < 45.0:
+            raise ConfigError(f"{where}: expected a number in [0, 45), got {value!r}")
     elif isinstance(default, bool):
         if not isinstance(value, bool):
             raise ConfigError(f"{where}: expected true or false, got {value!r}")

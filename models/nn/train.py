@@ -145,6 +145,24 @@ class TrainedModel:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+def overshoot(targets: np.ndarray, margin_deg: float) -> np.ndarray:
+    """Lengthen non-identity corrections by ``margin_deg`` about their own axis.
+
+    A learned correction that falls a little short leaves the limb just outside the boundary;
+    training on corrections that go ``margin`` further trades a little accuracy (and a jump of
+    ``margin`` at the boundary, which the network smooths) for fewer violations. (N, 4) → (N, 4).
+    """
+    if margin_deg <= 0.0:
+        return targets
+    ang = quat.angle(targets)
+    moving = ang > 1e-9
+    axis = np.zeros((len(targets), 3))
+    axis[moving] = targets[moving, 1:] / np.linalg.norm(targets[moving, 1:], axis=1,
+                                                        keepdims=True)
+    new = quat.from_axis_angle(axis, ang + math.radians(margin_deg))
+    return np.where(moving[:, None], new, targets)
+
+
 def split(q, t, sizes, rng):
     """Train/validation split of a pattern set, keeping the pattern order within each part."""
     n_tr = sizes[0]
@@ -166,6 +184,7 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     q, t = training_patterns(constraint, n, rng, distribution=dc["distribution"],
                              order=dc["order"], hemisphere=dc["hemisphere"], oracle=oracle)
     x = canonicalise(q, ref)
+    t = overshoot(t, dc["overshoot_deg"])
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
     # raw sensor quaternions come with either sign; without in-graph canonicalisation the
