@@ -268,6 +268,8 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, default=Path("docs/thesis-reproduction.md"))
     ap.add_argument("--only", default="", help="comma-separated groups")
     ap.add_argument("--resume", action="store_true", help="keep finished results")
+    ap.add_argument("--append", type=Path, default=None,
+                    help="Markdown file appended to the report (notes, other benchmarks)")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the Markdown from the JSON-lines results and exit")
     args = ap.parse_args(argv)
@@ -290,7 +292,10 @@ def main(argv=None) -> None:
         commit0 = head[1].split("`")[1] if len(head) > 1 else "?"
         wall = float(head[2].split()[2]) * 60 if len(head) > 2 else 0.0
         aliases = [e for e in exps if "alias" in e]
-        args.out.write_text(report(_with_aliases(done, aliases), cmd0, commit0, wall))
+        text = report(_with_aliases(done, aliases), cmd0, commit0, wall)
+        if args.append:
+            text += "\n" + args.append.read_text()
+        args.out.write_text(text)
         print(f"wrote {args.out}")
         return
     have = {(r["group"], r["name"], r["seed"]) for r in done}
