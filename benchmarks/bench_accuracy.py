@@ -14,6 +14,9 @@ Never asserts on time.
 - ``activations``: hidden activation under the ``best`` training regime (fixed topology, 20
   nodes, 2000 epochs), same two constraints.
 - ``capacity``: what lower errors cost — 40 and 80 hidden nodes, 2000 patterns, 3000 epochs.
+- ``sweep``: ``best`` (or ``--preset``) over all regular boundaries of the thesis (radii 5, 20,
+  45, 90, 135, 150° about +X, +Y, +Z) and the five irregular shapes; prints per-constraint
+  rows and the means.
 """
 
 from __future__ import annotations
@@ -99,13 +102,50 @@ def table(rows) -> None:
               f"{r['hidden']} / {r['links']} | {r['train_s']:.1f} | {r['us']:.1f} |", flush=True)
 
 
+def sweep(args) -> None:
+    import json
+
+    from models.shapes import SHAPES
+
+    over = json.loads(args.override)
+    cs = {f"cone {ax} {r}°": JointConstraint.cone(v, r, name=f"cone-{ax}-{r}")
+          for ax, v in (("X", [1, 0, 0]), ("Y", [0, 1, 0]), ("Z", [0, 0, 1]))
+          for r in (5, 20, 45, 90, 135, 150)}
+    cs.update({s: load_shape(s) for s in SHAPES})
+    rows = []
+    for cname, c in cs.items():
+        for seed in range(args.seeds):
+            r = run(f"preset {args.preset}", c, args.preset, over, seed, args.quick)
+            rows.append((cname, r))
+            print(f"# {cname} / seed {seed}: 3-D {r['even']['mean_3d_error_pct']:.3f} %, "
+                  f"{r['train_s']:.1f} s", flush=True)
+    table(rows)
+    for kind, sel in (("regular", lambda n: n.startswith("cone")),
+                      ("irregular", lambda n: not n.startswith("cone"))):
+        rs = [r for n, r in rows if sel(n)]
+        if not rs:
+            continue
+        e = [r["even"] for r in rs]
+        print(f"{kind}: mean 3-D {np.mean([m['mean_3d_error_pct'] for m in e]):.3f} %, "
+              f"max {max(m['max_3d_error_pct'] for m in e):.2f} %, MSE "
+              f"{np.mean([m['mse'] for m in e]):.2e}, invalid > 1° out "
+              f"{100 * np.mean([m['frac_invalid_violating_1deg'] for m in e]):.2f} %, "
+              f"uniform-direction 3-D "
+              f"{np.mean([r['uniform']['mean_3d_error_pct'] for r in rs]):.3f} %")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="presets,activations,capacity")
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--preset", default="best")
+    ap.add_argument("--override", default="{}", help="JSON override for the sweep's preset")
     args = ap.parse_args()
     groups = args.only.split(",")
+    if "sweep" in groups:
+        sweep(args)
+        return
     cs = constraints()
     plans = []
     if "presets" in groups:
