@@ -64,15 +64,12 @@ def no_leaks():
     yield
     # a thread that was told to stop may need a moment to return from its last call
     deadline = time.monotonic() + 2.0
-    while True:
-        extra_threads = [
-            t for t in threading.enumerate() if t not in threads_before and t.is_alive()
-        ]
-        extra_ptys = _open_ptys() - ptys_before
-        extra_kids = _children() - kids_before
-        if not (extra_threads or extra_ptys or extra_kids) or time.monotonic() > deadline:
-            break
-        time.sleep(0.01)
+    for t in threading.enumerate():
+        if t not in threads_before and t.is_alive():
+            t.join(max(0.0, deadline - time.monotonic()))
+    extra_threads = [t for t in threading.enumerate() if t not in threads_before and t.is_alive()]
+    extra_ptys = _open_ptys() - ptys_before
+    extra_kids = _children() - kids_before
     problems = []
     if extra_threads:
         problems.append(f"threads left running: {[t.name for t in extra_threads]}")
