@@ -80,6 +80,7 @@ _THESIS: dict[str, Any] = {
         "delta_max": 50.0,
         "variant": "irprop-",
         "dtype": "float32",
+        "huber": 0.0,
     },
     "data": {
         "train": 500,
@@ -127,7 +128,7 @@ _INT_MIN = {
 _UNIT = {("evolution", k) for k in ("crossover_rate", "mutation_rate", "alpha2",
                                     "link_probability", "hidden_probability")}
 _POS = {("training", k) for k in ("stop_mse", "learning_rate", "delta_max")}
-_NONNEG = {("data", "overshoot_deg")}
+_NONNEG = {("data", "overshoot_deg"), ("training", "huber")}
 
 
 def _check_field(sec: str, key: str, value: Any, default: Any) -> Any:

@@ -273,7 +273,8 @@ class Evolver:
         theta0 = init_params(dec.spec, rng)
         res = train_population(theta0, dec.spec, x, t, max_epochs=dec.epochs,
                                stop_mse=tr["stop_mse"], delta0=dec.delta0,
-                               delta_max=dec.delta_max, variant=tr["variant"], dtype=dtype)
+                               delta_max=dec.delta_max, variant=tr["variant"], dtype=dtype,
+                               huber=tr["huber"])
         yv, _ = forward(res.theta, dec.spec, with_bias(np.asarray(xv, np.float64)),
                         need_grad=False)
         sse = np.einsum("pno,pno->p", yv - tv, yv - tv)

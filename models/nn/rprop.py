@@ -60,6 +60,7 @@ def train_population(
     delta_max: np.ndarray | float = 50.0,
     variant: str = "irprop-",
     dtype=np.float32,
+    huber: float = 0.0,
 ) -> TrainResult:
     """Train P networks at once with batch RPROP.
 
@@ -81,6 +82,11 @@ def train_population(
     variant : {"irprop-", "irprop+"}
     dtype : numpy float dtype
         Arithmetic precision (float32 is about twice as fast; see benchmarks/bench_evolution.py).
+    huber : float
+        If > 0, descend the Huber loss with this threshold instead of the SSE: residuals are
+        clipped to ±huber in the gradient, so the few patterns at a discontinuity the network
+        cannot fit (thesis's correctional discontinuity) stop dominating the weight updates.
+        Stopping still uses the MSE.
 
     Returns
     -------
@@ -134,6 +140,8 @@ def train_population(
             eprev, dmax, mse = eprev[keep], dmax[keep], mse[keep]
             y, cache = forward(th, sub, xb, coef)
             err = y - t
+        if huber > 0.0:
+            np.clip(err, -huber, huber, out=err)
         g = backward(err, cache, sub, xb)
         g *= mask
         s = g * gprev

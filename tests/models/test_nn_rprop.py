@@ -57,3 +57,12 @@ def test_bad_variant():
     with pytest.raises(ValueError, match="variant"):
         train_population(np.zeros((1, 1)), None, np.zeros((1, 4)), np.zeros((1, 4)),
                          max_epochs=1, stop_mse=0.1, variant="rprop")
+
+
+def test_huber_clips_residuals_in_the_gradient(problem):
+    x, t, spec, theta = problem
+    a = train_population(theta, spec, x, t, max_epochs=30, stop_mse=1e-9)
+    b = train_population(theta, spec, x, t, max_epochs=30, stop_mse=1e-9, huber=1e-3)
+    c = train_population(theta, spec, x, t, max_epochs=30, stop_mse=1e-9, huber=1e3)
+    np.testing.assert_array_equal(a.theta, c.theta)  # threshold above every residual: SSE
+    assert not np.array_equal(a.theta, b.theta)
