@@ -415,6 +415,10 @@ class _PolygonSolver:
         self._table = np.ascontiguousarray(
             np.stack((self.g, self.t0, self.t1, self.v0, self.v1), 1)
         )
+        # plain-float copies for the scalar (single-orientation) path
+        self._g_list = [tuple(r) for r in self.g.tolist()]
+        self._v_list = [tuple(r) for r in self.v0.tolist()]
+        self._vn_list = [tuple(r) for r in self.vertex_normal.tolist()]
 
     # -- per (point, edge) pair ----------------------------------------------------------------
     def _pair_keys(self, p: np.ndarray, e: np.ndarray):
@@ -570,22 +574,31 @@ class _PolygonSolver:
         j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
         cell = ((2 * ax + (major < 0)) * G + i) * G + j
         cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
-        key, in_arc, s, end1 = self._pair_keys(np.array([d]), cand)
-        k = int(np.argmin(key))  # first minimum: lowest edge index (lists are sorted)
+        # all five dot products of every candidate edge in one product; the end chords come
+        # from 2 - 2 p·v here (ranking only: the winner's distance is recomputed exactly below)
+        dots = self._table[cand] @ np.array(d)
+        s = dots[:, 0]
+        s2 = s * s
+        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (s2 < (1.0 - 1e-12) ** 2)
+        key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+        k01 = 2.0 - 2.0 * dots[:, 3:]
+        k = int(np.argmin(np.where(in_arc, key_in, k01.min(axis=1))))  # ties: lowest edge
         e = int(cand[k])
-        theta = 2.0 * math.asin(min(math.sqrt(float(key[k])) * 0.5, 1.0))
-        sk = float(s[k])
         if in_arc[k]:
+            sk = float(s[k])
+            key = 2.0 * sk * sk / (1.0 + math.sqrt(max(1.0 - sk * sk, 0.0)))
             inside = self.orient * sk >= 0.0
-            g = self.g[e]
+            g = self._g_list[e]
             f = (px - sk * g[0], py - sk * g[1], pz - sk * g[2])
-            fn = math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2) or 1.0
+            fn = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) or 1.0
             b = (f[0] / fn, f[1] / fn, f[2] / fn)
         else:
-            vi = (e + 1) % self.m if end1[k] else e
-            mv = self.vertex_normal[vi]
+            vi = (e + 1) % self.m if k01[k, 1] < k01[k, 0] else e
+            b = self._v_list[vi]
+            key = (px - b[0]) ** 2 + (py - b[1]) ** 2 + (pz - b[2]) ** 2
+            mv = self._vn_list[vi]
             inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
-            b = tuple(self.v0[vi].tolist())
+        theta = 2.0 * math.asin(min(math.sqrt(key) * 0.5, 1.0))
         return (-theta if inside else theta), b
 
 
