@@ -1,9 +1,9 @@
 """``rig train`` and ``rig evaluate``: learn a corrective constraint, export it, check it.
 
-``rig train --constraint FILE --out MODEL.onnx [--config YAML] [--preset best|thesis|fixed]
-[--seed N]`` evolves and trains a GMLP (:mod:`models.nn`) on patterns of the constraint, prints
-one progress line per generation, and writes an ONNX model whose metadata holds the
-constraint, the training-data hash and the held-out metrics.
+``rig train --constraint FILE --out MODEL.onnx [--config YAML]
+[--preset best|thesis|fixed|large] [--seed N]`` evolves and trains a GMLP (:mod:`models.nn`)
+on patterns of the constraint, prints one progress line per generation, and writes an ONNX
+model whose metadata holds the constraint, the training-data hash and the held-out metrics.
 
 ``rig evaluate --model MODEL.onnx --constraint FILE`` runs the model through onnxruntime on
 fresh held-out orientations and prints the metrics of :func:`models.metrics.evaluate`.
@@ -46,8 +46,9 @@ def _print_metrics(metrics: dict) -> None:
               help="Where to write the ONNX model.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="YAML overriding fields of the preset.")
-@click.option("--preset", type=click.Choice(["best", "thesis", "fixed"]), default="best",
-              show_default=True, help="Starting configuration.")
+@click.option("--preset", type=click.Choice(["best", "thesis", "fixed", "large"]),
+              default="best", show_default=True,
+              help="Starting configuration (models.nn.config).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 def train(constraint_path, out_path, config_path, preset, seed) -> None:
     """Train a corrective-constraint network and export it to ONNX."""
