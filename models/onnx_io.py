@@ -4,7 +4,7 @@ The exported graph (opset 17, float32) is the whole correction, so callers feed 
 quaternions::
 
     orientation [N, 4]  (w, x, y, z), either sign
-      │  s = +1 if orientation·r ≥ 0 else -1;  x = s · orientation    hemisphere canonicalisation
+      │  x = swing(orientation)  or  x = sign(orientation·r) orientation   input map (gmlp.py)
       │  for each activation kind k:  h_k = f_k(x W1[:, k] + b1[k])     hidden nodes grouped by kind
       │  y = Σ_k h_k W2[k] + x W_io + b_o;  y ← f_o(y)                  input→output shortcut links
       ▼  correction = y / max(|y|, 1e-12)                               unit quaternion
@@ -130,7 +130,17 @@ def to_onnx(
     g = _Graph()
     i, h = network.n_inputs, network.n_hidden
     x = INPUT
-    if network.canonical_ref is not None:
+    if network.input_map == "swing":
+        w, qx, qy, qz = (g.op("Slice", [INPUT, g.const([k], dtype=np.int64),
+                                         g.const([k + 1], dtype=np.int64),
+                                         g.const([1], dtype=np.int64)]) for k in range(4))
+        s0 = g.op("Add", [g.op("Mul", [w, w]), g.op("Mul", [qx, qx])])
+        s2 = g.op("Sub", [g.op("Mul", [w, qy]), g.op("Mul", [qx, qz])])
+        s3 = g.op("Add", [g.op("Mul", [w, qz]), g.op("Mul", [qx, qy])])
+        s = g.op("Concat", [s0, g.op("Mul", [s0, g.const(0.0)]), s2, s3], axis=1)
+        sn = g.op("Max", [g.op("ReduceL2", [s], axes=[1], keepdims=1), g.const(1e-12)])
+        x = g.op("Div", [s, sn], stem="swing")
+    elif network.canonical_ref is not None:
         d = g.op("MatMul", [INPUT, g.const(np.asarray(network.canonical_ref).reshape(4, 1))])
         s = g.op("Where", [g.op("GreaterOrEqual", [d, g.const(0.0)]), g.const(1.0),
                            g.const(-1.0)])
@@ -179,8 +189,8 @@ def to_onnx(
         "jointlimits.constraint_sha256": hashlib.sha256(constraint_yaml.encode()).hexdigest(),
         "jointlimits.training_data_sha256": training_data_sha256,
         "jointlimits.metrics": json.dumps(metrics or {}, sort_keys=True),
-        "jointlimits.network": json.dumps({**network.info, **(extra or {})}, sort_keys=True,
-                                          default=str),
+        "jointlimits.network": json.dumps({**network.info, "input_map": network.input_map,
+                                           **(extra or {})}, sort_keys=True, default=str),
         "jointlimits.version": package_version(),
     }
     onnx.helper.set_model_props(model, meta)

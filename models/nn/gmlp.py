@@ -21,9 +21,19 @@ only uses its sign, so the factor 2 and the mean are dropped) is the usual back-
     δ_o = (y - t) f_o'(z_o)           ∂SSE/∂W2 = [h, x̃]ᵀ δ_o
     δ_h = (δ_o W2[:H]ᵀ) f_h'(z_h)      ∂SSE/∂W1 = x̃ᵀ δ_h
 
-The deployed network (:class:`GMLP`) also owns the *hemisphere canonicalisation* of its input
-(``q ← sign(q·r) q`` for a reference quaternion ``r``, so that ``q`` and ``-q`` give the same
-correction) and normalises its output to a unit quaternion; the ONNX export reproduces both.
+The deployed network (:class:`GMLP`) also owns its *input map* and normalises its output to a
+unit quaternion; the ONNX export reproduces both. Input maps:
+
+- ``"canonical"``: hemisphere canonicalisation ``q ← sign(q·r) q`` for a reference quaternion
+  ``r`` (``sign(0) = +1``), so that ``q`` and ``-q`` give the same correction;
+- ``"swing"``: the twist-free *swing* of ``q`` — the minimal rotation taking the limb axis X to
+  the limb direction ``d = R(q) X`` (thesis eq. 60-62's ``Qi``). For ``q = (w, x, y, z)``::
+
+      swing(q) ∝ (w² + x², 0, wy - xz, wz + xy)      (= (1 + d·X, X × d) / 2, normalised)
+
+  homogeneous of degree 2, so sign- and scale-invariant. For a swing-only constraint the
+  parent-frame correction depends on ``d`` alone, so a network trained on the thesis's
+  twist-free patterns serves live orientations with any twist.
 """
 
 from __future__ import annotations
@@ -200,6 +210,18 @@ def backward(err: np.ndarray, cache, spec: PopulationSpec, xb: np.ndarray) -> np
     return np.concatenate((g1.reshape(p, -1), g2h.reshape(p, -1), g2x.reshape(p, -1)), axis=1)
 
 
+def swing_of(q: np.ndarray) -> np.ndarray:
+    """Twist-free swing ``(w² + x², 0, wy - xz, wz + xy)`` normalised, (N, 4) → (N, 4).
+
+    The minimal rotation taking +X to the limb direction of ``q`` (``w ≥ 0``); for the limb
+    pointing exactly along -X (``w² + x² = 0`` and the rest zero) it returns zeros.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    s = np.stack((w * w + x * x, np.zeros_like(w), w * y - x * z, w * z + x * y), axis=1)
+    return s / np.maximum(np.linalg.norm(s, axis=1, keepdims=True), 1e-12)
+
+
 @dataclass
 class GMLP:
     """One trained network, ready to correct orientations.
@@ -216,7 +238,9 @@ class GMLP:
         Spline template control values.
     canonical_ref : (4,) float64 or None
         Reference quaternion ``r`` of the input hemisphere canonicalisation ``q ← sign(q·r) q``
-        (``sign(0) = +1``); None disables it.
+        (``sign(0) = +1``); None disables it. Ignored when ``input_map == "swing"``.
+    input_map : {"canonical", "swing"}
+        How raw orientations become network inputs (module docstring).
     info : dict
         Provenance (preset, genome summary, epochs, …), JSON-serialisable.
     """
@@ -228,6 +252,7 @@ class GMLP:
     spline: np.ndarray | None = None
     canonical_ref: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    input_map: str = "canonical"
 
     @property
     def n_inputs(self) -> int:
@@ -259,7 +284,9 @@ class GMLP:
         )
 
     def canonicalise(self, q: np.ndarray) -> np.ndarray:
-        """Hemisphere canonicalisation of raw quaternions (N, 4) → (N, 4)."""
+        """The input map applied to raw quaternions (N, 4) → (N, 4)."""
+        if self.input_map == "swing":
+            return swing_of(q)
         if self.canonical_ref is None:
             return q
         s = np.where(q @ self.canonical_ref >= 0.0, 1.0, -1.0)

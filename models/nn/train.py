@@ -29,7 +29,7 @@ import numpy as np
 from models import metrics as M
 from models import quaternion as quat
 from models.nn.evolution import EvolutionResult, GenerationStats, evolve
-from models.nn.gmlp import GMLP
+from models.nn.gmlp import GMLP, swing_of
 from models.nn.thesis_data import cone_patterns
 
 BAND_DEG = 10.0
@@ -51,8 +51,11 @@ def _centre_direction(constraint) -> np.ndarray:
 
 
 def canonical_reference(constraint, mode: str) -> np.ndarray | None:
-    """Reference quaternion ``r`` (4,) of the canonicalisation ``mode`` (None for ``none``)."""
-    if mode == "none":
+    """Reference quaternion ``r`` (4,) of the canonicalisation ``mode``.
+
+    None for ``none`` and ``swing`` (the swing map needs no reference).
+    """
+    if mode in ("none", "swing"):
         return None
     if mode == "w-positive":
         return quat.IDENTITY.copy()
@@ -97,13 +100,15 @@ def _zone_sample(constraint, oracle, n, rng, distribution) -> np.ndarray:
 
 def training_patterns(constraint, n: int, rng: np.random.Generator, *,
                       distribution: str = "even", order: str = "valid-first",
-                      hemisphere: str = "w-positive",
+                      hemisphere: str = "w-positive", twist: bool = False,
                       oracle=None) -> tuple[np.ndarray, np.ndarray]:
     """``n`` patterns (inputs (n, 4), exact corrections (n, 4), ``w ≥ 0``) of a constraint.
 
     ``hemisphere`` is the input sign rule of :func:`models.datasets.quaternion_dataset`
     (``ambiguous``, ``centre``, ``w-positive``); the built-in fallback sampler supports
-    ``w-positive`` only (its inputs are twist-free with ``w ≥ 0``).
+    ``w-positive`` only (its inputs are twist-free with ``w ≥ 0``). ``twist=True`` draws full
+    3-DOF orientations (random twist about the limb axis; needs :mod:`models.datasets`) — what
+    a live sensor delivers; a network trained twist-free is meaningless on twisted inputs.
     """
     try:
         from models.datasets import quaternion_dataset
@@ -111,8 +116,12 @@ def training_patterns(constraint, n: int, rng: np.random.Generator, *,
         quaternion_dataset = None
     if quaternion_dataset is not None:
         ds = quaternion_dataset(constraint, n, rng, distribution=distribution, order=order,
-                                hemisphere=hemisphere, twist=False)
+                                hemisphere=hemisphere, twist=twist)
         return np.asarray(ds.inputs, np.float64), quat.canonical(np.asarray(ds.targets))
+    if twist:
+        from models.errors import DatasetError
+
+        raise DatasetError("twist=True patterns need models.datasets")
     oracle = oracle or _oracle(constraint)
     sw = constraint.swing
     if hasattr(sw, "radius_deg") and constraint.twist is None and np.allclose(
@@ -178,20 +187,31 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     from models.onnx_io import data_sha256
 
     oracle = oracle or _oracle(constraint)
+    mode = config["network"]["canonicalise"]
+    if mode == "swing" and getattr(constraint, "twist", None) is not None:
+        # the swing map discards the twist, which a twist limit needs: learn from twisted
+        # patterns with the centre hemisphere rule instead
+        config = {**config, "network": {**config["network"], "canonicalise": "centre"},
+                  "data": {**config["data"], "twist": True}}
+        mode = "centre"
     dc = config["data"]
-    ref = canonical_reference(constraint, config["network"]["canonicalise"])
+    ref = canonical_reference(constraint, mode)
     n = dc["train"] + dc["validation"]
     q, t = training_patterns(constraint, n, rng, distribution=dc["distribution"],
-                             order=dc["order"], hemisphere=dc["hemisphere"], oracle=oracle)
-    x = canonicalise(q, ref)
+                             order=dc["order"], hemisphere=dc["hemisphere"],
+                             twist=dc["twist"], oracle=oracle)
+    x = swing_of(q) if mode == "swing" else canonicalise(q, ref)
     t = overshoot(t, dc["overshoot_deg"])
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
+    res.network.input_map = "swing" if mode == "swing" else "canonical"
+    res.network.info["input_map"] = res.network.input_map
     # raw sensor quaternions come with either sign; without in-graph canonicalisation the
     # network only knows the training data's hemisphere rule, so test with that rule
-    test_hemi = dc["hemisphere"] if ref is None else "ambiguous"
+    test_hemi = dc["hemisphere"] if mode == "none" else "ambiguous"
     qt, _ = training_patterns(constraint, dc["test"], rng, distribution=dc["distribution"],
-                              order="random", hemisphere=test_hemi, oracle=oracle)
+                              order="random", hemisphere=test_hemi, twist=dc["twist"],
+                              oracle=oracle)
     metrics = M.evaluate(res.network.predict, oracle, qt)
     metrics.update({"hidden": res.network.n_hidden, "links": res.network.n_links,
                     "val_mse": res.val_mse, "train_mse": res.train_mse,

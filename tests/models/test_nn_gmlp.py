@@ -92,3 +92,29 @@ def test_activation_names_round_trip(name):
 def test_unknown_activation_is_rejected():
     with pytest.raises(ValueError, match="unknown activation"):
         act.index_of("swish")
+
+
+def test_swing_map_is_the_twist_free_rotation_to_the_limb_direction():
+    from models import quaternion as quat
+    from models.nn.gmlp import swing_of
+
+    rng = np.random.default_rng(4)
+    q = quat.random_quaternions(200, rng)
+    s = swing_of(q)
+    d = quat.limb_direction(q)
+    np.testing.assert_allclose(s, quat.from_two_vectors(np.broadcast_to(quat.LIMB_AXIS, d.shape),
+                                                        d), atol=1e-12)
+    np.testing.assert_allclose(swing_of(-3.0 * q), s, atol=1e-12)  # sign and scale
+    twist = quat.from_axis_angle(np.array([1.0, 0.0, 0.0]), rng.uniform(-np.pi, np.pi, 200))
+    np.testing.assert_allclose(swing_of(quat.multiply(q, twist)), s, atol=1e-12)
+
+
+def test_swing_input_map_makes_predictions_twist_invariant():
+    from models import quaternion as quat
+
+    rng = np.random.default_rng(5)
+    spec = _spec(rng, p=1)
+    net = GMLP.from_population(init_params(spec, rng), spec, 0, input_map="swing")
+    q = quat.random_quaternions(50, rng)
+    twist = quat.from_axis_angle(np.array([1.0, 0.0, 0.0]), rng.uniform(-np.pi, np.pi, 50))
+    np.testing.assert_allclose(net.predict(quat.multiply(q, twist)), net.predict(q), atol=1e-12)

@@ -60,3 +60,15 @@ def test_small_training_run_gives_sane_metrics():
     assert m.metrics["mean_3d_error_pct"] < 5.0
     assert m.network.n_hidden == 20 and len(m.data_sha256) == 64
     assert m.network.info["hidden_activations"][0] == "leaky_relu"
+
+
+def test_swing_map_for_swing_constraints_and_fallback_with_twist_limits():
+    tiny = {"evolution": {"population": 2},
+            "training": {"max_epochs": 30, "min_epochs": 30},
+            "data": {"train": 120, "validation": 60, "test": 100}}
+    m = train_correction(JointConstraint.cone([1, 0, 0], 50), get_config("best", tiny),
+                         np.random.default_rng(3))
+    assert m.network.input_map == "swing"
+    m = train_correction(JointConstraint.cone([1, 0, 0], 50, twist=(-40, 40)),
+                         get_config("best", tiny), np.random.default_rng(3))
+    assert m.network.input_map == "canonical" and m.network.canonical_ref is not None

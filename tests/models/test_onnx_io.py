@@ -17,24 +17,25 @@ from models.onnx_io import export_onnx, load_model, to_onnx
 CONSTRAINT = "name: c45\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 45}\n"
 
 
-def _net(rng, kinds, out_kinds, h=7, ref=(1.0, 0.0, 0.0, 0.0), scale=2.0):
+def _net(rng, kinds, out_kinds, h=7, ref=(1.0, 0.0, 0.0, 0.0), scale=2.0, input_map="canonical"):
     spec = PopulationSpec(rng.random((1, 5, h)) < 0.8, rng.random((1, h + 5, 4)) < 0.8,
                           rng.choice(kinds, (1, h)), rng.choice(out_kinds, (1, 4)),
                           rng.uniform(-1, 1, (1, 4, 9)))
     spec.mask2[:, -1] = True
     theta = init_params(spec, rng) * scale
-    return GMLP.from_population(theta, spec, 0,
+    return GMLP.from_population(theta, spec, 0, input_map=input_map,
                                 canonical_ref=None if ref is None else np.asarray(ref))
 
 
-@pytest.mark.parametrize(("kinds", "out_kinds", "ref"), [
-    ([2], [0], (1.0, 0.0, 0.0, 0.0)),
-    ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], [0, 1, 2, 8, 9], (0.5, 0.5, -0.5, 0.5)),
-    ([6], [0], None),
+@pytest.mark.parametrize(("kinds", "out_kinds", "ref", "input_map"), [
+    ([2], [0], (1.0, 0.0, 0.0, 0.0), "canonical"),
+    ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], [0, 1, 2, 8, 9], (0.5, 0.5, -0.5, 0.5), "canonical"),
+    ([6], [0], None, "canonical"),
+    ([6], [0], None, "swing"),
 ])
-def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref):
+def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref, input_map):
     rng = np.random.default_rng(len(kinds))
-    net = _net(rng, kinds, out_kinds, ref=ref)
+    net = _net(rng, kinds, out_kinds, ref=ref, input_map=input_map)
     path = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=CONSTRAINT,
                        training_data_sha256="ab" * 32, metrics={"mse": 1e-4})
     model = load_model(path, expected_constraint=CONSTRAINT)
@@ -42,8 +43,9 @@ def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref):
     got = model.correction(q)
     assert got.dtype == np.float32 and got.shape == (10_000, 4)
     np.testing.assert_allclose(got, net.predict(q), atol=1e-5)
-    if ref is not None:
+    if ref is not None or input_map == "swing":
         np.testing.assert_allclose(model.correction(-q), got, atol=1e-6)
+    assert model.network_info["input_map"] == input_map
     np.testing.assert_allclose(model.correct_one(*q[3]), got[3], atol=1e-6)
     np.testing.assert_allclose(model.correction(q[3]), got[3], atol=1e-6)
 
