@@ -82,23 +82,31 @@ def run(label, c, preset, override, seed, quick) -> dict:
                                       hemisphere="ambiguous", oracle=oracle)
         q_uni, _ = training_patterns(c, n, rng, distribution="uniform", order="random",
                                      hemisphere="ambiguous", oracle=oracle)
+        from models.datasets import quaternion_dataset
+
+        q_tw = quaternion_dataset(c, n, 20_000 + seed, twist=True, hemisphere="ambiguous",
+                                  order="random").inputs
         even = M.evaluate(model.correction, oracle, q_even)
         uni = M.evaluate(model.correction, oracle, q_uni)
+        tw = M.evaluate(model.correction, oracle, q_tw)
         us = latency_us(model, 1000 if quick else 5000)
-    return {"label": label, "even": even, "uniform": uni, "us": us, "train_s": train_s,
+    return {"label": label, "even": even, "uniform": uni, "twisted": tw, "us": us,
+            "train_s": train_s,
             "hidden": m.network.n_hidden, "links": m.network.n_links}
 
 
 def table(rows) -> None:
     print("| model | constraint | mean 3-D % (even) | max 3-D % | MSE | invalid > 1° out | "
-          "mean identity err ° | mean 3-D % (uniform) | hidden / links | train s | µs |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "mean identity err ° | mean 3-D % (uniform) | mean 3-D % (twisted) | hidden / links | "
+          "train s | µs |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for cname, r in rows:
         e, u = r["even"], r["uniform"]
         print(f"| {r['label']} | {cname} | {e['mean_3d_error_pct']:.3f} | "
               f"{e['max_3d_error_pct']:.2f} | {e['mse']:.2e} | "
               f"{100 * e['frac_invalid_violating_1deg']:.1f} % | "
               f"{e['mean_identity_error_deg']:.3f} | {u['mean_3d_error_pct']:.3f} | "
+              f"{r['twisted']['mean_3d_error_pct']:.3f} | "
               f"{r['hidden']} / {r['links']} | {r['train_s']:.1f} | {r['us']:.1f} |", flush=True)
 
 

@@ -131,13 +131,15 @@ def to_onnx(
     i, h = network.n_inputs, network.n_hidden
     x = INPUT
     if network.input_map == "swing":
-        w, qx, qy, qz = (g.op("Slice", [INPUT, g.const([k], dtype=np.int64),
-                                         g.const([k + 1], dtype=np.int64),
-                                         g.const([1], dtype=np.int64)]) for k in range(4))
-        s0 = g.op("Add", [g.op("Mul", [w, w]), g.op("Mul", [qx, qx])])
-        s2 = g.op("Sub", [g.op("Mul", [w, qy]), g.op("Mul", [qx, qz])])
-        s3 = g.op("Add", [g.op("Mul", [w, qz]), g.op("Mul", [qx, qy])])
-        s = g.op("Concat", [s0, g.op("Mul", [s0, g.const(0.0)]), s2, s3], axis=1)
+        # swing components are quadratic forms of q: (q qᵀ) flattened (N, 16) times B (16, 4)
+        b = np.zeros((16, 4))
+        b[0, 0] = b[5, 0] = 1.0  # w² + x²
+        b[2, 2], b[7, 2] = 1.0, -1.0  # wy - xz
+        b[3, 3] = b[6, 3] = 1.0  # wz + xy
+        col = g.op("Unsqueeze", [INPUT, g.const([2], dtype=np.int64)])
+        row = g.op("Unsqueeze", [INPUT, g.const([1], dtype=np.int64)])
+        outer = g.op("Reshape", [g.op("Mul", [col, row]), g.const([-1, 16], dtype=np.int64)])
+        s = g.op("MatMul", [outer, g.const(b)])
         sn = g.op("Max", [g.op("ReduceL2", [s], axes=[1], keepdims=1), g.const(1e-12)])
         x = g.op("Div", [s, sn], stem="swing")
     elif network.canonical_ref is not None:
