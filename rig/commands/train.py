@@ -97,14 +97,17 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="best", see
               help="Number of held-out orientations.")
 @click.option("--distribution", type=click.Choice(["even", "uniform", "clustered"]),
               default="even", show_default=True, help="Held-out pattern distribution.")
+@click.option("--twist/--no-twist", default=False, show_default=True,
+              help="Add a random twist about the limb axis (as live sensor data has).")
 @click.option("--seed", type=int, default=12345, show_default=True, help="Random seed.")
-def evaluate(model_path, constraint_path, n, distribution, seed) -> None:
+def evaluate(model_path, constraint_path, n, distribution, twist, seed) -> None:
     """Print a model's accuracy metrics on fresh held-out orientations."""
-    run_evaluate(model_path, constraint_path, n=n, distribution=distribution, seed=seed)
+    run_evaluate(model_path, constraint_path, n=n, distribution=distribution, twist=twist,
+                 seed=seed)
 
 
-def run_evaluate(model_path, constraint_path, *, n=3000, distribution="even", seed=12345,
-                 echo=click.echo) -> dict:
+def run_evaluate(model_path, constraint_path, *, n=3000, distribution="even", twist=False,
+                 seed=12345, echo=click.echo) -> dict:
     """What ``rig evaluate`` does; returns the metrics."""
     import numpy as np
 
@@ -117,10 +120,12 @@ def run_evaluate(model_path, constraint_path, *, n=3000, distribution="even", se
     model = load_model(model_path, expected_constraint=constraint)
     oracle = _oracle(constraint)
     q, _ = training_patterns(constraint, n, np.random.default_rng(seed),
-                             distribution=distribution, order="random", oracle=oracle)
+                             distribution=distribution, order="random", hemisphere="ambiguous",
+                             twist=twist, oracle=oracle)
     metrics = M.evaluate(model.correction, oracle, q)
     info = model.network_info
     echo(f"{model_path}: {info.get('hidden', '?')} hidden nodes, {info.get('links', '?')} links, "
-         f"{len(q)} held-out {distribution} orientations of {constraint.name!r}")
+         f"{len(q)} held-out {distribution} orientations{' with twist' if twist else ''} of "
+         f"{constraint.name!r}")
     _print_metrics(metrics)
     return metrics

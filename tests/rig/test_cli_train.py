@@ -42,6 +42,9 @@ def test_train_then_evaluate(files, capsys):
                          "--n", "300"], capsys)
     assert code == 0
     assert "300 held-out even orientations" in out and "MSE" in out
+    code, out, _ = _run(["evaluate", "--model", str(model), "--constraint", str(c),
+                         "--n", "200", "--twist"], capsys)
+    assert code == 0 and "with twist" in out
 
 
 def test_thesis_preset_flag(files, capsys):
