@@ -10,6 +10,16 @@ quaternions::
       ▼  correction = y / max(|y|, 1e-12)                               unit quaternion
     correction [N, 4]   corrected = correction ⊗ orientation
 
+A centre-frame network (``GMLP.frame = R_c``, :mod:`models.nn.gmlp`) costs no extra node: with
+``F = L(R_c⁻¹)`` and ``G = L(R_c) R(R_c⁻¹)`` (both orthogonal, constant),
+
+- swing map: ``swing(F q)`` is again a quadratic form of ``q``; its (16, 4) matrix becomes
+  ``B'[(a,b), k] = Σ_ij F[i,a] F[j,b] B[(i,j), k]``;
+- canonical map: ``sign(q·r)`` is frame-invariant and ``(F x)ᵀ W = xᵀ (Fᵀ W)``, so the input rows
+  of ``W1`` and ``W_io`` are replaced by ``Fᵀ W``;
+- output: ``G y`` — folded into every output weight (``W2 ← W2 Gᵀ``) when the outputs are linear,
+  else one ``MatMul`` after the output activations; ``|G y| = |y|``, so the normalisation stays.
+
 Spline activations are evaluated in-graph: ``u = clip((z - z₀)/h, 0, S - ε)``, segment
 ``Gather`` of the Catmull-Rom coefficient tables (:mod:`models.nn.activations`), Horner form.
 
@@ -36,7 +46,7 @@ from onnx import TensorProto, helper, numpy_helper
 
 from models.errors import ModelFileError
 from models.nn import activations as act
-from models.nn.gmlp import GMLP
+from models.nn.gmlp import GMLP, frame_matrices
 
 FORMAT = "jointlimits-correction/1"
 INPUT = "orientation"
@@ -129,6 +139,15 @@ def to_onnx(
     """Build the ONNX model of a trained network (see module docstring for the graph)."""
     g = _Graph()
     i, h = network.n_inputs, network.n_hidden
+    w1, w2 = network.w1.copy(), network.w2.copy()
+    fold_out = None
+    into = None
+    if network.frame is not None:
+        into, back = frame_matrices(network.frame)
+        if (network.act_out == 0).all():
+            w2 = w2 @ back.T  # linear outputs: y Gᵀ folded into every output weight
+        else:
+            fold_out = back.T
     x = INPUT
     if network.input_map == "swing":
         # swing components are quadratic forms of q: (q qᵀ) flattened (N, 16) times B (16, 4)
@@ -136,6 +155,8 @@ def to_onnx(
         b[0, 0] = b[5, 0] = 1.0  # w² + x²
         b[2, 2], b[7, 2] = 1.0, -1.0  # wy - xz
         b[3, 3] = b[6, 3] = 1.0  # wz + xy
+        if into is not None:  # swing(F q): B'[(a,b),k] = Σ_ij F[i,a] F[j,b] B[(i,j),k]
+            b = np.einsum("ia,jb,ijk->abk", into, into, b.reshape(4, 4, 4)).reshape(16, 4)
         col = g.op("Unsqueeze", [INPUT, g.const([2], dtype=np.int64)])
         row = g.op("Unsqueeze", [INPUT, g.const([1], dtype=np.int64)])
         outer = g.op("Reshape", [g.op("Mul", [col, row]), g.const([-1, 16], dtype=np.int64)])
@@ -147,8 +168,10 @@ def to_onnx(
         s = g.op("Where", [g.op("GreaterOrEqual", [d, g.const(0.0)]), g.const(1.0),
                            g.const(-1.0)])
         x = g.op("Mul", [INPUT, s], stem="canonical")
+    if into is not None and network.input_map != "swing":  # (F x)ᵀ W = xᵀ (Fᵀ W)
+        w1[:i] = into.T @ w1[:i]
+        w2[h:h + i] = into.T @ w2[h:h + i]
     coef = None if network.spline is None else act.spline_coefficients(network.spline)
-    w1, w2 = network.w1, network.w2
     terms = [g.op("Gemm", [x, g.const(w2[h:h + i]), g.const(w2[h + i])], stem="shortcut")]
     kinds = network.act_hidden
     plain = sorted({int(k) for k in kinds if k < act.SPLINE0})
@@ -171,6 +194,8 @@ def to_onnx(
                              coef)
             parts.append((k, g.op("Mul", [fk, g.const(sel.astype(np.float32)[None, :])])))
         y = g.op("Sum", [p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
+    if fold_out is not None:
+        y = g.op("MatMul", [y, g.const(fold_out)], stem="parent_frame")
     n = g.op("ReduceL2", [y], axes=[1], keepdims=1)
     n = g.op("Max", [n, g.const(1e-12)])
     g.op("Div", [y, n], out=OUTPUT)
@@ -192,6 +217,8 @@ def to_onnx(
         "jointlimits.training_data_sha256": training_data_sha256,
         "jointlimits.metrics": json.dumps(metrics or {}, sort_keys=True),
         "jointlimits.network": json.dumps({**network.info, "input_map": network.input_map,
+                                           "frame": (None if network.frame is None else
+                                                     [float(v) for v in network.frame]),
                                            **(extra or {})}, sort_keys=True, default=str),
         "jointlimits.version": package_version(),
     }

@@ -11,8 +11,8 @@ Public API::
 Modules: :mod:`~models.nn.activations` (node functions, spline templates),
 :mod:`~models.nn.gmlp` (stacked forward/backward), :mod:`~models.nn.rprop` (population
 iRprop−/+), :mod:`~models.nn.evolution` (NetGEN-style GA), :mod:`~models.nn.config` (presets,
-YAML), :mod:`~models.nn.train` (patterns → evolution → metrics),
-:mod:`~models.nn.thesis_data` (thesis eq. 59-68 cone patterns and exact oracle).
+YAML), :mod:`~models.nn.train` (patterns from :mod:`models.datasets` → evolution →
+metrics). Exact oracles: :mod:`models.oracle`.
 """
 
 from models.nn.config import PRESETS, ConfigError, get_config, load_config

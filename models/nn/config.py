@@ -58,6 +58,7 @@ _THESIS: dict[str, Any] = {
         "spline_control_points": 9,
         "spline_templates": 4,
         "canonicalise": "w-positive",
+        "frame": "parent",
     },
     "evolution": {
         "population": 50,
@@ -103,7 +104,8 @@ _THESIS: dict[str, Any] = {
 
 PRESETS: dict[str, dict[str, Any]] = {"thesis": _THESIS}
 PRESETS["best"] = copy.deepcopy(_THESIS)
-PRESETS["best"]["network"].update({"hidden_activations": ["leaky_relu"], "canonicalise": "swing"})
+PRESETS["best"]["network"].update({"hidden_activations": ["leaky_relu"], "canonicalise": "swing",
+                                   "frame": "centre"})
 PRESETS["best"]["training"].update({"max_epochs": 2000, "min_epochs": 2000, "stop_mse": 1e-6,
                                     "learning_rate": 0.01, "delta_max": 1.0})
 PRESETS["best"]["evolution"].update({"generations": 0, "population": 10, "repeats": 1,
@@ -123,6 +125,7 @@ PRESETS["fixed"]["evolution"].update({"generations": 0, "population": 10, "repea
 
 _CHOICES = {
     ("network", "canonicalise"): ("swing", "w-positive", "centre", "none"),
+    ("network", "frame"): ("centre", "parent"),
     ("training", "variant"): ("irprop-", "irprop+"),
     ("training", "dtype"): ("float32", "float64"),
     ("data", "distribution"): ("even", "clustered", "uniform"),

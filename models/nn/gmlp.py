@@ -34,6 +34,25 @@ unit quaternion; the ONNX export reproduces both. Input maps:
   homogeneous of degree 2, so sign- and scale-invariant. For a swing-only constraint the
   parent-frame correction depends on ``d`` alone, so a network trained on the thesis's
   twist-free patterns serves live orientations with any twist.
+
+Centre frame (``frame = R_c``, thesis ch. 9's "reduced-coordinate encodings"). The swing map is
+singular at ``d = -X`` and smooth everywhere else, while a corrective constraint is
+discontinuous at the antipode of its boundary centre (the correctional discontinuity). With
+``R_c`` the minimal rotation taking the limb axis to the boundary centre ``c`` the network works
+in the centre frame::
+
+    q' = R_c⁻¹ ⊗ q                      limb direction R_c⁻¹ d: the centre c maps to +X
+    x  = swing(q')  (or sign(q·r) q')   input map as above, on q'
+    c' = network(x)                      correction in the centre frame
+    ĉ  = R_c ⊗ c' ⊗ R_c⁻¹                back to the parent frame, then normalised
+
+so the input singularity (``d' = -X``, i.e. ``d = -c``) sits exactly on the discontinuity and
+costs nothing, whatever the centre. Training targets are ``t' = R_c⁻¹ ⊗ t ⊗ R_c``, since
+``R_c ⊗ (t' ⊗ q') = t ⊗ q``. Both fixed products are linear maps, ``q' = L(R_c⁻¹) q`` and
+``ĉ = L(R_c) R(R_c⁻¹) c'`` (:func:`left_matrix`, :func:`right_matrix`; orthogonal, and the
+conjugation keeps the scalar part ``w``), so the ONNX export folds them into the swing's
+quadratic form, the first-layer weights and the output weights. ``frame = None`` is the
+parent frame (the thesis's encoding).
 """
 
 from __future__ import annotations
@@ -210,6 +229,41 @@ def backward(err: np.ndarray, cache, spec: PopulationSpec, xb: np.ndarray) -> np
     return np.concatenate((g1.reshape(p, -1), g2h.reshape(p, -1), g2x.reshape(p, -1)), axis=1)
 
 
+def left_matrix(p: np.ndarray) -> np.ndarray:
+    """4×4 matrix ``L(p)`` with ``p ⊗ q = L(p) q`` (Hamilton, scalar-first)."""
+    w, x, y, z = np.asarray(p, dtype=np.float64)
+    return np.array([[w, -x, -y, -z], [x, w, -z, y], [y, z, w, -x], [z, -y, x, w]])
+
+
+def right_matrix(p: np.ndarray) -> np.ndarray:
+    """4×4 matrix ``R(p)`` with ``q ⊗ p = R(p) q`` (Hamilton, scalar-first)."""
+    w, x, y, z = np.asarray(p, dtype=np.float64)
+    return np.array([[w, -x, -y, -z], [x, w, z, -y], [y, -z, w, x], [z, y, -x, w]])
+
+
+def conjugate_of(p: np.ndarray) -> np.ndarray:
+    """``p⁻¹`` of a unit quaternion ``p`` (4,)."""
+    return np.asarray(p, dtype=np.float64) * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def frame_matrices(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Input and output maps of the centre frame ``R_c`` (module docstring).
+
+    Parameters
+    ----------
+    frame : (4,) float, unit
+
+    Returns
+    -------
+    into : (4, 4)
+        ``L(R_c⁻¹)``: ``q' = into @ q``.
+    back : (4, 4)
+        ``L(R_c) R(R_c⁻¹)``: ``ĉ = back @ c'``.
+    """
+    inv = conjugate_of(frame)
+    return left_matrix(inv), left_matrix(frame) @ right_matrix(inv)
+
+
 def swing_of(q: np.ndarray) -> np.ndarray:
     """Twist-free swing ``(w² + x², 0, wy - xz, wz + xy)`` normalised, (N, 4) → (N, 4).
 
@@ -241,6 +295,8 @@ class GMLP:
         (``sign(0) = +1``); None disables it. Ignored when ``input_map == "swing"``.
     input_map : {"canonical", "swing"}
         How raw orientations become network inputs (module docstring).
+    frame : (4,) float64 or None
+        Centre-frame rotation ``R_c`` (module docstring); None for the parent frame.
     info : dict
         Provenance (preset, genome summary, epochs, …), JSON-serialisable.
     """
@@ -253,6 +309,7 @@ class GMLP:
     canonical_ref: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     input_map: str = "canonical"
+    frame: np.ndarray | None = None
 
     @property
     def n_inputs(self) -> int:
@@ -284,13 +341,17 @@ class GMLP:
         )
 
     def canonicalise(self, q: np.ndarray) -> np.ndarray:
-        """The input map applied to raw quaternions (N, 4) → (N, 4)."""
-        if self.input_map == "swing":
-            return swing_of(q)
-        if self.canonical_ref is None:
-            return q
-        s = np.where(q @ self.canonical_ref >= 0.0, 1.0, -1.0)
-        return q * s[:, None]
+        """The input map applied to raw quaternions (N, 4) → (N, 4).
+
+        ``canonical_ref`` is a parent-frame reference: ``sign(q·r) = sign(q'·r')`` with
+        ``r' = R_c⁻¹ ⊗ r`` because ``L(R_c⁻¹)`` is orthogonal.
+        """
+        q = np.asarray(q, dtype=np.float64)
+        if self.input_map != "swing" and self.canonical_ref is not None:
+            q = q * np.where(q @ self.canonical_ref >= 0.0, 1.0, -1.0)[:, None]
+        if self.frame is not None:
+            q = q @ frame_matrices(self.frame)[0].T
+        return swing_of(q) if self.input_map == "swing" else q
 
     def forward(self, x: np.ndarray) -> np.ndarray:
         """Raw network output (N, O) for already canonicalised inputs (N, I), float64."""
@@ -319,5 +380,7 @@ class GMLP:
         single = q.ndim == 1
         q = q.reshape(-1, 4)
         y = self.forward(self.canonicalise(q))
+        if self.frame is not None:
+            y = y @ frame_matrices(self.frame)[1].T
         y = y / np.maximum(np.linalg.norm(y, axis=1, keepdims=True), 1e-12)
         return y[0] if single else y

@@ -2,17 +2,20 @@
 
 Pipeline for a :class:`models.constraint.JointConstraint`:
 
-1. Patterns (thesis ch. 3-4): twist-free orientations ``Qi`` (rotation taking the limb axis to a
-   direction ``V``, eq. 59-62) labelled by the exact oracle's correction (eq. 63-68 for a cone,
-   nearest boundary point by limb-endpoint angle for a polygon). :mod:`models.datasets` is used
-   when installed; otherwise a built-in sampler with the thesis's *even* distribution (four
-   equally filled zones by signed distance: inner valid, 10° valid band, 10° invalid band, outer
-   invalid) — exact zone sampling for cones (:mod:`models.nn.thesis_data`), rejection sampling
-   for polygons.
+1. Patterns (thesis ch. 3-4, :func:`models.datasets.quaternion_dataset`): twist-free
+   orientations ``Qi`` (rotation taking the limb axis to a direction ``V``, eq. 59-62) labelled
+   by the exact oracle's correction (eq. 63-68 for a cone, nearest boundary point by
+   limb-endpoint angle for a polygon). The ONNX training-data hash is the dataset's
+   :meth:`~models.datasets.Dataset.content_hash`.
 2. Hemisphere canonicalisation ``q ← sign(q·r) q`` with ``r`` = ``(1, 0, 0, 0)`` (``w-positive``)
    or the twist-free rotation to the boundary centre (``centre``; the hemisphere cut then lies
    opposite the valid region, away from the boundary — cf. thesis TABLE IV), applied identically
    to training data and, inside the exported graph, to live inputs.
+   Centre frame (``network.frame: centre``, :mod:`models.nn.gmlp`): with ``R_c`` =
+   :func:`centre_frame` the network sees ``q' = R_c⁻¹ ⊗ q`` (through the input map) and learns
+   ``t' = canonical(R_c⁻¹ ⊗ t ⊗ R_c)``; the deployed network maps back,
+   ``ĉ = R_c ⊗ c' ⊗ R_c⁻¹``. This puts the swing map's singularity (limb along ``-X`` in the
+   frame, i.e. ``d = -centre``) on the correctional discontinuity.
 3. Evolution (:func:`models.nn.evolution.evolve`) on train/validation splits.
 4. Metrics (:func:`models.metrics.evaluate`) on a fresh test set from the same generator.
 """
@@ -30,9 +33,6 @@ from models import metrics as M
 from models import quaternion as quat
 from models.nn.evolution import EvolutionResult, GenerationStats, evolve
 from models.nn.gmlp import GMLP, swing_of
-from models.nn.thesis_data import cone_patterns
-
-BAND_DEG = 10.0
 
 
 def _oracle(constraint):
@@ -70,32 +70,38 @@ def canonicalise(q: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     return q * np.where(q @ ref >= 0.0, 1.0, -1.0)[:, None]
 
 
-def _zone_sample(constraint, oracle, n, rng, distribution) -> np.ndarray:
+def centre_frame(constraint) -> np.ndarray:
+    """Centre-frame rotation ``R_c`` (4,): the minimal rotation limb axis → boundary centre.
+
+    The centre is the cone's centre; for a polygon the normalised mean of its vertices when that
+    direction is inside the boundary (and not degenerate), else the polygon's stored interior
+    point; the limb axis when there is no swing limit.
+    """
     axis = np.asarray(constraint.limb_axis, dtype=np.float64)
-    if distribution == "uniform":
-        v = quat.random_unit_vectors(n, rng)
-        return quat.from_two_vectors(np.broadcast_to(axis, v.shape), v)
-    band = math.radians(BAND_DEG if distribution == "even" else 5.0)
-    quota = [n // 4 + (1 if k < n % 4 else 0) for k in range(4)]
-    if distribution == "clustered":
-        quota = [n // 8, n // 4 + n // 8, n // 4 + n // 8, 0]
-        quota[3] = n - sum(quota)
-    got: list[list[np.ndarray]] = [[], [], [], []]
-    have = [0, 0, 0, 0]
-    for _ in range(200):
-        v = quat.random_unit_vectors(max(4 * n, 4096), rng)
-        q = quat.from_two_vectors(np.broadcast_to(axis, v.shape), v)
-        d = oracle.signed_distance(q)
-        zone = np.select([d < -band, d <= 0.0, d <= band], [0, 1, 2], 3)
-        for k in range(4):
-            need = quota[k] - have[k]
-            if need > 0:
-                sel = q[zone == k][:need]
-                got[k].append(sel)
-                have[k] += len(sel)
-        if all(h >= qk for h, qk in zip(have, quota, strict=True)):
-            break
-    return np.concatenate([np.concatenate(g) if g else np.zeros((0, 4)) for g in got])
+    sw = constraint.swing
+    centre = _centre_direction(constraint)
+    if sw is not None and hasattr(sw, "vertices"):
+        m = np.asarray(sw.vertices, dtype=np.float64).mean(axis=0)
+        if np.linalg.norm(m) > 1e-6:
+            m = m / np.linalg.norm(m)
+            if _oracle(constraint).is_valid(quat.from_two_vectors(axis, m)[None])[0]:
+                centre = m
+    return quat.from_two_vectors(axis, quat.check_vectors(centre))
+
+
+def to_frame(q: np.ndarray, frame: np.ndarray | None) -> np.ndarray:
+    """``R_c⁻¹ ⊗ q`` for (N, 4) ``q``; unchanged if ``frame`` is None."""
+    if frame is None:
+        return q
+    return quat.multiply(np.broadcast_to(quat.conjugate(frame), q.shape), q)
+
+
+def target_to_frame(t: np.ndarray, frame: np.ndarray | None) -> np.ndarray:
+    """Corrections in the centre frame, ``canonical(R_c⁻¹ ⊗ t ⊗ R_c)``, (N, 4)."""
+    if frame is None:
+        return t
+    f = np.broadcast_to(frame, t.shape)
+    return quat.canonical(quat.multiply(quat.multiply(quat.conjugate(f), t), f))
 
 
 def training_patterns(constraint, n: int, rng: np.random.Generator, *,
@@ -104,42 +110,21 @@ def training_patterns(constraint, n: int, rng: np.random.Generator, *,
                       oracle=None) -> tuple[np.ndarray, np.ndarray]:
     """``n`` patterns (inputs (n, 4), exact corrections (n, 4), ``w ≥ 0``) of a constraint.
 
-    ``hemisphere`` is the input sign rule of :func:`models.datasets.quaternion_dataset`
-    (``ambiguous``, ``centre``, ``w-positive``); the built-in fallback sampler supports
-    ``w-positive`` only (its inputs are twist-free with ``w ≥ 0``). ``twist=True`` draws full
-    3-DOF orientations (random twist about the limb axis; needs :mod:`models.datasets`) — what
-    a live sensor delivers; a network trained twist-free is meaningless on twisted inputs.
+    A thin wrapper of :func:`models.datasets.quaternion_dataset`: ``hemisphere`` is its input
+    sign rule (``ambiguous``, ``centre``, ``w-positive``); ``twist=True`` draws full 3-DOF
+    orientations (random twist about the limb axis) — what a live sensor delivers. ``oracle``
+    is accepted for compatibility and unused (the dataset labels with the exact oracle).
     """
-    try:
-        from models.datasets import quaternion_dataset
-    except ImportError:
-        quaternion_dataset = None
-    if quaternion_dataset is not None:
-        ds = quaternion_dataset(constraint, n, rng, distribution=distribution, order=order,
-                                hemisphere=hemisphere, twist=twist)
-        return np.asarray(ds.inputs, np.float64), quat.canonical(np.asarray(ds.targets))
-    if twist:
-        from models.errors import DatasetError
+    return _patterns(constraint, n, rng, distribution=distribution, order=order,
+                     hemisphere=hemisphere, twist=twist)[:2]
 
-        raise DatasetError("twist=True patterns need models.datasets")
-    oracle = oracle or _oracle(constraint)
-    sw = constraint.swing
-    if hasattr(sw, "radius_deg") and constraint.twist is None and np.allclose(
-            constraint.limb_axis, quat.LIMB_AXIS):
-        return cone_patterns(n, sw.centre, sw.radius_deg, rng, distribution=distribution,
-                             order=order)
-    q = _zone_sample(constraint, oracle, n, rng, distribution)
-    valid = oracle.is_valid(q)
-    if order == "valid-first":
-        idx = np.concatenate((rng.permutation(np.flatnonzero(valid)),
-                              rng.permutation(np.flatnonzero(~valid))))
-    elif order == "reversed":
-        idx = np.concatenate((rng.permutation(np.flatnonzero(~valid)),
-                              rng.permutation(np.flatnonzero(valid))))
-    else:
-        idx = rng.permutation(len(q))
-    q = q[idx]
-    return q, quat.canonical(oracle.correction(q))
+
+def _patterns(constraint, n, rng, **kw) -> tuple[np.ndarray, np.ndarray, str]:
+    from models.datasets import quaternion_dataset
+
+    ds = quaternion_dataset(constraint, n, rng, **kw)
+    return (np.asarray(ds.inputs, np.float64), quat.canonical(np.asarray(ds.targets)),
+            ds.content_hash())
 
 
 @dataclass
@@ -184,8 +169,6 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
                      progress: Callable[[GenerationStats], None] | None = None,
                      oracle=None) -> TrainedModel:
     """Train a correction network for ``constraint`` with a validated ``config``."""
-    from models.onnx_io import data_sha256
-
     oracle = oracle or _oracle(constraint)
     mode = config["network"]["canonicalise"]
     if mode == "swing" and getattr(constraint, "twist", None) is not None:
@@ -196,16 +179,19 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
         mode = "centre"
     dc = config["data"]
     ref = canonical_reference(constraint, mode)
+    frame = centre_frame(constraint) if config["network"]["frame"] == "centre" else None
     n = dc["train"] + dc["validation"]
-    q, t = training_patterns(constraint, n, rng, distribution=dc["distribution"],
-                             order=dc["order"], hemisphere=dc["hemisphere"],
-                             twist=dc["twist"], oracle=oracle)
-    x = swing_of(q) if mode == "swing" else canonicalise(q, ref)
-    t = overshoot(t, dc["overshoot_deg"])
+    q, t, data_hash = _patterns(constraint, n, rng, distribution=dc["distribution"],
+                                order=dc["order"], hemisphere=dc["hemisphere"],
+                                twist=dc["twist"])
+    x = swing_of(to_frame(q, frame)) if mode == "swing" else to_frame(canonicalise(q, ref), frame)
+    t = target_to_frame(overshoot(t, dc["overshoot_deg"]), frame)
     xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
     res.network.input_map = "swing" if mode == "swing" else "canonical"
+    res.network.frame = frame
     res.network.info["input_map"] = res.network.input_map
+    res.network.info["frame"] = config["network"]["frame"]
     # raw sensor quaternions come with either sign; without in-graph canonicalisation the
     # network only knows the training data's hemisphere rule, so test with that rule
     test_hemi = dc["hemisphere"] if mode == "none" else "ambiguous"
@@ -216,4 +202,4 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     metrics.update({"hidden": res.network.n_hidden, "links": res.network.n_links,
                     "val_mse": res.val_mse, "train_mse": res.train_mse,
                     "evolution_s": res.elapsed_s})
-    return TrainedModel(res.network, res, metrics, data_sha256(xtr, ttr), config)
+    return TrainedModel(res.network, res, metrics, data_hash, config)

@@ -8,13 +8,19 @@ import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
-from models.nn.thesis_data import ConeOracle, cone_patterns
+from models.constraint import JointConstraint
+from models.datasets import quaternion_dataset
+from models.oracle import ConstraintOracle
+
+
+def _cone(radius_deg):
+    return ConstraintOracle(JointConstraint.cone([1, 0, 0], radius_deg))
 
 
 def test_exact_prediction_scores_zero():
     rng = np.random.default_rng(0)
-    oracle = ConeOracle([1, 0, 0], 40)
-    q, _ = cone_patterns(400, [1, 0, 0], 40, rng)
+    oracle = _cone(40)
+    q = quaternion_dataset(JointConstraint.cone([1, 0, 0], 40), 400, rng).inputs
     m = M.evaluate(oracle.correction, oracle, q)
     assert m["mse"] < 1e-20 and m["mean_3d_error_pct"] < 1e-6
     assert m["frac_invalid_violating_1deg"] == 0.0 and m["max_violation_deg"] < 1e-6
@@ -25,7 +31,7 @@ def test_exact_prediction_scores_zero():
 
 
 def test_identity_prediction_errors_equal_the_distance_outside():
-    oracle = ConeOracle([1, 0, 0], 30)
+    oracle = _cone(30)
     # limb at 50 degrees from the centre about Z: 20 degrees outside
     q = quat.from_axis_angle(np.array([[0.0, 0.0, 1.0]]), np.radians([50.0]))
     ident = lambda qq: np.tile(quat.IDENTITY, (len(qq), 1))  # noqa: E731
@@ -41,7 +47,7 @@ def test_identity_prediction_errors_equal_the_distance_outside():
 
 
 def test_identity_error_on_valid_inputs():
-    oracle = ConeOracle([1, 0, 0], 90)
+    oracle = _cone(90)
     q = quat.from_axis_angle(np.array([[0.0, 1.0, 0.0]]), np.radians([10.0]))
     wrong = quat.from_axis_angle(np.array([[1.0, 0.0, 0.0]]), np.radians([3.0]))
     m = M.evaluate(lambda qq: wrong, oracle, q)

@@ -5,9 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from models.constraint import JointConstraint
+from models.datasets import quaternion_dataset
 from models.nn import evolution as E
 from models.nn.config import ConfigError, get_config, load_config
-from models.nn.thesis_data import cone_patterns
+
+
+def cone_patterns(n, centre, radius_deg, rng):
+    """Twist-free ``w ≥ 0`` patterns of a cone, valid first: (inputs, targets)."""
+    ds = quaternion_dataset(JointConstraint.cone(centre, radius_deg), n, rng,
+                            hemisphere="w-positive")
+    return ds.inputs, ds.targets
 
 
 def _cfg(**evo):

@@ -5,15 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from models.constraint import JointConstraint
+from models.datasets import quaternion_dataset
 from models.nn.gmlp import PopulationSpec, forward, init_params, with_bias
 from models.nn.rprop import train_population
-from models.nn.thesis_data import cone_patterns
 
 
 @pytest.fixture(scope="module")
 def problem():
     rng = np.random.default_rng(0)
-    x, t = cone_patterns(200, [1, 0, 0], 45, rng)
+    ds = quaternion_dataset(JointConstraint.cone([1, 0, 0], 45), 200, rng, hemisphere="w-positive")
+    x, t = ds.inputs, ds.targets
     p, i, h, o = 6, 4, 8, 4
     spec = PopulationSpec(rng.random((p, i + 1, h)) < 0.7, rng.random((p, h + i + 1, o)) < 0.7,
                           np.full((p, h), 2), np.zeros((p, o), int))

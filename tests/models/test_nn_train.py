@@ -5,17 +5,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from models import quaternion as quat
 from models.constraint import JointConstraint
-from models.nn.config import get_config
+from models.nn.config import ConfigError, get_config
 from models.nn.train import (
     canonical_reference,
     canonicalise,
+    centre_frame,
     overshoot,
+    target_to_frame,
+    to_frame,
     train_correction,
     training_patterns,
 )
+from models.oracle import ConstraintOracle
+from models.shapes import load_shape
 
 
 def test_canonical_reference_and_sign_rule():
@@ -72,3 +78,48 @@ def test_swing_map_for_swing_constraints_and_fallback_with_twist_limits():
     m = train_correction(JointConstraint.cone([1, 0, 0], 50, twist=(-40, 40)),
                          get_config("best", tiny), np.random.default_rng(3))
     assert m.network.input_map == "canonical" and m.network.canonical_ref is not None
+
+
+def test_frame_config_field():
+    assert get_config("best")["network"]["frame"] == "centre"
+    assert get_config("thesis")["network"]["frame"] == "parent"
+    assert get_config("fixed")["network"]["frame"] == "parent"
+    with pytest.raises(ConfigError, match=r"network\.frame"):
+        get_config("best", {"network": {"frame": "child"}})
+
+
+def test_centre_frame_of_cone_and_polygon():
+    r = centre_frame(JointConstraint.cone([0, 0, 1], 30))
+    np.testing.assert_allclose(quat.limb_direction(r), [0, 0, 1], atol=1e-12)
+    shape = load_shape("c-shape")
+    d = quat.limb_direction(centre_frame(shape))
+    assert ConstraintOracle(shape).is_valid(quat.from_two_vectors(quat.LIMB_AXIS, d)[None])[0]
+
+
+def test_centre_frame_targets_are_the_x_cone_problem():
+    """In the centre frame a +Y cone's patterns are exactly those of the same +X cone."""
+    rc = centre_frame(JointConstraint.cone([0, 1, 0], 40))
+    q = quat.random_quaternions(500, np.random.default_rng(4))
+    t = ConstraintOracle(JointConstraint.cone([0, 1, 0], 40)).correction(q)
+    tx = ConstraintOracle(JointConstraint.cone([1, 0, 0], 40)).correction(to_frame(q, rc))
+    np.testing.assert_allclose(target_to_frame(t, rc), quat.canonical(tx), atol=1e-12)
+    # mapping back: R_c ⊗ (t' ⊗ q') = t ⊗ q
+    tp = target_to_frame(t, rc)
+    back = quat.multiply(np.broadcast_to(rc, q.shape), quat.multiply(tp, to_frame(q, rc)))
+    np.testing.assert_allclose(back, quat.multiply(t, q), atol=1e-12)
+
+
+@pytest.mark.parametrize("twist", [None, (-40, 40)])
+def test_centre_frame_network_predicts_parent_frame_corrections(twist):
+    tiny = {"evolution": {"population": 2},
+            "training": {"max_epochs": 200, "min_epochs": 200},
+            "data": {"train": 200, "validation": 60, "test": 200}}
+    c = JointConstraint.cone([0, 0, 1], 50, twist=twist)
+    m = train_correction(c, get_config("best", tiny), np.random.default_rng(5))
+    assert m.network.frame is not None and m.network.info["frame"] == "centre"
+    q = quat.random_quaternions(300, np.random.default_rng(6))
+    y = m.network.predict(q)
+    np.testing.assert_allclose(np.linalg.norm(y, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(m.network.predict(-q), y, atol=1e-12)
+    if twist is None:
+        assert m.metrics["mean_3d_error_pct"] < 5.0

@@ -17,25 +17,35 @@ from models.onnx_io import export_onnx, load_model, to_onnx
 CONSTRAINT = "name: c45\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 45}\n"
 
 
-def _net(rng, kinds, out_kinds, h=7, ref=(1.0, 0.0, 0.0, 0.0), scale=2.0, input_map="canonical"):
+def _net(rng, kinds, out_kinds, h=7, ref=(1.0, 0.0, 0.0, 0.0), scale=2.0, input_map="canonical",
+         frame=None):
     spec = PopulationSpec(rng.random((1, 5, h)) < 0.8, rng.random((1, h + 5, 4)) < 0.8,
                           rng.choice(kinds, (1, h)), rng.choice(out_kinds, (1, 4)),
                           rng.uniform(-1, 1, (1, 4, 9)))
     spec.mask2[:, -1] = True
     theta = init_params(spec, rng) * scale
     return GMLP.from_population(theta, spec, 0, input_map=input_map,
-                                canonical_ref=None if ref is None else np.asarray(ref))
+                                canonical_ref=None if ref is None else np.asarray(ref),
+                                frame=None if frame is None else np.asarray(frame))
 
 
-@pytest.mark.parametrize(("kinds", "out_kinds", "ref", "input_map"), [
-    ([2], [0], (1.0, 0.0, 0.0, 0.0), "canonical"),
-    ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], [0, 1, 2, 8, 9], (0.5, 0.5, -0.5, 0.5), "canonical"),
-    ([6], [0], None, "canonical"),
-    ([6], [0], None, "swing"),
+_FRAME = tuple(quat.from_two_vectors(quat.LIMB_AXIS, np.array([0.3, -0.8, 0.52])))
+
+
+@pytest.mark.parametrize(("kinds", "out_kinds", "ref", "input_map", "frame"), [
+    ([2], [0], (1.0, 0.0, 0.0, 0.0), "canonical", None),
+    ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], [0, 1, 2, 8, 9], (0.5, 0.5, -0.5, 0.5), "canonical",
+     None),
+    ([6], [0], None, "canonical", None),
+    ([6], [0], None, "swing", None),
+    ([6], [0], None, "swing", _FRAME),
+    ([6], [0], _FRAME, "canonical", _FRAME),
+    ([1, 2, 8], [0, 2, 8], (0.5, 0.5, -0.5, 0.5), "canonical", _FRAME),
+    ([1, 6], [1, 0], None, "swing", _FRAME),
 ])
-def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref, input_map):
+def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref, input_map, frame):
     rng = np.random.default_rng(len(kinds))
-    net = _net(rng, kinds, out_kinds, ref=ref, input_map=input_map)
+    net = _net(rng, kinds, out_kinds, ref=ref, input_map=input_map, frame=frame)
     path = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=CONSTRAINT,
                        training_data_sha256="ab" * 32, metrics={"mse": 1e-4})
     model = load_model(path, expected_constraint=CONSTRAINT)
@@ -46,8 +56,25 @@ def test_parity_with_numpy_on_10k(tmp_path, kinds, out_kinds, ref, input_map):
     if ref is not None or input_map == "swing":
         np.testing.assert_allclose(model.correction(-q), got, atol=1e-6)
     assert model.network_info["input_map"] == input_map
+    assert (model.network_info["frame"] is None) == (frame is None)
     np.testing.assert_allclose(model.correct_one(*q[3]), got[3], atol=1e-6)
     np.testing.assert_allclose(model.correction(q[3]), got[3], atol=1e-6)
+
+
+def test_centre_frame_maps():
+    """``predict`` of a centre-frame net is the parent-frame net conjugated by ``R_c``."""
+    rng = np.random.default_rng(5)
+    net = _net(rng, [6], [0], ref=None, input_map="swing", frame=_FRAME)
+    q = quat.random_quaternions(500, rng)
+    r = np.asarray(_FRAME)
+    qp = quat.multiply(np.broadcast_to(quat.conjugate(r), q.shape), q)
+    y = net.forward(GMLP.canonicalise(net, q))
+    np.testing.assert_allclose(y, net.forward(quat.from_two_vectors(
+        np.broadcast_to(quat.LIMB_AXIS, (500, 3)), quat.limb_direction(qp))), atol=1e-9)
+    y = y / np.linalg.norm(y, axis=1, keepdims=True)
+    back = quat.multiply(quat.multiply(np.broadcast_to(r, y.shape), y),
+                         np.broadcast_to(quat.conjugate(r), y.shape))
+    np.testing.assert_allclose(net.predict(q), back, atol=1e-12)
 
 
 def test_metadata(tmp_path):

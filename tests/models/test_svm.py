@@ -6,15 +6,16 @@ import numpy as np
 import pytest
 
 from models import quaternion as quat
+from models.constraint import JointConstraint
 from models.errors import ModelFileError
-from models.nn.thesis_data import ConeOracle
+from models.oracle import ConstraintOracle
 from models.svm import BinaryConstraintSVM, features
 
 
 @pytest.fixture(scope="module")
 def data():
     rng = np.random.default_rng(0)
-    oracle = ConeOracle([0, 1, 0], 60)
+    oracle = ConstraintOracle(JointConstraint.cone([0, 1, 0], 60))
     q = quat.random_quaternions(600, rng)
     qt = quat.random_quaternions(500, rng)
     return oracle, q, oracle.is_valid(q), qt
