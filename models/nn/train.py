@@ -34,6 +34,9 @@ from models import quaternion as quat
 from models.nn.evolution import EvolutionResult, GenerationStats, evolve
 from models.nn.gmlp import GMLP, swing_of
 
+#: Directions searched for a polygon's centre frame (:func:`centre_frame`).
+FRAME_GRID = 20_000
+
 
 def _oracle(constraint):
     from models.oracle import ConstraintOracle
@@ -70,23 +73,45 @@ def canonicalise(q: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     return q * np.where(q @ ref >= 0.0, 1.0, -1.0)[:, None]
 
 
-def centre_frame(constraint) -> np.ndarray:
-    """Centre-frame rotation ``R_c`` (4,): the minimal rotation limb axis → boundary centre.
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1.0 - 2.0 * i / n)
+    th = math.pi * (1.0 + math.sqrt(5.0)) * i
+    return np.stack((np.cos(phi), np.sin(phi) * np.cos(th), np.sin(phi) * np.sin(th)), axis=1)
 
-    The centre is the cone's centre; for a polygon the normalised mean of its vertices when that
-    direction is inside the boundary (and not degenerate), else the polygon's stored interior
-    point; the limb axis when there is no swing limit.
+
+def centre_frame(constraint, oracle=None, n_grid: int = FRAME_GRID) -> np.ndarray:
+    """Centre-frame rotation ``R_c`` (4,): the minimal rotation limb axis → constraint centre.
+
+    The swing map's singularity lands on ``-centre``, so the best centre is the one whose
+    antipode lies deepest in the invalid region (where the correction flips). For a cone that is
+    its centre, used exactly. For a polygon it is the antipode of the limb direction farthest
+    outside the boundary (largest ``oracle.signed_distance``) on a deterministic Fibonacci grid
+    of ``n_grid`` directions (~1.4° spacing for 20 000) — measured on the five thesis shapes,
+    3 seeds: mean 3-D error 2.32 % vs 2.32 % for the normalised vertex mean and 2.35 % for the
+    parent frame, MSE 8.9e-4 vs 9.3e-4 / 9.8e-4 (all within seed noise: the shapes are centred
+    near +X already). The limb axis itself (``R_c`` = identity) without a swing limit.
+
+    Parameters
+    ----------
+    constraint : JointConstraint
+    oracle : ConstraintOracle, optional
+        Reused if given.
+    n_grid : int
+        Grid size for polygons.
+
+    Returns
+    -------
+    (4,) float64, unit quaternion.
     """
     axis = np.asarray(constraint.limb_axis, dtype=np.float64)
     sw = constraint.swing
-    centre = _centre_direction(constraint)
-    if sw is not None and hasattr(sw, "vertices"):
-        m = np.asarray(sw.vertices, dtype=np.float64).mean(axis=0)
-        if np.linalg.norm(m) > 1e-6:
-            m = m / np.linalg.norm(m)
-            if _oracle(constraint).is_valid(quat.from_two_vectors(axis, m)[None])[0]:
-                centre = m
-    return quat.from_two_vectors(axis, quat.check_vectors(centre))
+    if sw is None or hasattr(sw, "centre"):
+        return quat.from_two_vectors(axis, quat.check_vectors(_centre_direction(constraint)))
+    oracle = oracle or _oracle(constraint)
+    g = _fibonacci_sphere(n_grid)
+    d = oracle.signed_distance(quat.from_two_vectors(np.broadcast_to(axis, g.shape), g))
+    return quat.from_two_vectors(axis, -g[int(np.argmax(d))])
 
 
 def to_frame(q: np.ndarray, frame: np.ndarray | None) -> np.ndarray:
@@ -179,7 +204,8 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
         mode = "centre"
     dc = config["data"]
     ref = canonical_reference(constraint, mode)
-    frame = centre_frame(constraint) if config["network"]["frame"] == "centre" else None
+    frame = (centre_frame(constraint, oracle) if config["network"]["frame"] == "centre"
+             else None)
     n = dc["train"] + dc["validation"]
     q, t, data_hash = _patterns(constraint, n, rng, distribution=dc["distribution"],
                                 order=dc["order"], hemisphere=dc["hemisphere"],

@@ -92,8 +92,13 @@ def test_centre_frame_of_cone_and_polygon():
     r = centre_frame(JointConstraint.cone([0, 0, 1], 30))
     np.testing.assert_allclose(quat.limb_direction(r), [0, 0, 1], atol=1e-12)
     shape = load_shape("c-shape")
-    d = quat.limb_direction(centre_frame(shape))
-    assert ConstraintOracle(shape).is_valid(quat.from_two_vectors(quat.LIMB_AXIS, d)[None])[0]
+    oracle = ConstraintOracle(shape)
+    d = quat.limb_direction(centre_frame(shape, n_grid=4000))
+    assert oracle.is_valid(quat.from_two_vectors(quat.LIMB_AXIS, d)[None])[0]
+    # its antipode lies deeper in the invalid region than the interior point's antipode
+    depth = [oracle.signed_distance(quat.from_two_vectors(quat.LIMB_AXIS, -v)[None])[0]
+             for v in (d, shape.swing.interior)]
+    assert depth[0] >= depth[1]
 
 
 def test_centre_frame_targets_are_the_x_cone_problem():
