@@ -16,7 +16,8 @@ Never asserts on time.
 - ``capacity``: what lower errors cost — 40 and 80 hidden nodes, 2000 patterns, 3000 epochs.
 - ``sweep``: ``best`` (or ``--preset``) over all regular boundaries of the thesis (radii 5, 20,
   45, 90, 135, 150° about +X, +Y, +Z) and the five irregular shapes; prints per-constraint
-  rows and the means.
+  rows and the means. ``--override '{"network": {"frame": "parent"}}'`` gives the parent-frame
+  input encoding (the ``best`` default before the centre frame).
 """
 
 from __future__ import annotations
