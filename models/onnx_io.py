@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -232,7 +233,13 @@ def export_onnx(network: GMLP, path: str | Path, **kw) -> Path:
     path = Path(path)
     model = to_onnx(network, **kw)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(model.SerializeToString())
+    # write then rename: an interrupted export never leaves a half-written model behind
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_bytes(model.SerializeToString())
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
 
 

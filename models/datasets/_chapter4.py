@@ -28,7 +28,7 @@ outer invalid (``s > b``).
 - ``"even"``: the same number of patterns (``n/4``) in each region whatever the constraint's
   size, with ``b = min(10°, depth_in/2, depth_out/2)``; ``depth_in`` is the deepest point
   inside (cone: ``r``), ``depth_out`` the farthest point outside (cone: ``180° − r``), so for a
-  cone ``b = min(10°, r/2, (180° − r)/2)`` — the rule of :mod:`models.nn.thesis_data`.
+  cone ``b = min(10°, r/2, (180° − r)/2)``.
 - ``"clustered"``: the same four equal regions but with ``b = min(5°, ...)``, i.e. half the
   patterns packed in a dense band within 5° of the boundary.
 - ``"uniform"``: limb directions uniform on S² (with ``twist=True``, orientations uniform on
