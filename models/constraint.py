@@ -164,14 +164,8 @@ class JointConstraint:
         limb_axis=(1.0, 0.0, 0.0),
     ) -> JointConstraint:
         """A cone swing limit (optionally with twist limits in degrees)."""
-        d: dict[str, Any] = {
-            "name": name,
-            "limb_axis": list(limb_axis),
-            "swing": {"cone": {"centre": list(centre), "radius_deg": radius_deg}},
-        }
-        if twist is not None:
-            d["twist"] = {"min_deg": twist[0], "max_deg": twist[1]}
-        return cls.from_dict(d)
+        swing = {"cone": {"centre": list(centre), "radius_deg": radius_deg}}
+        return cls._build(swing, twist, name, limb_axis)
 
     @classmethod
     def polygon(
@@ -184,16 +178,17 @@ class JointConstraint:
         limb_axis=(1.0, 0.0, 0.0),
     ) -> JointConstraint:
         """A polygon swing limit (optionally with twist limits in degrees)."""
-        d: dict[str, Any] = {
-            "name": name,
-            "limb_axis": list(limb_axis),
-            "swing": {
-                "polygon": {
-                    "vertices": np.asarray(vertices, dtype=float).tolist(),
-                    "interior": list(np.asarray(interior, dtype=float)),
-                }
-            },
+        swing = {
+            "polygon": {
+                "vertices": np.asarray(vertices, dtype=float).tolist(),
+                "interior": list(np.asarray(interior, dtype=float)),
+            }
         }
+        return cls._build(swing, twist, name, limb_axis)
+
+    @classmethod
+    def _build(cls, swing: dict, twist, name: str, limb_axis) -> JointConstraint:
+        d: dict[str, Any] = {"name": name, "limb_axis": list(limb_axis), "swing": swing}
         if twist is not None:
             d["twist"] = {"min_deg": twist[0], "max_deg": twist[1]}
         return cls.from_dict(d)
