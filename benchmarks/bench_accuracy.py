@@ -27,20 +27,20 @@ import os
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
-import argparse  # noqa: E402
-import statistics  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from models import metrics as M  # noqa: E402
-from models.constraint import JointConstraint  # noqa: E402
-from models.nn.config import get_config  # noqa: E402
-from models.nn.train import _oracle, train_correction, training_patterns  # noqa: E402
-from models.onnx_io import export_onnx, load_model  # noqa: E402
-from models.shapes import load_shape  # noqa: E402
+from models import metrics as M
+from models.constraint import JointConstraint
+from models.nn.config import get_config
+from models.nn.train import _oracle, train_correction, training_patterns
+from models.onnx_io import export_onnx, load_model
+from models.shapes import load_shape
 
 
 def constraints():

@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dynamixel_sdk import (  # noqa: E402
+from dynamixel_sdk import (
     COMM_SUCCESS,
     GroupSyncRead,
     GroupSyncWrite,
@@ -35,7 +35,7 @@ from dynamixel_sdk import (  # noqa: E402
     PortHandler,
 )
 
-from rig.sim.dynamixel import start_servo_bus  # noqa: E402
+from rig.sim.dynamixel import start_servo_bus
 
 IDS = (1, 2, 3)
 TORQUE, RETURN_DELAY, GOAL_POS, PRESENT_POS = 64, 9, 116, 132

@@ -18,16 +18,16 @@ import os
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
-import argparse  # noqa: E402
-import statistics  # noqa: E402
-import time  # noqa: E402
+import argparse
+import statistics
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from models.constraint import JointConstraint  # noqa: E402
-from models.nn.config import get_config  # noqa: E402
-from models.nn.evolution import evolve  # noqa: E402
-from models.nn.train import canonical_reference, canonicalise, split, training_patterns  # noqa: E402
+from models.constraint import JointConstraint
+from models.nn.config import get_config
+from models.nn.evolution import evolve
+from models.nn.train import canonical_reference, canonicalise, split, training_patterns
 
 
 def one_run(constraint, seed: int, dtype: str, quick: bool) -> tuple[float, dict]:

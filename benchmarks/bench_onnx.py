@@ -15,18 +15,18 @@ import os
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
-import argparse  # noqa: E402
-import statistics  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from models import quaternion as quat  # noqa: E402
-from models.nn import activations as act  # noqa: E402
-from models.nn.gmlp import GMLP, PopulationSpec, init_params  # noqa: E402
-from models.onnx_io import export_onnx, load_model  # noqa: E402
+from models import quaternion as quat
+from models.nn import activations as act
+from models.nn.gmlp import GMLP, PopulationSpec, init_params
+from models.onnx_io import export_onnx, load_model
 
 
 def _network(kind: str, rng) -> GMLP:
