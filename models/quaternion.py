@@ -24,8 +24,6 @@ default: always go through :func:`to_rotation` / :func:`from_rotation`, which pa
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -312,8 +310,3 @@ def random_unit_vectors(n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` unit vectors uniform on the sphere S²."""
     v = rng.standard_normal((n, 3))
     return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def deg(x) -> float:
-    """Degrees → radians shorthand for configuration values."""
-    return math.radians(float(x))
