@@ -126,7 +126,7 @@ class ConstraintOracle:
         numpy gather for a polygon) built for the control loop; it gives the same answers as
         the batched path.
         """
-        if isinstance(q, np.ndarray) and q.shape == (4,):
+        if isinstance(q, np.ndarray) and q.shape == (4,) and q.dtype.kind in "fiu":
             return self._evaluate_one(q, normalize)
         q = Q.check_quaternions(q, normalize=normalize)
         single = q.ndim == 1
