@@ -2,10 +2,11 @@
 
     python benchmarks/bench_onnx.py [--model MODEL.onnx] [--calls 20000]
 
-Without ``--model`` it exports two 20-hidden-node networks (leaky ReLU as in the ``best``
-preset, sigmoid as in the thesis preset) with random weights — latency does not depend on the
-weights. Prints the median single-orientation latency (``CorrectionModel.correct_one`` and a
-(1, 4) ``correction`` call) and batched throughput. Never asserts on time.
+Without ``--model`` it exports two networks of ``--hidden`` nodes (default 20; leaky ReLU as in
+the ``best`` preset, sigmoid as in the thesis preset) with random weights — latency does not
+depend on the weights. Prints the median single-orientation latency
+(``CorrectionModel.correct_one`` and a (1, 4) ``correction`` call) and batched throughput.
+Never asserts on time.
 """
 
 from __future__ import annotations
@@ -29,8 +30,7 @@ from models.nn.gmlp import GMLP, PopulationSpec, init_params
 from models.onnx_io import export_onnx, load_model
 
 
-def _network(kind: str, rng) -> GMLP:
-    h = 20
+def _network(kind: str, rng, h: int = 20) -> GMLP:
     spec = PopulationSpec(np.ones((1, 5, h), bool), np.ones((1, h + 5, 4), bool),
                           np.full((1, h), act.index_of(kind)), np.zeros((1, 4), int))
     if kind == "leaky_relu":  # as the best preset: in-graph swing map
@@ -76,6 +76,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path)
     ap.add_argument("--calls", type=int, default=20_000)
+    ap.add_argument("--hidden", type=int, default=20, help="hidden nodes of the random networks")
     args = ap.parse_args()
     if args.model:
         print(args.model)
@@ -84,10 +85,10 @@ def main() -> None:
     rng = np.random.default_rng(1)
     with tempfile.TemporaryDirectory() as d:
         for kind in ("leaky_relu", "sigmoid"):
-            p = export_onnx(_network(kind, rng), Path(d) / f"{kind}.onnx",
+            p = export_onnx(_network(kind, rng, args.hidden), Path(d) / f"{kind}.onnx",
                             constraint_yaml="name: bench\n")
             pre = "swing map" if kind == "leaky_relu" else "hemisphere canonicalisation"
-            print(f"20 hidden {kind} + linear output, {pre} + normalisation in-graph")
+            print(f"{args.hidden} hidden {kind} + linear output, {pre} + normalisation in-graph")
             bench(p, args.calls)
 
 
