@@ -1,6 +1,6 @@
 """What an irregular boundary takes: held-out accuracy against network capacity.
 
-Trains preset ``large`` with the given hidden nodes, training patterns and epochs on one of the
+Trains preset ``best`` with the given hidden nodes, training patterns and epochs on one of the
 shipped shapes and prints the held-out metrics (fresh test orientations, exact oracle as the
 reference). Prints figures; asserts nothing.
 
@@ -35,7 +35,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
     cfg = get_config(
-        "large",
+        "best",
         {
             "network": {"max_hidden": a.hidden},
             "training": {"max_epochs": a.epochs, "min_epochs": a.epochs},

@@ -14,25 +14,23 @@ Presets
     hidden nodes and epochs, hidden sigmoid + linear output (TABLE XII's baseline), 500
     training patterns, 5 repeats.
 ``best``
-    What won on accuracy per microsecond of inference (``benchmarks/bench_accuracy.py``; every
-    ≤ 20-hidden network costs the same ~9 µs through onnxruntime, so accuracy decides): a fully
-    connected GMLP with 20 leaky-ReLU hidden nodes and linear outputs, iRprop− with Δ₀ = 0.01,
-    Δmax = 1 for 2000 epochs on 1000 training patterns, best of 10 random starts on 500
-    validation patterns, and the in-graph *swing* input map (the network sees the twist-free
-    swing of any orientation, so it serves live, twisted orientations; for a constraint with
-    twist limits training falls back to the ``centre`` hemisphere rule on twisted patterns),
-    in the *centre frame* (``network.frame: centre``, :mod:`models.nn.gmlp`: the input map's
-    singularity sits on the correctional discontinuity opposite the boundary centre, so
-    +Y/+Z-centred cones reach the +X figures — 45° cone 2.30 / 2.57 % → 0.54 % mean 3-D error).
+    What wins on accuracy per microsecond of inference (``benchmarks/bench_accuracy.py``,
+    ``benchmarks/bench_onnx.py --hidden N``): through onnxruntime a single orientation costs
+    the same ~9.5 µs with 20 or 80 hidden nodes, so the larger network wins. A fully connected
+    GMLP with 80 leaky-ReLU hidden nodes and linear outputs, iRprop− with Δ₀ = 0.01, Δmax = 1
+    for 3000 epochs on 2000 training patterns, best of 10 random starts on 500 validation
+    patterns, the in-graph *swing* input map (the network sees the twist-free swing of any
+    orientation, so it serves live, twisted orientations; for a constraint with twist limits
+    training falls back to the ``centre`` hemisphere rule on twisted patterns), in the *centre
+    frame* (``network.frame: centre``, :mod:`models.nn.gmlp`: the input map's singularity sits
+    on the correctional discontinuity opposite the boundary centre, so +Y/+Z-centred cones
+    reach the +X figures). ~25 s of training on one core.
+``compact``
+    ``best`` within the thesis's 20-hidden-node limit (1000 patterns, 2000 epochs, ~2 s of
+    training): about twice the error of ``best``. Topology evolution did not pay against it: on
+    a 45° cone an evolved leaky-ReLU GMLP (population 20 × 5 generations, same training)
+    reached 0.63 % mean 3-D error in 155 s, the fixed one 0.52 % in 13 s.
     ``thesis`` and ``fixed`` keep ``network.frame: parent`` (the thesis's encoding).
-    Topology evolution did not pay here: on a 45° cone an evolved leaky-ReLU GMLP (population
-    20 × 5 generations, same training) reached 0.63 % mean 3-D error in 155 s, the fixed one
-    0.52 % in 13 s.
-``large``
-    ``best`` beyond the thesis's size limit — 80 hidden nodes, 2000 patterns, 3000 epochs:
-    about half the error of ``best`` (45° +X cone 0.29 %, MSE 5e-6, 1.3 % of invalid inputs
-    left > 1° outside; 'original' 1.34 %) for ~3-6× the training time (23 s) and a
-    single-orientation call of ~13-15 µs instead of ~9 µs; batched ≥ 4.6 M orientations/s.
 ``fixed``
     The thesis's baseline without evolution: a fully connected GMLP (20 sigmoid hidden nodes,
     linear outputs) with the thesis's training settings (≤ 500 epochs, stop MSE 0.001 SNNS,
@@ -107,20 +105,21 @@ _THESIS: dict[str, Any] = {
 }
 
 PRESETS: dict[str, dict[str, Any]] = {"thesis": _THESIS}
-PRESETS["best"] = copy.deepcopy(_THESIS)
-PRESETS["best"]["network"].update({"hidden_activations": ["leaky_relu"], "canonicalise": "swing",
-                                   "frame": "centre"})
-PRESETS["best"]["training"].update({"max_epochs": 2000, "min_epochs": 2000, "stop_mse": 1e-6,
-                                    "learning_rate": 0.01, "delta_max": 1.0})
-PRESETS["best"]["evolution"].update({"generations": 0, "population": 10, "repeats": 1,
-                                     "link_probability": 1.0, "hidden_probability": 1.0,
-                                     "evolve_links": False, "evolve_hidden": False,
-                                     "evolve_epochs": False})
-PRESETS["best"]["data"].update({"train": 1000, "validation": 500})
-PRESETS["large"] = copy.deepcopy(PRESETS["best"])
-PRESETS["large"]["network"]["max_hidden"] = 80
-PRESETS["large"]["training"].update({"max_epochs": 3000, "min_epochs": 3000})
-PRESETS["large"]["data"]["train"] = 2000
+PRESETS["compact"] = copy.deepcopy(_THESIS)
+PRESETS["compact"]["network"].update(
+    {"hidden_activations": ["leaky_relu"], "canonicalise": "swing", "frame": "centre"})
+PRESETS["compact"]["training"].update(
+    {"max_epochs": 2000, "min_epochs": 2000, "stop_mse": 1e-6, "learning_rate": 0.01,
+     "delta_max": 1.0})
+PRESETS["compact"]["evolution"].update(
+    {"generations": 0, "population": 10, "repeats": 1, "link_probability": 1.0,
+     "hidden_probability": 1.0, "evolve_links": False, "evolve_hidden": False,
+     "evolve_epochs": False})
+PRESETS["compact"]["data"].update({"train": 1000, "validation": 500})
+PRESETS["best"] = copy.deepcopy(PRESETS["compact"])
+PRESETS["best"]["network"]["max_hidden"] = 80
+PRESETS["best"]["training"].update({"max_epochs": 3000, "min_epochs": 3000})
+PRESETS["best"]["data"]["train"] = 2000
 PRESETS["fixed"] = copy.deepcopy(_THESIS)
 PRESETS["fixed"]["evolution"].update({"generations": 0, "population": 10, "repeats": 1,
                                       "link_probability": 1.0, "hidden_probability": 1.0,

@@ -33,7 +33,8 @@ QUICK_OVERRIDE = {
               type=click.Path(file_okay=False), help="Folder for the files the demo writes.")
 @click.option("--constraint", "constraint_path", default=None, type=click.Path(dir_okay=False),
               help="Constraint YAML (default: the shipped shoulder shape 'original').")
-@click.option("--preset", type=click.Choice(["best", "thesis", "fixed"]), default="best",
+@click.option("--preset", type=click.Choice(["best", "compact", "thesis", "fixed"]),
+              default="best",
               show_default=True, help="Training preset.")
 @click.option("--quick", is_flag=True, help="Tiny training run (smoke test).")
 @click.option("--seed", type=int, default=0, show_default=True)

@@ -1,7 +1,7 @@
 """``rig train`` and ``rig evaluate``: learn a corrective constraint, export it, check it.
 
 ``rig train --constraint FILE --out MODEL.onnx [--config YAML]
-[--preset best|thesis|fixed|large] [--seed N]`` evolves and trains a GMLP (:mod:`models.nn`)
+[--preset best|compact|thesis|fixed] [--seed N]`` evolves and trains a GMLP (:mod:`models.nn`)
 on patterns of the constraint, prints one progress line per generation, and writes an ONNX
 model whose metadata holds the constraint, the training-data hash and the held-out metrics.
 
@@ -46,7 +46,7 @@ def _print_metrics(metrics: dict) -> None:
               help="Where to write the ONNX model.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="YAML overriding fields of the preset.")
-@click.option("--preset", type=click.Choice(["best", "thesis", "fixed", "large"]),
+@click.option("--preset", type=click.Choice(["best", "compact", "thesis", "fixed"]),
               default="best", show_default=True,
               help="Starting configuration (models.nn.config).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")

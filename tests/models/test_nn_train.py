@@ -64,7 +64,7 @@ def test_small_training_run_gives_sane_metrics():
                               "data": {"train": 300, "validation": 100, "test": 300}})
     m = train_correction(c, cfg, np.random.default_rng(2))
     assert m.metrics["mean_3d_error_pct"] < 5.0
-    assert m.network.n_hidden == 20 and len(m.data_sha256) == 64
+    assert m.network.n_hidden == cfg["network"]["max_hidden"] == 80 and len(m.data_sha256) == 64
     assert m.network.info["hidden_activations"][0] == "leaky_relu"
 
 
