@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_onnx import single_latencies_ns  # benchmarks/ is on the path when run as a script
 
 from models import metrics as M
 from models.constraint import JointConstraint
@@ -49,16 +50,8 @@ def constraints():
 
 
 def latency_us(model, n=5000) -> float:
-    rng = np.random.default_rng(0)
-    rows = [tuple(map(float, r)) for r in rng.standard_normal((n, 4))]
-    for r in rows[:500]:
-        model.correct_one(*r)
-    ts = []
-    for r in rows:
-        t0 = time.perf_counter_ns()
-        model.correct_one(*r)
-        ts.append(time.perf_counter_ns() - t0)
-    return statistics.median(ts) / 1e3
+    qs = np.random.default_rng(0).standard_normal((n, 4))
+    return statistics.median(single_latencies_ns(model, qs, warmup=500)) / 1e3
 
 
 def run(label, c, preset, override, seed, quick) -> dict:

@@ -39,18 +39,24 @@ def _network(kind: str, rng, h: int = 20) -> GMLP:
                                 canonical_ref=np.array([1.0, 0.0, 0.0, 0.0]))
 
 
+def single_latencies_ns(model, qs: np.ndarray, warmup: int = 2000) -> list[int]:
+    """Per-call latency (ns) of ``model.correct_one`` over the orientations ``qs`` (N, 4)."""
+    rows = [tuple(map(float, r)) for r in qs]
+    for r in rows[:warmup]:
+        model.correct_one(*r)
+    lat = []
+    for r in rows:
+        t0 = time.perf_counter_ns()
+        model.correct_one(*r)
+        lat.append(time.perf_counter_ns() - t0)
+    return lat
+
+
 def bench(path: Path, calls: int) -> None:
     m = load_model(path)
     rng = np.random.default_rng(0)
     qs = quat.random_quaternions(calls, rng)
-    rows = [tuple(map(float, r)) for r in qs]
-    for r in rows[:2000]:
-        m.correct_one(*r)
-    lat = []
-    for r in rows:
-        t0 = time.perf_counter_ns()
-        m.correct_one(*r)
-        lat.append(time.perf_counter_ns() - t0)
+    lat = single_latencies_ns(m, qs)
     q1 = qs[:1].astype(np.float32)
     lat2 = []
     for _ in range(calls):
