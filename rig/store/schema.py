@@ -1,0 +1,272 @@
+"""Schema of the session store and its ordered migrations.
+
+Layout (current version :data:`SCHEMA_VERSION`)::
+
+    schema_version(version PK, applied_at, description)        one row per applied migration
+    patients(id, pseudonym UNIQUE, side, notes, created_at)     a pseudonym only -- no name fields
+     +-- sessions(id, patient_id, rig_name, joint, side, kind, status,
+     |            started_at, ended_at, dropped, meta)
+          +-- sensors(id, session_id, name, segment, kind, port)       UNIQUE(session_id, name)
+          +-- samples(id, session_id, sensor_id, t, device_t, w, x, y, z, status)
+          |        index (session_id, sensor_id, t)
+          +-- calibrations(id, session_id, kind, data, residual_deg, created_at)
+          +-- annotations(id, session_id, t, text, created_at)
+          +-- boundaries(id, session_id NULL, constraint_yaml, meta, created_at)
+          |     +-- models(id, boundary_id NULL, session_id NULL, path, sha256, metrics, created_at)
+          +-- runs(id, session_id, status, started_at, ended_at, meta, summary)         (v2)
+                +-- telemetry(id, run_id, cycle, t_s, target_w..z, commanded_w..z,
+                              present_w..z, read_ms, compute_ms, write_ms, cycle_ms,
+                              correction_deg, violation_deg, intervention, fault, extra)
+
+Units: times ``t``, ``device_t``, ``t_s`` in seconds (``t`` on the recording host's monotonic
+clock, ``started_at``/``ended_at``/``created_at`` Unix time); quaternions scalar-first
+``w, x, y, z`` (Hamilton), one float64 column per component; angles in degrees. JSON columns
+(``meta``, ``data``, ``metrics``, ``summary``, ``extra``) are text written by :mod:`json`, so
+SQLite and PostgreSQL store the same bytes.
+
+Migration policy: migrations are *append-only* functions ``_mN(conn)`` in :data:`MIGRATIONS`;
+each creates or alters tables with definitions frozen inside the function (never the current
+:data:`metadata`, which may change later), runs in one transaction together with the row it
+adds to ``schema_version``, and is never edited once released. A database newer than the code
+is refused, never downgraded. ``tests/rig/test_store.py`` checks that a version-1 database is
+migrated to the current schema with its data intact, and that the migrated tables equal
+:data:`metadata`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from sqlalchemy import (
+    BigInteger,
+    Column,
+    Double,
+    ForeignKey,
+    Index,
+    Integer,
+    MetaData,
+    SmallInteger,
+    String,
+    Table,
+    Text,
+    UniqueConstraint,
+    select,
+)
+from sqlalchemy.engine import Connection
+
+#: SQLite's rowid alias must be INTEGER; PostgreSQL gets BIGSERIAL for the big tables.
+BigId = BigInteger().with_variant(Integer(), "sqlite")
+
+
+def _v1_tables(md: MetaData) -> None:
+    """Version-1 tables, frozen: recording (patients .. models)."""
+    Table(
+        "schema_version",
+        md,
+        Column("version", Integer, primary_key=True, autoincrement=False),
+        Column("applied_at", Double, nullable=False),
+        Column("description", Text, nullable=False),
+    )
+    Table(
+        "patients",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("pseudonym", String(64), nullable=False, unique=True),
+        Column("side", String(8)),
+        Column("notes", Text),
+        Column("created_at", Double, nullable=False),
+    )
+    Table(
+        "sessions",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("patient_id", Integer, ForeignKey("patients.id"), nullable=False, index=True),
+        Column("rig_name", String(128)),
+        Column("joint", String(64)),
+        Column("side", String(8)),
+        Column("kind", String(16), nullable=False),
+        Column("status", String(16), nullable=False),
+        Column("started_at", Double, nullable=False),
+        Column("ended_at", Double),
+        Column("dropped", BigInteger, nullable=False, server_default="0"),
+        Column("meta", Text, nullable=False, server_default="{}"),
+    )
+    Table(
+        "sensors",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), nullable=False),
+        Column("name", String(64), nullable=False),
+        Column("segment", String(64)),
+        Column("kind", String(16), nullable=False),
+        Column("port", Text),
+        UniqueConstraint("session_id", "name", name="uq_sensors_session_name"),
+    )
+    Table(
+        "samples",
+        md,
+        Column("id", BigId, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), nullable=False),
+        Column("sensor_id", Integer, ForeignKey("sensors.id"), nullable=False),
+        Column("t", Double, nullable=False),
+        Column("device_t", Double),
+        Column("w", Double, nullable=False),
+        Column("x", Double, nullable=False),
+        Column("y", Double, nullable=False),
+        Column("z", Double, nullable=False),
+        Column("status", SmallInteger, nullable=False, server_default="0"),
+        Index("ix_samples_session_sensor_t", "session_id", "sensor_id", "t"),
+    )
+    Table(
+        "calibrations",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), nullable=False, index=True),
+        Column("kind", String(64), nullable=False),
+        Column("data", Text, nullable=False),
+        Column("residual_deg", Double),
+        Column("created_at", Double, nullable=False),
+    )
+    Table(
+        "annotations",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), nullable=False, index=True),
+        Column("t", Double, nullable=False),
+        Column("text", Text, nullable=False),
+        Column("created_at", Double, nullable=False),
+    )
+    Table(
+        "boundaries",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), index=True),
+        Column("constraint_yaml", Text, nullable=False),
+        Column("meta", Text, nullable=False, server_default="{}"),
+        Column("created_at", Double, nullable=False),
+    )
+    Table(
+        "models",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("boundary_id", Integer, ForeignKey("boundaries.id"), index=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), index=True),
+        Column("path", Text, nullable=False),
+        Column("sha256", String(64), nullable=False),
+        Column("metrics", Text, nullable=False, server_default="{}"),
+        Column("created_at", Double, nullable=False),
+    )
+
+
+def _v2_tables(md: MetaData) -> None:
+    """Version-2 tables, frozen: the live loop's runs and per-cycle telemetry."""
+    Table(
+        "runs",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("session_id", Integer, ForeignKey("sessions.id"), nullable=False, index=True),
+        Column("status", String(16), nullable=False),
+        Column("started_at", Double, nullable=False),
+        Column("ended_at", Double),
+        Column("meta", Text, nullable=False, server_default="{}"),
+        Column("summary", Text),
+    )
+    cols = [
+        Column("id", BigId, primary_key=True),
+        Column("run_id", Integer, ForeignKey("runs.id"), nullable=False),
+        Column("cycle", BigInteger),
+        Column("t_s", Double, nullable=False),
+    ]
+    for group in ("target", "commanded", "present"):
+        cols += [Column(f"{group}_{c}", Double) for c in "wxyz"]
+    cols += [
+        Column(name, Double)
+        for name in (
+            "read_ms",
+            "compute_ms",
+            "write_ms",
+            "cycle_ms",
+            "correction_deg",
+            "violation_deg",
+        )
+    ]
+    cols += [
+        Column("intervention", SmallInteger, nullable=False, server_default="0"),
+        Column("fault", Text),
+        Column("extra", Text),
+    ]
+    Table("telemetry", md, *cols, Index("ix_telemetry_run_t", "run_id", "t_s"))
+
+
+def _m1(conn: Connection) -> None:
+    md = MetaData()
+    _v1_tables(md)
+    md.create_all(conn)
+
+
+def _m2(conn: Connection) -> None:
+    md = MetaData()
+    _v1_tables(md)  # foreign-key targets only; they exist already
+    _v2_tables(md)
+    md.create_all(conn, tables=[md.tables["runs"], md.tables["telemetry"]])
+
+
+#: Ordered, append-only: (version, description, function).
+MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
+    (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
+        "boundaries, models", _m1),
+    (2, "live loop: runs, telemetry", _m2),
+]
+
+#: The version this code reads and writes.
+SCHEMA_VERSION = MIGRATIONS[-1][0]
+
+# ---------------------------------------------------------------------------------------------
+# The current schema, used by every query. Must equal what the migrations build (tested).
+metadata = MetaData()
+_v1_tables(metadata)
+_v2_tables(metadata)
+
+schema_version = metadata.tables["schema_version"]
+patients = metadata.tables["patients"]
+sessions = metadata.tables["sessions"]
+sensors = metadata.tables["sensors"]
+samples = metadata.tables["samples"]
+calibrations = metadata.tables["calibrations"]
+annotations = metadata.tables["annotations"]
+boundaries = metadata.tables["boundaries"]
+models = metadata.tables["models"]
+runs = metadata.tables["runs"]
+telemetry = metadata.tables["telemetry"]
+
+#: Telemetry keys stored in their own columns; any other key of a row goes to ``extra`` (JSON).
+TELEMETRY_COLUMNS: tuple[str, ...] = tuple(
+    c.name for c in telemetry.columns if c.name not in ("id", "run_id", "extra")
+)
+
+
+def current_version(conn: Connection) -> int:
+    """Highest applied migration, 0 for an empty database."""
+    from sqlalchemy import inspect
+
+    if not inspect(conn).has_table("schema_version"):
+        return 0
+    v = conn.execute(select(schema_version.c.version).order_by(schema_version.c.version.desc()))
+    row = v.first()
+    return 0 if row is None else int(row[0])
+
+
+def apply_migrations(conn: Connection, start: int, target: int) -> list[int]:
+    """Apply migrations ``start+1 .. target`` on ``conn`` (inside the caller's transaction)."""
+    done = []
+    for version, description, fn in MIGRATIONS:
+        if start < version <= target:
+            fn(conn)
+            conn.execute(
+                schema_version.insert().values(
+                    version=version, applied_at=time.time(), description=description
+                )
+            )
+            done.append(version)
+    return done

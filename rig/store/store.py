@@ -1,0 +1,765 @@
+"""The session store: one small class in front of SQLAlchemy Core.
+
+``open_store(url_or_path)`` gives a :class:`Store` on
+
+* a plain path or ``sqlite:///PATH`` -- an embedded SQLite file (the default), or
+* ``postgresql://user@host/db`` -- a PostgreSQL server (driver: psycopg 3, extra ``pg``).
+
+Nothing else in the project writes SQL. Every method takes and returns plain Python types or
+numpy arrays; rows come back as dicts.
+
+SQLite set-up (applied to every connection) and why:
+
+* ``journal_mode=WAL``: readers (``rig session list`` in another terminal) never block the
+  recorder's commits, and a commit is one append to the ``-wal`` file.
+* ``synchronous=FULL``: each commit fsyncs the WAL. A ``kill -9`` of the process loses nothing
+  committed even with ``NORMAL`` (the OS keeps the written pages); ``FULL`` extends the same
+  guarantee to power loss and OS crashes. The :class:`~rig.store.writers.SampleWriter` commits
+  about twice a second, so the fsync costs a few milliseconds per second.
+* ``foreign_keys=ON``, ``busy_timeout=10000`` (a second writer waits instead of failing).
+* transactions are opened by the store itself (``BEGIN`` for reads, ``BEGIN IMMEDIATE`` for
+  writes), so DDL is transactional and a migration is all-or-nothing.
+
+A new SQLite file is created owner-only (``0600``) before SQLite opens it; SQLite gives its
+``-wal`` and ``-shm`` files the permissions of the database file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import stat
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import create_engine, event, func, select, text
+from sqlalchemy.engine import Connection, Engine, make_url
+from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError, OperationalError
+from sqlalchemy.pool import StaticPool
+
+from rig.errors import RigConfigError, RigConnectionError
+from rig.store import schema as S
+
+SESSION_KINDS = ("record", "enforce")
+SESSION_STATUSES = ("running", "completed", "interrupted", "device_lost", "failed")
+RUN_STATUSES = ("running", "completed", "interrupted", "safe_state", "failed")
+SIDES = ("left", "right")
+
+
+def _dumps(obj: Any) -> str:
+    """JSON text of ``obj``; numpy scalars/arrays become numbers/lists; NaN is refused."""
+
+    def default(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, Path):
+            return str(o)
+        raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+    try:
+        return json.dumps({} if obj is None else obj, default=default, allow_nan=False,
+                          sort_keys=True)
+    except (TypeError, ValueError) as err:
+        raise RigConfigError(f"cannot store {obj!r:.80}: {err}") from err
+
+
+def _loads(s: str | None) -> Any:
+    return None if s is None else json.loads(s)
+
+
+def describe_url(url_or_path: str | os.PathLike) -> str:
+    """The database as shown to a person: a path, or a URL with its password hidden."""
+    s = os.fspath(url_or_path)
+    if "://" not in s:
+        return s
+    try:
+        return make_url(s).render_as_string(hide_password=True)
+    except ArgumentError:
+        return s
+
+
+def _sqlite_path(s: str) -> str | None:
+    """Filesystem path of a SQLite URL or plain path; ``None`` for a URL of another scheme."""
+    if s.startswith("sqlite://"):
+        rest = s[len("sqlite://"):]
+        if rest in ("", "/", "/:memory:"):
+            return ":memory:"
+        if not rest.startswith("/"):
+            raise RigConfigError(f"bad SQLite URL {s!r}: use sqlite:///relative/path or "
+                                 "sqlite:////absolute/path")
+        return rest[1:].split("?", 1)[0]
+    if "://" in s:
+        return None
+    return s
+
+
+def _create_owner_only(path: Path) -> None:
+    """Create an empty file readable and writable by its owner only (0600), atomically."""
+    fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+    try:
+        os.fchmod(fd, 0o600)  # whatever the umask
+    finally:
+        os.close(fd)
+
+
+def _sqlite_engine(path: str, create: bool) -> Engine:
+    if path == ":memory:":
+        engine = create_engine(
+            "sqlite://", poolclass=StaticPool, connect_args={"check_same_thread": False}
+        )
+    else:
+        p = Path(path).expanduser()
+        if p.is_dir():
+            raise RigConfigError(f"--db {path}: is a directory, expected a database file")
+        if not p.exists():
+            if not create:
+                raise RigConfigError(
+                    f"no database at {path} (a recording creates it: rig record --db {path})"
+                )
+            if not p.parent.is_dir():
+                raise RigConfigError(f"--db {path}: directory {p.parent} does not exist")
+            try:
+                _create_owner_only(p)
+            except FileExistsError:
+                pass  # another process created it between the check and here
+            except OSError as err:
+                raise RigConfigError(f"--db {path}: cannot create: {err.strerror}") from err
+        elif not os.access(p, os.R_OK):
+            raise RigConfigError(f"--db {path}: permission denied")
+        engine = create_engine(
+            f"sqlite:///{p}",
+            connect_args={"check_same_thread": False, "timeout": 10.0},
+        )
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_conn, _record):  # pragma: no cover - exercised by every test
+        # the store opens transactions itself (see _begin): no implicit ones from pysqlite
+        dbapi_conn.isolation_level = None
+        cur = dbapi_conn.cursor()
+        if path != ":memory:":
+            cur.execute("PRAGMA journal_mode=WAL")
+        cur.execute("PRAGMA synchronous=FULL")
+        cur.execute("PRAGMA foreign_keys=ON")
+        cur.execute("PRAGMA busy_timeout=10000")
+        cur.close()
+
+    @event.listens_for(engine, "begin")
+    def _begin(conn):  # pragma: no cover - exercised by every test
+        write = conn.get_execution_options().get("rig_write", False)
+        conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+
+    return engine
+
+
+def _postgres_engine(s: str) -> Engine:
+    url = make_url(s)
+    if url.drivername in ("postgresql", "postgres"):
+        url = url.set(drivername="postgresql+psycopg")
+    try:
+        return create_engine(url, pool_pre_ping=True)
+    except (NoSuchModuleError, ModuleNotFoundError) as err:
+        raise RigConfigError(
+            f"--db {describe_url(s)}: PostgreSQL needs the psycopg driver "
+            "(pip install 'jointlimits-rig[pg]')"
+        ) from err
+
+
+def open_store(url_or_path: str | os.PathLike, *, create: bool = True) -> Store:
+    """Open (and create or migrate) the store at ``url_or_path``.
+
+    Parameters
+    ----------
+    url_or_path : str or path
+        A filesystem path or ``sqlite:///PATH`` (SQLite, the default), or
+        ``postgresql://user[:password]@host[:port]/dbname`` (also
+        ``postgresql://user@/dbname?host=/socket/dir``).
+    create : bool
+        Create a missing SQLite file (owner-only, 0600). ``False`` makes a missing file a
+        :class:`~rig.errors.RigConfigError` -- for commands that only read.
+
+    Returns
+    -------
+    Store
+        Migrated to :data:`~rig.store.schema.SCHEMA_VERSION`; close it (or use ``with``).
+
+    Raises
+    ------
+    RigConfigError
+        Bad URL or path, missing file with ``create=False``, a database newer than this code.
+    RigConnectionError
+        The database server cannot be reached or the file cannot be opened.
+    """
+    s = os.fspath(url_or_path)
+    if not s:
+        raise RigConfigError("--db: empty database path")
+    path = _sqlite_path(s)
+    if path is not None:
+        engine = _sqlite_engine(path, create)
+    elif s.startswith(("postgresql://", "postgresql+", "postgres://")):
+        engine = _postgres_engine(s)
+    else:
+        scheme = s.split("://", 1)[0]
+        raise RigConfigError(
+            f"--db {describe_url(s)}: unsupported scheme {scheme!r}; use a file path, "
+            "sqlite:///PATH or postgresql://USER@HOST/DB"
+        )
+    store = Store(engine, describe_url(s))
+    try:
+        store._migrate()
+    except BaseException:
+        store.close()
+        raise
+    return store
+
+
+class Store:
+    """Patients, sessions, samples, calibrations, boundaries, models, runs and telemetry.
+
+    Thread-safe: every method checks a connection out of the engine's pool for its own
+    transaction. Use :meth:`sample_writer` / :meth:`telemetry_writer` for high-rate rows.
+    """
+
+    def __init__(self, engine: Engine, display: str) -> None:
+        self.engine = engine
+        self.url = display
+        self.dialect = engine.dialect.name  # "sqlite" | "postgresql"
+        self._closed = False
+
+    # -- plumbing ------------------------------------------------------------------------
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release every pooled connection (idempotent)."""
+        if not self._closed:
+            self._closed = True
+            self.engine.dispose()
+
+    def __repr__(self) -> str:
+        return f"Store({self.url!r})"
+
+    @contextlib.contextmanager
+    def _tx(self, write: bool = True) -> Iterator[Connection]:
+        """One transaction; database errors become :class:`RigConnectionError`."""
+        if self._closed:
+            raise RigConnectionError(f"store {self.url} is closed")
+        try:
+            with self.engine.connect() as conn:
+                if write:
+                    conn.execution_options(rig_write=True)
+                with conn.begin():
+                    yield conn
+        except OperationalError as err:
+            raise RigConnectionError(f"database {self.url}: {err.orig}") from err
+
+    def _migrate(self, target: int | None = None) -> None:
+        target = S.SCHEMA_VERSION if target is None else target
+        with self._tx(write=True) as conn:
+            if self.dialect == "postgresql":
+                # one migrator at a time across processes
+                conn.execute(text("SELECT pg_advisory_xact_lock(7274420)"))
+            have = S.current_version(conn)
+            if have > S.SCHEMA_VERSION:
+                raise RigConfigError(
+                    f"database {self.url} has schema version {have}, newer than this rig "
+                    f"understands ({S.SCHEMA_VERSION}); upgrade jointlimits-rig"
+                )
+            if have < target:
+                S.apply_migrations(conn, have, target)
+
+    def schema_version(self) -> int:
+        """The database's schema version."""
+        with self._tx(write=False) as conn:
+            return S.current_version(conn)
+
+    def check_integrity(self) -> str:
+        """``"ok"`` or the problems found (SQLite ``PRAGMA integrity_check``; PostgreSQL: "ok")."""
+        if self.dialect != "sqlite":
+            with self._tx(write=False) as conn:
+                conn.execute(text("SELECT 1"))
+            return "ok"
+        with self._tx(write=False) as conn:
+            rows = conn.exec_driver_sql("PRAGMA integrity_check").all()
+        return "\n".join(str(r[0]) for r in rows)
+
+    # -- patients ------------------------------------------------------------------------
+    def add_patient(self, pseudonym: str, *, side: str | None = None,
+                    notes: str | None = None) -> int:
+        """Register a patient under a pseudonym and return its id.
+
+        Only a pseudonym is stored -- the store has no name, birth-date or contact fields, and
+        the mapping from pseudonym to person stays with the clinic. ``notes`` must not identify
+        the patient either.
+        """
+        pseudonym = _check_text("pseudonym", pseudonym, 64)
+        side = _check_choice("side", side, SIDES)
+        try:
+            with self._tx() as conn:
+                res = conn.execute(
+                    S.patients.insert().values(
+                        pseudonym=pseudonym, side=side, notes=notes, created_at=time.time()
+                    )
+                )
+                return int(res.inserted_primary_key[0])
+        except IntegrityError as err:
+            raise RigConfigError(f"patient {pseudonym!r} already exists in {self.url}") from err
+
+    def ensure_patient(self, pseudonym: str, *, side: str | None = None) -> int:
+        """The id of patient ``pseudonym``, registering it first if it is new."""
+        found = self.find_patient(pseudonym)
+        if found is not None:
+            return int(found["id"])
+        try:
+            return self.add_patient(pseudonym, side=side)
+        except RigConfigError:  # created concurrently
+            found = self.find_patient(pseudonym)
+            if found is None:
+                raise
+            return int(found["id"])
+
+    def find_patient(self, pseudonym: str) -> dict | None:
+        """The patient row with this pseudonym, or ``None``."""
+        with self._tx(write=False) as conn:
+            row = conn.execute(
+                select(S.patients).where(S.patients.c.pseudonym == pseudonym)
+            ).mappings().first()
+        return None if row is None else dict(row)
+
+    def get_patient(self, patient_id: int) -> dict:
+        """The patient row ``patient_id`` (``id``, ``pseudonym``, ``side``, ``notes``...)."""
+        with self._tx(write=False) as conn:
+            row = conn.execute(
+                select(S.patients).where(S.patients.c.id == int(patient_id))
+            ).mappings().first()
+        if row is None:
+            raise RigConfigError(f"no patient {patient_id} in {self.url}")
+        return dict(row)
+
+    def list_patients(self) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(select(S.patients).order_by(S.patients.c.id)).mappings().all()
+        return [dict(r) for r in rows]
+
+    # -- sessions ------------------------------------------------------------------------
+    def start_session(
+        self,
+        patient_id: int,
+        *,
+        rig_name: str | None = None,
+        joint: str | None = None,
+        side: str | None = None,
+        kind: str = "record",
+        meta: Mapping[str, Any] | None = None,
+    ) -> int:
+        """Open a session (status ``running``) and return its id."""
+        kind = _check_choice("kind", kind, SESSION_KINDS)
+        side = _check_choice("side", side, SIDES)
+        self.get_patient(patient_id)
+        with self._tx() as conn:
+            res = conn.execute(
+                S.sessions.insert().values(
+                    patient_id=int(patient_id), rig_name=rig_name, joint=joint, side=side,
+                    kind=kind, status="running", started_at=time.time(), meta=_dumps(meta),
+                )
+            )
+            return int(res.inserted_primary_key[0])
+
+    def end_session(
+        self,
+        session_id: int,
+        *,
+        status: str = "completed",
+        meta: Mapping[str, Any] | None = None,
+        dropped: int | None = None,
+    ) -> None:
+        """Close a session: ``status`` (one of :data:`SESSION_STATUSES`), ``meta`` merged into
+        the session's, ``dropped`` (samples lost before the store) recorded when given."""
+        status = _check_choice("status", status, SESSION_STATUSES)
+        cur = self.get_session(session_id)
+        merged = dict(cur["meta"])
+        merged.update(meta or {})
+        values: dict[str, Any] = {"status": status, "ended_at": time.time(),
+                                  "meta": _dumps(merged)}
+        if dropped is not None:
+            values["dropped"] = int(dropped)
+        with self._tx() as conn:
+            conn.execute(
+                S.sessions.update().where(S.sessions.c.id == int(session_id)).values(**values)
+            )
+
+    def set_dropped(self, session_id: int, dropped: int) -> None:
+        """Record how many samples were lost before reaching the store (sequence gaps, full
+        queues); the count is shown by ``rig session list``."""
+        with self._tx() as conn:
+            conn.execute(
+                S.sessions.update()
+                .where(S.sessions.c.id == int(session_id))
+                .values(dropped=int(dropped))
+            )
+
+    def get_session(self, session_id: int) -> dict:
+        """The session row, ``meta`` decoded, plus ``pseudonym`` of its patient."""
+        q = (
+            select(S.sessions, S.patients.c.pseudonym)
+            .join(S.patients, S.patients.c.id == S.sessions.c.patient_id)
+            .where(S.sessions.c.id == int(session_id))
+        )
+        with self._tx(write=False) as conn:
+            row = conn.execute(q).mappings().first()
+        if row is None:
+            raise RigConfigError(f"no session {session_id} in {self.url}")
+        out = dict(row)
+        out["meta"] = _loads(out["meta"])
+        return out
+
+    def list_sessions(self) -> list[dict]:
+        """Every session, oldest first, with its patient's pseudonym and sample counts.
+
+        Each dict has the session columns plus ``pseudonym``, ``samples`` (total),
+        ``samples_by_sensor`` ({name: count}) and ``runs`` (number of live-loop runs).
+        """
+        q = (
+            select(S.sessions, S.patients.c.pseudonym)
+            .join(S.patients, S.patients.c.id == S.sessions.c.patient_id)
+            .order_by(S.sessions.c.id)
+        )
+        counts = (
+            select(S.samples.c.session_id, S.samples.c.sensor_id, func.count().label("n"))
+            .group_by(S.samples.c.session_id, S.samples.c.sensor_id)
+            .subquery()
+        )
+        cq = select(counts.c.session_id, S.sensors.c.name, counts.c.n).join(
+            S.sensors, S.sensors.c.id == counts.c.sensor_id
+        )
+        rq = select(S.runs.c.session_id, func.count()).group_by(S.runs.c.session_id)
+        with self._tx(write=False) as conn:
+            rows = [dict(r) for r in conn.execute(q).mappings()]
+            by_sensor: dict[int, dict[str, int]] = {}
+            for sid, name, n in conn.execute(cq):
+                by_sensor.setdefault(int(sid), {})[name] = int(n)
+            nruns = {int(sid): int(n) for sid, n in conn.execute(rq)}
+        for r in rows:
+            r["meta"] = _loads(r["meta"])
+            r["samples_by_sensor"] = dict(sorted(by_sensor.get(r["id"], {}).items()))
+            r["samples"] = sum(r["samples_by_sensor"].values())
+            r["runs"] = nruns.get(r["id"], 0)
+        return rows
+
+    # -- sensors and samples -------------------------------------------------------------
+    def add_sensor(self, session_id: int, name: str, *, segment: str | None = None,
+                   kind: str = "sensor", port: str | None = None) -> int:
+        """Describe a data stream of the session (an IMU on ``segment``, or a joint) -> id."""
+        name = _check_text("sensor name", name, 64)
+        kind = _check_choice("kind", kind, ("sensor", "joint"))
+        self.get_session(session_id)
+        try:
+            with self._tx() as conn:
+                return self._insert_sensor(conn, int(session_id), name, segment, kind, port)
+        except IntegrityError as err:
+            raise RigConfigError(f"session {session_id} already has a sensor {name!r}") from err
+
+    @staticmethod
+    def _insert_sensor(conn: Connection, session_id: int, name: str, segment: str | None,
+                       kind: str, port: str | None) -> int:
+        res = conn.execute(
+            S.sensors.insert().values(
+                session_id=session_id, name=name, segment=segment, kind=kind, port=port
+            )
+        )
+        return int(res.inserted_primary_key[0])
+
+    def sensors(self, session_id: int) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(
+                select(S.sensors)
+                .where(S.sensors.c.session_id == int(session_id))
+                .order_by(S.sensors.c.id)
+            ).mappings().all()
+        return [dict(r) for r in rows]
+
+    def sample_writer(self, session_id: int, *, flush_interval_s: float = 0.5):
+        """A :class:`~rig.store.writers.SampleWriter` for ``session_id`` (close it)."""
+        from rig.store.writers import SampleWriter
+
+        self.get_session(session_id)
+        return SampleWriter(self, int(session_id), flush_interval_s=flush_interval_s)
+
+    def samples(self, session_id: int, name: str | None = None) -> dict[str, np.ndarray]:
+        """Recorded samples of a session, in arrival order.
+
+        Returns
+        -------
+        dict
+            ``t`` (N,) float64 s (host monotonic clock), ``device_t`` (N,) float64 s (NaN where
+            the device has no clock), ``name`` (N,) str, ``kind`` (N,) str, ``q`` (N, 4) float64
+            ``w, x, y, z``, ``status`` (N,) int64. Restricted to sensor ``name`` when given.
+        """
+        self.get_session(session_id)
+        q = (
+            select(
+                S.samples.c.t, S.samples.c.device_t, S.sensors.c.name, S.sensors.c.kind,
+                S.samples.c.w, S.samples.c.x, S.samples.c.y, S.samples.c.z, S.samples.c.status,
+            )
+            .join(S.sensors, S.sensors.c.id == S.samples.c.sensor_id)
+            .where(S.samples.c.session_id == int(session_id))
+            .order_by(S.samples.c.id)
+        )
+        if name is not None:
+            q = q.where(S.sensors.c.name == name)
+        with self._tx(write=False) as conn:
+            rows = conn.execute(q).all()
+        n = len(rows)
+        if n == 0:
+            return {
+                "t": np.zeros(0), "device_t": np.zeros(0), "name": np.zeros(0, dtype=object),
+                "kind": np.zeros(0, dtype=object), "q": np.zeros((0, 4)),
+                "status": np.zeros(0, dtype=np.int64),
+            }
+        cols = list(zip(*rows, strict=True))
+        return {
+            "t": np.asarray(cols[0], dtype=np.float64),
+            "device_t": np.array([np.nan if v is None else v for v in cols[1]], dtype=np.float64),
+            "name": np.array(cols[2], dtype=object),
+            "kind": np.array(cols[3], dtype=object),
+            "q": np.column_stack([np.asarray(c, dtype=np.float64) for c in cols[4:8]]),
+            "status": np.asarray(cols[8], dtype=np.int64),
+        }
+
+    def sample_count(self, session_id: int) -> int:
+        with self._tx(write=False) as conn:
+            return int(conn.execute(
+                select(func.count()).select_from(S.samples)
+                .where(S.samples.c.session_id == int(session_id))
+            ).scalar_one())
+
+    # -- calibrations, annotations, boundaries, models -------------------------------------
+    def add_calibration(self, session_id: int, kind: str, data: Mapping[str, Any],
+                        residual_deg: float | None = None) -> int:
+        """Store a calibration result (``data`` JSON-serialisable; arrays become lists)."""
+        kind = _check_text("calibration kind", kind, 64)
+        self.get_session(session_id)
+        res_deg = None if residual_deg is None else _finite("residual_deg", residual_deg)
+        with self._tx() as conn:
+            res = conn.execute(S.calibrations.insert().values(
+                session_id=int(session_id), kind=kind, data=_dumps(data),
+                residual_deg=res_deg, created_at=time.time(),
+            ))
+            return int(res.inserted_primary_key[0])
+
+    def calibrations(self, session_id: int) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(
+                select(S.calibrations).where(S.calibrations.c.session_id == int(session_id))
+                .order_by(S.calibrations.c.id)
+            ).mappings().all()
+        return [dict(r, data=_loads(r["data"])) for r in rows]
+
+    def add_annotation(self, session_id: int, t: float, text_: str) -> int:
+        """A clinician's note at time ``t`` (s, the samples' clock)."""
+        self.get_session(session_id)
+        with self._tx() as conn:
+            res = conn.execute(S.annotations.insert().values(
+                session_id=int(session_id), t=_finite("t", t), text=str(text_),
+                created_at=time.time(),
+            ))
+            return int(res.inserted_primary_key[0])
+
+    def annotations(self, session_id: int) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(
+                select(S.annotations).where(S.annotations.c.session_id == int(session_id))
+                .order_by(S.annotations.c.t, S.annotations.c.id)
+            ).mappings().all()
+        return [dict(r) for r in rows]
+
+    def add_boundary(self, session_id: int | None, constraint_yaml: str,
+                     meta: Mapping[str, Any] | None = None) -> int:
+        """Store an extracted boundary: the constraint file's YAML text and its provenance.
+        ``session_id`` is ``None`` for a boundary extracted from an imported file."""
+        if not isinstance(constraint_yaml, str) or not constraint_yaml.strip():
+            raise RigConfigError("boundary: constraint_yaml must be non-empty YAML text")
+        if session_id is not None:
+            self.get_session(session_id)
+        with self._tx() as conn:
+            res = conn.execute(S.boundaries.insert().values(
+                session_id=None if session_id is None else int(session_id),
+                constraint_yaml=constraint_yaml, meta=_dumps(meta), created_at=time.time(),
+            ))
+            return int(res.inserted_primary_key[0])
+
+    def get_boundary(self, boundary_id: int) -> dict:
+        with self._tx(write=False) as conn:
+            row = conn.execute(
+                select(S.boundaries).where(S.boundaries.c.id == int(boundary_id))
+            ).mappings().first()
+        if row is None:
+            raise RigConfigError(f"no boundary {boundary_id} in {self.url}")
+        return dict(row, meta=_loads(row["meta"]))
+
+    def boundaries(self, session_id: int) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(
+                select(S.boundaries).where(S.boundaries.c.session_id == int(session_id))
+                .order_by(S.boundaries.c.id)
+            ).mappings().all()
+        return [dict(r, meta=_loads(r["meta"])) for r in rows]
+
+    def add_model(self, path: str | os.PathLike, *, sha256: str | None = None,
+                  metrics: Mapping[str, Any] | None = None, boundary_id: int | None = None,
+                  session_id: int | None = None) -> int:
+        """Register a trained model file: its path, SHA-256 (computed from the file when not
+        given) and metrics; linked to the boundary it learned and/or the session."""
+        path = os.fspath(path)
+        if sha256 is None:
+            sha256 = file_sha256(path)
+        sha256 = str(sha256).lower()
+        if len(sha256) != 64 or any(c not in "0123456789abcdef" for c in sha256):
+            raise RigConfigError(f"model {path}: sha256 must be 64 hex digits, got {sha256!r}")
+        if boundary_id is not None:
+            self.get_boundary(boundary_id)
+        if session_id is not None:
+            self.get_session(session_id)
+        with self._tx() as conn:
+            res = conn.execute(S.models.insert().values(
+                boundary_id=boundary_id, session_id=session_id, path=path, sha256=sha256,
+                metrics=_dumps(metrics), created_at=time.time(),
+            ))
+            return int(res.inserted_primary_key[0])
+
+    def get_model(self, model_id: int) -> dict:
+        with self._tx(write=False) as conn:
+            row = conn.execute(
+                select(S.models).where(S.models.c.id == int(model_id))
+            ).mappings().first()
+        if row is None:
+            raise RigConfigError(f"no model {model_id} in {self.url}")
+        return dict(row, metrics=_loads(row["metrics"]))
+
+    def models_for(self, *, boundary_id: int | None = None,
+                   session_id: int | None = None) -> list[dict]:
+        q = select(S.models).order_by(S.models.c.id)
+        if boundary_id is not None:
+            q = q.where(S.models.c.boundary_id == int(boundary_id))
+        if session_id is not None:
+            q = q.where(S.models.c.session_id == int(session_id))
+        with self._tx(write=False) as conn:
+            rows = conn.execute(q).mappings().all()
+        return [dict(r, metrics=_loads(r["metrics"])) for r in rows]
+
+    # -- live loop -------------------------------------------------------------------------
+    def start_run(self, session_id: int, meta: Mapping[str, Any] | None = None) -> int:
+        """Open a live-loop run (status ``running``) within a session."""
+        self.get_session(session_id)
+        with self._tx() as conn:
+            res = conn.execute(S.runs.insert().values(
+                session_id=int(session_id), status="running", started_at=time.time(),
+                meta=_dumps(meta),
+            ))
+            return int(res.inserted_primary_key[0])
+
+    def end_run(self, run_id: int, summary: Mapping[str, Any] | None = None, *,
+                status: str = "completed") -> None:
+        """Close a run with its end-of-run summary (``rate_hz``, ``cycles``, ``p99_cycle_ms``)."""
+        status = _check_choice("status", status, RUN_STATUSES)
+        self.get_run(run_id)
+        with self._tx() as conn:
+            conn.execute(S.runs.update().where(S.runs.c.id == int(run_id)).values(
+                status=status, ended_at=time.time(), summary=_dumps(summary),
+            ))
+
+    def get_run(self, run_id: int) -> dict:
+        with self._tx(write=False) as conn:
+            row = conn.execute(
+                select(S.runs).where(S.runs.c.id == int(run_id))
+            ).mappings().first()
+        if row is None:
+            raise RigConfigError(f"no run {run_id} in {self.url}")
+        return dict(row, meta=_loads(row["meta"]), summary=_loads(row["summary"]))
+
+    def runs(self, session_id: int) -> list[dict]:
+        with self._tx(write=False) as conn:
+            rows = conn.execute(
+                select(S.runs).where(S.runs.c.session_id == int(session_id))
+                .order_by(S.runs.c.id)
+            ).mappings().all()
+        return [dict(r, meta=_loads(r["meta"]), summary=_loads(r["summary"])) for r in rows]
+
+    def telemetry_writer(self, run_id: int, *, flush_interval_s: float = 0.5):
+        """A :class:`~rig.store.writers.TelemetryWriter` for ``run_id`` (close it)."""
+        from rig.store.writers import TelemetryWriter
+
+        self.get_run(run_id)
+        return TelemetryWriter(self, int(run_id), flush_interval_s=flush_interval_s)
+
+    def telemetry(self, run_id: int) -> dict[str, np.ndarray]:
+        """Telemetry of a run in cycle order: one array per column of
+        :data:`~rig.store.schema.TELEMETRY_COLUMNS` (float64, NaN for missing; ``fault`` and
+        ``extra`` as object arrays, ``extra`` decoded)."""
+        cols = [S.telemetry.c[n] for n in S.TELEMETRY_COLUMNS] + [S.telemetry.c.extra]
+        q = select(*cols).where(S.telemetry.c.run_id == int(run_id)).order_by(S.telemetry.c.id)
+        with self._tx(write=False) as conn:
+            rows = conn.execute(q).all()
+        names = [*S.TELEMETRY_COLUMNS, "extra"]
+        data = list(zip(*rows, strict=True)) if rows else [() for _ in names]
+        out: dict[str, np.ndarray] = {}
+        for name, col in zip(names, data, strict=True):
+            if name == "fault":
+                out[name] = np.array(col, dtype=object)
+            elif name == "extra":
+                out[name] = np.array([_loads(v) for v in col], dtype=object)
+            elif name in ("cycle", "intervention"):
+                out[name] = np.array([-1 if v is None else v for v in col], dtype=np.int64)
+            else:
+                out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
+        return out
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def file_mode(path: str | os.PathLike) -> int:
+    """Permission bits of a file (``0o600`` for a store created here)."""
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
+def _check_text(what: str, value: Any, max_len: int) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise RigConfigError(f"{what} must be a non-empty string, got {value!r}")
+    if len(value) > max_len:
+        raise RigConfigError(f"{what} {value[:20]!r}... is longer than {max_len} characters")
+    return value
+
+
+def _check_choice(what: str, value: Any, choices: tuple[str, ...]) -> Any:
+    if value is None and what == "side":
+        return None
+    if value not in choices:
+        raise RigConfigError(f"{what} must be one of {', '.join(choices)}; got {value!r}")
+    return value
+
+
+def _finite(what: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as err:
+        raise RigConfigError(f"{what} must be a number, got {value!r}") from err
+    if not math.isfinite(v):
+        raise RigConfigError(f"{what} must be finite, got {value!r}")
+    return v
