@@ -6,31 +6,58 @@ split by swing-twist about the limb axis (``q = swing ⊗ twist``, see :mod:`mod
 - the **swing** limit is a region of the unit sphere S² that the limb direction
   ``d = rotate(q, limb_axis)`` must stay in: a *cone* (centre, radius — the thesis's "regular
   boundary") or a spherical *polygon* whose edges are great-circle arcs (the thesis's "irregular
-  boundary"; concave allowed);
-- the **twist** limit is an interval of the twist angle about the limb axis.
+  boundary"; concave allowed; geometry in :mod:`models.geometry`);
+- the **twist** limit is an interval of the twist angle about the limb axis — constant, or
+  depending smoothly on the swing direction (``by_swing``, below).
 
-File format (YAML, read with ``yaml.safe_load``)::
+File format (YAML, read with ``yaml.safe_load``; full reference in ``docs/constraint-format.md``)::
 
     name: right-shoulder-example
     limb_axis: [1, 0, 0]                         # optional, default +X
+    joint: shoulder                              # optional binding: joint name,
+    side: right                                  #   side (left | right),
+    patient: P-007                               #   patient pseudonym (never a real name)
     swing:
       cone: {centre: [1, 0, 0], radius_deg: 45}  # a regular boundary, or:
       # polygon: {vertices: [[x, y, z], ...], interior: [x, y, z]}   # irregular; concave allowed
-    twist: {min_deg: -60, max_deg: 60}           # optional; absent = unconstrained
-    # optional free-form provenance (patient id, recording session, ...), kept verbatim:
-    source: {recorded: 2026-11-21, session: 12}
+    twist:                                       # optional; absent = unconstrained
+      min_deg: -60                               # the envelope (and fallback)
+      max_deg: 60
+      by_swing:                                  # optional swing-dependent limits
+        bandwidth_deg: 20
+        points:
+          - {direction: [1, 0, 0], min_deg: -50, max_deg: 40}
+          - {direction: [0, 1, 0], min_deg: -20, max_deg: 60}
+    provenance: {session: 12, recorded: 2026-11-21}   # optional, free-form, kept verbatim
 
-Vectors need not be unit length in the file; they are normalised on load. Polygon vertices are
-listed in order along the boundary, either direction; ``interior`` is any point strictly inside,
-which tells which of the two regions the polygon bounds (a polygon may enclose more than a
-hemisphere). A polygon must be simple: no repeated consecutive vertices, no antipodal
-neighbours, no crossing or overlapping edges, not all on one great circle.
+Unknown keys are errors at every level (a misspelt ``twsit:`` must not silently drop a limit);
+only ``provenance`` is free-form. Vectors need not be unit length in the file; they are
+normalised on load. Polygon vertices are listed in order along the boundary, either direction;
+``interior`` is any point strictly inside, which tells which of the two regions the polygon
+bounds (a polygon may enclose more than a hemisphere). A polygon must be simple: no repeated
+consecutive vertices, no antipodal neighbours, no crossing or overlapping edges, not all on one
+great circle.
 
-Every validation error is a :class:`~models.errors.ConstraintError` that names the field.
+Swing-dependent twist (``by_swing``)
+------------------------------------
+The limits at a limb direction ``d`` (unit, parent frame) are Gaussian-kernel (von Mises-Fisher)
+weighted means of the tabulated limits at directions ``d_i``::
+
+    w_i = exp(κ (d·d_i − 1)),   κ = 1 / (1 − cos β)   (β = bandwidth_deg)
+    min(d) = Σ w_i min_i / Σ w_i,   max(d) = Σ w_i max_i / Σ w_i
+
+i.e. ``w / Σw = softmax(κ d·d_i)``: smooth in ``d``, everywhere defined, and exactly
+reproducible in an ONNX graph (MatMul, Softmax, MatMul). ``min_deg``/``max_deg`` are the
+envelope: every point's interval must lie within it, so the interpolated interval does too.
+The oracle clamps the twist to the limits at the *corrected* swing direction.
+
+Every validation error is a :class:`~models.errors.ConstraintError` that names the file and the
+field.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,17 +70,25 @@ from models.errors import ConstraintError
 from models.quaternion import LIMB_AXIS
 
 __all__ = [
+    "SIDES",
     "ConeSwing",
     "JointConstraint",
     "PolygonSwing",
+    "SwingTwistTable",
     "TwistLimits",
     "dump_constraint",
     "load_constraint",
     "loads_constraint",
 ]
 
-#: Two directions closer than this (radians) are "the same point" for validation purposes.
-_COINCIDENT = 1e-9
+#: Accepted values of ``side``.
+SIDES = ("left", "right")
+
+#: Top-level keys of a constraint file.
+_TOP_KEYS = ("name", "limb_axis", "joint", "side", "patient", "swing", "twist", "provenance")
+
+#: Rows per block when evaluating the twist table on many directions (bounds the N×K temporary).
+_TABLE_CHUNK = 32768
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,6 +143,12 @@ class PolygonSwing:
             }
         }
 
+    def area_sr(self) -> float:
+        """Solid angle (steradians) of the valid region."""
+        from models.geometry import polygon_area
+
+        return polygon_area(self.vertices, self.interior)
+
     def __eq__(self, other: object) -> bool:
         return (
             isinstance(other, PolygonSwing)
@@ -119,23 +160,196 @@ class PolygonSwing:
     __hash__ = None  # type: ignore[assignment]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
+class SwingTwistTable:
+    """Twist limits tabulated over swing directions, interpolated by a Gaussian kernel on S².
+
+    Attributes
+    ----------
+    bandwidth_deg : float, in (0, 180)
+        Kernel width ``β``; ``κ = 1 / (1 − cos β)``.
+    directions : (K, 3) float64, unit, parent frame
+        Limb directions ``d_i`` at which the limits are given.
+    min_deg, max_deg : (K,) float64, degrees
+        Twist interval at each direction, ``-180 <= min_deg[i] <= max_deg[i] <= 180``.
+    """
+
+    bandwidth_deg: float
+    directions: np.ndarray
+    min_deg: np.ndarray
+    max_deg: np.ndarray
+
+    def __post_init__(self) -> None:
+        d = np.array(self.directions, dtype=np.float64).reshape(-1, 3)
+        lo = np.array(self.min_deg, dtype=np.float64).reshape(-1)
+        hi = np.array(self.max_deg, dtype=np.float64).reshape(-1)
+        if not (len(d) == len(lo) == len(hi) >= 1):
+            raise ConstraintError(
+                f"directions, min_deg and max_deg need the same length >= 1, got "
+                f"{len(d)}, {len(lo)}, {len(hi)}",
+                "twist.by_swing.points",
+            )
+        # the file parser names the offending point; these guard construction in code
+        n = np.linalg.norm(d, axis=1)
+        if not (np.isfinite(d).all() and (n > 1e-12).all()):
+            raise ConstraintError("directions must be finite and non-zero", "twist.by_swing.points")
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+            raise ConstraintError("limits must be finite", "twist.by_swing.points")
+        if (lo > hi).any() or lo.min() < -180.0 or hi.max() > 180.0:
+            raise ConstraintError(
+                "needs -180 <= min_deg <= max_deg <= 180 at every point", "twist.by_swing.points"
+            )
+        if not 0.0 < float(self.bandwidth_deg) < 180.0:
+            raise ConstraintError(
+                f"must be in (0, 180) degrees, got {self.bandwidth_deg}",
+                "twist.by_swing.bandwidth_deg",
+            )
+        d = d / n[:, None]
+        for a in (d, lo, hi):
+            a.setflags(write=False)
+        object.__setattr__(self, "directions", d)
+        object.__setattr__(self, "min_deg", lo)
+        object.__setattr__(self, "max_deg", hi)
+        half = math.radians(self.bandwidth_deg) / 2.0
+        object.__setattr__(self, "kappa", 1.0 / (2.0 * math.sin(half) ** 2))  # 1/(1 - cos β)
+        # (3, K): radians min, max, and ones — one product gives Σw·min, Σw·max and Σw
+        tab = np.stack((np.radians(lo), np.radians(hi), np.ones(len(lo))))
+        object.__setattr__(self, "_sums", np.ascontiguousarray(tab))
+        object.__setattr__(self, "_sums_t", np.ascontiguousarray(tab.T))
+        object.__setattr__(self, "_dirs_k", np.ascontiguousarray(d * self.kappa))
+
+    kappa: float = field(init=False, repr=False)
+
+    def weights(self, directions) -> np.ndarray:
+        """Normalised kernel weights ``w / Σw`` (N, K) at limb directions (N, 3), unit."""
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        e = self._exponents(d)
+        return e / e.sum(axis=1, keepdims=True)
+
+    def _exponents(self, d: np.ndarray) -> np.ndarray:
+        # κ(d·d_i − 1) ≤ 0; if every weight underflows (narrow kernel, far from all points)
+        # shift by the row maximum instead — the normalised weights are the same
+        z = d @ self._dirs_k.T - self.kappa
+        w = np.exp(z)
+        small = w.max(axis=1) < 1e-150
+        if small.any():
+            zs = z[small]
+            w[small] = np.exp(zs - zs.max(axis=1, keepdims=True))
+        return w
+
+    def limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
+        """Twist limits (radians) at limb directions.
+
+        Parameters
+        ----------
+        directions : (N, 3) or (3,) float64, unit, parent frame
+
+        Returns
+        -------
+        lo, hi : (N,) float64 (or floats for one direction), radians
+        """
+        d = np.asarray(directions, dtype=np.float64)
+        single = d.ndim == 1
+        d = d.reshape(-1, 3)
+        n = len(d)
+        lo = np.empty(n)
+        hi = np.empty(n)
+        for s in range(0, n, _TABLE_CHUNK):
+            w = self._exponents(d[s : s + _TABLE_CHUNK])
+            r = w @ self._sums_t  # (n, 3): Σw·min, Σw·max, Σw
+            lo[s : s + _TABLE_CHUNK] = r[:, 0] / r[:, 2]
+            hi[s : s + _TABLE_CHUNK] = r[:, 1] / r[:, 2]
+        if single:
+            return float(lo[0]), float(hi[0])
+        return lo, hi
+
+    def limits_at_one(self, d: tuple[float, float, float]) -> tuple[float, float]:
+        """Scalar twin of :meth:`limits_at` for one unit direction (the control loop's path)."""
+        w = np.exp(self._dirs_k @ d - self.kappa)
+        r = self._sums @ w
+        if r[2] < 1e-150:  # see _exponents: shift by the maximum
+            z = self._dirs_k @ d
+            w = np.exp(z - z.max())
+            r = self._sums @ w
+        lo, hi, s = r.tolist()
+        return lo / s, hi / s
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "bandwidth_deg": float(self.bandwidth_deg),
+            "points": [
+                {"direction": _vec_out(d), "min_deg": float(a), "max_deg": float(b)}
+                for d, a, b in zip(self.directions, self.min_deg, self.max_deg, strict=True)
+            ],
+        }
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, SwingTwistTable)
+            and math.isclose(self.bandwidth_deg, other.bandwidth_deg, abs_tol=1e-12)
+            and self.directions.shape == other.directions.shape
+            and np.allclose(self.directions, other.directions, atol=1e-12)
+            and np.allclose(self.min_deg, other.min_deg, atol=1e-12)
+            and np.allclose(self.max_deg, other.max_deg, atol=1e-12)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False)
 class TwistLimits:
-    """Twist interval about the limb axis, degrees, ``-180 <= min_deg <= max_deg <= 180``."""
+    """Twist interval about the limb axis, degrees, ``-180 <= min_deg <= max_deg <= 180``.
+
+    Attributes
+    ----------
+    min_deg, max_deg : float, degrees
+        The interval; with ``by_swing`` the envelope that contains every tabulated interval.
+    by_swing : SwingTwistTable or None
+        Swing-dependent limits; None = the constant interval everywhere.
+    """
 
     min_deg: float
     max_deg: float
+    by_swing: SwingTwistTable | None = None
 
     @property
     def min(self) -> float:
+        """Envelope minimum, radians."""
         return math.radians(self.min_deg)
 
     @property
     def max(self) -> float:
+        """Envelope maximum, radians."""
         return math.radians(self.max_deg)
 
+    def limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
+        """Twist limits (radians) at limb directions (N, 3) (unit, parent frame) → (N,), (N,).
+
+        The constant interval when there is no ``by_swing`` table.
+        """
+        if self.by_swing is not None:
+            return self.by_swing.limits_at(directions)
+        d = np.asarray(directions, dtype=np.float64)
+        if d.ndim == 1:
+            return self.min, self.max
+        n = len(d.reshape(-1, 3))
+        return np.full(n, self.min), np.full(n, self.max)
+
     def to_dict(self) -> dict[str, Any]:
-        return {"min_deg": float(self.min_deg), "max_deg": float(self.max_deg)}
+        out: dict[str, Any] = {"min_deg": float(self.min_deg), "max_deg": float(self.max_deg)}
+        if self.by_swing is not None:
+            out["by_swing"] = self.by_swing.to_dict()
+        return out
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, TwistLimits)
+            and math.isclose(self.min_deg, other.min_deg, abs_tol=1e-12)
+            and math.isclose(self.max_deg, other.max_deg, abs_tol=1e-12)
+            and self.by_swing == other.by_swing
+        )
+
+    __hash__ = None  # type: ignore[assignment]
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,13 +358,29 @@ class JointConstraint:
 
     Use :func:`load_constraint` to read one from a file, :meth:`from_dict` for a parsed mapping,
     or the :meth:`cone` / :meth:`polygon` shortcuts in code.
+
+    Attributes
+    ----------
+    name : str
+    swing : ConeSwing, PolygonSwing or None (unconstrained)
+    twist : TwistLimits or None (unconstrained)
+    limb_axis : (3,) float64, unit, limb frame
+    joint, side, patient : str or None
+        What the constraint is bound to: joint name (``shoulder``), side (``left``/``right``),
+        patient pseudonym. Models trained on it carry them (see :mod:`models.onnx_io`).
+    provenance : dict
+        Free-form record of where the boundary came from (session or file, parameters, sample
+        count), kept verbatim.
     """
 
     name: str
     swing: ConeSwing | PolygonSwing | None
     twist: TwistLimits | None = None
     limb_axis: np.ndarray = field(default_factory=lambda: LIMB_AXIS.copy())
-    extra: dict[str, Any] = field(default_factory=dict)
+    joint: str | None = None
+    side: str | None = None
+    patient: str | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     # -- construction ---------------------------------------------------------------------
     @classmethod
@@ -159,13 +389,19 @@ class JointConstraint:
         centre=(1.0, 0.0, 0.0),
         radius_deg: float = 45.0,
         *,
-        twist: tuple[float, float] | None = None,
+        twist=None,
         name: str = "cone",
         limb_axis=(1.0, 0.0, 0.0),
+        **binding: Any,
     ) -> JointConstraint:
-        """A cone swing limit (optionally with twist limits in degrees)."""
+        """A cone swing limit.
+
+        ``twist`` is ``(min_deg, max_deg)``, a ``twist:`` mapping (with ``by_swing``) or a
+        :class:`TwistLimits`; ``binding`` takes ``joint``, ``side``, ``patient``,
+        ``provenance``.
+        """
         swing = {"cone": {"centre": list(centre), "radius_deg": radius_deg}}
-        return cls._build(swing, twist, name, limb_axis)
+        return cls._build(swing, twist, name, limb_axis, binding)
 
     @classmethod
     def polygon(
@@ -173,25 +409,33 @@ class JointConstraint:
         vertices,
         interior,
         *,
-        twist: tuple[float, float] | None = None,
+        twist=None,
         name: str = "polygon",
         limb_axis=(1.0, 0.0, 0.0),
+        **binding: Any,
     ) -> JointConstraint:
-        """A polygon swing limit (optionally with twist limits in degrees)."""
+        """A polygon swing limit (``twist`` and ``binding`` as in :meth:`cone`)."""
         swing = {
             "polygon": {
                 "vertices": np.asarray(vertices, dtype=float).tolist(),
                 "interior": list(np.asarray(interior, dtype=float)),
             }
         }
-        return cls._build(swing, twist, name, limb_axis)
+        return cls._build(swing, twist, name, limb_axis, binding)
 
     @classmethod
-    def _build(cls, swing: dict, twist, name: str, limb_axis) -> JointConstraint:
+    def _build(cls, swing, twist, name: str, limb_axis, binding: dict) -> JointConstraint:
         d: dict[str, Any] = {"name": name, "limb_axis": list(limb_axis), "swing": swing}
-        if twist is not None:
+        if swing is None:
+            del d["swing"]
+        if isinstance(twist, TwistLimits):
+            d["twist"] = twist.to_dict()
+        elif isinstance(twist, dict):
+            d["twist"] = twist
+        elif twist is not None:
             d["twist"] = {"min_deg": twist[0], "max_deg": twist[1]}
-        return cls.from_dict(d)
+        d.update({k: v for k, v in binding.items() if v is not None})
+        return cls.from_dict(_plain(d, "constraint"))
 
     @classmethod
     def from_dict(cls, data: Any, source: str | None = None) -> JointConstraint:
@@ -201,28 +445,76 @@ class JointConstraint:
                 f"expected a mapping with 'name' and 'swing', got {type(data).__name__}",
                 source=source,
             )
-        known = {"name", "limb_axis", "swing", "twist"}
+        _reject_unknown(data, _TOP_KEYS, None, source)
         name = data.get("name", "unnamed")
         if not isinstance(name, str) or not name.strip():
             raise ConstraintError("must be a non-empty string", "name", source)
         limb_axis = _vector(data.get("limb_axis", [1, 0, 0]), "limb_axis", source)
+        joint = _label(data.get("joint"), "joint", source)
+        side = _label(data.get("side"), "side", source)
+        if side is not None:
+            side = side.lower()
+            if side not in SIDES:
+                raise ConstraintError(
+                    f"must be one of {', '.join(SIDES)}, got {data['side']!r}", "side", source
+                )
+        patient = _label(data.get("patient"), "patient", source)
+        provenance = data.get("provenance", {})
+        if provenance is None:
+            provenance = {}
+        if not isinstance(provenance, dict):
+            raise ConstraintError(
+                f"expected a mapping (free-form), got {provenance!r}", "provenance", source
+            )
         swing = _parse_swing(data.get("swing"), source)
         twist = _parse_twist(data.get("twist"), source)
         if swing is None and twist is None:
             raise ConstraintError(
                 "a constraint needs a 'swing' limit, a 'twist' limit, or both", source=source
             )
-        extra = {k: v for k, v in data.items() if k not in known}
-        return cls(name=name, swing=swing, twist=twist, limb_axis=limb_axis, extra=extra)
+        return cls(
+            name=name,
+            swing=swing,
+            twist=twist,
+            limb_axis=limb_axis,
+            joint=joint,
+            side=side,
+            patient=patient,
+            provenance=dict(provenance),
+        )
+
+    # -- queries --------------------------------------------------------------------------
+    def twist_limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
+        """Twist limits (radians) at limb directions; ``(-π, π)`` when twist is unconstrained.
+
+        Parameters
+        ----------
+        directions : (N, 3) or (3,) float64, unit, parent frame
+
+        Returns
+        -------
+        lo, hi : (N,) float64 radians (floats for a single direction)
+        """
+        if self.twist is not None:
+            return self.twist.limits_at(directions)
+        d = np.asarray(directions, dtype=np.float64)
+        if d.ndim == 1:
+            return -math.pi, math.pi
+        n = len(d.reshape(-1, 3))
+        return np.full(n, -math.pi), np.full(n, math.pi)
 
     # -- output ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "limb_axis": _vec_out(self.limb_axis)}
+        for key in ("joint", "side", "patient"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
         if self.swing is not None:
             out["swing"] = self.swing.to_dict()
         if self.twist is not None:
             out["twist"] = self.twist.to_dict()
-        out.update(self.extra)
+        if self.provenance:
+            out["provenance"] = _plain(self.provenance, "provenance")
         return out
 
     def to_yaml(self) -> str:
@@ -230,7 +522,7 @@ class JointConstraint:
         return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None)
 
     def __eq__(self, other: object) -> bool:
-        """Same limits (name and provenance are ignored)."""
+        """Same limits (name, binding and provenance are ignored)."""
         return (
             isinstance(other, JointConstraint)
             and self.swing == other.swing
@@ -243,15 +535,18 @@ class JointConstraint:
     def summary(self) -> str:
         """A few human-readable lines describing the limits."""
         lines = [f"constraint {self.name!r}", f"  limb axis   {_fmt_vec(self.limb_axis)}"]
+        bound = [
+            f"{k} {getattr(self, k)}" for k in ("joint", "side", "patient") if getattr(self, k)
+        ]
+        if bound:
+            lines.append(f"  bound to    {', '.join(bound)}")
         if isinstance(self.swing, ConeSwing):
             lines.append(
                 f"  swing       cone, centre {_fmt_vec(self.swing.centre)}, "
                 f"radius {self.swing.radius_deg:g} deg"
             )
         elif isinstance(self.swing, PolygonSwing):
-            from models.oracle import polygon_area_sr  # local: oracle imports this module
-
-            area = polygon_area_sr(self.swing)
+            area = self.swing.area_sr()
             lines.append(
                 f"  swing       polygon, {len(self.swing.vertices)} vertices, "
                 f"interior {_fmt_vec(self.swing.interior)}, "
@@ -260,15 +555,26 @@ class JointConstraint:
         else:
             lines.append("  swing       unconstrained")
         if self.twist is not None:
-            lines.append(f"  twist       {self.twist.min_deg:g} .. {self.twist.max_deg:g} deg")
+            tw = self.twist
+            lines.append(f"  twist       {tw.min_deg:g} .. {tw.max_deg:g} deg")
+            if tw.by_swing is not None:
+                t = tw.by_swing
+                lines[-1] += " (envelope)"
+                lines.append(
+                    f"  by swing    {len(t.directions)} points, bandwidth {t.bandwidth_deg:g} deg, "
+                    f"min {t.min_deg.min():g} .. {t.min_deg.max():g} deg, "
+                    f"max {t.max_deg.min():g} .. {t.max_deg.max():g} deg"
+                )
         else:
             lines.append("  twist       unconstrained")
+        if self.provenance:
+            lines.append(f"  provenance  {_fmt_provenance(self.provenance)}")
         return "\n".join(lines)
 
 
 # -- file I/O ---------------------------------------------------------------------------------
 def loads_constraint(text: str, source: str | None = None) -> JointConstraint:
-    """Parse constraint YAML text."""
+    """Parse constraint YAML text (``source`` names it in error messages)."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
@@ -309,6 +615,47 @@ def dump_constraint(constraint: JointConstraint, path: str | Path) -> None:
 
 
 # -- validation helpers -----------------------------------------------------------------------
+def _reject_unknown(
+    body: dict, allowed: tuple[str, ...], where: str | None, source: str | None
+) -> None:
+    """Raise naming the first key of ``body`` not in ``allowed`` (with a spelling hint)."""
+    for key in body:
+        if key in allowed:
+            continue
+        path = f"{where}.{key}" if where else str(key)
+        close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        if key == "source" and where is None:
+            hint = " (provenance now goes under 'provenance:')"
+        raise ConstraintError(
+            f"unknown key '{key}'{hint}; allowed here: {', '.join(allowed)}", path, source
+        )
+
+
+def _require(
+    body: dict,
+    keys: tuple[str, ...],
+    where: str,
+    source: str | None,
+    optional: tuple[str, ...] = (),
+) -> None:
+    _reject_unknown(body, keys + optional, where, source)
+    for k in keys:
+        if k not in body:
+            raise ConstraintError(f"missing '{k}'", where, source)
+
+
+def _label(value: Any, field_name: str, source: str | None) -> str | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (str, int)):
+        raise ConstraintError(f"expected a short text, got {value!r}", field_name, source)
+    text = str(value).strip()
+    if not text or "\n" in text:
+        raise ConstraintError("must be a non-empty single-line text", field_name, source)
+    return text
+
+
 def _vector(value: Any, field_name: str, source: str | None) -> np.ndarray:
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise ConstraintError(f"expected a 3-vector [x, y, z], got {value!r}", field_name, source)
@@ -336,21 +683,14 @@ def _number(value: Any, field_name: str, source: str | None) -> float:
 def _parse_swing(value: Any, source: str | None) -> ConeSwing | PolygonSwing | None:
     if value is None:
         return None
-    if (
-        not isinstance(value, dict)
-        or len(value) != 1
-        or next(iter(value))
-        not in (
-            "cone",
-            "polygon",
-        )
-    ):
-        raise ConstraintError(
-            "expected exactly one of 'cone: {centre, radius_deg}' or "
-            "'polygon: {vertices, interior}'",
-            "swing",
-            source,
-        )
+    expected = (
+        "expected exactly one of 'cone: {centre, radius_deg}' or 'polygon: {vertices, interior}'"
+    )
+    if not isinstance(value, dict):
+        raise ConstraintError(f"{expected}, got {value!r}", "swing", source)
+    _reject_unknown(value, ("cone", "polygon"), "swing", source)
+    if len(value) != 1:
+        raise ConstraintError(expected, "swing", source)
     kind, body = next(iter(value.items()))
     if not isinstance(body, dict):
         raise ConstraintError(f"expected a mapping, got {body!r}", f"swing.{kind}", source)
@@ -377,13 +717,15 @@ def _parse_swing(value: Any, source: str | None) -> ConeSwing | PolygonSwing | N
     return PolygonSwing(vertices=verts, interior=interior)
 
 
-def _require(body: dict, keys: tuple[str, ...], where: str, source: str | None) -> None:
-    for k in keys:
-        if k not in body:
-            raise ConstraintError(f"missing '{k}'", where, source)
-    unknown = set(body) - set(keys)
-    if unknown:
-        raise ConstraintError(f"unknown key(s) {sorted(unknown)}", where, source)
+def _twist_interval(body: dict, where: str, source: str | None) -> tuple[float, float]:
+    lo = _number(body["min_deg"], f"{where}.min_deg", source)
+    hi = _number(body["max_deg"], f"{where}.max_deg", source)
+    for v, f in ((lo, f"{where}.min_deg"), (hi, f"{where}.max_deg")):
+        if not -180.0 <= v <= 180.0:
+            raise ConstraintError(f"must be within [-180, 180] degrees, got {v:g}", f, source)
+    if lo > hi:
+        raise ConstraintError(f"min_deg ({lo:g}) is greater than max_deg ({hi:g})", where, source)
+    return lo, hi
 
 
 def _parse_twist(value: Any, source: str | None) -> TwistLimits | None:
@@ -391,104 +733,85 @@ def _parse_twist(value: Any, source: str | None) -> TwistLimits | None:
         return None
     if not isinstance(value, dict):
         raise ConstraintError(f"expected {{min_deg, max_deg}}, got {value!r}", "twist", source)
-    _require(value, ("min_deg", "max_deg"), "twist", source)
-    lo = _number(value["min_deg"], "twist.min_deg", source)
-    hi = _number(value["max_deg"], "twist.max_deg", source)
-    for v, f in ((lo, "twist.min_deg"), (hi, "twist.max_deg")):
-        if not -180.0 <= v <= 180.0:
-            raise ConstraintError(f"must be within [-180, 180] degrees, got {v:g}", f, source)
-    if lo > hi:
-        raise ConstraintError(f"min_deg ({lo:g}) is greater than max_deg ({hi:g})", "twist", source)
-    return TwistLimits(min_deg=lo, max_deg=hi)
+    _require(value, ("min_deg", "max_deg"), "twist", source, optional=("by_swing",))
+    lo, hi = _twist_interval(value, "twist", source)
+    table = None
+    if value.get("by_swing") is not None:
+        table = _parse_by_swing(value["by_swing"], lo, hi, source)
+    return TwistLimits(min_deg=lo, max_deg=hi, by_swing=table)
 
 
-def _check_polygon(verts: np.ndarray, interior: np.ndarray, source: str | None) -> None:
-    """Reject degenerate and self-intersecting spherical polygons."""
-    f = "swing.polygon.vertices"
-    m = len(verts)
-    nxt = np.roll(verts, -1, axis=0)
-    gap = np.arctan2(np.linalg.norm(np.cross(verts, nxt), axis=1), np.sum(verts * nxt, axis=1))
-    for i in range(m):
-        j = (i + 1) % m
-        if gap[i] < _COINCIDENT:
-            raise ConstraintError(f"vertices {i} and {j} coincide (zero-length edge)", f, source)
-        if gap[i] > math.pi - 1e-6:
+def _parse_by_swing(value: Any, env_lo: float, env_hi: float, source: str | None):
+    where = "twist.by_swing"
+    if not isinstance(value, dict):
+        raise ConstraintError(
+            f"expected {{bandwidth_deg, points: [...]}}, got {value!r}", where, source
+        )
+    _require(value, ("bandwidth_deg", "points"), where, source)
+    bw = _number(value["bandwidth_deg"], f"{where}.bandwidth_deg", source)
+    if not 0.0 < bw < 180.0:
+        raise ConstraintError(
+            f"must be in (0, 180) degrees, got {bw:g}", f"{where}.bandwidth_deg", source
+        )
+    points = value["points"]
+    if not isinstance(points, (list, tuple)) or not points:
+        raise ConstraintError(
+            "expected a non-empty list of {direction, min_deg, max_deg}", f"{where}.points", source
+        )
+    dirs, los, his = [], [], []
+    for i, p in enumerate(points):
+        pw = f"{where}.points[{i}]"
+        if not isinstance(p, dict):
             raise ConstraintError(
-                f"vertices {i} and {j} are antipodal: the edge between them is undefined", f, source
+                f"expected {{direction, min_deg, max_deg}}, got {p!r}", pw, source
             )
-    # all on one great circle -> zero area, inside undefined
-    if np.linalg.svd(verts, compute_uv=False)[-1] < 1e-9:
-        raise ConstraintError("all vertices lie on one great circle (zero area)", f, source)
-    pair = _first_crossing(verts)
-    if pair is not None:
-        i, j = pair
-        raise ConstraintError(
-            f"the polygon intersects itself: edge {i}-{(i + 1) % m} crosses edge {j}-{(j + 1) % m}",
-            f,
-            source,
-        )
-    from models.oracle import polygon_boundary_distance  # local: oracle imports this module
-
-    if polygon_boundary_distance(verts, interior) < 1e-6:
-        raise ConstraintError(
-            "lies on the boundary; it must be strictly inside", "swing.polygon.interior", source
-        )
-
-
-def _first_crossing(verts: np.ndarray) -> tuple[int, int] | None:
-    """First pair of non-adjacent edges (great-circle arcs) that cross or overlap, else None."""
-    m = len(verts)
-    a0 = verts
-    a1 = np.roll(verts, -1, axis=0)
-    n = np.cross(a0, a1)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    i, j = np.triu_indices(m, k=2)
-    keep = ~((i == 0) & (j == m - 1))  # first and last edges share vertex 0
-    i, j = i[keep], j[keep]
-    if len(i) == 0:
-        return None
-    hits = np.zeros(len(i), dtype=bool)
-    chunk = 200_000
-    for s in range(0, len(i), chunk):
-        ii, jj = i[s : s + chunk], j[s : s + chunk]
-        hits[s : s + chunk] = _arcs_cross(a0[ii], a1[ii], n[ii], a0[jj], a1[jj], n[jj])
-    if hits.any():
-        k = int(np.argmax(hits))
-        return int(i[k]), int(j[k])
-    return None
-
-
-def _on_arc(p, a0, a1, n, tol=1e-12):
-    """Is unit ``p`` (on the great circle with normal ``n``) within the arc a0→a1?"""
-    return (np.sum(np.cross(a0, p) * n, axis=-1) >= -tol) & (
-        np.sum(np.cross(p, a1) * n, axis=-1) >= -tol
+        _require(p, ("direction", "min_deg", "max_deg"), pw, source)
+        dirs.append(_vector(p["direction"], f"{pw}.direction", source))
+        lo, hi = _twist_interval(p, pw, source)
+        if lo < env_lo or hi > env_hi:
+            raise ConstraintError(
+                f"interval {lo:g} .. {hi:g} deg lies outside the envelope twist.min_deg .. "
+                f"twist.max_deg ({env_lo:g} .. {env_hi:g} deg); widen the envelope",
+                pw,
+                source,
+            )
+        los.append(lo)
+        his.append(hi)
+    return SwingTwistTable(
+        bandwidth_deg=bw, directions=np.stack(dirs), min_deg=np.array(los), max_deg=np.array(his)
     )
 
 
-def _arcs_cross(a0, a1, na, b0, b1, nb):
-    line = np.cross(na, nb)
-    ln = np.linalg.norm(line, axis=1)
-    same_circle = ln < 1e-12
-    safe = np.where(same_circle, 1.0, ln)[:, None]
-    x = line / safe
-    hit = np.zeros(len(a0), dtype=bool)
-    for s in (1.0, -1.0):
-        p = s * x
-        hit |= _on_arc(p, a0, a1, na) & _on_arc(p, b0, b1, nb)
-    if same_circle.any():
-        # arcs on one great circle overlap when a point of one lies strictly inside the other
-        k = same_circle
-        mid_b = b0[k] + b1[k]
-        mid_b /= np.linalg.norm(mid_b, axis=1, keepdims=True)
-        strict = -1e-12
-        hit[k] = (
-            _on_arc(b0[k], a0[k], a1[k], na[k], strict)
-            | _on_arc(b1[k], a0[k], a1[k], na[k], strict)
-            | _on_arc(a0[k], b0[k], b1[k], nb[k], strict)
-            | _on_arc(a1[k], b0[k], b1[k], nb[k], strict)
-            | _on_arc(mid_b, a0[k], a1[k], na[k], strict)
-        )
-    return hit
+def _check_polygon(verts: np.ndarray, interior: np.ndarray, source: str | None) -> None:
+    """Reject degenerate and self-intersecting spherical polygons (:mod:`models.geometry`)."""
+    from models.errors import GeometryError
+    from models.geometry import check_polygon
+
+    try:
+        check_polygon(verts, interior)
+    except GeometryError as err:
+        raise ConstraintError(str(err), f"swing.polygon.{err.part}", source) from err
+
+
+def _plain(value: Any, where: str) -> Any:
+    """``value`` as plain YAML-safe Python (numpy scalars and arrays, tuples converted)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v, f"{where}.{k}") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist(), where)
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    if value is None or isinstance(value, (str, bool, int, float)):
+        return value
+    import datetime as _dt
+
+    if isinstance(value, (_dt.date, _dt.datetime)):
+        return value
+    raise ConstraintError(f"cannot be written as YAML: {type(value).__name__}", where)
 
 
 def _vec_out(v: np.ndarray) -> list[float]:
@@ -497,3 +820,8 @@ def _vec_out(v: np.ndarray) -> list[float]:
 
 def _fmt_vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{c:.3f}" for c in v) + "]"
+
+
+def _fmt_provenance(p: dict) -> str:
+    text = ", ".join(f"{k}: {v}" for k, v in p.items() if not isinstance(v, (dict, list)))
+    return text if len(text) <= 100 else text[:97] + "..."

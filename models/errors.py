@@ -5,6 +5,7 @@ Hierarchy::
     ModelsError
      +-- QuaternionError (ValueError)      bad orientation: shape, NaN/inf, zero or non-unit norm
      +-- ConstraintError (ValueError)      invalid constraint file or definition; names the field
+     +-- GeometryError (ValueError)        a spherical polygon is degenerate or self-intersecting
      +-- DatasetError (ValueError)         a dataset file or request is invalid
      +-- ModelFileError (ValueError)       model file missing, not ONNX, or not what was expected
 
@@ -45,6 +46,22 @@ class ConstraintError(ModelsError, ValueError):
         if field:
             where += f"{field}: "
         super().__init__(where + message)
+
+
+class GeometryError(ModelsError, ValueError):
+    """A spherical polygon is degenerate, self-intersecting, or its interior point is not inside.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong (names the vertices or edges involved).
+    part : str
+        ``"vertices"`` or ``"interior"``: which input is at fault.
+    """
+
+    def __init__(self, message: str, part: str = "vertices"):
+        self.part = part
+        super().__init__(message)
 
 
 class DatasetError(ModelsError, ValueError):

@@ -50,10 +50,95 @@ def test_yaml_round_trip(text, tmp_path):
     assert again.name == c.name
 
 
-def test_provenance_is_kept():
-    c = loads_constraint(MINIMAL + "source: {patient: P-007, session: 3}\n")
-    assert c.extra["source"]["patient"] == "P-007"
-    assert "P-007" in c.to_yaml()
+def test_provenance_is_kept_verbatim_and_round_trips(tmp_path):
+    text = MINIMAL + (
+        "provenance:\n"
+        "  session: 3\n"
+        "  recorded: 2026-11-21\n"
+        "  parameters: {alpha_deg: 4.5, outliers: [0.01, 0.99], method: concave-hull}\n"
+        "  samples: 120345\n"
+    )
+    c = loads_constraint(text)
+    assert c.provenance["session"] == 3 and c.provenance["samples"] == 120345
+    assert c.provenance["parameters"]["outliers"] == [0.01, 0.99]
+    path = tmp_path / "c.yaml"
+    dump_constraint(c, path)
+    assert load_constraint(path).provenance == c.provenance
+
+
+def test_binding_fields_round_trip_and_are_validated(tmp_path):
+    c = loads_constraint(MINIMAL + "joint: shoulder\nside: Right\npatient: P-007\n")
+    assert (c.joint, c.side, c.patient) == ("shoulder", "right", "P-007")
+    path = tmp_path / "c.yaml"
+    dump_constraint(c, path)
+    again = load_constraint(path)
+    assert (again.joint, again.side, again.patient) == ("shoulder", "right", "P-007")
+    assert "bound to    joint shoulder, side right, patient P-007" in c.summary()
+    with pytest.raises(ConstraintError, match="side: must be one of left, right") as info:
+        loads_constraint(MINIMAL + "side: middle\n", source="c.yaml")
+    assert info.value.field == "side"
+    with pytest.raises(ConstraintError, match="patient: expected a short text"):
+        loads_constraint(MINIMAL + "patient: [a, b]\n")
+    with pytest.raises(ConstraintError, match="provenance: expected a mapping"):
+        loads_constraint(MINIMAL + "provenance: recorded by hand\n")
+
+
+def test_code_shortcuts_take_binding_and_numpy_provenance():
+    c = JointConstraint.cone(
+        [0, 1, 0],
+        30,
+        twist=(-10, 20),
+        joint="elbow",
+        side="left",
+        patient="P-1",
+        provenance={"samples": np.int64(12), "centre": np.array([0.0, 1.0, 0.0])},
+    )
+    again = loads_constraint(c.to_yaml())
+    assert again == c and again.joint == "elbow" and again.side == "left"
+    assert again.provenance == {"samples": 12, "centre": [0.0, 1.0, 0.0]}
+
+
+# -- unknown keys are errors at every level (a misspelt key must never drop a limit) -------------
+@pytest.mark.parametrize(
+    "text, field, hint",
+    [
+        (MINIMAL.replace("twist:", "twsit:"), "twsit", "did you mean 'twist'"),
+        (MINIMAL + "source: {session: 3}\n", "source", "provenance"),
+        (MINIMAL + "patient_name: Jane\n", "patient_name", "did you mean 'patient'"),
+        (MINIMAL.replace("cone:", "cnoe:"), "swing.cnoe", "did you mean 'cone'"),
+        (
+            MINIMAL.replace("radius_deg: 45", "radius_deg: 45, colour: red"),
+            "swing.cone.colour",
+            "allowed here: centre, radius_deg",
+        ),
+        (MINIMAL.replace("max_deg: 60", "max_deg: 60, mx_deg: 3"), "twist.mx_deg", "max_deg"),
+        (SQUARE.replace("interior:", "inteiror:"), "swing.polygon.inteiror", "interior"),
+        (
+            MINIMAL.replace(
+                "max_deg: 60}",
+                "max_deg: 60, by_swing: {bandwidth_deg: 20, points: [], kernel: gauss}}",
+            ),
+            "twist.by_swing.kernel",
+            "allowed here: bandwidth_deg, points",
+        ),
+        (
+            MINIMAL.replace(
+                "max_deg: 60}",
+                "max_deg: 60, by_swing: {bandwidth_deg: 20, points: "
+                "[{direction: [1, 0, 0], min_deg: -5, max_deg: 5, weight: 2}]}}",
+            ),
+            "twist.by_swing.points[0].weight",
+            "direction, min_deg, max_deg",
+        ),
+    ],
+)
+def test_unknown_keys_are_rejected_at_every_level(text, field, hint):
+    with pytest.raises(ConstraintError, match="unknown key") as info:
+        loads_constraint(text, source="patient.yaml")
+    msg = str(info.value)
+    assert info.value.field == field
+    assert msg.startswith(f"patient.yaml: {field}: unknown key '{field.split('.')[-1]}'")
+    assert hint in msg
 
 
 @pytest.mark.parametrize(
@@ -70,12 +155,13 @@ def test_provenance_is_kept():
         ("swing: {cone: {centre: [0, 0, 0], radius_deg: 30}}", "swing.cone.centre", "zero vector"),
         ("swing: {cone: {centre: [1, 0], radius_deg: 30}}", "swing.cone.centre", "3-vector"),
         ("swing: {cone: {centre: [1, 0, 0]}}", "swing.cone", "missing 'radius_deg'"),
+        ("swing: {sphere: {}}", "swing.sphere", "unknown key 'sphere'"),
         (
-            "swing: {cone: {centre: [1, 0, 0], radius_deg: 30, colour: red}}",
-            "swing.cone",
-            "unknown",
+            "swing: {cone: {centre: [1, 0, 0], radius_deg: 30},"
+            " polygon: {vertices: [], interior: [1, 0, 0]}}",
+            "swing",
+            "exactly one of",
         ),
-        ("swing: {sphere: {}}", "swing", "exactly one of"),
         (MINIMAL.replace("min_deg: -60", "min_deg: 70"), "twist", "greater than max_deg"),
         (MINIMAL.replace("max_deg: 60", "max_deg: 200"), "twist.max_deg", r"\[-180, 180\]"),
         (MINIMAL.replace("max_deg: 60", "max_deg: sixty"), "twist.max_deg", "expected a number"),

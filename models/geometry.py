@@ -1,0 +1,533 @@
+"""Spherical-polygon geometry on the unit sphere S²: validity, area, inside test, nearest point.
+
+A spherical polygon is a closed chain of vertices ``v_0 … v_{M−1}`` (unit vectors) joined by
+great-circle arcs (edge ``i`` runs from ``v_i`` to ``v_{i+1}``, indices mod M) plus one point
+strictly inside, which says which of the two regions bounded by the chain is meant (a polygon
+may cover more than a hemisphere). Used by :mod:`models.constraint` (validation),
+:mod:`models.oracle` (exact projection) and boundary extraction.
+
+Maths
+-----
+*Edge.* The great circle of edge ``i`` has unit normal ``g_i = v_i × v_{i+1} / |…|``. A unit
+point ``p`` lies at angle ``asin(p·g_i)`` from that circle; its foot ``p − (p·g_i) g_i``
+(normalised) lies inside the arc iff ``(g_i × v_i)·p ≥ 0`` and ``(v_{i+1} × g_i)·p ≥ 0``;
+otherwise the nearest point of the arc is the nearer end. Distances are ranked by squared
+chords (monotonic in the angle, accurate near 0): ``2 s² / (1 + √(1 − s²))`` to the circle
+(``s = p·g_i``) and ``|p − v|²`` to a vertex.
+
+*Inside.* Signed distance by pseudo-normals (Bærentzen & Aanæs 2005, on the sphere): when the
+nearest point is inside an edge the sign is that of ``p·g_i`` (oriented so the interior point
+is inside); when it is a vertex, that of ``p·(n_{i−1} + n_i)``, the sum of the two edges'
+inward normals. This is exact for simple polygons, concave ones included.
+
+*Area* (Gauss–Bonnet): the region to the left of the travel direction has area
+``2π − Σ turning angles`` (mod 4π); the interior point says whether it is that region or its
+complement.
+
+*Simplicity.* Two arcs cross where their great circles meet (``± g_a × g_b``) at a point on
+both arcs; arcs on one great circle overlap if an end or midpoint of one lies strictly inside
+the other.
+
+*Speed.* :class:`SphericalPolygon` finds the nearest edge through a cube-map grid over S²: for
+every cell it precomputes the edges that can be nearest to *any* point of the cell (edges whose
+distance from the cell centre is within ``D + 2ρ`` of the nearest, ``ρ`` the cell's angular
+radius), so the search is exact yet touches only a handful of edges per query.
+
+Determinism: several boundary points exactly equidistant → the edge with the lowest index wins.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models.errors import GeometryError
+
+__all__ = [
+    "SphericalPolygon",
+    "arc_distance",
+    "boundary_distance",
+    "check_polygon",
+    "densify",
+    "first_crossing",
+    "polygon_area",
+]
+
+#: Two directions closer than this (radians) are "the same point" for validation purposes.
+COINCIDENT = 1e-9
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+# -- validation -------------------------------------------------------------------------------
+def check_polygon(vertices, interior=None) -> None:
+    """Raise :class:`~models.errors.GeometryError` unless the polygon is simple and valid.
+
+    Parameters
+    ----------
+    vertices : (M, 3) float64, unit, boundary order
+    interior : (3,) float64, unit, optional
+        Must lie strictly inside (more than 1e-6 rad from the boundary) when given.
+
+    Raises
+    ------
+    GeometryError
+        Fewer than 3 vertices, coincident or antipodal neighbours, all vertices on one great
+        circle, crossing or overlapping edges (``part="vertices"``), or an interior point on the
+        boundary (``part="interior"``). The message names the vertices or edges.
+    """
+    verts = np.asarray(vertices, dtype=np.float64)
+    if verts.ndim != 2 or verts.shape[1] != 3 or len(verts) < 3:
+        raise GeometryError(f"expected at least 3 vertices of shape (M, 3), got {verts.shape}")
+    m = len(verts)
+    gap = _angle(verts, np.roll(verts, -1, axis=0))
+    for i in range(m):
+        j = (i + 1) % m
+        if gap[i] < COINCIDENT:
+            raise GeometryError(f"vertices {i} and {j} coincide (zero-length edge)")
+        if gap[i] > math.pi - 1e-6:
+            raise GeometryError(
+                f"vertices {i} and {j} are antipodal: the edge between them is undefined"
+            )
+    # all on one great circle -> zero area, inside undefined
+    if np.linalg.svd(verts, compute_uv=False)[-1] < 1e-9:
+        raise GeometryError("all vertices lie on one great circle (zero area)")
+    pair = first_crossing(verts)
+    if pair is not None:
+        i, j = pair
+        raise GeometryError(
+            f"the polygon intersects itself: edge {i}-{(i + 1) % m} crosses edge {j}-{(j + 1) % m}"
+        )
+    if interior is not None and boundary_distance(verts, interior) < 1e-6:
+        raise GeometryError("lies on the boundary; it must be strictly inside", part="interior")
+
+
+def first_crossing(vertices) -> tuple[int, int] | None:
+    """First pair ``(i, j)``, ``i < j``, of non-adjacent edges that cross or overlap, else None.
+
+    O(M²) pairs, vectorised in chunks (a 500-vertex polygon takes a few tens of ms).
+    """
+    verts = np.asarray(vertices, dtype=np.float64)
+    m = len(verts)
+    a0 = verts
+    a1 = np.roll(verts, -1, axis=0)
+    n = np.cross(a0, a1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    i, j = np.triu_indices(m, k=2)
+    keep = ~((i == 0) & (j == m - 1))  # first and last edges share vertex 0
+    i, j = i[keep], j[keep]
+    if len(i) == 0:
+        return None
+    hits = np.zeros(len(i), dtype=bool)
+    chunk = 200_000
+    for s in range(0, len(i), chunk):
+        ii, jj = i[s : s + chunk], j[s : s + chunk]
+        hits[s : s + chunk] = _arcs_cross(a0[ii], a1[ii], n[ii], a0[jj], a1[jj], n[jj])
+    if hits.any():
+        k = int(np.argmax(hits))
+        return int(i[k]), int(j[k])
+    return None
+
+
+def _on_arc(p, a0, a1, n, tol=1e-12):
+    """Is unit ``p`` (on the great circle with normal ``n``) within the arc a0→a1?"""
+    return (np.sum(np.cross(a0, p) * n, axis=-1) >= -tol) & (
+        np.sum(np.cross(p, a1) * n, axis=-1) >= -tol
+    )
+
+
+def _arcs_cross(a0, a1, na, b0, b1, nb):
+    line = np.cross(na, nb)
+    ln = np.linalg.norm(line, axis=1)
+    same_circle = ln < 1e-12
+    safe = np.where(same_circle, 1.0, ln)[:, None]
+    x = line / safe
+    hit = np.zeros(len(a0), dtype=bool)
+    for s in (1.0, -1.0):
+        p = s * x
+        hit |= _on_arc(p, a0, a1, na) & _on_arc(p, b0, b1, nb)
+    if same_circle.any():
+        # arcs on one great circle overlap when a point of one lies strictly inside the other
+        k = same_circle
+        mid_b = b0[k] + b1[k]
+        mid_b /= np.linalg.norm(mid_b, axis=1, keepdims=True)
+        strict = -1e-12
+        hit[k] = (
+            _on_arc(b0[k], a0[k], a1[k], na[k], strict)
+            | _on_arc(b1[k], a0[k], a1[k], na[k], strict)
+            | _on_arc(a0[k], b0[k], b1[k], nb[k], strict)
+            | _on_arc(a1[k], b0[k], b1[k], nb[k], strict)
+            | _on_arc(mid_b, a0[k], a1[k], na[k], strict)
+        )
+    return hit
+
+
+# -- measures ---------------------------------------------------------------------------------
+def polygon_area(vertices, interior) -> float:
+    """Solid angle (steradians) of the region bounded by the polygon that contains ``interior``."""
+    v = np.asarray(vertices, dtype=np.float64)
+    g = np.cross(v, np.roll(v, -1, axis=0))
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    t_out = np.cross(g, v)  # leaving vertex k along edge k
+    t_in = np.cross(np.roll(g, 1, axis=0), v)  # arriving at vertex k along edge k-1
+    turn = np.arctan2(
+        np.einsum("ij,ij->i", np.cross(t_in, t_out), v), np.einsum("ij,ij->i", t_in, t_out)
+    )
+    left_area = (2.0 * math.pi - float(turn.sum())) % (4.0 * math.pi)  # region left of travel
+    solver = SphericalPolygon(v, interior=None)
+    interior_left = solver.brute_nearest(np.asarray(interior, dtype=np.float64)[None, :])[0][0] <= 0
+    return left_area if interior_left else 4.0 * math.pi - left_area
+
+
+def boundary_distance(vertices, point) -> float:
+    """Unsigned angular distance (radians) from one unit ``point`` (3,) to the polygon's boundary.
+
+    Brute force over the edges; no interior point needed.
+    """
+    solver = SphericalPolygon(vertices, interior=None)
+    return float(abs(solver.brute_nearest(np.asarray(point, dtype=np.float64)[None, :])[0][0]))
+
+
+def arc_distance(points, a, b) -> np.ndarray:
+    """Unsigned angular distance (radians) from unit ``points`` to the great-circle arc a→b.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, unit
+    a, b : (3,) or (N, 3) float64, unit, the arc's ends (not antipodal; the shorter arc)
+
+    Returns
+    -------
+    (N,) float64, radians, in [0, π]
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    a = np.broadcast_to(np.asarray(a, dtype=np.float64), p.shape)
+    b = np.broadcast_to(np.asarray(b, dtype=np.float64), p.shape)
+    g = np.cross(a, b)
+    g = g / np.linalg.norm(g, axis=1, keepdims=True)
+    s = np.einsum("ij,ij->i", p, g)
+    in_arc = (np.einsum("ij,ij->i", np.cross(g, a), p) >= 0.0) & (
+        np.einsum("ij,ij->i", np.cross(b, g), p) >= 0.0
+    )
+    to_circle = np.abs(np.arcsin(np.clip(s, -1.0, 1.0)))
+    to_ends = np.minimum(_angle(p, a), _angle(p, b))
+    return np.where(in_arc, to_circle, to_ends)
+
+
+def densify(vertices, max_step_deg: float = 1.0) -> np.ndarray:
+    """Points along the closed boundary, at most ``max_step_deg`` apart (M' , 3), unit.
+
+    Each edge contributes its start vertex and evenly spaced points along the great-circle arc
+    (spherical interpolation), in boundary order.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    v1 = np.roll(v, -1, axis=0)
+    out = []
+    step = math.radians(max_step_deg)
+    for a, b in zip(v, v1, strict=True):
+        theta = float(_angle(a, b))
+        k = max(1, math.ceil(theta / step))
+        t = np.arange(k)[:, None] / k
+        sin_t = math.sin(theta)
+        out.append((np.sin((1 - t) * theta) * a + np.sin(t * theta) * b) / sin_t)
+    return np.concatenate(out)
+
+
+# -- nearest boundary point -------------------------------------------------------------------
+class SphericalPolygon:
+    """A simple spherical polygon: exact signed distance and nearest boundary point.
+
+    Parameters
+    ----------
+    vertices : (M, 3) float64, unit, in boundary order (either direction)
+    interior : (3,) float64, unit, or None
+        A point strictly inside; None builds only what unsigned distances need (no grid,
+        :meth:`brute_nearest` only — used during validation).
+    grid : int, optional
+        Initial cube-map resolution (refined automatically).
+
+    The polygon is assumed simple (see :func:`check_polygon`); distances are angles in
+    radians, negative inside. ``nearest`` and ``nearest_one`` give identical answers (the
+    batched and the per-sample path).
+    """
+
+    def __init__(self, vertices, interior=None, grid: int | None = None):
+        v = np.asarray(vertices, dtype=np.float64)
+        self.vertices = v
+        self.interior = None if interior is None else np.asarray(interior, dtype=np.float64)
+        self.m = len(v)
+        self.v0 = v
+        self.v1 = np.roll(v, -1, axis=0)
+        g = np.cross(self.v0, self.v1)
+        self.g = g / np.linalg.norm(g, axis=1, keepdims=True)  # geometric edge normals
+        self.t0 = np.cross(self.g, self.v0)  # along the edge at its start
+        self.t1 = np.cross(self.v1, self.g)  # back along the edge at its end
+        self.orient = 1.0
+        self._set_pseudo_normals()
+        if interior is None:  # only unsigned distances are wanted
+            return
+        # orient the normals so that the interior point is inside
+        if self.brute_nearest(np.asarray(interior, dtype=np.float64)[None, :])[0][0] > 0.0:
+            self.orient = -1.0
+            self._set_pseudo_normals()
+        self.G = grid if grid is not None else int(np.clip(round(3.0 * math.sqrt(self.m)), 8, 64))
+        self._build_grid()
+
+    def _set_pseudo_normals(self):
+        n_in = self.orient * self.g
+        # vertex k is the start of edge k and the end of edge k-1
+        self.vertex_normal = n_in + np.roll(n_in, 1, axis=0)
+        # one row per edge, gathered once per (point, edge) pair: g | t0 | t1 | v0 | v1
+        self._table = np.ascontiguousarray(
+            np.stack((self.g, self.t0, self.t1, self.v0, self.v1), 1)
+        )
+        # plain-float copies for the scalar (single-orientation) path
+        self._g_list = [tuple(r) for r in self.g.tolist()]
+        self._v_list = [tuple(r) for r in self.v0.tolist()]
+        self._vn_list = [tuple(r) for r in self.vertex_normal.tolist()]
+
+    # -- per (point, edge) pair ----------------------------------------------------------------
+    def _pair_keys(self, p: np.ndarray, e: np.ndarray):
+        """Squared chord from p to edge e's nearest point, plus what is needed to classify.
+
+        ``p`` (K, 3) and ``e`` (K,) list the pairs. Returns ``key`` (squared chord, monotonic in
+        the angle), ``in_arc`` (the nearest point is inside the edge, not an end), ``s`` (sine
+        of the angle to the edge's great circle, signed by the geometric normal) and
+        ``end_is_1`` (when an end is nearest: is it the edge's second vertex).
+        """
+        t = self._table[e]  # (K, 5, 3): g, t0, t1, v0, v1 of each pair's edge
+        dots = np.einsum("kij,kj->ki", t[:, :3], p)
+        s = dots[:, 0]
+        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
+        s2 = s * s
+        key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+        # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
+        diff = t[:, 3:] - p[:, None, :]
+        k01 = np.einsum("kij,kij->ki", diff, diff)
+        end_is_1 = k01[:, 1] < k01[:, 0]
+        key = np.where(in_arc, key_in, np.minimum(k01[:, 0], k01[:, 1]))
+        return key, in_arc, s, end_is_1
+
+    def _finish(self, p, e, key, in_arc, s, end_is_1, need_point):
+        """Signed distance (and nearest point) from the winning edge of each point."""
+        theta = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
+        vidx = np.where(end_is_1, (e + 1) % self.m, e)
+        inside_edge = self.orient * s >= 0.0
+        inside_vertex = np.einsum("ij,ij->i", p, self.vertex_normal[vidx]) >= 0.0
+        inside = np.where(in_arc, inside_edge, inside_vertex)
+        dist = np.where(inside, -theta, theta)
+        if not need_point:
+            return dist, None
+        foot = p - s[:, None] * self.g[e]
+        fn = np.linalg.norm(foot, axis=1, keepdims=True)
+        foot = foot / np.where(fn < 1e-300, 1.0, fn)
+        b = np.where(in_arc[:, None], foot, self.v0[vidx])
+        return dist, b
+
+    def brute_nearest(self, p: np.ndarray, need_point: bool = False):
+        """:meth:`nearest` by trying every edge (set-up, validation, and a reference for tests)."""
+        n = len(p)
+        pi = np.repeat(np.arange(n), self.m)
+        e = np.tile(np.arange(self.m), n)
+        key, in_arc, s, end1 = self._pair_keys(p[pi], e)
+        best = np.argmin(key.reshape(n, self.m), axis=1)  # first minimum: lowest edge index
+        sel = np.arange(n) * self.m + best
+        return self._finish(p, best, key[sel], in_arc[sel], s[sel], end1[sel], need_point)
+
+    # -- grid ------------------------------------------------------------------------------
+    #: finest grid and the candidate count below which refining stops paying
+    MAX_GRID = 128
+    TARGET_CANDIDATES = 6.0
+    MAX_BUILD_PAIRS = 4_000_000
+
+    def _cell_index(self, p: np.ndarray, G: int | None = None) -> np.ndarray:
+        G = self.G if G is None else G
+        ab = np.abs(p)
+        ax = np.argmax(ab, axis=1)
+        r = np.arange(len(p))
+        major = p[r, ax]
+        inv = 1.0 / np.abs(major)
+        u = p[r, (ax + 1) % 3] * inv
+        v = p[r, (ax + 2) % 3] * inv
+        i = np.clip(((u + 1.0) * (0.5 * G)).astype(np.int64), 0, G - 1)
+        j = np.clip(((v + 1.0) * (0.5 * G)).astype(np.int64), 0, G - 1)
+        face = 2 * ax + (major < 0)
+        return (face * G + i) * G + j
+
+    def _build_grid(self):
+        """Candidate edges per cube-map cell, refined level by level (each cell's list is a
+        subset of its parent's, so a level only searches its parent's candidates)."""
+        G = 8
+        ptr = np.arange(6 * G * G + 1) * self.m
+        edges = np.tile(np.arange(self.m), 6 * G * G)
+        while True:
+            ptr, edges = self._refine(G, ptr, edges)
+            mean = (ptr[-1]) / (len(ptr) - 1)
+            if (
+                G >= self.MAX_GRID
+                or mean <= self.TARGET_CANDIDATES
+                or 4 * len(edges) > self.MAX_BUILD_PAIRS  # the next level would cost too much
+            ):
+                break
+            # subdivide: child (i, j) at 2G inherits the list of parent (i // 2, j // 2) at G
+            G2 = 2 * G
+            f, i, j = np.meshgrid(np.arange(6), np.arange(G2), np.arange(G2), indexing="ij")
+            parent = ((f * G + i // 2) * G + j // 2).ravel()
+            counts = ptr[parent + 1] - ptr[parent]
+            starts = ptr[parent]
+            new_ptr = np.concatenate(([0], np.cumsum(counts)))
+            owner = np.repeat(np.arange(len(parent)), counts)
+            edges = edges[np.arange(new_ptr[-1]) - new_ptr[owner] + starts[owner]]
+            ptr, G = new_ptr, G2
+        self.G = G
+        self.cell_ptr = ptr
+        self.cell_edges = edges
+        self.mean_candidates = float(ptr[-1] / (len(ptr) - 1))
+
+    def _refine(self, G: int, ptr: np.ndarray, edges: np.ndarray):
+        """Keep, per cell of a G-grid, the edges that can be nearest to some point of the cell."""
+        centres, radii = _cube_cells(G)
+        n_cells = len(centres)
+        counts = np.diff(ptr)
+        owner = np.repeat(np.arange(n_cells), counts)
+        angles = np.empty(len(edges))
+        chunk = 1_000_000
+        for s in range(0, len(edges), chunk):
+            key = self._pair_keys(centres[owner[s : s + chunk]], edges[s : s + chunk])[0]
+            angles[s : s + chunk] = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
+        starts = ptr[:-1]
+        nearest = np.minimum.reduceat(angles, starts) if len(edges) else np.zeros(n_cells)
+        bound = nearest + 2.0 * radii + 1e-9
+        keep = angles <= bound[owner]
+        new_counts = np.add.reduceat(keep.astype(np.int64), starts)
+        return np.concatenate(([0], np.cumsum(new_counts))), edges[keep]
+
+    def nearest(self, p: np.ndarray, need_point: bool = True, chunk: int = 16384):
+        """Signed distance (N,) and nearest boundary point (N, 3) of unit directions ``p`` (N, 3).
+
+        Without an interior point the search is brute force and only ``|distance|`` means
+        anything.
+        """
+        if self.interior is None:
+            return self.brute_nearest(p, need_point)
+        n = len(p)
+        if n > chunk:
+            parts = [self.nearest(p[s : s + chunk], need_point, chunk) for s in range(0, n, chunk)]
+            dist = np.concatenate([x[0] for x in parts])
+            pts = np.concatenate([x[1] for x in parts]) if need_point else None
+            return dist, pts
+        cell = self._cell_index(p)
+        start = self.cell_ptr[cell]
+        counts = self.cell_ptr[cell + 1] - start
+        offsets = np.zeros(n, dtype=np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        total = int(offsets[-1] + counts[-1]) if n else 0
+        owner = np.repeat(np.arange(n), counts)
+        pos = np.arange(total) - (offsets - start)[owner]
+        e = self.cell_edges[pos]
+        key, in_arc, s, end1 = self._pair_keys(p[owner], e)
+        best_key = np.minimum.reduceat(key, offsets)
+        hit = np.flatnonzero(key == best_key[owner])
+        first = hit[np.searchsorted(owner[hit], np.arange(n))]  # lowest edge index on ties
+        return self._finish(
+            p, e[first], key[first], in_arc[first], s[first], end1[first], need_point
+        )
+
+    def nearest_one(self, d: tuple[float, float, float]):
+        """Scalar twin of :meth:`nearest` for one direction (one gather of the cell's edges)."""
+        px, py, pz = d
+        ab = (abs(px), abs(py), abs(pz))
+        ax = 0 if ab[0] >= ab[1] and ab[0] >= ab[2] else (1 if ab[1] >= ab[2] else 2)
+        major = d[ax]
+        u = d[(ax + 1) % 3] / abs(major)
+        v = d[(ax + 2) % 3] / abs(major)
+        G = self.G
+        i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
+        j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
+        cell = ((2 * ax + (major < 0)) * G + i) * G + j
+        cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
+        # all five dot products of every candidate edge in one product; the end chords come
+        # from 2 - 2 p·v here (ranking only: the winner's distance is recomputed exactly below)
+        dots = self._table[cand] @ np.array(d)
+        s = dots[:, 0]
+        s2 = s * s
+        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (s2 < (1.0 - 1e-12) ** 2)
+        key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+        k01 = 2.0 - 2.0 * dots[:, 3:]
+        k = int(np.argmin(np.where(in_arc, key_in, k01.min(axis=1))))  # ties: lowest edge
+        e = int(cand[k])
+        if in_arc[k]:
+            sk = float(s[k])
+            key = 2.0 * sk * sk / (1.0 + math.sqrt(max(1.0 - sk * sk, 0.0)))
+            inside = self.orient * sk >= 0.0
+            g = self._g_list[e]
+            f = (px - sk * g[0], py - sk * g[1], pz - sk * g[2])
+            fn = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) or 1.0
+            b = (f[0] / fn, f[1] / fn, f[2] / fn)
+        else:
+            vi = (e + 1) % self.m if k01[k, 1] < k01[k, 0] else e
+            b = self._v_list[vi]
+            key = (px - b[0]) ** 2 + (py - b[1]) ** 2 + (pz - b[2]) ** 2
+            mv = self._vn_list[vi]
+            inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
+        theta = 2.0 * math.asin(min(math.sqrt(key) * 0.5, 1.0))
+        return (-theta if inside else theta), b
+
+    # -- conveniences ----------------------------------------------------------------------
+    def _need_interior(self) -> None:
+        if self.interior is None:
+            raise GeometryError(
+                "this polygon has no interior point: signed queries need one", part="interior"
+            )
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Signed angular distance (radians) of unit points (N, 3) to the boundary, < 0 inside."""
+        self._need_interior()
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return self.nearest(p, need_point=False)[0]
+
+    def contains(self, points, tolerance: float = 0.0) -> np.ndarray:
+        """Point-in-polygon test: (N,) bool, True inside or within ``tolerance`` rad outside."""
+        return self.signed_distance(points) <= tolerance
+
+    def nearest_point(self, points) -> np.ndarray:
+        """Nearest boundary point (N, 3) of unit points (N, 3) — inside points included."""
+        self._need_interior()
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return self.nearest(p)[1]
+
+    def area(self) -> float:
+        """Solid angle (steradians) of the region containing the interior point."""
+        self._need_interior()
+        return polygon_area(self.vertices, self.interior)
+
+
+def _cube_cells(G: int) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (6G², 3) and angular radii (6G²,) of a G×G cube map's cells, in index order."""
+    edges = (np.arange(G + 1) / G) * 2.0 - 1.0
+    mids = (np.arange(G) + 0.5) / G * 2.0 - 1.0
+    centres, radii = [], []
+    uu, vv = np.meshgrid(mids, mids, indexing="ij")
+    for face in range(6):
+        ax, sign = face // 2, -1.0 if face % 2 else 1.0
+        c = _face_points(ax, sign, uu.ravel(), vv.ravel())
+        rad = np.zeros(len(c))
+        for du in (0, 1):
+            for dv in (0, 1):
+                cu, cv = np.meshgrid(edges[du : G + du], edges[dv : G + dv], indexing="ij")
+                corner = _face_points(ax, sign, cu.ravel(), cv.ravel())
+                rad = np.maximum(rad, _angle(c, corner))
+        centres.append(c)
+        radii.append(rad)
+    return np.concatenate(centres), np.concatenate(radii)
+
+
+def _face_points(ax: int, sign: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    p = np.empty((len(u), 3))
+    p[:, ax] = sign
+    p[:, (ax + 1) % 3] = u
+    p[:, (ax + 2) % 3] = v
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
