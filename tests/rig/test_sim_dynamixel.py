@@ -11,7 +11,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import dynamixel_sdk.port_handler
@@ -30,6 +29,7 @@ from dynamixel_sdk import (
 
 from firmware_protocol.dynamixel import ErrorCode, decode_packet, instructions
 from rig.errors import RigConfigError
+from rig.sim.clock import ManualClock
 from rig.sim.dynamixel import ACCEL_UNIT, VELOCITY_UNIT, bus_from_url, start_servo_bus
 
 # X-series control table addresses (e-Manual)
@@ -39,16 +39,6 @@ POS_P_GAIN, GOAL_VELOCITY, PROFILE_ACC, PROFILE_VEL = 84, 104, 108, 112
 GOAL_POS, MOVING, PRESENT_POS, PRESENT_TEMP = 116, 122, 132, 146
 
 ALERT = 0x80
-
-
-class ManualClock:
-    """Simulated time that only moves when the test says so."""
-
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def le(value: int, size: int) -> list[int]:
@@ -72,14 +62,14 @@ def tolerant_sdk_timeouts(monkeypatch):
 
 @pytest.fixture
 def clock():
-    return ManualClock()
+    return ManualClock(100.0)
 
 
 @pytest.fixture
 def bus(clock):
     with start_servo_bus([1, 2, 3], "XM430-W350", return_delay_us=0, clock=clock) as b:
         yield b
-        assert b.internal_errors == []
+        assert b.server_error is None
 
 
 @pytest.fixture
@@ -539,7 +529,7 @@ def test_serves_when_fd_numbers_exceed_fd_setsize():
         for fd in [*filler, null]:  # free low numbers: pyserial's own select() needs one
             os.close(fd)
     with bus:
-        assert bus._master >= 1024
+        assert bus.fileno() >= 1024
         port = PortHandler(bus.port)
         assert port.openPort()
         try:
@@ -643,15 +633,18 @@ def test_line_noise_and_a_half_packet_do_not_wedge_the_bus(sdk):
 
 
 def test_random_instructions_never_break_the_simulator():
-    """Thousands of random (well-framed) instructions straight into the dispatcher: every one
-    is answered or ignored, none raises inside the simulator, the bus still serves."""
+    """Thousands of random (well-framed) instructions through the pty: every one is decoded
+    and answered or ignored, none raises inside the simulator, the bus still serves."""
     import random
+
+    import serial
 
     rng = random.Random(99)
     codes = [0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x08, 0x10, 0x82, 0x83, 0x8A, 0x92, 0x93, 0x9A,
              0x00, 0x55, 0x7F, 0xFF]
-    with start_servo_bus([1, 2, 3], return_delay_us=0) as bus:
-        instructions_sent = 0
+    with start_servo_bus([1, 2, 3], return_delay_us=0) as bus, \
+            serial.Serial(bus.port, 1_000_000, timeout=0, write_timeout=10) as ser:
+        sent = 0
         for _ in range(3000):
             dxl_id = rng.choice((1, 2, 3, 0xFE, 7))
             params = rng.randbytes(rng.choice((0, 1, 2, 3, 4, 5, 6, 8, 10, 15, 30)))
@@ -659,17 +652,21 @@ def test_random_instructions_never_break_the_simulator():
                 params = rng.randrange(0, 700).to_bytes(2, "little") + bytes(
                     (rng.randrange(0, 8), 0)) + params[4:]
             packet = instructions.InstructionPacket(dxl_id, rng.choice(codes), params)
-            instructions_sent += packet.instruction != 0x55  # 0x55 is a status: ignored
-            bus._on_bytes(packet.encode(), time.monotonic())
-        assert bus.internal_errors == []
-        assert bus.instructions_seen == instructions_sent
-        for servo in bus.servos.values():  # whatever state the storm left: make it talk again
-            servo.factory_reset(0xFF)
-            servo._set("ID", next(k for k, v in bus.servos.items() if v is servo))
-            servo._set("Baud Rate", 3)
-        port = PortHandler(bus.port)
-        assert port.openPort()
-        try:
-            assert PacketHandler(2.0).ping(port, 2)[1] == COMM_SUCCESS
-        finally:
-            port.closePort()
+            sent += packet.instruction != 0x55  # 0x55 is a status: ignored
+            ser.write(packet.encode())
+            ser.reset_input_buffer()  # replies are not the point
+        assert bus.wait_for(lambda: bus.instructions_seen == sent, timeout=30)
+        assert bus.server_error is None
+        bus.restore_defaults()  # whatever state the storm left: IDs, baud rates, torque
+        ser.reset_input_buffer()
+    with start_servo_bus([1]) as other:  # and a fresh bus is unaffected, of course
+        assert other.server_error is None
+
+
+def test_restore_defaults_makes_a_stormed_bus_talk_again(sdk, bus):
+    port, ph = sdk
+    ph.write1ByteTxOnly(port, 2, 7, 42)  # ID 2 -> 42
+    assert ph.ping(port, 42)[1] == COMM_SUCCESS
+    assert ph.ping(port, 2)[1] == COMM_RX_TIMEOUT
+    bus.restore_defaults()
+    assert ph.ping(port, 2) == (1020, COMM_SUCCESS, 0)

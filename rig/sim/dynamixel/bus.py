@@ -1,0 +1,416 @@
+"""The simulated bus: servos behind a simulated USB adapter (U2D2), served on a pty.
+
+:class:`DynamixelBus` stands on :class:`rig.sim.pty_server.PtyServer` (thread, pty, error
+policy, adapter unplug) and adds Protocol 2.0 (:mod:`firmware_protocol.dynamixel`): it decodes
+instruction packets, lets the addressed :class:`~rig.sim.dynamixel.servo.SimServo` objects
+execute them, and schedules their status packets at the times the wire would deliver them.
+
+Wire time: a reply starts ``instruction bytes × 10 / baud`` after the instruction arrived plus
+the servo's Return Delay Time, and occupies ``bytes × 10 / baud``; sync/bulk read replies follow
+one another in request order (an absent servo is skipped). A new instruction cancels replies
+not yet sent. A half-received packet is abandoned after :data:`PACKET_TIMEOUT` without bytes.
+Packets with a bad CRC are ignored — no status, no effect, no watchdog reset (see
+``docs/sim.md`` for the evidence). The USB adapter's own latency is not modelled.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable, Iterable, Sequence
+
+from firmware_protocol.dynamixel import instructions as ins
+from firmware_protocol.dynamixel.framing import BROADCAST_ID
+from firmware_protocol.dynamixel.packets import (
+    ErrorCode,
+    Instruction,
+    InstructionPacket,
+    StreamDecoder,
+    encode_status,
+)
+from firmware_protocol.errors import ChecksumError, ProtocolError
+from rig.errors import RigConfigError
+from rig.sim.clock import Clock
+from rig.sim.dynamixel.faults import FaultInjection, Faults
+from rig.sim.dynamixel.servo import TICKS_PER_REV, SimServo
+from rig.sim.pty_server import PtyServer
+
+__all__ = ["PACKET_TIMEOUT", "DynamixelBus", "start_servo_bus"]
+
+PACKET_TIMEOUT = 0.02
+"""Inter-byte timeout after which a servo abandons a half-received packet, s (modelling
+choice: the e-Manual does not publish the firmware's value)."""
+
+_READS = frozenset({Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ,
+                    Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ})
+_GROUP_READS = frozenset({Instruction.SYNC_READ, Instruction.FAST_SYNC_READ,
+                          Instruction.BULK_READ, Instruction.FAST_BULK_READ})
+
+
+class DynamixelBus(FaultInjection, PtyServer):
+    """A chain of simulated servos served on a pseudo-terminal.
+
+    Parameters
+    ----------
+    servos : sequence of SimServo
+        The servos on the bus (distinct IDs).
+    clock : callable, default time.monotonic
+        Simulated clock in seconds; motion and the Bus Watchdog run on it (a
+        :class:`~rig.sim.clock.ManualClock` makes them exact in tests).
+    model_wire_time : bool, default True
+        Delay replies by the time the bytes take on the wire at the servo's baud rate.
+
+    Attributes
+    ----------
+    port : str
+        Path of the pty slave to open with ``PortHandler`` / pyserial.
+    servos : dict of int to SimServo
+        By ID at creation (IDs written later keep their original key).
+    instructions_seen, replies_sent, crc_errors : int
+        Instruction packets decoded, status packets written, instruction packets ignored for a
+        bad CRC.
+
+    Examples
+    --------
+    >>> with start_servo_bus([1, 2, 3]) as bus:  # doctest: +SKIP
+    ...     port = dynamixel_sdk.PortHandler(bus.port)
+    """
+
+    thread_name = "dxl-sim"
+
+    def __init__(self, servos: Sequence[SimServo], *, clock: Clock = time.monotonic,
+                 model_wire_time: bool = True):
+        ids = [s.id for s in servos]
+        if not ids:
+            raise ValueError("a servo bus needs at least one servo")
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"servo ids must be distinct, got {ids}")
+        self.servos: dict[int, SimServo] = {s.id: s for s in servos}
+        self.model_wire_time = model_wire_time
+        self._faults = Faults()
+        self._decoder = StreamDecoder()
+        self._last_rx = 0.0
+        self._outbox: list[tuple[float, bytes]] = []
+        self.replies_sent = 0
+        self.instructions_seen = 0
+        self.crc_errors = 0
+        # the line starts at the servos' rate, as an adapter left configured for them
+        super().__init__(clock=clock, line_speed=servos[0].baud_rate)
+        self._start()
+
+    # ------------------------------------------------------------------ python API
+    def servo(self, dxl_id: int) -> SimServo:
+        """The simulated servo whose ID is now ``dxl_id`` (or, failing that, was at creation)."""
+        for servo in self.servos.values():
+            if servo.id == dxl_id:
+                return servo
+        try:
+            return self.servos[dxl_id]
+        except KeyError:
+            raise KeyError(f"no simulated servo with id {dxl_id}; ids: {sorted(self.servos)}") \
+                from None
+
+    def set_hand(self, dxl_id: int,
+                 position: float | Callable[[float], float] | None) -> None:
+        """Move the limb by hand: with torque off, Present Position follows ``position``.
+
+        Parameters
+        ----------
+        dxl_id : int
+            Servo ID.
+        position : float, callable or None
+            Ticks; or a function of the simulated time (s) returning ticks, for a continuous
+            movement (a clinician sweeping the limb while it records); ``None`` lets go (the
+            shaft stays where it is).
+        """
+        with self.lock:
+            servo = self.servo(dxl_id)
+            servo.advance(self.clock())
+            servo.hand = position if position is None or callable(position) else float(position)
+
+    def position(self, dxl_id: int) -> float:
+        """True (noise-free) shaft position in ticks, advanced to now (watchdog included)."""
+        with self.lock:
+            servo = self.servo(dxl_id)
+            servo.advance(self.clock())
+            return servo.pos
+
+    def watchdog_tripped(self, dxl_id: int) -> bool:
+        """True while servo ``dxl_id`` has its Bus Watchdog error flagged (advanced to now)."""
+        with self.lock:
+            servo = self.servo(dxl_id)
+            servo.advance(self.clock())
+            return servo.watchdog_error
+
+    def restore_defaults(self) -> None:
+        """Every servo back to its state at creation (ID, baud rate, table, position, no
+        errors); pending faults and half-received input are forgotten."""
+        with self.lock:
+            for servo in self.servos.values():
+                servo.restore()
+            self._faults = Faults()
+            self._decoder.clear()
+            self._outbox.clear()
+
+    # ------------------------------------------------------------------ server hooks
+    def _deadline(self) -> float | None:
+        due = self._outbox[0][0] if self._outbox else None
+        if self._decoder.pending:  # a partial frame: give up on it after a while
+            stale = self._last_rx + PACKET_TIMEOUT
+            due = stale if due is None else min(due, stale)
+        return due
+
+    def _on_timer(self, now: float) -> None:
+        if self._decoder.pending and now - self._last_rx >= PACKET_TIMEOUT:
+            self._decoder.skip_frame()
+            self._last_rx = now
+            self._drain(now)
+        while self._outbox and self._outbox[0][0] <= now:
+            _, data = self._outbox.pop(0)
+            if data and self.connected:
+                self._send(data)
+                self.replies_sent += 1
+
+    def _on_bytes(self, data: bytes, t_rx: float) -> None:
+        self._last_rx = t_rx
+        self._decoder.feed(data)
+        self._drain(t_rx)
+
+    def _on_disconnect(self) -> None:
+        self._outbox.clear()
+        self._decoder.clear()
+
+    def _drain(self, t_rx: float) -> None:
+        while True:
+            try:
+                packet = self._decoder.next_packet()
+            except ChecksumError:
+                self.crc_errors += 1  # a servo cannot trust any field: it stays silent
+                continue
+            except ProtocolError:
+                continue  # framing: resynchronise on the next header
+            if packet is None:
+                return
+            if isinstance(packet, InstructionPacket):
+                if self._faults.spoil_instruction():
+                    self.crc_errors += 1
+                    continue
+                self._outbox.clear()  # a new instruction pre-empts unsent replies
+                self.instructions_seen += 1
+                self._dispatch(packet, t_rx)
+
+    # ------------------------------------------------------------------ instruction handling
+    def _listeners(self) -> list[SimServo]:
+        if self._faults.bus_unplugged:
+            return []
+        client = self.line_speed
+        return [s for s in self.servos.values()
+                if s.plugged and (client is None or client == s.baud_rate)]
+
+    def _schedule(self, servo: SimServo, packet: bytes, start_after: float) -> float:
+        """Queue ``packet`` to be sent; returns the time its last byte is on the wire."""
+        byte_time = 10.0 / servo.baud_rate if self.model_wire_time else 0.0
+        begin = start_after + servo.return_delay
+        end = begin + len(packet) * byte_time
+        out, extra = self._faults.outgoing(packet)
+        if out is not None:
+            self._outbox.append((end + extra, out))
+            self._outbox.sort(key=lambda e: e[0])
+        return end
+
+    def _dispatch(self, pkt: InstructionPacket, t_rx: float) -> None:
+        now = self.clock()
+        listeners = self._listeners()
+        if not listeners:
+            return
+        size = 10 + len(pkt.params)  # header, id, length, instruction, CRC (stuffing ignored)
+        wire = size * 10.0 / listeners[0].baud_rate if self.model_wire_time else 0.0
+        t = t_rx + wire
+        inst = pkt.instruction
+        if inst in _GROUP_READS:
+            if pkt.id == BROADCAST_ID:
+                self._group_read(pkt, listeners, now, t)
+            return
+        if inst in (Instruction.SYNC_WRITE, Instruction.BULK_WRITE):
+            if pkt.id == BROADCAST_ID:
+                self._group_write(pkt, listeners, now)
+            return
+        targets = listeners if pkt.id == BROADCAST_ID else [s for s in listeners
+                                                             if s.id == pkt.id]
+        for servo in targets:
+            servo.note_instruction(now)
+        for servo in sorted(targets, key=lambda s: s.id):
+            # the level in force when the instruction arrived decides (a write that changes
+            # Status Return Level is still acknowledged under the old level)
+            answer = inst == Instruction.PING or (pkt.id != BROADCAST_ID
+                                                  and self._srl_allows(servo, inst))
+            error, params, after = self._execute(servo, pkt, now)
+            # a broadcast PING is answered by every servo, one after another in ID order
+            if answer:
+                status = encode_status(servo.id, error | servo.error_byte, params)
+                t = self._schedule(servo, status, t)
+            if after is not None:
+                after()
+
+    @staticmethod
+    def _srl_allows(servo: SimServo, inst: int) -> bool:
+        level = servo.get("Status Return Level")
+        if inst == Instruction.PING:
+            return True
+        if inst in _READS:
+            return level >= 1
+        return level >= 2
+
+    def _execute(self, servo: SimServo, pkt: InstructionPacket,
+                 now: float) -> tuple[int, bytes, Callable[[], None] | None]:
+        """Run a unicast/broadcast instruction on one servo: (error, reply params, after)."""
+        inst = pkt.instruction
+        try:
+            if inst == Instruction.PING:
+                return 0, ins.ping_status_params(servo.table.model_number,
+                                                 servo.get("Firmware Version")), None
+            if inst == Instruction.READ:
+                address, length = ins.parse_read(pkt.params)
+                error, data = servo.read(address, length, now)
+                return error, data, None
+            if inst == Instruction.WRITE:
+                address, data = ins.parse_write(pkt.params)
+                return servo.write(address, data, now), b"", None
+            if inst == Instruction.REG_WRITE:
+                address, data = ins.parse_write(pkt.params)
+                if address + len(data) > servo.table.size or not data:
+                    return ErrorCode.ACCESS if data else ErrorCode.DATA_LENGTH, b"", None
+                servo.registered = (address, data)
+                return 0, b"", None
+            if inst == Instruction.ACTION:
+                if servo.registered is None:
+                    return ErrorCode.INSTRUCTION, b"", None
+                address, data = servo.registered
+                servo.registered = None
+                return servo.write(address, data, now), b"", None
+            if inst == Instruction.REBOOT:
+                return 0, b"", servo.reboot
+            if inst == Instruction.FACTORY_RESET:
+                if len(pkt.params) != 1 or pkt.params[0] not in (0xFF, 0x01, 0x02):
+                    return ErrorCode.DATA_RANGE, b"", None
+                if servo.torque:
+                    return ErrorCode.ACCESS, b"", None
+                option = pkt.params[0]
+                return 0, b"", lambda: servo.factory_reset(option)
+            if inst == Instruction.CLEAR:
+                if pkt.params != ins.CLEAR_MULTI_TURN:
+                    return ErrorCode.DATA_RANGE, b"", None
+                servo.advance(now)
+                if servo.vel != 0:
+                    return ErrorCode.RESULT_FAIL, b"", None
+                servo.pos %= TICKS_PER_REV
+                servo.target = servo.pos
+                return 0, b"", None
+        except ProtocolError:
+            return ErrorCode.DATA_LENGTH, b"", None
+        return ErrorCode.INSTRUCTION, b"", None
+
+    def _group_read(self, pkt: InstructionPacket, listeners: list[SimServo], now: float,
+                    t: float) -> None:
+        by_id = {s.id: s for s in listeners}
+        try:
+            if pkt.instruction in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
+                address, length, ids = ins.parse_sync_read(pkt.params)
+                requests = [(i, address, length) for i in ids]
+            else:
+                requests = ins.parse_bulk_read(pkt.params)
+        except ProtocolError:
+            return
+        for dxl_id in {r[0] for r in requests}:
+            if dxl_id in by_id:
+                by_id[dxl_id].note_instruction(now)
+        fast = pkt.instruction in (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ)
+        entries: list[tuple[int, int, bytes]] = []
+        last: SimServo | None = None
+        for dxl_id, address, length in requests:
+            servo = by_id.get(dxl_id)
+            if servo is None or not self._srl_allows(servo, pkt.instruction):
+                continue  # absent servo: the next one answers after its own delay
+            error, data = servo.read(address, length, now)
+            error |= servo.error_byte
+            if fast:
+                entries.append((error, servo.id, data))
+                last = servo
+            else:
+                t = self._schedule(servo, encode_status(servo.id, error, data), t)
+        if fast and entries and last is not None:
+            delay = sum(by_id[e[1]].return_delay for e in entries[:-1])
+            self._schedule(last, ins.encode_fast_status(entries), t + delay)
+
+    def _group_write(self, pkt: InstructionPacket, listeners: list[SimServo], now: float) -> None:
+        by_id = {s.id: s for s in listeners}
+        try:
+            if pkt.instruction == Instruction.SYNC_WRITE:
+                address, _, data = ins.parse_sync_write(pkt.params)
+                writes = [(i, address, d) for i, d in data.items()]
+            else:
+                writes = ins.parse_bulk_write(pkt.params)
+        except ProtocolError:
+            return
+        for dxl_id in {w[0] for w in writes}:
+            if dxl_id in by_id:
+                by_id[dxl_id].note_instruction(now)
+        for dxl_id, address, data in writes:
+            servo = by_id.get(dxl_id)
+            if servo is not None:
+                servo.write(address, data, now)
+
+
+
+def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
+                    model: str = "XM430-W350", *, baud_rate: int = 1_000_000,
+                    return_delay_us: int | None = None, noise_ticks: float = 0.0,
+                    seed: int = 0, positions: Sequence[float] | None = None,
+                    clock: Clock = time.monotonic,
+                    model_wire_time: bool = True) -> DynamixelBus:
+    """Start a simulated servo chain on a new pty.
+
+    Parameters
+    ----------
+    ids : iterable of int, or of (id, model)
+        Servo IDs (all of ``model``), or ``(id, model)`` pairs for a mixed chain.
+    model : str
+        e-Manual model name, e.g. ``"XM430-W350"``, ``"XL430-W250"``, ``"XC330-M288"``.
+    baud_rate : int
+        Line speed of every servo, bit/s.
+    return_delay_us : int or None
+        Return Delay Time of every servo in µs; None keeps the default 500 µs.
+    noise_ticks : float
+        Encoder noise standard deviation, ticks.
+    seed : int
+        Seed of the encoder noise (servo ``k`` uses ``seed + id``).
+    positions : sequence of float, optional
+        Initial shaft positions in ticks (default 2048, mid-range).
+    clock : callable
+        Simulated clock, seconds.
+    model_wire_time : bool
+        Model the time bytes take on the wire.
+
+    Returns
+    -------
+    DynamixelBus
+        Already serving; use it as a context manager or call ``close()``.
+
+    Raises
+    ------
+    RigConfigError
+        Unknown model, bad ID, duplicate IDs or unsupported baud rate.
+    """
+    specs = [(i, model) if isinstance(i, int) else (int(i[0]), str(i[1])) for i in ids]
+    if not specs:
+        raise RigConfigError("a servo bus needs at least one servo id")
+    try:
+        servos = [SimServo(i, m, baud_rate=baud_rate, return_delay_us=return_delay_us,
+                           position=positions[k] if positions is not None else 2048.0,
+                           noise_ticks=noise_ticks, rng=random.Random(seed + i))
+                  for k, (i, m) in enumerate(specs)]
+        return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time)
+    except ValueError as err:
+        raise RigConfigError(str(err)) from err
+
+

@@ -1,0 +1,68 @@
+"""``sim://dynamixel?...``: the port string that starts a simulated servo chain.
+
+``sim://dynamixel?ids=1,2,3&model=XM430-W350&baud=57600&return_delay_us=0&noise=0.5&seed=1``
+
+==================  ==============================================  =====================
+key                 meaning                                         default
+==================  ==============================================  =====================
+``ids``             servo IDs, ``1,2,3`` or ``1-3``                 ``1``
+``model``           e-Manual model name of every servo              ``XM430-W350``
+``baud``            line speed of every servo, bit/s                ``1000000``
+``return_delay_us`` Return Delay Time, µs (even, 0..508)            500 (e-Manual)
+``noise``           encoder noise standard deviation, ticks         0
+``seed``            seed of the encoder noise                       0
+``wire_time``       model the time bytes take on the wire (on/off)  on
+``clock``,          simulated time (:mod:`rig.sim.urls`)            real time
+``time_scale``
+==================  ==============================================  =====================
+
+``sim://dxl`` is accepted as a short form.
+"""
+
+from __future__ import annotations
+
+from rig.sim.dynamixel.bus import DynamixelBus, start_servo_bus
+from rig.sim.urls import SimUrl
+
+__all__ = ["DEVICES", "EXAMPLE", "bus_from_url"]
+
+DEVICES = ("dynamixel", "dxl")
+EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
+_KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time")
+
+
+def bus_from_url(url: str, **overrides: object) -> DynamixelBus:
+    """Start a simulated chain described by a port string (every key optional).
+
+    Parameters
+    ----------
+    url : str
+        ``sim://dynamixel`` URL (keys in the module docstring).
+    **overrides
+        Keyword arguments of :func:`~rig.sim.dynamixel.bus.start_servo_bus` that win over the
+        URL (e.g. ``clock``).
+
+    Returns
+    -------
+    DynamixelBus
+        Serving; close it (or use it as a context manager).
+
+    Raises
+    ------
+    RigConfigError
+        Not a ``sim://dynamixel`` URL, unknown key, bad value (the message names the key), or
+        a configuration the bus refuses (unknown model, duplicate IDs, ...).
+    """
+    q = SimUrl(url, DEVICES, _KEYS, EXAMPLE)
+    kwargs: dict[str, object] = {
+        "ids": q.int_list("ids", [1]),
+        "model": q.text("model", "XM430-W350"),
+        "baud_rate": q.integer("baud", 1_000_000, 1),
+        "return_delay_us": q.integer("return_delay_us", None, 0, 508),
+        "noise_ticks": q.number("noise", 0.0, 0.0),
+        "seed": q.integer("seed", 0),
+        "model_wire_time": q.flag("wire_time", True),
+        "clock": q.clock(),
+    }
+    kwargs.update(overrides)
+    return start_servo_bus(**kwargs)  # type: ignore[arg-type]
