@@ -34,6 +34,12 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim": ("rig.commands.sim", "sim", "Run a simulated servo chain or IMU on a pseudo-terminal."),
     "train": ("rig.commands.train", "train", "Train a corrective-constraint network, export ONNX."),
     "evaluate": ("rig.commands.train", "evaluate", "Metrics of an ONNX model on held-out data."),
+    "session": ("rig.commands.session", "session", "List the sessions in a store (--db)."),
+    "export": (
+        "rig.commands.export",
+        "export",
+        "Export a session's orientations as OpenSim .sto or CSV.",
+    ),
 }
 
 

@@ -261,7 +261,8 @@ class Store:
                 with conn.begin():
                     yield conn
         except OperationalError as err:
-            raise RigConnectionError(f"database {self.url}: {err.orig}") from err
+            detail = " ".join(str(err.orig).split())  # one line: psycopg adds hints
+            raise RigConnectionError(f"database {self.url}: {detail}") from err
 
     def _migrate(self, target: int | None = None) -> None:
         target = S.SCHEMA_VERSION if target is None else target

@@ -1,0 +1,659 @@
+"""Import and export of orientation time series: OpenSim ``.sto`` and CSV.
+
+OpenSim orientation ``.sto`` (what OpenSense's IMU placer and IMU inverse kinematics read,
+written by OpenSim's ``STOFileAdapterQuaternion``)::
+
+    DataRate=400.000000          \\
+    DataType=Quaternion           | header: key=value lines (any others kept in ``meta``),
+    version=3                     | lines without '=' (a table name, comments) are ignored
+    OpenSimVersion=4.5           /
+    endheader
+    time<TAB>thorax_imu<TAB>humerus_imu
+    0.0025<TAB>w,x,y,z<TAB>w,x,y,z            one row per time, one cell per column
+
+Cells are scalar-first ``w,x,y,z`` (SimTK::Quaternion's order, the rig's convention too).
+Columns whose cells are not four numbers (scalars, Vec3s from other exporters) are kept out of
+the table and named in ``meta["ignored_columns"]``. OpenSim names IMU columns ``<body>_imu``;
+:meth:`OrientationTable.get` accepts the name with or without that suffix.
+
+CSV forms (comma-separated, one header line)::
+
+    t_s,w,x,y,z                                     single orientation (also rig enforce targets)
+    t_s,thorax_w,thorax_x,thorax_y,thorax_z,humerus_w,...          wide: several segments
+    t_s,device_t_s,name,kind,w,x,y,z,status         long: one row per sample (session export)
+
+Validation, on every reader: a row with the wrong number of cells, a non-number, a NaN or
+infinite value, a zero quaternion, or a quaternion whose norm differs from 1 by more than
+:data:`NORM_TOLERANCE` is refused with :class:`~rig.errors.RigConfigError` naming the file, the
+line and the column. Quaternions within the tolerance are returned *as written* -- never
+silently renormalised -- so that export -> import is exact; times must be finite and strictly
+increasing per series.
+
+Writers use Python's shortest round-trip float repr, so ``write_sto`` -> ``read_sto`` (and the
+CSV pair) reproduce every float64 bit for bit. Files are written to a temporary name and
+renamed, so a crash never leaves half a file under the final name.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from rig import __version__
+from rig.errors import RigConfigError
+
+if TYPE_CHECKING:
+    from rig.store.store import Store
+
+#: Largest accepted | ||q|| - 1 | of an imported quaternion. Text written with 4 decimals is
+#: within ~2e-4 of unit norm; anything further off is a unit error or a corrupted value.
+NORM_TOLERANCE = 1e-3
+
+#: Header keys written by :func:`write_sto` (OpenSim's order), then any of the table's meta.
+STO_VERSION = "3"
+OPENSIM_VERSION = "4.5"
+
+
+@dataclass
+class OrientationTable:
+    """Orientations of one or more segments (or joints) at common times.
+
+    Attributes
+    ----------
+    time : (N,) float64
+        Seconds, strictly increasing.
+    columns : dict[str, (N, 4) float64]
+        Column label -> scalar-first quaternions ``w, x, y, z`` (as read; unit within
+        :data:`NORM_TOLERANCE`). Insertion order is file order.
+    rate_hz : float or None
+        The file's ``DataRate`` (``.sto``), or None.
+    meta : dict[str, str]
+        Other header entries (``.sto``), ``ignored_columns``, ``source``.
+    """
+
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    rate_hz: float | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
+        n = self.time.shape[0]
+        cols = {}
+        for label, q in self.columns.items():
+            q = np.asarray(q, dtype=np.float64)
+            if q.shape != (n, 4):
+                raise RigConfigError(f"column {label!r}: expected shape ({n}, 4), got {q.shape}")
+            cols[str(label)] = q
+        self.columns = cols
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    @property
+    def labels(self) -> list[str]:
+        return list(self.columns)
+
+    def get(self, name: str) -> np.ndarray:
+        """Quaternions (N, 4) of column ``name`` (``humerus`` also finds ``humerus_imu``)."""
+        if name in self.columns:
+            return self.columns[name]
+        if name + "_imu" in self.columns:
+            return self.columns[name + "_imu"]
+        raise RigConfigError(
+            f"no column {name!r} in {self.meta.get('source', 'the table')}; "
+            f"columns: {', '.join(self.columns) or '(none)'}"
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# reading helpers
+
+
+def _num(cell: str, where: str) -> float:
+    try:
+        v = float(cell)
+    except ValueError:
+        raise RigConfigError(f"{where}: {cell.strip()!r} is not a number") from None
+    if not math.isfinite(v):
+        raise RigConfigError(f"{where}: {cell.strip()} is not a finite number")
+    return v
+
+
+def _quat(parts: list[str], where: str) -> tuple[float, float, float, float]:
+    vals = []
+    for p in parts:
+        try:
+            vals.append(float(p))
+        except ValueError:
+            raise RigConfigError(f"{where}: {p.strip()!r} is not a number") from None
+    if any(math.isnan(v) for v in vals):
+        raise RigConfigError(f"{where}: NaN in quaternion {','.join(s.strip() for s in parts)}")
+    if any(math.isinf(v) for v in vals):
+        raise RigConfigError(f"{where}: infinite value in quaternion")
+    n = math.sqrt(sum(v * v for v in vals))
+    if n == 0.0:
+        raise RigConfigError(f"{where}: zero quaternion (no orientation)")
+    if abs(n - 1.0) > NORM_TOLERANCE:
+        raise RigConfigError(
+            f"{where}: quaternion norm {n:.6g} is not 1 (tolerance {NORM_TOLERANCE:g}); "
+            "refusing to renormalise"
+        )
+    return vals[0], vals[1], vals[2], vals[3]
+
+
+def _check_time(t: np.ndarray, lines: list[int], src: str, what: str = "time") -> None:
+    if t.size > 1:
+        d = np.diff(t)
+        bad = np.flatnonzero(d <= 0)
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise RigConfigError(
+                f"{src}:{lines[i]}: {what} {t[i]!r} does not increase (previous {t[i - 1]!r})"
+            )
+
+
+def _read_lines(path: str | os.PathLike) -> list[str]:
+    p = Path(path)
+    if p.is_dir():
+        raise RigConfigError(f"{path}: is a directory")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise
+    except UnicodeDecodeError as err:
+        raise RigConfigError(f"{path}: not a text file ({err.reason})") from err
+    return text.splitlines()
+
+
+# ---------------------------------------------------------------------------------------------
+# .sto
+
+
+def read_sto(path: str | os.PathLike) -> OrientationTable:
+    """Read an OpenSim orientation ``.sto`` file (see the module docstring)."""
+    src = os.fspath(path)
+    lines = _read_lines(path)
+    meta: dict[str, str] = {"source": src}
+    i = 0
+    end = None
+    while i < len(lines):
+        line = lines[i].strip()
+        i += 1
+        if line.lower() == "endheader":
+            end = i
+            break
+        if "=" in line:
+            k, v = line.split("=", 1)
+            if k.strip() and v.strip():
+                meta[k.strip()] = v.strip()
+    if end is None:
+        raise RigConfigError(f"{src}: no 'endheader' line: not an OpenSim .sto file")
+    dtype = meta.pop("DataType", None)
+    if dtype is not None and dtype != "Quaternion":
+        raise RigConfigError(
+            f"{src}: DataType={dtype}, expected DataType=Quaternion (an orientations file)"
+        )
+    rate = None
+    if "DataRate" in meta:
+        try:
+            rate = float(meta.pop("DataRate"))
+        except ValueError:
+            raise RigConfigError(f"{src}: DataRate is not a number") from None
+    # column labels: first non-blank line after endheader
+    while i < len(lines) and not lines[i].strip():
+        i += 1
+    if i >= len(lines):
+        raise RigConfigError(f"{src}: no column labels after endheader")
+    label_line = i + 1
+    labels = [c.strip() for c in lines[i].rstrip("\r\n").split("\t")]
+    i += 1
+    if labels[0].lower() != "time":
+        raise RigConfigError(
+            f"{src}:{label_line}: first column must be 'time', got {labels[0]!r}"
+        )
+    ncol = len(labels)
+    if len(set(labels)) != ncol:
+        raise RigConfigError(f"{src}:{label_line}: duplicate column labels")
+    times: list[float] = []
+    rows: list[list[tuple]] = []
+    line_nos: list[int] = []
+    quat_cols: list[int] | None = None
+    for j in range(i, len(lines)):
+        raw = lines[j].rstrip("\r\n")
+        if not raw.strip():
+            continue
+        ln = j + 1
+        cells = raw.split("\t")
+        if len(cells) != ncol:
+            raise RigConfigError(
+                f"{src}:{ln}: {len(cells)} cells, expected {ncol} ({', '.join(labels)})"
+            )
+        if quat_cols is None:  # column kinds from the first data row
+            quat_cols = [c for c in range(1, ncol) if cells[c].count(",") == 3]
+            ignored = [labels[c] for c in range(1, ncol) if c not in quat_cols]
+            if ignored:
+                meta["ignored_columns"] = ",".join(ignored)
+            if not quat_cols:
+                raise RigConfigError(
+                    f"{src}:{ln}: no quaternion columns (cells of four comma-separated numbers)"
+                )
+        times.append(_num(cells[0], f"{src}:{ln}: time"))
+        row = []
+        for c in quat_cols:
+            parts = cells[c].split(",")
+            if len(parts) != 4:
+                raise RigConfigError(
+                    f"{src}:{ln}: column {labels[c]}: {len(parts)} components, expected 4 (w,x,y,z)"
+                )
+            row.append(_quat(parts, f"{src}:{ln}: column {labels[c]}"))
+        rows.append(row)
+        line_nos.append(ln)
+    if not rows:
+        raise RigConfigError(f"{src}: no data rows")
+    t = np.array(times)
+    _check_time(t, line_nos, src)
+    arr = np.array(rows, dtype=np.float64)  # (N, C, 4)
+    assert quat_cols is not None
+    columns = {labels[c]: np.ascontiguousarray(arr[:, k, :]) for k, c in enumerate(quat_cols)}
+    return OrientationTable(time=t, columns=columns, rate_hz=rate, meta=meta)
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _atomic_write(path: str | os.PathLike, chunks: Iterable[str]) -> None:
+    p = Path(path)
+    if not p.parent.is_dir():
+        raise RigConfigError(f"--out {path}: directory {p.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+            for c in chunks:
+                fh.write(c)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        with _suppress():
+            os.unlink(tmp)
+        raise
+
+
+class _suppress:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return True
+
+
+def _rate_of(table: OrientationTable) -> float:
+    if table.rate_hz is not None:
+        return float(table.rate_hz)
+    if len(table) > 1:
+        return float(1.0 / np.median(np.diff(table.time)))
+    return 0.0
+
+
+def write_sto(path: str | os.PathLike, table: OrientationTable) -> None:
+    """Write ``table`` as an OpenSim orientation ``.sto`` (exact float round trip).
+
+    Header: ``DataRate`` (the table's, else 1 / median time step), ``DataType=Quaternion``,
+    ``version=3``, ``OpenSimVersion``, the table's other ``meta`` entries (keys and values
+    without tabs, newlines or '='), then ``endheader``.
+    """
+    if len(table) == 0:
+        raise RigConfigError(f"{path}: nothing to write (no rows)")
+    _check_time(table.time, list(range(1, len(table) + 1)), os.fspath(path), "time row")
+    head = [
+        f"DataRate={_rate_of(table):.6f}\n",
+        "DataType=Quaternion\n",
+        f"version={STO_VERSION}\n",
+        f"OpenSimVersion={OPENSIM_VERSION}\n",
+    ]
+    for k, v in table.meta.items():
+        if k in ("source", "DataRate", "DataType", "version", "OpenSimVersion"):
+            continue
+        k, v = str(k), str(v)
+        if any(ch in k + v for ch in "\t\r\n") or "=" in k or not k or not v:
+            continue
+        head.append(f"{k}={v}\n")
+    head.append("endheader\n")
+    labels = list(table.columns)
+    for lab in labels:
+        if any(ch in lab for ch in "\t\r\n,") or not lab:
+            raise RigConfigError(f"column label {lab!r} cannot be written to a .sto file")
+    head.append("time\t" + "\t".join(labels) + "\n")
+    cols = [table.columns[lab].tolist() for lab in labels]
+    times = table.time.tolist()
+
+    def body():
+        yield "".join(head)
+        out = []
+        for r, t in enumerate(times):
+            cells = [repr(t)]
+            for c in cols:
+                w, x, y, z = c[r]
+                cells.append(f"{w!r},{x!r},{y!r},{z!r}")
+            out.append("\t".join(cells))
+            if len(out) >= 4096:
+                yield "\n".join(out) + "\n"
+                out = []
+        if out:
+            yield "\n".join(out) + "\n"
+
+    _atomic_write(path, body())
+
+
+# ---------------------------------------------------------------------------------------------
+# CSV
+
+_LONG_REQUIRED = ("t_s", "name", "w", "x", "y", "z")
+
+
+def _csv_header(lines: list[str], src: str) -> tuple[int, list[str]]:
+    for i, line in enumerate(lines):
+        if line.strip() and not line.lstrip().startswith("#"):
+            cols = [c.strip() for c in line.split(",")]
+            if len(set(cols)) != len(cols):
+                raise RigConfigError(f"{src}:{i + 1}: duplicate column names")
+            return i, cols
+    raise RigConfigError(f"{src}: empty CSV file")
+
+
+def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a long-form CSV (``t_s,name,w,x,y,z`` and optionally ``device_t_s``, ``kind``,
+    ``status``; other columns ignored) into arrays shaped like :meth:`Store.samples`."""
+    src = os.fspath(path)
+    lines = _read_lines(path)
+    h, cols = _csv_header(lines, src)
+    missing = [c for c in _LONG_REQUIRED if c not in cols]
+    if missing:
+        raise RigConfigError(f"{src}:{h + 1}: long-form CSV needs columns {', '.join(missing)}")
+    ix = {c: cols.index(c) for c in cols}
+    t, dt, names, kinds, qs, st, lns = [], [], [], [], [], [], []
+    for j in range(h + 1, len(lines)):
+        raw = lines[j]
+        if not raw.strip() or raw.lstrip().startswith("#"):
+            continue
+        ln = j + 1
+        cells = raw.split(",")
+        if len(cells) != len(cols):
+            raise RigConfigError(f"{src}:{ln}: {len(cells)} cells, expected {len(cols)}")
+        t.append(_num(cells[ix["t_s"]], f"{src}:{ln}: t_s"))
+        if "device_t_s" in ix and cells[ix["device_t_s"]].strip() not in ("", "nan", "NaN"):
+            dt.append(_num(cells[ix["device_t_s"]], f"{src}:{ln}: device_t_s"))
+        else:
+            dt.append(math.nan)
+        name = cells[ix["name"]].strip()
+        if not name:
+            raise RigConfigError(f"{src}:{ln}: empty name")
+        names.append(name)
+        kinds.append(cells[ix["kind"]].strip() if "kind" in ix else "sensor")
+        qs.append(_quat([cells[ix[c]] for c in "wxyz"], f"{src}:{ln}: {name}"))
+        if "status" in ix and cells[ix["status"]].strip():
+            try:
+                st.append(int(cells[ix["status"]]))
+            except ValueError:
+                raise RigConfigError(f"{src}:{ln}: status {cells[ix['status']]!r} is not an "
+                                     "integer") from None
+        else:
+            st.append(0)
+        lns.append(ln)
+    if not t:
+        raise RigConfigError(f"{src}: no data rows")
+    out = {
+        "t": np.array(t), "device_t": np.array(dt), "name": np.array(names, dtype=object),
+        "kind": np.array(kinds, dtype=object), "q": np.array(qs, dtype=np.float64),
+        "status": np.array(st, dtype=np.int64),
+    }
+    for nm in dict.fromkeys(names):
+        sel = np.flatnonzero(out["name"] == nm)
+        _check_time(out["t"][sel], [lns[k] for k in sel], src, f"t_s of {nm}")
+    return out
+
+
+def read_csv(path: str | os.PathLike) -> OrientationTable:
+    """Read any of the three CSV forms into an :class:`OrientationTable`.
+
+    Single form -> one column labelled ``orientation``; wide form -> one column per
+    ``<name>_w..z`` group (other columns ignored, named in ``meta["ignored_columns"]``); long
+    form -> the series aligned on common times by :func:`align_series`.
+    """
+    src = os.fspath(path)
+    lines = _read_lines(path)
+    h, cols = _csv_header(lines, src)
+    if "t_s" not in cols:
+        raise RigConfigError(f"{src}:{h + 1}: no t_s column (columns: {', '.join(cols)})")
+    if "name" in cols:
+        s = read_samples_csv(path)
+        series = {
+            nm: (s["t"][s["name"] == nm], s["q"][s["name"] == nm])
+            for nm in dict.fromkeys(s["name"].tolist())
+        }
+        table, dropped = align_series(series)
+        table.meta.update(source=src, aligned_dropped=str(dropped))
+        return table
+    groups: dict[str, list[int]] = {}
+    if all(c in cols for c in "wxyz"):
+        groups["orientation"] = [cols.index(c) for c in "wxyz"]
+    for c in cols:
+        if len(c) > 2 and c[-2] == "_" and c[-1] == "w":
+            base = c[:-2]
+            names = [f"{base}_{k}" for k in "wxyz"]
+            if all(n in cols for n in names):
+                groups[base] = [cols.index(n) for n in names]
+    if not groups:
+        raise RigConfigError(
+            f"{src}:{h + 1}: no quaternion columns: expected t_s,w,x,y,z or "
+            "t_s,<name>_w,<name>_x,<name>_y,<name>_z,... or t_s,name,w,x,y,z"
+        )
+    used = {cols.index("t_s")} | {k for g in groups.values() for k in g}
+    meta = {"source": src}
+    ignored = [c for k, c in enumerate(cols) if k not in used]
+    if ignored:
+        meta["ignored_columns"] = ",".join(ignored)
+    ti = cols.index("t_s")
+    t, rows, lns = [], [], []
+    for j in range(h + 1, len(lines)):
+        raw = lines[j]
+        if not raw.strip() or raw.lstrip().startswith("#"):
+            continue
+        ln = j + 1
+        cells = raw.split(",")
+        if len(cells) != len(cols):
+            raise RigConfigError(f"{src}:{ln}: {len(cells)} cells, expected {len(cols)}")
+        t.append(_num(cells[ti], f"{src}:{ln}: t_s"))
+        rows.append([
+            _quat([cells[k] for k in g], f"{src}:{ln}: {name}") for name, g in groups.items()
+        ])
+        lns.append(ln)
+    if not rows:
+        raise RigConfigError(f"{src}: no data rows")
+    tt = np.array(t)
+    _check_time(tt, lns, src, "t_s")
+    arr = np.array(rows, dtype=np.float64)
+    columns = {name: np.ascontiguousarray(arr[:, k, :]) for k, name in enumerate(groups)}
+    return OrientationTable(time=tt, columns=columns, meta=meta)
+
+
+def write_csv(path: str | os.PathLike, table: OrientationTable, *, single: bool = False) -> None:
+    """Write the wide form (``t_s,<label>_w,...``), or with ``single=True`` and one column
+    the single form ``t_s,w,x,y,z``. Exact float round trip."""
+    labels = list(table.columns)
+    if single and len(labels) != 1:
+        raise RigConfigError(f"single-orientation CSV needs one column, table has {len(labels)}")
+    header = ["t_s"]
+    if single:
+        header += list("wxyz")
+    else:
+        for lab in labels:
+            if "," in lab or not lab:
+                raise RigConfigError(f"column label {lab!r} cannot be written to CSV")
+            header += [f"{lab}_{c}" for c in "wxyz"]
+    cols = [table.columns[lab].tolist() for lab in labels]
+
+    def body():
+        yield ",".join(header) + "\n"
+        out = []
+        for r, t in enumerate(table.time.tolist()):
+            cells = [repr(t)]
+            for c in cols:
+                cells.extend(repr(v) for v in c[r])
+            out.append(",".join(cells))
+            if len(out) >= 4096:
+                yield "\n".join(out) + "\n"
+                out = []
+        if out:
+            yield "\n".join(out) + "\n"
+
+    _atomic_write(path, body())
+
+
+def write_samples_csv(path: str | os.PathLike, s: Mapping[str, np.ndarray]) -> None:
+    """Write samples (as returned by :meth:`Store.samples`) in the long form
+    ``t_s,device_t_s,name,kind,w,x,y,z,status``; lossless."""
+    for nm in set(s["name"].tolist()) | set(s["kind"].tolist()):
+        if "," in nm or "\n" in nm:
+            raise RigConfigError(f"name {nm!r} cannot be written to CSV")
+
+    def body():
+        yield "t_s,device_t_s,name,kind,w,x,y,z,status\n"
+        out = []
+        q = s["q"].tolist()
+        for t, d, nm, kd, qq, st in zip(
+            s["t"].tolist(), s["device_t"].tolist(), s["name"].tolist(), s["kind"].tolist(), q,
+            s["status"].tolist(), strict=True,
+        ):
+            dd = "" if math.isnan(d) else repr(d)
+            out.append(f"{t!r},{dd},{nm},{kd},{qq[0]!r},{qq[1]!r},{qq[2]!r},{qq[3]!r},{st}")
+            if len(out) >= 4096:
+                yield "\n".join(out) + "\n"
+                out = []
+        if out:
+            yield "\n".join(out) + "\n"
+
+    _atomic_write(path, body())
+
+
+def read_orientations(path: str | os.PathLike) -> OrientationTable:
+    """Read a ``.sto`` or ``.csv`` file (chosen by suffix) into an :class:`OrientationTable`."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".sto":
+        return read_sto(path)
+    if suffix in (".csv", ".txt"):
+        return read_csv(path)
+    raise RigConfigError(f"{path}: unknown format {suffix!r} (expected .sto or .csv)")
+
+
+# ---------------------------------------------------------------------------------------------
+# sessions
+
+
+def align_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]]
+                 ) -> tuple[OrientationTable, int]:
+    """Put several (t, q) series on common times.
+
+    When every series has the same times the table is exact. Otherwise the series with the
+    fewest samples is the reference; each other series contributes its sample nearest in time,
+    if within half the reference's median period; reference rows without a match in every
+    series are dropped. Samples are never interpolated.
+
+    Returns
+    -------
+    table : OrientationTable
+    dropped : int
+        Reference rows left out.
+    """
+    if not series:
+        raise RigConfigError("nothing to align: no series")
+    names = list(series)
+    ts = {n: np.asarray(series[n][0], dtype=np.float64) for n in names}
+    qs = {n: np.asarray(series[n][1], dtype=np.float64) for n in names}
+    first = ts[names[0]]
+    if all(ts[n].shape == first.shape and np.array_equal(ts[n], first) for n in names):
+        return OrientationTable(time=first.copy(), columns={n: qs[n].copy() for n in names}), 0
+    ref = min(names, key=lambda n: ts[n].size)
+    tr = ts[ref]
+    tol = 0.5 * float(np.median(np.diff(tr))) if tr.size > 1 else 0.0
+    keep = np.ones(tr.size, dtype=bool)
+    picks = {}
+    for n in names:
+        if n == ref:
+            continue
+        tn = ts[n]
+        if tn.size == 0:
+            keep[:] = False
+            picks[n] = np.zeros(tr.size, dtype=np.intp)
+            continue
+        j = np.clip(np.searchsorted(tn, tr), 1, max(tn.size - 1, 1))
+        j0 = np.clip(j - 1, 0, tn.size - 1)
+        j1 = np.clip(j, 0, tn.size - 1)
+        best = np.where(np.abs(tn[j0] - tr) <= np.abs(tn[j1] - tr), j0, j1)
+        keep &= np.abs(tn[best] - tr) <= tol
+        picks[n] = best
+    idx = np.flatnonzero(keep)
+    cols = {n: (qs[n][idx] if n == ref else qs[n][picks[n][idx]]) for n in names}
+    return OrientationTable(time=tr[idx], columns=cols), int(tr.size - idx.size)
+
+
+def session_table(store: Store, session_id: int) -> tuple[OrientationTable, int]:
+    """A session's samples as a table: one column per sensor (``<name>_imu``) or joint
+    (``<name>``), aligned by :func:`align_series`. Returns (table, reference rows dropped)."""
+    s = store.samples(session_id)
+    if s["t"].size == 0:
+        raise RigConfigError(f"session {session_id} has no samples to export")
+    series = {}
+    for nm in dict.fromkeys(s["name"].tolist()):
+        sel = s["name"] == nm
+        kind = s["kind"][sel][0]
+        label = nm if (kind == "joint" or nm.endswith("_imu")) else f"{nm}_imu"
+        t, q = s["t"][sel], s["q"][sel]
+        order = np.argsort(t, kind="stable")
+        series[label] = (t[order], q[order])
+    table, dropped = align_series(series)
+    sess = store.get_session(session_id)
+    table.meta.update({
+        "rig_session": str(session_id),
+        "rig_patient": str(sess["pseudonym"]),
+        "rig_version": __version__,
+    })
+    if sess.get("joint"):
+        table.meta["rig_joint"] = str(sess["joint"])
+    if sess.get("side"):
+        table.meta["rig_side"] = str(sess["side"])
+    return table, dropped
+
+
+EXPORT_FORMATS = ("sto", "csv")
+
+
+def export_session(store: Store, session_id: int, fmt: str, out: str | os.PathLike) -> dict:
+    """Write a session's samples to ``out``.
+
+    ``sto``: the OpenSim orientation table of :func:`session_table`. ``csv``: the long form,
+    every sample exactly as stored (no alignment). Returns a summary dict: ``rows``,
+    ``columns`` (or ``names``), ``dropped_rows`` (sto alignment), ``path``.
+    """
+    if fmt not in EXPORT_FORMATS:
+        raise RigConfigError(f"--format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
+    if fmt == "sto":
+        table, dropped = session_table(store, session_id)
+        write_sto(out, table)
+        return {"path": os.fspath(out), "rows": len(table), "columns": table.labels,
+                "dropped_rows": dropped}
+    s = store.samples(session_id)
+    if s["t"].size == 0:
+        raise RigConfigError(f"session {session_id} has no samples to export")
+    write_samples_csv(out, s)
+    return {"path": os.fspath(out), "rows": int(s["t"].size),
+            "names": list(dict.fromkeys(s["name"].tolist())), "dropped_rows": 0}
