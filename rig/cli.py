@@ -35,6 +35,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
     "train": ("rig.commands.train", "train", "Train a corrective-constraint network, export ONNX."),
     "evaluate": ("rig.commands.train", "evaluate", "Metrics of an ONNX model on held-out data."),
     "session": ("rig.commands.session", "session", "List the sessions in a store (--db)."),
+    "record": (
+        "rig.commands.record",
+        "record",
+        "Calibrate and record a patient's range of motion (live coverage display).",
+    ),
     "export": (
         "rig.commands.export",
         "export",

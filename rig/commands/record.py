@@ -1,0 +1,76 @@
+"""``rig record``: record a patient's range of motion into the session store.
+
+A thin layer over :func:`rig.record.record`: options → :class:`~rig.record.RecordOptions`, a
+display (rich on a terminal, plain lines otherwise), and the exit status:
+
+- 0 — the session ended as asked (``--duration`` reached, Ctrl-C or SIGTERM);
+- 1 — the device vanished mid-session (everything up to then is kept, status ``device_lost``);
+- 2 — a user mistake (bad option, config, unknown key, wrong port), one line, nothing recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+
+@click.command("record")
+@click.option("--rig", "rig_name", required=True, metavar="NAME|FILE",
+              help="Rig configuration: a shipped name (sim-imu, sim-shoulder) or a YAML file.")
+@click.option("--db", required=True, metavar="DB",
+              help="Session store: a SQLite path, sqlite:///... or postgresql://...")
+@click.option("--patient", required=True, metavar="PSEUDONYM",
+              help="The patient's pseudonym (never a real name).")
+@click.option("--duration", type=float, default=None, metavar="S",
+              help="Seconds to record after calibration (sample time); default: until Ctrl-C.")
+@click.option("--annotate", "annotations", multiple=True, metavar="[T:]TEXT",
+              help="A note stored with the session, at T seconds into the recording "
+                   "(default: at its start). Repeatable. On a terminal, typing a line and "
+                   "Enter while recording adds one too.")
+@click.option("--no-calibration", is_flag=True,
+              help="Skip the guided calibration steps (raw samples only).")
+@click.option("--display", type=click.Choice(["auto", "live", "plain"]), default="auto",
+              show_default=True, help="Live panel (terminal) or plain progress lines.")
+@click.option("--events", is_flag=True,
+              help="Print machine-readable JSON lines (session id, commits) on stdout.")
+def record(rig_name, db, patient, duration, annotations, no_calibration, display, events):
+    """Calibrate, then record a patient's shoulder moving to its limits.
+
+    Shows the coverage of the boundary per direction while recording; stop with Ctrl-C once it
+    says COVERAGE SUFFICIENT (or give --duration).
+    """
+    from rig.record import RecordOptions, make_display, parse_annotation, record_session
+
+    opts = RecordOptions(
+        rig=rig_name, db=db, patient=patient, duration_s=duration,
+        annotations=[parse_annotation(a) for a in annotations], calibrate=not no_calibration)
+    opts.check()
+
+    def on_event(name: str, info: dict) -> None:
+        if events:
+            print(json.dumps({"event": name, **info}), flush=True)
+
+    shown = make_display(display, stream=sys.stderr if events else sys.stdout)
+    result = record_session(opts, display=shown, on_event=on_event)
+    summary = (f"session {result.session_id}: {result.status}, {result.samples} samples over "
+               f"{result.span_s:.1f} s, dropped {result.dropped} (sequence gaps "
+               f"{result.gaps}, queue overflow {result.overflow})")
+    if result.calibration is not None:
+        summary += f", calibration residual {result.calibration.residual_deg:.2f}°"
+    cov = result.coverage
+    if cov:
+        summary += (", coverage sufficient" if cov.get("sufficient") else
+                    f", coverage {cov.get('explored_sectors', 0)}/{len(cov.get('sectors', []))}"
+                    " sectors")
+    if events:
+        print(json.dumps({"event": "end", "session_id": result.session_id,
+                          "status": result.status, "samples": result.samples,
+                          "dropped": result.dropped, "first_t": result.first_t,
+                          "last_t": result.last_t}), flush=True)
+    click.echo(summary, err=events)
+    if result.status == "device_lost":
+        click.echo(f"rig: error: device lost during the recording: {result.error}; "
+                   f"session {result.session_id} kept with everything recorded so far", err=True)
+        sys.exit(1)
