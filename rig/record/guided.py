@@ -1,0 +1,280 @@
+"""Guided calibration at the start of a recording, and joint orientations from samples.
+
+The protocol is :class:`calibration.protocol.CalibrationProtocol`: a static neutral pose
+(standing, arm hanging at the side, forearm forward; ``static_s``), then flexion/extension of
+the straight arm in the sagittal plane (``functional_s``), with ``settle_s`` trimmed at both ends
+of each phase. Its :meth:`~calibration.protocol.CalibrationProtocol.windows` slice the samples;
+the maths is :class:`calibration.alignment.ImuJointCalibration` (IMU rigs). On a servo rig the
+forward kinematics already give the joint orientation; the neutral pose then checks the chain's
+zero (residual = RMS angle from the identity) and the functional movement its axis.
+
+**Protocol time.** On a simulated rig the simulated patient performs the protocol from its own
+time 0 and the steps advance by themselves: protocol time is the patient's time, from the
+rig's :meth:`~rig.record.rigio.OpenRig.patient_time`. On hardware the clinician is prompted,
+gets the patient into the neutral pose and presses Enter: protocol time starts at the first
+sample after that, and the display says when to start the flexion/extension.
+
+Everything recorded during the protocol is also in the store; the windows used are in the
+calibration's data.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import sys
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from models import quaternion as Q
+from rig.record.pump import SampleBatch
+
+__all__ = ["CalibrationResult", "GuidedCalibration"]
+
+
+@dataclass
+class CalibrationResult:
+    """What is stored (``store.add_calibration(session, kind, data, residual_deg)``) and what
+    turns raw samples into joint orientations.
+
+    Attributes
+    ----------
+    kind : str
+        ``"imu-alignment"`` or ``"servo-zero"``.
+    data : dict
+        JSON-able calibration parameters plus the protocol windows.
+    residual_deg : float
+        The calibration's own residual, degrees.
+    model : object or None
+        The fitted :class:`~calibration.alignment.ImuJointCalibration` (IMU rigs).
+    """
+
+    kind: str
+    data: dict
+    residual_deg: float
+    model: object = None
+
+
+class GuidedCalibration:
+    """Runs the calibration protocol over the recorder's sample stream.
+
+    Parameters
+    ----------
+    config : RigConfig
+    rig : OpenRig
+    display : display object (``message``)
+    protocol : CalibrationProtocol, optional
+    stdin : text stream, optional
+        Where Enter is read on hardware (default ``sys.stdin``).
+    """
+
+    def __init__(self, config, rig, *, display, protocol=None, stdin=None) -> None:
+        from calibration.protocol import CalibrationProtocol
+
+        self.config = config
+        self.rig = rig
+        self.display = display
+        self.protocol = protocol if protocol is not None else CalibrationProtocol()
+        self.stdin = stdin if stdin is not None else sys.stdin
+        self.parent = config.joint.parent
+        self.child = config.joint.child
+        self._origin: float | None = None  # hardware: sample time at which the protocol began
+        self._armed = False
+        self._said_functional = False
+        self._done = False
+        self._batches: list[tuple[np.ndarray, SampleBatch]] = []  # (protocol time, batch)
+        self._enter = threading.Event()
+        self._stop_reader = threading.Event()
+        self._reader: threading.Thread | None = None
+        self._result: CalibrationResult | None = None
+        self._last_parent: np.ndarray | None = None
+
+    # -- progress --------------------------------------------------------------------------
+    @property
+    def prompt(self) -> str:
+        if self._done:
+            return "calibrated"
+        if not self._armed:
+            return "calibration: neutral pose, press Enter when ready"
+        return ("calibration: flexion/extension" if self._said_functional
+                else "calibration: neutral pose, hold still")
+
+    def begin(self, stop: threading.Event) -> None:
+        """Announce the protocol; on hardware wait (in the background) for Enter."""
+        p = self.protocol
+        self.display.message(
+            f"calibration — 1) neutral pose: patient upright, arm hanging relaxed at the side, "
+            f"forearm forward; hold still {p.static_s:g} s. 2) then raise the straight arm "
+            f"forwards and lower it behind (flexion/extension) for {p.functional_s:g} s")
+        if self.rig.simulated:
+            self._armed = True
+            self.display.message("simulated patient: the steps advance by themselves")
+            return
+        self.display.message("press Enter when the patient is in the neutral pose")
+        self._reader = threading.Thread(target=self._read_enter, name="rig-record-enter",
+                                        daemon=True)
+        self._reader.start()
+
+    def _read_enter(self) -> None:
+        try:
+            fd = self.stdin.fileno()
+        except (AttributeError, OSError, ValueError):
+            self._enter.set()  # no usable stdin: start at once
+            return
+        while not self._stop_reader.is_set():
+            ready, _, _ = select.select([fd], [], [], 0.2)
+            if ready:
+                data = os.read(fd, 1024)
+                if not data or b"\n" in data:  # Enter, or EOF (nobody will press it)
+                    self._enter.set()
+                    return
+
+    def _protocol_time(self, batch: SampleBatch) -> np.ndarray:
+        if self.rig.simulated:
+            return self.rig.patient_time(batch)
+        clock = batch.time()
+        if self._origin is None:
+            self._origin = float(clock[0])
+        return clock - self._origin
+
+    def feed(self, batch: SampleBatch) -> bool:
+        """Take a batch; True once the whole protocol has been recorded."""
+        if self._done:
+            return True
+        if not self._armed:
+            if not self._enter.is_set():
+                return False
+            self._armed = True
+            self.display.message(f"neutral pose: hold still ({self.protocol.static_s:g} s)")
+        pt = self._protocol_time(batch)
+        self._batches.append((pt, batch))
+        last = float(pt[-1])
+        if not self._said_functional and last >= self.protocol.static_s:
+            self._said_functional = True
+            self.display.message("now flexion/extension: raise the straight arm forwards, then "
+                                 f"behind, slowly ({self.protocol.functional_s:g} s)")
+        if last >= self.protocol.duration_s:
+            self._done = True
+        return self._done
+
+    def close(self) -> None:
+        self._stop_reader.set()
+        if self._reader is not None:
+            self._reader.join()
+            self._reader = None
+
+    # -- solving ---------------------------------------------------------------------------
+    def window(self, name: str) -> SampleBatch:
+        """Samples inside protocol window ``name`` (``"static"`` or ``"functional"``)."""
+        lo, hi = self.protocol.windows()[name]
+        parts = [b.select((pt >= lo) & (pt <= hi)) for pt, b in self._batches]
+        return _concat(parts)
+
+    def finish(self) -> CalibrationResult:
+        """Compute the calibration from the recorded protocol."""
+        static = self.window("static")
+        functional = self.window("functional")
+        if self.rig.kind == "servo":
+            result = _servo_check(static, functional)
+        else:
+            result = _solve_imu(static, functional, self.parent, self.child)
+        result.data = {**result.data,
+                       "protocol": {k: getattr(self.protocol, k) for k in (
+                           "static_s", "functional_s", "flexion_deg", "extension_deg",
+                           "period_s", "settle_s")},
+                       "windows_s": {k: list(v) for k, v in self.protocol.windows().items()}}
+        self._result = result
+        self._batches.clear()
+        return result
+
+    def joint_orientations(self, batch: SampleBatch) -> tuple[np.ndarray, np.ndarray]:
+        """Joint orientations (M, 4) and their times (M,) from a batch, calibration applied.
+
+        IMU rigs: each child-segment sample is paired with the latest parent-segment sample
+        (the stream device sends both in one frame with one timestamp).
+        """
+        if self.rig.kind == "servo":
+            sel = batch.kind == "joint"
+            return batch.q[sel], batch.time()[sel]
+        is_parent = batch.name == self.parent
+        is_child = batch.name == self.child
+        if not is_child.any():
+            if is_parent.any():
+                self._last_parent = batch.q[np.flatnonzero(is_parent)[-1]]
+            return np.empty((0, 4)), np.empty(0)
+        # forward-fill the latest parent sample over the rows
+        idx = np.where(is_parent, np.arange(len(batch)), -1)
+        idx = np.maximum.accumulate(idx)
+        child_rows = np.flatnonzero(is_child)
+        src = idx[child_rows]
+        have = src >= 0
+        parent_q = np.empty((len(child_rows), 4))
+        parent_q[have] = batch.q[src[have]]
+        if (~have).any():
+            if self._last_parent is None:
+                child_rows, parent_q = child_rows[have], parent_q[have]
+            else:
+                parent_q[~have] = self._last_parent
+        if is_parent.any():
+            self._last_parent = batch.q[np.flatnonzero(is_parent)[-1]]
+        child_q = batch.q[child_rows]
+        if self._result is not None and self._result.model is not None:
+            q = _apply_imu(self._result.model, parent_q, child_q)
+        else:
+            q = Q.multiply(Q.conjugate(parent_q), child_q)
+        return q, batch.time()[child_rows]
+
+
+def _concat(batches: list[SampleBatch]) -> SampleBatch:
+    if not batches:
+        e = np.empty(0)
+        return SampleBatch(e, e, np.empty(0, object), np.empty(0, object), np.empty((0, 4)),
+                           np.empty(0, np.int64))
+    return SampleBatch(*(np.concatenate([getattr(b, f) for b in batches])
+                         for f in ("t", "device_t", "name", "kind", "q", "status")))
+
+
+def _pairs(b: SampleBatch, parent: str, child: str) -> tuple[np.ndarray, np.ndarray]:
+    """Parent and child orientations at the same instants (equal sample times)."""
+    clock = b.time()
+    sp = b.name == parent
+    sc = b.name == child
+    _, ip, ic = np.intersect1d(clock[sp], clock[sc], assume_unique=False, return_indices=True)
+    return b.q[sp][ip], b.q[sc][ic]
+
+
+def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child: str):
+    from calibration.alignment import ImuJointCalibration
+
+    st, sl = _pairs(static, parent, child)
+    ft, fl = _pairs(functional, parent, child)
+    cal = ImuJointCalibration().fit(st, sl, ft, fl)
+    return CalibrationResult("imu-alignment", cal.to_dict(), float(cal.residual_deg_), cal)
+
+
+def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
+    return model.transform(parent_q, child_q)
+
+
+def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationResult:
+    """Servo chain: the neutral pose must read as the identity through the forward kinematics
+    (a wrong zero offset or direction shows here), the functional movement as a rotation about
+    one axis. No correction is applied: the chain's zeros are the rig configuration's."""
+    from calibration.alignment import functional_axis
+
+    qs = static.q[static.kind == "joint"]
+    qf = functional.q[functional.kind == "joint"]
+    zero = np.degrees(Q.angle(qs)) if len(qs) else np.array([math.nan])
+    static_rms = float(np.sqrt(np.mean(zero**2)))
+    data = {"kind": "servo-chain-check", "static_rms_deg": static_rms,
+            "static_max_deg": float(np.max(zero))}
+    residual = static_rms
+    if len(qf) >= 2:
+        axis, off_axis, flex_range = functional_axis(qf)
+        data.update({"functional_axis": [float(v) for v in axis],
+                     "functional_deg": float(off_axis), "functional_range_deg": float(flex_range)})
+        residual = max(residual, float(off_axis))
+    return CalibrationResult("servo-zero", data, residual, None)

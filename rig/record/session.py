@@ -1,0 +1,421 @@
+"""A recording session, start to end: ``rig record`` is a thin layer over :func:`record`.
+
+Sequence (every step that can fail on a user mistake comes before anything is recorded)
+------------------------------------------------------------------------------------------
+1. Check the options; load the rig configuration (unknown keys, bad values → RigConfigError);
+   open the store; open the devices (wrong port, silent device → RigConnectionError /
+   RigTimeoutError). The CLI shows any of these as one line, exit 2, nothing written.
+2. Create (or find) the pseudonymised patient, start the session, register its sensors, start
+   the reader thread (:class:`~rig.record.pump.SamplePump`) and the store's sample writer. From
+   here on every sample is written, calibration steps included.
+3. **Guided calibration** (:mod:`rig.record.guided`): a static neutral pose, then functional
+   flexion/extension. On simulated rigs the steps advance by themselves (the simulated patient
+   performs them); on hardware the clinician is prompted and presses Enter. The calibration and
+   its residual are stored (``store.add_calibration``).
+4. **Recording** until ``duration_s`` of sample time, Ctrl-C / SIGTERM, or a vanished device.
+   Joint orientations (calibrated) feed the live :class:`~rig.record.coverage.CoverageMap`.
+5. **End**: the reader is stopped, the queue drained, the writer closed (last commit) and the
+   session ended with its status (``completed``, ``interrupted``, ``device_lost``, ``failed``)
+   and counts (samples, sequence gaps, queue overflow).
+
+Crash safety is the store's commit cadence: the writer commits at least once a second, so a
+``kill -9`` loses at most the last second; SQLite's WAL keeps the file consistent.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rig.errors import RigConfigError, RigConnectionError
+from rig.record.coverage import CoverageMap
+from rig.record.display import PlainDisplay, RecordStatus
+from rig.record.guided import CalibrationResult, GuidedCalibration
+from rig.record.pump import SampleBatch, SamplePump
+from rig.record.rigio import OpenRig, load_config, open_rig
+
+__all__ = ["Annotation", "RecordOptions", "RecordResult", "parse_annotation", "record"]
+
+
+@dataclass(frozen=True)
+class Annotation:
+    """A note attached to the recording at ``at_s`` seconds of sample time (None: at start)."""
+
+    text: str
+    at_s: float | None = None
+
+
+def parse_annotation(spec: str) -> Annotation:
+    """``"text"`` (at the start) or ``"12.5:text"`` (12.5 s into the recording)."""
+    head, sep, tail = spec.partition(":")
+    if sep:
+        try:
+            at = float(head)
+        except ValueError:
+            return Annotation(spec.strip())
+        if not math.isfinite(at) or at < 0:
+            raise RigConfigError(f"--annotate {spec!r}: the time must be >= 0 seconds")
+        if not tail.strip():
+            raise RigConfigError(f"--annotate {spec!r}: no text after the time")
+        return Annotation(tail.strip(), at)
+    if not spec.strip():
+        raise RigConfigError("--annotate: empty text")
+    return Annotation(spec.strip())
+
+
+@dataclass
+class RecordOptions:
+    """What ``rig record`` takes (see :func:`record`).
+
+    Attributes
+    ----------
+    rig : str
+        Rig configuration name (``sim-imu``) or YAML path.
+    db : str
+        Store path or URL.
+    patient : str
+        Pseudonym (never a real name).
+    duration_s : float or None
+        Recording length in sample time after calibration; None: until Ctrl-C.
+    annotations : sequence of Annotation
+    calibrate : bool
+        Run the guided calibration steps (default). Without them the recording is stored raw
+        and calibration must come from elsewhere.
+    queue_batches : int
+        Capacity of the reader → writer queue, in batches.
+    coverage : dict
+        Keyword arguments of :class:`~rig.record.coverage.CoverageMap`.
+    source_options : dict
+        Extra keyword arguments for opening the orientation source.
+    """
+
+    rig: str
+    db: str
+    patient: str
+    duration_s: float | None = None
+    annotations: Sequence[Annotation] = ()
+    calibrate: bool = True
+    queue_batches: int = 1024
+    coverage: dict = field(default_factory=dict)
+    source_options: dict = field(default_factory=dict)
+
+    def check(self) -> None:
+        """Raise :class:`RigConfigError` on a bad option (before anything is opened)."""
+        if not self.patient or not self.patient.strip():
+            raise RigConfigError("--patient: a pseudonym is required")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s)
+                                                and self.duration_s > 0):
+            raise RigConfigError(f"--duration must be > 0 seconds, got {self.duration_s}")
+        if self.queue_batches < 1:
+            raise RigConfigError("queue size must be >= 1")
+
+
+@dataclass
+class RecordResult:
+    """How a session ended.
+
+    Attributes
+    ----------
+    session_id, patient_id : int
+    status : str
+        ``completed`` (duration reached), ``interrupted`` (Ctrl-C / SIGTERM), ``device_lost``
+        (the source raised RigConnectionError), ``failed`` (anything else; re-raised).
+    samples : int
+        Samples written to the store.
+    gaps, overflow : int
+        Samples lost at the source (sequence gaps) and in the queue (writer too slow).
+    span_s : float
+        Sample time covered (first to last sample), seconds.
+    first_t, last_t : float
+        Host time (``t`` column) of the first and last sample written.
+    calibration : CalibrationResult or None
+    coverage : dict
+        :meth:`CoverageSummary.as_dict` at the end.
+    error : str or None
+        What ended a ``device_lost`` session.
+    """
+
+    session_id: int
+    patient_id: int
+    status: str
+    samples: int = 0
+    gaps: int = 0
+    overflow: int = 0
+    span_s: float = 0.0
+    first_t: float = math.nan
+    last_t: float = math.nan
+    calibration: CalibrationResult | None = None
+    coverage: dict = field(default_factory=dict)
+    error: str | None = None
+
+    @property
+    def dropped(self) -> int:
+        return self.gaps + self.overflow
+
+
+class _Stop:
+    """SIGINT / SIGTERM set a flag instead of raising somewhere inside a store commit."""
+
+    def __init__(self, event: threading.Event) -> None:
+        self.event = event
+        self.signal: int | None = None
+        self._old: dict[int, object] = {}
+
+    def __enter__(self) -> _Stop:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.signal = signum
+        self.event.set()
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def record(
+    options: RecordOptions,
+    *,
+    display=None,
+    stop: threading.Event | None = None,
+    on_event: Callable[[str, dict], None] | None = None,
+    rig: OpenRig | None = None,
+) -> RecordResult:
+    """Run one recording session (see the module docstring).
+
+    Parameters
+    ----------
+    options : RecordOptions
+    display : PlainDisplay or LiveDisplay, optional
+        Default: plain progress lines on stdout.
+    stop : threading.Event, optional
+        Set it to end the session (as Ctrl-C does); SIGINT/SIGTERM also set it when called from
+        the main thread.
+    on_event : callable(name, info), optional
+        Called at ``"session"`` (ids), ``"calibrated"``, ``"recording"`` and ``"committed"``
+        (samples written so far) — used by tests and the CLI's machine-readable output.
+    rig : OpenRig, optional
+        An already opened rig (tests, benchmarks); otherwise opened from ``options.rig``. Either
+        way it is closed at the end.
+
+    Returns
+    -------
+    RecordResult
+
+    Raises
+    ------
+    RigConfigError, RigConnectionError, RigTimeoutError, FileNotFoundError
+        Before anything is recorded: bad options, config, store path or ports.
+    """
+    from rig.store import open_store
+
+    options.check()
+    stop = stop if stop is not None else threading.Event()
+    display = display if display is not None else PlainDisplay()
+    emit = on_event if on_event is not None else (lambda name, info: None)
+
+    if rig is None:
+        config = load_config(options.rig)
+        store = open_store(options.db)
+        try:
+            rig = open_rig(config, **options.source_options)
+        except BaseException:
+            _close(store)
+            raise
+    else:
+        config = rig.config
+        try:
+            store = open_store(options.db)
+        except BaseException:
+            rig.close()
+            raise
+    with contextlib.ExitStack() as stack:
+        stack.callback(_close, store)
+        stack.callback(rig.close)
+        return _run(options, config, rig, store, display, stop, emit)
+
+
+def _close(store) -> None:
+    close = getattr(store, "close", None)
+    if close is not None:
+        close()
+
+
+def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordResult:
+    joint = config.joint
+    patient_id = int(store.ensure_patient(options.patient.strip(), side=joint.side))
+    meta = {"rig": config.name, "simulated": rig.simulated,
+            "duration_s": options.duration_s, "sensors": [s.name for s in rig.sensors]}
+    session_id = int(store.start_session(patient_id, rig_name=config.name, joint=joint.name,
+                                         side=joint.side, kind="record", meta=meta))
+    for s in rig.sensors:
+        store.add_sensor(session_id, s.name, segment=s.segment, kind=s.kind, port=s.port)
+    emit("session", {"session_id": session_id, "patient_id": patient_id})
+    result = RecordResult(session_id, patient_id, status="failed")
+    status = RecordStatus(patient=options.patient, phase="starting",
+                          duration_s=options.duration_s)
+    coverage = CoverageMap(**options.coverage)
+    writer = store.sample_writer(session_id)
+    pump = SamplePump(rig.source, maxsize=options.queue_batches)
+    calib = GuidedCalibration(config, rig, display=display)
+    pending = sorted(options.annotations, key=lambda a: -1.0 if a.at_s is None else a.at_s)
+    t_start: float | None = None  # sample time (best clock) when recording proper began
+    rate = _Rate()
+    last_commit_report = -math.inf
+    error: BaseException | None = None
+    phase = "calibration" if options.calibrate else "recording"
+    display.start()
+    try:
+        with _Stop(stop):
+            pump.start()
+            if options.calibrate:
+                calib.begin(stop)
+            else:
+                emit("recording", {"session_id": session_id})
+            while True:
+                batch = pump.get(timeout=0.1)
+                if batch is not None:
+                    _write(writer, batch)
+                    result.samples += len(batch)
+                    if math.isnan(result.first_t):
+                        result.first_t = float(batch.t[0])
+                    result.last_t = float(batch.t[-1])
+                    rate.add(len(batch))
+                    clock = batch.time()
+                    if phase == "calibration":
+                        done = calib.feed(batch)
+                        if done:
+                            cal = calib.finish()
+                            result.calibration = cal
+                            store.add_calibration(session_id, cal.kind, cal.data, cal.residual_deg)
+                            display.message(f"calibration stored: {cal.kind}, residual "
+                                            f"{cal.residual_deg:.2f}°")
+                            emit("calibrated", {"residual_deg": cal.residual_deg})
+                            phase = "recording"
+                            emit("recording", {"session_id": session_id})
+                    if phase == "recording":
+                        if t_start is None:
+                            t_start = float(clock[0])
+                        joint_q, joint_t = calib.joint_orientations(batch)
+                        if len(joint_q):
+                            coverage.add(joint_q, joint_t)
+                        status.elapsed_s = float(clock[-1]) - t_start
+                        while pending and (pending[0].at_s is None
+                                           or pending[0].at_s <= status.elapsed_s):
+                            note = pending.pop(0)
+                            _annotate(store, session_id, float(batch.t[-1]), note.text, status)
+                        if (options.duration_s is not None
+                                and status.elapsed_s >= options.duration_s):
+                            result.status = "completed"
+                            break
+                if stop.is_set():
+                    result.status = "interrupted"
+                    break
+                if pump.finished:
+                    if pump.error is not None:
+                        error = pump.error
+                        if not isinstance(error, RigConnectionError | OSError):
+                            raise error
+                        result.status = "device_lost"
+                        result.error = str(error) or type(error).__name__
+                    else:
+                        result.status = "interrupted"
+                    break
+                now = time.monotonic()
+                if now - last_commit_report >= 1.0:
+                    last_commit_report = now
+                    emit("committed", {"samples": result.samples})
+                status.phase = calib.prompt if phase == "calibration" else "recording"
+                status.samples = result.samples
+                status.rate_hz = rate.value()
+                status.dropped = pump.dropped
+                writer.set_dropped(pump.dropped)
+                if phase == "recording":
+                    if rate.due_summary():
+                        status.coverage = coverage.summary()
+                display.update(status)
+    except BaseException:
+        result.status = "failed"
+        raise
+    finally:
+        pump.stop()
+        # what the reader had queued is kept, whatever ended the session
+        for batch in pump.drain():
+            _write(writer, batch)
+            result.samples += len(batch)
+            if math.isnan(result.first_t):
+                result.first_t = float(batch.t[0])
+            result.last_t = float(batch.t[-1])
+        calib.close()
+        result.gaps = int(getattr(rig.source, "dropped", 0) or 0)
+        result.overflow = pump.overflow
+        writer.set_dropped(result.dropped)
+        writer.close()
+        final = coverage.summary()
+        result.coverage = final.as_dict()
+        result.span_s = final.t_span_s
+        status.coverage = final
+        status.samples = result.samples
+        status.dropped = result.dropped
+        status.phase = result.status
+        display.update(status, force=True)
+        display.stop()
+        end_meta = {
+            "samples": result.samples, "dropped": result.dropped, "gaps": result.gaps,
+            "queue_overflow": result.overflow, "coverage": result.coverage,
+            "calibration_residual_deg": (None if result.calibration is None
+                                         else result.calibration.residual_deg),
+        }
+        if result.error:
+            end_meta["error"] = result.error
+        store.end_session(session_id, status=result.status, meta=end_meta,
+                          dropped=result.dropped)
+    return result
+
+
+def _write(writer, batch: SampleBatch) -> None:
+    writer.add_many(batch.t, batch.device_t, batch.name, batch.kind, batch.q, batch.status)
+
+
+def _annotate(store, session_id: int, t: float, text: str, status: RecordStatus) -> None:
+    store.add_annotation(session_id, t, text)
+    status.annotations.append((status.elapsed_s, text))
+
+
+class _Rate:
+    """Samples per second over the last couple of real seconds (display only)."""
+
+    def __init__(self) -> None:
+        self._marks: list[tuple[float, int]] = []
+        self._last_summary = -math.inf
+
+    def add(self, n: int) -> None:
+        now = time.monotonic()
+        self._marks.append((now, n))
+        while self._marks and now - self._marks[0][0] > 2.0:
+            self._marks.pop(0)
+
+    def value(self) -> float:
+        if len(self._marks) < 2:
+            return 0.0
+        dt = self._marks[-1][0] - self._marks[0][0]
+        return sum(n for _, n in self._marks[1:]) / dt if dt > 0 else 0.0
+
+    def due_summary(self) -> bool:
+        now = time.monotonic()
+        if now - self._last_summary >= 0.25:
+            self._last_summary = now
+            return True
+        return False
+
+
