@@ -3,8 +3,8 @@
 Sequence (every step that can fail on a user mistake comes before anything is recorded)
 ------------------------------------------------------------------------------------------
 1. Check the options; load the rig configuration (unknown keys, bad values → RigConfigError);
-   open the store; open the devices (wrong port, silent device → RigConnectionError /
-   RigTimeoutError). The CLI shows any of these as one line, exit 2, nothing written.
+   open the devices (wrong port, silent device → RigConnectionError / RigTimeoutError); open
+   the store. The CLI shows any of these as one line, exit 2, nothing written.
 2. Create (or find) the pseudonymised patient, start the session, register its sensors, start
    the reader thread (:class:`~rig.record.pump.SamplePump`) and the store's sample writer. From
    here on every sample is written, calibration steps included.
@@ -226,11 +226,11 @@ def record(
 
     if rig is None:
         config = load_config(options.rig)
-        store = open_store(options.db)
+        rig = open_rig(config, **options.source_options)  # wrong port: fails here, no DB yet
         try:
-            rig = open_rig(config, **options.source_options)
+            store = open_store(options.db)
         except BaseException:
-            _close(store)
+            rig.close()
             raise
     else:
         config = rig.config
@@ -334,7 +334,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                 now = time.monotonic()
                 if now - last_commit_report >= 1.0:
                     last_commit_report = now
-                    emit("committed", {"samples": result.samples})
+                    emit("committed", {"samples": result.samples, "last_t": result.last_t,
+                                       "written": writer.written})
                 status.phase = calib.prompt if phase == "calibration" else "recording"
                 status.samples = result.samples
                 status.rate_hz = rate.value()

