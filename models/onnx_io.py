@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -129,16 +130,172 @@ def _activation(g: _Graph, kind: int, z: str, templates: np.ndarray | None = Non
     return g.op("Add", [g.op("Mul", [y, t]), d])
 
 
+def _product_tensor() -> np.ndarray:
+    """(4, 4, 4): ``(e_i ⊗ e_j)_k`` — the Hamilton product as a bilinear form."""
+    from models.quaternion import multiply
+
+    eye = np.eye(4)
+    return np.stack([np.stack([multiply(eye[i], eye[j]) for j in range(4)]) for i in range(4)])
+
+
+def _rotation_tensor(axis: np.ndarray) -> np.ndarray:
+    """(4, 4, 3): ``R(q) a`` as a quadratic form of (not necessarily unit) ``q``."""
+    def f(q):
+        w, u = q[0], q[1:]
+        return (w * w - u @ u) * axis + 2.0 * (u @ axis) * u + 2.0 * w * np.cross(u, axis)
+
+    eye = np.eye(4)
+    t = np.zeros((4, 4, 3))
+    for i in range(4):
+        t[i, i] = f(eye[i])
+        for j in range(i + 1, 4):
+            t[i, j] = t[j, i] = 0.5 * (f(eye[i] + eye[j]) - f(eye[i]) - f(eye[j]))
+    return t
+
+
+def _bilinear(g: _Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") -> str:
+    """``out_k = Σ_ij p_i q_j t[i, j, k]`` for (N, I), (N, J) inputs: 4 nodes, zero pairs pruned."""
+    ni, nj, _ = t.shape
+    if p == q:  # a quadratic form: fold t[j, i] into t[i, j] (i < j)
+        t = np.triu(np.moveaxis(t + np.swapaxes(t, 0, 1), -1, 0) * 0.5, 0)
+        t = np.moveaxis(t + np.triu(t, 1), 0, -1)
+    pairs = [(i, j) for i in range(ni) for j in range(nj) if np.any(t[i, j] != 0.0)]
+    a = np.zeros((ni, len(pairs)))
+    b = np.zeros((nj, len(pairs)))
+    s = np.stack([t[i, j] for i, j in pairs])
+    for n, (i, j) in enumerate(pairs):
+        a[i, n] = b[j, n] = 1.0
+    prod = g.op("Mul", [g.op("MatMul", [p, g.const(a)]), g.op("MatMul", [q, g.const(b)])])
+    return g.op("MatMul", [prod, g.const(s)], stem=stem)
+
+
+def _field_graph(g: _Graph, model) -> None:
+    """The swing-field + twist-clamp graph of :class:`models.field.FieldModel` (its docstring)."""
+    from models.field import _encode_bias, _encode_matrix, _index_weights
+
+    axis = model.axis
+    prod = _product_tensor()
+    d = _bilinear(g, INPUT, INPUT, _rotation_tensor(axis), "limb_direction")
+    delta = None
+    if model.table is not None:  # nearest table node in the two octahedral diamonds
+        p = g.op("Div", [d, g.op("ReduceL1", [d], axes=[1], keepdims=1)])
+        x = g.op("Floor", [g.op("Gemm", [p, g.const(_encode_matrix(model.grid)),
+                                           g.const(_encode_bias(model.grid))])])
+        flat = g.op("ReduceSum", [g.op("Mul", [x, g.const(_index_weights(model.grid))]),
+                                  g.const([1], dtype=np.int64)], keepdims=0)
+        idx = g.op("Cast", [flat], to=TensorProto.INT64)
+        delta = g.op("Gather", [g.const(model.table), idx], stem="swing_correction")
+    tw = model.constraint.twist
+    if tw is None:
+        if delta is None:  # nothing constrained: identity for every row
+            delta = g.op("Add", [g.op("Mul", [INPUT, g.const(0.0)]),
+                                 g.const([[1.0, 0.0, 0.0, 0.0]])])
+        g.op("Identity", [delta], out=OUTPUT)
+        return
+    # twist half-angle pair t = (w', a·v') of q' = Δ ⊗ q
+    tmap = np.concatenate((prod[..., :1], (prod[..., 1:] @ axis)[..., None]), axis=-1)
+    by_swing = getattr(tw, "by_swing", None)
+    rot90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+    if by_swing is None:
+        mid, half = 0.5 * (tw.min + tw.max), 0.5 * (tw.max - tw.min)
+        cm, sm = math.cos(mid / 2), math.sin(mid / 2)
+        turn = np.array([[cm, -sm], [sm, cm]])  # u = t e^{-i mid/2}
+        if delta is None:
+            u = g.op("MatMul", [INPUT, g.const(tmap[0] @ turn)])
+        else:
+            u = _bilinear(g, delta, INPUT, tmap @ turn, "twist")
+        u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
+                                         g.const(1e-12)])])
+        cr, sr = math.cos(half / 2), math.sin(half / 2)
+        ab = g.op("Abs", [u])
+        valid = g.op("LessOrEqual", [g.op("MatMul", [ab, g.const([[0.0], [1.0]])]),
+                                     g.const(sr)])
+        mr = g.op("MatMul", [ab, g.const([[cr, sr], [sr, -cr]])])
+    else:  # limits interpolated at the corrected direction b = R(q') a (contract 3)
+        qp = INPUT if delta is None else _bilinear(g, delta, INPUT, prod, "corrected")
+        b = _bilinear(g, qp, qp, _rotation_tensor(axis), "corrected_direction")
+        kappa = float(by_swing.kappa)
+        z = g.op("MatMul", [b, g.const(kappa * np.asarray(by_swing.directions).T)])
+        w = g.op("Exp", [g.op("Sub", [z, g.op("ReduceMax", [z], axes=[1], keepdims=1)])])
+        lims = g.op("Div", [g.op("MatMul", [w, g.const(np.radians(np.stack(
+            (by_swing.min_deg, by_swing.max_deg), axis=1)))]),
+            g.op("ReduceSum", [w, g.const([1], dtype=np.int64)], keepdims=1)])
+        mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # (mid/2, half/2)
+        cmr, smr = g.op("Cos", [mh]), g.op("Sin", [mh])
+        first, second = g.const([[1.0], [0.0]]), g.const([[0.0], [1.0]])
+        cm, cr = g.op("MatMul", [cmr, first]), g.op("MatMul", [cmr, second])
+        sm, sr = g.op("MatMul", [smr, first]), g.op("MatMul", [smr, second])
+        t = g.op("MatMul", [qp, g.const(tmap[0])])  # (w', a·v') of q'
+        u = g.op("Add", [g.op("Mul", [t, cm]),
+                         g.op("Mul", [g.op("MatMul", [t, g.const(rot90.T)]), sm])])
+        u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
+                                         g.const(1e-12)])])
+        ab = g.op("Abs", [u])
+        valid = g.op("LessOrEqual", [g.op("MatMul", [ab, g.const([[0.0], [1.0]])]), sr])
+        swapped = g.op("MatMul", [ab, g.const([[0.0, 1.0], [1.0, 0.0]])])
+        mr = g.op("Add", [g.op("Mul", [ab, g.op("Mul", [cr, g.const([[1.0, -1.0]])])]),
+                          g.op("Mul", [swapped, sr])])
+    # clamp: valid → e = 1; else e = (cr a + sr b, ±(sr a − cr b)), side = sign(u_w u_x)
+    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[1], keepdims=1),
+                                   g.const(0.0)])
+    ms = g.op("Where", [side, mr, g.op("Mul", [mr, g.const([[1.0, -1.0]])])])
+    e = g.op("Where", [valid, g.const([[1.0, 0.0]]), ms], stem="twist_clamp")
+    # τ = (e_w, e_x d) = (1, d) ⊙ (e_w, e_x, e_x, e_x): the twist clamp about the limb
+    d1 = g.op("Pad", [d, g.const([0, 1, 0, 0], dtype=np.int64), g.const(1.0)])
+    tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])],
+               stem="twist_correction")
+    if delta is None:
+        g.op("Identity", [tau], out=OUTPUT)
+        return
+    g.op("Identity", [_bilinear(g, delta, tau, prod)], out=OUTPUT)  # Δ ⊗ τ
+
+
+def _finish(g: _Graph, meta: dict[str, str]) -> onnx.ModelProto:
+    graph = helper.make_graph(
+        g.nodes, "jointlimits_correction",
+        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", 4])],
+        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", 4])],
+        g.inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
+                              producer_name="jointlimits-rig", producer_version=package_version())
+    model.ir_version = 8
+    model.doc_string = ("Corrective joint constraint: corrected = correction ⊗ orientation "
+                        "(scalar-first w, x, y, z; Hamilton product).")
+    onnx.helper.set_model_props(model, meta)
+    onnx.checker.check_model(model)
+    return model
+
+
+def _meta(constraint_yaml, training_data_sha256, metrics, network: dict) -> dict[str, str]:
+    return {
+        "jointlimits.format": FORMAT,
+        "jointlimits.constraint": constraint_yaml,
+        "jointlimits.constraint_sha256": hashlib.sha256(constraint_yaml.encode()).hexdigest(),
+        "jointlimits.training_data_sha256": training_data_sha256,
+        "jointlimits.metrics": json.dumps(metrics or {}, sort_keys=True),
+        "jointlimits.network": json.dumps(network, sort_keys=True, default=str),
+        "jointlimits.version": package_version(),
+    }
+
+
 def to_onnx(
-    network: GMLP,
+    network,
     *,
     constraint_yaml: str,
     training_data_sha256: str = "",
     metrics: dict[str, Any] | None = None,
     extra: dict[str, Any] | None = None,
 ) -> onnx.ModelProto:
-    """Build the ONNX model of a trained network (see module docstring for the graph)."""
+    """Build the ONNX model of a trained network or field model (module docstring).
+
+    ``network`` is a :class:`~models.nn.gmlp.GMLP` or a :class:`models.field.FieldModel`.
+    """
     g = _Graph()
+    if not isinstance(network, GMLP):  # a FieldModel
+        _field_graph(g, network)
+        info = {**network.info, **(extra or {})}
+        return _finish(g, _meta(constraint_yaml, training_data_sha256, metrics, info))
     i, h = network.n_inputs, network.n_hidden
     w1, w2 = network.w1.copy(), network.w2.copy()
     fold_out = None
