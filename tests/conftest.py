@@ -90,3 +90,148 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "hardware" in item.keywords:
             item.add_marker(skip)
+
+
+# =============================================================================================
+# PostgreSQL server for the store tests (owner: store helper; nothing above depends on it).
+#
+# ``pg_server`` (session scope) starts a throw-away PostgreSQL cluster with the distribution's
+# binaries (Debian: /usr/lib/postgresql/<version>/bin, package ``postgresql``; or the directory
+# in RIG_PG_BINDIR): initdb + pg_ctl into a temporary directory, listening on a unix socket in
+# that directory only (no TCP port), as the ``postgres`` user when the tests run as root. Tests
+# skip cleanly when the binaries or the psycopg driver are missing; with RIG_REQUIRE_PG=1 (set
+# by .ci/run after installing the package) a server that does not start fails instead.
+# ``db_url`` is parametrised over both back ends: a fresh SQLite file, a fresh PG database.
+# =============================================================================================
+import glob as _glob  # noqa: E402  (this block is appended; see its header)
+import shutil as _shutil  # noqa: E402
+import subprocess as _subprocess  # noqa: E402
+import tempfile as _tempfile  # noqa: E402
+
+
+def _pg_bindir() -> str | None:
+    candidates = []
+    if os.environ.get("RIG_PG_BINDIR"):
+        candidates.append(os.environ["RIG_PG_BINDIR"])
+
+    def _ver(p: str) -> float:
+        try:
+            return float(p.rstrip("/").split("/")[-2])
+        except ValueError:
+            return 0.0
+
+    candidates += sorted(_glob.glob("/usr/lib/postgresql/*/bin"), key=_ver, reverse=True)
+    on_path = _shutil.which("initdb")
+    if on_path:
+        candidates.append(os.path.dirname(on_path))
+    for d in candidates:
+        if os.access(os.path.join(d, "initdb"), os.X_OK) and os.access(
+            os.path.join(d, "pg_ctl"), os.X_OK
+        ):
+            return d
+    return None
+
+
+class PostgresServer:
+    """A private PostgreSQL cluster on a unix socket; ``new_database()`` -> SQLAlchemy URL."""
+
+    def __init__(self, bindir: str) -> None:
+        self.bindir = bindir
+        self.dir = _tempfile.mkdtemp(prefix="rig-pg-")
+        self.data = os.path.join(self.dir, "data")
+        self.log = os.path.join(self.dir, "server.log")
+        self.user = None  # OS user running the server; None = this process's user
+        self._n = 0
+        if os.geteuid() == 0:
+            import pwd
+
+            try:
+                pw = pwd.getpwnam("postgres")
+            except KeyError:
+                self.cleanup()
+                pytest.skip("running as root and no 'postgres' user to run PostgreSQL as")
+            self.user = "postgres"
+            os.chown(self.dir, pw.pw_uid, pw.pw_gid)
+
+    def _run(self, *args: str, timeout: float = 120) -> _subprocess.CompletedProcess:
+        cmd = [os.path.join(self.bindir, args[0]), *args[1:]]
+        if self.user:
+            cmd = ["runuser", "-u", self.user, "--", *cmd]
+        env = dict(os.environ, LC_ALL="C", LANG="C")
+        return _subprocess.run(
+            cmd, cwd=self.dir, env=env, capture_output=True, text=True, timeout=timeout
+        )
+
+    def start(self) -> None:
+        r = self._run("initdb", "-D", self.data, "-A", "trust", "-U", "rig", "-E", "UTF8",
+                      "--no-locale", "--no-sync")
+        if r.returncode != 0:
+            raise RuntimeError(f"initdb failed: {r.stderr.strip()[-800:]}")
+        opts = (f"-c listen_addresses='' -c unix_socket_directories='{self.dir}' "
+                "-c fsync=off -c synchronous_commit=off -c full_page_writes=off "
+                "-c max_connections=40")
+        r = self._run("pg_ctl", "-D", self.data, "-l", self.log, "-w", "-t", "60",
+                      "-o", opts, "start")
+        if r.returncode != 0:
+            log = ""
+            try:
+                with open(self.log) as fh:
+                    log = fh.read()[-800:]
+            except OSError:
+                pass
+            raise RuntimeError(f"pg_ctl start failed: {r.stderr.strip()[-400:]} {log}")
+
+    def url(self, dbname: str) -> str:
+        return f"postgresql+psycopg://rig@/{dbname}?host={self.dir}"
+
+    def new_database(self) -> str:
+        """Create an empty database and return its URL."""
+        import psycopg
+
+        self._n += 1
+        name = f"rigtest_{os.getpid()}_{self._n}"
+        with psycopg.connect(host=self.dir, user="rig", dbname="postgres",
+                             autocommit=True) as conn:
+            conn.execute(f'CREATE DATABASE "{name}"')
+        return self.url(name)
+
+    def stop(self) -> None:
+        if os.path.isdir(self.data):
+            self._run("pg_ctl", "-D", self.data, "-m", "immediate", "-w", "stop", timeout=60)
+
+    def cleanup(self) -> None:
+        _shutil.rmtree(self.dir, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """A running private PostgreSQL server, or a skip saying why there is none."""
+    bindir = _pg_bindir()
+    if bindir is None:
+        pytest.skip("PostgreSQL binaries not installed (Debian: apt-get install postgresql)")
+    try:
+        import psycopg  # noqa: F401
+    except ImportError:
+        pytest.skip("psycopg not installed (pip install 'psycopg[binary]')")
+    server = PostgresServer(bindir)
+    try:
+        server.start()
+    except (RuntimeError, OSError, _subprocess.TimeoutExpired) as err:
+        server.stop()
+        server.cleanup()
+        if os.environ.get("RIG_REQUIRE_PG"):
+            pytest.fail(f"PostgreSQL did not start: {err}")
+        pytest.skip(f"PostgreSQL did not start: {err}")
+    try:
+        yield server
+    finally:
+        server.stop()
+        server.cleanup()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path) -> str:
+    """A fresh, empty store location on each back end: a SQLite file path, a PG URL."""
+    if request.param == "sqlite":
+        return str(tmp_path / "rig.db")
+    return request.getfixturevalue("pg_server").new_database()

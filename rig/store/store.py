@@ -67,7 +67,11 @@ def _dumps(obj: Any) -> str:
     try:
         return json.dumps({} if obj is None else obj, default=default, allow_nan=False,
                           sort_keys=True)
-    except (TypeError, ValueError) as err:
+    except ValueError as err:
+        raise RigConfigError(
+            f"cannot store {obj!r:.80}: numbers must be finite (JSON has no NaN/inf)"
+        ) from err
+    except TypeError as err:
         raise RigConfigError(f"cannot store {obj!r:.80}: {err}") from err
 
 

@@ -1,0 +1,336 @@
+"""The session store on both back ends: SQLite (always) and PostgreSQL (a private server the
+``pg_server`` fixture starts when the distribution's binaries are installed)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import stat
+import time
+
+import numpy as np
+import pytest
+from sqlalchemy import create_engine, inspect
+
+from rig.errors import RigConfigError
+from rig.store import SCHEMA_VERSION, TELEMETRY_COLUMNS, open_store
+from rig.store import schema as S
+
+
+def _unit(rng, n):
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+@pytest.fixture
+def store(db_url):
+    with open_store(db_url) as s:
+        yield s
+
+
+@pytest.fixture
+def session(store):
+    pid = store.add_patient("P-0001", side="right")
+    sid = store.start_session(pid, rig_name="sim-imu", joint="shoulder", side="right",
+                              meta={"rate_hz": 400})
+    return sid
+
+
+def test_patients_are_pseudonyms_only(store):
+    cols = {c["name"] for c in inspect(store.engine).get_columns("patients")}
+    assert cols == {"id", "pseudonym", "side", "notes", "created_at"}
+    pid = store.add_patient("P-0001", side="left")
+    assert store.get_patient(pid)["pseudonym"] == "P-0001"
+    assert store.ensure_patient("P-0001") == pid
+    other = store.ensure_patient("P-0002")
+    assert other != pid
+    assert [p["pseudonym"] for p in store.list_patients()] == ["P-0001", "P-0002"]
+    with pytest.raises(RigConfigError, match="already exists"):
+        store.add_patient("P-0001")
+    with pytest.raises(RigConfigError, match="side"):
+        store.add_patient("P-0003", side="up")
+    with pytest.raises(RigConfigError, match="no patient 999"):
+        store.get_patient(999)
+
+
+def test_session_lifecycle(store, session):
+    s = store.get_session(session)
+    assert s["status"] == "running" and s["ended_at"] is None
+    assert s["pseudonym"] == "P-0001" and s["meta"] == {"rate_hz": 400}
+    store.end_session(session, status="interrupted", meta={"reason": "ctrl-c"}, dropped=3)
+    s = store.get_session(session)
+    assert s["status"] == "interrupted" and s["dropped"] == 3
+    assert s["meta"] == {"rate_hz": 400, "reason": "ctrl-c"}
+    assert s["ended_at"] >= s["started_at"]
+    with pytest.raises(RigConfigError, match="status"):
+        store.end_session(session, status="finished-ish")
+    with pytest.raises(RigConfigError, match="kind"):
+        store.start_session(s["patient_id"], kind="play")
+    with pytest.raises(RigConfigError, match="no session 77"):
+        store.get_session(77)
+    with pytest.raises(RigConfigError, match="finite"):
+        store.start_session(s["patient_id"], meta={"x": float("nan")})
+
+
+def test_samples_round_trip_exactly(store, session):
+    rng = np.random.default_rng(1)
+    store.add_sensor(session, "thorax", segment="thorax", kind="sensor", port="sim://imu-stream")
+    n = 3000
+    t = 100.0 + np.arange(n) / 400.0
+    q_th, q_hu = _unit(rng, n), _unit(rng, n)
+    with store.sample_writer(session) as w:
+        w.add_many(t, t * 1.5, "thorax", "sensor", q_th, 3)
+        w.add_many(t, None, "humerus", "sensor", q_hu, np.arange(n) % 4)
+        w.add(t[-1] + 1, None, "shoulder", "joint", [1.0, 0.0, 0.0, 0.0], 0)
+        w.set_dropped(7)
+    assert w.added == w.written == 2 * n + 1 and w.pending == 0
+    all_ = store.samples(session)
+    assert all_["q"].shape == (2 * n + 1, 4)
+    th = store.samples(session, "thorax")
+    np.testing.assert_array_equal(th["t"], t)
+    np.testing.assert_array_equal(th["device_t"], t * 1.5)
+    np.testing.assert_array_equal(th["q"], q_th)  # bit-exact float64
+    assert set(th["status"]) == {3} and set(th["kind"]) == {"sensor"}
+    hu = store.samples(session, "humerus")
+    np.testing.assert_array_equal(hu["q"], q_hu)
+    assert np.isnan(hu["device_t"]).all()
+    np.testing.assert_array_equal(hu["status"], np.arange(n) % 4)
+    sh = store.samples(session, "shoulder")
+    assert list(sh["kind"]) == ["joint"]
+    sensors = {r["name"]: r for r in store.sensors(session)}
+    assert sensors["thorax"]["port"] == "sim://imu-stream"  # the registered row is reused
+    assert sensors["humerus"]["kind"] == "sensor" and sensors["shoulder"]["kind"] == "joint"
+    [row] = store.list_sessions()
+    assert row["samples"] == 2 * n + 1 and row["dropped"] == 7
+    assert row["samples_by_sensor"] == {"humerus": n, "shoulder": 1, "thorax": n}
+    assert row["pseudonym"] == "P-0001" and row["kind"] == "record"
+    assert store.sample_count(session) == 2 * n + 1
+
+
+def test_writer_refuses_bad_samples(store, session):
+    with store.sample_writer(session) as w:
+        with pytest.raises(RigConfigError, match="finite and non-zero"):
+            w.add(0.0, None, "humerus", "sensor", [float("nan"), 0, 0, 1])
+        with pytest.raises(RigConfigError, match="finite and non-zero"):
+            w.add(0.0, None, "humerus", "sensor", [0, 0, 0, 0])
+        q = np.tile([1.0, 0, 0, 0], (5, 1))
+        q[3] = 0.0
+        with pytest.raises(RigConfigError, match="sample 3"):
+            w.add_many(np.arange(5.0), None, "humerus", "sensor", q)
+        with pytest.raises(RigConfigError, match="shape"):
+            w.add_many(np.arange(5.0), None, "humerus", "sensor", q[:, :3])
+    assert w.written == 0
+    assert store.sample_count(session) == 0
+
+
+def test_background_thread_commits_without_close(db_url, store, session):
+    w = store.sample_writer(session, flush_interval_s=0.2)
+    try:
+        w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
+        deadline = time.monotonic() + 30.0  # a bound for a wedged thread, not a timing check
+        while w.commits == 0 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert w.commits >= 1 and w.pending == 0
+        with open_store(db_url, create=False) as other:  # another connection pool sees it
+            assert other.sample_count(session) == 1
+    finally:
+        w.close()
+
+
+def test_add_commits_itself_when_the_thread_is_late(store, session):
+    from rig.store import SampleWriter
+
+    # max_latency_s=0: every add finds its rows "too old" and commits before returning
+    w = SampleWriter(store, session, flush_interval_s=1.0, max_latency_s=0.0)
+    try:
+        for k in range(5):
+            w.add(float(k), None, "humerus", "sensor", [1.0, 0, 0, 0])
+            assert w.pending == 0
+            assert store.sample_count(session) == k + 1
+    finally:
+        w.close()
+
+
+def test_flush_interval_must_commit_every_second(store, session):
+    with pytest.raises(RigConfigError, match="at least every second"):
+        store.sample_writer(session, flush_interval_s=2.0)
+
+
+def test_calibrations_annotations_boundaries_models(store, session, tmp_path):
+    cid = store.add_calibration(session, "sensor-to-segment",
+                                {"q": np.array([1.0, 0, 0, 0]), "n": np.int64(3)}, 1.25)
+    [c] = store.calibrations(session)
+    assert c["id"] == cid and c["data"] == {"q": [1.0, 0.0, 0.0, 0.0], "n": 3}
+    assert c["residual_deg"] == 1.25
+    store.add_annotation(session, 12.5, "arm at maximal abduction")
+    store.add_annotation(session, 2.0, "start")
+    assert [a["text"] for a in store.annotations(session)] == ["start",
+                                                                "arm at maximal abduction"]
+    yaml_text = "name: p1\nswing:\n  type: cone\n"
+    bid = store.add_boundary(session, yaml_text, {"samples": 1000, "method": "test"})
+    b = store.get_boundary(bid)
+    assert b["constraint_yaml"] == yaml_text and b["meta"]["samples"] == 1000
+    assert store.add_boundary(None, yaml_text) != bid  # from an imported file
+    with pytest.raises(RigConfigError, match="non-empty"):
+        store.add_boundary(session, "  ")
+    model = tmp_path / "m.onnx"
+    model.write_bytes(b"\x08\x01not really onnx")
+    mid = store.add_model(model, metrics={"mean_3d_error_pct": 0.5}, boundary_id=bid,
+                          session_id=session)
+    m = store.get_model(mid)
+    assert m["sha256"] == hashlib.sha256(model.read_bytes()).hexdigest()
+    assert m["metrics"] == {"mean_3d_error_pct": 0.5} and m["path"] == str(model)
+    assert [x["id"] for x in store.models_for(boundary_id=bid)] == [mid]
+    with pytest.raises(RigConfigError, match="64 hex"):
+        store.add_model(model, sha256="abc")
+    with pytest.raises(RigConfigError, match="no boundary"):
+        store.add_model(model, sha256="0" * 64, boundary_id=999)
+
+
+def test_runs_and_telemetry(store, session):
+    rid = store.start_run(session, {"model": "m.onnx", "rate_hz": 200})
+    rows = []
+    for k in range(250):
+        rows.append({
+            "cycle": k, "t_s": k / 200, "target_w": 1.0, "target_x": 0.0, "target_y": 0.0,
+            "target_z": 0.0, "commanded_w": np.float64(1.0), "read_ms": 0.3,
+            "violation_deg": float("nan") if k == 3 else 0.0, "intervention": k % 50 == 0,
+            "fault": "timeout" if k == 7 else None, "overrun": k == 9,
+        })
+    with store.telemetry_writer(rid) as tw:
+        for r in rows:
+            tw.add(r)
+    store.end_run(rid, {"cycles": 250, "p99_cycle_ms": 1.2})
+    run = store.get_run(rid)
+    assert run["status"] == "completed" and run["summary"]["cycles"] == 250
+    tel = store.telemetry(rid)
+    assert set(TELEMETRY_COLUMNS) <= set(tel)
+    np.testing.assert_array_equal(tel["cycle"], np.arange(250))
+    np.testing.assert_array_equal(tel["t_s"], np.arange(250) / 200)
+    assert np.isnan(tel["violation_deg"][3]) and tel["violation_deg"][4] == 0.0
+    assert np.isnan(tel["present_w"]).all()
+    assert tel["intervention"].sum() == 5
+    assert tel["fault"][7] == "timeout" and tel["fault"][8] is None
+    assert tel["extra"][9] == {"overrun": True}
+    assert [r["id"] for r in store.runs(session)] == [rid]
+    assert store.list_sessions()[0]["runs"] == 1
+    with pytest.raises(RigConfigError, match="t_s"):
+        with store.telemetry_writer(rid) as tw:
+            tw.add({"cycle": 1})
+
+
+def test_v1_database_is_migrated_with_its_data(db_url):
+    url = db_url if "://" in db_url else f"sqlite:///{db_url}"
+    engine = create_engine(url)
+    try:
+        with engine.begin() as conn:
+            assert S.apply_migrations(conn, 0, 1) == [1]
+            pid = conn.execute(S.patients.insert().values(
+                pseudonym="OLD-1", created_at=1.0)).inserted_primary_key[0]
+            sid = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="completed", started_at=1.0,
+                ended_at=2.0)).inserted_primary_key[0]
+            snr = conn.execute(S.sensors.insert().values(
+                session_id=sid, name="humerus", kind="sensor")).inserted_primary_key[0]
+            conn.execute(S.samples.insert(), [
+                {"session_id": sid, "sensor_id": snr, "t": k * 0.01, "device_t": None,
+                 "w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0, "status": 0} for k in range(10)])
+        with engine.connect() as conn:
+            assert set(inspect(conn).get_table_names()) == {
+                "schema_version", "patients", "sessions", "sensors", "samples", "calibrations",
+                "annotations", "boundaries", "models"}
+            assert S.current_version(conn) == 1
+    finally:
+        engine.dispose()
+
+    with open_store(db_url, create=False) as store:
+        assert store.schema_version() == SCHEMA_VERSION == 2
+        [row] = store.list_sessions()
+        assert row["pseudonym"] == "OLD-1" and row["samples"] == 10 and row["runs"] == 0
+        rid = store.start_run(row["id"])  # the v2 tables work on the migrated database
+        with store.telemetry_writer(rid) as tw:
+            tw.add({"t_s": 0.0})
+        assert store.telemetry(rid)["t_s"].tolist() == [0.0]
+        # the migrated schema is exactly the schema the code queries
+        insp = inspect(store.engine)
+        assert set(insp.get_table_names()) == set(S.metadata.tables)
+        for name, table in S.metadata.tables.items():
+            got = {c["name"]: c["nullable"] for c in insp.get_columns(name)}
+            assert got == {c.name: c.nullable for c in table.columns}, name
+            idx = {i["name"] for i in insp.get_indexes(name)}
+            assert {i.name for i in table.indexes} <= idx, name
+    with open_store(db_url, create=False) as store:  # a second open migrates nothing
+        assert store.schema_version() == 2
+
+
+def test_newer_database_is_refused(db_url):
+    with open_store(db_url) as store:
+        with store.engine.begin() as conn:
+            conn.execute(S.schema_version.insert().values(
+                version=99, applied_at=0.0, description="from the future"))
+    with pytest.raises(RigConfigError, match="schema version 99, newer"):
+        open_store(db_url)
+
+
+# -- SQLite specifics ----------------------------------------------------------------------------
+
+
+def _mode(p) -> int:
+    return stat.S_IMODE(os.stat(p).st_mode)
+
+
+def test_sqlite_file_is_owner_only_with_wal(tmp_path):
+    path = tmp_path / "clinic.db"
+    old = os.umask(0o022)  # a typical umask that would give 0644
+    try:
+        with open_store(path) as store:
+            pid = store.add_patient("P-1")
+            sid = store.start_session(pid)
+            w = store.sample_writer(sid)
+            try:
+                w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
+                w.flush()
+                wal, shm = tmp_path / "clinic.db-wal", tmp_path / "clinic.db-shm"
+                assert wal.exists() and shm.exists()
+                assert _mode(path) == _mode(wal) == _mode(shm) == 0o600
+                with store.engine.connect() as conn:
+                    assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
+                    assert conn.exec_driver_sql("PRAGMA synchronous").scalar() == 2  # FULL
+                    assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+            finally:
+                w.close()
+            assert store.check_integrity() == "ok"
+    finally:
+        os.umask(old)
+    assert _mode(path) == 0o600
+
+
+def test_sqlite_paths_and_urls(tmp_path):
+    missing = tmp_path / "none.db"
+    with pytest.raises(RigConfigError, match="no database at"):
+        open_store(missing, create=False)
+    assert not missing.exists()
+    with pytest.raises(RigConfigError, match="is a directory"):
+        open_store(tmp_path)
+    with pytest.raises(RigConfigError, match="does not exist"):
+        open_store(tmp_path / "no-dir" / "x.db")
+    with pytest.raises(RigConfigError, match="unsupported scheme 'mysql'"):
+        open_store("mysql://u@h/db")
+    with open_store(f"sqlite:///{tmp_path}/u.db") as s:
+        s.add_patient("P-9")
+    with open_store(tmp_path / "u.db", create=False) as s:
+        assert s.find_patient("P-9") is not None
+        assert s.find_patient("P-10") is None
+
+
+def test_two_processes_worth_of_connections_share_a_file(tmp_path):
+    """A reader (rig session list) while the recorder's writer commits: WAL lets both go on."""
+    path = tmp_path / "r.db"
+    with open_store(path) as rec, open_store(path, create=False) as viewer:
+        sid = rec.start_session(rec.add_patient("P-1"))
+        with rec.sample_writer(sid) as w:
+            for k in range(5):
+                w.add_many(np.arange(100) + 100.0 * k, None, "humerus", "sensor",
+                           np.tile([1.0, 0, 0, 0], (100, 1)))
+                w.flush()
+                assert viewer.list_sessions()[0]["samples"] == 100 * (k + 1)
