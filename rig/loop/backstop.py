@@ -1,0 +1,80 @@
+"""Servo position limits derived from the boundary: the hardware backstop.
+
+The servos' own Min/Max Position Limit registers (EEPROM 52/48 on X-series; in position mode a
+goal beyond them is clamped by the servo firmware) are set so that even a host that sends a
+wild goal cannot drive a joint beyond the range the valid region needs.
+
+Method: sample the valid set densely — orientations uniform over SO(3) that the oracle accepts,
+plus exact projections of rejected ones (so the boundary itself is covered) — solve the inverse
+kinematics of each on the branch nearest the start posture, and take per joint the smallest
+tick interval containing them, widened by ``margin_deg`` and by the start posture itself (a limb
+starting outside must be able to come back), then intersected with the configured
+``min_ticks..max_ticks``. The result is a box in joint space containing the valid region: a
+coarse outer bound (a 3-DOF region is not a box), never the primary limit — the supervisor is.
+An interval that would cover the whole turn is left at the configured limits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from models import quaternion as Q
+from rig.devices.kinematics import TICKS_PER_REV
+from rig.errors import UnreachableError
+
+__all__ = ["position_limits_from_boundary"]
+
+
+def position_limits_from_boundary(kinematics, oracle, near_ticks, *, n: int = 6000,
+                                  margin_deg: float = 5.0, seed: int = 0
+                                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-joint tick limits containing the valid region (see the module docstring).
+
+    Parameters
+    ----------
+    kinematics : rig.devices.kinematics.ChainKinematics
+    oracle : models.oracle.ConstraintOracle
+    near_ticks : (n_joints,) array_like
+        Start posture (present position), chooses the IK branch and is always inside.
+    n : int
+        Random orientations drawn.
+    margin_deg : float
+        Widening on each side.
+
+    Returns
+    -------
+    min_ticks, max_ticks : (n_joints,) int64
+    """
+    rng = np.random.default_rng(seed)
+    q = Q.random_quaternions(n, rng)
+    res = oracle.evaluate(q)
+    samples = np.concatenate([q[res.valid], res.projected[~res.valid]])
+    near = np.asarray(near_ticks, dtype=np.float64)
+    ticks = []
+    for qi in samples:
+        try:
+            ticks.append(kinematics.inverse_float(qi, near))
+        except UnreachableError:
+            continue
+    lo_cfg = kinematics.min_ticks.astype(np.int64)
+    hi_cfg = kinematics.max_ticks.astype(np.int64)
+    if not ticks:
+        return lo_cfg.copy(), hi_cfg.copy()
+    t = np.array(ticks)
+    margin = margin_deg / 360.0 * TICKS_PER_REV
+    lo = np.floor(np.minimum(t.min(0), near) - margin).astype(np.int64)
+    hi = np.ceil(np.maximum(t.max(0), near) + margin).astype(np.int64)
+    whole = (hi - lo) >= TICKS_PER_REV - 1
+    lo = np.where(whole, lo_cfg, np.maximum(lo, lo_cfg))
+    hi = np.where(whole, hi_cfg, np.minimum(hi, hi_cfg))
+    return lo, hi
+
+
+def describe_limits(kinematics, lo, hi) -> str:
+    """``"ID 1 1024..3072 (180.0°), ..."`` for logs."""
+    parts = []
+    for i, a, b in zip(kinematics.ids, lo, hi, strict=True):
+        parts.append(f"ID {i} {int(a)}..{int(b)} ({(int(b) - int(a)) * 360 / TICKS_PER_REV:.1f}°)")
+    return ", ".join(parts)
+
+

@@ -1,0 +1,451 @@
+"""The live enforcement loop: target → model → supervisor → IK → one sync write, at a fixed rate.
+
+One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler`)::
+
+    sync read (fast sync read where supported) → present ticks → FK → present orientation
+    [faults: timeout / garbled → retry while the cycle budget allows; adapter gone → safe state;
+     hardware alert on any servo → safe state; servo data older than the watchdog → safe state]
+    latest target (source.latest(t)) → supervisor.admit (NaN / zero / stale → hold)
+    model correction (onnxruntime, one session, single-sample path) → supervisor.step
+    IK (nearest the previous goal) → goal ticks → FK → supervisor.accept (final exact check)
+    one sync write of the goal ticks
+    telemetry row (preallocated chunk; written by another thread)
+
+The present orientation is read before the goal is computed, so the cycle's telemetry pairs
+the target with the limb's state at the cycle's start. Latency columns are measured with
+``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
+or :class:`~rig.loop.scheduler.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
+
+Safe state (``safe_state="hold"``, the default, or ``"torque-off"``)
+--------------------------------------------------------------------
+Entered at once on: the adapter going away, a hardware alert on any servo of the limb, servo
+data older than ``stale_present_s`` (reads failing beyond the retries), a failed write, a
+stop request (SIGINT / SIGTERM), a target source whose device vanished (after its target went
+stale: the goal already holds). ``hold`` writes Goal Position = Present Position (torque stays
+on: an arm without brakes would fall); ``torque-off`` disables torque. If the bus itself is
+gone nothing can be written: the servos' Bus Watchdog (armed at start, ``watchdog_ms``) stops
+them. The run then ends; the summary says why. A normal end (duration reached) leaves the limb
+holding its last goal with the watchdog armed.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rig.errors import (
+    RigConnectionError,
+    RigError,
+    RigProtocolError,
+    RigTimeoutError,
+    UnreachableError,
+)
+from rig.loop.scheduler import Scheduler
+from rig.loop.supervisor import SAFETY_FLAGS, Intervention, Supervisor, SupervisorConfig
+from rig.loop.telemetry import Fault, Telemetry, intervention_counts, summarise
+
+__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig"]
+
+SAFE_STATES = ("hold", "torque-off")
+_NAN4 = (math.nan, math.nan, math.nan, math.nan)
+
+
+@dataclass
+class LoopConfig:
+    """Settings of one run.
+
+    Attributes
+    ----------
+    rate_hz : float
+        Cycle rate (default 200 Hz).
+    duration_s : float or None
+        Stop after this long (loop time); None runs until stopped or the target source ends.
+    safe_state : {"hold", "torque-off"}
+    read_attempts : int
+        Sync-read attempts per cycle (retries only while the next deadline is not threatened).
+    supervisor : SupervisorConfig
+    watchdog_ms : int or None
+        Bus Watchdog to arm (None: the rig configuration's; 0: off).
+    backstop : bool
+        Set the servos' position-limit registers from the boundary.
+    backstop_margin_deg : float
+    settle_s : float
+        When the target source has a natural end and no duration is given, run this long past
+        it (the limb reaches the last target).
+    """
+
+    rate_hz: float = 200.0
+    duration_s: float | None = None
+    safe_state: str = "hold"
+    read_attempts: int = 3
+    supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
+    watchdog_ms: int | None = None
+    backstop: bool = True
+    backstop_margin_deg: float = 5.0
+    settle_s: float = 0.5
+
+    def __post_init__(self):
+        if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
+                and 0 < self.rate_hz <= 5000):
+            raise ValueError(f"--rate: expected 0 < Hz <= 5000, got {self.rate_hz!r}")
+        if self.duration_s is not None and not (math.isfinite(self.duration_s)
+                                                and self.duration_s > 0):
+            raise ValueError(f"--duration: expected a positive number of seconds, got "
+                             f"{self.duration_s!r}")
+        if self.safe_state not in SAFE_STATES:
+            raise ValueError(f"--safe-state: expected one of {', '.join(SAFE_STATES)}, got "
+                             f"{self.safe_state!r}")
+        if self.read_attempts < 1:
+            raise ValueError("read_attempts must be >= 1")
+
+
+class EnforcementLoop:
+    """Runs the cycle against a servo chain (see the module docstring).
+
+    Parameters
+    ----------
+    chain : rig.devices.dynamixel.DynamixelChain
+        Opened. Used: ``read_ticks``, ``write_goal_ticks``, ``set_torque``, ``kinematics``,
+        ``poll_alerts``, ``arm_watchdog``, ``configure`` / ``set_position_limits``.
+    model : models.onnx_io.CorrectionModel or None
+        The learned correction (None: targets go to the supervisor uncorrected).
+    oracle : models.oracle.ConstraintOracle
+        The enforced constraint.
+    targets : rig.loop.targets.TargetSource
+    config : LoopConfig
+    clock, sleep : callables
+        Loop clock (default ``time.monotonic`` / ``time.sleep``; tests pass a ManualClock).
+    telemetry : Telemetry, optional
+        Default: in memory only (``keep=True``).
+    on_cycle : callable(loop, k), optional
+        Called at the start of every cycle (fault injection in tests and benchmarks).
+    log : callable(str), optional
+        One-line messages (start-up, safe state).
+
+    Attributes
+    ----------
+    summary : dict
+        After :meth:`run`.
+    """
+
+    def __init__(self, chain, model, oracle, targets, config: LoopConfig | None = None, *,
+                 clock=time.monotonic, sleep=time.sleep, telemetry: Telemetry | None = None,
+                 on_cycle=None, log=None):
+        self.chain = chain
+        self.model = model
+        self.oracle = oracle
+        self.targets = targets
+        self.config = config or LoopConfig()
+        self.clock = clock
+        manual = clock is not time.monotonic
+        self.scheduler = Scheduler(self.config.rate_hz, clock=clock, sleep=sleep,
+                                   spin_s=0.0 if manual else 0.0003)
+        self.supervisor = Supervisor(oracle, self.config.supervisor,
+                                     period_s=self.scheduler.period)
+        self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True)
+        self.kin = chain.kinematics
+        self.on_cycle = on_cycle
+        self.log = log or (lambda msg: None)
+        self.stop_reason: str | None = None
+        self.safe = False
+        self.safe_state_entries = 0
+        self.safe_state_reason: str | None = None
+        self.safe_state_note: str | None = None
+        self.safe_state_cycle: int | None = None
+        self.end_reason = ""
+        self.limits: tuple[np.ndarray, np.ndarray] | None = None
+        self.fault_counts: Counter = Counter()
+        self.intervention_bits: Counter = Counter()
+        self.max_violation = 0.0
+        self.summary: dict = {}
+        self._setup_done = False
+
+    # ------------------------------------------------------------------ start-up
+    def setup(self) -> None:
+        """Configure the servos (backstop limits, watchdog), torque on, start the supervisor.
+
+        Raises
+        ------
+        RigError
+            The bus does not answer / a servo reports an error (before any motion).
+        """
+        chain = self.chain
+        ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
+        lo = hi = None
+        if self.config.backstop:
+            from rig.loop.backstop import describe_limits, position_limits_from_boundary
+
+            lo, hi = position_limits_from_boundary(self.kin, self.oracle, ticks,
+                                                   margin_deg=self.config.backstop_margin_deg)
+            self.limits = (lo, hi)
+            self.log(f"backstop position limits: {describe_limits(self.kin, lo, hi)}")
+        _configure(chain, lo, hi)
+        wd = self.config.watchdog_ms
+        if wd is None:
+            wd = getattr(chain, "watchdog_ms", None)
+        chain.set_torque(True)
+        if wd:
+            chain.arm_watchdog(int(wd))
+        self.watchdog_ms = wd
+        ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
+        self._present_ticks = ticks
+        self._goal_ticks = ticks.copy()
+        present = self.kin.forward(ticks)
+        self._present = tuple(float(v) for v in present)
+        self._commanded = self._present
+        self._setup_done = True
+
+    def request_stop(self, reason: str) -> None:
+        """Ask the loop to enter the safe state and end (signal handlers call this)."""
+        if self.stop_reason is None:
+            self.stop_reason = reason
+
+    # ------------------------------------------------------------------ safe state
+    def enter_safe_state(self, reason: str, cycle: int) -> None:
+        """Command the configured safe state once (see the module docstring)."""
+        if self.safe:
+            return
+        self.safe = True
+        self.safe_state_entries += 1
+        self.safe_state_reason = reason
+        self.safe_state_cycle = cycle
+        chain = self.chain
+        try:
+            if self.config.safe_state == "torque-off":
+                chain.set_torque(False)
+            else:
+                try:
+                    ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
+                except (RigTimeoutError, RigProtocolError):
+                    ticks = self._present_ticks
+                chain.write_goal_ticks(ticks)
+                self._goal_ticks = ticks
+        except RigError as err:
+            self.safe_state_note = (f"could not command the safe state ({err}); the servos' "
+                                    f"Bus Watchdog ({self.watchdog_ms} ms) stops them")
+        self.log(f"safe state ({self.config.safe_state}): {reason}"
+                 + (f"; {self.safe_state_note}" if self.safe_state_note else ""))
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, max_cycles: int | None = None) -> dict:
+        """Run until the duration, the target source's end, a stop request or the safe state.
+
+        Returns
+        -------
+        dict
+            The summary (also :attr:`summary`).
+        """
+        if not self._setup_done:
+            self.setup()
+        cfg = self.config
+        sched = self.scheduler
+        sup = self.supervisor
+        kin = self.kin
+        chain = self.chain
+        model = self.model
+        tel = self.telemetry
+        targets = self.targets
+        perf = time.perf_counter
+        clock = self.clock
+        duration = cfg.duration_s
+        if duration is None and getattr(targets, "duration_s", None) is not None:
+            duration = targets.duration_s + cfg.settle_s
+        t0 = sched.start()
+        targets.start(t0)
+        sup.reset(0.0, self._present)
+        t_present = 0.0
+        read_attempts = cfg.read_attempts
+        period = sched.period
+        present = self._present
+        commanded = self._commanded
+        fc = self.fault_counts
+        ib = self.intervention_bits
+        alerts_fn = getattr(chain, "poll_alerts", None)
+        max_viol = 0.0
+        self.end_reason = "completed"
+        k = -1
+        while True:
+            k, due, start = sched.wait()
+            c0 = perf()
+            t = start - t0
+            if self.on_cycle is not None:
+                self.on_cycle(self, k)
+            faults = 0
+            # -- 1. present positions: one sync read, retried within the cycle budget --------
+            fresh = False
+            lost = False
+            for attempt in range(read_attempts):
+                try:
+                    ticks = chain.read_ticks()
+                    fresh = True
+                    break
+                except RigTimeoutError:
+                    faults |= Fault.READ_TIMEOUT
+                except RigProtocolError:
+                    faults |= Fault.READ_CORRUPT
+                except RigConnectionError:
+                    faults |= Fault.CONNECTION_LOST
+                    lost = True
+                    break
+                if attempt + 1 < read_attempts and clock() < due + 0.5 * period:
+                    faults |= Fault.READ_RETRY
+                    continue
+                break
+            c1 = perf()
+            if fresh:
+                self._present_ticks = ticks
+                pq = kin.forward(ticks)
+                present = (float(pq[0]), float(pq[1]), float(pq[2]), float(pq[3]))
+                t_present = t
+            else:
+                faults |= Fault.READ_FAILED
+            reason = None
+            if lost:
+                reason = "the bus adapter went away"
+            elif alerts_fn is not None and not lost:
+                try:
+                    alerts = alerts_fn()
+                except RigConnectionError:
+                    alerts, reason = (), "the bus adapter went away"
+                    faults |= Fault.CONNECTION_LOST
+                except (RigTimeoutError, RigProtocolError):
+                    alerts = ()
+                if alerts:
+                    faults |= Fault.HARDWARE_ALERT
+                    a = alerts[0]
+                    reason = getattr(a, "message", None) or f"hardware alert {a!r}"
+            if reason is None and sup.present_stale(t, t_present):
+                faults |= Fault.STALE_PRESENT
+                reason = (f"servo data stale for {1e3 * (t - t_present):.0f} ms (limit "
+                          f"{1e3 * sup.config.stale_present_s:.0f} ms)")
+            if reason is None and self.stop_reason is not None:
+                faults |= Fault.SIGNAL
+                reason = f"stop requested ({self.stop_reason})"
+            if reason is None and getattr(targets, "error", None) is not None \
+                    and sup.flags & Intervention.HOLD_STALE:
+                faults |= Fault.TARGET_LOST
+                reason = f"target source failed: {targets.error}"
+            # -- 2. target → model → supervisor → IK ----------------------------------------
+            c2 = perf()
+            target_t, target = targets.latest(start)
+            tq = sup.admit(start, target, target_t)
+            corr = _NAN4
+            if reason is None:
+                if tq is not None and model is not None:
+                    cv = model.correct_one(tq[0], tq[1], tq[2], tq[3])
+                    corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
+                    goal = sup.step(start, tq, corr)
+                else:
+                    goal = sup.step(start, tq, None)
+                try:
+                    gt = kin.inverse(goal, self._goal_ticks)
+                    cq = kin.forward(gt)
+                    cand = (float(cq[0]), float(cq[1]), float(cq[2]), float(cq[3]))
+                    if sup.accept(cand):
+                        self._goal_ticks = gt
+                        commanded = cand
+                except UnreachableError:
+                    sup.revert(commanded, Intervention.UNREACHABLE)
+            c3 = perf()
+            # -- 3. one sync write ---------------------------------------------------------
+            if reason is None:
+                try:
+                    chain.write_goal_ticks(self._goal_ticks)
+                except RigConnectionError:
+                    faults |= Fault.CONNECTION_LOST
+                    reason = "the bus adapter went away"
+                except RigError as err:
+                    faults |= Fault.WRITE_FAILED
+                    reason = f"sync write failed: {err}"
+            if reason is not None:
+                self.enter_safe_state(reason, k)
+            c4 = perf()
+            # -- 4. telemetry ---------------------------------------------------------------
+            d = sup.last_commanded_distance
+            viol = d if d > 0.0 else 0.0
+            if viol > max_viol:
+                max_viol = viol
+            bits = sup.flags if reason is None else 0
+            if bits:
+                ib[bits] += 1
+            over = sched.finish()
+            if over:
+                faults |= Fault.OVERRUN
+            if faults:
+                fc[faults] += 1
+            tgt = target if target is not None else _NAN4
+            tel.record((
+                k, t,
+                tgt[0], tgt[1], tgt[2], tgt[3],
+                corr[0], corr[1], corr[2], corr[3],
+                commanded[0], commanded[1], commanded[2], commanded[3],
+                present[0], present[1], present[2], present[3],
+                math.degrees(sup.last_correction_angle), math.degrees(viol), math.degrees(d),
+                1e3 * (c1 - c0), 1e3 * (c3 - c2), 1e3 * (c4 - c3), 1e3 * (perf() - c0),
+                1e3 * (start - due),
+                bits, int(faults), 1 if self.safe else 0,
+            ))
+            if self.safe:
+                self.end_reason = "safe state: " + (self.safe_state_reason or "?")
+                break
+            if duration is not None and t + period > duration + 1e-9:
+                break
+            if max_cycles is not None and k + 1 >= max_cycles:
+                break
+        self.max_violation = max_viol
+        t_end = clock() - t0
+        self._commanded = commanded
+        self.summary = self._summary(max(t_end, tel.rows * period if t_end <= 0 else t_end))
+        return self.summary
+
+    # ------------------------------------------------------------------ summary
+    def _summary(self, duration_s: float) -> dict:
+        fc: Counter = Counter()
+        for bits, n in self.fault_counts.items():
+            for f in Fault:
+                if f.value and bits & f.value:
+                    fc[f.name.lower()] += n
+        interventions = sum(n for bits, n in self.intervention_bits.items()
+                            if bits & SAFETY_FLAGS)
+        counters = {
+            "overruns": self.scheduler.overruns,
+            "skipped_deadlines": self.scheduler.skipped,
+            "max_violation_deg": math.degrees(self.max_violation),
+            "tolerance_deg": self.config.supervisor.tolerance_deg,
+            "interventions": int(interventions),
+            "interventions_by_kind": intervention_counts(dict(self.intervention_bits)),
+            "faults": dict(sorted(fc.items())),
+            "safe_state": self.config.safe_state,
+            "safe_state_entries": self.safe_state_entries,
+            "safe_state_reason": self.safe_state_reason,
+            "safe_state_cycle": self.safe_state_cycle,
+            "safe_state_note": self.safe_state_note,
+            "end_reason": self.end_reason,
+            "watchdog_ms": getattr(self, "watchdog_ms", None),
+            "backstop_ticks": (None if self.limits is None else
+                               {str(i): [int(a), int(b)] for i, a, b in
+                                zip(self.kin.ids, self.limits[0], self.limits[1],
+                                    strict=True)}),
+        }
+        return summarise(rate_hz=self.config.rate_hz, telemetry=self.telemetry,
+                         counters=counters, duration_s=duration_s)
+
+
+def _configure(chain, lo, hi) -> None:
+    """Write the start-up registers through the driver (position limits when given)."""
+    if lo is not None and hasattr(chain, "set_position_limits"):
+        chain.configure()
+        chain.set_position_limits(lo, hi)
+        return
+    if lo is not None:
+        try:
+            chain.configure(position_limits=(lo, hi))
+            return
+        except TypeError:
+            pass
+    chain.configure()
+

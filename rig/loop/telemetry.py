@@ -1,0 +1,293 @@
+"""Per-cycle telemetry of the live loop: preallocated rows, a writer thread, the run summary.
+
+The control loop hands one tuple per cycle to :meth:`Telemetry.record` (one numpy row
+assignment into a preallocated chunk, no allocation beyond the tuple). Full chunks go to a
+writer thread that appends them to the ``--telemetry`` CSV and to the store
+(:meth:`rig.store.Store.telemetry_writer`); the loop never waits on a disk or a database.
+Cycle times and lateness are also kept in compact growing arrays for the summary.
+
+Columns (:data:`COLUMNS`; orientations scalar-first joint orientations, parent frame)
+-------------------------------------------------------------------------------------
+=====================  =========================================================================
+``cycle``              cycle index (deadline ``t0 + cycle / rate``; skipped indices = overruns)
+``t_s``                loop time of the cycle's start, s since the loop started
+``target_w..z``        the target as the source gave it (may be NaN / zero / non-unit)
+``correction_w..z``    the learned model's correction (NaN when the target was not usable)
+``commanded_w..z``     the orientation the goal ticks sent encode (forward kinematics)
+``present_w..z``       present orientation (forward kinematics of the sync read)
+``correction_deg``     angle of the model's correction, degrees
+``violation_deg``      how far the commanded orientation is outside, degrees (0 inside)
+``distance_deg``       signed distance of the commanded orientation (> 0 outside, < 0 margin)
+``read_ms``            sync read (retries included), ms
+``compute_ms``         model + supervisor + IK + FK, ms
+``write_ms``           sync write, ms
+``cycle_ms``           the whole cycle's work, ms
+``late_ms``            start − deadline, ms
+``intervention``       :class:`rig.loop.supervisor.Intervention` bits
+``faults``             :class:`Fault` bits
+``safe_state``         1 from the cycle the safe state was entered
+=====================  =========================================================================
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import queue
+import threading
+from enum import IntFlag
+from pathlib import Path
+
+import numpy as np
+
+from rig.loop.supervisor import SAFETY_FLAGS, Intervention
+
+__all__ = ["COLUMNS", "Fault", "Telemetry", "summarise"]
+
+
+class Fault(IntFlag):
+    """Faults seen in a cycle (bits)."""
+
+    NONE = 0
+    READ_RETRY = 1        #: a sync read failed and was retried within the cycle
+    READ_TIMEOUT = 2      #: a sync read attempt timed out (dropped status packets)
+    READ_CORRUPT = 4      #: a sync read attempt got garbled bytes (bad CRC, truncated)
+    READ_FAILED = 8       #: no fresh present position this cycle
+    WRITE_FAILED = 16     #: the sync write raised
+    HARDWARE_ALERT = 32   #: a servo reported a hardware error (overload, overheating, ...)
+    CONNECTION_LOST = 64  #: the adapter went away
+    STALE_PRESENT = 128   #: servo data older than the watchdog allows
+    OVERRUN = 256         #: the cycle ended after the next deadline
+    TARGET_LOST = 512     #: the target source failed (its device vanished)
+    SIGNAL = 1024         #: SIGINT / SIGTERM
+
+
+#: Faults that send the limb to the safe state at once.
+SAFE_STATE_FAULTS = int(Fault.HARDWARE_ALERT | Fault.CONNECTION_LOST | Fault.STALE_PRESENT
+                        | Fault.SIGNAL)
+
+COLUMNS: tuple[str, ...] = (
+    "cycle", "t_s",
+    "target_w", "target_x", "target_y", "target_z",
+    "correction_w", "correction_x", "correction_y", "correction_z",
+    "commanded_w", "commanded_x", "commanded_y", "commanded_z",
+    "present_w", "present_x", "present_y", "present_z",
+    "correction_deg", "violation_deg", "distance_deg",
+    "read_ms", "compute_ms", "write_ms", "cycle_ms", "late_ms",
+    "intervention", "faults", "safe_state",
+)
+_INT_COLUMNS = frozenset({"cycle", "intervention", "faults", "safe_state"})
+_STORE_DROP = ("faults", "safe_state")
+
+CHUNK = 2048
+
+
+def _fault_names(bits: int) -> str | None:
+    if not bits:
+        return None
+    return "|".join(f.name.lower() for f in Fault if f.value and bits & f.value)
+
+
+class Telemetry:
+    """Collects rows; writes them off the hot path.
+
+    Parameters
+    ----------
+    csv_path : str or Path, optional
+        Telemetry CSV (header :data:`COLUMNS`).
+    store_writer : object with ``add_many(rows)`` and ``close()``, optional
+        :meth:`rig.store.Store.telemetry_writer`.
+    keep : bool
+        Keep every row in memory as well (tests and short runs: :meth:`table`).
+    """
+
+    def __init__(self, csv_path=None, store_writer=None, *, keep: bool = False):
+        self.n_col = len(COLUMNS)
+        self.csv_path = None if csv_path is None else Path(csv_path)
+        self.store_writer = store_writer
+        self.keep = keep
+        self.kept: list[np.ndarray] = []
+        self._chunk = np.empty((CHUNK, self.n_col))
+        self._i = 0
+        self.rows = 0
+        self._cycle_ms = np.empty(1 << 14)
+        self._late_ms = np.empty(1 << 14)
+        self._compute_ms = np.empty(1 << 14)
+        self._q: queue.Queue = queue.Queue()
+        self._fh = None
+        self._csv = None
+        self.error: BaseException | None = None
+        if self.csv_path is not None:
+            self.csv_path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.csv_path.open("w", newline="")
+            self._csv = csv.writer(self._fh)
+            self._csv.writerow(COLUMNS)
+        self._thread = None
+        if self._fh is not None or store_writer is not None:
+            self._thread = threading.Thread(target=self._run, name="rig-loop-telemetry",
+                                            daemon=True)
+            self._thread.start()
+
+    # ------------------------------------------------------------------ hot path
+    def record(self, row: tuple) -> None:
+        """Append one cycle's row (a tuple in :data:`COLUMNS` order)."""
+        i = self._i
+        self._chunk[i] = row
+        n = self.rows
+        if n >= len(self._cycle_ms):
+            self._grow()
+        self._cycle_ms[n] = row[24]
+        self._late_ms[n] = row[25]
+        self._compute_ms[n] = row[22]
+        self.rows = n + 1
+        i += 1
+        if i == CHUNK:
+            self._hand_over(self._chunk)
+            self._chunk = np.empty((CHUNK, self.n_col))
+            i = 0
+        self._i = i
+
+    def _grow(self) -> None:
+        for name in ("_cycle_ms", "_late_ms", "_compute_ms"):
+            a = getattr(self, name)
+            b = np.empty(2 * len(a))
+            b[:len(a)] = a
+            setattr(self, name, b)
+
+    def _hand_over(self, block: np.ndarray) -> None:
+        if self.keep:
+            self.kept.append(block)
+        if self._thread is not None:
+            self._q.put(block)
+
+    # ------------------------------------------------------------------ writer thread
+    def _run(self) -> None:
+        while True:
+            block = self._q.get()
+            if block is None:
+                return
+            try:
+                self._write(block)
+            except BaseException as err:  # reported by close()
+                self.error = err
+
+    def _write(self, block: np.ndarray) -> None:
+        if self._csv is not None:
+            for r in block:
+                self._csv.writerow([int(v) if c in _INT_COLUMNS else f"{v:.9g}"
+                                    for c, v in zip(COLUMNS, r, strict=True)])
+            self._fh.flush()
+        if self.store_writer is not None:
+            rows = []
+            for r in block:
+                d = {c: (int(v) if c in _INT_COLUMNS else float(v))
+                     for c, v in zip(COLUMNS, r, strict=True) if c not in _STORE_DROP}
+                d["fault"] = _fault_names(int(r[27]))
+                d["intervention_flags"] = int(r[26])
+                d["safe_state"] = int(r[28])
+                rows.append(d)
+            self.store_writer.add_many(rows)
+
+    def flush_partial(self) -> None:
+        """Hand the rows recorded so far over (end of run)."""
+        if self._i:
+            self._hand_over(self._chunk[: self._i].copy())
+            self._i = 0
+
+    def close(self) -> None:
+        """Flush everything, stop the thread, close the CSV (idempotent)."""
+        self.flush_partial()
+        if self._thread is not None:
+            self._q.put(None)
+            self._thread.join()
+            self._thread = None
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+        if self.store_writer is not None:
+            close = getattr(self.store_writer, "close", None)
+            self.store_writer = None
+            if close is not None:
+                close()
+
+    # ------------------------------------------------------------------ reading back
+    def table(self) -> dict[str, np.ndarray]:
+        """Every row kept (``keep=True``), one array per column."""
+        blocks = [*self.kept]
+        if self._i:
+            blocks.append(self._chunk[: self._i])
+        arr = np.concatenate(blocks) if blocks else np.empty((0, self.n_col))
+        return {c: (arr[:, k].astype(np.int64) if c in _INT_COLUMNS else arr[:, k])
+                for k, c in enumerate(COLUMNS)}
+
+    def cycle_ms(self) -> np.ndarray:
+        return self._cycle_ms[: self.rows].copy()
+
+    def late_ms(self) -> np.ndarray:
+        return self._late_ms[: self.rows].copy()
+
+    def compute_ms(self) -> np.ndarray:
+        return self._compute_ms[: self.rows].copy()
+
+
+def _pct(a: np.ndarray, p: float) -> float | None:
+    return None if len(a) == 0 else float(np.percentile(a, p))
+
+
+def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_s: float,
+              extra: dict | None = None) -> dict:
+    """The end-of-run summary (JSON-ready).
+
+    Keys: ``rate_hz`` (configured), ``achieved_hz``, ``cycles``, ``duration_s``,
+    ``p50_cycle_ms``, ``p99_cycle_ms``, ``max_cycle_ms``, ``p50_late_ms``, ``p99_late_ms``,
+    ``overruns``, ``skipped_deadlines``, ``p50_compute_us``, ``max_violation_deg``,
+    ``interventions`` (cycles with any safety intervention), ``interventions_by_kind``,
+    ``faults`` (counts by kind), ``safe_state_entries``, ``safe_state_reason``, plus ``extra``.
+    """
+    cyc = telemetry.cycle_ms()
+    late = telemetry.late_ms()
+    comp = telemetry.compute_ms()
+    n = telemetry.rows
+    out = {
+        "rate_hz": float(rate_hz),
+        "achieved_hz": (n / duration_s) if duration_s > 0 else None,
+        "cycles": int(n),
+        "duration_s": float(duration_s),
+        "p50_cycle_ms": _pct(cyc, 50),
+        "p99_cycle_ms": _pct(cyc, 99),
+        "max_cycle_ms": None if n == 0 else float(cyc.max()),
+        "p50_late_ms": _pct(late, 50),
+        "p99_late_ms": _pct(late, 99),
+        "p50_compute_us": None if n == 0 else 1e3 * float(np.median(comp)),
+    }
+    out.update(counters)
+    if extra:
+        out.update(extra)
+    return json.loads(json.dumps(out, default=_jsonable))
+
+
+def _jsonable(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        v = float(o)
+        return v if math.isfinite(v) else None
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def intervention_counts(bits_seen: dict[int, int]) -> dict[str, int]:
+    """Counts by :class:`Intervention` name from a histogram of bit patterns."""
+    out: dict[str, int] = {}
+    for bits, n in bits_seen.items():
+        for f in Intervention:
+            if f.value and bits & f.value:
+                out[f.name.lower()] = out.get(f.name.lower(), 0) + n
+    return out
+
+
+def is_intervention(bits: int) -> bool:
+    """True if the bits contain a safety intervention (rate limiting alone is not one)."""
+    return bool(bits & SAFETY_FLAGS)
