@@ -174,7 +174,7 @@ def _servo_check(port: str | None, ids: list[int], echo) -> dict:
 
 def _imu_check(port: str | None, seed: int, echo) -> dict:
     from firmware_protocol.imu import bno055 as B
-    from rig.drivers.bno055 import Bno055
+    from rig.devices.bno055 import Bno055
 
     sim = None
     if port is None:

@@ -7,7 +7,7 @@ import pytest
 
 from firmware_protocol.imu import bno055 as B
 from models import quaternion as Q
-from rig.drivers.bno055 import Bno055
+from rig.devices.bno055 import Bno055
 from rig.errors import RigConnectionError, RigError
 from rig.sim.imu import Bno055Simulator
 from rig.sim.limb import NoiseModel, SimulatedLimb
@@ -46,5 +46,5 @@ def test_write_refused_names_the_status(chip):
 
 
 def test_missing_port_is_a_connection_error(tmp_path):
-    with pytest.raises(RigConnectionError, match="cannot open"):
+    with pytest.raises(RigConnectionError, match="no such port"):
         Bno055(str(tmp_path / "ttyUSB9"))

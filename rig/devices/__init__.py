@@ -1,0 +1,60 @@
+"""Devices: port strings, drivers, the rig configuration and orientation sources.
+
+Above :mod:`rig.devices.ports` no code knows whether a port is hardware or a simulator.
+
+Public API
+----------
+:func:`open_port`, :class:`Port`
+    Port strings (``/dev/ttyUSB0``, ``sim://dynamixel?...``) -> an opened port.
+:class:`Device`
+    Base class of the drivers (template method, retries, typed errors).
+:class:`DynamixelChain`, :func:`scan`
+    X-series servo chains over ``dynamixel_sdk``.
+:class:`ChainKinematics`, :class:`ServoJoint`
+    Forward / closed-form inverse kinematics of 1-3 joint chains.
+:class:`Bno055`, :class:`StreamImu`, :class:`ImuSample`
+    IMU drivers.
+:func:`load_rig_config`, :class:`RigConfig`
+    Validated rig configuration files (``rig/configs/*.yaml`` by name).
+:class:`OrientationSample`, :class:`ServoChainSource`, :class:`ImuSetSource`,
+:func:`open_source`
+    The orientation-source interface recording and the live loop consume.
+"""
+
+from rig.devices.base import Device
+from rig.devices.bno055 import Bno055
+from rig.devices.config import RigConfig, ServosConfig, load_rig_config, rig_config_names
+from rig.devices.dynamixel import DynamixelChain, ServoInfo, scan
+from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.devices.ports import Port, open_port
+from rig.devices.sources import (
+    ImuSetSource,
+    OrientationSample,
+    OrientationSource,
+    ServoChainSource,
+    open_source,
+)
+from rig.devices.stream_imu import ImuSample, StreamImu
+
+__all__ = [
+    "Bno055",
+    "ChainKinematics",
+    "Device",
+    "DynamixelChain",
+    "ImuSample",
+    "ImuSetSource",
+    "OrientationSample",
+    "OrientationSource",
+    "Port",
+    "RigConfig",
+    "ServoChainSource",
+    "ServoInfo",
+    "ServoJoint",
+    "ServosConfig",
+    "StreamImu",
+    "load_rig_config",
+    "open_port",
+    "open_source",
+    "rig_config_names",
+    "scan",
+]

@@ -1,0 +1,340 @@
+"""Rig configuration files: which joint, which sensors and servos on which ports.
+
+YAML read with ``yaml.safe_load`` and validated field by field; **unknown keys are rejected at
+every level, naming the key** (a misspelt safety setting must never be silently ignored).
+Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
+(``--rig sim-shoulder``); anything else is a file path. Reference::
+
+    name: sim-imu                          # required, str
+    description: "..."                     # optional, str
+    joint:                                 # required
+      name: shoulder                       #   str
+      side: right                          #   left | right
+      parent: thorax                       #   segment names (str)
+      child: humerus
+    constraint: original                   # optional: shipped shape name or constraint file
+                                           #   (relative to this file); the patient / default
+    sensors:                               # optional (IMU rigs)
+      port: "sim://imu-stream?sensors=2&rate=200&patient=original&seed=1"
+                                           #   str; for protocol bno055 a list, one per sensor
+      protocol: stream                     #   stream | bno055
+      rate_hz: 200                         #   int > 0 (default 100)
+      baud: 921600                         #   int (default: stream 921600, bno055 115200)
+      segments: {thorax: 0, humerus: 1}    #   segment -> sensor index (port index for bno055);
+                                           #   must name joint.parent and joint.child
+    servos:                                # optional (servo rigs)
+      port: "sim://dynamixel?ids=1,2,3&return_delay_us=0"
+      baud: 1000000                        #   int, an X-series rate (default 1000000)
+      model: XM430-W350                    #   optional: every servo must report this model
+      return_delay_us: 0                   #   0..508, even (default 0), EEPROM
+      status_return_level: 2               #   0..2 (default 2)
+      watchdog_ms: 100                     #   0 (off) or 20..2540 (default 100)
+      ik_tolerance_deg: 0.1                #   > 0 (default 0.1)
+      latency_ms: null                     #   SDK packet-timeout latency; default: detected
+      chain:                               #   parent -> child, 1..3 joints
+        - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
+           max_ticks: 4095, name: j1}      #   zero/direction/min/max/name optional
+
+At least one of ``sensors`` / ``servos`` is required.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.errors import RigConfigError
+
+__all__ = [
+    "JointInfo",
+    "RigConfig",
+    "SensorsConfig",
+    "ServosConfig",
+    "load_rig_config",
+    "loads_rig_config",
+    "rig_config_names",
+]
+
+_X_BAUDS = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
+
+
+@dataclass(frozen=True)
+class JointInfo:
+    name: str
+    side: str
+    parent: str
+    child: str
+
+
+@dataclass(frozen=True)
+class SensorsConfig:
+    """IMU set: ``ports`` (one for ``stream``, one per sensor for ``bno055``)."""
+
+    ports: tuple[str, ...]
+    protocol: str
+    rate_hz: int
+    baud: int
+    segments: dict[str, int]
+
+    @property
+    def port(self) -> str:
+        return self.ports[0]
+
+
+@dataclass(frozen=True)
+class ServosConfig:
+    port: str
+    chain: tuple[ServoJoint, ...]
+    baud: int = 1_000_000
+    model: str | None = None
+    return_delay_us: int = 0
+    status_return_level: int = 2
+    watchdog_ms: int = 100
+    ik_tolerance_deg: float = 0.1
+    latency_ms: float | None = None
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return tuple(j.id for j in self.chain)
+
+    def kinematics(self) -> ChainKinematics:
+        return ChainKinematics(self.chain, tolerance_deg=self.ik_tolerance_deg)
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    name: str
+    joint: JointInfo
+    constraint: str | None = None
+    sensors: SensorsConfig | None = None
+    servos: ServosConfig | None = None
+    description: str = ""
+    source: str | None = field(default=None, compare=False)
+
+    def load_constraint(self):
+        """The constraint (:class:`models.constraint.JointConstraint`) or None."""
+        if self.constraint is None:
+            return None
+        from models.constraint import load_constraint
+        from models.shapes import SHAPES, load_shape
+
+        if self.constraint in SHAPES:
+            return load_shape(self.constraint)
+        return load_constraint(self.constraint)
+
+
+# ---------------------------------------------------------------------------------- helpers
+class _Ctx:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, what: str) -> RigConfigError:
+        return RigConfigError(f"{self.source}: {where}: {what}")
+
+    def mapping(self, value: Any, where: str, required: set[str], optional: set[str]) -> dict:
+        if not isinstance(value, Mapping):
+            raise self.fail(where, f"expected a mapping, got {type(value).__name__}")
+        for key in value:
+            if key not in required | optional:
+                raise self.fail(where, f"unknown key {key!r} (known: "
+                                       f"{', '.join(sorted(required | optional))})")
+        for key in sorted(required):
+            if key not in value:
+                raise self.fail(where, f"missing required key {key!r}")
+        return dict(value)
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(where, f"expected a non-empty string, got {value!r}")
+        return value.strip()
+
+    def integer(self, value: Any, where: str, lo: int | None = None, hi: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(where, f"expected a whole number, got {value!r}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(where, f"{value} is out of range {lo}..{hi}")
+        return value
+
+    def number(self, value: Any, where: str, lo: float | None = None) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise self.fail(where, f"expected a number, got {value!r}")
+        if lo is not None and not value > lo:
+            raise self.fail(where, f"must be > {lo}, got {value}")
+        return float(value)
+
+
+def _joint(ctx: _Ctx, value: Any) -> JointInfo:
+    d = ctx.mapping(value, "joint", {"name", "side", "parent", "child"}, set())
+    side = ctx.string(d["side"], "joint.side")
+    if side not in ("left", "right"):
+        raise ctx.fail("joint.side", f"expected 'left' or 'right', got {side!r}")
+    parent = ctx.string(d["parent"], "joint.parent")
+    child = ctx.string(d["child"], "joint.child")
+    if parent == child:
+        raise ctx.fail("joint", f"parent and child are the same segment {parent!r}")
+    return JointInfo(ctx.string(d["name"], "joint.name"), side, parent, child)
+
+
+def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
+    d = ctx.mapping(value, "sensors", {"port", "segments"}, {"protocol", "rate_hz", "baud"})
+    protocol = ctx.string(d.get("protocol", "stream"), "sensors.protocol")
+    if protocol not in ("stream", "bno055"):
+        raise ctx.fail("sensors.protocol", f"expected 'stream' or 'bno055', got {protocol!r}")
+    raw_ports = d["port"]
+    if isinstance(raw_ports, list):
+        if not raw_ports:
+            raise ctx.fail("sensors.port", "empty list")
+        ports = tuple(ctx.string(p, f"sensors.port[{i}]") for i, p in enumerate(raw_ports))
+    else:
+        ports = (ctx.string(raw_ports, "sensors.port"),)
+    if protocol == "stream" and len(ports) != 1:
+        raise ctx.fail("sensors.port", "the stream protocol uses one port (one board)")
+    rate = ctx.integer(d.get("rate_hz", 100), "sensors.rate_hz", 1, 65535)
+    baud = ctx.integer(d.get("baud", 921600 if protocol == "stream" else 115200),
+                       "sensors.baud", 1)
+    segs = d["segments"]
+    if not isinstance(segs, Mapping) or not segs:
+        raise ctx.fail("sensors.segments", "expected a mapping segment -> sensor index")
+    segments: dict[str, int] = {}
+    limit = 15 if protocol == "stream" else len(ports) - 1
+    for name, index in segs.items():
+        seg = ctx.string(name, "sensors.segments")
+        segments[seg] = ctx.integer(index, f"sensors.segments.{seg}", 0, limit)
+    if len(set(segments.values())) != len(segments):
+        raise ctx.fail("sensors.segments", "two segments share one sensor index")
+    for need in (joint.parent, joint.child):
+        if need not in segments:
+            raise ctx.fail("sensors.segments", f"no sensor for segment {need!r} "
+                                               f"(joint {joint.parent} -> {joint.child})")
+    return SensorsConfig(ports, protocol, rate, baud, segments)
+
+
+def _chain_joint(ctx: _Ctx, value: Any, where: str) -> ServoJoint:
+    d = ctx.mapping(value, where, {"id", "axis"},
+                    {"zero_ticks", "direction", "min_ticks", "max_ticks", "name"})
+    dxl_id = ctx.integer(d["id"], f"{where}.id", 0, 252)
+    axis = d["axis"]
+    if not isinstance(axis, list) or len(axis) != 3:
+        raise ctx.fail(f"{where}.axis", f"expected [x, y, z], got {axis!r}")
+    vec = tuple(ctx.number(a, f"{where}.axis") for a in axis)
+    if math.hypot(*vec) < 1e-9:
+        raise ctx.fail(f"{where}.axis", "must not be zero")
+    direction = ctx.integer(d.get("direction", 1), f"{where}.direction")
+    if direction not in (1, -1):
+        raise ctx.fail(f"{where}.direction", f"expected 1 or -1, got {direction}")
+    lo = ctx.integer(d.get("min_ticks", 0), f"{where}.min_ticks", -1_048_575, 1_048_575)
+    hi = ctx.integer(d.get("max_ticks", 4095), f"{where}.max_ticks", -1_048_575, 1_048_575)
+    zero = ctx.integer(d.get("zero_ticks", 2048), f"{where}.zero_ticks", -1_048_575, 1_048_575)
+    if not lo <= zero <= hi:
+        raise ctx.fail(where, f"need min_ticks <= zero_ticks <= max_ticks, got {lo}, {zero}, {hi}")
+    name = ctx.string(d["name"], f"{where}.name") if "name" in d else None
+    return ServoJoint(dxl_id, vec, zero, direction, lo, hi, name)  # type: ignore[arg-type]
+
+
+def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
+    d = ctx.mapping(value, "servos", {"port", "chain"},
+                    {"baud", "model", "return_delay_us", "status_return_level", "watchdog_ms",
+                     "ik_tolerance_deg", "latency_ms"})
+    port = ctx.string(d["port"], "servos.port")
+    baud = ctx.integer(d.get("baud", 1_000_000), "servos.baud")
+    if baud not in _X_BAUDS:
+        raise ctx.fail("servos.baud", f"{baud} is not an X-series rate "
+                                      f"({', '.join(map(str, _X_BAUDS))})")
+    chain_raw = d["chain"]
+    if not isinstance(chain_raw, list) or not 1 <= len(chain_raw) <= 3:
+        raise ctx.fail("servos.chain", "expected a list of 1 to 3 joints (parent -> child)")
+    chain = tuple(_chain_joint(ctx, j, f"servos.chain[{i}]") for i, j in enumerate(chain_raw))
+    ids = [j.id for j in chain]
+    for i in ids:
+        if ids.count(i) > 1:
+            raise ctx.fail("servos.chain", f"duplicate ID {i}")
+    model = ctx.string(d["model"], "servos.model") if d.get("model") is not None else None
+    rd = ctx.integer(d.get("return_delay_us", 0), "servos.return_delay_us", 0, 508)
+    if rd % 2:
+        raise ctx.fail("servos.return_delay_us", f"must be even (2 µs units), got {rd}")
+    srl = ctx.integer(d.get("status_return_level", 2), "servos.status_return_level", 0, 2)
+    wd = ctx.integer(d.get("watchdog_ms", 100), "servos.watchdog_ms", 0, 2540)
+    if 0 < wd < 20:
+        raise ctx.fail("servos.watchdog_ms", f"0 (off) or 20..2540 ms, got {wd}")
+    tol = ctx.number(d.get("ik_tolerance_deg", 0.1), "servos.ik_tolerance_deg", 0.0)
+    lat = d.get("latency_ms")
+    latency = None if lat is None else ctx.number(lat, "servos.latency_ms", 0.0)
+    cfg = ServosConfig(port, chain, baud, model, rd, srl, wd, tol, latency)
+    try:
+        cfg.kinematics()
+    except RigConfigError as err:
+        raise ctx.fail("servos.chain", str(err).removeprefix("servo chain: ")) from None
+    return cfg
+
+
+def loads_rig_config(text: str, source: str = "<rig config>",
+                     base_dir: Path | None = None) -> RigConfig:
+    """Parse and validate rig-config YAML ``text`` (``source`` names it in errors)."""
+    ctx = _Ctx(source)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise RigConfigError(f"{source}: not valid YAML: {str(err).splitlines()[0]}") from err
+    d = ctx.mapping(data, "top level", {"name", "joint"},
+                    {"description", "constraint", "sensors", "servos"})
+    name = ctx.string(d["name"], "name")
+    joint = _joint(ctx, d["joint"])
+    constraint = None
+    if d.get("constraint") is not None:
+        constraint = ctx.string(d["constraint"], "constraint")
+        from models.shapes import SHAPES
+
+        if constraint not in SHAPES:
+            path = Path(constraint)
+            if not path.is_absolute() and base_dir is not None and (base_dir / path).exists():
+                path = base_dir / path
+            if not path.is_file():
+                raise ctx.fail("constraint", f"{constraint!r} is neither a shape "
+                                             f"({', '.join(SHAPES)}) nor an existing file")
+            constraint = str(path)
+    sensors = _sensors(ctx, d["sensors"], joint) if d.get("sensors") is not None else None
+    servos = _servos(ctx, d["servos"]) if d.get("servos") is not None else None
+    if sensors is None and servos is None:
+        raise ctx.fail("top level", "needs 'sensors' or 'servos' (or both)")
+    desc = ctx.string(d["description"], "description") if d.get("description") else ""
+    return RigConfig(name, joint, constraint, sensors, servos, desc, source)
+
+
+def rig_config_names() -> list[str]:
+    """Names of the shipped configurations (``rig/configs/*.yaml``)."""
+    folder = resources.files("rig").joinpath("configs")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def load_rig_config(name_or_path: str | Path) -> RigConfig:
+    """A shipped configuration by name (``sim-shoulder``) or a YAML file by path.
+
+    Raises
+    ------
+    RigConfigError
+        Unknown name (the message lists the shipped ones), missing file, or invalid content
+        (the message names the file, the field and what is wrong).
+    """
+    text_name = str(name_or_path)
+    path = Path(text_name)
+    looks_like_file = (isinstance(name_or_path, Path) or path.suffix in (".yaml", ".yml")
+                       or "/" in text_name or "\\" in text_name)
+    if not looks_like_file:
+        names = rig_config_names()
+        if text_name not in names:
+            raise RigConfigError(f"--rig {text_name!r}: no such shipped rig config (shipped: "
+                                 f"{', '.join(names)}) and not a file path")
+        res = resources.files("rig").joinpath("configs", f"{text_name}.yaml")
+        return loads_rig_config(res.read_text(encoding="utf-8"), f"{text_name}.yaml",
+                                Path(str(res)).parent)
+    if not path.is_file():
+        raise RigConfigError(f"{path}: no such rig config file")
+    return loads_rig_config(path.read_text(encoding="utf-8"), str(path), path.parent)

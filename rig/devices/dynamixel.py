@@ -1,0 +1,671 @@
+"""A chain of Dynamixel X-series servos (Protocol 2.0) over the official ``dynamixel_sdk``.
+
+Instruction packets are built and parsed by the SDK's ``PacketHandler`` (protocol 2.0); this
+module keeps what the SDK's group classes throw away — the **error byte of every status
+packet**, whose bit 7 is the *alert* bit (a hardware error is latched; the instruction still
+ran) — and turns SDK result codes into typed errors (:mod:`rig.errors`).
+
+Per cycle (:meth:`DynamixelChain.read_ticks` / :meth:`DynamixelChain.write_goal_ticks`): one
+SYNC READ of Present Position (132, 4 bytes) — FAST SYNC READ (one status packet for all
+servos) when every servo's firmware supports it (X-series firmware ≥ 45, e-Manual
+"Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply).
+
+Start-up (:meth:`DynamixelChain.configure`): Operating Mode (11) = position, Return Delay
+Time (9, 2 µs units), Min/Max Position Limit (52/48) from the chain's tick limits — EEPROM, so
+written only while torque is off (refused otherwise) and only when they differ (EEPROM has a
+limited write life) — then Status Return Level (68, RAM). :meth:`DynamixelChain.arm_watchdog`
+writes Bus Watchdog (98, 20 ms units): with torque on, a servo that hears nothing from the host
+for that long stops and flags ``Bus Watchdog = -1`` (255) until 0 is written.
+
+Hardware errors are events: a status packet with the alert bit marks its servo;
+:meth:`DynamixelChain.poll_alerts` reads Torque Enable (64), Hardware Error Status (70) and Bus
+Watchdog (98) and returns :class:`~rig.errors.HardwareAlert` records with the torque state as
+the servo reports it.
+
+Timeouts: the SDK's packet timeout is ``tx_time × bytes + 2 × LATENCY_TIMER + 2 ms`` with a
+module constant ``LATENCY_TIMER = 16`` measured on ``time.time()``; the port class here uses the
+same formula with a per-chain latency (the adapter's detected USB latency timer, see
+:mod:`rig.devices.latency`) and the monotonic clock.
+"""
+
+from __future__ import annotations
+
+import math
+import termios
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import dynamixel_sdk as sdk
+import numpy as np
+import serial
+
+from firmware_protocol.dynamixel.control_table import (
+    BAUD_RATES,
+    ControlTable,
+    load_control_table,
+)
+from rig.devices.base import Device
+from rig.devices.config import ServosConfig
+from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
+from rig.devices.ports import Port, open_port
+from rig.errors import (
+    HardwareAlert,
+    HardwareAlertError,
+    RigConfigError,
+    RigConnectionError,
+    RigError,
+    RigProtocolError,
+    RigTimeoutError,
+    UnreachableError,
+)
+
+__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelChain", "ServoInfo", "scan"]
+
+ALERT_BIT = 0x80
+FAST_SYNC_READ_FIRMWARE = 45
+"""X-series firmware from which FAST SYNC READ / FAST BULK READ are supported (e-Manual)."""
+
+SCAN_BAUDS = tuple(b for b in BAUD_RATES.values() if b != 4_500_000)
+"""X-series rates ``dynamixel_sdk`` can set (its rate list lacks 4.5 Mbit/s)."""
+
+_HW_BITS = {0x01: "input_voltage", 0x04: "overheating", 0x08: "encoder",
+            0x10: "electrical_shock", 0x20: "overload"}
+_ERROR_NAMES = {1: "result fail", 2: "instruction error", 3: "CRC error", 4: "data range error",
+                5: "data length error", 6: "data limit error", 7: "access error"}
+_CONNECTION_ERRORS = (OSError, serial.SerialException, termios.error)
+
+# X-series addresses (checked against the control table of every model found)
+_ITEMS = ("Return Delay Time", "Operating Mode", "Max Position Limit", "Min Position Limit",
+          "Torque Enable", "Status Return Level", "Hardware Error Status", "Bus Watchdog",
+          "Goal Position", "Present Position", "Firmware Version")
+
+
+@dataclass(frozen=True)
+class ServoInfo:
+    """What a PING found: ID, model number and name, firmware version, baud rate."""
+
+    id: int
+    model_number: int
+    model: str
+    firmware: int
+    baud: int
+
+
+class _SdkPort(sdk.PortHandler):
+    """``PortHandler`` with the SDK's timeout formula on a per-port latency and the monotonic
+    clock (the SDK's own uses a module constant and ``time.time()``)."""
+
+    def __init__(self, port_name: str, latency_ms: float) -> None:
+        super().__init__(port_name)
+        self.latency_ms = float(latency_ms)
+
+    def setPacketTimeout(self, packet_length):
+        self.packet_start_time = self.getCurrentTime()
+        self.packet_timeout = self.tx_time_per_byte * packet_length + self.latency_ms * 2.0 + 2.0
+
+    def getCurrentTime(self):
+        return time.monotonic() * 1000.0
+
+
+def _model_name(model_number: int) -> str:
+    try:
+        return load_control_table(model_number).display_name
+    except (ValueError, FileNotFoundError):
+        return f"model {model_number}"
+
+
+def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPort, object]:
+    port = _SdkPort(path, latency_ms)
+    try:
+        ok = port.setBaudRate(baud)
+    except _CONNECTION_ERRORS as err:
+        msg = getattr(err, "strerror", None) or str(err)
+        if "Inappropriate ioctl" in msg:
+            msg = "not a serial port"
+        raise RigConnectionError(f"cannot open the servo port: {msg}", port=url) from err
+    if not ok:
+        raise RigConfigError(f"dynamixel_sdk cannot set {baud} bit/s", port=url,
+                             expected=", ".join(map(str, SCAN_BAUDS)))
+    return port, sdk.PacketHandler(2.0)
+
+
+def _default_latency(port: Port) -> float:
+    if port.is_simulated:
+        return float(SDK_LATENCY_MS)  # a pty has no USB latency; keep the SDK's margin
+    timer = usb_latency_timer_ms(port.path)
+    return float(max(timer, 1)) if timer is not None else float(SDK_LATENCY_MS)
+
+
+def _ping(port: _SdkPort, ph, dxl_id: int) -> tuple[int, int, int] | None:
+    """(model number, firmware, error byte) or None when nobody answered."""
+    tx = [0] * 10
+    tx[sdk.PKT_ID] = dxl_id
+    tx[sdk.PKT_LENGTH_L] = 3
+    tx[sdk.PKT_INSTRUCTION] = sdk.INST_PING
+    port.is_using = False
+    rx, result, error = ph.txRxPacket(port, tx)
+    if result != sdk.COMM_SUCCESS:
+        return None
+    p0 = sdk.PKT_PARAMETER0 + 1  # status parameters follow the error byte
+    return rx[p0] | rx[p0 + 1] << 8, rx[p0 + 2], error
+
+
+class DynamixelChain(Device):
+    """A 1-3 servo chain on one bus: open, check, read, write, kinematics, alerts.
+
+    Parameters
+    ----------
+    port : str, Port or None
+        Port string (``/dev/ttyUSB0``, ``sim://dynamixel?...``) or an opened
+        :class:`~rig.devices.ports.Port`; None takes ``chain.port`` (a :class:`ServosConfig`).
+    chain : ServosConfig or sequence of ServoJoint
+        The joints, parent → child.
+    baud : int, optional
+        Line speed (default ``chain.baud`` or 1 Mbit/s).
+    timeout : float, optional
+        Seconds per attempt of a transaction (on top of the SDK's packet timeout).
+    retries : int
+        Extra attempts after a timeout / garbled reply.
+    latency_ms : float, optional
+        Latency in the SDK's packet-timeout formula; default: the adapter's USB latency timer
+        (≥ 1 ms) on hardware, the SDK's 16 ms on a simulator's pty.
+    fast : bool, optional
+        Force FAST SYNC READ on/off; default: when every servo's firmware supports it.
+
+    Attributes
+    ----------
+    ids : tuple of int
+    kinematics : ChainKinematics
+    servos : dict of int to ServoInfo
+        What each servo reported at open.
+    fast : bool
+        FAST SYNC READ in use.
+    alert_pending : bool
+        A status packet carried the alert bit since the last :meth:`poll_alerts`.
+    advice : list of str
+        One-line hints found at open (e.g. the USB latency timer).
+
+    Raises
+    ------
+    RigConnectionError
+        Port missing / not a serial port; nobody answering (wrong baud?); IDs missing.
+    RigConfigError
+        Bad chain, unsupported baud, a servo of another model than ``chain.model``.
+    """
+
+    kind = "Dynamixel chain"
+    default_timeout = 0.1
+    default_retries = 2
+
+    def __init__(self, port: str | Port | None, chain: ServosConfig | Sequence[ServoJoint], *,
+                 baud: int | None = None, timeout: float | None = None,
+                 retries: int | None = None, latency_ms: float | None = None,
+                 fast: bool | None = None) -> None:
+        if isinstance(chain, ServosConfig):
+            self.config = chain
+        else:
+            joints = tuple(chain)
+            self.config = ServosConfig(port="" if port is None else str(port), chain=joints)
+        if port is None:
+            port = self.config.port
+        self.kinematics: ChainKinematics = self.config.kinematics()
+        self.ids = self.kinematics.ids
+        self._latency = latency_ms if latency_ms is not None else self.config.latency_ms
+        self._fast_wanted = fast
+        baud = int(baud if baud is not None else self.config.baud)
+        self.alert_pending = False
+        self._alert_ids: set[int] = set()
+        self.advice: list[str] = []
+        super().__init__(port, baud=baud, timeout=timeout, retries=retries)
+
+    @classmethod
+    def from_config(cls, config: ServosConfig, **kwargs) -> DynamixelChain:
+        """Open the chain a rig config's ``servos`` section describes."""
+        return cls(None, config, **kwargs)
+
+    # -- open / close ---------------------------------------------------------------------
+    def _open(self) -> None:
+        url = str(self.port)
+        latency = self._latency if self._latency is not None else _default_latency(self.port)
+        self._sdk_port, self._ph = _open_sdk(self.path, url, self.baud, latency)
+        try:
+            self._check_servos()
+        except BaseException:
+            self._close()
+            raise
+        if not self.port.is_simulated:
+            tip = latency_advice(self.port.path)
+            if tip:
+                self.advice.append(tip)
+
+    def _close(self) -> None:
+        port = getattr(self, "_sdk_port", None)
+        if port is not None and port.is_open:
+            try:
+                port.closePort()
+            except _CONNECTION_ERRORS:
+                pass
+
+    def _check_servos(self) -> None:
+        url = str(self.port)
+        found: dict[int, ServoInfo] = {}
+        for dxl_id in self.ids:
+            got = None
+            for _ in range(2):
+                got = self._guard(lambda i=dxl_id: _ping(self._sdk_port, self._ph, i))
+                if got is not None:
+                    break
+            if got is not None:
+                model, fw, _err = got
+                found[dxl_id] = ServoInfo(dxl_id, model, _model_name(model), fw, self.baud)
+        if not found:
+            raise RigConnectionError(
+                f"no servo answered at {self.baud} bit/s (wrong baud rate or port? try "
+                f"`rig scan {url}`)", port=url, actual=[], expected=list(self.ids))
+        missing = [i for i in self.ids if i not in found]
+        if missing:
+            raise RigConnectionError(f"servo ID {missing[0]} did not answer at {self.baud} bit/s",
+                                     port=url, actual=sorted(found), expected=list(self.ids))
+        want = self.config.model
+        if want is not None:
+            for info in found.values():
+                if info.model.upper() != want.upper():
+                    raise RigConfigError("servo model differs from the rig config", port=url,
+                                         dxl_id=info.id, actual=info.model, expected=want)
+        tables = {i: load_control_table(s.model_number) for i, s in found.items()}
+        first = next(iter(tables.values()))
+        for dxl_id, table in tables.items():
+            for item in _ITEMS:
+                if item not in table or (table[item].address, table[item].size) != \
+                        (first[item].address, first[item].size):
+                    raise RigConfigError(f"control table of {table.display_name} lacks or moves "
+                                         f"{item!r}; the chain needs X-series servos",
+                                         port=url, dxl_id=dxl_id)
+        self.servos = found
+        self.table: ControlTable = first
+        t = first
+        self._a_present, self._a_goal = t["Present Position"].address, t["Goal Position"].address
+        supported = all(s.firmware >= FAST_SYNC_READ_FIRMWARE for s in found.values())
+        self.fast = supported if self._fast_wanted is None else bool(self._fast_wanted)
+        self._id_param = list(self.ids)
+        self._id_index = {i: k for k, i in enumerate(self.ids)}
+
+    # -- helpers --------------------------------------------------------------------------
+    def _guard(self, fn):
+        """Run an SDK call; OS-level failures (adapter gone) -> RigConnectionError."""
+        try:
+            return fn()
+        except _CONNECTION_ERRORS as err:
+            self._sdk_port.is_using = False
+            msg = getattr(err, "strerror", None) or str(err) or type(err).__name__
+            raise RigConnectionError(f"the servo adapter stopped working ({msg}); unplugged?",
+                                     port=str(self.port)) from err
+
+    def _result(self, result: int, what: str, dxl_id: int | None = None) -> None:
+        if result == sdk.COMM_SUCCESS:
+            return
+        url = str(self.port)
+        if result == sdk.COMM_RX_TIMEOUT:
+            raise RigTimeoutError(f"{what}: no answer", port=url, dxl_id=dxl_id)
+        if result in (sdk.COMM_RX_CORRUPT, sdk.COMM_RX_FAIL):
+            raise RigProtocolError(f"{what}: garbled answer", port=url, dxl_id=dxl_id)
+        if result == sdk.COMM_TX_FAIL:
+            raise RigConnectionError(f"{what}: could not send", port=url)
+        raise RigProtocolError(f"{what}: {self._ph.getTxRxResult(result)}", port=url,
+                               dxl_id=dxl_id)
+
+    def _status_error(self, dxl_id: int, error: int, what: str) -> None:
+        if error & ALERT_BIT:
+            self._alert_ids.add(dxl_id)
+            self.alert_pending = True
+        code = error & 0x7F
+        if code:
+            raise RigProtocolError(f"{what}: servo answered {_ERROR_NAMES.get(code, code)}",
+                                   port=str(self.port), dxl_id=dxl_id, actual=code)
+
+    # -- the cycle ------------------------------------------------------------------------
+    def read_ticks(self) -> np.ndarray:
+        """Present Position of every servo, (n,) int64 ticks, by one (fast) sync read.
+
+        Raises
+        ------
+        RigTimeoutError, RigProtocolError
+            After the retries.
+        RigConnectionError
+            The adapter is gone.
+        """
+        return self.transact(self._read_once, "sync read of Present Position")
+
+    def _read_once(self, deadline: float) -> np.ndarray:
+        data = self.sync_read(self._a_present, 4)
+        out = np.empty(len(self.ids), dtype=np.int64)
+        for k, dxl_id in enumerate(self.ids):
+            out[k] = int.from_bytes(data[dxl_id], "little", signed=True)
+        return out
+
+    def sync_read(self, address: int, length: int,
+                  ids: Sequence[int] | None = None) -> dict[int, bytes]:
+        """One SYNC READ (FAST SYNC READ when in use): ``{id: bytes}``; no retries.
+
+        Status error bytes are checked (alert bit noted, error codes raised).
+        """
+        ids = self._id_param if ids is None else list(ids)
+        port, ph = self._sdk_port, self._ph
+        port.is_using = False
+        out: dict[int, bytes] = {}
+        if self.fast:
+            result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids),
+                                                       True))
+            self._result(result, "fast sync read")
+            raw, result, _ = self._guard(
+                lambda: ph.fastSyncReadRx(port, sdk.BROADCAST_ID, (length + 4) * len(ids)))
+            self._result(result, "fast sync read")
+            off = 0
+            for _ in ids:
+                if off + 2 + length > len(raw):
+                    break
+                err, dxl_id = raw[off], raw[off + 1]
+                out[dxl_id] = bytes(raw[off + 2:off + 2 + length])
+                self._status_error(dxl_id, err, "fast sync read")
+                off += length + 4
+            missing = [i for i in ids if i not in out]
+            if missing:
+                raise RigTimeoutError("fast sync read: no data", port=str(self.port),
+                                      dxl_id=missing[0])
+            return out
+        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), False))
+        self._result(result, "sync read")
+        for dxl_id in ids:
+            data, result, err = self._guard(lambda i=dxl_id: ph.readRx(port, i, length))
+            self._result(result, "sync read", dxl_id)
+            self._status_error(dxl_id, err, "sync read")
+            out[dxl_id] = bytes(data)
+        return out
+
+    def check_goal(self, ticks: Sequence[int]) -> None:
+        """Raise :class:`UnreachableError` if a goal is outside its joint's tick limits."""
+        kin = self.kinematics
+        if len(ticks) != kin.n:
+            raise ValueError(f"expected {kin.n} goal ticks, got {len(ticks)}")
+        for k in range(kin.n):
+            t = int(ticks[k])
+            if not kin.min_ticks[k] <= t <= kin.max_ticks[k]:
+                raise UnreachableError("goal outside the joint's tick limits", port=str(self.port),
+                                       dxl_id=self.ids[k], actual=t,
+                                       expected=f"{kin.min_ticks[k]}..{kin.max_ticks[k]}")
+
+    def write_goal_ticks(self, ticks: Sequence[int]) -> None:
+        """Goal Position of every servo by one SYNC WRITE (no reply, no retry).
+
+        Raises
+        ------
+        UnreachableError
+            A goal outside its joint's ``[min_ticks, max_ticks]``: nothing is sent.
+        RigConnectionError
+            The adapter is gone.
+        """
+        self._check_open()
+        self.check_goal(ticks)
+        param: list[int] = []
+        for dxl_id, t in zip(self.ids, ticks, strict=True):
+            v = int(t) & 0xFFFFFFFF
+            param += (dxl_id, v & 0xFF, v >> 8 & 0xFF, v >> 16 & 0xFF, v >> 24 & 0xFF)
+        port = self._sdk_port
+        port.is_using = False
+        result = self._guard(lambda: self._ph.syncWriteTxOnly(port, self._a_goal, 4, param,
+                                                              len(param)))
+        self._result(result, "sync write of Goal Position")
+
+    # -- register access ------------------------------------------------------------------
+    def read_register(self, dxl_id: int, name: str) -> int:
+        """One control-table item of one servo (retried)."""
+        item = self.table[name]
+
+        def once(deadline: float) -> int:
+            port = self._sdk_port
+            port.is_using = False
+            data, result, err = self._guard(
+                lambda: self._ph.readTxRx(port, dxl_id, item.address, item.size))
+            self._result(result, f"read of {name}", dxl_id)
+            self._status_error(dxl_id, err, f"read of {name}")
+            return item.decode(bytes(data))
+
+        return self.transact(once, f"read of {name}", dxl_id=dxl_id)
+
+    def write_register(self, dxl_id: int, name: str, value: int) -> None:
+        """Write one control-table item of one servo (acknowledged when Status Return Level is
+        2, then retried; otherwise sent once)."""
+        item = self.table[name]
+        data = list(item.encode(int(value)))
+        acked = getattr(self, "_srl", 2) >= 2
+
+        def once(deadline: float) -> None:
+            port = self._sdk_port
+            port.is_using = False
+            if not acked:
+                result = self._guard(lambda: self._ph.writeTxOnly(port, dxl_id, item.address,
+                                                                  item.size, data))
+                self._result(result, f"write of {name}", dxl_id)
+                return
+            result, err = self._guard(lambda: self._ph.writeTxRx(port, dxl_id, item.address,
+                                                                 item.size, data))
+            self._result(result, f"write of {name}", dxl_id)
+            self._status_error(dxl_id, err, f"write of {name} = {value}")
+
+        self.transact(once, f"write of {name}", dxl_id=dxl_id)
+
+    def bulk_read(self, requests: Mapping[int, tuple[int, int]]) -> dict[int, bytes]:
+        """One BULK READ: ``{id: (address, length)}`` → ``{id: bytes}`` (retried)."""
+        def once(deadline: float) -> dict[int, bytes]:
+            port = self._sdk_port
+            port.is_using = False
+            param: list[int] = []
+            for dxl_id, (address, length) in requests.items():
+                param += (dxl_id, address & 0xFF, address >> 8, length & 0xFF, length >> 8)
+            result = self._guard(lambda: self._ph.bulkReadTx(port, param, len(param), False))
+            self._result(result, "bulk read")
+            out = {}
+            for dxl_id, (_, length) in requests.items():
+                data, result, err = self._guard(lambda i=dxl_id, n=length:
+                                                self._ph.readRx(port, i, n))
+                self._result(result, "bulk read", dxl_id)
+                self._status_error(dxl_id, err, "bulk read")
+                out[dxl_id] = bytes(data)
+            return out
+
+        return self.transact(once, "bulk read")
+
+    def ping(self, dxl_id: int) -> ServoInfo | None:
+        """PING one ID: what answered, or None."""
+        self._check_open()
+        got = self._guard(lambda: _ping(self._sdk_port, self._ph, dxl_id))
+        if got is None:
+            return None
+        return ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], self.baud)
+
+    # -- torque, configuration, watchdog --------------------------------------------------
+    def torque(self) -> np.ndarray:
+        """Torque Enable as each servo reports it, (n,) bool."""
+        a = self.table["Torque Enable"].address
+        data = self.transact(lambda d: self.sync_read(a, 1), "sync read of Torque Enable")
+        return np.array([bool(data[i][0]) for i in self.ids])
+
+    def set_torque(self, on: bool) -> np.ndarray:
+        """Torque on/off on every servo; returns the state the servos then report.
+
+        Raises
+        ------
+        HardwareAlertError
+            Torque on was asked but a servo in hardware-error shutdown stays off.
+        """
+        for dxl_id in self.ids:
+            self.write_register(dxl_id, "Torque Enable", 1 if on else 0)
+        state = self.torque()
+        if on and not state.all():
+            alerts = {a.dxl_id: a for a in self.poll_alerts()}
+            off = [i for i, s in zip(self.ids, state, strict=True) if not s]
+            if off[0] in alerts:
+                raise HardwareAlertError(alerts[off[0]])
+            raise RigProtocolError("torque did not come on", port=str(self.port),
+                                   dxl_id=off[0])
+        return state
+
+    def configure(self) -> None:
+        """Set the registers the loop depends on (see the module docstring).
+
+        Raises
+        ------
+        RigError
+            An EEPROM value must change while a servo's torque is on (turn torque off first;
+            this method never does that by itself: the limb could fall).
+        """
+        cfg, kin = self.config, self.kinematics
+        multi_turn = bool((kin.min_ticks < 0).any() or (kin.max_ticks > 4095).any())
+        for k, dxl_id in enumerate(self.ids):
+            want = {"Operating Mode": 4 if multi_turn else 3,
+                    "Return Delay Time": cfg.return_delay_us // 2}
+            if not multi_turn:
+                want["Min Position Limit"] = int(kin.min_ticks[k])
+                want["Max Position Limit"] = int(kin.max_ticks[k])
+            have = {name: self.read_register(dxl_id, name) for name in want}
+            change = {n: v for n, v in want.items() if have[n] != v}
+            if change and self.read_register(dxl_id, "Torque Enable"):
+                n, v = next(iter(change.items()))
+                raise RigError(f"EEPROM item {n!r} must change but torque is on; turn torque "
+                               f"off first (set_torque(False))", port=str(self.port),
+                               dxl_id=dxl_id, actual=have[n], expected=v)
+            for name, value in change.items():
+                self.write_register(dxl_id, name, value)
+        for dxl_id in self.ids:
+            self.write_register(dxl_id, "Status Return Level", cfg.status_return_level)
+        self._srl = cfg.status_return_level
+
+    def arm_watchdog(self, ms: int | None = None) -> int:
+        """Arm the Bus Watchdog on every servo (``ms`` rounded up to 20 ms units; default the
+        config's ``watchdog_ms``; 0 disarms and clears a watchdog error). Returns the ms set."""
+        ms = self.config.watchdog_ms if ms is None else int(ms)
+        if ms < 0 or ms > 2540:
+            raise RigConfigError("Bus Watchdog must be 0..2540 ms", port=str(self.port),
+                                 actual=ms)
+        units = 0 if ms == 0 else max(1, math.ceil(ms / 20))
+        for dxl_id in self.ids:
+            if units:  # a latched watchdog error (-1) must be cleared with 0 first
+                self.write_register(dxl_id, "Bus Watchdog", 0)
+            self.write_register(dxl_id, "Bus Watchdog", units)
+        return units * 20
+
+    def poll_alerts(self) -> list[HardwareAlert]:
+        """Current hardware alerts (one per servo in error), torque as the servo reports it.
+
+        Level-triggered: a servo in error is reported at every poll until it is rebooted
+        (hardware error) or its watchdog is cleared. Clears :attr:`alert_pending`.
+        """
+        t = self.table
+        a0 = t["Torque Enable"].address
+        a_hw, a_wd = t["Hardware Error Status"].address, t["Bus Watchdog"].address
+        length = a_wd + 1 - a0
+        data = self.transact(lambda d: self.sync_read(a0, length), "alert poll")
+        now = time.monotonic()
+        alerts = []
+        for dxl_id in self.ids:
+            b = data[dxl_id]
+            hw, wd = b[a_hw - a0], b[a_wd - a0]
+            names = tuple(n for bit, n in _HW_BITS.items() if hw & bit)
+            if wd == 0xFF:
+                names += ("bus_watchdog",)
+            if names or dxl_id in self._alert_ids:
+                alerts.append(HardwareAlert(str(self.port), dxl_id, now, hw, names,
+                                            bool(b[0])))
+        self._alert_ids.clear()
+        self.alert_pending = False
+        return alerts
+
+    def reboot(self, dxl_id: int) -> None:
+        """REBOOT one servo (clears its hardware error; torque comes back off)."""
+        port = self._sdk_port
+        port.is_using = False
+        result, _ = self._guard(lambda: self._ph.reboot(port, dxl_id))
+        self._result(result, "reboot", dxl_id)
+        self._alert_ids.discard(dxl_id)
+
+    # -- kinematics conveniences ----------------------------------------------------------
+    def read_orientation(self) -> np.ndarray:
+        """Forward kinematics of :meth:`read_ticks`: (4,) limb relative to parent."""
+        return self.kinematics.forward(self.read_ticks())
+
+    def write_orientation(self, q: Sequence[float], near_ticks: Sequence[int]) -> np.ndarray:
+        """Inverse kinematics then :meth:`write_goal_ticks`; returns the goal ticks.
+
+        Raises
+        ------
+        UnreachableError
+            Nothing sent.
+        """
+        goal = self.kinematics.inverse(q, near_ticks)
+        self.write_goal_ticks(goal)
+        return goal
+
+
+def scan(port: str | Port, bauds: Iterable[int] | None = None,
+         ids: Iterable[int] = range(253), *, latency_ms: float | None = None,
+         on_found=None) -> list[ServoInfo]:
+    """PING every ID at every baud rate: what answers.
+
+    Per-ID pings with the SDK's timeout formula at ``latency_ms`` (default: the adapter's
+    detected latency timer, 16 ms on a simulator) rather than ``broadcastPing``, which always
+    waits ~0.8 s (4.4 s at 9600 bit/s) whatever answers.
+
+    Parameters
+    ----------
+    port : str or Port
+    bauds : iterable of int, optional
+        Default: every X-series rate the SDK can set (:data:`SCAN_BAUDS`), fastest first.
+    ids : iterable of int
+    on_found : callable, optional
+        Called with each :class:`ServoInfo` as it is found.
+
+    Raises
+    ------
+    RigConnectionError
+        The port cannot be opened.
+    """
+    bauds = list(bauds) if bauds is not None else sorted(SCAN_BAUDS, reverse=True)
+    ids = list(ids)
+    own = not isinstance(port, Port)
+    p = open_port(port, baud=bauds[0]) if own else port
+    try:
+        latency = latency_ms if latency_ms is not None else _default_latency(p)
+        found: list[ServoInfo] = []
+        sdk_port = None
+        try:
+            for baud in bauds:
+                if sdk_port is None:
+                    sdk_port, ph = _open_sdk(p.current_path(), str(p), baud, latency)
+                elif not sdk_port.setBaudRate(baud):
+                    raise RigConfigError(f"dynamixel_sdk cannot set {baud} bit/s", port=str(p))
+                seen = {s.id for s in found}
+                for dxl_id in ids:
+                    if dxl_id in seen:
+                        continue
+                    try:
+                        got = _ping(sdk_port, ph, dxl_id)
+                    except _CONNECTION_ERRORS as err:
+                        raise RigConnectionError(f"the adapter stopped working ({err})",
+                                                 port=str(p)) from err
+                    if got is not None:
+                        info = ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], baud)
+                        found.append(info)
+                        if on_found is not None:
+                            on_found(info)
+        finally:
+            if sdk_port is not None and sdk_port.is_open:
+                try:
+                    sdk_port.closePort()
+                except _CONNECTION_ERRORS:
+                    pass
+        return found
+    finally:
+        if own:
+            p.close()

@@ -1,0 +1,321 @@
+"""Orientation sources: the one interface recording and the live loop consume.
+
+A source is a context manager and an iterator of batches of :class:`OrientationSample`:
+
+* ``read(timeout) -> list[OrientationSample]`` — what arrived (possibly empty) within
+  ``timeout`` seconds;
+* ``dropped`` — samples lost (sequence gaps) so far; ``names`` — what it reports;
+* ``iter(source)`` — ``read`` in a loop, yielding non-empty batches until the source is closed.
+
+A device that vanishes makes ``read`` raise :class:`~rig.errors.RigConnectionError` (a servo
+chain that stops answering too: its timeouts are turned into a connection error there).
+
+Implementations
+---------------
+:class:`ServoChainSource`
+    Forward kinematics of one sync read per period: ``kind="joint"``, ``name`` the rig
+    config's joint name; periods on a drift-free monotonic schedule at ``rate_hz``.
+:class:`ImuSetSource`
+    A stream-protocol board, or one BNO055 per segment: ``kind="sensor"``, ``name`` the
+    segment the sensor is strapped to (the rig config's ``segments``), ``q`` the sensor
+    relative to its world frame.
+
+:func:`open_source` builds either from a :class:`~rig.devices.config.RigConfig`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from rig.devices.bno055 import Bno055
+from rig.devices.config import RigConfig
+from rig.devices.dynamixel import DynamixelChain
+from rig.devices.ports import Port
+from rig.devices.stream_imu import StreamImu
+from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
+
+__all__ = [
+    "ImuSetSource",
+    "OrientationSample",
+    "OrientationSource",
+    "ServoChainSource",
+    "open_source",
+]
+
+
+@dataclass(frozen=True)
+class OrientationSample:
+    """One timestamped orientation.
+
+    Attributes
+    ----------
+    t : float
+        Host monotonic time, s.
+    device_t : float or None
+        Device timestamp, s (None if the device has none).
+    name : str
+        Segment name (``kind="sensor"``) or joint name (``kind="joint"``).
+    kind : str
+        ``"sensor"``: IMU orientation in its world frame; ``"joint"``: limb relative to parent.
+    q : (4,) float64
+        Unit quaternion (w, x, y, z).
+    status : int
+        Calibration status byte (IMU) or 0.
+    """
+
+    t: float
+    device_t: float | None
+    name: str
+    kind: str
+    q: np.ndarray
+    status: int
+
+
+@runtime_checkable
+class OrientationSource(Protocol):
+    """What recording and the live loop consume (see the module docstring)."""
+
+    names: tuple[str, ...]
+
+    @property
+    def dropped(self) -> int: ...  # pragma: no cover - protocol
+
+    def read(self, timeout: float) -> list[OrientationSample]: ...  # pragma: no cover
+
+    def close(self) -> None: ...  # pragma: no cover
+
+    def __enter__(self): ...  # pragma: no cover
+
+    def __exit__(self, *exc: object) -> None: ...  # pragma: no cover
+
+    def __iter__(self) -> Iterator[list[OrientationSample]]: ...  # pragma: no cover
+
+
+class _SourceBase:
+    names: tuple[str, ...] = ()
+    _closed = False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._closed = True
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def read(self, timeout: float) -> list[OrientationSample]:  # pragma: no cover
+        raise NotImplementedError
+
+    def __iter__(self) -> Iterator[list[OrientationSample]]:
+        while not self._closed:
+            batch = self.read(0.5)
+            if batch:
+                yield batch
+
+
+class ServoChainSource(_SourceBase):
+    """Joint orientation of a servo chain by forward kinematics, at ``rate_hz``.
+
+    Parameters
+    ----------
+    chain : DynamixelChain
+        Opened; closed with the source when ``own`` is true.
+    name : str
+        Joint name in the samples.
+    rate_hz : float
+        Reads per second, on a drift-free schedule (a late read is not made up for).
+    own : bool
+        Close the chain with the source.
+
+    Attributes
+    ----------
+    ticks : (n,) int64 or None
+        The last ticks read.
+    """
+
+    def __init__(self, chain: DynamixelChain, name: str = "joint", *, rate_hz: float = 100.0,
+                 own: bool = True) -> None:
+        if not rate_hz > 0:
+            raise RigConfigError(f"rate_hz must be > 0, got {rate_hz}")
+        self.chain = chain
+        self.names = (name,)
+        self.period = 1.0 / float(rate_hz)
+        self._own = own
+        self._next = time.monotonic()
+        self.ticks: np.ndarray | None = None
+
+    @property
+    def dropped(self) -> int:
+        return 0  # each read is a request: nothing can be lost in between
+
+    def read(self, timeout: float) -> list[OrientationSample]:
+        """One reading if the next period starts within ``timeout`` s, else []."""
+        now = time.monotonic()
+        wait = self._next - now
+        if wait > timeout:
+            time.sleep(max(0.0, timeout))
+            return []
+        if wait > 0:
+            time.sleep(wait)
+        self._next += self.period
+        if self._next < time.monotonic():  # fell behind: skip the missed periods
+            self._next = time.monotonic() + self.period
+        try:
+            ticks = self.chain.read_ticks()
+        except (RigTimeoutError, RigProtocolError) as err:
+            raise RigConnectionError(f"the servo chain stopped answering ({err})",
+                                     port=str(self.chain.port)) from err
+        t = time.monotonic()
+        self.ticks = ticks
+        q = self.chain.kinematics.forward(ticks)
+        return [OrientationSample(t, None, self.names[0], "joint", q, 0)]
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            if self._own:
+                self.chain.close()
+
+
+class ImuSetSource(_SourceBase):
+    """Sensor orientations of an IMU set, named by segment.
+
+    Parameters
+    ----------
+    devices : StreamImu, or sequence of Bno055
+        One stream board, or one BNO055 per sensor index.
+    segments : mapping of str to int
+        Segment name -> sensor index (index into ``devices`` for BNO055s).
+    rate_hz : float
+        Poll rate for BNO055s (a stream board sets its own).
+    own : bool
+        Close the devices with the source.
+    """
+
+    def __init__(self, devices: StreamImu | Sequence[Bno055], segments: Mapping[str, int], *,
+                 rate_hz: float = 100.0, own: bool = True) -> None:
+        self._stream = devices if isinstance(devices, StreamImu) else None
+        self._chips = [] if self._stream is not None else list(devices)  # type: ignore[arg-type]
+        self._by_index = {int(i): str(s) for s, i in segments.items()}
+        self.names = tuple(segments)
+        self.period = 1.0 / float(rate_hz)
+        self._next = time.monotonic()
+        self._own = own
+        if self._stream is None:
+            for s, i in segments.items():
+                if not 0 <= i < len(self._chips):
+                    raise RigConfigError(f"segment {s!r}: sensor {i} but only "
+                                         f"{len(self._chips)} BNO055 ports")
+
+    @property
+    def dropped(self) -> int:
+        return self._stream.dropped if self._stream is not None else 0
+
+    def read(self, timeout: float) -> list[OrientationSample]:
+        if self._stream is not None:
+            samples = self._stream.read(timeout)
+            return [OrientationSample(s.t, s.device_t, self._by_index[s.sensor], "sensor", s.q,
+                                      s.calibration)
+                    for s in samples if s.sensor in self._by_index]
+        wait = self._next - time.monotonic()
+        if wait > timeout:
+            time.sleep(max(0.0, timeout))
+            return []
+        if wait > 0:
+            time.sleep(wait)
+        self._next += self.period
+        if self._next < time.monotonic():
+            self._next = time.monotonic() + self.period
+        out = []
+        for index, name in self._by_index.items():
+            chip = self._chips[index]
+            try:
+                s = chip.sample()
+            except (RigTimeoutError, RigProtocolError) as err:
+                raise RigConnectionError(f"the BNO055 of {name!r} stopped answering ({err})",
+                                         port=str(chip.port)) from err
+            out.append(OrientationSample(s.t, None, name, "sensor", s.q, s.calibration))
+        return out
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        if self._own:
+            devices = [self._stream] if self._stream is not None else self._chips
+            errors = []
+            for d in devices:
+                try:
+                    d.close()
+                except Exception as err:
+                    errors.append(err)
+            if errors:
+                raise errors[0]
+
+
+def open_source(config: RigConfig, which: str | None = None, *,
+                rate_hz: float | None = None, ports: Mapping[str, Port] | None = None
+                ) -> ServoChainSource | ImuSetSource:
+    """Open the orientation source a rig config describes.
+
+    Parameters
+    ----------
+    config : RigConfig
+    which : {"servos", "sensors"}, optional
+        Needed when the config has both.
+    rate_hz : float, optional
+        Default: ``sensors.rate_hz``, or 100 Hz for a servo chain.
+    ports : mapping of str to Port, optional
+        Already opened ports by port string (a test keeps the simulator for fault injection).
+
+    Raises
+    ------
+    RigConfigError, RigConnectionError
+        Before anything long starts: bad config, missing port, nobody answering.
+    """
+    if which is None:
+        if config.servos is not None and config.sensors is not None:
+            raise RigConfigError(f"rig config {config.name!r} has both servos and sensors: "
+                                 f"say which to open")
+        which = "servos" if config.servos is not None else "sensors"
+    ports = dict(ports or {})
+    if which == "servos":
+        if config.servos is None:
+            raise RigConfigError(f"rig config {config.name!r} has no servos")
+        port = ports.get(config.servos.port, config.servos.port)
+        chain = DynamixelChain(port, config.servos)
+        return ServoChainSource(chain, config.joint.name, rate_hz=rate_hz or 100.0)
+    if which != "sensors":
+        raise ValueError(f"which must be 'servos' or 'sensors', got {which!r}")
+    sensors = config.sensors
+    if sensors is None:
+        raise RigConfigError(f"rig config {config.name!r} has no sensors")
+    rate = rate_hz or sensors.rate_hz
+    if sensors.protocol == "stream":
+        board = StreamImu(ports.get(sensors.port, sensors.port),
+                          sensors=sorted(set(sensors.segments.values())), rate_hz=int(rate),
+                          baud=sensors.baud)
+        return ImuSetSource(board, sensors.segments)
+    chips: list[Bno055] = []
+    try:
+        for k, p in enumerate(sensors.ports):
+            chips.append(Bno055(ports.get(p, p), baud=sensors.baud, sensor=k))
+        from firmware_protocol.imu import bno055 as B
+
+        for chip in chips:
+            chip.set_mode(B.OperationMode.NDOF)
+    except BaseException:
+        for chip in chips:
+            chip.close()
+        raise
+    return ImuSetSource(chips, sensors.segments, rate_hz=rate)
