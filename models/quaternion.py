@@ -16,6 +16,8 @@ Conventions (the whole project, every file, API and model)
   about ``a`` (limb frame) and ``swing`` is the minimal rotation taking ``a`` to the limb direction.
 - ``q`` and ``-q`` are the same rotation. Functions that return a rotation "as a rotation"
   (:func:`canonical`) pick ``w >= 0``; functions that transform an orientation keep its sign.
+- **Angles wrap to (-π, π]** (:func:`wrap_angle`, scalar twin :func:`wrap_angle1`): a twist of
+  exactly half a turn is ``+π`` for ``q`` and ``-q`` alike, on every path.
 
 scipy's :class:`scipy.spatial.transform.Rotation` is used for conversions (it is scalar-last by
 default: always go through :func:`to_rotation` / :func:`from_rotation`, which pass
@@ -23,6 +25,8 @@ default: always go through :func:`to_rotation` / :func:`from_rotation`, which pa
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -51,13 +55,20 @@ __all__ = [
     "from_two_vectors",
     "limb_direction",
     "multiply",
+    "perpendicular",
     "random_quaternions",
     "random_unit_vectors",
     "rotate",
     "swing_twist",
     "to_rotation",
     "twist_angle",
+    "twist_angle1",
+    "wrap_angle",
+    "wrap_angle1",
 ]
+
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
 
 
 def check_quaternions(q, *, normalize: bool = False, name: str = "orientation") -> np.ndarray:
@@ -209,7 +220,7 @@ def from_axis_angle(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     return np.concatenate((np.cos(half)[..., None], axis * np.sin(half)[..., None]), axis=-1)
 
 
-def _perpendicular(v: np.ndarray) -> np.ndarray:
+def perpendicular(v: np.ndarray) -> np.ndarray:
     """A unit vector perpendicular to each unit ``v``, chosen deterministically.
 
     Uses the cross product with the basis axis least aligned with ``v`` (ties: lowest index).
@@ -222,10 +233,13 @@ def _perpendicular(v: np.ndarray) -> np.ndarray:
     return p.reshape(v.shape)
 
 
+_perpendicular = perpendicular  # former private name
+
+
 def from_two_vectors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Minimal rotation taking unit vectors ``a`` to ``b`` (axis ``a × b``), ``w >= 0``.
 
-    For antiparallel vectors the rotation is by π about :func:`_perpendicular` of ``a`` — a
+    For antiparallel vectors the rotation is by π about :func:`perpendicular` of ``a`` — a
     deterministic choice, documented because every such choice is arbitrary.
     """
     a = np.asarray(a, dtype=np.float64)
@@ -247,19 +261,43 @@ def twist_angle(q: np.ndarray, axis: np.ndarray = LIMB_AXIS) -> np.ndarray:
     """Twist of ``q`` about the limb ``axis`` (limb frame), radians in (-π, π].
 
     With ``q = swing ⊗ twist`` the twist is ``(w, (v·a) a)`` normalised, and its signed angle is
-    ``2 atan2(v·a, w)``; wrapping to (-π, π] makes ``q`` and ``-q`` agree.
+    ``2 atan2(v·a, w)``, evaluated on the representative with ``w >= 0`` so that ``q`` and ``-q``
+    give bit-identical angles; half a turn (``w = 0``) is ``+π``.
     """
     q = np.asarray(q, dtype=np.float64)
     axis = np.asarray(axis, dtype=np.float64)
     proj = q[..., 1:] @ axis
-    phi = 2.0 * np.arctan2(proj, q[..., 0])
-    return _wrap_pi(phi)
+    w = q[..., 0]
+    neg = w < 0.0
+    phi = 2.0 * np.arctan2(np.where(neg, -proj, proj), np.abs(w))
+    return np.where(phi <= -_PI, _PI, phi)
 
 
-def _wrap_pi(phi: np.ndarray) -> np.ndarray:
-    """Wrap angles to (-π, π]."""
-    out = np.mod(phi + np.pi, 2.0 * np.pi) - np.pi
-    return np.where(out == -np.pi, np.pi, out)
+def twist_angle1(q, axis) -> float:
+    """Scalar twin of :func:`twist_angle` for one quaternion and axis (tuples of floats)."""
+    p = q[1] * axis[0] + q[2] * axis[1] + q[3] * axis[2]
+    w = q[0]
+    phi = 2.0 * math.atan2(-p, -w) if w < 0.0 else 2.0 * math.atan2(p, abs(w))  # abs: w = -0.0
+    return _PI if phi <= -_PI else phi
+
+
+def wrap_angle(phi) -> np.ndarray:
+    """Wrap angles (radians) to (-π, π]; angles already inside are returned unchanged."""
+    phi = np.asarray(phi, dtype=np.float64)
+    out = np.mod(phi + _PI, _TWO_PI) - _PI
+    out = np.where(out == -_PI, _PI, out)
+    return np.where((phi > -_PI) & (phi <= _PI), phi, out)
+
+
+def wrap_angle1(phi: float) -> float:
+    """Scalar twin of :func:`wrap_angle` (same results, bit for bit)."""
+    if -_PI < phi <= _PI:
+        return phi
+    out = (phi + _PI) % _TWO_PI - _PI
+    return _PI if out == -_PI else out
+
+
+_wrap_pi = wrap_angle  # former private name
 
 
 def swing_twist(q: np.ndarray, axis: np.ndarray = LIMB_AXIS) -> tuple[np.ndarray, np.ndarray]:
@@ -274,7 +312,7 @@ def swing_twist(q: np.ndarray, axis: np.ndarray = LIMB_AXIS) -> tuple[np.ndarray
 
     The signs follow ``q``: ``multiply(swing, twist) == q`` exactly (not only up to sign).
     When the limb points exactly opposite ``axis`` the twist is undefined; the swing is then
-    taken about :func:`_perpendicular` of ``axis`` (deterministic).
+    taken about :func:`perpendicular` of ``axis`` (deterministic).
     """
     q = np.asarray(q, dtype=np.float64)
     axis = np.asarray(axis, dtype=np.float64)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -235,3 +237,148 @@ def test_yaml_tags_are_not_executed(tmp_path):
     path.write_text("!!python/object/apply:os.system ['echo hacked']\n")
     with pytest.raises(ConstraintError, match="not valid YAML"):
         load_constraint(path)
+
+
+# -- swing-dependent twist (twist.by_swing) ------------------------------------------------------
+BY_SWING = """
+name: table
+swing:
+  cone: {centre: [1, 0, 0], radius_deg: 70}
+twist:
+  min_deg: -60
+  max_deg: 70
+  by_swing:
+    bandwidth_deg: 20
+    points:
+      - {direction: [1, 0, 0], min_deg: -50, max_deg: 40}
+      - {direction: [0, 2, 0], min_deg: -20, max_deg: 70}
+      - {direction: [1, 0, 1], min_deg: -60, max_deg: 10}
+"""
+
+
+def test_by_swing_loads_normalises_and_round_trips(tmp_path):
+    c = loads_constraint(BY_SWING)
+    t = c.twist.by_swing
+    assert t.bandwidth_deg == 20 and len(t.directions) == 3
+    np.testing.assert_allclose(t.directions[1], [0, 1, 0])
+    np.testing.assert_allclose(t.directions[2], np.array([1, 0, 1]) / np.sqrt(2))
+    np.testing.assert_array_equal(t.min_deg, [-50, -20, -60])
+    path = tmp_path / "c.yaml"
+    dump_constraint(c, path)
+    again = load_constraint(path)
+    assert again == c and again.twist.by_swing == t
+    # the table is part of the limits: a different table is a different constraint
+    other = loads_constraint(BY_SWING.replace("max_deg: 10", "max_deg: 11"))
+    assert other != c
+    assert "by swing    3 points, bandwidth 20 deg" in c.summary()
+
+
+def test_kernel_interpolation_matches_the_formula():
+    c = loads_constraint(BY_SWING)
+    t = c.twist.by_swing
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    kappa = 1.0 / (1.0 - np.cos(np.radians(20)))
+    w = np.exp(kappa * (d @ t.directions.T - 1.0))
+    lo_ref = np.radians((w @ t.min_deg) / w.sum(axis=1))
+    hi_ref = np.radians((w @ t.max_deg) / w.sum(axis=1))
+    lo, hi = c.twist_limits_at(d)
+    np.testing.assert_allclose(lo, lo_ref, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(hi, hi_ref, rtol=1e-12, atol=1e-14)
+    assert t.kappa == pytest.approx(kappa, rel=1e-12)
+    np.testing.assert_allclose(t.weights(d), w / w.sum(axis=1, keepdims=True), atol=1e-14)
+    # within the envelope everywhere, and the single-direction twin agrees
+    assert (lo >= np.radians(-60) - 1e-12).all() and (hi <= np.radians(70) + 1e-12).all()
+    for i in range(20):
+        one = t.limits_at_one(tuple(d[i]))
+        assert one == pytest.approx((lo[i], hi[i]), abs=1e-14)
+        assert c.twist_limits_at(d[i]) == pytest.approx((lo[i], hi[i]), abs=1e-14)
+
+
+def test_narrow_kernel_far_from_every_point_is_still_defined():
+    text = BY_SWING.replace("bandwidth_deg: 20", "bandwidth_deg: 0.5")
+    t = loads_constraint(text).twist.by_swing
+    far = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # every weight underflows to 0
+    lo, hi = t.limits_at(far)
+    assert np.isfinite(lo).all() and np.isfinite(hi).all()
+    # the nearest point dominates: from -Y that is +X or the (1, 0, 1) point, not +Y
+    assert math.degrees(lo[1]) < -40
+    assert t.limits_at_one((0.0, -1.0, 0.0)) == pytest.approx((lo[1], hi[1]), abs=1e-12)
+    # at a table point with a narrow kernel the limits are that point's
+    lo0, hi0 = t.limits_at(np.array([[0.0, 1.0, 0.0]]))
+    assert math.degrees(lo0[0]) == pytest.approx(-20) and math.degrees(hi0[0]) == pytest.approx(70)
+
+
+def test_constant_twist_limits_at():
+    c = loads_constraint(MINIMAL)
+    lo, hi = c.twist_limits_at(np.array([[1.0, 0, 0], [0, 1.0, 0]]))
+    np.testing.assert_array_equal(lo, [math.radians(-60)] * 2)
+    np.testing.assert_array_equal(hi, [math.radians(60)] * 2)
+
+
+@pytest.mark.parametrize(
+    "old, new, field, message",
+    [
+        ("bandwidth_deg: 20", "bandwidth_deg: 0", "twist.by_swing.bandwidth_deg", r"\(0, 180\)"),
+        ("bandwidth_deg: 20", "bandwidth_deg: 180", "twist.by_swing.bandwidth_deg", "180"),
+        ("bandwidth_deg: 20", "bandwidth_deg: wide", "twist.by_swing.bandwidth_deg", "number"),
+        ("    bandwidth_deg: 20\n", "", "twist.by_swing", "missing 'bandwidth_deg'"),
+        (
+            "direction: [0, 2, 0]",
+            "direction: [0, 0, 0]",
+            "twist.by_swing.points[1].direction",
+            "zero vector",
+        ),
+        (
+            "direction: [0, 2, 0]",
+            "direction: [0, 2]",
+            "twist.by_swing.points[1].direction",
+            "3-vector",
+        ),
+        (
+            "min_deg: -20, max_deg: 70",
+            "min_deg: 30, max_deg: 20",
+            "twist.by_swing.points[1]",
+            "greater than max_deg",
+        ),
+        (
+            "min_deg: -20, max_deg: 70",
+            "min_deg: -20, max_deg: 190",
+            "twist.by_swing.points[1].max_deg",
+            r"\[-180, 180\]",
+        ),
+        (
+            "min_deg: -20, max_deg: 70",
+            "min_deg: -20, max_deg: 75",
+            "twist.by_swing.points[1]",
+            "outside the envelope",
+        ),
+        (
+            "min_deg: -20, max_deg: 70",
+            "max_deg: 70",
+            "twist.by_swing.points[1]",
+            "missing 'min_deg'",
+        ),
+    ],
+)
+def test_by_swing_validation_names_the_field(old, new, field, message):
+    assert old in BY_SWING
+    with pytest.raises(ConstraintError, match=message) as info:
+        loads_constraint(BY_SWING.replace(old, new, 1), source="t.yaml")
+    assert info.value.field == field
+    assert str(info.value).startswith(f"t.yaml: {field}: ")
+
+
+@pytest.mark.parametrize(
+    "by_swing, message",
+    [
+        ("[]", "expected {bandwidth_deg"),
+        ("{bandwidth_deg: 20, points: []}", "non-empty list"),
+        ("{bandwidth_deg: 20, points: [[1, 0, 0]]}", "expected {direction"),
+    ],
+)
+def test_by_swing_shape_errors(by_swing, message):
+    text = f"twist: {{min_deg: -10, max_deg: 10, by_swing: {by_swing}}}"
+    with pytest.raises(ConstraintError, match=message):
+        loads_constraint(text)

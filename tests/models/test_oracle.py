@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.errors import QuaternionError
-from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle, polygon_area_sr
+from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
@@ -52,6 +52,37 @@ def star_polygon(centre, radii_deg, phase=0.0):
     return Q.rotate(rot, local)
 
 
+#: constant twist ranges that touch ±180° (the wrap-around cases of issue 9 item 3)
+EDGE_TWISTS = [(-90.0, 180.0), (-180.0, -170.0), (-180.0, 90.0), (170.0, 180.0), (-180.0, 180.0)]
+
+
+@st.composite
+def twist_tables(draw):
+    """A ``twist:`` mapping with a ``by_swing`` table (envelope = hull of the points)."""
+    k = draw(st.integers(1, 12))
+    points = []
+    for _ in range(k):
+        lo = draw(st.floats(-180, 60))
+        hi = draw(st.floats(lo, 180))
+        points.append({"direction": draw(unit_vectors()).tolist(), "min_deg": lo, "max_deg": hi})
+    if draw(st.booleans()):  # some tables reach the ±180° wrap
+        points[0]["min_deg"], points[-1]["max_deg"] = -180.0, 180.0
+    return {
+        "min_deg": min(p["min_deg"] for p in points),
+        "max_deg": max(p["max_deg"] for p in points),
+        "by_swing": {"bandwidth_deg": draw(st.floats(5, 120)), "points": points},
+    }
+
+
+def twists():
+    return (
+        st.none()
+        | st.tuples(st.floats(-170, 0), st.floats(0, 170))
+        | st.sampled_from(EDGE_TWISTS)
+        | twist_tables()
+    )
+
+
 @st.composite
 def polygon_constraints(draw):
     centre = draw(unit_vectors())
@@ -61,21 +92,40 @@ def polygon_constraints(draw):
     verts = star_polygon(centre, radii, phase)
     # half the time the valid region is the complement (more than a hemisphere)
     interior = centre if draw(st.booleans()) else -centre
-    twist = draw(st.none() | st.tuples(st.floats(-170, 0), st.floats(0, 170)))
-    return JointConstraint.polygon(verts, interior, twist=twist)
+    return JointConstraint.polygon(verts, interior, twist=draw(twists()))
 
 
 @st.composite
 def cone_constraints(draw, with_twist=True):
     centre = draw(unit_vectors())
     radius = draw(st.floats(1, 179))
-    twist = (
-        draw(st.none() | st.tuples(st.floats(-170, 0), st.floats(0, 170))) if with_twist else None
-    )
+    twist = draw(twists()) if with_twist else None
     return JointConstraint.cone(centre, radius, twist=twist)
 
 
-any_constraint = st.one_of(cone_constraints(), polygon_constraints())
+@st.composite
+def twist_only_constraints(draw):
+    twist = draw(twists().filter(lambda t: t is not None))
+    if isinstance(twist, tuple):
+        twist = {"min_deg": twist[0], "max_deg": twist[1]}
+    return JointConstraint.from_dict({"name": "twist-only", "twist": twist})
+
+
+any_constraint = st.one_of(cone_constraints(), polygon_constraints(), twist_only_constraints())
+
+
+@st.composite
+def half_turn_quaternions(draw):
+    """Orientations whose twist about +X is exactly half a turn (w = 0 exactly), either sign."""
+    sy, sz = draw(st.floats(-1, 1)), draw(st.floats(-1, 1))
+    c = draw(st.floats(0.01, 1))
+    n = math.sqrt(c * c + sy * sy + sz * sz)
+    w, y, z = c / n, sy / n, sz / n
+    q = np.array([0.0, w, z, -y])  # (w, 0, y, z) ⊗ (0, 1, 0, 0), computed exactly
+    return -q if draw(st.booleans()) else q
+
+
+orientations = unit_quaternions() | half_turn_quaternions()
 
 
 def same_rotation(p, q, atol=1e-9):
@@ -188,87 +238,6 @@ def test_cone_and_360_vertex_polygon_agree_within_sagitta(radius_deg):
     assert Q.angle_between(limb_a[far], limb_b[far]).max() <= half_edge + sagitta + 1e-9
 
 
-# -- polygon machinery against independent references -----------------------------------------
-def crossing_inside(verts, interior, p):
-    """Reference inside test: parity of boundary crossings of the arc interior->p."""
-    n = len(verts)
-    inside = np.ones(len(p), dtype=bool)
-    for i in range(n):
-        a, b = verts[i], verts[(i + 1) % n]
-        na = np.cross(a, b)
-        na /= np.linalg.norm(na)
-        nb = np.cross(interior, p)
-        nb /= np.linalg.norm(nb, axis=1, keepdims=True)
-        x = np.cross(na, nb)
-        x /= np.linalg.norm(x, axis=1, keepdims=True)
-        for s in (1.0, -1.0):
-            y = s * x
-            on_edge = (np.cross(a, y) @ na >= 0) & (np.einsum("ij,j->i", np.cross(y, b), na) >= 0)
-            on_path = (
-                np.einsum("ij,ij->i", np.cross(np.broadcast_to(interior, p.shape), y), nb) >= 0
-            ) & (np.einsum("ij,ij->i", np.cross(y, p), nb) >= 0)
-            inside ^= on_edge & on_path
-    return inside
-
-
-@pytest.mark.parametrize("seed", range(4))
-def test_polygon_inside_matches_crossing_parity(seed):
-    rng = np.random.default_rng(seed)
-    centre = Q.random_unit_vectors(1, rng)[0]
-    radii = rng.uniform(10, 80, size=rng.integers(5, 60))
-    verts = star_polygon(centre, radii)
-    for interior in (centre, -centre):
-        o = ConstraintOracle(JointConstraint.polygon(verts, interior))
-        p = Q.random_unit_vectors(4000, rng)
-        dist = o.swing_distance(p)
-        clear = np.abs(dist) > 1e-6
-        ref = crossing_inside(verts, interior, p)
-        np.testing.assert_array_equal((dist <= 0)[clear], ref[clear])
-
-
-@pytest.mark.parametrize("seed", range(3))
-def test_polygon_grid_search_equals_brute_force(seed):
-    rng = np.random.default_rng(100 + seed)
-    th = np.linspace(0, 2 * np.pi, 300, endpoint=False)
-    radii = 45 + 25 * np.sin(3 * th + seed) + rng.uniform(-3, 3, size=300)
-    verts = star_polygon(Q.random_unit_vectors(1, rng)[0], radii)
-    o = ConstraintOracle(JointConstraint.polygon(verts, verts.mean(axis=0)))
-    solver = o._swing
-    p = Q.random_unit_vectors(5000, rng)
-    fast_d, fast_b = solver.nearest(p)
-    ref_d, ref_b = solver._brute(p, need_point=True)
-    np.testing.assert_array_equal(fast_d, ref_d)
-    np.testing.assert_array_equal(fast_b, ref_b)
-
-
-def test_polygon_nearest_point_is_on_the_boundary_and_nearest():
-    rng = np.random.default_rng(5)
-    verts = star_polygon([0, 0, 1], [40, 15, 60, 30, 55, 20, 50])  # concave
-    o = ConstraintOracle(JointConstraint.polygon(verts, [0, 0, 1]))
-    p = Q.random_unit_vectors(3000, rng)
-    b = o.nearest_swing_point(p)
-    out = o.swing_distance(p) > 1e-9
-    np.testing.assert_allclose(o.swing_distance(b[out]), 0.0, atol=1e-9)
-    # no densely sampled boundary point is nearer than the reported one
-    t = np.linspace(0, 1, 400)[:, None, None]
-    a0, a1 = verts, np.roll(verts, -1, axis=0)
-    dense = ((1 - t) * a0 + t * a1).reshape(-1, 3)
-    dense /= np.linalg.norm(dense, axis=1, keepdims=True)
-    reported = Q.angle_between(p[out], b[out])
-    best = np.min(np.arccos(np.clip(p[out] @ dense.T, -1, 1)), axis=1)
-    assert (reported <= best + 1e-9).all()
-
-
-def test_polygon_area_matches_cone_and_complement():
-    centre = np.array([0.0, 1.0, 0.0])
-    verts = star_polygon(centre, np.full(720, 60.0))
-    inner = JointConstraint.polygon(verts, centre).swing
-    outer = JointConstraint.polygon(verts, -centre).swing
-    cap = 2 * math.pi * (1 - math.cos(math.radians(60)))
-    assert polygon_area_sr(inner) == pytest.approx(cap, rel=1e-3)
-    assert polygon_area_sr(outer) == pytest.approx(4 * math.pi - cap, rel=1e-3)
-
-
 # -- twist -------------------------------------------------------------------------------------
 def test_twist_is_clamped_to_the_nearer_limit_and_swing_kept():
     o = ConstraintOracle(JointConstraint.cone([1, 0, 0], 90, twist=(-30, 45)))
@@ -305,6 +274,117 @@ def test_twist_only_constraint():
     np.testing.assert_array_equal(o.is_valid(q), np.abs(tw) <= 80)
 
 
+# -- swing-dependent twist (twist.by_swing) ------------------------------------------------------
+def table_constraint(swing="cone", bandwidth=30.0):
+    """Twist wide open towards +Y, narrow towards -Y and +Z."""
+    twist = {
+        "min_deg": -80,
+        "max_deg": 80,
+        "by_swing": {
+            "bandwidth_deg": bandwidth,
+            "points": [
+                {"direction": [0, 1, 0], "min_deg": -80, "max_deg": 80},
+                {"direction": [0, -1, 0], "min_deg": -5, "max_deg": 5},
+                {"direction": [0, 0, 1], "min_deg": -20, "max_deg": 0},
+                {"direction": [1, 0, 0], "min_deg": -40, "max_deg": 30},
+            ],
+        },
+    }
+    if swing == "cone":
+        return JointConstraint.cone([1, 0, 0], 60, twist=twist)
+    verts = star_polygon([1, 0, 0], [60, 30, 65, 45, 55, 25, 60, 50])
+    return JointConstraint.polygon(verts, [1, 0, 0], twist=twist)
+
+
+@pytest.mark.parametrize("swing", ["cone", "polygon"])
+def test_twist_is_clamped_to_the_limits_at_the_corrected_direction(swing):
+    c = table_constraint(swing)
+    o = ConstraintOracle(c)
+    rng = np.random.default_rng(4)
+    q = Q.random_quaternions(20000, rng)
+    r = o.evaluate(q)
+    e = Q.rotate(r.projected, Q.LIMB_AXIS)
+    lo, hi = o.twist_limits_at(e)
+    phi = Q.twist_angle(r.projected)
+    assert ((phi >= lo - 1e-9) & (phi <= hi + 1e-9)).all()
+    assert o.is_valid(r.projected).all()
+    np.testing.assert_allclose(o.project(r.projected), r.projected, atol=1e-9)
+    # the swing correction alone fixes the direction: the twist clamp never moves the limb
+    swing_only = ConstraintOracle(JointConstraint(name="s", swing=c.swing))
+    np.testing.assert_allclose(e, Q.rotate(swing_only.project(q), Q.LIMB_AXIS), atol=1e-12)
+    # a clamped twist sits exactly on the limit of the corrected direction
+    clamped = ~r.valid & (np.abs(phi - lo) > 1e-9) & (np.abs(phi - hi) > 1e-9)
+    tw_in = Q.twist_angle(q)
+    lo_in, hi_in = o.twist_limits_at(Q.rotate(q, Q.LIMB_AXIS))
+    swing_ok = o.swing_distance(Q.rotate(q, Q.LIMB_AXIS)) <= BOUNDARY_TOLERANCE
+    assert not (clamped & swing_ok & ((tw_in < lo_in) | (tw_in > hi_in))).any()
+    # validity of the input uses the limits at its own direction
+    inside_tw = (tw_in >= lo_in - 1e-9) & (tw_in <= hi_in + 1e-9)
+    np.testing.assert_array_equal(r.valid, swing_ok & inside_tw)
+
+
+def test_limits_at_the_corrected_not_the_input_direction():
+    o = ConstraintOracle(table_constraint("cone"))
+    # limb beyond the 60° cone towards -Y (narrow twist there), twist 60°
+    d = np.array([math.cos(math.radians(100)), -math.sin(math.radians(100)), 0.0])
+    swing = Q.from_two_vectors(np.array([1.0, 0, 0]), d)
+    q = Q.multiply(swing, Q.from_axis_angle(np.array([1.0, 0, 0]), math.radians(60)))
+    p = o.project(q)
+    e = Q.rotate(p, Q.LIMB_AXIS)
+    assert Q.angle_between(e, [1, 0, 0]) == pytest.approx(math.radians(60), abs=1e-9)
+    _, hi_e = o.twist_limits_at(e)
+    _, hi_d = o.twist_limits_at(d)
+    assert abs(hi_e - hi_d) > math.radians(1)  # the two directions' limits really differ
+    assert Q.twist_angle(p) == pytest.approx(hi_e, abs=1e-9)
+    np.testing.assert_allclose(o.project(q[None, :])[0], p, atol=1e-12)
+
+
+def test_a_uniform_table_behaves_like_a_constant_twist():
+    rng = np.random.default_rng(8)
+    dirs = Q.random_unit_vectors(7, rng)
+    table = {
+        "min_deg": -35,
+        "max_deg": 50,
+        "by_swing": {
+            "bandwidth_deg": 25,
+            "points": [{"direction": d.tolist(), "min_deg": -35, "max_deg": 50} for d in dirs],
+        },
+    }
+    verts = star_polygon([0, 0, 1], [40, 15, 60, 30, 55, 20, 50])
+    a = ConstraintOracle(JointConstraint.polygon(verts, [0, 0, 1], twist=table))
+    b = ConstraintOracle(JointConstraint.polygon(verts, [0, 0, 1], twist=(-35, 50)))
+    q = Q.random_quaternions(5000, rng)
+    ra, rb = a.evaluate(q), b.evaluate(q)
+    np.testing.assert_array_equal(ra.valid, rb.valid)
+    np.testing.assert_allclose(ra.projected, rb.projected, atol=1e-12)
+    np.testing.assert_allclose(ra.distance, rb.distance, atol=1e-12)
+    lo, hi = a.twist_limits_at(Q.random_unit_vectors(100, rng))
+    np.testing.assert_allclose(lo, math.radians(-35), atol=1e-14)
+    np.testing.assert_allclose(hi, math.radians(50), atol=1e-14)
+
+
+def test_twist_only_constraint_with_a_table():
+    c = JointConstraint.from_dict({"name": "forearm", "twist": table_constraint().twist.to_dict()})
+    o = ConstraintOracle(c)
+    rng = np.random.default_rng(3)
+    q = Q.random_quaternions(3000, rng)
+    lo, hi = o.twist_limits_at(Q.rotate(q, Q.LIMB_AXIS))
+    tw = Q.twist_angle(q)
+    np.testing.assert_array_equal(o.is_valid(q), (tw >= lo - 1e-9) & (tw <= hi + 1e-9))
+    np.testing.assert_allclose(
+        Q.rotate(o.project(q), Q.LIMB_AXIS), Q.rotate(q, Q.LIMB_AXIS), atol=1e-12
+    )
+
+
+def test_twist_limits_at_checks_directions_and_handles_no_twist():
+    o = ConstraintOracle(JointConstraint.cone([1, 0, 0], 40))
+    lo, hi = o.twist_limits_at(np.array([[1.0, 0, 0], [0, 2.0, 0]]))
+    np.testing.assert_array_equal(lo, [-math.pi] * 2)
+    np.testing.assert_array_equal(hi, [math.pi] * 2)
+    with pytest.raises(QuaternionError, match="zero length"):
+        o.twist_limits_at(np.zeros(3))
+
+
 # -- determinism at discontinuities ------------------------------------------------------------
 def test_cone_antipode_resolves_deterministically():
     o = ConstraintOracle(JointConstraint.cone([1, 0, 0], 40))
@@ -318,29 +398,49 @@ def test_cone_antipode_resolves_deterministically():
     assert abs(limb[1]) < 1e-12
 
 
-def test_polygon_equidistant_point_takes_lowest_edge():
-    verts = star_polygon([1, 0, 0], np.full(4, 30.0))
-    o = ConstraintOracle(JointConstraint.polygon(verts, [1, 0, 0]))
-    # -X is equidistant from all four edges (by symmetry) -> edge 0 wins
-    p = np.array([[-1.0, 0.0, 0.0]])
-    b = o.nearest_swing_point(p)
-    solver = o._swing
-    d_edge0 = solver._pair_keys(p, np.array([0]))[0][0]
-    d_found = np.sum((p - b) ** 2)
-    assert d_found == pytest.approx(d_edge0, abs=1e-12)
-
-
 # -- single-orientation path -------------------------------------------------------------------
-@SETTINGS
-@given(any_constraint, unit_quaternions())
+@settings(max_examples=150, deadline=None)
+@given(any_constraint, orientations)
 def test_scalar_path_equals_batch_path(constraint, q):
+    """Cones, polygons and twist-only; constant, ±180°-touching and swing-dependent twist;
+    orientations with a twist of exactly ±π among them."""
     o = ConstraintOracle(constraint)
     one = o.evaluate(q)
     many = o.evaluate(q[None, :])
     assert bool(one.valid) == bool(many.valid[0])
+    assert bool(o.is_valid(q)) == bool(o.is_valid(q[None, :])[0]) == bool(one.valid)
     np.testing.assert_allclose(one.distance, many.distance[0], atol=1e-12)
     np.testing.assert_allclose(one.projected, many.projected[0], atol=1e-12)
     np.testing.assert_allclose(one.correction, many.correction[0], atol=1e-12)
+    np.testing.assert_allclose(one.twist, many.twist[0], atol=1e-12)
+    for single in (o.project(q), o.correction(q), o.signed_distance(q)):
+        assert np.shape(single) in ((4,), ())
+
+
+@pytest.mark.parametrize("twist", EDGE_TWISTS)
+@pytest.mark.parametrize("q", [(0.0, 1.0, 0.0, 0.0), (-0.0, -1.0, 0.0, 0.0)])
+def test_half_turn_twist_is_inside_ranges_reaching_180(twist, q):
+    """Issue 9 item 3: twist range (-90°, 180°) and q = (0, 1, 0, 0) were valid in the batch
+    path and invalid in the single path. A twist of ±π is inside any range reaching ±180°."""
+    q = np.array(q)
+    for c in (
+        JointConstraint.cone([1, 0, 0], 30, twist=twist),
+        JointConstraint.polygon(star_polygon([1, 0, 0], [30, 40, 35, 20]), [1, 0, 0], twist=twist),
+    ):
+        o = ConstraintOracle(c)
+        assert o.is_valid(q) and o.is_valid(q[None, :])[0]
+        assert o.evaluate(q).valid and o.evaluate(q[None, :]).valid[0]
+        assert o.signed_distance(q) == pytest.approx(0.0, abs=1e-12)  # on the twist limit
+        np.testing.assert_array_equal(o.correction(q), Q.IDENTITY)
+
+
+def test_half_turn_twist_outside_is_clamped_the_same_on_both_paths():
+    o = ConstraintOracle(JointConstraint.cone([1, 0, 0], 30, twist=(-30, 45)))
+    q = np.array([0.0, 1.0, 0.0, 0.0])  # twist π: 135° from max, 150° from min
+    one, many = o.project(q), o.project(q[None, :])[0]
+    np.testing.assert_allclose(one, many, atol=1e-15)
+    assert math.degrees(Q.twist_angle(one)) == pytest.approx(45.0, abs=1e-9)
+    assert not o.is_valid(q) and not o.is_valid(q[None, :])[0]
 
 
 # -- bad input ---------------------------------------------------------------------------------

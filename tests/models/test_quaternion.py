@@ -115,3 +115,65 @@ def test_check_quaternions_normalises_only_on_request():
     # rounding-level deviations (float32 sensors) are accepted and removed
     q = np.array([1.0 + 1e-7, 0, 0, 0])
     assert np.linalg.norm(Q.check_quaternions(q)) == pytest.approx(1.0, abs=1e-15)
+
+
+# -- one angle-wrap convention, (-π, π], on every path ------------------------------------------
+def _unit(t):
+    q = np.array(t, dtype=float)
+    return q / np.linalg.norm(q)
+
+
+quaternion_tuples = st.tuples(*[st.floats(-1, 1, allow_nan=False) for _ in range(4)]).filter(
+    lambda t: math.sqrt(sum(c * c for c in t)) > 1e-3
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(quaternion_tuples, st.booleans())
+def test_twist_angle_is_sign_independent_bit_for_bit_and_in_range(t, half_turn):
+    q = _unit(t)
+    if half_turn and np.linalg.norm(q[1:]) > 1e-3:  # w = 0 exactly: x != 0 is a half-turn twist
+        q[0] = 0.0
+        q = q / np.linalg.norm(q)
+    a = float(Q.twist_angle(q))
+    b = float(Q.twist_angle(-q))
+    assert a == b
+    assert -math.pi < a <= math.pi
+    # the scalar twin: same bits for q and -q, and numpy's value to the last bit or so (numpy's
+    # arctan2 and libm's atan2 may differ by an ulp); half turns are exactly +π on both
+    s = Q.twist_angle1(tuple(q), (1.0, 0.0, 0.0))
+    assert Q.twist_angle1(tuple(-q), (1.0, 0.0, 0.0)) == s
+    assert -math.pi < s <= math.pi
+    assert abs(s - a) <= 1e-15
+    if q[0] == 0.0 and q[1] != 0.0:
+        assert a == s == math.pi
+
+
+@pytest.mark.parametrize("q", [(0.0, 1.0, 0.0, 0.0), (-0.0, -1.0, 0.0, 0.0), (0.0, -1.0, 0.0, 0.0)])
+def test_half_turn_twist_is_plus_pi(q):
+    q = np.array(q)
+    assert Q.twist_angle(q) == math.pi
+    assert Q.twist_angle1(tuple(q), (1.0, 0.0, 0.0)) == math.pi
+    np.testing.assert_array_equal(Q.twist_angle(np.stack([q, -q])), [math.pi, math.pi])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(-20.0, 20.0, allow_nan=False)
+    | st.sampled_from([-math.pi, math.pi, 0.0, 3 * math.pi, -3 * math.pi, 2 * math.pi])
+)
+def test_wrap_angle_scalar_and_vector_agree(x):
+    v = float(Q.wrap_angle(np.array([x]))[0])
+    assert v == Q.wrap_angle1(x)
+    assert -math.pi < v <= math.pi
+    assert math.isclose(math.cos(v), math.cos(x), abs_tol=1e-12)
+    assert math.isclose(math.sin(v), math.sin(x), abs_tol=1e-12)
+    if -math.pi < x <= math.pi:
+        assert v == x  # angles already in range are untouched
+
+
+def test_wrap_angle_maps_minus_pi_to_plus_pi():
+    np.testing.assert_array_equal(
+        Q.wrap_angle(np.array([-math.pi, math.pi, 3 * math.pi, -3 * math.pi])), [math.pi] * 4
+    )
+    assert Q.wrap_angle1(-math.pi) == math.pi
