@@ -156,8 +156,8 @@ def _patterns(constraint, n, rng, **kw) -> tuple[np.ndarray, np.ndarray, str]:
 class TrainedModel:
     """A trained correction network with its provenance and held-out metrics."""
 
-    network: GMLP
-    result: EvolutionResult
+    network: GMLP | Any  #: a GMLP, or a models.field.FieldModel (preset field)
+    result: EvolutionResult | None  #: None for the field model
     metrics: dict[str, float]
     data_sha256: str
     config: dict[str, Any]
@@ -190,11 +190,55 @@ def split(q, t, sizes, rng):
     return q[tr], t[tr], q[va], t[va]
 
 
+def _train_field(constraint, config: dict, rng, oracle, patterns) -> TrainedModel:
+    import time
+
+    from models.evaluation import evaluate_model
+    from models.field import FieldModel
+
+    t0 = time.perf_counter()
+    f = FieldModel.from_constraint(constraint, grid=config["model"]["grid"], oracle=oracle)
+    build_s = time.perf_counter() - t0
+    seed = int(rng.integers(2**31))
+    metrics = evaluate_model(f, constraint, n=config["data"]["test"], seed=seed, oracle=oracle)
+    metrics["build_s"] = build_s
+    data_hash = f.content_hash()
+    extra = {"table_sha256": data_hash}
+    if patterns is not None:  # a dataset: the field samples its constraint; scored on it too
+        q, _, data_hash = patterns
+        on = evaluate_model(f, constraint, q=q, oracle=oracle)
+        metrics.update({f"dataset_{k}": v for k, v in on.items()
+                        if k in ("mean_3d_error_pct", "frac_invalid_violating_1deg",
+                                 "mean_identity_error_deg", "n")})
+        extra["data_use"] = ("the table samples the dataset's constraint with the exact "
+                             "oracle; dataset_* metrics are measured on its patterns")
+    f.info.update(extra)
+    return TrainedModel(f, None, metrics, data_hash, config, extra)
+
+
 def train_correction(constraint, config: dict, rng: np.random.Generator,
                      progress: Callable[[GenerationStats], None] | None = None,
-                     oracle=None) -> TrainedModel:
-    """Train a correction network for ``constraint`` with a validated ``config``."""
+                     oracle=None, patterns=None) -> TrainedModel:
+    """Train a corrective-constraint model for ``constraint`` with a validated ``config``.
+
+    Parameters
+    ----------
+    constraint : JointConstraint
+    config : dict
+        :func:`models.nn.config.get_config`; ``model.method`` chooses a GMLP (thesis, best,
+        compact, fixed presets) or the swing-field model (:mod:`models.field`, preset field).
+    rng : Generator
+    progress : callable, optional
+        Called with :class:`GenerationStats` after each generation (GMLP only).
+    oracle : ConstraintOracle, optional
+    patterns : (inputs (N, 4), targets (N, 4), sha256 str), optional
+        Training patterns from a dataset file (``rig train --data``) instead of freshly
+        generated ones; split into train / validation in the configured proportion, and the
+        model records their hash.
+    """
     oracle = oracle or _oracle(constraint)
+    if config.get("model", {}).get("method") == "field":
+        return _train_field(constraint, config, rng, oracle, patterns)
     mode = config["network"]["canonicalise"]
     if mode == "swing" and getattr(constraint, "twist", None) is not None:
         # the swing map discards the twist, which a twist limit needs: learn from twisted
@@ -207,12 +251,22 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
     frame = (centre_frame(constraint, oracle) if config["network"]["frame"] == "centre"
              else None)
     n = dc["train"] + dc["validation"]
-    q, t, data_hash = _patterns(constraint, n, rng, distribution=dc["distribution"],
-                                order=dc["order"], hemisphere=dc["hemisphere"],
-                                twist=dc["twist"])
+    if patterns is None:
+        q, t, data_hash = _patterns(constraint, n, rng, distribution=dc["distribution"],
+                                    order=dc["order"], hemisphere=dc["hemisphere"],
+                                    twist=dc["twist"])
+        sizes = (dc["train"], dc["validation"])
+    else:
+        q, t, data_hash = patterns
+        q = np.asarray(q, np.float64)
+        t = quat.canonical(np.asarray(t, np.float64))
+        if len(q) < 3:
+            raise ValueError(f"patterns: need at least 3 patterns, got {len(q)}")
+        n_tr = min(max(1, round(len(q) * dc["train"] / n)), len(q) - 1)
+        sizes = (n_tr, len(q) - n_tr)
     x = swing_of(to_frame(q, frame)) if mode == "swing" else to_frame(canonicalise(q, ref), frame)
     t = target_to_frame(overshoot(t, dc["overshoot_deg"]), frame)
-    xtr, ttr, xva, tva = split(x, t, (dc["train"], dc["validation"]), rng)
+    xtr, ttr, xva, tva = split(x, t, sizes, rng)
     res = evolve(config, xtr, ttr, xva, tva, rng, progress, canonical_ref=ref)
     res.network.input_map = "swing" if mode == "swing" else "canonical"
     res.network.frame = frame

@@ -1,12 +1,16 @@
 """``rig train`` and ``rig evaluate``: learn a corrective constraint, export it, check it.
 
-``rig train --constraint FILE --out MODEL.onnx [--config YAML]
-[--preset best|compact|thesis|fixed] [--seed N]`` evolves and trains a GMLP (:mod:`models.nn`)
-on patterns of the constraint, prints one progress line per generation, and writes an ONNX
-model whose metadata holds the constraint, the training-data hash and the held-out metrics.
+``rig train (--constraint FILE | --data FILE.npz) --out MODEL.onnx [--config YAML]
+[--preset field|best|compact|thesis|fixed] [--seed N]`` builds the model (preset ``field``, the
+default: :mod:`models.field`; the others evolve and train a GMLP, :mod:`models.nn`, printing one
+progress line per generation) and writes an ONNX model whose metadata holds the constraint, the
+training-data hash and the held-out metrics. ``--data`` takes a dataset written by
+``rig dataset make`` (its constraint comes from the file; the model records the dataset's
+content hash — the one ``rig dataset info`` prints); a GMLP preset trains on its patterns.
 
-``rig evaluate --model MODEL.onnx --constraint FILE`` runs the model through onnxruntime on
-fresh held-out orientations and prints the metrics of :func:`models.metrics.evaluate`.
+``rig evaluate --model MODEL.onnx --constraint FILE`` runs the model through onnxruntime on fresh
+held-out orientations (:func:`models.evaluation.held_out_orientations`: half uniform on SO(3),
+half within 20° of the boundary; or a thesis-style distribution) and prints the metrics.
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ from __future__ import annotations
 import time
 
 import click
+
+PRESET_NAMES = ["field", "best", "compact", "thesis", "fixed"]
 
 _LABELS = {
     "mse": "MSE (correction quaternion)",
@@ -40,37 +46,69 @@ def _print_metrics(metrics: dict) -> None:
 
 
 @click.command()
-@click.option("--constraint", "constraint_path", required=True,
-              type=click.Path(dir_okay=False), help="Constraint YAML file.")
+@click.option("--constraint", "constraint_path", type=click.Path(dir_okay=False), default=None,
+              help="Constraint YAML file (optional with --data: the dataset names its own).")
+@click.option("--data", "data_path", type=click.Path(dir_okay=False), default=None,
+              help="Dataset .npz written by `rig dataset make` to train on.")
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Where to write the ONNX model.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="YAML overriding fields of the preset.")
-@click.option("--preset", type=click.Choice(["best", "compact", "thesis", "fixed"]),
-              default="best", show_default=True,
+@click.option("--preset", type=click.Choice(PRESET_NAMES), default="field", show_default=True,
               help="Starting configuration (models.nn.config).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-def train(constraint_path, out_path, config_path, preset, seed) -> None:
-    """Train a corrective-constraint network and export it to ONNX."""
-    run_train(constraint_path, out_path, config_path=config_path, preset=preset, seed=seed)
+def train(constraint_path, data_path, out_path, config_path, preset, seed) -> None:
+    """Train a corrective-constraint model and export it to ONNX."""
+    run_train(constraint_path, out_path, config_path=config_path, preset=preset, seed=seed,
+              data_path=data_path)
 
 
-def run_train(constraint_path, out_path, *, config_path=None, preset="best", seed=0,
-              echo=click.echo):
+def _load_data(data_path, constraint_path):
+    """(constraint, (inputs, targets, content hash)) of a dataset file; checks the constraint."""
+    from models.constraint import load_constraint
+    from models.datasets import load_dataset
+    from models.errors import DatasetError
+
+    ds = load_dataset(data_path)
+    c = ds.constraint()
+    if c is None or ds.inputs.shape[1:] != (4,) or ds.targets.shape[1:] != (4,):
+        raise DatasetError(f"--data: {data_path} is not a quaternion dataset with a constraint "
+                           "(make one with `rig dataset make --kind quaternion`)")
+    if constraint_path is not None and load_constraint(constraint_path) != c:
+        raise DatasetError(f"--data: {data_path} was made for constraint {c.name!r}, which "
+                           f"differs from --constraint {constraint_path}")
+    return c, (ds.inputs, ds.targets, ds.content_hash())
+
+
+def run_train(constraint_path, out_path, *, config_path=None, preset="field", seed=0,
+              echo=click.echo, data_path=None):
     """What ``rig train`` does; returns the :class:`models.nn.train.TrainedModel`."""
     import numpy as np
 
     from models.constraint import load_constraint
+    from models.errors import ConstraintError
     from models.nn.config import get_config, load_config
     from models.nn.train import train_correction
     from models.onnx_io import export_onnx
 
-    constraint = load_constraint(constraint_path)
     cfg = load_config(config_path, preset) if config_path else get_config(preset)
+    patterns = None
+    if data_path is not None:
+        constraint, patterns = _load_data(data_path, constraint_path)
+    elif constraint_path is None:
+        raise ConstraintError("--constraint: required (or --data with a dataset file)")
+    else:
+        constraint = load_constraint(constraint_path)
+    field = cfg["model"]["method"] == "field"
     gens = cfg["evolution"]["generations"]
-    echo(f"training {constraint.name!r}: preset {preset}, population "
-         f"{cfg['evolution']['population']}, {gens} generations, ≤ "
-         f"{cfg['training']['max_epochs']} epochs, {cfg['evolution']['repeats']} run(s)")
+    src = f" on {len(patterns[0])} patterns of {data_path}" if patterns is not None else ""
+    if field:
+        echo(f"building {constraint.name!r}: preset {preset}, swing field on a "
+             f"{cfg['model']['grid']}-node grid + exact twist clamp{src}")
+    else:
+        echo(f"training {constraint.name!r}: preset {preset}, population "
+             f"{cfg['evolution']['population']}, {gens} generations, ≤ "
+             f"{cfg['training']['max_epochs']} epochs, {cfg['evolution']['repeats']} run(s){src}")
 
     def progress(st):
         echo(f"  generation {st.generation:3d}/{gens}  best fitness {st.best_fitness:.6f}  "
@@ -78,12 +116,18 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="best", see
              f"elapsed {st.elapsed_s:6.1f} s")
 
     t0 = time.perf_counter()
-    model = train_correction(constraint, cfg, np.random.default_rng(seed), progress)
+    model = train_correction(constraint, cfg, np.random.default_rng(seed), progress,
+                             patterns=patterns)
+    extra = {"preset": preset, "seed": seed, "config": cfg}
+    if data_path is not None:
+        extra["data_file"] = str(data_path)
     path = export_onnx(model.network, out_path, constraint_yaml=constraint.to_yaml(),
                        training_data_sha256=model.data_sha256, metrics=model.metrics,
-                       extra={"preset": preset, "seed": seed, "config": cfg})
-    echo(f"wrote {path} ({model.network.n_hidden} hidden nodes, {model.network.n_links} links) "
-         f"in {time.perf_counter() - t0:.1f} s; held-out metrics:")
+                       extra=extra)
+    what = ("swing field" if field else
+            f"{model.network.n_hidden} hidden nodes, {model.network.n_links} links")
+    echo(f"wrote {path} ({what}) in {time.perf_counter() - t0:.1f} s; training-data sha256 "
+         f"{model.data_sha256[:16]}…; held-out metrics:")
     _print_metrics(model.metrics)
     return model
 
@@ -93,12 +137,14 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="best", see
               help="ONNX model written by `rig train`.")
 @click.option("--constraint", "constraint_path", required=True,
               type=click.Path(dir_okay=False), help="Constraint YAML the model must match.")
-@click.option("--n", "n", type=click.IntRange(min=10), default=3000, show_default=True,
+@click.option("--n", "n", type=click.IntRange(min=10), default=10000, show_default=True,
               help="Number of held-out orientations.")
-@click.option("--distribution", type=click.Choice(["even", "uniform", "clustered"]),
-              default="even", show_default=True, help="Held-out pattern distribution.")
+@click.option("--distribution", type=click.Choice(["held-out", "even", "uniform", "clustered"]),
+              default="held-out", show_default=True,
+              help="held-out: half uniform on SO(3), half within 20° of the boundary; the "
+                   "others are the thesis's pattern distributions.")
 @click.option("--twist/--no-twist", default=False, show_default=True,
-              help="Add a random twist about the limb axis (as live sensor data has).")
+              help="Thesis distributions: add a random twist about the limb axis.")
 @click.option("--seed", type=int, default=12345, show_default=True, help="Random seed.")
 def evaluate(model_path, constraint_path, n, distribution, twist, seed) -> None:
     """Print a model's accuracy metrics on fresh held-out orientations."""
@@ -106,26 +152,33 @@ def evaluate(model_path, constraint_path, n, distribution, twist, seed) -> None:
                  seed=seed)
 
 
-def run_evaluate(model_path, constraint_path, *, n=3000, distribution="even", twist=False,
+def run_evaluate(model_path, constraint_path, *, n=10000, distribution="held-out", twist=False,
                  seed=12345, echo=click.echo) -> dict:
-    """What ``rig evaluate`` does; returns the metrics."""
+    """What ``rig evaluate`` does (:func:`models.evaluation.evaluate_model`); returns metrics."""
     import numpy as np
 
-    from models import metrics as M
     from models.constraint import load_constraint
+    from models.evaluation import evaluate_model, held_out_orientations
     from models.nn.train import _oracle, training_patterns
     from models.onnx_io import load_model
 
     constraint = load_constraint(constraint_path)
     model = load_model(model_path, expected_constraint=constraint)
     oracle = _oracle(constraint)
-    q, _ = training_patterns(constraint, n, np.random.default_rng(seed),
-                             distribution=distribution, order="random", hemisphere="ambiguous",
-                             twist=twist, oracle=oracle)
-    metrics = M.evaluate(model.correction, oracle, q)
+    if distribution == "held-out":
+        q = held_out_orientations(constraint, n, seed, oracle=oracle)
+    else:
+        q, _ = training_patterns(constraint, n, np.random.default_rng(seed),
+                                 distribution=distribution, order="random",
+                                 hemisphere="ambiguous", twist=twist, oracle=oracle)
+    metrics = evaluate_model(model, constraint, q=q, oracle=oracle)
     info = model.network_info
-    echo(f"{model_path}: {info.get('hidden', '?')} hidden nodes, {info.get('links', '?')} links, "
-         f"{len(q)} held-out {distribution} orientations{' with twist' if twist else ''} of "
+    what = (f"swing field, grid {info.get('grid')}" if info.get("method") == "field" else
+            f"{info.get('hidden', '?')} hidden nodes, {info.get('links', '?')} links")
+    kind = ("orientations (half uniform, half within 20° of the boundary)"
+            if distribution == "held-out" else f"{distribution} orientations")
+    echo(f"{model_path}: {what}, {len(q)} held-out {kind}"
+         f"{' with twist' if twist and distribution != 'held-out' else ''} of "
          f"{constraint.name!r}")
     _print_metrics(metrics)
     return metrics

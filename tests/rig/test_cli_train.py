@@ -30,28 +30,82 @@ def _run(argv, capsys):
     return exc.value.code, out.out, out.err
 
 
-def test_train_then_evaluate(files, capsys):
+def test_train_then_evaluate_gmlp(files, capsys):
     tmp, c, cfg = files
     model = tmp / "out" / "m.onnx"
-    code, out, _ = _run(["train", "--constraint", str(c), "--out", str(model),
-                         "--config", str(cfg), "--seed", "3"], capsys)
+    code, out, _ = _run(["train", "--constraint", str(c), "--out", str(model), "--preset",
+                         "best", "--config", str(cfg), "--seed", "3"], capsys)
     assert code == 0, out
     assert "generation   2/2" in out and "best fitness" in out and "elapsed" in out
     assert model.exists() and "mean 3-D error" in out
     code, out, _ = _run(["evaluate", "--model", str(model), "--constraint", str(c),
-                         "--n", "300"], capsys)
+                         "--n", "300", "--distribution", "even"], capsys)
     assert code == 0
     assert "300 held-out even orientations" in out and "MSE" in out
     code, out, _ = _run(["evaluate", "--model", str(model), "--constraint", str(c),
-                         "--n", "200", "--twist"], capsys)
+                         "--n", "200", "--distribution", "uniform", "--twist"], capsys)
     assert code == 0 and "with twist" in out
 
 
-def test_thesis_preset_flag(files, capsys):
-    tmp, c, cfg = files
-    code, out, _ = _run(["train", "--constraint", str(c), "--out", str(tmp / "t.onnx"),
-                         "--config", str(cfg), "--preset", "thesis"], capsys)
-    assert code == 0 and "preset thesis" in out
+def test_default_preset_is_the_field_model(files, capsys):
+    tmp, c, _ = files
+    c.write_text(CONE + "twist: {min_deg: -30, max_deg: 80}\n")
+    model = tmp / "f.onnx"
+    code, out, _ = _run(["train", "--constraint", str(c), "--out", str(model)], capsys)
+    assert code == 0 and "preset field" in out and "swing field" in out
+    from models.onnx_io import load_model
+
+    m = load_model(model)
+    assert m.network_info["method"] == "field" and m.network_info["twist"] == "constant"
+    assert m.metrics["mean_3d_error_pct"] < 0.5
+    code, out, _ = _run(["evaluate", "--model", str(model), "--constraint", str(c),
+                         "--n", "2000"], capsys)
+    assert code == 0 and "2000 held-out orientations (half uniform, half within 20°" in out
+    line = [ln for ln in out.splitlines() if "invalid inputs left > 1 deg outside" in ln][0]
+    assert float(line.split()[-2]) < 1.0
+
+
+@pytest.mark.parametrize("preset", ["field", "best"])
+def test_train_on_a_dataset_records_its_hash(tmp_path, capsys, preset):
+    from models.datasets import load_dataset
+    from models.onnx_io import load_model
+
+    data = tmp_path / "d.npz"
+    code, out, _ = _run(["dataset", "make", "--shape", "small", "--n", "400", "--split",
+                         "0.7,0.15,0.15", "--out", str(data)], capsys)
+    assert code == 0, out
+    train = tmp_path / "d-train.npz"
+    tiny = tmp_path / "tiny.yaml"
+    tiny.write_text(TINY)
+    model = tmp_path / "m.onnx"
+    argv = ["train", "--data", str(train), "--out", str(model), "--preset", preset]
+    code, out, _ = _run(argv + (["--config", str(tiny)] if preset == "best" else []), capsys)
+    assert code == 0, out
+    ds = load_dataset(train)
+    meta = load_model(model).metadata
+    assert meta["jointlimits.training_data_sha256"] == ds.content_hash()
+    assert f"{len(ds)} patterns of" in out
+    # the model is bound to the dataset's constraint
+    assert load_model(model, expected_constraint=ds.constraint()) is not None
+
+
+def test_train_data_user_errors(tmp_path, capsys, files):
+    _, c, _ = files
+    data = tmp_path / "d.npz"
+    assert _run(["dataset", "make", "--shape", "small", "--n", "100", "--out", str(data)],
+                capsys)[0] == 0
+    code, _, err = _run(["train", "--data", str(data), "--constraint", str(c), "--out",
+                         str(tmp_path / "m.onnx")], capsys)
+    assert code == 2 and "differs from --constraint" in err
+    assert len(err.strip().splitlines()) == 1
+    ball = tmp_path / "b.npz"
+    assert _run(["dataset", "make", "--kind", "ball3", "--n", "50", "--out", str(ball)],
+                capsys)[0] == 0
+    code, _, err = _run(["train", "--data", str(ball), "--out", str(tmp_path / "m.onnx")],
+                        capsys)
+    assert code == 2 and "not a quaternion dataset" in err
+    code, _, err = _run(["train", "--out", str(tmp_path / "m.onnx")], capsys)
+    assert code == 2 and "--constraint: required" in err
 
 
 @pytest.mark.parametrize(("setup", "message"), [
@@ -79,8 +133,7 @@ def test_evaluate_refuses_wrong_files(files, capsys):
     code, _, err = _run(["evaluate", "--model", str(c), "--constraint", str(c)], capsys)
     assert code == 2 and "not an ONNX model" in err
     model = tmp / "m.onnx"
-    assert _run(["train", "--constraint", str(c), "--out", str(model), "--config", str(cfg)],
-                capsys)[0] == 0
+    assert _run(["train", "--constraint", str(c), "--out", str(model)], capsys)[0] == 0
     other = tmp / "other.yaml"
     other.write_text(CONE.replace("60", "30"))
     code, _, err = _run(["evaluate", "--model", str(model), "--constraint", str(other)], capsys)
