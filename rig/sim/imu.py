@@ -1,10 +1,12 @@
 """Simulated IMUs on pseudo-terminals: a BNO055 on its UART, and a multi-IMU stream device.
 
 Both serve real bytes on the master side of a pseudo-terminal; ``serial.Serial(sim.port)``
-(pyserial, unchanged) opens the slave exactly as it opens a USB-UART. A background thread waits
-with ``poll`` on the master and a shutdown pipe — no busy sleeps — and answers requests; the
-stream device also wakes at its sample deadlines (``poll`` timeout). Orientations come from a
-:class:`~rig.sim.limb.SimulatedLimb` (ground truth available through :attr:`limb`).
+(pyserial, unchanged) opens the slave exactly as it opens a USB-UART. Thread, pty, error
+policy and adapter unplug come from :class:`rig.sim.pty_server.PtyServer`; the stream device
+also wakes at its sample deadlines (or when its :class:`~rig.sim.clock.ManualClock` is
+advanced). Orientations come from a :class:`~rig.sim.limb.SimulatedLimb` (ground truth through
+:attr:`limb`). Port strings: :func:`bno055_from_url` (``sim://bno055?...``) and
+:func:`stream_from_url` (``sim://imu-stream?...``).
 
 :class:`Bno055Simulator`
     Register reads and writes as the chip answers them (:mod:`firmware_protocol.imu.bno055`):
@@ -21,20 +23,15 @@ stream device also wakes at its sample deadlines (``poll`` timeout). Orientation
     simulator started).
 
 Both are context managers with an idempotent :meth:`close`; ``close`` re-raises an exception
-that stopped the server thread, so a test sees simulator bugs.
+that stopped the server thread, so a test sees simulator bugs; :meth:`disconnect` /
+:meth:`reconnect` unplug and replug the USB-UART.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import select
-import threading
 import time
-import tty
 from collections.abc import Callable
-from typing import TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -43,128 +40,19 @@ from firmware_protocol.errors import ChecksumError, FramingError, PacketError
 from firmware_protocol.imu import bno055 as B
 from firmware_protocol.imu import stream as S
 from models import quaternion as Q
-from rig.sim.limb import Measurement, SimulatedLimb
+from rig.errors import RigConfigError
+from rig.sim.clock import real_delay
+from rig.sim.limb import Measurement, NoiseModel, SensorMount, SimulatedLimb, default_mounts
+from rig.sim.pty_server import PtyServer
+from rig.sim.urls import SimUrl
 
-__all__ = ["Bno055Simulator", "StreamImuSimulator"]
-
-_Server = TypeVar("_Server", bound="_PtyServer")
-
-
-class _PtyServer:
-    """Pseudo-terminal plus a server thread; subclasses implement ``_on_bytes`` / ``_on_timer``."""
-
-    _thread_name = "imu-sim"
-
-    def __init__(self, clock: Callable[[], float]) -> None:
-        self._clock = clock
-        master, slave = os.openpty()
-        try:
-            tty.setraw(slave)  # no echo, no line discipline: the host's bytes reach us verbatim
-            os.set_blocking(master, False)
-            self.port: str = os.ttyname(slave)
-        except BaseException:
-            os.close(master)
-            os.close(slave)
-            raise
-        self._master, self._slave = master, slave
-        self._wake_r, self._wake_w = os.pipe()
-        self._lock = threading.RLock()
-        self._closed = False
-        self._error: BaseException | None = None
-        self.bytes_dropped = 0
-        """Output bytes lost because the host did not read (pty buffer full), like a UART."""
-        self._thread = threading.Thread(target=self._run, name=f"{self._thread_name} {self.port}",
-                                        daemon=True)
-
-    def _start(self) -> None:
-        self._thread.start()
-
-    def __enter__(self: _Server) -> _Server:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
-    def close(self) -> None:
-        """Stop the server thread and close the pseudo-terminal; safe to call twice.
-
-        Raises
-        ------
-        RuntimeError
-            The server thread had died of an exception (chained), reported once.
-        """
-        with self._lock:
-            if self._closed:
-                return
-            self._closed = True
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
-        if self._thread.is_alive() or self._thread.ident is not None:
-            self._thread.join()
-        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
-            with contextlib.suppress(OSError):
-                os.close(fd)
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise RuntimeError(f"simulator on {self.port} stopped: {err!r}") from err
-
-    def _run(self) -> None:
-        poller = select.poll()
-        poller.register(self._master, select.POLLIN)
-        poller.register(self._wake_r, select.POLLIN)
-        try:
-            while True:
-                deadline = self._timer_deadline()
-                if deadline is None:
-                    timeout_ms = None
-                else:  # rounded up: waking early would spin until the deadline
-                    timeout_ms = max(0, math.ceil((deadline - self._timer_clock()) * 1000.0))
-                ready = {fd for fd, _ in poller.poll(timeout_ms)}
-                if self._wake_r in ready:
-                    os.read(self._wake_r, 64)
-                    if self._closed:
-                        return
-                if self._master in ready:
-                    try:
-                        data = os.read(self._master, 4096)
-                    except BlockingIOError:
-                        data = b""
-                    if data:
-                        with self._lock:
-                            self._on_bytes(data, self._clock())
-                with self._lock:
-                    self._on_timer(self._timer_clock())
-        except BaseException as err:  # surfaced by close()
-            self._error = err
-
-    def _send(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            try:
-                n = os.write(self._master, view)
-            except BlockingIOError:
-                self.bytes_dropped += len(view)
-                return
-            view = view[n:]
-
-    # hooks -----------------------------------------------------------------------------------
-    def _on_bytes(self, data: bytes, now: float) -> None:
-        raise NotImplementedError
-
-    def _timer_clock(self) -> float:
-        """Clock of :meth:`_timer_deadline` and :meth:`_on_timer` (default: the device clock)."""
-        return self._clock()
-
-    def _timer_deadline(self) -> float | None:
-        return None
-
-    def _on_timer(self, now: float) -> None:
-        return None
-
+__all__ = [
+    "Bno055Simulator",
+    "StreamImuSimulator",
+    "bno055_from_url",
+    "resolve_patient",
+    "stream_from_url",
+]
 
 # ---------------------------------------------------------------------------------------------
 # BNO055
@@ -205,7 +93,7 @@ def _axis_remap(config: int, sign: int) -> np.ndarray | None:
     return m
 
 
-class Bno055Simulator(_PtyServer):
+class Bno055Simulator(PtyServer):
     """One BNO055 in UART mode, on a pseudo-terminal.
 
     Parameters
@@ -235,7 +123,7 @@ class Bno055Simulator(_PtyServer):
         The measurement behind the data registers last read (ground truth in ``last.truth``).
     """
 
-    _thread_name = "bno055-sim"
+    thread_name = "bno055-sim"
 
     def __init__(
         self,
@@ -256,7 +144,8 @@ class Bno055Simulator(_PtyServer):
             raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
         self.rate_hz = float(rate_hz)
         self.char_timeout_s = float(char_timeout_s)
-        super().__init__(clock)
+        super().__init__(clock=clock)
+        self.clock: Callable[[], float] = clock
         self._t0 = clock()
         self._decoder = B.RequestDecoder()
         self._last_rx = time.monotonic()
@@ -323,8 +212,9 @@ class Bno055Simulator(_PtyServer):
             regs[B.Register.SYS_STATUS] = 0 if mode == B.OperationMode.CONFIG else 6
 
     # protocol -----------------------------------------------------------------------------
-    def _on_bytes(self, data: bytes, now: float) -> None:
-        self._last_rx = time.monotonic()
+    def _on_bytes(self, data: bytes, t_rx: float) -> None:
+        self._last_rx = t_rx
+        now = self.clock()
         self._decoder.feed(data)
         while True:
             try:
@@ -339,10 +229,8 @@ class Bno055Simulator(_PtyServer):
             else:
                 self._send(self._write(req, now))
 
-    def _timer_clock(self) -> float:
-        return time.monotonic()  # the inter-character timeout is a link timer: real time
-
-    def _timer_deadline(self) -> float | None:
+    def _deadline(self) -> float | None:
+        # the inter-character timeout is a link timer: real time, whatever the clock
         return self._last_rx + self.char_timeout_s if self._decoder.buffered else None
 
     def _on_timer(self, now: float) -> None:
@@ -428,7 +316,7 @@ def _euler(q: np.ndarray, radians: bool) -> tuple[float, float, float]:
 # stream protocol
 
 
-class StreamImuSimulator(_PtyServer):
+class StreamImuSimulator(PtyServer):
     """A microcontroller streaming several IMUs with the rig stream protocol, on a pty.
 
     Parameters
@@ -450,18 +338,33 @@ class StreamImuSimulator(_PtyServer):
         ``limb.truth((unwrapped_timestamp_us - timestamp_offset_us) / 1e6)``.
     clock : callable
         Monotonic seconds; the device clock is ``clock() - clock_at_start`` in microseconds.
+        With a :class:`~rig.sim.clock.ManualClock` every ``advance`` emits at once the samples
+        whose time has come (simulated time as fast as the host reads).
     seed : int, optional
+    max_lag_s : float or None
+        When the device falls more than this behind its sample grid (a starved thread), it
+        skips the missed samples, as firmware would, counting them in ``samples_skipped``;
+        ``None`` never skips: every sample of the grid is sent, late if need be.
+    flow_control : bool
+        False: a UART — bytes the host does not read in time are lost (``bytes_dropped``).
+        True: a USB CDC device — the device waits for the host, nothing is lost; with
+        ``max_lag_s=None`` and a manual or scaled clock, zero samples are lost however fast
+        simulated time runs.
+    initial_seq : int
+        Sequence number of the first frame after power-up (0..65535), e.g. to test wrapping.
 
     Attributes
     ----------
     port : str
+    clock : callable
     limb : SimulatedLimb
         Ground truth: ``limb.truth(timestamp_us / 1e6)`` for a SAMPLE's timestamp.
     samples_sent, samples_skipped : int
-        Samples streamed, and samples not sent because the thread fell more than 0.1 s behind.
+        Samples streamed, and samples skipped because the device fell more than ``max_lag_s``
+        behind.
     """
 
-    _thread_name = "stream-imu-sim"
+    thread_name = "stream-imu-sim"
     FIRMWARE_VERSION = 0x0100
 
     def __init__(
@@ -476,7 +379,14 @@ class StreamImuSimulator(_PtyServer):
         timestamp_offset_us: int = 0,
         clock: Callable[[], float] = time.monotonic,
         seed: int | None = 0,
+        max_lag_s: float | None = 0.1,
+        flow_control: bool = False,
+        initial_seq: int = 0,
     ) -> None:
+        if max_lag_s is not None and not max_lag_s > 0:
+            raise ValueError(f"max_lag_s must be > 0 or None, got {max_lag_s!r}")
+        if not 0 <= initial_seq <= 0xFFFF:
+            raise ValueError(f"initial_seq must be 0..65535, got {initial_seq}")
         if limb is None:
             if not 1 <= sensors <= S.MAX_SENSORS:
                 raise ValueError(f"sensors must be 1..{S.MAX_SENSORS}, got {sensors}")
@@ -499,10 +409,12 @@ class StreamImuSimulator(_PtyServer):
         self.samples_skipped = 0
         self.commands_received = 0
         self.frames_rejected = 0
-        super().__init__(clock)
+        self.max_lag_s = max_lag_s
+        super().__init__(clock=clock, flow_control=flow_control)
+        self.clock: Callable[[], float] = clock
         self._t0 = clock()
         self._decoder = S.StreamDecoder(track_sequence=False)
-        self._tx_seq = 0
+        self._tx_seq = int(initial_seq)
         self._send(b"\x00")  # SPEC §3.1: a delimiter after power-up
         self._next_sample: float | None = None  # device time (s) of the next sample slot
         self._grid_base = 0.0  # device time of sample 0 of the current rate
@@ -511,7 +423,7 @@ class StreamImuSimulator(_PtyServer):
 
     def device_time_us(self, now: float | None = None) -> int:
         """The device clock in microseconds, not wrapped (SAMPLEs carry it modulo 2**32)."""
-        t = (self._clock() if now is None else now) - self._t0
+        t = (self.clock() if now is None else now) - self._t0
         return round(t * 1e6) + self.timestamp_offset_us
 
     def _seq(self) -> int:
@@ -530,7 +442,8 @@ class StreamImuSimulator(_PtyServer):
         )
 
     # protocol -----------------------------------------------------------------------------
-    def _on_bytes(self, data: bytes, now: float) -> None:
+    def _on_bytes(self, data: bytes, t_rx: float) -> None:
+        now = self.clock()
         self._decoder.feed(data)
         while True:
             try:
@@ -588,24 +501,36 @@ class StreamImuSimulator(_PtyServer):
         else:
             self._send(S.encode_nak(self._seq(), frame.seq, cmd, nak))
 
-    def _timer_deadline(self) -> float | None:
+    _BACKLOG = 8192
+    """With flow control, stop producing samples while this many bytes wait for the host."""
+
+    def _deadline(self) -> float | None:
         if self._next_sample is None:
             return None
-        return self._t0 + self._next_sample
+        if self.flow_control and self.tx_backlog >= self._BACKLOG:
+            return None  # wait for the host to read (the base waits for POLLOUT)
+        delay = real_delay(self.clock, self._t0 + self._next_sample - self.clock())
+        if delay is None:  # manual clock: due now, or when it is advanced (it wakes us)
+            return time.monotonic() if self.clock() - self._t0 >= self._next_sample else None
+        return time.monotonic() + delay
 
     def _on_timer(self, now: float) -> None:
         if self._next_sample is None:
             return
-        t_now = now - self._t0
+        t_now = self.clock() - self._t0
         rate = self.rate_hz
-        if t_now - self._next_sample > 0.1:  # fell far behind: skip, as firmware would
-            missed = int((t_now - self._next_sample) * rate)
+        lag = t_now - self._next_sample
+        if self.max_lag_s is not None and lag > self.max_lag_s:
+            # fell far behind (SPEC §8): skip the missed slots, as firmware would
+            missed = int(lag * rate)
             self.samples_skipped += missed
             self._grid_k += missed
             self._next_sample = self._grid_base + self._grid_k / rate
         active = [i for i in range(self.limb.n_sensors) if self.active_mask >> i & 1]
         out = bytearray()
         while self._next_sample <= t_now:
+            if self.flow_control and self.tx_backlog + len(out) >= self._BACKLOG:
+                break  # the rest when the host has read
             t = self._next_sample
             m = self.limb.measure(t)
             readings = [
@@ -626,3 +551,162 @@ def _frame_type(frame) -> int:
     if isinstance(frame, S.Ack):
         return S.FrameType.ACK
     return S.FrameType.NAK
+
+
+# ---------------------------------------------------------------------------------------------
+# port strings
+
+_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed")
+BNO055_EXAMPLE = "sim://bno055?seed=1&rate=100&patient=original"
+STREAM_EXAMPLE = "sim://imu-stream?sensors=2&rate=200&patient=original&seed=1"
+
+
+def resolve_patient(value: str, *, key: str = "patient", url: str = ""):
+    """The constraint of a simulated patient: a shipped shape name or a constraint file.
+
+    Parameters
+    ----------
+    value : str
+        One of :data:`models.shapes.SHAPES` (``original``, ``c-shape``, ...) or a path to a
+        constraint YAML file.
+
+    Returns
+    -------
+    models.constraint.JointConstraint
+
+    Raises
+    ------
+    RigConfigError
+        Neither a shape nor a readable, valid constraint file (names ``key``).
+    """
+    from models.constraint import load_constraint
+    from models.shapes import SHAPES, load_shape
+
+    prefix = f"{url}: " if url else ""
+    if value in SHAPES:
+        return load_shape(value)
+    try:
+        return load_constraint(value)
+    except FileNotFoundError:
+        raise RigConfigError(f"{prefix}{key}={value!r}: not a shape name ({', '.join(SHAPES)}) "
+                             f"nor an existing constraint file") from None
+    except (OSError, ValueError) as err:  # ConstraintError is a ValueError
+        raise RigConfigError(f"{prefix}{key}={value!r}: {err}") from err
+
+
+def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
+    """The simulated patient described by the URL's patient keys."""
+    seed = q.integer("seed", 0)
+    patient = q.text("patient")
+    constraint = resolve_patient(patient, url=q.url) if patient is not None else None
+    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
+    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
+    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    rng = np.random.default_rng([seed, 0x5EA7])  # mounts: independent of the motion draws
+    mounts = default_mounts(sensors, rng)
+    if misplace:
+        mounts = [_misplaced(m, misplace, rng) for m in mounts]
+    return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
+                         speed=speed, seed=seed)
+
+
+def _misplaced(mount: SensorMount, angle_deg: float, rng: np.random.Generator) -> SensorMount:
+    """``mount`` turned by ``angle_deg`` about a random axis (a strap not quite where meant)."""
+    axis = rng.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    error = Q.from_axis_angle(axis, math.radians(angle_deg))
+    return SensorMount(mount.segment, tuple(Q.canonical(Q.multiply(mount.mount, error))))
+
+
+def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
+    """Start a simulated BNO055 described by a port string.
+
+    ``sim://bno055?seed=1&rate=100&patient=original`` — every key optional:
+
+    ================  ===========================================================  ==========
+    key               meaning                                                      default
+    ================  ===========================================================  ==========
+    ``patient``       range of motion: a shape of :mod:`models.shapes` or a        60° cone
+                      constraint YAML path
+    ``sensor``        which sensor of the patient this chip is: 0 thorax, 1 arm    1
+    ``rate``          fusion output rate, Hz (the chip: 100)                       100
+    ``seed``          seed of motion, noise and mounting                           0
+    ``noise``         sensor errors (white noise, drift, magnetic disturbances,   on
+                      calibration) on / off
+    ``misplace_deg``  each strap turned this far off its nominal mounting          5
+    ``excursion``     RMS of the motion relative to the range (> 0, <= 3)          1
+    ``speed``         multiplies the motion's frequencies (> 0, <= 20)             1
+    ``clock``,        simulated time (:mod:`rig.sim.urls`): ``clock=manual``       real time
+    ``time_scale``    gives ``sim.clock`` a :class:`~rig.sim.clock.ManualClock`
+    ================  ===========================================================  ==========
+
+    Parameters
+    ----------
+    url : str
+    **overrides
+        Keyword arguments of :class:`Bno055Simulator` that win over the URL (``clock``,
+        ``limb``, ``char_timeout_s``, ...).
+
+    Raises
+    ------
+    RigConfigError
+        Not ``sim://bno055``, unknown key, bad value (the message names the key).
+    """
+    q = SimUrl(url, ("bno055",), (*_LIMB_KEYS, "sensor", "rate"), BNO055_EXAMPLE)
+    kwargs: dict[str, object] = {
+        "sensor": q.integer("sensor", 1, 0, 1),
+        "rate_hz": q.number("rate", 100.0, 0.0, 1000.0, open_lo=True),
+        "clock": q.clock(),
+    }
+    if "limb" not in overrides:
+        kwargs["limb"] = _limb_from_query(q, 2)
+    kwargs.update(overrides)
+    return Bno055Simulator(**kwargs)  # type: ignore[arg-type]
+
+
+def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
+    """Start a simulated stream-protocol IMU board described by a port string.
+
+    ``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1`` — every key optional; the
+    patient keys of :func:`bno055_from_url` (``patient``, ``seed``, ``noise``,
+    ``misplace_deg``, ``excursion``, ``speed``, ``clock``, ``time_scale``) and:
+
+    ===========  ==================================================================  ========
+    key          meaning                                                             default
+    ===========  ==================================================================  ========
+    ``sensors``  sensors on the board (1..16): 0 on the thorax, the others on the    2
+                 arm
+    ``rate``     initial sample rate, Hz (SET_RATE may change it within 10..max(400,  100
+                 rate))
+    ``max_lag``  seconds behind its sample grid after which the device skips         0.1
+                 samples; ``none``: never skip
+    ``flow``     flow control: ``on`` the device waits for the host (nothing lost),  off
+                 ``off`` unread bytes are lost like on a UART
+    ===========  ==================================================================  ========
+
+    A benchmark that must not lose a sample at any speed:
+    ``sim://imu-stream?sensors=2&rate=400&clock=manual&max_lag=none&flow=on`` and advance
+    ``sim.clock``.
+
+    Raises
+    ------
+    RigConfigError
+        Not ``sim://imu-stream``, unknown key, bad value (the message names the key).
+    """
+    q = SimUrl(url, ("imu-stream", "stream"), (*_LIMB_KEYS, "sensors", "rate", "max_lag", "flow"),
+               STREAM_EXAMPLE)
+    sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
+    rate = q.integer("rate", 100, 1, 0xFFFF)
+    kwargs: dict[str, object] = {
+        "rate_hz": rate,
+        "min_rate_hz": min(10, rate),
+        "max_rate_hz": max(400, rate),
+        "max_lag_s": q.number("max_lag", 0.1, 0.0, none_ok=True, open_lo=True),
+        "flow_control": q.flag("flow", False),
+        "clock": q.clock(),
+    }
+    if "limb" not in overrides:
+        kwargs["limb"] = _limb_from_query(q, sensors)
+    kwargs.update(overrides)
+    return StreamImuSimulator(**kwargs)  # type: ignore[arg-type]

@@ -21,12 +21,13 @@ about the middle of the twist range; both are sums of sinusoids with seeded rand
 (0.03-0.3 Hz) and phases, so the motion is smooth, closed-form and evaluable at any time. Each
 axis's RMS is ``excursion`` times the reach of the range (cone radius, or the largest
 centre-to-vertex angle of a polygon; half the twist range), so with ``excursion = 1`` about a third
-of the time the raw motion lies outside the range; ``range_.project`` then puts it on the nearest
-boundary point, and the limb slides **along the limit** — the motion a boundary recording needs.
+of the time the raw motion lies outside the range; the oracle's ``project`` then puts it on the
+nearest boundary point, and the limb slides **along the limit** — the motion a boundary
+recording needs.
 
-``range_`` is anything with ``project(q: (N, 4)) -> (N, 4)``: a
-:class:`models.oracle.ConstraintOracle` (:meth:`SimulatedLimb.from_constraint`), or the
-self-contained :class:`ConeRange` used when no constraint file is given.
+The range of motion is a :class:`models.constraint.JointConstraint` (default: a 60° cone about
++X with twist ±45°), projected by the exact oracle :class:`models.oracle.ConstraintOracle` —
+the one implementation the datasets, the evaluation and the live supervisor use too.
 
 Sensor errors (per sensor, :class:`NoiseModel`)
 -----------------------------------------------
@@ -51,18 +52,18 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
 from models import quaternion as Q
+from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.oracle import ConstraintOracle
 
 __all__ = [
-    "ConeRange",
+    "DEFAULT_CONSTRAINT",
     "LimbState",
     "Measurement",
     "NoiseModel",
-    "RangeOfMotion",
     "SensorMount",
     "SimulatedLimb",
     "default_mounts",
@@ -70,14 +71,6 @@ __all__ = [
 
 _Z = np.array([0.0, 0.0, 1.0])
 _Y = np.array([0.0, 1.0, 0.0])
-
-
-class RangeOfMotion(Protocol):
-    """What the limb needs of a joint range: the nearest valid orientation."""
-
-    def project(self, q: np.ndarray) -> np.ndarray:  # pragma: no cover - protocol
-        """Nearest valid orientations, ``(N, 4) -> (N, 4)``, limb relative to thorax."""
-        ...
 
 
 def _exp_map(rotvec: np.ndarray) -> np.ndarray:
@@ -96,60 +89,9 @@ def _tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(c, u)
 
 
-@dataclass(frozen=True)
-class ConeRange:
-    """A cone swing limit and a twist interval, with an exact ``project``.
-
-    Parameters
-    ----------
-    centre : (3,) array_like
-        Cone axis in the thorax frame (normalised).
-    radius_deg : float
-        Cone half-angle, degrees, in (0, 180).
-    twist_deg : (float, float)
-        Twist interval about the limb axis, degrees.
-    limb_axis : (3,) array_like
-        Limb long axis in the limb frame.
-    """
-
-    centre: Sequence[float] = (1.0, 0.0, 0.0)
-    radius_deg: float = 60.0
-    twist_deg: tuple[float, float] = (-45.0, 45.0)
-    limb_axis: Sequence[float] = (1.0, 0.0, 0.0)
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.radius_deg < 180.0:
-            raise ValueError(f"radius_deg must be in (0, 180), got {self.radius_deg}")
-        lo, hi = self.twist_deg
-        if not -180.0 <= lo <= hi <= 180.0:
-            raise ValueError(f"twist_deg must satisfy -180 <= min <= max <= 180, got {lo}, {hi}")
-        # unit vectors, validated once (frozen dataclass: cache through object.__setattr__)
-        object.__setattr__(self, "_a", Q.check_vectors(self.limb_axis))
-        object.__setattr__(self, "_c", Q.check_vectors(self.centre))
-
-    def project(self, q: np.ndarray) -> np.ndarray:
-        """Nearest orientation inside the cone and twist interval; ``(N, 4) -> (N, 4)``."""
-        q = np.atleast_2d(np.asarray(q, dtype=np.float64))
-        a, c = self._a, self._c
-        d = Q.rotate(q, a)
-        theta = Q.angle_between(d, c)
-        r = math.radians(self.radius_deg)
-        out = q.copy()
-        far = theta > r
-        if far.any():
-            # rotate d about c × d back onto the cone: the great-circle move to the boundary
-            axis = np.cross(c, d[far])
-            n = np.linalg.norm(axis, axis=1, keepdims=True)
-            axis = np.where(n > 1e-12, axis / np.where(n > 1e-12, n, 1.0), _tangent_basis(c)[0])
-            delta = Q.from_axis_angle(axis, r - theta[far])
-            out[far] = Q.multiply(delta, q[far])
-        phi = Q.twist_angle(out, a)
-        lo, hi = (math.radians(v) for v in self.twist_deg)
-        clamped = np.clip(phi, lo, hi)
-        fix = clamped != phi
-        if fix.any():
-            out[fix] = Q.multiply(out[fix], Q.from_axis_angle(a, clamped[fix] - phi[fix]))
-        return out
+DEFAULT_CONSTRAINT = JointConstraint.cone((1.0, 0.0, 0.0), 60.0, twist=(-45.0, 45.0),
+                                          name="default-cone")
+"""The range of motion of a :class:`SimulatedLimb` given none: 60° cone about +X, twist ±45°."""
 
 
 @dataclass(frozen=True)
@@ -262,15 +204,18 @@ class SimulatedLimb:
 
     Parameters
     ----------
-    range_ : RangeOfMotion, optional
-        Joint range; default ``ConeRange()`` (60° cone about +X, twist ±45°).
+    constraint : JointConstraint, optional
+        The patient's range of motion (limb relative to thorax); default
+        :data:`DEFAULT_CONSTRAINT`. Motion outside it is projected onto it by
+        :class:`models.oracle.ConstraintOracle`.
     centre : (3,) array_like, optional
         Centre of the motion (thorax frame); default: the cone centre / polygon interior of
-        ``range_`` when it has one, else the limb axis.
+        the constraint, else the limb axis.
     reach_deg : float, optional
-        Angular reach of the range from ``centre``; default from ``range_`` or 60°.
+        Angular reach of the range from ``centre``; default from the constraint (60° if its
+        swing is unlimited).
     twist_deg : (float, float), optional
-        Twist interval the motion explores; default from ``range_`` or (-45, 45).
+        Twist interval the motion explores; default from the constraint or (-45, 45).
     excursion : float
         RMS of the raw motion relative to the reach (1.0: outside the range ~1/3 of the time).
     speed : float
@@ -288,7 +233,7 @@ class SimulatedLimb:
 
     def __init__(
         self,
-        range_: RangeOfMotion | None = None,
+        constraint: JointConstraint | None = None,
         *,
         centre: Sequence[float] | None = None,
         reach_deg: float | None = None,
@@ -302,15 +247,18 @@ class SimulatedLimb:
         seed: int | np.random.Generator | None = 0,
     ) -> None:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-        self.range_ = range_ if range_ is not None else ConeRange()
+        if constraint is None:
+            constraint = DEFAULT_CONSTRAINT
+        if not isinstance(constraint, JointConstraint):
+            raise TypeError(f"constraint must be a models.constraint.JointConstraint, got "
+                            f"{type(constraint).__name__}")
+        self.constraint = constraint
+        self.oracle = ConstraintOracle(constraint)
         self.noise = noise if noise is not None else NoiseModel()
         if not excursion > 0 or not speed > 0:
             raise ValueError("excursion and speed must be > 0")
-        axis = getattr(self.range_, "limb_axis", None)
-        if axis is None:
-            axis = getattr(getattr(self.range_, "constraint", None), "limb_axis", Q.LIMB_AXIS)
-        self.limb_axis = Q.check_vectors(axis)
-        c_default, reach_default, twist_default = _describe_range(self.range_)
+        self.limb_axis = Q.check_vectors(constraint.limb_axis)
+        c_default, reach_default, twist_default = _describe_range(constraint)
         self.centre = Q.check_vectors(centre if centre is not None else
                                       (c_default if c_default is not None else self.limb_axis))
         self.reach = math.radians(reach_deg if reach_deg is not None else reach_default)
@@ -351,12 +299,10 @@ class SimulatedLimb:
             self._errors.append(e)
 
     @classmethod
-    def from_constraint(cls, constraint, **kwargs) -> SimulatedLimb:
-        """A limb whose range of motion is a :class:`models.constraint.JointConstraint`
-        (projected with :class:`models.oracle.ConstraintOracle`)."""
-        from models.oracle import ConstraintOracle
-
-        return cls(_OracleRange(ConstraintOracle(constraint), constraint), **kwargs)
+    def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedLimb:
+        """A limb whose range of motion is ``constraint`` (same as ``SimulatedLimb(constraint,
+        **kwargs)``)."""
+        return cls(constraint, **kwargs)
 
     @property
     def n_sensors(self) -> int:
@@ -383,7 +329,7 @@ class SimulatedLimb:
 
     def joint(self, t) -> np.ndarray:
         """Joint orientation (N, 4), limb relative to thorax, inside the range of motion."""
-        q = np.asarray(self.range_.project(self.raw_joint(t)), dtype=np.float64).reshape(-1, 4)
+        q = self.oracle.project(self.raw_joint(t), normalize=True).reshape(-1, 4)
         return q / np.linalg.norm(q, axis=1, keepdims=True)
 
     def thorax(self, t) -> np.ndarray:
@@ -482,33 +428,17 @@ def _calibration_byte(times: np.ndarray, elapsed: float, disturbed: bool) -> int
     return (system << 6) | (gyr << 4) | (acc << 2) | mag
 
 
-def _describe_range(range_) -> tuple[np.ndarray | None, float, tuple[float, float]]:
-    """Centre, reach (deg) and twist interval (deg) of a range, from whatever it exposes."""
-    if isinstance(range_, ConeRange):
-        return np.asarray(range_.centre, float), range_.radius_deg, tuple(range_.twist_deg)
-    constraint = getattr(range_, "constraint", None)
+def _describe_range(constraint: JointConstraint
+                    ) -> tuple[np.ndarray | None, float, tuple[float, float]]:
+    """Centre, reach (deg) and twist interval (deg) the motion should explore."""
     centre, reach, twist = None, 60.0, (-45.0, 45.0)
-    if constraint is not None:
-        swing = getattr(constraint, "swing", None)
-        if getattr(swing, "radius_deg", None) is not None:
-            centre, reach = np.asarray(swing.centre, float), float(swing.radius_deg)
-        elif getattr(swing, "interior", None) is not None:
-            centre = Q.check_vectors(swing.interior)
-            verts = Q.check_vectors(swing.vertices)
-            reach = float(np.degrees(np.max(Q.angle_between(verts, centre))))
-        tw = getattr(constraint, "twist", None)
-        if tw is not None:
-            twist = (float(tw.min_deg), float(tw.max_deg))
+    swing = constraint.swing
+    if isinstance(swing, ConeSwing):
+        centre, reach = np.asarray(swing.centre, float), float(swing.radius_deg)
+    elif isinstance(swing, PolygonSwing):
+        centre = Q.check_vectors(swing.interior)
+        verts = Q.check_vectors(swing.vertices)
+        reach = float(np.degrees(np.max(Q.angle_between(verts, centre))))
+    if constraint.twist is not None:
+        twist = (float(constraint.twist.min_deg), float(constraint.twist.max_deg))
     return centre, reach, twist
-
-
-class _OracleRange:
-    """Adapts a :class:`models.oracle.ConstraintOracle` (keeps the constraint for its extents)."""
-
-    def __init__(self, oracle, constraint) -> None:
-        self.oracle = oracle
-        self.constraint = constraint
-        self.limb_axis = np.asarray(constraint.limb_axis, dtype=np.float64)
-
-    def project(self, q: np.ndarray) -> np.ndarray:
-        return self.oracle.project(q, normalize=True)
