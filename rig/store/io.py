@@ -156,7 +156,8 @@ def _check_time(t: np.ndarray, lines: list[int], src: str, what: str = "time") -
         if bad.size:
             i = int(bad[0]) + 1
             raise RigConfigError(
-                f"{src}:{lines[i]}: {what} {t[i]!r} does not increase (previous {t[i - 1]!r})"
+                f"{src}:{lines[i]}: {what} {float(t[i])!r} does not increase "
+                f"(previous {float(t[i - 1])!r})"
             )
 
 

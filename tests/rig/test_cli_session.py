@@ -1,0 +1,123 @@
+"""``rig session list`` and ``rig export`` as a user runs them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rig.cli import main
+from rig.store import open_store
+from rig.store.io import read_samples_csv, read_sto
+
+
+def run(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    out, err = capsys.readouterr()
+    return exc.value.code, out, err
+
+
+@pytest.fixture
+def db(tmp_path):
+    path = tmp_path / "clinic.db"
+    rng = np.random.default_rng(5)
+    with open_store(path) as store:
+        p1 = store.add_patient("P-0001", side="right")
+        s1 = store.start_session(p1, rig_name="sim-imu", joint="shoulder", side="right")
+        t = np.arange(200) / 400.0
+        q = rng.normal(size=(200, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        with store.sample_writer(s1) as w:
+            w.add_many(t, None, "thorax", "sensor", q)
+            w.add_many(t, None, "humerus", "sensor", q[::-1])
+            w.set_dropped(2)
+        store.end_session(s1, status="completed")
+        p2 = store.add_patient("P-0002")
+        s2 = store.start_session(p2, rig_name="sim-shoulder", kind="enforce")
+        store.end_run(store.start_run(s2), {"cycles": 0})
+    return path
+
+
+def test_session_list_shows_pseudonym_kind_counts_status(db, capsys):
+    code, out, err = run(["session", "list", "--db", str(db)], capsys)
+    assert code == 0 and err == ""
+    lines = out.splitlines()
+    assert lines[0].split() == ["id", "patient", "kind", "joint", "started", "duration",
+                                "samples", "dropped", "status"]
+    assert "P-0001" in lines[1] and "record" in lines[1] and "right shoulder" in lines[1]
+    assert "400 (humerus 200, thorax 200)" in lines[1] and "completed" in lines[1]
+    assert "P-0002" in lines[2] and "enforce" in lines[2] and "1 run" in lines[2]
+    assert "running (not ended)" in lines[2]
+    code, out, _ = run(["session", "list", "--db", str(db), "--json"], capsys)
+    rows = json.loads(out)
+    assert [r["samples"] for r in rows] == [400, 0] and rows[0]["dropped"] == 2
+
+
+def test_missing_database_is_an_error_not_a_new_file(tmp_path, capsys):
+    missing = tmp_path / "typo.db"
+    code, out, err = run(["session", "list", "--db", str(missing)], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith("rig: error: no database at") and err.count("\n") == 1
+    assert not missing.exists()
+
+
+def test_export_sto_and_csv(db, tmp_path, capsys):
+    code, out, _ = run(["export", "--db", str(db), "--session", "1", "--format", "sto",
+                        "--out", str(tmp_path / "s1.sto")], capsys)
+    assert code == 0 and "wrote 200 rows (thorax_imu, humerus_imu)" in out
+    table = read_sto(tmp_path / "s1.sto")
+    with open_store(db, create=False) as store:
+        np.testing.assert_array_equal(table.get("humerus"), store.samples(1, "humerus")["q"])
+    code, out, _ = run(["export", "--db", str(db), "--session", "1",
+                        "--out", str(tmp_path / "s1.csv")], capsys)  # format from the suffix
+    assert code == 0 and "wrote 400 rows" in out
+    assert read_samples_csv(tmp_path / "s1.csv")["t"].size == 400
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--session", "9", "--format", "sto"], "no session 9 in"),
+        (["--session", "2", "--format", "csv"], "session 2 has no samples"),
+        (["--session", "1", "--format", "c3d"], "Invalid value for '--format'"),
+        (["--session", "1"], "cannot tell the format from the suffix"),
+    ],
+)
+def test_export_mistakes_are_one_line_exit_2(db, tmp_path, capsys, args, message):
+    code, out, err = run(["export", "--db", str(db), *args, "--out", str(tmp_path / "x.out")],
+                         capsys)
+    assert code == 2, (out, err)
+    assert err.startswith("rig: error:") and message in err and err.count("\n") == 1
+    assert not (tmp_path / "x.out").exists()
+
+
+def test_export_into_a_missing_directory(db, tmp_path, capsys):
+    code, _, err = run(["export", "--db", str(db), "--session", "1", "--format", "sto",
+                        "--out", str(tmp_path / "nope" / "x.sto")], capsys)
+    assert code == 2 and "does not exist" in err
+
+
+def test_session_list_through_the_console_script(db):
+    """The installed entry point, as a person types it: no traceback on a bad URL."""
+    r = subprocess.run([sys.executable, "-m", "rig", "session", "list", "--db", "mysql://x/y"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip().startswith("rig: error: --db mysql://x/y: unsupported scheme")
+    assert "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "rig", "session", "list", "--db", str(db)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "P-0001" in r.stdout
+
+
+def test_session_list_on_postgresql(pg_server, capsys):
+    url = pg_server.new_database()
+    with open_store(url) as store:
+        sid = store.start_session(store.add_patient("PG-1"))
+        with store.sample_writer(sid) as w:
+            w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
+    code, out, _ = run(["session", "list", "--db", url], capsys)
+    assert code == 0 and "PG-1" in out and "1 (humerus 1)" in out

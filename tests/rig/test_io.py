@@ -1,0 +1,261 @@
+"""OpenSim ``.sto`` and CSV import/export (rig.store.io)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rig.errors import RigConfigError
+from rig.store import open_store
+from rig.store.io import (
+    NORM_TOLERANCE,
+    OrientationTable,
+    export_session,
+    read_csv,
+    read_orientations,
+    read_samples_csv,
+    read_sto,
+    session_table,
+    write_csv,
+    write_samples_csv,
+    write_sto,
+)
+
+DATA = Path(__file__).parent / "data"
+OPENSENSE = DATA / "opensense_orientations.sto"
+
+
+def _unit(rng, n):
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _table(rng, n=200, labels=("thorax_imu", "humerus_imu")):
+    # awkward floats on purpose: tiny, large and non-terminating times
+    t = np.cumsum(rng.uniform(1e-4, 0.01, n)) + 1234.5678901234567
+    return OrientationTable(time=t, columns={lab: _unit(rng, n) for lab in labels})
+
+
+def test_sto_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(7)
+    table = _table(rng)
+    table.columns["thorax_imu"][0] = [1.0, 0.0, 0.0, 1e-300]  # subnormal-ish extremes survive
+    table.meta["rig_session"] = "12"
+    path = tmp_path / "rec.sto"
+    write_sto(path, table)
+    head = path.read_text().splitlines()[:7]
+    assert head[1:4] == ["DataType=Quaternion", "version=3", "OpenSimVersion=4.5"]
+    assert head[0].startswith("DataRate=") and "endheader" in head
+    back = read_sto(path)
+    np.testing.assert_array_equal(back.time, table.time)
+    assert back.labels == table.labels
+    for lab in table.labels:
+        np.testing.assert_array_equal(back.columns[lab], table.columns[lab])
+    assert back.meta["rig_session"] == "12"
+    assert back.rate_hz == pytest.approx(1 / np.median(np.diff(table.time)), rel=1e-6)
+
+
+def test_csv_round_trips_are_exact(tmp_path):
+    rng = np.random.default_rng(8)
+    table = _table(rng)
+    write_csv(tmp_path / "wide.csv", table)
+    assert (tmp_path / "wide.csv").read_text().splitlines()[0] == (
+        "t_s,thorax_imu_w,thorax_imu_x,thorax_imu_y,thorax_imu_z,"
+        "humerus_imu_w,humerus_imu_x,humerus_imu_y,humerus_imu_z")
+    back = read_csv(tmp_path / "wide.csv")
+    np.testing.assert_array_equal(back.time, table.time)
+    for lab in table.labels:
+        np.testing.assert_array_equal(back.columns[lab], table.columns[lab])
+    one = OrientationTable(time=table.time, columns={"target": table.columns["thorax_imu"]})
+    write_csv(tmp_path / "single.csv", one, single=True)
+    assert (tmp_path / "single.csv").read_text().startswith("t_s,w,x,y,z\n")
+    back = read_orientations(tmp_path / "single.csv")
+    np.testing.assert_array_equal(back.get("orientation"), one.columns["target"])
+
+
+def test_reads_an_opensense_style_file():
+    """Shaped like OpenSim's STOFileAdapter output and the OpenSense example trials: a bare
+    first header line, DataRate/DataType/version/OpenSimVersion, more IMU columns than used,
+    16 significant digits, a trial that does not start at 0."""
+    table = read_sto(OPENSENSE)
+    assert table.rate_hz == 100.0
+    assert table.labels == ["pelvis_imu", "torso_imu", "humerus_r_imu", "ulna_r_imu",
+                            "radius_r_imu"]
+    assert len(table) == 12 and table.time[0] == 7.25
+    assert table.meta["OpenSimVersion"].startswith("4.5")
+    q = table.get("humerus_r")  # with or without the _imu suffix
+    assert q is table.get("humerus_r_imu") and q.shape == (12, 4)
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-12)
+    with pytest.raises(RigConfigError, match=r"no column 'femur_r'.*pelvis_imu"):
+        table.get("femur_r")
+
+
+def test_reads_windows_line_endings_extra_header_lines_and_non_quaternion_columns(tmp_path):
+    lines = OPENSENSE.read_text().splitlines()
+    header, body = lines[:lines.index("endheader")], lines[lines.index("endheader") + 1:]
+    extra = ["Xsens MT Manager export", "nRows=12", "nColumns=6", "", "inDegrees=no"]
+    labels = body[0] + "\tframe\tacc_torso"
+    rows = [r + f"\t{k}\t0.1,9.8,0.2" for k, r in enumerate(body[1:])]
+    text = "\r\n".join(header + extra + ["endheader", labels, *rows, "", ""])
+    p = tmp_path / "win.sto"
+    p.write_bytes(text.encode())
+    table = read_sto(p)
+    ref = read_sto(OPENSENSE)
+    assert table.labels == ref.labels
+    assert table.meta["ignored_columns"] == "frame,acc_torso"
+    assert table.meta["nRows"] == "12"
+    for lab in ref.labels:
+        np.testing.assert_array_equal(table.columns[lab], ref.columns[lab])
+
+
+def _sto(tmp_path, rows, labels="time\tthorax_imu\thumerus_imu", header=None):
+    header = header or ["DataRate=100.000000", "DataType=Quaternion", "version=3", "endheader"]
+    p = tmp_path / "bad.sto"
+    p.write_text("\n".join([*header, labels, *rows]) + "\n")
+    return p
+
+
+GOOD = "1,0,0,0"
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        (f"0.02\tnan,0,0,0\t{GOOD}", "bad.sto:7: column thorax_imu: NaN in quaternion"),
+        (f"0.02\t{GOOD}\t0,0,0,0", "bad.sto:7: column humerus_imu: zero quaternion"),
+        (f"0.02\t{GOOD}\t0.9,0,0,0", "bad.sto:7: column humerus_imu: quaternion norm 0.9 is "
+                                     "not 1"),
+        (f"0.02\t{GOOD}\t2,0,0,0", "refusing to renormalise"),
+        (f"0.02\t{GOOD}", "bad.sto:7: 2 cells, expected 3"),
+        (f"0.02\t{GOOD}\t1,0,0", "bad.sto:7: column humerus_imu: 3 components, expected 4"),
+        (f"0.02\t{GOOD}\t1,0,zero,0", "bad.sto:7: column humerus_imu: 'zero' is not a number"),
+        (f"0.02\t{GOOD}\tinf,0,0,0", "bad.sto:7: column humerus_imu: infinite"),
+        (f"abc\t{GOOD}\t{GOOD}", "bad.sto:7: time: 'abc' is not a number"),
+        (f"0.01\t{GOOD}\t{GOOD}", "bad.sto:7: time 0.01 does not increase"),
+    ],
+)
+def test_bad_sto_rows_are_named_by_line(tmp_path, row, message):
+    p = _sto(tmp_path, [f"0.01\t{GOOD}\t{GOOD}", row])
+    with pytest.raises(RigConfigError) as err:
+        read_sto(p)
+    assert message in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_near_unit_quaternions_are_kept_as_written(tmp_path):
+    off = 1.0 + 0.5 * NORM_TOLERANCE
+    p = _sto(tmp_path, [f"0.01\t{off!r},0,0,0\t0.7071,0.7071,0,0"])
+    table = read_sto(p)
+    assert table.get("thorax")[0, 0] == off  # not renormalised
+    assert table.get("humerus")[0].tolist() == [0.7071, 0.7071, 0.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("header", "labels", "message"),
+    [
+        (["DataRate=100", "DataType=Quaternion"], "time\tthorax_imu", "no 'endheader'"),
+        (["DataType=double", "endheader"], "time\tthorax_imu", "DataType=double, expected"),
+        (["endheader"], "t\tthorax_imu", "first column must be 'time'"),
+        (["endheader"], "time\tframe", "no quaternion columns"),
+    ],
+)
+def test_bad_sto_headers(tmp_path, header, labels, message):
+    rows = ["0.01\t3"] if labels.endswith("frame") else [f"0.01\t{GOOD}"]
+    with pytest.raises(RigConfigError, match=message):
+        read_sto(_sto(tmp_path, rows, labels=labels, header=header))
+
+
+def test_bad_csv_rows_are_named_by_line(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("t_s,w,x,y,z\n0.0,1,0,0,0\n0.1,NaN,0,0,0\n")
+    with pytest.raises(RigConfigError, match=r"t\.csv:3: orientation: NaN in quaternion"):
+        read_csv(p)
+    p.write_text("t_s,w,x,y,z\n0.0,1,0,0,0\n0.1,0,0,0\n")
+    with pytest.raises(RigConfigError, match=r"t\.csv:3: 4 cells, expected 5"):
+        read_csv(p)
+    p.write_text("t_s,name,w,x,y,z\n0.0,humerus,1,0,0,0\n0.1,humerus,0,0,0,0\n")
+    with pytest.raises(RigConfigError, match=r"t\.csv:3: humerus: zero quaternion"):
+        read_csv(p)
+    p.write_text("t_s,a,b\n0.0,1,2\n")
+    with pytest.raises(RigConfigError, match="no quaternion columns"):
+        read_csv(p)
+    with pytest.raises(RigConfigError, match="unknown format"):
+        read_orientations(tmp_path / "x.c3d")
+
+
+def test_long_csv_is_aligned_without_interpolation(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 400
+    t = np.arange(n) / 400.0
+    th = np.r_[0:100, 110:n]  # thorax: 10 samples lost -> the sparser series leads
+    qa, qb = _unit(rng, th.size), _unit(rng, n - 1)
+    s = {
+        "t": np.r_[t[th], t[1:] + 0.0003],  # humerus: 0.3 ms later, its first sample missing
+        "device_t": np.full(th.size + n - 1, np.nan),
+        "name": np.array(["thorax"] * th.size + ["humerus"] * (n - 1), dtype=object),
+        "kind": np.array(["sensor"] * (th.size + n - 1), dtype=object),
+        "q": np.r_[qa, qb],
+        "status": np.zeros(th.size + n - 1, dtype=np.int64),
+    }
+    write_samples_csv(tmp_path / "long.csv", s)
+    back = read_samples_csv(tmp_path / "long.csv")
+    for k in ("t", "q", "status"):
+        np.testing.assert_array_equal(back[k], s[k])
+    assert list(back["name"]) == list(s["name"])
+    table = read_csv(tmp_path / "long.csv")
+    assert table.meta["aligned_dropped"] == "1"  # thorax at t=0 has no humerus partner
+    np.testing.assert_array_equal(table.time, t[th[1:]])
+    np.testing.assert_array_equal(table.get("thorax"), qa[1:])
+    np.testing.assert_array_equal(table.get("humerus"), qb[th[1:] - 1])  # nearest, not mixed
+
+
+def _recorded(store, rng, n=500, shared=True):
+    pid = store.add_patient("P-77")
+    sid = store.start_session(pid, rig_name="sim-imu", joint="shoulder", side="left")
+    t = 50.0 + np.arange(n) / 400.0
+    q = {"thorax": _unit(rng, n), "humerus": _unit(rng, n)}
+    with store.sample_writer(sid) as w:
+        for k in range(n):  # interleaved, as a reader thread delivers them
+            w.add(t[k], k / 400.0, "thorax", "sensor", q["thorax"][k], 3)
+            tk = t[k] if shared else t[k] + 0.0004
+            w.add(tk, k / 400.0, "humerus", "sensor", q["humerus"][k], 2)
+    store.end_session(sid)
+    return sid, t, q
+
+
+def test_session_export_import_is_exact(tmp_path):
+    rng = np.random.default_rng(11)
+    with open_store(tmp_path / "r.db") as store:
+        sid, t, q = _recorded(store, rng)
+        info = export_session(store, sid, "sto", tmp_path / "s.sto")
+        assert info["rows"] == 500 and info["dropped_rows"] == 0
+        table = read_sto(tmp_path / "s.sto")
+        assert table.labels == ["thorax_imu", "humerus_imu"]
+        np.testing.assert_array_equal(table.time, t)
+        np.testing.assert_array_equal(table.get("thorax"), q["thorax"])
+        np.testing.assert_array_equal(table.get("humerus"), q["humerus"])
+        assert table.meta["rig_patient"] == "P-77" and table.meta["rig_side"] == "left"
+        assert table.rate_hz == pytest.approx(400.0)
+        export_session(store, sid, "csv", tmp_path / "s.csv")
+        back = read_samples_csv(tmp_path / "s.csv")
+        s = store.samples(sid)
+        for k in ("t", "device_t", "q", "status"):
+            np.testing.assert_array_equal(back[k], s[k])
+        assert list(back["name"]) == list(s["name"]) and list(back["kind"]) == list(s["kind"])
+        with pytest.raises(RigConfigError, match="--format"):
+            export_session(store, sid, "c3d", tmp_path / "x")
+
+
+def test_session_export_aligns_sensors_with_their_own_clocks(tmp_path):
+    rng = np.random.default_rng(12)
+    with open_store(tmp_path / "r.db") as store:
+        sid, _, q = _recorded(store, rng, n=300, shared=False)
+        table, dropped = session_table(store, sid)
+        assert dropped == 0 and len(table) == 300
+        np.testing.assert_array_equal(table.get("thorax"), q["thorax"])
+        np.testing.assert_array_equal(table.get("humerus"), q["humerus"])
+        empty = store.start_session(store.ensure_patient("P-77"))
+        with pytest.raises(RigConfigError, match="no samples"):
+            export_session(store, empty, "sto", tmp_path / "e.sto")
