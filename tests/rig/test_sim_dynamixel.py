@@ -30,7 +30,13 @@ from dynamixel_sdk import (
 from firmware_protocol.dynamixel import ErrorCode, decode_packet, instructions
 from rig.errors import RigConfigError
 from rig.sim.clock import ManualClock
-from rig.sim.dynamixel import ACCEL_UNIT, VELOCITY_UNIT, bus_from_url, start_servo_bus
+from rig.sim.dynamixel import (
+    ACCEL_UNIT,
+    VELOCITY_UNIT,
+    DynamixelBus,
+    bus_from_url,
+    start_servo_bus,
+)
 
 # X-series control table addresses (e-Manual)
 RETURN_DELAY, OPERATING_MODE, MAX_POS, MIN_POS = 9, 11, 48, 52
@@ -670,3 +676,155 @@ def test_restore_defaults_makes_a_stormed_bus_talk_again(sdk, bus):
     assert ph.ping(port, 2)[1] == COMM_RX_TIMEOUT
     bus.restore_defaults()
     assert ph.ping(port, 2) == (1020, COMM_SUCCESS, 0)
+
+
+# ---------------------------------------------------------------------------- Bus Watchdog
+
+BUS_WATCHDOG = 98
+
+
+def test_bus_watchdog_stops_a_moving_servo_and_locks_the_goals(sdk, bus, clock):
+    """e-Manual Bus Watchdog(98): silent host for longer than the setting -> the servo stops
+    where it is, the item reads -1, Goal writes get a Data Range Error until 0 is written."""
+    port, ph = sdk
+    assert ph.write4ByteTxRx(port, 1, PROFILE_VEL, 50) == (COMM_SUCCESS, 0)  # ~780 ticks/s
+    assert ph.write1ByteTxRx(port, 1, TORQUE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, BUS_WATCHDOG, 5) == (COMM_SUCCESS, 0)  # 100 ms
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 4000) == (COMM_SUCCESS, 0)
+    clock.t += 0.09  # within the watchdog time: still moving (observed without bus traffic)
+    assert not bus.watchdog_tripped(1) and bus.position(1) > 2048
+    clock.t += 1.0
+    assert bus.watchdog_tripped(1)
+    stopped = bus.position(1)
+    expected = 2048 + 50 * VELOCITY_UNIT * 0.1  # moved for exactly the 100 ms
+    assert stopped == pytest.approx(expected, abs=1.0)
+    clock.t += 1.0
+    assert bus.position(1) == stopped  # and stays stopped
+    assert ph.read1ByteTxRx(port, 1, BUS_WATCHDOG) == (0xFF, COMM_SUCCESS, 0)  # -1
+    assert ph.read4ByteTxRx(port, 1, GOAL_POS)[0] == round(stopped)
+    assert ph.read1ByteTxRx(port, 1, MOVING)[0] == 0
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 100) == (COMM_SUCCESS, ErrorCode.DATA_RANGE)
+    writer = GroupSyncWrite(port, ph, GOAL_POS, 4)
+    writer.addParam(1, le(100, 4))
+    assert writer.txPacket() == COMM_SUCCESS
+    clock.t += 1.0
+    assert bus.position(1) == stopped  # a sync write is refused too
+    assert ph.write1ByteTxRx(port, 1, BUS_WATCHDOG, 3) == (COMM_SUCCESS, ErrorCode.DATA_RANGE)
+    assert ph.write1ByteTxRx(port, 1, BUS_WATCHDOG, 0) == (COMM_SUCCESS, 0)  # clears
+    assert ph.read1ByteTxRx(port, 1, BUS_WATCHDOG)[0] == 0
+    assert ph.write4ByteTxRx(port, 1, GOAL_POS, 3000) == (COMM_SUCCESS, 0)
+    clock.t += 5.0
+    assert bus.position(1) == 3000
+
+
+def test_bus_watchdog_in_velocity_mode_sets_goal_velocity_to_zero(sdk, bus, clock):
+    port, ph = sdk
+    assert ph.write1ByteTxRx(port, 2, OPERATING_MODE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 2, BUS_WATCHDOG, 100) == (COMM_SUCCESS, 0)  # 2 s, e-Manual
+    assert ph.write4ByteTxRx(port, 2, GOAL_VELOCITY, 50) == (COMM_SUCCESS, 0)
+    clock.t += 10.0
+    at_stop = bus.position(2)
+    assert at_stop == pytest.approx(2048 + 50 * VELOCITY_UNIT * 2.0, abs=1.0)
+    assert ph.read4ByteTxRx(port, 2, GOAL_VELOCITY)[0] == 0
+    assert signed32(ph.read4ByteTxRx(port, 2, 128)[0]) == 0  # present velocity
+    assert ph.write4ByteTxRx(port, 2, GOAL_VELOCITY, 150) == (COMM_SUCCESS,
+                                                               ErrorCode.DATA_RANGE)
+
+
+def test_bus_watchdog_is_fed_only_by_packets_that_reach_the_servo(sdk, bus, clock):
+    """Traffic to servo 2 (and sync reads naming it) does not feed servo 1's watchdog; a
+    sync read naming servo 1 does; with torque off nothing is monitored."""
+    port, ph = sdk
+    for i in (1, 2, 3):
+        assert ph.write1ByteTxRx(port, i, BUS_WATCHDOG, 5) == (COMM_SUCCESS, 0)  # 100 ms
+    for i in (1, 2):
+        assert ph.write1ByteTxRx(port, i, TORQUE, 1) == (COMM_SUCCESS, 0)
+    reader = GroupSyncRead(port, ph, PRESENT_POS, 4)
+    reader.addParam(2)
+    for _ in range(10):  # one second of host traffic to servo 2 only
+        clock.t += 0.08
+        assert reader.txRxPacket() == COMM_SUCCESS
+    assert bus.watchdog_tripped(1) and not bus.watchdog_tripped(2)
+    assert not bus.watchdog_tripped(3)  # torque off: not monitored
+    clock.t += 1.0
+    assert bus.watchdog_tripped(2)
+
+
+def test_watchdog_trips_when_the_adapter_is_unplugged(bus, clock):
+    """What the live loop relies on: the host vanishes, the servos stop by themselves."""
+    port = PortHandler(bus.port)
+    assert port.openPort()
+    ph = PacketHandler(2.0)
+    try:
+        assert ph.write1ByteTxRx(port, 3, BUS_WATCHDOG, 10) == (COMM_SUCCESS, 0)
+        assert ph.write1ByteTxRx(port, 3, TORQUE, 1) == (COMM_SUCCESS, 0)
+        assert ph.write4ByteTxRx(port, 3, GOAL_POS, 4095) == (COMM_SUCCESS, 0)
+    finally:
+        port.closePort()
+    bus.unplug(adapter=True)
+    clock.t += 3.0
+    assert bus.watchdog_tripped(3)
+    assert 2048 < bus.position(3) < 4095
+    assert bus.servo(3).watchdog_trips == 1
+
+
+# ---------------------------------------------------------------------------- CRC, fault rates
+
+
+def test_bad_crc_instruction_is_ignored_entirely(sdk, bus):
+    """No status, no effect (docs/sim.md: CRC errors); counted for observation."""
+    port, ph = sdk
+    bad = bytearray(instructions.write(1, LED, b"\x01").encode())
+    bad[-2] ^= 0x55
+    port.clearPort()
+    port.writePort(bytes(bad))
+    port.setPacketTimeout(11)
+    assert ph.rxPacket(port, False)[1] == COMM_RX_TIMEOUT
+    assert bus.crc_errors == 1
+    assert ph.read1ByteTxRx(port, 1, LED) == (0, COMM_SUCCESS, 0)
+    bus.corrupt_instructions(1)  # the same through fault injection (line noise to the servos)
+    assert ph.write1ByteTxRx(port, 1, LED, 1)[0] == COMM_RX_TIMEOUT
+    assert ph.read1ByteTxRx(port, 1, LED) == (0, COMM_SUCCESS, 0)
+    assert bus.crc_errors == 2 and bus.fault_counts["instructions_corrupted"] == 1
+
+
+def test_random_fault_rates_are_seeded_and_counted(sdk, bus):
+    port, ph = sdk
+    outcomes = []
+    for seed in (5, 5):
+        bus.set_fault_rates(corrupt=0.3, seed=seed)
+        outcomes.append([ph.read4ByteTxRx(port, 1, PRESENT_POS)[1] for _ in range(40)])
+    bus.set_fault_rates()
+    assert outcomes[0] == outcomes[1]  # reproducible
+    corrupt = outcomes[0].count(COMM_RX_CORRUPT)
+    assert 0 < corrupt < 40 and set(outcomes[0]) == {COMM_SUCCESS, COMM_RX_CORRUPT}
+    assert bus.fault_counts["corrupted"] == 2 * corrupt
+    assert ph.ping(port, 1)[1] == COMM_SUCCESS
+    with pytest.raises(ValueError, match="drop"):
+        bus.set_fault_rates(drop=1.5)
+
+
+def test_url_clock_and_named_key_errors():
+    with bus_from_url("sim://dynamixel?ids=1-3&clock=manual&wire_time=off") as bus:
+        assert isinstance(bus.clock, ManualClock)
+        assert sorted(bus.servos) == [1, 2, 3] and not bus.model_wire_time
+    for url, key in (("sim://dynamixel?idz=1", "idz"), ("sim://dynamixel?baud=fast", "baud"),
+                     ("sim://dynamixel?return_delay_us=600", "return_delay_us"),
+                     ("sim://dynamixel?noise=-1", "noise"), ("sim://dynamixel?ids=1&ids=2",
+                                                              "ids"),
+                     ("sim://dynamixel?wire_time=sometimes", "wire_time")):
+        with pytest.raises(RigConfigError, match=key):
+            bus_from_url(url)
+
+
+def test_from_url_dispatches_on_the_device():
+    from rig.sim import from_url
+    from rig.sim.imu import Bno055Simulator, StreamImuSimulator
+
+    for url, cls in (("sim://dynamixel?ids=2", DynamixelBus), ("sim://bno055", Bno055Simulator),
+                     ("sim://imu-stream?sensors=1", StreamImuSimulator)):
+        with from_url(url) as sim:
+            assert isinstance(sim, cls) and sim.port.startswith("/dev/pts/")
+    with pytest.raises(RigConfigError, match="names no simulator"):
+        from_url("sim://toaster")

@@ -99,3 +99,22 @@ def test_sync_read_positions(chain):
         single = _signed(ph.read4ByteTxRx(port, dxl_id, PRESENT_POS)[0])
         assert abs(synced - single) <= 20  # torque is off: the shaft is (nearly) still
     assert ph.read1ByteTxRx(port, ids[0], TORQUE)[1] == COMM_SUCCESS
+
+
+BUS_WATCHDOG = 98
+
+
+def test_bus_watchdog_register_range(chain):
+    """Bus Watchdog (98) takes 0..127 (20 ms units); other values are a Data Range Error.
+    Torque stays off, so the watchdog is never armed and nothing moves."""
+    port, ph, ids = chain
+    dxl_id = ids[0]
+    try:
+        assert ph.write1ByteTxRx(port, dxl_id, BUS_WATCHDOG, 127)[:2] == (COMM_SUCCESS, 0)
+        assert ph.read1ByteTxRx(port, dxl_id, BUS_WATCHDOG)[:2] == (127, COMM_SUCCESS)
+        result, error = ph.write1ByteTxRx(port, dxl_id, BUS_WATCHDOG, 128)
+        assert result == COMM_SUCCESS and error & 0x7F == ErrorCode.DATA_RANGE
+        assert ph.read1ByteTxRx(port, dxl_id, BUS_WATCHDOG)[0] == 127
+    finally:
+        ph.write1ByteTxRx(port, dxl_id, BUS_WATCHDOG, 0)
+    assert ph.read1ByteTxRx(port, dxl_id, BUS_WATCHDOG)[:2] == (0, COMM_SUCCESS)
