@@ -43,8 +43,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from rig.record import PlainDisplay, RecordOptions, record_session  # noqa: E402
-from rig.record.rigio import load_config, open_rig  # noqa: E402
+from rig.record import PlainDisplay, RecordOptions, record_session
+from rig.record.rigio import load_config, open_rig
 
 
 class _Lockstep(PlainDisplay):
@@ -83,7 +83,6 @@ def throughput(minutes: float, rate: int, repeats: int, window_s: float) -> None
                 f"child: humerus}}\nsensors:\n  port: \"{port}\"\n  protocol: stream\n"
                 f"  rate_hz: {rate}\n  segments: {{thorax: 0, humerus: 1}}\n")
             del base
-            base = None
             config = load_config(str(cfg_path))
             rig = open_rig(config)
             sim = rig.simulators[0]

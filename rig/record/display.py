@@ -161,7 +161,7 @@ def render(st: RecordStatus):
             mid = 0.5 * (s.azimuth_deg[0] + s.azimuth_deg[1])
             arrow = _COMPASS[int(((mid + 22.5) % 360) // 45)]
             frac = min(1.0, s.boundary_samples / need)
-            bar = "█" * int(round(frac * 20)) + "·" * (20 - int(round(frac * 20)))
+            bar = "█" * round(frac * 20) + "·" * (20 - round(frac * 20))
             state = ("[green]explored[/]" if s.explored else
                      "[yellow]still growing[/]" if s.samples and not s.stable else
                      "[yellow]needs samples[/]" if s.samples else "[red]not visited[/]")

@@ -237,6 +237,19 @@ def _concat(batches: list[SampleBatch]) -> SampleBatch:
                          for f in ("t", "device_t", "name", "kind", "q", "status")))
 
 
+def patient_performs_protocol(rig) -> bool:
+    """Whether every simulated patient of ``rig`` follows the calibration protocol.
+
+    A :class:`rig.sim.limb.SimulatedLimb` that performs it exposes the protocol it follows as
+    ``calibration_protocol`` (None or absent: it moves freely from time 0, and calibrating
+    against it would fit noise).
+    """
+    patients = [getattr(p, "patient", None) for p in getattr(rig, "ports", [])]
+    patients = [p for p in patients if p is not None]
+    return bool(patients) and all(
+        getattr(p, "calibration_protocol", None) is not None for p in patients)
+
+
 def _pairs(b: SampleBatch, parent: str, child: str) -> tuple[np.ndarray, np.ndarray]:
     """Parent and child orientations at the same instants (equal sample times)."""
     clock = b.time()

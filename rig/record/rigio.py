@@ -88,34 +88,51 @@ def load_config(name_or_path: str):
     return load_rig_config(name_or_path)
 
 
-def open_rig(config, **source_options) -> OpenRig:
-    """Open the rig's devices and its orientation source.
+def open_rig(config, *, which: str | None = None, rate_hz: float | None = None) -> OpenRig:
+    """Open the rig's ports, devices and orientation source.
+
+    The ports are opened here (:func:`rig.devices.ports.open_port`) and handed to
+    :func:`rig.devices.sources.open_source`, so the simulators behind ``sim://`` ports stay
+    reachable (:attr:`OpenRig.simulators`: the patient's clock, fault injection).
 
     Raises whatever the devices raise for a wrong port or a silent device
     (:class:`rig.errors.RigConnectionError`, :class:`rig.errors.RigTimeoutError`), before any
     sample is recorded.
     """
-    from rig.devices import sources as S
+    from rig.devices.ports import open_port
+    from rig.devices.sources import open_source
 
+    if which is None:
+        which = "sensors" if getattr(config, "sensors", None) is not None else "servos"
     stack = contextlib.ExitStack()
     try:
-        if getattr(config, "sensors", None) is not None:
-            sc = config.sensors
-            source = stack.enter_context(S.ImuSetSource.from_config(config, **source_options))
-            sensors = [SensorInfo(name, segment=name, kind="sensor", port=str(sc.port))
+        if which == "sensors":
+            urls = list(config.sensors.ports)
+            baud = config.sensors.baud
+        else:
+            urls = [config.servos.port]
+            baud = config.servos.baud
+        ports = {}
+        for url in urls:
+            ports[url] = stack.enter_context(open_port(url, baud=baud))
+        source = open_source(config, which, rate_hz=rate_hz, ports=ports)
+        stack.callback(source.close)  # LIFO: the source closes before its ports
+        if which == "sensors":
+            sensors = [SensorInfo(name, segment=name, kind="sensor", port=urls[0])
                        for name in source.names]
             kind = "imu"
-        elif getattr(config, "servos", None) is not None:
-            source = stack.enter_context(S.ServoChainSource.from_config(config, **source_options))
-            sensors = [SensorInfo(name, segment=config.joint.child, kind="joint",
-                                  port=str(config.servos.port)) for name in source.names]
+        else:
+            sensors = [SensorInfo(name, segment=config.joint.child, kind="joint", port=urls[0])
+                       for name in source.names]
             kind = "servo"
-        else:  # load_rig_config refuses this; a config built by hand might not
-            from rig.errors import RigConfigError
-
-            raise RigConfigError(f"rig {config.name!r} has neither sensors nor servos")
-        sims = list(getattr(source, "simulators", []) or [])
-        return OpenRig(config, source, sensors, sims, kind, stack)
+        port_list = list(ports.values())
+        sims = [p.simulator for p in port_list if p.simulator is not None]
+        if sims and len(sims) != len(port_list):
+            sims = []  # a mixed rig counts as hardware: the clinician is prompted
+        device_t0 = 0.0
+        if kind == "imu" and sims:
+            device_t0 = float(getattr(sims[0], "timestamp_offset_us", 0)) / 1e6
+        return OpenRig(config, source, sensors, sims, kind, stack, port_list, device_t0)
     except BaseException:
         stack.close()
         raise

@@ -34,10 +34,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rig.errors import RigConfigError, RigConnectionError
+from rig.errors import RigConfigError, RigConnectionError, RigError
 from rig.record.coverage import CoverageMap
 from rig.record.display import PlainDisplay, RecordStatus
-from rig.record.guided import CalibrationResult, GuidedCalibration
+from rig.record.guided import CalibrationResult, GuidedCalibration, patient_performs_protocol
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
 
@@ -264,7 +264,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     result = RecordResult(session_id, patient_id, status="failed")
     status = RecordStatus(patient=options.patient, phase="starting",
                           duration_s=options.duration_s)
-    coverage = CoverageMap(**options.coverage)
+    coverage = CoverageMap(**{"centre": _range_centre(config), **options.coverage})
     writer = store.sample_writer(session_id)
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
     calib = GuidedCalibration(config, rig, display=display)
@@ -273,12 +273,17 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     rate = _Rate()
     last_commit_report = -math.inf
     error: BaseException | None = None
-    phase = "calibration" if options.calibrate else "recording"
+    calibrate = options.calibrate
+    if calibrate and rig.simulated and not patient_performs_protocol(rig):
+        display.message("the simulated patient does not perform the calibration protocol: "
+                        "calibration skipped, samples recorded raw")
+        calibrate = False
+    phase = "calibration" if calibrate else "recording"
     display.start()
     try:
         with _Stop(stop):
             pump.start()
-            if options.calibrate:
+            if calibrate:
                 calib.begin(stop)
             else:
                 emit("recording", {"session_id": session_id})
@@ -295,7 +300,13 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                     if phase == "calibration":
                         done = calib.feed(batch)
                         if done:
-                            cal = calib.finish()
+                            try:
+                                cal = calib.finish()
+                            except ValueError as err:  # CalibrationError: repeat it
+                                result.error = f"calibration failed: {err}"
+                                raise RigError(f"calibration failed: {err} (session "
+                                               f"{session_id} kept, status failed; repeat "
+                                               "the recording)") from err
                             result.calibration = cal
                             store.add_calibration(session_id, cal.kind, cal.data, cal.residual_deg)
                             display.message(f"calibration stored: {cal.kind}, residual "
@@ -382,6 +393,20 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
         store.end_session(session_id, status=result.status, meta=end_meta,
                           dropped=result.dropped)
     return result
+
+
+def _range_centre(config) -> np.ndarray | None:
+    """Centre of the rig configuration's default constraint (cone centre, polygon interior)."""
+    try:
+        constraint = config.load_constraint()
+    except Exception:  # a default that does not load is no reason to refuse a recording
+        return None
+    swing = getattr(constraint, "swing", None)
+    for attr in ("centre", "interior"):
+        c = getattr(swing, attr, None)
+        if c is not None:
+            return np.asarray(c, dtype=np.float64)
+    return None
 
 
 def _write(writer, batch: SampleBatch) -> None:

@@ -9,9 +9,14 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
+from models.constraint import JointConstraint
 from rig.record.coverage import CoverageMap, fibonacci_sphere
 from rig.record.display import PlainDisplay, RecordStatus, make_display, progress_line, render
-from rig.sim.limb import ConeRange, NoiseModel, SimulatedLimb
+from rig.sim.limb import NoiseModel, SimulatedLimb
+
+
+def ConeRange(centre=(1.0, 0.0, 0.0), radius_deg=60.0, twist_deg=(-45.0, 45.0)):
+    return JointConstraint.cone(centre, radius_deg, twist=twist_deg)
 
 
 def _feed(cov: CoverageMap, limb: SimulatedLimb, seconds: float, rate: float = 50.0,
