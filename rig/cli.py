@@ -31,9 +31,15 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "Validate and inspect joint-constraint files.",
     ),
     "dataset": ("rig.commands.dataset", "dataset", "Generate training datasets (thesis ch. 3-4)."),
+    "scan": ("rig.commands.scan", "scan", "List the Dynamixel servos answering on a port."),
     "sim": ("rig.commands.sim", "sim", "Run a simulated servo chain or IMU on a pseudo-terminal."),
     "train": ("rig.commands.train", "train", "Train a corrective-constraint network, export ONNX."),
     "evaluate": ("rig.commands.train", "evaluate", "Metrics of an ONNX model on held-out data."),
+    "enforce": (
+        "rig.commands.enforce",
+        "enforce",
+        "Enforce a patient's joint limits on a servo limb in real time.",
+    ),
     "session": ("rig.commands.session", "session", "List the sessions in a store (--db)."),
     "record": (
         "rig.commands.record",
