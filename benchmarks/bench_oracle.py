@@ -32,6 +32,24 @@ def concave_polygon(m: int = 500) -> JointConstraint:
     return JointConstraint.polygon(verts, [1, 0, 0], twist=(-60, 60), name=f"concave-{m}")
 
 
+def with_twist_table(c: JointConstraint, k: int = 36) -> JointConstraint:
+    """The same swing with swing-dependent twist limits: a ``by_swing`` table of ``k`` points
+    (Fibonacci directions, limits varying smoothly, bandwidth 20°)."""
+    i = np.arange(k) + 0.5
+    z = 1.0 - 2.0 * i / k
+    az = np.pi * (1.0 + np.sqrt(5.0)) * i
+    d = np.stack([z, np.sqrt(1 - z * z) * np.cos(az), np.sqrt(1 - z * z) * np.sin(az)], axis=1)
+    lo = -60 + 20 * (1 + d[:, 1]) / 2
+    hi = 60 - 30 * (1 + d[:, 2]) / 2
+    points = [{"direction": v.tolist(), "min_deg": float(a), "max_deg": float(b)}
+              for v, a, b in zip(d, lo, hi, strict=True)]
+    data = c.to_dict()
+    data["twist"] = {"min_deg": -60, "max_deg": 60,
+                     "by_swing": {"bandwidth_deg": 20, "points": points}}
+    data["name"] += f"-table{k}"
+    return JointConstraint.from_dict(data)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=7)
@@ -47,24 +65,28 @@ def main() -> None:
     oracle = ConstraintOracle(c)
     t_build = time.perf_counter() - t
     cone = ConstraintOracle(JointConstraint.cone([1, 0, 0], 50, twist=(-60, 60)))
+    cases = [("polygon-500", oracle), ("cone", cone)]
+    if hasattr(c.twist, "by_swing"):  # swing-dependent twist limits (twist.by_swing)
+        cases.append(("polygon+tab36", ConstraintOracle(with_twist_table(c))))
+        cases.append(("cone+tab36", ConstraintOracle(with_twist_table(cone.constraint))))
     print(f"polygon: {len(c.swing.vertices)} vertices, concave, twist -60..60 deg")
     print(f"  load+validate {t_validate * 1e3:.0f} ms, oracle set-up {t_build * 1e3:.0f} ms "
           f"(grid {oracle._swing.G}, {oracle._swing.mean_candidates:.1f} candidate edges/cell)")
 
     q = Q.random_quaternions(args.n, rng)  # uniform over SO(3), both hemispheres
     oracle.project(q[:1000])  # warm-up
-    for name, o in (("polygon-500", oracle), ("cone", cone)):
+    for name, o in cases:
         rates = []
         for _ in range(args.repeats):
             t = time.perf_counter()
             o.project(q)
             rates.append(args.n / (time.perf_counter() - t))
-        print(f"batched project, {name:11s}: median {statistics.median(rates) / 1e3:7.0f} k/s "
+        print(f"batched project, {name:13s}: median {statistics.median(rates) / 1e3:7.0f} k/s "
               f"(min {min(rates) / 1e3:.0f}, max {max(rates) / 1e3:.0f}; {args.repeats} runs "
               f"of {args.n})")
 
     singles = q[: args.single]
-    for name, o in (("polygon-500", oracle), ("cone", cone)):
+    for name, o in cases:
         meds = []
         for _ in range(args.repeats):
             ts = np.empty(len(singles))
@@ -73,7 +95,7 @@ def main() -> None:
                 o.project(qi)
                 ts[i] = time.perf_counter() - t
             meds.append(float(np.median(ts)))
-        print(f"single project, {name:11s}: median {statistics.median(meds) * 1e6:6.1f} µs "
+        print(f"single project, {name:13s}: median {statistics.median(meds) * 1e6:6.1f} µs "
               f"(per-run medians {min(meds) * 1e6:.1f}..{max(meds) * 1e6:.1f} µs; "
               f"{args.repeats} runs of {len(singles)})")
 

@@ -57,6 +57,7 @@ field.
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
 from dataclasses import dataclass, field
@@ -66,7 +67,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from models.errors import ConstraintError
+from models.errors import ConstraintError, GeometryError
+from models.geometry import check_polygon, polygon_area
 from models.quaternion import LIMB_AXIS
 
 __all__ = [
@@ -145,8 +147,6 @@ class PolygonSwing:
 
     def area_sr(self) -> float:
         """Solid angle (steradians) of the valid region."""
-        from models.geometry import polygon_area
-
         return polygon_area(self.vertices, self.interior)
 
     def __eq__(self, other: object) -> bool:
@@ -784,9 +784,6 @@ def _parse_by_swing(value: Any, env_lo: float, env_hi: float, source: str | None
 
 def _check_polygon(verts: np.ndarray, interior: np.ndarray, source: str | None) -> None:
     """Reject degenerate and self-intersecting spherical polygons (:mod:`models.geometry`)."""
-    from models.errors import GeometryError
-    from models.geometry import check_polygon
-
     try:
         check_polygon(verts, interior)
     except GeometryError as err:
@@ -807,9 +804,7 @@ def _plain(value: Any, where: str) -> Any:
         return str(value)
     if value is None or isinstance(value, (str, bool, int, float)):
         return value
-    import datetime as _dt
-
-    if isinstance(value, (_dt.date, _dt.datetime)):
+    if isinstance(value, (datetime.date, datetime.datetime)):
         return value
     raise ConstraintError(f"cannot be written as YAML: {type(value).__name__}", where)
 

@@ -127,6 +127,8 @@ class ConstraintOracle:
         tw = constraint.twist
         self._twist = (tw.min, tw.max) if tw is not None else None
         self._table = tw.by_swing if tw is not None else None
+        # can an interval reach the ±π seam (so the twist test must look across it)?
+        self._wraps = tw is not None and _reaches_seam(tw.min, tw.max)
 
     # -- public API ------------------------------------------------------------------------
     def evaluate(self, q, *, normalize: bool = False) -> OracleResult:
@@ -155,7 +157,7 @@ class ConstraintOracle:
         valid = self._swing_dist(d) <= BOUNDARY_TOLERANCE
         if self._twist is not None:
             lo, hi = self._limits(d)
-            valid &= _twist_inside(Q.twist_angle(q2, self.axis), lo, hi)
+            valid &= _twist_inside(Q.twist_angle(q2, self.axis), lo, hi, self._wraps)
         return valid[0] if single else valid
 
     def project(self, q, *, normalize: bool = False) -> np.ndarray:
@@ -236,14 +238,19 @@ class ConstraintOracle:
             else:
                 lo, hi = self._twist
             phi_p = _twist1(proj, ax) if swing_out else phi
-            if not _inside1(phi_p, lo, hi):
+            t = BOUNDARY_TOLERANCE
+            if not (lo - t <= phi_p <= hi + t or (self._wraps and _across_seam1(phi_p, lo, hi))):
                 d_lo = abs(_wrap1(phi_p - lo))
                 d_hi = abs(_wrap1(phi_p - hi))
                 half = 0.5 * _wrap1((lo if d_lo < d_hi else hi) - phi_p)
                 sh = math.sin(half)
                 proj = _mul1(proj, (math.cos(half), ax[0] * sh, ax[1] * sh, ax[2] * sh))
-            margin = min(margin, _margin1(phi, lo, hi))
-            invalid = invalid or not _inside1(phi, lo, hi)
+            if lo - t <= phi <= hi + t:
+                margin = min(margin, phi - lo, hi - phi)
+            elif self._wraps and _across_seam1(phi, lo, hi):
+                margin = min(margin, 0.0)  # within the tolerance of a limit, across the seam
+            else:
+                invalid = True
         if invalid:
             c = _mul1(proj, (qt[0], -qt[1], -qt[2], -qt[3]))
             cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
@@ -293,12 +300,15 @@ class ConstraintOracle:
         margin = -sdist
         if self._twist is not None:
             any_out = bool(out.any())
-            e = np.where(out[:, None], b, d) if any_out else d  # corrected limb direction
-            lo, hi = self._limits(e)
+            if self._table is not None:
+                e = np.where(out[:, None], b, d) if any_out else d  # corrected limb direction
+                lo, hi = self._table.limits_at(e)
+            else:
+                lo, hi = self._twist
             lo = np.broadcast_to(lo, (n,))
             hi = np.broadcast_to(hi, (n,))
             phi_p = Q.twist_angle(projected, self.axis) if any_out else phi
-            bad_tw = ~_twist_inside(phi_p, lo, hi)
+            bad_tw = ~_twist_inside(phi_p, lo, hi, self._wraps)
             if bad_tw.any():
                 f = phi_p[bad_tw]
                 lo_b, hi_b = lo[bad_tw], hi[bad_tw]
@@ -307,8 +317,10 @@ class ConstraintOracle:
                 target = np.where(d_lo < d_hi, lo_b, hi_b)
                 tau = Q.from_axis_angle(self.axis, Q.wrap_angle(target - f))
                 projected[bad_tw] = Q.multiply(projected[bad_tw], tau)
-            margin = np.minimum(margin, _twist_margin(phi, lo, hi))
-            invalid = out | ~_twist_inside(phi, lo, hi)
+            # the plain margin; across the seam a valid twist is within the tolerance of a
+            # limit, and the distance clips the margin at 0 anyway
+            margin = np.minimum(margin, np.minimum(phi - lo, hi - phi))
+            invalid = out | ~_twist_inside(phi, lo, hi, self._wraps)
         else:
             invalid = out
         corr = np.tile(Q.IDENTITY, (n, 1))
@@ -331,32 +343,26 @@ class ConstraintOracle:
 _TWO_PI = 2.0 * math.pi
 
 
-def _twist_inside(phi, lo, hi):
-    """``φ`` (radians, (−π, π]) inside ``[lo, hi]`` on the circle, within the tolerance."""
+def _reaches_seam(lo, hi) -> bool:
+    """Can a twist across the ±π seam lie within the tolerance of ``[lo, hi]``?"""
     t = BOUNDARY_TOLERANCE
-    return (
-        ((phi >= lo - t) & (phi <= hi + t)) | (phi - _TWO_PI >= lo - t) | (phi + _TWO_PI <= hi + t)
-    )
+    return bool(np.min(lo) <= -math.pi + t or np.max(hi) >= math.pi - t)
 
 
-def _twist_margin(phi, lo, hi):
-    """Signed margin of ``φ`` inside ``[lo, hi]`` on the circle (the best of ``φ``, ``φ ± 2π``)."""
-    m = np.minimum(phi - lo, hi - phi)
-    m = np.maximum(m, np.minimum(phi - _TWO_PI - lo, hi - phi + _TWO_PI))
-    return np.maximum(m, np.minimum(phi + _TWO_PI - lo, hi - phi - _TWO_PI))
+def _twist_inside(phi, lo, hi, wraps: bool = True):
+    """``φ`` (radians, (−π, π]) inside ``[lo, hi]`` on the circle, within the tolerance.
 
-
-def _inside1(phi: float, lo: float, hi: float) -> bool:
+    ``φ − 2π`` and ``φ + 2π`` are tried too when ``wraps`` (an interval touching ±π)."""
     t = BOUNDARY_TOLERANCE
-    return (lo - t <= phi <= hi + t) or phi - _TWO_PI >= lo - t or phi + _TWO_PI <= hi + t
+    inside = (phi >= lo - t) & (phi <= hi + t)
+    if wraps:
+        inside |= (phi - _TWO_PI >= lo - t) | (phi + _TWO_PI <= hi + t)
+    return inside
 
 
-def _margin1(phi: float, lo: float, hi: float) -> float:
-    return max(
-        min(phi - lo, hi - phi),
-        min(phi - _TWO_PI - lo, hi - phi + _TWO_PI),
-        min(phi + _TWO_PI - lo, hi - phi - _TWO_PI),
-    )
+def _across_seam1(phi: float, lo: float, hi: float) -> bool:
+    t = BOUNDARY_TOLERANCE
+    return phi - _TWO_PI >= lo - t or phi + _TWO_PI <= hi + t
 
 
 # -- scalar kernels for the single-orientation path (tuples of floats, w x y z) ---------------
