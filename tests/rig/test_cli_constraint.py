@@ -40,6 +40,12 @@ def test_check_summarises_a_good_file(tmp_path, capsys):
         ("swing: {cone: {centre: [1, 0, 0], radius_deg: 200}}", "swing.cone.radius_deg"),
         ("twist: {min_deg: 10, max_deg: -10}", "twist: min_deg (10) is greater"),
         ("swing: [", "not valid YAML"),
+        # a misspelt key must not silently drop a limit
+        (GOOD.replace("twist:", "twsit:"), "twsit: unknown key 'twsit' (did you mean 'twist'?)"),
+        (
+            GOOD.replace("max_deg: 45}", "max_deg: 45, by_swing: {bandwidth_deg: 20, pionts: []}}"),
+            "twist.by_swing.pionts: unknown key",
+        ),
     ],
 )
 def test_check_reports_bad_files_in_one_line(tmp_path, capsys, content, expected):
@@ -50,6 +56,27 @@ def test_check_reports_bad_files_in_one_line(tmp_path, capsys, content, expected
     assert err.count("\n") == 1 and err.startswith("rig: error: ")
     assert str(path) in err and expected in err
     assert "Traceback" not in err
+
+
+def test_check_summarises_swing_dependent_twist_and_binding(tmp_path, capsys):
+    path = tmp_path / "table.yaml"
+    path.write_text(
+        "name: table\njoint: shoulder\nside: left\npatient: P-3\n"
+        "swing: {cone: {centre: [1, 0, 0], radius_deg: 60}}\n"
+        "twist:\n  min_deg: -45\n  max_deg: 45\n  by_swing:\n    bandwidth_deg: 30\n"
+        "    points:\n"
+        "      - {direction: [1, 0, 0], min_deg: -45, max_deg: 45}\n"
+        "      - {direction: [0, 1, 0], min_deg: -10, max_deg: 10}\n"
+        "provenance: {session: 7, samples: 1200}\n"
+    )
+    code, out, err = run(["constraint", "check", str(path), "--samples", "20000"], capsys)
+    assert code == 0, err
+    assert "by swing    2 points, bandwidth 30 deg" in out
+    assert "bound to    joint shoulder, side left, patient P-3" in out
+    assert "provenance  session: 7, samples: 1200" in out
+    # narrower twist towards +Y: fewer valid orientations than the constant ±45° envelope
+    frac = float(out.split("valid")[1].split("%")[0])
+    assert 0.5 < frac < 6.25
 
 
 def test_check_missing_file(tmp_path, capsys):
