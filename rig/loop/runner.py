@@ -31,6 +31,7 @@ holding its last goal with the watchdog armed.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -48,7 +49,7 @@ from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention, Supervisor, SupervisorConfig
 from rig.loop.telemetry import Fault, Telemetry, intervention_counts, summarise
 
-__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig"]
+__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_chain"]
 
 SAFE_STATES = ("hold", "torque-off")
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
@@ -70,12 +71,13 @@ class LoopConfig:
     supervisor : SupervisorConfig
     watchdog_ms : int or None
         Bus Watchdog to arm (None: the rig configuration's; 0: off).
-    backstop : bool
-        Set the servos' position-limit registers from the boundary.
-    backstop_margin_deg : float
     settle_s : float
         When the target source has a natural end and no duration is given, run this long past
         it (the limb reaches the last target).
+    switch_interval_s : float
+        Python's thread switch interval while the loop runs (``sys.setswitchinterval``; the
+        default 5 ms would let a busy thread — the SDK's busy-polling receive loop, a simulator
+        thread — hold the interpreter for a whole cycle).
     """
 
     rate_hz: float = 200.0
@@ -84,9 +86,8 @@ class LoopConfig:
     read_attempts: int = 3
     supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
     watchdog_ms: int | None = None
-    backstop: bool = True
-    backstop_margin_deg: float = 5.0
     settle_s: float = 0.5
+    switch_interval_s: float = 0.0005
 
     def __post_init__(self):
         if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
@@ -157,7 +158,8 @@ class EnforcementLoop:
         self.safe_state_note: str | None = None
         self.safe_state_cycle: int | None = None
         self.end_reason = ""
-        self.limits: tuple[np.ndarray, np.ndarray] | None = None
+        self.watchdog_ms = 0
+        self.limits: tuple[np.ndarray, np.ndarray] | None = getattr(chain, "backstop", None)
         self.fault_counts: Counter = Counter()
         self.intervention_bits: Counter = Counter()
         self.max_violation = 0.0
@@ -166,32 +168,24 @@ class EnforcementLoop:
 
     # ------------------------------------------------------------------ start-up
     def setup(self) -> None:
-        """Configure the servos (backstop limits, watchdog), torque on, start the supervisor.
+        """Torque on, arm the Bus Watchdog, read the start posture, start the supervisor.
+
+        The registers (return delay, status return level, position limits from the boundary)
+        are written before, by :func:`prepare_chain`, with torque off.
 
         Raises
         ------
         RigError
-            The bus does not answer / a servo reports an error (before any motion).
+            The bus does not answer, or a servo is in hardware-error shutdown
+            (:class:`~rig.errors.HardwareAlertError`), before any motion.
         """
         chain = self.chain
-        ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
-        lo = hi = None
-        if self.config.backstop:
-            from rig.loop.backstop import describe_limits, position_limits_from_boundary
-
-            lo, hi = position_limits_from_boundary(self.kin, self.oracle, ticks,
-                                                   margin_deg=self.config.backstop_margin_deg)
-            self.limits = (lo, hi)
-            self.log(f"backstop position limits: {describe_limits(self.kin, lo, hi)}")
-        _configure(chain, lo, hi)
+        chain.set_torque(True)
         wd = self.config.watchdog_ms
         if wd is None:
-            wd = getattr(chain, "watchdog_ms", None)
-        chain.set_torque(True)
-        if wd:
-            chain.arm_watchdog(int(wd))
-        self.watchdog_ms = wd
-        ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
+            wd = getattr(getattr(chain, "config", None), "watchdog_ms", 0)
+        self.watchdog_ms = chain.arm_watchdog(int(wd)) if wd else 0
+        ticks = _read_retrying(chain)
         self._present_ticks = ticks
         self._goal_ticks = ticks.copy()
         present = self.kin.forward(ticks)
@@ -214,6 +208,8 @@ class EnforcementLoop:
         self.safe_state_reason = reason
         self.safe_state_cycle = cycle
         chain = self.chain
+        if hasattr(chain, "retries"):
+            chain.retries = self._driver_retries  # the safe state may take its time
         try:
             if self.config.safe_state == "torque-off":
                 chain.set_torque(False)
@@ -249,15 +245,34 @@ class EnforcementLoop:
         model = self.model
         tel = self.telemetry
         targets = self.targets
-        perf = time.perf_counter
         clock = self.clock
         duration = cfg.duration_s
         if duration is None and getattr(targets, "duration_s", None) is not None:
             duration = targets.duration_s + cfg.settle_s
         t0 = sched.start()
         targets.start(t0)
-        sup.reset(0.0, self._present)
-        t_present = 0.0
+        sup.reset(t0, self._present)
+        self.end_reason = "completed"
+        self._driver_retries = getattr(chain, "retries", 0)
+        if hasattr(chain, "retries"):
+            chain.retries = 0  # the loop retries, within the cycle budget
+        old_switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(old_switch, cfg.switch_interval_s))
+        try:
+            self._cycles(sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0)
+        finally:
+            sys.setswitchinterval(old_switch)
+            if hasattr(chain, "retries"):
+                chain.retries = self._driver_retries
+        t_end = clock() - t0
+        self.summary = self._summary(t_end if t_end > 0 else tel.rows * sched.period)
+        return self.summary
+
+    def _cycles(self, sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0):
+        cfg = self.config
+        perf = time.perf_counter
+        clock = self.clock
+        t_present = t0
         read_attempts = cfg.read_attempts
         period = sched.period
         present = self._present
@@ -265,8 +280,8 @@ class EnforcementLoop:
         fc = self.fault_counts
         ib = self.intervention_bits
         alerts_fn = getattr(chain, "poll_alerts", None)
+        has_flag = hasattr(chain, "alert_pending")
         max_viol = 0.0
-        self.end_reason = "completed"
         k = -1
         while True:
             k, due, start = sched.wait()
@@ -300,13 +315,13 @@ class EnforcementLoop:
                 self._present_ticks = ticks
                 pq = kin.forward(ticks)
                 present = (float(pq[0]), float(pq[1]), float(pq[2]), float(pq[3]))
-                t_present = t
+                t_present = start
             else:
                 faults |= Fault.READ_FAILED
             reason = None
             if lost:
                 reason = "the bus adapter went away"
-            elif alerts_fn is not None and not lost:
+            elif alerts_fn is not None and (not has_flag or chain.alert_pending):
                 try:
                     alerts = alerts_fn()
                 except RigConnectionError:
@@ -318,9 +333,9 @@ class EnforcementLoop:
                     faults |= Fault.HARDWARE_ALERT
                     a = alerts[0]
                     reason = getattr(a, "message", None) or f"hardware alert {a!r}"
-            if reason is None and sup.present_stale(t, t_present):
+            if reason is None and sup.present_stale(start, t_present):
                 faults |= Fault.STALE_PRESENT
-                reason = (f"servo data stale for {1e3 * (t - t_present):.0f} ms (limit "
+                reason = (f"servo data stale for {1e3 * (start - t_present):.0f} ms (limit "
                           f"{1e3 * sup.config.stale_present_s:.0f} ms)")
             if reason is None and self.stop_reason is not None:
                 faults |= Fault.SIGNAL
@@ -397,10 +412,7 @@ class EnforcementLoop:
             if max_cycles is not None and k + 1 >= max_cycles:
                 break
         self.max_violation = max_viol
-        t_end = clock() - t0
         self._commanded = commanded
-        self.summary = self._summary(max(t_end, tel.rows * period if t_end <= 0 else t_end))
-        return self.summary
 
     # ------------------------------------------------------------------ summary
     def _summary(self, duration_s: float) -> dict:
@@ -435,17 +447,76 @@ class EnforcementLoop:
                          counters=counters, duration_s=duration_s)
 
 
-def _configure(chain, lo, hi) -> None:
-    """Write the start-up registers through the driver (position limits when given)."""
-    if lo is not None and hasattr(chain, "set_position_limits"):
-        chain.configure()
-        chain.set_position_limits(lo, hi)
-        return
-    if lo is not None:
+def _read_retrying(chain, attempts: int = 5) -> np.ndarray:
+    last: RigError | None = None
+    for _ in range(attempts):
         try:
-            chain.configure(position_limits=(lo, hi))
-            return
-        except TypeError:
-            pass
-    chain.configure()
+            return np.asarray(chain.read_ticks(), dtype=np.int64)
+        except (RigTimeoutError, RigProtocolError) as err:
+            last = err
+    assert last is not None
+    raise last
 
+
+def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_deg: float = 5.0,
+                  latency_ms: float | None = None, log=None):
+    """Open a servo chain for the loop and write its start-up registers.
+
+    Opens :class:`rig.devices.dynamixel.DynamixelChain` on an opened ``port`` (the loop turns
+    the driver's own retries off while it runs: it retries within its cycle budget). With
+    ``backstop``,
+    the position limits of :func:`rig.loop.backstop.position_limits_from_boundary` (widened to
+    contain each joint's zero) replace the configured ones, in the kinematics and in the
+    servos' Min/Max Position Limit registers. :meth:`~DynamixelChain.configure` writes EEPROM
+    only with torque off: if a servo's torque is already on (a limb holding), the registers are
+    left as they are and a line is logged (the supervisor stays the primary limit).
+
+    Parameters
+    ----------
+    port : rig.devices.ports.Port
+        Opened port (the caller closes it).
+    servos : rig.devices.config.ServosConfig
+    oracle : models.oracle.ConstraintOracle, optional
+        Needed for the backstop.
+
+    Returns
+    -------
+    chain : DynamixelChain
+        With ``chain.backstop = (min_ticks, max_ticks)`` or None.
+    """
+    import dataclasses
+
+    from rig.devices.dynamixel import DynamixelChain
+
+    log = log or (lambda msg: None)
+    if latency_ms is None:
+        latency_ms = servos.latency_ms
+    chain = DynamixelChain(port, servos, latency_ms=latency_ms)
+    limits = None
+    try:
+        torque_on = bool(np.asarray(chain.torque()).any())
+        if torque_on:
+            log("servo torque is already on: position-limit registers left as they are "
+                "(turn torque off to let the loop write the boundary's backstop)")
+        elif backstop and oracle is not None:
+            from rig.loop.backstop import describe_limits, position_limits_from_boundary
+
+            ticks = _read_retrying(chain)
+            kin = chain.kinematics
+            lo, hi = position_limits_from_boundary(kin, oracle, ticks, margin_deg=margin_deg)
+            lo = np.minimum(lo, kin.zero_ticks)
+            hi = np.maximum(hi, kin.zero_ticks)
+            joints = tuple(dataclasses.replace(j, min_ticks=int(a), max_ticks=int(b))
+                           for j, a, b in zip(servos.chain, lo, hi, strict=True))
+            servos = dataclasses.replace(servos, chain=joints)
+            chain.close()
+            chain = DynamixelChain(port, servos, latency_ms=latency_ms)
+            limits = (lo, hi)
+            log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
+        if not torque_on:
+            chain.configure()
+    except BaseException:
+        chain.close()
+        raise
+    chain.backstop = limits
+    return chain

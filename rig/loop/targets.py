@@ -326,7 +326,7 @@ class ScriptedTargets(TargetSource):
                                                       rng.uniform(0, 0.9 * self.depth)),
                                       self.twist_mid) for _ in range(32)])
         bad = [_NAN4, (0.0, 0.0, 0.0, 0.0), (math.inf, 0.0, 0.0, 0.0), (2.0, 0.0, 0.0, 0.0),
-               (math.nan, 1.0, 0.0, 0.0), (0.5, 0.5, 0.5, 0.49)]
+               (math.nan, 1.0, 0.0, 0.0), (0.5, 0.5, 0.5, 0.3)]
         tup = lambda a: tuple(float(v) for v in a)  # noqa: E731
         self._far = [tup(v) for v in far] or [self._q(-self.centre, 0.0)]
         self._pairs = [(self._q(a, self.twist_mid), self._q(b, self.twist_mid))
