@@ -59,45 +59,52 @@ class _Lockstep(PlainDisplay):
 
 
 def _drive(clock, sim, display: _Lockstep, n_sensors: int, stop: threading.Event,
-           step_s: float, window_s: float, rate: int) -> None:
-    """Advance the manual clock while the recorder keeps up (at most ``window_s`` ahead)."""
+           recording: threading.Event, step_s: float, window_s: float, rate: int) -> None:
+    """Advance the manual clock: at real-time pace until the recording starts (the driver
+    must not see a silent board while the store opens), then in lockstep with the writer
+    (at most ``window_s`` simulated seconds ahead)."""
     ahead = int(window_s * rate * n_sensors)
+    while not recording.is_set() and not stop.is_set():
+        clock.advance(step_s)
+        time.sleep(step_s)
     while not stop.is_set():
-        sent = sim.samples_sent * n_sensors
-        if sent - display.samples < ahead:
+        due = clock() * rate * n_sensors  # samples the board has produced (started at 0)
+        if due - display.samples < ahead:
             clock.advance(step_s)
         else:
             time.sleep(0.0005)
 
 
 def throughput(minutes: float, rate: int, repeats: int, window_s: float) -> None:
-    base = load_config("sim-imu")
     results = []
     for rep in range(repeats):
         with tempfile.TemporaryDirectory() as tmp:
             port = (f"sim://imu-stream?sensors=2&rate={rate}&patient=original&seed={rep + 1}"
-                    f"&clock=manual")
+                    f"&clock=manual&max_lag=none&flow=off")
             cfg_path = Path(tmp) / "rig.yaml"
             cfg_path.write_text(
                 f"name: bench-imu\njoint: {{name: shoulder, side: right, parent: thorax, "
                 f"child: humerus}}\nsensors:\n  port: \"{port}\"\n  protocol: stream\n"
                 f"  rate_hz: {rate}\n  segments: {{thorax: 0, humerus: 1}}\n")
-            del base
             config = load_config(str(cfg_path))
             rig = open_rig(config)
             sim = rig.simulators[0]
             clock = sim.clock
             display = _Lockstep()
             stop = threading.Event()
-            driver = threading.Thread(target=_drive, args=(clock, sim, display, 2, stop, 0.01,
-                                                           window_s, rate), daemon=True)
+            recording = threading.Event()
+            driver = threading.Thread(target=_drive, args=(clock, sim, display, 2, stop,
+                                                           recording, 0.005, window_s, rate),
+                                      daemon=True)
             opts = RecordOptions(rig=str(cfg_path), db=str(Path(tmp) / "bench.db"),
                                  patient="BENCH", duration_s=minutes * 60.0, calibrate=False,
                                  queue_batches=256)
             t0 = time.perf_counter()
             driver.start()
             try:
-                res = record_session(opts, display=display, rig=rig)
+                res = record_session(
+                    opts, display=display, rig=rig,
+                    on_event=lambda name, info, ev=recording: name == "recording" and ev.set())
             finally:
                 stop.set()
                 driver.join()
@@ -124,7 +131,7 @@ def main(argv=None) -> None:
     t.add_argument("--minutes", type=float, default=10.0)
     t.add_argument("--rate", type=int, default=400)
     t.add_argument("--repeats", type=int, default=3)
-    t.add_argument("--window", type=float, default=0.25,
+    t.add_argument("--window", type=float, default=0.1,
                    help="simulated seconds the clock may run ahead of the writer")
     a = sub.add_parser("accuracy")
     a.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
