@@ -1,0 +1,642 @@
+"""Boundary extraction: recorded joint orientations → a patient-specific joint constraint.
+
+Input: joint orientations ``q`` (N, 4) (limb relative to thorax, scalar-first). Output: a
+:class:`models.constraint.JointConstraint` with a spherical-polygon swing limit, a twist range
+(and, when the data supports it, a swing-dependent twist table), and its provenance.
+
+Method
+------
+1. **Directions and twist.** ``d = q a q*`` (limb axis ``a``, default +X) and the twist ``φ``
+   of ``q = swing ⊗ twist`` about ``a`` (:mod:`models.quaternion`). Samples whose IMU
+   calibration status (BNO055 ``CALIB_STAT`` system level, bits 7-6) is below
+   ``min_system_status`` are dropped first (magnetic disturbances drop it).
+2. **Projection.** The centre ``c`` is the normalised mean direction, re-centred on the samples
+   nearest it (95 %). Directions are mapped to the plane by the *azimuthal-equidistant*
+   projection about ``c`` (Snyder 1987, *Map projections — a working manual*, USGS PP 1395,
+   §25): ``p = θ (cos α, sin α)`` with ``θ = ∠(d, c)`` in degrees and ``α`` the azimuth in a
+   tangent basis at ``c``. Distances from ``c`` are exact; other distances are stretched by
+   ``θ / sin θ`` across the radial direction (5 % at 30°, 21 % at 60°), which only matters for
+   the alpha radius, not for the result's accuracy (vertices are mapped back exactly).
+3. **Density trimming.** A histogram on ``cell_deg`` cells, smoothed by a disc of radius
+   ``trim_radius_deg`` (:func:`scipy.ndimage.convolve`), gives each sample's local count.
+   Samples whose count is below ``trim_min_count`` *and* in the lowest ``trim_fraction`` of
+   counts are outliers (isolated glitches); a real trajectory passing once leaves a count of
+   ``≈ 2 r f / v`` samples (rate ``f``, speed ``v``), far above.
+4. **Alpha shape** (Edelsbrunner, Kirkpatrick & Seidel 1983, *IEEE Trans. Inf. Theory*
+   29:551): the Delaunay triangulation (:class:`scipy.spatial.Delaunay`) of the per-cell mean
+   positions, triangles with circumradius ``< alpha_deg`` kept, merged with
+   :func:`shapely.coverage_union_all`; the component holding most samples is kept and its holes
+   filled (a swing limit is simply connected). The region is concave where the data is and
+   claims no range the limb did not visit. If it holds less than ``coverage`` of the kept
+   samples, ``alpha`` grows by 1.5× (up to 4 times): no recorded region left out.
+5. **Simplification** (Douglas-Peucker, topology-preserving, :meth:`shapely.Polygon.simplify`)
+   with the smallest tolerance ≥ ``simplify_deg`` that leaves at most ``max_vertices``; the
+   vertices are mapped back to the sphere and joined by great-circle edges. The result is
+   validated by :mod:`models.constraint` (simple, non-degenerate); the interior point is the
+   pole of inaccessibility (:func:`shapely.ops.polylabel`), or ``c`` when that is nearly as deep.
+6. **Twist range**: the ``twist_percentiles`` of the kept samples' twist, after centring on their
+   circular mean (so a range across ±180° is handled). **By swing region** (contract 3,
+   ``twist.by_swing``): at table directions ``d_i`` on a grid of spacing ``by_swing_spacing_deg``
+   inside the polygon, the same percentiles weighted by the kernel ``exp(κ (d·d_i − 1))``,
+   ``κ = 1 / (1 − cos β)``, where the effective sample count ``(Σw)²/Σw²`` reaches
+   ``by_swing_min_samples``; emitted when ``by_swing`` is True, or ("auto") when some region's
+   limit differs from the envelope by more than ``by_swing_min_diff_deg``.
+7. **Sparse arcs.** Points every 0.5° along the final boundary with fewer than
+   ``sparse_min_samples`` kept samples within ``sparse_deg`` are grouped into arcs and reported
+   (``sparse_arcs_``): stretches of the limit the patient reached rarely or never, where the
+   boundary is an interpolation.
+
+Accuracy measure (:func:`boundary_distance`)
+--------------------------------------------
+The *symmetric mean boundary distance* between swing regions ``A`` and ``B`` is
+``D = ½ (mean_{a ∈ ∂A} dist(a, ∂B) + mean_{b ∈ ∂B} dist(b, ∂A))`` with points spaced evenly
+(0.25°) along each boundary by arc length and ``dist`` the geodesic distance to the other
+boundary (exact, :class:`models.oracle.ConstraintOracle`). It is the mean of the two directed
+average Hausdorff distances; the maximum of the per-point distances (Hausdorff) is reported too.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from models import quaternion as Q
+from models.constraint import JointConstraint
+from models.errors import ConstraintError
+
+__all__ = [
+    "BoundaryExtractor",
+    "SparseArc",
+    "boundary_distance",
+    "boundary_points",
+    "outside_fraction",
+]
+
+
+@dataclass(frozen=True)
+class SparseArc:
+    """A stretch of the extracted boundary with few samples nearby.
+
+    Attributes
+    ----------
+    start, end : (3,) float64, unit directions (parent frame) where the arc begins and ends
+    length_deg : float, arc length along the boundary, degrees
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    length_deg: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "from": [round(float(v), 6) for v in self.start],
+            "to": [round(float(v), 6) for v in self.end],
+            "length_deg": round(float(self.length_deg), 2),
+        }
+
+
+# -- projection -------------------------------------------------------------------------------
+def _tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    u = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
+    u /= np.linalg.norm(u)
+    return u, np.cross(c, u)
+
+
+def _ae_forward(d: np.ndarray, c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Azimuthal-equidistant coordinates (N, 2), degrees, of unit directions (N, 3)."""
+    x = d @ u
+    y = d @ v
+    s = np.hypot(x, y)
+    theta = np.degrees(np.arctan2(s, d @ c))
+    safe = np.where(s > 1e-15, s, 1.0)
+    return np.column_stack((theta * x / safe, theta * y / safe))
+
+
+def _ae_inverse(p: np.ndarray, c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Unit directions (N, 3) of azimuthal-equidistant coordinates (N, 2), degrees."""
+    theta = np.hypot(p[:, 0], p[:, 1])
+    safe = np.where(theta > 1e-12, theta, 1.0)
+    t = np.radians(theta)
+    tang = (p[:, :1] / safe[:, None]) * u + (p[:, 1:] / safe[:, None]) * v
+    return np.cos(t)[:, None] * c + np.sin(t)[:, None] * tang
+
+
+def _circular_centre(phi: np.ndarray) -> float:
+    return float(np.angle(np.mean(np.exp(1j * phi))))
+
+
+def _wrap(x):
+    return (np.asarray(x) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _weighted_percentiles(x: np.ndarray, w: np.ndarray, pct: tuple[float, float]):
+    order = np.argsort(x)
+    xs, ws = x[order], w[order]
+    cw = np.cumsum(ws)
+    cw = (cw - 0.5 * ws) / cw[-1]
+    return tuple(float(np.interp(p / 100.0, cw, xs)) for p in pct)
+
+
+class BoundaryExtractor:
+    """Recorded joint orientations → swing polygon, twist range, provenance (see module doc).
+
+    Hyper-parameters (angles in degrees) are set here; :meth:`fit` returns ``self`` with the
+    fitted state in trailing-underscore attributes.
+
+    Parameters
+    ----------
+    alpha_deg : float
+        Alpha-shape radius: concavities narrower than about twice this are bridged.
+    cell_deg : float
+        Histogram cell (thinning and density) size.
+    trim_radius_deg, trim_min_count, trim_fraction
+        Density trimming (step 3): a sample is an outlier when fewer than ``trim_min_count``
+        samples lie within ``trim_radius_deg`` and its count is in the lowest
+        ``trim_fraction``.
+    coverage : float
+        Fraction of kept samples the region must hold (step 4).
+    max_vertices : int
+        Vertex budget of the simplified polygon.
+    simplify_deg : float
+        Smallest simplification tolerance.
+    twist_percentiles : (float, float)
+        Robust twist limits (percent).
+    by_swing : bool or "auto"
+        Swing-dependent twist table (step 6).
+    by_swing_bandwidth_deg, by_swing_spacing_deg, by_swing_min_samples, by_swing_min_diff_deg
+        Kernel width, table spacing, effective samples per table point, "auto" threshold.
+    sparse_deg, sparse_min_samples
+        Sparse-arc test (step 7).
+    min_system_status : int
+        Minimum BNO055 system calibration level (0-3) of a sample, when statuses are given.
+    limb_axis : (3,) array_like
+        Limb long axis in the limb frame.
+    name : str
+        Name of the constraint produced.
+
+    Attributes
+    ----------
+    constraint_ : JointConstraint
+    centre_ : (3,) unit, projection centre
+    vertices_ : (M, 3) polygon vertices; ``interior_`` (3,)
+    twist_deg_ : (float, float), the twist envelope
+    by_swing_ : dict or None, the contract-3 ``by_swing`` mapping
+    by_swing_candidate_ : dict or None, the table computed (also when not emitted)
+    sparse_arcs_ : list of SparseArc
+    alpha_used_deg_ : float
+    n_samples_, n_status_dropped_, n_trimmed_, n_used_ : int
+    coverage_ : float, fraction of kept samples inside the region (within ``cell_deg``)
+    """
+
+    def __init__(
+        self,
+        *,
+        alpha_deg: float = 4.0,
+        cell_deg: float = 0.5,
+        trim_radius_deg: float = 1.5,
+        trim_min_count: int = 5,
+        trim_fraction: float = 0.01,
+        coverage: float = 0.995,
+        max_vertices: int = 64,
+        simplify_deg: float = 0.3,
+        twist_percentiles: tuple[float, float] = (1.0, 99.0),
+        by_swing: bool | str = "auto",
+        by_swing_bandwidth_deg: float = 20.0,
+        by_swing_spacing_deg: float = 20.0,
+        by_swing_min_samples: int = 500,
+        by_swing_min_diff_deg: float = 8.0,
+        sparse_deg: float = 3.0,
+        sparse_min_samples: int = 10,
+        min_system_status: int = 2,
+        limb_axis=(1.0, 0.0, 0.0),
+        name: str = "recorded",
+    ) -> None:
+        if by_swing not in (True, False, "auto"):
+            raise ValueError(f"by_swing must be True, False or 'auto', got {by_swing!r}")
+        for label, val in (("alpha_deg", alpha_deg), ("cell_deg", cell_deg),
+                           ("trim_radius_deg", trim_radius_deg), ("sparse_deg", sparse_deg),
+                           ("simplify_deg", simplify_deg)):
+            if not val > 0:
+                raise ValueError(f"{label} must be > 0, got {val!r}")
+        lo, hi = twist_percentiles
+        if not 0.0 <= lo < hi <= 100.0:
+            raise ValueError(f"twist_percentiles must satisfy 0 <= lo < hi <= 100, got {lo}, {hi}")
+        if max_vertices < 3:
+            raise ValueError(f"max_vertices must be >= 3, got {max_vertices}")
+        self.alpha_deg = float(alpha_deg)
+        self.cell_deg = float(cell_deg)
+        self.trim_radius_deg = float(trim_radius_deg)
+        self.trim_min_count = int(trim_min_count)
+        self.trim_fraction = float(trim_fraction)
+        self.coverage = float(coverage)
+        self.max_vertices = int(max_vertices)
+        self.simplify_deg = float(simplify_deg)
+        self.twist_percentiles = (float(lo), float(hi))
+        self.by_swing = by_swing
+        self.by_swing_bandwidth_deg = float(by_swing_bandwidth_deg)
+        self.by_swing_spacing_deg = float(by_swing_spacing_deg)
+        self.by_swing_min_samples = int(by_swing_min_samples)
+        self.by_swing_min_diff_deg = float(by_swing_min_diff_deg)
+        self.sparse_deg = float(sparse_deg)
+        self.sparse_min_samples = int(sparse_min_samples)
+        self.min_system_status = int(min_system_status)
+        self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
+        self.name = name
+
+    def params(self) -> dict[str, Any]:
+        """The hyper-parameters as plain types (recorded in the provenance)."""
+        return {
+            "alpha_deg": self.alpha_deg, "cell_deg": self.cell_deg,
+            "trim_radius_deg": self.trim_radius_deg, "trim_min_count": self.trim_min_count,
+            "trim_fraction": self.trim_fraction, "coverage": self.coverage,
+            "max_vertices": self.max_vertices, "simplify_deg": self.simplify_deg,
+            "twist_percentiles": list(self.twist_percentiles),
+            "by_swing": self.by_swing,
+            "by_swing_bandwidth_deg": self.by_swing_bandwidth_deg,
+            "sparse_deg": self.sparse_deg, "sparse_min_samples": self.sparse_min_samples,
+            "min_system_status": self.min_system_status,
+        }
+
+    # -- fit -------------------------------------------------------------------------------
+    def fit(self, q, *, status=None, provenance: dict | None = None) -> BoundaryExtractor:
+        """Extract the boundary from joint orientations.
+
+        Parameters
+        ----------
+        q : (N, 4) array_like
+            Joint orientations (limb relative to thorax), scalar-first, unit (either sign).
+        status : (N,) array_like of int, optional
+            IMU calibration bytes (``CALIB_STAT``); None for sources without one (servo FK).
+        provenance : dict, optional
+            Where the data came from (session, file, ...); extended with the parameters and
+            sample counts and stored in the constraint's ``provenance``.
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        CalibrationError
+            Too few usable samples, or directions spread too wide to form a swing region.
+        """
+        q = Q.check_quaternions(q, normalize=True, name="joint orientation").reshape(-1, 4)
+        self.n_samples_ = len(q)
+        keep = np.ones(len(q), dtype=bool)
+        if status is not None:
+            st = np.asarray(status).reshape(-1)
+            if len(st) != len(q):
+                raise CalibrationError(f"status has {len(st)} entries for {len(q)} orientations")
+            keep &= (st.astype(np.int64) >> 6) >= self.min_system_status
+        self.n_status_dropped_ = int((~keep).sum())
+        if keep.sum() < 100:
+            raise CalibrationError(
+                f"need at least 100 usable samples to extract a boundary, got {int(keep.sum())} "
+                f"of {len(q)}"
+                + (f" ({self.n_status_dropped_} dropped for calibration status "
+                   f"< {self.min_system_status})" if self.n_status_dropped_ else "")
+            )
+        q = q[keep]
+        d = Q.rotate(q, self.limb_axis)
+        phi = Q.twist_angle(q, self.limb_axis)
+        c = self._centre(d)
+        u, v = _tangent_basis(c)
+        p = _ae_forward(d, c, u, v)
+        if np.hypot(p[:, 0], p[:, 1]).max() > 150.0:
+            raise CalibrationError(
+                "recorded directions span more than 150 deg from their centre; a swing region "
+                "this large cannot be extracted"
+            )
+        inlier = self._trim(p)
+        self.n_trimmed_ = int((~inlier).sum())
+        p, d, phi = p[inlier], d[inlier], phi[inlier]
+        self.n_used_ = len(p)
+        poly = self._alpha_region(p)
+        verts2d = self._simplify(poly)
+        self._finish(verts2d, poly, p, d, phi, c, u, v, provenance)
+        return self
+
+    def _centre(self, d: np.ndarray) -> np.ndarray:
+        m = d.mean(axis=0)
+        if np.linalg.norm(m) < 0.2:
+            raise CalibrationError(
+                "recorded directions have no clear centre (spread over the whole sphere)"
+            )
+        c = m / np.linalg.norm(m)
+        ang = Q.angle_between(d, c)
+        near = ang <= np.quantile(ang, 0.95)
+        m = d[near].mean(axis=0)
+        return m / np.linalg.norm(m)
+
+    def _grid(self, p: np.ndarray):
+        h = self.cell_deg
+        ij = np.floor(p / h).astype(np.int64)
+        lo = ij.min(axis=0)
+        ij -= lo
+        shape = tuple(ij.max(axis=0) + 1)
+        return ij, shape, lo
+
+    def _trim(self, p: np.ndarray) -> np.ndarray:
+        from scipy import ndimage
+
+        ij, shape, _ = self._grid(p)
+        pad = int(math.ceil(self.trim_radius_deg / self.cell_deg))
+        hist = np.zeros((shape[0] + 2 * pad, shape[1] + 2 * pad))
+        np.add.at(hist, (ij[:, 0] + pad, ij[:, 1] + pad), 1.0)
+        k = np.arange(-pad, pad + 1) * self.cell_deg
+        disc = (k[:, None] ** 2 + k[None, :] ** 2 <= self.trim_radius_deg**2).astype(float)
+        dens = ndimage.convolve(hist, disc, mode="constant")
+        count = dens[ij[:, 0] + pad, ij[:, 1] + pad]
+        cut = np.quantile(count, self.trim_fraction)
+        return ~((count < self.trim_min_count) & (count <= cut))
+
+    def _cell_means(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ij, shape, _ = self._grid(p)
+        flat = ij[:, 0] * shape[1] + ij[:, 1]
+        uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        sx = np.bincount(inv, weights=p[:, 0])
+        sy = np.bincount(inv, weights=p[:, 1])
+        return np.column_stack((sx / counts, sy / counts)), counts
+
+    def _alpha_region(self, p: np.ndarray):
+        import shapely
+        from scipy.spatial import Delaunay, QhullError
+
+        pts, counts = self._cell_means(p)
+        if len(pts) < 3:
+            raise CalibrationError("the recorded directions cover too small an area")
+        try:
+            tri = Delaunay(pts)
+        except QhullError as err:
+            raise CalibrationError(
+                "the recorded directions are degenerate (all on one line)"
+            ) from err
+        a, b, cc = (pts[tri.simplices[:, k]] for k in range(3))
+        la = np.linalg.norm(b - cc, axis=1)
+        lb = np.linalg.norm(a - cc, axis=1)
+        lc = np.linalg.norm(a - b, axis=1)
+        area2 = np.abs((b[:, 0] - a[:, 0]) * (cc[:, 1] - a[:, 1])
+                       - (b[:, 1] - a[:, 1]) * (cc[:, 0] - a[:, 0]))
+        circum = la * lb * lc / np.maximum(2.0 * area2, 1e-300)
+        alpha = self.alpha_deg
+        total = counts.sum()
+        best = None
+        for _ in range(5):
+            sel = tri.simplices[circum < alpha]
+            if len(sel):
+                rings = np.concatenate((pts[sel], pts[sel][:, :1]), axis=1)
+                union = shapely.coverage_union_all(shapely.polygons(rings))
+                parts = list(getattr(union, "geoms", [union]))
+                inside = [counts[shapely.contains_xy(g.buffer(1e-9), pts[:, 0], pts[:, 1])].sum()
+                          for g in parts]
+                k = int(np.argmax(inside))
+                region = shapely.Polygon(parts[k].exterior)
+                held = counts[shapely.contains_xy(region.buffer(self.cell_deg), pts[:, 0],
+                                                  pts[:, 1])].sum() / total
+                best = (region, held, alpha)
+                if held >= self.coverage:
+                    break
+            alpha *= 1.5
+        if best is None:
+            raise CalibrationError("no alpha shape could be formed from the recorded directions")
+        region, held, alpha = best
+        self.alpha_used_deg_ = float(alpha)
+        self.coverage_ = float(held)
+        return region
+
+    def _simplify(self, poly) -> np.ndarray:
+        tol = self.simplify_deg
+        for _ in range(40):
+            s = poly.simplify(tol, preserve_topology=True)
+            ring = np.asarray(s.exterior.coords)[:-1]
+            if len(ring) <= self.max_vertices and s.is_valid and s.area > 0:
+                return ring
+            tol *= 1.25
+        raise CalibrationError("could not simplify the boundary to the vertex budget")
+
+    def _finish(self, verts2d, poly, p, d, phi, c, u, v, provenance) -> None:
+        from shapely.ops import polylabel
+
+        verts = _ae_inverse(verts2d, c, u, v)
+        # interior: the pole of inaccessibility, or the centre when it is nearly as deep
+        import shapely
+
+        spoly = shapely.Polygon(verts2d)
+        pole = polylabel(spoly, tolerance=0.1)
+        depth_pole = spoly.exterior.distance(pole)
+        origin = shapely.Point(0.0, 0.0)
+        interior2d = np.array([[pole.x, pole.y]])
+        if spoly.contains(origin) and spoly.exterior.distance(origin) >= 0.5 * depth_pole:
+            interior2d = np.zeros((1, 2))
+        interior = _ae_inverse(interior2d, c, u, v)[0]
+        self.centre_ = c
+        self.vertices_ = verts
+        self.interior_ = interior
+        # twist envelope
+        lo_p, hi_p = self.twist_percentiles
+        mid = _circular_centre(phi)
+        rel = _wrap(phi - mid)
+        lo, hi = np.percentile(rel, [lo_p, hi_p])
+        tw_lo = math.degrees(float(np.clip(lo + mid, -math.pi, math.pi)))
+        tw_hi = math.degrees(float(np.clip(hi + mid, -math.pi, math.pi)))
+        if tw_lo > tw_hi:  # the range crosses ±180°: keep the larger side, say so
+            tw_lo, tw_hi = (tw_lo, 180.0) if 180.0 - tw_lo >= tw_hi + 180.0 else (-180.0, tw_hi)
+        self.twist_deg_ = (tw_lo, tw_hi)
+        self.by_swing_candidate_ = self._twist_table(d, rel, mid, verts, interior, spoly, c, u, v)
+        table = self.by_swing_candidate_
+        emit = False
+        if table is not None and self.by_swing is True:
+            emit = True
+        elif table is not None and self.by_swing == "auto":
+            mins = np.array([pt["min_deg"] for pt in table["points"]])
+            maxs = np.array([pt["max_deg"] for pt in table["points"]])
+            emit = bool(max(mins.max() - tw_lo, tw_hi - maxs.min()) > self.by_swing_min_diff_deg)
+        self.by_swing_ = table if emit else None
+        self.sparse_arcs_ = self._sparse_arcs(verts, d)
+        prov = dict(provenance or {})
+        prov.update({
+            "method": "calibration.boundary.BoundaryExtractor",
+            "parameters": self.params(),
+            "samples": int(self.n_samples_),
+            "samples_used": int(self.n_used_),
+            "dropped_status": int(self.n_status_dropped_),
+            "trimmed_outliers": int(self.n_trimmed_),
+            "alpha_used_deg": round(self.alpha_used_deg_, 3),
+            "coverage": round(self.coverage_, 5),
+            "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
+        })
+        twist: dict[str, Any] = {"min_deg": round(tw_lo, 3), "max_deg": round(tw_hi, 3)}
+        if self.by_swing_ is not None:
+            twist["by_swing"] = self.by_swing_
+        data = {
+            "name": self.name,
+            "limb_axis": [float(x) for x in self.limb_axis],
+            "swing": {"polygon": {"vertices": verts.tolist(), "interior": interior.tolist()}},
+            "twist": twist,
+            "provenance": prov,
+        }
+        try:
+            self.constraint_ = JointConstraint.from_dict(data)
+        except ConstraintError as err:
+            raise CalibrationError(f"the extracted boundary is not a valid constraint: {err}") \
+                from err
+
+    def _twist_table(self, d, rel, mid, verts, interior, spoly, c, u, v):
+        """Kernel-weighted twist percentiles at grid directions inside the polygon."""
+        import shapely
+
+        step = self.by_swing_spacing_deg
+        minx, miny, maxx, maxy = spoly.bounds
+        gx = np.arange(math.floor(minx / step), math.ceil(maxx / step) + 1) * step
+        gy = np.arange(math.floor(miny / step), math.ceil(maxy / step) + 1) * step
+        xx, yy = np.meshgrid(gx, gy)
+        grid = np.column_stack((xx.ravel(), yy.ravel()))
+        grid = grid[shapely.contains_xy(spoly, grid[:, 0], grid[:, 1])]
+        if len(grid) < 2:
+            return None
+        dirs = _ae_inverse(grid, c, u, v)
+        beta = math.radians(self.by_swing_bandwidth_deg)
+        kappa = 1.0 / (1.0 - math.cos(beta))
+        lo_p, hi_p = self.twist_percentiles
+        points = []
+        env_lo, env_hi = self.twist_deg_
+        for di in dirs:
+            w = np.exp(kappa * (d @ di - 1.0))
+            sw = w.sum()
+            if sw <= 0 or sw * sw / (w @ w) < self.by_swing_min_samples:
+                continue
+            a, b = _weighted_percentiles(rel, w, (lo_p, hi_p))
+            a = float(np.clip(math.degrees(a + mid), env_lo, env_hi))
+            b = float(np.clip(math.degrees(b + mid), env_lo, env_hi))
+            points.append({"direction": [round(float(x), 6) for x in di],
+                           "min_deg": round(a, 3), "max_deg": round(max(a, b), 3)})
+        if len(points) < 3:
+            return None
+        return {"bandwidth_deg": self.by_swing_bandwidth_deg, "points": points}
+
+    def _sparse_arcs(self, verts: np.ndarray, d: np.ndarray) -> list[SparseArc]:
+        from scipy.spatial import cKDTree
+
+        pts, seg_len = boundary_points(verts, step_deg=0.5)
+        tree = cKDTree(d)
+        chord = 2.0 * math.sin(math.radians(self.sparse_deg) / 2.0)
+        counts = tree.query_ball_point(pts, chord, return_length=True)
+        sparse = counts < self.sparse_min_samples
+        arcs: list[SparseArc] = []
+        if not sparse.any():
+            return arcs
+        n = len(pts)
+        if sparse.all():
+            return [SparseArc(pts[0], pts[-1], float(seg_len.sum()))]
+        # rotate so that the sequence starts on a non-sparse point, then group runs
+        start = int(np.argmin(sparse))
+        order = (np.arange(n) + start) % n
+        run: list[int] = []
+        for k in list(order) + [order[0]]:
+            if sparse[k]:
+                run.append(int(k))
+            elif run:
+                length = float(seg_len[run].sum())
+                if length >= 1.0:
+                    arcs.append(SparseArc(pts[run[0]], pts[run[-1]], length))
+                run = []
+        return arcs
+
+    def report(self) -> dict[str, Any]:
+        """What the extraction did, as plain types (for the CLI and the store)."""
+        return {
+            "samples": self.n_samples_,
+            "samples_used": self.n_used_,
+            "dropped_status": self.n_status_dropped_,
+            "trimmed_outliers": self.n_trimmed_,
+            "vertices": len(self.vertices_),
+            "alpha_used_deg": self.alpha_used_deg_,
+            "coverage": self.coverage_,
+            "twist_deg": list(self.twist_deg_),
+            "by_swing_points": 0 if self.by_swing_ is None else len(self.by_swing_["points"]),
+            "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
+            "sparse_length_deg": float(sum(a.length_deg for a in self.sparse_arcs_)),
+        }
+
+
+# -- accuracy measures ------------------------------------------------------------------------
+def boundary_points(vertices, step_deg: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+    """Points evenly spaced along a spherical polygon's great-circle edges.
+
+    Parameters
+    ----------
+    vertices : (M, 3) array_like, unit, in boundary order
+    step_deg : float, spacing along each edge (at most)
+
+    Returns
+    -------
+    points : (K, 3) unit
+    length_deg : (K,) arc length each point stands for (sums to the perimeter)
+    """
+    v = Q.check_vectors(vertices, name="vertices")
+    w = np.roll(v, -1, axis=0)
+    out, lens = [], []
+    for a, b in zip(v, w, strict=True):
+        ang = float(Q.angle_between(a, b))
+        n = max(1, int(math.ceil(math.degrees(ang) / step_deg)))
+        t = (np.arange(n) + 0.5) / n
+        s = math.sin(ang)
+        pts = (np.sin((1 - t) * ang)[:, None] * a + np.sin(t * ang)[:, None] * b) / s
+        out.append(pts)
+        lens.append(np.full(n, math.degrees(ang) / n))
+    return np.concatenate(out), np.concatenate(lens)
+
+
+def _swing_oracle(constraint_or_vertices, interior=None):
+    from models.oracle import ConstraintOracle
+
+    if isinstance(constraint_or_vertices, JointConstraint):
+        c = constraint_or_vertices
+        return ConstraintOracle(JointConstraint.from_dict(
+            {"name": "swing", "limb_axis": [float(x) for x in c.limb_axis],
+             "swing": c.swing.to_dict()})), c.swing
+    raise TypeError("expected a JointConstraint")
+
+
+def _boundary_vertices(swing, step_deg):
+    if hasattr(swing, "vertices"):
+        return boundary_points(swing.vertices, step_deg)
+    # a cone: a circle of points
+    c = np.asarray(swing.centre, dtype=float)
+    u, v = _tangent_basis(c)
+    n = max(8, int(math.ceil(360.0 * math.sin(swing.radius) / step_deg)))
+    a = 2 * math.pi * (np.arange(n) + 0.5) / n
+    r = swing.radius
+    pts = math.cos(r) * c + math.sin(r) * (np.cos(a)[:, None] * u + np.sin(a)[:, None] * v)
+    return pts, np.full(n, 360.0 * math.sin(r) / n)
+
+
+def boundary_distance(a: JointConstraint, b: JointConstraint, step_deg: float = 0.25) -> dict:
+    """Symmetric mean boundary-to-boundary distance of two swing regions (see module doc).
+
+    Returns
+    -------
+    dict with ``mean_deg`` (the symmetric mean ``D``), ``a_to_b_deg``, ``b_to_a_deg`` (directed
+    arc-length-weighted means), ``hausdorff_deg`` (largest point distance either way).
+    """
+    oa, sa = _swing_oracle(a)
+    ob, sb = _swing_oracle(b)
+    pa, la = _boundary_vertices(sa, step_deg)
+    pb, lb = _boundary_vertices(sb, step_deg)
+    da = np.degrees(np.abs(ob.swing_distance(pa)))
+    db = np.degrees(np.abs(oa.swing_distance(pb)))
+    ab = float(np.sum(da * la) / la.sum())
+    ba = float(np.sum(db * lb) / lb.sum())
+    return {"mean_deg": 0.5 * (ab + ba), "a_to_b_deg": ab, "b_to_a_deg": ba,
+            "hausdorff_deg": float(max(da.max(), db.max()))}
+
+
+def outside_fraction(constraint: JointConstraint, directions, tolerance_deg: float = 1.0) -> float:
+    """Fraction of limb directions (N, 3) more than ``tolerance_deg`` outside the swing region."""
+    o, _ = _swing_oracle(constraint)
+    dist = o.swing_distance(Q.check_vectors(directions, name="directions"))
+    return float(np.mean(dist > math.radians(tolerance_deg)))
