@@ -420,10 +420,11 @@ class StreamHost:
 
 @pytest.fixture
 def stream():
-    """A 4-sensor stream device on a manual clock: time moves only when the test says."""
+    """A 4-sensor stream device on a manual clock: time moves only when the test says; with
+    flow control, as a clock jump produces a burst larger than the pty's buffer."""
     clock = ManualClock()
     limb = SimulatedLimb(sensors=4, noise=QUIET, seed=31)
-    with StreamImuSimulator(limb, rate_hz=100, clock=clock, max_lag_s=None) as sim, \
+    with StreamImuSimulator(limb, rate_hz=100, clock=clock, flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         yield sim, StreamHost(ser), clock
         assert sim.server_error is None
@@ -503,7 +504,8 @@ def test_stream_commands_and_refusals(stream):
 
 def test_stream_sequence_numbers_wrap():
     clock = ManualClock()
-    with StreamImuSimulator(sensors=1, clock=clock, initial_seq=0xFFFD) as sim, \
+    with StreamImuSimulator(sensors=1, clock=clock, initial_seq=0xFFFD,
+                            flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         host = StreamHost(ser)
         host.command(S.CommandType.START)  # its ACK is 0xFFFD
@@ -533,7 +535,7 @@ def test_stream_timestamps_wrap_and_unwrap():
     offset = 2**32 - 100_000  # wraps 0.1 s after the start
     clock = ManualClock()
     with StreamImuSimulator(limb, rate_hz=400, timestamp_offset_us=offset, clock=clock,
-                            max_lag_s=None) as sim, \
+                            flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         host = StreamHost(ser)
         host.command(S.CommandType.START)
@@ -572,7 +574,7 @@ def test_fast_simulated_time_loses_nothing_through_the_pty():
     """The benchmark's recipe at a test's scale: 2 sensors at 400 Hz, 5 simulated seconds
     advanced at once (far faster than real time); every sample arrives, in order, no gaps."""
     url = ("sim://imu-stream?sensors=2&rate=400&patient=original&seed=3"
-           "&clock=manual&max_lag=none&flow=on")
+           "&clock=manual&flow=on")
     with stream_from_url(url) as sim, serial.Serial(sim.port, timeout=0.05) as ser:
         host = StreamHost(ser)
         host.command(S.CommandType.START)
