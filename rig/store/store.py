@@ -511,34 +511,42 @@ class Store:
             ``w, x, y, z``, ``status`` (N,) int64. Restricted to sensor ``name`` when given.
         """
         self.get_session(session_id)
+        sensors = self.sensors(session_id)
+        by_id = {int(r["id"]): r for r in sensors}
         q = (
             select(
-                S.samples.c.t, S.samples.c.device_t, S.sensors.c.name, S.sensors.c.kind,
-                S.samples.c.w, S.samples.c.x, S.samples.c.y, S.samples.c.z, S.samples.c.status,
+                S.samples.c.t, S.samples.c.device_t, S.samples.c.sensor_id, S.samples.c.w,
+                S.samples.c.x, S.samples.c.y, S.samples.c.z, S.samples.c.status,
             )
-            .join(S.sensors, S.sensors.c.id == S.samples.c.sensor_id)
             .where(S.samples.c.session_id == int(session_id))
             .order_by(S.samples.c.id)
         )
         if name is not None:
-            q = q.where(S.sensors.c.name == name)
+            sel = [int(r["id"]) for r in sensors if r["name"] == name]
+            q = q.where(S.samples.c.sensor_id == (sel[0] if sel else -1))
         with self._tx(write=False) as conn:
-            rows = conn.execute(q).all()
-        n = len(rows)
-        if n == 0:
+            rows = _fetch_tuples(conn, q)
+        if not rows:
             return {
                 "t": np.zeros(0), "device_t": np.zeros(0), "name": np.zeros(0, dtype=object),
                 "kind": np.zeros(0, dtype=object), "q": np.zeros((0, 4)),
                 "status": np.zeros(0, dtype=np.int64),
             }
-        cols = list(zip(*rows, strict=True))
+        a = np.array(rows, dtype=object)  # (N, 8); one pass over the rows, columns below
+        dev = a[:, 1]
+        missing = np.equal(dev, None)
+        if missing.any():
+            dev = np.where(missing, np.nan, dev)
+        uniq, inv = np.unique(a[:, 2].astype(np.int64), return_inverse=True)
+        names = np.array([by_id[int(u)]["name"] for u in uniq], dtype=object)[inv]
+        kinds = np.array([by_id[int(u)]["kind"] for u in uniq], dtype=object)[inv]
         return {
-            "t": np.asarray(cols[0], dtype=np.float64),
-            "device_t": np.array([np.nan if v is None else v for v in cols[1]], dtype=np.float64),
-            "name": np.array(cols[2], dtype=object),
-            "kind": np.array(cols[3], dtype=object),
-            "q": np.column_stack([np.asarray(c, dtype=np.float64) for c in cols[4:8]]),
-            "status": np.asarray(cols[8], dtype=np.int64),
+            "t": a[:, 0].astype(np.float64),
+            "device_t": dev.astype(np.float64),
+            "name": names,
+            "kind": kinds,
+            "q": a[:, 3:7].astype(np.float64),
+            "status": a[:, 7].astype(np.int64),
         }
 
     def sample_count(self, session_id: int) -> int:
@@ -728,6 +736,23 @@ class Store:
             else:
                 out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
         return out
+
+
+def _fetch_tuples(conn: Connection, stmt) -> list[tuple]:
+    """Rows of a SELECT as plain tuples from the driver's cursor, in the caller's transaction.
+
+    For bulk reads only: SQLAlchemy's Row objects cost about 20x more to turn into numpy
+    arrays than tuples. The SQL is still SQLAlchemy's, compiled for the connection's dialect.
+    """
+    comp = stmt.compile(dialect=conn.dialect)
+    params = (tuple(comp.params[k] for k in comp.positiontup) if comp.positional
+              else comp.params)
+    cur = conn.connection.dbapi_connection.cursor()
+    try:
+        cur.execute(comp.string, params)
+        return cur.fetchall()
+    finally:
+        cur.close()
 
 
 def file_sha256(path: str | os.PathLike) -> str:
