@@ -458,6 +458,17 @@ def _read_retrying(chain, attempts: int = 5) -> np.ndarray:
     raise last
 
 
+def _open_chain(cls, port, servos, latency_ms, attempts: int = 3):
+    """Open the chain; a servo that missed its PINGs (a loaded host) is asked again, twice."""
+    for k in range(attempts):
+        try:
+            return cls(port, servos, latency_ms=latency_ms)
+        except RigConnectionError as err:
+            if k + 1 == attempts or "did not answer" not in str(err):
+                raise
+    raise AssertionError("unreachable")
+
+
 def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_deg: float = 5.0,
                   latency_ms: float | None = None, log=None):
     """Open a servo chain for the loop and write its start-up registers.
@@ -491,7 +502,7 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
     log = log or (lambda msg: None)
     if latency_ms is None:
         latency_ms = servos.latency_ms
-    chain = DynamixelChain(port, servos, latency_ms=latency_ms)
+    chain = _open_chain(DynamixelChain, port, servos, latency_ms)
     limits = None
     try:
         torque_on = bool(np.asarray(chain.torque()).any())
@@ -510,7 +521,7 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
                            for j, a, b in zip(servos.chain, lo, hi, strict=True))
             servos = dataclasses.replace(servos, chain=joints)
             chain.close()
-            chain = DynamixelChain(port, servos, latency_ms=latency_ms)
+            chain = _open_chain(DynamixelChain, port, servos, latency_ms)
             limits = (lo, hi)
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
         if not torque_on:

@@ -21,10 +21,14 @@ ticks) → ``accept(commanded)``:
    ``quantum_deg``, the room kept for rounding the goal to encoder ticks): ``c`` is replaced by
    the exact projection (flag ``PROJECTED``).
 4. **Rate limits.** From the previous goal ``g₀`` with goal angular velocity ``ω₀`` (parent
-   frame, rad/s) towards ``c`` (``r = c ⊗ g₀⁻¹``, ``θ = |log r|``, unit axis ``u``):
-   desired speed ``s = min(ω_max, θ/Δt, √(2 α_max θ))`` (the last term brakes in time),
-   ``ω₁ = ω₀ + clip(s u − ω₀, α_max Δt)``, ``|ω₁| ≤ ω_max``, ``g₁ = exp(ω₁ Δt) ⊗ g₀`` (flag
-   ``RATE_LIMITED`` when ``g₁ ≠ c``).
+   frame, rad/s) towards ``c``: the candidate's own velocity ``v_c = log(c ⊗ c₋₁⁻¹)/Δt`` is fed
+   forward (0 after a hold, or when it jumped faster than ``ω_max``); the lag
+   ``e = log(c ⊗ g₀⁻¹) − v_c Δt`` is closed at speed ``s = min(ω_max, |e|/Δt, √(2 α_max |e|))``
+   (the last term brakes in time); desired ``ω_d = v_c + s ê`` with ``|ω_d| ≤ ω_max``;
+   ``ω₁ = ω₀ + clip(ω_d − ω₀, α_max Δt)``, ``|ω₁| ≤ ω_max``, ``g₁ = exp(ω₁ Δt) ⊗ g₀`` (flag
+   ``RATE_LIMITED`` when ``g₁ ≠ c``). A path slower than the limits is therefore followed
+   without lag; when a moving target stops, the goal overshoots by at most ``|ω|²/(2 α_max)``
+   (caught by step 5 if that leaves the region).
 5. **Exact check of the rate-limited goal** (a straight path between two valid orientations
    can leave a concave region): ``D(g₁) > τ − δ`` → ``g₁`` ← its exact projection (flag
    ``REPROJECTED``). Safety beats smoothness here: the projection moves the goal by at most
@@ -182,6 +186,7 @@ class Supervisor:
         self.last_correction_angle = 0.0
         self.last_commanded_distance = 0.0
         self._t: float | None = None
+        self._c_prev: qs.Quat | None = None
         self._ready = False
 
     # ------------------------------------------------------------------ oracle access
@@ -214,6 +219,7 @@ class Supervisor:
         self.velocity = (0.0, 0.0, 0.0)
         self.flags = 0
         self._t = float(t)
+        self._c_prev = None
         self._ready = True
 
     @property
@@ -276,6 +282,7 @@ class Supervisor:
         g0 = self.goal
         if target is None:  # hold the last safe goal, stop its motion
             self.velocity = (0.0, 0.0, 0.0)
+            self._c_prev = None
             return g0
         c = target
         if correction is not None:
@@ -289,6 +296,7 @@ class Supervisor:
             else:
                 self.flags |= Intervention.MODEL_INVALID
         if self.recovering:
+            self._c_prev = None
             return self._recover(g0, dt)
         ev = self._eval(c)
         if ev.distance > self.tol_eff:
@@ -298,7 +306,8 @@ class Supervisor:
             c_dist = 0.0
         else:
             c_dist = float(ev.distance)
-        g1, limited = self._rate_limit(g0, c, dt)
+        g1, limited = self._rate_limit(g0, c, dt, self._c_prev)
+        self._c_prev = c
         if not limited:
             self.goal, self.goal_distance = c, c_dist
             return c
@@ -343,6 +352,7 @@ class Supervisor:
         self.goal = g
         self.goal_distance = self.distance(g)
         self.velocity = (0.0, 0.0, 0.0)
+        self._c_prev = None
         self.flags |= int(flag)
 
     def present_stale(self, t: float, t_present: float | None) -> bool:
@@ -350,17 +360,31 @@ class Supervisor:
         return t_present is None or t - t_present > self.config.stale_present_s
 
     # ------------------------------------------------------------------ internals
-    def _rate_limit(self, g0: qs.Quat, c: qs.Quat, dt: float) -> tuple[qs.Quat, bool]:
+    def _rate_limit(self, g0: qs.Quat, c: qs.Quat, dt: float,
+                    c_prev: qs.Quat | None = None) -> tuple[qs.Quat, bool]:
         r = qs.relative(g0, c)
         wv = qs.log_vec(r)
-        th = math.sqrt(wv[0] * wv[0] + wv[1] * wv[1] + wv[2] * wv[2])
+        # the candidate's own velocity (feed-forward), unless it jumped faster than ω_max
+        vt = (0.0, 0.0, 0.0)
+        if c_prev is not None:
+            m = qs.log_vec(qs.relative(c_prev, c))
+            k = 1.0 / dt
+            m = (m[0] * k, m[1] * k, m[2] * k)
+            if m[0] * m[0] + m[1] * m[1] + m[2] * m[2] <= self.vmax * self.vmax:
+                vt = m
+        e = (wv[0] - vt[0] * dt, wv[1] - vt[1] * dt, wv[2] - vt[2] * dt)  # the lag
+        th = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
         v0 = self.velocity
         if th > 1e-12:
             s = min(self.vmax, th / dt, math.sqrt(2.0 * self.amax * th))
             k = s / th
-            vd = (wv[0] * k, wv[1] * k, wv[2] * k)
+            vd = (vt[0] + e[0] * k, vt[1] + e[1] * k, vt[2] + e[2] * k)
         else:
-            vd = (0.0, 0.0, 0.0)
+            vd = vt
+        vn = math.sqrt(vd[0] * vd[0] + vd[1] * vd[1] + vd[2] * vd[2])
+        if vn > self.vmax:
+            k = self.vmax / vn
+            vd = (vd[0] * k, vd[1] * k, vd[2] * k)
         dv = (vd[0] - v0[0], vd[1] - v0[1], vd[2] - v0[2])
         dvn = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
         lim = self.amax * dt

@@ -1,0 +1,305 @@
+"""The live loop on the simulated servo chain (real ``dynamixel_sdk`` on a pty), driven by a
+manual clock: correctness by counts and telemetry content, never by wall time.
+
+Faults are injected through the simulator's public fault-injection API. The Bus Watchdog is
+armed at 1 s in these tests (not the rig's 100 ms) so a loaded test machine cannot trip it
+between two cycles; ``test_bus_watchdog_is_armed`` checks the rig's own value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from models import quaternion as Q
+from models.constraint import JointConstraint, dump_constraint
+from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
+from models.shapes import load_shape
+from rig.cli import main
+from rig.devices.config import load_rig_config
+from rig.devices.ports import open_port
+from rig.loop import (
+    EnforcementLoop,
+    Fault,
+    Intervention,
+    LoopConfig,
+    ManualClock,
+    ScriptedTargets,
+    SupervisorConfig,
+)
+from rig.loop.runner import prepare_chain
+
+URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
+RIG = load_rig_config("sim-shoulder")
+SERVOS = dataclasses.replace(RIG.servos, port=URL)
+TOL = math.radians(1.0)
+
+
+def _train(constraint_path, out):
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--constraint", str(constraint_path), "--out", str(out)])
+    assert exc.value.code == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    d = tmp_path_factory.mktemp("loop-models")
+    orig = load_shape("original")
+    notch = JointConstraint.polygon(orig.swing.vertices, orig.swing.interior, twist=(-45, 70),
+                                    name="original+twist")
+    cone = JointConstraint.cone((1, 0, 0), 50.0, twist=(-40, 40), name="cone50")
+    out = {}
+    for c in (notch, cone):
+        path = d / f"{c.name}.yaml"
+        dump_constraint(c, path)
+        out[c.name] = (c, load_model(_train(path, d / f"{c.name}.onnx")))
+    return out
+
+
+def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
+         safe_state="hold", before=None, **sup):
+    """Open the simulated chain, run ``cycles`` cycles on a manual clock, close everything.
+
+    Returns (summary, telemetry table, bus, loop).
+    """
+    oracle = ConstraintOracle(constraint)
+    clk = ManualClock()
+    cfg = LoopConfig(rate_hz=200.0, watchdog_ms=watchdog_ms, safe_state=safe_state,
+                     supervisor=SupervisorConfig(**sup))
+    with open_port(URL, baud=SERVOS.baud) as port:
+        bus = port.simulator
+        if before is not None:
+            before(bus)
+        chain = prepare_chain(port, SERVOS, oracle)
+        try:
+            loop = EnforcementLoop(chain, model, oracle, targets, cfg, clock=clk.now,
+                                   sleep=clk.sleep, on_cycle=on_cycle)
+            loop.setup()
+            summary = loop.run(max_cycles=cycles)
+            state = {i: (bus.servo(i).torque, bus.servo(i).get("Goal Position"),
+                         bus.position(i)) for i in SERVOS.ids}
+        finally:
+            chain.close()
+    return summary, loop.telemetry.table(), state, loop
+
+
+def _col(table, name):
+    return np.stack([table[f"{name}_{c}"] for c in "wxyz"], axis=1)
+
+
+def _distance(oracle, q):
+    return oracle.signed_distance(q)
+
+
+# --------------------------------------------------------------------------- safety
+@pytest.mark.parametrize("which", ["original+twist", "wrong-model"])
+def test_adversarial_targets_never_commanded_beyond_tolerance(models, which):
+    constraint, model = models["original+twist"]
+    if which == "wrong-model":  # a model trained for another constraint (as --force-model)
+        model = models["cone50"][1]
+    oracle = ConstraintOracle(constraint)
+    src = ScriptedTargets("adversarial", oracle, seed=7, segment_s=0.05)
+    summary, table, _, _ = _run(constraint, model, src, cycles=800)
+    assert summary["cycles"] == 800 and summary["end_reason"] == "completed"
+    commanded = _col(table, "commanded")
+    d = _distance(oracle, commanded)
+    assert (d <= TOL).all(), f"{(d > TOL).sum()} commanded orientations beyond 1°"
+    assert summary["max_violation_deg"] <= 1.0
+    # the telemetry's own distance column agrees with the oracle
+    np.testing.assert_allclose(table["distance_deg"], np.degrees(d), atol=1e-6)
+    target = _col(table, "target")
+    ok = np.isfinite(target).all(1) & (np.abs(np.linalg.norm(target, axis=1) - 1) < 0.02)
+    assert (_distance(oracle, target[ok]) > TOL).sum() > 200  # plenty of targets were outside
+    bits = table["intervention"]
+    assert (bits & Intervention.HOLD_INVALID).sum() > 25
+    assert (bits & Intervention.HOLD_STALE).sum() > 25
+    assert summary["interventions"] > 0 and summary["safe_state_entries"] == 0
+    if which == "wrong-model":
+        assert (bits & (Intervention.PROJECTED | Intervention.REPROJECTED)).sum() > 50
+
+
+def test_slow_valid_path_is_tracked(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    src = ScriptedTargets("slow", oracle, period_s=3.0)
+    summary, table, _, _ = _run(constraint, model, src, cycles=800)
+    target, present = _col(table, "target"), _col(table, "present")
+    err = np.degrees(Q.angle(Q.multiply(present, Q.conjugate(target))))
+    settled = table["t_s"] > 1.0  # after the goal has caught up with the path
+    assert np.median(err[settled]) <= 1.5
+    bits = table["intervention"][settled]
+    assert not (bits & (Intervention.PROJECTED | Intervention.REPROJECTED)).any()
+    assert summary["max_violation_deg"] == 0.0
+
+
+def test_limb_starting_outside_is_brought_back(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    kin = SERVOS.kinematics()
+    start = Q.from_two_vectors(Q.LIMB_AXIS, np.array([0.0, math.sin(1.4), math.cos(1.4)]))
+    ticks = kin.inverse(start, kin.zero_ticks)  # ~80° from the axis: 30° outside the cone
+
+    def place(bus):  # torque off: the limb rests where the hand left it
+        for i, t in zip(SERVOS.ids, ticks, strict=True):
+            bus.set_hand(i, float(t))
+
+    src = ScriptedTargets("adversarial", oracle, seed=1, segment_s=0.1)
+    summary, table, _, _ = _run(constraint, model, src, cycles=600, before=place)
+    d = np.degrees(_distance(oracle, _col(table, "commanded")))
+    assert d[0] > 25.0
+    back = np.flatnonzero(d <= 1.0)
+    assert len(back) and back[0] < 200  # < 1 s at 120°/s
+    # monotone: never further out than any earlier command
+    assert (np.diff(d[: back[0] + 1]) <= 1e-9).all()
+    assert (d[back[0]:] <= 1.0).all()
+    steered = Intervention.RECOVERY | Intervention.HOLD_INVALID | Intervention.HOLD_STALE
+    assert (table["intervention"][: back[0]] & steered).all()
+    assert (table["intervention"][: back[0]] & Intervention.RECOVERY).sum() > back[0] // 2
+
+
+# --------------------------------------------------------------------------- faults
+def test_one_percent_dropped_and_corrupted_packets(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    bus_ref = {}
+
+    def on_cycle(loop, k):
+        if k == 0:
+            bus_ref["bus"].set_fault_rates(drop=0.01, corrupt=0.01)
+
+    def keep(bus):
+        bus_ref["bus"] = bus
+
+    src = ScriptedTargets("slow", oracle)
+    summary, table, _, _ = _run(constraint, model, src, cycles=1000, on_cycle=on_cycle,
+                                before=keep)
+    assert summary["cycles"] == 1000 and summary["safe_state_entries"] == 0
+    faults = summary["faults"]
+    assert faults.get("read_timeout", 0) > 0 and faults.get("read_corrupt", 0) > 0
+    assert faults.get("read_retry", 0) > 0
+    injected = bus_ref["bus"].fault_counts
+    assert injected["dropped"] > 0 and injected["corrupted"] > 0
+    # each failed attempt is one injected fault (or a genuine timeout of a loaded machine)
+    bits = table["faults"]
+    assert ((bits & Fault.READ_CORRUPT) > 0).sum() <= injected["corrupted"]
+    assert (_distance(oracle, _col(table, "commanded")) <= TOL).all()
+
+
+def test_unplugged_adapter_reaches_the_safe_state_within_two_cycles(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    bus_ref = {}
+
+    def on_cycle(loop, k):
+        if k == 100:
+            bus_ref["bus"].unplug(adapter=True)
+
+    summary, table, _, loop = _run(constraint, model, ScriptedTargets("slow", oracle),
+                                   cycles=200, on_cycle=on_cycle,
+                                   before=lambda b: bus_ref.setdefault("bus", b))
+    assert summary["safe_state_entries"] == 1
+    assert 100 <= summary["safe_state_cycle"] <= 102
+    assert "adapter" in summary["safe_state_reason"]
+    assert table["safe_state"][-1] == 1 and table["cycle"][-1] == summary["safe_state_cycle"]
+    assert table["faults"][-1] & Fault.CONNECTION_LOST
+    assert summary["end_reason"].startswith("safe state")
+    # nothing could be written: the note says the servos' Bus Watchdog takes over
+    assert "Bus Watchdog" in summary["safe_state_note"]
+
+
+@pytest.mark.parametrize("safe_state", ["hold", "torque-off"])
+def test_hardware_error_on_one_servo_puts_the_limb_in_the_safe_state(models, safe_state):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    bus_ref = {}
+
+    def on_cycle(loop, k):
+        if k == 80:
+            bus_ref["bus"].raise_hardware_error(2, "overload")
+
+    summary, table, state, _ = _run(constraint, model, ScriptedTargets("sweep", oracle),
+                                    cycles=200, on_cycle=on_cycle, safe_state=safe_state,
+                                    before=lambda b: bus_ref.setdefault("bus", b))
+    assert summary["safe_state_entries"] == 1
+    assert 80 <= summary["safe_state_cycle"] <= 82
+    assert "overload" in summary["safe_state_reason"] and "ID 2" in summary["safe_state_reason"]
+    assert table["faults"][-1] & Fault.HARDWARE_ALERT
+    assert state[2][0] is False or state[2][0] == 0  # overload is in Shutdown: torque off
+    if safe_state == "hold":
+        for i in (1, 3):  # the others hold where they are, torque on
+            torque, goal, pos = state[i]
+            assert torque and abs(goal - pos) <= 3
+    else:
+        assert not any(state[i][0] for i in SERVOS.ids)
+
+
+def test_stale_servo_data_trips_the_watchdog(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    bus_ref = {}
+
+    def on_cycle(loop, k):
+        if k == 50:
+            bus_ref["bus"].unplug()  # the bus cable: nobody answers, the port stays open
+
+    summary, table, _, _ = _run(constraint, model, ScriptedTargets("slow", oracle),
+                                cycles=200, on_cycle=on_cycle, stale_present_s=0.03,
+                                before=lambda b: bus_ref.setdefault("bus", b))
+    assert summary["safe_state_entries"] == 1
+    assert "stale" in summary["safe_state_reason"]
+    # 30 ms at 5 ms per cycle: the 7th cycle without fresh data
+    assert 50 + 5 <= summary["safe_state_cycle"] <= 50 + 6
+    failed = (table["faults"] & Fault.READ_FAILED) > 0
+    assert failed[50:].all() and not failed[:50].any()
+
+
+def test_stop_request_leaves_the_limb_held(models):
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+
+    def on_cycle(loop, k):
+        if k == 120:
+            loop.request_stop("SIGTERM")
+
+    summary, table, state, loop = _run(constraint, model, ScriptedTargets("sweep", oracle),
+                                       cycles=200, on_cycle=on_cycle)
+    assert summary["safe_state_cycle"] == 120 and loop.stop_reason == "SIGTERM"
+    assert "SIGTERM" in summary["safe_state_reason"]
+    for torque, goal, pos in state.values():
+        assert torque and abs(goal - pos) <= 3
+
+
+def test_bus_watchdog_is_armed_and_backstop_written(models):
+    constraint, model = models["original+twist"]
+    oracle = ConstraintOracle(constraint)
+    clk = ManualClock()
+    with open_port(URL, baud=SERVOS.baud) as port:
+        bus = port.simulator
+        chain = prepare_chain(port, SERVOS, oracle)
+        try:
+            loop = EnforcementLoop(chain, model, oracle, ScriptedTargets("hold", oracle),
+                                   LoopConfig(), clock=clk.now, sleep=clk.sleep)
+            loop.setup()
+            lo, hi = chain.backstop
+            for k, i in enumerate(SERVOS.ids):
+                s = bus.servo(i)
+                assert s.get("Bus Watchdog") == 5  # the rig's 100 ms in 20 ms units
+                assert s.get("Min Position Limit") == lo[k]
+                assert s.get("Max Position Limit") == hi[k]
+                assert SERVOS.chain[k].min_ticks <= lo[k] < hi[k] <= SERVOS.chain[k].max_ticks
+            # the box holds every valid orientation's IK solution (sampled)
+            q = Q.random_quaternions(3000, np.random.default_rng(0))
+            valid = q[oracle.is_valid(q)]
+            ticks = np.array([chain.kinematics.inverse_float(v, loop._present_ticks)
+                              for v in valid[:300]])
+            assert (ticks >= lo - 1).all() and (ticks <= hi + 1).all()
+            summary = loop.run(max_cycles=20)
+        finally:
+            chain.close()
+    assert summary["watchdog_ms"] == 100 and summary["cycles"] == 20
+    assert summary["backstop_ticks"]["1"] == [int(lo[0]), int(hi[0])]
