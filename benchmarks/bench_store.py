@@ -10,6 +10,7 @@ Prints medians over ``--repeats`` runs of:
 * bulk rate -- ``SampleWriter.add_many`` in blocks of 800 rows, committed every 0.5 s by the
   writer's thread (rows/s from first add to close);
 * per-sample rate -- ``SampleWriter.add`` one row at a time (what a reader thread does);
+* read back -- ``Store.samples`` of the bulk session (rows/s);
 * commit latency -- one transaction of 400 rows (0.5 s of 2 sensors x 400 Hz) via ``flush``;
 * cost of real time -- CPU seconds the store spends per second of a 2 x 400 Hz recording.
 
@@ -44,7 +45,7 @@ def bench(db: str, rows: int, repeats: int) -> None:
     rng = np.random.default_rng(0)
     store = open_store(db)
     pid = store.ensure_patient("BENCH")
-    bulk, single, commit_ms, cpu_per_s = [], [], [], []
+    bulk, single, commit_ms, cpu_per_s, read = [], [], [], [], []
     block = 800
     q = _unit(rng, block)
     for r in range(repeats):
@@ -57,6 +58,9 @@ def bench(db: str, rows: int, repeats: int) -> None:
             w.add_many(t, t, "humerus" if k % 1600 else "thorax", "sensor", q, 3)
         w.close()
         bulk.append(rows / (time.perf_counter() - t0))
+        t0 = time.perf_counter()
+        got = store.samples(sid)["t"].size
+        read.append(got / (time.perf_counter() - t0))
         # one row at a time
         n1 = min(rows, 100_000)
         w = store.sample_writer(sid)
@@ -92,6 +96,7 @@ def bench(db: str, rows: int, repeats: int) -> None:
     print(f"store: {store.url} ({store.dialect}); {repeats} repeats, {total} rows written")
     print(f"  bulk add_many          {statistics.median(bulk):12,.0f} rows/s (median)")
     print(f"  per-sample add         {statistics.median(single):12,.0f} rows/s (median)")
+    print(f"  read back (samples())  {statistics.median(read):12,.0f} rows/s (median)")
     print(f"  commit of 400 rows     {statistics.median(commit_ms):12.2f} ms   (median)")
     print(f"  CPU per recorded s     {1e3 * statistics.median(cpu_per_s):12.1f} ms   "
           "(2 sensors x 400 Hz, median)")
