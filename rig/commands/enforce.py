@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import signal
+import sys
 from pathlib import Path
 
 import click
@@ -74,7 +75,7 @@ def enforce(rig_name, model_path, targets, rate, duration, telemetry_path, summa
         max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2, seed=seed,
         echo=(lambda m: None) if quiet else click.echo, install_signals=True)
     if code:
-        raise click.exceptions.Exit(code)
+        sys.exit(code)
 
 
 def _check_out_path(option: str, value) -> Path | None:

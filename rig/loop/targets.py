@@ -551,8 +551,7 @@ def _open_mirror(spec: str, rig) -> MirrorTargets:
                              "mirror:<rig with sensors> (e.g. mirror:sim-imu)")
     from rig.devices import sources
 
-    src = sources.open_source(rig) if hasattr(sources, "open_source") else \
-        sources.ImuSetSource.from_config(rig)
+    src = sources.open_source(rig, "sensors")
     joint = rig.joint
     return MirrorTargets(src, parent=joint.parent, child=joint.child,
                          description=f"mirror of {rig.name} sensors")
