@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import click
-import numpy as np
 
 QUICK_OVERRIDE = {
     "evolution": {"population": 8, "generations": 2},
@@ -40,14 +39,18 @@ QUICK_OVERRIDE = {
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--dxl-port", envvar="RIG_DXL_PORT", default=None,
               help="Real Dynamixel port (default: simulated chain). Env: RIG_DXL_PORT.")
-@click.option("--dxl-ids", default="1,2,3", show_default=True, help="Servo IDs on the bus.")
+@click.option("--dxl-ids", default="1,2,3", show_default=True,
+              help="Servo IDs of the chain (1 to 3, parent to child).")
+@click.option("--dxl-baud", type=int, default=1_000_000, show_default=True,
+              help="Dynamixel bus baud rate (X-series factory default: 57600).")
 @click.option("--imu-port", envvar="RIG_IMU_PORT", default=None,
               help="Real BNO055 UART port (default: simulated chip). Env: RIG_IMU_PORT.")
-def demo(out_dir, constraint_path, preset, quick, seed, dxl_port, dxl_ids, imu_port) -> None:
+def demo(out_dir, constraint_path, preset, quick, seed, dxl_port, dxl_ids, dxl_baud,
+         imu_port) -> None:
     """Run the main job end to end (simulated rig unless ports are given)."""
     ids = _parse_ids(dxl_ids)
     run_demo(Path(out_dir), constraint_path=constraint_path, preset=preset, quick=quick,
-             seed=seed, dxl_port=dxl_port, dxl_ids=ids, imu_port=imu_port)
+             seed=seed, dxl_port=dxl_port, dxl_ids=ids, dxl_baud=dxl_baud, imu_port=imu_port)
 
 
 def _parse_ids(text: str) -> list[int]:
@@ -59,7 +62,38 @@ def _parse_ids(text: str) -> list[int]:
         raise RigConfigError(f"--dxl-ids {text!r}: expected comma-separated integers") from err
     if not ids or any(not 0 <= i <= 252 for i in ids):
         raise RigConfigError(f"--dxl-ids {text!r}: IDs must be 0..252")
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise RigConfigError(f"--dxl-ids {text!r}: duplicate ID {dup}")
+    if len(ids) > 3:
+        raise RigConfigError(f"--dxl-ids {text!r}: a servo chain has 1 to 3 joints")
     return ids
+
+
+def _open_devices(dxl_port, ids, baud, imu_port, seed, echo):
+    """Open (and check) the servo chain and the IMU before any long work: a wrong port, wrong
+    baud, silent bus or duplicate ID fails here, in about a second, not after training."""
+    from rig.devices.bno055 import Bno055
+    from rig.devices.dynamixel import DynamixelChain
+    from rig.devices.kinematics import ServoJoint
+
+    if dxl_port is None:
+        dxl_port = f"sim://dynamixel?ids={','.join(map(str, ids))}&model=XM430-W350"
+        echo(f"  simulated XM430-W350 chain {ids}: {dxl_port}")
+    axes = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))
+    joints = [ServoJoint(i, axes[k]) for k, i in enumerate(ids)]
+    chain = DynamixelChain(dxl_port, joints, baud=baud)
+    try:
+        for tip in chain.advice:
+            echo(f"  note: {tip}")
+        if imu_port is None:
+            imu_port = f"sim://bno055?seed={seed}"
+            echo(f"  simulated BNO055: {imu_port}")
+        imu = Bno055(imu_port)
+    except BaseException:
+        chain.close()
+        raise
+    return chain, imu
 
 
 def _step(echo, n: int, title: str) -> float:
@@ -68,8 +102,24 @@ def _step(echo, n: int, title: str) -> float:
 
 
 def run_demo(out: Path, *, constraint_path=None, preset="best", quick=False, seed=0,
-             dxl_port=None, dxl_ids=(1, 2, 3), imu_port=None, echo=click.echo) -> dict:
+             dxl_port=None, dxl_ids=(1, 2, 3), dxl_baud=1_000_000, imu_port=None,
+             echo=click.echo) -> dict:
     """What ``rig demo`` does; returns the figures it printed (for tests)."""
+    echo("[0/6] devices (opened and checked before the long work)")
+    chain, imu = _open_devices(dxl_port, list(dxl_ids), dxl_baud, imu_port, seed, echo)
+    try:
+        return _run(out, chain, imu, constraint_path=constraint_path, preset=preset,
+                    quick=quick, seed=seed, echo=echo)
+    finally:
+        try:
+            imu.close()
+        finally:
+            chain.close()
+
+
+def _run(out: Path, chain, imu, *, constraint_path, preset, quick, seed, echo) -> dict:
+    import numpy as np
+
     from models.constraint import dump_constraint, load_constraint
     from models.datasets import quaternion_dataset, split_dataset
     from models.shapes import load_shape
@@ -115,86 +165,42 @@ def run_demo(out: Path, *, constraint_path=None, preset="best", quick=False, see
     echo(f"  ({time.perf_counter() - t:.1f} s)")
 
     t = _step(echo, 5, "servo bus (Dynamixel Protocol 2.0 through dynamixel_sdk)")
-    report["servos"] = _servo_check(dxl_port, list(dxl_ids), echo)
+    report["servos"] = _servo_check(chain, echo)
     echo(f"  ({time.perf_counter() - t:.2f} s)")
 
     t = _step(echo, 6, "IMU (BNO055 UART protocol through pyserial)")
-    report["imu"] = _imu_check(imu_port, seed, echo)
+    report["imu"] = _imu_check(imu, echo)
     echo(f"  ({time.perf_counter() - t:.2f} s)")
     echo(f"\ndone: files in {out}/")
     return report
 
 
-def _servo_check(port: str | None, ids: list[int], echo) -> dict:
-    import dynamixel_sdk as sdk
-
-    from rig.errors import RigConnectionError
-
-    bus = None
-    if port is None:
-        from rig.sim.dynamixel import start_servo_bus
-
-        bus = start_servo_bus(ids, "XM430-W350")
-        port = bus.port
-        echo(f"  simulated XM430-W350 chain {ids} on {port}")
-    try:
-        ph = sdk.PortHandler(port)
-        if not ph.openPort():
-            raise RigConnectionError(f"{port}: cannot open the Dynamixel port")
-        try:
-            if not ph.setBaudRate(1_000_000):
-                raise RigConnectionError(f"{port}: cannot set 1 Mbit/s")
-            pk = sdk.PacketHandler(2.0)
-            found = {}
-            for i in ids:
-                model, res, _ = pk.ping(ph, i)
-                found[i] = model if res == sdk.COMM_SUCCESS else None
-            echo("  ping: " + ", ".join(
-                f"ID {i} → model {m}" if m is not None else f"ID {i} → no answer"
-                for i, m in found.items()))
-            alive = [i for i, m in found.items() if m is not None]
-            reader = sdk.GroupSyncRead(ph, pk, 132, 4)  # Present Position
-            for i in alive:
-                reader.addParam(i)
-            n, t0 = 50, time.perf_counter()
-            ok = 0
-            for _ in range(n):
-                ok += reader.txRxPacket() == sdk.COMM_SUCCESS
-            rate = n / (time.perf_counter() - t0)
-            pos = {i: reader.getData(i, 132, 4) for i in alive}
-            echo(f"  {ok}/{n} sync reads of Present Position OK ({rate:.0f} Hz); "
-                 f"positions {pos} ticks")
-            return {"found": found, "sync_read_hz": rate, "positions": pos}
-        finally:
-            ph.closePort()
-    finally:
-        if bus is not None:
-            bus.close()
+def _servo_check(chain, echo) -> dict:
+    found = {i: info.model_number for i, info in chain.servos.items()}
+    echo("  ping: " + ", ".join(f"ID {i} -> {info.model} (firmware {info.firmware})"
+                                for i, info in chain.servos.items()))
+    n, t0 = 50, time.perf_counter()
+    for _ in range(n):
+        ticks = chain.read_ticks()  # raises after its retries: a silent bus is not a success
+    rate = n / (time.perf_counter() - t0)
+    pos = dict(zip(chain.ids, ticks.tolist(), strict=True))
+    echo(f"  {n} {'fast ' if chain.fast else ''}sync reads of Present Position ({rate:.0f} Hz);"
+         f" positions {pos} ticks; retries {chain.retried}")
+    return {"found": found, "sync_read_hz": rate, "positions": pos}
 
 
-def _imu_check(port: str | None, seed: int, echo) -> dict:
+def _imu_check(imu, echo) -> dict:
+    import numpy as np
+
     from firmware_protocol.imu import bno055 as B
-    from rig.devices.bno055 import Bno055
 
-    sim = None
-    if port is None:
-        from rig.sim.imu import Bno055Simulator
-
-        sim = Bno055Simulator(seed=seed)
-        port = sim.port
-        echo(f"  simulated BNO055 on {port}")
-    try:
-        with Bno055(port) as imu:
-            chip = imu.chip_id()
-            imu.set_mode(B.OperationMode.NDOF)
-            n, t0 = 100, time.perf_counter()
-            qs = np.array([imu.quaternion() for _ in range(n)])
-            rate = n / (time.perf_counter() - t0)
-            cal = imu.calibration()
-        echo(f"  chip id 0x{chip:02X}; {n} quaternion reads at {rate:.0f} Hz; last "
-             f"(w, x, y, z) = {np.round(qs[-1], 4).tolist()}; calibration sys/gyr/acc/mag = "
-             f"{cal.system}/{cal.gyroscope}/{cal.accelerometer}/{cal.magnetometer}")
-        return {"chip_id": chip, "read_hz": rate, "last": qs[-1].tolist()}
-    finally:
-        if sim is not None:
-            sim.close()
+    chip = imu.chip_id()
+    imu.set_mode(B.OperationMode.NDOF)
+    n, t0 = 100, time.perf_counter()
+    qs = np.array([imu.quaternion() for _ in range(n)])
+    rate = n / (time.perf_counter() - t0)
+    cal = imu.calibration()
+    echo(f"  chip id 0x{chip:02X}; {n} quaternion reads at {rate:.0f} Hz; last "
+         f"(w, x, y, z) = {np.round(qs[-1], 4).tolist()}; calibration sys/gyr/acc/mag = "
+         f"{cal.system}/{cal.gyroscope}/{cal.accelerometer}/{cal.magnetometer}")
+    return {"chip_id": chip, "read_hz": rate, "last": qs[-1].tolist()}

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.devices.ports import Port, _closing, parse_sim_url
+from rig.devices.ports import Port, _closing
 from rig.errors import RigConfigError, UnreachableError
 
 _DXL_OWN_KEYS = frozenset({"patient", "chain", "speed", "excursion"})
@@ -144,56 +144,22 @@ def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
 
 
 def open_sim_bno055(url: str, *, baud: int | None = None) -> Port:
-    from rig.sim.imu import Bno055Simulator
-    from rig.sim.limb import SimulatedLimb
+    """``sim://bno055?...``: :func:`rig.sim.imu.bno055_from_url` (keys documented there)."""
+    from rig.sim.imu import bno055_from_url
 
-    one = parse_sim_url(url, {"patient", "seed", "rate", "sensor", "noise", "speed"})
-    seed = _num(one, "seed", 0, int, url)
-    if "patient" in one:
-        limb = load_patient(one["patient"], sensors=2, seed=seed,
-                            noise=one.get("noise", "default"),
-                            speed=_num(one, "speed", 1.0, float, url), url=url)
-    else:
-        from rig.sim.limb import NoiseModel
-
-        limb = SimulatedLimb(sensors=2, seed=seed,
-                             noise=NoiseModel.ideal() if one.get("noise") == "ideal" else None)
-    try:
-        sim = Bno055Simulator(limb, sensor=_num(one, "sensor", None, int, url),
-                              rate_hz=_num(one, "rate", 100.0, float, url))
-    except ValueError as err:
-        raise RigConfigError(f"port {url!r}: {err}") from err
-    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-bno055", patient=limb,
+    sim = bno055_from_url(url)
+    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-bno055", patient=sim.limb,
                 patient_t0=time.monotonic())
     port._closers.append(_closing(sim))
     return port
 
 
 def open_sim_imu_stream(url: str, *, baud: int | None = None) -> Port:
-    from rig.sim.imu import StreamImuSimulator
-    from rig.sim.limb import NoiseModel, SimulatedLimb
+    """``sim://imu-stream?...``: :func:`rig.sim.imu.stream_from_url` (keys documented there)."""
+    from rig.sim.imu import stream_from_url
 
-    one = parse_sim_url(url, {"sensors", "rate", "patient", "seed", "noise", "speed",
-                              "max_rate", "min_rate"})
-    seed = _num(one, "seed", 0, int, url)
-    sensors = _num(one, "sensors", 2, int, url)
-    if not 1 <= sensors <= 16:
-        raise RigConfigError(f"port {url!r}: sensors must be 1..16, got {sensors}")
-    if "patient" in one:
-        limb = load_patient(one["patient"], sensors=sensors, seed=seed,
-                            noise=one.get("noise", "default"),
-                            speed=_num(one, "speed", 1.0, float, url), url=url)
-    else:
-        limb = SimulatedLimb(sensors=sensors, seed=seed,
-                             noise=NoiseModel.ideal() if one.get("noise") == "ideal" else None)
-    rate = _num(one, "rate", 100, int, url)
-    try:
-        sim = StreamImuSimulator(limb, rate_hz=rate,
-                                 min_rate_hz=_num(one, "min_rate", min(10, rate), int, url),
-                                 max_rate_hz=_num(one, "max_rate", max(1000, rate), int, url))
-    except ValueError as err:
-        raise RigConfigError(f"port {url!r}: {err}") from err
-    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-imu-stream", patient=limb,
+    sim = stream_from_url(url)
+    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-imu-stream", patient=sim.limb,
                 patient_t0=time.monotonic())
     port._closers.append(_closing(sim))
     return port

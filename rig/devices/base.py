@@ -3,7 +3,8 @@
 :class:`Device` owns the life cycle and the error policy; subclasses implement hooks:
 
 * ``_open()`` — open :attr:`Device.path` and check the device is there (called by
-  ``__init__``; on failure the port, and a simulator behind it, are closed again);
+  ``__init__``; on failure ``_close()`` runs and the port, and a simulator behind it, are
+  closed again);
 * ``_close()`` — release the device (called once by :meth:`Device.close`, idempotent);
 * transactions go through :meth:`Device.transact`, which gives each attempt a monotonic
   deadline, retries :class:`~rig.errors.RigTimeoutError` and :class:`~rig.errors.RigProtocolError`
@@ -70,7 +71,12 @@ class Device:
             self._open()
         except BaseException:
             self._closed = True
-            self._release_port()
+            try:
+                self._close()  # whatever _open got as far as opening
+            except Exception:
+                pass
+            finally:
+                self._release_port()
             raise
 
     # -- template hooks -------------------------------------------------------------------

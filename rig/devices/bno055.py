@@ -90,6 +90,8 @@ class Bno055(Device):
             self._decoder = B.ResponseDecoder()
             ser.write(request)
             resp = self._receive(deadline)
+        except RigError:  # RigTimeoutError is an OSError too: not a connection failure
+            raise
         except _CONNECTION_ERRORS as err:
             raise RigConnectionError(f"the BNO055 port failed ({err})",
                                      port=str(self.port)) from err

@@ -133,7 +133,9 @@ def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPo
 
 def _default_latency(port: Port) -> float:
     if port.is_simulated:
-        return float(SDK_LATENCY_MS)  # a pty has no USB latency; keep the SDK's margin
+        # a pty has no USB latency, but a simulator thread on a loaded machine can be late:
+        # a generous margin (timeouts ~0.1 s) only costs time when a reply is really lost
+        return 50.0
     timer = usb_latency_timer_ms(port.path)
     return float(max(timer, 1)) if timer is not None else float(SDK_LATENCY_MS)
 
@@ -170,7 +172,7 @@ class DynamixelChain(Device):
         Extra attempts after a timeout / garbled reply.
     latency_ms : float, optional
         Latency in the SDK's packet-timeout formula; default: the adapter's USB latency timer
-        (≥ 1 ms) on hardware, the SDK's 16 ms on a simulator's pty.
+        (≥ 1 ms) on hardware, 50 ms on a simulator's pty (a loaded machine).
     fast : bool, optional
         Force FAST SYNC READ on/off; default: when every servo's firmware supports it.
 
@@ -251,15 +253,19 @@ class DynamixelChain(Device):
     def _check_servos(self) -> None:
         url = str(self.port)
         found: dict[int, ServoInfo] = {}
-        for dxl_id in self.ids:
-            got = None
-            for _ in range(2):
+        # a silent bus gets two passes; once anyone answers, a missing ID gets three tries
+        for attempt in range(3):
+            if attempt == 2 and not found:
+                break
+            for dxl_id in self.ids:
+                if dxl_id in found:
+                    continue
                 got = self._guard(lambda i=dxl_id: _ping(self._sdk_port, self._ph, i))
                 if got is not None:
-                    break
-            if got is not None:
-                model, fw, _err = got
-                found[dxl_id] = ServoInfo(dxl_id, model, _model_name(model), fw, self.baud)
+                    model, fw, _err = got
+                    found[dxl_id] = ServoInfo(dxl_id, model, _model_name(model), fw, self.baud)
+            if len(found) == len(self.ids):
+                break
         if not found:
             raise RigConnectionError(
                 f"no servo answered at {self.baud} bit/s (wrong baud rate or port? try "
@@ -614,7 +620,7 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
     """PING every ID at every baud rate: what answers.
 
     Per-ID pings with the SDK's timeout formula at ``latency_ms`` (default: the adapter's
-    detected latency timer, 16 ms on a simulator) rather than ``broadcastPing``, which always
+    detected latency timer, 50 ms on a simulator) rather than ``broadcastPing``, which always
     waits ~0.8 s (4.4 s at 9600 bit/s) whatever answers.
 
     Parameters

@@ -18,11 +18,11 @@ Port strings
     ``chain=<rig config name | file>`` (default ``sim-shoulder``), so a recording of the
     servo limb sees a patient's motion; ``speed`` scales that motion's frequencies,
     ``excursion`` its reach.
-``sim://bno055?patient=original&seed=0&rate=100&sensor=1&noise=default|ideal``
-    A simulated BNO055 on its UART (:class:`rig.sim.imu.Bno055Simulator`).
-``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&noise=default|ideal&max_rate=1000``
+``sim://bno055?patient=original&seed=0&rate=100&sensor=1&noise=on|off``
+    A simulated BNO055 on its UART (:func:`rig.sim.imu.bno055_from_url` lists the keys).
+``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&flow=off``
     A simulated multi-IMU board speaking the rig stream protocol
-    (:class:`rig.sim.imu.StreamImuSimulator`). Sensor 0 is on the thorax, 1.. on the upper arm.
+    (:func:`rig.sim.imu.stream_from_url`). Sensor 0 is on the thorax, 1.. on the upper arm.
 
 Unknown query keys are errors naming the key. A simulator is started by :func:`open_port` and
 stopped by :meth:`Port.close`.

@@ -29,3 +29,29 @@ def test_demo_rejects_bad_ids_in_one_line(capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith("rig: error: --dxl-ids") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(("args", "match"), [
+    (["--dxl-port", "/dev/ttyUSB9"], "/dev/ttyUSB9: no such port"),
+    (["--dxl-port", "/dev/null"], "not a serial port"),
+    (["--dxl-ids", "1,1"], "duplicate ID 1"),
+    (["--dxl-ids", "1,2,3,4"], "1 to 3 joints"),
+    (["--dxl-port", "sim://dynamixel?ids=1,2,3&baud=57600"], "no servo answered at 1000000"),
+    (["--dxl-port", "sim://dynamixel?ids=1,2"], "servo ID 3 did not answer"),
+    (["--imu-port", "/dev/ttyUSB8"], "/dev/ttyUSB8: no such port"),
+])
+def test_demo_checks_devices_before_any_long_work(tmp_path, args, match, capsys):
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as info:
+        main(["demo", "--quick", "--out", str(out), *args])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rig: error: ") and err.count("\n") == 1 and match in err
+    assert not out.exists()  # nothing was trained or written
+
+
+def test_demo_takes_the_bus_baud_rate(tmp_path):
+    lines: list[str] = []
+    report = run_demo(tmp_path, quick=True, dxl_port="sim://dynamixel?ids=1,2&baud=57600",
+                      dxl_ids=[1, 2], dxl_baud=57600, echo=lines.append)
+    assert sorted(report["servos"]["found"]) == [1, 2]

@@ -1,0 +1,81 @@
+"""``rig scan PORT [--baud B]``: which Dynamixel servos answer on a bus, at which baud rate.
+
+Per-ID PINGs through ``dynamixel_sdk`` (:func:`rig.devices.dynamixel.scan`); every X-series
+rate the SDK can set when no ``--baud`` is given, fastest first. The model name comes from the
+SDK's control-table files. Nothing answering is an error (exit 2), with the rates tried.
+"""
+
+from __future__ import annotations
+
+import click
+
+
+def parse_id_ranges(text: str) -> list[int]:
+    """``"1-3,7"`` -> ``[1, 2, 3, 7]`` (IDs 0..252)."""
+    from rig.errors import RigConfigError
+
+    ids: list[int] = []
+    try:
+        for part in text.split(","):
+            part = part.strip()
+            if not part:
+                continue
+            if "-" in part:
+                lo, hi = (int(x) for x in part.split("-", 1))
+                ids.extend(range(lo, hi + 1))
+            else:
+                ids.append(int(part))
+    except ValueError as err:
+        raise RigConfigError(f"--ids {text!r}: expected IDs or ranges like 1-3,7") from err
+    if not ids or any(not 0 <= i <= 252 for i in ids):
+        raise RigConfigError(f"--ids {text!r}: IDs must be 0..252")
+    return sorted(set(ids))
+
+
+@click.command()
+@click.argument("port")
+@click.option("--baud", type=int, default=None,
+              help="Only this baud rate (default: every X-series rate, fastest first).")
+@click.option("--ids", "ids_text", default="0-252", show_default=True,
+              help="IDs to ping, e.g. 1-3,7.")
+@click.option("--latency-ms", type=float, default=None,
+              help="Latency in the SDK's timeout formula (default: the adapter's USB latency "
+                   "timer; 50 ms on a simulator).")
+def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None) -> None:
+    """List the servos answering on PORT (/dev/ttyUSB0, COM3 or sim://dynamixel?...)."""
+    run_scan(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms)
+
+
+def run_scan(port: str, *, baud: int | None = None, ids=range(253), latency_ms=None,
+             echo=click.echo) -> list:
+    """What ``rig scan`` does; returns the :class:`~rig.devices.dynamixel.ServoInfo` found."""
+    from rig.devices.dynamixel import SCAN_BAUDS
+    from rig.devices.dynamixel import scan as scan_bus
+    from rig.devices.latency import latency_advice
+    from rig.devices.ports import open_port
+    from rig.errors import RigConfigError, RigConnectionError
+
+    if baud is not None and baud not in SCAN_BAUDS:
+        raise RigConfigError(f"--baud {baud}: not an X-series rate dynamixel_sdk can set "
+                             f"({', '.join(map(str, SCAN_BAUDS))})")
+    bauds = [baud] if baud is not None else sorted(SCAN_BAUDS, reverse=True)
+    with open_port(port, baud=bauds[0]) as p:
+        if not p.is_simulated:
+            tip = latency_advice(p.path)
+            if tip:
+                echo(f"rig: note: {tip}", err=True)
+        header = False
+
+        def show(info) -> None:
+            nonlocal header
+            if not header:
+                echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}")
+                header = True
+            echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}")
+
+        found = scan_bus(p, bauds, ids, latency_ms=latency_ms, on_found=show)
+    if not found:
+        raise RigConnectionError(f"no servo answered (IDs {ids[0]}..{ids[-1]} at "
+                                 f"{', '.join(map(str, bauds))} bit/s); check power, wiring "
+                                 f"and the port", port=port)
+    return found

@@ -1,0 +1,43 @@
+"""``rig scan PORT [--baud B]``: what answers, at which rate; mistakes in one line, exit 2."""
+
+from __future__ import annotations
+
+import pytest
+
+from rig.cli import main
+
+
+def run(args, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    out = capsys.readouterr()
+    return info.value.code, out.out, out.err
+
+
+def test_scan_finds_servos_at_their_baud_rate(capsys):
+    code, out, err = run(["scan", "sim://dynamixel?ids=1,3&baud=57600&model=XL430-W250",
+                          "--ids", "0-3", "--latency-ms", "50"], capsys)
+    assert code == 0, err
+    rows = [line.split() for line in out.splitlines()[1:]]
+    assert rows == [["1", "XL430-W250", "48", "57600"], ["3", "XL430-W250", "48", "57600"]]
+
+
+def test_scan_one_baud(capsys):
+    code, out, _ = run(["scan", "sim://dynamixel?ids=2", "--baud", "1000000", "--ids", "1-2"],
+                       capsys)
+    assert code == 0 and out.splitlines()[1].split()[:2] == ["2", "XM430-W350"]
+
+
+@pytest.mark.parametrize(("args", "match"), [
+    (["scan", "/dev/ttyUSB9"], "/dev/ttyUSB9: no such port"),
+    (["scan", "/dev/null"], "not a serial port"),
+    (["scan", "sim://dynamixel?ids=5&baud=57600", "--baud", "1000000", "--ids", "4-5"],
+     "no servo answered"),
+    (["scan", "sim://dynamixel", "--baud", "12345"], "--baud 12345"),
+    (["scan", "sim://dynamixel", "--ids", "1-x"], "--ids"),
+    (["scan", "sim://dynamixel?idz=1"], "unknown key 'idz'"),
+])
+def test_scan_mistakes_are_one_line(args, match, capsys):
+    code, _, err = run(args, capsys)
+    assert code == 2
+    assert err.startswith("rig: error: ") and err.count("\n") == 1 and match in err

@@ -1,0 +1,83 @@
+"""Rig configuration files: shipped configs load; every level rejects unknown keys by name."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from rig.devices.config import load_rig_config, loads_rig_config, rig_config_names
+from rig.errors import RigConfigError
+
+
+def test_shipped_configs_load():
+    assert {"sim-shoulder", "sim-imu", "hardware-template"} <= set(rig_config_names())
+    shoulder = load_rig_config("sim-shoulder")
+    assert shoulder.servos.ids == (1, 2, 3) and shoulder.sensors is None
+    assert shoulder.load_constraint().name == "original"
+    assert shoulder.servos.kinematics().n == 3
+    imu = load_rig_config("sim-imu")
+    assert imu.sensors.segments == {"thorax": 0, "humerus": 1} and imu.sensors.rate_hz == 200
+    hw = load_rig_config("hardware-template")
+    assert hw.servos.port.startswith("/dev/") and hw.sensors.protocol == "stream"
+
+
+def base() -> dict:
+    return yaml.safe_load("""
+name: t
+joint: {name: shoulder, side: right, parent: thorax, child: humerus}
+sensors:
+  port: "sim://imu-stream?sensors=2"
+  segments: {thorax: 0, humerus: 1}
+servos:
+  port: "sim://dynamixel?ids=1,2"
+  chain:
+    - {id: 1, axis: [0, 0, 1]}
+    - {id: 2, axis: [0, 1, 0]}
+""")
+
+
+def parse(d):
+    return loads_rig_config(yaml.safe_dump(d), "t.yaml")
+
+
+def test_minimal_config_gets_defaults():
+    cfg = parse(base())
+    assert cfg.servos.baud == 1_000_000 and cfg.servos.watchdog_ms == 100
+    assert cfg.servos.chain[0].zero_ticks == 2048 and cfg.sensors.protocol == "stream"
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda d: d.update(servo={}), "top level: unknown key 'servo'"),
+    (lambda d: d["joint"].update(sid="left"), "joint: unknown key 'sid'"),
+    (lambda d: d["sensors"].update(rate=100), "sensors: unknown key 'rate'"),
+    (lambda d: d["servos"].update(watchdog=1), "servos: unknown key 'watchdog'"),
+    (lambda d: d["servos"]["chain"][1].update(zero=0), r"servos.chain\[1\]: unknown key 'zero'"),
+    (lambda d: d["servos"]["chain"][1].update(id=1), "duplicate ID 1"),
+    (lambda d: d["servos"]["chain"][1].update(axis=[0, 0, 3]), "parallel"),
+    (lambda d: d["servos"].update(baud=12345), "not an X-series rate"),
+    (lambda d: d["servos"].update(return_delay_us=3), "even"),
+    (lambda d: d["joint"].update(side="up"), "joint.side"),
+    (lambda d: d["sensors"].update(segments={"thorax": 0}), "no sensor for segment 'humerus'"),
+    (lambda d: d["sensors"].update(segments={"thorax": 0, "humerus": 0}), "share"),
+    (lambda d: d.pop("joint"), "missing required key 'joint'"),
+    (lambda d: (d.pop("sensors"), d.pop("servos")), "needs 'sensors' or 'servos'"),
+    (lambda d: d.update(constraint="nowhere.yaml"), "constraint"),
+    (lambda d: d["servos"]["chain"][0].update(id=True), "whole number"),
+])
+def test_invalid_configs_name_the_field(edit, match):
+    d = base()
+    edit(d)
+    with pytest.raises(RigConfigError, match=match) as info:
+        parse(d)
+    assert str(info.value).startswith("t.yaml: ")
+
+
+def test_unknown_name_lists_the_shipped_configs(tmp_path):
+    with pytest.raises(RigConfigError, match=r"shipped: .*sim-imu"):
+        load_rig_config("sim-elbow")
+    with pytest.raises(RigConfigError, match="no such rig config file"):
+        load_rig_config(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: [unclosed\n")
+    with pytest.raises(RigConfigError, match="not valid YAML"):
+        load_rig_config(bad)

@@ -1,0 +1,108 @@
+"""Forward / closed-form inverse kinematics of 1-3 joint servo chains."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from models import quaternion as Q
+from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.errors import RigConfigError, UnreachableError
+
+ZYX = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]
+
+
+def chain(axes, lo=-8192, hi=8192, **kw):
+    return ChainKinematics([ServoJoint(i + 1, a, min_ticks=lo, max_ticks=hi)
+                            for i, a in enumerate(axes)], **kw)
+
+
+def angle_deg(p, q):
+    return float(np.degrees(Q.angle(Q.multiply(p, Q.conjugate(q)))))
+
+
+def test_forward_is_the_product_of_axis_angle_rotations():
+    kin = chain(ZYX)
+    ticks = np.array([2048 + 512, 2048 - 256, 2048 + 1024])  # +45°, -22.5°, +90°
+    expected = Q.multiply(Q.multiply(Q.from_axis_angle(np.array([0.0, 0, 1]), math.pi / 4),
+                                     Q.from_axis_angle(np.array([0.0, 1, 0]), -math.pi / 8)),
+                          Q.from_axis_angle(np.array([1.0, 0, 0]), math.pi / 2))
+    assert angle_deg(kin.forward(ticks), expected) < 1e-9
+    assert kin.forward([2048, 2048, 2048]) == pytest.approx([1, 0, 0, 0])
+    batch = kin.forward_batch(np.array([ticks, [2048, 2048, 2048]]))
+    assert np.allclose(batch[0], kin.forward(ticks))
+
+
+def test_direction_and_zero_offset():
+    kin = ChainKinematics([ServoJoint(7, (0, 0, 1), zero_ticks=1000, direction=-1,
+                                      min_ticks=0, max_ticks=4095)])
+    q = kin.forward([1000 + 1024])  # -90° about Z
+    assert angle_deg(q, Q.from_axis_angle(np.array([0.0, 0, 1]), -math.pi / 2)) < 1e-9
+
+
+@pytest.mark.parametrize("axes", [ZYX, [(0, 0, 1), (0.3, 1, 0.2), (1, 0.1, 0)],
+                                  [(0, 1, 0), (1, 0, 0), (0, 1, 0)]])
+def test_inverse_inverts_forward_and_picks_the_solution_near_the_present(axes):
+    kin = chain(axes)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        ticks = rng.uniform(0, 4095, 3)
+        q = kin.forward(ticks)
+        near = ticks + rng.normal(0, 30, 3)
+        sol = kin.inverse_float(q, near)
+        assert angle_deg(kin.forward(sol), q) < 1e-6
+        # no farther from the present position than the solution we started from
+        assert np.sum((sol - near) ** 2) <= np.sum((ticks - near) ** 2) + 1e-6
+        assert np.abs(kin.inverse_float(q, ticks) - ticks).max() < 1e-6
+
+
+def test_inverse_branch_follows_near_ticks_by_whole_turns():
+    kin = chain(ZYX)
+    q = kin.forward([2048, 2048, 2048 + 100])
+    assert kin.inverse(q, [2048, 2048, 2048 + 4096])[2] == 2048 + 100 + 4096
+
+
+def test_gimbal_lock_keeps_the_first_joint_where_it_is():
+    kin = chain(ZYX)
+    # elevation -90°: limb along +Z, first and third axes aligned
+    q = kin.forward([2048 + 300, 2048 - 1024, 2048 + 100])
+    sol = kin.inverse_float(q, [2048 + 250, 2048 - 1000, 2048])
+    assert angle_deg(kin.forward(sol), q) < 1e-6
+    assert sol[0] == pytest.approx(2048 + 250)
+
+
+def test_out_of_tick_range_is_unreachable_never_clipped():
+    kin = chain(ZYX, lo=1024, hi=3072)
+    q = kin.forward([2048, 2048, 2048 + 1500])  # axial rotation beyond the +90° stop
+    with pytest.raises(UnreachableError, match="ID 3"):
+        kin.inverse(q, [2048, 2048, 2048])
+
+
+def test_two_joint_chain_reaches_only_its_surface():
+    kin = chain([(0, 0, 1), (0, 1, 0)])
+    q = kin.forward([2300, 1900])
+    assert kin.inverse(q, [2048, 2048]).tolist() == [2300, 1900]
+    twisted = Q.multiply(q, Q.from_axis_angle(np.array([1.0, 0, 0]), math.radians(10)))
+    with pytest.raises(UnreachableError, match="from the nearest orientation"):
+        kin.inverse(twisted, [2048, 2048])
+
+
+def test_non_unit_target_is_refused():
+    with pytest.raises(UnreachableError, match="unit quaternion"):
+        chain(ZYX).inverse([0, 0, 0, 0], [2048] * 3)
+    with pytest.raises(UnreachableError):
+        chain(ZYX).inverse([math.nan, 0, 0, 1], [2048] * 3)
+
+
+@pytest.mark.parametrize(("joints", "match"), [
+    ([ServoJoint(1, (0, 0, 1)), ServoJoint(1, (0, 1, 0))], "duplicate ID 1"),
+    ([ServoJoint(1, (0, 0, 1)), ServoJoint(2, (0, 0, 2))], "parallel"),
+    ([ServoJoint(1, (0, 0, 0))], "non-zero"),
+    ([], "1 to 3"),
+    ([ServoJoint(i, (0, 0, 1) if i % 2 else (0, 1, 0)) for i in range(4)], "1 to 3"),
+])
+def test_bad_chains(joints, match):
+    with pytest.raises(RigConfigError, match=match):
+        ChainKinematics(joints)
