@@ -23,8 +23,18 @@ Vec = tuple[float, float, float]
 
 IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
 
-__all__ = ["IDENTITY", "angle", "angle_between", "conj", "exp_vec", "log_vec", "mul",
-           "normalize", "norm", "relative"]
+__all__ = [
+    "IDENTITY",
+    "angle",
+    "angle_between",
+    "conj",
+    "exp_vec",
+    "log_vec",
+    "mul",
+    "norm",
+    "normalize",
+    "relative",
+]
 
 
 def mul(p: Quat, q: Quat) -> Quat:

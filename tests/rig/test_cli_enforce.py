@@ -173,7 +173,7 @@ def test_sigint_leaves_the_servos_held(files, tmp_path):
                 assert line, proc.stderr.read()
             time.sleep(0.5)  # let it move (any amount of motion will do)
             proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=60)
+            _, err = proc.communicate(timeout=60)
         finally:
             if proc.poll() is None:
                 proc.kill()

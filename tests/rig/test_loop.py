@@ -149,7 +149,7 @@ def test_limb_starting_outside_is_brought_back(models):
             bus.set_hand(i, float(t))
 
     src = ScriptedTargets("adversarial", oracle, seed=1, segment_s=0.1)
-    summary, table, _, _ = _run(constraint, model, src, cycles=600, before=place)
+    _, table, _, _ = _run(constraint, model, src, cycles=600, before=place)
     d = np.degrees(_distance(oracle, _col(table, "commanded")))
     assert d[0] > 25.0
     back = np.flatnonzero(d <= 1.0)
@@ -199,9 +199,9 @@ def test_unplugged_adapter_reaches_the_safe_state_within_two_cycles(models):
         if k == 100:
             bus_ref["bus"].unplug(adapter=True)
 
-    summary, table, _, loop = _run(constraint, model, ScriptedTargets("slow", oracle),
-                                   cycles=200, on_cycle=on_cycle,
-                                   before=lambda b: bus_ref.setdefault("bus", b))
+    summary, table, _, _ = _run(constraint, model, ScriptedTargets("slow", oracle),
+                                cycles=200, on_cycle=on_cycle,
+                                before=lambda b: bus_ref.setdefault("bus", b))
     assert summary["safe_state_entries"] == 1
     assert 100 <= summary["safe_state_cycle"] <= 102
     assert "adapter" in summary["safe_state_reason"]
@@ -266,8 +266,8 @@ def test_stop_request_leaves_the_limb_held(models):
         if k == 120:
             loop.request_stop("SIGTERM")
 
-    summary, table, state, loop = _run(constraint, model, ScriptedTargets("sweep", oracle),
-                                       cycles=200, on_cycle=on_cycle)
+    summary, _, state, loop = _run(constraint, model, ScriptedTargets("sweep", oracle),
+                                   cycles=200, on_cycle=on_cycle)
     assert summary["safe_state_cycle"] == 120 and loop.stop_reason == "SIGTERM"
     assert "SIGTERM" in summary["safe_state_reason"]
     for torque, goal, pos in state.values():

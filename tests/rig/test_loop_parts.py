@@ -110,7 +110,7 @@ def test_open_targets_forms_and_errors(tmp_path):
         open_targets("script:dance", oracle=oracle)
     with pytest.raises(RigConfigError, match="unknown key 'speed'"):
         open_targets("script:slow?speed=2", oracle=oracle)
-    with pytest.raises(RigConfigError, match="expected PATH.csv"):
+    with pytest.raises(RigConfigError, match=r"expected PATH\.csv"):
         open_targets("nowhere", oracle=oracle)
     with pytest.raises(FileNotFoundError):
         open_targets(str(tmp_path / "missing.csv"), oracle=oracle)
