@@ -40,7 +40,13 @@ from typing import Any
 import numpy as np
 from sqlalchemy import create_engine, event, func, select, text
 from sqlalchemy.engine import Connection, Engine, make_url
-from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError, OperationalError
+from sqlalchemy.exc import (
+    ArgumentError,
+    DatabaseError,
+    IntegrityError,
+    NoSuchModuleError,
+    OperationalError,
+)
 from sqlalchemy.pool import StaticPool
 
 from rig.errors import RigConfigError, RigConnectionError
@@ -264,9 +270,14 @@ class Store:
                     conn.execution_options(rig_write=True)
                 with conn.begin():
                     yield conn
+        except IntegrityError:
+            raise  # the callers turn these into messages about the duplicate
         except OperationalError as err:
             detail = " ".join(str(err.orig).split())  # one line: psycopg adds hints
             raise RigConnectionError(f"database {self.url}: {detail}") from err
+        except DatabaseError as err:  # e.g. "file is not a database"
+            detail = " ".join(str(err.orig).split())
+            raise RigConfigError(f"--db {self.url}: {detail}") from err
 
     def _migrate(self, target: int | None = None) -> None:
         target = S.SCHEMA_VERSION if target is None else target

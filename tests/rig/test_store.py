@@ -316,6 +316,10 @@ def test_sqlite_paths_and_urls(tmp_path):
         open_store(tmp_path / "no-dir" / "x.db")
     with pytest.raises(RigConfigError, match="unsupported scheme 'mysql'"):
         open_store("mysql://u@h/db")
+    junk = tmp_path / "notes.txt"
+    junk.write_text("not a database\n" * 100)
+    with pytest.raises(RigConfigError, match="file is not a database"):
+        open_store(junk, create=False)
     with open_store(f"sqlite:///{tmp_path}/u.db") as s:
         s.add_patient("P-9")
     with open_store(tmp_path / "u.db", create=False) as s:
