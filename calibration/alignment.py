@@ -333,9 +333,11 @@ class ImuJointCalibration:
 
     @classmethod
     def from_dict(cls, data: dict) -> ImuJointCalibration:
-        """Rebuild a fitted calibration from :meth:`to_dict` output."""
+        """Rebuild a fitted calibration from :meth:`to_dict` output (plus the recorder's
+        ``protocol`` and ``windows_s`` entries, which are ignored); other keys are errors."""
         known = {"kind", "thorax_mount", "limb_mount", "heading_offset_deg", "residuals_deg",
-                 "residual_deg"}
+                 "residual_deg",
+                 "protocol", "windows_s"}  # what the recorder adds: the protocol it ran
         unknown = set(data) - known
         if unknown:
             raise CalibrationError(f"calibration record: unknown key(s) {sorted(unknown)}")

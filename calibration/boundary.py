@@ -133,6 +133,27 @@ def _wrap(x):
     return (np.asarray(x) + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _pileup_offset(depth: np.ndarray, band: float, bin_width: float, prominence: float) -> float:
+    """Depth of the pile-up of samples just inside an envelope (0 when there is none).
+
+    ``depth`` (≥ 0) is each sample's distance inward from the envelope. A limit the patient
+    dwells on leaves a ridge of samples, blurred by measurement noise; the envelope sits on the
+    ridge's outer tail, the ridge's crest on the limit. Returns the crest's depth: the mode of a
+    histogram of ``depth`` over ``[0, band]`` (bins of ``bin_width``, smoothed over 3 bins),
+    provided it stands ``prominence`` times above the median bin of the band; else 0.
+    """
+    d = depth[(depth >= 0) & (depth <= band)]
+    if len(d) < 50:
+        return 0.0
+    edges = np.arange(0.0, band + bin_width, bin_width)
+    h, _ = np.histogram(d, edges)
+    hs = np.convolve(h, np.ones(3) / 3.0, mode="same")
+    k = int(np.argmax(hs))
+    if k == 0 or hs[k] < prominence * max(float(np.median(hs)), 1.0):
+        return 0.0
+    return float(0.5 * (edges[k] + edges[k + 1]))
+
+
 def _weighted_percentiles(x: np.ndarray, w: np.ndarray, pct: tuple[float, float]):
     order = np.argsort(x)
     xs, ws = x[order], w[order]
@@ -212,6 +233,8 @@ class BoundaryExtractor:
         sparse_deg: float = 3.0,
         sparse_min_samples: int = 10,
         min_system_status: int = 2,
+        noise_correction: bool = True,
+        pileup_band_deg: float = 10.0,
         limb_axis=(1.0, 0.0, 0.0),
         name: str = "recorded",
     ) -> None:
@@ -244,6 +267,8 @@ class BoundaryExtractor:
         self.sparse_deg = float(sparse_deg)
         self.sparse_min_samples = int(sparse_min_samples)
         self.min_system_status = int(min_system_status)
+        self.noise_correction = bool(noise_correction)
+        self.pileup_band_deg = float(pileup_band_deg)
         self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
         self.name = name
 
@@ -259,6 +284,8 @@ class BoundaryExtractor:
             "by_swing_bandwidth_deg": self.by_swing_bandwidth_deg,
             "sparse_deg": self.sparse_deg, "sparse_min_samples": self.sparse_min_samples,
             "min_system_status": self.min_system_status,
+            "noise_correction": self.noise_correction,
+            "pileup_band_deg": self.pileup_band_deg,
         }
 
     # -- fit -------------------------------------------------------------------------------
@@ -316,6 +343,7 @@ class BoundaryExtractor:
         p, d, phi = p[inlier], d[inlier], phi[inlier]
         self.n_used_ = len(p)
         poly = self._alpha_region(p)
+        poly = self._noise_inset(poly, p)
         verts2d = self._simplify(poly)
         self._finish(verts2d, poly, p, d, phi, c, u, v, provenance)
         return self
@@ -344,7 +372,7 @@ class BoundaryExtractor:
         from scipy import ndimage
 
         ij, shape, _ = self._grid(p)
-        pad = int(math.ceil(self.trim_radius_deg / self.cell_deg))
+        pad = math.ceil(self.trim_radius_deg / self.cell_deg)
         hist = np.zeros((shape[0] + 2 * pad, shape[1] + 2 * pad))
         np.add.at(hist, (ij[:, 0] + pad, ij[:, 1] + pad), 1.0)
         k = np.arange(-pad, pad + 1) * self.cell_deg
@@ -357,7 +385,7 @@ class BoundaryExtractor:
     def _cell_means(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ij, shape, _ = self._grid(p)
         flat = ij[:, 0] * shape[1] + ij[:, 1]
-        uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        _uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
         sx = np.bincount(inv, weights=p[:, 0])
         sy = np.bincount(inv, weights=p[:, 1])
         return np.column_stack((sx / counts, sy / counts)), counts
@@ -408,6 +436,27 @@ class BoundaryExtractor:
         self.coverage_ = float(held)
         return region
 
+    def _noise_inset(self, poly, p: np.ndarray):
+        """Move the envelope in to the crest of the boundary pile-up (step 4b)."""
+        import shapely
+
+        self.inset_deg_ = 0.0
+        if not self.noise_correction:
+            return poly
+        ring = poly.exterior
+        inside = shapely.contains_xy(poly, p[:, 0], p[:, 1])
+        depth = np.where(inside, shapely.distance(ring, shapely.points(p)), 0.0)
+        inset = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
+        if inset <= 0.0:
+            return poly
+        shrunk = poly.buffer(-inset, join_style="round")
+        parts = list(getattr(shrunk, "geoms", [shrunk]))
+        if not parts or shrunk.is_empty:
+            return poly
+        best = max(parts, key=lambda g: g.area)
+        self.inset_deg_ = inset
+        return shapely.Polygon(best.exterior)
+
     def _simplify(self, poly) -> np.ndarray:
         tol = self.simplify_deg
         for _ in range(40):
@@ -441,6 +490,17 @@ class BoundaryExtractor:
         mid = _circular_centre(phi)
         rel = _wrap(phi - mid)
         lo, hi = np.percentile(rel, [lo_p, hi_p])
+        self.twist_inset_deg_ = (0.0, 0.0)
+        if self.noise_correction:
+            # the same pile-up correction at each end of the twist range (degrees)
+            e_lo, e_hi = np.percentile(rel, [0.1, 99.9])
+            a = _pileup_offset(np.degrees(rel - e_lo), self.pileup_band_deg, 0.25, 2.0)
+            b = _pileup_offset(np.degrees(e_hi - rel), self.pileup_band_deg, 0.25, 2.0)
+            if a > 0:
+                lo = e_lo + math.radians(a)
+            if b > 0:
+                hi = e_hi - math.radians(b)
+            self.twist_inset_deg_ = (a, b)
         tw_lo = math.degrees(float(np.clip(lo + mid, -math.pi, math.pi)))
         tw_hi = math.degrees(float(np.clip(hi + mid, -math.pi, math.pi)))
         if tw_lo > tw_hi:  # the range crosses ±180°: keep the larger side, say so
@@ -466,6 +526,8 @@ class BoundaryExtractor:
             "dropped_status": int(self.n_status_dropped_),
             "trimmed_outliers": int(self.n_trimmed_),
             "alpha_used_deg": round(self.alpha_used_deg_, 3),
+            "noise_inset_deg": round(self.inset_deg_, 3),
+            "twist_noise_inset_deg": [round(x, 3) for x in self.twist_inset_deg_],
             "coverage": round(self.coverage_, 5),
             "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
         })
@@ -536,7 +598,7 @@ class BoundaryExtractor:
         start = int(np.argmin(sparse))
         order = (np.arange(n) + start) % n
         run: list[int] = []
-        for k in list(order) + [order[0]]:
+        for k in [*list(order), order[0]]:
             if sparse[k]:
                 run.append(int(k))
             elif run:
@@ -582,7 +644,7 @@ def boundary_points(vertices, step_deg: float = 0.25) -> tuple[np.ndarray, np.nd
     out, lens = [], []
     for a, b in zip(v, w, strict=True):
         ang = float(Q.angle_between(a, b))
-        n = max(1, int(math.ceil(math.degrees(ang) / step_deg)))
+        n = max(1, math.ceil(math.degrees(ang) / step_deg))
         t = (np.arange(n) + 0.5) / n
         s = math.sin(ang)
         pts = (np.sin((1 - t) * ang)[:, None] * a + np.sin(t * ang)[:, None] * b) / s
@@ -608,7 +670,7 @@ def _boundary_vertices(swing, step_deg):
     # a cone: a circle of points
     c = np.asarray(swing.centre, dtype=float)
     u, v = _tangent_basis(c)
-    n = max(8, int(math.ceil(360.0 * math.sin(swing.radius) / step_deg)))
+    n = max(8, math.ceil(360.0 * math.sin(swing.radius) / step_deg))
     a = 2 * math.pi * (np.arange(n) + 0.5) / n
     r = swing.radius
     pts = math.cos(r) * c + math.sin(r) * (np.cos(a)[:, None] * u + np.sin(a)[:, None] * v)

@@ -51,6 +51,16 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "export",
         "Export a session's orientations as OpenSim .sto or CSV.",
     ),
+    "boundary": (
+        "rig.commands.boundary",
+        "boundary",
+        "Extract a patient-specific constraint file from a recording (session or .sto/.csv).",
+    ),
+    "rom": (
+        "rig.commands.rom",
+        "rom",
+        "Print the clinical range of motion of a session, a file or a constraint.",
+    ),
 }
 
 

@@ -33,7 +33,8 @@ def star_patient(seed: int, *, vertices: int = 40, max_tilt_deg: float = 20.0) -
     rng = np.random.default_rng(seed)
     tilt = math.radians(rng.uniform(0.0, max_tilt_deg))
     az = rng.uniform(0, 2 * math.pi)
-    centre = np.array([math.cos(tilt), math.sin(tilt) * math.cos(az), math.sin(tilt) * math.sin(az)])
+    centre = np.array([math.cos(tilt), math.sin(tilt) * math.cos(az),
+                       math.sin(tilt) * math.sin(az)])
     phi = np.linspace(0.0, 2 * math.pi, vertices, endpoint=False)
     base = rng.uniform(35.0, 60.0)
     r = np.full(vertices, base)
@@ -121,7 +122,7 @@ def make_limb(constraint: JointConstraint, seed: int, *, noise: NoiseModel | Non
 
 def record_imu(limb: ScriptedLimb, duration_s: float, rate_hz: float = 100.0) -> Recording:
     """Sample ``limb.measure`` at ``rate_hz`` for the protocol plus ``duration_s`` seconds."""
-    n = int(round((limb.start_s + limb.protocol.duration_s + duration_s) * rate_hz))
+    n = round((limb.start_s + limb.protocol.duration_s + duration_s) * rate_hz)
     t = np.arange(n) / rate_hz
     thorax = np.empty((n, 4))
     arm = np.empty((n, 4))
@@ -139,7 +140,7 @@ def record_servo(limb: ScriptedLimb, duration_s: float, rate_hz: float = 100.0,
                  seed: int = 0) -> Recording:
     """A back-driven servo limb: the joint read through 3 encoders of 4096 ticks per turn
     (Z-Y-X chain), i.e. the truth quantised to 0.088° per joint; no drift, no mounts."""
-    n = int(round((limb.start_s + limb.protocol.duration_s + duration_s) * rate_hz))
+    n = round((limb.start_s + limb.protocol.duration_s + duration_s) * rate_hz)
     t = np.arange(n) / rate_hz
     truth = limb.joint(t)
     from scipy.spatial.transform import Rotation

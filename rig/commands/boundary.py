@@ -1,0 +1,270 @@
+"""``rig boundary``: a patient-specific constraint file from a recording.
+
+Input is a recorded session (``--db DB --session ID``) or an imported orientation file
+(``FILE.sto`` / ``FILE.csv`` with ``--reference COLUMN --limb COLUMN``: joint orientation =
+reference⁻¹ ⊗ limb; with ``--limb`` alone the column already holds joint orientations). The
+extraction is :class:`calibration.boundary.BoundaryExtractor`; the constraint file records its
+provenance (session or file, parameters, sample counts, sparse arcs).
+
+:func:`load_joint_orientations` is shared with ``rig rom``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from rig.errors import RigConfigError
+
+
+@dataclass
+class JointData:
+    """Joint orientations from a session or file, and where they came from."""
+
+    q: np.ndarray  # (N, 4) limb relative to reference
+    status: np.ndarray | None  # (N,) IMU calibration bytes, or None
+    limb_axis: np.ndarray  # (3,)
+    side: str | None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    patient: str | None = None
+    joint: str | None = None
+
+
+def _parse_axis(text: str | None) -> np.ndarray:
+    if text is None:
+        return np.array([1.0, 0.0, 0.0])
+    try:
+        v = np.array([float(c) for c in text.split(",")])
+    except ValueError as err:
+        raise RigConfigError(f"--limb-axis: expected x,y,z numbers, got {text!r}") from err
+    if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) < 1e-9:
+        raise RigConfigError(f"--limb-axis: expected a non-zero x,y,z vector, got {text!r}")
+    return v / np.linalg.norm(v)
+
+
+def check_source(file: str | None, db: str | None, session_id: int | None,
+                 reference: str | None, limb: str | None) -> None:
+    """Option combinations, checked before any work (one-line errors)."""
+    if file is not None and (db is not None or session_id is not None):
+        raise RigConfigError("give either FILE or --db/--session, not both")
+    if file is None and (db is None or session_id is None):
+        raise RigConfigError("give a recording: FILE.sto|FILE.csv, or --db DB --session ID")
+    if file is not None:
+        if limb is None:
+            raise RigConfigError(f"{file}: --limb COLUMN is required with a file")
+        if not Path(file).is_file():
+            raise RigConfigError(f"{file}: no such file")
+    elif reference is not None or limb is not None:
+        raise RigConfigError("--reference/--limb apply to files; a session knows its segments")
+
+
+def load_joint_orientations(file: str | None = None, *, db: str | None = None,
+                            session_id: int | None = None, reference: str | None = None,
+                            limb: str | None = None, limb_axis: str | None = None) -> JointData:
+    """Joint orientations of a session or an orientation file (see module doc)."""
+    check_source(file, db, session_id, reference, limb)
+    axis = _parse_axis(limb_axis)
+    if file is not None:
+        return _from_file(file, reference, limb, axis)
+    return _from_session(db, session_id, axis)
+
+
+def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) -> JointData:
+    from calibration.alignment import joint_orientation
+    from rig.store.io import read_orientations
+
+    table = read_orientations(file)
+    if len(table) < 1:
+        raise RigConfigError(f"{file}: no samples")
+    child = table.get(limb)
+    if reference is not None:
+        q = joint_orientation(table.get(reference), child)
+    else:
+        q = np.asarray(child, dtype=np.float64)
+    prov = {"file": str(Path(file).name), "limb": limb}
+    if reference is not None:
+        prov["reference"] = reference
+    side = table.meta.get("rig_side")
+    return JointData(q, None, axis, side if side in ("left", "right") else None, prov,
+                     table.meta.get("rig_patient"), table.meta.get("rig_joint"))
+
+
+def _from_session(db: str, session_id: int, axis: np.ndarray) -> JointData:
+    from calibration.alignment import ImuJointCalibration
+    from calibration.errors import CalibrationError
+    from rig.store import open_store
+
+    with open_store(db, create=False) as store:
+        sess = store.get_session(session_id)
+        s = store.samples(session_id)
+        sensors = store.sensors(session_id)
+        cals = store.calibrations(session_id)
+    if s["t"].size == 0:
+        raise RigConfigError(f"session {session_id} has no samples")
+    prov: dict[str, Any] = {"session": int(session_id)}
+    is_joint = s["kind"] == "joint"
+    if is_joint.any():
+        q = s["q"][is_joint]
+        status = None
+        prov["source"] = "joint samples"
+    else:
+        cal = next((c for c in reversed(cals) if c["kind"] == "imu-alignment"), None)
+        if cal is None:
+            raise RigConfigError(
+                f"session {session_id} has IMU samples but no imu-alignment calibration"
+            )
+        try:
+            model = ImuJointCalibration.from_dict(cal["data"])
+        except CalibrationError as err:
+            raise RigConfigError(f"session {session_id}: {err}") from err
+        parent, child = _segments(sess, sensors, s, session_id)
+        tp, qp, sp = (a[s["name"] == parent] for a in (s["t"], s["q"], s["status"]))
+        tc, qc, sc = (a[s["name"] == child] for a in (s["t"], s["q"], s["status"]))
+        _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
+        if len(ip) < 0.5 * min(len(tp), len(tc)):
+            # different clocks: nearest-in-time pairing through the store's aligner
+            from rig.store.io import align_series
+
+            table, _ = align_series({parent: (tp, qp), child: (tc, qc)})
+            qpar, qchi, status = table.columns[parent], table.columns[child], None
+        else:
+            qpar, qchi = qp[ip], qc[ic]
+            status = np.minimum(sp[ip], sc[ic])
+        q = model.transform(qpar, qchi)
+        prov.update({"source": "imu samples", "calibration_id": int(cal["id"]),
+                     "calibration_residual_deg": cal.get("residual_deg")})
+    side = sess.get("side")
+    return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
+                     sess.get("pseudonym"), sess.get("joint"))
+
+
+def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tuple[str, str]:
+    names = list(dict.fromkeys(s["name"].tolist()))
+    meta = sess.get("meta") or {}
+    parent, child = meta.get("parent"), meta.get("child")
+    if parent in names and child in names:
+        return parent, child
+    by_segment = {r.get("segment"): r.get("name") for r in sensors}
+    parent = by_segment.get("thorax")
+    others = [n for n in names if n != parent]
+    if parent in names and len(others) == 1:
+        return parent, others[0]
+    raise RigConfigError(
+        f"session {session_id}: cannot tell the thorax and limb sensors apart "
+        f"(samples from {', '.join(names)})"
+    )
+
+
+@click.command()
+@click.argument("file", required=False, type=click.Path(dir_okay=False))
+@click.option("--db", default=None, help="Store: a file path, sqlite:///PATH or postgresql://...")
+@click.option("--session", "session_id", default=None, type=click.IntRange(min=1),
+              help="Session id (see rig session list).")
+@click.option("--reference", default=None, help="FILE column of the reference segment (thorax).")
+@click.option("--limb", default=None, help="FILE column of the limb segment (joint orientations "
+              "when --reference is not given).")
+@click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
+              "(default 1,0,0).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
+              help="Constraint file to write (YAML).")
+@click.option("--name", default=None, help="Constraint name (default from the source).")
+@click.option("--side", type=click.Choice(["left", "right"]), default=None,
+              help="Arm side recorded in the constraint (default: the session's).")
+@click.option("--alpha-deg", default=4.0, show_default=True, type=click.FloatRange(min=0.5),
+              help="Alpha-shape radius: concavities narrower than ~2x this are bridged.")
+@click.option("--max-vertices", default=64, show_default=True, type=click.IntRange(min=3),
+              help="Vertex budget of the boundary polygon.")
+@click.option("--by-swing", type=click.Choice(["auto", "on", "off"]), default="auto",
+              show_default=True, help="Swing-dependent twist limits.")
+@click.option("--store/--no-store", "store_result", default=True, show_default=True,
+              help="With --db: also store the boundary in the session database.")
+def boundary(file, db, session_id, reference, limb, limb_axis, out, name, side, alpha_deg,
+             max_vertices, by_swing, store_result) -> None:
+    """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
+
+    FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
+    """
+    check_source(file, db, session_id, reference, limb)
+    _parse_axis(limb_axis)
+    out_path = Path(out)
+    if not out_path.parent.is_dir():
+        raise RigConfigError(f"--out {out}: directory {out_path.parent} does not exist")
+    data = load_joint_orientations(file, db=db, session_id=session_id, reference=reference,
+                                   limb=limb, limb_axis=limb_axis)
+    result = extract(data, name=name, side=side, alpha_deg=alpha_deg,
+                     max_vertices=max_vertices, by_swing=by_swing)
+    from models.constraint import dump_constraint
+
+    dump_constraint(result.constraint_, out_path)
+    if db is not None and store_result:
+        from rig.store import open_store
+
+        with open_store(db, create=False) as st:
+            st.add_boundary(session_id, result.constraint_.to_yaml(),
+                            {"path": str(out_path), **result.report()})
+    click.echo(describe(result, out_path))
+
+
+def extract(data: JointData, *, name: str | None = None, side: str | None = None,
+            alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto"):
+    """Run the extractor on loaded joint orientations (user errors become RigConfigError)."""
+    from calibration.boundary import BoundaryExtractor
+    from calibration.errors import CalibrationError
+
+    bs = {"auto": "auto", "on": True, "off": False}[by_swing]
+    label = name or _default_name(data)
+    ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
+                           limb_axis=data.limb_axis, name=label)
+    prov = dict(data.provenance)
+    try:
+        ex.fit(data.q, status=data.status, provenance=prov)
+    except CalibrationError as err:
+        raise RigConfigError(f"boundary extraction: {err}") from err
+    side = side or data.side
+    binding = {"side": side, "joint": data.joint, "patient": data.patient}
+    binding = {k: v for k, v in binding.items() if v}
+    if binding:
+        from models.constraint import JointConstraint
+
+        d = ex.constraint_.to_dict()
+        d.update(binding)
+        try:
+            ex.constraint_ = JointConstraint.from_dict(d)
+        except ValueError:  # a loader without the binding fields: keep them in provenance
+            d = ex.constraint_.to_dict()
+            d.setdefault("provenance", {}).update(binding)
+            ex.constraint_ = JointConstraint.from_dict(d)
+    return ex
+
+
+def _default_name(data: JointData) -> str:
+    if "session" in data.provenance:
+        return f"session-{data.provenance['session']}"
+    return Path(str(data.provenance.get("file", "recording"))).stem
+
+
+def describe(ex, out_path: Path | None = None) -> str:
+    r = ex.report()
+    lines = []
+    if out_path is not None:
+        lines.append(f"wrote {out_path}")
+    lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
+                 f"{r['dropped_status']} dropped for IMU status, "
+                 f"{r['trimmed_outliers']} outliers trimmed)")
+    lines.append(f"  swing       polygon, {r['vertices']} vertices, alpha "
+                 f"{r['alpha_used_deg']:.1f} deg, {100 * r['coverage']:.2f} % of samples inside")
+    tw = r["twist_deg"]
+    extra = f", {r['by_swing_points']} swing regions" if r["by_swing_points"] else ""
+    lines.append(f"  twist       {tw[0]:.1f} .. {tw[1]:.1f} deg{extra}")
+    if r["sparse_arcs"]:
+        lines.append(f"  sparse      {len(r['sparse_arcs'])} boundary arcs "
+                     f"({r['sparse_length_deg']:.0f} deg) with fewer than "
+                     f"{ex.sparse_min_samples} samples within {ex.sparse_deg:g} deg: "
+                     "the boundary there is interpolated; record more there")
+    else:
+        lines.append("  sparse      none: every part of the boundary has samples nearby")
+    return "\n".join(lines)

@@ -1,0 +1,61 @@
+"""``rig rom``: the clinical range-of-motion table of a session, a file or a constraint.
+
+Peaks (flexion, extension, abduction, adduction, horizontal adduction, internal and external
+rotation) come from the patient's boundary (:func:`calibration.clinical.range_of_motion`):
+extracted from the recording as ``rig boundary`` does, or read from ``--constraint``. They are
+printed next to the AAOS values and the Gill et al. 2020 population reference.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from rig.errors import RigConfigError
+
+
+@click.command()
+@click.argument("file", required=False, type=click.Path(dir_okay=False))
+@click.option("--db", default=None, help="Store: a file path, sqlite:///PATH or postgresql://...")
+@click.option("--session", "session_id", default=None, type=click.IntRange(min=1),
+              help="Session id (see rig session list).")
+@click.option("--reference", default=None, help="FILE column of the thorax.")
+@click.option("--limb", default=None, help="FILE column of the upper arm (joint orientations "
+              "when --reference is not given).")
+@click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z.")
+@click.option("--constraint", "constraint_path", default=None,
+              type=click.Path(dir_okay=False), help="Use this constraint file instead of a "
+              "recording.")
+@click.option("--side", type=click.Choice(["left", "right"]), default=None,
+              help="Arm side (default: the session's or the constraint's, else right).")
+@click.option("--age", type=click.IntRange(min=18, max=110), default=None,
+              help="Patient age, for the population reference band.")
+@click.option("--sex", type=click.Choice(["female", "male"]), default=None,
+              help="Patient sex, for the population reference.")
+def rom(file, db, session_id, reference, limb, limb_axis, constraint_path, side, age,
+        sex) -> None:
+    """Print the clinical range of motion (ISB angles, peaks, normative values)."""
+    from calibration.clinical import format_rom_table, range_of_motion
+
+    if constraint_path is not None:
+        if file is not None or db is not None or session_id is not None:
+            raise RigConfigError("give either --constraint or a recording, not both")
+        if not Path(constraint_path).is_file():
+            raise RigConfigError(f"{constraint_path}: no such file")
+        from models.constraint import load_constraint
+
+        constraint = load_constraint(constraint_path)
+        side = side or getattr(constraint, "side", None) or "right"
+        source = constraint_path
+    else:
+        from rig.commands.boundary import check_source, extract, load_joint_orientations
+
+        check_source(file, db, session_id, reference, limb)
+        data = load_joint_orientations(file, db=db, session_id=session_id, reference=reference,
+                                       limb=limb, limb_axis=limb_axis)
+        side = side or data.side or "right"
+        constraint = extract(data, side=side).constraint_
+        source = file if file is not None else f"session {session_id}"
+    table = format_rom_table(range_of_motion(constraint, side), age=age, sex=sex)
+    click.echo(f"{source}\n{table}")
