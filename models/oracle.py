@@ -44,6 +44,9 @@ Determinism at discontinuities (thesis's "correctional" and "concave-region" dis
 - Polygon, several boundary points exactly equidistant: the edge with the lowest index wins
   (edge ``i`` joins vertices ``i`` and ``i+1``).
 - Twist exactly half-way round from the allowed interval: clamped to ``max``.
+- Limb within ~2e-6 rad of ``−a`` (:data:`TWIST_SINGULARITY`): the twist is undefined and not
+  limited (no rotation about ``a`` could change it); such an orientation lies on the closure
+  of the valid set whenever its direction is allowed.
 - A point within :data:`BOUNDARY_TOLERANCE` outside counts as valid (its correction is identity).
 - ``q`` and ``−q`` give the same validity, distance and correction; ``project`` keeps the sign
   of its input.
@@ -68,6 +71,7 @@ from models.geometry import SphericalPolygon, boundary_distance, polygon_area
 
 __all__ = [
     "BOUNDARY_TOLERANCE",
+    "TWIST_SINGULARITY",
     "ConstraintOracle",
     "OracleResult",
     "polygon_area_sr",
@@ -76,6 +80,12 @@ __all__ = [
 
 #: Orientations at most this far (radians) outside the boundary count as valid.
 BOUNDARY_TOLERANCE = 1e-9
+
+#: Where the twist part of ``q`` (``(w, (v·a) a)``) is shorter than this, the limb points within
+#: about 2e-6 rad of ``−a`` (the swing-twist singularity): the twist is undefined there, no
+#: rotation about ``a`` changes it, and the twist limit is not applied.
+TWIST_SINGULARITY = 1e-6
+_SING2 = TWIST_SINGULARITY**2
 
 
 @dataclass(frozen=True)
@@ -157,7 +167,10 @@ class ConstraintOracle:
         valid = self._swing_dist(d) <= BOUNDARY_TOLERANCE
         if self._twist is not None:
             lo, hi = self._limits(d)
-            valid &= _twist_inside(Q.twist_angle(q2, self.axis), lo, hi, self._wraps)
+            ok = _twist_inside(Q.twist_angle(q2, self.axis), lo, hi, self._wraps)
+            if not ok.all():
+                ok |= _singular(q2, self.axis)
+            valid &= ok
         return valid[0] if single else valid
 
     def project(self, q, *, normalize: bool = False) -> np.ndarray:
@@ -239,7 +252,11 @@ class ConstraintOracle:
                 lo, hi = self._twist
             phi_p = _twist1(proj, ax) if swing_out else phi
             t = BOUNDARY_TOLERANCE
-            if not (lo - t <= phi_p <= hi + t or (self._wraps and _across_seam1(phi_p, lo, hi))):
+            if not (
+                lo - t <= phi_p <= hi + t
+                or (self._wraps and _across_seam1(phi_p, lo, hi))
+                or _singular1(proj, ax)
+            ):
                 d_lo = abs(_wrap1(phi_p - lo))
                 d_hi = abs(_wrap1(phi_p - hi))
                 half = 0.5 * _wrap1((lo if d_lo < d_hi else hi) - phi_p)
@@ -247,8 +264,8 @@ class ConstraintOracle:
                 proj = _mul1(proj, (math.cos(half), ax[0] * sh, ax[1] * sh, ax[2] * sh))
             if lo - t <= phi <= hi + t:
                 margin = min(margin, phi - lo, hi - phi)
-            elif self._wraps and _across_seam1(phi, lo, hi):
-                margin = min(margin, 0.0)  # within the tolerance of a limit, across the seam
+            elif (self._wraps and _across_seam1(phi, lo, hi)) or _singular1(qt, ax):
+                margin = min(margin, 0.0)  # at a limit across the seam, or twist undefined
             else:
                 invalid = True
         if invalid:
@@ -310,6 +327,8 @@ class ConstraintOracle:
             phi_p = Q.twist_angle(projected, self.axis) if any_out else phi
             bad_tw = ~_twist_inside(phi_p, lo, hi, self._wraps)
             if bad_tw.any():
+                bad_tw &= ~_singular(projected, self.axis)
+            if bad_tw.any():
                 f = phi_p[bad_tw]
                 lo_b, hi_b = lo[bad_tw], hi[bad_tw]
                 d_lo = np.abs(Q.wrap_angle(f - lo_b))
@@ -320,7 +339,13 @@ class ConstraintOracle:
             # the plain margin; across the seam a valid twist is within the tolerance of a
             # limit, and the distance clips the margin at 0 anyway
             margin = np.minimum(margin, np.minimum(phi - lo, hi - phi))
-            invalid = out | ~_twist_inside(phi, lo, hi, self._wraps)
+            tw_bad = ~_twist_inside(phi, lo, hi, self._wraps)
+            if tw_bad.any():
+                sing = _singular(q, self.axis)
+                if sing.any():
+                    tw_bad &= ~sing
+                    margin = np.where(sing, np.minimum(margin, 0.0), margin)
+            invalid = out | tw_bad
         else:
             invalid = out
         corr = np.tile(Q.IDENTITY, (n, 1))
@@ -358,6 +383,17 @@ def _twist_inside(phi, lo, hi, wraps: bool = True):
     if wraps:
         inside |= (phi - _TWO_PI >= lo - t) | (phi + _TWO_PI <= hi + t)
     return inside
+
+
+def _singular(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N,) bool: the twist of ``q`` is undefined (limb within ~2e-6 rad of ``−axis``)."""
+    p = q[:, 1:] @ axis
+    return q[:, 0] * q[:, 0] + p * p < _SING2
+
+
+def _singular1(q, a) -> bool:
+    p = q[1] * a[0] + q[2] * a[1] + q[3] * a[2]
+    return q[0] * q[0] + p * p < _SING2
 
 
 def _across_seam1(phi: float, lo: float, hi: float) -> bool:

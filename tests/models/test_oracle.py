@@ -468,3 +468,26 @@ def test_normalisation_only_when_asked():
     q = np.array([2.0, 0, 0, 0])
     assert o.is_valid(q, normalize=True)
     np.testing.assert_allclose(o.project(q, normalize=True), [1, 0, 0, 0])
+
+
+@pytest.mark.parametrize("twist", [(-180.0, -170.0), (10.0, 20.0)])
+def test_twist_is_not_limited_where_it_is_undefined(twist):
+    """Limb exactly opposite its axis (q = half turn about z): no twist is defined and no
+    rotation about the axis changes that, so the twist limit does not apply there."""
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    twist_only = ConstraintOracle(
+        JointConstraint.from_dict({"twist": {"min_deg": twist[0], "max_deg": twist[1]}})
+    )
+    for qq in (q, q[None, :]):
+        assert np.all(twist_only.is_valid(qq))
+        np.testing.assert_array_equal(twist_only.project(qq), qq)
+        assert np.all(twist_only.signed_distance(qq) == 0.0)
+    # with a swing limit that excludes -X the swing is corrected and the twist then clamped
+    o = ConstraintOracle(JointConstraint.cone([1, 0, 0], 120, twist=twist))
+    one, many = o.project(q), o.project(q[None, :])[0]
+    np.testing.assert_allclose(one, many, atol=1e-12)
+    assert o.is_valid(one) and not o.is_valid(q)
+    limb = Q.rotate(one, Q.LIMB_AXIS)
+    assert math.degrees(Q.angle_between(limb, [1, 0, 0])) == pytest.approx(120, abs=1e-9)
+    tw = math.degrees(Q.twist_angle(one))
+    assert twist[0] - 1e-9 <= tw <= twist[1] + 1e-9 or (twist[0] == -180 and tw == 180)

@@ -25,6 +25,7 @@ def test_each_shape_is_a_valid_polygon_file_around_x(name):
     assert isinstance(c.swing, PolygonSwing)
     assert 20 <= len(c.swing.vertices) <= 60
     np.testing.assert_allclose(c.limb_axis, [1.0, 0.0, 0.0])
+    assert c.provenance["kind"] == "synthetic"  # where the outline came from, kept on load
     oracle = ConstraintOracle(c)
     assert oracle.swing_distance(np.array([1.0, 0.0, 0.0])) < 0.0  # +X is inside
     assert oracle.swing_distance(np.array([-1.0, 0.0, 0.0])) > 0.0
