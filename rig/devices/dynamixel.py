@@ -296,6 +296,8 @@ class DynamixelChain(Device):
         supported = all(s.firmware >= FAST_SYNC_READ_FIRMWARE for s in found.values())
         self.fast = supported if self._fast_wanted is None else bool(self._fast_wanted)
         self._id_param = list(self.ids)
+        self._lo = self.kinematics.min_ticks.tolist()
+        self._hi = self.kinematics.max_ticks.tolist()
         self._id_index = {i: k for k, i in enumerate(self.ids)}
 
     # -- helpers --------------------------------------------------------------------------
@@ -346,10 +348,8 @@ class DynamixelChain(Device):
 
     def _read_once(self, deadline: float) -> np.ndarray:
         data = self.sync_read(self._a_present, 4)
-        out = np.empty(len(self.ids), dtype=np.int64)
-        for k, dxl_id in enumerate(self.ids):
-            out[k] = int.from_bytes(data[dxl_id], "little", signed=True)
-        return out
+        return np.array([int.from_bytes(data[i], "little", signed=True) for i in self.ids],
+                        dtype=np.int64)
 
     def sync_read(self, address: int, length: int,
                   ids: Sequence[int] | None = None) -> dict[int, bytes]:
@@ -395,11 +395,10 @@ class DynamixelChain(Device):
         kin = self.kinematics
         if len(ticks) != kin.n:
             raise ValueError(f"expected {kin.n} goal ticks, got {len(ticks)}")
-        for k in range(kin.n):
-            t = int(ticks[k])
-            if not kin.min_ticks[k] <= t <= kin.max_ticks[k]:
+        for k, t in enumerate(ticks):
+            if not self._lo[k] <= t <= self._hi[k]:
                 raise UnreachableError("goal outside the joint's tick limits", port=str(self.port),
-                                       dxl_id=self.ids[k], actual=t,
+                                       dxl_id=self.ids[k], actual=int(t),
                                        expected=f"{kin.min_ticks[k]}..{kin.max_ticks[k]}")
 
     def write_goal_ticks(self, ticks: Sequence[int]) -> None:
@@ -413,6 +412,7 @@ class DynamixelChain(Device):
             The adapter is gone.
         """
         self._check_open()
+        ticks = [int(t) for t in ticks]
         self.check_goal(ticks)
         param: list[int] = []
         for dxl_id, t in zip(self.ids, ticks, strict=True):
