@@ -61,18 +61,24 @@ import click
               help="Goal angular velocity limit.")
 @click.option("--max-accel-deg-s2", type=float, default=1200.0, show_default=True,
               help="Goal angular acceleration limit.")
+@click.option("--stale-servo-ms", type=float, default=50.0, show_default=True,
+              help="Servo data older than this (reads failing) puts the limb in the safe state.")
+@click.option("--stale-target-ms", type=float, default=100.0, show_default=True,
+              help="A target older than this holds the last safe goal.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of scripted targets.")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def enforce(rig_name, model_path, targets, rate, duration, telemetry_path, summary_path, db,
             session_id, patient, constraint_path, force_model, safe_state, tolerance_deg,
-            max_velocity_deg_s, max_accel_deg_s2, seed, quiet) -> None:
+            max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, stale_target_ms, seed,
+            quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     code = run_enforce(
         rig=rig_name, model=model_path, targets=targets, rate_hz=rate, duration_s=duration,
         telemetry=telemetry_path, summary_json=summary_path, db=db, session_id=session_id,
         patient=patient, constraint=constraint_path, force_model=force_model,
         safe_state=safe_state, tolerance_deg=tolerance_deg,
-        max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2, seed=seed,
+        max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2,
+        stale_servo_ms=stale_servo_ms, stale_target_ms=stale_target_ms, seed=seed,
         echo=(lambda m: None) if quiet else click.echo, install_signals=True)
     if code:
         sys.exit(code)
@@ -95,7 +101,8 @@ def _check_out_path(option: str, value) -> Path | None:
 def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetry=None,
                 summary_json=None, db=None, session_id=None, patient=None, constraint=None,
                 force_model=False, safe_state="hold", tolerance_deg=1.0,
-                max_velocity_deg_s=120.0, max_accel_deg_s2=1200.0, seed=0,
+                max_velocity_deg_s=120.0, max_accel_deg_s2=1200.0, stale_servo_ms=50.0,
+                stale_target_ms=100.0, seed=0,
                 echo=click.echo, install_signals=False, on_cycle=None, clock=None,
                 ports=None, result=None) -> int:
     """What ``rig enforce`` does; returns the exit status (0, 1, 130, 143).
@@ -129,6 +136,8 @@ def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetr
     positive("--tolerance-deg", tolerance_deg)
     positive("--max-velocity-deg-s", max_velocity_deg_s)
     positive("--max-accel-deg-s2", max_accel_deg_s2)
+    positive("--stale-servo-ms", stale_servo_ms)
+    positive("--stale-target-ms", stale_target_ms)
     if rate_hz > 5000:
         raise RigConfigError(f"--rate {rate_hz}: at most 5000 Hz")
     if tolerance_deg <= 0.25:
@@ -144,7 +153,9 @@ def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetr
         rate_hz=float(rate_hz), duration_s=duration_s, safe_state=safe_state,
         supervisor=SupervisorConfig(tolerance_deg=float(tolerance_deg),
                                     max_velocity_deg_s=float(max_velocity_deg_s),
-                                    max_accel_deg_s2=float(max_accel_deg_s2)))
+                                    max_accel_deg_s2=float(max_accel_deg_s2),
+                                    stale_present_s=float(stale_servo_ms) / 1e3,
+                                    stale_target_s=float(stale_target_ms) / 1e3))
 
     # -- files: rig config, model, store, constraint ------------------------------------------
     rig_cfg = load_rig_config(rig)

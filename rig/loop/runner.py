@@ -469,18 +469,28 @@ def _open_chain(cls, port, servos, latency_ms, attempts: int = 3):
     raise AssertionError("unreachable")
 
 
+#: SDK latency (ms) of the loop's chain on a simulator: packet timeout 2 × 4 + 2 = 10 ms, so a
+#: lost reply costs two cycles at 200 Hz, not the ~100 ms the driver allows for opening.
+SIM_LOOP_LATENCY_MS = 4.0
+
+
 def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_deg: float = 5.0,
                   latency_ms: float | None = None, log=None):
     """Open a servo chain for the loop and write its start-up registers.
 
-    Opens :class:`rig.devices.dynamixel.DynamixelChain` on an opened ``port`` (the loop turns
-    the driver's own retries off while it runs: it retries within its cycle budget). With
-    ``backstop``,
-    the position limits of :func:`rig.loop.backstop.position_limits_from_boundary` (widened to
-    contain each joint's zero) replace the configured ones, in the kinematics and in the
-    servos' Min/Max Position Limit registers. :meth:`~DynamixelChain.configure` writes EEPROM
-    only with torque off: if a servo's torque is already on (a limb holding), the registers are
-    left as they are and a line is logged (the supervisor stays the primary limit).
+    1. Open :class:`rig.devices.dynamixel.DynamixelChain` on the opened ``port`` with the
+       driver's own (generous) timeouts; read torque and the start posture.
+    2. With ``backstop`` and torque off: the position limits of
+       :func:`rig.loop.backstop.position_limits_from_boundary` (widened to contain each joint's
+       zero) replace the configured ones; :meth:`~DynamixelChain.configure` writes them to the
+       servos' Min/Max Position Limit registers with the other start-up registers. EEPROM is
+       written only with torque off: if a servo's torque is already on (a limb holding), the
+       registers are left as they are and a line is logged (the supervisor stays the primary
+       limit).
+    3. Reopen for the loop with the loop's packet timeout: ``latency_ms``, else the rig
+       config's ``latency_ms``, else :data:`SIM_LOOP_LATENCY_MS` on a simulator and the
+       driver's default (the adapter's detected latency timer) on hardware. The loop turns the
+       driver's retries off while it runs (it retries within its cycle budget).
 
     Parameters
     ----------
@@ -502,7 +512,9 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
     log = log or (lambda msg: None)
     if latency_ms is None:
         latency_ms = servos.latency_ms
-    chain = _open_chain(DynamixelChain, port, servos, latency_ms)
+    if latency_ms is None and getattr(port, "is_simulated", False):
+        latency_ms = SIM_LOOP_LATENCY_MS
+    chain = _open_chain(DynamixelChain, port, servos, servos.latency_ms)
     limits = None
     try:
         torque_on = bool(np.asarray(chain.torque()).any())
@@ -521,11 +533,14 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
                            for j, a, b in zip(servos.chain, lo, hi, strict=True))
             servos = dataclasses.replace(servos, chain=joints)
             chain.close()
-            chain = _open_chain(DynamixelChain, port, servos, latency_ms)
+            chain = _open_chain(DynamixelChain, port, servos, servos.latency_ms)
             limits = (lo, hi)
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
         if not torque_on:
             chain.configure()
+        if latency_ms != servos.latency_ms:
+            chain.close()
+            chain = _open_chain(DynamixelChain, port, servos, latency_ms)
     except BaseException:
         chain.close()
         raise

@@ -46,8 +46,10 @@ def files(tmp_path_factory):
 
 
 def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="sim-shoulder"):
+    # runs in real time: a generous servo-data watchdog, so that a loaded test machine stalling
+    # the loop for 50 ms does not end a run in the safe state (tests/rig/test_loop.py checks it)
     return ["enforce", "--rig", rig, "--model", str(files / model), "--targets", targets,
-            *extra]
+            "--stale-servo-ms", "1000", *extra]
 
 
 @pytest.mark.parametrize(("case", "message"), [
@@ -193,7 +195,7 @@ def test_mirroring_an_imu_worn_limb(files, tmp_path, capsys):
     tel = tmp_path / "t.csv"
     code, out, err = _run(_argv(files, "--duration", "1.5", "--telemetry", str(tel),
                                 targets="mirror:sim-imu"), capsys)
-    assert code == 0, err
+    assert code == 0, (out, err)
     assert "mirror of sim-imu" in out
     with tel.open() as fh:
         rows = list(csv.DictReader(fh))
