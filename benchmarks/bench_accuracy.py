@@ -1,23 +1,20 @@
-"""Accuracy and inference cost of the presets, activations, and what the targets take.
+"""Accuracy of the models against issue 9's targets, beside the analytic peer; older sweeps.
 
-    python benchmarks/bench_accuracy.py [--only presets,activations,capacity] [--seeds 1]
-        [--quick]
+    python benchmarks/bench_accuracy.py [--only targets] [--n 10000] [--random 20]
+        [--methods field,peer[,best]]
+    python benchmarks/bench_accuracy.py --only presets,activations,capacity|sweep [--quick]
 
-Every model is trained by :func:`models.nn.train.train_correction`, exported to ONNX and
-*evaluated through onnxruntime* (the deployed artefact) on 3000 fresh held-out orientations of
-the training distribution (even) and on 3000 uniformly distributed limb directions. Latency is
-the median single-orientation ``CorrectionModel.correct_one`` call. Prints Markdown tables.
-Never asserts on time.
+``targets`` (the default): every held-out boundary of :mod:`models.evaluation` — the five thesis
+shapes with twist limits and ``--random`` seeded concave star polygons with twist ranges
+(irregular), cones of radius 5-150° about +X, +Y, +Z (regular) — gets a model per method, built
+by :func:`models.nn.train.train_correction`, exported to ONNX and **evaluated through
+onnxruntime**; the analytic peer (``bench_peer.VanDenBergenClamp``, numpy) is scored on the
+*same* orientations (:func:`models.evaluation.held_out_orientations`, ``--n`` per boundary).
+Prints one row per boundary and method, the mean per set, and the target table. Build times
+are wall-clock on a shared machine (contended); accuracy figures are not affected.
 
-- ``presets``: ``best``, ``fixed``, ``thesis`` (one repeat) on a regular boundary (45° cone
-  about +X) and an irregular one (the 'original' shape).
-- ``activations``: hidden activation under the ``best`` training regime (fixed topology, 20
-  nodes, 2000 epochs), same two constraints.
-- ``capacity``: what lower errors cost — 40 and 80 hidden nodes, 2000 patterns, 3000 epochs.
-- ``sweep``: ``best`` (or ``--preset``) over all regular boundaries of the thesis (radii 5, 20,
-  45, 90, 135, 150° about +X, +Y, +Z) and the five irregular shapes; prints per-constraint
-  rows and the means. ``--override '{"network": {"frame": "parent"}}'`` gives the parent-frame
-  input encoding (the ``best`` default before the centre frame).
+The other groups are the earlier preset studies (trained GMLPs on a 45° cone and 'original',
+thesis-style test patterns): ``presets``, ``activations``, ``capacity``, ``sweep``.
 """
 
 from __future__ import annotations
@@ -35,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_onnx import single_latencies_ns  # benchmarks/ is on the path when run as a script
+from bench_peer import VanDenBergenClamp
 
 from models import metrics as M
 from models.constraint import JointConstraint
@@ -136,15 +134,96 @@ def sweep(args) -> None:
               f"{np.mean([r['uniform']['mean_3d_error_pct'] for r in rs]):.3f} %")
 
 
+def _build(method: str, c, seed: int):
+    """(ONNX CorrectionModel or numpy predict, build seconds) of one method for ``c``."""
+    if method == "peer":
+        t0 = time.perf_counter()
+        m = VanDenBergenClamp(c)
+        return m.predict, time.perf_counter() - t0
+    t0 = time.perf_counter()
+    tm = train_correction(c, get_config(method), np.random.default_rng(seed))
+    dt = time.perf_counter() - t0
+    d = tempfile.mkdtemp()
+    p = export_onnx(tm.network, Path(d) / "m.onnx", constraint_yaml=c.to_yaml(),
+                    training_data_sha256=tm.data_sha256, metrics=tm.metrics)
+    return load_model(p, expected_constraint=c), dt
+
+
+TARGETS = {"irregular": {"mean_3d_error_pct": 0.8, "frac_invalid_violating_1deg": 0.01,
+                         "mean_identity_error_deg": 0.2, "p99_angular_error_deg": 5.0},
+           "regular": {"mean_3d_error_pct": 0.4, "frac_invalid_violating_1deg": 0.005}}
+
+
+def targets(args) -> None:
+    from models.evaluation import (
+        TARGET_METRICS,
+        evaluate_model,
+        held_out_orientations,
+        irregular_boundaries,
+        regular_boundaries,
+        summarise,
+    )
+
+    methods = args.methods.split(",")
+    sets = {"irregular": irregular_boundaries(args.random), "regular": regular_boundaries()}
+    sets = {k: v for k, v in sets.items() if k in args.sets.split(",")}
+    hdr = " | ".join(lab for _, lab in TARGET_METRICS)
+    print(f"| set | boundary | method | {hdr} | build s |")
+    print("|---|---|---|" + "---|" * (len(TARGET_METRICS) + 1))
+    res: dict[tuple[str, str], list] = {}
+    times: dict[tuple[str, str], list] = {}
+    for sname, cs in sets.items():
+        for i, (name, c) in enumerate(cs.items()):
+            oracle = _oracle(c)
+            q = held_out_orientations(c, args.n, 50_000 + i, oracle=oracle)
+            for meth in methods:
+                model, dt = _build(meth, c, i)
+                m = evaluate_model(model, c, q=q, oracle=oracle)
+                res.setdefault((sname, meth), []).append(m)
+                times.setdefault((sname, meth), []).append(dt)
+                vals = []
+                for k, _ in TARGET_METRICS:
+                    vals.append(f"{100 * m[k]:.2f} %" if k.startswith("frac") else f"{m[k]:.3f}")
+                print(f"| {sname} | {name} | {meth} | {' | '.join(vals)} | {dt:.2f} |",
+                      flush=True)
+    print("\n## Means over boundaries (same orientations for every method)\n")
+    print(f"| set | method | {hdr} | median build s | target met |")
+    print("|---|---|" + "---|" * (len(TARGET_METRICS) + 2))
+    for (sname, meth), rows in res.items():
+        s = summarise(rows)
+        ok = all(s[k] <= v for k, v in TARGETS[sname].items())
+        vals = [f"{100 * s[k]:.3f} %" if k.startswith("frac") else f"{s[k]:.3f}"
+                for k, _ in TARGET_METRICS]
+        print(f"| {sname} | {meth} | {' | '.join(vals)} | "
+              f"{statistics.median(times[(sname, meth)]):.2f} | {'yes' if ok else 'no'} |")
+    for sname in sets:
+        if (sname, "peer") in res:
+            peer = summarise(res[(sname, "peer")])["mean_3d_error_pct"]
+            for meth in methods:
+                if meth != "peer":
+                    ours = summarise(res[(sname, meth)])["mean_3d_error_pct"]
+                    ratio = peer / ours if ours > 0 else float("inf")
+                    print(f"{sname}: peer / {meth} mean 3-D error = {peer:.3f} / {ours:.3f} = "
+                          f"{ratio:.1f}×")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--only", default="presets,activations,capacity")
+    ap.add_argument("--only", default="targets")
+    ap.add_argument("--n", type=int, default=10_000, help="targets: orientations per boundary")
+    ap.add_argument("--random", type=int, default=20, help="targets: random star polygons")
+    ap.add_argument("--methods", default="field,peer",
+                    help="targets: presets of rig train and/or 'peer', comma-separated")
+    ap.add_argument("--sets", default="irregular,regular", help="targets: boundary sets")
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--preset", default="best")
     ap.add_argument("--override", default="{}", help="JSON override for the sweep's preset")
     args = ap.parse_args()
     groups = args.only.split(",")
+    if "targets" in groups:
+        targets(args)
+        return
     if "sweep" in groups:
         sweep(args)
         return

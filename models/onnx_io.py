@@ -227,7 +227,7 @@ def _field_graph(g: _Graph, model) -> None:
         sm, sr = g.op("MatMul", [smr, first]), g.op("MatMul", [smr, second])
         t = g.op("MatMul", [qp, g.const(tmap[0])])  # (w', a·v') of q'
         u = g.op("Add", [g.op("Mul", [t, cm]),
-                         g.op("Mul", [g.op("MatMul", [t, g.const(rot90.T)]), sm])])
+                         g.op("Mul", [g.op("MatMul", [t, g.const(rot90)]), sm])])
         u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
                                          g.const(1e-12)])])
         ab = g.op("Abs", [u])

@@ -154,3 +154,79 @@ def test_graph_is_valid_onnx_without_pickle():
     onnx.checker.check_model(model, full_check=True)
     props = {p.key: p.value for p in model.metadata_props}
     assert json.loads(props["jointlimits.metrics"]) == {"a": 1.0}
+
+
+# -- the field model's graph (models.field) ---------------------------------------------------
+def _field_case(constraint, tmp_path, grid=120):
+    from models.field import FieldModel
+
+    f = FieldModel.from_constraint(constraint, grid=grid)
+    p = export_onnx(f, tmp_path / "f.onnx", constraint_yaml=constraint.to_yaml(),
+                    training_data_sha256=f.content_hash(), metrics={"x": 1.0})
+    return f, load_model(p, expected_constraint=constraint)
+
+
+def _rotation_deg(a, b):
+    from models import quaternion as quat
+
+    return np.degrees(quat.angle(quat.multiply(a, quat.conjugate(b))))
+
+
+@pytest.mark.parametrize("twist", [None, (-45.0, 70.0)])
+@pytest.mark.parametrize("swing", ["polygon", "cone", "none"])
+def test_field_graph_matches_its_numpy_reference(tmp_path, swing, twist):
+    from models import quaternion as quat
+    from models.constraint import JointConstraint
+    from models.shapes import load_shape
+
+    if swing == "polygon":
+        s = load_shape("c-shape").swing
+        c = JointConstraint.polygon(s.vertices, s.interior, twist=twist)
+    elif swing == "cone":
+        c = JointConstraint.cone([0, 0, 1], 35, twist=twist)
+    elif twist is None:
+        pytest.skip("a constraint needs a swing or a twist limit")
+    else:
+        c = JointConstraint.from_dict({"name": "t", "twist": {"min_deg": twist[0],
+                                                              "max_deg": twist[1]}})
+    f, m = _field_case(c, tmp_path)
+    q = quat.random_quaternions(5000, np.random.default_rng(8))
+    got = m.correction(q).astype(np.float64)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-5)
+    err = _rotation_deg(got, f.predict(q))
+    # float32 may pick a neighbouring node for a handful of directions
+    assert np.mean(err > 1e-2) < 0.005 and err.max() < 3.0
+    np.testing.assert_allclose(m.correction(-q), got, atol=1e-5)  # sign-free
+    assert m.metadata["jointlimits.training_data_sha256"] == f.content_hash()
+    assert m.network_info["method"] == "field" and m.metrics == {"x": 1.0}
+    one = m.correct_one(*map(float, q[0]))
+    np.testing.assert_allclose(one, got[0], atol=1e-6)
+
+
+def test_field_graph_with_swing_dependent_twist_limits(tmp_path):
+    """A hand-built by_swing table (contract 3): graph = numpy reference = oracle's limits."""
+    from models import quaternion as quat
+    from models.constraint import JointConstraint
+    from models.oracle import ConstraintOracle
+
+    c = JointConstraint.from_dict({
+        "name": "bs", "swing": {"cone": {"centre": [1, 0, 0], "radius_deg": 70}},
+        "twist": {"min_deg": -80, "max_deg": 90, "by_swing": {"bandwidth_deg": 25, "points": [
+            {"direction": [1, 0, 0], "min_deg": -40, "max_deg": 60},
+            {"direction": [0, 1, 0], "min_deg": -80, "max_deg": 10},
+            {"direction": [0, 0, 1], "min_deg": 0, "max_deg": 90}]}}})
+    f, m = _field_case(c, tmp_path)
+    assert m.network_info["twist"] == "by_swing"
+    q = quat.random_quaternions(4000, np.random.default_rng(9))
+    got = m.correction(q).astype(np.float64)
+    err = _rotation_deg(got, f.predict(q))
+    assert np.mean(err > 1e-2) < 0.005
+    out = quat.multiply(got, q)
+    o = ConstraintOracle(c)
+    lo, hi = c.twist.limits_at(quat.limb_direction(out))
+    phi = quat.twist_angle(out)
+    tol = np.radians(0.05)
+    assert np.all((phi >= lo - tol) & (phi <= hi + tol))
+    # valid inputs well inside stay put
+    deep = o.is_valid(q) & (o.signed_distance(q) < -np.radians(5))
+    assert np.degrees(quat.angle(got[deep])).max() < 1e-3
