@@ -94,15 +94,25 @@ def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) ->
 
 
 def _from_session(db: str, session_id: int, axis: np.ndarray) -> JointData:
-    from calibration.alignment import ImuJointCalibration
-    from calibration.errors import CalibrationError
     from rig.store import open_store
 
     with open_store(db, create=False) as store:
-        sess = store.get_session(session_id)
-        s = store.samples(session_id)
-        sensors = store.sensors(session_id)
-        cals = store.calibrations(session_id)
+        return joint_orientations_from_store(store, session_id, axis)
+
+
+def joint_orientations_from_store(store, session_id: int,
+                                  axis: np.ndarray | None = None) -> JointData:
+    """Joint orientations of a session in an opened store (joint samples as recorded; IMU
+    samples through the session's ``imu-alignment`` calibration). Used by ``rig boundary``,
+    ``rig rom`` and the report (:mod:`rig.report.session`)."""
+    from calibration.alignment import ImuJointCalibration
+    from calibration.errors import CalibrationError
+
+    axis = _parse_axis(None) if axis is None else axis
+    sess = store.get_session(session_id)
+    s = store.samples(session_id)
+    sensors = store.sensors(session_id)
+    cals = store.calibrations(session_id)
     if s["t"].size == 0:
         raise RigConfigError(f"session {session_id} has no samples")
     prov: dict[str, Any] = {"session": int(session_id)}
