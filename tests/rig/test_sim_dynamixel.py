@@ -650,6 +650,9 @@ def test_random_instructions_never_break_the_simulator():
              0x00, 0x55, 0x7F, 0xFF]
     with start_servo_bus([1, 2, 3], return_delay_us=0) as bus, \
             serial.Serial(bus.port, 1_000_000, timeout=0, write_timeout=10) as ser:
+        # a writer stalled mid-packet on a loaded machine is not what this test is about:
+        # no half-received packet is abandoned
+        bus.packet_timeout = 60.0
         sent = 0
         for _ in range(3000):
             dxl_id = rng.choice((1, 2, 3, 0xFE, 7))
@@ -661,7 +664,7 @@ def test_random_instructions_never_break_the_simulator():
             sent += packet.instruction != 0x55  # 0x55 is a status: ignored
             ser.write(packet.encode())
             ser.reset_input_buffer()  # replies are not the point
-        assert bus.wait_for(lambda: bus.instructions_seen == sent, timeout=30)
+        assert bus.wait_for(lambda: bus.instructions_seen == sent, timeout=60)  # hang guard
         assert bus.server_error is None
         bus.restore_defaults()  # whatever state the storm left: IDs, baud rates, torque
         ser.reset_input_buffer()

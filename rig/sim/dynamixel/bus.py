@@ -69,6 +69,9 @@ class DynamixelBus(FaultInjection, PtyServer):
     instructions_seen, replies_sent, crc_errors : int
         Instruction packets decoded, status packets written, instruction packets ignored for a
         bad CRC.
+    packet_timeout : float
+        Real seconds without bytes after which a half-received packet is abandoned (default
+        :data:`PACKET_TIMEOUT`; a test that floods the bus from a loaded machine may raise it).
 
     Examples
     --------
@@ -94,6 +97,7 @@ class DynamixelBus(FaultInjection, PtyServer):
         self.replies_sent = 0
         self.instructions_seen = 0
         self.crc_errors = 0
+        self.packet_timeout = PACKET_TIMEOUT
         # the line starts at the servos' rate, as an adapter left configured for them
         super().__init__(clock=clock, line_speed=servos[0].baud_rate)
         self._start()
@@ -156,12 +160,12 @@ class DynamixelBus(FaultInjection, PtyServer):
     def _deadline(self) -> float | None:
         due = self._outbox[0][0] if self._outbox else None
         if self._decoder.pending:  # a partial frame: give up on it after a while
-            stale = self._last_rx + PACKET_TIMEOUT
+            stale = self._last_rx + self.packet_timeout
             due = stale if due is None else min(due, stale)
         return due
 
     def _on_timer(self, now: float) -> None:
-        if self._decoder.pending and now - self._last_rx >= PACKET_TIMEOUT:
+        if self._decoder.pending and now - self._last_rx >= self.packet_timeout:
             self._decoder.skip_frame()
             self._last_rx = now
             self._drain(now)
