@@ -112,6 +112,25 @@ def test_ideal_sensors_equal_truth_and_gyro_is_the_rate():
     np.testing.assert_allclose(m0.gyro, rate, atol=0.02)
 
 
+def test_measure_many_is_the_same_process_as_measure():
+    """Batched measurements: identical to one-by-one without errors; with errors, the same
+    statistics (draw order differs)."""
+    a, b = (SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=12) for _ in range(2))
+    ts = np.arange(60) / 100.0
+    for x, y in zip(a.measure_many(ts), [b.measure(t) for t in ts], strict=True):
+        np.testing.assert_allclose(x.quaternions, y.quaternions, atol=1e-12)
+        np.testing.assert_allclose(x.gyro, y.gyro, atol=1e-9)
+        assert list(x.calibration) == list(y.calibration)
+    white = NoiseModel(white_deg=0.5, drift_heading_deg=0.0, drift_tilt_deg=0.0,
+                       disturbance_rate_hz=0.0, calibration_time_s=0.0)
+    limb = SimulatedLimb(sensors=4, noise=white, seed=8)
+    err = np.concatenate([_angle_deg(m.quaternions, m.truth.sensors[0])
+                          for m in limb.measure_many(np.arange(150) * 0.01)])
+    assert abs(np.sqrt(np.mean(err**2)) - 0.5 * math.sqrt(3)) < 0.1
+    with pytest.raises(ValueError, match="back in time"):
+        limb.measure_many([0.5])
+
+
 def test_noise_model_statistics():
     white = NoiseModel(white_deg=0.5, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                        disturbance_rate_hz=0.0, calibration_time_s=0.0)
