@@ -1,4 +1,43 @@
 """Sensor-to-segment alignment, joint orientation, boundary extraction and clinical angles.
 
-Uses :mod:`models` for the quaternion conventions and the constraint file format.
+Pure computation on orientation arrays (no device I/O); uses :mod:`models` for the quaternion
+conventions (scalar-first ``w, x, y, z``, Hamilton, limb long axis +X) and the constraint file
+format. Estimators follow scikit-learn: hyper-parameters in ``__init__``, ``fit`` returns
+``self``, fitted state in trailing-underscore attributes, each with its residual in degrees.
+
+Public API
+----------
+- :class:`ImuJointCalibration` — two-IMU calibration (static pose + flexion/extension), joint
+  orientation ``thorax⁻¹ ⊗ humerus`` in segment frames (:mod:`calibration.alignment`).
+- :func:`joint_orientation`, :func:`status_ok` — helpers of the same module.
+- :class:`CalibrationProtocol` — the guided calibration movements (:mod:`calibration.protocol`).
+- :class:`ServoChainCalibration` — servo zero offsets and directions (:mod:`calibration.servo`).
+- :class:`BoundaryExtractor`, :func:`boundary_distance`, :func:`outside_fraction` —
+  recording → constraint, and its accuracy measures (:mod:`calibration.boundary`).
+- :func:`isb_angles`, :func:`range_of_motion`, :func:`format_rom_table`, :data:`NORMATIVE` —
+  clinical angles and peaks (:mod:`calibration.clinical`).
+- :class:`CalibrationError` — input that cannot determine a result.
 """
+
+from calibration.alignment import ImuJointCalibration, joint_orientation, status_ok
+from calibration.boundary import BoundaryExtractor, boundary_distance, outside_fraction
+from calibration.clinical import NORMATIVE, format_rom_table, isb_angles, range_of_motion
+from calibration.errors import CalibrationError
+from calibration.protocol import CalibrationProtocol
+from calibration.servo import ServoChainCalibration
+
+__all__ = [
+    "NORMATIVE",
+    "BoundaryExtractor",
+    "CalibrationError",
+    "CalibrationProtocol",
+    "ImuJointCalibration",
+    "ServoChainCalibration",
+    "boundary_distance",
+    "format_rom_table",
+    "isb_angles",
+    "joint_orientation",
+    "outside_fraction",
+    "range_of_motion",
+    "status_ok",
+]

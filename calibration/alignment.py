@@ -40,9 +40,14 @@ de Vries et al. 2010, *Gait Posture* 31:120; Favre et al. 2009, *J Biomech* 42:2
    limb's, carried into thorax-sensor coordinates through the mean neutral-pose relative
    orientation ``R̄₀`` (``z_t = R̄₀ z_l``). This defines the thorax heading so that the joint
    is the identity in the neutral pose, which removes the heading offset between the two
-   sensors' worlds at calibration time; the offset itself (the rotation about the vertical
-   between the two worlds) is reported as ``heading_offset_deg_``. Heading drift *after*
-   calibration is not observable from orientations alone (see docs/calibration.md).
+   sensors' worlds at calibration time (whatever it is: it is absorbed, and it cannot be
+   measured from orientations alone, since nothing else fixes the thorax's anterior
+   direction). Heading drift *after* calibration is not observable either; it is the dominant
+   error of the IMU path (docs/calibration.md).
+
+The neutral pose *defines* the segment frames: a thorax leaning by a small rotation ``s``
+during the static pose (postural sway) turns every recovered joint orientation into
+``s J s⁻¹``, an error of about ``2 sin(|J|/2) |s|``.
 
 Fusion of raw accelerometer/gyroscope/magnetometer samples is not done here: the rig's sensors
 (BNO055, the stream IMU board) fuse on the device and deliver quaternions.
@@ -226,9 +231,6 @@ class ImuJointCalibration:
     ----------
     thorax_mount_, limb_mount_ : (4,) float64
         Sensor relative to segment (w ≥ 0).
-    heading_offset_deg_ : float
-        Rotation about the vertical from the limb sensor's world to the thorax sensor's world
-        at calibration time, degrees in (−180, 180].
     residuals_ : dict[str, float]
         Degrees: ``static`` (RMS angle of the calibrated joint from identity over the static
         pose), ``gravity_thorax``/``gravity_limb`` (spread of gravity), ``functional``
@@ -287,12 +289,6 @@ class ImuJointCalibration:
         self.limb_mount_, ortho = _mount_from_axes(x_l, z_l)
         z_t = Q.rotate(r0, z_l)
         self.thorax_mount_, _ = _mount_from_axes(x_t, z_t)
-        # heading offset between the two worlds: segment frames agree at neutral, so
-        # (q_t m_t⁻¹)(q_l m_l⁻¹)⁻¹ is world_l -> world_t, a rotation about the vertical
-        seg_t = Q.multiply(st, Q.conjugate(self.thorax_mount_))
-        seg_l = Q.multiply(sl, Q.conjugate(self.limb_mount_))
-        off = _mean_rotation(Q.multiply(seg_t, Q.conjugate(seg_l)))
-        self.heading_offset_deg_ = math.degrees(float(Q.twist_angle(off, np.array([0, 0, 1.0]))))
         static_angle = np.degrees(Q.angle(self.transform(st, sl)))
         self.residuals_ = {
             "static": float(np.sqrt(np.mean(static_angle**2))),
@@ -326,7 +322,6 @@ class ImuJointCalibration:
             "kind": "imu-two-sensor",
             "thorax_mount": [float(v) for v in self.thorax_mount_],
             "limb_mount": [float(v) for v in self.limb_mount_],
-            "heading_offset_deg": float(self.heading_offset_deg_),
             "residuals_deg": {k: float(v) for k, v in self.residuals_.items()},
             "residual_deg": float(self.residual_deg_),
         }
@@ -335,7 +330,7 @@ class ImuJointCalibration:
     def from_dict(cls, data: dict) -> ImuJointCalibration:
         """Rebuild a fitted calibration from :meth:`to_dict` output (plus the recorder's
         ``protocol`` and ``windows_s`` entries, which are ignored); other keys are errors."""
-        known = {"kind", "thorax_mount", "limb_mount", "heading_offset_deg", "residuals_deg",
+        known = {"kind", "thorax_mount", "limb_mount", "residuals_deg",
                  "residual_deg",
                  "protocol", "windows_s"}  # what the recorder adds: the protocol it ran
         unknown = set(data) - known
@@ -345,7 +340,6 @@ class ImuJointCalibration:
         try:
             self.thorax_mount_ = Q.check_quaternions(data["thorax_mount"], name="thorax_mount")
             self.limb_mount_ = Q.check_quaternions(data["limb_mount"], name="limb_mount")
-            self.heading_offset_deg_ = float(data.get("heading_offset_deg", 0.0))
             self.residuals_ = dict(data.get("residuals_deg", {}))
             self.residual_deg_ = float(data.get("residual_deg", math.nan))
         except KeyError as err:

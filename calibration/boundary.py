@@ -333,14 +333,14 @@ class BoundaryExtractor:
         c = self._centre(d)
         u, v = _tangent_basis(c)
         p = _ae_forward(d, c, u, v)
+        inlier = self._trim(p)
+        self.n_trimmed_ = int((~inlier).sum())
+        p, d, phi = p[inlier], d[inlier], phi[inlier]
         if np.hypot(p[:, 0], p[:, 1]).max() > 150.0:
             raise CalibrationError(
                 "recorded directions span more than 150 deg from their centre; a swing region "
                 "this large cannot be extracted"
             )
-        inlier = self._trim(p)
-        self.n_trimmed_ = int((~inlier).sum())
-        p, d, phi = p[inlier], d[inlier], phi[inlier]
         self.n_used_ = len(p)
         poly = self._alpha_region(p)
         poly = self._noise_inset(poly, p)

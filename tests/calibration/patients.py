@@ -114,10 +114,11 @@ def misplaced_mounts(rng: np.random.Generator, misplace_deg: float = 25.0) -> li
 
 
 def make_limb(constraint: JointConstraint, seed: int, *, noise: NoiseModel | None = None,
-              misplace_deg: float = 25.0) -> ScriptedLimb:
+              misplace_deg: float = 25.0, **kwargs) -> ScriptedLimb:
+    """The patient with misplaced sensors (further keywords go to :class:`ScriptedLimb`)."""
     rng = np.random.default_rng(10_000 + seed)
     return ScriptedLimb(constraint, sensors=misplaced_mounts(rng, misplace_deg),
-                                        noise=noise, seed=seed)
+                        noise=noise, seed=seed, **kwargs)
 
 
 def record_imu(limb: ScriptedLimb, duration_s: float, rate_hz: float = 100.0) -> Recording:

@@ -1,0 +1,125 @@
+"""Boundary extraction on simulated patients (servo path: fast and exact ground truth)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from calibration import BoundaryExtractor, CalibrationError, boundary_distance, outside_fraction
+from models import quaternion as Q
+from models.constraint import JointConstraint, loads_constraint
+from models.oracle import ConstraintOracle
+
+X = np.array([1.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def extracted(servo_patient):
+    c, rec = servo_patient
+    return c, rec, BoundaryExtractor().fit(rec.limb, provenance={"file": "test"})
+
+
+def test_boundary_and_twist_match_the_truth(extracted):
+    c, rec, ex = extracted
+    d = boundary_distance(ex.constraint_, c)
+    assert d["mean_deg"] < 1.0
+    assert outside_fraction(ex.constraint_, Q.rotate(rec.truth, X), 1.0) < 0.002
+    assert ex.twist_deg_[0] == pytest.approx(c.twist.min_deg, abs=1.5)
+    assert ex.twist_deg_[1] == pytest.approx(c.twist.max_deg, abs=1.5)
+    assert 3 <= len(ex.vertices_) <= ex.max_vertices
+
+
+def test_the_concave_notch_is_kept(extracted):
+    c, _, ex = extracted
+    truth = ConstraintOracle(JointConstraint.from_dict(
+        {"name": "t", "swing": c.swing.to_dict()}))
+    got = ConstraintOracle(JointConstraint.from_dict(
+        {"name": "g", "swing": ex.constraint_.swing.to_dict()}))
+    # directions inside the truth's spherical convex hull (between neighbouring vertices across
+    # the notch) but outside the truth: the notch. They must be outside the extraction too.
+    v = c.swing.vertices
+    mids = []
+    for i in range(len(v)):
+        for k in (3, 4, 5, 6):
+            m = v[i] + v[(i + k) % len(v)]
+            mids.append(m / np.linalg.norm(m))
+    mids = np.array(mids)
+    notch = mids[truth.swing_distance(mids) > math.radians(3.0)]
+    assert len(notch) > 0, "the test patient has a notch"
+    assert np.mean(got.swing_distance(notch) > 0) > 0.9
+
+
+def test_constraint_file_round_trips_with_provenance(extracted):
+    _, rec, ex = extracted
+    text = ex.constraint_.to_yaml()
+    again = loads_constraint(text)
+    assert again == ex.constraint_
+    prov = again.provenance
+    assert prov["samples"] == len(rec.limb)
+    assert prov["file"] == "test"
+    assert prov["parameters"]["alpha_deg"] == ex.alpha_deg
+
+
+def test_outliers_are_trimmed_without_moving_the_boundary(servo_patient):
+    c, rec = servo_patient
+    rng = np.random.default_rng(3)
+    glitches = Q.random_quaternions(len(rec.limb) // 400, rng)  # 0.25 % random orientations
+    q = np.concatenate((rec.limb, glitches))
+    ex = BoundaryExtractor().fit(q)
+    assert ex.n_trimmed_ >= 0.8 * len(glitches)
+    assert boundary_distance(ex.constraint_, c)["mean_deg"] < 1.0
+
+
+def test_unrecorded_range_is_not_claimed_and_sparse_arcs_are_reported(servo_patient):
+    c, rec = servo_patient
+    d = Q.rotate(rec.limb, X)
+    centre = c.swing.interior
+    side = np.cross(centre, [0.0, 0.0, 1.0])
+    half = rec.limb[(d - centre) @ side < 0.0]  # the patient never moved to one side
+    ex = BoundaryExtractor().fit(half)
+    other = Q.rotate(rec.truth, X)
+    other = other[(other - centre) @ side > 0.15]
+    assert outside_fraction(ex.constraint_, other, 1.0) > 0.9
+    full = BoundaryExtractor().fit(rec.limb)
+    assert sum(a.length_deg for a in ex.sparse_arcs_) >= sum(
+        a.length_deg for a in full.sparse_arcs_)
+
+
+def test_low_status_samples_are_dropped(servo_patient):
+    _, rec = servo_patient
+    status = np.full(len(rec.limb), 0xFF)
+    status[::2] = 0x40  # system level 1: a magnetic disturbance
+    ex = BoundaryExtractor().fit(rec.limb, status=status)
+    assert ex.n_status_dropped_ == (len(status) + 1) // 2
+
+
+def test_swing_dependent_twist_table_follows_contract_3(extracted):
+    _, rec, _ = extracted
+    ex = BoundaryExtractor(by_swing=True).fit(rec.limb)
+    tw = ex.constraint_.to_dict()["twist"]
+    table = tw["by_swing"]
+    assert set(table) == {"bandwidth_deg", "points"}
+    assert len(table["points"]) >= 3
+    for p in table["points"]:
+        assert set(p) == {"direction", "min_deg", "max_deg"}
+        assert tw["min_deg"] <= p["min_deg"] <= p["max_deg"] <= tw["max_deg"]
+    assert loads_constraint(ex.constraint_.to_yaml()) == ex.constraint_
+
+
+def test_too_few_samples_or_whole_sphere_are_refused():
+    rng = np.random.default_rng(0)
+    with pytest.raises(CalibrationError, match="at least 100"):
+        BoundaryExtractor().fit(Q.random_quaternions(50, rng))
+    with pytest.raises(CalibrationError):
+        BoundaryExtractor().fit(Q.random_quaternions(5000, rng))
+
+
+def test_boundary_distance_of_nested_cones():
+    a = JointConstraint.cone((1.0, 0, 0), 40.0)
+    b = JointConstraint.cone((1.0, 0, 0), 43.0)
+    assert boundary_distance(a, a)["mean_deg"] == pytest.approx(0.0, abs=1e-6)
+    d = boundary_distance(a, b)
+    assert d["mean_deg"] == pytest.approx(3.0, abs=1e-3)
+    assert d["hausdorff_deg"] == pytest.approx(3.0, abs=1e-3)

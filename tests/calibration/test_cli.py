@@ -1,0 +1,102 @@
+"""``rig boundary`` and ``rig rom`` through the CLI entry point."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from models.constraint import load_constraint
+from rig.cli import main
+from rig.store import open_store
+from rig.store.io import OrientationTable, write_csv, write_sto
+
+
+def run(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def sto_file(servo_patient, tmp_path_factory):
+    _, rec = servo_patient
+    path = tmp_path_factory.mktemp("rec") / "patient.sto"
+    write_sto(path, OrientationTable(time=rec.t, columns={"thorax_imu": rec.thorax,
+                                                          "humerus_imu": rec.limb}, rate_hz=50.0))
+    return path
+
+
+def test_boundary_from_sto_writes_a_loadable_constraint(sto_file, tmp_path, capsys):
+    out = tmp_path / "c.yaml"
+    code, stdout, err = run(["boundary", str(sto_file), "--reference", "thorax",
+                             "--limb", "humerus", "--out", str(out), "--side", "left"], capsys)
+    assert code == 0, err
+    assert "wrote" in stdout and "twist" in stdout
+    c = load_constraint(out)
+    assert c.provenance["file"] == "patient.sto" and c.provenance["reference"] == "thorax"
+    assert c.side == "left"
+
+
+def test_boundary_from_csv_with_joint_column(servo_patient, tmp_path, capsys):
+    _, rec = servo_patient
+    csv = tmp_path / "joint.csv"
+    write_csv(csv, OrientationTable(time=rec.t, columns={"shoulder": rec.limb}))
+    code, _, err = run(["boundary", str(csv), "--limb", "shoulder", "--out",
+                        str(tmp_path / "c.yaml")], capsys)
+    assert code == 0, err
+
+
+def test_boundary_from_a_session_is_stored(servo_patient, tmp_path, capsys):
+    _, rec = servo_patient
+    db = tmp_path / "s.db"
+    with open_store(db) as st:
+        pid = st.add_patient("P-001")
+        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with st.sample_writer(sid) as w:
+            w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
+        st.end_session(sid, status="completed", meta={})
+    out = tmp_path / "c.yaml"
+    code, _, err = run(["boundary", "--db", str(db), "--session", str(sid), "--out", str(out)],
+                       capsys)
+    assert code == 0, err
+    c = load_constraint(out)
+    assert c.provenance["session"] == sid and c.patient == "P-001"
+    code, stdout, err = run(["rom", "--db", str(db), "--session", str(sid), "--age", "50",
+                             "--sex", "female"], capsys)
+    assert code == 0, err
+    assert "flexion" in stdout and "AAOS" in stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["boundary", "--out", "c.yaml"], "give a recording"),
+    (["boundary", "missing.sto", "--limb", "h", "--out", "c.yaml"], "no such file"),
+    (["boundary", "{sto}", "--out", "c.yaml"], "--limb"),
+    (["boundary", "{sto}", "--reference", "thx", "--limb", "humerus", "--out", "c.yaml"],
+     "no column 'thx'"),
+    (["boundary", "{sto}", "--limb", "humerus", "--limb-axis", "1,0", "--out", "c.yaml"],
+     "--limb-axis"),
+    (["boundary", "{sto}", "--db", "x.db", "--session", "1", "--limb", "h", "--out", "c.yaml"],
+     "not both"),
+    (["rom", "--constraint", "nope.yaml"], "no such file"),
+])
+def test_bad_input_is_one_line_exit_2(args, message, sto_file, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = [a.format(sto=sto_file) for a in args]
+    code, _, err = run(args, capsys)
+    assert code == 2
+    assert err.startswith("rig: error:") and message in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_rom_from_a_constraint_file(capsys, tmp_path):
+    from models.constraint import JointConstraint, dump_constraint
+
+    path = tmp_path / "cone.yaml"
+    dump_constraint(JointConstraint.cone((1.0, 0, 0), 50.0, twist=(-30.0, 60.0)), path)
+    code, stdout, err = run(["rom", "--constraint", str(path)], capsys)
+    assert code == 0, err
+    line = next(ln for ln in stdout.splitlines() if ln.startswith("external rotation"))
+    measured = line.split(")")[1].split()[0]
+    assert np.isclose(float(measured.rstrip("°")), 60.0)
