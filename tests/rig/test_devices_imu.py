@@ -29,7 +29,9 @@ def collect(imu, n):
 
 
 def test_stream_samples_are_timestamped_and_true():
-    with open_port("sim://imu-stream?sensors=3&rate=200&noise=off&seed=3") as port, \
+    # flow=on, max_lag=none: the board waits for the host and never skips (a loaded machine)
+    with open_port("sim://imu-stream?sensors=3&rate=200&noise=off&seed=3&max_lag=none&flow=on") \
+            as port, \
             StreamImu(port, sensors=[0, 2], rate_hz=200) as imu:
         assert imu.identity.present_mask == 0b111 and imu.sensors == [0, 2]
         samples = collect(imu, 100)
