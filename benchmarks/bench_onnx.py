@@ -2,7 +2,8 @@
 
     python benchmarks/bench_onnx.py [--model MODEL.onnx] [--calls 20000]
 
-Without ``--model`` it exports two networks of ``--hidden`` nodes (default 20; leaky ReLU as in
+Without ``--model`` it builds the ``field`` model (:mod:`models.field`, the default of
+``rig train``) of the 'original' shape with and without a twist range, then exports two networks of ``--hidden`` nodes (default 20; leaky ReLU as in
 the ``best`` preset, sigmoid as in the thesis preset) with random weights — latency does not
 depend on the weights. Prints the median single-orientation latency
 (``CorrectionModel.correct_one`` and a (1, 4) ``correction`` call) and batched throughput.
@@ -90,6 +91,20 @@ def main() -> None:
         return
     rng = np.random.default_rng(1)
     with tempfile.TemporaryDirectory() as d:
+        from models.constraint import JointConstraint
+        from models.field import FieldModel
+        from models.shapes import load_shape
+
+        s = load_shape("original").swing
+        for tw in ((-45.0, 70.0), None):
+            c = JointConstraint.polygon(s.vertices, s.interior, twist=tw, name="original")
+            t0 = time.perf_counter()
+            f = FieldModel.from_constraint(c)
+            build = time.perf_counter() - t0
+            p = export_onnx(f, Path(d) / "field.onnx", constraint_yaml=c.to_yaml())
+            print(f"preset field (swing table, grid {f.grid}), 'original'"
+                  f"{f' + twist {tw}' if tw else ', no twist'}: built in {build:.2f} s")
+            bench(p, args.calls)
         for kind in ("leaky_relu", "sigmoid"):
             p = export_onnx(_network(kind, rng, args.hidden), Path(d) / f"{kind}.onnx",
                             constraint_yaml="name: bench\n")
