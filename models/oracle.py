@@ -252,10 +252,11 @@ class ConstraintOracle:
                 lo, hi = self._twist
             phi_p = _twist1(proj, ax) if swing_out else phi
             t = BOUNDARY_TOLERANCE
-            if not (
-                lo - t <= phi_p <= hi + t
-                or (self._wraps and _across_seam1(phi_p, lo, hi))
-                or _singular1(proj, ax)
+            if not lo - t <= phi_p <= hi + t and not (
+                (self._wraps and _across_seam1(phi_p, lo, hi))
+                # twist undefined (TWIST_SINGULARITY), inline: this is the per-cycle path
+                or proj[0] * proj[0] + (proj[1] * ax[0] + proj[2] * ax[1] + proj[3] * ax[2]) ** 2
+                < _SING2
             ):
                 d_lo = abs(_wrap1(phi_p - lo))
                 d_hi = abs(_wrap1(phi_p - hi))
@@ -264,7 +265,9 @@ class ConstraintOracle:
                 proj = _mul1(proj, (math.cos(half), ax[0] * sh, ax[1] * sh, ax[2] * sh))
             if lo - t <= phi <= hi + t:
                 margin = min(margin, phi - lo, hi - phi)
-            elif (self._wraps and _across_seam1(phi, lo, hi)) or _singular1(qt, ax):
+            elif (self._wraps and _across_seam1(phi, lo, hi)) or (
+                qt[0] * qt[0] + (qt[1] * ax[0] + qt[2] * ax[1] + qt[3] * ax[2]) ** 2 < _SING2
+            ):
                 margin = min(margin, 0.0)  # at a limit across the seam, or twist undefined
             else:
                 invalid = True
@@ -272,11 +275,12 @@ class ConstraintOracle:
             c = _mul1(proj, (qt[0], -qt[1], -qt[2], -qt[3]))
             cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
             sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
-            corr = tuple(sign * v / cn for v in c)
-            pn = math.sqrt(proj[0] ** 2 + proj[1] ** 2 + proj[2] ** 2 + proj[3] ** 2)
-            proj = tuple(v / pn for v in proj)
+            corr = (sign * c[0] / cn, sign * c[1] / cn, sign * c[2] / cn, sign * c[3] / cn)
+            p0, p1, p2, p3 = proj
+            pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+            proj = (p0 / pn, p1 / pn, p2 / pn, p3 / pn)
             distance = 2.0 * math.atan2(
-                math.sqrt(corr[1] ** 2 + corr[2] ** 2 + corr[3] ** 2), abs(corr[0])
+                math.sqrt(corr[1] * corr[1] + corr[2] * corr[2] + corr[3] * corr[3]), abs(corr[0])
             )
         else:
             corr = (1.0, 0.0, 0.0, 0.0)
@@ -389,11 +393,6 @@ def _singular(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """(N,) bool: the twist of ``q`` is undefined (limb within ~2e-6 rad of ``−axis``)."""
     p = q[:, 1:] @ axis
     return q[:, 0] * q[:, 0] + p * p < _SING2
-
-
-def _singular1(q, a) -> bool:
-    p = q[1] * a[0] + q[2] * a[1] + q[3] * a[2]
-    return q[0] * q[0] + p * p < _SING2
 
 
 def _across_seam1(phi: float, lo: float, hi: float) -> bool:
