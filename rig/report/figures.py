@@ -15,8 +15,8 @@ import math
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 __all__ = [
     "EqualAreaMap",
@@ -62,7 +62,7 @@ def densify_arc(a: np.ndarray, b: np.ndarray, step_deg: float = 1.0) -> np.ndarr
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     ang = math.acos(max(-1.0, min(1.0, float(a @ b))))
-    k = max(2, int(math.ceil(math.degrees(ang) / step_deg)) + 1)
+    k = max(2, math.ceil(math.degrees(ang) / step_deg) + 1)
     if ang < 1e-9:
         return np.vstack([a, b])
     t = np.linspace(0.0, 1.0, k)[:, None]

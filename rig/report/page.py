@@ -47,6 +47,7 @@ class ReportData:
     boundary_png: bytes | None = None
     boundary_facts: dict[str, Any] = field(default_factory=dict)
     sparse_arcs_deg: list[tuple[float, float]] = field(default_factory=list)
+    sparse_arcs_text: list[str] = field(default_factory=list)  # arcs in clinical words
     calibrations: list[dict[str, Any]] = field(default_factory=list)
     model_metrics: dict[str, Any] = field(default_factory=dict)
     model_verdict: str | None = None
@@ -149,9 +150,11 @@ def render_html(data: ReportData) -> str:
         out.append("<div>")
         if data.boundary_facts:
             out.append(_kv_table(data.boundary_facts, 1))
-        if data.sparse_arcs_deg:
-            arcs = ", ".join(f"{a:.0f}°–{b:.0f}°" for a, b in data.sparse_arcs_deg)
-            out.append(f"<p class='warn'>Sparsely sampled boundary (azimuth ranges): {arcs}. "
+        if data.sparse_arcs_deg or data.sparse_arcs_text:
+            arcs = "; ".join([f"{a:.0f}°–{b:.0f}°" for a, b in data.sparse_arcs_deg]
+                             + list(data.sparse_arcs_text))
+            what = "azimuth ranges" if not data.sparse_arcs_text else "red on the map"
+            out.append(f"<p class='warn'>Sparsely sampled boundary ({_e(what)}): {_e(arcs)}. "
                        "The boundary there is not supported by recorded motion; consider "
                        "recording again.</p>")
         else:

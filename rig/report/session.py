@@ -1,0 +1,339 @@
+"""Assemble the clinician's report of one session from the store.
+
+What each section is made of (a section with no data is left out):
+
+- **patient and session** — the session row (pseudonym, side, rig, start, duration, samples,
+  dropped samples);
+- **range of motion** — :func:`calibration.clinical.range_of_motion` of the session's boundary
+  (the last one stored with the session, else extracted from its samples with the defaults of
+  ``rig boundary``), next to the AAOS values and the Gill et al. 2020 population reference
+  (:func:`calibration.clinical.normative_band`; by age band and sex when given);
+- **recorded boundary** — the joint orientations' limb directions (thorax frame) and the
+  boundary polygon on the equal-area map (:func:`rig.report.figures.boundary_figure`), sparse
+  arcs in red, optionally a reference boundary (the simulated patient's truth) dashed;
+- **calibration** — the session's calibrations and their residuals;
+- **learned model** — a model file (given, or the last registered with the session) evaluated
+  through onnxruntime on held-out orientations of its own constraint
+  (:func:`models.evaluation.evaluate_model`), with per-orientation 3-D error (thesis ch. 5:
+  distance between the limb endpoints corrected by the model and by the exact oracle, in % of
+  its maximum 2) coloured at the limb direction of the input orientation;
+- **live enforcement** — the runs of the session itself (an ``enforce`` session) or of the
+  ``enforce`` sessions that name it as their ``recording_session``: achieved rate, cycles,
+  interventions, max violation against the tolerance, faults, safe-state entries.
+
+Verdicts compare with the project's targets (issue 9: mean 3-D error ≤ 0.8 %, invalid inputs
+left > 1° outside ≤ 1 %, mean identity error ≤ 0.2°, p99 direction error ≤ 5°; issue 10: no
+command beyond the tolerance).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rig.report.page import ReportData, RomRow, write_report
+
+__all__ = ["MODEL_TARGETS", "model_verdict", "report_data_for_session", "report_for_session"]
+
+#: Targets of the learned model (issue 9), metric → (limit, label, unit).
+MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
+    "mean_3d_error_pct": (0.8, "mean 3-D error", "%"),
+    "frac_invalid_violating_1deg": (0.01, "invalid inputs left > 1° outside", ""),
+    "mean_identity_error_deg": (0.2, "mean identity error on valid inputs", "°"),
+    "p99_angular_error_deg": (5.0, "p99 direction error", "°"),
+}
+
+_ROM_LABELS = {
+    "flexion": "Flexion", "extension": "Extension", "abduction": "Abduction",
+    "adduction": "Adduction", "horizontal_adduction": "Horizontal adduction",
+    "internal_rotation": "Internal rotation (arm at side)",
+    "external_rotation": "External rotation (arm at side)",
+}
+
+
+def model_verdict(metrics: dict[str, float]) -> tuple[bool, str]:
+    """(all targets met, one-line verdict) of held-out metrics against :data:`MODEL_TARGETS`."""
+    missed = []
+    for key, (limit, label, unit) in MODEL_TARGETS.items():
+        v = metrics.get(key)
+        if v is None:
+            continue
+        if key.startswith("frac_"):
+            if v > limit:
+                missed.append(f"{label} {100 * v:.2f} % > {100 * limit:g} %")
+        elif v > limit:
+            missed.append(f"{label} {v:.3g}{unit} > {limit:g}{unit}")
+    if missed:
+        return False, "warning: misses targets: " + "; ".join(missed)
+    return True, ("ok: within targets (mean 3-D error ≤ 0.8 %, invalid inputs left > 1° "
+                  "outside ≤ 1 %, identity error ≤ 0.2°, p99 direction error ≤ 5°)")
+
+
+def _iso(t: float | None) -> str | None:
+    if t is None:
+        return None
+    return _dt.datetime.fromtimestamp(float(t), _dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def _population(movement: str, age: int | None, sex: str | None) -> str | None:
+    from calibration.clinical import normative_band
+
+    if sex is not None:
+        v = normative_band(movement, age=age, sex=sex)
+        if v is None:
+            return None
+        band = f", age {age}" if age is not None else ""
+        return f"{v:.0f} ({'women' if sex == 'female' else 'men'}{band}; Gill 2020)"
+    f = normative_band(movement, sex="female")
+    m = normative_band(movement, sex="male")
+    if f is None or m is None:
+        return None
+    return f"{f:.0f} women / {m:.0f} men (Gill 2020)"
+
+
+def rom_rows(constraint, side: str, *, age: int | None = None,
+             sex: str | None = None) -> list[RomRow]:
+    """The range-of-motion table of a boundary (:func:`calibration.clinical.range_of_motion`)."""
+    from calibration.clinical import NORMATIVE, range_of_motion
+
+    rom = range_of_motion(constraint, side)
+    rows = []
+    for m in rom.MOVEMENTS:
+        rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m), NORMATIVE["aaos"].get(m),
+                           _population(m, age, sex)))
+    return rows
+
+
+def _arc_text(arc: dict, side: str) -> str:
+    """A sparse boundary arc in clinical words: its length and where its middle points."""
+    from calibration.clinical import isb_angles
+    from models import quaternion as Q
+
+    a, b = np.asarray(arc["from"], float), np.asarray(arc["to"], float)
+    mid = a + b
+    mid = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else a
+    q = Q.from_two_vectors(np.array([1.0, 0.0, 0.0]), mid)
+    ang = isb_angles(q, side)
+    elev = float(ang["elevation"][0])
+    plane = float(ang["plane_of_elevation"][0])
+    where = (f"elevation {elev:.0f}°" if math.isnan(plane)
+             else f"elevation {elev:.0f}° in the plane of elevation {plane:.0f}°")
+    return f"{float(arc.get('length_deg', 0.0)):.0f}° of boundary around {where}"
+
+
+def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
+    """(constraint, extraction report, where it came from) — stored, else extracted."""
+    from models.constraint import loads_constraint
+
+    stored = store.boundaries(session_id)
+    if stored:
+        b = stored[-1]
+        c = loads_constraint(b["constraint_yaml"], source=f"boundary {b['id']}")
+        return c, dict(b.get("meta") or {}), f"boundary {b['id']} stored with the session"
+    if joint is None:
+        return None, {}, ""
+    from rig.commands.boundary import extract
+
+    ex = extract(joint)
+    return ex.constraint_, ex.report(), "extracted from the recorded samples for this report"
+
+
+def _recording_session(store, sess: dict) -> int | None:
+    if sess.get("kind") == "enforce":
+        rec = (sess.get("meta") or {}).get("recording_session")
+        return int(rec) if rec is not None else None
+    return int(sess["id"])
+
+
+def _runs(store, sess: dict, rec_id: int | None) -> list[dict]:
+    runs = list(store.runs(sess["id"])) if sess.get("kind") == "enforce" else []
+    if rec_id is not None:
+        for other in store.list_sessions():
+            if (other.get("kind") == "enforce" and other["id"] != sess["id"]
+                    and (other.get("meta") or {}).get("recording_session") == rec_id):
+                runs.extend(store.runs(other["id"]))
+    return runs
+
+
+def enforcement_facts(summary: dict) -> tuple[dict[str, Any], str]:
+    """Report rows and verdict of one run's end-of-run summary (:mod:`rig.loop.telemetry`)."""
+    tol = summary.get("tolerance_deg")
+    viol = summary.get("max_violation_deg")
+    facts = {
+        "loop rate asked (Hz)": summary.get("rate_hz"),
+        "loop rate achieved (Hz)": summary.get("achieved_hz"),
+        "cycles": summary.get("cycles"),
+        "p99 cycle time (ms)": summary.get("p99_cycle_ms"),
+        "interventions of the supervisor": summary.get("interventions"),
+        "max violation of the boundary (°)": viol,
+        "tolerance (°)": tol,
+        "safe-state entries": summary.get("safe_state_entries"),
+        "targets": summary.get("targets"),
+        "end": summary.get("end_reason"),
+    }
+    facts = {k: v for k, v in facts.items() if v is not None}
+    if viol is None or tol is None:
+        verdict = "no violation figures in this run's summary"
+    elif viol <= tol:
+        verdict = (f"ok: no command left the boundary by more than the tolerance "
+                   f"(max {viol:.2f}° ≤ {tol:g}°)")
+    else:
+        verdict = f"VIOLATION: a command was {viol:.2f}° outside (tolerance {tol:g}°)"
+    if summary.get("safe_state_entries"):
+        verdict += f"; safe state entered: {summary.get('safe_state_reason')}"
+    return facts, verdict
+
+
+def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
+    """(constraint, metrics, limb directions (n, 3), 3-D error % (n,)) of a model on held-out
+    orientations of the constraint embedded in it."""
+    from models import quaternion as Q
+    from models.constraint import loads_constraint
+    from models.evaluation import evaluate_model, held_out_orientations
+    from models.metrics import three_d_error_percent
+    from models.onnx_io import load_model
+    from models.oracle import ConstraintOracle
+
+    model = load_model(model_path)
+    constraint = loads_constraint(model.constraint_yaml, source=str(model_path))
+    oracle = ConstraintOracle(constraint)
+    q = held_out_orientations(constraint, n, seed, oracle=oracle)
+    metrics = evaluate_model(model, constraint, q=q, oracle=oracle)
+    ideal = Q.canonical(oracle.correction(q))
+    learned = np.asarray(model.correction(q), dtype=np.float64)
+    learned /= np.linalg.norm(learned, axis=1, keepdims=True)
+    err = three_d_error_percent(q, ideal, learned)
+    return constraint, metrics, Q.limb_direction(q), err
+
+
+def report_data_for_session(store, session_id: int, *, model=None, age: int | None = None,
+                            sex: str | None = None, reference=None,
+                            eval_n: int = 4000) -> ReportData:
+    """Everything the report of ``session_id`` shows (see the module docstring).
+
+    Parameters
+    ----------
+    store : rig.store.Store
+        Opened store.
+    session_id : int
+        A recording session, or an ``enforce`` session (its recording session, if it names
+        one, supplies the range of motion).
+    model : path, optional
+        ONNX model to evaluate; default the last model registered with the recording session
+        (when its file exists).
+    age, sex : optional
+        For the population reference band.
+    reference : JointConstraint, optional
+        A boundary drawn dashed for comparison (e.g. the simulated patient's true range).
+    eval_n : int
+        Held-out orientations for the model section.
+    """
+    from rig import __version__
+    from rig.errors import RigConfigError
+
+    sess = store.get_session(session_id)
+    side = sess.get("side") or "right"
+    data = ReportData(patient=sess.get("pseudonym") or "?", session_id=session_id,
+                      joint=sess.get("joint") or "shoulder", side=sess.get("side"),
+                      rig=sess.get("rig_name"), started=_iso(sess.get("started_at")),
+                      software=f"rig {__version__}")
+    if sess.get("ended_at") and sess.get("started_at"):
+        data.duration_s = float(sess["ended_at"]) - float(sess["started_at"])
+    data.samples = int(store.sample_count(session_id))
+    data.dropped = sess.get("dropped")
+    rec_id = _recording_session(store, sess)
+
+    if rec_id is not None:
+        from rig.commands.boundary import joint_orientations_from_store
+
+        joint = None
+        try:
+            joint = joint_orientations_from_store(store, rec_id)
+        except RigConfigError as err:
+            data.rom_note = f"Samples not usable for the boundary: {err}."
+        constraint, rep, origin = _boundary(store, rec_id, joint)
+        if constraint is not None:
+            data.rom_rows = rom_rows(constraint, side, age=age, sex=sex)
+            note = ("Peaks along the clinical planes from the recorded boundary "
+                    f"({origin}); rotations with the arm at the side (AAOS measures them at "
+                    "90° abduction).")
+            data.rom_note = note if data.rom_note is None else f"{data.rom_note} {note}"
+            directions = np.empty((0, 3))
+            if joint is not None:
+                from models import quaternion as Q
+
+                directions = Q.limb_direction(joint.q, joint.limb_axis)
+            arcs = rep.get("sparse_arcs") or []
+            pairs = [(np.asarray(a["from"], float), np.asarray(a["to"], float)) for a in arcs]
+            from rig.report.figures import boundary_figure
+
+            data.boundary_png = boundary_figure(directions, constraint.swing, sparse_arcs=pairs,
+                                                reference_swing=getattr(reference, "swing",
+                                                                        None))
+            facts: dict[str, Any] = {"joint orientations": len(directions)}
+            verts = getattr(constraint.swing, "vertices", None)
+            if verts is not None:
+                facts["boundary vertices"] = len(verts)
+            tw = constraint.twist
+            if tw is not None:
+                facts["twist range (°)"] = f"{tw.min_deg:.1f} … {tw.max_deg:.1f}"
+            if "coverage" in rep:
+                facts["samples inside the boundary (%)"] = 100.0 * float(rep["coverage"])
+            if reference is not None:
+                from calibration.boundary import boundary_distance
+
+                dist = boundary_distance(constraint, reference)
+                facts["mean distance to reference (°)"] = dist["mean_deg"]
+            data.boundary_facts = facts
+            data.sparse_arcs_deg = []
+            data.sparse_arcs_text = [_arc_text(a, side) for a in arcs]
+        data.calibrations = [{"kind": c.get("kind"), "residual_deg": c.get("residual_deg")}
+                             for c in store.calibrations(rec_id)]
+        if model is None:
+            for m in reversed(store.models_for(session_id=rec_id)):
+                if Path(m["path"]).is_file():
+                    model = m["path"]
+                    break
+
+    if model is not None:
+        from rig.report.figures import error_map_figure
+
+        mc, metrics, dirs, err = evaluate_for_report(model, n=eval_n)
+        _, verdict = model_verdict(metrics)
+        data.model_verdict = verdict
+        data.model_metrics = {
+            "held-out orientations": int(metrics.get("n", len(err))),
+            "mean 3-D error (%)": metrics["mean_3d_error_pct"],
+            "p99 direction error (°)": metrics["p99_angular_error_deg"],
+            "invalid inputs left > 1° outside (%)":
+                100.0 * metrics["frac_invalid_violating_1deg"],
+            "max violation (°)": metrics["max_violation_deg"],
+            "mean identity error, valid inputs (°)": metrics["mean_identity_error_deg"],
+            "model file": Path(model).name,
+        }
+        data.error_map_png = error_map_figure(dirs, err, mc.swing)
+
+    runs = _runs(store, sess, rec_id)
+    done = [r for r in runs if r.get("summary")]
+    if done:
+        last = done[-1]
+        facts, verdict = enforcement_facts(last["summary"])
+        if len(done) > 1:
+            facts["runs"] = len(done)
+            facts["max violation over all runs (°)"] = max(
+                float(r["summary"].get("max_violation_deg") or 0.0) for r in done)
+        data.enforcement = facts
+        data.enforcement_verdict = verdict
+    return data
+
+
+def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
+                       reference=None, eval_n: int = 4000) -> Path:
+    """Write the HTML report of a session (:func:`report_data_for_session`); returns its path."""
+    data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
+                                   reference=reference, eval_n=eval_n)
+    return write_report(data, out_path)
