@@ -61,6 +61,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "rom",
         "Print the clinical range of motion of a session, a file or a constraint.",
     ),
+    "report": (
+        "rig.commands.report",
+        "report",
+        "Write the clinician's HTML report of a session.",
+    ),
 }
 
 
