@@ -1,10 +1,12 @@
 """Method (b) of issue 9: a network for the signed geodesic distance to the swing boundary.
 
 Pose-NDF / NRDF style: a small MLP ``f: S² → ℝ`` regresses the exact signed distance
-``s(d)`` of a limb direction to the swing boundary (:meth:`models.oracle.ConstraintOracle.swing_distance`,
-radians, > 0 outside); an invalid direction is projected by ``K`` geodesic gradient steps
+``s(d)`` of a limb direction to the swing boundary
+(:meth:`models.oracle.ConstraintOracle.swing_distance`, radians, > 0 outside); an invalid
+direction is projected by ``K`` geodesic gradient steps
 
-    ``d ← cos(f⁺) d − sin(f⁺) ĝ``,  ``ĝ = P_d ∇f / |P_d ∇f|``  (``P_d = I − d dᵀ``, ``f⁺ = max(f, 0)``)
+    ``d ← cos(f⁺) d − sin(f⁺) ĝ``,  ``ĝ = P_d ∇f / |P_d ∇f|``
+    (``P_d = I − d dᵀ``, ``f⁺ = max(f, 0)``)
 
 so a valid direction (``f ≤ 0``) takes no step. The swing correction is the minimal rotation
 ``d₀ → d_K``; the twist is clamped exactly as in :mod:`models.field` (same code path).
@@ -80,7 +82,7 @@ class DistanceMLP:
             gw1 = d.T @ d1
             gb1 = d1.sum(0)
             lr = self.lr * (0.1 ** (it / self.epochs))
-            for p, g, mm, vv in zip(ps, [gw1, gb1, gw2, gb2, gw3, gb3], m, v):
+            for p, g, mm, vv in zip(ps, [gw1, gb1, gw2, gb2, gw3, gb3], m, v, strict=True):
                 mm *= 0.9
                 mm += 0.1 * g
                 vv *= 0.999

@@ -61,7 +61,7 @@ def test_default_preset_is_the_field_model(files, capsys):
     code, out, _ = _run(["evaluate", "--model", str(model), "--constraint", str(c),
                          "--n", "2000"], capsys)
     assert code == 0 and "2000 held-out orientations (half uniform, half within 20°" in out
-    line = [ln for ln in out.splitlines() if "invalid inputs left > 1 deg outside" in ln][0]
+    line = next(ln for ln in out.splitlines() if "invalid inputs left > 1 deg outside" in ln)
     assert float(line.split()[-2]) < 1.0
 
 
@@ -129,7 +129,7 @@ def test_train_user_errors_are_one_line(files, capsys, setup, message):
 
 
 def test_evaluate_refuses_wrong_files(files, capsys):
-    tmp, c, cfg = files
+    tmp, c, _ = files
     code, _, err = _run(["evaluate", "--model", str(c), "--constraint", str(c)], capsys)
     assert code == 2 and "not an ONNX model" in err
     model = tmp / "m.onnx"
