@@ -265,7 +265,7 @@ boundary, through onnxruntime; `python benchmarks/bench_accuracy.py`):
 | | thesis (its own test sets) | preset `field` | analytic peer (van den Bergen) |
 |---|---|---|---|
 | regular, mean 3-D error | 0.99 % | 0.084 % (18 cones, 5-150°, X/Y/Z) | 0.000 % (exact for cones) |
-| irregular, mean 3-D error | 2.15 % (no twist) | 0.143 % (5 shapes + 20 stars, with twist) | 6.07 % |
+| irregular, mean 3-D error | 2.15 % (no twist) | 0.143 % (5 shapes + 20 stars, twist) | 6.07 % |
 | invalid inputs left > 1° outside, irregular | — | 0.18 % | 43.7 % |
 | build / training time | 16-18 h per experiment | ~1 s | — |
 """

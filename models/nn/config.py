@@ -1,8 +1,8 @@
 """Training configuration: presets and YAML files, validated field by field.
 
 A configuration is a nested mapping with five sections (``model`` chooses the method); a YAML
-file (``rig train --config``) overrides any subset of a preset's fields. Unknown fields and bad values raise
-:class:`models.errors.ConfigError` naming the dotted field, e.g.
+file (``rig train --config``) overrides any subset of a preset's fields. Unknown fields and bad
+values raise :class:`models.errors.ConfigError` naming the dotted field, e.g.
 ``evolution.population: expected an integer >= 2, got 'fifty'``.
 
 Presets
