@@ -1,26 +1,89 @@
-"""The main job (``rig demo``) runs end to end on the simulated rig."""
+"""``rig demo``: the whole job end to end on the simulators, and its early device checks."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
+from models.constraint import load_constraint
 from models.onnx_io import load_model
-from models.shapes import load_shape
 from rig.cli import main
-from rig.commands.demo import run_demo
+from rig.demo.pipeline import PATIENT_TWIST_DEG, check_hardware
+from rig.store import open_store
 
 
-def test_quick_demo_runs_every_step_on_the_simulators(tmp_path):
-    lines: list[str] = []
-    report = run_demo(tmp_path, quick=True, echo=lines.append)
-    for name in ("constraint.yaml", "train.npz", "validation.npz", "test.npz", "model.onnx"):
-        assert (tmp_path / name).is_file(), name
-    # the exported model carries the constraint it was trained for
-    load_model(tmp_path / "model.onnx", expected_constraint=load_shape("original"))
-    assert all(m == 1020 for m in report["servos"]["found"].values())  # XM430-W350 model number
-    assert report["imu"]["chip_id"] == 0xA0
-    assert report["eval_metrics"]["mse"] > 0
-    assert any(line.startswith("[6/6]") for line in (s.strip() for s in lines))
+def test_quick_demo_runs_every_stage_into_one_database(tmp_path, capsys):
+    out = tmp_path / "demo"
+    with pytest.raises(SystemExit) as info:
+        main(["demo", "--quick", "--out", str(out), "--seed", "3"])
+    text = capsys.readouterr().out
+    assert info.value.code == 0, text
+
+    # files: the patient's truth, the rig configurations used, boundary, model, report
+    for name in ("patient.yaml", "rigs/sim-imu.yaml", "rigs/sim-shoulder.yaml",
+                 "rigs/sim-shoulder-live.yaml", "boundary.yaml", "model.onnx", "report.html",
+                 "rig.db"):
+        assert (out / name).is_file(), name
+    truth = load_constraint(out / "patient.yaml")
+    assert (truth.twist.min_deg, truth.twist.max_deg) == PATIENT_TWIST_DEG
+    boundary = load_constraint(out / "boundary.yaml")
+    model = load_model(out / "model.onnx", expected_constraint=boundary)  # bound to the boundary
+    assert model.constraint_yaml
+
+    # one verdict line per stage, and the summary with the report's path
+    verdicts = {name: v for v, name in re.findall(
+        r"^\[(PASS|WARN|FAIL|INFO|SKIP)\] ([A-Za-z ]+) \(", text, re.M)}
+    assert list(verdicts) == ["record IMUs", "record servo limb", "boundary", "train",
+                              "evaluate", "enforce", "report"]
+    assert "FAIL" not in verdicts.values() and "SKIP" not in verdicts.values()
+    assert verdicts["evaluate"] == "PASS"  # issue 9's targets on the extracted boundary
+    assert re.search(r"^report: ", text, re.M) and "report.html" in text
+    m = re.search(r"servo: mean distance to truth ([0-9.]+)°", text.replace("\n", " "))
+    assert m is not None and float(m.group(1)) <= 2.0
+
+    # the database holds the whole job
+    with open_store(out / "rig.db", create=False) as store:
+        sessions = {s["id"]: s for s in store.list_sessions()}
+        kinds = sorted((s["rig_name"], s["kind"]) for s in sessions.values())
+        assert kinds == [("sim-imu", "record"), ("sim-shoulder", "enforce"),
+                         ("sim-shoulder", "record")]
+        assert {s["pseudonym"] for s in sessions.values()} == {"SIM-0003"}
+        imu = next(s for s in sessions.values() if s["rig_name"] == "sim-imu")
+        servo = next(s for s in sessions.values()
+                     if s["rig_name"] == "sim-shoulder" and s["kind"] == "record")
+        enf = next(s for s in sessions.values() if s["kind"] == "enforce")
+        assert imu["status"] == servo["status"] == "completed"
+        assert set(imu["samples_by_sensor"]) == {"thorax", "humerus"}
+        assert min(imu["samples_by_sensor"].values()) > 1000 and imu["dropped"] == 0
+        assert servo["samples"] > 100
+        assert set(store.samples(servo["id"])["kind"]) == {"joint"}
+        bounds = store.boundaries(servo["id"])
+        assert len(bounds) == 1
+        assert load_constraint(out / "boundary.yaml") == load_constraint(
+            _write(tmp_path / "b.yaml", bounds[0]["constraint_yaml"]))
+        models = store.models_for(session_id=servo["id"])
+        assert len(models) == 1 and models[0]["boundary_id"] == bounds[0]["id"]
+        assert models[0]["metrics"]["mean_3d_error_pct"] >= 0
+        (run,) = store.runs(enf["id"])
+        assert enf["meta"]["recording_session"] == servo["id"]
+        s = run["summary"]
+        assert s["cycles"] > 0 and s["max_violation_deg"] <= s["tolerance_deg"]
+        tel = store.telemetry(run["id"])
+        assert len(tel["cycle"]) > 0
+        assert float(max(tel["violation_deg"])) <= s["tolerance_deg"]
+
+    # the report carries every section
+    html = (out / "report.html").read_text()
+    for heading in ("Range of motion", "Recorded boundary", "Learned constraint model",
+                    "Live enforcement"):
+        assert f">{heading}</h2>" in html
+    assert "SIM-0003" in html
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
 
 
 def test_demo_rejects_bad_ids_in_one_line(capsys):
@@ -39,6 +102,7 @@ def test_demo_rejects_bad_ids_in_one_line(capsys):
     (["--dxl-port", "sim://dynamixel?ids=1,2,3&baud=57600"], "no servo answered at 1000000"),
     (["--dxl-port", "sim://dynamixel?ids=1,2"], "servo ID 3 did not answer"),
     (["--imu-port", "/dev/ttyUSB8"], "/dev/ttyUSB8: no such port"),
+    (["--rate", "0"], "--rate"),
 ])
 def test_demo_checks_devices_before_any_long_work(tmp_path, args, match, capsys):
     out = tmp_path / "out"
@@ -47,11 +111,14 @@ def test_demo_checks_devices_before_any_long_work(tmp_path, args, match, capsys)
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith("rig: error: ") and err.count("\n") == 1 and match in err
-    assert not out.exists()  # nothing was trained or written
+    assert not out.exists()  # nothing was recorded, trained or written
 
 
-def test_demo_takes_the_bus_baud_rate(tmp_path):
+def test_hardware_check_takes_the_bus_baud_rate():
     lines: list[str] = []
-    report = run_demo(tmp_path, quick=True, dxl_port="sim://dynamixel?ids=1,2&baud=57600",
-                      dxl_ids=[1, 2], dxl_baud=57600, echo=lines.append)
-    assert sorted(report["servos"]["found"]) == [1, 2]
+    hw = check_hardware("sim://dynamixel?ids=1,2&baud=57600", [1, 2], 57600, "sim://bno055",
+                        echo=lines.append)
+    assert hw["servos"]["found"] == {1: 1020, 2: 1020}  # XM430-W350 model number
+    assert set(hw["servos"]["positions"]) == {1, 2}
+    assert hw["imu"]["chip_id"] == 0xA0
+    assert any(line.startswith("ping: ID 1 -> XM430-W350") for line in lines)
