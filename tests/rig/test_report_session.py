@@ -1,0 +1,150 @@
+"""The report of a real (small) recorded session: assembled from the store, written by
+``rig report``, drawn by headless Chromium."""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from models.constraint import dump_constraint
+from rig.cli import main
+from rig.commands.enforce import run_enforce
+from rig.commands.train import run_train
+from rig.demo.pipeline import SIZES, patient_constraint, write_rig_configs
+from rig.record import PlainDisplay, RecordOptions, record_session
+from rig.report.session import report_data_for_session
+from rig.store import open_store
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A 4 s servo-limb recording (patient time ×20), its boundary (``rig boundary``), a model
+    (``rig train``) and a 1 s enforcement run (``rig enforce``), in one temp store."""
+    tmp = tmp_path_factory.mktemp("report")
+    truth = patient_constraint()
+    dump_constraint(truth, tmp / "patient.yaml")
+    rigs = write_rig_configs(tmp, tmp / "patient.yaml", 5, SIZES["quick"])
+    db = tmp / "rig.db"
+    res = record_session(RecordOptions(rig=str(rigs["sim-shoulder"]), db=str(db),
+                                       patient="P-REPORT", duration_s=4.0,
+                                       source_options={"rate_hz": 200.0}),
+                         display=PlainDisplay(io.StringIO()))
+    sid = res.session_id
+    with pytest.raises(SystemExit) as info:
+        main(["boundary", "--db", str(db), "--session", str(sid), "--out",
+              str(tmp / "boundary.yaml")])
+    assert info.value.code == 0
+    run_train(str(tmp / "boundary.yaml"), str(tmp / "model.onnx"), echo=lambda s: None)
+    with open_store(db) as store:
+        store.add_model(tmp / "model.onnx", session_id=sid)
+        empty = store.start_session(store.ensure_patient("P-EMPTY"), kind="record")
+        store.end_session(empty)
+    code = run_enforce(rig=str(rigs["sim-shoulder-live"]), model=str(tmp / "model.onnx"),
+                       targets="script:adversarial", duration_s=1.0, db=str(db),
+                       session_id=sid, echo=lambda s: None)
+    assert code in (0, 1)  # 1: a safe state on a loaded machine; the run is stored either way
+    return {"tmp": tmp, "db": db, "session": sid, "empty": empty, "truth": truth}
+
+
+def test_report_data_comes_from_the_store(recorded):
+    with open_store(recorded["db"]) as store:
+        data = report_data_for_session(store, recorded["session"], reference=recorded["truth"],
+                                       age=45, sex="female", eval_n=600)
+        enf = next(s for s in store.list_sessions() if s["kind"] == "enforce")
+        enforce_view = report_data_for_session(store, enf["id"], eval_n=600)
+    assert data.patient == "P-REPORT" and data.side == "right" and data.samples > 100
+    rows = {r.movement: r for r in data.rom_rows}
+    assert rows["Flexion"].aaos_deg == 180.0 and rows["Flexion"].measured_deg > 0
+    assert "women, age 45" in rows["Abduction"].population
+    assert data.boundary_png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert data.boundary_facts["joint orientations"] == data.samples
+    assert data.boundary_facts["mean distance to reference (°)"] < 5.0
+    # the model registered with the session is found and evaluated
+    assert data.model_metrics["held-out orientations"] == 600
+    assert data.model_verdict.startswith(("ok", "warning"))
+    assert data.error_map_png[:8] == b"\x89PNG\r\n\x1a\n"
+    # the run of the enforce session that names this recording
+    assert data.enforcement["cycles"] > 0
+    assert data.enforcement["max violation of the boundary (°)"] <= data.enforcement[
+        "tolerance (°)"]
+    assert data.enforcement_verdict.startswith("ok")
+    # an enforce session's own report: its run, and its recording session's range of motion
+    assert enforce_view.enforcement["cycles"] == data.enforcement["cycles"]
+    assert [r.movement for r in enforce_view.rom_rows] == [r.movement for r in data.rom_rows]
+
+
+def test_rig_report_leaves_out_sections_without_data(recorded, capsys):
+    out = recorded["tmp"] / "empty.html"
+    with pytest.raises(SystemExit) as info:
+        main(["report", "--db", str(recorded["db"]), "--session", str(recorded["empty"]),
+              "--out", str(out)])
+    assert info.value.code == 0
+    html = out.read_text()
+    assert "P-EMPTY" in html and "<h2>" not in html
+
+
+@pytest.mark.parametrize(("args", "match"), [
+    (["--session", "999"], "no session 999"),
+    (["--out", "/nonexistent-dir/r.html"], "does not exist"),
+    (["--model", "/nonexistent.onnx"], "no such file"),
+])
+def test_rig_report_user_errors_are_one_line(recorded, args, match, capsys):
+    base = {"--session": str(recorded["session"]), "--out": str(recorded["tmp"] / "x.html")}
+    for k, v in zip(args[::2], args[1::2], strict=True):
+        base[k] = v
+    argv = ["report", "--db", str(recorded["db"])] + [x for kv in base.items() for x in kv]
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rig: error: ") and err.count("\n") == 1 and match in err
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def test_report_of_a_recorded_session_renders_in_headless_chromium(recorded):
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no Chromium installed (.ci/run installs Debian's chromium)")
+    import matplotlib.image
+
+    page = recorded["tmp"] / "report.html"
+    with pytest.raises(SystemExit) as info:
+        main(["report", "--db", str(recorded["db"]), "--session", str(recorded["session"]),
+              "--out", str(page), "--reference", str(recorded["tmp"] / "patient.yaml")])
+    assert info.value.code == 0
+    html = page.read_text()
+    for heading in ("Range of motion", "Recorded boundary", "Learned constraint model",
+                    "Live enforcement"):
+        assert f">{heading}</h2>" in html
+    assert not re.search(r"""(src|href)=["'](https?:|//|file:)""", html)
+    shot = recorded["tmp"] / "shot.png"
+    tmp = recorded["tmp"]
+    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", f"--user-data-dir={tmp / 'profile'}", "--hide-scrollbars",
+           "--window-size=1200,3000", f"--screenshot={shot}", page.as_uri()]
+    subprocess.run(cmd, check=True, capture_output=True, env={**os.environ, "HOME": str(tmp)})
+    img = matplotlib.image.imread(io.BytesIO(shot.read_bytes()), format="png")[..., :3]
+    assert img.shape[:2] == (3000, 1200)
+    # text, tables and outlines
+    assert (img.sum(axis=2) < 0.6).mean() > 0.002
+    # recorded samples (#4477aa) and the error map's boundary (#cc3311) are drawn
+    blue = (np.abs(img - np.array([0x44, 0x77, 0xAA]) / 255).max(axis=2) < 0.15).sum()
+    red = (np.abs(img - np.array([0xCC, 0x33, 0x11]) / 255).max(axis=2) < 0.08).sum()
+    assert blue > 50 and red > 200
+    # the "ok" verdict of the enforcement section is styled (#1b7837)
+    green = (np.abs(img - np.array([0x1B, 0x78, 0x37]) / 255).max(axis=2) < 0.08).sum()
+    assert green > 20
