@@ -180,11 +180,11 @@ class EnforcementLoop:
             (:class:`~rig.errors.HardwareAlertError`), before any motion.
         """
         chain = self.chain
-        chain.set_torque(True)
+        _patiently(lambda: chain.set_torque(True))
         wd = self.config.watchdog_ms
         if wd is None:
             wd = getattr(getattr(chain, "config", None), "watchdog_ms", 0)
-        self.watchdog_ms = chain.arm_watchdog(int(wd)) if wd else 0
+        self.watchdog_ms = _patiently(lambda: chain.arm_watchdog(int(wd))) if wd else 0
         ticks = _read_retrying(chain)
         self._present_ticks = ticks
         self._goal_ticks = ticks.copy()
@@ -407,7 +407,7 @@ class EnforcementLoop:
             if self.safe:
                 self.end_reason = "safe state: " + (self.safe_state_reason or "?")
                 break
-            if duration is not None and t + period > duration + 1e-9:
+            if duration is not None and t + period > duration - 1e-9:
                 break
             if max_cycles is not None and k + 1 >= max_cycles:
                 break
@@ -447,15 +447,20 @@ class EnforcementLoop:
                          counters=counters, duration_s=duration_s)
 
 
-def _read_retrying(chain, attempts: int = 5) -> np.ndarray:
-    last: RigError | None = None
-    for _ in range(attempts):
+def _patiently(fn, attempts: int = 5):
+    """``fn()`` again after a timeout or a garbled answer (idempotent start-up steps: the
+    loop's chain has cycle-sized timeouts that a loaded host can miss)."""
+    for k in range(attempts):
         try:
-            return np.asarray(chain.read_ticks(), dtype=np.int64)
-        except (RigTimeoutError, RigProtocolError) as err:
-            last = err
-    assert last is not None
-    raise last
+            return fn()
+        except (RigTimeoutError, RigProtocolError):
+            if k + 1 == attempts:
+                raise
+    raise AssertionError("unreachable")
+
+
+def _read_retrying(chain, attempts: int = 5) -> np.ndarray:
+    return np.asarray(_patiently(chain.read_ticks, attempts), dtype=np.int64)
 
 
 def _open_chain(cls, port, servos, latency_ms, attempts: int = 3):

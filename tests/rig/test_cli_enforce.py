@@ -195,6 +195,11 @@ def test_mirroring_an_imu_worn_limb(files, tmp_path, capsys):
     tel = tmp_path / "t.csv"
     code, out, err = _run(_argv(files, "--duration", "1.5", "--telemetry", str(tel),
                                 targets="mirror:sim-imu"), capsys)
+    if code != 0 and tel.exists():  # say what the bus did
+        with tel.open() as fh:
+            tail = [(r["cycle"], r["t_s"], r["faults"], r["read_ms"], r["cycle_ms"])
+                    for r in list(csv.DictReader(fh))[-12:]]
+        err += f"\nlast rows (cycle, t_s, faults, read_ms, cycle_ms): {tail}"
     assert code == 0, (out, err)
     assert "mirror of sim-imu" in out
     with tel.open() as fh:
