@@ -37,12 +37,12 @@ _LABELS = {
 }
 
 
-def _print_metrics(metrics: dict) -> None:
+def _print_metrics(metrics: dict, echo=click.echo) -> None:
     for key, label in _LABELS.items():
         if key in metrics:
             v = metrics[key]
             text = f"{100 * v:.3f} %" if key.startswith("frac_") else f"{v:.6g}"
-            click.echo(f"  {label:<42} {text}")
+            echo(f"  {label:<42} {text}")
 
 
 @click.command()
@@ -128,7 +128,7 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="field", se
             f"{model.network.n_hidden} hidden nodes, {model.network.n_links} links")
     echo(f"wrote {path} ({what}) in {time.perf_counter() - t0:.1f} s; training-data sha256 "
          f"{model.data_sha256[:16]}…; held-out metrics:")
-    _print_metrics(model.metrics)
+    _print_metrics(model.metrics, echo)
     return model
 
 
@@ -180,5 +180,5 @@ def run_evaluate(model_path, constraint_path, *, n=10000, distribution="held-out
     echo(f"{model_path}: {what}, {len(q)} held-out {kind}"
          f"{' with twist' if twist and distribution != 'held-out' else ''} of "
          f"{constraint.name!r}")
-    _print_metrics(metrics)
+    _print_metrics(metrics, echo)
     return metrics
