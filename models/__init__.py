@@ -48,7 +48,10 @@ _EXPORTS: dict[str, tuple[str, str | None]] = {
     # learned models (onnxruntime is imported only when these are used)
     "load_model": ("models.onnx_io", "load_model"),
     "CorrectionModel": ("models.onnx_io", "CorrectionModel"),
+    "FieldModel": ("models.field", "FieldModel"),
+    "export_onnx": ("models.onnx_io", "export_onnx"),
     "evaluate_model": ("models.evaluation", "evaluate_model"),
+    "held_out_orientations": ("models.evaluation", "held_out_orientations"),
     # errors
     "ModelsError": ("models.errors", "ModelsError"),
     "ConstraintError": ("models.errors", "ConstraintError"),
@@ -70,6 +73,7 @@ __all__ = [
     "ConstraintOracle",
     "CorrectionModel",
     "DatasetError",
+    "FieldModel",
     "GeometryError",
     "JointConstraint",
     "ModelFileError",
@@ -83,7 +87,9 @@ __all__ = [
     "dump_constraint",
     "evaluate_model",
     "evaluation",
+    "export_onnx",
     "geometry",
+    "held_out_orientations",
     "load_constraint",
     "load_model",
     "load_shape",
@@ -127,8 +133,9 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
         ModelsError,
         QuaternionError,
     )
-    from models.evaluation import evaluate_model
+    from models.evaluation import evaluate_model, held_out_orientations
+    from models.field import FieldModel
     from models.geometry import SphericalPolygon
-    from models.onnx_io import CorrectionModel, load_model
+    from models.onnx_io import CorrectionModel, export_onnx, load_model
     from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle, OracleResult
     from models.shapes import SHAPES, load_shape
