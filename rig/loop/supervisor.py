@@ -187,6 +187,10 @@ class Supervisor:
         self.last_commanded_distance = 0.0
         self._t: float | None = None
         self._c_prev: qs.Quat | None = None
+        self._cache_c: qs.Quat | None = None
+        self._cache_c_result = (0.0, qs.IDENTITY)
+        self._cache_cmd: qs.Quat | None = None
+        self._cache_cmd_d = 0.0
         self._ready = False
 
     # ------------------------------------------------------------------ oracle access
@@ -298,14 +302,17 @@ class Supervisor:
         if self.recovering:
             self._c_prev = None
             return self._recover(g0, dt)
-        ev = self._eval(c)
-        if ev.distance > self.tol_eff:
-            p = ev.projected
-            c = (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+        if c == self._cache_c:  # a held target: D is a function of c alone
+            c_dist, proj = self._cache_c_result
+        else:
+            ev = self._eval(c)
+            c_dist, p = float(ev.distance), ev.projected
+            proj = (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+            self._cache_c, self._cache_c_result = c, (c_dist, proj)
+        if c_dist > self.tol_eff:
+            c = proj
             self.flags |= Intervention.PROJECTED
             c_dist = 0.0
-        else:
-            c_dist = float(ev.distance)
         g1, limited = self._rate_limit(g0, c, dt, self._c_prev)
         self._c_prev = c
         if not limited:
@@ -334,7 +341,13 @@ class Supervisor:
         commanded : (4,) array-like
             Forward kinematics of the goal ticks, unit.
         """
-        d = self.distance(commanded)
+        cmd = (float(commanded[0]), float(commanded[1]), float(commanded[2]),
+               float(commanded[3]))
+        if cmd == self._cache_cmd:  # the same ticks as last cycle (a holding goal)
+            d = self._cache_cmd_d
+        else:
+            d = self.distance(cmd)
+            self._cache_cmd, self._cache_cmd_d = cmd, d
         if d <= self.tol or d <= self.ceiling:
             if d < self.ceiling:
                 self.ceiling = max(0.0, d)

@@ -197,19 +197,22 @@ class ScriptedTargets(TargetSource):
         swinging through the middle half of its range, one lap per ``period_s`` (default 8 s):
         always valid, slow enough to track. ``sweep``: straight swings from the deepest point to
         30° beyond the boundary and back, in turn in 12 directions. ``adversarial``: segments of
-        ``segment_s`` (default 0.25 s) each: far outside (≥ 30°), alternating every cycle
-        between the two sides of a correctional discontinuity (outside points ≤ 1° apart whose
-        exact projections are ≥ 10° apart — the antipode of a cone, the mouth of a concave
-        notch), valid swing with twist 20-120° beyond its limits, NaN / zero / infinite /
-        non-unit targets, stale targets (timestamped 1 s in the past), and large valid jumps.
+        ``segment_s`` (default 1 s) each, every target held ``hold_s`` (default 0.4 s: long
+        enough for the goal to reach the boundary and press on it): far outside (≥ 30°),
+        alternating at ``alternate_hz`` (every cycle at 200 Hz) between the two sides of a
+        correctional discontinuity (outside points ≤ 1° apart whose exact projections are ≥ 10°
+        apart — the antipode of a cone, the mouth of a concave notch), valid swing with twist
+        20-120° beyond its limits, NaN / zero / infinite / non-unit targets (a new one every
+        tick), stale targets (timestamped 1 s in the past), and large valid jumps.
         ``hold``: the deepest point, still.
     oracle : models.oracle.ConstraintOracle
     seed : int
-    period_s, segment_s : float
+    period_s, segment_s, hold_s : float
+    alternate_hz : float
     """
 
     def __init__(self, name: str, oracle, *, seed: int = 0, period_s: float = 8.0,
-                 segment_s: float = 0.25, alternate_hz: float = 200.0):
+                 segment_s: float = 1.0, hold_s: float = 0.4, alternate_hz: float = 200.0):
         if name not in SCRIPTS:
             raise RigConfigError(f"--targets script:{name}: unknown script; known: "
                                  f"{', '.join(SCRIPTS)}")
@@ -219,6 +222,7 @@ class ScriptedTargets(TargetSource):
         self.axis = np.asarray(oracle.constraint.limb_axis, dtype=np.float64)
         self.period_s = float(period_s)
         self.segment_s = float(segment_s)
+        self.hold_s = float(hold_s)
         self.alternate_hz = float(alternate_hz)
         self.description = f"script:{name} (seed {seed})"
         self.t0 = 0.0
@@ -282,7 +286,6 @@ class ScriptedTargets(TargetSource):
     def _build_adversarial(self) -> None:
         rng = self.rng
         o = self.oracle
-        ax = self.axis
         # far outside: random orientations ≥ 30° from the region
         q = Q.random_quaternions(4000, rng)
         far = q[o.signed_distance(q) > math.radians(30)]
@@ -329,8 +332,11 @@ class ScriptedTargets(TargetSource):
                (math.nan, 1.0, 0.0, 0.0), (0.5, 0.5, 0.5, 0.3)]
         tup = lambda a: tuple(float(v) for v in a)  # noqa: E731
         self._far = [tup(v) for v in far] or [self._q(-self.centre, 0.0)]
-        self._pairs = [(self._q(a, self.twist_mid), self._q(b, self.twist_mid))
-                       for a, b in pairs]
+        self._pairs = []
+        for a, b in pairs:  # b's orientation = a's turned by the small rotation taking a to b
+            qa = self._q(a, self.twist_mid)
+            step = Q.from_two_vectors(a, b)
+            self._pairs.append((qa, tuple(float(v) for v in Q.multiply(step, np.array(qa)))))
         self._twist = twist_q
         self._valid = [tup(v) for v in valid]
         self._bad = bad
@@ -339,8 +345,6 @@ class ScriptedTargets(TargetSource):
         if not self._pairs:
             segs = [s for s in segs if s[0] != "discontinuity"]
         self._segments = segs
-        # ``ax`` kept for clarity of the twist construction
-        del ax
 
     # -- TargetSource ------------------------------------------------------------------------
     def segment(self, t: float) -> str:
@@ -370,20 +374,20 @@ class ScriptedTargets(TargetSource):
         e = max(0.0, e)
         seg_i = int(e / self.segment_s)
         kind = self._segments[seg_i % len(self._segments)][0]
-        lap = seg_i // len(self._segments)
+        held = seg_i * 7 + int((e - seg_i * self.segment_s) / self.hold_s)  # which target
         tick = int(e * self.alternate_hz)
         if kind == "far":
-            return t, self._far[(lap * 7 + tick // 10) % len(self._far)]
+            return t, self._far[held % len(self._far)]
         if kind == "discontinuity":
-            a, b = self._pairs[(lap * 5 + tick // 20) % len(self._pairs)]
+            a, b = self._pairs[held % len(self._pairs)]
             return t, (a if tick % 2 == 0 else b)
         if kind == "twist":
-            return t, self._twist[(lap * 3 + tick // 10) % len(self._twist)]
+            return t, self._twist[held % len(self._twist)]
         if kind == "invalid":
             return t, self._bad[tick % len(self._bad)]
         if kind == "stale":
-            return t - 1.0, self._valid[lap % len(self._valid)]
-        return t, self._valid[(lap * 11 + tick // 25) % len(self._valid)]
+            return t - 1.0, self._valid[held % len(self._valid)]
+        return t, self._valid[(held * 11) % len(self._valid)]
 
     def _reach(self, azimuth: float) -> float:
         """Polar angle 30° beyond the boundary in this azimuth (bisection on the swing)."""
@@ -498,7 +502,7 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0) -> TargetSource:
     """A target source from a ``--targets`` string.
 
     ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory`;
-    ``script:NAME[?seed=N&period_s=S&segment_s=S]`` → :class:`ScriptedTargets`;
+    ``script:NAME[?seed=N&period_s=S&segment_s=S&hold_s=S]`` → :class:`ScriptedTargets`;
     ``mirror`` (the rig configuration's sensors) → :class:`MirrorTargets`.
 
     Raises
@@ -516,7 +520,7 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0) -> TargetSource:
             params = urllib.parse.parse_qs(query, strict_parsing=bool(query))
         except ValueError as err:
             raise RigConfigError(f"--targets {spec!r}: bad query ({err})") from None
-        known = {"seed": int, "period_s": float, "segment_s": float}
+        known = {"seed": int, "period_s": float, "segment_s": float, "hold_s": float}
         kw = {}
         for k, v in params.items():
             if k not in known:
