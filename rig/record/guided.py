@@ -77,6 +77,8 @@ class GuidedCalibration:
         self.config = config
         self.rig = rig
         self.display = display
+        if protocol is None and rig.simulated:
+            protocol = getattr(rig, "protocol", None)  # the one the simulated patient performs
         self.protocol = protocol if protocol is not None else CalibrationProtocol()
         self.stdin = stdin if stdin is not None else sys.stdin
         self.parent = config.joint.parent
@@ -134,7 +136,8 @@ class GuidedCalibration:
 
     def _protocol_time(self, batch: SampleBatch) -> np.ndarray:
         if self.rig.simulated:
-            return self.rig.patient_time(batch)
+            return self.rig.patient_time(batch) - float(getattr(self.rig, "protocol_start_s",
+                                                                0.0))
         clock = batch.time()
         if self._origin is None:
             self._origin = float(clock[0])
@@ -250,22 +253,39 @@ def patient_performs_protocol(rig) -> bool:
         getattr(p, "calibration_protocol", None) is not None for p in patients)
 
 
-def _pairs(b: SampleBatch, parent: str, child: str) -> tuple[np.ndarray, np.ndarray]:
-    """Parent and child orientations at the same instants (equal sample times)."""
+def _pairs(b: SampleBatch, parent: str, child: str
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Parent and child orientations at the same instants (equal sample times), and whether
+    both sensors' calibration status is trustworthy there (:func:`calibration.alignment.
+    status_ok`: a magnetic disturbance drops it)."""
+    from calibration.alignment import status_ok
+
     clock = b.time()
     sp = b.name == parent
     sc = b.name == child
     _, ip, ic = np.intersect1d(clock[sp], clock[sc], assume_unique=False, return_indices=True)
-    return b.q[sp][ip], b.q[sc][ic]
+    ok = status_ok(np.stack((b.status[sp][ip], b.status[sc][ic]), axis=1)) if len(ip) else \
+        np.zeros(0, bool)
+    return b.q[sp][ip], b.q[sc][ic], ok
+
+
+def _usable(ok: np.ndarray):
+    """The status mask, unless it leaves too little (then every sample, as on hardware whose
+    status byte is not meaningful)."""
+    return ok if ok.sum() >= max(20, len(ok) // 4) else None
 
 
 def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child: str):
     from calibration.alignment import ImuJointCalibration
 
-    st, sl = _pairs(static, parent, child)
-    ft, fl = _pairs(functional, parent, child)
-    cal = ImuJointCalibration().fit(st, sl, ft, fl)
-    return CalibrationResult("imu-alignment", cal.to_dict(), float(cal.residual_deg_), cal)
+    st, sl, sok = _pairs(static, parent, child)
+    ft, fl, fok = _pairs(functional, parent, child)
+    cal = ImuJointCalibration().fit(st, sl, ft, fl, static_ok=_usable(sok),
+                                    functional_ok=_usable(fok))
+    data = cal.to_dict()
+    data["samples_used"] = {"static": int(len(st) if _usable(sok) is None else sok.sum()),
+                            "functional": int(len(ft) if _usable(fok) is None else fok.sum())}
+    return CalibrationResult("imu-alignment", data, float(cal.residual_deg_), cal)
 
 
 def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:

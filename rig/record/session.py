@@ -226,7 +226,8 @@ def record(
 
     if rig is None:
         config = load_config(options.rig)
-        rig = open_rig(config, **options.source_options)  # wrong port: fails here, no DB yet
+        rig = open_rig(config, calibrate=options.calibrate,
+                       **options.source_options)  # wrong port: fails here, no DB yet
         try:
             store = open_store(options.db)
         except BaseException:

@@ -564,7 +564,7 @@ def _frame_type(frame) -> int:
 # ---------------------------------------------------------------------------------------------
 # port strings
 
-_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed")
+_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate")
 BNO055_EXAMPLE = "sim://bno055?seed=1&rate=100&patient=original"
 STREAM_EXAMPLE = "sim://imu-stream?sensors=2&rate=200&patient=original&seed=1"
 
@@ -611,12 +611,17 @@ def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
     misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
     excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
     speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    protocol = None
+    if q.flag("calibrate", False):
+        from calibration.protocol import CalibrationProtocol
+
+        protocol = CalibrationProtocol()
     rng = np.random.default_rng([seed, 0x5EA7])  # mounts: independent of the motion draws
     mounts = default_mounts(sensors, rng)
     if misplace:
         mounts = [_misplaced(m, misplace, rng) for m in mounts]
     return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
-                         speed=speed, seed=seed)
+                         speed=speed, seed=seed, calibration_protocol=protocol)
 
 
 def _misplaced(mount: SensorMount, angle_deg: float, rng: np.random.Generator) -> SensorMount:
@@ -645,6 +650,9 @@ def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
     ``misplace_deg``  each strap turned this far off its nominal mounting          5
     ``excursion``     RMS of the motion relative to the range (> 0, <= 3)          1
     ``speed``         multiplies the motion's frequencies (> 0, <= 20)             1
+    ``calibrate``     the patient performs the guided calibration protocol          off
+                      (:class:`calibration.protocol.CalibrationProtocol`: neutral
+                      pose from 2 s, flexion/extension, then free motion) on / off
     ``clock``,        simulated time (:mod:`rig.sim.urls`): ``clock=manual``       real time
     ``time_scale``    gives ``sim.clock`` a :class:`~rig.sim.clock.ManualClock`
     ================  ===========================================================  ==========
@@ -678,7 +686,7 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
 
     ``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1`` — every key optional; the
     patient keys of :func:`bno055_from_url` (``patient``, ``seed``, ``noise``,
-    ``misplace_deg``, ``excursion``, ``speed``, ``clock``, ``time_scale``) and:
+    ``misplace_deg``, ``excursion``, ``speed``, ``calibrate``, ``clock``, ``time_scale``) and:
 
     ===========  ==================================================================  ========
     key          meaning                                                             default

@@ -45,6 +45,17 @@ Sensor errors (per sensor, :class:`NoiseModel`)
 - the calibration status (``CALIB_STAT`` byte) rises from 0 to 3 per component at seeded times
   spread over ``calibration_time_s``; during a disturbance of more than 3° the magnetometer
   (and so the system) status drops to 1.
+
+Guided calibration protocol (optional)
+--------------------------------------
+With a ``calibration_protocol`` (duck-typed as :class:`calibration.protocol.CalibrationProtocol`:
+``joint(u) -> (N, 4)``, ``duration_s``) the patient first performs it: neutral pose (the identity
+joint orientation) until ``protocol_start_s``, then ``protocol.joint(t - protocol_start_s)``,
+then a smooth hand-over to the free motion over ``blend_s`` seconds,
+``q(t) = P(slerp(q_protocol_end, q_free_raw(t), w))`` with ``w = smoothstep((t - t_end) /
+blend_s)`` (C¹: the velocity is continuous at both ends of the blend), everything through the
+oracle's projection ``P``, so a protocol pose outside the patient's range is performed at the
+nearest reachable pose, as a real patient would.
 """
 
 from __future__ import annotations
@@ -229,6 +240,14 @@ class SimulatedLimb:
         Amplitude of the thorax's postural sway.
     seed : int or numpy Generator
         Seeds motion, mountings and errors.
+    calibration_protocol : CalibrationProtocol, optional
+        The guided calibration the patient performs before moving freely (see the module
+        docstring); None (default): free motion from time 0.
+    protocol_start_s : float
+        Patient time (s) at which the protocol starts; before it the patient stands in the
+        neutral pose (sensors strapped, fusion calibrating).
+    blend_s : float
+        Length of the hand-over from the protocol's last pose to the free motion, seconds.
     """
 
     def __init__(
@@ -245,6 +264,9 @@ class SimulatedLimb:
         world_from_thorax: Sequence[float] | None = None,
         sway_deg: float = 2.0,
         seed: int | np.random.Generator | None = 0,
+        calibration_protocol=None,
+        protocol_start_s: float = 2.0,
+        blend_s: float = 3.0,
     ) -> None:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         if constraint is None:
@@ -287,6 +309,14 @@ class SimulatedLimb:
         self._on_limb = np.array([m.segment == "limb" for m in self.mounts])
         self._rng = rng
         self._last_t: float | None = None
+        if not blend_s > 0:
+            raise ValueError(f"blend_s must be > 0, got {blend_s!r}")
+        self.blend_s = float(blend_s)
+        self._plan = None
+        self.calibration_protocol = None
+        self.protocol_start_s = 0.0
+        if calibration_protocol is not None:
+            self.perform_protocol(calibration_protocol, protocol_start_s)
         nz = self.noise
         n = len(self.mounts)
         self._drift = rng.standard_normal((n, 3)) * np.radians(
@@ -308,6 +338,31 @@ class SimulatedLimb:
     def n_sensors(self) -> int:
         return len(self.mounts)
 
+    def perform_protocol(self, protocol, start_s: float = 2.0) -> None:
+        """Have the patient perform ``protocol`` from patient time ``start_s`` (seconds).
+
+        Changes the motion at every time: call it before the simulator has sampled times after
+        ``min(start_s, now)`` (a servo simulator back-driven by this limb samples lazily, so
+        setting it at once after opening the port is enough when ``start_s`` lies ahead).
+        ``protocol=None`` returns to free motion from time 0.
+        """
+        if protocol is not None:
+            if not (math.isfinite(start_s) and start_s >= 0):
+                raise ValueError(f"protocol_start_s must be >= 0, got {start_s!r}")
+            if not protocol.duration_s > 0:
+                raise ValueError("the protocol must last > 0 s")
+        # one assignment: the simulator threads see either the old or the new plan
+        self._plan = None if protocol is None else (protocol, float(start_s))
+        self.calibration_protocol = protocol
+        self.protocol_start_s = float(start_s) if protocol is not None else 0.0
+
+    @property
+    def protocol_end_s(self) -> float:
+        """Patient time at which the protocol has ended (free motion, blended, follows);
+        0 without a protocol."""
+        plan = self._plan
+        return 0.0 if plan is None else plan[1] + plan[0].duration_s
+
     # -- ground truth ---------------------------------------------------------------------
     def _series(self, row: int, t: np.ndarray) -> np.ndarray:
         arg = 2.0 * math.pi * self._freq[row] * t[:, None] + self._phase[row]
@@ -328,8 +383,19 @@ class SimulatedLimb:
         return Q.multiply(swing, Q.from_axis_angle(self.limb_axis, phi))
 
     def joint(self, t) -> np.ndarray:
-        """Joint orientation (N, 4), limb relative to thorax, inside the range of motion."""
-        q = self.oracle.project(self.raw_joint(t), normalize=True).reshape(-1, 4)
+        """Joint orientation (N, 4), limb relative to thorax, inside the range of motion
+        (after the calibration protocol when the patient performs one)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        raw = self.raw_joint(t)
+        plan = self._plan
+        if plan is not None:
+            protocol, start = plan
+            u = t - start
+            scripted = np.asarray(protocol.joint(u), dtype=np.float64).reshape(-1, 4)
+            x = np.clip((u - protocol.duration_s) / self.blend_s, 0.0, 1.0)
+            w = x * x * (3.0 - 2.0 * x)  # smoothstep: C1 at both ends
+            raw = np.where((w >= 1.0)[:, None], raw, _slerp(scripted, raw, w))
+        q = self.oracle.project(raw, normalize=True).reshape(-1, 4)
         return q / np.linalg.norm(q, axis=1, keepdims=True)
 
     def thorax(self, t) -> np.ndarray:
@@ -474,6 +540,16 @@ class SimulatedLimb:
                     total += peak * math.sin(math.pi * u) ** 2
         err.events = keep
         return total
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Spherical interpolation ``a ⊗ exp(w log(a* ⊗ b))`` (N, 4), shortest arc, ``w`` (N,)."""
+    rel = Q.multiply(Q.conjugate(a), b)
+    rel *= np.where(rel[:, :1] < 0, -1.0, 1.0)
+    vn = np.linalg.norm(rel[:, 1:], axis=1)
+    ang = 2.0 * np.arctan2(vn, rel[:, 0])  # rotation angle of a* b, [0, π]
+    axis = rel[:, 1:] / np.where(vn > 1e-15, vn, 1.0)[:, None]
+    return Q.multiply(a, _exp_map(axis * (w * ang)[:, None]))
 
 
 def _calibration_byte(times: np.ndarray, elapsed: float, disturbed: bool) -> int:
