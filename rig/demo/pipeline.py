@@ -366,16 +366,19 @@ def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
     result = DemoResult(out=out, db=db, stages=stages)
     stages.append(check)
 
+    check.seconds = time.perf_counter() - t0
+
     # 1. the simulated patient ------------------------------------------------------------------
     from models.constraint import dump_constraint
+
+    t0 = time.perf_counter()
 
     truth = patient_constraint()
     patient_file = out / "patient.yaml"
     dump_constraint(truth, patient_file)
     rigs = write_rig_configs(out, patient_file, options.seed, size)
-    check.seconds = time.perf_counter() - t0
     stages.append(StageResult(
-        "patient", seconds=0.0, verdict="INFO",
+        "patient", seconds=time.perf_counter() - t0, verdict="INFO",
         detail=f"shape 'original' (concave notch), twist {PATIENT_TWIST_DEG[0]:g}…"
                f"{PATIENT_TWIST_DEG[1]:g}°, seed {options.seed}: {patient_file}"))
     pseudonym = f"SIM-{options.seed:04d}"
