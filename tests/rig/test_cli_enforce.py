@@ -209,3 +209,40 @@ def test_mirroring_an_imu_worn_limb(files, tmp_path, capsys):
     followed = np.isfinite(target).all(1) & ((bits & 4) == 0)  # a fresh target was used
     assert followed.sum() > 0
     assert max(float(r["violation_deg"]) for r in rows) <= 1.0
+
+
+def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys):
+    from models.shapes import load_shape
+    from rig.store import open_store
+
+    orig = load_shape("original")
+    db = tmp_path / "rig.db"
+    with open_store(db) as store:
+        pid = store.add_patient("P-1")
+        sid = store.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        store.add_boundary(sid, orig.to_yaml(), {"source": "test"})
+        store.end_session(sid)
+    summ = tmp_path / "s.json"
+    code, _, err = _run(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
+                              str(sid), "--summary-json", str(summ)), capsys)
+    assert code == 0, err
+    s = json.loads(summ.read_text())
+    assert s["constraint_source"] == f"session {sid}"
+    with open_store(db) as store:
+        run_session = store.get_session(s["session_id"])
+        assert run_session["pseudonym"] == "P-1" and run_session["kind"] == "enforce"
+        assert run_session["meta"]["recording_session"] == sid
+    # a model trained for another patient's boundary (same limits) is refused
+    other = load_shape("original")
+    import dataclasses
+
+    dump_constraint(dataclasses.replace(other, patient="P-2"), tmp_path / "p2.yaml")
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--constraint", str(tmp_path / "p2.yaml"), "--out",
+              str(tmp_path / "p2.onnx")])
+    assert exc.value.code == 0
+    capsys.readouterr()
+    code, _, err = _run(["enforce", "--rig", "sim-shoulder", "--model", str(tmp_path / "p2.onnx"),
+                         "--targets", "script:hold", "--db", str(db), "--session", str(sid)],
+                        capsys)
+    assert code == 2 and "model is for patient 'P-2', session" in err and "P-1" in err
