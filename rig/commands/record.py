@@ -31,11 +31,14 @@ import click
                    "Enter while recording adds one too.")
 @click.option("--no-calibration", is_flag=True,
               help="Skip the guided calibration steps (raw samples only).")
+@click.option("--no-rom", is_flag=True,
+              help="Do not compute the clinical range of motion at the end.")
 @click.option("--display", type=click.Choice(["auto", "live", "plain"]), default="auto",
               show_default=True, help="Live panel (terminal) or plain progress lines.")
 @click.option("--events", is_flag=True,
               help="Print machine-readable JSON lines (session id, commits) on stdout.")
-def record(rig_name, db, patient, duration, annotations, no_calibration, display, events):
+def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom, display,
+           events):
     """Calibrate, then record a patient's shoulder moving to its limits.
 
     Shows the coverage of the boundary per direction while recording; stop with Ctrl-C once it
@@ -45,7 +48,8 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, display
 
     opts = RecordOptions(
         rig=rig_name, db=db, patient=patient, duration_s=duration,
-        annotations=[parse_annotation(a) for a in annotations], calibrate=not no_calibration)
+        annotations=[parse_annotation(a) for a in annotations], calibrate=not no_calibration,
+        rom=not no_rom)
     opts.check()
 
     def on_event(name: str, info: dict) -> None:
@@ -59,6 +63,8 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, display
                f"{result.gaps}, queue overflow {result.overflow})")
     if result.calibration is not None:
         summary += f", calibration residual {result.calibration.residual_deg:.2f}°"
+    elif not result.calibrated:
+        summary += ", NOT calibrated (sensor frames)"
     cov = result.coverage
     if cov:
         summary += (", coverage sufficient" if cov.get("sufficient") else
@@ -68,8 +74,14 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, display
         print(json.dumps({"event": "end", "session_id": result.session_id,
                           "status": result.status, "samples": result.samples,
                           "dropped": result.dropped, "first_t": result.first_t,
-                          "last_t": result.last_t}), flush=True)
+                          "last_t": result.last_t, "calibrated": result.calibrated,
+                          "rom": result.rom}), flush=True)
     click.echo(summary, err=events)
+    if result.rom_table:
+        click.echo(f"range of motion of session {result.session_id} (from its extracted "
+                   f"boundary; stored in the session):\n{result.rom_table}", err=events)
+    elif result.rom_note and opts.rom:
+        click.echo(result.rom_note, err=events)
     if result.status == "device_lost":
         click.echo(f"rig: error: device lost during the recording: {result.error}; "
                    f"session {result.session_id} kept with everything recorded so far", err=True)

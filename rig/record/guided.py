@@ -282,10 +282,7 @@ def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child:
     ft, fl, fok = _pairs(functional, parent, child)
     cal = ImuJointCalibration().fit(st, sl, ft, fl, static_ok=_usable(sok),
                                     functional_ok=_usable(fok))
-    data = cal.to_dict()
-    data["samples_used"] = {"static": int(len(st) if _usable(sok) is None else sok.sum()),
-                            "functional": int(len(ft) if _usable(fok) is None else fok.sum())}
-    return CalibrationResult("imu-alignment", data, float(cal.residual_deg_), cal)
+    return CalibrationResult("imu-alignment", cal.to_dict(), float(cal.residual_deg_), cal)
 
 
 def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:

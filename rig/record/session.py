@@ -90,6 +90,10 @@ class RecordOptions:
         and calibration must come from elsewhere.
     queue_batches : int
         Capacity of the reader → writer queue, in batches.
+    rom : bool
+        At the end, extract the boundary from the session and store the clinical range of
+        motion (:func:`calibration.clinical.range_of_motion`) in the session's metadata
+        (``rom``) — only for calibrated recordings (IMU) or joint samples (servo limb).
     coverage : dict
         Keyword arguments of :class:`~rig.record.coverage.CoverageMap`.
     source_options : dict
@@ -103,6 +107,7 @@ class RecordOptions:
     annotations: Sequence[Annotation] = ()
     calibrate: bool = True
     queue_batches: int = 1024
+    rom: bool = True
     coverage: dict = field(default_factory=dict)
     source_options: dict = field(default_factory=dict)
 
@@ -136,6 +141,14 @@ class RecordResult:
     first_t, last_t : float
         Host time (``t`` column) of the first and last sample written.
     calibration : CalibrationResult or None
+    calibrated : bool
+        The joint orientations are calibrated: an IMU recording with a stored ``imu-alignment``
+        calibration, or a servo limb (its forward kinematics are the joint orientation; the
+        ``servo-zero`` step only checks them). False for an IMU recording without one — its
+        coverage and angles are sensor-frame approximations and say so.
+    rom, rom_table : dict, str or None
+        Clinical range-of-motion peaks of the session's extracted boundary and their table
+        (:mod:`calibration.clinical`), when computed; ``rom_note`` says why not otherwise.
     coverage : dict
         :meth:`CoverageSummary.as_dict` at the end.
     error : str or None
@@ -154,6 +167,10 @@ class RecordResult:
     calibration: CalibrationResult | None = None
     coverage: dict = field(default_factory=dict)
     error: str | None = None
+    calibrated: bool = False
+    rom: dict | None = None
+    rom_table: str | None = None
+    rom_note: str | None = None
 
     @property
     def dropped(self) -> int:
@@ -243,7 +260,41 @@ def record(
     with contextlib.ExitStack() as stack:
         stack.callback(_close, store)
         stack.callback(rig.close)
-        return _run(options, config, rig, store, display, stop, emit)
+        result = _run(options, config, rig, store, display, stop, emit)
+        rig.close()  # devices first: the range of motion is computed from the store
+        if options.rom:
+            _range_of_motion(store, result, config)
+        return result
+
+
+def _range_of_motion(store, result: RecordResult, config) -> None:
+    """Boundary → clinical peaks, stored in the session's metadata (never fails the session).
+
+    Only for calibrated joint orientations: an uncalibrated IMU recording has no anatomical
+    frames, and angles from it would be numbers without meaning.
+    """
+    if result.samples == 0 or result.status == "failed":
+        result.rom_note = "no range of motion: nothing recorded"
+        return
+    if not result.calibrated:
+        result.rom_note = ("no range of motion: the recording is not calibrated (sensor frames, "
+                           "not anatomical ones)")
+        return
+    try:
+        from calibration.clinical import format_rom_table, range_of_motion
+        from rig.commands.boundary import extract, joint_orientations_from_store
+
+        side = config.joint.side if config.joint.side in ("left", "right") else "right"
+        data = joint_orientations_from_store(store, result.session_id)
+        constraint = extract(data, side=side).constraint_
+        rom = range_of_motion(constraint, side)
+    except Exception as err:  # too few samples, degenerate region: say so, keep the session
+        result.rom_note = f"no range of motion: {err}"
+        return
+    result.rom = rom.to_dict()
+    result.rom_table = format_rom_table(rom)
+    store.end_session(result.session_id, status=result.status,
+                      meta={"rom": result.rom, "rom_source": "extracted boundary"})
 
 
 def _close(store) -> None:
@@ -280,6 +331,10 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                         "calibration skipped, samples recorded raw")
         calibrate = False
     phase = "calibration" if calibrate else "recording"
+    result.calibrated = rig.kind == "servo" and not calibrate  # FK: joint orientations as read
+    if not calibrate and rig.kind != "servo":
+        display.message("not calibrated: coverage and twist are shown in the sensors' frames "
+                        "(thorax sensor⁻¹ ⊗ arm sensor), not anatomical ones")
     display.start()
     try:
         with _Stop(stop):
@@ -309,9 +364,15 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                                f"{session_id} kept, status failed; repeat "
                                                "the recording)") from err
                             result.calibration = cal
+                            result.calibrated = cal.model is not None or rig.kind == "servo"
                             store.add_calibration(session_id, cal.kind, cal.data, cal.residual_deg)
-                            display.message(f"calibration stored: {cal.kind}, residual "
-                                            f"{cal.residual_deg:.2f}°")
+                            if cal.model is not None:
+                                display.message(f"calibration stored: {cal.kind}, residual "
+                                                f"{cal.residual_deg:.2f}°")
+                            else:  # servo limb: a check of the chain's zeros, no correction
+                                display.message(f"calibration check stored: {cal.kind} (zero "
+                                                f"and axis of the chain checked, no correction "
+                                                f"applied), residual {cal.residual_deg:.2f}°")
                             emit("calibrated", {"residual_deg": cal.residual_deg})
                             phase = "recording"
                             emit("recording", {"session_id": session_id})
@@ -348,7 +409,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                     last_commit_report = now
                     emit("committed", {"samples": result.samples, "last_t": result.last_t,
                                        "written": writer.written})
-                status.phase = calib.prompt if phase == "calibration" else "recording"
+                status.phase = (calib.prompt if phase == "calibration" else
+                                "recording" if result.calibrated else "recording, uncalibrated")
                 status.samples = result.samples
                 status.rate_hz = rate.value()
                 status.dropped = pump.dropped
@@ -388,6 +450,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
             "queue_overflow": result.overflow, "coverage": result.coverage,
             "calibration_residual_deg": (None if result.calibration is None
                                          else result.calibration.residual_deg),
+            "calibrated": result.calibrated,
         }
         if result.error:
             end_meta["error"] = result.error

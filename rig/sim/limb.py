@@ -327,6 +327,10 @@ class SimulatedLimb:
             e = _SensorErrors(calib_times=nz.calibration_time_s * rng.uniform(0.2, 1.0, size=3))
             e.next_event = self._draw_event_gap()
             self._errors.append(e)
+        # one stream per error process: the numbers do not depend on how a simulator batches
+        # its calls (measure_many of 64 samples or 1 draws the same values per sample)
+        self._rng_drift, self._rng_white, self._rng_gyro, self._rng = (
+            np.random.default_rng(int(x)) for x in rng.integers(0, 2**63 - 1, size=4))
 
     @classmethod
     def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedLimb:
@@ -445,18 +449,18 @@ class SimulatedLimb:
         gyro = 2.0 * rel[:, 1:] / 1e-3
         elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
         s = self.n_sensors
-        rng = self._rng
         sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
         if dt > 0:
             a = math.exp(-dt / nz.drift_time_s)
-            self._drift = a * self._drift + math.sqrt(1.0 - a * a) * sig * rng.standard_normal(
-                (s, 3))
+            self._drift = a * self._drift + math.sqrt(1.0 - a * a) * sig * (
+                self._rng_drift.standard_normal((s, 3)))
         heading = np.array([self._disturbance(err, t) for err in self._errors])
         e_world = _exp_map(self._drift + heading[:, None] * _Z)
-        white = _exp_map(rng.standard_normal((s, 3)) * math.radians(nz.white_deg))
+        white = _exp_map(self._rng_white.standard_normal((s, 3)) * math.radians(nz.white_deg))
         q = Q.multiply(Q.multiply(e_world, q_true), white)
         out_q = Q.canonical(q / np.linalg.norm(q, axis=1, keepdims=True))
-        gyro += self._bias + rng.standard_normal((s, 3)) * math.radians(nz.gyro_noise_dps)
+        gyro += self._bias + self._rng_gyro.standard_normal((s, 3)) * math.radians(
+            nz.gyro_noise_dps)
         disturbed = np.abs(heading) > math.radians(3.0)
         calib = np.array([_calibration_byte(err.calib_times, elapsed, bool(d))
                           for err, d in zip(self._errors, disturbed, strict=True)])
@@ -482,14 +486,13 @@ class SimulatedLimb:
         self._last_t = float(ts[-1])
         nz = self.noise
         s = self.n_sensors
-        rng = self._rng
         truth = self.truth(np.concatenate((ts, ts + 1e-3)))
         q_true, q_next = truth.sensors[:k], truth.sensors[k:]
         rel = Q.multiply(Q.conjugate(q_true), q_next)
         rel *= np.where(rel[..., :1] < 0, -1.0, 1.0)
         gyro = 2.0 * rel[..., 1:] / 1e-3  # (K, S, 3)
         sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
-        xi = rng.standard_normal((k, s, 3))
+        xi = self._rng_drift.standard_normal((k, s, 3))
         a = np.exp(-dts / nz.drift_time_s)
         b = np.sqrt(1.0 - a * a)
         drift = np.empty((k, s, 3))
@@ -502,10 +505,10 @@ class SimulatedLimb:
         heading = np.array([[self._disturbance(err, float(t)) for err in self._errors]
                             for t in ts])  # (K, S)
         e_world = _exp_map(drift + heading[..., None] * _Z)
-        white = _exp_map(rng.standard_normal((k, s, 3)) * math.radians(nz.white_deg))
+        white = _exp_map(self._rng_white.standard_normal((k, s, 3)) * math.radians(nz.white_deg))
         q = Q.multiply(Q.multiply(e_world, q_true), white)
         out_q = Q.canonical(q / np.linalg.norm(q, axis=-1, keepdims=True))
-        gyro = gyro + self._bias + rng.standard_normal((k, s, 3)) * math.radians(
+        gyro = gyro + self._bias + self._rng_gyro.standard_normal((k, s, 3)) * math.radians(
             nz.gyro_noise_dps)
         times = np.array([err.calib_times for err in self._errors])  # (S, 3)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,0 +1,215 @@
+"""End-to-end accuracy of ``rig record`` on a simulated patient whose range of motion is known.
+
+The whole stack, nothing bypassed: a seeded patient (:func:`star_patient`) written to a
+constraint file → a simulator on a real pty (``sim://imu-stream`` with sensor noise, drift,
+magnetic disturbances and misplaced straps on a lockstep manual clock, or the back-driven servo
+limb ``sim://dynamixel?...&patient=`` on a scaled clock) → the real driver and orientation
+source → :func:`rig.record.record_session` (guided calibration performed by the simulated
+patient, store) → joint orientations read back from the store through the stored calibration
+(:func:`rig.commands.boundary.joint_orientations_from_store`) → boundary extraction
+(:func:`rig.commands.boundary.extract`, i.e. :class:`calibration.boundary.BoundaryExtractor`) →
+compared with the patient's truth:
+
+- ``mean_deg`` / ``hausdorff_deg``: symmetric mean / largest distance between the extracted and
+  the true swing boundaries (:func:`calibration.boundary.boundary_distance`);
+- ``out1_pct`` / ``out2_pct``: % of the patient's true limb directions during the recording more
+  than 1° / 2° outside the extracted region ("recorded region left out");
+- ``twist_deg``: the larger of the two twist-limit errors;
+- ``peaks``: the clinical peaks (:func:`calibration.clinical.range_of_motion`) of both
+  constraints, ``peaks_deg`` the largest difference, ``swing_peaks_deg`` over flexion,
+  extension, abduction, adduction and horizontal adduction only.
+
+Used by ``benchmarks/bench_record.py accuracy`` (held-out seeds) and one fast seeded test.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from models import quaternion as Q
+
+__all__ = ["AccuracyResult", "record_imu_patient", "record_servo_patient", "star_patient"]
+
+_SWING_PEAKS = ("flexion", "extension", "abduction", "adduction", "horizontal_adduction")
+
+
+def star_patient(seed: int, *, max_tilt_deg: float = 10.0):
+    """A seeded random concave star polygon (:func:`models.evaluation.random_star_polygon`)
+    turned so that its centre lies within ``max_tilt_deg`` of the arm at the side (+X) — the
+    neutral pose of the calibration protocol must be reachable — with a physiological twist
+    range ``[-a, b]``, ``a, b`` uniform in 20-70° (0 = neutral rotation inside it).
+
+    Returns
+    -------
+    models.constraint.JointConstraint
+    """
+    from models.constraint import JointConstraint
+    from models.evaluation import random_star_polygon
+
+    rng = np.random.default_rng([seed, 0xACC])
+    star = random_star_polygon(seed, name=f"star-{seed}", twist=False)
+    c = Q.check_vectors(star.swing.interior)
+    tilt = math.radians(rng.uniform(0.0, max_tilt_deg))
+    az = rng.uniform(0.0, 2.0 * math.pi)
+    target = np.array([math.cos(tilt), math.sin(tilt) * math.cos(az),
+                       math.sin(tilt) * math.sin(az)])
+    r = Q.from_two_vectors(c, target)
+    verts = Q.rotate(np.broadcast_to(r, (len(star.swing.vertices), 4)),
+                     Q.check_vectors(star.swing.vertices))
+    twist = (-float(rng.uniform(20.0, 70.0)), float(rng.uniform(20.0, 70.0)))
+    return JointConstraint.polygon(verts, target, twist=twist, name=f"star-{seed}")
+
+
+@dataclass
+class AccuracyResult:
+    """One recorded patient compared with its truth (see the module docstring)."""
+
+    patient: str
+    path: str  # "imu" or "servo"
+    status: str
+    samples: int
+    dropped: int
+    calibration_residual_deg: float | None
+    mean_deg: float
+    hausdorff_deg: float
+    out1_pct: float
+    out2_pct: float
+    twist_deg: float
+    peaks_deg: float
+    swing_peaks_deg: float
+    peaks: dict = field(default_factory=dict)  # movement -> (extracted, truth)
+    twist: tuple = ()  # ((lo, hi) extracted, (lo, hi) truth)
+
+
+def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
+    from calibration.boundary import boundary_distance, outside_fraction
+    from calibration.clinical import range_of_motion
+    from rig.commands.boundary import extract, joint_orientations_from_store
+    from rig.store import open_store
+
+    with open_store(store_path, create=False) as store:
+        data = joint_orientations_from_store(store, res.session_id)
+    ex = extract(data, side="right")
+    est = ex.constraint_
+    d = boundary_distance(est, truth)
+    dirs = Q.rotate(truth_q, np.array([1.0, 0.0, 0.0]))
+    lo, hi = ex.twist_deg_
+    a = range_of_motion(est, "right").to_dict()
+    b = range_of_motion(truth, "right").to_dict()
+    peaks, errs, swing_errs = {}, [], []
+    for m, tv in b.items():
+        if m == "side":
+            continue
+        ev = a[m]
+        peaks[m] = (ev, tv)
+        err = (0.0 if ev is None and tv is None else
+               math.inf if ev is None or tv is None else abs(ev - tv))
+        errs.append(err)
+        if m in _SWING_PEAKS:
+            swing_errs.append(err)
+    cal = res.calibration
+    return AccuracyResult(
+        patient=name, path=path, status=res.status, samples=res.samples, dropped=res.dropped,
+        calibration_residual_deg=None if cal is None else float(cal.residual_deg),
+        mean_deg=float(d["mean_deg"]), hausdorff_deg=float(d["hausdorff_deg"]),
+        out1_pct=100.0 * float(outside_fraction(est, dirs, 1.0)),
+        out2_pct=100.0 * float(outside_fraction(est, dirs, 2.0)),
+        twist_deg=max(abs(lo - truth.twist.min_deg), abs(hi - truth.twist.max_deg)),
+        peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), peaks=peaks,
+        twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)))
+
+
+def _rig_yaml(tmp: Path, body: str) -> Path:
+    p = tmp / "rig.yaml"
+    p.write_text(body)
+    return p
+
+
+def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float = 300.0,
+                       rate_hz: int = 100, misplace_deg: float = 25.0, display=None,
+                       step_s: float = 0.05, window_s: float = 0.5) -> AccuracyResult:
+    """Record ``constraint`` worn as two IMUs (``sim://imu-stream``, noise on, straps turned
+    ``misplace_deg`` off, patient performing the calibration protocol) for ``free_s`` seconds
+    of free motion after calibration, faster than real time (:class:`LockstepClock`), and
+    compare the extracted boundary with the truth."""
+    from models.constraint import dump_constraint
+    from rig.record import RecordOptions, record_session
+    from rig.record.lockstep import CountingDisplay, LockstepClock
+    from rig.record.rigio import load_config, open_rig
+    from rig.store import open_store
+
+    tmp = Path(tmp)
+    cpath = tmp / f"patient-{seed}.yaml"
+    dump_constraint(constraint, cpath)
+    port = (f"sim://imu-stream?sensors=2&rate={rate_hz}&patient={cpath}&seed={seed}"
+            f"&misplace_deg={misplace_deg:g}&clock=manual&flow=on&max_lag=none")
+    cfg = _rig_yaml(tmp, f"name: accuracy-imu\njoint: {{name: shoulder, side: right, parent: "
+                         f"thorax, child: humerus}}\nsensors:\n  port: \"{port}\"\n"
+                         f"  protocol: stream\n  rate_hz: {rate_hz}\n"
+                         f"  segments: {{thorax: 0, humerus: 1}}\n")
+    db = tmp / f"imu-{seed}.db"
+    rig = open_rig(load_config(str(cfg)), calibrate=True)
+    limb = rig.patients[0]
+    shown = CountingDisplay(display)
+    with LockstepClock(rig.simulators[0].clock, lambda: shown.samples, 2.0 * rate_hz,
+                       step_s=step_s, window_s=window_s) as lock:
+        res = record_session(
+            RecordOptions(rig=str(cfg), db=str(db), patient=f"IMU-{seed}", duration_s=free_s,
+                          rom=False),
+            display=shown, rig=rig,
+            on_event=lambda name, info: name == "session" and lock.start())
+    with open_store(db, create=False) as store:
+        s = store.samples(res.session_id, name="humerus")
+    truth_q = limb.joint(s["device_t"] - rig.device_t0)
+    return _compare(constraint.name or f"star-{seed}", "imu", res, db, constraint, truth_q)
+
+
+def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: float = 300.0,
+                         time_scale: float = 10.0, rate_hz: float = 200.0,
+                         display=None) -> AccuracyResult:
+    """Record ``constraint`` on the back-driven servo limb (``sim-shoulder``'s chain, patient
+    time ``time_scale`` × real time, servos read at ``rate_hz`` real Hz) for ``free_s``
+    seconds of patient time after the calibration protocol, and compare with the truth."""
+    from importlib import resources
+
+    from models.constraint import dump_constraint
+    from rig.record import PlainDisplay, RecordOptions, record_session
+    from rig.record.rigio import load_config, open_rig
+
+    tmp = Path(tmp)
+    cpath = tmp / f"patient-{seed}.yaml"
+    dump_constraint(constraint, cpath)
+    base = load_config("sim-shoulder")
+    text = resources.files("rig").joinpath("configs", "sim-shoulder.yaml").read_text()
+    url = (base.servos.port.replace("patient=original", f"patient={cpath}")
+           .replace("seed=1", f"seed={seed}") + f"&time_scale={time_scale:g}")
+    cfg = _rig_yaml(tmp, text.replace(base.servos.port, url))
+    db = tmp / f"servo-{seed}.db"
+    rig = open_rig(load_config(str(cfg)), rate_hz=rate_hz, calibrate=True)
+    limb = rig.patients[0]
+    shown = display if display is not None else PlainDisplay(_Null())
+    res = record_session(RecordOptions(rig=str(cfg), db=str(db), patient=f"SERVO-{seed}",
+                                       duration_s=free_s / time_scale, rom=False),
+                         display=shown, rig=rig)
+    from rig.record.pump import SampleBatch
+    from rig.store import open_store
+
+    with open_store(db, create=False) as store:
+        s = store.samples(res.session_id)
+    n = len(s["t"])
+    batch = SampleBatch(s["t"], np.full(n, np.nan), s["name"], s["kind"], s["q"], s["status"])
+    truth_q = limb.joint(rig.patient_time(batch))
+    return _compare(constraint.name or f"star-{seed}", "servo", res, db, constraint, truth_q)
+
+
+class _Null:
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+

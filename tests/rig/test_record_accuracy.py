@@ -1,0 +1,38 @@
+"""End to end on the IMU path: a seeded patient with a known concave range and twist limits,
+recorded by ``rig record``'s machinery through a simulated stream board on a real pty (noise,
+drift, magnetic disturbances, straps 25° off), calibrated by the guided protocol the simulated
+patient performs, stored, read back through the stored calibration, boundary extracted — and
+compared with the truth. Simulated time runs in lockstep with the recorder (faster than real
+time, no wall-clock condition). The held-out figures over several patients and the servo path
+are ``benchmarks/bench_record.py accuracy`` (other seeds; this one is seed 7).
+"""
+
+from __future__ import annotations
+
+from rig.record.accuracy import record_imu_patient, star_patient
+from rig.store import open_store
+
+
+def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
+    truth = star_patient(7)
+    r = record_imu_patient(truth, 7, tmp_path, free_s=300.0)
+    assert r.status == "completed" and r.dropped == 0
+    # the guided calibration ran on the simulated patient and recovered the straps
+    assert r.calibration_residual_deg is not None and r.calibration_residual_deg < 3.0
+    # targets of the issue that the IMU path meets: boundary within 2° mean distance, nothing
+    # recorded left out by more than 2° (beyond a fraction of a percent: noise), swing peaks
+    assert r.mean_deg < 2.0
+    assert r.out2_pct < 1.0
+    assert r.swing_peaks_deg < 2.0
+    # twist: the 3° target is NOT met on this path (relative heading drift of two
+    # magnetometer-referenced IMUs is, with the arm near the side, twist — docs/recording.md);
+    # this only guards against a gross error such as a wrong calibration or sign
+    assert r.twist_deg < 10.0
+    (lo, hi), (tlo, thi) = r.twist
+    assert lo < 0 < hi and tlo < 0 < thi
+    # the stored session says what it is
+    with open_store(tmp_path / "imu-7.db", create=False) as store:
+        sess = store.list_sessions()[-1]
+        meta = store.get_session(sess["id"])["meta"]
+        assert meta["calibrated"] is True
+        assert len(store.calibrations(sess["id"])) == 1
