@@ -61,7 +61,7 @@ import click
               help="Goal angular velocity limit.")
 @click.option("--max-accel-deg-s2", type=float, default=1200.0, show_default=True,
               help="Goal angular acceleration limit.")
-@click.option("--stale-servo-ms", type=float, default=50.0, show_default=True,
+@click.option("--stale-servo-ms", type=float, default=100.0, show_default=True,
               help="Servo data older than this (reads failing) puts the limb in the safe state.")
 @click.option("--stale-target-ms", type=float, default=100.0, show_default=True,
               help="A target older than this holds the last safe goal.")
@@ -101,7 +101,7 @@ def _check_out_path(option: str, value) -> Path | None:
 def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetry=None,
                 summary_json=None, db=None, session_id=None, patient=None, constraint=None,
                 force_model=False, safe_state="hold", tolerance_deg=1.0,
-                max_velocity_deg_s=120.0, max_accel_deg_s2=1200.0, stale_servo_ms=50.0,
+                max_velocity_deg_s=120.0, max_accel_deg_s2=1200.0, stale_servo_ms=100.0,
                 stale_target_ms=100.0, seed=0,
                 echo=click.echo, install_signals=False, on_cycle=None, clock=None,
                 ports=None, result=None) -> int:

@@ -15,6 +15,8 @@ The present orientation is read before the goal is computed, so the cycle's tele
 the target with the limb's state at the cycle's start. Latency columns are measured with
 ``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
 or :class:`~rig.loop.scheduler.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
+While it runs, the objects alive at start are frozen out of the cyclic garbage collector
+(``gc.freeze``), so a collection during a cycle has little to scan.
 
 Safe state (``safe_state="hold"``, the default, or ``"torque-off"``)
 --------------------------------------------------------------------
@@ -30,6 +32,7 @@ holding its last goal with the watchdog armed.
 
 from __future__ import annotations
 
+import gc
 import math
 import sys
 import time
@@ -238,14 +241,8 @@ class EnforcementLoop:
         if not self._setup_done:
             self.setup()
         cfg = self.config
-        sched = self.scheduler
-        sup = self.supervisor
-        kin = self.kin
-        chain = self.chain
-        model = self.model
-        tel = self.telemetry
-        targets = self.targets
-        clock = self.clock
+        sched, sup, kin, chain = self.scheduler, self.supervisor, self.kin, self.chain
+        model, tel, targets, clock = self.model, self.telemetry, self.targets, self.clock
         duration = cfg.duration_s
         if duration is None and getattr(targets, "duration_s", None) is not None:
             duration = targets.duration_s + cfg.settle_s
@@ -258,9 +255,14 @@ class EnforcementLoop:
             chain.retries = 0  # the loop retries, within the cycle budget
         old_switch = sys.getswitchinterval()
         sys.setswitchinterval(min(old_switch, cfg.switch_interval_s))
+        # everything alive now (numpy, onnxruntime, the SDK, ...) leaves the cyclic garbage
+        # collector's view: a full collection in the middle of a cycle then has little to scan
+        gc.collect()
+        gc.freeze()
         try:
             self._cycles(sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0)
         finally:
+            gc.unfreeze()
             sys.setswitchinterval(old_switch)
             if hasattr(chain, "retries"):
                 chain.retries = self._driver_retries

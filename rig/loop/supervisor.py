@@ -122,7 +122,7 @@ class SupervisorConfig:
     max_velocity_deg_s: float = 120.0
     max_accel_deg_s2: float = 1200.0
     stale_target_s: float = 0.1
-    stale_present_s: float = 0.05
+    stale_present_s: float = 0.1
     norm_tolerance: float = 0.02
 
     def __post_init__(self):

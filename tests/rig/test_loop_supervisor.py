@@ -260,7 +260,7 @@ def test_config_is_validated():
 def test_present_watchdog():
     sup = _start(ORACLES["cone40"])
     assert not sup.present_stale(1.0, 0.99)
-    assert sup.present_stale(1.0, 0.9)
+    assert sup.present_stale(1.0, 0.85)
     assert sup.present_stale(1.0, None)
 
 
