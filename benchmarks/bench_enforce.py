@@ -150,17 +150,16 @@ def main() -> None:
         # 2. highest sustainable rate ---------------------------------------------------------
         print("\n2. highest sustainable rate (5 s each; < 1 % overruns and p99 late <= 1 ms)")
         best = None
-        for rate in (200, 300, 400, 500, 600, 800, 1000):
+        for rate in (200, 300, 400, 500, 700, 1000):
             s2, t2 = run_loop(servos, oracle, model,
                               ScriptedTargets("adversarial", oracle, seed=2), rate=float(rate),
                               duration=5.0)
-            _rate_line(f"{rate} Hz", s2, t2)
             ok = s2["overruns"] < 0.01 * s2["cycles"] and np.percentile(t2["late_ms"], 99) <= 1
+            _rate_line(f"{rate} Hz {'(sustained)' if ok else '(not sustained)'}", s2, t2)
             if ok:
                 best = rate
-            else:
-                break
-        print(f"  highest sustainable: {best} Hz")
+        print(f"  highest sustainable: {best} Hz; the median cycle ({s['p50_cycle_ms']:.3f} ms "
+              f"at 200 Hz) alone would allow {1e3 / s['p50_cycle_ms']:.0f} Hz")
     servos_in = dataclasses.replace(rig.servos, port=SIM_URL)
     s3, t3 = run_loop(servos_in, oracle, model, ScriptedTargets("adversarial", oracle, seed=3),
                       rate=200.0, duration=min(10.0, args.duration))
