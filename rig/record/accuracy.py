@@ -158,8 +158,7 @@ def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float 
     with LockstepClock(rig.simulators[0].clock, lambda: shown.samples, 2.0 * rate_hz,
                        step_s=step_s, window_s=window_s) as lock:
         res = record_session(
-            RecordOptions(rig=str(cfg), db=str(db), patient=f"IMU-{seed}", duration_s=free_s,
-                          rom=False),
+            RecordOptions(rig=str(cfg), db=str(db), patient=f"IMU-{seed}", duration_s=free_s),
             display=shown, rig=rig,
             on_event=lambda name, info: name == "session" and lock.start())
     with open_store(db, create=False) as store:

@@ -19,11 +19,13 @@ def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
     assert r.status == "completed" and r.dropped == 0
     # the guided calibration ran on the simulated patient and recovered the straps
     assert r.calibration_residual_deg is not None and r.calibration_residual_deg < 3.0
-    # targets of the issue that the IMU path meets: boundary within 2° mean distance, nothing
-    # recorded left out by more than 2° (beyond a fraction of a percent: noise), swing peaks
+    # targets of the issue that the IMU path meets on every held-out patient: boundary within
+    # 2° mean distance, nothing recorded left out by more than 2° (beyond a fraction of a
+    # percent: noise)
     assert r.mean_deg < 2.0
     assert r.out2_pct < 1.0
-    assert r.swing_peaks_deg < 2.0
+    # swing peaks: within 2° on this patient (1.4°), not on every held-out one (docs): a guard
+    assert r.swing_peaks_deg < 3.0
     # twist: the 3° target is NOT met on this path (relative heading drift of two
     # magnetometer-referenced IMUs is, with the arm near the side, twist — docs/recording.md);
     # this only guards against a gross error such as a wrong calibration or sign
@@ -36,3 +38,10 @@ def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
         meta = store.get_session(sess["id"])["meta"]
         assert meta["calibrated"] is True
         assert len(store.calibrations(sess["id"])) == 1
+        # the clinical peaks stored at the end of the session are those of its boundary
+        rom = meta["rom"]
+        for movement, (extracted, _truth) in r.peaks.items():
+            if extracted is None:
+                assert rom[movement] is None
+            else:
+                assert abs(rom[movement] - extracted) < 1e-6, movement

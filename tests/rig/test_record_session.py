@@ -81,6 +81,30 @@ def test_parse_annotation():
     assert parse_annotation("note: colon inside").text == "note: colon inside"
 
 
+def test_sim_imu_records_and_completes(tmp_path):
+    db = tmp_path / "s.db"
+    out = io.StringIO()
+    opts = RecordOptions(rig="sim-imu", db=str(db), patient="P-6", duration_s=2.0,
+                         calibrate=False, annotations=[parse_annotation("0.5:half a second")])
+    res = record_session(opts, display=PlainDisplay(out))
+    assert res.status == "completed" and res.dropped == 0 and res.span_s >= 2.0
+    # no calibration: nothing claims one, and no clinical angles from sensor frames
+    assert res.calibration is None and res.calibrated is False
+    assert res.rom is None and "not calibrated" in res.rom_note
+    assert "recording, uncalibrated" in out.getvalue()
+    assert "calibration stored" not in out.getvalue()
+    with open_store(db) as store:
+        s = store.get_session(res.session_id)
+        assert s["meta"]["calibrated"] is False and "rom" not in s["meta"]
+        assert store.calibrations(res.session_id) == []
+        assert s["status"] == "completed" and s["meta"]["samples"] == res.samples
+        data = store.samples(res.session_id)
+        assert len(data["t"]) == res.samples > 0
+        assert set(data["name"]) == {"thorax", "humerus"}
+        assert [a["text"] for a in store.annotations(res.session_id)] == ["half a second"]
+    assert "[completed]" in out.getvalue()
+
+
 def test_sim_imu_records_calibrates_and_completes(tmp_path):
     # the shipped sim-imu port, the patient's time 4x faster than real time (the protocol is
     # 2 s of standing + 15 s of calibration movements in patient time)
@@ -97,6 +121,7 @@ def test_sim_imu_records_calibrates_and_completes(tmp_path):
     assert res.status == "completed", res
     assert res.dropped == 0
     assert res.calibration is not None and res.calibration.residual_deg < 3.0
+    assert res.calibrated is True and res.calibration.kind == "imu-alignment"
     assert {"session", "calibrated", "recording"} <= set(events)
     with open_store(db) as store:
         s = store.get_session(res.session_id)
