@@ -101,7 +101,9 @@ def user_errors() -> tuple[type[BaseException], ...]:
 def main(argv: list[str] | None = None) -> None:
     """Entry point; exits with 0 on success, 2 on a user error, 130 on Ctrl-C."""
     try:
-        cli.main(args=argv, prog_name="rig", standalone_mode=False)
+        # In non-standalone mode click returns the code of a ``click.exceptions.Exit`` (and
+        # ``ctx.exit(n)``) instead of raising it: honour it.
+        rc = cli.main(args=argv, prog_name="rig", standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("rig: aborted", err=True)
         sys.exit(130)
@@ -125,4 +127,4 @@ def main(argv: list[str] | None = None) -> None:
             msg = f"{exc.filename}: {msg}"
         click.echo(f"rig: error: {msg}", err=True)
         sys.exit(2)
-    sys.exit(0)
+    sys.exit(rc if isinstance(rc, int) and not isinstance(rc, bool) else 0)
