@@ -65,6 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from models import qscalar as qs
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.geometry import SphericalPolygon, boundary_distance, polygon_area
@@ -405,36 +406,9 @@ _wrap1 = Q.wrap_angle1
 _twist1 = Q.twist_angle1
 
 
-def _mul1(p, q):
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    )
-
-
-def _rot1(q, v):
-    w, x, y, z = q
-    tx = 2.0 * (y * v[2] - z * v[1])
-    ty = 2.0 * (z * v[0] - x * v[2])
-    tz = 2.0 * (x * v[1] - y * v[0])
-    return (
-        v[0] + w * tx + (y * tz - z * ty),
-        v[1] + w * ty + (z * tx - x * tz),
-        v[2] + w * tz + (x * ty - y * tx),
-    )
-
-
-def _two_vectors1(a, b):
-    w = 1.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    if w < 1e-12:  # antiparallel: same rule as models.quaternion.from_two_vectors
-        return (0.0, *Q.perpendicular(np.array(a)).tolist())
-    q = (w, a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+_mul1 = qs.mul
+_rot1 = qs.rotate
+_two_vectors1 = qs.from_two_vectors
 
 
 def _first_nonzero_negative(c) -> bool:

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from models import qscalar as qs
 from rig.errors import RigConfigError, UnreachableError
 
 __all__ = ["RAD_PER_TICK", "TICKS_PER_REV", "ChainKinematics", "ServoJoint"]
@@ -103,32 +104,6 @@ def _dot(a: Sequence[float], b: Sequence[float]) -> float:
 
 def _cross(a: Sequence[float], b: Sequence[float]) -> Vec:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _qmul(p: Sequence[float], q: Sequence[float]) -> Quat:
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
-
-
-def _qconj(q: Sequence[float]) -> Quat:
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def _rotate(q: Sequence[float], v: Sequence[float]) -> Vec:
-    w, u = q[0], (q[1], q[2], q[3])
-    t = _cross(u, v)
-    t = (2.0 * t[0], 2.0 * t[1], 2.0 * t[2])
-    c = _cross(u, t)
-    return (v[0] + w * t[0] + c[0], v[1] + w * t[1] + c[1], v[2] + w * t[2] + c[2])
-
-
-def _axis_angle(a: Sequence[float], theta: float) -> Quat:
-    s = math.sin(0.5 * theta)
-    return (math.cos(0.5 * theta), s * a[0], s * a[1], s * a[2])
 
 
 def _subproblem1(w: Sequence[float], p: Sequence[float], q: Sequence[float]) -> float | None:
@@ -228,7 +203,7 @@ class ChainKinematics:
         """
         q: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
         for a, theta in zip(self._axes, self.angles(ticks), strict=True):
-            q = _qmul(q, _axis_angle(a, theta))
+            q = qs.mul(q, qs.axis_angle(a, theta))
         out = np.array(q)
         return -out if out[0] < 0 else out
 
@@ -251,13 +226,13 @@ class ChainKinematics:
         if self.n == 1:
             return [(_twist_about(q, a[0]),)]
         if self.n == 2:
-            t1 = _subproblem1(a[0], a[1], _rotate(q, a[1]))
+            t1 = _subproblem1(a[0], a[1], qs.rotate(q, a[1]))
             if t1 is None:
                 t1 = near_theta[0]
-            q2 = _qmul(_qconj(_axis_angle(a[0], t1)), q)
+            q2 = qs.mul(qs.conj(qs.axis_angle(a[0], t1)), q)
             return [(t1, _twist_about(q2, a[1]))]
         a1, a2, a3 = a
-        target = _rotate(q, a3)
+        target = qs.rotate(q, a3)
         k = _dot(a1, a2)
         cr = _cross(a1, a2)
         cr2 = _dot(cr, cr)
@@ -274,16 +249,16 @@ class ChainKinematics:
             t1 = _subproblem1(a1, c, target)
             if t1 is None:  # gimbal lock: R a3 along a1, θ1 free -> keep the present value
                 t1 = near_theta[0]
-                q1 = _axis_angle(a1, t1)
-                t2 = _subproblem1(a2, a3, _rotate(_qconj(q1), target))
+                q1 = qs.axis_angle(a1, t1)
+                t2 = _subproblem1(a2, a3, qs.rotate(qs.conj(q1), target))
                 if t2 is None:
                     t2 = near_theta[1]
             else:
                 t2 = _subproblem1(a2, a3, c)
                 if t2 is None:
                     t2 = near_theta[1]
-            q12 = _qmul(_axis_angle(a1, t1), _axis_angle(a2, t2))
-            t3 = _twist_about(_qmul(_qconj(q12), q), a3)
+            q12 = qs.mul(qs.axis_angle(a1, t1), qs.axis_angle(a2, t2))
+            t3 = _twist_about(qs.mul(qs.conj(q12), q), a3)
             out.append((t1, t2, t3))
         return out
 
@@ -305,7 +280,7 @@ class ChainKinematics:
             # residual: distance of the target from what these angles reach
             r: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
             for a, t in zip(self._axes, theta, strict=True):
-                r = _qmul(r, _axis_angle(a, t))
+                r = qs.mul(r, qs.axis_angle(a, t))
             res = _angle_between(r, qq)
             if res > self.tolerance:
                 residual_deg = math.degrees(res)

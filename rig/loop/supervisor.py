@@ -68,7 +68,7 @@ from enum import IntFlag
 
 import numpy as np
 
-from rig.loop import qscalar as qs
+from models import qscalar as qs
 
 __all__ = ["SAFETY_FLAGS", "Intervention", "Supervisor", "SupervisorConfig"]
 

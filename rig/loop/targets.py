@@ -459,7 +459,7 @@ class MirrorTargets(TargetSource):
             self._thread.start()
 
     def _run(self) -> None:
-        from rig.loop import qscalar as qs
+        from models import qscalar as qs
 
         try:
             while not self._stop.is_set():

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from models import qscalar as qs
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.oracle import ConstraintOracle
 from models.shapes import load_shape
-from rig.loop import qscalar as qs
 from rig.loop.supervisor import Intervention, Supervisor, SupervisorConfig
 from rig.loop.targets import ScriptedTargets
 
@@ -49,24 +49,6 @@ def _cycle(sup, t, target, target_t=None, correction=None):
     goal = sup.step(t, tq, correction)
     assert sup.accept(goal)
     return goal
-
-
-# --------------------------------------------------------------------------- scalar kernels
-def test_scalar_kernels_match_models_quaternion():
-    rng = np.random.default_rng(0)
-    p, q = Q.random_quaternions(200, rng), Q.random_quaternions(200, rng)
-    for a, b in zip(p, q, strict=True):
-        np.testing.assert_allclose(qs.mul(_tup(a), _tup(b)), Q.multiply(a, b), atol=1e-12)
-        np.testing.assert_allclose(qs.conj(_tup(a)), Q.conjugate(a), atol=0)
-        assert qs.angle(_tup(a)) == pytest.approx(float(Q.angle(a)), abs=1e-12)
-        r = qs.relative(_tup(a), _tup(b))
-        assert r[0] >= 0
-        np.testing.assert_allclose(Q.canonical(Q.multiply(r, a)), Q.canonical(b), atol=1e-12)
-        v = qs.log_vec(r)
-        back = qs.exp_vec(v)
-        np.testing.assert_allclose(back, r, atol=1e-12)
-        axis = np.asarray(v) / np.linalg.norm(v)
-        np.testing.assert_allclose(Q.from_axis_angle(axis, np.linalg.norm(v)), r, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- target handling

@@ -1,13 +1,18 @@
-"""Scalar quaternion kernels for the control loop's hot path (tuples of floats, ``w x y z``).
+"""Scalar quaternion kernels for one orientation at a time (tuples of floats, ``w x y z``).
 
-Same conventions as :mod:`models.quaternion` (scalar-first, Hamilton, ``p ⊗ q`` rotates by
-``q`` first), written on plain floats because one orientation per cycle through numpy costs
-more in call overhead than in arithmetic. ``tests/rig/test_loop_supervisor.py`` checks every
-kernel against its :mod:`models.quaternion` counterpart.
+The single-orientation twins of :mod:`models.quaternion`, used wherever one orientation per
+call must be cheap: the exact oracle's single path, servo-chain kinematics and the control
+loop's supervisor. Same conventions (scalar-first, Hamilton, ``p ⊗ q`` rotates by ``q``
+first), written on plain floats because one orientation through numpy costs more in call
+overhead than in arithmetic. ``tests/models/test_qscalar.py`` checks every kernel against its
+:mod:`models.quaternion` counterpart.
 
 Maths
 -----
 - product: ``(p ⊗ q)_w = p_w q_w − p·q``, ``(p ⊗ q)_v = p_w q_v + q_w p_v + p_v × q_v``;
+- rotation of a vector: ``v' = v + w t + u × t`` with ``t = 2 u × v`` (``q = (w, u)``);
+- shortest rotation from unit ``a`` to unit ``b``: ``normalize(1 + a·b, a × b)``; antiparallel
+  vectors rotate by π about :func:`models.quaternion.perpendicular` of ``a``;
 - relative rotation from ``a`` to ``b`` (parent frame): ``r = b ⊗ a⁻¹``, sign chosen so that
   ``r_w ≥ 0`` (the shorter way round);
 - rotation vector: ``log(r) = θ u`` with ``θ = 2 atan2(|r_v|, r_w)``, ``u = r_v / |r_v|``;
@@ -27,13 +32,16 @@ __all__ = [
     "IDENTITY",
     "angle",
     "angle_between",
+    "axis_angle",
     "conj",
     "exp_vec",
+    "from_two_vectors",
     "log_vec",
     "mul",
     "norm",
     "normalize",
     "relative",
+    "rotate",
 ]
 
 
@@ -47,6 +55,39 @@ def mul(p: Quat, q: Quat) -> Quat:
         pw * qy - px * qz + py * qw + pz * qx,
         pw * qz + px * qy - py * qx + pz * qw,
     )
+
+
+def rotate(q, v) -> Vec:
+    """Vector ``v`` rotated by the unit quaternion ``q``."""
+    w, x, y, z = q
+    tx = 2.0 * (y * v[2] - z * v[1])
+    ty = 2.0 * (z * v[0] - x * v[2])
+    tz = 2.0 * (x * v[1] - y * v[0])
+    return (
+        v[0] + w * tx + (y * tz - z * ty),
+        v[1] + w * ty + (z * tx - x * tz),
+        v[2] + w * tz + (x * ty - y * tx),
+    )
+
+
+def axis_angle(axis, theta: float) -> Quat:
+    """Rotation by ``theta`` radians about the unit ``axis``."""
+    s = math.sin(0.5 * theta)
+    return (math.cos(0.5 * theta), s * axis[0], s * axis[1], s * axis[2])
+
+
+def from_two_vectors(a, b) -> Quat:
+    """Shortest rotation taking unit ``a`` to unit ``b`` (antiparallel: the rule of
+    :func:`models.quaternion.from_two_vectors`)."""
+    w = 1.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    if w < 1e-12:
+        from models.quaternion import perpendicular
+
+        p = perpendicular(a)
+        return (0.0, float(p[0]), float(p[1]), float(p[2]))
+    q = (w, a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
 def conj(q: Quat) -> Quat:
