@@ -5,7 +5,8 @@
 Without ``--model`` it builds the ``field`` model (:mod:`models.field`, the default of
 ``rig train``) of the 'original' shape with and without a twist range, then exports two
 networks of ``--hidden`` nodes (default 20; leaky ReLU as in the ``best`` preset, sigmoid as
-in the thesis preset) with random weights — latency does not depend on the weights. Prints the median single-orientation latency
+in the thesis preset) with random weights — latency does not depend on the weights. Prints the
+median single-orientation latency
 (``CorrectionModel.correct_one`` and a (1, 4) ``correction`` call) and batched throughput.
 Never asserts on time.
 """

@@ -19,7 +19,8 @@ Adaptations needed to score it on our constraints: the rest direction is the con
 the polygon's ``interior`` point (our boundaries sit at varied centres; the ellipse is centred
 on the rest direction, as in the talk), the ellipse is a least-squares fit of
 ``y²A₁₁ + 2yzA₁₂ + z²A₂₂ = 1`` to 2000 points sampled along the boundary, and the twist is
-clamped the way the constraint defines it (the twist of ``Δ ⊗ q`` after the swing correction ``Δ``), so that only the swing
+clamped the way the constraint defines it (the twist of ``Δ ⊗ q`` after the swing correction
+``Δ``), so that only the swing
 model differs from the exact oracle. Run alone it prints the peer's metrics on the held-out
 boundary sets (:mod:`models.evaluation`); ``bench_accuracy.py`` scores it beside our models on
 the same orientations.
