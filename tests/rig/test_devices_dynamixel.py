@@ -198,3 +198,12 @@ def test_configure_writes_registers_and_refuses_eeprom_with_torque_on(sim):
     with DynamixelChain(sim, joints([1, 2], lo=500, hi=3000)) as chain:
         with pytest.raises(RigError, match="torque is on"):
             chain.configure()
+
+
+def test_scan_of_every_id_finds_the_servos_through_one_broadcast_ping():
+    from rig.devices.dynamixel import BROADCAST_SCAN_ABOVE
+
+    assert len(range(253)) > BROADCAST_SCAN_ABOVE
+    found = scan("sim://dynamixel?ids=4,9,200&baud=57600", bauds=[1_000_000, 57600])
+    assert [(s.id, s.model, s.baud) for s in found] == [
+        (4, "XM430-W350", 57600), (9, "XM430-W350", 57600), (200, "XM430-W350", 57600)]
