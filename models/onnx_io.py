@@ -357,32 +357,10 @@ def to_onnx(
     n = g.op("ReduceL2", [y], axes=[1], keepdims=1)
     n = g.op("Max", [n, g.const(1e-12)])
     g.op("Div", [y, n], out=OUTPUT)
-    graph = helper.make_graph(
-        g.nodes, "jointlimits_correction",
-        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", 4])],
-        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", 4])],
-        g.inits,
-    )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
-                              producer_name="jointlimits-rig", producer_version=package_version())
-    model.ir_version = 8
-    model.doc_string = ("Corrective joint constraint: corrected = correction ⊗ orientation "
-                        "(scalar-first w, x, y, z; Hamilton product).")
-    meta = {
-        "jointlimits.format": FORMAT,
-        "jointlimits.constraint": constraint_yaml,
-        "jointlimits.constraint_sha256": hashlib.sha256(constraint_yaml.encode()).hexdigest(),
-        "jointlimits.training_data_sha256": training_data_sha256,
-        "jointlimits.metrics": json.dumps(metrics or {}, sort_keys=True),
-        "jointlimits.network": json.dumps({**network.info, "input_map": network.input_map,
-                                           "frame": (None if network.frame is None else
-                                                     [float(v) for v in network.frame]),
-                                           **(extra or {})}, sort_keys=True, default=str),
-        "jointlimits.version": package_version(),
-    }
-    onnx.helper.set_model_props(model, meta)
-    onnx.checker.check_model(model)
-    return model
+    info = {**network.info, "input_map": network.input_map,
+            "frame": None if network.frame is None else [float(v) for v in network.frame],
+            **(extra or {})}
+    return _finish(g, _meta(constraint_yaml, training_data_sha256, metrics, info))
 
 
 def export_onnx(network: GMLP, path: str | Path, **kw) -> Path:
