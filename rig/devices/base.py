@@ -22,9 +22,28 @@ from typing import TypeVar
 from rig.devices.ports import Port, open_port
 from rig.errors import RigConnectionError, RigError, RigProtocolError, RigTimeoutError
 
-__all__ = ["Device"]
+__all__ = ["Device", "describe_open_error", "open_serial"]
 
 T = TypeVar("T")
+
+
+def describe_open_error(err: BaseException) -> str:
+    """What went wrong opening a port, in the user's terms (``/dev/null`` → "not a serial
+    port" rather than the OS's "Inappropriate ioctl for device")."""
+    msg = getattr(err, "strerror", None) or str(err)
+    return "not a serial port" if "Inappropriate ioctl" in msg else msg
+
+
+def open_serial(path: str, baud: int, *, what: str, url: str):
+    """A non-blocking :class:`serial.Serial` on ``path``, or :class:`RigConnectionError`
+    naming ``what`` ("the BNO055 port") and the port string ``url``."""
+    import serial
+
+    try:
+        return serial.Serial(path, baudrate=baud, timeout=0)
+    except (serial.SerialException, OSError) as err:
+        raise RigConnectionError(f"cannot open {what}: {describe_open_error(err)}",
+                                 port=url) from err
 
 
 class Device:

@@ -21,7 +21,7 @@ import serial
 
 from firmware_protocol.errors import ProtocolError
 from firmware_protocol.imu import bno055 as B
-from rig.devices.base import Device
+from rig.devices.base import Device, open_serial
 from rig.devices.ports import Port
 from rig.devices.stream_imu import ImuSample
 from rig.errors import RigConnectionError, RigError, RigProtocolError, RigTimeoutError
@@ -60,13 +60,7 @@ class Bno055(Device):
 
     def _open(self) -> None:
         url = str(self.port)
-        try:
-            self._serial = serial.Serial(self.path, baudrate=self.baud, timeout=0)
-        except (serial.SerialException, OSError) as err:
-            msg = str(err)
-            if "Inappropriate ioctl" in msg:
-                msg = "not a serial port"
-            raise RigConnectionError(f"cannot open the BNO055 port: {msg}", port=url) from err
+        self._serial = open_serial(self.path, self.baud, what="the BNO055 port", url=url)
         self._decoder = B.ResponseDecoder()
         chip = self.chip_id()
         if chip != B.CHIP_ID_VALUE:

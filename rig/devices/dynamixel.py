@@ -45,7 +45,7 @@ from firmware_protocol.dynamixel.control_table import (
     ControlTable,
     load_control_table,
 )
-from rig.devices.base import Device
+from rig.devices.base import Device, describe_open_error
 from rig.devices.config import ServosConfig
 from rig.devices.kinematics import ChainKinematics, ServoJoint
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
@@ -121,10 +121,8 @@ def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPo
     try:
         ok = port.setBaudRate(baud)
     except _CONNECTION_ERRORS as err:
-        msg = getattr(err, "strerror", None) or str(err)
-        if "Inappropriate ioctl" in msg:
-            msg = "not a serial port"
-        raise RigConnectionError(f"cannot open the servo port: {msg}", port=url) from err
+        raise RigConnectionError(f"cannot open the servo port: {describe_open_error(err)}",
+                                 port=url) from err
     if not ok:
         raise RigConfigError(f"dynamixel_sdk cannot set {baud} bit/s", port=url,
                              expected=", ".join(map(str, SCAN_BAUDS)))

@@ -29,7 +29,7 @@ import serial
 
 from firmware_protocol.errors import ProtocolError
 from firmware_protocol.imu import stream as S
-from rig.devices.base import Device
+from rig.devices.base import Device, open_serial
 from rig.devices.ports import Port
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
 
@@ -121,13 +121,7 @@ class StreamImu(Device):
         url = str(self.port)
         if self._serial is not None:
             self._drop_serial()
-        try:
-            self._serial = serial.Serial(self.path, baudrate=self.baud, timeout=0)
-        except (serial.SerialException, OSError) as err:
-            msg = str(err)
-            if "Inappropriate ioctl" in msg:
-                msg = "not a serial port"
-            raise RigConnectionError(f"cannot open the IMU board port: {msg}", port=url) from err
+        self._serial = open_serial(self.path, self.baud, what="the IMU board port", url=url)
         self._decoder = S.StreamDecoder(track_sequence=True)
         self._unwrap = S.TimestampUnwrapper()
         self._offset: float | None = None
