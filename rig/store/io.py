@@ -36,6 +36,7 @@ renamed, so a crash never leaves half a file under the final name.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import tempfile
@@ -271,30 +272,26 @@ def _fmt(v: float) -> str:
     return repr(float(v))
 
 
-def _atomic_write(path: str | os.PathLike, chunks: Iterable[str]) -> None:
+def _atomic_write(path: str | os.PathLike, head: str, lines: Iterable[str]) -> None:
+    """Write ``head`` then each line (newline-terminated) to a temporary file beside ``path``,
+    fsync, then rename over ``path``: a reader never sees a half-written export."""
     p = Path(path)
     if not p.parent.is_dir():
         raise RigConfigError(f"--out {path}: directory {p.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            for c in chunks:
-                fh.write(c)
+            fh.write(head)
+            for line in lines:
+                fh.write(line)
+                fh.write("\n")
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, p)
     except BaseException:
-        with _suppress():
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
-
-
-class _suppress:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return True
 
 
 def _rate_of(table: OrientationTable) -> float:
@@ -337,22 +334,15 @@ def write_sto(path: str | os.PathLike, table: OrientationTable) -> None:
     cols = [table.columns[lab].tolist() for lab in labels]
     times = table.time.tolist()
 
-    def body():
-        yield "".join(head)
-        out = []
+    def lines():
         for r, t in enumerate(times):
             cells = [repr(t)]
             for c in cols:
                 w, x, y, z = c[r]
                 cells.append(f"{w!r},{x!r},{y!r},{z!r}")
-            out.append("\t".join(cells))
-            if len(out) >= 4096:
-                yield "\n".join(out) + "\n"
-                out = []
-        if out:
-            yield "\n".join(out) + "\n"
+            yield "\t".join(cells)
 
-    _atomic_write(path, body())
+    _atomic_write(path, "".join(head), lines())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -503,21 +493,14 @@ def write_csv(path: str | os.PathLike, table: OrientationTable, *, single: bool 
             header += [f"{lab}_{c}" for c in "wxyz"]
     cols = [table.columns[lab].tolist() for lab in labels]
 
-    def body():
-        yield ",".join(header) + "\n"
-        out = []
+    def lines():
         for r, t in enumerate(table.time.tolist()):
             cells = [repr(t)]
             for c in cols:
                 cells.extend(repr(v) for v in c[r])
-            out.append(",".join(cells))
-            if len(out) >= 4096:
-                yield "\n".join(out) + "\n"
-                out = []
-        if out:
-            yield "\n".join(out) + "\n"
+            yield ",".join(cells)
 
-    _atomic_write(path, body())
+    _atomic_write(path, ",".join(header) + "\n", lines())
 
 
 def write_samples_csv(path: str | os.PathLike, s: Mapping[str, np.ndarray]) -> None:
@@ -527,23 +510,16 @@ def write_samples_csv(path: str | os.PathLike, s: Mapping[str, np.ndarray]) -> N
         if "," in nm or "\n" in nm:
             raise RigConfigError(f"name {nm!r} cannot be written to CSV")
 
-    def body():
-        yield "t_s,device_t_s,name,kind,w,x,y,z,status\n"
-        out = []
+    def lines():
         q = s["q"].tolist()
         for t, d, nm, kd, qq, st in zip(
             s["t"].tolist(), s["device_t"].tolist(), s["name"].tolist(), s["kind"].tolist(), q,
             s["status"].tolist(), strict=True,
         ):
             dd = "" if math.isnan(d) else repr(d)
-            out.append(f"{t!r},{dd},{nm},{kd},{qq[0]!r},{qq[1]!r},{qq[2]!r},{qq[3]!r},{st}")
-            if len(out) >= 4096:
-                yield "\n".join(out) + "\n"
-                out = []
-        if out:
-            yield "\n".join(out) + "\n"
+            yield f"{t!r},{dd},{nm},{kd},{qq[0]!r},{qq[1]!r},{qq[2]!r},{qq[3]!r},{st}"
 
-    _atomic_write(path, body())
+    _atomic_write(path, "t_s,device_t_s,name,kind,w,x,y,z,status\n", lines())
 
 
 def read_orientations(path: str | os.PathLike) -> OrientationTable:
