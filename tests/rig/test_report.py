@@ -3,14 +3,9 @@
 from __future__ import annotations
 
 import base64
-import io
-import os
 import re
-import shutil
-import subprocess
 
 import numpy as np
-import pytest
 
 from models import quaternion as Q
 from models.constraint import load_constraint
@@ -18,6 +13,7 @@ from models.oracle import ConstraintOracle
 from models.shapes import shape_path
 from rig.report import ReportData, RomRow, render_html, write_report
 from rig.report.figures import EqualAreaMap, boundary_figure, error_map_figure
+from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 
 def _data() -> ReportData:
@@ -68,36 +64,12 @@ def test_sections_without_data_are_left_out():
     assert "P-1" in text and "<h2>" not in text
 
 
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
-
-
 def test_report_renders_in_headless_chromium(tmp_path):
-    browser = _chromium()
-    if browser is None:
-        pytest.skip("no Chromium installed (.ci/run installs Debian's chromium)")
-    import matplotlib.image
-
     page = write_report(_data(), tmp_path / "report.html")
-    shot = tmp_path / "shot.png"
-    profile = tmp_path / "profile"
-    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-           "--no-first-run", "--disable-background-networking", "--disable-component-update",
-           "--disable-sync", f"--user-data-dir={profile}", "--hide-scrollbars",
-           "--window-size=1200,2600", f"--screenshot={shot}", page.as_uri()]
-    subprocess.run(cmd, check=True, capture_output=True, env={**os.environ, "HOME": str(tmp_path)})
-    img = matplotlib.image.imread(io.BytesIO(shot.read_bytes()), format="png")[..., :3]
-    assert img.shape[0] == 2600 and img.shape[1] == 1200
-    dark = (img.sum(axis=2) < 0.6).mean()  # text and outlines
-    assert dark > 0.002
-    # the sparse arc / error-map boundary red (#cc3311) and the sample blue (#4477aa) are drawn
-    red = (np.abs(img - np.array([0xCC, 0x33, 0x11]) / 255).max(axis=2) < 0.08).sum()
-    blue = (np.abs(img - np.array([0x44, 0x77, 0xAA]) / 255).max(axis=2) < 0.15).sum()
-    assert red > 200 and blue > 50
-    # the verdict colour of the "ok" lines (#1b7837) shows the page was styled
-    green = (np.abs(img - np.array([0x1B, 0x78, 0x37]) / 255).max(axis=2) < 0.08).sum()
-    assert green > 20
+    img = screenshot(page, tmp_path, height=2600)
+    assert dark_fraction(img) > 0.002  # text and outlines
+    # the sparse arc / error-map boundary red and the sample blue are drawn
+    assert pixels_near(img, "#cc3311", 0.08) > 200
+    assert pixels_near(img, "#4477aa", 0.15) > 50
+    # the verdict colour of the "ok" lines shows the page was styled
+    assert pixels_near(img, "#1b7837", 0.08) > 20
