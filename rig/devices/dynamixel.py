@@ -516,6 +516,27 @@ class DynamixelChain(Device):
                                    dxl_id=off[0])
         return state
 
+    def set_position_limits(self, min_ticks, max_ticks) -> None:
+        """Replace every joint's min/max ticks (no bus traffic): the kinematics, the goal check
+        of :meth:`write_goal_ticks` and the next :meth:`configure` use them."""
+        import dataclasses
+
+        lo, hi = np.asarray(min_ticks), np.asarray(max_ticks)
+        if lo.shape != (len(self.ids),) or hi.shape != (len(self.ids),):
+            raise ValueError(f"need {len(self.ids)} min and max ticks, got {lo.shape}, {hi.shape}")
+        joints = tuple(dataclasses.replace(j, min_ticks=int(a), max_ticks=int(b))
+                       for j, a, b in zip(self.config.chain, lo, hi, strict=True))
+        config = dataclasses.replace(self.config, chain=joints)
+        self.kinematics = config.kinematics()  # validates the new limits
+        self.config = config
+        self._lo = self.kinematics.min_ticks.tolist()
+        self._hi = self.kinematics.max_ticks.tolist()
+
+    def set_latency(self, latency_ms: float) -> None:
+        """Adapter latency (ms) the SDK's packet timeout is computed from, from now on."""
+        self._latency = float(latency_ms)
+        self._sdk_port.latency_ms = float(latency_ms)
+
     def configure(self) -> None:
         """Set the registers the loop depends on (see the module docstring).
 

@@ -494,7 +494,7 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
        written only with torque off: if a servo's torque is already on (a limb holding), the
        registers are left as they are and a line is logged (the supervisor stays the primary
        limit).
-    3. Reopen for the loop with the loop's packet timeout: ``latency_ms``, else the rig
+    3. Set the loop's packet timeout on the open chain: ``latency_ms``, else the rig
        config's ``latency_ms``, else :data:`SIM_LOOP_LATENCY_MS` on a simulator and the
        driver's default (the adapter's detected latency timer) on hardware. The loop turns the
        driver's retries off while it runs (it retries within its cycle budget).
@@ -512,8 +512,6 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
     chain : DynamixelChain
         With ``chain.backstop = (min_ticks, max_ticks)`` or None.
     """
-    import dataclasses
-
     from rig.devices.dynamixel import DynamixelChain
 
     log = log or (lambda msg: None)
@@ -536,18 +534,13 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
             lo, hi = position_limits_from_boundary(kin, oracle, ticks, margin_deg=margin_deg)
             lo = np.minimum(lo, kin.zero_ticks)
             hi = np.maximum(hi, kin.zero_ticks)
-            joints = tuple(dataclasses.replace(j, min_ticks=int(a), max_ticks=int(b))
-                           for j, a, b in zip(servos.chain, lo, hi, strict=True))
-            servos = dataclasses.replace(servos, chain=joints)
-            chain.close()
-            chain = _open_chain(DynamixelChain, port, servos, servos.latency_ms)
+            chain.set_position_limits(lo, hi)
             limits = (lo, hi)
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
         if not torque_on:
             chain.configure()
-        if latency_ms != servos.latency_ms:
-            chain.close()
-            chain = _open_chain(DynamixelChain, port, servos, latency_ms)
+        if latency_ms is not None:
+            chain.set_latency(latency_ms)
     except BaseException:
         chain.close()
         raise

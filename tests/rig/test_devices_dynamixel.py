@@ -207,3 +207,18 @@ def test_scan_of_every_id_finds_the_servos_through_one_broadcast_ping():
     found = scan("sim://dynamixel?ids=4,9,200&baud=57600", bauds=[1_000_000, 57600])
     assert [(s.id, s.model, s.baud) for s in found] == [
         (4, "XM430-W350", 57600), (9, "XM430-W350", 57600), (200, "XM430-W350", 57600)]
+
+
+def test_new_position_limits_are_checked_on_goals_and_written_by_configure(sim):
+    with DynamixelChain(sim, joints([1, 2, 3], lo=1024, hi=3072)) as chain:
+        chain.set_position_limits([1500, 1600, 1700], [2500, 2600, 2700])
+        with pytest.raises(UnreachableError, match="ID 1") as info:
+            chain.write_goal_ticks([1400, 2000, 2000])
+        assert info.value.actual == 1400 and info.value.expected == "1500..2500"
+        chain.configure()
+        assert [chain.read_register(i, "Min Position Limit") for i in (1, 2, 3)] == [
+            1500, 1600, 1700]
+        assert [chain.read_register(i, "Max Position Limit") for i in (1, 2, 3)] == [
+            2500, 2600, 2700]
+        with pytest.raises(ValueError, match="need 3 min and max ticks"):
+            chain.set_position_limits([1500, 1600], [2500, 2600])
