@@ -68,17 +68,20 @@ def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
     Returns (summary, telemetry table, bus, loop).
     """
     oracle = ConstraintOracle(constraint)
-    clk = ManualClock()
     cfg = LoopConfig(rate_hz=200.0, watchdog_ms=watchdog_ms, safe_state=safe_state,
                      supervisor=SupervisorConfig(**sup))
-    with open_port(URL, baud=SERVOS.baud) as port:
+    # the loop and the servos share one simulated clock: the limb moves exactly as far per
+    # cycle as the loop's time says, however fast or loaded the test machine is
+    with open_port(URL + "&clock=manual&wire_time=off", baud=SERVOS.baud) as port:
         bus = port.simulator
+        clk = bus.clock
         if before is not None:
             before(bus)
+            clk.advance(0.01)  # let what ``before`` did to the limb take effect
         chain = prepare_chain(port, SERVOS, oracle)
         try:
-            loop = EnforcementLoop(chain, model, oracle, targets, cfg, clock=clk.now,
-                                   sleep=clk.sleep, on_cycle=on_cycle)
+            loop = EnforcementLoop(chain, model, oracle, targets, cfg, clock=clk,
+                                   sleep=clk.advance, on_cycle=on_cycle)
             loop.setup()
             summary = loop.run(max_cycles=cycles)
             state = {i: (bus.servo(i).torque, bus.servo(i).get("Goal Position"),
