@@ -132,8 +132,11 @@ def joint_orientations_from_store(store, session_id: int,
         except CalibrationError as err:
             raise RigConfigError(f"session {session_id}: {err}") from err
         parent, child = _segments(sess, sensors, s, session_id)
-        tp, qp, sp = (a[s["name"] == parent] for a in (s["t"], s["q"], s["status"]))
-        tc, qc, sc = (a[s["name"] == child] for a in (s["t"], s["q"], s["status"]))
+        # pair the two sensors' samples by the device timestamp when the device gives one (the
+        # readings of one frame share it; host times are per batch and repeat), else host time
+        key = s["device_t"] if np.isfinite(s["device_t"]).all() else s["t"]
+        tp, qp, sp = (a[s["name"] == parent] for a in (key, s["q"], s["status"]))
+        tc, qc, sc = (a[s["name"] == child] for a in (key, s["q"], s["status"]))
         _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
         if len(ip) < 0.5 * min(len(tp), len(tc)):
             # different clocks: nearest-in-time pairing through the store's aligner
