@@ -17,7 +17,11 @@ compared with the patient's truth:
 - ``twist_deg``: the larger of the two twist-limit errors;
 - ``peaks``: the clinical peaks (:func:`calibration.clinical.range_of_motion`) of both
   constraints, ``peaks_deg`` the largest difference, ``swing_peaks_deg`` over flexion,
-  extension, abduction, adduction and horizontal adduction only.
+  extension, abduction, adduction and horizontal adduction only;
+- ``twist_offset_deg`` / ``twist_wander_deg``: mean and standard deviation over the recording of
+  the per-sample twist error (recorded joint orientation against the truth at the same instant,
+  samples the extractor keeps): how much of ``twist_deg`` is a constant offset (the heading
+  misalignment at calibration) and how much drifts during the session.
 
 Used by ``benchmarks/bench_record.py accuracy`` (held-out seeds) and one fast seeded test.
 """
@@ -81,6 +85,8 @@ class AccuracyResult:
     twist_deg: float
     peaks_deg: float
     swing_peaks_deg: float
+    twist_offset_deg: float = math.nan
+    twist_wander_deg: float = math.nan
     peaks: dict = field(default_factory=dict)  # movement -> (extracted, truth)
     twist: tuple = ()  # ((lo, hi) extracted, (lo, hi) truth)
 
@@ -111,6 +117,7 @@ def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
         errs.append(err)
         if m in _SWING_PEAKS:
             swing_errs.append(err)
+    tw_off, tw_wander = _twist_error(data, truth_q, ex.limb_axis, ex.min_system_status)
     cal = res.calibration
     return AccuracyResult(
         patient=name, path=path, status=res.status, samples=res.samples, dropped=res.dropped,
@@ -119,8 +126,21 @@ def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
         out1_pct=100.0 * float(outside_fraction(est, dirs, 1.0)),
         out2_pct=100.0 * float(outside_fraction(est, dirs, 2.0)),
         twist_deg=max(abs(lo - truth.twist.min_deg), abs(hi - truth.twist.max_deg)),
-        peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), peaks=peaks,
+        peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), twist_offset_deg=tw_off,
+        twist_wander_deg=tw_wander, peaks=peaks,
         twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)))
+
+
+def _twist_error(data, truth_q, axis, min_status: int) -> tuple[float, float]:
+    """Mean and std (degrees) of recorded minus true twist, sample by sample."""
+    q = np.asarray(data.q)
+    if len(q) != len(truth_q):  # not paired one to one with the truth: no figure
+        return math.nan, math.nan
+    d = np.degrees(Q.twist_angle(q, axis) - Q.twist_angle(truth_q, axis))
+    d = (d + 180.0) % 360.0 - 180.0
+    if data.status is not None:
+        d = d[(np.asarray(data.status).astype(np.int64) >> 6) >= min_status]
+    return (float(d.mean()), float(d.std())) if d.size else (math.nan, math.nan)
 
 
 def _rig_yaml(tmp: Path, body: str) -> Path:
