@@ -16,7 +16,6 @@ keeps the joint angles continuous. While torque is off, Present Position follows
 from __future__ import annotations
 
 import threading
-import time
 import urllib.parse
 from typing import Any
 
@@ -51,6 +50,15 @@ def load_patient(spec: str, *, sensors: int = 2, seed: int = 0, noise: str = "de
                                              speed=speed, excursion=excursion)
     except ValueError as err:
         raise RigConfigError(f"port {url!r}: {err}") from err
+
+
+def _patient_t0(clock: Any, t0: float) -> float:
+    """:attr:`Port.patient_t0 <rig.devices.ports.Port.patient_t0>` of a patient whose motion
+    time is 0 when the simulator's ``clock`` reads ``t0``: host monotonic time on the real clock
+    and on a :class:`~rig.sim.clock.ScaledClock` (its ``host_time``), the clock's own reading on
+    a :class:`~rig.sim.clock.ManualClock` (whose time no host time corresponds to)."""
+    host_time = getattr(clock, "host_time", None)
+    return float(host_time(t0)) if host_time is not None else float(t0)
 
 
 def _num(one: dict[str, str], key: str, default: Any, kind: type, url: str) -> Any:
@@ -135,7 +143,7 @@ def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
         for k, dxl_id in enumerate(kin.ids):
             bus.set_hand(dxl_id, drive.hand(k))
         port.patient = limb
-        port.patient_t0 = t0 if bus.clock is time.monotonic else time.monotonic()
+        port.patient_t0 = _patient_t0(bus.clock, t0)
         port.backdrive = drive  # type: ignore[attr-defined]
     except BaseException:
         port.close()
@@ -148,8 +156,9 @@ def open_sim_bno055(url: str, *, baud: int | None = None) -> Port:
     from rig.sim.imu import bno055_from_url
 
     sim = bno055_from_url(url)
+    # the chip samples the patient at clock() - _t0 (its start)
     port = Port(url=url, path=sim.port, simulator=sim, kind="sim-bno055", patient=sim.limb,
-                patient_t0=time.monotonic())
+                patient_t0=_patient_t0(sim.clock, sim._t0))
     port._closers.append(_closing(sim))
     return port
 
@@ -159,7 +168,8 @@ def open_sim_imu_stream(url: str, *, baud: int | None = None) -> Port:
     from rig.sim.imu import stream_from_url
 
     sim = stream_from_url(url)
+    # the device clock, which samples the patient, is clock() - _t0 (its start)
     port = Port(url=url, path=sim.port, simulator=sim, kind="sim-imu-stream", patient=sim.limb,
-                patient_t0=time.monotonic())
+                patient_t0=_patient_t0(sim.clock, sim._t0))
     port._closers.append(_closing(sim))
     return port

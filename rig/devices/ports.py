@@ -63,8 +63,11 @@ class Port:
     patient : object or None
         The :class:`rig.sim.limb.SimulatedLimb` driving a simulator (ground truth), if any.
     patient_t0 : float
-        Host monotonic time at which the patient's motion time was 0 (``limb.joint(t -
-        patient_t0)`` is the truth at host time ``t``).
+        When the patient's motion time was 0. On the real clock (the default) and a
+        ``time_scale=`` one: host monotonic time, ``limb.joint((t - patient_t0) * scale)`` is
+        the truth at host time ``t`` (``scale``: the simulator clock's, 1 on real time). On a
+        ``clock=manual`` simulator host time does not move the patient: it is the simulator
+        clock's reading, ``limb.joint(simulator.clock() - patient_t0)`` is the truth now.
     """
 
     url: str

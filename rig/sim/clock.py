@@ -1,16 +1,23 @@
-"""Simulated time for the simulators: the real monotonic clock, a manual clock, a scaled clock.
+"""Simulated time: the one manual clock of the project, and a scaled clock.
 
-A simulator's *clock* is any zero-argument callable returning seconds (``time.monotonic`` by
-default). Two richer clocks let tests and benchmarks run simulated time at their own pace:
+A *clock* is any zero-argument callable returning seconds; the real one is ``time.monotonic``
+(the default of every simulator and of the live loop, which then calls it directly: no
+wrapper on the real-time path). Two richer clocks let tests and benchmarks run time at their
+own pace:
 
 :class:`ManualClock`
-    Moves only when the caller says (:meth:`ManualClock.advance`). Simulators subscribe to it,
-    so an ``advance`` wakes their server threads at once: a stream IMU then emits every sample
-    whose time has come — as fast as the host reads, far faster than real time — and nothing
-    spins while the clock stands still.
+    Moves only when the caller says (:meth:`ManualClock.advance`, or :meth:`ManualClock.sleep`
+    for a loop that sleeps on it). Simulators subscribe to it, so an ``advance`` wakes their
+    server threads at once: a stream IMU then emits every sample whose time has come — as fast
+    as the host reads, far faster than real time — and nothing spins while the clock stands
+    still. The live loop (:class:`rig.loop.scheduler.Scheduler`,
+    :class:`rig.loop.runner.EnforcementLoop`) runs on it with ``clock=clk, sleep=clk.sleep``;
+    sharing one with a simulated servo bus (``sim://dynamixel?...&clock=manual``) keeps the
+    loop and the limb on one time.
 :class:`ScaledClock`
     ``t = start + scale × (monotonic() − monotonic_at_creation)``: simulated time running
-    ``scale`` times faster than real time (``sim://...&time_scale=20``).
+    ``scale`` times faster than real time (``sim://...&time_scale=20``); :meth:`ScaledClock.at`
+    and :meth:`ScaledClock.host_time` convert between its readings and host monotonic time.
 
 :func:`real_delay` converts a simulated interval into the real seconds a server thread should
 wait for it (``None``: only an ``advance`` can bring it).
@@ -46,6 +53,10 @@ class ManualClock:
     >>> clock.t += 0.25          # same as advance(0.25)
     >>> clock()
     0.75
+    >>> clock.sleep(0.25)        # a loop sleeping on it: advances, never blocks
+    >>> clock.sleep(-1.0)        # a deadline already passed: nothing to wait for
+    >>> clock()
+    1.0
     """
 
     def __init__(self, start: float = 0.0) -> None:
@@ -72,6 +83,15 @@ class ManualClock:
         if not dt >= 0.0:
             raise ValueError(f"a clock only moves forward: dt={dt!r}")
         self.set(self._t + float(dt))
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` on this clock: advance it (never blocks); ``<= 0`` does nothing.
+
+        The ``sleep`` of a loop running on manual time
+        (``Scheduler(rate, clock=clk, sleep=clk.sleep)``).
+        """
+        if seconds > 0.0:
+            self.advance(seconds)
 
     def set(self, t: float) -> None:
         """Set the reading to ``t`` (not earlier than now) and wake the subscribers."""
@@ -117,6 +137,14 @@ class ScaledClock:
 
     def __call__(self) -> float:
         return self._start + self.scale * (time.monotonic() - self._real0)
+
+    def at(self, host_t: float) -> float:
+        """The reading at host monotonic time ``host_t``."""
+        return self._start + self.scale * (float(host_t) - self._real0)
+
+    def host_time(self, t: float) -> float:
+        """The host monotonic time at which the clock reads ``t`` (inverse of :meth:`at`)."""
+        return self._real0 + (float(t) - self._start) / self.scale
 
 
 def real_delay(clock: Clock, sim_dt: float) -> float | None:
