@@ -48,12 +48,12 @@ from rig.devices.ports import open_port
 from rig.loop import (
     EnforcementLoop,
     LoopConfig,
-    ManualClock,
     ScriptedTargets,
     Supervisor,
     SupervisorConfig,
 )
 from rig.loop.runner import prepare_chain
+from rig.sim.clock import ManualClock
 
 SIM_URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
 
@@ -85,7 +85,7 @@ class ChildBus:
 def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None, clock=None):
     cfg = LoopConfig(rate_hz=rate, duration_s=duration,
                      watchdog_ms=1000 if clock is not None else None)
-    kw = {} if clock is None else {"clock": clock.now, "sleep": clock.sleep}
+    kw = {} if clock is None else {"clock": clock, "sleep": clock.sleep}
     with open_port(servos.port, baud=servos.baud) as port:
         chain = prepare_chain(port, servos, oracle)
         try:

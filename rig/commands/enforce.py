@@ -107,7 +107,7 @@ def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetr
                 ports=None, result=None) -> int:
     """What ``rig enforce`` does; returns the exit status (0, 1, 130, 143).
 
-    ``on_cycle``, ``clock`` (a :class:`rig.loop.ManualClock`) and ``ports`` (already opened
+    ``on_cycle``, ``clock`` (a :class:`rig.sim.clock.ManualClock`) and ``ports`` (already opened
     :class:`rig.devices.ports.Port` by port string, for fault injection) serve tests; ``result``
     (a dict) receives the loop, summary and ids.
 
@@ -253,7 +253,7 @@ def _run_with_devices(*, rig_cfg, mdl, binding, oracle, src, cfg, tel_path, sum_
             telemetry = Telemetry(tel_path, store_writer, keep=result is not None)
             kw = {}
             if clock is not None:
-                kw = {"clock": clock.now, "sleep": clock.sleep}
+                kw = {"clock": clock, "sleep": clock.sleep}
             loop = EnforcementLoop(chain, mdl, oracle, src, cfg, telemetry=telemetry,
                                    on_cycle=on_cycle, log=echo, **kw)
             if result is not None:

@@ -15,7 +15,7 @@
 
 from rig.loop.binding import Binding, ModelBindingError, bind_model
 from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig
-from rig.loop.scheduler import ManualClock, Scheduler
+from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import Intervention, Supervisor, SupervisorConfig
 from rig.loop.targets import CsvTrajectory, MirrorTargets, ScriptedTargets, open_targets
 from rig.loop.telemetry import COLUMNS, Fault, Telemetry
@@ -29,7 +29,6 @@ __all__ = [
     "Fault",
     "Intervention",
     "LoopConfig",
-    "ManualClock",
     "MirrorTargets",
     "ModelBindingError",
     "Scheduler",

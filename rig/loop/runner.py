@@ -14,7 +14,7 @@ One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler
 The present orientation is read before the goal is computed, so the cycle's telemetry pairs
 the target with the limb's state at the cycle's start. Latency columns are measured with
 ``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
-or :class:`~rig.loop.scheduler.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
+or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
 While it runs, the objects alive at start are frozen out of the cyclic garbage collector
 (``gc.freeze``), so a collection during a cycle has little to scan.
 
@@ -122,7 +122,8 @@ class EnforcementLoop:
     targets : rig.loop.targets.TargetSource
     config : LoopConfig
     clock, sleep : callables
-        Loop clock (default ``time.monotonic`` / ``time.sleep``; tests pass a ManualClock).
+        Loop clock (default ``time.monotonic`` / ``time.sleep``; tests pass a
+        :class:`rig.sim.clock.ManualClock` ``clk`` as ``clock=clk, sleep=clk.sleep``).
     telemetry : Telemetry, optional
         Default: in memory only (``keep=True``).
     on_cycle : callable(loop, k), optional

@@ -9,8 +9,10 @@ stale commands). Each cycle reports its **lateness**: how long after its deadlin
 Sleeping: ``time.sleep`` until ``spin_s`` before the deadline, then a short busy-wait (the
 kernel's sleep granularity on a loaded machine is coarser than a 5 ms period tolerates).
 
-For tests, :class:`ManualClock` replaces the wall clock: ``sleep`` advances it, so a loop runs
-as fast as the CPU allows with the same arithmetic and deterministic timestamps.
+Tests and benchmarks run it on simulated time: ``clock=clk, sleep=clk.sleep`` with a
+:class:`rig.sim.clock.ManualClock` (``sleep`` advances it and never blocks), so a loop runs as
+fast as the CPU allows with the same arithmetic and deterministic timestamps. The real clock
+path calls ``time.monotonic`` / ``time.sleep`` directly.
 """
 
 from __future__ import annotations
@@ -19,37 +21,7 @@ import math
 import time
 from collections.abc import Callable
 
-__all__ = ["ManualClock", "Scheduler"]
-
-
-class ManualClock:
-    """A clock that only moves when told (``sleep`` advances it; never blocks).
-
-    Parameters
-    ----------
-    t0 : float
-        Starting time, s.
-    tick_s : float
-        Amount every call of :meth:`now` advances the clock by (models the time work takes;
-        0 = time stands still between sleeps).
-    """
-
-    def __init__(self, t0: float = 0.0, tick_s: float = 0.0):
-        self.t = float(t0)
-        self.tick_s = float(tick_s)
-
-    def now(self) -> float:
-        t = self.t
-        self.t += self.tick_s
-        return t
-
-    def sleep(self, seconds: float) -> None:
-        if seconds > 0:
-            self.t += seconds
-
-    def advance(self, seconds: float) -> None:
-        """Move time forward (a test simulating a slow cycle)."""
-        self.t += float(seconds)
+__all__ = ["Scheduler"]
 
 
 class Scheduler:
@@ -60,8 +32,9 @@ class Scheduler:
     rate_hz : float
         Cycle rate.
     clock : callable, default time.monotonic
-        Returns seconds.
+        Returns seconds (a :class:`rig.sim.clock.ManualClock` for simulated time).
     sleep : callable, default time.sleep
+        Waits that many seconds of ``clock`` (``ManualClock.sleep`` for simulated time).
     spin_s : float, default 0.0003
         Busy-wait this long before each deadline instead of sleeping (0 with a manual clock).
 

@@ -27,11 +27,11 @@ from rig.loop import (
     Fault,
     Intervention,
     LoopConfig,
-    ManualClock,
     ScriptedTargets,
     SupervisorConfig,
 )
 from rig.loop.runner import prepare_chain
+from rig.sim.clock import ManualClock
 
 URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
 RIG = load_rig_config("sim-shoulder")
@@ -81,7 +81,7 @@ def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
         chain = prepare_chain(port, SERVOS, oracle)
         try:
             loop = EnforcementLoop(chain, model, oracle, targets, cfg, clock=clk,
-                                   sleep=clk.advance, on_cycle=on_cycle)
+                                   sleep=clk.sleep, on_cycle=on_cycle)
             loop.setup()
             summary = loop.run(max_cycles=cycles)
             state = {i: (bus.servo(i).torque, bus.servo(i).get("Goal Position"),
@@ -289,7 +289,7 @@ def test_bus_watchdog_is_armed_and_backstop_written(models):
         chain = prepare_chain(port, SERVOS, oracle)
         try:
             loop = EnforcementLoop(chain, model, oracle, ScriptedTargets("hold", oracle),
-                                   LoopConfig(), clock=clk.now, sleep=clk.sleep)
+                                   LoopConfig(), clock=clk, sleep=clk.sleep)
             loop.setup()
             lo, hi = chain.backstop
             for k, i in enumerate(SERVOS.ids):

@@ -16,7 +16,6 @@ from rig.errors import RigConfigError
 from rig.loop import (
     COLUMNS,
     CsvTrajectory,
-    ManualClock,
     ModelBindingError,
     Scheduler,
     ScriptedTargets,
@@ -25,17 +24,21 @@ from rig.loop import (
     open_targets,
 )
 from rig.loop.targets import load_trajectory
+from rig.sim.clock import ManualClock
 
 
 # --------------------------------------------------------------------------- scheduler
 def test_scheduler_deadlines_are_absolute_and_drift_free():
-    clk = ManualClock(t0=10.0, tick_s=0.0001)  # every clock read costs 0.1 ms
-    s = Scheduler(200.0, clock=clk.now, sleep=clk.sleep, spin_s=0.0)
+    clk = ManualClock(10.0)
+    # every sleep oversleeps by 0.1 ms and every cycle works 1 ms: neither accumulates
+    s = Scheduler(200.0, clock=clk, sleep=lambda dt: clk.sleep(dt + 0.0001), spin_s=0.0)
     t0 = s.start()
     for k in range(1000):
         cycle, due, start = s.wait()
         assert cycle == k and due == pytest.approx(t0 + k * 0.005, abs=1e-9)
-        assert start >= due
+        # cycle 0 is due at once; every later one is late by one oversleep, never more
+        assert start - due == pytest.approx(0.0 if k == 0 else 0.0001, abs=1e-9)
+        clk.advance(0.001)
         assert not s.finish()
     # after 1000 cycles the deadline is exactly t0 + 1000 T: nothing accumulated
     cycle, due, _ = s.wait()
@@ -45,7 +48,7 @@ def test_scheduler_deadlines_are_absolute_and_drift_free():
 
 def test_scheduler_overrun_skips_missed_deadlines_without_a_burst():
     clk = ManualClock()
-    s = Scheduler(100.0, clock=clk.now, sleep=clk.sleep, spin_s=0.0)
+    s = Scheduler(100.0, clock=clk, sleep=clk.sleep, spin_s=0.0)
     s.start()
     s.wait()
     clk.advance(0.035)  # cycle 0 takes 3.5 periods
