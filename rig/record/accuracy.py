@@ -35,37 +35,11 @@ from pathlib import Path
 import numpy as np
 
 from models import quaternion as Q
+from rig.sim.patients import star_patient  # the factory of simulated patients (re-exported)
 
 __all__ = ["AccuracyResult", "record_imu_patient", "record_servo_patient", "star_patient"]
 
 _SWING_PEAKS = ("flexion", "extension", "abduction", "adduction", "horizontal_adduction")
-
-
-def star_patient(seed: int, *, max_tilt_deg: float = 10.0):
-    """A seeded random concave star polygon (:func:`models.evaluation.random_star_polygon`)
-    turned so that its centre lies within ``max_tilt_deg`` of the arm at the side (+X) — the
-    neutral pose of the calibration protocol must be reachable — with a physiological twist
-    range ``[-a, b]``, ``a, b`` uniform in 20-70° (0 = neutral rotation inside it).
-
-    Returns
-    -------
-    models.constraint.JointConstraint
-    """
-    from models.constraint import JointConstraint
-    from models.evaluation import random_star_polygon
-
-    rng = np.random.default_rng([seed, 0xACC])
-    star = random_star_polygon(seed, name=f"star-{seed}", twist=False)
-    c = Q.check_vectors(star.swing.interior)
-    tilt = math.radians(rng.uniform(0.0, max_tilt_deg))
-    az = rng.uniform(0.0, 2.0 * math.pi)
-    target = np.array([math.cos(tilt), math.sin(tilt) * math.cos(az),
-                       math.sin(tilt) * math.sin(az)])
-    r = Q.from_two_vectors(c, target)
-    verts = Q.rotate(np.broadcast_to(r, (len(star.swing.vertices), 4)),
-                     Q.check_vectors(star.swing.vertices))
-    twist = (-float(rng.uniform(20.0, 70.0)), float(rng.uniform(20.0, 70.0)))
-    return JointConstraint.polygon(verts, target, twist=twist, name=f"star-{seed}")
 
 
 @dataclass

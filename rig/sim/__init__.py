@@ -20,6 +20,9 @@ imu
     Simulated IMUs (BNO055 UART and the rig stream protocol).
 limb
     The simulated patient: shoulder motion inside a constraint, sensor placement and errors.
+patients
+    The factory of simulated patients with a known range (seeded star polygons, misplaced
+    straps, the calibration protocol) and offline IMU / servo recordings of them.
 
 :func:`from_url` starts the simulator a ``sim://`` port string names.
 """

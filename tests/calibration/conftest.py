@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from tests.calibration.patients import make_limb, record_servo, star_patient
+from rig.sim.patients import patient_limb, record_servo, star_patient
+
+#: the servo-path patient (rig.sim.patients.star_patient); not a held-out seed of the
+#: benchmarks (bench_boundary 100-104, bench_record accuracy 101-105)
+SERVO_SEED = 7
 
 
 @pytest.fixture(scope="session")
 def servo_patient():
     """A concave star patient recorded through the servo path (encoder-quantised truth)."""
-    c = star_patient(7, max_tilt_deg=10)
-    rec = record_servo(make_limb(c, 7), 300.0, 50.0)
+    c = star_patient(SERVO_SEED)
+    rec = record_servo(patient_limb(c, SERVO_SEED), 300.0, 50.0)
     return c, rec
