@@ -5,7 +5,8 @@ Layout (current version :data:`SCHEMA_VERSION`)::
     schema_version(version PK, applied_at, description)        one row per applied migration
     patients(id, pseudonym UNIQUE, side, notes, created_at)     a pseudonym only -- no name fields
      +-- sessions(id, patient_id, rig_name, joint, side, kind, status,
-     |            started_at, ended_at, dropped, meta)
+     |            started_at, ended_at, dropped, meta,
+     |            writer_host, writer_pid, writer_start, heartbeat_at, last_sample_at)  (v3)
           +-- sensors(id, session_id, name, segment, kind, port)       UNIQUE(session_id, name)
           +-- samples(id, session_id, sensor_id, t, device_t, w, x, y, z, status)
           |        index (session_id, sensor_id, t)
@@ -28,9 +29,15 @@ Migration policy: migrations are *append-only* functions ``_mN(conn)`` in :data:
 each creates or alters tables with definitions frozen inside the function (never the current
 :data:`metadata`, which may change later), runs in one transaction together with the row it
 adds to ``schema_version``, and is never edited once released. A database newer than the code
-is refused, never downgraded. ``tests/rig/test_store.py`` checks that a version-1 database is
-migrated to the current schema with its data intact, and that the migrated tables equal
-:data:`metadata`.
+is refused, never downgraded. ``tests/rig/test_store.py`` checks that version-1 and version-2
+databases are migrated to the current schema with their data intact, and that the migrated
+tables equal :data:`metadata`.
+
+Version 3 adds columns to ``sessions`` (``ALTER TABLE ... ADD COLUMN``, nullable, so rows of
+older sessions read as "writer unknown"): who writes the session (``writer_host``,
+``writer_pid``, ``writer_start`` -- see :mod:`rig.store.liveness`) and the writer's heartbeat
+(``heartbeat_at``, Unix time of its last commit; ``last_sample_at``, Unix time of the newest
+sample committed).
 """
 
 from __future__ import annotations
@@ -52,6 +59,7 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
     select,
+    text,
 )
 from sqlalchemy.engine import Connection
 
@@ -199,6 +207,22 @@ def _v2_tables(md: MetaData) -> None:
     Table("telemetry", md, *cols, Index("ix_telemetry_run_t", "run_id", "t_s"))
 
 
+def _v3_session_columns() -> list[Column]:
+    """Version-3 columns of ``sessions``, frozen: writer identity and heartbeat."""
+    return [
+        Column("writer_host", String(255)),
+        Column("writer_pid", Integer),
+        Column("writer_start", String(80)),
+        Column("heartbeat_at", Double),
+        Column("last_sample_at", Double),
+    ]
+
+
+def _v3_tables(md: MetaData) -> None:
+    for col in _v3_session_columns():
+        md.tables["sessions"].append_column(col)
+
+
 def _m1(conn: Connection) -> None:
     md = MetaData()
     _v1_tables(md)
@@ -212,11 +236,21 @@ def _m2(conn: Connection) -> None:
     md.create_all(conn, tables=[md.tables["runs"], md.tables["telemetry"]])
 
 
+def _m3(conn: Connection) -> None:
+    prep = conn.dialect.identifier_preparer
+    for col in _v3_session_columns():
+        conn.execute(text(
+            f"ALTER TABLE sessions ADD COLUMN {prep.quote(col.name)} "
+            f"{col.type.compile(dialect=conn.dialect)}"
+        ))
+
+
 #: Ordered, append-only: (version, description, function).
 MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
         "boundaries, models", _m1),
     (2, "live loop: runs, telemetry", _m2),
+    (3, "sessions: writer (host, pid, process start) and heartbeat", _m3),
 ]
 
 #: The version this code reads and writes.
@@ -227,6 +261,7 @@ SCHEMA_VERSION = MIGRATIONS[-1][0]
 metadata = MetaData()
 _v1_tables(metadata)
 _v2_tables(metadata)
+_v3_tables(metadata)
 
 schema_version = metadata.tables["schema_version"]
 patients = metadata.tables["patients"]

@@ -51,6 +51,7 @@ from sqlalchemy.pool import StaticPool
 
 from rig.errors import RigConfigError, RigConnectionError
 from rig.store import schema as S
+from rig.store.liveness import STALE_AFTER_S, Liveness, Probe, judge, probe_process, this_writer
 
 SESSION_KINDS = ("record", "enforce")
 SESSION_STATUSES = ("running", "completed", "interrupted", "device_lost", "failed")
@@ -378,18 +379,33 @@ class Store:
         kind: str = "record",
         meta: Mapping[str, Any] | None = None,
     ) -> int:
-        """Open a session (status ``running``) and return its id."""
+        """Open a session (status ``running``) and return its id.
+
+        The calling process is recorded as the session's writer (host name, pid, process
+        start; :mod:`rig.store.liveness`) until a sample writer claims it.
+        """
         kind = _check_choice("kind", kind, SESSION_KINDS)
         side = _check_choice("side", side, SIDES)
         self.get_patient(patient_id)
+        me = this_writer()
         with self._tx() as conn:
             res = conn.execute(
                 S.sessions.insert().values(
                     patient_id=int(patient_id), rig_name=rig_name, joint=joint, side=side,
                     kind=kind, status="running", started_at=time.time(), meta=_dumps(meta),
+                    writer_host=me.host, writer_pid=me.pid, writer_start=me.start,
                 )
             )
             return int(res.inserted_primary_key[0])
+
+    def _claim_writer(self, session_id: int) -> None:
+        """Record the calling process as the writer of ``session_id`` (a heartbeat too)."""
+        me = this_writer()
+        with self._tx() as conn:
+            conn.execute(S.sessions.update().where(S.sessions.c.id == int(session_id)).values(
+                writer_host=me.host, writer_pid=me.pid, writer_start=me.start,
+                heartbeat_at=time.time(),
+            ))
 
     def end_session(
         self,
@@ -439,11 +455,16 @@ class Store:
         out["meta"] = _loads(out["meta"])
         return out
 
-    def list_sessions(self) -> list[dict]:
+    def list_sessions(self, *, stale_after_s: float = STALE_AFTER_S, now: float | None = None,
+                      host: str | None = None, probe: Probe = probe_process) -> list[dict]:
         """Every session, oldest first, with its patient's pseudonym and sample counts.
 
         Each dict has the session columns plus ``pseudonym``, ``samples`` (total),
-        ``samples_by_sensor`` ({name: count}) and ``runs`` (number of live-loop runs).
+        ``samples_by_sensor`` ({name: count}), ``runs`` (number of live-loop runs),
+        ``last_sample_at`` (Unix time of the newest sample, None when unknown) and
+        ``liveness`` (``{"state", "reason"}``: for a ``running`` session ``live``,
+        ``interrupted`` or ``unknown`` by :func:`rig.store.liveness.judge` with the keyword
+        arguments given; ``ended`` otherwise).
         """
         q = (
             select(S.sessions, S.patients.c.pseudonym)
@@ -470,7 +491,81 @@ class Store:
             r["samples_by_sensor"] = dict(sorted(by_sensor.get(r["id"], {}).items()))
             r["samples"] = sum(r["samples_by_sensor"].values())
             r["runs"] = nruns.get(r["id"], 0)
+            r["last_sample_at"] = _last_sample_at(r)
+            r["liveness"] = judge(r, host=host, now=now, stale_after_s=stale_after_s,
+                                  probe=probe).as_dict()
         return rows
+
+    def session_liveness(self, session_id: int, *, stale_after_s: float = STALE_AFTER_S,
+                         now: float | None = None, host: str | None = None,
+                         probe: Probe = probe_process) -> Liveness:
+        """Whether the writer of ``session_id`` is alive (:func:`rig.store.liveness.judge`)."""
+        return judge(self.get_session(session_id), host=host, now=now,
+                     stale_after_s=stale_after_s, probe=probe)
+
+    def close_interrupted(self, session_id: int, *, force: bool = False,
+                          stale_after_s: float = STALE_AFTER_S, now: float | None = None,
+                          host: str | None = None, probe: Probe = probe_process) -> dict:
+        """Close a ``running`` session whose writer died (``kill -9``, power cut).
+
+        The session gets status ``interrupted`` and ``ended_at`` = the Unix time of its last
+        sample (without samples: its writer's last commit, else its start); its runs still
+        ``running`` become ``interrupted`` with the same end. ``meta["recovered"]`` records
+        what was judged and when. Samples, calibrations and annotations are untouched.
+
+        Refused (:class:`RigConfigError`) when the session is not ``running``, or -- unless
+        ``force`` -- when its writer is alive or cannot be judged (a session older than schema
+        version 3). Returns ``{"id", "ended_at", "samples", "liveness"}``.
+        """
+        sess = self.get_session(session_id)
+        if sess["status"] != "running":
+            raise RigConfigError(f"session {session_id} is not running: it ended as "
+                                 f"{sess['status']!r}")
+        live = judge(sess, host=host, now=now, stale_after_s=stale_after_s, probe=probe)
+        if not force and live.state == "live":
+            raise RigConfigError(f"session {session_id} is still being written ({live.reason}); "
+                                 "stop that recording, or use --force")
+        if not force and live.state == "unknown":
+            raise RigConfigError(f"session {session_id}: cannot tell whether it is still being "
+                                 f"written ({live.reason}); make sure it is not, then use "
+                                 "--force")
+        n = self.sample_count(session_id)
+        end = _last_sample_at(sess)
+        if end is None and n:
+            end = self._estimate_last_sample(session_id, sess)
+        if end is None:
+            end = max(float(sess["started_at"]),
+                      float(sess["heartbeat_at"] or sess["started_at"]))
+        meta = dict(sess["meta"])
+        meta["recovered"] = {
+            "liveness": live.state, "reason": live.reason, "forced": bool(force),
+            "closed_at": time.time() if now is None else float(now),
+            "end": "last sample" if n else "last commit",
+        }
+        with self._tx() as conn:
+            res = conn.execute(
+                S.sessions.update()
+                .where((S.sessions.c.id == int(session_id)) & (S.sessions.c.status == "running"))
+                .values(status="interrupted", ended_at=end, meta=_dumps(meta))
+            )
+            if res.rowcount != 1:
+                raise RigConfigError(f"session {session_id} was ended meanwhile; not closed")
+            conn.execute(
+                S.runs.update()
+                .where((S.runs.c.session_id == int(session_id)) & (S.runs.c.status == "running"))
+                .values(status="interrupted", ended_at=end)
+            )
+        return {"id": int(session_id), "ended_at": end, "samples": n,
+                "liveness": live.as_dict()}
+
+    def _estimate_last_sample(self, session_id: int, sess: dict) -> float:
+        """A session older than schema 3 has no clock offset: start + the samples' span."""
+        with self._tx(write=False) as conn:
+            lo, hi = conn.execute(
+                select(func.min(S.samples.c.t), func.max(S.samples.c.t))
+                .where(S.samples.c.session_id == int(session_id))
+            ).one()
+        return float(sess["started_at"]) + max(0.0, float(hi) - float(lo))
 
     # -- sensors and samples -------------------------------------------------------------
     def add_sensor(self, session_id: int, name: str, *, segment: str | None = None,
@@ -747,6 +842,17 @@ class Store:
             else:
                 out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
         return out
+
+
+def _last_sample_at(row: Mapping[str, Any]) -> float | None:
+    """Unix time of a session's newest sample as its writer stored it, kept within the
+    session's life (after its start, not after its writer's last commit)."""
+    t = row.get("last_sample_at")
+    if t is None:
+        return None
+    t = max(float(t), float(row["started_at"]))
+    beat = row.get("heartbeat_at")
+    return t if beat is None else min(t, max(float(beat), float(row["started_at"])))
 
 
 def _fetch_tuples(conn: Connection, stmt) -> list[tuple]:

@@ -11,6 +11,15 @@ loop); it relies on the thread alone.
 
 A database error in the background thread is kept and raised by the next ``add``/``flush``/
 ``close``; the rows that failed stay pending.
+
+Both writers keep their session's liveness record (:mod:`rig.store.liveness`): on creation they
+record the calling process as the session's writer, and every commit also sets the session's
+``heartbeat_at`` (Unix time of the commit) in the same transaction -- one ``UPDATE`` by primary
+key, no extra commit. With nothing to commit, the thread still refreshes the heartbeat every
+:data:`~rig.store.liveness.IDLE_HEARTBEAT_S` seconds. The :class:`SampleWriter` also stores
+``last_sample_at``: the newest committed sample's ``t`` (the host's monotonic clock, as the
+sources stamp it) converted to Unix time with the clocks' offset at the commit, never later
+than the commit itself.
 """
 
 from __future__ import annotations
@@ -27,6 +36,7 @@ from sqlalchemy import select
 
 from rig.errors import RigConfigError
 from rig.store import schema as S
+from rig.store.liveness import IDLE_HEARTBEAT_S
 
 if TYPE_CHECKING:
     from rig.store.store import Store
@@ -57,6 +67,9 @@ class _BatchWriter:
         self.added = 0  #: rows handed to add/add_many
         self.written = 0  #: rows committed
         self.commits = 0  #: transactions committed
+        self.session_id = int(self._session_of(store))
+        store._claim_writer(self.session_id)
+        self._beat = time.monotonic()  # when the heartbeat was last written
         self._thread = threading.Thread(
             target=self._run, name=f"rig-store-{self._kind}-writer", daemon=True
         )
@@ -123,11 +136,26 @@ class _BatchWriter:
             self.commits += 1
             return len(rows)
 
+    def _session_of(self, store: Store) -> int:  # pragma: no cover - abstract
+        raise NotImplementedError
+
     def _write(self, rows: list) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def _heartbeat(self, conn, **values: Any) -> None:
+        """Set the session's heartbeat (and ``values``) inside the caller's transaction."""
+        conn.execute(S.sessions.update().where(S.sessions.c.id == self.session_id)
+                     .values(heartbeat_at=time.time(), **values))
+        self._beat = time.monotonic()
+
+    def _idle_due(self) -> bool:
+        return time.monotonic() - self._beat >= IDLE_HEARTBEAT_S
+
     def _write_extra(self) -> None:
-        """Hook for state written even without rows (the session's dropped count)."""
+        """State written even without rows: the heartbeat when it is due."""
+        if self._idle_due():
+            with self._store._tx() as conn:
+                self._heartbeat(conn)
 
     def close(self) -> None:
         """Stop the thread and commit what is pending (idempotent)."""
@@ -160,12 +188,13 @@ class SampleWriter(_BatchWriter):
 
     def __init__(self, store: Store, session_id: int, *, flush_interval_s: float = 0.5,
                  max_latency_s: float = 0.8) -> None:
-        self.session_id = int(session_id)
+        self._sid = int(session_id)
         self._sensor_ids: dict[str, int] = {
-            r["name"]: int(r["id"]) for r in store.sensors(self.session_id)
+            r["name"]: int(r["id"]) for r in store.sensors(self._sid)
         }
         self.dropped = 0
         self._dropped_written = 0
+        self._t_max = -math.inf  # newest sample time committed (host monotonic clock)
         super().__init__(store, flush_interval_s=flush_interval_s,
                          max_latency_s=max_latency_s)
 
@@ -239,6 +268,9 @@ class SampleWriter(_BatchWriter):
         ]
         self._append(rows)
 
+    def _session_of(self, store: Store) -> int:
+        return self._sid
+
     def _sensor_id(self, conn, name: str, kind: str, new: dict[str, int]) -> int:
         sid = self._sensor_ids.get(name)
         if sid is None:
@@ -271,21 +303,24 @@ class SampleWriter(_BatchWriter):
                 for (t, dt, nm, kd, w, x, y, z, st) in rows
             ]
             conn.execute(S.samples.insert(), params)
-            self._write_dropped(conn)
+            t_max = max(self._t_max, max(r[0] for r in rows))
+            # the newest sample's t on the Unix clock, never after this commit
+            wall, mono = time.time(), time.monotonic()
+            values = {"last_sample_at": min(wall, wall - (mono - t_max))}
+            dropped = self.dropped
+            if dropped != self._dropped_written:
+                values["dropped"] = int(dropped)
+            self._heartbeat(conn, **values)
+        self._t_max = t_max
+        self._dropped_written = dropped
         self._sensor_ids.update(new)
 
-    def _write_dropped(self, conn) -> None:
-        if self.dropped != self._dropped_written:
-            conn.execute(
-                S.sessions.update().where(S.sessions.c.id == self.session_id)
-                .values(dropped=int(self.dropped))
-            )
-            self._dropped_written = self.dropped
-
     def _write_extra(self) -> None:
-        if self.dropped != self._dropped_written:
+        dropped = self.dropped
+        if dropped != self._dropped_written or self._idle_due():
             with self._store._tx() as conn:
-                self._write_dropped(conn)
+                self._heartbeat(conn, dropped=int(dropped))
+            self._dropped_written = dropped
 
 
 class TelemetryWriter(_BatchWriter):
@@ -303,6 +338,9 @@ class TelemetryWriter(_BatchWriter):
     def __init__(self, store: Store, run_id: int, *, flush_interval_s: float = 0.5) -> None:
         self.run_id = int(run_id)
         super().__init__(store, flush_interval_s=flush_interval_s, max_latency_s=None)
+
+    def _session_of(self, store: Store) -> int:
+        return int(store.get_run(self.run_id)["session_id"])
 
     def add(self, row: Mapping[str, Any]) -> None:
         """Queue one cycle's row (cheap: an append under a lock)."""
@@ -342,6 +380,7 @@ class TelemetryWriter(_BatchWriter):
                 p.setdefault(k, 0 if k == "intervention" else None)
         with self._store._tx() as conn:
             conn.execute(S.telemetry.insert(), params)
+            self._heartbeat(conn)
 
 
 _TELEMETRY_SET = frozenset(S.TELEMETRY_COLUMNS)

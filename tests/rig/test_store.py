@@ -245,23 +245,91 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == SCHEMA_VERSION == 2
+        assert store.schema_version() == SCHEMA_VERSION == 3
         [row] = store.list_sessions()
         assert row["pseudonym"] == "OLD-1" and row["samples"] == 10 and row["runs"] == 0
         rid = store.start_run(row["id"])  # the v2 tables work on the migrated database
         with store.telemetry_writer(rid) as tw:
             tw.add({"t_s": 0.0})
         assert store.telemetry(rid)["t_s"].tolist() == [0.0]
-        # the migrated schema is exactly the schema the code queries
-        insp = inspect(store.engine)
-        assert set(insp.get_table_names()) == set(S.metadata.tables)
-        for name, table in S.metadata.tables.items():
-            got = {c["name"]: c["nullable"] for c in insp.get_columns(name)}
-            assert got == {c.name: c.nullable for c in table.columns}, name
-            idx = {i["name"] for i in insp.get_indexes(name)}
-            assert {i.name for i in table.indexes} <= idx, name
+        _assert_schema_is_current(store)
     with open_store(db_url, create=False) as store:  # a second open migrates nothing
-        assert store.schema_version() == 2
+        assert store.schema_version() == 3
+
+
+def _assert_schema_is_current(store):
+    """The migrated schema is exactly the schema the code queries."""
+    insp = inspect(store.engine)
+    assert set(insp.get_table_names()) == set(S.metadata.tables)
+    for name, table in S.metadata.tables.items():
+        got = {c["name"]: c["nullable"] for c in insp.get_columns(name)}
+        assert got == {c.name: c.nullable for c in table.columns}, name
+        idx = {i["name"] for i in insp.get_indexes(name)}
+        assert {i.name for i in table.indexes} <= idx, name
+
+
+def test_v2_database_is_migrated_and_its_running_session_closed(db_url):
+    """A version-2 store with a completed session and one left 'running' by a killed
+    recorder: v3 adds the writer/heartbeat columns, keeps the data, and the old running session
+    (writer unknown) can be listed and closed only with force."""
+    url = db_url if "://" in db_url else f"sqlite:///{db_url}"
+    engine = create_engine(url)
+    v2_sessions = ("id", "patient_id", "rig_name", "joint", "side", "kind", "status",
+                   "started_at", "ended_at", "dropped", "meta")
+    try:
+        with engine.begin() as conn:
+            assert S.apply_migrations(conn, 0, 2) == [1, 2]
+            pid = conn.execute(S.patients.insert().values(
+                pseudonym="OLD-2", created_at=1.0)).inserted_primary_key[0]
+            done = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="completed", started_at=1000.0,
+                ended_at=1010.0, meta='{"a": 1}')).inserted_primary_key[0]
+            killed = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="running", started_at=2000.0,
+                meta="{}")).inserted_primary_key[0]
+            for sid in (done, killed):
+                snr = conn.execute(S.sensors.insert().values(
+                    session_id=sid, name="humerus", kind="sensor")).inserted_primary_key[0]
+                conn.execute(S.samples.insert(), [
+                    {"session_id": sid, "sensor_id": snr, "t": 50.0 + k * 0.25,
+                     "device_t": None, "w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0, "status": 0}
+                    for k in range(9)])
+            rid = conn.execute(S.runs.insert().values(
+                session_id=done, status="completed", started_at=1001.0,
+                meta="{}")).inserted_primary_key[0]
+            conn.execute(S.telemetry.insert().values(run_id=rid, t_s=0.5, intervention=0))
+        with engine.connect() as conn:
+            assert S.current_version(conn) == 2
+            cols = [c["name"] for c in inspect(conn).get_columns("sessions")]
+            assert tuple(cols) == v2_sessions
+    finally:
+        engine.dispose()
+
+    with open_store(db_url, create=False) as store:
+        assert store.schema_version() == 3
+        _assert_schema_is_current(store)
+        rows = {r["id"]: r for r in store.list_sessions()}
+        assert rows[done]["status"] == "completed" and rows[done]["meta"] == {"a": 1}
+        assert rows[done]["samples"] == rows[killed]["samples"] == 9
+        assert rows[done]["runs"] == 1 and store.telemetry(rid)["t_s"].tolist() == [0.5]
+        old = rows[killed]
+        assert old["writer_host"] is None and old["heartbeat_at"] is None
+        assert old["last_sample_at"] is None
+        assert old["liveness"]["state"] == "unknown"
+        with pytest.raises(RigConfigError, match="cannot tell whether it is still being"):
+            store.close_interrupted(killed)
+        res = store.close_interrupted(killed, force=True)
+        # no clock offset before v3: start + the samples' span (8 x 0.25 s)
+        assert res["ended_at"] == 2002.0 and res["samples"] == 9
+        s = store.get_session(killed)
+        assert s["status"] == "interrupted" and s["ended_at"] == 2002.0
+        assert s["meta"]["recovered"]["forced"] is True
+        # a new session on the migrated store records its writer
+        new = store.start_session(store.ensure_patient("OLD-2"))
+        with store.sample_writer(new) as w:
+            w.add(1.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
+        row = store.get_session(new)
+        assert row["writer_pid"] == os.getpid() and row["heartbeat_at"] is not None
 
 
 def test_newer_database_is_refused(db_url):

@@ -4,7 +4,8 @@ The child writes two sensors at 400 Hz each through the public store API, paced 
 (never faster), and after every batch prints how many samples per sensor it has handed to the
 writer. The parent kills it with SIGKILL mid-stream, then compares the child's last report with
 the database -- by sample counts and the samples' own clock (``device_t = index / 400``), not
-by any wall-clock measurement.
+by any wall-clock measurement. The session is then judged interrupted (its writer is gone) and
+closed.
 """
 
 from __future__ import annotations
@@ -94,6 +95,8 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
     with open_store(db, create=False) as store:
         session = store.get_session(sid)
         assert session["status"] == "running"  # it never ended, and says so
+        live = store.session_liveness(sid)  # ... but its writer is gone
+        assert live.state == "interrupted" and f"pid {proc.pid} " in live.reason
         counts = {}
         for name, phase in (("thorax", 0.0), ("humerus", 1.0)):
             s = store.samples(sid, name)
@@ -111,7 +114,14 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
             assert (k_reported - 1) / RATE - s["device_t"][-1] <= 1.0
         print(f"kill -9: child reported {k_reported} per sensor, database has {counts}")
         assert abs(counts["thorax"] - counts["humerus"]) <= 1
-        # readable and exportable
+        # closed as interrupted at its last sample (the samples' clock is the host's monotonic
+        # one here, as in a recording), then still readable and exportable
+        closed = store.close_interrupted(sid)
+        session = store.get_session(sid)
+        assert session["status"] == "interrupted"
+        assert session["ended_at"] == closed["ended_at"] == store.list_sessions()[0][
+            "last_sample_at"]
+        assert session["started_at"] <= session["ended_at"] <= session["heartbeat_at"]
         info = export_session(store, sid, "sto", tmp_path / "crash.sto")
         table = read_sto(tmp_path / "crash.sto")
         assert len(table) == info["rows"] == min(counts.values())
