@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ import pytest
 
 from rig.cli import main
 from rig.store import open_store
+from rig.store import schema as S
 from rig.store.io import read_samples_csv, read_sto
 
 
@@ -47,11 +49,11 @@ def test_session_list_shows_pseudonym_kind_counts_status(db, capsys):
     assert code == 0 and err == ""
     lines = out.splitlines()
     assert lines[0].split() == ["id", "patient", "kind", "joint", "started", "duration",
-                                "samples", "dropped", "status"]
+                                "samples", "last", "sample", "dropped", "status"]
     assert "P-0001" in lines[1] and "record" in lines[1] and "right shoulder" in lines[1]
     assert "400 (humerus 200, thorax 200)" in lines[1] and "completed" in lines[1]
     assert "P-0002" in lines[2] and "enforce" in lines[2] and "1 run" in lines[2]
-    assert "running (not ended)" in lines[2]
+    assert "running (not ended)" in lines[2]  # written by this process: alive
     code, out, _ = run(["session", "list", "--db", str(db), "--json"], capsys)
     rows = json.loads(out)
     assert [r["samples"] for r in rows] == [400, 0] and rows[0]["dropped"] == 2
@@ -121,3 +123,88 @@ def test_session_list_on_postgresql(pg_server, capsys):
             w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
     code, out, _ = run(["session", "list", "--db", url], capsys)
     assert code == 0 and "PG-1" in out and "1 (humerus 1)" in out
+
+
+def _dead_pid() -> int:
+    """The pid of a child that has exited and been reaped."""
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True, timeout=60)
+    return int(child.stdout)
+
+
+def _orphan(url, pid):
+    """Session 2 of the fixture as a killed recorder leaves it: running, writer ``pid``."""
+    with open_store(url, create=False) as store:
+        with store.sample_writer(2) as w:
+            w.add_many(np.arange(5) / 400.0, None, "humerus", "sensor",
+                       np.tile([1.0, 0, 0, 0], (5, 1)))
+        with store.engine.begin() as conn:  # then the writer process vanishes
+            conn.execute(S.sessions.update().where(S.sessions.c.id == 2).values(writer_pid=pid))
+
+
+def test_killed_session_is_listed_interrupted_and_closed(db, capsys):
+    _orphan(db, _dead_pid())
+    code, out, _ = run(["session", "list", "--db", str(db)], capsys)
+    assert code == 0
+    lines = out.splitlines()
+    assert "interrupted (not closed)" in lines[2] and "5 (humerus 5)" in lines[2]
+    assert lines[3].startswith("session 2: writer pid ") and "is gone" in lines[3]
+    assert f"rig session close --db {db} --session 2" in lines[3]
+    code, out, _ = run(["session", "list", "--db", str(db), "--json"], capsys)
+    row = json.loads(out)[1]
+    assert row["status"] == "running" and row["liveness"]["state"] == "interrupted"
+    assert row["samples"] == 5 and row["last_sample_at"] is not None
+
+    code, out, err = run(["session", "close", "--db", str(db), "--session", "2"], capsys)
+    assert code == 0 and err == ""
+    assert out.startswith("session 2 closed as interrupted: 5 samples, ended at its last "
+                          "sample")
+    with open_store(db, create=False) as store:
+        s = store.get_session(2)
+        assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
+        assert [r["status"] for r in store.runs(2)] == ["completed"]  # it had ended
+    code, out, _ = run(["session", "list", "--db", str(db)], capsys)
+    assert out.splitlines()[2].endswith("interrupted") and len(out.splitlines()) == 3
+    code, out, _ = run(["export", "--db", str(db), "--session", "2", "--format", "csv",
+                        "--out", str(db.parent / "s2.csv")], capsys)
+    assert code == 0 and "wrote 5 rows" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--session", "2"], "session 2 is still being written (writer pid "),
+        (["--session", "1"], "session 1 is not running: it ended as 'completed'"),
+        (["--session", "7"], "no session 7 in"),
+        (["--session", "2", "--stale-after", "0"], "--stale-after must be > 0 seconds"),
+    ],
+)
+def test_close_mistakes_are_one_line_exit_2(db, capsys, args, message):
+    code, out, err = run(["session", "close", "--db", str(db), *args], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith("rig: error:") and message in err and err.count("\n") == 1
+    with open_store(db, create=False) as store:
+        assert store.get_session(2)["status"] == "running"
+
+
+def test_close_live_session_with_force(db, capsys):
+    code, out, _ = run(["session", "close", "--db", str(db), "--session", "2", "--force"],
+                       capsys)
+    assert code == 0 and "closed as interrupted: 0 samples" in out
+    assert f"writer pid {os.getpid()}" in out
+
+
+def test_close_on_postgresql(pg_server, capsys):
+    url = pg_server.new_database()
+    with open_store(url) as store:
+        s1 = store.start_session(store.add_patient("PG-1"))
+        assert s1 == 1
+        sid = store.start_session(store.add_patient("PG-2"))
+        assert sid == 2
+    _orphan(url, _dead_pid())
+    code, out, _ = run(["session", "list", "--db", url], capsys)
+    assert code == 0 and "interrupted (not closed)" in out.splitlines()[2]
+    code, out, _ = run(["session", "close", "--db", url, "--session", "2"], capsys)
+    assert code == 0 and "closed as interrupted: 5 samples" in out
+    with open_store(url, create=False) as store:
+        assert store.get_session(2)["status"] == "interrupted"

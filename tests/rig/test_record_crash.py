@@ -6,6 +6,12 @@ samples kept must reach to within one second of the last ``last_t`` the child re
 (judged on the samples' own timestamps, not on the wall clock), the kept samples must be
 complete up to there (no holes in the device's sample grid), and the session must be readable
 and exportable with ``rig export``.
+
+``rig session list`` then shows the session as interrupted (its writer process is gone) with
+its samples and last sample; ``rig session close`` closes it as ``interrupted`` with the end
+time of its last sample, refuses a second close, and the closed session still exports and
+feeds ``rig boundary``. The recording is calibrated (the simulated patient performs the
+protocol at 4x real time) and killed during the recording proper.
 """
 
 from __future__ import annotations
@@ -25,22 +31,40 @@ from rig.store import open_store
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _rig_yaml(tmp_path: Path) -> Path:
+    """The shipped sim-imu rig with the patient's time 4x real time (a shorter calibration)."""
+    cfg = load_config("sim-imu")
+    p = tmp_path / "rig.yaml"
+    p.write_text(f"""
+name: crash-imu
+joint: {{name: shoulder, side: right, parent: thorax, child: humerus}}
+sensors:
+  port: "{cfg.sensors.port}&time_scale=4"
+  protocol: stream
+  rate_hz: {cfg.sensors.rate_hz}
+  segments: {{thorax: 0, humerus: 1}}
+""")
+    return p
+
+
 def test_kill_9_loses_at_most_one_second(tmp_path):
     db = tmp_path / "crash.db"
     rate = load_config("sim-imu").sensors.rate_hz
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rig", "record", "--rig", "sim-imu", "--db", str(db),
-         "--patient", "P-crash", "--no-calibration", "--events", "--display", "plain"],
+        [sys.executable, "-m", "rig", "record", "--rig", str(_rig_yaml(tmp_path)), "--db",
+         str(db), "--patient", "P-crash", "--events", "--display", "plain"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
         env={**os.environ, "PYTHONUNBUFFERED": "1"})
     reported = []
     session_id = None
+    calibrated = False
     try:
         for line in proc.stdout:
             ev = json.loads(line)
             if ev["event"] == "session":
                 session_id = ev["session_id"]
-            if ev["event"] == "committed" and ev["samples"] > 0:
+            calibrated = calibrated or ev["event"] == "calibrated"
+            if calibrated and ev["event"] == "committed" and ev["samples"] > 0:
                 reported.append(ev)
                 if len(reported) >= 3:
                     break
@@ -73,11 +97,43 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         steps = np.round(np.diff(d) * rate).astype(int)
         assert np.all(steps == 1), np.unique(steps)
 
+    # the dead recorder's session: listed as interrupted, with its samples and last sample
+    listed = _rig("session", "list", "--db", str(db), "--json")
+    assert listed.returncode == 0, listed.stderr
+    [row] = [r for r in json.loads(listed.stdout) if r["id"] == session_id]
+    assert row["status"] == "running" and row["liveness"]["state"] == "interrupted"
+    assert f"writer pid {proc.pid} on " in row["liveness"]["reason"]
+    assert row["samples"] == len(t) and row["last_sample_at"] is not None
+    assert row["started_at"] <= row["last_sample_at"] <= row["heartbeat_at"]
+    table = _rig("session", "list", "--db", str(db))
+    [line] = [ln for ln in table.stdout.splitlines() if ln.startswith(f"{session_id} ")]
+    assert "interrupted (not closed)" in line and f" {len(t)} (" in line
+
+    closed = _rig("session", "close", "--db", str(db), "--session", str(session_id))
+    assert closed.returncode == 0, closed.stderr
+    assert f"closed as interrupted: {len(t)} samples, ended at its last sample" in closed.stdout
+    with open_store(db, create=False) as store:
+        s = store.get_session(session_id)
+        assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
+        assert s["meta"]["recovered"]["liveness"] == "interrupted"
+        assert len(store.calibrations(session_id)) == 1
+    again = _rig("session", "close", "--db", str(db), "--session", str(session_id))
+    assert again.returncode == 2 and again.stderr.count("\n") == 1
+    assert "is not running: it ended as 'interrupted'" in again.stderr
+
     out = tmp_path / "crash.csv"
-    res = subprocess.run(
-        [sys.executable, "-m", "rig", "export", "--db", str(db), "--session", str(session_id),
-         "--format", "csv", "--out", str(out)],
-        capture_output=True, text=True, cwd=REPO, timeout=120)
+    res = _rig("export", "--db", str(db), "--session", str(session_id), "--format", "csv",
+               "--out", str(out))
     assert res.returncode == 0, res.stderr
     rows = [ln for ln in out.read_text().splitlines() if ln and not ln.startswith("#")]
-    assert len(rows) > 1
+    assert len(rows) == len(t) + 1  # header + every sample
+    # the closed session is a recording like any other for rig boundary
+    res = _rig("boundary", "--db", str(db), "--session", str(session_id), "--out",
+               str(tmp_path / "crash-boundary.yaml"))
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "crash-boundary.yaml").read_text().strip()
+
+
+def _rig(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True, text=True,
+                          cwd=REPO, timeout=120)
