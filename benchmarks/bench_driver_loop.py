@@ -63,9 +63,9 @@ def driver_loop(port: str, cycles: int) -> tuple[list[float], list[float]]:
 
 def child_bus():
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
-                             "--return-delay-us", "0"], stdout=subprocess.PIPE, text=True,
-                            env=env)
+    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
+                             "sim://dynamixel?ids=1,2,3&return_delay_us=0"],
+                            stdout=subprocess.PIPE, text=True, env=env)
     return proc, proc.stdout.readline().strip()
 
 

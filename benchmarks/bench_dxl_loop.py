@@ -98,8 +98,8 @@ def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[f
     out = []
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     for _ in range(runs):
-        proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
-                                 "--return-delay-us", str(delay_us)],
+        proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
+                                 f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}"],
                                 stdout=subprocess.PIPE, text=True, env=env)
         try:
             port_name = proc.stdout.readline().strip()

@@ -70,8 +70,8 @@ class ChildBus:
 
     def __enter__(self):
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
-             "--return-delay-us", "0"], stdout=subprocess.PIPE, text=True,
+            [sys.executable, "-m", "rig", "sim", "servos",
+             "sim://dynamixel?ids=1,2,3&return_delay_us=0"], stdout=subprocess.PIPE, text=True,
             env=dict(os.environ, PYTHONPATH=str(ROOT)))
         self.port = self.proc.stdout.readline().strip()
         return self

@@ -1,28 +1,92 @@
-"""``rig sim ...``: start a simulator that speaks a real wire protocol on a pseudo-terminal.
+"""``rig sim servos|imu [URL]``: a simulator that speaks a real wire protocol on a pty.
 
-Each simulator prints its port path as the first line on stdout, then runs until SIGINT/SIGTERM.
+The simulator is described by the port string a rig config or ``--port`` carries
+(``sim://dynamixel?ids=1,2,3``, ``sim://imu-stream?sensors=4&rate=200``,
+``sim://bno055?patient=original``) and started by :func:`rig.devices.ports.open_port`, so the
+command takes exactly the keys a port takes, with the same checks and the same one-line errors
+(an unknown key is an error). ``docs/sim.md`` lists the keys.
+
+Each command prints the port path (``/dev/pts/N``) as the first line on stdout, then serves
+until SIGINT or SIGTERM, closes the simulator and exits 0. Open the path with
+``dynamixel_sdk.PortHandler`` or ``serial.Serial`` as if it were a USB adapter::
+
+    rig sim imu 'sim://imu-stream?sensors=4&rate=200' &
+    python -c "import serial; s = serial.Serial('/dev/pts/N') ..."
 """
 
 from __future__ import annotations
 
+import signal
+
 import click
 
-from rig.commands._lazy import lazy_group_class
-
-_SIMS = {
-    "servos": (
-        "rig.commands.sim_servos",
-        "servos",
-        "Simulated Dynamixel Protocol 2.0 servo chain.",
-    ),
-    "imu": (
-        "rig.commands.sim_imu",
-        "imu",
-        "Simulated IMU (BNO055 UART or the rig stream protocol).",
-    ),
-}
+from rig.errors import RigConfigError
 
 
-@click.group(cls=lazy_group_class(_SIMS, "Simulators"))
+def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = None) -> None:
+    """Start the simulator ``url`` names (one of ``devices``), print its port, serve until
+    SIGINT/SIGTERM, close it.
+
+    Raises
+    ------
+    RigConfigError
+        Not a ``sim://`` URL of one of ``devices``; an unknown key or a bad value (named);
+        ``clock=manual``, which nothing would advance in a process of its own.
+    """
+    # block the stop signals before any thread starts (the simulator's server thread, and the
+    # BLAS threads importing numpy starts), so they inherit the mask and only this thread
+    # receives them (sigwait: no polling, no handler races)
+    stop = {signal.SIGINT, signal.SIGTERM}
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+    try:
+        from rig.devices.ports import open_port
+        from rig.sim.clock import ManualClock
+        from rig.sim.urls import sim_device
+
+        sim_device(url, devices, example, what)
+        with open_port(url) as port:
+            if isinstance(port.simulator.clock, ManualClock):
+                raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of "
+                                     f"a simulator in its own process (time_scale= runs it "
+                                     f"faster than real time)")
+            click.echo(port.path)
+            click.get_text_stream("stdout").flush()
+            signal.sigwait(stop)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+
+
+@click.group()
 def sim() -> None:
-    """Run a simulated device on a pseudo-terminal (no hardware needed)."""
+    """Run a simulated device on a pseudo-terminal (no hardware needed).
+
+    The device is a port string, as in a rig config: its keys are listed in docs/sim.md.
+    """
+
+
+@sim.command("servos", short_help="Simulated Dynamixel servo chain (sim://dynamixel?...).")
+@click.argument("url", default="sim://dynamixel")
+def servos(url: str) -> None:
+    """Simulated Dynamixel Protocol 2.0 servo chain, e.g. 'sim://dynamixel?ids=1,2,3'.
+
+    Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, time_scale; patient,
+    chain, speed, excursion (a simulated patient back-drives the chain). Default: one
+    XM430-W350 (ID 1) at 1 000 000 bit/s.
+    """
+    from rig.sim.dynamixel.url import EXAMPLE
+
+    serve(url, ("dynamixel", "dxl"), EXAMPLE)
+
+
+@sim.command("imu", short_help="Simulated IMU (sim://imu-stream?... or sim://bno055?...).")
+@click.argument("url", default="sim://imu-stream")
+def imu(url: str) -> None:
+    """Simulated IMU: 'sim://imu-stream?...' (the rig stream protocol) or 'sim://bno055?...'
+    (a BNO055 UART).
+
+    Keys (both): patient, seed, noise, misplace_deg, excursion, speed, calibrate, rate,
+    time_scale; imu-stream: sensors, max_lag, flow; bno055: sensor. Default: a 2-sensor stream
+    board at 100 Hz.
+    """
+    serve(url, ("imu-stream", "bno055"), "sim://imu-stream?sensors=4&rate=200",
+          "imu-stream or bno055")

@@ -113,8 +113,9 @@ def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
         overrides["baud_rate"] = int(baud)
     try:
         bus = bus_from_url(sim_url, **overrides)
-    except RigConfigError as err:
-        raise RigConfigError(str(err).replace(repr(sim_url), repr(url))) from err
+    except RigConfigError as err:  # name the URL as given (with the keys handled here)
+        msg = str(err).replace(sim_url, url)
+        raise RigConfigError(msg if url in msg else f"{url}: {msg}") from err
     port = Port(url=url, path=bus.port, simulator=bus, kind="sim-dynamixel")
     port._closers.append(_closing(bus))
     if "patient" not in own:

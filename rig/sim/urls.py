@@ -25,12 +25,29 @@ from collections.abc import Iterable
 from rig.errors import RigConfigError
 from rig.sim.clock import Clock, ManualClock, ScaledClock
 
-__all__ = ["TIME_KEYS", "SimUrl"]
+__all__ = ["TIME_KEYS", "SimUrl", "sim_device"]
 
 TIME_KEYS = frozenset({"clock", "time_scale"})
 
 _TRUE = {"1", "on", "true", "yes"}
 _FALSE = {"0", "off", "false", "no"}
+
+
+def sim_device(url: str, devices: Iterable[str], example: str, what: str | None = None) -> str:
+    """The device (URL host) of ``url``, a ``sim://`` URL naming one of ``devices``.
+
+    Raises
+    ------
+    RigConfigError
+        Anything else: ``'<url>' is not a simulated <what> URL (expected e.g. <example>)``;
+        ``what`` defaults to the first device.
+    """
+    devices = tuple(devices)
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != "sim" or parts.netloc not in devices or parts.path not in ("", "/"):
+        raise RigConfigError(f"{url!r} is not a simulated {what or devices[0]} URL "
+                             f"(expected e.g. {example})")
+    return parts.netloc
 
 
 class SimUrl:
@@ -55,11 +72,8 @@ class SimUrl:
     def __init__(self, url: str, devices: Iterable[str], known: Iterable[str],
                  example: str) -> None:
         self.url = url
+        self.device = sim_device(url, devices, example)
         parts = urllib.parse.urlsplit(url)
-        devices = tuple(devices)
-        if parts.scheme != "sim" or parts.netloc not in devices or parts.path not in ("", "/"):
-            raise RigConfigError(f"{url!r} is not a simulated {devices[0]} URL "
-                                 f"(expected e.g. {example})")
         pairs = urllib.parse.parse_qsl(parts.query, keep_blank_values=True,
                                        strict_parsing=False)
         known_set = set(known) | TIME_KEYS

@@ -575,12 +575,18 @@ def test_port_string_chooses_the_simulator():
 # ---------------------------------------------------------------------------- CLI
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
-def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum):
+SHOULDER_URL = ("sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0&patient=original"
+                "&chain=sim-shoulder&seed=1")
+
+
+@pytest.mark.parametrize(("signum", "url"), [
+    (signal.SIGTERM, "sim://dynamixel?ids=1,2,3&model=XM430-W350&baud=1000000"),
+    (signal.SIGINT, SHOULDER_URL),  # a port string's own keys: a patient back-drives the chain
+])
+def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum, url):
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", "--ids", "1,2,3",
-                             "--model", "XM430-W350", "--baud", "1000000"],
+    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", url],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     try:
         port_name = proc.stdout.readline().strip()
@@ -602,18 +608,40 @@ def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum):
         proc.stderr.close()
 
 
-@pytest.mark.parametrize("args", [["--model", "XQ999"], ["--ids", "1,x"], ["--ids", "1,1"],
-                                  ["--ids", "300"], ["--baud", "12345"],
-                                  ["--return-delay-us", "600"]])
-def test_cli_bad_option_is_one_line_error(args):
+@pytest.mark.parametrize(("url", "needle"), [
+    ("sim://dynamixel?model=XQ999", "'XQ999'"),
+    ("sim://dynamixel?ids=1,x", "ids='1,x'"),
+    ("sim://dynamixel?ids=1,1", "distinct"),
+    ("sim://dynamixel?ids=300", "300"),
+    ("sim://dynamixel?baud=12345", "12345"),
+    ("sim://dynamixel?return_delay_us=600", "return_delay_us='600'"),
+    ("sim://dynamixel?idz=1", "unknown key 'idz'"),
+    ("sim://dynamixel?ids=1&ids=2", "given twice"),
+    (SHOULDER_URL.replace("patient=original", "patient=nobody"), "nobody"),
+    ("sim://dynamixel?speed=2", "speed need patient="),
+])
+def test_cli_bad_url_is_one_line_error_naming_it(url, needle, capsys):
+    from rig.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["sim", "servos", url])
+    out, err = capsys.readouterr()
+    assert info.value.code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], err
+    assert lines[0].startswith((f"rig: error: {url}: ", f"rig: error: port {url!r}: ")), err
+
+
+@pytest.mark.parametrize("url", ["sim://bno055", "/dev/ttyUSB0", "--ids"])
+def test_cli_refuses_what_is_not_a_servo_port_string(url):
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, PYTHONPATH=str(root))
-    done = subprocess.run([sys.executable, "-m", "rig", "sim", "servos", *args],
+    done = subprocess.run([sys.executable, "-m", "rig", "sim", "servos", url],
                           capture_output=True, text=True, env=env, timeout=30)
-    assert done.returncode == 2
-    assert done.stdout == ""
+    assert done.returncode == 2 and done.stdout == ""
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"rig: error: {args[0]}: "), done.stderr
+    assert len(lines) == 1 and lines[0].startswith("rig: error: "), done.stderr
+    assert ("not a simulated dynamixel URL" in lines[0]) == (url != "--ids")
 
 
 def test_math_sanity_of_units():

@@ -650,7 +650,7 @@ def test_stream_from_url_builds_a_realistic_patient():
         np.testing.assert_allclose(moved, 10.0, atol=1e-6)
 
 
-@pytest.mark.parametrize(("url", "key"), [
+BAD_IMU_URLS = [
     ("sim://imu-stream?sensorz=2", "sensorz"),
     ("sim://imu-stream?sensors=17", "sensors"),
     ("sim://imu-stream?sensors=two", "sensors"),
@@ -667,7 +667,11 @@ def test_stream_from_url_builds_a_realistic_patient():
     ("sim://bno055?sensors=2", "sensors"),
     ("sim://bno055?misplace_deg=-3", "misplace_deg"),
     ("sim://bno055?time_scale=0", "time_scale"),
-])
+    ("sim://bno055?rate=100&patient=/no/such/file.yaml", "file.yaml"),
+]
+
+
+@pytest.mark.parametrize(("url", "key"), BAD_IMU_URLS)
 def test_bad_imu_urls_name_the_key(url, key):
     build = stream_from_url if "imu-stream" in url else bno055_from_url
     with pytest.raises(RigConfigError, match=key):
@@ -689,22 +693,23 @@ def _run_cli(*args: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-@pytest.mark.parametrize("protocol", ["bno055", "stream"])
-def test_cli_serves_until_sigterm(protocol, tmp_path):
+@pytest.mark.parametrize("device", ["bno055", "imu-stream"])
+def test_cli_serves_the_port_string_until_sigterm(device, tmp_path):
     cfile = tmp_path / "shoulder.yaml"
     cfile.write_text("name: test\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 40}\n"
                      "twist: {min_deg: -30, max_deg: 30}\n")
-    proc = _run_cli("--protocol", protocol, "--rate", "200", "--seed", "3",
-                    "--constraint", str(cfile))
+    extra = "&sensors=3" if device == "imu-stream" else "&sensor=0"
+    proc = _run_cli(f"sim://{device}?rate=200&seed=3&patient={cfile}&time_scale=2{extra}")
     try:
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/pts/"), proc.stderr.read() if not port else port
         with serial.Serial(port, timeout=0.05) as ser:
-            if protocol == "bno055":
+            if device == "bno055":
                 assert _read(ser, 0, 1) == b"\xa0"
             else:
                 host = StreamHost(ser)
-                assert host.command(S.CommandType.IDENTIFY).identity.rate_hz == 200
+                identity = host.command(S.CommandType.IDENTIFY).identity
+                assert identity.rate_hz == 200 and identity.present_mask == 0b111
                 host.command(S.CommandType.START)
                 host.wait_samples(5)
         proc.send_signal(signal.SIGTERM)
@@ -717,10 +722,14 @@ def test_cli_serves_until_sigterm(protocol, tmp_path):
     assert out == "" and err == ""
 
 
-def test_cli_sigint_also_exits_zero():
-    proc = _run_cli("--protocol", "stream")
+def test_cli_default_is_a_stream_board_and_sigint_also_exits_zero():
+    proc = _run_cli()
     try:
-        assert proc.stdout.readline().startswith("/dev/pts/")
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/pts/")
+        with serial.Serial(port, timeout=0.05) as ser:
+            identity = StreamHost(ser).command(S.CommandType.IDENTIFY).identity
+            assert identity.rate_hz == 100 and identity.present_mask == 0b11  # URL defaults
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=10)
     finally:
@@ -730,25 +739,45 @@ def test_cli_sigint_also_exits_zero():
     assert proc.returncode == 0, err
 
 
-@pytest.mark.parametrize(
-    ("args", "needle"),
-    [(["--protocol", "spi"], "--protocol"), (["--rate", "50"], "--rate"),
-     (["--rate", "fast"], "--rate"), (["--protocol", "bno055", "--sensors", "2"], "--sensors"),
-     (["--sensors", "17"], "--sensors"), (["--constraint", "/no/such/file.yaml"], "file.yaml")],
-)
-def test_cli_bad_options_one_line(args, needle, capsys):
+def _cli_error(capsys, *args: str) -> str:
     from rig.cli import main
 
     with pytest.raises(SystemExit) as info:
         main(["sim", "imu", *args])
     out, err = capsys.readouterr()
-    assert info.value.code == 2
-    assert out == ""
-    assert len(err.strip().splitlines()) == 1 and needle in err, err
+    assert info.value.code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1, err
+    return err
 
 
-def test_cli_bad_option_in_a_real_process_has_no_traceback():
-    proc = _run_cli("--rate", "1000")
+@pytest.mark.parametrize(("url", "key"), BAD_IMU_URLS)
+def test_cli_bad_url_is_the_ports_one_line_error(url, key, capsys):
+    """The command takes the port's keys through the port's parser: the same message."""
+    build = stream_from_url if "imu-stream" in url else bno055_from_url
+    with pytest.raises(RigConfigError) as port_error:
+        build(url)
+    err = _cli_error(capsys, url)
+    assert err == f"rig: error: {port_error.value}\n" and key in err
+
+
+@pytest.mark.parametrize(("url", "needle"), [
+    ("sim://dynamixel?ids=1", "not a simulated imu-stream or bno055 URL"),
+    ("/dev/ttyUSB0", "not a simulated imu-stream or bno055 URL"),
+    ("sim://imu-stream?clock=manual", "clock=manual"),
+])
+def test_cli_refuses_other_devices_and_a_manual_clock(url, needle, capsys):
+    err = _cli_error(capsys, url)
+    assert err.startswith(f"rig: error: {url}") or err.startswith(f"rig: error: {url!r}")
+    assert needle in err
+
+
+def test_cli_old_options_are_usage_errors(capsys):
+    err = _cli_error(capsys, "--protocol", "stream")
+    assert "--protocol" in err
+
+
+def test_cli_bad_url_in_a_real_process_has_no_traceback():
+    proc = _run_cli("sim://imu-stream?rate=fast")
     out, err = proc.communicate(timeout=20)
     assert proc.returncode == 2 and out == ""
-    assert err == "rig: error: --rate 1000: must be 100..400 Hz\n"
+    assert err == "rig: error: sim://imu-stream?rate=fast: rate='fast': must be an integer\n"
