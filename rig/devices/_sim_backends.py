@@ -159,7 +159,7 @@ def open_sim_bno055(url: str, *, baud: int | None = None) -> Port:
     sim = bno055_from_url(url)
     # the chip samples the patient at clock() - _t0 (its start)
     port = Port(url=url, path=sim.port, simulator=sim, kind="sim-bno055", patient=sim.limb,
-                patient_t0=_patient_t0(sim.clock, sim._t0))
+                patient_t0=_patient_t0(sim.clock, sim.started_at))
     port._closers.append(_closing(sim))
     return port
 
@@ -171,6 +171,6 @@ def open_sim_imu_stream(url: str, *, baud: int | None = None) -> Port:
     sim = stream_from_url(url)
     # the device clock, which samples the patient, is clock() - _t0 (its start)
     port = Port(url=url, path=sim.port, simulator=sim, kind="sim-imu-stream", patient=sim.limb,
-                patient_t0=_patient_t0(sim.clock, sim._t0))
+                patient_t0=_patient_t0(sim.clock, sim.started_at))
     port._closers.append(_closing(sim))
     return port

@@ -42,7 +42,7 @@ from firmware_protocol.imu import stream as S
 from models import quaternion as Q
 from rig.errors import RigConfigError
 from rig.sim.clock import real_delay
-from rig.sim.limb import Measurement, NoiseModel, SensorMount, SimulatedLimb, default_mounts
+from rig.sim.limb import Measurement, NoiseModel, SimulatedLimb
 from rig.sim.pty_server import PtyServer
 from rig.sim.urls import SimUrl
 
@@ -162,6 +162,12 @@ class Bno055Simulator(PtyServer):
         self._page1[B.Register.PAGE_ID] = 1
         self._fusing_since: float | None = None
         self._fused = 0.0  # seconds spent in fusion modes before _fusing_since
+
+    @property
+    def started_at(self) -> float:
+        """Reading of :attr:`clock` when the simulator started: device time 0 and patient
+        time 0."""
+        return self._t0
 
     @property
     def mode(self) -> B.OperationMode:
@@ -422,6 +428,12 @@ class StreamImuSimulator(PtyServer):
         self._grid_k = 0
         self._start()
 
+    @property
+    def started_at(self) -> float:
+        """Reading of :attr:`clock` when the simulator started: device time 0 and patient
+        time 0."""
+        return self._t0
+
     def device_time_us(self, now: float | None = None) -> int:
         """The device clock in microseconds, not wrapped (SAMPLEs carry it modulo 2**32)."""
         t = (self.clock() if now is None else now) - self._t0
@@ -616,20 +628,12 @@ def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
         from calibration.protocol import CalibrationProtocol
 
         protocol = CalibrationProtocol()
-    rng = np.random.default_rng([seed, 0x5EA7])  # mounts: independent of the motion draws
-    mounts = default_mounts(sensors, rng)
-    if misplace:
-        mounts = [_misplaced(m, misplace, rng) for m in mounts]
+    from rig.sim.patients import misplaced_mounts
+
+    # mounts: independent of the motion draws
+    mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace, sensors)
     return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
                          speed=speed, seed=seed, calibration_protocol=protocol)
-
-
-def _misplaced(mount: SensorMount, angle_deg: float, rng: np.random.Generator) -> SensorMount:
-    """``mount`` turned by ``angle_deg`` about a random axis (a strap not quite where meant)."""
-    axis = rng.standard_normal(3)
-    axis /= np.linalg.norm(axis)
-    error = Q.from_axis_angle(axis, math.radians(angle_deg))
-    return SensorMount(mount.segment, tuple(Q.canonical(Q.multiply(mount.mount, error))))
 
 
 def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
