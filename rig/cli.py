@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> None:
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
     except click.UsageError as exc:
-        # one line, like every other user mistake: "rig sim imu: Invalid value for '--rate' ..."
+        # one line, like every other user mistake: "rig record: Invalid value for '--duration' ..."
         where = exc.ctx.command_path if exc.ctx is not None else "rig"
         click.echo(f"rig: error: {where}: {exc.format_message()} (see --help)", err=True)
         sys.exit(2)

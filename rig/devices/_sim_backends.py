@@ -105,17 +105,13 @@ def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
     parts = urllib.parse.urlsplit(url)
     query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
     own = {k: v[-1] for k, v in query.items() if k in _DXL_OWN_KEYS}
-    rest = {k: v for k, v in query.items() if k not in _DXL_OWN_KEYS}
-    sim_url = urllib.parse.urlunsplit(("sim", "dynamixel", "",
-                                       urllib.parse.urlencode(rest, doseq=True, safe=","), ""))
     overrides: dict[str, Any] = {}
-    if "baud" not in rest and baud is not None:
+    if "baud" not in query and baud is not None:
         overrides["baud_rate"] = int(baud)
     try:
-        bus = bus_from_url(sim_url, **overrides)
-    except RigConfigError as err:  # name the URL as given (with the keys handled here)
-        msg = str(err).replace(sim_url, url)
-        raise RigConfigError(msg if url in msg else f"{url}: {msg}") from err
+        bus = bus_from_url(url, also_known=tuple(sorted(_DXL_OWN_KEYS)), **overrides)
+    except RigConfigError as err:  # every message names the URL
+        raise RigConfigError(str(err) if url in str(err) else f"{url}: {err}") from err
     port = Port(url=url, path=bus.port, simulator=bus, kind="sim-dynamixel")
     port._closers.append(_closing(bus))
     if "patient" not in own:
@@ -135,7 +131,7 @@ def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
         if missing:
             raise RigConfigError(f"port {url!r}: chain {chain_name!r} needs servo IDs "
                                  f"{list(kin.ids)}, the simulated bus has no ID {missing[0]}")
-        seed = _num(own | {k: v[-1] for k, v in rest.items()}, "seed", 0, int, url)
+        seed = _num({k: v[-1] for k, v in query.items()}, "seed", 0, int, url)
         limb = load_patient(own["patient"], sensors=2, seed=seed,
                             speed=_num(own, "speed", 1.0, float, url),
                             excursion=_num(own, "excursion", 1.0, float, url), url=url)

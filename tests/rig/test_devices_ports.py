@@ -75,3 +75,17 @@ def test_back_driven_servos_follow_the_simulated_patient():
         # within a few encoder ticks of the patient's joint (0.088° per tick)
         assert max(seen) < 1.0
         assert len({tuple(t) for t in ticks_list}) > 1  # the patient moves
+
+
+def test_sim_dynamixel_unknown_key_lists_the_back_driving_keys_too():
+    # the bus and the back-driven patient share one URL: the error names every key it accepts,
+    # and a bus error names the URL as given
+    with pytest.raises(RigConfigError) as err:
+        open_port("sim://dynamixel?ids=1&bogus=2")
+    msg = str(err.value)
+    assert msg.startswith("sim://dynamixel?ids=1&bogus=2: unknown key 'bogus'")
+    for key in ("patient", "chain", "speed", "excursion", "ids", "baud"):
+        assert key in msg.split("known keys:")[1]
+    with pytest.raises(RigConfigError, match=r"^sim://dynamixel\?ids=300&patient=original: "
+                                             r"servo id must be 0\.\.252"):
+        open_port("sim://dynamixel?ids=300&patient=original")

@@ -31,13 +31,17 @@ EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
 _KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time")
 
 
-def bus_from_url(url: str, **overrides: object) -> DynamixelBus:
+def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
+                 **overrides: object) -> DynamixelBus:
     """Start a simulated chain described by a port string (every key optional).
 
     Parameters
     ----------
     url : str
         ``sim://dynamixel`` URL (keys in the module docstring).
+    also_known : tuple of str
+        Further keys a caller handles itself (the back-driving patient keys of
+        :mod:`rig.devices._sim_backends`): accepted and listed as known, ignored here.
     **overrides
         Keyword arguments of :func:`~rig.sim.dynamixel.bus.start_servo_bus` that win over the
         URL (e.g. ``clock``).
@@ -53,7 +57,7 @@ def bus_from_url(url: str, **overrides: object) -> DynamixelBus:
         Not a ``sim://dynamixel`` URL, unknown key, bad value (the message names the key), or
         a configuration the bus refuses (unknown model, duplicate IDs, ...).
     """
-    q = SimUrl(url, DEVICES, _KEYS, EXAMPLE)
+    q = SimUrl(url, DEVICES, (*_KEYS, *also_known), EXAMPLE)
     kwargs: dict[str, object] = {
         "ids": q.int_list("ids", [1]),
         "model": q.text("model", "XM430-W350"),
