@@ -10,6 +10,8 @@ Public API
 - :class:`ImuJointCalibration` — two-IMU calibration (static pose + flexion/extension), joint
   orientation ``thorax⁻¹ ⊗ humerus`` in segment frames (:mod:`calibration.alignment`).
 - :func:`joint_orientation`, :func:`status_ok` — helpers of the same module.
+- :class:`HeadingCorrection` — relative heading drift of the two IMUs removed at neutral-pose
+  checkpoints (:mod:`calibration.heading`).
 - :class:`CalibrationProtocol` — the guided calibration movements (:mod:`calibration.protocol`).
 - :class:`ServoChainCalibration` — servo zero offsets and directions (:mod:`calibration.servo`).
 - :class:`BoundaryExtractor`, :func:`boundary_distance`, :func:`outside_fraction` —
@@ -23,6 +25,7 @@ from calibration.alignment import ImuJointCalibration, joint_orientation, status
 from calibration.boundary import BoundaryExtractor, boundary_distance, outside_fraction
 from calibration.clinical import NORMATIVE, format_rom_table, isb_angles, range_of_motion
 from calibration.errors import CalibrationError
+from calibration.heading import HeadingCorrection
 from calibration.protocol import CalibrationProtocol
 from calibration.servo import ServoChainCalibration
 
@@ -31,6 +34,7 @@ __all__ = [
     "BoundaryExtractor",
     "CalibrationError",
     "CalibrationProtocol",
+    "HeadingCorrection",
     "ImuJointCalibration",
     "ServoChainCalibration",
     "boundary_distance",

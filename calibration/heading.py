@@ -1,0 +1,249 @@
+"""Heading re-zeroing at neutral checkpoints: removing the IMUs' relative heading drift.
+
+The error
+---------
+Each IMU fuses its own heading (magnetometer-referenced), and the two sensors' headings drift
+relative to each other after calibration (:mod:`calibration.alignment` absorbs the offset *at*
+calibration, nothing can see it afterwards from orientations alone). A relative heading change
+``δ`` is a rotation of one sensor's world about the world vertical. Carried through the joint
+orientation ``q = m_t ⊗ q_t⁻¹ ⊗ q_l ⊗ m_l⁻¹`` it becomes a rotation about the **thorax's
+vertical, expressed in the thorax segment frame** — with the thorax upright that is the segment's
+long axis, **+X** (inferior), the limb axis at neutral. So the recorded joint orientation is
+
+    q_recorded(t) = R_X(ψ(t)) ⊗ q_true(t)
+
+a **left** multiplication (a rotation in the parent frame, the same for every limb direction),
+not a right one (a rotation about the limb's own axis would depend on where the arm points).
+With the arm at the side it adds directly to the twist (axial rotation); with the arm raised it
+turns the swing direction about the vertical as well. Both are undone exactly by
+``R_X(−ψ) ⊗ q_recorded``.
+
+The measurement
+---------------
+In the neutral pose (arm hanging at the side, forearm forward) the true joint orientation is
+the identity, up to the patient's repeatability ``n`` (about 2° of axial rotation). The twist
+of the recorded orientation about +X there is ``ψ + n`` (to second order in the small swing).
+Each **checkpoint** — a window of samples during which the patient held the neutral pose — gives
+``ψ_k`` = circular mean of the twist angles (:func:`models.quaternion.twist_angle`) over the
+window, at the window's centre time. A window is rejected (its reason kept) when
+
+- it holds fewer than ``min_samples`` samples (with ``status``: samples whose system
+  calibration level is at least ``min_system``; a magnetic disturbance drops it),
+- the median angle of the limb axis from ``axis`` exceeds ``max_swing_deg``: the patient was not
+  at neutral, so the twist there is not the heading,
+- its ``ψ_k`` differs from the median of the other checkpoints' (anchors included) by more than
+  ``max_jump_deg``: an outlier (the patient rotated the arm, or a disturbance).
+
+Anchors are times at which ψ = 0 by construction: the calibration's own static neutral window
+(the calibration makes the joint the identity there), so the correction starts from zero.
+
+The correction
+--------------
+``ψ(t)`` is piecewise linear between the accepted checkpoint centres and anchors, on the
+unwrapped angles (a drift through ±180° stays continuous), constant before the first and after
+the last; ``apply`` returns ``R_axis(−ψ(t)) ⊗ q``. With no accepted checkpoint and no anchor the
+correction is the identity. Between checkpoints the residual error is the drift's departure from
+a straight line (an Ornstein-Uhlenbeck drift with a 30 s correlation time moves little in 20 s)
+plus each checkpoint's repeatability ``n``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from models import quaternion as Q
+
+__all__ = ["HeadingCorrection"]
+
+
+def _circular_mean(a: np.ndarray) -> float:
+    return float(np.arctan2(np.mean(np.sin(a)), np.mean(np.cos(a))))
+
+
+def _wrap(a):
+    return (np.asarray(a, dtype=np.float64) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class HeadingCorrection:
+    """Relative heading drift ψ(t) from neutral checkpoints, and its removal (module doc).
+
+    Parameters
+    ----------
+    axis : (3,) array_like
+        The thorax vertical in the joint (parent) frame = the limb axis at neutral (+X).
+    max_swing_deg : float
+        Largest median angle of the limb axis from ``axis`` in an accepted window.
+    max_jump_deg : float
+        Largest difference of a window's heading from the median of the others.
+    min_samples : int
+        Fewest usable samples in an accepted window.
+    min_system : int
+        Least BNO055 system calibration level of a usable sample (when ``status`` is given).
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    times_ : (M,) float64
+        Interpolation nodes (accepted checkpoint centres and anchors), ascending.
+    psi_deg_ : (M,) float64
+        ψ at the nodes, degrees, unwrapped (continuous through ±180°).
+    accepted_ : list of (t0, t1)
+        The accepted checkpoint windows.
+    psi_window_deg_ : list of float
+        ψ_k of each accepted window (wrapped to (−180, 180]), in the order of ``accepted_``.
+    rejected_ : list of ((t0, t1), reason)
+    anchors_ : list of float
+        Anchor times (ψ = 0).
+    checkpoints_ : int
+        Windows given to :meth:`fit`.
+    """
+
+    def __init__(self, axis=(1.0, 0.0, 0.0), *, max_swing_deg: float = 15.0,
+                 max_jump_deg: float = 15.0, min_samples: int = 10, min_system: int = 2) -> None:
+        self.axis = axis
+        self.max_swing_deg = max_swing_deg
+        self.max_jump_deg = max_jump_deg
+        self.min_samples = min_samples
+        self.min_system = min_system
+
+    # -- fitting ---------------------------------------------------------------------------
+    def fit(self, t, q, windows, *, axis=None, max_swing_deg: float | None = None,
+            max_jump_deg: float | None = None, status=None, anchors=()) -> HeadingCorrection:
+        """Estimate ψ at each checkpoint window.
+
+        Parameters
+        ----------
+        t : (N,) array_like
+            Sample times (seconds, the clock the windows are in).
+        q : (N, 4) array_like
+            Joint orientations after the sensor-to-segment calibration.
+        windows : (K, 2) array_like
+            Checkpoint windows ``[t0, t1]`` (the patient held the neutral pose).
+        axis, max_swing_deg, max_jump_deg : optional
+            Override the constructor's values.
+        status : (N,) array_like of int, optional
+            IMU calibration bytes; samples below ``min_system`` are not used.
+        anchors : sequence of float
+            Times at which ψ = 0 (the calibration's static window centre).
+
+        Returns
+        -------
+        self
+        """
+        if axis is not None:
+            self.axis = axis
+        if max_swing_deg is not None:
+            self.max_swing_deg = max_swing_deg
+        if max_jump_deg is not None:
+            self.max_jump_deg = max_jump_deg
+        ax = np.asarray(self.axis, dtype=np.float64).reshape(3)
+        n = float(np.linalg.norm(ax))
+        if not (math.isfinite(n) and n > 1e-9):
+            raise CalibrationError(f"heading correction: axis must be non-zero, got {self.axis}")
+        ax = ax / n
+        self.axis_ = ax
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        q = Q.check_quaternions(q, normalize=True, name="joint orientations").reshape(-1, 4)
+        if len(t) != len(q):
+            raise CalibrationError(f"heading correction: {len(t)} times for {len(q)} "
+                                   "orientations")
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
+        if not np.isfinite(w).all() or (w[:, 1] < w[:, 0]).any():
+            raise CalibrationError("heading correction: windows must be finite [t0, t1] with "
+                                   "t0 <= t1")
+        usable = np.ones(len(t), bool)
+        if status is not None:
+            from calibration.alignment import status_ok
+
+            usable = status_ok(np.asarray(status).reshape(-1), self.min_system)
+        anchors = [float(a) for a in anchors if math.isfinite(float(a))]
+
+        self.checkpoints_ = len(w)
+        self.rejected_: list[tuple[tuple[float, float], str]] = []
+        cands: list[tuple[tuple[float, float], float]] = []  # (window, psi rad)
+        for t0, t1 in w:
+            win = (float(t0), float(t1))
+            sel = usable & (t >= t0) & (t <= t1)
+            k = int(sel.sum())
+            if k < self.min_samples:
+                self.rejected_.append((win, f"{k} usable samples (< {self.min_samples})"))
+                continue
+            qs = q[sel]
+            swing = float(np.degrees(np.median(Q.angle_between(Q.rotate(qs, ax), ax))))
+            if swing > self.max_swing_deg:
+                self.rejected_.append((win, f"not at neutral: limb axis {swing:.1f}° from it "
+                                            f"(> {self.max_swing_deg:g}°)"))
+                continue
+            cands.append((win, _circular_mean(Q.twist_angle(qs, ax))))
+
+        # outliers: a heading far from the median of the others (anchors count, at 0)
+        psis = np.array([p for _, p in cands] + [0.0] * len(anchors))
+        self.accepted_: list[tuple[float, float]] = []
+        self.psi_window_deg_: list[float] = []
+        for i, (win, p) in enumerate(cands):
+            others = np.delete(psis, i)
+            if len(others):
+                jump = math.degrees(abs(float(np.median(_wrap(others - p)))))
+                if jump > self.max_jump_deg:
+                    self.rejected_.append((win, f"heading {math.degrees(p):.1f}° is {jump:.1f}° "
+                                                f"from the others' (> {self.max_jump_deg:g}°)"))
+                    continue
+            self.accepted_.append(win)
+            self.psi_window_deg_.append(math.degrees(p))
+        self.anchors_ = anchors
+        nodes = [(0.5 * (a + b), math.radians(p))
+                 for (a, b), p in zip(self.accepted_, self.psi_window_deg_, strict=True)]
+        nodes += [(a, 0.0) for a in anchors]
+        nodes.sort(key=lambda x: x[0])
+        self.times_ = np.array([x[0] for x in nodes], dtype=np.float64)
+        psi = np.array([x[1] for x in nodes], dtype=np.float64)
+        self.psi_deg_ = np.degrees(np.unwrap(psi)) if len(psi) else psi
+        return self
+
+    # -- applying --------------------------------------------------------------------------
+    def psi_deg(self, t) -> np.ndarray:
+        """ψ(t) in degrees (piecewise linear, constant outside the nodes; 0 without nodes)."""
+        self._check_fitted()
+        t = np.asarray(t, dtype=np.float64)
+        if len(self.times_) == 0:
+            return np.zeros(t.shape)
+        return np.interp(t, self.times_, self.psi_deg_)
+
+    def apply(self, t, q) -> np.ndarray:
+        """``R_axis(−ψ(t)) ⊗ q`` (N, 4); ``q`` unchanged (a copy) with nothing accepted."""
+        self._check_fitted()
+        q = np.asarray(q, dtype=np.float64)
+        if len(self.times_) == 0:
+            return q.copy()
+        psi = np.radians(self.psi_deg(t))
+        return Q.multiply(Q.from_axis_angle(self.axis_, -psi), q)
+
+    def fit_apply(self, t, q, windows, **kwargs) -> np.ndarray:
+        """:meth:`fit` then :meth:`apply` on the same samples."""
+        return self.fit(t, q, windows, **kwargs).apply(t, q)
+
+    @property
+    def accepted_count_(self) -> int:
+        self._check_fitted()
+        return len(self.accepted_)
+
+    def to_dict(self) -> dict:
+        """JSON-able summary for provenance."""
+        self._check_fitted()
+        return {
+            "neutral_checkpoints": int(self.checkpoints_),
+            "accepted": len(self.accepted_),
+            "rejected": [{"window": [w[0], w[1]], "reason": r} for w, r in self.rejected_],
+            "anchors": list(self.anchors_),
+            "times_s": [float(x) for x in self.times_],
+            "psi_deg": [round(float(x), 3) for x in self.psi_deg_],
+            "axis": [float(x) for x in self.axis_],
+            "max_swing_deg": float(self.max_swing_deg),
+            "max_jump_deg": float(self.max_jump_deg),
+        }
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "times_"):
+            raise CalibrationError("heading correction: call fit() first")
