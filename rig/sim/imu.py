@@ -576,7 +576,10 @@ def _frame_type(frame) -> int:
 # ---------------------------------------------------------------------------------------------
 # port strings
 
-_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate")
+_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate",
+              "neutral", "neutral_sd")
+_NEUTRAL_HOLD_S = 2.0  # SimulatedLimb's defaults: neutral hold and ramp, seconds
+_NEUTRAL_RAMP_S = 1.5
 BNO055_EXAMPLE = "sim://bno055?seed=1&rate=100&patient=original"
 STREAM_EXAMPLE = "sim://imu-stream?sensors=2&rate=200&patient=original&seed=1"
 
@@ -623,6 +626,12 @@ def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
     misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
     excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
     speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    neutral = q.number("neutral", 0.0, 0.0)
+    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
+    if 0.0 < neutral < least:
+        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
+                             f"checkpoint interval >= {least:g} s")
+    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
     protocol = None
     if q.flag("calibrate", False):
         from calibration.protocol import CalibrationProtocol
@@ -633,7 +642,9 @@ def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
     # mounts: independent of the motion draws
     mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace, sensors)
     return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
-                         speed=speed, seed=seed, calibration_protocol=protocol)
+                         speed=speed, seed=seed, calibration_protocol=protocol,
+                         neutral_every_s=neutral, neutral_hold_s=_NEUTRAL_HOLD_S,
+                         neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
 
 
 def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
@@ -657,6 +668,12 @@ def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
     ``calibrate``     the patient performs the guided calibration protocol          off
                       (:class:`calibration.protocol.CalibrationProtocol`: neutral
                       pose from 2 s, flexion/extension, then free motion) on / off
+    ``neutral``       the patient returns to the neutral pose every this many      0 (never)
+                      seconds after the calibration (or from 0 s): 1.5 s into it,
+                      held 2 s, 1.5 s out (``SimulatedLimb(neutral_every_s=)``);
+                      0 (never) or >= 6
+    ``neutral_sd``    the patient's repeatability of the neutral pose: std of its  2
+                      axial rotation, degrees (0..10; swing: half of it)
     ``clock``,        simulated time (:mod:`rig.sim.urls`): ``clock=manual``       real time
     ``time_scale``    gives ``sim.clock`` a :class:`~rig.sim.clock.ManualClock`
     ================  ===========================================================  ==========
@@ -690,7 +707,8 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
 
     ``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1`` — every key optional; the
     patient keys of :func:`bno055_from_url` (``patient``, ``seed``, ``noise``,
-    ``misplace_deg``, ``excursion``, ``speed``, ``calibrate``, ``clock``, ``time_scale``) and:
+    ``misplace_deg``, ``excursion``, ``speed``, ``calibrate``, ``neutral``, ``neutral_sd``,
+    ``clock``, ``time_scale``) and:
 
     ===========  ==================================================================  ========
     key          meaning                                                             default

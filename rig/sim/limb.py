@@ -56,6 +56,23 @@ then a smooth hand-over to the free motion over ``blend_s`` seconds,
 blend_s)`` (C¹: the velocity is continuous at both ends of the blend), everything through the
 oracle's projection ``P``, so a protocol pose outside the patient's range is performed at the
 nearest reachable pose, as a real patient would.
+
+Neutral checkpoints (optional)
+------------------------------
+With ``neutral_every_s > 0`` the patient returns to the neutral pose at regular intervals (as
+a clinician has them do between movements, so that the IMUs' relative heading can be
+re-zeroed). Checkpoint ``k = 1, 2, ...`` holds the window ``[t_k, t_k + neutral_hold_s]``,
+``t_k = start + k · neutral_every_s``, ``start = protocol_end_s + blend_s`` with a calibration
+protocol, else 0 (:meth:`SimulatedLimb.neutral_windows`). The patient moves from the free
+motion to the checkpoint's neutral pose ``n_k`` over ``[t_k - ramp, t_k]``, holds it, and moves
+back over ``[t_k + hold, t_k + hold + ramp]``: ``q(t) = P(slerp(q_free_raw(t), n_k, w))``, ``w``
+a smoothstep rising over the first ramp, 1 over the hold, falling over the second (C¹), through
+the projection ``P`` like the protocol. ``n_k = exp(r)`` is the identity perturbed by the
+patient's repeatability: ``r`` has the limb-axis (axial rotation) component
+``N(0, neutral_sd_deg²)`` and the two others ``N(0, (neutral_sd_deg / 2)²)``, drawn from a seed
+sequence of its own per checkpoint (:meth:`SimulatedLimb.neutral_poses`), so every other draw
+is the same with checkpoints on or off, and ``n_k`` does not depend on the order in which
+times are sampled.
 """
 
 from __future__ import annotations
@@ -248,6 +265,17 @@ class SimulatedLimb:
         neutral pose (sensors strapped, fusion calibrating).
     blend_s : float
         Length of the hand-over from the protocol's last pose to the free motion, seconds.
+    neutral_every_s : float
+        Interval between neutral checkpoints, seconds (see the module docstring); 0 (default):
+        none, and the motion is exactly that of a limb without checkpoints. Otherwise at least
+        ``2 * neutral_ramp_s + neutral_hold_s + 1``.
+    neutral_hold_s : float
+        How long the patient holds the neutral pose at each checkpoint, seconds (> 0).
+    neutral_ramp_s : float
+        How long the patient takes to move into and out of the neutral pose, seconds (> 0).
+    neutral_sd_deg : float
+        The patient's repeatability of the neutral pose: standard deviation of its axial
+        rotation, degrees (>= 0; the two swing components have half of it).
     """
 
     def __init__(
@@ -267,8 +295,18 @@ class SimulatedLimb:
         calibration_protocol=None,
         protocol_start_s: float = 2.0,
         blend_s: float = 3.0,
+        neutral_every_s: float = 0.0,
+        neutral_hold_s: float = 2.0,
+        neutral_ramp_s: float = 1.5,
+        neutral_sd_deg: float = 2.0,
     ) -> None:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        # the neutral poses' own seed sequence: derived from the seed without drawing from it
+        ss = getattr(rng.bit_generator, "seed_seq", None)
+        self._neutral_seed = ss if isinstance(ss, np.random.SeedSequence) else (
+            np.random.SeedSequence(0))
+        self._neutral_cache: dict[int, np.ndarray] = {}
+        self._set_neutral(neutral_every_s, neutral_hold_s, neutral_ramp_s, neutral_sd_deg)
         if constraint is None:
             constraint = DEFAULT_CONSTRAINT
         if not isinstance(constraint, JointConstraint):
@@ -367,6 +405,88 @@ class SimulatedLimb:
         plan = self._plan
         return 0.0 if plan is None else plan[1] + plan[0].duration_s
 
+    # -- neutral checkpoints --------------------------------------------------------------
+    def _set_neutral(self, every: float, hold: float, ramp: float, sd: float) -> None:
+        every, hold, ramp, sd = float(every), float(hold), float(ramp), float(sd)
+        if not (math.isfinite(hold) and hold > 0):
+            raise ValueError(f"neutral_hold_s must be > 0, got {hold!r}")
+        if not (math.isfinite(ramp) and ramp > 0):
+            raise ValueError(f"neutral_ramp_s must be > 0, got {ramp!r}")
+        if not (math.isfinite(sd) and sd >= 0):
+            raise ValueError(f"neutral_sd_deg must be >= 0, got {sd!r}")
+        least = 2.0 * ramp + hold + 1.0
+        if not (math.isfinite(every) and (every == 0.0 or every >= least)):
+            raise ValueError(f"neutral_every_s must be 0 (off) or >= 2 * neutral_ramp_s + "
+                             f"neutral_hold_s + 1 = {least:g}, got {every!r}")
+        self.neutral_every_s = every
+        self.neutral_hold_s = hold
+        self.neutral_ramp_s = ramp
+        self.neutral_sd_deg = sd
+
+    def _neutral_start(self, plan) -> float:
+        return 0.0 if plan is None else plan[1] + plan[0].duration_s + self.blend_s
+
+    @property
+    def neutral_start_s(self) -> float:
+        """Patient time from which neutral checkpoints are counted: the end of the protocol's
+        hand-over to free motion (``protocol_end_s + blend_s``), or 0 without a protocol.
+        Checkpoint ``k`` starts its hold at ``neutral_start_s + k * neutral_every_s``."""
+        return self._neutral_start(self._plan)
+
+    def neutral_windows(self, t_end: float) -> np.ndarray:
+        """Hold windows ``[t_k, t_k + neutral_hold_s]`` (K, 2) of the neutral checkpoints
+        ``k = 1, 2, ...`` that end by patient time ``t_end`` (seconds); ``(0, 2)`` when
+        ``neutral_every_s`` is 0."""
+        every = self.neutral_every_s
+        start = self._neutral_start(self._plan)
+        if every <= 0 or not t_end >= start + every + self.neutral_hold_s:
+            return np.empty((0, 2))
+        k = np.arange(1, math.floor((t_end - self.neutral_hold_s - start) / every) + 2)
+        t0 = start + k * every
+        t0 = t0[t0 + self.neutral_hold_s <= t_end]
+        return np.stack((t0, t0 + self.neutral_hold_s), axis=1)
+
+    def neutral_poses(self, k) -> np.ndarray:
+        """Neutral pose (joint orientation, before the oracle's projection) of checkpoints
+        ``k`` (int or (K,) ints >= 1), (K, 4): the identity perturbed by the patient's
+        repeatability (module docstring). Deterministic per seed and checkpoint."""
+        ks = np.atleast_1d(np.asarray(k, dtype=np.int64))
+        if np.any(ks < 1):
+            raise ValueError("neutral checkpoints are numbered from 1")
+        sd = math.radians(self.neutral_sd_deg)
+        u, v = _tangent_basis(self.limb_axis)
+        out = np.empty((len(ks), 4))
+        ss = self._neutral_seed
+        for i, kk in enumerate(ks.tolist()):
+            z = self._neutral_cache.get(kk)
+            if z is None:
+                child = np.random.SeedSequence(ss.entropy,
+                                               spawn_key=(*ss.spawn_key, 0x4E75, kk))
+                z = np.random.default_rng(child).standard_normal(3)
+                self._neutral_cache[kk] = z
+            rotvec = sd * (z[0] * self.limb_axis + 0.5 * z[1] * u + 0.5 * z[2] * v)
+            out[i] = _exp_map(rotvec)
+        return out
+
+    def _neutral_blend(self, t: np.ndarray, q: np.ndarray, plan) -> np.ndarray:
+        """``q`` (N, 4) with the neutral checkpoints' ramps and holds applied (unprojected)."""
+        every, hold, ramp = self.neutral_every_s, self.neutral_hold_s, self.neutral_ramp_s
+        start = self._neutral_start(plan)
+        k = np.floor((t - start + ramp) / every)
+        x = t - (start + k * every)  # time since t_k, in [-ramp, every - ramp)
+        s = np.clip(np.minimum((x + ramp) / ramp, (hold + ramp - x) / ramp), 0.0, 1.0)
+        w = s * s * (3.0 - 2.0 * s)  # smoothstep: C1 at every end
+        active = (k >= 1) & (w > 0.0)
+        if not active.any():
+            return q
+        ka = k[active].astype(np.int64)
+        uniq, inv = np.unique(ka, return_inverse=True)
+        pose = self.neutral_poses(uniq)[inv]
+        wa = w[active]
+        out = q.copy()
+        out[active] = np.where((wa >= 1.0)[:, None], pose, _slerp(q[active], pose, wa))
+        return out
+
     # -- ground truth ---------------------------------------------------------------------
     def _series(self, row: int, t: np.ndarray) -> np.ndarray:
         arg = 2.0 * math.pi * self._freq[row] * t[:, None] + self._phase[row]
@@ -388,7 +508,8 @@ class SimulatedLimb:
 
     def joint(self, t) -> np.ndarray:
         """Joint orientation (N, 4), limb relative to thorax, inside the range of motion
-        (after the calibration protocol when the patient performs one)."""
+        (after the calibration protocol when the patient performs one; in the neutral pose at
+        the neutral checkpoints when ``neutral_every_s > 0``)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         raw = self.raw_joint(t)
         plan = self._plan
@@ -399,6 +520,8 @@ class SimulatedLimb:
             x = np.clip((u - protocol.duration_s) / self.blend_s, 0.0, 1.0)
             w = x * x * (3.0 - 2.0 * x)  # smoothstep: C1 at both ends
             raw = np.where((w >= 1.0)[:, None], raw, _slerp(scripted, raw, w))
+        if self.neutral_every_s > 0:
+            raw = self._neutral_blend(t, raw, plan)
         q = self.oracle.project(raw, normalize=True).reshape(-1, 4)
         return q / np.linalg.norm(q, axis=1, keepdims=True)
 

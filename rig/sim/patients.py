@@ -109,7 +109,7 @@ def patient_limb(constraint, seed: int, *, noise: NoiseModel | None = None,
         under the default noise model (``calibration_time_s`` 5 s).
     **kwargs
         Further :class:`~rig.sim.limb.SimulatedLimb` keywords (``sway_deg``, ``excursion``,
-        ...).
+        ``neutral_every_s`` and the other neutral-checkpoint keywords, ...).
     """
     if isinstance(protocol, str) and protocol == "default":
         from calibration.protocol import CalibrationProtocol

@@ -650,6 +650,27 @@ def test_stream_from_url_builds_a_realistic_patient():
         np.testing.assert_allclose(moved, 10.0, atol=1e-6)
 
 
+def test_url_keys_neutral_checkpoints():
+    with stream_from_url("sim://imu-stream?sensors=2&patient=original&neutral=20&neutral_sd=3"
+                         "&clock=manual") as sim:
+        limb = sim.limb
+        assert (limb.neutral_every_s, limb.neutral_hold_s, limb.neutral_ramp_s,
+                limb.neutral_sd_deg) == (20.0, 2.0, 1.5, 3.0)
+        np.testing.assert_allclose(limb.neutral_windows(45.0), [[20, 22], [40, 42]])
+    with bno055_from_url("sim://bno055?neutral=6&calibrate=on&clock=manual") as sim:
+        assert sim.limb.neutral_every_s == 6.0  # the least: 1.5 s in, 2 s held, 1.5 s out, 1 s
+        assert sim.limb.neutral_start_s == pytest.approx(sim.limb.protocol_end_s + 3.0)
+    with stream_from_url("sim://imu-stream?neutral=0&clock=manual") as sim, \
+            stream_from_url("sim://imu-stream?clock=manual") as default:
+        for limb in (sim.limb, default.limb):
+            assert limb.neutral_every_s == 0.0 and limb.neutral_sd_deg == 2.0
+            assert limb.neutral_windows(1e4).shape == (0, 2)
+    with pytest.raises(RigConfigError) as err:
+        stream_from_url("sim://imu-stream?neutral=4")
+    assert str(err.value) == ("sim://imu-stream?neutral=4: neutral='4': must be 0 (off) or a "
+                              "checkpoint interval >= 6 s")
+
+
 BAD_IMU_URLS = [
     ("sim://imu-stream?sensorz=2", "sensorz"),
     ("sim://imu-stream?sensors=17", "sensors"),
@@ -668,14 +689,22 @@ BAD_IMU_URLS = [
     ("sim://bno055?misplace_deg=-3", "misplace_deg"),
     ("sim://bno055?time_scale=0", "time_scale"),
     ("sim://bno055?rate=100&patient=/no/such/file.yaml", "file.yaml"),
+    ("sim://imu-stream?neutral=often", "neutral"),
+    ("sim://imu-stream?neutral=-20", "neutral"),
+    ("sim://imu-stream?neutral=5", "neutral"),  # shorter than ramp in, hold, ramp out + 1 s
+    ("sim://imu-stream?neutral=inf", "neutral"),
+    ("sim://bno055?neutral_sd=11", "neutral_sd"),
+    ("sim://bno055?neutral_sd=-1", "neutral_sd"),
+    ("sim://bno055?neutral=20&neutral_sd=two", "neutral_sd"),
 ]
 
 
 @pytest.mark.parametrize(("url", "key"), BAD_IMU_URLS)
 def test_bad_imu_urls_name_the_key(url, key):
     build = stream_from_url if "imu-stream" in url else bno055_from_url
-    with pytest.raises(RigConfigError, match=key):
+    with pytest.raises(RigConfigError, match=key) as err:
         build(url)
+    assert "\n" not in str(err.value)
 
 
 def test_foreign_urls_are_refused():
