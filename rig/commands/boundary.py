@@ -101,10 +101,18 @@ def _from_session(db: str, session_id: int, axis: np.ndarray) -> JointData:
 
 
 def joint_orientations_from_store(store, session_id: int,
-                                  axis: np.ndarray | None = None) -> JointData:
+                                  axis: np.ndarray | None = None, *,
+                                  heading: bool = True) -> JointData:
     """Joint orientations of a session in an opened store (joint samples as recorded; IMU
     samples through the session's ``imu-alignment`` calibration). Used by ``rig boundary``,
-    ``rig rom`` and the report (:mod:`rig.report.session`)."""
+    ``rig rom`` and the report (:mod:`rig.report.session`).
+
+    IMU sessions with ``neutral-checkpoint`` calibrations (the patient back in the neutral pose
+    during the recording, :mod:`rig.record.guided`) also have the two sensors' relative
+    heading drift removed (:class:`calibration.heading.HeadingCorrection`, anchored at ψ = 0
+    at the centre of the calibration's static window); ``heading=False`` leaves it in. The
+    provenance says how many checkpoints were used (``heading_correction``).
+    """
     from calibration.alignment import ImuJointCalibration
     from calibration.errors import CalibrationError
 
@@ -134,7 +142,8 @@ def joint_orientations_from_store(store, session_id: int,
         parent, child = _segments(sess, sensors, s, session_id)
         # pair the two sensors' samples by the device timestamp when the device gives one (the
         # readings of one frame share it; host times are per batch and repeat), else host time
-        key = s["device_t"] if np.isfinite(s["device_t"]).all() else s["t"]
+        key_name = "device_t" if np.isfinite(s["device_t"]).all() else "t"
+        key = s[key_name]
         tp, qp, sp = (a[s["name"] == parent] for a in (key, s["q"], s["status"]))
         tc, qc, sc = (a[s["name"] == child] for a in (key, s["q"], s["status"]))
         _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
@@ -144,15 +153,76 @@ def joint_orientations_from_store(store, session_id: int,
 
             table, _ = align_series({parent: (tp, qp), child: (tc, qc)})
             qpar, qchi, status = table.columns[parent], table.columns[child], None
+            times = {key_name: np.asarray(table.time)}
         else:
             qpar, qchi = qp[ip], qc[ic]
             status = np.minimum(sp[ip], sc[ic])
+            # the child's times in the pairing clock first, its host times too
+            times = {key_name: tc[ic], "t": s["t"][s["name"] == child][ic]}
         q = model.transform(qpar, qchi)
         prov.update({"source": "imu samples", "calibration_id": int(cal["id"]),
                      "calibration_residual_deg": cal.get("residual_deg")})
+        checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
+        if heading and checkpoints:
+            q, prov["heading_correction"] = _heading_correction(
+                q, times, status, checkpoints, cal["data"], session_id)
     side = sess.get("side")
     return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
                      sess.get("pseudonym"), sess.get("joint"))
+
+
+def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, checkpoints,
+                        cal_data: dict, session_id: int):
+    """Fit and apply :class:`~calibration.heading.HeadingCorrection` on a session's joint
+    orientations; the windows are taken in the clock they were stored in (``time``: the
+    samples' ``device_t`` or host ``t``), checkpoints in a clock the pairing did not keep are
+    rejected. The axis is +X whatever ``--limb-axis`` says: the IMU calibration's segment
+    frames have +X along gravity in the neutral pose, the thorax vertical the drift turns
+    about. Returns the corrected orientations and the provenance entry."""
+    from calibration.errors import CalibrationError
+    from calibration.heading import HeadingCorrection
+
+    base = next(iter(times))
+    t = times[base]
+    windows, unusable = [], []
+    for c in checkpoints:
+        d = c.get("data") or {}
+        w, clock = _window(d.get("window")), d.get("time", "t")
+        if w is not None and clock != base:
+            other = times.get(clock)
+            # stored in another clock: its window through the samples (both clocks known)
+            inside = (other >= w[0]) & (other <= w[1]) if other is not None else None
+            w = ([float(t[inside].min()), float(t[inside].max())]
+                 if inside is not None and inside.any() else None)
+        if w is None:
+            unusable.append({"window": d.get("window"),
+                             "reason": f"no samples in its window ({clock} clock)"})
+        else:
+            windows.append(w)
+    anchors = []
+    origin = (cal_data.get("protocol") or {}).get("origin") or {}
+    static = (cal_data.get("windows_s") or {}).get("static")
+    if origin.get("time") == base and static is not None:
+        anchors.append(float(origin["t0"]) + 0.5 * (float(static[0]) + float(static[1])))
+    hc = HeadingCorrection((1.0, 0.0, 0.0))
+    try:
+        hc.fit(t, q, np.asarray(windows, dtype=np.float64).reshape(-1, 2), status=status,
+               anchors=anchors)
+    except CalibrationError as err:
+        raise RigConfigError(f"session {session_id}: neutral checkpoints: {err}") from err
+    rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
+    prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
+            "rejected": rejected, "anchored": bool(anchors), "clock": base,
+            "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_]}
+    return hc.apply(t, q), prov
+
+
+def _window(w) -> list[float] | None:
+    try:
+        a, b = (float(x) for x in w)
+    except (TypeError, ValueError):
+        return None
+    return [a, b] if np.isfinite([a, b]).all() and a <= b else None
 
 
 def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tuple[str, str]:
