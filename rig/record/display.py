@@ -38,6 +38,7 @@ class RecordStatus:
     coverage: CoverageSummary | None = None
     annotations: list[tuple[float, str]] = field(default_factory=list)
     duration_s: float | None = None
+    checkpoints: int | None = None  # neutral checkpoints marked (None: not marking)
 
 
 def _fmt(x: float, nd: int = 0) -> str:
@@ -50,6 +51,8 @@ def progress_line(st: RecordStatus) -> str:
     if st.duration_s is not None:
         parts[-1] += f"/{st.duration_s:g}s"
     parts += [f"samples={st.samples}", f"rate={st.rate_hz:.0f}/s", f"dropped={st.dropped}"]
+    if st.checkpoints is not None:
+        parts.append(f"neutral={st.checkpoints}")
     cov = st.coverage
     if cov is not None and cov.sectors:
         reach = " ".join(_fmt(s.reach_deg) for s in cov.sectors)
@@ -146,6 +149,8 @@ def render(st: RecordStatus):
     head.append(f"t {st.elapsed_s:6.1f}{dur} s   samples {st.samples}   "
                 f"{st.rate_hz:5.0f}/s   ")
     head.append(f"dropped {st.dropped}", style="bold red" if st.dropped else "green")
+    if st.checkpoints is not None:
+        head.append(f"   neutral checkpoints {st.checkpoints}")
     parts: list = [head]
     cov = st.coverage
     if cov is not None and cov.sectors:

@@ -32,7 +32,7 @@ import numpy as np
 from models import quaternion as Q
 from rig.record.pump import SampleBatch
 
-__all__ = ["CalibrationResult", "GuidedCalibration"]
+__all__ = ["CalibrationResult", "GuidedCalibration", "NeutralCheckpoints"]
 
 
 @dataclass
@@ -189,9 +189,30 @@ class GuidedCalibration:
                            "static_s", "functional_s", "flexion_deg", "extension_deg",
                            "period_s", "settle_s")},
                        "windows_s": {k: list(v) for k, v in self.protocol.windows().items()}}
+        origin = self._clock_origin()
+        if origin is not None:  # where the windows are on the samples' clock
+            result.data["protocol"]["origin"] = origin
         self._result = result
         self._batches.clear()
         return result
+
+    def _clock_origin(self) -> dict | None:
+        """Where protocol time 0 is on the samples' clock (:meth:`SampleBatch.time`: device
+        time where the device has one, else host time), stored as the calibration's
+        ``protocol.origin``: ``{"time": "device_t" | "t", "t0": seconds}``, so that a window
+        ``windows_s[name]`` is ``t0 + window`` in that clock. None when the recorded batches mix
+        the two clocks or the offset is not constant (a simulator whose patient runs faster
+        than the host's clock)."""
+        if not self._batches:
+            return None
+        dev = np.concatenate([b.device_t for _, b in self._batches])
+        has = np.isfinite(dev)
+        if has.any() and not has.all():
+            return None
+        off = np.concatenate([b.time() - pt for pt, b in self._batches])
+        if not np.isfinite(off).all() or float(np.ptp(off)) > 1e-3:
+            return None
+        return {"time": "device_t" if has.all() else "t", "t0": float(np.median(off))}
 
     def joint_orientations(self, batch: SampleBatch) -> tuple[np.ndarray, np.ndarray]:
         """Joint orientations (M, 4) and their times (M,) from a batch, calibration applied.
@@ -229,6 +250,206 @@ class GuidedCalibration:
         else:
             q = Q.multiply(Q.conjugate(parent_q), child_q)
         return q, batch.time()[child_rows]
+
+
+@dataclass
+class Checkpoint:
+    """One completed neutral checkpoint: what is stored, ``store.add_calibration(session,
+    "neutral-checkpoint", data, residual_deg)``.
+
+    ``data`` is ``{"window": [t0, t1], "time": "device_t" | "t"}``: the hold window on the
+    samples' clock, the one the calibration protocol's windows are in (:meth:`SampleBatch.time`:
+    device time where the device has one, else host time), and which column that is.
+    ``residual_deg`` is the median angle of the limb axis from the neutral direction during
+    the window (live joint orientations), None without samples there.
+    """
+
+    data: dict
+    residual_deg: float | None
+
+
+class NeutralCheckpoints:
+    """Marks neutral-pose checkpoints during the free recording of an IMU rig.
+
+    The patient returns to the neutral pose between movements; each return lets the read path
+    re-zero the two sensors' relative heading (:class:`calibration.heading.HeadingCorrection`,
+    :func:`rig.commands.boundary.joint_orientations_from_store`).
+
+    - **Simulated rig**: the windows are the simulated patient's schedule
+      (``neutral_windows(t_end)`` of :class:`rig.sim.limb.SimulatedLimb`, patient time, turned
+      into the samples' clock); the display says "return to neutral" shortly before each (the
+      simulated patient does it). No schedule (``neutral_every_s`` 0, or a patient without
+      one): no checkpoints.
+    - **Hardware**: the clinician presses Enter when the patient is back in the neutral pose;
+      the window is ``[t_press, t_press + hold_s]`` of sample time (the patient holds still).
+
+    Each window is handed back by :meth:`feed` once the samples have passed its end.
+
+    Parameters
+    ----------
+    rig : OpenRig
+    display : display object (``message``)
+    stdin : text stream, optional
+        Where Enter is read on hardware (default ``sys.stdin``).
+    hold_s : float
+        Hardware: how long the patient holds still after Enter.
+    lead_s : float
+        Simulated rig: the prompt comes this long before the patient starts moving back.
+    """
+
+    def __init__(self, rig, *, display, stdin=None, hold_s: float = 1.0,
+                 lead_s: float = 1.0) -> None:
+        self.rig = rig
+        self.display = display
+        self.stdin = stdin if stdin is not None else sys.stdin
+        self.hold_s = float(hold_s)
+        self.lead_s = float(lead_s)
+        self.count = 0
+        self._limb = None
+        if rig.simulated:
+            pats = rig.patients
+            limb = pats[0] if pats else None
+            if (limb is not None and callable(getattr(limb, "neutral_windows", None))
+                    and float(getattr(limb, "neutral_every_s", 0.0) or 0.0) > 0.0):
+                self._limb = limb
+        self.active = rig.kind == "imu" and (self._limb is not None or not rig.simulated)
+        self._schedule = np.empty((0, 2))  # simulated: patient-time windows known so far
+        self._horizon = -math.inf
+        self._next = 0  # index of the next scheduled window not yet completed
+        self._announced = 0  # scheduled windows announced
+        self._open: list[list[float]] = []  # windows (samples' clock) waiting for their end
+        self._buf_t: list[np.ndarray] = []
+        self._buf_q: list[np.ndarray] = []
+        self._presses = 0
+        self._lock = threading.Lock()
+        self._stop_reader = threading.Event()
+        self._reader: threading.Thread | None = None
+        self._prompt: str | None = None
+
+    @property
+    def prompt(self) -> str | None:
+        """What the status line should say while a checkpoint is due or held (else None)."""
+        return self._prompt
+
+    def begin(self) -> None:
+        """Say what to do; on hardware start reading Enter in the background."""
+        if not self.active:
+            return
+        if self._limb is not None:
+            every = float(self._limb.neutral_every_s)
+            self.display.message(
+                f"neutral checkpoints: the simulated patient returns to the neutral pose every "
+                f"{every:g} s (arm hanging at the side, forearm forward) and holds it "
+                f"{float(getattr(self._limb, 'neutral_hold_s', 2.0)):g} s")
+            return
+        try:
+            self.stdin.fileno()
+        except (AttributeError, OSError, ValueError):
+            self.active = False  # no usable stdin: nobody can mark a checkpoint
+            return
+        self.display.message(
+            "neutral checkpoints: between movements bring the patient back to the neutral pose "
+            f"(arm hanging at the side, forearm forward) and press Enter; hold still "
+            f"{self.hold_s:g} s")
+        self._reader = threading.Thread(target=self._read_enter, name="rig-record-neutral",
+                                        daemon=True)
+        self._reader.start()
+
+    def _read_enter(self) -> None:
+        try:
+            fd = self.stdin.fileno()
+        except (AttributeError, OSError, ValueError):
+            return
+        while not self._stop_reader.is_set():
+            ready, _, _ = select.select([fd], [], [], 0.2)
+            if ready:
+                data = os.read(fd, 1024)
+                if not data:  # EOF: nobody will press it again
+                    return
+                if b"\n" in data:
+                    with self._lock:
+                        self._presses += 1
+
+    def close(self) -> None:
+        self._stop_reader.set()
+        if self._reader is not None:
+            self._reader.join()
+            self._reader = None
+
+    # -- the recording loop ----------------------------------------------------------------
+    def feed(self, batch: SampleBatch, joint_q: np.ndarray, joint_t: np.ndarray
+             ) -> list[Checkpoint]:
+        """Take a batch (and its live joint orientations); the checkpoints completed by it."""
+        if not self.active or len(batch) == 0:
+            return []
+        clock = batch.time()
+        now = float(clock[-1])
+        base = "device_t" if np.isfinite(batch.device_t).all() else "t"
+        if self._limb is not None:
+            self._schedule_from_patient(batch)
+        else:
+            with self._lock:
+                presses, self._presses = self._presses, 0
+            if presses:
+                self._open.append([now, now + self.hold_s])
+                self._prompt = "neutral checkpoint: hold still"
+                self.display.message(f"neutral checkpoint {self.count + len(self._open)}: hold "
+                                     f"still {self.hold_s:g} s")
+        if self._open and len(joint_q):
+            lo = self._open[0][0]
+            keep = joint_t >= lo
+            if keep.any():
+                self._buf_t.append(joint_t[keep])
+                self._buf_q.append(joint_q[keep])
+        done = []
+        while self._open and now >= self._open[0][1]:
+            t0, t1 = self._open.pop(0)
+            done.append(Checkpoint({"window": [t0, t1], "time": base}, self._residual(t0, t1)))
+            self.count += 1
+            if not self._open:
+                self._buf_t.clear()
+                self._buf_q.clear()
+                self._prompt = None
+        return done
+
+    def _schedule_from_patient(self, batch: SampleBatch) -> None:
+        pt = self.rig.patient_time(batch)
+        clock = batch.time()
+        offset = float(np.median(clock - pt))  # samples' clock minus patient time
+        now = float(pt[-1])
+        limb = self._limb
+        ramp = float(getattr(limb, "neutral_ramp_s", 0.0) or 0.0)
+        if now + 60.0 > self._horizon:  # the schedule a minute ahead
+            self._horizon = now + 120.0
+            self._schedule = np.asarray(limb.neutral_windows(self._horizon),
+                                        dtype=np.float64).reshape(-1, 2)
+        sched = self._schedule
+        while self._announced < len(sched) and now >= sched[self._announced, 0] - ramp - \
+                self.lead_s:
+            k = self._announced
+            self._announced += 1
+            if now >= sched[k, 1]:  # already over (the recording began after it): skip
+                self._next = max(self._next, k + 1)
+                continue
+            self._prompt = "return to neutral"
+            self.display.message(f"neutral checkpoint {self.count + 1}: return to the neutral "
+                                 "pose (arm hanging at the side, forearm forward) and hold still")
+        while self._next < self._announced and now >= sched[self._next, 0]:
+            t0, t1 = sched[self._next]
+            self._open.append([float(t0 + offset), float(t1 + offset)])
+            self._next += 1
+            self._prompt = "neutral checkpoint: hold still"
+
+    def _residual(self, t0: float, t1: float) -> float | None:
+        if not self._buf_t:
+            return None
+        t = np.concatenate(self._buf_t)
+        q = np.concatenate(self._buf_q)
+        sel = (t >= t0) & (t <= t1)
+        if not sel.any():
+            return None
+        x = np.array([1.0, 0.0, 0.0])
+        return float(np.degrees(np.median(Q.angle_between(Q.rotate(q[sel], x), x))))
 
 
 def _concat(batches: list[SampleBatch]) -> SampleBatch:

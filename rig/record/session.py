@@ -14,6 +14,11 @@ Sequence (every step that can fail on a user mistake comes before anything is re
    its residual are stored (``store.add_calibration``).
 4. **Recording** until ``duration_s`` of sample time, Ctrl-C / SIGTERM, or a vanished device.
    Joint orientations (calibrated) feed the live :class:`~rig.record.coverage.CoverageMap`.
+   On a calibrated IMU rig the patient's returns to the neutral pose are marked as
+   **neutral checkpoints** (:class:`~rig.record.guided.NeutralCheckpoints`: the simulated
+   patient's schedule, or Enter on hardware), each stored as it ends
+   (``store.add_calibration(session, "neutral-checkpoint", {"window": [t0, t1], "time": ...})``)
+   for the read path's heading re-zeroing.
 5. **End**: the reader is stopped, the queue drained, the writer closed (last commit) and the
    session ended with its status (``completed``, ``interrupted``, ``device_lost``, ``failed``)
    and counts (samples, sequence gaps, queue overflow).
@@ -37,7 +42,12 @@ import numpy as np
 from rig.errors import RigConfigError, RigConnectionError, RigError
 from rig.record.coverage import CoverageMap
 from rig.record.display import PlainDisplay, RecordStatus
-from rig.record.guided import CalibrationResult, GuidedCalibration, patient_performs_protocol
+from rig.record.guided import (
+    CalibrationResult,
+    GuidedCalibration,
+    NeutralCheckpoints,
+    patient_performs_protocol,
+)
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
 
@@ -146,6 +156,8 @@ class RecordResult:
         calibration, or a servo limb (its forward kinematics are the joint orientation; the
         ``servo-zero`` step only checks them). False for an IMU recording without one — its
         coverage and angles are sensor-frame approximations and say so.
+    neutral_checkpoints : int
+        Neutral checkpoints marked and stored (calibrated IMU rigs).
     rom, rom_table : dict, str or None
         Clinical range-of-motion peaks of the session's extracted boundary and their table
         (:mod:`calibration.clinical`), when computed; ``rom_note`` says why not otherwise.
@@ -168,6 +180,7 @@ class RecordResult:
     coverage: dict = field(default_factory=dict)
     error: str | None = None
     calibrated: bool = False
+    neutral_checkpoints: int = 0
     rom: dict | None = None
     rom_table: str | None = None
     rom_note: str | None = None
@@ -320,6 +333,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     writer = store.sample_writer(session_id)
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
     calib = GuidedCalibration(config, rig, display=display)
+    checkpoints = NeutralCheckpoints(rig, display=display)
+    marking = False  # neutral checkpoints are being marked (calibrated IMU rig)
     pending = sorted(options.annotations, key=lambda a: -1.0 if a.at_s is None else a.at_s)
     t_start: float | None = None  # sample time (best clock) when recording proper began
     rate = _Rate()
@@ -374,6 +389,11 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                                 f"and axis of the chain checked, no correction "
                                                 f"applied), residual {cal.residual_deg:.2f}°")
                             emit("calibrated", {"residual_deg": cal.residual_deg})
+                            if cal.model is not None and checkpoints.active:
+                                calib.close()  # its Enter reader is done: one reader of stdin
+                                checkpoints.begin()
+                                marking = checkpoints.active
+                                status.checkpoints = 0 if marking else None
                             phase = "recording"
                             emit("recording", {"session_id": session_id})
                     if phase == "recording":
@@ -382,6 +402,12 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                         joint_q, joint_t = calib.joint_orientations(batch)
                         if len(joint_q):
                             coverage.add(joint_q, joint_t)
+                        if marking:
+                            for cp in checkpoints.feed(batch, joint_q, joint_t):
+                                store.add_calibration(session_id, "neutral-checkpoint",
+                                                      cp.data, cp.residual_deg)
+                            result.neutral_checkpoints = checkpoints.count
+                            status.checkpoints = checkpoints.count
                         status.elapsed_s = float(clock[-1]) - t_start
                         while pending and (pending[0].at_s is None
                                            or pending[0].at_s <= status.elapsed_s):
@@ -411,6 +437,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                        "written": writer.written})
                 status.phase = (calib.prompt if phase == "calibration" else
                                 "recording" if result.calibrated else "recording, uncalibrated")
+                if marking and checkpoints.prompt:
+                    status.phase = f"recording — {checkpoints.prompt}"
                 status.samples = result.samples
                 status.rate_hz = rate.value()
                 status.dropped = pump.dropped
@@ -432,6 +460,9 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                 result.first_t = float(batch.t[0])
             result.last_t = float(batch.t[-1])
         calib.close()
+        checkpoints.close()
+        if marking:
+            display.message(f"neutral checkpoints marked: {result.neutral_checkpoints}")
         result.gaps = int(getattr(rig.source, "dropped", 0) or 0)
         result.overflow = pump.overflow
         writer.set_dropped(result.dropped)
@@ -452,6 +483,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                          else result.calibration.residual_deg),
             "calibrated": result.calibrated,
         }
+        if marking:
+            end_meta["neutral_checkpoints"] = result.neutral_checkpoints
         if result.error:
             end_meta["error"] = result.error
         store.end_session(session_id, status=result.status, meta=end_meta,
