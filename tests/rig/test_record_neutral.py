@@ -10,6 +10,7 @@ the recorder (no wall-clock condition). Seed 3 is not a held-out seed of the ben
 
 from __future__ import annotations
 
+import io
 import os
 import types
 
@@ -18,7 +19,7 @@ import pytest
 
 from models import quaternion as Q
 from rig.commands.boundary import joint_orientations_from_store
-from rig.record import RecordOptions, record_session
+from rig.record import PlainDisplay, RecordOptions, RecordStatus, record_session
 from rig.record.guided import NeutralCheckpoints
 from rig.record.lockstep import CountingDisplay, LockstepClock
 from rig.record.pump import SampleBatch
@@ -46,13 +47,15 @@ def recorded(tmp_path_factory):
     db = tmp / "neutral.db"
     rig = open_rig(load_config(str(cfg)), calibrate=True)
     limb = rig.patients[0]
-    shown = CountingDisplay()
+    lines = io.StringIO()
+    shown = CountingDisplay(PlainDisplay(lines))
     with LockstepClock(rig.simulators[0].clock, lambda: shown.samples, 2.0 * RATE) as lock:
         res = record_session(
             RecordOptions(rig=str(cfg), db=str(db), patient="NEUTRAL-3", duration_s=FREE_S),
             display=shown, rig=rig,
             on_event=lambda name, info: name == "session" and lock.start())
-    return types.SimpleNamespace(res=res, db=db, limb=limb, rig=rig, shown=shown)
+    return types.SimpleNamespace(res=res, db=db, limb=limb, rig=rig, shown=shown,
+                                 lines=lines.getvalue().splitlines())
 
 
 def test_checkpoints_are_marked_and_stored_in_the_samples_clock(recorded):
@@ -83,6 +86,8 @@ def test_checkpoints_are_marked_and_stored_in_the_samples_clock(recorded):
     msgs = recorded.shown.messages
     assert sum("return to the neutral pose" in m for m in msgs) == len(expected)
     assert f"neutral checkpoints marked: {len(expected)}" in msgs
+    progress = [ln for ln in recorded.lines if ln.startswith("[")]
+    assert f" neutral={len(expected)} " in progress[-1]
 
 
 def test_read_path_applies_them_and_the_twist_error_drops(recorded):
@@ -111,6 +116,18 @@ def test_read_path_applies_them_and_the_twist_error_drops(recorded):
     assert np.sqrt(np.mean(e_on**2)) < np.sqrt(np.mean(e_off**2))
     # the session's stored range of motion came through the corrected read path
     assert recorded.res.rom is not None
+
+
+def test_live_panel_shows_the_count():
+    from rich.console import Console
+
+    from rig.record.display import render
+
+    console = Console(file=io.StringIO(), width=120)
+    console.print(render(RecordStatus(patient="P", phase="recording — return to neutral",
+                                      checkpoints=3)))
+    text = console.file.getvalue()
+    assert "neutral checkpoints 3" in text and "return to neutral" in text
 
 
 def _batch(t: np.ndarray) -> SampleBatch:
