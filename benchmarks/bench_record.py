@@ -112,15 +112,18 @@ def main(argv=None) -> None:
                    help="patient time per real second on the servo path")
     a.add_argument("--servo-rate", type=float, default=300.0, help="servo reads per real s")
     a.add_argument("--paths", nargs="+", choices=["imu", "servo"], default=["imu", "servo"])
+    a.add_argument("--neutral", type=float, default=20.0,
+                   help="IMU path: the patient returns to neutral every N s (0: never)")
     args = ap.parse_args(argv)
     if args.what == "throughput":
         throughput(args.minutes, args.rate, args.repeats, args.window, args.step, args.flow)
     else:
-        accuracy(args.seeds, args.free, args.servo_scale, args.servo_rate, tuple(args.paths))
+        accuracy(args.seeds, args.free, args.servo_scale, args.servo_rate, tuple(args.paths),
+                 args.neutral)
 
 
 def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
-             paths: tuple[str, ...]) -> None:
+             paths: tuple[str, ...], neutral_s: float = 20.0) -> None:
     """Held-out seeded patients through the whole stack (see :mod:`rig.record.accuracy`)."""
     from rig.record.accuracy import record_imu_patient, record_servo_patient, star_patient
 
@@ -131,7 +134,7 @@ def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
             t0 = time.perf_counter()
             with tempfile.TemporaryDirectory() as tmp:
                 if path == "imu":
-                    r = record_imu_patient(truth, seed, tmp, free_s=free_s)
+                    r = record_imu_patient(truth, seed, tmp, free_s=free_s, neutral_s=neutral_s)
                 else:
                     r = record_servo_patient(truth, seed, tmp, free_s=free_s,
                                              time_scale=servo_scale, rate_hz=servo_rate)
@@ -144,7 +147,8 @@ def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
     for path in paths:
         rs = rows[path]
         print(f"\n{path} path ({free_s:g} s of free motion after the guided calibration"
-              + (", noise + drift + disturbances, straps 25° off)" if path == "imu" else
+              + (f", noise + drift + disturbances, straps 25° off, neutral every {neutral_s:g} s)"
+                 if path == "imu" else
                  f", patient time x{servo_scale:g}, servos read at {servo_rate:g} Hz)"))
         print(f"{'patient':10s} {'resid°':>6s} {'mean°':>6s} {'Haus°':>6s} {'out>1°%':>8s} "
               f"{'out>2°%':>8s} {'twist°':>7s} {'peaks°':>7s} {'swing°':>7s} {'rot°':>6s} "

@@ -65,6 +65,8 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom,
         summary += f", calibration residual {result.calibration.residual_deg:.2f}°"
     elif not result.calibrated:
         summary += ", NOT calibrated (sensor frames)"
+    if getattr(result, "neutral_checkpoints", 0):
+        summary += f", {result.neutral_checkpoints} neutral checkpoints"
     cov = result.coverage
     if cov:
         summary += (", coverage sufficient" if cov.get("sufficient") else

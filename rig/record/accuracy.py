@@ -124,12 +124,14 @@ def _rig_yaml(tmp: Path, body: str) -> Path:
 
 
 def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float = 300.0,
-                       rate_hz: int = 100, misplace_deg: float = 25.0, display=None,
-                       step_s: float = 0.05, window_s: float = 0.5) -> AccuracyResult:
+                       rate_hz: int = 100, misplace_deg: float = 25.0, neutral_s: float = 20.0,
+                       display=None, step_s: float = 0.05,
+                       window_s: float = 0.5) -> AccuracyResult:
     """Record ``constraint`` worn as two IMUs (``sim://imu-stream``, noise on, straps turned
-    ``misplace_deg`` off, patient performing the calibration protocol) for ``free_s`` seconds
-    of free motion after calibration, faster than real time (:class:`LockstepClock`), and
-    compare the extracted boundary with the truth."""
+    ``misplace_deg`` off, patient performing the calibration protocol, then returning to
+    neutral every ``neutral_s`` seconds — 0: never — with 2° repeatability) for ``free_s``
+    seconds of free motion after calibration, faster than real time (:class:`LockstepClock`),
+    and compare the extracted boundary with the truth."""
     from models.constraint import dump_constraint
     from rig.record import RecordOptions, record_session
     from rig.record.lockstep import CountingDisplay, LockstepClock
@@ -140,7 +142,8 @@ def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float 
     cpath = tmp / f"patient-{seed}.yaml"
     dump_constraint(constraint, cpath)
     port = (f"sim://imu-stream?sensors=2&rate={rate_hz}&patient={cpath}&seed={seed}"
-            f"&misplace_deg={misplace_deg:g}&clock=manual&flow=on&max_lag=none")
+            f"&misplace_deg={misplace_deg:g}&neutral={neutral_s:g}&clock=manual&flow=on"
+            "&max_lag=none")
     cfg = _rig_yaml(tmp, f"name: accuracy-imu\njoint: {{name: shoulder, side: right, parent: "
                          f"thorax, child: humerus}}\nsensors:\n  port: \"{port}\"\n"
                          f"  protocol: stream\n  rate_hz: {rate_hz}\n"

@@ -291,8 +291,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.boundary_facts = facts
             data.sparse_arcs_deg = []
             data.sparse_arcs_text = [_arc_text(a, side) for a in arcs]
-        data.calibrations = [{"kind": c.get("kind"), "residual_deg": c.get("residual_deg")}
-                             for c in store.calibrations(rec_id)]
+        data.calibrations = _calibration_rows(store.calibrations(rec_id))
         if model is None:
             for m in reversed(store.models_for(session_id=rec_id)):
                 if Path(m["path"]).is_file():
@@ -337,3 +336,16 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n)
     return write_report(data, out_path)
+
+
+def _calibration_rows(cals: list[dict]) -> list[dict]:
+    """One row per calibration; the neutral checkpoints (one stored row each) as one row:
+    their count and the median of their residuals (limb axis from neutral, degrees)."""
+    rows = [{"kind": c.get("kind"), "residual_deg": c.get("residual_deg")}
+            for c in cals if c.get("kind") != "neutral-checkpoint"]
+    ck = [c.get("residual_deg") for c in cals if c.get("kind") == "neutral-checkpoint"]
+    if ck:
+        vals = [float(r) for r in ck if r is not None]
+        rows.append({"kind": f"neutral checkpoints ×{len(ck)} (median)",
+                     "residual_deg": float(np.median(vals)) if vals else None})
+    return rows

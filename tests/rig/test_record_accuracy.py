@@ -38,7 +38,11 @@ def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
         sess = store.list_sessions()[-1]
         meta = store.get_session(sess["id"])["meta"]
         assert meta["calibrated"] is True
-        assert len(store.calibrations(sess["id"])) == 1
+        kinds = [c["kind"] for c in store.calibrations(sess["id"])]
+        # the guided calibration, then the patient's returns to neutral every 20 s of the 300 s
+        assert kinds.count("imu-alignment") == 1
+        assert kinds.count("neutral-checkpoint") >= 12 and set(kinds) == {
+            "imu-alignment", "neutral-checkpoint"}
         # the clinical peaks stored at the end of the session are those of its boundary
         rom = meta["rom"]
         for movement, (extracted, _truth) in r.peaks.items():
