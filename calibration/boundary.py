@@ -1,8 +1,9 @@
 """Boundary extraction: recorded joint orientations → a patient-specific joint constraint.
 
-Input: joint orientations ``q`` (N, 4) (limb relative to thorax, scalar-first). Output: a
-:class:`models.constraint.JointConstraint` with a spherical-polygon swing limit, a twist range
-(and, when the data supports it, a swing-dependent twist table), and its provenance.
+Input: joint orientations ``q`` (N, 4) (limb relative to thorax, scalar-first), in recording
+order (consecutive samples are read as a trajectory; any other order only loses that evidence).
+Output: a :class:`models.constraint.JointConstraint` with a spherical-polygon swing limit, a
+twist range (and, when the data supports it, a swing-dependent twist table), and its provenance.
 
 Method
 ------
@@ -20,15 +21,48 @@ Method
 3. **Density trimming.** A histogram on ``cell_deg`` cells, smoothed by a disc of radius
    ``trim_radius_deg`` (:func:`scipy.ndimage.convolve`), gives each sample's local count.
    Samples whose count is below ``trim_min_count`` *and* in the lowest ``trim_fraction`` of
-   counts are outliers (isolated glitches); a real trajectory passing once leaves a count of
-   ``≈ 2 r f / v`` samples (rate ``f``, speed ``v``), far above.
+   counts *and* that are on no trajectory are outliers (isolated glitches). A sample is on a
+   trajectory when its predecessor or successor lies within ``track_step_deg``: the limb moved
+   continuously through it. (A fast pass at a modest rate leaves samples several degrees apart,
+   each alone in its disc; counts alone would trim such real, rarely visited range.)
 4. **Alpha shape** (Edelsbrunner, Kirkpatrick & Seidel 1983, *IEEE Trans. Inf. Theory*
    29:551): the Delaunay triangulation (:class:`scipy.spatial.Delaunay`) of the per-cell mean
-   positions, triangles with circumradius ``< alpha_deg`` kept, merged with
-   :func:`shapely.coverage_union_all`; the component holding most samples is kept and its holes
-   filled (a swing limit is simply connected). The region is concave where the data is and
-   claims no range the limb did not visit. If it holds less than ``coverage`` of the kept
-   samples, ``alpha`` grows by 1.5× (up to 4 times): no recorded region left out.
+   positions, triangles with circumradius ``< alpha_deg`` merged with
+   :func:`shapely.coverage_union_all`. The region is concave where the data is and claims no
+   range the limb did not visit; a swing limit is simply connected, so the pieces are joined
+   and holes filled, on recorded evidence only:
+
+   i. *Clusters.* Cells are connected by Delaunay edges shorter than ``2 alpha`` (the longest
+      edge an alpha triangle can have) and by trajectory steps (``track_step_deg``). Cells
+      outside the cluster holding most samples, in clusters of less than ``cluster_share`` of
+      the samples each, are isolated glitch clusters: left out, and not counted as evidence
+      (``glitch_cluster_samples`` in the provenance). Only the main cluster's triangles are used.
+   ii. *Along the trajectory.* Cells are labelled by the piece of the shape they lie in. A run of
+      consecutive trajectory samples between two labelled samples is a **transit** when the
+      pieces differ (the limb went from one to the other through the gap, e.g. a thin neck) and
+      an **excursion** when it leaves the shape by more than ``cell_deg`` (a sparse stretch, such
+      as a lobe visited once, that formed no triangle); so are runs at the ends of a stretch of
+      trajectory. These runs are buffered by ``cell_deg / 2`` and merged with the pieces, then
+      closed by ``cell_deg`` (a slit of less than two cells is no evidence of a limit).
+   iii. *Bridges.* Pieces still apart that hold at least ``trim_min_count`` samples (a lobe only
+      ever seen inside, never on the way in) are joined to the piece holding most samples along
+      the minimax path through the recorded cells — the Euclidean minimum spanning tree
+      (:func:`scipy.sparse.csgraph.minimum_spanning_tree`; edges inside a piece cost nothing),
+      edges shorter than ``2 alpha``: alpha grown locally, along the data, not everywhere.
+   iv. The piece holding most samples is kept and its holes filled.
+
+   If a piece other than the largest holds more than ``1 − coverage`` of the evidence (a
+   sparse recording splits the whole shape into pieces, with unvisited pockets between them),
+   or the final region (after 4b) leaves more than that out by more than ``cell_deg`` + the
+   inset, ``alpha`` grows by 1.5× (up to 4 times).
+
+   4b. **Noise correction**: a limit the patient dwells on leaves a ridge of samples, blurred
+   by measurement noise; the region's envelope sits on the ridge's outer tail. The region is
+   shrunk to the ridge's crest: the mode of the samples' depth inside it (0.2° bins over
+   ``pileup_band_deg``, used only when it stands 2× above the band's median; depth to within
+   0.025°, from the boundary's points 0.05° apart). The shrunk pieces are joined again as in
+   4 ii-iii (transits, excursions beyond the unshrunk shape, bridges): a neck narrower than twice
+   the inset does not cut a recorded lobe off.
 5. **Simplification** (Douglas-Peucker, topology-preserving, :meth:`shapely.Polygon.simplify`)
    with the smallest tolerance ≥ ``simplify_deg`` that leaves at most ``max_vertices``; the
    vertices are mapped back to the sphere and joined by great-circle edges. The result is
@@ -154,6 +188,33 @@ def _pileup_offset(depth: np.ndarray, band: float, bin_width: float, prominence:
     return float(0.5 * (edges[k] + edges[k + 1]))
 
 
+def _label(parts, xy: np.ndarray) -> np.ndarray:
+    """Index of the part (polygons) covering each point (N, 2), or -1."""
+    import shapely
+
+    out = np.full(len(xy), -1, dtype=np.int64)
+    for k, g in enumerate(parts):
+        shapely.prepare(g)
+        out[(out < 0) & shapely.intersects_xy(g, xy[:, 0], xy[:, 1])] = k
+    return out
+
+
+def _distance(geom, xy: np.ndarray, step: float = 0.05) -> np.ndarray:
+    """Distance (N,) of points (N, 2) to the boundary of ``geom`` (or to a line), to within
+    ``step / 2``: nearest of the boundary's points ``step`` apart (a k-d tree; exact distance to
+    a ring of thousands of vertices is slow for 10⁵ points)."""
+    import shapely
+    from scipy.spatial import cKDTree
+
+    line = geom if geom.geom_type in ("LineString", "LinearRing", "MultiLineString") \
+        else geom.boundary
+    ring = shapely.get_coordinates(shapely.segmentize(line, step))
+    if len(xy) == 0 or len(ring) == 0:
+        return np.zeros(len(xy))
+    dist, _ = cKDTree(ring).query(xy)
+    return dist
+
+
 def _weighted_percentiles(x: np.ndarray, w: np.ndarray, pct: tuple[float, float]):
     order = np.argsort(x)
     xs, ws = x[order], w[order]
@@ -180,6 +241,11 @@ class BoundaryExtractor:
         ``trim_fraction``.
     coverage : float
         Fraction of kept samples the region must hold (step 4).
+    track_step_deg : float
+        Consecutive samples this close are a trajectory (steps 3, 4 i-ii).
+    cluster_share : float
+        A cluster joined to the main one neither in space nor along the trajectory and holding
+        less than this share of the samples is a glitch cluster (step 4 i).
     max_vertices : int
         Vertex budget of the simplified polygon.
     simplify_deg : float
@@ -209,7 +275,7 @@ class BoundaryExtractor:
     by_swing_candidate_ : dict or None, the table computed (also when not emitted)
     sparse_arcs_ : list of SparseArc
     alpha_used_deg_ : float
-    n_samples_, n_status_dropped_, n_trimmed_, n_used_ : int
+    n_samples_, n_status_dropped_, n_trimmed_, n_used_, n_glitch_cluster_ : int
     coverage_ : float, fraction of kept samples inside the region (within ``cell_deg``)
     """
 
@@ -222,6 +288,8 @@ class BoundaryExtractor:
         trim_min_count: int = 5,
         trim_fraction: float = 0.01,
         coverage: float = 0.995,
+        track_step_deg: float = 5.0,
+        cluster_share: float = 0.01,
         max_vertices: int = 64,
         simplify_deg: float = 0.3,
         twist_percentiles: tuple[float, float] = (1.0, 99.0),
@@ -256,6 +324,8 @@ class BoundaryExtractor:
         self.trim_min_count = int(trim_min_count)
         self.trim_fraction = float(trim_fraction)
         self.coverage = float(coverage)
+        self.track_step_deg = float(track_step_deg)
+        self.cluster_share = float(cluster_share)
         self.max_vertices = int(max_vertices)
         self.simplify_deg = float(simplify_deg)
         self.twist_percentiles = (float(lo), float(hi))
@@ -278,6 +348,7 @@ class BoundaryExtractor:
             "alpha_deg": self.alpha_deg, "cell_deg": self.cell_deg,
             "trim_radius_deg": self.trim_radius_deg, "trim_min_count": self.trim_min_count,
             "trim_fraction": self.trim_fraction, "coverage": self.coverage,
+            "track_step_deg": self.track_step_deg, "cluster_share": self.cluster_share,
             "max_vertices": self.max_vertices, "simplify_deg": self.simplify_deg,
             "twist_percentiles": list(self.twist_percentiles),
             "by_swing": self.by_swing,
@@ -333,7 +404,7 @@ class BoundaryExtractor:
         c = self._centre(d)
         u, v = _tangent_basis(c)
         p = _ae_forward(d, c, u, v)
-        inlier = self._trim(p)
+        inlier = self._trim(p, self._links(d))
         self.n_trimmed_ = int((~inlier).sum())
         p, d, phi = p[inlier], d[inlier], phi[inlier]
         if np.hypot(p[:, 0], p[:, 1]).max() > 150.0:
@@ -342,10 +413,19 @@ class BoundaryExtractor:
                 "this large cannot be extracted"
             )
         self.n_used_ = len(p)
-        poly = self._alpha_region(p)
-        poly = self._noise_inset(poly, p)
-        verts2d = self._simplify(poly)
-        self._finish(verts2d, poly, p, d, phi, c, u, v, provenance)
+        poly = self._alpha_region(p, self._links(d))
+        tol = self.simplify_deg
+        for attempt in range(4):
+            verts2d = self._simplify(poly, tol)
+            try:
+                self._finish(verts2d, poly, p, d, phi, c, u, v, provenance)
+                break
+            except CalibrationError:
+                # a corridor simplified to straight lines in the plane can still cross itself
+                # on the sphere (great-circle edges): simplify further
+                if attempt == 3:
+                    raise
+                tol *= 2.0
         return self
 
     def _centre(self, d: np.ndarray) -> np.ndarray:
@@ -368,7 +448,12 @@ class BoundaryExtractor:
         shape = tuple(ij.max(axis=0) + 1)
         return ij, shape, lo
 
-    def _trim(self, p: np.ndarray) -> np.ndarray:
+    def _links(self, d: np.ndarray) -> np.ndarray:
+        """(N-1,) bool: consecutive samples within ``track_step_deg`` (a recorded trajectory)."""
+        chord = np.linalg.norm(d[1:] - d[:-1], axis=1)
+        return chord <= 2.0 * math.sin(math.radians(self.track_step_deg) / 2.0)
+
+    def _trim(self, p: np.ndarray, links: np.ndarray) -> np.ndarray:
         from scipy import ndimage
 
         ij, shape, _ = self._grid(p)
@@ -380,21 +465,27 @@ class BoundaryExtractor:
         dens = ndimage.convolve(hist, disc, mode="constant")
         count = dens[ij[:, 0] + pad, ij[:, 1] + pad]
         cut = np.quantile(count, self.trim_fraction)
-        return ~((count < self.trim_min_count) & (count <= cut))
+        on_track = np.zeros(len(p), dtype=bool)
+        on_track[1:] |= links
+        on_track[:-1] |= links
+        return ~((count < self.trim_min_count) & (count <= cut) & ~on_track)
 
-    def _cell_means(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _cell_means(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ij, shape, _ = self._grid(p)
         flat = ij[:, 0] * shape[1] + ij[:, 1]
         _uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
         sx = np.bincount(inv, weights=p[:, 0])
         sy = np.bincount(inv, weights=p[:, 1])
-        return np.column_stack((sx / counts, sy / counts)), counts
+        return np.column_stack((sx / counts, sy / counts)), counts, inv.reshape(-1)
 
-    def _alpha_region(self, p: np.ndarray):
+    def _alpha_region(self, p: np.ndarray, links: np.ndarray):
+        """Alpha shape joined along the recorded trajectory (step 4); sets the join state."""
         import shapely
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
         from scipy.spatial import Delaunay, QhullError
 
-        pts, counts = self._cell_means(p)
+        pts, counts, inv = self._cell_means(p)
         if len(pts) < 3:
             raise CalibrationError("the recorded directions cover too small an area")
         try:
@@ -410,31 +501,199 @@ class BoundaryExtractor:
         area2 = np.abs((b[:, 0] - a[:, 0]) * (cc[:, 1] - a[:, 1])
                        - (b[:, 1] - a[:, 1]) * (cc[:, 0] - a[:, 0]))
         circum = la * lb * lc / np.maximum(2.0 * area2, 1e-300)
-        alpha = self.alpha_deg
+        # the triangulation's edges, each once
+        e = np.sort(np.concatenate([tri.simplices[:, [0, 1]], tri.simplices[:, [1, 2]],
+                                    tri.simplices[:, [2, 0]]]), axis=1)
+        e = np.unique(e, axis=0)
+        elen = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1)
+        # trajectory edges between cells: the limb moved continuously from one to the other
+        ta, tb = inv[:-1][links], inv[1:][links]
+        moved = ta != tb
+        ta, tb = ta[moved], tb[moved]
+        n = len(pts)
         total = counts.sum()
+        alpha = self.alpha_deg
         best = None
         for _ in range(5):
             sel = tri.simplices[circum < alpha]
             if len(sel):
-                rings = np.concatenate((pts[sel], pts[sel][:, :1]), axis=1)
+                # connected: within 2 alpha (the longest edge an alpha triangle can have) or
+                # along the trajectory
+                near = elen < 2.0 * alpha
+                ea = np.concatenate((e[near, 0], ta))
+                eb = np.concatenate((e[near, 1], tb))
+                graph = coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
+                _, label = connected_components(graph, directed=False)
+                weight = np.bincount(label, weights=counts)
+                main = int(np.argmax(weight))
+                in_main = label == main
+                # clusters joined to the main one neither in space nor along the trajectory,
+                # each holding less than ``cluster_share``: isolated glitch clusters
+                glitch = ~in_main & (weight[label] < self.cluster_share * total)
+                evidence = total - counts[glitch].sum()
+                mine = sel[in_main[sel[:, 0]]]
+                rings = np.concatenate((pts[mine], pts[mine][:, :1]), axis=1)
                 union = shapely.coverage_union_all(shapely.polygons(rings))
+                # alpha is large enough when one piece of the shape holds the evidence: a
+                # sparse recording splits the shape into pieces (and leaves pockets between
+                # them), which a larger alpha joins
                 parts = list(getattr(union, "geoms", [union]))
-                inside = [counts[shapely.contains_xy(g.buffer(1e-9), pts[:, 0], pts[:, 1])].sum()
-                          for g in parts]
-                k = int(np.argmax(inside))
-                region = shapely.Polygon(parts[k].exterior)
-                held = counts[shapely.contains_xy(region.buffer(self.cell_deg), pts[:, 0],
-                                                  pts[:, 1])].sum() / total
-                best = (region, held, alpha)
+                held = max(counts[shapely.contains_xy(g.buffer(self.cell_deg), pts[:, 0],
+                                                      pts[:, 1])].sum() for g in parts) / evidence
+                keep = in_main[e[:, 0]] & (elen < 2.0 * alpha)
+                self._join_state = (union, pts, counts, inv, in_main, links, e[keep], elen[keep])
+                region = None
+                self.alpha_used_deg_ = float(alpha)
+                if held >= self.coverage:
+                    # and the joined, inset region holds it too, but for the inset band (a
+                    # pocket of the shape opening onto the outside can leave a stretch of the
+                    # boundary the limb slid along out)
+                    region = self._noise_inset(self._join(union, union, p), p)
+                    tol = self.cell_deg + self.inset_deg_
+                    held = counts[shapely.contains_xy(region.buffer(tol), pts[:, 0],
+                                                      pts[:, 1])].sum() / evidence
+                best = (held, alpha, region, self._join_state, glitch)
                 if held >= self.coverage:
                     break
             alpha *= 1.5
         if best is None:
             raise CalibrationError("no alpha shape could be formed from the recorded directions")
-        region, held, alpha = best
-        self.alpha_used_deg_ = float(alpha)
+        held, alpha, region, self._join_state, glitch = best
         self.coverage_ = float(held)
+        self.n_glitch_cluster_ = int(counts[glitch].sum())
+        self.alpha_used_deg_ = float(alpha)
+        if region is None:
+            region = self._join(self._join_state[0], self._join_state[0], p)
+            region = self._noise_inset(region, p)
         return region
+
+    def _join(self, union, reference, p):
+        """The part of ``union`` holding most samples, joined to the others by the trajectory.
+
+        Cells are labelled by the part of ``union`` they lie in. A *run* is a stretch of linked
+        samples (all in the main cluster) between two consecutive labelled samples: a
+        **transit** when the labels differ (the limb went from one part to another), an
+        **excursion** when they agree but the run leaves ``reference`` by more than
+        ``cell_deg`` (recorded range outside the alpha shape).
+        Runs also at the ends of a stretch of linked samples (leaving a part and not coming
+        back). The runs are buffered by ``cell_deg / 2`` and merged; of the result, the part
+        holding most samples is kept and its holes filled.
+        """
+        import shapely
+
+        _, pts, counts, inv, in_main, links, _, _ = self._join_state
+        parts = [g for g in getattr(union, "geoms", [union]) if not g.is_empty]
+        cell_part = _label(parts, pts)
+        lab = np.where(in_main[inv], cell_part[inv], -2)  # -2: not in the main cluster
+        ok = links & (lab[:-1] != -2) & (lab[1:] != -2)
+        chain = np.concatenate(([0], np.cumsum(~ok)))
+        k = np.flatnonzero(lab >= 0)
+        runs = []
+        if len(k):
+            k1, k2 = k[:-1], k[1:]
+            same_chain = chain[k1] == chain[k2]
+            transit = same_chain & (lab[k1] != lab[k2])
+            excursion = same_chain & (lab[k1] == lab[k2]) & (k2 - k1 > 1)
+            runs.append(np.column_stack((k1[transit], k2[transit])))
+            ends = []
+            exc = np.column_stack((k1[excursion], k2[excursion]))
+            # stretches that leave a part and end (or begin) outside every part
+            first = np.ones(len(k), dtype=bool)
+            first[1:] = chain[k[1:]] != chain[k[:-1]]
+            last = np.ones(len(k), dtype=bool)
+            last[:-1] = first[1:]
+            start_of = np.searchsorted(chain, chain[k[first]], side="left")
+            end_of = np.searchsorted(chain, chain[k[last]], side="right") - 1
+            ends.append(np.column_stack((start_of, k[first])))
+            ends.append(np.column_stack((k[last], end_of)))
+            cand = np.concatenate([exc, *ends])
+            cand = cand[cand[:, 1] > cand[:, 0]]
+            if len(cand):
+                runs.append(self._leaving(cand, reference, p, lab))
+        runs = np.concatenate(runs) if runs else np.zeros((0, 2), dtype=np.int64)
+        geoms = parts
+        if len(runs):
+            length = runs[:, 1] - runs[:, 0] + 1
+            ids = np.repeat(np.arange(len(runs)), length)
+            idx = np.repeat(runs[:, 0] - np.cumsum(np.r_[0, length[:-1]]), length) \
+                + np.arange(length.sum())
+            lines = shapely.linestrings(p[idx], indices=ids)
+            geoms = [*parts, *shapely.buffer(lines, 0.5 * self.cell_deg, quad_segs=2)]
+        if not geoms:
+            raise CalibrationError("no alpha shape could be formed from the recorded directions")
+        # closing by one cell: a slit narrower than two cells between the pieces is no
+        # evidence of a limit (it would leave an unvisited pocket in the region)
+        # (united with the pieces themselves: the closing would erase a sliver of the alpha
+        # shape along a boundary the limb slid along, which encloses such a pocket)
+        r = self.cell_deg
+        merged = shapely.union_all(geoms)
+        merged = shapely.union(merged.buffer(r, quad_segs=4).buffer(-r, quad_segs=4), merged)
+        pieces = list(getattr(merged, "geoms", [merged]))
+        if len(pieces) > 1:
+            pieces = self._bridge(pieces)
+        held = [counts[shapely.intersects_xy(g, pts[:, 0], pts[:, 1])].sum() for g in pieces]
+        return shapely.Polygon(pieces[int(np.argmax(held))].exterior)
+
+    def _bridge(self, pieces):
+        """Join pieces of the region that the trajectory did not join (a lobe the limb was only
+        ever seen inside): along the minimax path through the recorded cells from each piece
+        to the piece holding most samples, edges shorter than ``2 alpha`` (local alpha growth
+        along the Euclidean minimum spanning tree, which holds every minimax path). Pieces
+        with fewer than ``trim_min_count`` samples are left alone (they fall away)."""
+        import shapely
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
+
+        _, pts, counts, _, _, _, e, elen = self._join_state
+        n = len(pts)
+        cp = _label(pieces, pts)
+        held = np.bincount(cp[cp >= 0], weights=counts[cp >= 0], minlength=len(pieces))
+        main = int(np.argmax(held))
+        # inside one piece an edge costs (almost) nothing: the tree crosses between pieces on
+        # the shortest edges
+        inside = (cp[e[:, 0]] == cp[e[:, 1]]) & (cp[e[:, 0]] >= 0)
+        w = np.where(inside, 1e-9, elen)
+        tree = minimum_spanning_tree(coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr())
+        root = int(np.flatnonzero(cp == main)[0])
+        _, pred = breadth_first_order(tree, root, directed=False, return_predecessors=True)
+        segs = []
+        for k in np.flatnonzero(held >= self.trim_min_count):
+            if k == main:
+                continue
+            node = int(np.flatnonzero(cp == k)[0])
+            path = []
+            while node >= 0 and cp[node] != main:
+                nxt = int(pred[node])
+                if nxt >= 0 and not (cp[node] == cp[nxt] and cp[node] >= 0):
+                    path.append((node, nxt))
+                node = nxt
+            if node >= 0:  # reached the main piece
+                segs.extend(path)
+        if not segs:
+            return pieces
+        s = np.asarray(segs)
+        lines = shapely.linestrings(np.stack((pts[s[:, 0]], pts[s[:, 1]]), axis=1))
+        merged = shapely.union_all([*pieces, *shapely.buffer(lines, 0.5 * self.cell_deg,
+                                                             quad_segs=2)])
+        return list(getattr(merged, "geoms", [merged]))
+
+    def _leaving(self, cand, reference, p, lab):
+        """Of candidate runs (M, 2), those with a sample more than ``cell_deg`` outside
+        ``reference``."""
+        import shapely
+
+        length = cand[:, 1] - cand[:, 0] + 1
+        ids = np.repeat(np.arange(len(cand)), length)
+        idx = np.repeat(cand[:, 0] - np.cumsum(np.r_[0, length[:-1]]), length) \
+            + np.arange(length.sum())
+        outside = lab[idx] < 0
+        far = np.zeros(len(cand), dtype=bool)
+        if outside.any():
+            xy = p[idx[outside]]
+            dist = np.where(shapely.intersects_xy(reference, xy[:, 0], xy[:, 1]), 0.0,
+                            _distance(reference, xy))
+            np.maximum.at(far, ids[outside], dist > self.cell_deg)
+        return cand[far]
 
     def _noise_inset(self, poly, p: np.ndarray):
         """Move the envelope in to the crest of the boundary pile-up (step 4b)."""
@@ -445,20 +704,20 @@ class BoundaryExtractor:
             return poly
         ring = poly.exterior
         inside = shapely.contains_xy(poly, p[:, 0], p[:, 1])
-        depth = np.where(inside, shapely.distance(ring, shapely.points(p)), 0.0)
+        depth = np.where(inside, _distance(ring, p), 0.0)
         inset = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
         if inset <= 0.0:
             return poly
+        union = self._join_state[0]
         shrunk = poly.buffer(-inset, join_style="round")
-        parts = list(getattr(shrunk, "geoms", [shrunk]))
-        if not parts or shrunk.is_empty:
+        if shrunk.is_empty:
             return poly
-        best = max(parts, key=lambda g: g.area)
         self.inset_deg_ = inset
-        return shapely.Polygon(best.exterior)
+        # the shrunk parts joined again along the trajectory (a neck narrower than twice the
+        # inset, or a corridor, does not cut a recorded lobe off)
+        return self._join(shrunk, union, p)
 
-    def _simplify(self, poly) -> np.ndarray:
-        tol = self.simplify_deg
+    def _simplify(self, poly, tol: float) -> np.ndarray:
         for _ in range(40):
             s = poly.simplify(tol, preserve_topology=True)
             ring = np.asarray(s.exterior.coords)[:-1]
@@ -525,6 +784,7 @@ class BoundaryExtractor:
             "samples_used": int(self.n_used_),
             "dropped_status": int(self.n_status_dropped_),
             "trimmed_outliers": int(self.n_trimmed_),
+            "glitch_cluster_samples": int(self.n_glitch_cluster_),
             "alpha_used_deg": round(self.alpha_used_deg_, 3),
             "noise_inset_deg": round(self.inset_deg_, 3),
             "twist_noise_inset_deg": [round(x, 3) for x in self.twist_inset_deg_],
@@ -615,6 +875,7 @@ class BoundaryExtractor:
             "samples_used": self.n_used_,
             "dropped_status": self.n_status_dropped_,
             "trimmed_outliers": self.n_trimmed_,
+            "glitch_cluster_samples": self.n_glitch_cluster_,
             "vertices": len(self.vertices_),
             "alpha_used_deg": self.alpha_used_deg_,
             "coverage": self.coverage_,
