@@ -69,7 +69,17 @@ Method
    validated by :mod:`models.constraint` (simple, non-degenerate); the interior point is the
    pole of inaccessibility (:func:`shapely.ops.polylabel`), or ``c`` when that is nearly as deep.
 6. **Twist range**: the ``twist_percentiles`` of the kept samples' twist, after centring on their
-   circular mean (so a range across ±180° is handled). **By swing region** (contract 3,
+   circular mean (so a range across ±180° is handled). With ``noise_correction``, each end is
+   then placed where the patient *dwelt* at it. The samples within ``twist_dwell_band_deg`` of
+   the envelope (the 0.1 / 99.9 percentiles) form runs of consecutive samples; a run of at
+   least ``twist_dwell_min_samples`` whose twist spread (interquartile range) is at most
+   ``twist_dwell_max_iqr_deg`` is a dwell at the limit (a pass that only sweeps through the band
+   is not flat). With at least ``twist_dwell_min_runs`` dwells, the end is the median over the
+   dwells of each dwell's median twist. Slowly varying errors (an IMU pair's relative heading
+   drift adds directly to the twist) shift each dwell by the error at that moment; the
+   envelope and every high percentile sit on the dwells with the largest positive error, the
+   median of dwells on the typical one. With fewer dwells, the end is the crest of the samples'
+   pile-up below the envelope as in 4b, else the percentile. **By swing region** (contract 3,
    ``twist.by_swing``): at table directions ``d_i`` on a grid of spacing ``by_swing_spacing_deg``
    inside the polygon, the same percentiles weighted by the kernel ``exp(κ (d·d_i − 1))``,
    ``κ = 1 / (1 − cos β)``, where the effective sample count ``(Σw)²/Σw²`` reaches
@@ -215,6 +225,28 @@ def _distance(geom, xy: np.ndarray, step: float = 0.05) -> np.ndarray:
     return dist
 
 
+def _dwell_depth(depth: np.ndarray, band: float, min_samples: int,
+                 max_iqr: float) -> tuple[int, float]:
+    """Dwells at a limit: runs of consecutive samples with ``depth`` (degrees inward from the
+    envelope, in recording order) within ``band``, at least ``min_samples`` long, whose
+    interquartile range is at most ``max_iqr``. Returns their number and the median of their
+    median depths (0 when there is none)."""
+    idx = np.flatnonzero(depth <= band)
+    if idx.size < min_samples:
+        return 0, 0.0
+    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
+    starts = np.concatenate(([0], cuts))
+    ends = np.concatenate((cuts, [idx.size]))
+    meds = []
+    for a, b in zip(starts, ends, strict=True):
+        if b - a < min_samples:
+            continue
+        q1, q2, q3 = np.percentile(depth[idx[a:b]], [25.0, 50.0, 75.0])
+        if q3 - q1 <= max_iqr:
+            meds.append(q2)
+    return len(meds), (float(np.median(meds)) if meds else 0.0)
+
+
 def _weighted_percentiles(x: np.ndarray, w: np.ndarray, pct: tuple[float, float]):
     order = np.argsort(x)
     xs, ws = x[order], w[order]
@@ -276,6 +308,7 @@ class BoundaryExtractor:
     sparse_arcs_ : list of SparseArc
     alpha_used_deg_ : float
     n_samples_, n_status_dropped_, n_trimmed_, n_used_, n_glitch_cluster_ : int
+    twist_dwells_ : (int, int), dwells found at the lower and upper twist limit (step 6)
     coverage_ : float, fraction of kept samples inside the region (within ``cell_deg``)
     """
 
@@ -303,6 +336,10 @@ class BoundaryExtractor:
         min_system_status: int = 2,
         noise_correction: bool = True,
         pileup_band_deg: float = 10.0,
+        twist_dwell_band_deg: float = 10.0,
+        twist_dwell_min_samples: int = 20,
+        twist_dwell_max_iqr_deg: float = 3.0,
+        twist_dwell_min_runs: int = 5,
         limb_axis=(1.0, 0.0, 0.0),
         name: str = "recorded",
     ) -> None:
@@ -339,6 +376,10 @@ class BoundaryExtractor:
         self.min_system_status = int(min_system_status)
         self.noise_correction = bool(noise_correction)
         self.pileup_band_deg = float(pileup_band_deg)
+        self.twist_dwell_band_deg = float(twist_dwell_band_deg)
+        self.twist_dwell_min_samples = int(twist_dwell_min_samples)
+        self.twist_dwell_max_iqr_deg = float(twist_dwell_max_iqr_deg)
+        self.twist_dwell_min_runs = int(twist_dwell_min_runs)
         self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
         self.name = name
 
@@ -357,6 +398,8 @@ class BoundaryExtractor:
             "min_system_status": self.min_system_status,
             "noise_correction": self.noise_correction,
             "pileup_band_deg": self.pileup_band_deg,
+            "twist_dwell": [self.twist_dwell_band_deg, self.twist_dwell_min_samples,
+                            self.twist_dwell_max_iqr_deg, self.twist_dwell_min_runs],
         }
 
     # -- fit -------------------------------------------------------------------------------
@@ -750,16 +793,24 @@ class BoundaryExtractor:
         rel = _wrap(phi - mid)
         lo, hi = np.percentile(rel, [lo_p, hi_p])
         self.twist_inset_deg_ = (0.0, 0.0)
+        self.twist_dwells_ = (0, 0)
         if self.noise_correction:
-            # the same pile-up correction at each end of the twist range (degrees)
+            # each end where the patient dwelt at it, else the crest of the pile-up (degrees)
             e_lo, e_hi = np.percentile(rel, [0.1, 99.9])
-            a = _pileup_offset(np.degrees(rel - e_lo), self.pileup_band_deg, 0.25, 2.0)
-            b = _pileup_offset(np.degrees(e_hi - rel), self.pileup_band_deg, 0.25, 2.0)
+            insets, dwells = [], []
+            for depth in (np.degrees(rel - e_lo), np.degrees(e_hi - rel)):
+                k, med = _dwell_depth(depth, self.twist_dwell_band_deg,
+                                      self.twist_dwell_min_samples, self.twist_dwell_max_iqr_deg)
+                dwells.append(k)
+                insets.append(med if k >= self.twist_dwell_min_runs else
+                              _pileup_offset(depth, self.pileup_band_deg, 0.25, 2.0))
+            a, b = insets
             if a > 0:
                 lo = e_lo + math.radians(a)
             if b > 0:
                 hi = e_hi - math.radians(b)
             self.twist_inset_deg_ = (a, b)
+            self.twist_dwells_ = (dwells[0], dwells[1])
         tw_lo = math.degrees(float(np.clip(lo + mid, -math.pi, math.pi)))
         tw_hi = math.degrees(float(np.clip(hi + mid, -math.pi, math.pi)))
         if tw_lo > tw_hi:  # the range crosses ±180°: keep the larger side, say so
@@ -788,6 +839,7 @@ class BoundaryExtractor:
             "alpha_used_deg": round(self.alpha_used_deg_, 3),
             "noise_inset_deg": round(self.inset_deg_, 3),
             "twist_noise_inset_deg": [round(x, 3) for x in self.twist_inset_deg_],
+            "twist_dwells": list(self.twist_dwells_),
             "coverage": round(self.coverage_, 5),
             "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
         })
