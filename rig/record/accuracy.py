@@ -12,8 +12,11 @@ compared with the patient's truth:
 
 - ``mean_deg`` / ``hausdorff_deg``: symmetric mean / largest distance between the extracted and
   the true swing boundaries (:func:`calibration.boundary.boundary_distance`);
-- ``out1_pct`` / ``out2_pct``: % of the patient's true limb directions during the recording more
-  than 1° / 2° outside the extracted region ("recorded region left out");
+- ``out1_pct`` / ``out2_pct``: % of the true limb directions during the recording more than
+  1° / 2° outside the extracted region ("recorded region left out"). On the servo path the
+  true directions are those the back-driven chain actually took: where the patient's motion
+  leaves the chain's reach (joint limits) the servo limb stays put, as its driver does, and
+  ``unreachable_pct`` says for how much of the recording;
 - ``twist_deg``: the larger of the two twist-limit errors;
 - ``peaks``: the clinical peaks (:func:`calibration.clinical.range_of_motion`) of both
   constraints, ``peaks_deg`` the largest difference, ``swing_peaks_deg`` over flexion,
@@ -59,13 +62,15 @@ class AccuracyResult:
     twist_deg: float
     peaks_deg: float
     swing_peaks_deg: float
+    unreachable_pct: float = 0.0
     twist_offset_deg: float = math.nan
     twist_wander_deg: float = math.nan
     peaks: dict = field(default_factory=dict)  # movement -> (extracted, truth)
     twist: tuple = ()  # ((lo, hi) extracted, (lo, hi) truth)
 
 
-def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
+def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
+             unreachable_pct: float = 0.0) -> AccuracyResult:
     from calibration.boundary import boundary_distance, outside_fraction
     from calibration.clinical import range_of_motion
     from rig.commands.boundary import extract, joint_orientations_from_store
@@ -76,7 +81,7 @@ def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
     ex = extract(data, side="right")
     est = ex.constraint_
     d = boundary_distance(est, truth)
-    dirs = Q.rotate(truth_q, np.array([1.0, 0.0, 0.0]))
+    dirs = Q.rotate(truth_q if recorded_q is None else recorded_q, np.array([1.0, 0.0, 0.0]))
     lo, hi = ex.twist_deg_
     a = range_of_motion(est, "right").to_dict()
     b = range_of_motion(truth, "right").to_dict()
@@ -91,7 +96,8 @@ def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
         errs.append(err)
         if m in _SWING_PEAKS:
             swing_errs.append(err)
-    tw_off, tw_wander = _twist_error(data, truth_q, ex.limb_axis, ex.min_system_status)
+    tw_off, tw_wander = _twist_error(data, truth_q if recorded_q is None else recorded_q,
+                                     ex.limb_axis, ex.min_system_status)
     cal = res.calibration
     return AccuracyResult(
         patient=name, path=path, status=res.status, samples=res.samples, dropped=res.dropped,
@@ -101,7 +107,7 @@ def _compare(name, path, res, store_path, truth, truth_q) -> AccuracyResult:
         out2_pct=100.0 * float(outside_fraction(est, dirs, 2.0)),
         twist_deg=max(abs(lo - truth.twist.min_deg), abs(hi - truth.twist.max_deg)),
         peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), twist_offset_deg=tw_off,
-        twist_wander_deg=tw_wander, peaks=peaks,
+        twist_wander_deg=tw_wander, unreachable_pct=unreachable_pct, peaks=peaks,
         twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)))
 
 
@@ -199,7 +205,29 @@ def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: floa
     n = len(s["t"])
     batch = SampleBatch(s["t"], np.full(n, np.nan), s["name"], s["kind"], s["q"], s["status"])
     truth_q = limb.joint(rig.patient_time(batch))
-    return _compare(constraint.name or f"star-{seed}", "servo", res, db, constraint, truth_q)
+    kin = rig.ports[0].backdrive.kin
+    chain_q, unreachable = _followed(kin, truth_q)
+    return _compare(constraint.name or f"star-{seed}", "servo", res, db, constraint, truth_q,
+                    recorded_q=chain_q, unreachable_pct=100.0 * unreachable / max(n, 1))
+
+
+def _followed(kin, truth_q: np.ndarray) -> tuple[np.ndarray, int]:
+    """The orientations a back-driven chain takes while its patient moves through ``truth_q``
+    (unquantised): the IK solution nearest the previous pose, or the previous pose where the
+    target is out of the chain's reach (as the simulator's back-drive does). Also returns how
+    many targets were out of reach."""
+    from rig.errors import UnreachableError
+
+    ticks = kin.zero_ticks.astype(np.float64)
+    out = np.empty((len(truth_q), len(ticks)))
+    missed = 0
+    for i, q in enumerate(truth_q):
+        try:
+            ticks = kin.inverse_float(q, ticks)
+        except UnreachableError:
+            missed += 1
+        out[i] = ticks
+    return kin.forward_batch(out), missed
 
 
 class _Null:
