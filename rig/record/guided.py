@@ -121,18 +121,10 @@ class GuidedCalibration:
         self._reader.start()
 
     def _read_enter(self) -> None:
-        try:
-            fd = self.stdin.fileno()
-        except (AttributeError, OSError, ValueError):
-            self._enter.set()  # no usable stdin: start at once
-            return
-        while not self._stop_reader.is_set():
-            ready, _, _ = select.select([fd], [], [], 0.2)
-            if ready:
-                data = os.read(fd, 1024)
-                if not data or b"\n" in data:  # Enter, or EOF (nobody will press it)
-                    self._enter.set()
-                    return
+        # Enter, or EOF / no usable stdin (nobody will press it): start at once
+        _watch_enter(self.stdin, self._stop_reader, lambda: False)
+        if not self._stop_reader.is_set():
+            self._enter.set()
 
     def _protocol_time(self, batch: SampleBatch) -> np.ndarray:
         if self.rig.simulated:
@@ -356,19 +348,12 @@ class NeutralCheckpoints:
         self._reader.start()
 
     def _read_enter(self) -> None:
-        try:
-            fd = self.stdin.fileno()
-        except (AttributeError, OSError, ValueError):
-            return
-        while not self._stop_reader.is_set():
-            ready, _, _ = select.select([fd], [], [], 0.2)
-            if ready:
-                data = os.read(fd, 1024)
-                if not data:  # EOF: nobody will press it again
-                    return
-                if b"\n" in data:
-                    with self._lock:
-                        self._presses += 1
+        _watch_enter(self.stdin, self._stop_reader, self._pressed)
+
+    def _pressed(self) -> bool:
+        with self._lock:
+            self._presses += 1
+        return True  # keep listening
 
     def close(self) -> None:
         self._stop_reader.set()
@@ -529,3 +514,20 @@ def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationRes
                      "functional_deg": float(off_axis), "functional_range_deg": float(flex_range)})
         residual = max(residual, float(off_axis))
     return CalibrationResult("servo-zero", data, residual, None)
+
+
+def _watch_enter(stdin, stop: threading.Event, on_enter) -> None:
+    """Read ``stdin`` until ``stop`` is set, EOF, or ``on_enter()`` (called at each line that
+    holds an Enter) returns False. Returns at once when ``stdin`` has no file descriptor."""
+    try:
+        fd = stdin.fileno()
+    except (AttributeError, OSError, ValueError):
+        return
+    while not stop.is_set():
+        ready, _, _ = select.select([fd], [], [], 0.2)
+        if ready:
+            data = os.read(fd, 1024)
+            if not data:  # EOF: nobody will press it again
+                return
+            if b"\n" in data and not on_enter():
+                return
