@@ -88,5 +88,5 @@ def imu(url: str) -> None:
     time_scale; imu-stream: sensors, max_lag, flow; bno055: sensor. Default: a 2-sensor stream
     board at 100 Hz.
     """
-    serve(url, ("imu-stream", "bno055"), "sim://imu-stream?sensors=4&rate=200",
+    serve(url, ("imu-stream", "stream", "bno055"), "sim://imu-stream?sensors=4&rate=200",
           "imu-stream or bno055")

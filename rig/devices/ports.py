@@ -20,7 +20,7 @@ Port strings
     ``excursion`` its reach.
 ``sim://bno055?patient=original&seed=0&rate=100&sensor=1&noise=on|off``
     A simulated BNO055 on its UART (:func:`rig.sim.imu.bno055_from_url` lists the keys).
-``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&flow=off``
+``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&flow=off`` (or ``sim://stream?...``)
     A simulated multi-IMU board speaking the rig stream protocol
     (:func:`rig.sim.imu.stream_from_url`). Sensor 0 is on the thorax, 1.. on the upper arm.
 
@@ -123,6 +123,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "dxl": ("rig.devices._sim_backends", "open_sim_dynamixel"),
     "bno055": ("rig.devices._sim_backends", "open_sim_bno055"),
     "imu-stream": ("rig.devices._sim_backends", "open_sim_imu_stream"),
+    "stream": ("rig.devices._sim_backends", "open_sim_imu_stream"),  # short form
 }
 
 

@@ -89,3 +89,11 @@ def test_sim_dynamixel_unknown_key_lists_the_back_driving_keys_too():
     with pytest.raises(RigConfigError, match=r"^sim://dynamixel\?ids=300&patient=original: "
                                              r"servo id must be 0\.\.252"):
         open_port("sim://dynamixel?ids=300&patient=original")
+
+
+def test_sim_stream_is_the_short_form_of_imu_stream():
+    port = open_port("sim://stream?sensors=2")
+    try:
+        assert port.kind == "sim-imu-stream" and port.path.startswith("/dev/")
+    finally:
+        port.close()
