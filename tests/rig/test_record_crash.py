@@ -27,24 +27,14 @@ import numpy as np
 
 from rig.record.rigio import load_config
 from rig.store import open_store
+from tests.rig.rigs import sim_imu_yaml
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def _rig_yaml(tmp_path: Path) -> Path:
     """The shipped sim-imu rig with the patient's time 4x real time (a shorter calibration)."""
-    cfg = load_config("sim-imu")
-    p = tmp_path / "rig.yaml"
-    p.write_text(f"""
-name: crash-imu
-joint: {{name: shoulder, side: right, parent: thorax, child: humerus}}
-sensors:
-  port: "{cfg.sensors.port}&time_scale=4"
-  protocol: stream
-  rate_hz: {cfg.sensors.rate_hz}
-  segments: {{thorax: 0, humerus: 1}}
-""")
-    return p
+    return sim_imu_yaml(tmp_path, port_suffix="&time_scale=4", name="crash-imu")
 
 
 def test_kill_9_loses_at_most_one_second(tmp_path):

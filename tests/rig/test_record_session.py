@@ -19,6 +19,7 @@ from rig.cli import main
 from rig.record import PlainDisplay, RecordOptions, parse_annotation, record_session
 from rig.record.rigio import load_config, open_rig
 from rig.store import open_store
+from tests.rig.rigs import sim_imu_yaml
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -31,20 +32,7 @@ def _run_cli(args, capsys):
 
 
 def _sim_imu_yaml(tmp_path: Path, port: str | None = None, extra: str = "") -> Path:
-    cfg = load_config("sim-imu")
-    port = port if port is not None else cfg.sensors.port
-    text = f"""
-name: test-imu
-joint: {{name: shoulder, side: right, parent: thorax, child: humerus}}
-sensors:
-  port: "{port}"
-  protocol: stream
-  rate_hz: {cfg.sensors.rate_hz}
-  segments: {{thorax: 0, humerus: 1}}
-{extra}"""
-    p = tmp_path / "rig.yaml"
-    p.write_text(text)
-    return p
+    return sim_imu_yaml(tmp_path, port=port, extra=extra)
 
 
 @pytest.mark.parametrize("case", ["unknown-key", "unknown-rig", "wrong-port", "bad-duration"])

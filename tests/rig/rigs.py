@@ -1,0 +1,27 @@
+"""Rig configuration files for tests: the shipped ``sim-imu`` rig, re-pointed or extended."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rig.record.rigio import load_config
+
+
+def sim_imu_yaml(tmp_path: Path, *, port: str | None = None, port_suffix: str = "",
+                 extra: str = "", name: str = "test-imu") -> Path:
+    """Write ``tmp_path/rig.yaml``: the shipped ``sim-imu`` rig named ``name``, its port
+    replaced by ``port`` (default: the shipped one) plus ``port_suffix`` (e.g.
+    ``"&time_scale=4"``), and ``extra`` YAML lines appended."""
+    cfg = load_config("sim-imu")
+    port = (port if port is not None else cfg.sensors.port) + port_suffix
+    p = tmp_path / "rig.yaml"
+    p.write_text(f"""
+name: {name}
+joint: {{name: shoulder, side: right, parent: thorax, child: humerus}}
+sensors:
+  port: "{port}"
+  protocol: stream
+  rate_hz: {cfg.sensors.rate_hz}
+  segments: {{thorax: 0, humerus: 1}}
+{extra}""")
+    return p
