@@ -40,7 +40,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "enforce",
         "Enforce a patient's joint limits on a servo limb in real time.",
     ),
-    "session": ("rig.commands.session", "session", "List the sessions in a store (--db); close one a killed recorder left running."),
+    "session": (
+        "rig.commands.session",
+        "session",
+        "List the sessions in a store (--db); close one a killed recorder left running.",
+    ),
     "record": (
         "rig.commands.record",
         "record",
