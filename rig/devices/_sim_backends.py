@@ -89,11 +89,30 @@ class _BackDrive:
             if key != self._key:
                 self._key = key
                 q = self.limb.joint(max(0.0, key / 1000.0 - self.t0))[0]
-                try:
-                    self._ticks = self.kin.inverse_float(q, self._ticks)
-                except UnreachableError:
-                    self.unreachable += 1  # the servo limb cannot follow: it stays put
+                self._ticks, reached = self._step(q, self._ticks)
+                self.unreachable += not reached
             return self._ticks
+
+    def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The chain's ticks for limb orientation ``q``: the IK solution nearest ``ticks``, or
+        ``ticks`` unchanged where ``q`` is out of reach (the servo limb cannot follow: it stays
+        put). Also says whether ``q`` was reached."""
+        try:
+            return self.kin.inverse_float(q, ticks), True
+        except UnreachableError:
+            return ticks, False
+
+    def follow(self, joint_q: np.ndarray) -> tuple[np.ndarray, int]:
+        """The orientations (N, 4) the chain takes, from its zero, while the patient moves
+        through ``joint_q`` (N, 4), unquantised, and how many of them were out of reach."""
+        ticks = self.kin.zero_ticks.astype(np.float64)
+        out = np.empty((len(joint_q), len(ticks)))
+        missed = 0
+        for i, q in enumerate(joint_q):
+            ticks, reached = self._step(q, ticks)
+            missed += not reached
+            out[i] = ticks
+        return self.kin.forward_batch(out), missed
 
     def hand(self, index: int):
         return lambda now: float(self.ticks(now)[index])
@@ -152,21 +171,20 @@ def open_sim_bno055(url: str, *, baud: int | None = None) -> Port:
     """``sim://bno055?...``: :func:`rig.sim.imu.bno055_from_url` (keys documented there)."""
     from rig.sim.imu import bno055_from_url
 
-    sim = bno055_from_url(url)
-    # the chip samples the patient at clock() - _t0 (its start)
-    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-bno055", patient=sim.limb,
-                patient_t0=_patient_t0(sim.clock, sim.started_at))
-    port._closers.append(_closing(sim))
-    return port
+    return _open_sim_imu(url, bno055_from_url, "sim-bno055")
 
 
 def open_sim_imu_stream(url: str, *, baud: int | None = None) -> Port:
     """``sim://imu-stream?...``: :func:`rig.sim.imu.stream_from_url` (keys documented there)."""
     from rig.sim.imu import stream_from_url
 
-    sim = stream_from_url(url)
-    # the device clock, which samples the patient, is clock() - _t0 (its start)
-    port = Port(url=url, path=sim.port, simulator=sim, kind="sim-imu-stream", patient=sim.limb,
+    return _open_sim_imu(url, stream_from_url, "sim-imu-stream")
+
+
+def _open_sim_imu(url: str, start: Any, kind: str) -> Port:
+    sim = start(url)
+    # the simulator samples its patient at clock() - started_at (its device time)
+    port = Port(url=url, path=sim.port, simulator=sim, kind=kind, patient=sim.limb,
                 patient_t0=_patient_t0(sim.clock, sim.started_at))
     port._closers.append(_closing(sim))
     return port

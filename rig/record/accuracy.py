@@ -205,29 +205,9 @@ def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: floa
     n = len(s["t"])
     batch = SampleBatch(s["t"], np.full(n, np.nan), s["name"], s["kind"], s["q"], s["status"])
     truth_q = limb.joint(rig.patient_time(batch))
-    kin = rig.ports[0].backdrive.kin
-    chain_q, unreachable = _followed(kin, truth_q)
+    chain_q, unreachable = rig.ports[0].backdrive.follow(truth_q)
     return _compare(constraint.name or f"star-{seed}", "servo", res, db, constraint, truth_q,
                     recorded_q=chain_q, unreachable_pct=100.0 * unreachable / max(n, 1))
-
-
-def _followed(kin, truth_q: np.ndarray) -> tuple[np.ndarray, int]:
-    """The orientations a back-driven chain takes while its patient moves through ``truth_q``
-    (unquantised): the IK solution nearest the previous pose, or the previous pose where the
-    target is out of the chain's reach (as the simulator's back-drive does). Also returns how
-    many targets were out of reach."""
-    from rig.errors import UnreachableError
-
-    ticks = kin.zero_ticks.astype(np.float64)
-    out = np.empty((len(truth_q), len(ticks)))
-    missed = 0
-    for i, q in enumerate(truth_q):
-        try:
-            ticks = kin.inverse_float(q, ticks)
-        except UnreachableError:
-            missed += 1
-        out[i] = ticks
-    return kin.forward_batch(out), missed
 
 
 class _Null:
@@ -236,4 +216,3 @@ class _Null:
 
     def flush(self) -> None:
         pass
-
