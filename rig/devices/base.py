@@ -46,6 +46,18 @@ def open_serial(path: str, baud: int, *, what: str, url: str):
                                  port=url) from err
 
 
+def close_serial(ser) -> None:
+    """Close ``ser`` (a :class:`serial.Serial` or None), ignoring a port that is already gone
+    (an unplugged adapter raises on close)."""
+    import serial
+
+    if ser is not None:
+        try:
+            ser.close()
+        except (OSError, serial.SerialException):
+            pass
+
+
 class Device:
     """Base class of every device driver.
 

@@ -21,7 +21,7 @@ import serial
 
 from firmware_protocol.errors import ProtocolError
 from firmware_protocol.imu import bno055 as B
-from rig.devices.base import Device, open_serial
+from rig.devices.base import Device, close_serial, open_serial
 from rig.devices.ports import Port
 from rig.devices.stream_imu import ImuSample
 from rig.errors import RigConnectionError, RigError, RigProtocolError, RigTimeoutError
@@ -69,11 +69,7 @@ class Bno055(Device):
 
     def _close(self) -> None:
         ser, self._serial = self._serial, None
-        if ser is not None:
-            try:
-                ser.close()
-            except _CONNECTION_ERRORS:
-                pass
+        close_serial(ser)
 
     # -- transactions ---------------------------------------------------------------------
     def _attempt(self, request: bytes, expected_length: int | None, deadline: float):

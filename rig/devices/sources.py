@@ -160,16 +160,10 @@ class ServoChainSource(_SourceBase):
 
     def read(self, timeout: float) -> list[OrientationSample]:
         """One reading if the next period starts within ``timeout`` s, else []."""
-        now = time.monotonic()
-        wait = self._next - now
-        if wait > timeout:
-            time.sleep(max(0.0, timeout))
+        nxt = _pace(self._next, self.period, timeout)
+        if nxt is None:
             return []
-        if wait > 0:
-            time.sleep(wait)
-        self._next += self.period
-        if self._next < time.monotonic():  # fell behind: skip the missed periods
-            self._next = time.monotonic() + self.period
+        self._next = nxt
         try:
             ticks = self.chain.read_ticks()
         except (RigTimeoutError, RigProtocolError) as err:
@@ -227,15 +221,10 @@ class ImuSetSource(_SourceBase):
             return [OrientationSample(s.t, s.device_t, self._by_index[s.sensor], "sensor", s.q,
                                       s.calibration)
                     for s in samples if s.sensor in self._by_index]
-        wait = self._next - time.monotonic()
-        if wait > timeout:
-            time.sleep(max(0.0, timeout))
+        nxt = _pace(self._next, self.period, timeout)
+        if nxt is None:
             return []
-        if wait > 0:
-            time.sleep(wait)
-        self._next += self.period
-        if self._next < time.monotonic():
-            self._next = time.monotonic() + self.period
+        self._next = nxt
         out = []
         for index, name in self._by_index.items():
             chip = self._chips[index]
@@ -319,3 +308,18 @@ def open_source(config: RigConfig, which: str | None = None, *,
             chip.close()
         raise
     return ImuSetSource(chips, sensors.segments, rate_hz=rate)
+
+
+def _pace(due: float, period: float, timeout: float) -> float | None:
+    """Wait for the reading due at monotonic time ``due`` if it falls within ``timeout`` s and
+    return when the next one is due (skipping missed periods when behind); otherwise sleep
+    ``timeout`` and return None."""
+    wait = due - time.monotonic()
+    if wait > timeout:
+        time.sleep(max(0.0, timeout))
+        return None
+    if wait > 0:
+        time.sleep(wait)
+    due += period
+    now = time.monotonic()
+    return now + period if due < now else due

@@ -29,7 +29,7 @@ import serial
 
 from firmware_protocol.errors import ProtocolError
 from firmware_protocol.imu import stream as S
-from rig.devices.base import Device, open_serial
+from rig.devices.base import Device, close_serial, open_serial
 from rig.devices.ports import Port
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
 
@@ -153,11 +153,7 @@ class StreamImu(Device):
 
     def _drop_serial(self) -> None:
         ser, self._serial = self._serial, None
-        if ser is not None:
-            try:
-                ser.close()
-            except _CONNECTION_ERRORS:
-                pass
+        close_serial(ser)
 
     def _close(self) -> None:
         if self._serial is not None:
