@@ -361,6 +361,19 @@ def _csv_header(lines: list[str], src: str) -> tuple[int, list[str]]:
     raise RigConfigError(f"{src}: empty CSV file")
 
 
+def _csv_rows(lines: list[str], header: int, ncols: int, src: str):
+    """``(line number, cells)`` of the data rows after the header line ``header`` (blank and
+    ``#`` lines skipped); a row with the wrong number of cells is named by its line."""
+    for j in range(header + 1, len(lines)):
+        raw = lines[j]
+        if not raw.strip() or raw.lstrip().startswith("#"):
+            continue
+        cells = raw.split(",")
+        if len(cells) != ncols:
+            raise RigConfigError(f"{src}:{j + 1}: {len(cells)} cells, expected {ncols}")
+        yield j + 1, cells
+
+
 def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read a long-form CSV (``t_s,name,w,x,y,z`` and optionally ``device_t_s``, ``kind``,
     ``status``; other columns ignored) into arrays shaped like :meth:`Store.samples`."""
@@ -372,14 +385,7 @@ def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise RigConfigError(f"{src}:{h + 1}: long-form CSV needs columns {', '.join(missing)}")
     ix = {c: cols.index(c) for c in cols}
     t, dt, names, kinds, qs, st, lns = [], [], [], [], [], [], []
-    for j in range(h + 1, len(lines)):
-        raw = lines[j]
-        if not raw.strip() or raw.lstrip().startswith("#"):
-            continue
-        ln = j + 1
-        cells = raw.split(",")
-        if len(cells) != len(cols):
-            raise RigConfigError(f"{src}:{ln}: {len(cells)} cells, expected {len(cols)}")
+    for ln, cells in _csv_rows(lines, h, len(cols), src):
         t.append(_num(cells[ix["t_s"]], f"{src}:{ln}: t_s"))
         if "device_t_s" in ix and cells[ix["device_t_s"]].strip() not in ("", "nan", "NaN"):
             dt.append(_num(cells[ix["device_t_s"]], f"{src}:{ln}: device_t_s"))
@@ -455,14 +461,7 @@ def read_csv(path: str | os.PathLike) -> OrientationTable:
         meta["ignored_columns"] = ",".join(ignored)
     ti = cols.index("t_s")
     t, rows, lns = [], [], []
-    for j in range(h + 1, len(lines)):
-        raw = lines[j]
-        if not raw.strip() or raw.lstrip().startswith("#"):
-            continue
-        ln = j + 1
-        cells = raw.split(",")
-        if len(cells) != len(cols):
-            raise RigConfigError(f"{src}:{ln}: {len(cells)} cells, expected {len(cols)}")
+    for ln, cells in _csv_rows(lines, h, len(cols), src):
         t.append(_num(cells[ti], f"{src}:{ln}: t_s"))
         rows.append([
             _quat([cells[k] for k in g], f"{src}:{ln}: {name}") for name, g in groups.items()
