@@ -25,3 +25,13 @@ sensors:
   segments: {{thorax: 0, humerus: 1}}
 {extra}""")
     return p
+
+
+def reap(proc) -> None:
+    """Kill ``proc`` (a :class:`subprocess.Popen` with piped stdout/stderr) if it still runs,
+    wait for it and close its pipes: the ``finally`` of every subprocess test."""
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait()
+    proc.stdout.close()
+    proc.stderr.close()

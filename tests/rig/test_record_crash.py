@@ -27,7 +27,7 @@ import numpy as np
 
 from rig.record.rigio import load_config
 from rig.store import open_store
-from tests.rig.rigs import sim_imu_yaml
+from tests.rig.rigs import reap, sim_imu_yaml
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -61,11 +61,7 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
+        reap(proc)
     assert proc.returncode == -signal.SIGKILL
     assert session_id is not None and reported
     last_reported_t = reported[-1]["last_t"]

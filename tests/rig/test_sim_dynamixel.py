@@ -37,6 +37,7 @@ from rig.sim.dynamixel import (
     bus_from_url,
     start_servo_bus,
 )
+from tests.rig.rigs import reap
 
 # X-series control table addresses (e-Manual)
 RETURN_DELAY, OPERATING_MODE, MAX_POS, MIN_POS = 9, 11, 48, 52
@@ -601,11 +602,7 @@ def test_cli_prints_port_serves_and_exits_cleanly_on_signal(signum, url):
         proc.send_signal(signum)
         assert proc.wait(timeout=10) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
+        reap(proc)
 
 
 @pytest.mark.parametrize(("url", "needle"), [

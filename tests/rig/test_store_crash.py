@@ -21,6 +21,7 @@ import numpy as np
 
 from rig.store import open_store
 from rig.store.io import export_session, read_samples_csv, read_sto
+from tests.rig.rigs import reap
 
 RATE = 400.0
 BATCH = 4  # samples per sensor between two reports
@@ -77,11 +78,7 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         os.kill(proc.pid, signal.SIGKILL)
         rest = proc.stdout.read()  # reports printed before the kill landed
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
+        reap(proc)
     assert proc.returncode == -signal.SIGKILL
     reports = [line for line in (line, *rest.splitlines()) if line.strip()]
     k_reported = int(reports[-1].split()[0])
