@@ -66,6 +66,10 @@ class OrientationSample:
         Unit quaternion (w, x, y, z).
     status : int
         Calibration status byte (IMU) or 0.
+    raw : (9,) float64 or None
+        The IMU's raw readings at the same instant, sensor frame: accelerometer (m/s², specific
+        force, +g up at rest), gyroscope (rad/s), magnetometer (µT), in that order; None when
+        the device does not deliver them (``sensors.raw`` off, or a joint sample).
     """
 
     t: float
@@ -74,6 +78,7 @@ class OrientationSample:
     kind: str
     q: np.ndarray
     status: int
+    raw: np.ndarray | None = None
 
 
 @runtime_checkable

@@ -443,7 +443,7 @@ def _concat(batches: list[SampleBatch]) -> SampleBatch:
         return SampleBatch(e, e, np.empty(0, object), np.empty(0, object), np.empty((0, 4)),
                            np.empty(0, np.int64))
     return SampleBatch(*(np.concatenate([getattr(b, f) for b in batches])
-                         for f in ("t", "device_t", "name", "kind", "q", "status")))
+                         for f in ("t", "device_t", "name", "kind", "q", "status", "raw")))
 
 
 def patient_performs_protocol(rig) -> bool:

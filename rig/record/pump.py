@@ -39,6 +39,9 @@ class SampleBatch:
     kind : (N,) object, ``"sensor"`` or ``"joint"``
     q : (N, 4) float64, scalar-first unit quaternions
     status : (N,) int64, calibration status byte or 0
+    raw : (N, 9) float64, the IMUs' raw readings (accelerometer m/s², gyroscope rad/s,
+        magnetometer µT, sensor frame; ``OrientationSample.raw``), NaN where a sample has none;
+        ``None`` given to the constructor means none at all
     """
 
     t: np.ndarray
@@ -47,6 +50,11 @@ class SampleBatch:
     kind: np.ndarray
     q: np.ndarray
     status: np.ndarray
+    raw: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.raw is None:
+            object.__setattr__(self, "raw", np.full((len(self.t), 9), np.nan))
 
     def __len__(self) -> int:
         return len(self.t)
@@ -58,7 +66,7 @@ class SampleBatch:
     def select(self, mask: np.ndarray) -> SampleBatch:
         """Rows where ``mask`` is true."""
         return SampleBatch(self.t[mask], self.device_t[mask], self.name[mask], self.kind[mask],
-                           self.q[mask], self.status[mask])
+                           self.q[mask], self.status[mask], self.raw[mask])
 
 
 def batch_from_samples(samples) -> SampleBatch:
@@ -70,6 +78,7 @@ def batch_from_samples(samples) -> SampleBatch:
     status = np.empty(n, dtype=np.int64)
     name = np.empty(n, dtype=object)
     kind = np.empty(n, dtype=object)
+    raw = np.full((n, 9), np.nan)
     for i, s in enumerate(samples):
         t[i] = s.t
         dt[i] = np.nan if s.device_t is None else s.device_t
@@ -77,7 +86,10 @@ def batch_from_samples(samples) -> SampleBatch:
         status[i] = s.status
         name[i] = s.name
         kind[i] = s.kind
-    return SampleBatch(t, dt, name, kind, q, status)
+        r = getattr(s, "raw", None)  # duck-typed samples may not have it
+        if r is not None:
+            raw[i] = r
+    return SampleBatch(t, dt, name, kind, q, status, raw)
 
 
 class SamplePump:
