@@ -1,7 +1,8 @@
-"""The rig's multi-IMU stream protocol, version 1.0 (normative text: ``SPEC.md`` beside this file).
+"""The rig's multi-IMU stream protocol, version 1.1 (normative text: ``SPEC.md`` beside this file).
 
-A microcontroller reads up to 16 orientation sensors and streams their quaternions to the host;
-the host starts, stops and configures the stream with commands that the device acknowledges.
+A microcontroller reads up to 16 orientation sensors and streams their quaternions (and, on
+request, their raw accelerometer, gyroscope and magnetometer readings) to the host; the host
+starts, stops and configures the stream with commands that the device acknowledges.
 
 Frame on the wire::
 
@@ -23,9 +24,12 @@ Frame on the wire::
 
 Frame types and payloads (little-endian)::
 
-    0x01 SAMPLE  device→host  u32 timestamp_us, u8 count, u8 record_size (11), count records:
+    0x01 SAMPLE  device→host  u32 timestamp_us, u8 count, u8 record_size (11, or 29 with the
+                              RAW field set), count records:
                               u8 sensor_id, u8 calib (sys<<6|gyr<<4|acc<<2|mag), u8 flags,
                               i16 w, i16 x, i16 y, i16 z   (1 LSB = 2**-14, scalar first)
+                              [RAW, 1.1: i16 acc x,y,z (100 LSB = 1 m/s²), i16 gyr x,y,z
+                              (16 LSB = 1 °/s), i16 mag x,y,z (16 LSB = 1 µT), sensor frame]
     0x02 ACK     device→host  u16 command_seq, u8 command_type, reply data (IDENTIFY: Identity)
     0x03 NAK     device→host  u16 command_seq, u8 command_type, u8 error
     0x80 IDENTIFY host→device  (empty)
@@ -33,6 +37,7 @@ Frame types and payloads (little-endian)::
     0x82 STOP     host→device  (empty)
     0x83 SET_RATE host→device  u16 rate_hz
     0x84 SET_SENSORS host→device u16 sensor_mask
+    0x85 SET_FIELDS  host→device u8 field_mask (bit 0 RAW)              [1.1]
 
 Decoding checks the frame size and the CRC before reading any field. The streaming
 :class:`StreamDecoder` splits at 0x00, so garbage costs at most the frame it lands in, and it
@@ -53,20 +58,26 @@ from firmware_protocol.imu import cobs
 from firmware_protocol.imu.bno055 import CalibrationStatus
 
 __all__ = [
+    "ACC_SCALE",
     "CRC_CHECK",
+    "GYR_SCALE",
     "HEADER_SIZE",
+    "MAG_SCALE",
     "MAX_BODY",
     "MAX_ENCODED",
+    "MAX_RAW_SENSORS",
     "MAX_SENSORS",
     "PROTOCOL_MAJOR",
     "PROTOCOL_MINOR",
     "QUATERNION_SCALE",
+    "RAW_RECORD_SIZE",
     "RECORD_SIZE",
     "TIMESTAMP_MODULUS",
     "Ack",
     "Command",
     "CommandType",
     "ErrorCode",
+    "FieldFlag",
     "FrameContentError",
     "FrameType",
     "Gap",
@@ -88,12 +99,14 @@ __all__ = [
     "encode_nak",
     "encode_sample",
     "quantize_quaternion",
+    "quantize_raw",
 ]
 
 PROTOCOL_MAJOR = 1
 """Major version, byte 0 of every frame. A receiver rejects frames of another major version."""
-PROTOCOL_MINOR = 0
-"""Minor version, reported by IDENTIFY. Minor versions only append (see SPEC.md)."""
+PROTOCOL_MINOR = 1
+"""Minor version, reported by IDENTIFY. Minor versions only append (see SPEC.md); 1.1 added
+SET_FIELDS and the raw fields of a SAMPLE record."""
 
 HEADER_SIZE = 4
 """version, type, seq."""
@@ -101,7 +114,12 @@ CRC_SIZE = 4
 MAX_SENSORS = 16
 """Sensor ids are 0..15; masks are 16 bits."""
 RECORD_SIZE = 11
-"""Bytes of one sensor record in a version-1.0 SAMPLE."""
+"""Bytes of one sensor record in a version-1.0 SAMPLE (the fields every 1.x record starts with)."""
+RAW_RECORD_SIZE = 29
+"""Bytes of one sensor record with the RAW fields (1.1): the 11 of 1.0, then 9 int16."""
+MAX_RAW_SENSORS = 8
+"""Most sensors one SAMPLE can carry with the RAW fields: 6 + 8·29 = 238 payload bytes fit
+the 248 a frame allows, 9 sensors do not."""
 MAX_BODY = 256
 """Largest frame body (header + payload + CRC) before COBS."""
 MAX_ENCODED = cobs.max_encoded_length(MAX_BODY)
@@ -110,6 +128,12 @@ QUATERNION_SCALE = 1 << 14
 """Quaternion LSB per unit, as the BNO055 outputs it."""
 TIMESTAMP_MODULUS = 1 << 32
 """Timestamps are microseconds modulo 2**32 (wrap every 4294.967296 s ≈ 71.6 min)."""
+ACC_SCALE = 100.0
+"""Accelerometer LSB per m/s² in a RAW record (the BNO055's ACC_DATA in m/s² units)."""
+GYR_SCALE = 16.0
+"""Gyroscope LSB per °/s in a RAW record (the BNO055's GYR_DATA in dps units)."""
+MAG_SCALE = 16.0
+"""Magnetometer LSB per µT in a RAW record (the BNO055's MAG_DATA)."""
 CRC_CHECK = 0xCBF43926
 """CRC-32/ISO-HDLC of b"123456789"."""
 
@@ -132,6 +156,17 @@ class CommandType(enum.IntEnum):
     STOP = 0x82
     SET_RATE = 0x83
     SET_SENSORS = 0x84
+    SET_FIELDS = 0x85
+    """Version 1.1: u8 mask of the optional record fields (:class:`FieldFlag`)."""
+
+
+class FieldFlag(enum.IntFlag):
+    """Argument of SET_FIELDS: optional fields of each SAMPLE record (1.1). Bits 1-7 are
+    reserved: a device refuses a mask naming them (NAK BAD_ARGUMENT)."""
+
+    NONE = 0
+    RAW = 0x01
+    """Raw accelerometer, gyroscope and magnetometer (record_size 29)."""
 
 
 class ErrorCode(enum.IntEnum):
@@ -161,6 +196,7 @@ _COMMAND_ARG = {
     CommandType.STOP: 0,
     CommandType.SET_RATE: 2,
     CommandType.SET_SENSORS: 2,
+    CommandType.SET_FIELDS: 1,
 }
 
 
@@ -188,12 +224,17 @@ class SensorReading:
     quaternion : tuple of 4 float
         Scalar-first ``(w, x, y, z)``, sensor frame relative to the sensor's world frame,
         quantised to 2**-14 (not renormalised; all zeros when ``FAULT``).
+    raw : tuple of 9 float or None
+        Version 1.1, RAW field set: accelerometer (m/s², specific force), gyroscope (rad/s),
+        magnetometer (µT), sensor frame, in that order, at the record's resolution
+        (0.01 m/s², 1/16 °/s, 1/16 µT); None in a record without the RAW fields (11 bytes).
     """
 
     sensor_id: int
     calibration: int
     flags: int
     quaternion: tuple[float, float, float, float]
+    raw: tuple[float, ...] | None = None
 
     @property
     def calibration_status(self) -> CalibrationStatus:
@@ -221,7 +262,8 @@ class Sample:
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """Host → device command; ``value`` is the argument of SET_RATE / SET_SENSORS, else None."""
+    """Host → device command; ``value`` is the argument of SET_RATE / SET_SENSORS / SET_FIELDS,
+    else None."""
 
     seq: int
     command: CommandType
@@ -369,20 +411,43 @@ def quantize_quaternion(q: Sequence[float]) -> tuple[int, int, int, int]:
         c = float(c)
         if c != c:
             raise ValueError("cannot encode a NaN quaternion component")
-        scaled = c * QUATERNION_SCALE
-        raw = math.floor(scaled + 0.5) if scaled >= 0 else -math.floor(-scaled + 0.5)
-        out.append(max(-32768, min(32767, raw)))
+        out.append(_round_saturate(c * QUATERNION_SCALE))
     return (out[0], out[1], out[2], out[3])
 
 
+def _round_saturate(scaled: float) -> int:
+    raw = math.floor(scaled + 0.5) if scaled >= 0 else -math.floor(-scaled + 0.5)
+    return max(-32768, min(32767, raw))
+
+
+def quantize_raw(raw: Sequence[float]) -> tuple[int, ...]:
+    """The 9 int16 RAW fields of a record from SI values.
+
+    ``raw`` is accelerometer (m/s²), gyroscope (rad/s), magnetometer (µT), sensor frame; each
+    is scaled to its LSB (:data:`ACC_SCALE` per m/s², :data:`GYR_SCALE` per °/s,
+    :data:`MAG_SCALE` per µT), rounded to nearest with ties away from zero and saturated.
+    """
+    if len(raw) != 9:
+        raise ValueError(f"raw readings are 9 values (acc, gyr, mag x/y/z), got {len(raw)}")
+    vals = [float(v) for v in raw]
+    if any(v != v for v in vals):
+        raise ValueError("cannot encode a NaN raw reading")
+    scales = (ACC_SCALE,) * 3 + (GYR_SCALE * 180.0 / math.pi,) * 3 + (MAG_SCALE,) * 3
+    return tuple(_round_saturate(v * k) for v, k in zip(vals, scales, strict=True))
+
+
 _RECORD = struct.Struct("<BBBhhhh")
+_RAW = struct.Struct("<9h")
 _SAMPLE_HEAD = struct.Struct("<IBB")
+_RAW_UNIT = (1.0 / ACC_SCALE,) * 3 + (math.pi / (180.0 * GYR_SCALE),) * 3 + (1.0 / MAG_SCALE,) * 3
 
 
 def encode_sample(
     seq: int,
     timestamp_us: int,
-    readings: Iterable[SensorReading | tuple[int, int, int, Sequence[float]]],
+    readings: Iterable[SensorReading | tuple],
+    *,
+    raw: bool | None = None,
 ) -> bytes:
     """Encode a SAMPLE frame.
 
@@ -392,36 +457,67 @@ def encode_sample(
         Device frame counter, 0..65535.
     timestamp_us : int
         Microseconds; reduced modulo 2**32 here, so a running 64-bit clock may be passed.
-    readings : iterable of SensorReading or (sensor_id, calibration, flags, quaternion)
-        At most 16, in strictly increasing ``sensor_id``; quaternion scalar-first.
+    readings : iterable of SensorReading or (sensor_id, calibration, flags, quaternion[, raw])
+        At most 16 (8 with raw fields), in strictly increasing ``sensor_id``; quaternion
+        scalar-first; ``raw`` 9 SI values as :attr:`SensorReading.raw`, or None.
+    raw : bool, optional
+        Records with the RAW fields (``record_size`` 29, version 1.1) or without (11). Default:
+        with them when every reading has ``raw``, without when none has. With ``raw=True`` every
+        reading needs its raw values (a FAULT record sends zeros); with ``raw=False`` they are
+        left out.
     """
+    items = []
+    for r in readings:
+        if isinstance(r, tuple):
+            sid, calib, flags, q, *rest = r
+            values = rest[0] if rest else None
+        else:
+            sid, calib, flags, q, values = (r.sensor_id, r.calibration, r.flags, r.quaternion,
+                                            r.raw)
+        items.append((sid, calib, flags, q, values))
+    has_raw = [v is not None for _, _, _, _, v in items]
+    if raw is None:
+        if any(has_raw) and not all(has_raw):
+            raise ValueError("either every reading of a SAMPLE has raw values or none has")
+        raw = bool(items) and all(has_raw)
+    elif raw and not all(has_raw):
+        raise ValueError("raw=True needs raw values for every reading (zeros for a FAULT)")
     recs = bytearray()
     last_id = -1
-    count = 0
-    for r in readings:
-        sid, calib, flags, q = r if isinstance(r, tuple) else (
-            r.sensor_id, r.calibration, r.flags, r.quaternion)
+    for sid, calib, flags, q, values in items:
         if not (0 <= sid < MAX_SENSORS) or sid <= last_id:
             raise ValueError(
                 f"sensor ids must be strictly increasing in 0..{MAX_SENSORS - 1}, got {sid}")
         if not (0 <= calib <= 0xFF and 0 <= flags <= 0xFF):
             raise ValueError("calibration and flags are single bytes")
         last_id = sid
-        count += 1
         recs += _RECORD.pack(sid, calib, flags, *quantize_quaternion(q))
+        if raw:
+            recs += _RAW.pack(*quantize_raw(values))
+    if raw and len(items) > MAX_RAW_SENSORS:
+        raise ValueError(f"a SAMPLE with raw fields carries at most {MAX_RAW_SENSORS} sensors, "
+                         f"got {len(items)}")
     if not isinstance(timestamp_us, int) or timestamp_us < 0:
         raise ValueError(f"timestamp_us must be a non-negative int, got {timestamp_us!r}")
-    payload = _SAMPLE_HEAD.pack(timestamp_us % TIMESTAMP_MODULUS, count, RECORD_SIZE) + recs
+    size = RAW_RECORD_SIZE if raw else RECORD_SIZE
+    payload = _SAMPLE_HEAD.pack(timestamp_us % TIMESTAMP_MODULUS, len(items), size) + recs
     return encode_frame(FrameType.SAMPLE, seq, payload)
 
 
 def encode_command(seq: int, command: CommandType | int, value: int | None = None) -> bytes:
-    """Encode a host command; ``value`` (u16) is required for SET_RATE and SET_SENSORS only."""
+    """Encode a host command; ``value`` is required for SET_RATE, SET_SENSORS (u16) and
+    SET_FIELDS (u8) only."""
     command = CommandType(command)
-    if _COMMAND_ARG[command]:
+    size = _COMMAND_ARG[command]
+    if size:
         if value is None:
             raise ValueError(f"{command.name} needs a value")
-        payload = struct.pack("<H", _check_u16(value, f"{command.name} value"))
+        if size == 1:
+            if not (isinstance(value, int) and 0 <= value <= 0xFF):
+                raise ValueError(f"{command.name} value must be an int in 0..255, got {value!r}")
+            payload = bytes([value])
+        else:
+            payload = struct.pack("<H", _check_u16(value, f"{command.name} value"))
     else:
         if value is not None:
             raise ValueError(f"{command.name} takes no value")
@@ -458,7 +554,6 @@ _HEAD = struct.Struct("<BBH")
 _U32 = struct.Struct("<I")
 _ACK_HEAD = struct.Struct("<HB")
 _NAK = struct.Struct("<HBB")
-_U16 = struct.Struct("<H")
 
 
 def decode_body(body: bytes) -> Frame:
@@ -512,7 +607,7 @@ def decode_body(body: bytes) -> Frame:
             raise FrameContentError(f"{command.name} payload length", seq=seq, frame_type=ftype,
                                     code=ErrorCode.BAD_LENGTH, actual=len(payload),
                                     expected=size)
-        value = _U16.unpack(payload)[0] if size else None
+        value = int.from_bytes(payload, "little") if size else None
         return Command(seq, command, value)
     return UnknownFrame(seq, ftype, bytes(payload))
 
@@ -542,8 +637,12 @@ def _decode_sample(seq: int, payload: bytes) -> Sample:
             raise _sample_error(seq, "SAMPLE sensor ids must increase within 0..15",
                                 actual=sid, expected=f"> {last}")
         last = sid
+        raw = None
+        if rsize >= RAW_RECORD_SIZE:
+            raw = tuple(v * k for v, k in zip(_RAW.unpack_from(payload, off + RECORD_SIZE),
+                                               _RAW_UNIT, strict=True))
         readings.append(SensorReading(sid, calib, flags, (w * scale, x * scale, y * scale,
-                                                          z * scale)))
+                                                          z * scale), raw))
         off += rsize
     return Sample(seq, ts, tuple(readings))
 

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import re
 import struct
+import subprocess
+import sys
+import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -28,6 +33,8 @@ def spec_vectors() -> dict[str, tuple[bytes, bytes]]:
     return out
 
 
+#: sensor 0 of the sample_raw vector: acc m/s², gyr rad/s (1 and -2 °/s), mag µT
+RAW0 = (0.12, -0.5, 9.81, math.radians(1), math.radians(-2), 0.0, 20.0, -5.5, -43.0)
 IDENTITY = S.Identity(1, 0, 0x0100, 0x51570001, 16, False, 0x000F, 0x0005, 200, 10, 400)
 
 #: name -> (encoded by the Python encoder, decoded frame)
@@ -60,6 +67,20 @@ EXPECTED = {
     "sample_empty": (S.encode_sample(0, 0, []), S.Sample(0, 0, ())),
     "sample_fault": (S.encode_sample(5, 1000, [(3, 0, 2, (0, 0, 0, 0))]),
                      S.Sample(5, 1000, (S.SensorReading(3, 0, 2, (0.0, 0.0, 0.0, 0.0)),))),
+    "set_fields": (S.encode_command(4, S.CommandType.SET_FIELDS, S.FieldFlag.RAW),
+                   S.Command(4, S.CommandType.SET_FIELDS, 1)),
+    "nak_fields": (S.encode_nak(0x13, 4, S.CommandType.SET_FIELDS, S.ErrorCode.UNKNOWN_COMMAND),
+                   S.Nak(0x13, 4, 0x85, 1)),
+    "sample_raw": (
+        S.encode_sample(0x0100, 2_000_000, [
+            (0, 0xFF, 0, (1, 0, 0, 0), RAW0),
+            (1, 0, 2, (0, 0, 0, 0), (0.0,) * 9)]),
+        S.Sample(0x0100, 2_000_000, (
+            S.SensorReading(0, 0xFF, 0, (1.0, 0.0, 0.0, 0.0),
+                            (0.12, -0.5, 9.81, math.pi / 180, -2 * math.pi / 180, 0.0,
+                             20.0, -5.5, -43.0)),
+            S.SensorReading(1, 0, 2, (0.0, 0.0, 0.0, 0.0), (0.0,) * 9))),
+    ),
 }
 
 
@@ -75,8 +96,20 @@ def test_spec_vectors(name):
     assert cobs.encode(body) + b"\x00" == wire
     assert cobs.decode(wire[:-1]) == body
     assert S.crc32(body[:-4]) == struct.unpack("<I", body[-4:])[0]
-    assert S.decode_frame(wire) == frame
-    assert S.decode_body(body) == frame
+    assert _close(S.decode_frame(wire), frame)
+    assert _close(S.decode_body(body), frame)
+
+
+def _close(a, b) -> bool:
+    """Frames equal, the float fields to 1e-12 (raw values are decoded by multiplying)."""
+    if isinstance(a, S.Sample) and isinstance(b, S.Sample):
+        return (a.seq, a.timestamp_us, len(a.readings)) == (b.seq, b.timestamp_us,
+                                                            len(b.readings)) and all(
+            (x.sensor_id, x.calibration, x.flags, x.quaternion, x.raw is None)
+            == (y.sensor_id, y.calibration, y.flags, y.quaternion, y.raw is None)
+            and (x.raw is None or np.allclose(x.raw, y.raw, rtol=0, atol=1e-12))
+            for x, y in zip(a.readings, b.readings, strict=True))
+    return a == b
 
 
 def test_identity_roundtrip():
@@ -233,12 +266,101 @@ def test_checksum_error_carries_values():
     assert info.value.received != info.value.computed
 
 
+def test_raw_fields_round_trip_at_their_resolution():
+    rng = np.random.default_rng(11)
+    acc = rng.uniform(-150, 150, (8, 3))  # BNO055 ranges: ±16 g, ±2000 °/s, ±1300 µT
+    gyr = np.radians(rng.uniform(-2000, 2000, (8, 3)))
+    mag = rng.uniform(-1300, 1300, (8, 3))
+    raws = np.hstack([acc, gyr, mag])
+    readings = [(i, 0xFF, 0, (1, 0, 0, 0), tuple(r)) for i, r in enumerate(raws)]
+    wire = S.encode_sample(9, 10, readings)
+    body = cobs.decode(wire[:-1])
+    assert body[9] == S.RAW_RECORD_SIZE and len(body) == 14 + 29 * 8 <= S.MAX_BODY
+    got = np.array([r.raw for r in S.decode_frame(wire).readings])
+    half_lsb = np.array([0.5 / S.ACC_SCALE] * 3 + [math.radians(0.5 / S.GYR_SCALE)] * 3
+                        + [0.5 / S.MAG_SCALE] * 3)
+    assert np.all(np.abs(got - raws) <= half_lsb + 1e-12)
+    # saturation, ties away from zero
+    assert S.quantize_raw((400, -400, 0.005, math.radians(3000), 0, 0, -3000, 1 / 32, 0)) == (
+        32767, -32768, 1, 32767, 0, 0, -32768, 1, 0)
+
+
+def test_raw_sample_arguments():
+    q = (1, 0, 0, 0)
+    with pytest.raises(ValueError, match="every reading"):
+        S.encode_sample(0, 0, [(0, 0, 0, q, (0.0,) * 9), (1, 0, 0, q)])
+    with pytest.raises(ValueError, match="raw=True"):
+        S.encode_sample(0, 0, [(0, 0, 0, q)], raw=True)
+    with pytest.raises(ValueError, match="at most 8"):
+        S.encode_sample(0, 0, [(i, 0, 0, q, (0.0,) * 9) for i in range(9)])
+    with pytest.raises(ValueError, match="9 values"):
+        S.quantize_raw((1.0, 2.0))
+    with pytest.raises(ValueError, match="NaN"):
+        S.quantize_raw((math.nan,) + (0.0,) * 8)
+    with pytest.raises(ValueError, match=r"0\.\.255"):
+        S.encode_command(0, S.CommandType.SET_FIELDS, 256)
+    # raw=False leaves the raw values out; an empty raw SAMPLE says record_size 29
+    plain = S.decode_frame(S.encode_sample(0, 0, [(0, 0, 0, q, (1.0,) * 9)], raw=False))
+    assert plain.readings[0].raw is None
+    assert cobs.decode(S.encode_sample(0, 0, [], raw=True)[:-1])[9] == 29
+    wire = S.encode_frame(S.CommandType.SET_FIELDS, 2, b"\x01\x00")
+    with pytest.raises(S.FrameContentError) as info:
+        S.decode_frame(wire)
+    assert info.value.code == S.ErrorCode.BAD_LENGTH
+
+
+def _decoder_of_version_1_0() -> types.ModuleType:
+    """The host decoder as released with protocol 1.0 (commit 9fdf835), from git history."""
+    try:
+        source = subprocess.run(
+            ["git", "show", "9fdf835:firmware_protocol/imu/stream.py"], cwd=SPEC.parent,
+            capture_output=True, text=True, check=True, timeout=30).stdout
+    except (OSError, subprocess.CalledProcessError) as err:
+        pytest.skip(f"the 1.0 decoder is not in this checkout's git history ({err})")
+    module = types.ModuleType("stream_1_0")
+    sys.modules[module.__name__] = module  # dataclasses look their module up while defining
+    try:
+        exec(compile(source, "stream_1_0.py", "exec"), module.__dict__)
+    finally:
+        del sys.modules[module.__name__]
+    assert module.PROTOCOL_MINOR == 0 and module.RECORD_SIZE == 11
+    return module
+
+
+def test_a_1_0_decoder_steps_through_raw_records():
+    """SPEC §9: a 1.0 receiver uses record_size, so it reads the quaternions of 29-byte records
+    and skips the raw fields — checked with the 1.0 decoder itself."""
+    old = _decoder_of_version_1_0()
+    _, wire = spec_vectors()["sample_raw"]
+    frame = old.decode_frame(wire)
+    assert [(r.sensor_id, r.calibration, r.flags, r.quaternion) for r in frame.readings] == [
+        (0, 0xFF, 0, (1.0, 0.0, 0.0, 0.0)), (1, 0, 2, (0.0, 0.0, 0.0, 0.0))]
+    rng = np.random.default_rng(3)
+    readings = [(i, 0x3F, 0, tuple(q / np.linalg.norm(q)), tuple(rng.normal(0, 20, 9)))
+                for i, q in zip((0, 3, 7), rng.normal(size=(3, 4)), strict=True)]
+    dec = old.StreamDecoder()
+    dec.feed(S.encode_sample(1, 5, readings) + S.encode_sample(2, 6, [r[:4] for r in readings]))
+    raw_frame, plain_frame = dec.drain()
+    assert dec.errors == 0 and dec.gaps == 0
+    assert [r.quaternion for r in raw_frame.readings] == \
+        [r.quaternion for r in plain_frame.readings]
+    assert [r.sensor_id for r in raw_frame.readings] == [0, 3, 7]
+
+
 def test_forward_compatible_extensions():
     # a 1.x SAMPLE with 13-byte records and a trailing payload field decodes as 1.0
     rec = struct.pack("<BBBhhhh", 2, 0xFF, 0, 16384, 0, 0, 0) + b"\xaa\xbb"
     payload = struct.pack("<IBB", 77, 1, 13) + rec + b"\x01\x02"
     frame = S.decode_frame(S.encode_frame(S.FrameType.SAMPLE, 3, payload))
     assert frame == S.Sample(3, 77, (S.SensorReading(2, 0xFF, 0, (1.0, 0.0, 0.0, 0.0)),))
+    # a later 1.x record with fields after the raw ones: raw read, the rest skipped
+    raw = struct.pack("<9h", 100, 0, 981, 16, 0, 0, 16, 32, -48)
+    rec = struct.pack("<BBBhhhh", 1, 0xFF, 0, 16384, 0, 0, 0) + raw + b"\xcc" * 4
+    payload = struct.pack("<IBB", 5, 2, 33) + rec + rec.replace(b"\x01", b"\x04", 1)
+    frame = S.decode_frame(S.encode_frame(S.FrameType.SAMPLE, 4, payload))
+    assert [r.sensor_id for r in frame.readings] == [1, 4]
+    np.testing.assert_allclose(frame.readings[1].raw, (
+        1.0, 0.0, 9.81, math.radians(1), 0.0, 0.0, 1.0, 2.0, -3.0), rtol=0, atol=1e-12)
     unknown = S.decode_frame(S.encode_frame(0x10, 4, b"xyz"))
     assert unknown == S.UnknownFrame(4, 0x10, b"xyz")
 

@@ -36,6 +36,7 @@ int main(void)
     uint8_t out[RIG_WIRE_MAX];
     size_t n;
     char cmd[8];
+    int i;
     static const uint8_t ident[20] = {1, 0, 0x00, 0x01, 0x01, 0x00, 0x57, 0x51, 16, 0,
                                       0x0f, 0, 0x05, 0, 200, 0, 10, 0, 0x90, 0x01};
     rig_reading_t r[16];
@@ -66,26 +67,50 @@ int main(void)
     r[0].sensor_id = 3; r[0].calib = 0; r[0].flags = RIG_FLAG_FAULT;
     memset(r[0].q, 0, sizeof r[0].q);
     n = rig_encode_sample(5, 1000, r, 1, out, sizeof out); hex("sample_fault", out, n);
+    n = rig_encode_command(4, RIG_CMD_SET_FIELDS, RIG_FIELD_RAW, 1, out, sizeof out);
+    hex("set_fields", out, n);
+    n = rig_encode_nak(0x13, 4, RIG_CMD_SET_FIELDS, RIG_ERR_UNKNOWN_COMMAND, out, sizeof out);
+    hex("nak_fields", out, n);
+    memset(r, 0, sizeof r);
+    r[0].sensor_id = 0; r[0].calib = 0xff; r[0].flags = 0; r[0].q[0] = rig_quat_component(1.0f);
+    r[0].raw[0] = 12; r[0].raw[1] = -50; r[0].raw[2] = 981;    /* ACC_DATA, 100 LSB/(m/s^2) */
+    r[0].raw[3] = 16; r[0].raw[4] = -32; r[0].raw[5] = 0;      /* GYR_DATA, 16 LSB/(deg/s) */
+    r[0].raw[6] = 320; r[0].raw[7] = -88; r[0].raw[8] = -688;  /* MAG_DATA, 16 LSB/uT */
+    r[1].sensor_id = 1; r[1].calib = 0; r[1].flags = RIG_FLAG_FAULT;
+    n = rig_encode_sample_fields(0x0100, 2000000u, r, 2, RIG_FIELD_RAW, out, sizeof out);
+    hex("sample_raw", out, n);
+    /* refused: 9 raw readings, a reserved field bit, a u8 argument above 255 */
+    for (i = 0; i < 9; i++) r[i].sensor_id = (uint8_t)i;
+    printf("refused %u %u %u\n",
+           (unsigned)rig_encode_sample_fields(0, 0, r, 9, RIG_FIELD_RAW, out, sizeof out),
+           (unsigned)rig_encode_sample_fields(0, 0, r, 1, 0x02, out, sizeof out),
+           (unsigned)rig_encode_command(0, RIG_CMD_SET_FIELDS, 256, 1, out, sizeof out));
     fflush(stdout);
 
-    /* random samples from stdin: S seq ts count (id calib flags w x y z) * count */
+    /* random samples from stdin: S|R seq ts count (id calib flags w x y z [9 raw]) * count */
     while (scanf("%7s", cmd) == 1) {
-        unsigned seq, count, i;
+        unsigned seq, count;
         unsigned long ts;
-        if (strcmp(cmd, "S") != 0) return 2;
+        int with_raw = strcmp(cmd, "R") == 0;
+        if (!with_raw && strcmp(cmd, "S") != 0) return 2;
         if (scanf("%u %lu %u", &seq, &ts, &count) != 3 || count > 16) return 3;
-        for (i = 0; i < count; i++) {
+        for (i = 0; i < (int)count; i++) {
             unsigned id, calib, flags;
-            int w, x, y, z;
+            int w, x, y, z, k, v;
             if (scanf("%u %u %u %d %d %d %d", &id, &calib, &flags, &w, &x, &y, &z) != 7)
                 return 4;
             r[i].sensor_id = (uint8_t)id; r[i].calib = (uint8_t)calib;
             r[i].flags = (uint8_t)flags;
             r[i].q[0] = (int16_t)w; r[i].q[1] = (int16_t)x;
             r[i].q[2] = (int16_t)y; r[i].q[3] = (int16_t)z;
+            for (k = 0; with_raw && k < 9; k++) {
+                if (scanf("%d", &v) != 1) return 5;
+                r[i].raw[k] = (int16_t)v;
+            }
         }
-        n = rig_encode_sample((uint16_t)seq, (uint32_t)ts, r, (uint8_t)count, out, sizeof out);
-        hex("S", out, n);
+        n = rig_encode_sample_fields((uint16_t)seq, (uint32_t)ts, r, (uint8_t)count,
+                                     with_raw ? RIG_FIELD_RAW : 0u, out, sizeof out);
+        hex(cmd, out, n);
     }
     return 0;
 }
@@ -122,7 +147,12 @@ def test_c_encoder_reproduces_spec_vectors(encoder):
                           timeout=10)
     lines = dict(line.split(" ", 1) for line in proc.stdout.splitlines())
     assert lines.pop("crc") == "cbf43926"
+    assert lines.pop("refused") == "0 0 0"
     assert lines == _spec_wires()
+
+
+_RAW_UNIT = np.array([1 / S.ACC_SCALE] * 3 + [np.pi / (180 * S.GYR_SCALE)] * 3
+                     + [1 / S.MAG_SCALE] * 3)
 
 
 def test_c_encoder_random_samples_decode_in_python(encoder):
@@ -131,20 +161,26 @@ def test_c_encoder_random_samples_decode_in_python(encoder):
     for k in range(300):
         seq = int(rng.integers(0, 1 << 16))
         ts = int(rng.integers(0, 1 << 32))
-        ids = sorted(rng.choice(16, size=int(rng.integers(0, 17)), replace=False).tolist())
+        with_raw = k % 2 == 1
+        most = S.MAX_RAW_SENSORS if with_raw else 16
+        ids = sorted(rng.choice(16, size=int(rng.integers(0, most + 1)), replace=False).tolist())
         recs = []
         for sid in ids:
             q = rng.integers(-32768, 32768, size=4).tolist()
+            raw = rng.integers(-32768, 32768, size=9).tolist() if with_raw else []
             if k % 3 == 0:
-                q = [0] * 4  # many zero bytes: COBS edge cases
-            recs.append((sid, int(rng.integers(0, 256)), int(rng.integers(0, 4)), q))
-        requests.append(f"S {seq} {ts} {len(recs)} "
-                        + " ".join(" ".join(map(str, (s, c, f, *q))) for s, c, f, q in recs))
+                q, raw = [0] * 4, [0] * len(raw)  # many zero bytes: COBS edge cases
+            recs.append((sid, int(rng.integers(0, 256)), int(rng.integers(0, 4)), q, raw))
+        requests.append(f"{'R' if with_raw else 'S'} {seq} {ts} {len(recs)} " + " ".join(
+            " ".join(map(str, (s, c, f, *q, *raw))) for s, c, f, q, raw in recs))
         expected.append(S.Sample(seq, ts, tuple(
-            S.SensorReading(s, c, f, tuple(v / 16384 for v in q)) for s, c, f, q in recs)))
+            S.SensorReading(s, c, f, tuple(v / 16384 for v in q),
+                            tuple((np.array(raw) * _RAW_UNIT).tolist()) if with_raw else None)
+            for s, c, f, q, raw in recs)))
     proc = subprocess.run([str(encoder)], input="\n".join(requests) + "\n", capture_output=True,
                           text=True, check=True, timeout=10)
-    wires = [bytes.fromhex(line[2:]) for line in proc.stdout.splitlines() if line.startswith("S ")]
+    wires = [bytes.fromhex(line[2:]) for line in proc.stdout.splitlines()
+             if line[:2] in ("S ", "R ")]
     assert len(wires) == len(expected)
     dec = S.StreamDecoder(track_sequence=False)
     dec.feed(b"".join(wires))

@@ -1,4 +1,4 @@
-/* Reference frame encoder for the rig IMU stream protocol 1.0; see stream_encoder.h, ../SPEC.md. */
+/* Reference frame encoder for the rig IMU stream protocol 1.1; see stream_encoder.h, ../SPEC.md. */
 #include "stream_encoder.h"
 
 uint32_t rig_crc32(const uint8_t *data, size_t n)
@@ -98,17 +98,28 @@ size_t rig_encode_frame(uint8_t type, uint16_t seq, const uint8_t *payload, size
 size_t rig_encode_sample(uint16_t seq, uint32_t timestamp_us, const rig_reading_t *readings,
                          uint8_t count, uint8_t *out, size_t cap)
 {
-    uint8_t payload[6u + RIG_MAX_SENSORS * RIG_RECORD_SIZE];
+    return rig_encode_sample_fields(seq, timestamp_us, readings, count, 0u, out, cap);
+}
+
+size_t rig_encode_sample_fields(uint16_t seq, uint32_t timestamp_us,
+                                const rig_reading_t *readings, uint8_t count, uint8_t fields,
+                                uint8_t *out, size_t cap)
+{
+    /* the larger of 16 plain records (182 bytes) and 8 raw records (238 bytes) */
+    uint8_t payload[6u + RIG_MAX_RAW_SENSORS * RIG_RAW_RECORD_SIZE];
     size_t off = 6;
     unsigned i;
     int k;
     int last = -1;
-    if (count > RIG_MAX_SENSORS) {
+    int raw = (fields & RIG_FIELD_RAW) != 0u;
+    size_t record = raw ? RIG_RAW_RECORD_SIZE : RIG_RECORD_SIZE;
+    if ((fields & (uint8_t)~RIG_FIELD_RAW) != 0u || count > RIG_MAX_SENSORS
+        || (raw && count > RIG_MAX_RAW_SENSORS)) {
         return 0;
     }
     put_u32(payload, timestamp_us);
     payload[4] = count;
-    payload[5] = (uint8_t)RIG_RECORD_SIZE;
+    payload[5] = (uint8_t)record;
     for (i = 0; i < count; i++) {
         const rig_reading_t *r = &readings[i];
         if (r->sensor_id >= RIG_MAX_SENSORS || (int)r->sensor_id <= last) {
@@ -121,7 +132,12 @@ size_t rig_encode_sample(uint16_t seq, uint32_t timestamp_us, const rig_reading_
         for (k = 0; k < 4; k++) {
             put_u16(payload + off + 3 + 2 * k, (uint16_t)r->q[k]);
         }
-        off += RIG_RECORD_SIZE;
+        if (raw) {
+            for (k = 0; k < 9; k++) {
+                put_u16(payload + off + RIG_RECORD_SIZE + 2 * k, (uint16_t)r->raw[k]);
+            }
+        }
+        off += record;
     }
     return rig_encode_frame(RIG_SAMPLE, seq, payload, off, out, cap);
 }
@@ -156,7 +172,7 @@ size_t rig_encode_command(uint16_t seq, uint8_t command_type, uint16_t arg, int 
                           uint8_t *out, size_t cap)
 {
     uint8_t payload[2];
-    if (arg_len != 0 && arg_len != 2) {
+    if (arg_len < 0 || arg_len > 2 || (arg_len == 1 && arg > 0xFFu)) {
         return 0;
     }
     put_u16(payload, arg);
