@@ -100,6 +100,10 @@ __all__ = [
 _Z = np.array([0.0, 0.0, 1.0])
 _Y = np.array([0.0, 1.0, 0.0])
 
+GRAVITY = 9.81
+"""m/s², the accelerometer's specific force at rest, along world +Z (up)."""
+_RAW_STEP_S = 1e-3  # finite-difference step of the gyroscope and accelerometer, seconds
+
 
 def _exp_map(rotvec: np.ndarray) -> np.ndarray:
     """Quaternion of rotation vectors ``(..., 3)`` (radians, axis × angle)."""
@@ -136,10 +140,15 @@ class NoiseModel:
     gyro_bias_dps: float = 0.2
     gyro_noise_dps: float = 0.1
     calibration_time_s: float = 5.0
+    field_ut: float = 48.0
+    dip_deg: float = 64.0
+    accel_noise: float = 0.02
+    mag_noise_ut: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("white_deg", "drift_heading_deg", "drift_tilt_deg", "disturbance_rate_hz",
-                     "disturbance_deg", "gyro_bias_dps", "gyro_noise_dps", "calibration_time_s"):
+                     "disturbance_deg", "gyro_bias_dps", "gyro_noise_dps", "calibration_time_s",
+                     "field_ut", "accel_noise", "mag_noise_ut"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if not self.drift_time_s > 0.0:
@@ -147,13 +156,22 @@ class NoiseModel:
         lo, hi = self.disturbance_duration_s
         if not 0.0 < lo <= hi:
             raise ValueError(f"disturbance_duration_s must be 0 < min <= max, got {lo}, {hi}")
+        if not -90.0 <= self.dip_deg <= 90.0:
+            raise ValueError(f"dip_deg must be in [-90, 90], got {self.dip_deg!r}")
+
+    @property
+    def earth_field(self) -> np.ndarray:
+        """The earth's magnetic field in the world frame (3,), µT: ``F (0, cos dip, -sin dip)``
+        (magnetic north = world +Y, Z up)."""
+        dip = math.radians(self.dip_deg)
+        return self.field_ut * np.array([0.0, math.cos(dip), -math.sin(dip)])
 
     @classmethod
     def ideal(cls) -> NoiseModel:
         """No errors at all, calibrated from the start: measured == truth (up to quantisation)."""
         return cls(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                    disturbance_rate_hz=0.0, gyro_bias_dps=0.0, gyro_noise_dps=0.0,
-                   calibration_time_s=0.0)
+                   calibration_time_s=0.0, accel_noise=0.0, mag_noise_ut=0.0)
 
 
 @dataclass(frozen=True)
@@ -211,6 +229,8 @@ class Measurement:
     gyro : (S, 3) float64, rad/s, sensor frame
     calibration : (S,) int, ``CALIB_STAT`` bytes
     truth : LimbState with N = 1
+    accel : (S, 3) float64, m/s², sensor frame: specific force (+9.81 along world up at rest)
+    mag : (S, 3) float64, µT, sensor frame
     """
 
     t: float
@@ -218,6 +238,8 @@ class Measurement:
     gyro: np.ndarray
     calibration: np.ndarray
     truth: LimbState
+    accel: np.ndarray
+    mag: np.ndarray
 
 
 @dataclass
@@ -276,6 +298,13 @@ class SimulatedLimb:
     neutral_sd_deg : float
         The patient's repeatability of the neutral pose: standard deviation of its axial
         rotation, degrees (>= 0; the two swing components have half of it).
+    limb_lever_m : float
+        Distance of every limb sensor from the shoulder centre along the limb axis, metres
+        (the shoulder centre is fixed in the world); sets the accelerometer's linear
+        acceleration.
+    thorax_lever_m : float
+        Height of the thorax sensor above a world-fixed pelvis pivot (along the thorax's −X,
+        superior), metres.
     """
 
     def __init__(
@@ -299,6 +328,8 @@ class SimulatedLimb:
         neutral_hold_s: float = 2.0,
         neutral_ramp_s: float = 1.5,
         neutral_sd_deg: float = 2.0,
+        limb_lever_m: float = 0.15,
+        thorax_lever_m: float = 0.3,
     ) -> None:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         # the neutral poses' own seed sequence: derived from the seed without drawing from it
@@ -369,6 +400,20 @@ class SimulatedLimb:
         # its calls (measure_many of 64 samples or 1 draws the same values per sample)
         self._rng_drift, self._rng_white, self._rng_gyro, self._rng = (
             np.random.default_rng(int(x)) for x in rng.integers(0, 2**63 - 1, size=4))
+        # accelerometer and magnetometer white noise: a stream of its own, derived from the
+        # seed sequence without drawing from it (every other draw is as without it)
+        ss = self._neutral_seed
+        self._rng_raw = np.random.default_rng(
+            np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, 0x5241)))
+        for name, v in (("limb_lever_m", limb_lever_m), ("thorax_lever_m", thorax_lever_m)):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be >= 0, got {v!r}")
+        self.limb_lever_m = float(limb_lever_m)
+        self.thorax_lever_m = float(thorax_lever_m)
+        # each sensor's position relative to its world-fixed pivot, in the sensor frame
+        lever = np.where(self._on_limb[:, None], self.limb_lever_m * self.limb_axis,
+                         -self.thorax_lever_m * np.array([1.0, 0.0, 0.0]))
+        self._lever_sensor = Q.rotate(Q.conjugate(self._mount_q), lever)  # (S, 3) m
 
     @classmethod
     def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedLimb:
@@ -563,13 +608,14 @@ class SimulatedLimb:
         dt = 0.0 if self._last_t is None else t - self._last_t
         self._last_t = t
         nz = self.noise
-        ts = np.array([t, t + 1e-3])
+        h = _RAW_STEP_S
+        ts = np.array([t, t + h, t - h])
         truth = self.truth(ts)
         q_true = truth.sensors[0]
         # sensor-frame angular rate from q(t)* ⊗ q(t + 1 ms)
         rel = Q.multiply(Q.conjugate(q_true), truth.sensors[1])
         rel *= np.where(rel[:, :1] < 0, -1.0, 1.0)
-        gyro = 2.0 * rel[:, 1:] / 1e-3
+        gyro = 2.0 * rel[:, 1:] / h
         elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
         s = self.n_sensors
         sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
@@ -587,9 +633,10 @@ class SimulatedLimb:
         disturbed = np.abs(heading) > math.radians(3.0)
         calib = np.array([_calibration_byte(err.calib_times, elapsed, bool(d))
                           for err, d in zip(self._errors, disturbed, strict=True)])
+        accel, mag = self._raw(q_true, truth.sensors[1], truth.sensors[2], heading)
         return Measurement(t=t, quaternions=out_q, gyro=gyro, calibration=calib,
                            truth=LimbState(truth.t[:1], truth.joint[:1], truth.thorax[:1],
-                                           truth.sensors[:1]))
+                                           truth.sensors[:1]), accel=accel, mag=mag)
 
     def measure_many(self, ts) -> list[Measurement]:
         """Sensor outputs at increasing times ``ts`` (K,) seconds, vectorised.
@@ -609,11 +656,12 @@ class SimulatedLimb:
         self._last_t = float(ts[-1])
         nz = self.noise
         s = self.n_sensors
-        truth = self.truth(np.concatenate((ts, ts + 1e-3)))
-        q_true, q_next = truth.sensors[:k], truth.sensors[k:]
+        h = _RAW_STEP_S
+        truth = self.truth(np.concatenate((ts, ts + h, ts - h)))
+        q_true, q_next, q_prev = truth.sensors[:k], truth.sensors[k:2 * k], truth.sensors[2 * k:]
         rel = Q.multiply(Q.conjugate(q_true), q_next)
         rel *= np.where(rel[..., :1] < 0, -1.0, 1.0)
-        gyro = 2.0 * rel[..., 1:] / 1e-3  # (K, S, 3)
+        gyro = 2.0 * rel[..., 1:] / h  # (K, S, 3)
         sig = np.radians([nz.drift_tilt_deg, nz.drift_tilt_deg, nz.drift_heading_deg])
         xi = self._rng_drift.standard_normal((k, s, 3))
         a = np.exp(-dts / nz.drift_time_s)
@@ -643,11 +691,37 @@ class SimulatedLimb:
                        levels[..., 2])
         system = np.minimum(np.minimum(levels[..., 0], levels[..., 1]), mag)
         calib = (system << 6) | (levels[..., 0] << 4) | (levels[..., 1] << 2) | mag
+        accel, field_ = self._raw(q_true, q_next, q_prev, heading)
         return [Measurement(t=float(ts[i]), quaternions=out_q[i], gyro=gyro[i],
                             calibration=calib[i],
                             truth=LimbState(truth.t[i:i + 1], truth.joint[i:i + 1],
-                                            truth.thorax[i:i + 1], truth.sensors[i:i + 1]))
+                                            truth.thorax[i:i + 1], truth.sensors[i:i + 1]),
+                            accel=accel[i], mag=field_[i])
                 for i in range(k)]
+
+    def _raw(self, q_true: np.ndarray, q_next: np.ndarray, q_prev: np.ndarray,
+             heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Accelerometer and magnetometer (..., S, 3) in the sensor frame from the true sensor
+        orientations at ``t``, ``t + h``, ``t - h`` (h = 1 ms) and the heading disturbance
+        ``heading`` (..., S) rad of the device-fusion model."""
+        nz = self.noise
+        h = _RAW_STEP_S
+        # sensor positions relative to their world-fixed pivots; central second difference
+        lever = self._lever_sensor
+        p0 = Q.rotate(q_true, lever)
+        a_lin = (Q.rotate(q_next, lever) - 2.0 * p0 + Q.rotate(q_prev, lever)) / (h * h)
+        f_world = a_lin + GRAVITY * _Z
+        # magnetometer: the earth field with its horizontal part turned by -h(t) about world Z:
+        # a field the device's fusion follows fully reads as a heading error of +h(t)
+        m = nz.earth_field
+        c, s = np.cos(heading), np.sin(heading)
+        m_world = np.stack((c * m[0] + s * m[1], -s * m[0] + c * m[1],
+                            np.full_like(heading, m[2])), axis=-1)
+        inv = Q.conjugate(q_true)
+        noise = self._rng_raw.standard_normal((*heading.shape, 6))
+        accel = Q.rotate(inv, f_world) + nz.accel_noise * noise[..., :3]
+        mag = Q.rotate(inv, m_world) + nz.mag_noise_ut * noise[..., 3:]
+        return accel, mag
 
     def _disturbance(self, err: _SensorErrors, t: float) -> float:
         nz = self.noise
