@@ -14,13 +14,16 @@ advanced). Orientations come from a :class:`~rig.sim.limb.SimulatedLimb` (ground
     writable only in CONFIG mode, otherwise ``EE 05``), invalid addresses ``EE 04``, bad start
     bytes ``EE 06``, a partial request left for ``char_timeout_s`` ``EE 0A``; calibration status
     rising while fusing; data registers refreshed at the fusion rate (100 Hz by default, like
-    the chip); ``SYS_TRIGGER`` bit 5 resets; ``UNIT_SEL`` (rate and Euler units) and axis remap
-    honoured.
+    the chip): accelerometer (``ACC_DATA``), magnetometer (``MAG_DATA``) and gyroscope
+    (``GYR_DATA``) in the modes that run those sensors, fusion outputs in the fusion modes;
+    ``SYS_TRIGGER`` bit 5 resets; ``UNIT_SEL`` (acceleration, rate and Euler units) and axis
+    remap honoured.
 :class:`StreamImuSimulator`
-    The rig stream protocol (:mod:`firmware_protocol.imu.stream`, ``SPEC.md``): IDENTIFY, START,
-    STOP, SET_RATE, SET_SENSORS answered with ACK/NAK; SAMPLE frames at the set rate for the
-    active sensors, timestamped on the exact sample grid of the device clock (µs since the
-    simulator started).
+    The rig stream protocol 1.1 (:mod:`firmware_protocol.imu.stream`, ``SPEC.md``; or a 1.0
+    device): IDENTIFY, START, STOP, SET_RATE, SET_SENSORS, SET_FIELDS answered with ACK/NAK;
+    SAMPLE frames at the set rate for the active sensors, timestamped on the exact sample grid
+    of the device clock (µs since the simulator started), with the raw accelerometer,
+    gyroscope and magnetometer readings when the RAW field is on.
 
 Both are context managers with an idempotent :meth:`close`; ``close`` re-raises an exception
 that stopped the server thread, so a test sees simulator bugs; :meth:`disconnect` /
@@ -63,6 +66,16 @@ _LAST_PAGE0 = 0x6A
 _GYRO_MODES = frozenset({B.OperationMode.GYROONLY, B.OperationMode.ACCGYRO,
                          B.OperationMode.MAGGYRO, B.OperationMode.AMG, B.OperationMode.IMU,
                          B.OperationMode.NDOF_FMC_OFF, B.OperationMode.NDOF})
+_ACC_MODES = frozenset({B.OperationMode.ACCONLY, B.OperationMode.ACCMAG,
+                        B.OperationMode.ACCGYRO, B.OperationMode.AMG, B.OperationMode.IMU,
+                        B.OperationMode.COMPASS, B.OperationMode.M4G,
+                        B.OperationMode.NDOF_FMC_OFF, B.OperationMode.NDOF})
+_MAG_MODES = frozenset({B.OperationMode.MAGONLY, B.OperationMode.ACCMAG,
+                        B.OperationMode.MAGGYRO, B.OperationMode.AMG, B.OperationMode.COMPASS,
+                        B.OperationMode.M4G, B.OperationMode.NDOF_FMC_OFF,
+                        B.OperationMode.NDOF})
+_MG_PER_MS2 = 1000.0 / 9.80665
+"""ACC_DATA LSB per m/s² with UNIT_SEL bit 0 set (1 LSB = 1 mg)."""
 
 
 def _page0_defaults() -> bytearray:
@@ -189,15 +202,18 @@ class Bno055Simulator(PtyServer):
         m = self.last
         assert m is not None
         q = m.quaternions[self.sensor]
-        gyro = m.gyro[self.sensor]
+        gyro, accel, field_ = m.gyro[self.sensor], m.accel[self.sensor], m.mag[self.sensor]
         remap = _axis_remap(regs[B.Register.AXIS_MAP_CONFIG], regs[B.Register.AXIS_MAP_SIGN])
         if remap is not None:
-            gyro = remap @ gyro
+            gyro, accel, field_ = remap @ gyro, remap @ accel, remap @ field_
             if np.linalg.det(remap) > 0:  # a proper rotation: the sensor axes are re-labelled
                 # v_remapped = M v, so q_world_remapped = q_world_sensor ⊗ quat(Mᵀ)
                 q = Q.multiply(q, Q.from_rotation(Rotation.from_matrix(remap.T)))
         unit = regs[B.Register.UNIT_SEL]
         zero6, zero8 = bytes(6), bytes(8)
+        regs[0x08:0x0E] = (B.encode_vector(accel, _MG_PER_MS2 if unit & 0x01 else 100.0)
+                           if mode in _ACC_MODES else zero6)
+        regs[0x0E:0x14] = B.encode_vector(field_, 16.0) if mode in _MAG_MODES else zero6
         if mode in _GYRO_MODES:
             if unit & 0x02:
                 regs[0x14:0x1A] = B.encode_vector(gyro, 900.0)
@@ -359,6 +375,9 @@ class StreamImuSimulator(PtyServer):
         simulated time runs.
     initial_seq : int
         Sequence number of the first frame after power-up (0..65535), e.g. to test wrapping.
+    protocol_minor : int
+        Minor protocol version the device speaks: 1 (default, SET_FIELDS and raw records) or
+        0 (a 1.0 device: IDENTIFY reports 0, SET_FIELDS is an unknown command).
 
     Attributes
     ----------
@@ -369,6 +388,9 @@ class StreamImuSimulator(PtyServer):
     samples_sent, samples_skipped : int
         Samples streamed, and samples skipped because the device fell more than ``max_lag_s``
         behind.
+    fields : int
+        The SET_FIELDS mask in force (:class:`~firmware_protocol.imu.stream.FieldFlag`);
+        with RAW each record carries ``limb``'s accelerometer, gyroscope and magnetometer.
     """
 
     thread_name = "stream-imu-sim"
@@ -389,7 +411,10 @@ class StreamImuSimulator(PtyServer):
         max_lag_s: float | None = None,
         flow_control: bool = False,
         initial_seq: int = 0,
+        protocol_minor: int = S.PROTOCOL_MINOR,
     ) -> None:
+        if protocol_minor not in (0, 1):
+            raise ValueError(f"protocol_minor must be 0 or 1, got {protocol_minor!r}")
         if max_lag_s is not None and not max_lag_s > 0:
             raise ValueError(f"max_lag_s must be > 0 or None, got {max_lag_s!r}")
         if not 0 <= initial_seq <= 0xFFFF:
@@ -411,6 +436,8 @@ class StreamImuSimulator(PtyServer):
         self.timestamp_offset_us = int(timestamp_offset_us)
         self.present_mask = (1 << limb.n_sensors) - 1
         self.active_mask = self.present_mask
+        self.protocol_minor = int(protocol_minor)
+        self.fields = 0
         self.streaming = False
         self.samples_sent = 0
         self.samples_skipped = 0
@@ -447,7 +474,7 @@ class StreamImuSimulator(PtyServer):
     def identity(self) -> S.Identity:
         """What IDENTIFY reports now."""
         return S.Identity(
-            protocol_major=S.PROTOCOL_MAJOR, protocol_minor=S.PROTOCOL_MINOR,
+            protocol_major=S.PROTOCOL_MAJOR, protocol_minor=self.protocol_minor,
             firmware_version=self.FIRMWARE_VERSION, serial=self.serial,
             max_sensors=S.MAX_SENSORS, streaming=self.streaming,
             present_mask=self.present_mask, active_mask=self.active_mask,
@@ -478,7 +505,8 @@ class StreamImuSimulator(PtyServer):
             self._command(frame, now)
 
     def _command(self, frame, now: float) -> None:
-        if not isinstance(frame, S.Command):
+        if not isinstance(frame, S.Command) or (frame.command == S.CommandType.SET_FIELDS
+                                                and self.protocol_minor < 1):
             ftype = frame.type if isinstance(frame, S.UnknownFrame) else _frame_type(frame)
             self._send(S.encode_nak(self._seq(), frame.seq, ftype, S.ErrorCode.UNKNOWN_COMMAND))
             return
@@ -505,10 +533,18 @@ class StreamImuSimulator(PtyServer):
                 nak = S.ErrorCode.BAD_ARGUMENT
         elif cmd == S.CommandType.SET_SENSORS:
             assert value is not None
-            if value == 0 or value & ~self.present_mask:
+            if value == 0 or value & ~self.present_mask or (
+                    self.fields & S.FieldFlag.RAW and value.bit_count() > S.MAX_RAW_SENSORS):
                 nak = S.ErrorCode.BAD_ARGUMENT
             else:
                 self.active_mask = value
+        elif cmd == S.CommandType.SET_FIELDS:
+            assert value is not None
+            if value & ~int(S.FieldFlag.RAW) or (
+                    value & S.FieldFlag.RAW and self.active_mask.bit_count() > S.MAX_RAW_SENSORS):
+                nak = S.ErrorCode.BAD_ARGUMENT
+            else:
+                self.fields = value
         if nak is None:
             self._send(S.encode_ack(self._seq(), frame.seq, cmd, data))
         else:
@@ -552,12 +588,17 @@ class StreamImuSimulator(PtyServer):
             batch = max(1, min(due, self._BATCH))
             ks = self._grid_k + np.arange(batch)
             times = self._grid_base + ks / rate
+            raw = bool(self.fields & S.FieldFlag.RAW)
             for t, m in zip(times, self.limb.measure_many(times), strict=True):
-                readings = [
-                    (i, int(m.calibration[i]), 0, m.quaternions[i].tolist()) for i in active
-                ]
+                if raw:
+                    values = np.hstack([m.accel, m.gyro, m.mag]).tolist()
+                    readings = [(i, int(m.calibration[i]), 0, m.quaternions[i].tolist(),
+                                 values[i]) for i in active]
+                else:
+                    readings = [(i, int(m.calibration[i]), 0, m.quaternions[i].tolist())
+                                for i in active]
                 ts = round(float(t) * 1e6) + self.timestamp_offset_us
-                out += S.encode_sample(self._seq(), ts, readings)
+                out += S.encode_sample(self._seq(), ts, readings, raw=raw)
             self.samples_sent += batch
             self._grid_k += batch
             self._next_sample = self._grid_base + self._grid_k / rate
@@ -566,6 +607,8 @@ class StreamImuSimulator(PtyServer):
 
 
 def _frame_type(frame) -> int:
+    if isinstance(frame, S.Command):
+        return int(frame.command)
     if isinstance(frame, S.Sample):
         return S.FrameType.SAMPLE
     if isinstance(frame, S.Ack):
@@ -710,18 +753,20 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
     ``misplace_deg``, ``excursion``, ``speed``, ``calibrate``, ``neutral``, ``neutral_sd``,
     ``clock``, ``time_scale``) and:
 
-    ===========  ==================================================================  ========
-    key          meaning                                                             default
-    ===========  ==================================================================  ========
-    ``sensors``  sensors on the board (1..16): 0 on the thorax, the others on the    2
-                 arm
-    ``rate``     initial sample rate, Hz (SET_RATE may change it within 10..max(400,  100
-                 rate))
-    ``max_lag``  seconds behind its sample grid after which the device skips         none
-                 samples (starved firmware); ``none``: never skip
-    ``flow``     flow control: ``on`` the device waits for the host (nothing lost),  off
-                 ``off`` unread bytes are lost like on a UART
-    ===========  ==================================================================  ========
+    ============  ==================================================================  ========
+    key           meaning                                                             default
+    ============  ==================================================================  ========
+    ``sensors``   sensors on the board (1..16): 0 on the thorax, the others on the    2
+                  arm
+    ``rate``      initial sample rate, Hz (SET_RATE may change it within 10..max(400,  100
+                  rate))
+    ``max_lag``   seconds behind its sample grid after which the device skips         none
+                  samples (starved firmware); ``none``: never skip
+    ``flow``      flow control: ``on`` the device waits for the host (nothing lost),  off
+                  ``off`` unread bytes are lost like on a UART
+    ``protocol``  stream protocol version the board speaks: ``1.1`` (raw samples on   1.1
+                  request) or ``1.0`` (an older firmware: no SET_FIELDS)
+    ============  ==================================================================  ========
 
     A benchmark that must not lose a sample at any speed:
     ``sim://imu-stream?sensors=2&rate=400&clock=manual&flow=on`` and advance ``sim.clock``.
@@ -731,8 +776,8 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
     RigConfigError
         Not ``sim://imu-stream``, unknown key, bad value (the message names the key).
     """
-    q = SimUrl(url, ("imu-stream", "stream"), (*_LIMB_KEYS, "sensors", "rate", "max_lag", "flow"),
-               STREAM_EXAMPLE)
+    q = SimUrl(url, ("imu-stream", "stream"),
+               (*_LIMB_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"), STREAM_EXAMPLE)
     sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
     rate = q.integer("rate", 100, 1, 0xFFFF)
     kwargs: dict[str, object] = {
@@ -741,6 +786,7 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         "max_rate_hz": max(400, rate),
         "max_lag_s": q.number("max_lag", None, 0.0, none_ok=True, open_lo=True),
         "flow_control": q.flag("flow", False),
+        "protocol_minor": int(q.choice("protocol", "1.1", ("1.0", "1.1"))[-1]),
         "clock": q.clock(),
     }
     if "limb" not in overrides:

@@ -331,6 +331,42 @@ def test_bno055_quaternion_matches_truth_without_noise():
                                                                 m.T @ v_new), atol=1e-3)
 
 
+def test_bno055_raw_data_registers():
+    """ACC_DATA and MAG_DATA (and GYR_DATA) hold the limb's raw readings in UNIT_SEL units, in
+    the modes that run those sensors, axis-remapped like the rest."""
+    clock = ManualClock(1000.0)
+    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=23)
+    with Bno055Simulator(limb, clock=clock) as sim, serial.Serial(sim.port, timeout=0.5) as ser:
+        assert _read(ser, B.Register.ACC_DATA, 12) == bytes(12)  # CONFIG: nothing measured
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
+        clock.t += 0.2
+        data = _read(ser, B.Register.ACC_DATA, 18)
+        m, k = sim.last, sim.sensor
+        np.testing.assert_allclose(B.decode_vector(data[:6], 100.0), m.accel[k], atol=0.0051)
+        np.testing.assert_allclose(B.decode_vector(data[6:12], 16.0), m.mag[k], atol=0.032)
+        np.testing.assert_allclose(np.radians(B.decode_vector(data[12:], 16.0)), m.gyro[k],
+                                   atol=0.001)
+        # IMU mode runs no magnetometer; ACCONLY no magnetometer and no gyroscope
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.IMU]) == 1
+        data = _read(ser, B.Register.ACC_DATA, 18)
+        assert data[6:12] == bytes(6) and data[:6] != bytes(6) and data[12:] != bytes(6)
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.ACCONLY]) == 1
+        data = _read(ser, B.Register.ACC_DATA, 18)
+        assert data[6:] == bytes(12) and data[:6] != bytes(6)
+        # mg units (UNIT_SEL bit 0) and an axis remap (X<->Y swapped, Z negated)
+        assert _write(ser, B.Register.OPR_MODE, [0]) == 1
+        assert _write(ser, B.Register.UNIT_SEL, [0x81]) == 1
+        assert _write(ser, B.Register.AXIS_MAP_CONFIG, [0x21, 0x01]) == 1
+        assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.AMG]) == 1
+        clock.t += 0.05
+        data = _read(ser, B.Register.ACC_DATA, 12)
+        a0, f0 = sim.last.accel[k], sim.last.mag[k]
+        np.testing.assert_allclose(np.array(B.decode_vector(data[:6], 1.0)) * 9.80665e-3,
+                                   [a0[1], a0[0], -a0[2]], atol=0.006)
+        np.testing.assert_allclose(B.decode_vector(data[6:], 16.0), [f0[1], f0[0], -f0[2]],
+                                   atol=0.032)
+
+
 def test_bno055_framing_errors_and_character_timeout(bno):
     _, ser, _ = bno
     ser.write(b"\x42")
@@ -452,7 +488,7 @@ def test_stream_identify(stream):
     sim, host, _ = stream
     ack = host.command(S.CommandType.IDENTIFY)
     assert isinstance(ack, S.Ack) and ack.command == S.CommandType.IDENTIFY
-    assert ack.identity == S.Identity(1, 0, 0x0100, sim.serial, 16, False, 0x000F, 0x000F, 100,
+    assert ack.identity == S.Identity(1, 1, 0x0100, sim.serial, 16, False, 0x000F, 0x000F, 100,
                                       10, 400)
 
 
@@ -518,6 +554,77 @@ def test_stream_commands_and_refusals(stream):
     ident = host.command(S.CommandType.IDENTIFY)
     assert host.frames[start:] == [ident]
     assert ident.identity.streaming is False and ident.identity.active_mask == 0b0101
+
+
+#: half an LSB of the raw record fields: acc m/s², gyr rad/s, mag µT
+RAW_HALF_LSB = np.array([0.5 / S.ACC_SCALE] * 3 + [math.radians(0.5 / S.GYR_SCALE)] * 3
+                        + [0.5 / S.MAG_SCALE] * 3) + 1e-9
+
+
+def test_stream_raw_fields_are_the_limb_measurement():
+    """SET_FIELDS RAW: every record carries the simulated accelerometer, gyroscope and
+    magnetometer of its instant (the limb's Measurement), at the record's resolution; RAW off
+    again gives 1.0 records."""
+    clock = ManualClock()
+    limb = SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=8)
+    with StreamImuSimulator(limb, rate_hz=100, clock=clock, flow_control=True) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        host = StreamHost(ser)
+        assert isinstance(host.command(S.CommandType.SET_FIELDS, S.FieldFlag.RAW), S.Ack)
+        assert sim.fields == S.FieldFlag.RAW
+        host.command(S.CommandType.START)
+        clock.advance(0.49)
+        samples = host.wait_samples(50)
+        off = host.command(S.CommandType.SET_FIELDS, 0)
+        clock.advance(0.05)
+        host.wait_samples(len(host.samples) + 5)
+        host.command(S.CommandType.STOP)
+        assert host.dec.errors == 0 and sim.server_error is None
+    times = np.array([s.timestamp_us for s in samples[:50]]) / 1e6
+    twin = SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=8)  # the same patient
+    for s, m in zip(samples[:50], twin.measure_many(times), strict=True):
+        got = np.array([r.raw for r in s.readings])
+        want = np.hstack([m.accel, m.gyro, m.mag])
+        assert np.all(np.abs(got - want) <= RAW_HALF_LSB), s.seq
+    # the specific force of a slowly moving arm is about g; the field about 48 µT
+    acc = np.array([r.raw[:3] for s in samples[:50] for r in s.readings])
+    mag = np.array([r.raw[6:] for s in samples[:50] for r in s.readings])
+    assert np.all(np.abs(np.linalg.norm(acc, axis=1) - 9.81) < 2.0)
+    assert np.all(np.abs(np.linalg.norm(mag, axis=1) - 48.0) < 1.0)
+    after = [f for f in host.frames[host.frames.index(off) + 1:] if isinstance(f, S.Sample)]
+    assert after and all(r.raw is None for f in after for r in f.readings)
+
+
+def test_stream_set_fields_refusals():
+    clock = ManualClock()
+    with StreamImuSimulator(sensors=10, clock=clock, flow_control=True) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        host = StreamHost(ser)
+        assert host.command(S.CommandType.SET_FIELDS, 0x02).error == S.ErrorCode.BAD_ARGUMENT
+        # 10 active sensors: a raw SAMPLE would not fit a frame
+        assert host.command(S.CommandType.SET_FIELDS, 1).error == S.ErrorCode.BAD_ARGUMENT
+        assert isinstance(host.command(S.CommandType.SET_SENSORS, 0x00FF), S.Ack)
+        assert isinstance(host.command(S.CommandType.SET_FIELDS, 1), S.Ack)
+        assert host.command(S.CommandType.SET_SENSORS, 0x01FF).error == S.ErrorCode.BAD_ARGUMENT
+        host.command(S.CommandType.START)
+        clock.advance(0.02)
+        (first, *_) = host.wait_samples(3)
+        assert [r.sensor_id for r in first.readings] == list(range(8))
+        assert all(r.raw is not None for r in first.readings)
+        host.command(S.CommandType.STOP)
+        assert sim.fields == 1 and sim.active_mask == 0x00FF
+
+
+def test_a_1_0_board_refuses_set_fields():
+    with stream_from_url("sim://imu-stream?protocol=1.0&clock=manual") as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        host = StreamHost(ser)
+        assert host.command(S.CommandType.IDENTIFY).identity.protocol_minor == 0
+        nak = host.command(S.CommandType.SET_FIELDS, 1)
+        assert nak.error == S.ErrorCode.UNKNOWN_COMMAND and nak.command == 0x85
+        assert sim.fields == 0
+    with stream_from_url("sim://imu-stream?clock=manual") as sim:
+        assert sim.protocol_minor == 1
 
 
 def test_stream_sequence_numbers_wrap():
@@ -680,6 +787,7 @@ BAD_IMU_URLS = [
     ("sim://imu-stream?noise=maybe", "noise"),
     ("sim://imu-stream?max_lag=-1", "max_lag"),
     ("sim://imu-stream?flow=yes-please", "flow"),
+    ("sim://imu-stream?protocol=1.2", "protocol"),
     ("sim://imu-stream?speed=0", "speed"),
     ("sim://imu-stream?excursion=nan", "excursion"),
     ("sim://imu-stream?clock=sundial", "clock"),
