@@ -9,7 +9,9 @@ number of times, then raised as :class:`~rig.errors.RigTimeoutError` /
 fails at once.
 
 :meth:`Bno055.sample` reads quaternion (0x20-0x27) through CALIB_STAT (0x35) in one 22-byte
-transaction.
+transaction; with ``raw=True`` it reads ACC_DATA (0x08) through CALIB_STAT in one 46-byte
+transaction (accelerometer, magnetometer, gyroscope, Euler angles, quaternion, ..., status) and
+returns the raw readings in SI units, converted with the chip's ``UNIT_SEL`` (read at open).
 """
 
 from __future__ import annotations
@@ -46,6 +48,9 @@ class Bno055(Device):
         Extra attempts after a timeout, a garbled response or ``BUS_OVER_RUN_ERROR``.
     sensor : int
         Index reported in :class:`~rig.devices.stream_imu.ImuSample.sensor`.
+    raw : bool
+        :meth:`sample` also returns the raw accelerometer, gyroscope and magnetometer readings
+        (:attr:`~rig.devices.stream_imu.ImuSample.raw`: m/s², rad/s, µT, sensor frame).
     """
 
     kind = "BNO055"
@@ -53,8 +58,10 @@ class Bno055(Device):
     default_retries = 3
 
     def __init__(self, port: str | Port, *, baud: int = 115200, timeout: float | None = None,
-                 retries: int | None = None, sensor: int = 0) -> None:
+                 retries: int | None = None, sensor: int = 0, raw: bool = False) -> None:
         self.sensor = sensor
+        self.raw = bool(raw)
+        self._units = 0x80
         self._serial: serial.Serial | None = None
         super().__init__(port, baud=baud, timeout=timeout, retries=retries)
 
@@ -66,6 +73,8 @@ class Bno055(Device):
         if chip != B.CHIP_ID_VALUE:
             raise RigProtocolError("this is not a BNO055 (CHIP_ID)", port=url,
                                    actual=f"0x{chip:02X}", expected=f"0x{B.CHIP_ID_VALUE:02X}")
+        if self.raw:
+            self._units = self.read(B.Register.UNIT_SEL, 1)[0]
 
     def _close(self) -> None:
         ser, self._serial = self._serial, None
@@ -134,6 +143,9 @@ class Bno055(Device):
             what = _status_name(resp.status) if isinstance(resp, B.StatusResponse) else resp
             raise RigError(f"BNO055 write to 0x{register:02X} failed: {what}",
                            port=str(self.port))
+        unit_sel = int(B.Register.UNIT_SEL) - register
+        if 0 <= unit_sel < len(data):
+            self._units = data[unit_sel]  # raw readings are converted with the units in force
 
     # -- conveniences ---------------------------------------------------------------------
     def chip_id(self) -> int:
@@ -163,14 +175,30 @@ class Bno055(Device):
         return B.CalibrationStatus.from_byte(self.read(B.Register.CALIB_STAT, 1)[0])
 
     def sample(self) -> ImuSample:
-        """Quaternion and calibration status in one transaction, host-timestamped (the time
-        half-way through the transaction; the chip has no clock to report)."""
+        """Quaternion and calibration status (and with ``raw`` the raw readings) in one
+        transaction, host-timestamped (the time half-way through the transaction; the chip has
+        no clock to report)."""
         t0 = time.monotonic()
-        first = int(B.Register.QUA_DATA)
+        first = int(B.Register.ACC_DATA if self.raw else B.Register.QUA_DATA)
         data = self.read(first, int(B.Register.CALIB_STAT) - first + 1)
         t = 0.5 * (t0 + time.monotonic())
-        q = self._unit(np.array(B.decode_quaternion(data[:8])), str(self.port))
-        return ImuSample(t, None, self.sensor, q, data[-1])
+        q_at = int(B.Register.QUA_DATA) - first
+        q = self._unit(np.array(B.decode_quaternion(data[q_at:q_at + 8])), str(self.port))
+        raw = self._raw(data[:18]) if self.raw else None
+        return ImuSample(t, None, self.sensor, q, data[-1], raw=raw)
+
+    def _raw(self, data: bytes) -> np.ndarray:
+        """ACC_DATA, MAG_DATA, GYR_DATA (18 bytes from 0x08) → (acc m/s², gyr rad/s, mag µT)
+        with the UNIT_SEL in force: acceleration 100 LSB/(m/s²) or 1 LSB/mg (bit 0), rate
+        16 LSB/(°/s) or 900 LSB/(rad/s) (bit 1), magnetic field 16 LSB/µT."""
+        acc = np.array(B.decode_vector(data[0:6], 1.0))
+        acc *= 9.80665e-3 if self._units & 0x01 else 0.01
+        mag = np.array(B.decode_vector(data[6:12], 16.0))
+        if self._units & 0x02:
+            gyr = np.array(B.decode_vector(data[12:18], 900.0))
+        else:
+            gyr = np.radians(B.decode_vector(data[12:18], 16.0))
+        return np.concatenate([acc, gyr, mag])
 
 
 def _status_name(code: int) -> str:

@@ -22,6 +22,9 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       baud: 921600                         #   int (default: stream 921600, bno055 115200)
       segments: {thorax: 0, humerus: 1}    #   segment -> sensor index (port index for bno055);
                                            #   must name joint.parent and joint.child
+      raw: false                           #   true | false (default false): also record raw
+                                           #   accelerometer/gyroscope/magnetometer samples
+                                           #   (stream protocol 1.1, at most 8 sensors)
     servos:                                # optional (servo rigs)
       port: "sim://dynamixel?ids=1,2,3&return_delay_us=0"
       baud: 1000000                        #   int, an X-series rate (default 1000000)
@@ -49,6 +52,7 @@ from typing import Any
 
 import yaml
 
+from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from rig.devices.kinematics import ChainKinematics, ServoJoint
 from rig.errors import RigConfigError
 
@@ -82,6 +86,8 @@ class SensorsConfig:
     rate_hz: int
     baud: int
     segments: dict[str, int]
+    raw: bool = False
+    """Ask the sensors for raw accelerometer, gyroscope and magnetometer readings too."""
 
     @property
     def port(self) -> str:
@@ -184,7 +190,8 @@ def _joint(ctx: _Ctx, value: Any) -> JointInfo:
 
 
 def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
-    d = ctx.mapping(value, "sensors", {"port", "segments"}, {"protocol", "rate_hz", "baud"})
+    d = ctx.mapping(value, "sensors", {"port", "segments"},
+                    {"protocol", "rate_hz", "baud", "raw"})
     protocol = ctx.string(d.get("protocol", "stream"), "sensors.protocol")
     if protocol not in ("stream", "bno055"):
         raise ctx.fail("sensors.protocol", f"expected 'stream' or 'bno055', got {protocol!r}")
@@ -214,7 +221,13 @@ def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
         if need not in segments:
             raise ctx.fail("sensors.segments", f"no sensor for segment {need!r} "
                                                f"(joint {joint.parent} -> {joint.child})")
-    return SensorsConfig(ports, protocol, rate, baud, segments)
+    raw = d.get("raw", False)
+    if not isinstance(raw, bool):
+        raise ctx.fail("sensors.raw", f"expected true or false, got {raw!r}")
+    if raw and protocol == "stream" and len(segments) > MAX_RAW_SENSORS:
+        raise ctx.fail("sensors.raw", f"raw samples carry at most {MAX_RAW_SENSORS} sensors "
+                                      f"per board, {len(segments)} segments listed")
+    return SensorsConfig(ports, protocol, rate, baud, segments, raw)
 
 
 def _chain_joint(ctx: _Ctx, value: Any, where: str) -> ServoJoint:

@@ -18,7 +18,8 @@ Implementations
 :class:`ImuSetSource`
     A stream-protocol board, or one BNO055 per segment: ``kind="sensor"``, ``name`` the
     segment the sensor is strapped to (the rig config's ``segments``), ``q`` the sensor
-    relative to its world frame.
+    relative to its world frame, ``raw`` the raw readings when the devices were opened with
+    ``raw=True`` (rig config ``sensors.raw``).
 
 :func:`open_source` builds either from a :class:`~rig.devices.config.RigConfig`.
 """
@@ -224,7 +225,7 @@ class ImuSetSource(_SourceBase):
         if self._stream is not None:
             samples = self._stream.read(timeout)
             return [OrientationSample(s.t, s.device_t, self._by_index[s.sensor], "sensor", s.q,
-                                      s.calibration)
+                                      s.calibration, s.raw)
                     for s in samples if s.sensor in self._by_index]
         nxt = _pace(self._next, self.period, timeout)
         if nxt is None:
@@ -238,7 +239,7 @@ class ImuSetSource(_SourceBase):
             except (RigTimeoutError, RigProtocolError) as err:
                 raise RigConnectionError(f"the BNO055 of {name!r} stopped answering ({err})",
                                          port=str(chip.port)) from err
-            out.append(OrientationSample(s.t, None, name, "sensor", s.q, s.calibration))
+            out.append(OrientationSample(s.t, None, name, "sensor", s.q, s.calibration, s.raw))
         return out
 
     def close(self) -> None:
@@ -298,12 +299,12 @@ def open_source(config: RigConfig, which: str | None = None, *,
     if sensors.protocol == "stream":
         board = StreamImu(ports.get(sensors.port, sensors.port),
                           sensors=sorted(set(sensors.segments.values())), rate_hz=int(rate),
-                          baud=sensors.baud)
+                          baud=sensors.baud, raw=sensors.raw)
         return ImuSetSource(board, sensors.segments)
     chips: list[Bno055] = []
     try:
         for k, p in enumerate(sensors.ports):
-            chips.append(Bno055(ports.get(p, p), baud=sensors.baud, sensor=k))
+            chips.append(Bno055(ports.get(p, p), baud=sensors.baud, sensor=k, raw=sensors.raw))
         from firmware_protocol.imu import bno055 as B
 
         for chip in chips:

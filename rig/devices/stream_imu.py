@@ -1,9 +1,12 @@
 """Host driver for a multi-IMU board speaking the rig stream protocol (``firmware_protocol/imu``).
 
-Start-up (each command answered by one ACK/NAK, SPEC §5): a 0x00 delimiter, ``IDENTIFY``
-(protocol major version and the sensors present are checked), ``SET_SENSORS`` (the wanted
-mask), ``SET_RATE``, ``START``. Then SAMPLE frames arrive at the rate; each becomes one
-:class:`ImuSample` per sensor reading.
+Start-up (each command answered by one ACK/NAK, SPEC §5): a 0x00 delimiter, ``STOP``,
+``IDENTIFY`` (protocol major version and the sensors present are checked), ``SET_SENSORS``
+(the wanted mask) and — on a 1.1 board — ``SET_FIELDS`` (RAW on with ``raw=True``, off
+otherwise), ``SET_RATE``, ``START``. Then SAMPLE frames arrive at the rate; each becomes one
+:class:`ImuSample` per sensor reading, with the raw readings in SI units when asked for.
+``raw=True`` on a 1.0 board, or for more than 8 sensors, is a :class:`~rig.errors.RigConfigError`
+at open.
 
 * **Sequence gaps** (the device's u16 frame counter skipping) are counted in
   :attr:`StreamImu.dropped` — frames the host never saw (UART overrun, a full buffer, noise);
@@ -56,6 +59,10 @@ class ImuSample:
         BNO055 ``CALIB_STAT`` byte (``sys<<6 | gyr<<4 | acc<<2 | mag``).
     flags : int
         Stream-protocol reading flags (0 for a BNO055).
+    raw : (9,) float64 or None
+        Raw readings at the same instant, sensor frame: accelerometer (m/s², specific force),
+        gyroscope (rad/s), magnetometer (µT); None unless the driver was opened with
+        ``raw=True``.
     """
 
     t: float
@@ -64,6 +71,7 @@ class ImuSample:
     q: np.ndarray
     calibration: int
     flags: int = 0
+    raw: np.ndarray | None = None
 
 
 class StreamImu(Device):
@@ -82,6 +90,9 @@ class StreamImu(Device):
         No sample for this long while streaming triggers a reconnect.
     reconnect_s : float
         How long a reconnect may take before :class:`RigConnectionError`.
+    raw : bool
+        Ask the board for the raw accelerometer, gyroscope and magnetometer readings
+        (protocol 1.1, at most 8 sensors); they arrive in :attr:`ImuSample.raw`.
 
     Attributes
     ----------
@@ -100,8 +111,9 @@ class StreamImu(Device):
     def __init__(self, port: str | Port, *, sensors: Iterable[int] | None = None,
                  rate_hz: int = 100, baud: int = 921600, timeout: float | None = None,
                  retries: int | None = None, silence_s: float = 0.5,
-                 reconnect_s: float = 2.0) -> None:
+                 reconnect_s: float = 2.0, raw: bool = False) -> None:
         self.rate_hz = int(rate_hz)
+        self.raw = bool(raw)
         self.wanted = None if sensors is None else sorted(set(int(s) for s in sensors))
         self.silence_s = float(silence_s)
         self.reconnect_s = float(reconnect_s)
@@ -143,9 +155,22 @@ class StreamImu(Device):
             raise RigConfigError("sample rate not supported by the board", port=url,
                                  actual=self.rate_hz,
                                  expected=f"{ident.min_rate_hz}..{ident.max_rate_hz} Hz")
+        if self.raw and ident.protocol_minor < 1:
+            raise RigConfigError(f"the IMU board speaks stream protocol {ident.protocol_major}."
+                                 f"{ident.protocol_minor}; raw samples need 1.1 (set "
+                                 f"sensors.raw: false, or update its firmware)", port=url)
+        if self.raw and len(wanted) > S.MAX_RAW_SENSORS:
+            raise RigConfigError(f"raw samples carry at most {S.MAX_RAW_SENSORS} sensors per "
+                                 f"board", port=url, actual=len(wanted))
         self.identity = ident
         self.sensors = wanted
-        self._command(S.CommandType.SET_SENSORS, sum(1 << i for i in wanted))
+        mask = sum(1 << i for i in wanted)
+        # a board keeps its fields: RAW off before a mask of more than 8 sensors, on after
+        if ident.protocol_minor >= 1 and not self.raw:
+            self._command(S.CommandType.SET_FIELDS, S.FieldFlag.NONE)
+        self._command(S.CommandType.SET_SENSORS, mask)
+        if self.raw:
+            self._command(S.CommandType.SET_FIELDS, S.FieldFlag.RAW)
         self._command(S.CommandType.SET_RATE, self.rate_hz)
         self._command(S.CommandType.START)
         self._decoder.reset_sequence()
@@ -224,8 +249,9 @@ class StreamImu(Device):
             n = float(np.linalg.norm(q))
             if n < 0.5:  # FAULT flag / all zeros: not an orientation
                 continue
+            raw = np.array(r.raw) if self.raw and r.raw is not None else None
             self._queue.append(ImuSample(t, device_t, r.sensor_id, q / n, r.calibration,
-                                         r.flags))
+                                         r.flags, raw))
 
     def _command(self, command: S.CommandType, value: int | None = None) -> S.Ack:
         name = command.name

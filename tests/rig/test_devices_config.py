@@ -44,6 +44,14 @@ def test_minimal_config_gets_defaults():
     cfg = parse(base())
     assert cfg.servos.baud == 1_000_000 and cfg.servos.watchdog_ms == 100
     assert cfg.servos.chain[0].zero_ticks == 2048 and cfg.sensors.protocol == "stream"
+    assert cfg.sensors.raw is False
+
+
+def test_sensors_raw_is_a_boolean():
+    d = base()
+    d["sensors"]["raw"] = True
+    assert parse(d).sensors.raw is True
+    assert load_rig_config("sim-imu").sensors.raw is True
 
 
 @pytest.mark.parametrize(("edit", "match"), [
@@ -63,6 +71,11 @@ def test_minimal_config_gets_defaults():
     (lambda d: (d.pop("sensors"), d.pop("servos")), "needs 'sensors' or 'servos'"),
     (lambda d: d.update(constraint="nowhere.yaml"), "constraint"),
     (lambda d: d["servos"]["chain"][0].update(id=True), "whole number"),
+    (lambda d: d["sensors"].update(raw="on"), "sensors.raw: expected true or false, got 'on'"),
+    (lambda d: d["sensors"].update(raw=1), "sensors.raw: expected true or false"),
+    (lambda d: d["sensors"].update(raws=True), "sensors: unknown key 'raws'"),
+    (lambda d: d["sensors"].update(raw=True, segments={f"s{i}": i for i in range(7)}
+                                   | {"thorax": 7, "humerus": 8}), "at most 8 sensors"),
 ])
 def test_invalid_configs_name_the_field(edit, match):
     d = base()

@@ -47,6 +47,59 @@ def test_stream_samples_are_timestamped_and_true():
         assert imu.dropped == 0 and imu.corrupt == 0
 
 
+def test_stream_raw_samples_in_si_units():
+    """raw=True on a 1.1 board: each sample carries accelerometer, gyroscope and magnetometer
+    in the sensor frame — checked against the sample's own quaternions (noise off)."""
+    url = "sim://imu-stream?sensors=2&rate=200&noise=off&seed=3&flow=on"
+    with open_port(url) as port, StreamImu(port, rate_hz=200, raw=True) as imu:
+        assert port.simulator.fields == 1
+        samples = collect(imu, 200)
+    for sensor in (0, 1):
+        mine = [s for s in samples if s.sensor == sensor]
+        raw = np.array([s.raw for s in mine])
+        q = np.array([s.q for s in mine])
+        assert raw.shape == (len(mine), 9) and np.isfinite(raw).all()
+        # at rest the accelerometer reads +g along world up: the arm moves slowly, so the
+        # specific force stays within a few degrees of the sensor's up axis
+        up = Q.rotate(Q.conjugate(q), np.array([0.0, 0.0, 1.0]))
+        cos = np.sum(raw[:, :3] * up, axis=1) / np.linalg.norm(raw[:, :3], axis=1)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 10.0
+        assert np.abs(np.linalg.norm(raw[:, 6:], axis=1) - 48.0).max() < 1.0  # µT
+        # the gyroscope is the rate of the quaternions (sensor frame), within the record's
+        # resolution and the finite difference
+        dt = np.diff([s.device_t for s in mine])
+        rate = Q.to_rotation(Q.multiply(Q.conjugate(q[:-1]), q[1:])).as_rotvec() / dt[:, None]
+        mid = 0.5 * (raw[:-1, 3:6] + raw[1:, 3:6])
+        assert np.median(np.linalg.norm(rate - mid, axis=1)) < 0.02  # rad/s
+        if sensor == 1:
+            assert np.linalg.norm(mid, axis=1).max() > 0.2  # the arm does move
+
+
+def test_stream_raw_needs_protocol_1_1_and_at_most_8_sensors():
+    with open_port("sim://imu-stream?sensors=2&protocol=1.0") as port:
+        with pytest.raises(RigConfigError) as err:
+            StreamImu(port, raw=True)
+        assert "speaks stream protocol 1.0; raw samples need 1.1" in str(err.value)
+        assert "\n" not in str(err.value)
+        with StreamImu(port) as imu:  # without raw, a 1.0 board is fine
+            assert collect(imu, 2)[0].raw is None
+    with open_port("sim://imu-stream?sensors=9") as port:
+        with pytest.raises(RigConfigError, match="at most 8 sensors"):
+            StreamImu(port, raw=True)
+        with StreamImu(port, sensors=range(8), raw=True) as imu:
+            assert collect(imu, 8)[0].raw.shape == (9,)
+
+
+def test_stream_host_without_raw_turns_a_left_over_raw_field_off():
+    with open_port("sim://imu-stream?sensors=2&flow=on") as port:
+        with StreamImu(port, raw=True) as imu:
+            assert collect(imu, 2)[0].raw is not None
+        assert port.simulator.fields == 1  # the board keeps it, as the SPEC says
+        with StreamImu(port) as imu:
+            assert port.simulator.fields == 0
+            assert all(s.raw is None for s in collect(imu, 4))
+
+
 def test_stream_sequence_gaps_are_counted():
     with open_port("sim://imu-stream?sensors=2&rate=400&flow=off") as port, \
             StreamImu(port, rate_hz=400) as imu:

@@ -58,6 +58,11 @@ def test_imu_set_source_names_segments():
             got += src.read(1.0)
         assert {s.name for s in got} == {"thorax", "humerus"}
         assert all(s.kind == "sensor" and s.device_t is not None for s in got)
+        # sensors.raw: true in sim-imu: accelerometer ~ g, magnetometer ~ 48 µT
+        raw = np.array([s.raw for s in got])
+        assert raw.shape == (len(got), 9) and np.isfinite(raw).all()
+        assert np.abs(np.linalg.norm(raw[:, :3], axis=1) - 9.81).max() < 3.0
+        assert np.abs(np.linalg.norm(raw[:, 6:], axis=1) - 48.0).max() < 10.0
         assert src.dropped == 0
 
 
@@ -70,6 +75,7 @@ sensors:
   port: ["sim://bno055?sensor=0&seed=2", "sim://bno055?sensor=1&seed=2"]
   rate_hz: 50
   segments: {thorax: 0, humerus: 1}
+  raw: true
 """, "two-chips.yaml")
     with open_source(cfg) as src:
         batch = []
@@ -77,6 +83,7 @@ sensors:
             batch = src.read(1.0)
         assert [s.name for s in batch] == ["thorax", "humerus"]
         assert all(np.linalg.norm(s.q) == pytest.approx(1.0) for s in batch)
+        assert all(s.raw.shape == (9,) and np.isfinite(s.raw).all() for s in batch)
 
 
 def test_both_kinds_need_a_choice():

@@ -31,6 +31,31 @@ def test_reads_chip_id_and_fused_quaternion(chip):
     assert np.degrees(Q.angle(Q.multiply(q, Q.conjugate(truth)))) < 0.05
 
 
+def test_raw_sample_in_one_burst_in_si_units():
+    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=5)
+    with Bno055Simulator(limb) as sim, Bno055(sim.port, raw=True) as dev:
+        dev.set_mode(B.OperationMode.NDOF)
+        s = dev.sample()
+        m, k = sim.last, sim.sensor
+        assert s.raw.shape == (9,)
+        np.testing.assert_allclose(s.raw[:3], m.accel[k], atol=0.0051)  # 100 LSB per m/s²
+        np.testing.assert_allclose(s.raw[3:6], m.gyro[k], atol=np.radians(1 / 32) + 1e-9)
+        np.testing.assert_allclose(s.raw[6:], m.mag[k], atol=1 / 32 + 1e-9)  # 16 LSB per µT
+        truth = m.truth.sensors[0, k]
+        assert np.degrees(Q.angle(Q.multiply(s.q, Q.conjugate(truth)))) < 0.05
+        # other units (mg, rad/s): the driver follows the UNIT_SEL it wrote
+        dev.set_mode(B.OperationMode.CONFIG)
+        dev.write(B.Register.UNIT_SEL, bytes([0x83]))
+        dev.set_mode(B.OperationMode.NDOF)
+        s = dev.sample()
+        m = sim.last
+        np.testing.assert_allclose(s.raw[:3], m.accel[k], atol=0.0051)  # 1 mg LSB
+        np.testing.assert_allclose(s.raw[3:6], m.gyro[k], atol=1 / 1800 + 1e-9)
+    with Bno055Simulator(limb) as sim, Bno055(sim.port) as dev:
+        dev.set_mode(B.OperationMode.NDOF)
+        assert dev.sample().raw is None
+
+
 def test_quaternion_outside_fusion_mode_is_an_error(chip):
     _, dev = chip
     dev.set_mode(B.OperationMode.CONFIG)

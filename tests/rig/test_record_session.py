@@ -35,7 +35,8 @@ def _sim_imu_yaml(tmp_path: Path, port: str | None = None, extra: str = "") -> P
     return sim_imu_yaml(tmp_path, port=port, extra=extra)
 
 
-@pytest.mark.parametrize("case", ["unknown-key", "unknown-rig", "wrong-port", "bad-duration"])
+@pytest.mark.parametrize("case", ["unknown-key", "unknown-rig", "wrong-port", "bad-duration",
+                                  "raw-from-1.0-board"])
 def test_user_mistakes_are_one_line_exit_2_and_record_nothing(tmp_path, capsys, case):
     db = tmp_path / "s.db"
     rig = "sim-imu"
@@ -46,6 +47,8 @@ def test_user_mistakes_are_one_line_exit_2_and_record_nothing(tmp_path, capsys, 
         rig = "no-such-rig"
     elif case == "wrong-port":
         rig = str(_sim_imu_yaml(tmp_path, port="/dev/ttyUSB9"))
+    elif case == "raw-from-1.0-board":  # firmware older than the rig file asks for
+        rig = str(sim_imu_yaml(tmp_path, port_suffix="&protocol=1.0", extra="  raw: true\n"))
     else:
         extra = ["--duration", "-1"]
     code, _out, err = _run_cli(["record", "--rig", rig, "--db", str(db), "--patient", "P-1",
@@ -58,6 +61,8 @@ def test_user_mistakes_are_one_line_exit_2_and_record_nothing(tmp_path, capsys, 
         assert "sensros_rate" in err
     if case == "wrong-port":
         assert "/dev/ttyUSB9" in err
+    if case == "raw-from-1.0-board":
+        assert "speaks stream protocol 1.0; raw samples need 1.1" in err
     # nothing recorded: the store was not even created
     assert not db.exists()
 
