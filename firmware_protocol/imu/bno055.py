@@ -26,14 +26,16 @@ bytes covers registers ``reg .. reg + len - 1`` (auto-increment).
 
 Register map (page 0, the subset the rig uses)::
 
-    0x00 CHIP_ID (0xA0)   0x14-0x19 GYR x,y,z      0x35 CALIB_STAT  sys|gyr|acc|mag, 2 bits each
-    0x07 PAGE_ID          0x1A-0x1F EUL h,r,p      0x39 SYS_STATUS  0x3A SYS_ERR  0x3B UNIT_SEL
-                          0x20-0x27 QUA w,x,y,z    0x3D OPR_MODE    0x3E PWR_MODE 0x3F SYS_TRIGGER
-                                                   0x41 AXIS_MAP_CONFIG  0x42 AXIS_MAP_SIGN
+    0x00 CHIP_ID (0xA0)   0x08-0x0D ACC x,y,z      0x35 CALIB_STAT  sys|gyr|acc|mag, 2 bits each
+    0x07 PAGE_ID          0x0E-0x13 MAG x,y,z      0x39 SYS_STATUS  0x3A SYS_ERR  0x3B UNIT_SEL
+                          0x14-0x19 GYR x,y,z      0x3D OPR_MODE    0x3E PWR_MODE 0x3F SYS_TRIGGER
+                          0x1A-0x1F EUL h,r,p      0x41 AXIS_MAP_CONFIG  0x42 AXIS_MAP_SIGN
+                          0x20-0x27 QUA w,x,y,z
 
 Multi-byte values are little-endian signed 16-bit. Quaternion: 1 LSB = 2**-14; Euler angles:
 16 LSB/° (900 LSB/rad with UNIT_SEL bit 2); angular rate: 16 LSB/(°/s) (900 LSB/(rad/s) with
-UNIT_SEL bit 1). Fusion data are valid only in the fusion modes (``OPR_MODE`` 0x08-0x0C); the
+UNIT_SEL bit 1); acceleration: 100 LSB/(m/s²) (1 LSB/mg with UNIT_SEL bit 0); magnetic field:
+16 LSB/µT. Fusion data are valid only in the fusion modes (``OPR_MODE`` 0x08-0x0C); the
 configuration registers can be written only in CONFIG mode (0x00).
 
 Everything here is pure: bytes in, bytes out. Encoders build requests and responses; the two
