@@ -10,6 +10,8 @@ Public API
 - :class:`ImuJointCalibration` — two-IMU calibration (static pose + flexion/extension), joint
   orientation ``thorax⁻¹ ⊗ humerus`` in segment frames (:mod:`calibration.alignment`).
 - :func:`joint_orientation`, :func:`status_ok` — helpers of the same module.
+- :func:`fuse_vqf`, :class:`FusionResult` — 9-D fusion of one sensor's raw accelerometer,
+  gyroscope and magnetometer samples with VQF (:mod:`calibration.fusion`).
 - :class:`HeadingCorrection` — relative heading drift of the two IMUs removed at neutral-pose
   checkpoints (:mod:`calibration.heading`).
 - :class:`CalibrationProtocol` — the guided calibration movements (:mod:`calibration.protocol`).
@@ -25,6 +27,7 @@ from calibration.alignment import ImuJointCalibration, joint_orientation, status
 from calibration.boundary import BoundaryExtractor, boundary_distance, outside_fraction
 from calibration.clinical import NORMATIVE, format_rom_table, isb_angles, range_of_motion
 from calibration.errors import CalibrationError
+from calibration.fusion import FusionResult, fuse_vqf
 from calibration.heading import HeadingCorrection
 from calibration.protocol import CalibrationProtocol
 from calibration.servo import ServoChainCalibration
@@ -34,11 +37,13 @@ __all__ = [
     "BoundaryExtractor",
     "CalibrationError",
     "CalibrationProtocol",
+    "FusionResult",
     "HeadingCorrection",
     "ImuJointCalibration",
     "ServoChainCalibration",
     "boundary_distance",
     "format_rom_table",
+    "fuse_vqf",
     "isb_angles",
     "joint_orientation",
     "outside_fraction",

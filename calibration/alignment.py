@@ -49,8 +49,10 @@ The neutral pose *defines* the segment frames: a thorax leaning by a small rotat
 during the static pose (postural sway) turns every recovered joint orientation into
 ``s J s⁻¹``, an error of about ``2 sin(|J|/2) |s|``.
 
-Fusion of raw accelerometer/gyroscope/magnetometer samples is not done here: the rig's sensors
-(BNO055, the stream IMU board) fuse on the device and deliver quaternions.
+The sensor orientations come either from the devices' own fusion or from the host's fusion of
+their raw samples (:mod:`calibration.fusion`, VQF); in the latter both sensors share one world
+(the earth's field is the heading reference), and the calibration must be fitted on those
+orientations, not on the device's.
 """
 
 from __future__ import annotations

@@ -64,13 +64,15 @@ def check_source(file: str | None, db: str | None, session_id: int | None,
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,
                             session_id: int | None = None, reference: str | None = None,
-                            limb: str | None = None, limb_axis: str | None = None) -> JointData:
-    """Joint orientations of a session or an orientation file (see module doc)."""
+                            limb: str | None = None, limb_axis: str | None = None,
+                            fusion: str = "auto") -> JointData:
+    """Joint orientations of a session or an orientation file (see module doc); ``fusion``
+    applies to sessions (:func:`joint_orientations_from_store`), files hold orientations."""
     check_source(file, db, session_id, reference, limb)
     axis = _parse_axis(limb_axis)
     if file is not None:
         return _from_file(file, reference, limb, axis)
-    return _from_session(db, session_id, axis)
+    return _from_session(db, session_id, axis, fusion)
 
 
 def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) -> JointData:
@@ -93,19 +95,43 @@ def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) ->
                      table.meta.get("rig_patient"), table.meta.get("rig_joint"))
 
 
-def _from_session(db: str, session_id: int, axis: np.ndarray) -> JointData:
+def _from_session(db: str, session_id: int, axis: np.ndarray, fusion: str) -> JointData:
     from rig.store import open_store
 
     with open_store(db, create=False) as store:
-        return joint_orientations_from_store(store, session_id, axis)
+        return joint_orientations_from_store(store, session_id, axis, fusion=fusion)
+
+
+#: ``fusion`` values of :func:`joint_orientations_from_store` (``--fusion`` of the commands).
+FUSION_CHOICES = ("auto", "device", "vqf")
 
 
 def joint_orientations_from_store(store, session_id: int,
                                   axis: np.ndarray | None = None, *,
-                                  heading: bool = True) -> JointData:
+                                  heading: bool = True, fusion: str = "auto") -> JointData:
     """Joint orientations of a session in an opened store (joint samples as recorded; IMU
     samples through the session's ``imu-alignment`` calibration). Used by ``rig boundary``,
     ``rig rom`` and the report (:mod:`rig.report.session`).
+
+    ``fusion`` chooses where IMU orientations come from:
+
+    - ``"device"``: the quaternions the devices fused (stored ``q``), through the stored
+      calibration;
+    - ``"vqf"``: each sensor's raw samples (the store's ``raw``: acc, gyr, mag) fused on the
+      host (:func:`calibration.fusion.fuse_vqf`, in the pairing clock: ``device_t`` where the
+      device has one); the stored calibration's mounts absorbed the *device* worlds' heading
+      offset, so :class:`~calibration.alignment.ImuJointCalibration` is re-fitted from the
+      fused orientations on the calibration's own windows (``windows_s`` placed on the
+      samples' clock by ``protocol.origin``). Fused samples are not filtered by the devices'
+      status bytes (they describe the devices' fusion; VQF detects and rejects magnetic
+      disturbances itself): ``JointData.status`` is None. Needs raw samples for every sample
+      of both sensors and a calibration with ``protocol.origin``; otherwise a one-line error;
+    - ``"auto"`` (default): ``"vqf"`` when those needs are met, else ``"device"``.
+
+    The provenance's ``fusion`` entry records the method (and for VQF the library version, the
+    parameters that differ from VQF's defaults, the resampling rate, each sensor's share of
+    samples flagged as magnetically disturbed and final gyroscope bias, and the re-fit's
+    residuals; for ``auto`` falling back to the device, why).
 
     IMU sessions with ``neutral-checkpoint`` calibrations (the patient back in the neutral pose
     during the recording, :mod:`rig.record.guided`) also have the two sensors' relative
@@ -116,6 +142,8 @@ def joint_orientations_from_store(store, session_id: int,
     from calibration.alignment import ImuJointCalibration
     from calibration.errors import CalibrationError
 
+    if fusion not in FUSION_CHOICES:
+        raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
     axis = _parse_axis(None) if axis is None else axis
     sess = store.get_session(session_id)
     s = store.samples(session_id)
@@ -144,8 +172,17 @@ def joint_orientations_from_store(store, session_id: int,
         # readings of one frame share it; host times are per batch and repeat), else host time
         key_name = "device_t" if np.isfinite(s["device_t"]).all() else "t"
         key = s[key_name]
-        tp, qp, sp = (a[s["name"] == parent] for a in (key, s["q"], s["status"]))
-        tc, qc, sc = (a[s["name"] == child] for a in (key, s["q"], s["status"]))
+        use_vqf, why = _vqf_usable(s, key, parent, child, cal["data"])
+        if fusion == "vqf" and not use_vqf:
+            raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
+        use_vqf = use_vqf and fusion != "device"
+        q_all, fusion_prov = s["q"], {"method": "device"}
+        if use_vqf:
+            q_all, fusion_prov = _fuse_sensors(s, key, parent, child, session_id)
+        elif fusion == "auto":
+            fusion_prov["auto"] = why
+        tp, qp, sp = (a[s["name"] == parent] for a in (key, q_all, s["status"]))
+        tc, qc, sc = (a[s["name"] == child] for a in (key, q_all, s["status"]))
         _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
         if len(ip) < 0.5 * min(len(tp), len(tc)):
             # different clocks: nearest-in-time pairing through the store's aligner
@@ -159,9 +196,16 @@ def joint_orientations_from_store(store, session_id: int,
             status = np.minimum(sp[ip], sc[ic])
             # the child's times in the pairing clock first, its host times too
             times = {key_name: tc[ic], "t": s["t"][s["name"] == child][ic]}
+        if use_vqf:
+            status = None  # the devices' status bytes do not describe the host's fusion
+            model = _refit(qpar, qchi, times, cal["data"], session_id)
+            fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
+            fusion_prov["refit_residuals_deg"] = {k: round(float(v), 3)
+                                                  for k, v in model.residuals_.items()}
         q = model.transform(qpar, qchi)
         prov.update({"source": "imu samples", "calibration_id": int(cal["id"]),
-                     "calibration_residual_deg": cal.get("residual_deg")})
+                     "calibration_residual_deg": cal.get("residual_deg"),
+                     "fusion": fusion_prov})
         checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
         if heading and checkpoints:
             q, prov["heading_correction"] = _heading_correction(
@@ -169,6 +213,81 @@ def joint_orientations_from_store(store, session_id: int,
     side = sess.get("side")
     return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
                      sess.get("pseudonym"), sess.get("joint"))
+
+
+def _vqf_usable(s: dict, key: np.ndarray, parent: str, child: str,
+                cal_data: dict) -> tuple[bool, str]:
+    """Can the session's IMU samples be fused on the host? (yes/no, why not)."""
+    raw = s.get("raw")
+    if raw is None:
+        return False, "the store has no raw samples (schema before v4)"
+    for name in (parent, child):
+        sel = s["name"] == name
+        have = np.isfinite(raw[sel]).all(axis=1)
+        if not have.all():
+            return False, (f"sensor {name!r} has no raw samples for {int((~have).sum())} of "
+                           f"{int(sel.sum())} samples (record with sensors.raw: true)")
+        if (np.diff(key[sel]) <= 0).any():
+            return False, f"sensor {name!r}: sample times repeat (no device clock to fuse on)"
+    origin = (cal_data.get("protocol") or {}).get("origin")
+    if not origin or not (cal_data.get("windows_s") or {}):
+        return False, ("the imu-alignment calibration does not say where its windows are on "
+                       "the samples' clock (protocol.origin), so it cannot be re-fitted")
+    return True, ""
+
+
+def _fuse_sensors(s: dict, key: np.ndarray, parent: str, child: str,
+                  session_id: int) -> tuple[np.ndarray, dict]:
+    """Every sample's ``q`` of the two sensors replaced by its VQF orientation; provenance."""
+    from importlib.metadata import version
+
+    from calibration.errors import CalibrationError
+    from calibration.fusion import fuse_vqf
+
+    q = np.array(s["q"], dtype=np.float64, copy=True)
+    prov: dict[str, Any] = {"method": "vqf", "library": f"vqf {version('vqf')}"}
+    per: dict[str, dict] = {}
+    for name in (parent, child):
+        sel = s["name"] == name
+        try:
+            res = fuse_vqf(key[sel], s["raw"][sel])
+        except CalibrationError as err:
+            raise RigConfigError(f"session {session_id}: sensor {name!r}: {err}") from err
+        q[sel] = res.q
+        prov["params"] = res.params
+        per[name] = {"rate_hz": round(res.rate_hz, 3), "pieces": res.pieces,
+                     "mag_disturbed_share": round(res.disturbed_share, 4),
+                     "gyro_bias_dps": res.bias_dps}
+    prov["sensors"] = per
+    prov["status_filter"] = "none (VQF rejects magnetic disturbances itself)"
+    return q, prov
+
+
+def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal_data: dict,
+           session_id: int):
+    """:class:`~calibration.alignment.ImuJointCalibration` fitted on the paired (fused)
+    orientations inside the stored calibration's static and functional windows."""
+    from calibration.alignment import ImuJointCalibration
+    from calibration.errors import CalibrationError
+
+    origin = cal_data["protocol"]["origin"]
+    clock = times.get(origin.get("time"))
+    if clock is None:
+        raise RigConfigError(f"session {session_id}: the calibration's windows are on the "
+                             f"{origin.get('time')} clock, which the pairing did not keep")
+    t0 = float(origin["t0"])
+    sel = {}
+    for name in ("static", "functional"):
+        w = _window((cal_data["windows_s"] or {}).get(name))
+        if w is None:
+            raise RigConfigError(f"session {session_id}: the calibration has no {name} window")
+        sel[name] = (clock >= t0 + w[0]) & (clock <= t0 + w[1])
+    try:
+        return ImuJointCalibration().fit(qpar[sel["static"]], qchi[sel["static"]],
+                                         qpar[sel["functional"]], qchi[sel["functional"]])
+    except CalibrationError as err:
+        raise RigConfigError(f"session {session_id}: re-fitting the calibration on the VQF "
+                             f"orientations: {err}") from err
 
 
 def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, checkpoints,
@@ -265,8 +384,11 @@ def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tupl
               show_default=True, help="Swing-dependent twist limits.")
 @click.option("--store/--no-store", "store_result", default=True, show_default=True,
               help="With --db: also store the boundary in the session database.")
+@click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
+              help="IMU sessions: orientations fused by the devices, or by VQF on the host "
+              "from the raw samples (auto: VQF when every sample has raw data).")
 def boundary(file, db, session_id, reference, limb, limb_axis, out, name, side, alpha_deg,
-             max_vertices, by_swing, store_result) -> None:
+             max_vertices, by_swing, store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
@@ -277,7 +399,7 @@ def boundary(file, db, session_id, reference, limb, limb_axis, out, name, side, 
     if not out_path.parent.is_dir():
         raise RigConfigError(f"--out {out}: directory {out_path.parent} does not exist")
     data = load_joint_orientations(file, db=db, session_id=session_id, reference=reference,
-                                   limb=limb, limb_axis=limb_axis)
+                                   limb=limb, limb_axis=limb_axis, fusion=fusion)
     result = extract(data, name=name, side=side, alpha_deg=alpha_deg,
                      max_vertices=max_vertices, by_swing=by_swing)
     from models.constraint import dump_constraint

@@ -30,15 +30,18 @@ import click
 @click.option("--reference", "reference_path", default=None, type=click.Path(dir_okay=False),
               metavar="C.yaml", help="A constraint drawn dashed for comparison (e.g. a "
                                      "simulated patient's true range).")
-def report(db, session_id, model_path, out_path, age, sex, reference_path) -> None:
+@click.option("--fusion", type=click.Choice(["auto", "device", "vqf"]), default="auto",
+              show_default=True, help="IMU recordings: orientations fused by the devices, or by "
+              "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
+def report(db, session_id, model_path, out_path, age, sex, reference_path, fusion) -> None:
     """Write the clinician's HTML report of a session."""
     path = run_report(db, session_id, out_path, model=model_path, age=age, sex=sex,
-                      reference=reference_path)
+                      reference=reference_path, fusion=fusion)
     click.echo(f"wrote {path}")
 
 
 def run_report(db, session_id: int, out_path, *, model=None, age=None, sex=None,
-               reference=None) -> Path:
+               reference=None, fusion: str = "auto") -> Path:
     """What ``rig report`` does; checks every file and the session before drawing anything."""
     from rig.errors import RigConfigError
     from rig.report.session import report_for_session
@@ -59,4 +62,4 @@ def run_report(db, session_id: int, out_path, *, model=None, age=None, sex=None,
     with open_store(db, create=False) as store:
         store.get_session(session_id)  # "no session N in DB" before any work
         return report_for_session(store, session_id, out, model=model, age=age, sex=sex,
-                                  reference=ref)
+                                  reference=ref, fusion=fusion)

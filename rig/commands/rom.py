@@ -33,8 +33,11 @@ from rig.errors import RigConfigError
               help="Patient age, for the population reference band.")
 @click.option("--sex", type=click.Choice(["female", "male"]), default=None,
               help="Patient sex, for the population reference.")
+@click.option("--fusion", type=click.Choice(["auto", "device", "vqf"]), default="auto",
+              show_default=True, help="IMU sessions: orientations fused by the devices, or by "
+              "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
 def rom(file, db, session_id, reference, limb, limb_axis, constraint_path, side, age,
-        sex) -> None:
+        sex, fusion) -> None:
     """Print the clinical range of motion (ISB angles, peaks, normative values)."""
     from calibration.clinical import format_rom_table, range_of_motion
 
@@ -53,7 +56,7 @@ def rom(file, db, session_id, reference, limb, limb_axis, constraint_path, side,
 
         check_source(file, db, session_id, reference, limb)
         data = load_joint_orientations(file, db=db, session_id=session_id, reference=reference,
-                                       limb=limb, limb_axis=limb_axis)
+                                       limb=limb, limb_axis=limb_axis, fusion=fusion)
         side = side or data.side or "right"
         constraint = extract(data, side=side).constraint_
         source = file if file is not None else f"session {session_id}"

@@ -212,7 +212,7 @@ def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
 
 def report_data_for_session(store, session_id: int, *, model=None, age: int | None = None,
                             sex: str | None = None, reference=None,
-                            eval_n: int = 4000) -> ReportData:
+                            eval_n: int = 4000, fusion: str = "auto") -> ReportData:
     """Everything the report of ``session_id`` shows (see the module docstring).
 
     Parameters
@@ -231,6 +231,9 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         A boundary drawn dashed for comparison (e.g. the simulated patient's true range).
     eval_n : int
         Held-out orientations for the model section.
+    fusion : {"auto", "device", "vqf"}
+        Where an IMU recording's orientations come from when its boundary is extracted
+        (:func:`rig.commands.boundary.joint_orientations_from_store`).
     """
     from rig import __version__
     from rig.errors import RigConfigError
@@ -252,7 +255,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
         joint = None
         try:
-            joint = joint_orientations_from_store(store, rec_id)
+            joint = joint_orientations_from_store(store, rec_id, fusion=fusion)
         except RigConfigError as err:
             data.rom_note = f"Samples not usable for the boundary: {err}."
         constraint, rep, origin = _boundary(store, rec_id, joint)
@@ -331,10 +334,10 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000) -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
     """Write the HTML report of a session (:func:`report_data_for_session`); returns its path."""
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
-                                   reference=reference, eval_n=eval_n)
+                                   reference=reference, eval_n=eval_n, fusion=fusion)
     return write_report(data, out_path)
 
 
