@@ -51,7 +51,7 @@ def test_raw_sample_in_one_burst_in_si_units():
         m = sim.last
         np.testing.assert_allclose(s.raw[:3], m.accel[k], atol=0.0051)  # 1 mg LSB
         np.testing.assert_allclose(s.raw[3:6], m.gyro[k], atol=1 / 1800 + 1e-9)
-    with Bno055Simulator(limb) as sim, Bno055(sim.port) as dev:
+    with Bno055Simulator(seed=5) as sim, Bno055(sim.port) as dev:
         dev.set_mode(B.OperationMode.NDOF)
         assert dev.sample().raw is None
 
