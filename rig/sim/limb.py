@@ -25,6 +25,20 @@ of the time the raw motion lies outside the range; the oracle's ``project`` then
 nearest boundary point, and the limb slides **along the limit** — the motion a boundary
 recording needs.
 
+Speed limit. ``P(target(t))`` alone (``P`` the projection, ``target`` the raw motion with the
+protocol and checkpoint blends below) jumps where a target outside a concave boundary crosses
+the exterior medial axis (on ``star_patient(204)``: up to 16,000°/s at 100 Hz). The limb
+therefore follows it at no more than ``max_speed_dps`` (360°/s): on a fixed global grid
+``i · 10 ms`` from ``t = 0``, computed lazily in 10 s chunks and kept, ``f_i = c_i`` (the
+closed form) while the closed form moves at most one step ``v·10 ms`` per interval and both
+halves of the interval alike (no jump inside it); otherwise ``f`` steps towards ``c_i`` along a
+path inside the range (the chord's projected midpoints, bisected until within one step; a step
+towards the range's centre when stuck in a corner) and rejoins the closed form once within one
+step of it. Between grid points off the closed form the limb moves along the same projected
+bisection of the interval. Everywhere else ``joint(t)`` is the closed form at ``t`` exactly.
+The values do not depend on the order or batching of evaluations. Residual: sampled at 1 kHz,
+steps of up to ~2° in 1 ms remain where the projected path itself crosses a medial axis.
+
 The range of motion is a :class:`models.constraint.JointConstraint` (default: a 60° cone about
 +X with twist ±45°), projected by the exact oracle :class:`models.oracle.ConstraintOracle` —
 the one implementation the datasets, the evaluation and the live supervisor use too.
@@ -40,8 +54,20 @@ Sensor errors (per sensor, :class:`NoiseModel`)
   ``a = exp(-Δt/τ)``; ``h`` the sum of magnetic disturbances: Poisson events (rate
   ``disturbance_rate_hz``) of peak ``N(0, disturbance_deg²)`` shaped ``sin²(π u)`` over
   ``u ∈ [0, 1]`` of a duration uniform in ``disturbance_duration_s``;
-- the gyroscope reads the true sensor-frame angular rate plus a constant bias
-  ``N(0, gyro_bias_dps²)`` and white noise ``N(0, gyro_noise_dps²)``;
+- the gyroscope reads the true sensor-frame angular rate (from ``q(t)* ⊗ q(t + 1 ms)``) plus a
+  constant bias ``N(0, gyro_bias_dps²)`` and white noise ``N(0, gyro_noise_dps²)``;
+- the accelerometer reads the specific force ``R_sᵀ (a_lin + 9.81 ẑ)`` m/s² plus white noise
+  ``N(0, accel_noise²)``, ``a_lin`` the central second difference (1 ms) of the sensor's world
+  position: limb sensors ``limb_lever_m`` (0.15 m) along the limb axis from a world-fixed
+  shoulder centre, the thorax sensor ``thorax_lever_m`` (0.3 m) above (thorax −X) a world-fixed
+  pelvis pivot;
+- the magnetometer reads ``R_sᵀ (m_h' + m_v)`` µT plus white noise ``N(0, mag_noise_ut²)``: the
+  earth field ``field_ut · (0, cos dip, −sin dip)`` (north = world +Y) with its horizontal part
+  turned by ``−h(t)`` about world Z — the same disturbance event as the fused heading error
+  ``h(t)`` above, the sign with which a fusion that follows the field fully reports ``+h``
+  (TRIAD of the ideal accelerometer and magnetometer gives the device's quaternion); the
+  accelerometer/magnetometer noise has a random stream of its own (derived from the seed
+  sequence), so every other draw is unchanged;
 - the calibration status (``CALIB_STAT`` byte) rises from 0 to 3 per component at seeded times
   spread over ``calibration_time_s``; during a disturbance of more than 3° the magnetometer
   (and so the system) status drops to 1.
@@ -78,6 +104,7 @@ times are sampled.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -103,6 +130,12 @@ _Y = np.array([0.0, 1.0, 0.0])
 GRAVITY = 9.81
 """m/s², the accelerometer's specific force at rest, along world +Z (up)."""
 _RAW_STEP_S = 1e-3  # finite-difference step of the gyroscope and accelerometer, seconds
+_FOLLOW_STEP_S = 0.01  # the speed-limited follower's global time grid, seconds
+_FOLLOW_CHUNK = 1000  # grid points computed at a time (10 s)
+_FOLLOW_REFINE = 10  # bisections of a grid interval of the follower's path, at most ...
+_FOLLOW_FINE = math.radians(0.05)  # ... until its pieces are this short, rad
+_FOLLOW_DEPTH = 12  # bisections of the follower's path per step, at most
+_FOLLOW_TOL = 0.25  # a grid interval whose halves differ by this share of a step: a jump
 
 
 def _exp_map(rotvec: np.ndarray) -> np.ndarray:
@@ -330,6 +363,7 @@ class SimulatedLimb:
         neutral_sd_deg: float = 2.0,
         limb_lever_m: float = 0.15,
         thorax_lever_m: float = 0.3,
+        max_speed_dps: float = 360.0,
     ) -> None:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         # the neutral poses' own seed sequence: derived from the seed without drawing from it
@@ -408,6 +442,11 @@ class SimulatedLimb:
         for name, v in (("limb_lever_m", limb_lever_m), ("thorax_lever_m", thorax_lever_m)):
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be >= 0, got {v!r}")
+        if not (math.isfinite(max_speed_dps) and max_speed_dps > 0):
+            raise ValueError(f"max_speed_dps must be > 0, got {max_speed_dps!r}")
+        self.max_speed_dps = float(max_speed_dps)
+        self._follow_lock = threading.Lock()
+        self._follow: _Follower | None = None
         self.limb_lever_m = float(limb_lever_m)
         self.thorax_lever_m = float(thorax_lever_m)
         # each sensor's position relative to its world-fixed pivot, in the sensor frame
@@ -554,10 +593,68 @@ class SimulatedLimb:
     def joint(self, t) -> np.ndarray:
         """Joint orientation (N, 4), limb relative to thorax, inside the range of motion
         (after the calibration protocol when the patient performs one; in the neutral pose at
-        the neutral checkpoints when ``neutral_every_s > 0``)."""
+        the neutral checkpoints when ``neutral_every_s > 0``), at times ``t`` (N,) seconds.
+
+        The closed form ``P(target(t))`` wherever it moves at most ``max_speed_dps``; where it
+        would move faster (a jump of the projection), the speed-limited follower (module
+        docstring). Deterministic: the same value at a time whatever else is evaluated, and in
+        whatever order or batches."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        raw = self.raw_joint(t)
         plan = self._plan
+        out = self._closed_joint(t, plan)
+        if not len(t):
+            return out
+        follow = self._follower(plan)
+        dt = _FOLLOW_STEP_S
+        i = np.floor(t / dt)
+        ok = np.isfinite(i) & (i >= 0)
+        if not ok.any():
+            return out
+        idx, val = follow.extend(int(i[ok].max()) + 1)
+        if not len(idx):
+            return out
+        ii = np.where(ok, i, -2).astype(np.int64)
+        # grid interval [i, i + 1] follows when either end is off the closed form
+        pos = np.searchsorted(idx, ii)
+        pos = np.minimum(pos, len(idx) - 1)
+        hit_left = idx[pos] == ii
+        pos1 = np.minimum(pos + hit_left, len(idx) - 1)
+        hit_right = idx[pos1] == ii + 1
+        off = follow.off_at(ii) | follow.off_at(ii + 1)
+        off &= ok & hit_left & hit_right
+        if not off.any():
+            return out
+        a, b = val[pos[off]], val[pos1[off]]
+        w = np.clip(t[off] / dt - ii[off], 0.0, 1.0)
+        out[off] = self._along(a, b, w)
+        return out
+
+    def _along(self, a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Points (N, 4) at fractions ``w`` (N,) of the follower's path between grid values
+        ``a`` and ``b`` (N, 4): the chord refined by ``_FOLLOW_REFINE`` projected bisections
+        until its pieces are short (the same path whatever ``w``), then projected."""
+        project = self.oracle.project
+        lo, hi = a.copy(), b.copy()
+        wl, wh = np.zeros_like(w), np.ones_like(w)
+        half = np.full(len(w), 0.5)
+        for _ in range(_FOLLOW_REFINE):
+            todo = np.flatnonzero(_angles(lo, hi) > _FOLLOW_FINE)
+            if not len(todo):
+                break
+            mid = project(_slerp(lo[todo], hi[todo], half[todo]), normalize=True).reshape(-1, 4)
+            mid /= np.linalg.norm(mid, axis=1, keepdims=True)
+            wm = 0.5 * (wl[todo] + wh[todo])
+            left = w[todo] <= wm
+            hi[todo] = np.where(left[:, None], mid, hi[todo])
+            wh[todo] = np.where(left, wm, wh[todo])
+            lo[todo] = np.where(left[:, None], lo[todo], mid)
+            wl[todo] = np.where(left, wl[todo], wm)
+        q = project(_slerp(lo, hi, (w - wl) / (wh - wl)), normalize=True).reshape(-1, 4)
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+    def _closed_joint(self, t: np.ndarray, plan) -> np.ndarray:
+        """``P(target(t))`` (N, 4): the projection of the raw, protocol and checkpoint target."""
+        raw = self.raw_joint(t)
         if plan is not None:
             protocol, start = plan
             u = t - start
@@ -569,6 +666,13 @@ class SimulatedLimb:
             raw = self._neutral_blend(t, raw, plan)
         q = self.oracle.project(raw, normalize=True).reshape(-1, 4)
         return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+    def _follower(self, plan) -> _Follower:
+        with self._follow_lock:
+            f = self._follow
+            if f is None or f.plan is not plan:
+                f = self._follow = _Follower(self, plan)
+            return f
 
     def thorax(self, t) -> np.ndarray:
         """Thorax relative to world (N, 4) at times ``t`` (N,)."""
@@ -740,6 +844,125 @@ class SimulatedLimb:
                     total += peak * math.sin(math.pi * u) ** 2
         err.events = keep
         return total
+
+
+class _Follower:
+    """The speed-limited joint motion on the global grid ``i · _FOLLOW_STEP_S``, computed
+    lazily from ``t = 0`` in chunks of ``_FOLLOW_CHUNK`` grid points and kept: only the grid
+    points where it differs from the closed form, and their neighbours, are stored."""
+
+    def __init__(self, limb: SimulatedLimb, plan) -> None:
+        self.limb = limb
+        self.plan = plan
+        self.step = math.radians(limb.max_speed_dps) * _FOLLOW_STEP_S  # rad per grid step
+        # the centre of the range: limb direction at the motion's centre, middle twist
+        self.home = _unit(Q.multiply(Q.from_two_vectors(limb.limb_axis, limb.centre),
+                                     Q.from_axis_angle(limb.limb_axis, limb.twist_centre)))
+        self.lock = threading.Lock()
+        self.done = 0  # grid points computed: 0 .. done - 1
+        self.f: np.ndarray | None = None  # value at done - 1
+        self.on = True  # f equals the closed form at done - 1
+        self.idx = np.empty(0, np.int64)  # stored grid points (sorted)
+        self.val = np.empty((0, 4))
+        self.off = np.empty(0, np.int64)  # grid points where the follower is off the closed form
+
+    def off_at(self, i: np.ndarray) -> np.ndarray:
+        if not len(self.off):
+            return np.zeros(i.shape, bool)
+        pos = np.minimum(np.searchsorted(self.off, i), len(self.off) - 1)
+        return self.off[pos] == i
+
+    def extend(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Compute the grid up to point ``n`` (inclusive); the stored points and values."""
+        with self.lock:
+            while self.done <= n:
+                self._chunk()
+            return self.idx, self.val
+
+    def _chunk(self) -> None:
+        limb, step = self.limb, self.step
+        n0 = self.done
+        grid = (n0 + np.arange(_FOLLOW_CHUNK)) * _FOLLOW_STEP_S
+        both = limb._closed_joint(np.concatenate((grid, grid - 0.5 * _FOLLOW_STEP_S)), self.plan)
+        c, mid = both[:_FOLLOW_CHUNK], both[_FOLLOW_CHUNK:]
+        prev = c[:1] if self.f is None else self.f[None]
+        seq = np.concatenate((prev, c))
+        # closed-form steps too fast, or a jump inside the interval (its two halves unequal)
+        left, right = _angles(seq[:-1], mid), _angles(mid, seq[1:])
+        big = (_angles(seq[:-1], seq[1:]) > step) | (np.abs(left - right) > _FOLLOW_TOL * step)
+        if self.f is None:
+            big[0] = False
+        big = np.flatnonzero(big)
+        f, on = seq[0], self.on
+        idx, val, off = [], [], []
+        i, n = 0, len(c)
+        while i < n:
+            if on:
+                j = big[np.searchsorted(big, i)] if len(big) and big[-1] >= i else n
+                if j >= n:
+                    f = c[-1]
+                    break
+                i = j
+                on = False
+                if i > 0:  # the last point on the closed form, a neighbour of the first off
+                    idx.append(n0 + i - 1)
+                    val.append(c[i - 1])
+                f = c[i - 1] if i > 0 else f
+            f, on = self._step(f, c[i])
+            off.append(n0 + i)  # (on again: c[i] reached, along the follower's path)
+            idx.append(n0 + i)
+            val.append(f)
+            i += 1
+        if idx:
+            self.idx = np.concatenate((self.idx, np.array(idx, np.int64)))
+            self.val = np.concatenate((self.val, np.array(val)))
+            keep = np.unique(self.idx, return_index=True)[1]
+            self.idx, self.val = self.idx[keep], self.val[keep]
+        if off:
+            self.off = np.concatenate((self.off, np.array(off, np.int64)))
+        self.f, self.on = np.asarray(f, dtype=np.float64), on
+        self.done = n0 + n
+
+
+    def _step(self, f: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, bool]:
+        """One grid step of the follower from ``f`` towards the closed form ``c`` (both (4,)):
+        ``(c, True)`` when within reach, else the point reached and False."""
+        step, project = self.step, self.limb.oracle.project
+        a = _angles(f[None], c[None])[0]
+        if a <= step:
+            return c, True
+        # a path inside the range from f to c by projected bisection of the chord: the
+        # nearest of its nodes within reach (the chord of two limit poses round a concave
+        # corner leaves the range; its projected midpoint goes round the corner)
+        target = c
+        for _ in range(_FOLLOW_DEPTH):
+            target = _unit(project(_slerp(f[None], target[None], np.array([0.5]))[0],
+                                   normalize=True))
+            a = _angles(f[None], target[None])[0]
+            if a <= step:
+                break
+        if a > step:  # still out of reach: step along the chord and project
+            target = _unit(project(_slerp(f[None], target[None], np.array([step / a]))[0],
+                                   normalize=True))
+            a = _angles(f[None], target[None])[0]
+        if a < 0.1 * step:  # stuck in a corner of the range: step towards its centre instead
+            home = self.home
+            b = _angles(f[None], home[None])[0]
+            if b > 0:
+                target = _unit(project(_slerp(f[None], home[None],
+                                              np.array([min(1.0, step / b)]))[0],
+                                       normalize=True))
+        return target, False
+
+
+def _unit(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q)
+
+
+def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation angles (N,) between orientations ``a`` and ``b`` (N, 4), radians."""
+    d = np.abs(np.sum(a * b, axis=-1))
+    return 2.0 * np.arccos(np.minimum(d, 1.0))
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
