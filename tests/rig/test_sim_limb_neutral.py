@@ -60,7 +60,9 @@ def test_on_changes_only_the_checkpoints_and_no_random_draw():
     near = np.zeros(len(t), bool)
     for t0, t1 in w:
         # (the gyro is taken from t and t + 1 ms)
-        near |= (t > t0 - on.neutral_ramp_s - 2e-3) & (t < t1 + on.neutral_ramp_s)
+        # (the motion's smoothing reaches two knots, 2 x smooth_s, either side)
+        m = 2.0 * on.smooth_s
+        near |= (t > t0 - on.neutral_ramp_s - m - 2e-3) & (t < t1 + on.neutral_ramp_s + m)
     assert near.sum() > 0 and (~near).sum() > 0
     qa, qb = base.joint(t), on.joint(t)
     assert np.array_equal(qa[~near], qb[~near])
@@ -81,9 +83,10 @@ def test_hold_is_the_checkpoints_neutral_pose():
     assert len(windows) == 8
     q = limb.joint(t)
     poses = limb.neutral_poses(np.arange(1, len(windows) + 1))
+    m = 2.0 * limb.smooth_s  # the motion's smoothing reaches two knots either side
     for k, (t0, t1) in enumerate(windows):
-        inside = (t >= t0) & (t <= t1)
-        assert inside.sum() >= 199
+        inside = (t >= t0 + m) & (t <= t1 - m)
+        assert inside.sum() >= 183
         held = q[inside]
         # constant, and the checkpoint's pose (well inside the default cone: not projected)
         assert _angle_deg(held, np.broadcast_to(held[0], held.shape)).max() < 1e-9
@@ -154,7 +157,7 @@ def test_checkpoints_start_after_the_protocol_and_its_hand_over():
     first = limb.neutral_windows(100.0)[0]
     assert first[0] - limb.neutral_ramp_s >= limb.protocol_end_s + limb.blend_s
     # protocol and hand-over exactly as without checkpoints
-    t = np.arange(0.0, first[0] - limb.neutral_ramp_s, 0.005)
+    t = np.arange(0.0, first[0] - limb.neutral_ramp_s - 2.0 * limb.smooth_s, 0.005)
     assert np.array_equal(base.joint(t), limb.joint(t))
     # a protocol given later (as the back-driven servo patient gets it) moves the schedule
     late = SimulatedLimb(seed=4, neutral_every_s=8.0)
@@ -178,8 +181,9 @@ def test_neutral_windows():
                           calibration_protocol=CalibrationProtocol(), protocol_start_s=0.0,
                           blend_s=2.0)
     np.testing.assert_allclose(other.neutral_windows(50.0), [[27, 30], [37, 40], [47, 50]])
-    # the windows are where the limb holds still
-    t = np.linspace(27.0, 30.0, 301)
+    # the windows are where the limb holds still (but for the smoothing's two knots each end)
+    m = 2.0 * other.smooth_s
+    t = np.linspace(27.0 + m, 30.0 - m, 301)
     q = other.joint(t)
     assert _angle_deg(q, np.broadcast_to(q[0], q.shape)).max() < 1e-9
 
