@@ -8,8 +8,10 @@ Layout (current version :data:`SCHEMA_VERSION`)::
      |            started_at, ended_at, dropped, meta,
      |            writer_host, writer_pid, writer_start, heartbeat_at, last_sample_at)  (v3)
           +-- sensors(id, session_id, name, segment, kind, port)       UNIQUE(session_id, name)
-          +-- samples(id, session_id, sensor_id, t, device_t, w, x, y, z, status)
-          |        index (session_id, sensor_id, t)
+          +-- samples(id, session_id, sensor_id, t, device_t, w, x, y, z, status,
+          |           acc_x, acc_y, acc_z, gyr_x, gyr_y, gyr_z, mag_x, mag_y, mag_z)  (v4)
+          |        index (session_id, sensor_id, t); (v4) partial index (session_id,
+          |        sensor_id) of the samples with a raw reading
           +-- calibrations(id, session_id, kind, data, residual_deg, created_at)
           +-- annotations(id, session_id, t, text, created_at)
           +-- boundaries(id, session_id NULL, constraint_yaml, meta, created_at)
@@ -29,7 +31,7 @@ Migration policy: migrations are *append-only* functions ``_mN(conn)`` in :data:
 each creates or alters tables with definitions frozen inside the function (never the current
 :data:`metadata`, which may change later), runs in one transaction together with the row it
 adds to ``schema_version``, and is never edited once released. A database newer than the code
-is refused, never downgraded. ``tests/rig/test_store.py`` checks that version-1 and version-2
+is refused, never downgraded. ``tests/rig/test_store.py`` checks that version-1, -2 and -3
 databases are migrated to the current schema with their data intact, and that the migrated
 tables equal :data:`metadata`.
 
@@ -38,6 +40,14 @@ older sessions read as "writer unknown"): who writes the session (``writer_host`
 ``writer_pid``, ``writer_start`` -- see :mod:`rig.store.liveness`) and the writer's heartbeat
 (``heartbeat_at``, Unix time of its last commit; ``last_sample_at``, Unix time of the newest
 sample committed).
+
+Version 4 adds nine nullable float64 columns to ``samples`` (:data:`RAW_COLUMNS`): the IMU's
+raw reading -- accelerometer ``acc_x..z`` (m/s², specific force), gyroscope ``gyr_x..z``
+(rad/s), magnetometer ``mag_x..z`` (µT), all in the sensor frame. NULL where a sample has no
+raw reading (every sample written before version 4, joint samples, devices that do not send
+it). A partial index ``ix_samples_raw`` (session_id, sensor_id) holds only the samples with a
+raw reading (any of the nine not NULL), so "does this session have raw readings?" is an index
+lookup instead of a scan.
 """
 
 from __future__ import annotations
@@ -58,6 +68,7 @@ from sqlalchemy import (
     Table,
     Text,
     UniqueConstraint,
+    func,
     select,
     text,
 )
@@ -223,6 +234,37 @@ def _v3_tables(md: MetaData) -> None:
         md.tables["sessions"].append_column(col)
 
 
+#: The raw-reading columns of ``samples`` (v4), in the order of ``SampleBatch.raw``.
+RAW_COLUMNS: tuple[str, ...] = tuple(
+    f"{group}_{axis}" for group in ("acc", "gyr", "mag") for axis in "xyz"
+)
+
+
+def _v4_sample_columns() -> list[Column]:
+    """Version-4 columns of ``samples``, frozen: the IMU's raw reading, sensor frame."""
+    return [
+        Column(name, Double)
+        for name in ("acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z",
+                     "mag_x", "mag_y", "mag_z")
+    ]
+
+
+def _v4_raw_index(samples_table: Table) -> Index:
+    """Version-4 partial index, frozen: the samples that have a raw reading, so that a reader
+    learns whether a session (or sensor) has any without scanning its samples."""
+    has_raw = func.coalesce(*(samples_table.c[c] for c in (
+        "acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z", "mag_x", "mag_y", "mag_z",
+    ))).is_not(None)
+    return Index("ix_samples_raw", samples_table.c.session_id, samples_table.c.sensor_id,
+                 sqlite_where=has_raw, postgresql_where=has_raw)
+
+
+def _v4_tables(md: MetaData) -> None:
+    for col in _v4_sample_columns():
+        md.tables["samples"].append_column(col)
+    _v4_raw_index(md.tables["samples"])  # attaches itself to the table
+
+
 def _m1(conn: Connection) -> None:
     md = MetaData()
     _v1_tables(md)
@@ -245,12 +287,27 @@ def _m3(conn: Connection) -> None:
         ))
 
 
+def _m4(conn: Connection) -> None:
+    prep = conn.dialect.identifier_preparer
+    for col in _v4_sample_columns():  # nullable, no default: old rows read as "no raw"
+        conn.execute(text(
+            f"ALTER TABLE samples ADD COLUMN {prep.quote(col.name)} "
+            f"{col.type.compile(dialect=conn.dialect)}"
+        ))
+    md = MetaData()
+    _v1_tables(md)
+    for col in _v4_sample_columns():
+        md.tables["samples"].append_column(col)
+    _v4_raw_index(md.tables["samples"]).create(conn)  # empty: no old sample has raw
+
+
 #: Ordered, append-only: (version, description, function).
 MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
         "boundaries, models", _m1),
     (2, "live loop: runs, telemetry", _m2),
     (3, "sessions: writer (host, pid, process start) and heartbeat", _m3),
+    (4, "samples: raw accelerometer, gyroscope, magnetometer (acc_x..mag_z)", _m4),
 ]
 
 #: The version this code reads and writes.
@@ -262,6 +319,7 @@ metadata = MetaData()
 _v1_tables(metadata)
 _v2_tables(metadata)
 _v3_tables(metadata)
+_v4_tables(metadata)
 
 schema_version = metadata.tables["schema_version"]
 patients = metadata.tables["patients"]

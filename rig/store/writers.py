@@ -20,6 +20,11 @@ key, no extra commit. With nothing to commit, the thread still refreshes the hea
 ``last_sample_at``: the newest committed sample's ``t`` (the host's monotonic clock, as the
 sources stamp it) converted to Unix time with the clocks' offset at the commit, never later
 than the commit itself.
+
+Samples may carry the IMU's raw reading (``raw=``: accelerometer m/s², gyroscope rad/s,
+magnetometer µT, sensor frame; the columns :data:`~rig.store.schema.RAW_COLUMNS`). NaN values
+are stored as SQL NULL and read back as NaN; a commit in which no sample has a raw reading
+inserts only the orientation columns, so recordings without raw readings cost what they did.
 """
 
 from __future__ import annotations
@@ -37,6 +42,8 @@ from sqlalchemy import select
 from rig.errors import RigConfigError
 from rig.store import schema as S
 from rig.store.liveness import IDLE_HEARTBEAT_S
+
+_NO_RAW = (None,) * 9
 
 if TYPE_CHECKING:
     from rig.store.store import Store
@@ -203,7 +210,8 @@ class SampleWriter(_BatchWriter):
         self.dropped = int(n)
 
     def add(self, t: float, device_t: float | None, name: str, kind: str,
-            q: Sequence[float] | np.ndarray, status: int = 0) -> None:
+            q: Sequence[float] | np.ndarray, status: int = 0,
+            raw: Sequence[float] | np.ndarray | None = None) -> None:
         """Queue one sample.
 
         Parameters
@@ -220,6 +228,10 @@ class SampleWriter(_BatchWriter):
             Orientation ``w, x, y, z``; must be finite and non-zero (not renormalised here).
         status : int
             Calibration status byte, or 0.
+        raw : (9,) float or None
+            The IMU's raw reading ``acc_x, acc_y, acc_z`` (m/s²), ``gyr_x..z`` (rad/s),
+            ``mag_x..z`` (µT), sensor frame; NaN values are stored as NULL (none). Infinite
+            values are refused.
         """
         w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
         t = float(t)
@@ -230,12 +242,16 @@ class SampleWriter(_BatchWriter):
                 f"got {(w, x, y, z)}"
             )
         dt = None if device_t is None else float(device_t)
-        self._append([(t, dt, name, kind, w, x, y, z, int(status))])
+        rw = None if raw is None else _raw_row(raw, name, t)
+        self._append([(t, dt, name, kind, w, x, y, z, int(status), rw)])
 
     def add_many(self, t: np.ndarray, device_t: np.ndarray | None, name: str | Sequence[str],
-                 kind: str | Sequence[str], q: np.ndarray, status: np.ndarray | int = 0) -> None:
+                 kind: str | Sequence[str], q: np.ndarray, status: np.ndarray | int = 0,
+                 raw: np.ndarray | None = None) -> None:
         """Queue N samples: ``t`` (N,), ``device_t`` (N,) or None (NaN = none), ``name`` and
-        ``kind`` a string or (N,), ``q`` (N, 4) ``w, x, y, z``, ``status`` (N,) or an int."""
+        ``kind`` a string or (N,), ``q`` (N, 4) ``w, x, y, z``, ``status`` (N,) or an int,
+        ``raw`` (N, 9) or None: the raw readings as in :meth:`add` (NaN = none, stored as
+        NULL; a row of NaN is a sample without a raw reading)."""
         t = np.asarray(t, dtype=np.float64).reshape(-1)
         q = np.asarray(q, dtype=np.float64)
         n = t.shape[0]
@@ -261,11 +277,20 @@ class SampleWriter(_BatchWriter):
         st = np.broadcast_to(np.asarray(status, dtype=np.int64), (n,)).tolist()
         if len(names) != n or len(kinds) != n:
             raise RigConfigError(f"add_many: name and kind must be a string or have length {n}")
+        raws = _raw_rows(raw, n, t)
         ql = q.tolist()
-        rows = [
-            (tt, dd, nm, kd, qq[0], qq[1], qq[2], qq[3], ss)
-            for tt, dd, nm, kd, qq, ss in zip(t.tolist(), dts, names, kinds, ql, st, strict=True)
-        ]
+        if raws is None:
+            rows = [
+                (tt, dd, nm, kd, qq[0], qq[1], qq[2], qq[3], ss, None)
+                for tt, dd, nm, kd, qq, ss in zip(t.tolist(), dts, names, kinds, ql, st,
+                                                  strict=True)
+            ]
+        else:
+            rows = [
+                (tt, dd, nm, kd, qq[0], qq[1], qq[2], qq[3], ss, rr)
+                for tt, dd, nm, kd, qq, ss, rr in zip(t.tolist(), dts, names, kinds, ql, st,
+                                                      raws, strict=True)
+            ]
         self._append(rows)
 
     def _session_of(self, store: Store) -> int:
@@ -300,8 +325,11 @@ class SampleWriter(_BatchWriter):
                     "sensor_id": self._sensor_id(conn, nm, kd, new),
                     "t": t, "device_t": dt, "w": w, "x": x, "y": y, "z": z, "status": st,
                 }
-                for (t, dt, nm, kd, w, x, y, z, st) in rows
+                for (t, dt, nm, kd, w, x, y, z, st, _) in rows
             ]
+            if any(r[9] is not None for r in rows):  # executemany: the same keys in every row
+                for p, r in zip(params, rows, strict=True):
+                    p.update(zip(S.RAW_COLUMNS, _NO_RAW if r[9] is None else r[9], strict=True))
             conn.execute(S.samples.insert(), params)
             t_max = max(self._t_max, max(r[0] for r in rows))
             # the newest sample's t on the Unix clock, never after this commit
@@ -321,6 +349,47 @@ class SampleWriter(_BatchWriter):
             with self._store._tx() as conn:
                 self._heartbeat(conn, dropped=int(dropped))
             self._dropped_written = dropped
+
+
+def _raw_row(raw: Sequence[float] | np.ndarray, name: str, t: float) -> tuple | None:
+    """One raw reading as column values (NaN -> None), or None when it has no value."""
+    r = np.asarray(raw, dtype=np.float64).reshape(-1)
+    if r.shape != (9,):
+        raise RigConfigError(f"sample of {name!r} at t={t}: raw must have 9 values "
+                             f"(acc, gyr, mag x/y/z), got {r.shape[0]}")
+    if np.isinf(r).any():
+        raise RigConfigError(f"sample of {name!r} at t={t}: raw reading must be finite "
+                             f"(NaN for none), got {r.tolist()}")
+    vals = r.tolist()
+    if all(v != v for v in vals):  # all NaN: no raw reading
+        return None
+    return tuple(None if v != v else v for v in vals)
+
+
+def _raw_rows(raw: np.ndarray | None, n: int, t: np.ndarray) -> list | None:
+    """N raw readings as column-value tuples (NaN -> None; a NaN row -> None), or None when
+    no sample has one."""
+    if raw is None:
+        return None
+    r = np.asarray(raw, dtype=np.float64)
+    if r.shape != (n, 9):
+        raise RigConfigError(f"add_many: raw must have shape ({n}, 9), got {r.shape}")
+    inf = np.isinf(r).any(axis=1)
+    if inf.any():
+        i = int(np.argmax(inf))
+        raise RigConfigError(f"add_many: sample {i} (t={t[i]}): raw reading must be finite "
+                             f"(NaN for none), got {r[i].tolist()}")
+    nan = np.isnan(r)
+    has = ~nan.all(axis=1)
+    if not has.any():
+        return None
+    if nan.any():
+        obj = r.astype(object)
+        obj[nan] = None
+        vals = obj.tolist()
+    else:
+        vals = r.tolist()
+    return [tuple(v) if h else None for v, h in zip(vals, has.tolist(), strict=True)]
 
 
 class TelemetryWriter(_BatchWriter):

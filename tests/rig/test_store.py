@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from sqlalchemy import create_engine, inspect
+from sqlalchemy import create_engine, func, inspect, select
 
 from rig.errors import RigConfigError
 from rig.store import SCHEMA_VERSION, TELEMETRY_COLUMNS, open_store
@@ -105,6 +105,103 @@ def test_samples_round_trip_exactly(store, session):
     assert row["samples_by_sensor"] == {"humerus": n, "shoulder": 1, "thorax": n}
     assert row["pseudonym"] == "P-0001" and row["kind"] == "record"
     assert store.sample_count(session) == 2 * n + 1
+
+
+def _raw(rng, n):
+    """Raw readings (N, 9): accelerometer ~g, gyroscope ~1 rad/s, magnetometer ~48 uT."""
+    return rng.normal(size=(n, 9)) * np.repeat([9.81, 1.0, 48.0], 3)
+
+
+def test_raw_readings_round_trip_exactly_nan_as_null(store, session):
+    rng = np.random.default_rng(4)
+    n = 500
+    t = np.arange(n) / 400.0
+    raw = _raw(rng, n)
+    raw[7] = np.nan  # a sample without a raw reading
+    raw[9, 6:] = np.nan  # a sample without its magnetometer
+    q = _unit(rng, n)
+    with store.sample_writer(session) as w:
+        w.add_many(t, t, "humerus", "sensor", q, 3, raw=raw)
+        w.add_many(t, None, "thorax", "sensor", q)  # no raw at all, same commit
+        w.add(t[-1] + 1.0, None, "humerus", "sensor", q[0], 3, raw=raw[0])
+        w.add(t[-1] + 2.0, None, "humerus", "sensor", q[1], 3, raw=[np.nan] * 9)
+        w.add(t[-1] + 3.0, None, "humerus", "sensor", q[2], 3)
+    hu = store.samples(session, "humerus")
+    assert hu["raw"].shape == (n + 3, 9) and hu["raw"].dtype == np.float64
+    np.testing.assert_array_equal(hu["raw"][:n], raw)  # bit-exact, NaN where NaN
+    np.testing.assert_array_equal(hu["raw"][n], raw[0])
+    assert np.isnan(hu["raw"][n + 1:]).all()
+    np.testing.assert_array_equal(hu["q"][:n], q)
+    th = store.samples(session, "thorax")
+    assert th["raw"].shape == (n, 9) and np.isnan(th["raw"]).all()
+    all_ = store.samples(session)
+    assert all_["raw"].shape == (2 * n + 3, 9)
+    np.testing.assert_array_equal(all_["raw"][all_["name"] == "humerus"], hu["raw"])
+    # stored as SQL NULL, not as a NaN value: a missing reading is a missing value
+    with store.engine.connect() as conn:
+        nulls = conn.execute(select(func.count()).select_from(S.samples).where(
+            S.samples.c.mag_x.is_(None))).scalar_one()
+    assert nulls == n + 2 + 1 + 1  # thorax, humerus rows 7 and 9, the NaN row, the last add
+
+
+def test_samples_without_raw_read_as_nan(store, session):
+    with store.sample_writer(session) as w:
+        w.add_many(np.arange(10.0), None, "humerus", "sensor", np.tile([1.0, 0, 0, 0], (10, 1)),
+                   raw=np.full((10, 9), np.nan))
+    s = store.samples(session)
+    assert s["raw"].shape == (10, 9) and np.isnan(s["raw"]).all()
+    assert store.samples(session, "nobody")["raw"].shape == (0, 9)
+
+
+def test_sqlite_finds_raw_readings_through_the_partial_index(tmp_path):
+    """Whether a session has raw readings is looked up in ix_samples_raw, not scanned."""
+    from rig.store.store import _raw_probe
+
+    with open_store(tmp_path / "r.db") as store:
+        sid = store.start_session(store.add_patient("P-1"))
+        for where in (S.samples.c.session_id == sid,
+                      (S.samples.c.session_id == sid) & (S.samples.c.sensor_id == 1)):
+            stmt = _raw_probe(where).compile(store.engine, compile_kwargs={"literal_binds": True})
+            with store.engine.connect() as conn:
+                plan = " ".join(r[-1] for r in conn.exec_driver_sql(f"EXPLAIN QUERY PLAN {stmt}"))
+            assert "USING INDEX ix_samples_raw" in plan, plan
+
+
+def test_writer_refuses_bad_raw_readings(store, session):
+    q = np.tile([1.0, 0, 0, 0], (4, 1))
+    with store.sample_writer(session) as w:
+        with pytest.raises(RigConfigError, match=r"raw must have shape \(4, 9\)"):
+            w.add_many(np.arange(4.0), None, "humerus", "sensor", q, raw=np.zeros((4, 6)))
+        bad = np.zeros((4, 9))
+        bad[2, 4] = np.inf
+        with pytest.raises(RigConfigError, match=r"sample 2 .*raw reading must be finite"):
+            w.add_many(np.arange(4.0), None, "humerus", "sensor", q, raw=bad)
+        with pytest.raises(RigConfigError, match="raw must have 9 values"):
+            w.add(0.0, None, "humerus", "sensor", q[0], raw=[0.0] * 3)
+        with pytest.raises(RigConfigError, match="must be finite"):
+            w.add(0.0, None, "humerus", "sensor", q[0], raw=[-np.inf] + [0.0] * 8)
+    assert w.written == 0 and store.sample_count(session) == 0
+
+
+def test_recorders_write_path_keeps_raw(store, session):
+    """rig record's writer step: OrientationSample.raw -> SampleBatch.raw -> the store."""
+    from rig.devices.sources import OrientationSample
+    from rig.record.pump import batch_from_samples
+    from rig.record.session import _write
+
+    rng = np.random.default_rng(6)
+    raw = _raw(rng, 6)
+    samples = [
+        OrientationSample(k / 100, k / 100, name, "sensor", np.array([1.0, 0, 0, 0]), 3,
+                          raw=None if k == 4 else raw[k])
+        for k in range(6) for name in ("thorax", "humerus")
+    ]
+    with store.sample_writer(session) as w:
+        _write(w, batch_from_samples(samples))
+    got = store.samples(session, "humerus")["raw"]
+    expect = raw.copy()
+    expect[4] = np.nan
+    np.testing.assert_array_equal(got, expect)
 
 
 def test_writer_refuses_bad_samples(store, session):
@@ -245,7 +342,7 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == SCHEMA_VERSION == 3
+        assert store.schema_version() == SCHEMA_VERSION == 4
         [row] = store.list_sessions()
         assert row["pseudonym"] == "OLD-1" and row["samples"] == 10 and row["runs"] == 0
         rid = store.start_run(row["id"])  # the v2 tables work on the migrated database
@@ -254,7 +351,8 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         assert store.telemetry(rid)["t_s"].tolist() == [0.0]
         _assert_schema_is_current(store)
     with open_store(db_url, create=False) as store:  # a second open migrates nothing
-        assert store.schema_version() == 3
+        assert store.schema_version() == 4
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4]
 
 
 def _assert_schema_is_current(store):
@@ -306,7 +404,7 @@ def test_v2_database_is_migrated_and_its_running_session_closed(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 3
+        assert store.schema_version() == 4
         _assert_schema_is_current(store)
         rows = {r["id"]: r for r in store.list_sessions()}
         assert rows[done]["status"] == "completed" and rows[done]["meta"] == {"a": 1}
@@ -330,6 +428,64 @@ def test_v2_database_is_migrated_and_its_running_session_closed(db_url):
             w.add(1.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
         row = store.get_session(new)
         assert row["writer_pid"] == os.getpid() and row["heartbeat_at"] is not None
+
+
+def test_v3_database_gains_raw_columns_with_its_samples_intact(db_url):
+    """A version-3 store (samples without raw columns, a session being written) migrates to
+    v4: the nine raw columns are appended, nullable; old samples read back unchanged with raw
+    NaN; new samples on the same session store their raw readings."""
+    url = db_url if "://" in db_url else f"sqlite:///{db_url}"
+    engine = create_engine(url)
+    v3_samples = ("id", "session_id", "sensor_id", "t", "device_t", "w", "x", "y", "z",
+                  "status")
+    rng = np.random.default_rng(8)
+    q = _unit(rng, 12)
+    try:
+        with engine.begin() as conn:
+            assert S.apply_migrations(conn, 0, 3) == [1, 2, 3]
+            pid = conn.execute(S.patients.insert().values(
+                pseudonym="OLD-3", created_at=1.0)).inserted_primary_key[0]
+            sid = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="completed", started_at=1000.0,
+                ended_at=1010.0, meta="{}", writer_host="h", writer_pid=1,
+                heartbeat_at=1010.0, last_sample_at=1009.0)).inserted_primary_key[0]
+            snr = conn.execute(S.sensors.insert().values(
+                session_id=sid, name="humerus", kind="sensor")).inserted_primary_key[0]
+            conn.execute(S.samples.insert(), [
+                {"session_id": sid, "sensor_id": snr, "t": 5.0 + k / 400, "device_t": k / 400,
+                 "w": q[k, 0], "x": q[k, 1], "y": q[k, 2], "z": q[k, 3], "status": 3}
+                for k in range(12)])
+        with engine.connect() as conn:
+            assert S.current_version(conn) == 3
+            cols = [c["name"] for c in inspect(conn).get_columns("samples")]
+            assert tuple(cols) == v3_samples
+    finally:
+        engine.dispose()
+
+    with open_store(db_url, create=False) as store:
+        assert store.schema_version() == 4
+        _assert_schema_is_current(store)
+        cols = [c for c in inspect(store.engine).get_columns("samples")]
+        assert tuple(c["name"] for c in cols) == v3_samples + S.RAW_COLUMNS  # appended
+        assert all(c["nullable"] for c in cols[len(v3_samples):])
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4]
+        s = store.samples(sid)
+        np.testing.assert_array_equal(s["q"], q)
+        np.testing.assert_array_equal(s["t"], 5.0 + np.arange(12) / 400)
+        assert s["raw"].shape == (12, 9) and np.isnan(s["raw"]).all()
+        raw = _raw(rng, 3)
+        with store.sample_writer(sid) as w:
+            w.add_many(6.0 + np.arange(3.0), None, "humerus", "sensor", q[:3], raw=raw)
+        s = store.samples(sid)
+        assert np.isnan(s["raw"][:12]).all()
+        np.testing.assert_array_equal(s["raw"][12:], raw)
+        assert store.get_session(sid)["writer_pid"] == os.getpid()  # the v3 columns still work
+
+
+def _versions(store):
+    with store.engine.connect() as conn:
+        return [dict(r) for r in conn.execute(
+            select(S.schema_version).order_by(S.schema_version.c.version)).mappings()]
 
 
 def test_newer_database_is_refused(db_url):
