@@ -16,7 +16,8 @@ from rig.errors import RigConfigError
               help="Session id (see rig session list).")
 @click.option("--format", "fmt", type=click.Choice(["sto", "csv"]), default=None,
               help="sto: OpenSim orientations (one <segment>_imu column per sensor); csv: every "
-              "sample, t_s,device_t_s,name,kind,w,x,y,z,status. Default: from --out's suffix.")
+              "sample, t_s,device_t_s,name,kind,w,x,y,z,status (then acc_x..mag_z when the "
+              "session has raw IMU readings). Default: from --out's suffix.")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
               help="Output file (written atomically).")
 def export(db: str, session_id: int, fmt: str | None, out: str) -> None:

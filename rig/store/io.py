@@ -21,6 +21,12 @@ CSV forms (comma-separated, one header line)::
     t_s,w,x,y,z                                     single orientation (also rig enforce targets)
     t_s,thorax_w,thorax_x,thorax_y,thorax_z,humerus_w,...          wide: several segments
     t_s,device_t_s,name,kind,w,x,y,z,status         long: one row per sample (session export)
+    t_s,device_t_s,name,kind,w,x,y,z,status,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,mag_x,mag_y,mag_z
+                                                    long, with the IMUs' raw readings
+
+The long form's raw columns (accelerometer m/s², gyroscope rad/s, magnetometer µT, sensor
+frame; :data:`rig.store.schema.RAW_COLUMNS`) are written when any sample has a raw reading; an
+empty cell is a value the sample does not have (NaN).
 
 Validation, on every reader: a row with the wrong number of cells, a non-number, a NaN or
 infinite value, a zero quaternion, or a quaternion whose norm differs from 1 by more than
@@ -349,6 +355,9 @@ def write_sto(path: str | os.PathLike, table: OrientationTable) -> None:
 # CSV
 
 _LONG_REQUIRED = ("t_s", "name", "w", "x", "y", "z")
+#: The long form's raw-reading columns (the store's, :data:`rig.store.schema.RAW_COLUMNS`).
+RAW_CSV_COLUMNS = ("acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z",
+                   "mag_x", "mag_y", "mag_z")
 
 
 def _csv_header(lines: list[str], src: str) -> tuple[int, list[str]]:
@@ -376,7 +385,9 @@ def _csv_rows(lines: list[str], header: int, ncols: int, src: str):
 
 def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read a long-form CSV (``t_s,name,w,x,y,z`` and optionally ``device_t_s``, ``kind``,
-    ``status``; other columns ignored) into arrays shaped like :meth:`Store.samples`."""
+    ``status``, the nine raw columns ``acc_x..mag_z`` -- all or none; other columns ignored)
+    into arrays shaped like :meth:`Store.samples` (``raw`` NaN where a cell is empty or the
+    file has no raw columns)."""
     src = os.fspath(path)
     lines = _read_lines(path)
     h, cols = _csv_header(lines, src)
@@ -384,7 +395,14 @@ def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     if missing:
         raise RigConfigError(f"{src}:{h + 1}: long-form CSV needs columns {', '.join(missing)}")
     ix = {c: cols.index(c) for c in cols}
-    t, dt, names, kinds, qs, st, lns = [], [], [], [], [], [], []
+    raw_ix: list[int] = []
+    if any(c in ix for c in RAW_CSV_COLUMNS):
+        lacking = [c for c in RAW_CSV_COLUMNS if c not in ix]
+        if lacking:
+            raise RigConfigError(f"{src}:{h + 1}: raw columns come as all nine "
+                                 f"({','.join(RAW_CSV_COLUMNS)}); missing {', '.join(lacking)}")
+        raw_ix = [ix[c] for c in RAW_CSV_COLUMNS]
+    t, dt, names, kinds, qs, st, lns, raws = [], [], [], [], [], [], [], []
     for ln, cells in _csv_rows(lines, h, len(cols), src):
         t.append(_num(cells[ix["t_s"]], f"{src}:{ln}: t_s"))
         if "device_t_s" in ix and cells[ix["device_t_s"]].strip() not in ("", "nan", "NaN"):
@@ -405,6 +423,12 @@ def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
                                      "integer") from None
         else:
             st.append(0)
+        if raw_ix:
+            raws.append([
+                math.nan if cells[k].strip() in ("", "nan", "NaN")
+                else _num(cells[k], f"{src}:{ln}: {cols[k]}")
+                for k in raw_ix
+            ])
         lns.append(ln)
     if not t:
         raise RigConfigError(f"{src}: no data rows")
@@ -412,6 +436,7 @@ def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         "t": np.array(t), "device_t": np.array(dt), "name": np.array(names, dtype=object),
         "kind": np.array(kinds, dtype=object), "q": np.array(qs, dtype=np.float64),
         "status": np.array(st, dtype=np.int64),
+        "raw": np.array(raws, dtype=np.float64) if raw_ix else np.full((len(t), 9), np.nan),
     }
     for nm in dict.fromkeys(names):
         sel = np.flatnonzero(out["name"] == nm)
@@ -504,21 +529,39 @@ def write_csv(path: str | os.PathLike, table: OrientationTable, *, single: bool 
 
 def write_samples_csv(path: str | os.PathLike, s: Mapping[str, np.ndarray]) -> None:
     """Write samples (as returned by :meth:`Store.samples`) in the long form
-    ``t_s,device_t_s,name,kind,w,x,y,z,status``; lossless."""
+    ``t_s,device_t_s,name,kind,w,x,y,z,status``, followed by the nine raw columns
+    ``acc_x..mag_z`` when any sample has a raw reading (``s["raw"]``, NaN written as an empty
+    cell); lossless."""
     for nm in set(s["name"].tolist()) | set(s["kind"].tolist()):
         if "," in nm or "\n" in nm:
             raise RigConfigError(f"name {nm!r} cannot be written to CSV")
+    raw = s.get("raw")
+    n = len(s["t"])
+    if raw is not None:
+        raw = np.asarray(raw, dtype=np.float64)
+        if raw.shape != (n, 9):
+            raise RigConfigError(f"samples: raw must have shape ({n}, 9), got {raw.shape}")
+        if np.isnan(raw).all():
+            raw = None
+    if raw is None:
+        tails = [""] * n
+    else:
+        cells = np.where(np.isnan(raw), None, raw).tolist()
+        tails = ["," + ",".join("" if v is None else repr(v) for v in r) for r in cells]
 
     def lines():
         q = s["q"].tolist()
-        for t, d, nm, kd, qq, st in zip(
+        for t, d, nm, kd, qq, st, tail in zip(
             s["t"].tolist(), s["device_t"].tolist(), s["name"].tolist(), s["kind"].tolist(), q,
-            s["status"].tolist(), strict=True,
+            s["status"].tolist(), tails, strict=True,
         ):
             dd = "" if math.isnan(d) else repr(d)
-            yield f"{t!r},{dd},{nm},{kd},{qq[0]!r},{qq[1]!r},{qq[2]!r},{qq[3]!r},{st}"
+            yield f"{t!r},{dd},{nm},{kd},{qq[0]!r},{qq[1]!r},{qq[2]!r},{qq[3]!r},{st}{tail}"
 
-    _atomic_write(path, "t_s,device_t_s,name,kind,w,x,y,z,status\n", lines())
+    head = "t_s,device_t_s,name,kind,w,x,y,z,status"
+    if raw is not None:
+        head += "," + ",".join(RAW_CSV_COLUMNS)
+    _atomic_write(path, head + "\n", lines())
 
 
 def read_orientations(path: str | os.PathLike) -> OrientationTable:
@@ -616,8 +659,9 @@ EXPORT_FORMATS = ("sto", "csv")
 def export_session(store: Store, session_id: int, fmt: str, out: str | os.PathLike) -> dict:
     """Write a session's samples to ``out``.
 
-    ``sto``: the OpenSim orientation table of :func:`session_table`. ``csv``: the long form,
-    every sample exactly as stored (no alignment). Returns a summary dict: ``rows``,
+    ``sto``: the OpenSim orientation table of :func:`session_table` (orientations only).
+    ``csv``: the long form, every sample exactly as stored (no alignment), with the raw
+    readings' columns when the session has any. Returns a summary dict: ``rows``,
     ``columns`` (or ``names``), ``dropped_rows`` (sto alignment), ``path``.
     """
     if fmt not in EXPORT_FORMATS:

@@ -9,8 +9,10 @@ import pytest
 
 from rig.errors import RigConfigError
 from rig.store import open_store
+from rig.store import schema as S
 from rig.store.io import (
     NORM_TOLERANCE,
+    RAW_CSV_COLUMNS,
     OrientationTable,
     export_session,
     read_csv,
@@ -204,6 +206,8 @@ def test_long_csv_is_aligned_without_interpolation(tmp_path):
     for k in ("t", "q", "status"):
         np.testing.assert_array_equal(back[k], s[k])
     assert list(back["name"]) == list(s["name"])
+    assert "acc_x" not in (tmp_path / "long.csv").read_text().splitlines()[0]
+    assert back["raw"].shape == (s["t"].size, 9) and np.isnan(back["raw"]).all()
     table = read_csv(tmp_path / "long.csv")
     assert table.meta["aligned_dropped"] == "1"  # thorax at t=0 has no humerus partner
     np.testing.assert_array_equal(table.time, t[th[1:]])
@@ -259,3 +263,79 @@ def test_session_export_aligns_sensors_with_their_own_clocks(tmp_path):
         empty = store.start_session(store.ensure_patient("P-77"))
         with pytest.raises(RigConfigError, match="no samples"):
             export_session(store, empty, "sto", tmp_path / "e.sto")
+
+
+def _samples_with_raw(rng, n=300):
+    raw = rng.normal(size=(n, 9)) * np.repeat([9.81, 1.0, 48.0], 3)
+    raw[::7] = np.nan  # samples without a raw reading
+    raw[3, 6:] = np.nan  # one without its magnetometer
+    raw[5, 0] = 1e-310  # subnormal: still exact
+    return {
+        "t": 10.0 + np.arange(n) / 400.0, "device_t": np.arange(n) / 400.0,
+        "name": np.array(["humerus"] * n, dtype=object),
+        "kind": np.array(["sensor"] * n, dtype=object),
+        "q": _unit(rng, n), "status": np.full(n, 3, dtype=np.int64), "raw": raw,
+    }
+
+
+def test_long_csv_keeps_raw_readings_exactly(tmp_path):
+    assert RAW_CSV_COLUMNS == S.RAW_COLUMNS  # the file's names are the store's
+    s = _samples_with_raw(np.random.default_rng(21))
+    write_samples_csv(tmp_path / "raw.csv", s)
+    lines = (tmp_path / "raw.csv").read_text().splitlines()
+    assert lines[0] == ("t_s,device_t_s,name,kind,w,x,y,z,status,"
+                        "acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,mag_x,mag_y,mag_z")
+    assert lines[1].endswith(",3" + "," * 9)  # sample 0: no raw reading, empty cells
+    back = read_samples_csv(tmp_path / "raw.csv")
+    for k in ("t", "device_t", "q", "status", "raw"):
+        np.testing.assert_array_equal(back[k], s[k])  # bit-exact, NaN where NaN
+    table = read_csv(tmp_path / "raw.csv")  # the orientation reader ignores them
+    np.testing.assert_array_equal(table.get("humerus"), s["q"])
+
+
+def test_long_csv_raw_columns_come_as_all_nine(tmp_path):
+    p = tmp_path / "part.csv"
+    p.write_text("t_s,name,w,x,y,z,acc_x,acc_y,acc_z\n0.0,humerus,1,0,0,0,0,0,9.81\n")
+    with pytest.raises(RigConfigError, match=r"raw columns come as all nine.*missing gyr_x"):
+        read_samples_csv(p)
+    head = "t_s,name,w,x,y,z," + ",".join(RAW_CSV_COLUMNS) + "\n"
+    p.write_text(head + "0.0,humerus,1,0,0,0,0,0,9.81,0,0,x,0,0,0\n")
+    with pytest.raises(RigConfigError, match=r"part.csv:2: gyr_z: 'x' is not a number"):
+        read_samples_csv(p)
+    p.write_text(head + "0.0,humerus,1,0,0,0,0,0,inf,0,0,0,0,0,0\n")
+    with pytest.raises(RigConfigError, match=r"part.csv:2: acc_z: inf is not a finite"):
+        read_samples_csv(p)
+    p.write_text(head + "0.0,humerus,1,0,0,0,0,0,9.81,nan,,0,1,2,3\n")
+    np.testing.assert_array_equal(read_samples_csv(p)["raw"],
+                                  [[0, 0, 9.81, np.nan, np.nan, 0, 1, 2, 3]])
+
+
+def test_session_with_raw_exports_its_raw_readings(tmp_path, capsys):
+    """``rig export --format csv`` keeps the raw readings; .sto carries orientations only."""
+    from rig.cli import main
+
+    rng = np.random.default_rng(22)
+    s = _samples_with_raw(rng, 200)
+    with open_store(tmp_path / "r.db") as store:
+        sid = store.start_session(store.add_patient("P-R"))
+        with store.sample_writer(sid) as w:
+            w.add_many(s["t"], s["device_t"], "humerus", "sensor", s["q"], 3, raw=s["raw"])
+            w.add_many(s["t"], None, "thorax", "sensor", _unit(rng, 200))  # no raw
+        store.end_session(sid)
+        stored = store.samples(sid)
+    out = tmp_path / "s.csv"
+    with pytest.raises(SystemExit) as exc:
+        main(["export", "--db", str(tmp_path / "r.db"), "--session", str(sid),
+              "--format", "csv", "--out", str(out)])
+    assert exc.value.code == 0 and "wrote 400 rows" in capsys.readouterr().out
+    assert out.read_text().splitlines()[0].endswith(",status," + ",".join(RAW_CSV_COLUMNS))
+    back = read_samples_csv(out)
+    for k in ("t", "device_t", "q", "status", "raw"):
+        np.testing.assert_array_equal(back[k], stored[k])
+    np.testing.assert_array_equal(back["raw"][back["name"] == "humerus"], s["raw"])
+    assert np.isnan(back["raw"][back["name"] == "thorax"]).all()
+    with pytest.raises(SystemExit) as exc:
+        main(["export", "--db", str(tmp_path / "r.db"), "--session", str(sid),
+              "--out", str(tmp_path / "s.sto")])
+    assert exc.value.code == 0
+    assert read_sto(tmp_path / "s.sto").labels == ["humerus_imu", "thorax_imu"]
