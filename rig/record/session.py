@@ -507,7 +507,8 @@ def _range_centre(config) -> np.ndarray | None:
 
 
 def _write(writer, batch: SampleBatch) -> None:
-    writer.add_many(batch.t, batch.device_t, batch.name, batch.kind, batch.q, batch.status)
+    writer.add_many(batch.t, batch.device_t, batch.name, batch.kind, batch.q, batch.status,
+                    raw=batch.raw)
 
 
 def _annotate(store, session_id: int, t: float, text: str, status: RecordStatus) -> None:
