@@ -16,7 +16,10 @@
     IMU (stream board on a pty, noise, drift, disturbances, straps 25° off, the guided
     calibration performed by the patient, lockstep manual clock) and the back-driven servo limb
     (scaled clock) — then boundary extraction and clinical peaks from the store, compared with
-    the truth (:mod:`rig.record.accuracy`).
+    the truth (:mod:`rig.record.accuracy`). The IMU recording carries the raw accelerometer,
+    gyroscope and magnetometer samples too, and is read back twice: through host-side VQF
+    fusion of the raw samples (``imu-vqf``) and through the devices' fused quaternions
+    (``imu-device``), ``--fusions``.
 
 The machine these figures come from may be shared: the script says how many CPUs it sees and
 the figures are medians; treat them as lower bounds of what an idle machine does.
@@ -25,6 +28,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_record.py throughput [--minutes 10] [--repeats 3]
     .venv/bin/python benchmarks/bench_record.py accuracy [--seeds 101 102 ...] [--paths imu]
+        [--fusions vqf device]
 """
 
 from __future__ import annotations
@@ -114,41 +118,56 @@ def main(argv=None) -> None:
     a.add_argument("--paths", nargs="+", choices=["imu", "servo"], default=["imu", "servo"])
     a.add_argument("--neutral", type=float, default=20.0,
                    help="IMU path: the patient returns to neutral every N s (0: never)")
+    a.add_argument("--fusions", nargs="+", choices=["vqf", "device"], default=["vqf", "device"],
+                   help="IMU path: read the one recording back with each (host-side VQF of "
+                        "the raw samples, the devices' fused quaternions)")
     args = ap.parse_args(argv)
     if args.what == "throughput":
         throughput(args.minutes, args.rate, args.repeats, args.window, args.step, args.flow)
     else:
         accuracy(args.seeds, args.free, args.servo_scale, args.servo_rate, tuple(args.paths),
-                 args.neutral)
+                 args.neutral, tuple(args.fusions))
+
+
+_SOURCE = {"imu-vqf": "host-side VQF of the raw samples",
+           "imu-device": "the devices' fused quaternions"}
 
 
 def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
-             paths: tuple[str, ...], neutral_s: float = 20.0) -> None:
+             paths: tuple[str, ...], neutral_s: float = 20.0,
+             fusions: tuple[str, ...] = ("vqf", "device")) -> None:
     """Held-out seeded patients through the whole stack (see :mod:`rig.record.accuracy`)."""
     from rig.record.accuracy import record_imu_patient, record_servo_patient, star_patient
 
-    rows: dict[str, list] = {p: [] for p in paths}
+    labels = [lab for p in paths for lab in ((f"imu-{f}" for f in fusions) if p == "imu"
+                                             else (p,))]
+    rows: dict[str, list] = {lab: [] for lab in labels}
     for seed in seeds:
         truth = star_patient(seed)
         for path in paths:
             t0 = time.perf_counter()
             with tempfile.TemporaryDirectory() as tmp:
-                if path == "imu":
-                    r = record_imu_patient(truth, seed, tmp, free_s=free_s, neutral_s=neutral_s)
+                if path == "imu":  # one recording, read back once per fusion
+                    got = record_imu_patient(truth, seed, tmp, free_s=free_s,
+                                             neutral_s=neutral_s, fusion=fusions)
+                    got = {f"imu-{f}": r for f, r in got.items()}
                 else:
-                    r = record_servo_patient(truth, seed, tmp, free_s=free_s,
-                                             time_scale=servo_scale, rate_hz=servo_rate)
+                    got = {path: record_servo_patient(truth, seed, tmp, free_s=free_s,
+                                                      time_scale=servo_scale,
+                                                      rate_hz=servo_rate)}
             wall = time.perf_counter() - t0
-            rows[path].append(r)
-            print(f"  {path} {r.patient}: {r.status}, {r.samples} samples, dropped {r.dropped}, "
-                  f"residual {r.calibration_residual_deg:.2f}°, mean {r.mean_deg:.2f}°, "
-                  f"twist {r.twist_deg:.2f}°, peaks {r.peaks_deg:.2f}° ({wall:.0f} s wall)",
-                  flush=True)
-    for path in paths:
+            for lab, r in got.items():
+                rows[lab].append(r)
+                print(f"  {lab} {r.patient}: {r.status}, {r.samples} samples, dropped "
+                      f"{r.dropped}, residual {r.calibration_residual_deg:.2f}°, mean "
+                      f"{r.mean_deg:.2f}°, twist {r.twist_deg:.2f}°, peaks {r.peaks_deg:.2f}° "
+                      f"({wall:.0f} s wall)", flush=True)
+    for path in labels:
         rs = rows[path]
         print(f"\n{path} path ({free_s:g} s of free motion after the guided calibration"
-              + (f", noise + drift + disturbances, straps 25° off, neutral every {neutral_s:g} s)"
-                 if path == "imu" else
+              + (f", noise + drift + disturbances, straps 25° off, neutral every {neutral_s:g} s;"
+                 f" orientations: {_SOURCE[path]})"
+                 if path.startswith("imu") else
                  f", patient time x{servo_scale:g}, servos read at {servo_rate:g} Hz)"))
         print(f"{'patient':10s} {'resid°':>6s} {'mean°':>6s} {'Haus°':>6s} {'out>1°%':>8s} "
               f"{'out>2°%':>8s} {'twist°':>7s} {'peaks°':>7s} {'swing°':>7s} {'rot°':>6s} "

@@ -67,17 +67,18 @@ class AccuracyResult:
     twist_wander_deg: float = math.nan
     peaks: dict = field(default_factory=dict)  # movement -> (extracted, truth)
     twist: tuple = ()  # ((lo, hi) extracted, (lo, hi) truth)
+    fusion: str = ""  # IMU path: the read path's orientation source ("vqf" or "device")
 
 
 def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
-             unreachable_pct: float = 0.0) -> AccuracyResult:
+             unreachable_pct: float = 0.0, fusion: str = "auto") -> AccuracyResult:
     from calibration.boundary import boundary_distance, outside_fraction
     from calibration.clinical import range_of_motion
     from rig.commands.boundary import extract, joint_orientations_from_store
     from rig.store import open_store
 
     with open_store(store_path, create=False) as store:
-        data = joint_orientations_from_store(store, res.session_id)
+        data = joint_orientations_from_store(store, res.session_id, fusion=fusion)
     ex = extract(data, side="right")
     est = ex.constraint_
     d = boundary_distance(est, truth)
@@ -108,7 +109,9 @@ def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
         twist_deg=max(abs(lo - truth.twist.min_deg), abs(hi - truth.twist.max_deg)),
         peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), twist_offset_deg=tw_off,
         twist_wander_deg=tw_wander, unreachable_pct=unreachable_pct, peaks=peaks,
-        twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)))
+        twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)),
+        fusion=str((data.provenance.get("fusion") or {}).get("method", "")) if path == "imu"
+        else "")
 
 
 def _twist_error(data, truth_q, axis, min_status: int) -> tuple[float, float]:
@@ -131,13 +134,16 @@ def _rig_yaml(tmp: Path, body: str) -> Path:
 
 def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float = 300.0,
                        rate_hz: int = 100, misplace_deg: float = 25.0, neutral_s: float = 20.0,
-                       display=None, step_s: float = 0.05,
-                       window_s: float = 0.5) -> AccuracyResult:
+                       display=None, step_s: float = 0.05, window_s: float = 0.5,
+                       raw: bool = True, fusion="auto"):
     """Record ``constraint`` worn as two IMUs (``sim://imu-stream``, noise on, straps turned
     ``misplace_deg`` off, patient performing the calibration protocol, then returning to
-    neutral every ``neutral_s`` seconds — 0: never — with 2° repeatability) for ``free_s``
+    neutral every ``neutral_s`` seconds — 0: never — with 2° repeatability; raw accelerometer,
+    gyroscope and magnetometer samples recorded too unless ``raw=False``) for ``free_s``
     seconds of free motion after calibration, faster than real time (:class:`LockstepClock`),
-    and compare the extracted boundary with the truth."""
+    and compare the extracted boundary with the truth, reading the session back with
+    ``fusion`` (``joint_orientations_from_store``: "auto", "vqf" or "device"). A sequence of
+    fusions reads the one recording back once per fusion and returns ``{fusion: result}``."""
     from models.constraint import dump_constraint
     from rig.record import RecordOptions, record_session
     from rig.record.lockstep import CountingDisplay, LockstepClock
@@ -153,6 +159,7 @@ def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float 
     cfg = _rig_yaml(tmp, f"name: accuracy-imu\njoint: {{name: shoulder, side: right, parent: "
                          f"thorax, child: humerus}}\nsensors:\n  port: \"{port}\"\n"
                          f"  protocol: stream\n  rate_hz: {rate_hz}\n"
+                         f"  raw: {'true' if raw else 'false'}\n"
                          f"  segments: {{thorax: 0, humerus: 1}}\n")
     db = tmp / f"imu-{seed}.db"
     rig = open_rig(load_config(str(cfg)), calibrate=True)
@@ -167,7 +174,10 @@ def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float 
     with open_store(db, create=False) as store:
         s = store.samples(res.session_id, name="humerus")
     truth_q = limb.joint(s["device_t"] - rig.device_t0)
-    return _compare(constraint.name or f"star-{seed}", "imu", res, db, constraint, truth_q)
+    name = constraint.name or f"star-{seed}"
+    if isinstance(fusion, str):
+        return _compare(name, "imu", res, db, constraint, truth_q, fusion=fusion)
+    return {f: _compare(name, "imu", res, db, constraint, truth_q, fusion=f) for f in fusion}
 
 
 def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: float = 300.0,

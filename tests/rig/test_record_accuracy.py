@@ -19,6 +19,8 @@ def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
     truth = star_patient(7)
     r = record_imu_patient(truth, 7, tmp_path, free_s=300.0)
     assert r.status == "completed" and r.dropped == 0
+    # the board streamed raw samples too, and the read path fused them on the host (VQF)
+    assert r.fusion == "vqf"
     # the guided calibration ran on the simulated patient and recovered the straps
     assert r.calibration_residual_deg is not None and r.calibration_residual_deg < 3.0
     # targets of the issue that the IMU path meets on every held-out patient: boundary within
