@@ -58,11 +58,25 @@ Method
 
    4b. **Noise correction**: a limit the patient dwells on leaves a ridge of samples, blurred
    by measurement noise; the region's envelope sits on the ridge's outer tail. The region is
-   shrunk to the ridge's crest: the mode of the samples' depth inside it (0.2° bins over
-   ``pileup_band_deg``, used only when it stands 2× above the band's median; depth to within
-   0.025°, from the boundary's points 0.05° apart). The shrunk pieces are joined again as in
-   4 ii-iii (transits, excursions beyond the unshrunk shape, bridges): a neck narrower than twice
-   the inset does not cut a recorded lobe off.
+   shrunk by the larger of two estimates of how far inside the envelope the limit lies:
+
+   - the ridge's crest: the mode of the samples' depth inside the region (0.2° bins over
+     ``pileup_band_deg``, used only when it stands 2× above the band's median; depth to within
+     0.025°, from the boundary's points 0.05° apart) — right for fast (white) noise;
+   - the typical **visit**: slow errors (a fused heading that wanders by a degree between
+     visits) shift whole visits, and the envelope follows the outermost one while each visit's
+     samples pile up on its own crest, so the pile-up sits just inside the envelope and misses
+     the shift. The boundary is cut into stretches of ``visit_segment_deg`` (by the nearest
+     boundary point of each sample within ``visit_band_deg``); in each stretch, a visit is a
+     run of samples in recording order with no gap longer than ``visit_gap_samples``, its
+     closest approach to the envelope is its minimum depth, and the stretch's value is the
+     median over its visits (stretches with at least ``visit_min`` visits); the estimate is the
+     median over the stretches. On simulated IMU recordings fused on the host (dev patients;
+     errors mostly slow) the pile-up crest left the boundary 0.6° (median) outside the truth
+     and this estimate 0.1°; on device-fused ones (fast noise) the two agree within ~0.3°.
+
+   The shrunk pieces are joined again as in 4 ii-iii (transits, excursions beyond the unshrunk
+   shape, bridges): a neck narrower than twice the inset does not cut a recorded lobe off.
 5. **Simplification** (Douglas-Peucker, topology-preserving, :meth:`shapely.Polygon.simplify`)
    with the smallest tolerance ≥ ``simplify_deg`` that leaves at most ``max_vertices``; the
    vertices are mapped back to the sphere and joined by great-circle edges. The result is
@@ -196,6 +210,34 @@ def _pileup_offset(depth: np.ndarray, band: float, bin_width: float, prominence:
     if k == 0 or hs[k] < prominence * max(float(np.median(hs)), 1.0):
         return 0.0
     return float(0.5 * (edges[k] + edges[k + 1]))
+
+
+def _visit_offset(depth: np.ndarray, near: np.ndarray, where: np.ndarray, segment: float,
+                  gap: int, min_visits: int) -> tuple[float, int]:
+    """How far inside the envelope a typical visit stopped (step 4b): ``near`` are the indices
+    (recording order, ascending) of the samples within the band, ``where`` their nearest
+    boundary point as arc length along the envelope. Returns the median over the stretches
+    of ``segment`` degrees of the median over their visits of each visit's minimum depth, and
+    the number of stretches used (0, 0 when none has ``min_visits`` visits)."""
+    if not len(near):
+        return 0.0, 0
+    seg = np.floor(where / segment).astype(np.int64)
+    order = np.lexsort((near, seg))  # by stretch, then in recording order
+    seg, idx = seg[order], near[order]
+    d = depth[idx]
+    # a new visit where the stretch changes or the recording skips more than ``gap`` samples
+    new = np.ones(len(idx), bool)
+    new[1:] = (seg[1:] != seg[:-1]) | (np.diff(idx) > gap)
+    visit = np.cumsum(new) - 1
+    closest = np.full(visit[-1] + 1, np.inf)
+    np.minimum.at(closest, visit, d)
+    vseg = seg[new]
+    values = []
+    for k in np.unique(vseg):
+        c = closest[vseg == k]
+        if len(c) >= min_visits:
+            values.append(float(np.median(c)))
+    return (float(np.median(values)), len(values)) if values else (0.0, 0)
 
 
 def _label(parts, xy: np.ndarray) -> np.ndarray:
@@ -336,6 +378,10 @@ class BoundaryExtractor:
         min_system_status: int = 2,
         noise_correction: bool = True,
         pileup_band_deg: float = 10.0,
+        visit_band_deg: float = 6.0,
+        visit_segment_deg: float = 3.0,
+        visit_gap_samples: int = 20,
+        visit_min: int = 3,
         twist_dwell_band_deg: float = 10.0,
         twist_dwell_min_samples: int = 20,
         twist_dwell_max_iqr_deg: float = 3.0,
@@ -376,6 +422,10 @@ class BoundaryExtractor:
         self.min_system_status = int(min_system_status)
         self.noise_correction = bool(noise_correction)
         self.pileup_band_deg = float(pileup_band_deg)
+        self.visit_band_deg = float(visit_band_deg)
+        self.visit_segment_deg = float(visit_segment_deg)
+        self.visit_gap_samples = int(visit_gap_samples)
+        self.visit_min = int(visit_min)
         self.twist_dwell_band_deg = float(twist_dwell_band_deg)
         self.twist_dwell_min_samples = int(twist_dwell_min_samples)
         self.twist_dwell_max_iqr_deg = float(twist_dwell_max_iqr_deg)
@@ -398,6 +448,8 @@ class BoundaryExtractor:
             "min_system_status": self.min_system_status,
             "noise_correction": self.noise_correction,
             "pileup_band_deg": self.pileup_band_deg,
+            "visit": [self.visit_band_deg, self.visit_segment_deg, self.visit_gap_samples,
+                      self.visit_min],
             "twist_dwell": [self.twist_dwell_band_deg, self.twist_dwell_min_samples,
                             self.twist_dwell_max_iqr_deg, self.twist_dwell_min_runs],
         }
@@ -743,12 +795,20 @@ class BoundaryExtractor:
         import shapely
 
         self.inset_deg_ = 0.0
+        self.inset_estimates_ = {"pileup_deg": 0.0, "visit_deg": 0.0, "visit_stretches": 0}
         if not self.noise_correction:
             return poly
         ring = poly.exterior
         inside = shapely.contains_xy(poly, p[:, 0], p[:, 1])
         depth = np.where(inside, _distance(ring, p), 0.0)
-        inset = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
+        pileup = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
+        near = np.flatnonzero(depth <= self.visit_band_deg)
+        where = shapely.line_locate_point(ring, shapely.points(p[near]))
+        visit, stretches = _visit_offset(depth, near, where, self.visit_segment_deg,
+                                         self.visit_gap_samples, self.visit_min)
+        self.inset_estimates_ = {"pileup_deg": round(pileup, 3), "visit_deg": round(visit, 3),
+                                 "visit_stretches": stretches}
+        inset = max(pileup, visit)
         if inset <= 0.0:
             return poly
         union = self._join_state[0]
@@ -838,6 +898,7 @@ class BoundaryExtractor:
             "glitch_cluster_samples": int(self.n_glitch_cluster_),
             "alpha_used_deg": round(self.alpha_used_deg_, 3),
             "noise_inset_deg": round(self.inset_deg_, 3),
+            "noise_inset_estimates": dict(getattr(self, "inset_estimates_", {})),
             "twist_noise_inset_deg": [round(x, 3) for x in self.twist_inset_deg_],
             "twist_dwells": list(self.twist_dwells_),
             "coverage": round(self.coverage_, 5),

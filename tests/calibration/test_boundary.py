@@ -128,3 +128,33 @@ def test_boundary_distance_of_nested_cones():
     d = boundary_distance(a, b)
     assert d["mean_deg"] == pytest.approx(3.0, abs=1e-3)
     assert d["hausdorff_deg"] == pytest.approx(3.0, abs=1e-3)
+
+
+def test_slow_error_that_shifts_whole_visits_is_taken_off_the_envelope(servo_patient):
+    # a fused heading that wanders slowly (OU, 1.5°, 20 s) shifts each visit to the limit as a
+    # whole: the envelope follows the outermost visits, the pile-up crest stays just inside it,
+    # the typical visit's closest approach (step 4b) measures the shift
+    import math
+
+    c, rec = servo_patient
+    clean = BoundaryExtractor().fit(rec.limb)
+    assert clean.inset_estimates_["visit_deg"] < 0.2  # no slow error: nothing to take off
+    assert clean.inset_deg_ == pytest.approx(clean.inset_estimates_["pileup_deg"])
+    n = len(rec.limb)
+    rng = np.random.default_rng(3)
+    a = math.exp(-(1.0 / 50.0) / 20.0)
+    psi = np.zeros(n)
+    xi = rng.standard_normal(n)
+    for i in range(1, n):
+        psi[i] = a * psi[i - 1] + math.sqrt(1.0 - a * a) * 1.5 * xi[i]
+    q = Q.multiply(Q.from_axis_angle(X, np.radians(psi)), rec.limb)
+    ex = BoundaryExtractor().fit(q)
+    est = ex.inset_estimates_
+    assert est["visit_deg"] > est["pileup_deg"] + 0.2 and est["visit_stretches"] > 50
+    assert ex.inset_deg_ == pytest.approx(est["visit_deg"], abs=1e-3)  # (rounded there)
+    assert ex.constraint_.to_dict()["provenance"]["noise_inset_estimates"] == est
+    # the vertices sit on the truth (median signed distance), nothing recorded is left out
+    v = Q.check_vectors(ex.constraint_.swing.vertices)
+    assert abs(float(np.median(np.degrees(ConstraintOracle(c).swing_distance(v))))) < 0.3
+    assert boundary_distance(ex.constraint_, c)["mean_deg"] < 1.0
+    assert outside_fraction(ex.constraint_, Q.rotate(rec.truth, X), 1.0) < 0.002
