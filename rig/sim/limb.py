@@ -112,6 +112,7 @@ times are sampled.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -137,6 +138,7 @@ _Y = np.array([0.0, 1.0, 0.0])
 GRAVITY = 9.81
 """m/s², the accelerometer's specific force at rest, along world +Z (up)."""
 _RAW_STEP_S = 1e-3  # finite-difference step of the gyroscope and accelerometer, seconds
+_CP_CACHE = 4096  # control points of the motion's B-spline kept (joint())
 
 
 def _exp_map(rotvec: np.ndarray) -> np.ndarray:
@@ -446,6 +448,9 @@ class SimulatedLimb:
         if not (math.isfinite(smooth_s) and smooth_s > 0):
             raise ValueError(f"smooth_s must be > 0, got {smooth_s!r}")
         self.smooth_s = float(smooth_s)
+        self._cp_cache: dict[int, np.ndarray] = {}  # cleared when the target changes
+        self._cp_plan = self._plan
+        self._cp_lock = threading.Lock()
         self._radial = _StarRadial.of(constraint, self.centre)
         self.limb_lever_m = float(limb_lever_m)
         self.thorax_lever_m = float(thorax_lever_m)
@@ -506,6 +511,9 @@ class SimulatedLimb:
         self.neutral_hold_s = hold
         self.neutral_ramp_s = ramp
         self.neutral_sd_deg = sd
+        if hasattr(self, "_cp_lock"):  # the target changed: forget the motion's control points
+            with self._cp_lock:
+                self._cp_cache.clear()
 
     def _neutral_start(self, plan) -> float:
         return 0.0 if plan is None else plan[1] + plan[0].duration_s + self.blend_s
@@ -574,7 +582,9 @@ class SimulatedLimb:
     # -- ground truth ---------------------------------------------------------------------
     def _series(self, row: int, t: np.ndarray) -> np.ndarray:
         arg = 2.0 * math.pi * self._freq[row] * t[:, None] + self._phase[row]
-        return np.sin(arg) @ self._amp[row]
+        # a row-wise sum, not a matrix product: BLAS may round differently with the batch size,
+        # and a value must not depend on what else is evaluated with it
+        return (np.sin(arg) * self._amp[row]).sum(axis=1)
 
     def raw_joint(self, t) -> np.ndarray:
         """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds, before projection."""
@@ -608,13 +618,34 @@ class SimulatedLimb:
         f = (x - i0)[:, None]
         idx = i0[:, None] + np.arange(-1.0, 3.0)  # (N, 4) control points of each span
         uniq, inv = np.unique(idx, return_inverse=True)
-        c = self._closed_joint(uniq * self.smooth_s, self._plan)[inv.reshape(-1)]
-        c = c.reshape(len(t), 4, 4)
+        c = self._control_points(uniq)[inv.reshape(-1)].reshape(len(t), 4, 4)
         c = c * np.where(np.sum(c * c[:, 1:2], axis=-1) < 0.0, -1.0, 1.0)[..., None]
         w = np.concatenate(((1.0 - f) ** 3, 3.0 * f**3 - 6.0 * f**2 + 4.0,
                             -3.0 * f**3 + 3.0 * f**2 + 3.0 * f + 1.0, f**3), axis=1) / 6.0
-        q = np.einsum("nk,nkj->nj", w, c)
+        # term by term (elementwise, so a row's value does not depend on the batch)
+        q = w[:, 0:1] * c[:, 0] + w[:, 1:2] * c[:, 1] + w[:, 2:3] * c[:, 2] + w[:, 3:4] * c[:, 3]
         return self.project(q)
+
+    def _control_points(self, index: np.ndarray) -> np.ndarray:
+        """The projected target at grid points ``index · smooth_s`` (N, 4), kept for the last
+        few thousand points asked for: a simulator sampling at 200 Hz asks for each point about
+        40 times (a pure function of the index, so keeping it changes no value)."""
+        keys = index.astype(np.int64).tolist()
+        plan = self._plan
+        with self._cp_lock:
+            cache = self._cp_cache
+            if self._cp_plan is not plan:  # a new protocol changes the target everywhere
+                cache.clear()
+                self._cp_plan = plan
+            missing = [k for k in keys if k not in cache]
+            if missing:
+                vals = self._closed_joint(np.asarray(missing, dtype=np.float64) * self.smooth_s,
+                                          plan)
+                if len(cache) > _CP_CACHE:
+                    for k in list(cache)[:len(cache) // 2]:
+                        del cache[k]
+                cache.update(zip(missing, vals, strict=True))
+            return np.array([cache[k] for k in keys])
 
     def _closed_joint(self, t: np.ndarray, plan) -> np.ndarray:
         """``P(target(t))`` (N, 4): the raw, protocol and checkpoint target, projected into the
