@@ -332,7 +332,8 @@ def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, che
     rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
     prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
             "rejected": rejected, "anchored": bool(anchors), "clock": base,
-            "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_]}
+            "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_],
+            "drift_model": dict(hc.drift_model_)}
     return hc.apply(t, q), prov
 
 
