@@ -2,7 +2,8 @@
 
 ``throughput``
     2 sensors at 400 Hz for 10 simulated minutes through the whole recording path — stream IMU
-    simulator on a pty (manual clock) → ``rig.devices`` stream driver → reader thread →
+    simulator on a pty (manual clock; raw accelerometer/gyroscope/magnetometer readings in every
+    record unless ``--no-raw``) → ``rig.devices`` stream driver → reader thread →
     bounded queue → store (SQLite, WAL) — faster than real time. The manual clock is advanced
     by ``--step`` simulated seconds at a time (default 50 ms), in lockstep with what the
     recorder has written (never more than ``--window`` simulated seconds ahead;
@@ -53,7 +54,7 @@ from rig.record.rigio import load_config, open_rig
 
 
 def throughput(minutes: float, rate: int, repeats: int, window_s: float, step_s: float = 0.05,
-               flow: bool = False) -> None:
+               flow: bool = False, raw: bool = True) -> None:
     results = []
     for rep in range(repeats):
         with tempfile.TemporaryDirectory() as tmp:
@@ -63,7 +64,8 @@ def throughput(minutes: float, rate: int, repeats: int, window_s: float, step_s:
             cfg_path.write_text(
                 f"name: bench-imu\njoint: {{name: shoulder, side: right, parent: thorax, "
                 f"child: humerus}}\nsensors:\n  port: \"{port}\"\n  protocol: stream\n"
-                f"  rate_hz: {rate}\n  segments: {{thorax: 0, humerus: 1}}\n")
+                f"  rate_hz: {rate}\n  raw: {'true' if raw else 'false'}\n"
+                f"  segments: {{thorax: 0, humerus: 1}}\n")
             config = load_config(str(cfg_path))
             rig = open_rig(config)
             display = CountingDisplay()
@@ -84,7 +86,8 @@ def throughput(minutes: float, rate: int, repeats: int, window_s: float, step_s:
                   f"{res.samples / wall:.0f} samples/s)", flush=True)
     walls = [w for _, w in results]
     spans = [r.span_s for r, _ in results]
-    print(f"\nthroughput: 2 sensors x {rate} Hz, {minutes:g} simulated min, {repeats} runs, "
+    print(f"\nthroughput: 2 sensors x {rate} Hz{' with raw samples' if raw else ''}, "
+          f"{minutes:g} simulated min, {repeats} runs, "
           f"{os.cpu_count()} CPUs (shared machine: contended figures)")
     print(f"  dropped (gaps + overflow), every run: {[r.dropped for r, _ in results]}")
     print(f"  median real time {statistics.median(walls):.1f} s, median speed-up "
@@ -103,6 +106,8 @@ def main(argv=None) -> None:
                    help="simulated seconds the clock may run ahead of the writer")
     t.add_argument("--step", type=float, default=0.05,
                    help="simulated seconds per clock advance")
+    t.add_argument("--no-raw", action="store_true",
+                   help="quaternions only (stream protocol 1.0 records), no raw samples")
     t.add_argument("--flow", action="store_true",
                    help="the simulated board waits for the host (USB CDC) instead of losing "
                         "unread bytes (UART)")
@@ -123,7 +128,8 @@ def main(argv=None) -> None:
                         "the raw samples, the devices' fused quaternions)")
     args = ap.parse_args(argv)
     if args.what == "throughput":
-        throughput(args.minutes, args.rate, args.repeats, args.window, args.step, args.flow)
+        throughput(args.minutes, args.rate, args.repeats, args.window, args.step, args.flow,
+                   not args.no_raw)
     else:
         accuracy(args.seeds, args.free, args.servo_scale, args.servo_rate, tuple(args.paths),
                  args.neutral, tuple(args.fusions))
