@@ -177,14 +177,15 @@ def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
                  f", patient time x{servo_scale:g}, servos read at {servo_rate:g} Hz)"))
         print(f"{'patient':10s} {'resid°':>6s} {'mean°':>6s} {'Haus°':>6s} {'out>1°%':>8s} "
               f"{'out>2°%':>8s} {'twist°':>7s} {'peaks°':>7s} {'swing°':>7s} {'rot°':>6s} "
-              f"{'tw-off°':>8s} {'tw-sd°':>7s} {'unreach%':>8s}")
+              f"{'tw-off°':>8s} {'tw-sd°':>7s} {'unreach%':>8s} {'pk±1°':>6s}")
         for r in rs:
             rot = max(abs(r.peaks[m][0] - r.peaks[m][1]) for m in
                       ("internal_rotation", "external_rotation"))
             print(f"{r.patient:10s} {r.calibration_residual_deg:6.2f} {r.mean_deg:6.2f} "
                   f"{r.hausdorff_deg:6.2f} {r.out1_pct:8.2f} {r.out2_pct:8.2f} "
                   f"{r.twist_deg:7.2f} {r.peaks_deg:7.2f} {r.swing_peaks_deg:7.2f} {rot:6.2f} "
-                  f"{r.twist_offset_deg:8.2f} {r.twist_wander_deg:7.2f} {r.unreachable_pct:8.2f}")
+                  f"{r.twist_offset_deg:8.2f} {r.twist_wander_deg:7.2f} {r.unreachable_pct:8.2f} "
+                  f"{r.peak_sensitivity_deg:6.2f}")
         for label, fn in (("median", statistics.median), ("worst", max)):
             print(f"{label:10s} {'':6s} {fn(r.mean_deg for r in rs):6.2f} "
                   f"{fn(r.hausdorff_deg for r in rs):6.2f} {fn(r.out1_pct for r in rs):8.2f} "
@@ -193,7 +194,8 @@ def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
         print("targets: mean <= 2, out>2 ~ 0, twist <= 3, peaks <= 2 (degrees); tw-off / "
               "tw-sd: mean / std of the per-sample twist error (recorded - truth); unreach%: "
               "share of the patient's motion beyond the servo chain's reach (the limb stays "
-              "put; out>1/out>2 count the directions the limb took)")
+              "put; out>1/out>2 count the directions the limb took); pk±1°: how far the TRUE "
+              "swing peaks move when the clinical planes turn by 1° (ill-conditioned peaks)")
     print(f"{os.cpu_count()} CPUs, shared machine (accuracy is deterministic up to thread "
           "timing; wall times are contended)")
 

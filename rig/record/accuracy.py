@@ -21,6 +21,9 @@ compared with the patient's truth:
 - ``peaks``: the clinical peaks (:func:`calibration.clinical.range_of_motion`) of both
   constraints, ``peaks_deg`` the largest difference, ``swing_peaks_deg`` over flexion,
   extension, abduction, adduction and horizontal adduction only;
+- ``peak_sensitivity_deg``: a property of the truth alone — how far its swing peaks move when
+  the clinical planes turn by ±1° (where the boundary runs nearly along a plane, a peak is
+  ill-conditioned: a tangential error of a degree moves it by several);
 - ``twist_offset_deg`` / ``twist_wander_deg``: mean and standard deviation over the recording of
   the per-sample twist error (recorded joint orientation against the truth at the same instant,
   samples the extractor keeps): how much of ``twist_deg`` is a constant offset (the heading
@@ -68,6 +71,7 @@ class AccuracyResult:
     peaks: dict = field(default_factory=dict)  # movement -> (extracted, truth)
     twist: tuple = ()  # ((lo, hi) extracted, (lo, hi) truth)
     fusion: str = ""  # IMU path: the read path's orientation source ("vqf" or "device")
+    peak_sensitivity_deg: float = math.nan  # of the truth: see _peak_sensitivity
 
 
 def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
@@ -110,8 +114,34 @@ def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
         peaks_deg=max(errs), swing_peaks_deg=max(swing_errs), twist_offset_deg=tw_off,
         twist_wander_deg=tw_wander, unreachable_pct=unreachable_pct, peaks=peaks,
         twist=((float(lo), float(hi)), (truth.twist.min_deg, truth.twist.max_deg)),
+        peak_sensitivity_deg=_peak_sensitivity(truth, b),
         fusion=str((data.provenance.get("fusion") or {}).get("method", "")) if path == "imu"
         else "")
+
+
+def _peak_sensitivity(truth, peaks_true: dict) -> float:
+    """How much the truth's own swing peaks move when the clinical planes turn by ±1° about the
+    thorax vertical (+X): the largest change, degrees. A peak where the boundary runs nearly
+    along the plane moves by several degrees per degree; no measurement whose planes are
+    aligned only to within a degree can be held to 2° there."""
+    from calibration.clinical import range_of_motion
+    from models.constraint import JointConstraint, PolygonSwing
+
+    if not isinstance(truth.swing, PolygonSwing):
+        return 0.0
+    worst = 0.0
+    for deg in (-1.0, 1.0):
+        r = Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), math.radians(deg))
+        verts = Q.rotate(np.broadcast_to(r, (len(truth.swing.vertices), 4)),
+                         Q.check_vectors(truth.swing.vertices))
+        inner = Q.rotate(r, Q.check_vectors(truth.swing.interior))
+        turned = JointConstraint.polygon(verts, inner)
+        got = range_of_motion(turned, "right").to_dict()
+        for m in _SWING_PEAKS:
+            a, b = got[m], peaks_true[m]
+            if a is not None and b is not None:
+                worst = max(worst, abs(a - b))
+    return worst
 
 
 def _twist_error(data, truth_q, axis, min_status: int) -> tuple[float, float]:
