@@ -18,7 +18,9 @@ Motion
 The swing direction is a 2-D excursion ``s(t)`` in the tangent plane at the centre ``c`` of the
 range of motion (exponential map: ``d = cos|s| c + sin|s| ŝ``), the twist ``φ(t)`` an excursion
 about the middle of the twist range; both are sums of sinusoids with seeded random frequencies
-(0.03-0.3 Hz) and phases, so the motion is smooth, closed-form and evaluable at any time. Each
+(0.03-0.3 Hz) and phases, so the motion is smooth, closed-form and evaluable at any time (the
+swing angle saturates smoothly between 120° and 170° from the centre: a push through the
+centre's antipode would flip its azimuth). Each
 axis's RMS is ``excursion`` times the reach of the range (cone radius, or the largest
 centre-to-vertex angle of a polygon; half the twist range), so with ``excursion = 1`` about a third
 of the time the raw motion lies outside the range; it is then brought onto the boundary
@@ -139,6 +141,8 @@ GRAVITY = 9.81
 """m/s², the accelerometer's specific force at rest, along world +Z (up)."""
 _RAW_STEP_S = 1e-3  # finite-difference step of the gyroscope and accelerometer, seconds
 _CP_CACHE = 4096  # control points of the motion's B-spline kept (joint())
+_PUSH_KNEE = math.radians(120.0)  # raw swing angle from the centre beyond which it saturates
+_PUSH_ROOM = math.radians(50.0)  # ... towards 170°
 
 
 def _exp_map(rotvec: np.ndarray) -> np.ndarray:
@@ -595,6 +599,10 @@ class SimulatedLimb:
         ang = np.hypot(su, sv)
         safe = np.where(ang > 1e-12, ang, 1.0)
         dirn = (su[:, None] * self._u + sv[:, None] * self._v) / safe[:, None]
+        # beyond 120° from the centre the push saturates smoothly (C1) below 170°: a push
+        # through the centre's antipode would flip its azimuth, and the arm with it
+        over = np.maximum(ang - _PUSH_KNEE, 0.0)
+        ang = np.minimum(ang, _PUSH_KNEE) + _PUSH_ROOM * np.tanh(over / _PUSH_ROOM)
         d = np.cos(ang)[:, None] * self.centre + np.sin(ang)[:, None] * dirn
         swing = Q.from_two_vectors(self.limb_axis, d)
         phi = self.twist_centre + self.excursion * self.twist_half * self._series(2, t)
@@ -872,8 +880,8 @@ class _StarRadial:
         if not isinstance(swing, PolygonSwing):
             return None
         verts = Q.check_vectors(swing.vertices)
-        if np.any(verts @ centre <= 0.0):
-            return None
+        if np.any(verts @ centre <= -1.0 + 1e-9):
+            return None  # a vertex at the centre's antipode has no azimuth
         u, v = _tangent_basis(centre)
         az = np.unwrap(np.arctan2(verts @ v, verts @ u))
         if az[-1] < az[0]:  # clockwise about the centre: walk it the other way

@@ -29,6 +29,18 @@ def test_speed_is_bounded_at_1_khz_and_the_limb_stays_in_range():
     assert limb.oracle.is_valid(q).all()
 
 
+def test_large_ranges_move_continuously_too():
+    # star 232 reaches beyond 90° from its centre (the radial stop must still apply) and its
+    # raw push passes near the centre's antipode (it saturates below 170°): before, the arm
+    # jumped there at over 100,000 deg/s
+    limb = patient_limb(star_patient(232), 232, protocol=None)
+    assert limb._radial is not None
+    verts = np.asarray(limb.constraint.swing.vertices, dtype=float)
+    assert np.degrees(np.arccos(verts @ limb.centre)).max() > 90.0
+    t = np.arange(0.0, 120.0, 2e-3)
+    assert _speed_dps(limb.joint(t), 2e-3).max() < 400.0
+
+
 def test_radial_stop_is_on_the_boundary_along_the_push():
     limb = patient_limb(star_patient(204), 204, protocol=None)
     rng = np.random.default_rng(0)
