@@ -267,6 +267,21 @@ def _distance(geom, xy: np.ndarray, step: float = 0.05) -> np.ndarray:
     return dist
 
 
+def _ring_distance(ring, xy: np.ndarray, step: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (N,) of points (N, 2) to a closed ring and the arc length (N,) along the ring
+    of their nearest point, both to within ``step / 2`` (as :func:`_distance`, one k-d tree
+    query for both)."""
+    import shapely
+    from scipy.spatial import cKDTree
+
+    pts = shapely.get_coordinates(shapely.segmentize(ring, step))
+    if len(xy) == 0 or len(pts) == 0:
+        return np.zeros(len(xy)), np.zeros(len(xy))
+    arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))))
+    dist, k = cKDTree(pts).query(xy)
+    return dist, arc[k]
+
+
 def _dwell_depth(depth: np.ndarray, band: float, min_samples: int,
                  max_iqr: float) -> tuple[int, float]:
     """Dwells at a limit: runs of consecutive samples with ``depth`` (degrees inward from the
@@ -800,11 +815,11 @@ class BoundaryExtractor:
             return poly
         ring = poly.exterior
         inside = shapely.contains_xy(poly, p[:, 0], p[:, 1])
-        depth = np.where(inside, _distance(ring, p), 0.0)
+        dist, arc = _ring_distance(ring, p)
+        depth = np.where(inside, dist, 0.0)
         pileup = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
         near = np.flatnonzero(depth <= self.visit_band_deg)
-        where = shapely.line_locate_point(ring, shapely.points(p[near]))
-        visit, stretches = _visit_offset(depth, near, where, self.visit_segment_deg,
+        visit, stretches = _visit_offset(depth, near, arc[near], self.visit_segment_deg,
                                          self.visit_gap_samples, self.visit_min)
         self.inset_estimates_ = {"pileup_deg": round(pileup, 3), "visit_deg": round(visit, 3),
                                  "visit_stretches": stretches}
