@@ -12,8 +12,9 @@
     loses unread bytes unless ``--flow``). A wider window lets the clock jump ahead in bursts a
     real board never sends (it streams evenly): with raw records (76 bytes per frame) the
     earlier 0.5 s window put 15 kB at once into the pty, more than it holds, and lost ~90
-    frames per 10 minutes whenever the recorder paused, even at ~12x real time. Prints samples, sequence gaps, queue overflow, real
-    time, rows/s and the speed-up over real time; medians over ``--repeats`` runs.
+    frames per 10 minutes whenever the recorder paused, even at ~12x real time. Prints samples,
+    sequence gaps, queue overflow, real time, rows/s and the speed-up over real time; medians
+    over ``--repeats`` runs.
 ``accuracy``
     Held-out seeded patients (concave star polygons with twist ranges,
     :func:`rig.record.accuracy.star_patient`) recorded through the whole stack on both paths —
