@@ -154,6 +154,11 @@ def joint_orientations_from_store(store, session_id: int,
     prov: dict[str, Any] = {"session": int(session_id)}
     is_joint = s["kind"] == "joint"
     if is_joint.any():
+        if fusion != "auto":
+            raise RigConfigError(
+                f"session {session_id} holds joint samples (a servo limb), not IMU ones: "
+                f"--fusion {fusion} applies to IMU sessions"
+            )
         q = s["q"][is_joint]
         status = None
         prov["source"] = "joint samples"

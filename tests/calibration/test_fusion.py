@@ -256,3 +256,28 @@ def test_boundary_and_rom_fusion_option(session, tmp_path, capsys):
     code, _, err = _run(["boundary", "--db", str(db), "--session", str(sid), "--out", str(out),
                          "--fusion", "madgwick"], capsys)
     assert code == 2 and "madgwick" in err
+
+
+def test_fusion_option_on_a_servo_session_is_a_user_error(session, tmp_path, capsys):
+    # a servo limb's session holds joint samples: asking for a fusion of IMUs there is a
+    # mistake (one line, exit 2); the default (auto) reads it as it is
+    from rig.store import open_store
+
+    limb, t, _, _, _, _, _ = session
+    db = tmp_path / "servo.db"
+    with open_store(db) as st:
+        pid = st.add_patient("P-003")
+        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        st.add_sensor(sid, "shoulder", kind="joint")
+        with st.sample_writer(sid) as w:
+            w.add_many(t, None, "shoulder", "joint", limb.joint(t), np.zeros(len(t), int))
+        st.end_session(sid, status="completed", meta={})
+    for fusion in ("vqf", "device"):
+        code, _, err = _run(["rom", "--db", str(db), "--session", str(sid), "--fusion",
+                             fusion], capsys)
+        assert code == 2 and err.startswith("rig: error:") and "joint samples" in err
+        assert f"--fusion {fusion} applies to IMU sessions" in err
+        assert len(err.strip().splitlines()) == 1
+    code, stdout, err = _run(["rom", "--db", str(db), "--session", str(sid)], capsys)
+    assert code == 0, err
+    assert "flexion" in stdout
