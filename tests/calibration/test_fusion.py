@@ -246,6 +246,10 @@ def test_boundary_and_rom_fusion_option(session, tmp_path, capsys):
                               "device"], capsys)
     assert code == 0, err
     assert "flexion" in stdout
+    assert stdout.splitlines()[0] == f"session {sid} (IMU orientations as fused by the devices)"
+    code, stdout, err = _run(["rom", "--db", str(db), "--session", str(sid)], capsys)
+    assert code == 0, err
+    assert "fused on the host by VQF" in stdout.splitlines()[0]  # auto: raw samples there
     db2 = tmp_path / "noraw.db"
     sid2 = _store_session(db2, limb, t, q, None, status)
     for cmd in (["rom"], ["boundary", "--out", str(out)]):
