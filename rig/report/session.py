@@ -278,6 +278,11 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
                                                 reference_swing=getattr(reference, "swing",
                                                                         None))
             facts: dict[str, Any] = {"joint orientations": len(directions)}
+            method = ((joint.provenance.get("fusion") or {}).get("method")
+                      if joint is not None else None)
+            if method is not None:
+                facts["IMU orientations"] = ("fused on the host by VQF from the raw samples"
+                                             if method == "vqf" else "as fused by the devices")
             verts = getattr(constraint.swing, "vertices", None)
             if verts is not None:
                 facts["boundary vertices"] = len(verts)
@@ -295,6 +300,11 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.sparse_arcs_deg = []
             data.sparse_arcs_text = [_arc_text(a, side) for a in arcs]
         data.calibrations = _calibration_rows(store.calibrations(rec_id))
+        refit = ((joint.provenance.get("fusion") or {}).get("refit_residual_deg")
+                 if joint is not None else None)
+        if refit is not None:
+            data.calibrations.append({"kind": "imu-alignment re-fitted on the VQF orientations",
+                                      "residual_deg": float(refit)})
         if model is None:
             for m in reversed(store.models_for(session_id=rec_id)):
                 if Path(m["path"]).is_file():

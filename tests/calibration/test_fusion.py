@@ -250,6 +250,14 @@ def test_boundary_and_rom_fusion_option(session, tmp_path, capsys):
     code, stdout, err = _run(["rom", "--db", str(db), "--session", str(sid)], capsys)
     assert code == 0, err
     assert "fused on the host by VQF" in stdout.splitlines()[0]  # auto: raw samples there
+    # the clinician's report says so too, with the calibration re-fitted on VQF's orientations
+    html = tmp_path / "r.html"
+    code, _, err = _run(["report", "--db", str(db), "--session", str(sid), "--out", str(html)],
+                        capsys)
+    assert code == 0, err
+    page = html.read_text()
+    assert "fused on the host by VQF from the raw samples" in page
+    assert "re-fitted on the VQF orientations" in page
     db2 = tmp_path / "noraw.db"
     sid2 = _store_session(db2, limb, t, q, None, status)
     for cmd in (["rom"], ["boundary", "--out", str(out)]):
