@@ -255,26 +255,19 @@ def _distance(geom, xy: np.ndarray, step: float = 0.05) -> np.ndarray:
     """Distance (N,) of points (N, 2) to the boundary of ``geom`` (or to a line), to within
     ``step / 2``: nearest of the boundary's points ``step`` apart (a k-d tree; exact distance to
     a ring of thousands of vertices is slow for 10⁵ points)."""
-    import shapely
-    from scipy.spatial import cKDTree
-
     line = geom if geom.geom_type in ("LineString", "LinearRing", "MultiLineString") \
         else geom.boundary
-    ring = shapely.get_coordinates(shapely.segmentize(line, step))
-    if len(xy) == 0 or len(ring) == 0:
-        return np.zeros(len(xy))
-    dist, _ = cKDTree(ring).query(xy)
-    return dist
+    return _ring_distance(line, xy, step)[0]
 
 
-def _ring_distance(ring, xy: np.ndarray, step: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
-    """Distance (N,) of points (N, 2) to a closed ring and the arc length (N,) along the ring
-    of their nearest point, both to within ``step / 2`` (as :func:`_distance`, one k-d tree
-    query for both)."""
+def _ring_distance(line, xy: np.ndarray, step: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (N,) of points (N, 2) to a line (:func:`_distance`) and, for a single ring or
+    line, the arc length (N,) along it of their nearest point; both to within ``step / 2``, from
+    one k-d tree query."""
     import shapely
     from scipy.spatial import cKDTree
 
-    pts = shapely.get_coordinates(shapely.segmentize(ring, step))
+    pts = shapely.get_coordinates(shapely.segmentize(line, step))
     if len(xy) == 0 or len(pts) == 0:
         return np.zeros(len(xy)), np.zeros(len(xy))
     arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))))

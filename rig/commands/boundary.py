@@ -33,6 +33,14 @@ class JointData:
     patient: str | None = None
     joint: str | None = None
 
+    @property
+    def orientations(self) -> str | None:
+        """Which IMU orientations an IMU session was read through, for people (None for joint
+        samples and files)."""
+        method = (self.provenance.get("fusion") or {}).get("method")
+        return {"vqf": "fused on the host by VQF from the raw samples",
+                "device": "as fused by the devices"}.get(method)
+
 
 def _parse_axis(text: str | None) -> np.ndarray:
     if text is None:

@@ -60,10 +60,7 @@ def rom(file, db, session_id, reference, limb, limb_axis, constraint_path, side,
         side = side or data.side or "right"
         constraint = extract(data, side=side).constraint_
         source = file if file is not None else f"session {session_id}"
-        method = (data.provenance.get("fusion") or {}).get("method")
-        if method == "vqf":
-            source += " (IMU orientations fused on the host by VQF from the raw samples)"
-        elif method == "device":
-            source += " (IMU orientations as fused by the devices)"
+        if data.orientations is not None:
+            source += f" (IMU orientations {data.orientations})"
     table = format_rom_table(range_of_motion(constraint, side), age=age, sex=sex)
     click.echo(f"{source}\n{table}")

@@ -278,11 +278,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
                                                 reference_swing=getattr(reference, "swing",
                                                                         None))
             facts: dict[str, Any] = {"joint orientations": len(directions)}
-            method = ((joint.provenance.get("fusion") or {}).get("method")
-                      if joint is not None else None)
-            if method is not None:
-                facts["IMU orientations"] = ("fused on the host by VQF from the raw samples"
-                                             if method == "vqf" else "as fused by the devices")
+            if joint is not None and joint.orientations is not None:
+                facts["IMU orientations"] = joint.orientations
             verts = getattr(constraint.swing, "vertices", None)
             if verts is not None:
                 facts["boundary vertices"] = len(verts)
@@ -300,8 +297,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.sparse_arcs_deg = []
             data.sparse_arcs_text = [_arc_text(a, side) for a in arcs]
         data.calibrations = _calibration_rows(store.calibrations(rec_id))
-        refit = ((joint.provenance.get("fusion") or {}).get("refit_residual_deg")
-                 if joint is not None else None)
+        refit = (None if joint is None else
+                 (joint.provenance.get("fusion") or {}).get("refit_residual_deg"))
         if refit is not None:
             data.calibrations.append({"kind": "imu-alignment re-fitted on the VQF orientations",
                                       "residual_deg": float(refit)})

@@ -452,7 +452,7 @@ class SimulatedLimb:
         if not (math.isfinite(smooth_s) and smooth_s > 0):
             raise ValueError(f"smooth_s must be > 0, got {smooth_s!r}")
         self.smooth_s = float(smooth_s)
-        self._cp_cache: dict[int, np.ndarray] = {}  # cleared when the target changes
+        self._cp_cache: dict[int, np.ndarray] = {}  # cleared when the protocol changes
         self._cp_plan = self._plan
         self._cp_lock = threading.Lock()
         self._radial = _StarRadial.of(constraint, self.centre)
@@ -515,9 +515,6 @@ class SimulatedLimb:
         self.neutral_hold_s = hold
         self.neutral_ramp_s = ramp
         self.neutral_sd_deg = sd
-        if hasattr(self, "_cp_lock"):  # the target changed: forget the motion's control points
-            with self._cp_lock:
-                self._cp_cache.clear()
 
     def _neutral_start(self, plan) -> float:
         return 0.0 if plan is None else plan[1] + plan[0].duration_s + self.blend_s
