@@ -1,0 +1,85 @@
+"""Segment-frame conventions of orientation data: the rig's and the ISB's.
+
+Two conventions name the axes fixed in a body segment (both right-handed, both with +Z to the
+body's right for either side, as OpenSim's bodies have it):
+
+============  ==========================================  ==========  ==========
+convention    long axis                                    +X          +Z
+============  ==========================================  ==========  ==========
+``rig``       +X along the segment, pointing distally      distal      right
+``isb``       +Y along the segment, pointing proximally    anterior    right
+============  ==========================================  ==========  ==========
+
+``isb`` follows the ISB recommendations (Wu et al. 2002, *J Biomech* 35:543, hip and ankle;
+Wu et al. 2005, *J Biomech* 38:981, shoulder, elbow, wrist) and is what OpenSim bodies and
+OpenSense's IMU tools give; the rig's own frames put the limb long axis on +X (the thesis's and
+the constraint file's convention). With the columns of ``M`` the rig's axes in ISB
+coordinates::
+
+    X_rig = −Y_isb,   Y_rig = X_isb,   Z_rig = Z_isb,
+    M = [[0, 1, 0], [−1, 0, 0], [0, 0, 1]]        (a rotation by −90° about Z)
+
+a **segment** orientation (segment → lab) in ISB frames becomes one in rig frames by
+``R_rig = R_isb M`` (``q_rig = q_isb ⊗ m``, ``m`` the quaternion of ``M``), and a **joint**
+orientation (child relative to parent, both in the same convention) by
+``J_rig = Mᵀ J_isb M`` (``m* ⊗ J ⊗ m``). A direction (a limb axis) given in ISB coordinates
+is ``Mᵀ v`` in rig coordinates. The conversion is exact (no fitting): the same recording read
+in either convention gives the same joint orientations, hence the same boundary and clinical
+angles.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models import quaternion as Q
+
+__all__ = [
+    "FRAMES",
+    "RIG_TO_ISB",
+    "direction_to_rig",
+    "joint_to_rig",
+    "segment_to_rig",
+]
+
+#: Conventions an orientation file may be in.
+FRAMES = ("rig", "isb")
+
+#: Columns: the rig's X, Y, Z axes in ISB coordinates (see module doc).
+RIG_TO_ISB = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+#: ``m``: the quaternion of :data:`RIG_TO_ISB` (−90° about Z), scalar-first.
+_M = np.array([math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)])
+
+
+def _check(frames: str) -> str:
+    if frames not in FRAMES:
+        raise ValueError(f"frames must be one of {', '.join(FRAMES)}, got {frames!r}")
+    return frames
+
+
+def segment_to_rig(q, frames: str) -> np.ndarray:
+    """Segment orientations (N, 4) (segment → lab, scalar-first) in ``frames`` → rig frames."""
+    q = np.asarray(q, dtype=np.float64)
+    if _check(frames) == "rig":
+        return q
+    return Q.multiply(q, np.broadcast_to(_M, q.shape))
+
+
+def joint_to_rig(q, frames: str) -> np.ndarray:
+    """Joint orientations (N, 4) (child relative to parent) in ``frames`` → rig frames."""
+    q = np.asarray(q, dtype=np.float64)
+    if _check(frames) == "rig":
+        return q
+    m = np.broadcast_to(_M, q.shape)
+    return Q.multiply(Q.conjugate(m), Q.multiply(q, m))
+
+
+def direction_to_rig(v, frames: str) -> np.ndarray:
+    """A direction (3,) or (N, 3) in segment coordinates of ``frames`` → rig coordinates."""
+    v = np.asarray(v, dtype=np.float64)
+    if _check(frames) == "rig":
+        return v
+    return v @ RIG_TO_ISB  # Mᵀ v, row-wise
