@@ -1,9 +1,16 @@
 """Boundary extraction: recorded joint orientations → a patient-specific joint constraint.
 
 Input: joint orientations ``q`` (N, 4) (limb relative to thorax, scalar-first), in recording
-order (consecutive samples are read as a trajectory; any other order only loses that evidence).
-Output: a :class:`models.constraint.JointConstraint` with a spherical-polygon swing limit, a
-twist range (and, when the data supports it, a swing-dependent twist table), and its provenance.
+order with their sample times (consecutive samples are read as a trajectory; any other order
+only loses that evidence). Output: a :class:`models.constraint.JointConstraint` with a
+spherical-polygon swing limit, a twist range (and, when the data supports it, a
+swing-dependent twist table), and its provenance.
+
+The principle: **keep what was recorded.** A patient reaches a limit briefly; a range of motion
+that leaves out a brief excursion is the one error a clinician cannot see. So the boundary
+holds every recorded sample except isolated spikes (sensor glitches), and moves inwards only by
+the measurement error the recording itself shows (near zero for optical motion capture or servo
+encoders). What the written boundary holds is then measured on it and recorded.
 
 Method
 ------
@@ -11,32 +18,43 @@ Method
    of ``q = swing ⊗ twist`` about ``a`` (:mod:`models.quaternion`). Samples whose IMU
    calibration status (BNO055 ``CALIB_STAT`` system level, bits 7-6) is below
    ``min_system_status`` are dropped first (magnetic disturbances drop it).
-2. **Projection.** The centre ``c`` is the normalised mean direction, re-centred on the samples
+2. **Spikes** (the only outliers). Consecutive samples are *linked* when the limb could have
+   moved between them: the step's angular speed is at most ``max_speed_dps`` (default
+   3,000°/s, faster than any limb segment's swing; the fastest human segment rotations reported,
+   about 2,500°/s, are the forearm's in throwing; without sample times a step is a jump when it
+   exceeds 15° and 20 median steps). A run of at most ``spike_max_samples`` (2) samples between
+   two jumps — reached and left at a speed no limb has — is a spike: a sensor glitch, dropped
+   and counted (``spikes``). A brief excursion to a limit is coherent motion, linked all the
+   way, and is never dropped however rare. (When such runs would hold more than 5 % of the
+   samples, the samples are not a trajectory in recording order and nothing is dropped.)
+3. **Projection.** The centre ``c`` is the normalised mean direction, re-centred on the samples
    nearest it (95 %). Directions are mapped to the plane by the *azimuthal-equidistant*
    projection about ``c`` (Snyder 1987, *Map projections — a working manual*, USGS PP 1395,
    §25): ``p = θ (cos α, sin α)`` with ``θ = ∠(d, c)`` in degrees and ``α`` the azimuth in a
    tangent basis at ``c``. Distances from ``c`` are exact; other distances are stretched by
    ``θ / sin θ`` across the radial direction (5 % at 30°, 21 % at 60°), which only matters for
    the alpha radius, not for the result's accuracy (vertices are mapped back exactly).
-3. **Density trimming.** A histogram on ``cell_deg`` cells, smoothed by a disc of radius
-   ``trim_radius_deg`` (:func:`scipy.ndimage.convolve`), gives each sample's local count.
-   Samples whose count is below ``trim_min_count`` *and* in the lowest ``trim_fraction`` of
-   counts *and* that are on no trajectory are outliers (isolated glitches). A sample is on a
-   trajectory when its predecessor or successor lies within ``track_step_deg``: the limb moved
-   continuously through it. (A fast pass at a modest rate leaves samples several degrees apart,
-   each alone in its disc; counts alone would trim such real, rarely visited range.)
+   **Measured noise**: the white noise of the directions, ``σ`` (degrees per axis), is the
+   robust standard deviation of the fourth differences of consecutive plane positions over
+   √70 (for white noise every order of difference gives ``σ``; smooth motion adds its fourth
+   derivative times Δt⁴, nothing at the rates the rig records — a 60 Hz optical recording gives
+   0.05° from second differences and 0.007° from fourth ones).
 4. **Alpha shape** (Edelsbrunner, Kirkpatrick & Seidel 1983, *IEEE Trans. Inf. Theory*
-   29:551): the Delaunay triangulation (:class:`scipy.spatial.Delaunay`) of the per-cell mean
-   positions, triangles with circumradius ``< alpha_deg`` merged with
-   :func:`shapely.coverage_union_all`. The region is concave where the data is and claims no
-   range the limb did not visit; a swing limit is simply connected, so the pieces are joined
-   and holes filled, on recorded evidence only:
+   29:551): the Delaunay triangulation (:class:`scipy.spatial.Delaunay`) of the points — each
+   occupied ``cell_deg`` cell's mean position, and in the cells at the edge of the occupied
+   area also the cell's outermost samples in eight directions, so that the envelope passes
+   through recorded samples rather than through cell means up to half a cell inside them —
+   triangles with circumradius ``< alpha_deg`` merged with :func:`shapely.coverage_union_all`.
+   The region is concave where the data is and claims no range the limb did not visit; a
+   swing limit is simply connected, so the pieces are joined and holes filled, on recorded
+   evidence only:
 
    i. *Clusters.* Cells are connected by Delaunay edges shorter than ``2 alpha`` (the longest
-      edge an alpha triangle can have) and by trajectory steps (``track_step_deg``). Cells
-      outside the cluster holding most samples, in clusters of less than ``cluster_share`` of
-      the samples each, are isolated glitch clusters: left out, and not counted as evidence
-      (``glitch_cluster_samples`` in the provenance). Only the main cluster's triangles are used.
+      edge an alpha triangle can have) and by linked trajectory steps (step 2). Cells outside
+      the cluster holding most samples, in clusters of less than ``cluster_share`` of the
+      samples each, are isolated glitch clusters — reached and left only by jumps no limb
+      makes: left out, and not counted as evidence (``glitch_cluster_samples`` in the
+      provenance). Only the main cluster's triangles are used.
    ii. *Along the trajectory.* Cells are labelled by the piece of the shape they lie in. A run of
       consecutive trajectory samples between two labelled samples is a **transit** when the
       pieces differ (the limb went from one to the other through the gap, e.g. a thin neck) and
@@ -44,9 +62,9 @@ Method
       as a lobe visited once, that formed no triangle); so are runs at the ends of a stretch of
       trajectory. These runs are buffered by ``cell_deg / 2`` and merged with the pieces, then
       closed by ``cell_deg`` (a slit of less than two cells is no evidence of a limit).
-   iii. *Bridges.* Pieces still apart that hold at least ``trim_min_count`` samples (a lobe only
-      ever seen inside, never on the way in) are joined to the piece holding most samples along
-      the minimax path through the recorded cells — the Euclidean minimum spanning tree
+   iii. *Bridges.* Pieces still apart that hold at least ``min_piece_samples`` samples (a lobe
+      only ever seen inside, never on the way in) are joined to the piece holding most samples
+      along the minimax path through the recorded cells — the Euclidean minimum spanning tree
       (:func:`scipy.sparse.csgraph.minimum_spanning_tree`; edges inside a piece cost nothing),
       edges shorter than ``2 alpha``: alpha grown locally, along the data, not everywhere.
    iv. The piece holding most samples is kept and its holes filled.
@@ -56,53 +74,69 @@ Method
    or the final region (after 4b) leaves more than that out by more than ``cell_deg`` + the
    inset, ``alpha`` grows by 1.5× (up to 4 times).
 
-   4b. **Noise correction**: a limit the patient dwells on leaves a ridge of samples, blurred
-   by measurement noise; the region's envelope sits on the ridge's outer tail. The region is
-   shrunk by the larger of two estimates of how far inside the envelope the limit lies:
+   4b. **Noise inset, as far as the measured errors support it.** A limit the patient dwells
+   on leaves a ridge of samples blurred by measurement error; the envelope sits on the ridge's
+   outer tail. Two estimates of how far inside the envelope the limit lies, each capped by
+   ``3 ×`` the error it stands for (the largest of a few hundred Gaussian draws), the larger
+   one taken:
 
-   - the ridge's crest: the mode of the samples' depth inside the region (0.2° bins over
-     ``pileup_band_deg``, used only when it stands 2× above the band's median; depth to within
-     0.025°, from the boundary's points 0.05° apart) — right for fast (white) noise;
-   - the typical **visit**: slow errors (a fused heading that wanders by a degree between
-     visits) shift whole visits, and the envelope follows the outermost one while each visit's
-     samples pile up on its own crest, so the pile-up sits just inside the envelope and misses
-     the shift. The boundary is cut into stretches of ``visit_segment_deg`` (by the nearest
+   - *fast (white) noise*: the ridge's crest, the mode of the samples' depth inside the region
+     (0.2° bins over ``pileup_band_deg``, used only when it stands 2× above the band's median;
+     depth to within 0.025°, from the boundary's points 0.05° apart), capped by ``3 σ`` (step
+     3). On clean data ``σ`` is a few thousandths of a degree and so is the inset, whatever
+     the density of the samples near the envelope;
+   - *slow errors* (a fused heading that wanders by a degree between visits shifts whole
+     visits, and the envelope follows the outermost one): the typical **visit**'s closest
+     approach. The boundary is cut into stretches of ``visit_segment_deg`` (by the nearest
      boundary point of each sample within ``visit_band_deg``); in each stretch, a visit is a
      run of samples in recording order with no gap longer than ``visit_gap_samples``, its
      closest approach to the envelope is its minimum depth, and the stretch's value is the
      median over its visits (stretches with at least ``visit_min`` visits); the estimate is the
-     median over the stretches. On simulated IMU recordings fused on the host (dev patients;
-     errors mostly slow) the pile-up crest left the boundary 0.6° (median) outside the truth
-     and this estimate 0.1°; on device-fused ones (fast noise) the two agree within ~0.3°.
+     median over the stretches. Visits that stop short of a limit are what people do, not
+     error, so this estimate is used only with a **measured** slow error (``slow_error_deg``:
+     the IMU read path passes the heading correction's own uncertainty,
+     :meth:`calibration.heading.HeadingCorrection.uncertainty_deg`), and capped at 3× it.
+     Without one (files, servo limbs) it is 0.
 
    The shrunk pieces are joined again as in 4 ii-iii (transits, excursions beyond the unshrunk
    shape, bridges): a neck narrower than twice the inset does not cut a recorded lobe off.
-5. **Simplification** (Douglas-Peucker, topology-preserving, :meth:`shapely.Polygon.simplify`)
-   with the smallest tolerance ≥ ``simplify_deg`` that leaves at most ``max_vertices``; the
-   vertices are mapped back to the sphere and joined by great-circle edges. The result is
+5. **Simplification around the region.** Douglas-Peucker (topology-preserving,
+   :meth:`shapely.Polygon.simplify`) with tolerance ``tol`` of the region grown by
+   ``tol + margin`` (margin 0.01°): the simplified boundary lies between ``margin`` and
+   ``2 tol + margin`` outside the region, so simplification never cuts recorded range off;
+   ``tol`` starts at ``simplify_deg`` and grows by 1.25× until at most ``max_vertices`` remain.
+   The vertices are mapped back to the sphere and joined by great-circle edges; if a
+   great-circle edge still leaves a sample the region held outside (it bulges inwards of its
+   straight image in the plane), the margin is tripled and the step repeated. The result is
    validated by :mod:`models.constraint` (simple, non-degenerate); the interior point is the
    pole of inaccessibility (:func:`shapely.ops.polylabel`), or ``c`` when that is nearly as deep.
-6. **Twist range**: the ``twist_percentiles`` of the kept samples' twist, after centring on their
-   circular mean (so a range across ±180° is handled). With ``noise_correction``, each end is
-   then placed where the patient *dwelt* at it. The samples within ``twist_dwell_band_deg`` of
-   the envelope (the 0.1 / 99.9 percentiles) form runs of consecutive samples; a run of at
-   least ``twist_dwell_min_samples`` whose twist spread (interquartile range) is at most
-   ``twist_dwell_max_iqr_deg`` is a dwell at the limit (a pass that only sweeps through the band
-   is not flat). With at least ``twist_dwell_min_runs`` dwells, the end is the median over the
-   dwells of each dwell's median twist. Slowly varying errors (an IMU pair's relative heading
-   drift adds directly to the twist) shift each dwell by the error at that moment; the
-   envelope and every high percentile sit on the dwells with the largest positive error, the
-   median of dwells on the typical one. With fewer dwells, the end is the crest of the samples'
-   pile-up below the envelope as in 4b, else the percentile. **By swing region** (contract 3,
-   ``twist.by_swing``): at table directions ``d_i`` on a grid of spacing ``by_swing_spacing_deg``
-   inside the polygon, the same percentiles weighted by the kernel ``exp(κ (d·d_i − 1))``,
-   ``κ = 1 / (1 − cos β)``, where the effective sample count ``(Σw)²/Σw²`` reaches
-   ``by_swing_min_samples``; emitted when ``by_swing`` is True, or ("auto") when some region's
-   limit differs from the envelope by more than ``by_swing_min_diff_deg``.
+6. **Twist range**: the envelope of the kept samples' twist (minimum and maximum after centring
+   on their circular mean, so a range across ±180° is handled), each end moved in as in 4b: by
+   the crest of the pile-up of samples below it, capped at 3× the twist's measured white noise
+   (fourth differences of the unwrapped twist); and, with a measured ``slow_error_deg``, by the
+   patient's *dwells* at it, capped at 3× that error (the samples within
+   ``twist_dwell_band_deg`` of the end form runs of consecutive samples; a run of at least
+   ``twist_dwell_min_samples`` whose twist spread (interquartile range) is at most
+   ``twist_dwell_max_iqr_deg`` is a dwell; with at least ``twist_dwell_min_runs`` dwells the
+   estimate is the median over the dwells of each dwell's median depth: slowly varying errors
+   such as an IMU pair's relative heading drift shift each dwell by the error at that moment).
+   **By swing region** (contract 3, ``twist.by_swing``): at table directions ``d_i`` on a grid
+   of spacing ``by_swing_spacing_deg`` inside the polygon, where the kernel
+   ``exp(κ (d·d_i − 1))``, ``κ = 1 / (1 − cos β)``, gives an effective sample count
+   ``(Σw)²/Σw²`` of at least ``by_swing_min_samples``, the twist extremes of the samples within
+   ``β`` of ``d_i``; then every interval is widened as little as possible (a linear programme,
+   :func:`_hold_twists`) until the table's interpolated limits hold every kept sample's twist
+   at its direction. Emitted when ``by_swing`` is True, or ("auto") when some region's limit
+   then still differs from the envelope by more than ``by_swing_min_diff_deg``. Limits are
+   written rounded outwards (3 decimals).
 7. **Sparse arcs.** Points every 0.5° along the final boundary with fewer than
    ``sparse_min_samples`` kept samples within ``sparse_deg`` are grouped into arcs and reported
    (``sparse_arcs_``): stretches of the limit the patient reached rarely or never, where the
    boundary is an interpolation.
+8. **What the boundary holds**, measured on the constraint written (the exact oracle,
+   :class:`models.oracle.ConstraintOracle`): the share of every usable recorded direction
+   (spikes included) inside the swing region (``inside_``) and within 1° of it, and the
+   farthest one outside; stored in the provenance (``inside``) and printed by ``rig boundary``.
 
 Accuracy measure (:func:`boundary_distance`)
 --------------------------------------------
@@ -181,6 +215,80 @@ def _ae_inverse(p: np.ndarray, c: np.ndarray, u: np.ndarray, v: np.ndarray) -> n
     t = np.radians(theta)
     tang = (p[:, :1] / safe[:, None]) * u + (p[:, 1:] / safe[:, None]) * v
     return np.cos(t)[:, None] * c + np.sin(t)[:, None] * tang
+
+
+def _steps(d: np.ndarray, t: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Angles (N-1,) in degrees between consecutive directions, and the time steps (N-1,)
+    (duplicate or backward times replaced by half the median positive step), or None."""
+    step = np.degrees(2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(d[1:] - d[:-1], axis=1),
+                                              0.0, 1.0)))
+    if t is None:
+        return step, None
+    dt = np.diff(t)
+    pos = dt[dt > 0]
+    floor = 0.5 * float(np.median(pos)) if len(pos) else 1.0
+    return step, np.maximum(dt, floor)
+
+
+def _links(d: np.ndarray, t: np.ndarray | None, max_speed_dps: float) -> np.ndarray:
+    """(N-1,) bool: consecutive samples the limb could have moved between — the step's angular
+    speed is at most ``max_speed_dps``. Without times, a step is a jump when it exceeds both
+    15° and ``_JUMP_RATIO`` times the median step."""
+    if len(d) < 2:
+        return np.zeros(0, dtype=bool)
+    step, dt = _steps(d, t)
+    if dt is None:
+        return step <= max(15.0, _JUMP_RATIO * float(np.median(step)))
+    return step <= max_speed_dps * dt
+
+
+#: How far outside the limit white noise of std σ (per axis) carries the envelope of the
+#: samples pressed against it, in σ: the largest of a few hundred draws of a Gaussian.
+_NOISE_REACH = 3.0
+#: Least clearance (degrees) between the region and the simplified polygon around it.
+_MARGIN_DEG = 0.01
+#: Without sample times: a step more than this many median steps (and > 15°) is a jump.
+_JUMP_RATIO = 20.0
+#: A recording with more of its samples in short runs between jumps is not a trajectory in
+#: recording order (shuffled, or sampled too sparsely to follow): no spike is taken out.
+_MAX_SPIKE_SHARE = 0.05
+
+
+def _spikes(d: np.ndarray, t: np.ndarray | None, max_speed_dps: float,
+            max_len: int) -> np.ndarray:
+    """(N,) bool: isolated spikes — runs of at most ``max_len`` consecutive samples that the
+    limb could neither have reached from the sample before nor have left for the sample after
+    (both steps faster than ``max_speed_dps``, :func:`_links`); a run at either end of the
+    recording needs the jump on its one side. A sensor glitch, not motion: no limb turns that
+    fast. Nothing is marked when such runs would hold more than ``_MAX_SPIKE_SHARE`` of the
+    samples (the samples are not a trajectory in recording order)."""
+    n = len(d)
+    out = np.zeros(n, dtype=bool)
+    if n < 2 * max_len + 2 or max_len < 1:
+        return out
+    jump = ~_links(d, t, max_speed_dps)
+    if not jump.any():
+        return out
+    run = np.concatenate(([0], np.cumsum(jump)))  # runs of linked samples, cut at each jump
+    short = np.bincount(run)[run] <= max_len
+    if short.mean() > _MAX_SPIKE_SHARE:
+        return np.zeros(n, dtype=bool)
+    return short
+
+
+def _fast_noise(p: np.ndarray) -> float:
+    """White measurement noise of the limb direction, degrees (std per axis, plane
+    coordinates): the robust (MAD) standard deviation of the fourth differences of consecutive
+    samples divided by √70 — for white noise of std σ the fourth difference has std √70 σ,
+    while smooth motion contributes its fourth derivative times Δt⁴, nothing at the rates the
+    rig records (the lower differences do not separate the two: a 60 Hz optical recording
+    shows 0.05° from its second differences, 0.007° from its fourth, while white noise gives
+    the same figure from every order)."""
+    if len(p) < 20:
+        return 0.0
+    d4 = np.diff(p, n=4, axis=0)
+    mad = np.median(np.abs(d4 - np.median(d4, axis=0)), axis=0)
+    return float(np.mean(1.4826 * mad) / math.sqrt(70.0))
 
 
 def _circular_centre(phi: np.ndarray) -> float:
@@ -297,12 +405,44 @@ def _dwell_depth(depth: np.ndarray, band: float, min_samples: int,
     return len(meds), (float(np.median(meds)) if meds else 0.0)
 
 
-def _weighted_percentiles(x: np.ndarray, w: np.ndarray, pct: tuple[float, float]):
-    order = np.argsort(x)
-    xs, ws = x[order], w[order]
-    cw = np.cumsum(ws)
-    cw = (cw - 0.5 * ws) / cw[-1]
-    return tuple(float(np.interp(p / 100.0, cw, xs)) for p in pct)
+def _hold_twists(points: list[dict], bandwidth_deg: float, d: np.ndarray, tw: np.ndarray,
+                 env_lo: float, env_hi: float) -> None:
+    """Widen the table's intervals (in place) as little as possible so that its interpolated
+    limits (:class:`models.constraint.SwingTwistTable`: kernel-weighted means of the points'
+    limits) hold every recorded twist ``tw`` (degrees) at its direction ``d``: a linear
+    programme per side — minimise the total widening ``Σ Δ_j ≥ 0`` subject to
+    ``Σ_j r_ij (max_j + Δ_j) ≥ tw_i`` (``r_ij`` the normalised kernel weights) and
+    ``max_j + Δ_j ≤`` the envelope, which every recorded twist is inside (so it is feasible),
+    over the samples outside, re-solved until none is (cutting planes)."""
+    from scipy.optimize import linprog
+
+    from models.constraint import SwingTwistTable
+
+    dirs = np.array([pt["direction"] for pt in points], dtype=np.float64)
+    lo = np.array([pt["min_deg"] for pt in points], dtype=np.float64)
+    hi = np.array([pt["max_deg"] for pt in points], dtype=np.float64)
+    r = SwingTwistTable(bandwidth_deg, dirs, lo, hi).weights(d)  # (N, K)
+    slack = 2e-3  # the file's 3 decimals, rounded outwards, keep a margin of 1e-3
+    for limits, sign, bound in ((hi, 1.0, env_hi), (lo, -1.0, env_lo)):
+        # in "sign" units the constraint reads r·(s·limits) + r·Δ >= s·tw, Δ <= s·bound - s·lim
+        rows = np.zeros(0, dtype=np.int64)
+        for _ in range(10):
+            excess = sign * tw - r @ (sign * limits) + slack
+            new = np.setdiff1d(np.flatnonzero(excess > 0), rows)
+            if not len(new):
+                break
+            rows = np.union1d(rows, new)
+            res = linprog(np.ones(len(limits)), A_ub=-r[rows],
+                          b_ub=-(sign * tw[rows] - r[rows] @ (sign * limits) + slack),
+                          bounds=list(zip(np.zeros(len(limits)),
+                                          np.maximum(sign * bound - sign * limits, 0.0),
+                                          strict=True)), method="highs")
+            if not res.success:  # cannot happen (the envelope holds all): widen to it
+                limits[:] = bound
+                break
+            limits += sign * res.x
+    for pt, a, b in zip(points, lo, hi, strict=True):
+        pt["min_deg"], pt["max_deg"] = float(a), float(max(a, b))
 
 
 class BoundaryExtractor:
@@ -316,15 +456,15 @@ class BoundaryExtractor:
     alpha_deg : float
         Alpha-shape radius: concavities narrower than about twice this are bridged.
     cell_deg : float
-        Histogram cell (thinning and density) size.
-    trim_radius_deg, trim_min_count, trim_fraction
-        Density trimming (step 3): a sample is an outlier when fewer than ``trim_min_count``
-        samples lie within ``trim_radius_deg`` and its count is in the lowest
-        ``trim_fraction``.
+        Cell size of the points the alpha shape is built on.
+    max_speed_dps : float
+        Fastest plausible angular speed of the limb direction, °/s (step 2).
+    spike_max_samples : int
+        Longest run between two jumps that counts as a spike (step 2).
+    min_piece_samples : int
+        Samples a separate piece needs to be bridged to the main one (step 4 iii).
     coverage : float
         Fraction of kept samples the region must hold (step 4).
-    track_step_deg : float
-        Consecutive samples this close are a trajectory (steps 3, 4 i-ii).
     cluster_share : float
         A cluster joined to the main one neither in space nor along the trajectory and holding
         less than this share of the samples is a glitch cluster (step 4 i).
@@ -332,8 +472,6 @@ class BoundaryExtractor:
         Vertex budget of the simplified polygon.
     simplify_deg : float
         Smallest simplification tolerance.
-    twist_percentiles : (float, float)
-        Robust twist limits (percent).
     by_swing : bool or "auto"
         Swing-dependent twist table (step 6).
     by_swing_bandwidth_deg, by_swing_spacing_deg, by_swing_min_samples, by_swing_min_diff_deg
@@ -357,9 +495,14 @@ class BoundaryExtractor:
     by_swing_candidate_ : dict or None, the table computed (also when not emitted)
     sparse_arcs_ : list of SparseArc
     alpha_used_deg_ : float
-    n_samples_, n_status_dropped_, n_trimmed_, n_used_, n_glitch_cluster_ : int
-    twist_dwells_ : (int, int), dwells found at the lower and upper twist limit (step 6)
-    coverage_ : float, fraction of kept samples inside the region (within ``cell_deg``)
+    n_samples_, n_status_dropped_, n_spikes_, n_used_, n_glitch_cluster_ : int
+    noise_deg_, twist_noise_deg_ : float, measured white noise of direction and twist (deg)
+    slow_error_deg_ : float or None, the measured slow error given to :meth:`fit`
+    inset_deg_, inset_estimates_ : the swing noise inset and its estimates (step 4b)
+    twist_inset_deg_ : (float, float); twist_dwells_ : (int, int), dwells at each end (step 6)
+    coverage_ : float, share of the evidence the region held when alpha was chosen (step 4)
+    inside_, inside_1deg_ : float, share of the recorded directions inside the written
+        boundary, and within 1° of it; outside_max_deg_ : the farthest one outside (step 8)
     """
 
     def __init__(
@@ -367,15 +510,13 @@ class BoundaryExtractor:
         *,
         alpha_deg: float = 4.0,
         cell_deg: float = 0.5,
-        trim_radius_deg: float = 1.5,
-        trim_min_count: int = 5,
-        trim_fraction: float = 0.01,
+        max_speed_dps: float = 3000.0,
+        spike_max_samples: int = 2,
+        min_piece_samples: int = 5,
         coverage: float = 0.995,
-        track_step_deg: float = 5.0,
         cluster_share: float = 0.01,
         max_vertices: int = 64,
         simplify_deg: float = 0.3,
-        twist_percentiles: tuple[float, float] = (1.0, 99.0),
         by_swing: bool | str = "auto",
         by_swing_bandwidth_deg: float = 20.0,
         by_swing_spacing_deg: float = 20.0,
@@ -400,26 +541,23 @@ class BoundaryExtractor:
         if by_swing not in (True, False, "auto"):
             raise ValueError(f"by_swing must be True, False or 'auto', got {by_swing!r}")
         for label, val in (("alpha_deg", alpha_deg), ("cell_deg", cell_deg),
-                           ("trim_radius_deg", trim_radius_deg), ("sparse_deg", sparse_deg),
+                           ("max_speed_dps", max_speed_dps), ("sparse_deg", sparse_deg),
                            ("simplify_deg", simplify_deg)):
             if not val > 0:
                 raise ValueError(f"{label} must be > 0, got {val!r}")
-        lo, hi = twist_percentiles
-        if not 0.0 <= lo < hi <= 100.0:
-            raise ValueError(f"twist_percentiles must satisfy 0 <= lo < hi <= 100, got {lo}, {hi}")
+        if spike_max_samples < 0:
+            raise ValueError(f"spike_max_samples must be >= 0, got {spike_max_samples!r}")
         if max_vertices < 3:
             raise ValueError(f"max_vertices must be >= 3, got {max_vertices}")
         self.alpha_deg = float(alpha_deg)
         self.cell_deg = float(cell_deg)
-        self.trim_radius_deg = float(trim_radius_deg)
-        self.trim_min_count = int(trim_min_count)
-        self.trim_fraction = float(trim_fraction)
+        self.max_speed_dps = float(max_speed_dps)
+        self.spike_max_samples = int(spike_max_samples)
+        self.min_piece_samples = int(min_piece_samples)
         self.coverage = float(coverage)
-        self.track_step_deg = float(track_step_deg)
         self.cluster_share = float(cluster_share)
         self.max_vertices = int(max_vertices)
         self.simplify_deg = float(simplify_deg)
-        self.twist_percentiles = (float(lo), float(hi))
         self.by_swing = by_swing
         self.by_swing_bandwidth_deg = float(by_swing_bandwidth_deg)
         self.by_swing_spacing_deg = float(by_swing_spacing_deg)
@@ -445,11 +583,10 @@ class BoundaryExtractor:
         """The hyper-parameters as plain types (recorded in the provenance)."""
         return {
             "alpha_deg": self.alpha_deg, "cell_deg": self.cell_deg,
-            "trim_radius_deg": self.trim_radius_deg, "trim_min_count": self.trim_min_count,
-            "trim_fraction": self.trim_fraction, "coverage": self.coverage,
-            "track_step_deg": self.track_step_deg, "cluster_share": self.cluster_share,
+            "max_speed_dps": self.max_speed_dps, "spike_max_samples": self.spike_max_samples,
+            "min_piece_samples": self.min_piece_samples, "coverage": self.coverage,
+            "cluster_share": self.cluster_share,
             "max_vertices": self.max_vertices, "simplify_deg": self.simplify_deg,
-            "twist_percentiles": list(self.twist_percentiles),
             "by_swing": self.by_swing,
             "by_swing_bandwidth_deg": self.by_swing_bandwidth_deg,
             "sparse_deg": self.sparse_deg, "sparse_min_samples": self.sparse_min_samples,
@@ -463,7 +600,8 @@ class BoundaryExtractor:
         }
 
     # -- fit -------------------------------------------------------------------------------
-    def fit(self, q, *, status=None, provenance: dict | None = None) -> BoundaryExtractor:
+    def fit(self, q, *, status=None, t=None, provenance: dict | None = None,
+            slow_error_deg: float | None = None) -> BoundaryExtractor:
         """Extract the boundary from joint orientations.
 
         Parameters
@@ -472,6 +610,15 @@ class BoundaryExtractor:
             Joint orientations (limb relative to thorax), scalar-first, unit (either sign).
         status : (N,) array_like of int, optional
             IMU calibration bytes (``CALIB_STAT``); None for sources without one (servo FK).
+        t : (N,) array_like, optional
+            Sample times, seconds, non-decreasing: what tells a physically impossible jump
+            (a spike) from fast motion. Without them a step counts as a jump when it is more
+            than ``jump_ratio`` times the recording's median step and more than 15°.
+        slow_error_deg : float, optional
+            Measured size of the recording's slowly varying errors (an IMU pair's relative
+            heading drift left after the neutral-checkpoint correction, degrees): the evidence
+            the visit estimate of the noise inset may use (step 4b). None: no such evidence,
+            the inset comes from the measured fast noise only.
         provenance : dict, optional
             Where the data came from (session, file, ...); extended with the parameters and
             sample counts and stored in the constraint's ``provenance``.
@@ -502,33 +649,55 @@ class BoundaryExtractor:
                    f"< {self.min_system_status})" if self.n_status_dropped_ else "")
             )
         q = q[keep]
+        if t is not None:
+            t = np.asarray(t, dtype=np.float64).reshape(-1)
+            if len(t) != self.n_samples_:
+                raise CalibrationError(f"t has {len(t)} entries for {self.n_samples_} "
+                                       "orientations")
+            t = t[keep]
+            if not np.isfinite(t).all() or (np.diff(t) < 0).any():
+                raise CalibrationError("sample times must be finite and non-decreasing")
         d = Q.rotate(q, self.limb_axis)
         phi = Q.twist_angle(q, self.limb_axis)
+        self.recorded_ = d  # every usable recorded direction: what "inside" is measured on
+        spikes = _spikes(d, t, self.max_speed_dps, self.spike_max_samples)
+        self.n_spikes_ = int(spikes.sum())
+        d, phi = d[~spikes], phi[~spikes]
+        t = None if t is None else t[~spikes]
+        self.slow_error_deg_ = None if slow_error_deg is None else float(slow_error_deg)
         c = self._centre(d)
         u, v = _tangent_basis(c)
         p = _ae_forward(d, c, u, v)
-        inlier = self._trim(p, self._links(d))
-        self.n_trimmed_ = int((~inlier).sum())
-        p, d, phi = p[inlier], d[inlier], phi[inlier]
+        links = _links(d, t, self.max_speed_dps)
+        self.noise_deg_ = _fast_noise(p)
         if np.hypot(p[:, 0], p[:, 1]).max() > 150.0:
             raise CalibrationError(
                 "recorded directions span more than 150 deg from their centre; a swing region "
                 "this large cannot be extracted"
             )
         self.n_used_ = len(p)
-        poly = self._alpha_region(p, self._links(d))
-        tol = self.simplify_deg
-        for attempt in range(4):
-            verts2d = self._simplify(poly, tol)
+        poly = self._alpha_region(p, links)
+        import shapely
+
+        held = shapely.contains_xy(poly, p[:, 0], p[:, 1])  # what the written boundary must hold
+        tol, margin = self.simplify_deg, _MARGIN_DEG
+        for attempt in range(6):
+            verts2d = self._simplify(poly, tol, margin)
             try:
                 self._finish(verts2d, poly, p, d, phi, c, u, v, provenance)
-                break
             except CalibrationError:
                 # a corridor simplified to straight lines in the plane can still cross itself
                 # on the sphere (great-circle edges): simplify further
-                if attempt == 3:
+                if attempt == 5:
                     raise
                 tol *= 2.0
+                continue
+            o, _ = _swing_oracle(self.constraint_)
+            if not held.any() or (o.swing_distance(d[held]) <= 0.0).all():
+                break
+            # a great-circle edge bulges inwards of its straight image in the plane by more
+            # than the margin: widen it
+            margin *= 3.0
         return self
 
     def _centre(self, d: np.ndarray) -> np.ndarray:
@@ -551,35 +720,37 @@ class BoundaryExtractor:
         shape = tuple(ij.max(axis=0) + 1)
         return ij, shape, lo
 
-    def _links(self, d: np.ndarray) -> np.ndarray:
-        """(N-1,) bool: consecutive samples within ``track_step_deg`` (a recorded trajectory)."""
-        chord = np.linalg.norm(d[1:] - d[:-1], axis=1)
-        return chord <= 2.0 * math.sin(math.radians(self.track_step_deg) / 2.0)
-
-    def _trim(self, p: np.ndarray, links: np.ndarray) -> np.ndarray:
-        from scipy import ndimage
-
-        ij, shape, _ = self._grid(p)
-        pad = math.ceil(self.trim_radius_deg / self.cell_deg)
-        hist = np.zeros((shape[0] + 2 * pad, shape[1] + 2 * pad))
-        np.add.at(hist, (ij[:, 0] + pad, ij[:, 1] + pad), 1.0)
-        k = np.arange(-pad, pad + 1) * self.cell_deg
-        disc = (k[:, None] ** 2 + k[None, :] ** 2 <= self.trim_radius_deg**2).astype(float)
-        dens = ndimage.convolve(hist, disc, mode="constant")
-        count = dens[ij[:, 0] + pad, ij[:, 1] + pad]
-        cut = np.quantile(count, self.trim_fraction)
-        on_track = np.zeros(len(p), dtype=bool)
-        on_track[1:] |= links
-        on_track[:-1] |= links
-        return ~((count < self.trim_min_count) & (count <= cut) & ~on_track)
-
     def _cell_means(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The points the alpha shape is built on: each occupied cell's mean position
+        (``counts`` its samples, ``inv`` each sample's cell), then, for the cells at the edge
+        of the occupied area (a 4-neighbour empty), the cell's outermost samples in eight
+        directions (count 0: geometry, not evidence; cells of one sample have it as their
+        mean): the envelope passes through the recorded samples, not through cell means up to
+        half a cell inside them."""
         ij, shape, _ = self._grid(p)
         flat = ij[:, 0] * shape[1] + ij[:, 1]
-        _uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        inv = inv.reshape(-1)
         sx = np.bincount(inv, weights=p[:, 0])
         sy = np.bincount(inv, weights=p[:, 1])
-        return np.column_stack((sx / counts, sy / counts)), counts, inv.reshape(-1)
+        means = np.column_stack((sx / counts, sy / counts))
+        occ = np.zeros((shape[0] + 2, shape[1] + 2), dtype=bool)
+        ci, cj = uniq // shape[1] + 1, uniq % shape[1] + 1
+        occ[ci, cj] = True
+        edge = ~(occ[ci - 1, cj] & occ[ci + 1, cj] & occ[ci, cj - 1] & occ[ci, cj + 1])
+        sel = np.flatnonzero(edge[inv] & (counts[inv] > 1))
+        if not len(sel):
+            return means, counts, inv
+        cell = inv[sel]
+        extra = []
+        for a in np.arange(8) * (math.pi / 4.0):
+            score = p[sel, 0] * math.cos(a) + p[sel, 1] * math.sin(a)
+            order = np.lexsort((score, cell))
+            last = np.flatnonzero(np.r_[cell[order][1:] != cell[order][:-1], True])
+            extra.append(sel[order[last]])
+        extra = np.unique(np.concatenate(extra))
+        return (np.concatenate((means, p[extra])),
+                np.concatenate((counts, np.zeros(len(extra), dtype=counts.dtype))), inv)
 
     def _alpha_region(self, p: np.ndarray, links: np.ndarray):
         """Alpha shape joined along the recorded trajectory (step 4); sets the join state."""
@@ -742,7 +913,7 @@ class BoundaryExtractor:
         ever seen inside): along the minimax path through the recorded cells from each piece
         to the piece holding most samples, edges shorter than ``2 alpha`` (local alpha growth
         along the Euclidean minimum spanning tree, which holds every minimax path). Pieces
-        with fewer than ``trim_min_count`` samples are left alone (they fall away)."""
+        with fewer than ``min_piece_samples`` samples are left alone (they fall away)."""
         import shapely
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
@@ -760,7 +931,7 @@ class BoundaryExtractor:
         root = int(np.flatnonzero(cp == main)[0])
         _, pred = breadth_first_order(tree, root, directed=False, return_predecessors=True)
         segs = []
-        for k in np.flatnonzero(held >= self.trim_min_count):
+        for k in np.flatnonzero(held >= self.min_piece_samples):
             if k == main:
                 continue
             node = int(np.flatnonzero(cp == k)[0])
@@ -803,7 +974,9 @@ class BoundaryExtractor:
         import shapely
 
         self.inset_deg_ = 0.0
-        self.inset_estimates_ = {"pileup_deg": 0.0, "visit_deg": 0.0, "visit_stretches": 0}
+        self.inset_estimates_ = {"noise_deg": round(self.noise_deg_, 4), "pileup_deg": 0.0,
+                                 "visit_deg": 0.0, "visit_stretches": 0,
+                                 "slow_error_deg": self.slow_error_deg_}
         if not self.noise_correction:
             return poly
         ring = poly.exterior
@@ -811,12 +984,19 @@ class BoundaryExtractor:
         dist, arc = _ring_distance(ring, p)
         depth = np.where(inside, dist, 0.0)
         pileup = _pileup_offset(depth, self.pileup_band_deg, 0.2, 2.0)
-        near = np.flatnonzero(depth <= self.visit_band_deg)
-        visit, stretches = _visit_offset(depth, near, arc[near], self.visit_segment_deg,
-                                         self.visit_gap_samples, self.visit_min)
-        self.inset_estimates_ = {"pileup_deg": round(pileup, 3), "visit_deg": round(visit, 3),
-                                 "visit_stretches": stretches}
-        inset = max(pileup, visit)
+        visit, stretches = 0.0, 0
+        if self.slow_error_deg_:
+            near = np.flatnonzero(depth <= self.visit_band_deg)
+            visit, stretches = _visit_offset(depth, near, arc[near], self.visit_segment_deg,
+                                             self.visit_gap_samples, self.visit_min)
+        self.inset_estimates_.update({"pileup_deg": round(pileup, 3),
+                                      "visit_deg": round(visit, 3),
+                                      "visit_stretches": stretches})
+        # each estimate only as far as the measured errors support it: white noise blurs the
+        # envelope out by a few of its standard deviations, slow errors by about their size
+        fast = min(pileup, _NOISE_REACH * self.noise_deg_)
+        slow = min(visit, _NOISE_REACH * (self.slow_error_deg_ or 0.0))
+        inset = max(fast, slow)
         if inset <= 0.0:
             return poly
         union = self._join_state[0]
@@ -828,12 +1008,18 @@ class BoundaryExtractor:
         # inset, or a corridor, does not cut a recorded lobe off)
         return self._join(shrunk, union, p)
 
-    def _simplify(self, poly, tol: float) -> np.ndarray:
+    def _simplify(self, poly, tol: float, margin: float) -> np.ndarray:
+        """Vertices (M, 2) of a polygon *around* ``poly`` with at most ``max_vertices``:
+        Douglas-Peucker with tolerance ``tol`` of ``poly`` grown by ``tol + margin``, whose
+        boundary then lies between ``margin`` and ``2 tol + margin`` outside ``poly`` — nothing
+        the region holds is cut off; ``tol`` grows by 1.25× until the budget is met."""
         for _ in range(40):
-            s = poly.simplify(tol, preserve_topology=True)
-            ring = np.asarray(s.exterior.coords)[:-1]
-            if len(ring) <= self.max_vertices and s.is_valid and s.area > 0:
-                return ring
+            grown = poly.buffer(tol + margin, quad_segs=4)
+            s = grown.simplify(tol, preserve_topology=True)
+            if s.geom_type == "Polygon" and s.is_valid and s.area > 0:
+                ring = np.asarray(s.exterior.coords)[:-1]
+                if len(ring) <= self.max_vertices:
+                    return ring
             tol *= 1.25
         raise CalibrationError("could not simplify the boundary to the vertex budget")
 
@@ -855,28 +1041,27 @@ class BoundaryExtractor:
         self.centre_ = c
         self.vertices_ = verts
         self.interior_ = interior
-        # twist envelope
-        lo_p, hi_p = self.twist_percentiles
+        # twist: the envelope of the kept samples, each end moved in only as far as the
+        # measured errors support (step 6)
         mid = _circular_centre(phi)
         rel = _wrap(phi - mid)
-        lo, hi = np.percentile(rel, [lo_p, hi_p])
+        lo, hi = float(rel.min()), float(rel.max())
+        self.twist_noise_deg_ = _fast_noise(np.degrees(np.unwrap(phi))[:, None])
         self.twist_inset_deg_ = (0.0, 0.0)
         self.twist_dwells_ = (0, 0)
         if self.noise_correction:
-            # each end where the patient dwelt at it, else the crest of the pile-up (degrees)
-            e_lo, e_hi = np.percentile(rel, [0.1, 99.9])
             insets, dwells = [], []
-            for depth in (np.degrees(rel - e_lo), np.degrees(e_hi - rel)):
+            for depth in (np.degrees(rel - lo), np.degrees(hi - rel)):
+                fast = min(_pileup_offset(depth, self.pileup_band_deg, 0.25, 2.0),
+                           _NOISE_REACH * self.twist_noise_deg_)
                 k, med = _dwell_depth(depth, self.twist_dwell_band_deg,
                                       self.twist_dwell_min_samples, self.twist_dwell_max_iqr_deg)
                 dwells.append(k)
-                insets.append(med if k >= self.twist_dwell_min_runs else
-                              _pileup_offset(depth, self.pileup_band_deg, 0.25, 2.0))
+                slow = min(med, _NOISE_REACH * (self.slow_error_deg_ or 0.0)) \
+                    if k >= self.twist_dwell_min_runs else 0.0
+                insets.append(max(fast, slow))
             a, b = insets
-            if a > 0:
-                lo = e_lo + math.radians(a)
-            if b > 0:
-                hi = e_hi - math.radians(b)
+            lo, hi = lo + math.radians(a), hi - math.radians(b)
             self.twist_inset_deg_ = (a, b)
             self.twist_dwells_ = (dwells[0], dwells[1])
         tw_lo = math.degrees(float(np.clip(lo + mid, -math.pi, math.pi)))
@@ -902,17 +1087,17 @@ class BoundaryExtractor:
             "samples": int(self.n_samples_),
             "samples_used": int(self.n_used_),
             "dropped_status": int(self.n_status_dropped_),
-            "trimmed_outliers": int(self.n_trimmed_),
+            "spikes": int(self.n_spikes_),
             "glitch_cluster_samples": int(self.n_glitch_cluster_),
             "alpha_used_deg": round(self.alpha_used_deg_, 3),
             "noise_inset_deg": round(self.inset_deg_, 3),
             "noise_inset_estimates": dict(getattr(self, "inset_estimates_", {})),
             "twist_noise_inset_deg": [round(x, 3) for x in self.twist_inset_deg_],
             "twist_dwells": list(self.twist_dwells_),
-            "coverage": round(self.coverage_, 5),
             "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
         })
-        twist: dict[str, Any] = {"min_deg": round(tw_lo, 3), "max_deg": round(tw_hi, 3)}
+        twist: dict[str, Any] = {"min_deg": max(-180.0, math.floor(tw_lo * 1000.0) / 1000.0),
+                                 "max_deg": min(180.0, math.ceil(tw_hi * 1000.0) / 1000.0)}
         if self.by_swing_ is not None:
             twist["by_swing"] = self.by_swing_
         data = {
@@ -923,10 +1108,22 @@ class BoundaryExtractor:
             "provenance": prov,
         }
         try:
-            self.constraint_ = JointConstraint.from_dict(data)
+            constraint = JointConstraint.from_dict(data)
         except ConstraintError as err:
             raise CalibrationError(f"the extracted boundary is not a valid constraint: {err}") \
                 from err
+        # what the written boundary holds, measured on it: every usable recorded direction
+        # (spikes included), the exact oracle's signed distance
+        o, _ = _swing_oracle(constraint)
+        dist = np.degrees(o.swing_distance(self.recorded_))
+        self.inside_ = float(np.mean(dist <= 0.0))
+        self.inside_1deg_ = float(np.mean(dist <= 1.0))
+        self.outside_max_deg_ = float(max(0.0, dist.max()))
+        data["provenance"]["inside"] = {
+            "share": round(self.inside_, 5), "within_1deg": round(self.inside_1deg_, 5),
+            "farthest_outside_deg": round(self.outside_max_deg_, 3),
+            "directions": len(self.recorded_)}
+        self.constraint_ = JointConstraint.from_dict(data)
 
     def _twist_table(self, d, rel, mid, verts, interior, spoly, c, u, v):
         """Kernel-weighted twist percentiles at grid directions inside the polygon."""
@@ -944,7 +1141,6 @@ class BoundaryExtractor:
         dirs = _ae_inverse(grid, c, u, v)
         beta = math.radians(self.by_swing_bandwidth_deg)
         kappa = 1.0 / (1.0 - math.cos(beta))
-        lo_p, hi_p = self.twist_percentiles
         points = []
         env_lo, env_hi = self.twist_deg_
         for di in dirs:
@@ -952,13 +1148,21 @@ class BoundaryExtractor:
             sw = w.sum()
             if sw <= 0 or sw * sw / (w @ w) < self.by_swing_min_samples:
                 continue
-            a, b = _weighted_percentiles(rel, w, (lo_p, hi_p))
+            near = d @ di >= math.cos(beta)  # the samples within the bandwidth: their extremes
+            if not near.any():
+                continue
+            a, b = float(rel[near].min()), float(rel[near].max())
             a = float(np.clip(math.degrees(a + mid), env_lo, env_hi))
             b = float(np.clip(math.degrees(b + mid), env_lo, env_hi))
             points.append({"direction": [round(float(x), 6) for x in di],
-                           "min_deg": round(a, 3), "max_deg": round(max(a, b), 3)})
+                           "min_deg": a, "max_deg": max(a, b)})
         if len(points) < 3:
             return None
+        _hold_twists(points, self.by_swing_bandwidth_deg, d,
+                     np.degrees(_wrap(rel + mid)), env_lo, env_hi)
+        for pt in points:  # rounded outwards: the file holds what the table holds
+            pt["min_deg"] = math.floor(pt["min_deg"] * 1000.0) / 1000.0
+            pt["max_deg"] = math.ceil(pt["max_deg"] * 1000.0) / 1000.0
         return {"bandwidth_deg": self.by_swing_bandwidth_deg, "points": points}
 
     def _sparse_arcs(self, verts: np.ndarray, d: np.ndarray) -> list[SparseArc]:
@@ -995,11 +1199,14 @@ class BoundaryExtractor:
             "samples": self.n_samples_,
             "samples_used": self.n_used_,
             "dropped_status": self.n_status_dropped_,
-            "trimmed_outliers": self.n_trimmed_,
+            "spikes": self.n_spikes_,
             "glitch_cluster_samples": self.n_glitch_cluster_,
             "vertices": len(self.vertices_),
             "alpha_used_deg": self.alpha_used_deg_,
-            "coverage": self.coverage_,
+            "inside": self.inside_,
+            "inside_1deg": self.inside_1deg_,
+            "directions": len(self.recorded_),
+            "noise_inset_deg": self.inset_deg_,
             "twist_deg": list(self.twist_deg_),
             "by_swing_points": 0 if self.by_swing_ is None else len(self.by_swing_["points"]),
             "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],

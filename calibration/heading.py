@@ -283,6 +283,20 @@ class HeadingCorrection:
             return self._gp.predict(t.reshape(-1, 1)).reshape(t.shape) + self._gp_mean
         return np.interp(t, self.times_, self.psi_deg_)
 
+    def uncertainty_deg(self, t0: float, t1: float, step_s: float = 1.0) -> float | None:
+        """The error the correction leaves, degrees: the root mean square over ``[t0, t1]``
+        (a grid of ``step_s``) of the Gaussian process's posterior standard deviation of
+        ψ(t) — the drift it could not pin down between checkpoints, by its own fitted model
+        (OU amplitude, correlation time, checkpoint noise). None for the ``linear`` estimate
+        (no error model) and without checkpoints."""
+        self._check_fitted()
+        if self._gp is None:
+            return None
+        n = max(2, min(100_000, math.ceil((t1 - t0) / step_s) + 1))
+        grid = np.linspace(float(t0), float(t1), n).reshape(-1, 1)
+        _, std = self._gp.predict(grid, return_std=True)
+        return float(math.sqrt(float(np.mean(np.square(std)))))
+
     def apply(self, t, q) -> np.ndarray:
         """``R_axis(−ψ(t)) ⊗ q`` (N, 4); ``q`` unchanged (a copy) with nothing accepted."""
         self._check_fitted()
