@@ -33,22 +33,47 @@ axis. The plane of elevation is reported as NaN below 5° of elevation.
 
 Peaks (:func:`range_of_motion`)
 --------------------------------
-From a swing-twist constraint (an extracted boundary, or the ground truth in tests): the extent
-of the swing region along great circles from the arm-at-the-side direction (ISB −Y), i.e. the
-clinical planar movements measured as with a goniometer:
+From a swing-twist constraint (an extracted boundary, or the ground truth in tests): how far the
+swing region reaches along each clinical plane, read as a goniometer aligned with the trunk
+reads a position — the angle from the arm at the side (ISB −Y) *within the plane*, for limb
+directions within ``band_deg`` (default 5°, a goniometer's alignment tolerance) of it:
 
-- **flexion** / **extension**: along the sagittal plane, anteriorly / posteriorly;
-- **abduction** / **adduction**: along the coronal plane, laterally / medially (adduction past
+- **flexion** / **extension**: the sagittal plane, anteriorly / posteriorly;
+- **abduction** / **adduction**: the coronal plane, laterally / medially (adduction past
   neutral, in front of the body);
-- **horizontal adduction**: along the horizontal plane at 90° elevation, from straight ahead
-  towards medial (None when straight ahead at 90° is outside the range);
+- **horizontal adduction**: the horizontal plane at 90° elevation, from straight ahead towards
+  medial (the band is then vertical);
 - **internal / external rotation**: the twist limits about the long axis with the arm at the
   side (the ``by_swing`` limits at that direction when the constraint has them). Note that the
   AAOS values are measured with the arm abducted 90°; the arm-at-the-side values are what every
   patient can perform, and the row says so.
 
-The extent along a great circle is the first angle at which the circle leaves the region
-(sampled every 0.05°, then bisected), so a concave notch ends it where the patient stops.
+Each peak is the **farthest** angle along its arc at which the band meets the region — the end
+position the patient reached in that plane, whatever path led there (a goniometer reads
+positions, not paths), so a sparsely recorded range or a concave notch the patient went round
+still gets its figure, and a region that does not contain the arm-at-the-side direction (a
+patient who cannot bring the arm to the side, or a recording that never rests there) gets its
+flexion, extension, abduction and adduction all the same. The arcs split the plane's great
+circle between the two directions of a movement pair: flexion and abduction run from the arm at
+the side through horizontal and overhead up to 240° (hyperflexion past vertical counts as
+flexion), extension and adduction the remaining 120° on the other side (no shoulder extends or
+adducts that far; an arm overhead is never counted as extension). None where the band never
+meets the region. Horizontal adduction runs from straight ahead to straight behind (180°).
+Angles are found on a 0.5° grid along the arc and ±``band_deg`` across it in 0.5° steps, then
+refined about the farthest hit (a 0.02° grid, then bisection).
+
+**With the recording.** Given the recorded limb directions too, each swing peak is the smaller
+of two readings, each free of one bias: the region's (above) and the recording's own — the
+farthest recorded direction within the band, at its in-plane angle. The region holds every
+recorded direction, so where the recording is clean the recording's reading is the smaller: the
+region's filling between recorded excursions (its alpha shape) is interpolation, not a position
+the patient was seen in. Where the recording is noisy the region's is the smaller: its envelope
+was moved in by the measured noise, while the outermost samples carry it. A movement with no
+recorded direction in its band is None (not recorded in that plane).
+
+``neutral_outside_deg`` says how far outside the region the arm-at-the-side direction lies (0
+when inside): the rotations are then the twist limits at a position the recording did not
+reach, and the table says so.
 
 Normative values (:data:`NORMATIVE`)
 ------------------------------------
@@ -71,10 +96,12 @@ from typing import Any
 
 import numpy as np
 
+from calibration.frames import RIG_TO_ISB
 from models import quaternion as Q
 from models.constraint import JointConstraint
 
 __all__ = [
+    "AAOS_NOT_COMPARABLE",
     "NORMATIVE",
     "RIG_TO_ISB",
     "RangeOfMotion",
@@ -83,12 +110,11 @@ __all__ = [
     "mirror_directions",
     "mirror_quaternions",
     "normative_band",
+    "population_reference",
     "range_of_motion",
     "to_isb",
 ]
 
-#: Columns: the rig's X, Y, Z axes in ISB coordinates (see module doc).
-RIG_TO_ISB = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 _DOWN = np.array([1.0, 0.0, 0.0])  # rig: arm at the side
 _ANTERIOR = np.array([0.0, 1.0, 0.0])
@@ -188,26 +214,50 @@ def _swing_distance_fn(constraint: JointConstraint):
     return oracle.swing_distance
 
 
-def _extent(dist, start: np.ndarray, toward: np.ndarray, limit_deg: float = 180.0):
-    """First angle (deg) at which the great circle start → toward leaves the region, or
-    ``limit_deg``; None when ``start`` itself is outside."""
-    if dist(start[None, :])[0] > 0:
+def _reach(dist, down: np.ndarray, toward: np.ndarray, across: np.ndarray, limit_deg: float,
+           band_deg: float) -> float | None:
+    """Farthest angle (deg, in-plane) along the arc ``down → toward`` (up to ``limit_deg``) at
+    which a direction within ``band_deg`` of the plane (offset along ``across``) is inside the
+    region (``dist <= 0``); None when none is (see the module doc)."""
+    offsets = np.radians(np.arange(-band_deg, band_deg + 1e-9, 0.5)) if band_deg > 0 \
+        else np.zeros(1)
+
+    def hit(theta_deg: np.ndarray) -> np.ndarray:
+        th = np.radians(theta_deg)[:, None]
+        inplane = np.cos(th)[..., None] * down + np.sin(th)[..., None] * toward  # (T, 1, 3)
+        pts = (np.cos(offsets)[None, :, None] * inplane
+               + np.sin(offsets)[None, :, None] * across)  # (T, F, 3)
+        return (dist(pts.reshape(-1, 3)) <= 0.0).reshape(len(th), -1).any(axis=1)
+
+    coarse = np.arange(0.0, limit_deg + 1e-9, 0.5)
+    inside = hit(coarse)
+    if not inside.any():
         return None
-    theta = np.radians(np.arange(0.0, limit_deg + 1e-9, 0.05))
-    pts = np.cos(theta)[:, None] * start + np.sin(theta)[:, None] * toward
-    out = dist(pts) > 0
-    if not out.any():
+    k = int(np.flatnonzero(inside)[-1])
+    if k == len(coarse) - 1:
         return float(limit_deg)
-    k = int(np.argmax(out))
-    lo, hi = theta[k - 1], theta[k]
-    for _ in range(30):
+    fine = np.arange(coarse[k], coarse[k + 1] + 1e-9, 0.02)
+    j = int(np.flatnonzero(hit(fine))[-1])
+    lo, hi = fine[j], fine[min(j + 1, len(fine) - 1)]
+    for _ in range(12):  # to ~5e-6°
         mid = 0.5 * (lo + hi)
-        p = math.cos(mid) * start + math.sin(mid) * toward
-        if dist(p[None, :])[0] > 0:
-            hi = mid
-        else:
+        if hit(np.array([mid]))[0]:
             lo = mid
-    return math.degrees(0.5 * (lo + hi))
+        else:
+            hi = mid
+    return float(lo)
+
+
+def _recorded_reach(d: np.ndarray, down: np.ndarray, toward: np.ndarray, across: np.ndarray,
+                    limit_deg: float, band_deg: float) -> float | None:
+    """Farthest in-plane angle (deg) along the arc ``down → toward`` (up to ``limit_deg``) of
+    the directions ``d`` (N, 3) within ``band_deg`` of the plane; None when there is none."""
+    near = np.abs(d @ across) <= math.sin(math.radians(band_deg))
+    if not near.any():
+        return None
+    psi = np.degrees(np.arctan2(d[near] @ toward, d[near] @ down)) % 360.0
+    psi = psi[psi <= limit_deg]
+    return float(psi.max()) if len(psi) else None
 
 
 @dataclass(frozen=True)
@@ -222,6 +272,10 @@ class RangeOfMotion:
     horizontal_adduction: float | None
     internal_rotation: float | None
     external_rotation: float | None
+    neutral_outside_deg: float = 0.0
+    """How far the arm-at-the-side direction lies outside the swing region (0 when inside):
+    when > 0, the swing peaks are where the range ends along each clinical plane (module doc)
+    and the rotations are the twist limits there, a position the patient did not reach."""
 
     MOVEMENTS = ("flexion", "extension", "abduction", "adduction", "horizontal_adduction",
                  "internal_rotation", "external_rotation")
@@ -230,7 +284,8 @@ class RangeOfMotion:
         return {"side": self.side, **{m: getattr(self, m) for m in self.MOVEMENTS}}
 
 
-def range_of_motion(constraint: JointConstraint, side: str = "right") -> RangeOfMotion:
+def range_of_motion(constraint: JointConstraint, side: str = "right", *,
+                    band_deg: float = 5.0, directions=None) -> RangeOfMotion:
     """Clinical peaks of a shoulder constraint (rig frames; see module doc for definitions).
 
     Parameters
@@ -239,7 +294,14 @@ def range_of_motion(constraint: JointConstraint, side: str = "right") -> RangeOf
         Swing region (limb directions, thorax frame) and twist limits of the humerus.
     side : "right" or "left"
         The arm the constraint belongs to; a left arm is mirrored first.
+    band_deg : float
+        Half-width of the band about each clinical plane whose directions count, degrees.
+    directions : (N, 3) array_like, optional
+        The recorded limb directions (thorax frame, rig axes, not mirrored): each swing peak is
+        then the smaller of the region's reading and the recording's (module doc).
     """
+    if not 0.0 <= band_deg <= 30.0:
+        raise ValueError(f"band_deg must be in [0, 30], got {band_deg!r}")
     _check_side(side)
     dist0 = _swing_distance_fn(constraint)
     if side == "left":
@@ -247,11 +309,22 @@ def range_of_motion(constraint: JointConstraint, side: str = "right") -> RangeOf
             return dist0(mirror_directions(p))
     else:
         dist = dist0
-    flex = _extent(dist, _DOWN, _ANTERIOR)
-    ext = _extent(dist, _DOWN, -_ANTERIOR)
-    abd = _extent(dist, _DOWN, _LATERAL)
-    add = _extent(dist, _DOWN, -_LATERAL)
-    hadd = _extent(dist, _ANTERIOR, -_LATERAL, limit_deg=180.0)
+    gap = max(0.0, math.degrees(float(dist(_DOWN[None, :])[0])))
+    rec = None
+    if directions is not None:
+        rec = Q.check_vectors(directions, name="directions").reshape(-1, 3)
+        if side == "left":
+            rec = mirror_directions(rec)
+    peaks = []
+    for args in ((_DOWN, _ANTERIOR, _LATERAL, 240.0), (_DOWN, -_ANTERIOR, _LATERAL, 120.0),
+                 (_DOWN, _LATERAL, _ANTERIOR, 240.0), (_DOWN, -_LATERAL, _ANTERIOR, 120.0),
+                 (_ANTERIOR, -_LATERAL, _DOWN, 180.0)):
+        v = _reach(dist, *args, band_deg)
+        if rec is not None and v is not None:
+            r = _recorded_reach(rec, *args, band_deg)
+            v = None if r is None else min(v, r)
+        peaks.append(v)
+    flex, ext, abd, add, hadd = peaks
     ir = er = None
     tw = constraint.twist
     if tw is not None:
@@ -267,7 +340,7 @@ def range_of_motion(constraint: JointConstraint, side: str = "right") -> RangeOf
             er, ir = hi, -lo
         else:
             er, ir = -lo, hi
-    return RangeOfMotion(side, flex, ext, abd, add, hadd, ir, er)
+    return RangeOfMotion(side, flex, ext, abd, add, hadd, ir, er, gap)
 
 
 # -- normative values ---------------------------------------------------------------------------
@@ -328,6 +401,46 @@ def normative_band(movement: str, *, age: int | None = None, sex: str | None = N
     return None
 
 
+#: Movements whose AAOS value was measured in another position than ours (rotations: AAOS at
+#: 90° abduction, the rig's peaks with the arm at the side): shown, never compared.
+AAOS_NOT_COMPARABLE = {"internal_rotation": "AAOS measures it at 90° abduction",
+                       "external_rotation": "AAOS measures it at 90° abduction"}
+
+
+def _band_of(movement: str, age: int, sex: str) -> tuple[int, int, float] | None:
+    bands = NORMATIVE["gill2020_band_median"].get(movement)
+    if bands is None:
+        return None
+    for lo, hi, med in bands[sex]:
+        if lo <= age <= hi:
+            return lo, hi, med
+    last = bands[sex][-1]
+    return last if age > last[1] else None
+
+
+def population_reference(movement: str, *, age: int | None = None,
+                         sex: str | None = None) -> str | None:
+    """The population reference of one movement as text (Gill et al. 2020): the median of the
+    patient's 5-year age band and sex when both are known; with one of them unknown, women and
+    men apart (band medians at that age, else the sex means); None when not tabulated."""
+    if sex is not None and sex not in ("male", "female"):
+        raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
+    word = {"female": "women", "male": "men"}
+    sexes = (sex,) if sex is not None else ("female", "male")
+    parts = []
+    for sx in sexes:
+        band = _band_of(movement, age, sx) if age is not None else None
+        if band is not None:
+            parts.append(f"{band[2]:.0f} {word[sx]} {band[0]}-{band[1]}")
+            continue
+        mean = (NORMATIVE["gill2020_mean"].get(movement) or {}).get(sx)
+        if mean is not None:
+            parts.append(f"{mean:.0f} {word[sx]}, all ages")
+    if len(parts) != len(sexes):
+        return None
+    return " / ".join(parts)
+
+
 _LABELS = {
     "flexion": "flexion", "extension": "extension", "abduction": "abduction",
     "adduction": "adduction", "horizontal_adduction": "horizontal adduction",
@@ -338,18 +451,22 @@ _LABELS = {
 
 def format_rom_table(rom: RangeOfMotion, *, age: int | None = None,
                      sex: str | None = None) -> str:
-    """The clinical table as text: movement, measured peak, AAOS, population reference."""
-    pop_head = "Gill 2020" + (f" ({sex}, {age})" if sex and age else f" ({sex})" if sex else "")
+    """The clinical table as text: movement, measured peak, AAOS, population reference (the
+    age band and sex when known, women and men apart otherwise; :func:`population_reference`).
+    AAOS values measured in another position (:data:`AAOS_NOT_COMPARABLE`) are not shown."""
+    who = ", ".join(x for x in ({"female": "women", "male": "men"}.get(sex or ""),
+                                None if age is None else f"age {age}") if x)
+    pop_head = "Gill 2020" + (f" ({who})" if who else "")
     rows = [("movement", "measured", "AAOS", pop_head)]
     for m in rom.MOVEMENTS:
         v = getattr(rom, m)
-        aaos = NORMATIVE["aaos"].get(m)
-        pop = normative_band(m, age=age, sex=sex) if sex else None
+        aaos = None if m in AAOS_NOT_COMPARABLE else NORMATIVE["aaos"].get(m)
+        pop = population_reference(m, age=age, sex=sex)
         rows.append((
             _LABELS[m],
             "-" if v is None else f"{v:.1f}°",
             "-" if aaos is None else f"{aaos:.0f}°",
-            "-" if pop is None else f"{pop:.1f}°",
+            "-" if pop is None else pop,
         ))
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     lines = [f"shoulder range of motion ({rom.side} arm)"]
@@ -358,5 +475,11 @@ def format_rom_table(rom: RangeOfMotion, *, age: int | None = None,
                                for i, (c, w) in enumerate(zip(r, widths, strict=True))))
         if k == 0:
             lines.append("  ".join("-" * w for w in widths))
+    if rom.neutral_outside_deg > 0:
+        lines.append(f"note: the arm at the side is {rom.neutral_outside_deg:.1f}° outside the "
+                     "recorded range: the rotations at the side were not recorded (the twist "
+                     "limits there are shown)")
+    lines.append("note: AAOS measures the rotations at 90° abduction, these are with the arm at "
+                 "the side (not comparable)")
     lines.append(f"sources: AAOS = {_AAOS}; population = {_GILL}")
     return "\n".join(lines)

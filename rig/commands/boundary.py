@@ -11,14 +11,62 @@ provenance (session or file, parameters, sample counts, sparse arcs).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import click
 import numpy as np
 
+from calibration.frames import FRAMES
 from rig.errors import RigConfigError
+
+#: Session statuses that mean the recording stopped before its planned end.
+_CUT_SHORT = ("interrupted", "device_lost", "failed")
+
+
+@dataclass(frozen=True)
+class RecordingFacts:
+    """What a reader must know before trusting figures from a recording.
+
+    ``interrupted``: the session ended before its planned end (Ctrl-C, SIGTERM, a lost device,
+    a killed recorder), None for files (unknown). ``explored``/``sectors``/``sufficient``: the
+    coverage of the swing sphere (:mod:`rig.record.coverage`: sectors around the range's
+    centre where the limit was reached and stopped moving outward). ``simulated``: samples
+    from a simulator (``sim://`` ports), None when unknown.
+    """
+
+    status: str | None = None
+    interrupted: bool | None = None
+    explored: int | None = None
+    sectors: int | None = None
+    sufficient: bool | None = None
+    simulated: bool | None = None
+
+    @property
+    def coverage(self) -> float | None:
+        """Share of the sectors explored, 0-1 (None before it is known)."""
+        if not self.sectors:
+            return None
+        return self.explored / self.sectors
+
+    def warnings(self) -> list[str]:
+        """One line per reason to doubt the figures (empty when there is none)."""
+        out = []
+        if self.interrupted:
+            out.append(f"the session was cut short (status {self.status!r}): the range of "
+                       "motion may not have been recorded to the end")
+        if self.sectors and not self.sufficient:
+            out.append(f"coverage {self.explored} of {self.sectors} directions explored: "
+                       "where a limit was not reached, the boundary and the peaks understate "
+                       "the range")
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"status": self.status, "interrupted": self.interrupted,
+                "coverage": None if self.coverage is None else round(self.coverage, 4),
+                "explored_sectors": self.explored, "sectors": self.sectors,
+                "coverage_sufficient": self.sufficient, "simulated": self.simulated}
 
 
 @dataclass
@@ -32,6 +80,35 @@ class JointData:
     provenance: dict[str, Any] = field(default_factory=dict)
     patient: str | None = None
     joint: str | None = None
+    t: np.ndarray | None = None  # (N,) sample times, seconds (any origin), or None
+
+    recording: RecordingFacts | None = None
+
+    def facts(self) -> RecordingFacts:
+        """What a reader must know before trusting figures from this recording (coverage
+        computed from the joint orientations when the recorder stored none)."""
+        if self.recording is None:
+            self.recording = RecordingFacts()
+        if self.recording.sectors is None:
+            from rig.record.coverage import coverage_of
+
+            cov = coverage_of(self.q, self.t, limb_axis=self.limb_axis)
+            self.recording = replace(self.recording, explored=cov.explored,
+                                     sectors=len(cov.sectors), sufficient=cov.sufficient)
+        return self.recording
+
+    @property
+    def directions(self) -> np.ndarray:
+        """(N, 3) the recorded limb directions, parent frame (rig axes)."""
+        from models import quaternion as Q
+
+        return Q.rotate(self.q, self.limb_axis)
+
+    @property
+    def slow_error_deg(self) -> float | None:
+        """Measured size of the slowly varying errors left in the orientations (the heading
+        correction's own uncertainty, IMU sessions with neutral checkpoints), else None."""
+        return (self.provenance.get("heading_correction") or {}).get("uncertainty_deg")
 
     @property
     def orientations(self) -> str | None:
@@ -55,7 +132,7 @@ def _parse_axis(text: str | None) -> np.ndarray:
 
 
 def check_source(file: str | None, db: str | None, session_id: int | None,
-                 reference: str | None, limb: str | None) -> None:
+                 reference: str | None, limb: str | None, frames: str | None = None) -> None:
     """Option combinations, checked before any work (one-line errors)."""
     if file is not None and (db is not None or session_id is not None):
         raise RigConfigError("give either FILE or --db/--session, not both")
@@ -68,23 +145,38 @@ def check_source(file: str | None, db: str | None, session_id: int | None,
             raise RigConfigError(f"{file}: no such file")
     elif reference is not None or limb is not None:
         raise RigConfigError("--reference/--limb apply to files; a session knows its segments")
+    elif frames is not None:
+        raise RigConfigError("--frames applies to files; a session is in the rig's frames")
 
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,
                             session_id: int | None = None, reference: str | None = None,
                             limb: str | None = None, limb_axis: str | None = None,
-                            fusion: str = "auto") -> JointData:
+                            fusion: str = "auto", frames: str | None = None) -> JointData:
     """Joint orientations of a session or an orientation file (see module doc); ``fusion``
-    applies to sessions (:func:`joint_orientations_from_store`), files hold orientations."""
-    check_source(file, db, session_id, reference, limb)
-    axis = _parse_axis(limb_axis)
+    applies to sessions (:func:`joint_orientations_from_store`), files hold orientations.
+
+    ``frames`` is the segment-frame convention of a file's orientations (``"rig"``, the
+    default, or ``"isb"``: :mod:`calibration.frames`); ``limb_axis`` is given in the same
+    convention (default: the long axis, +X in rig frames, −Y in ISB frames). The joint
+    orientations returned are in rig frames either way."""
+    check_source(file, db, session_id, reference, limb, frames)
     if file is not None:
-        return _from_file(file, reference, limb, axis)
-    return _from_session(db, session_id, axis, fusion)
+        frames = frames or "rig"
+        if limb_axis is None:
+            axis = _parse_axis(None)
+        else:
+            from calibration.frames import direction_to_rig
+
+            axis = direction_to_rig(_parse_axis(limb_axis), frames)
+        return _from_file(file, reference, limb, axis, frames)
+    return _from_session(db, session_id, _parse_axis(limb_axis), fusion)
 
 
-def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) -> JointData:
+def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray,
+               frames: str = "rig") -> JointData:
     from calibration.alignment import joint_orientation
+    from calibration.frames import joint_to_rig, segment_to_rig
     from rig.store.io import read_orientations
 
     table = read_orientations(file)
@@ -92,15 +184,17 @@ def _from_file(file: str, reference: str | None, limb: str, axis: np.ndarray) ->
         raise RigConfigError(f"{file}: no samples")
     child = table.get(limb)
     if reference is not None:
-        q = joint_orientation(table.get(reference), child)
+        q = joint_orientation(segment_to_rig(table.get(reference), frames),
+                              segment_to_rig(child, frames))
     else:
-        q = np.asarray(child, dtype=np.float64)
-    prov = {"file": str(Path(file).name), "limb": limb}
+        q = joint_to_rig(child, frames)
+    prov = {"file": str(Path(file).name), "limb": limb, "frames": frames}
     if reference is not None:
         prov["reference"] = reference
     side = table.meta.get("rig_side")
     return JointData(q, None, axis, side if side in ("left", "right") else None, prov,
-                     table.meta.get("rig_patient"), table.meta.get("rig_joint"))
+                     table.meta.get("rig_patient"), table.meta.get("rig_joint"),
+                     np.asarray(table.time, dtype=np.float64))
 
 
 def _from_session(db: str, session_id: int, axis: np.ndarray, fusion: str) -> JointData:
@@ -168,6 +262,7 @@ def joint_orientations_from_store(store, session_id: int,
                 f"--fusion {fusion} applies to IMU sessions"
             )
         q = s["q"][is_joint]
+        t = s["t"][is_joint]
         status = None
         prov["source"] = "joint samples"
     else:
@@ -216,6 +311,7 @@ def joint_orientations_from_store(store, session_id: int,
             fusion_prov["refit_residuals_deg"] = {k: round(float(v), 3)
                                                   for k, v in model.residuals_.items()}
         q = model.transform(qpar, qchi)
+        t = times[key_name]
         prov.update({"source": "imu samples", "calibration_id": int(cal["id"]),
                      "calibration_residual_deg": cal.get("residual_deg"),
                      "fusion": fusion_prov})
@@ -225,7 +321,28 @@ def joint_orientations_from_store(store, session_id: int,
                 q, times, status, checkpoints, cal["data"], session_id)
     side = sess.get("side")
     return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
-                     sess.get("pseudonym"), sess.get("joint"))
+                     sess.get("pseudonym"), sess.get("joint"), np.asarray(t, dtype=np.float64),
+                     _session_facts(store, sess, sensors))
+
+
+def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
+    """Status, interruption and the recorder's own final coverage of a session."""
+    status = sess.get("status")
+    cut = status in _CUT_SHORT
+    if status == "running":  # a recorder that died without closing it counts as cut short
+        cut = store.session_liveness(int(sess["id"])).state != "live"
+    cov = (sess.get("meta") or {}).get("coverage") or {}  # the recorder's own, when it ended
+    sectors = cov.get("sectors")
+    meta = sess.get("meta") or {}
+    simulated = meta.get("simulated")
+    if simulated is None:
+        ports = [str(r.get("port") or "") for r in sensors]
+        simulated = bool(ports) and all(p.startswith("sim://") for p in ports)
+    facts = RecordingFacts(status=status, interrupted=bool(cut), simulated=bool(simulated))
+    if isinstance(sectors, list) and sectors and "explored_sectors" in cov:
+        facts = replace(facts, explored=int(cov["explored_sectors"]), sectors=len(sectors),
+                        sufficient=bool(cov.get("sufficient")))
+    return facts
 
 
 def _vqf_usable(s: dict, key: np.ndarray, parent: str, child: str,
@@ -343,10 +460,12 @@ def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, che
     except CalibrationError as err:
         raise RigConfigError(f"session {session_id}: neutral checkpoints: {err}") from err
     rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
+    uncertainty = hc.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
     prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
             "rejected": rejected, "anchored": bool(anchors), "clock": base,
             "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_],
-            "drift_model": dict(hc.drift_model_)}
+            "drift_model": dict(hc.drift_model_),
+            "uncertainty_deg": None if uncertainty is None else round(uncertainty, 3)}
     return hc.apply(t, q), prov
 
 
@@ -384,7 +503,10 @@ def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tupl
 @click.option("--limb", default=None, help="FILE column of the limb segment (joint orientations "
               "when --reference is not given).")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
-              "(default 1,0,0).")
+              "(default: the long axis of --frames, 1,0,0 in rig frames).")
+@click.option("--frames", type=click.Choice(FRAMES), default=None,
+              help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
+              "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
               help="Constraint file to write (YAML).")
 @click.option("--name", default=None, help="Constraint name (default from the source).")
@@ -401,19 +523,19 @@ def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tupl
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
-def boundary(file, db, session_id, reference, limb, limb_axis, out, name, side, alpha_deg,
-             max_vertices, by_swing, store_result, fusion) -> None:
+def boundary(file, db, session_id, reference, limb, limb_axis, frames, out, name, side,
+             alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
     """
-    check_source(file, db, session_id, reference, limb)
+    check_source(file, db, session_id, reference, limb, frames)
     _parse_axis(limb_axis)
     out_path = Path(out)
     if not out_path.parent.is_dir():
         raise RigConfigError(f"--out {out}: directory {out_path.parent} does not exist")
     data = load_joint_orientations(file, db=db, session_id=session_id, reference=reference,
-                                   limb=limb, limb_axis=limb_axis, fusion=fusion)
+                                   limb=limb, limb_axis=limb_axis, fusion=fusion, frames=frames)
     result = extract(data, name=name, side=side, alpha_deg=alpha_deg,
                      max_vertices=max_vertices, by_swing=by_swing)
     from models.constraint import dump_constraint
@@ -426,6 +548,8 @@ def boundary(file, db, session_id, reference, limb, limb_axis, out, name, side, 
             st.add_boundary(session_id, result.constraint_.to_yaml(),
                             {"path": str(out_path), **result.report()})
     click.echo(describe(result, out_path))
+    for w in data.facts().warnings():
+        click.echo(f"warning: {w}")
 
 
 def extract(data: JointData, *, name: str | None = None, side: str | None = None,
@@ -439,8 +563,10 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
     ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
                            limb_axis=data.limb_axis, name=label)
     prov = dict(data.provenance)
+    prov["recording"] = data.facts().as_dict()
     try:
-        ex.fit(data.q, status=data.status, provenance=prov)
+        ex.fit(data.q, status=data.status, t=data.t, provenance=prov,
+               slow_error_deg=data.slow_error_deg)
     except CalibrationError as err:
         raise RigConfigError(f"boundary extraction: {err}") from err
     side = side or data.side
@@ -473,9 +599,13 @@ def describe(ex, out_path: Path | None = None) -> str:
         lines.append(f"wrote {out_path}")
     lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
                  f"{r['dropped_status']} dropped for IMU status, "
-                 f"{r['trimmed_outliers']} outliers trimmed)")
+                 f"{r['spikes']} isolated spikes, {r['glitch_cluster_samples']} in glitch "
+                 "clusters)")
     lines.append(f"  swing       polygon, {r['vertices']} vertices, alpha "
-                 f"{r['alpha_used_deg']:.1f} deg, {100 * r['coverage']:.2f} % of samples inside")
+                 f"{r['alpha_used_deg']:.1f} deg, noise inset {r['noise_inset_deg']:.2f} deg")
+    lines.append(f"  inside      {100 * r['inside']:.2f} % of the {r['directions']} recorded "
+                 f"directions inside the boundary written, {100 * r['inside_1deg']:.2f} % "
+                 "within 1 deg")
     tw = r["twist_deg"]
     extra = f", {r['by_swing_points']} swing regions" if r["by_swing_points"] else ""
     lines.append(f"  twist       {tw[0]:.1f} .. {tw[1]:.1f} deg{extra}")

@@ -496,7 +496,7 @@ class _Ctx:
                                                             if label == "servo" else None,
                                                             **rep})
                 dist = boundary_distance(c, self.truth)
-                rom_est = range_of_motion(c, "right").to_dict()
+                rom_est = range_of_motion(c, "right", directions=joint.directions).to_dict()
                 rom_true = range_of_motion(self.truth, "right").to_dict()
                 peaks = {m: abs(rom_est[m] - rom_true[m]) for m in rom_true
                          if m != "side" and rom_est.get(m) is not None

@@ -88,7 +88,7 @@ def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
     d = boundary_distance(est, truth)
     dirs = Q.rotate(truth_q if recorded_q is None else recorded_q, np.array([1.0, 0.0, 0.0]))
     lo, hi = ex.twist_deg_
-    a = range_of_motion(est, "right").to_dict()
+    a = range_of_motion(est, "right", directions=data.directions).to_dict()
     b = range_of_motion(truth, "right").to_dict()
     peaks, errs, swing_errs = {}, [], []
     for m, tv in b.items():

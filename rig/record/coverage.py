@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 
 from models import quaternion as Q
 
-__all__ = ["CoverageMap", "CoverageSummary", "SectorCoverage", "fibonacci_sphere"]
+__all__ = ["CoverageMap", "CoverageSummary", "SectorCoverage", "coverage_of", "fibonacci_sphere"]
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:
@@ -293,3 +293,36 @@ class CoverageMap:
         if keep_from > 0:
             del self._history[:keep_from]
         return best
+
+
+def coverage_of(q, t=None, *, step_s: float = 1.0, **options) -> CoverageSummary:
+    """The coverage a live :class:`CoverageMap` would have shown at the end of a recording.
+
+    The samples are added in slices of ``step_s`` seconds of sample time with a summary after
+    each (the stability test compares reaches ``settle_s`` apart), as the recorder does while
+    it records; used for sessions whose recorder stored no final coverage (killed) and for
+    imported files.
+
+    Parameters
+    ----------
+    q : (N, 4) array_like
+        Joint orientations, limb relative to thorax, scalar-first, in recording order.
+    t : (N,) array_like, optional
+        Sample times, seconds (non-decreasing). Without times the stability test never passes.
+    options
+        Keyword arguments of :class:`CoverageMap`.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+    cmap = CoverageMap(**options)
+    if t is None or len(q) == 0:
+        cmap.add(q)
+        return cmap.summary()
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    if len(t) != len(q):
+        raise ValueError(f"t has {len(t)} entries for {len(q)} orientations")
+    slot = np.floor((t - t[0]) / float(step_s)).astype(np.int64)
+    cuts = np.flatnonzero(np.diff(slot)) + 1
+    for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(q)], strict=True):
+        cmap.add(q[a:b], t[a:b])
+        cmap.summary()
+    return cmap.summary()

@@ -300,12 +300,13 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
         data = joint_orientations_from_store(store, result.session_id)
         constraint = extract(data, side=side).constraint_
-        rom = range_of_motion(constraint, side)
+        rom = range_of_motion(constraint, side, directions=data.directions)
     except Exception as err:  # too few samples, degenerate region: say so, keep the session
         result.rom_note = f"no range of motion: {err}"
         return
     result.rom = rom.to_dict()
-    result.rom_table = format_rom_table(rom)
+    result.rom_table = "\n".join([*(f"warning: {w}" for w in data.facts().warnings()),
+                                  format_rom_table(rom)])
     store.end_session(result.session_id, status=result.status,
                       meta={"rom": result.rom, "rom_source": "extracted boundary"})
 

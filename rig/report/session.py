@@ -96,11 +96,12 @@ def _population(movement: str, age: int | None, sex: str | None) -> str | None:
 
 
 def rom_rows(constraint, side: str, *, age: int | None = None,
-             sex: str | None = None) -> list[RomRow]:
-    """The range-of-motion table of a boundary (:func:`calibration.clinical.range_of_motion`)."""
+             sex: str | None = None, directions=None) -> list[RomRow]:
+    """The range-of-motion table of a boundary and, when given, the recorded limb directions
+    (:func:`calibration.clinical.range_of_motion`)."""
     from calibration.clinical import NORMATIVE, range_of_motion
 
-    rom = range_of_motion(constraint, side)
+    rom = range_of_motion(constraint, side, directions=directions)
     rows = []
     for m in rom.MOVEMENTS:
         rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m), NORMATIVE["aaos"].get(m),
@@ -260,7 +261,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.rom_note = f"Samples not usable for the boundary: {err}."
         constraint, rep, origin = _boundary(store, rec_id, joint)
         if constraint is not None:
-            data.rom_rows = rom_rows(constraint, side, age=age, sex=sex)
+            data.rom_rows = rom_rows(constraint, side, age=age, sex=sex,
+                                     directions=None if joint is None else joint.directions)
             note = ("Peaks along the clinical planes from the recorded boundary "
                     f"({origin}); rotations with the arm at the side (AAOS measures them at "
                     "90° abduction).")
@@ -286,8 +288,9 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             tw = constraint.twist
             if tw is not None:
                 facts["twist range (°)"] = f"{tw.min_deg:.1f} … {tw.max_deg:.1f}"
-            if "coverage" in rep:
-                facts["samples inside the boundary (%)"] = 100.0 * float(rep["coverage"])
+            if "inside" in rep:
+                facts["recorded directions inside the boundary (%)"] = \
+                    100.0 * float(rep["inside"])
             if reference is not None:
                 from calibration.boundary import boundary_distance
 
