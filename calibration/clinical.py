@@ -421,8 +421,9 @@ def _band_of(movement: str, age: int, sex: str) -> tuple[int, int, float] | None
 def population_reference(movement: str, *, age: int | None = None,
                          sex: str | None = None) -> str | None:
     """The population reference of one movement as text (Gill et al. 2020): the median of the
-    patient's 5-year age band and sex when both are known; with one of them unknown, women and
-    men apart (band medians at that age, else the sex means); None when not tabulated."""
+    patient's 5-year age band and sex when both are known, e.g. ``"152 (women, 45-49)"``; with
+    one of them unknown, women and men apart (band medians at that age, else the sex means,
+    ``"158 (women, all ages) / 162 (men, all ages)"``); None when not tabulated."""
     if sex is not None and sex not in ("male", "female"):
         raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
     word = {"female": "women", "male": "men"}
@@ -431,11 +432,11 @@ def population_reference(movement: str, *, age: int | None = None,
     for sx in sexes:
         band = _band_of(movement, age, sx) if age is not None else None
         if band is not None:
-            parts.append(f"{band[2]:.0f} {word[sx]} {band[0]}-{band[1]}")
+            parts.append(f"{band[2]:.0f} ({word[sx]}, {band[0]}-{band[1]})")
             continue
         mean = (NORMATIVE["gill2020_mean"].get(movement) or {}).get(sx)
         if mean is not None:
-            parts.append(f"{mean:.0f} {word[sx]}, all ages")
+            parts.append(f"{mean:.0f} ({word[sx]}, all ages)")
     if len(parts) != len(sexes):
         return None
     return " / ".join(parts)

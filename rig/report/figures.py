@@ -20,6 +20,7 @@ import numpy as np
 
 __all__ = [
     "EqualAreaMap",
+    "anatomical_directions",
     "boundary_figure",
     "error_map_figure",
     "to_png",
@@ -35,9 +36,18 @@ class EqualAreaMap:
         Direction at the middle of the map (normalised).
     """
 
-    def __init__(self, centre) -> None:
+    def __init__(self, centre, up=None) -> None:
         c = np.asarray(centre, dtype=np.float64)
         self.centre = c / np.linalg.norm(c)
+        if up is not None:
+            # page up = ``up`` made tangent at the centre; page right = up × centre (the
+            # sphere seen from outside, looking at the centre)
+            w = np.asarray(up, dtype=np.float64)
+            w = w - (w @ self.centre) * self.centre
+            if np.linalg.norm(w) > 1e-6:
+                self.v = w / np.linalg.norm(w)
+                self.u = np.cross(self.v, self.centre)
+                return
         helper = np.eye(3)[int(np.argmin(np.abs(self.centre)))]
         u = np.cross(helper, self.centre)
         self.u = u / np.linalg.norm(u)
@@ -127,11 +137,46 @@ def to_png(fig, dpi: int = 110) -> bytes:
     return buf.getvalue()
 
 
+#: Anatomical directions of the limb in the rig's thorax frame (+X inferior, +Y anterior, +Z
+#: right): a right limb's lateral is +Z, a left limb's −Z.
+def anatomical_directions(side: str | None) -> dict[str, np.ndarray]:
+    """Label → unit direction (thorax frame, rig axes) of the six anatomical directions a
+    limb can point to; ``side`` decides which of ±Z is lateral (right when None)."""
+    lateral = -1.0 if side == "left" else 1.0
+    return {"superior": np.array([-1.0, 0.0, 0.0]), "inferior (at side)": np.array([1.0, 0, 0]),
+            "anterior": np.array([0.0, 1.0, 0.0]), "posterior": np.array([0.0, -1.0, 0.0]),
+            "lateral": np.array([0.0, 0.0, lateral]), "medial": np.array([0.0, 0.0, -lateral])}
+
+
+def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float, side: str | None) -> None:
+    """Each anatomical direction marked where it falls on the map, or named at the map's edge
+    in its direction (with an arrow) when it lies beyond the map."""
+    rim = EqualAreaMap.ring_radius(max_deg)
+    for label, d in anatomical_directions(side).items():
+        theta = math.degrees(math.acos(max(-1.0, min(1.0, float(d @ m.centre)))))
+        x, y = m.project(d[None, :])[0]
+        if theta <= max_deg and theta < 150.0:
+            ax.plot([x], [y], "s", color="#762a83", ms=4)
+            ax.annotate(label, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7,
+                        color="#762a83")
+        else:
+            if theta >= 150.0:  # nearly opposite the centre: its azimuth says nothing
+                ax.text(0.0, 1.0, f"{label}: opposite the centre", transform=ax.transAxes,
+                        fontsize=7, color="#762a83", ha="left", va="top")
+                continue
+            a = math.atan2(float(d @ m.v), float(d @ m.u))
+            ca, sa = math.cos(a), math.sin(a)
+            arrow = ("→" if ca > 0 else "←") if abs(ca) >= abs(sa) else ("↑" if sa > 0 else "↓")
+            ax.annotate(f"{label} {arrow}", (0.97 * rim * ca, 0.97 * rim * sa), fontsize=7,
+                        color="#762a83", ha="center", va="center")
+
+
 def boundary_figure(
     directions: np.ndarray,
     swing,
     *,
     centre=None,
+    side: str | None = None,
     sparse_arcs: list[tuple[np.ndarray, np.ndarray]] | None = None,
     reference_swing=None,
     max_points: int = 20000,
@@ -147,6 +192,9 @@ def boundary_figure(
         The extracted boundary.
     centre : (3,), optional
         Map centre; default the polygon's interior point or the cone centre.
+    side : "right", "left" or None
+        The limb's side: the map is drawn with superior up and the anatomical directions
+        (superior, inferior, anterior, posterior, lateral, medial) labelled.
     sparse_arcs : list of ((3,), (3,)), optional
         Boundary arcs with no samples nearby, drawn in red.
     reference_swing : optional
@@ -161,13 +209,21 @@ def boundary_figure(
             centre = getattr(swing, "centre", None)
         if centre is None:
             centre = d.mean(axis=0) if len(d) else np.array([1.0, 0.0, 0.0])
-    m = EqualAreaMap(centre)
+    anat = anatomical_directions(side)
+    c = np.asarray(centre, dtype=np.float64) / np.linalg.norm(centre)
+    # superior up, unless the map looks along the vertical (a range about the arm at the
+    # side): then anterior up
+    up = anat["superior"] if abs(float(c @ anat["superior"])) < math.cos(math.radians(45.0)) \
+        else anat["anterior"]
+    m = EqualAreaMap(centre, up=up)
     if len(d) > max_points:
         d = d[np.random.default_rng(seed).choice(len(d), max_points, replace=False)]
     outline = swing_outline(swing)
     ref = swing_outline(reference_swing)
     fig, ax = plt.subplots(figsize=(5.4, 5.4))
-    _grid(ax, _extent_deg(m, d, outline, ref))
+    extent = _extent_deg(m, d, outline, ref)
+    _grid(ax, extent)
+    _anatomical_labels(ax, m, extent, side)
     if len(d):
         p = m.project(d)
         ax.scatter(p[:, 0], p[:, 1], s=2.5, c="#4477aa", alpha=0.4, linewidths=0,

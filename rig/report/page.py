@@ -25,8 +25,9 @@ class RomRow:
 
     movement: str
     measured_deg: float | None
-    aaos_deg: float | None = None
-    population: str | None = None  # e.g. "168 (159-177), Gill 2020, women 18-39"
+    aaos_deg: float | None = None  # None where AAOS measured it in another position
+    population: str | None = None  # e.g. "152 (women, 45-49), Gill 2020"
+    note: str | None = None  # why there is no AAOS comparison, e.g. "AAOS: at 90° abduction"
 
 
 @dataclass
@@ -44,6 +45,8 @@ class ReportData:
     dropped: int | None = None
     rom_rows: list[RomRow] = field(default_factory=list)
     rom_note: str | None = None
+    warnings: list[str] = field(default_factory=list)  # reasons to doubt the figures
+    simulated: bool = False  # the samples come from the rig's simulator, not a person
     boundary_png: bytes | None = None
     boundary_facts: dict[str, Any] = field(default_factory=dict)
     sparse_arcs_deg: list[tuple[float, float]] = field(default_factory=list)
@@ -128,18 +131,30 @@ def render_html(data: ReportData) -> str:
         if value is not None:
             out.append(f"<tr><td>{label}</td><td>{value}</td></tr>")
     out.append("</table>")
+    if data.simulated:
+        out.append("<p class='warn'>Simulated patient: these figures come from the rig's "
+                   "simulator, not from a person.</p>")
+    for w in data.warnings:
+        out.append(f"<p class='warn'>Warning: {_e(w)}.</p>")
 
     if data.rom_rows:
         out.append("<h2>Range of motion</h2>")
         out.append("<table><tr><th>Movement</th><th>Measured (°)</th><th>AAOS normal (°)</th>"
                    "<th>% of AAOS</th><th>Population reference</th></tr>")
+        notes = []
         for r in data.rom_rows:
             pct = (100.0 * r.measured_deg / r.aaos_deg
                    if r.measured_deg is not None and r.aaos_deg else None)
+            aaos = _fmt(r.aaos_deg, 0)
+            if r.note:
+                notes.append(f"{r.movement}: {r.note}")
+                aaos = f"{aaos}<sup>{len(notes)}</sup>"
             out.append(f"<tr><td>{_e(r.movement)}</td><td>{_fmt(r.measured_deg)}</td>"
-                       f"<td>{_fmt(r.aaos_deg, 0)}</td><td>{_fmt(pct, 0)}</td>"
+                       f"<td>{aaos}</td><td>{_fmt(pct, 0)}</td>"
                        f"<td>{_e(r.population or '–')}</td></tr>")
         out.append("</table>")
+        for k, n in enumerate(notes, 1):
+            out.append(f"<p class='small'><sup>{k}</sup> {_e(n)}</p>")
         if data.rom_note:
             out.append(f"<p class='small'>{_e(data.rom_note)}</p>")
 

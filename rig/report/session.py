@@ -7,7 +7,8 @@ What each section is made of (a section with no data is left out):
 - **range of motion** — :func:`calibration.clinical.range_of_motion` of the session's boundary
   (the last one stored with the session, else extracted from its samples with the defaults of
   ``rig boundary``), next to the AAOS values and the Gill et al. 2020 population reference
-  (:func:`calibration.clinical.normative_band`; by age band and sex when given);
+  (:func:`calibration.clinical.population_reference`: the age band and sex when given, women
+  and men apart otherwise); AAOS values measured in another position are not compared;
 - **recorded boundary** — the joint orientations' limb directions (thorax frame) and the
   boundary polygon on the equal-area map (:func:`rig.report.figures.boundary_figure`), sparse
   arcs in red, optionally a reference boundary (the simulated patient's truth) dashed;
@@ -79,33 +80,30 @@ def _iso(t: float | None) -> str | None:
     return _dt.datetime.fromtimestamp(float(t), _dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
-def _population(movement: str, age: int | None, sex: str | None) -> str | None:
-    from calibration.clinical import normative_band
-
-    if sex is not None:
-        v = normative_band(movement, age=age, sex=sex)
-        if v is None:
-            return None
-        band = f", age {age}" if age is not None else ""
-        return f"{v:.0f} ({'women' if sex == 'female' else 'men'}{band}; Gill 2020)"
-    f = normative_band(movement, sex="female")
-    m = normative_band(movement, sex="male")
-    if f is None or m is None:
-        return None
-    return f"{f:.0f} women / {m:.0f} men (Gill 2020)"
-
-
 def rom_rows(constraint, side: str, *, age: int | None = None,
              sex: str | None = None, directions=None) -> list[RomRow]:
     """The range-of-motion table of a boundary and, when given, the recorded limb directions
-    (:func:`calibration.clinical.range_of_motion`)."""
-    from calibration.clinical import NORMATIVE, range_of_motion
+    (:func:`calibration.clinical.range_of_motion`). AAOS values measured in another position
+    (the rotations: at 90° abduction) are not compared; the population reference is the age
+    band and sex when known, women and men apart otherwise."""
+    from calibration.clinical import (
+        AAOS_NOT_COMPARABLE,
+        NORMATIVE,
+        population_reference,
+        range_of_motion,
+    )
 
     rom = range_of_motion(constraint, side, directions=directions)
     rows = []
     for m in rom.MOVEMENTS:
-        rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m), NORMATIVE["aaos"].get(m),
-                           _population(m, age, sex)))
+        pop = population_reference(m, age=age, sex=sex)
+        other = AAOS_NOT_COMPARABLE.get(m)
+        rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m),
+                           None if other else NORMATIVE["aaos"].get(m),
+                           None if pop is None else f"{pop}, Gill 2020",
+                           None if other is None else
+                           f"not compared with AAOS ({NORMATIVE['aaos'][m]:.0f}°): {other}; "
+                           "measured here with the arm at the side"))
     return rows
 
 
@@ -259,13 +257,19 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             joint = joint_orientations_from_store(store, rec_id, fusion=fusion)
         except RigConfigError as err:
             data.rom_note = f"Samples not usable for the boundary: {err}."
+        rec_meta = store.get_session(rec_id).get("meta") or {}
+        data.simulated = bool(rec_meta.get("simulated"))
+        if joint is not None:
+            facts = joint.facts()
+            data.simulated = bool(facts.simulated)
+            data.warnings = facts.warnings()
         constraint, rep, origin = _boundary(store, rec_id, joint)
         if constraint is not None:
             data.rom_rows = rom_rows(constraint, side, age=age, sex=sex,
                                      directions=None if joint is None else joint.directions)
-            note = ("Peaks along the clinical planes from the recorded boundary "
-                    f"({origin}); rotations with the arm at the side (AAOS measures them at "
-                    "90° abduction).")
+            note = ("Peaks: the farthest reach along each clinical plane (within 5°) of the "
+                    f"recorded boundary ({origin}) and of the recorded samples, the smaller of "
+                    "the two; rotations with the arm at the side.")
             data.rom_note = note if data.rom_note is None else f"{data.rom_note} {note}"
             directions = np.empty((0, 3))
             if joint is not None:
@@ -276,10 +280,16 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             pairs = [(np.asarray(a["from"], float), np.asarray(a["to"], float)) for a in arcs]
             from rig.report.figures import boundary_figure
 
-            data.boundary_png = boundary_figure(directions, constraint.swing, sparse_arcs=pairs,
+            data.boundary_png = boundary_figure(directions, constraint.swing, side=side,
+                                                sparse_arcs=pairs,
                                                 reference_swing=getattr(reference, "swing",
                                                                         None))
             facts: dict[str, Any] = {"joint orientations": len(directions)}
+            if joint is not None and joint.facts().sectors:
+                f = joint.facts()
+                facts["coverage of the range"] = (
+                    f"{f.explored} of {f.sectors} directions explored"
+                    + ("" if f.sufficient else " (not sufficient)"))
             if joint is not None and joint.orientations is not None:
                 facts["IMU orientations"] = joint.orientations
             verts = getattr(constraint.swing, "vertices", None)
@@ -291,6 +301,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             if "inside" in rep:
                 facts["recorded directions inside the boundary (%)"] = \
                     100.0 * float(rep["inside"])
+            if "inside_1deg" in rep:
+                facts["… within 1° of it (%)"] = 100.0 * float(rep["inside_1deg"])
             if reference is not None:
                 from calibration.boundary import boundary_distance
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibration.clinical import RangeOfMotion
 from models.constraint import load_constraint
 from rig.cli import main
 from rig.store import open_store
@@ -69,6 +70,35 @@ def test_boundary_from_a_session_is_stored(servo_patient, tmp_path, capsys):
     assert "flexion" in stdout and "AAOS" in stdout
 
 
+def test_rom_json_of_an_interrupted_session(servo_patient, tmp_path, capsys):
+    import json
+
+    _, rec = servo_patient
+    db = tmp_path / "s.db"
+    with open_store(db) as st:
+        pid = st.add_patient("P-002")
+        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
+        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with st.sample_writer(sid) as w:
+            w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
+        st.end_session(sid, status="interrupted", meta={})
+    code, stdout, err = run(["rom", "--db", str(db), "--session", str(sid), "--json"], capsys)
+    assert code == 0, err
+    rom = json.loads(stdout)  # one JSON object, nothing else printed
+    assert rom["joint"] == "shoulder" and rom["side"] == "left"
+    assert set(RangeOfMotion.MOVEMENTS) <= set(rom)
+    assert all(rom[m] is None or isinstance(rom[m], float) for m in RangeOfMotion.MOVEMENTS)
+    assert rom["interrupted"] is True and 0.0 <= rom["coverage"] <= 1.0
+    assert any("cut short" in w for w in rom["warnings"])
+    # the table says it too
+    code, stdout, err = run(["rom", "--db", str(db), "--session", str(sid)], capsys)
+    assert code == 0 and "warning: the session was cut short" in stdout
+    code, stdout, err = run(["boundary", "--db", str(db), "--session", str(sid), "--out",
+                             str(tmp_path / "b.yaml")], capsys)
+    assert code == 0 and "warning: the session was cut short" in stdout
+    assert load_constraint(tmp_path / "b.yaml").provenance["recording"]["interrupted"] is True
+
+
 @pytest.mark.parametrize("args, message", [
     (["boundary", "--out", "c.yaml"], "give a recording"),
     (["boundary", "missing.sto", "--limb", "h", "--out", "c.yaml"], "no such file"),
@@ -80,6 +110,11 @@ def test_boundary_from_a_session_is_stored(servo_patient, tmp_path, capsys):
     (["boundary", "{sto}", "--db", "x.db", "--session", "1", "--limb", "h", "--out", "c.yaml"],
      "not both"),
     (["rom", "--constraint", "nope.yaml"], "no such file"),
+    (["rom", "--constraint", "nope.yaml", "--frames", "isb"], "--frames applies"),
+    (["boundary", "--db", "x.db", "--session", "1", "--frames", "isb", "--out", "c.yaml"],
+     "--frames applies to files"),
+    (["boundary", "{sto}", "--limb", "humerus", "--frames", "opensim", "--out", "c.yaml"],
+     "--frames"),
 ])
 def test_bad_input_is_one_line_exit_2(args, message, sto_file, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)

@@ -58,7 +58,14 @@ def test_report_data_comes_from_the_store(recorded):
     assert data.patient == "P-REPORT" and data.side == "right" and data.samples > 100
     rows = {r.movement: r for r in data.rom_rows}
     assert rows["Flexion"].aaos_deg == 180.0 and rows["Flexion"].measured_deg > 0
-    assert "women, age 45" in rows["Abduction"].population
+    assert rows["Abduction"].population.startswith("152 (women, 45-49)")
+    # rotations measured with the arm at the side are not compared with AAOS (at 90° abduction)
+    rot = rows["External rotation (arm at side)"]
+    assert rot.aaos_deg is None and "90° abduction" in rot.note
+    # a 4 s simulated recording: said to be simulated, and too short to cover the range
+    assert data.simulated
+    assert any("coverage" in w for w in data.warnings)
+    assert "of 12 directions explored" in data.boundary_facts["coverage of the range"]
     assert data.boundary_png[:8] == b"\x89PNG\r\n\x1a\n"
     assert data.boundary_facts["joint orientations"] == data.samples
     assert data.boundary_facts["mean distance to reference (°)"] < 5.0
@@ -113,10 +120,13 @@ def test_report_of_a_recorded_session_renders_in_headless_chromium(recorded):
     for heading in ("Range of motion", "Recorded boundary", "Learned constraint model",
                     "Live enforcement"):
         assert f">{heading}</h2>" in html
+    assert "Simulated patient" in html and "Warning: coverage" in html
     assert not re.search(r"""(src|href)=["'](https?:|//|file:)""", html)
     img = screenshot(page, recorded["tmp"], height=3000)
     assert dark_fraction(img) > 0.002  # text, tables and outlines
-    # recorded samples and the error map's boundary are drawn
+    # recorded samples and the error map's boundary are drawn, the swing map's anatomical
+    # direction labels too
     assert pixels_near(img, "#4477aa", 0.15) > 50 and pixels_near(img, "#cc3311", 0.08) > 200
+    assert pixels_near(img, "#762a83", 0.06) > 30
     # the "ok" verdict of the enforcement section is styled
     assert pixels_near(img, "#1b7837", 0.08) > 20
