@@ -36,9 +36,12 @@ Method
    the alpha radius, not for the result's accuracy (vertices are mapped back exactly).
    **Measured noise**: the white noise of the directions, ``σ`` (degrees per axis), is the
    robust standard deviation of the fourth differences of consecutive plane positions over
-   √70 (for white noise every order of difference gives ``σ``; smooth motion adds its fourth
-   derivative times Δt⁴, nothing at the rates the rig records — a 60 Hz optical recording gives
-   0.05° from second differences and 0.007° from fourth ones).
+   √70 — for white noise every order of difference gives ``σ``; smooth motion adds its fourth
+   derivative times Δt⁴, less at each higher order (a 60 Hz optical recording gives 0.05° from
+   second differences and 0.007° from fourth ones). Only when the fourth-order figure is at
+   least 0.6 of the second-order one (white noise's signature) is it taken as noise; otherwise
+   the differences are motion (a slowly sampled recording looks rough at every order) and no
+   noise is claimed (:func:`_fast_noise`).
 4. **Alpha shape** (Edelsbrunner, Kirkpatrick & Seidel 1983, *IEEE Trans. Inf. Theory*
    29:551): the Delaunay triangulation (:class:`scipy.spatial.Delaunay`) of the points — each
    occupied ``cell_deg`` cell's mean position, and in the cells at the edge of the occupied
@@ -68,6 +71,9 @@ Method
       (:func:`scipy.sparse.csgraph.minimum_spanning_tree`; edges inside a piece cost nothing),
       edges shorter than ``2 alpha``: alpha grown locally, along the data, not everywhere.
    iv. The piece holding most samples is kept and its holes filled.
+   v. *Held samples.* A sample of the main cluster still outside (a trajectory that grazed the
+      shape by less than ``cell_deg``) is reached by a strip 0.02° wide from the region's
+      nearest point: the envelope touches every recorded sample.
 
    If a piece other than the largest holds more than ``1 − coverage`` of the evidence (a
    sparse recording splits the whole shape into pieces, with unvisited pockets between them),
@@ -276,19 +282,35 @@ def _spikes(d: np.ndarray, t: np.ndarray | None, max_speed_dps: float,
     return short
 
 
+def _difference_std(p: np.ndarray, k: int) -> float:
+    """Robust (MAD) standard deviation per axis of the ``k``-th differences of consecutive
+    rows of ``p``, divided by the factor white noise gains (``√Σ C(k, i)²``)."""
+    dk = np.diff(p, n=k, axis=0)
+    mad = np.median(np.abs(dk - np.median(dk, axis=0)), axis=0)
+    return float(np.mean(1.4826 * mad) / math.sqrt(math.comb(2 * k, k)))
+
+
+#: White noise gives the same figure from every order of difference; smooth motion gives less
+#: from each higher order. Below this ratio of the 4th-order figure to the 2nd-order one, the
+#: differences are motion, and the noise — smaller still — cannot be told from it.
+_WHITE_RATIO = 0.6
+
+
 def _fast_noise(p: np.ndarray) -> float:
     """White measurement noise of the limb direction, degrees (std per axis, plane
-    coordinates): the robust (MAD) standard deviation of the fourth differences of consecutive
-    samples divided by √70 — for white noise of std σ the fourth difference has std √70 σ,
-    while smooth motion contributes its fourth derivative times Δt⁴, nothing at the rates the
-    rig records (the lower differences do not separate the two: a 60 Hz optical recording
-    shows 0.05° from its second differences, 0.007° from its fourth, while white noise gives
-    the same figure from every order)."""
+    coordinates), or 0 when the recording does not show it.
+
+    For white noise of std σ, the ``k``-th difference of consecutive samples has std
+    ``σ √C(2k, k)`` whatever ``k``; smooth motion contributes its ``k``-th derivative times
+    ``Δtᵏ``, less with every order where the motion is well sampled (a 60 Hz optical recording:
+    0.05° from second differences, 0.007° from fourth). So the estimate is the fourth-order
+    figure when it is at least ``_WHITE_RATIO`` of the second-order one (the signature of white
+    noise: a device-fused IMU gives 0.43° from both); otherwise the differences are the motion
+    (slowly sampled motion looks rough at every order) and no noise is claimed."""
     if len(p) < 20:
         return 0.0
-    d4 = np.diff(p, n=4, axis=0)
-    mad = np.median(np.abs(d4 - np.median(d4, axis=0)), axis=0)
-    return float(np.mean(1.4826 * mad) / math.sqrt(70.0))
+    s2, s4 = _difference_std(p, 2), _difference_std(p, 4)
+    return s4 if s4 >= _WHITE_RATIO * s2 else 0.0
 
 
 def _circular_centre(phi: np.ndarray) -> float:
@@ -822,7 +844,7 @@ class BoundaryExtractor:
                     # and the joined, inset region holds it too, but for the inset band (a
                     # pocket of the shape opening onto the outside can leave a stretch of the
                     # boundary the limb slid along out)
-                    region = self._noise_inset(self._join(union, union, p), p)
+                    region = self._noise_inset(self._hold(self._join(union, union, p), p), p)
                     tol = self.cell_deg + self.inset_deg_
                     held = counts[shapely.contains_xy(region.buffer(tol), pts[:, 0],
                                                       pts[:, 1])].sum() / evidence
@@ -837,7 +859,7 @@ class BoundaryExtractor:
         self.n_glitch_cluster_ = int(counts[glitch].sum())
         self.alpha_used_deg_ = float(alpha)
         if region is None:
-            region = self._join(self._join_state[0], self._join_state[0], p)
+            region = self._hold(self._join(self._join_state[0], self._join_state[0], p), p)
             region = self._noise_inset(region, p)
         return region
 
@@ -907,6 +929,26 @@ class BoundaryExtractor:
             pieces = self._bridge(pieces)
         held = [counts[shapely.intersects_xy(g, pts[:, 0], pts[:, 1])].sum() for g in pieces]
         return shapely.Polygon(pieces[int(np.argmax(held))].exterior)
+
+    def _hold(self, poly, p: np.ndarray):
+        """``poly`` reaching out to every sample of the main cluster still outside it (a
+        trajectory that grazed the shape by less than ``cell_deg``, so no excursion of step
+        4 ii): joined by a strip 0.02° wide from the nearest point of the region, so the
+        envelope touches it."""
+        import shapely
+
+        _, _, _, inv, in_main, _, _, _ = self._join_state
+        evidence = in_main[inv]  # not the samples of glitch clusters (step 4 i)
+        out = p[evidence & ~shapely.contains_xy(poly, p[:, 0], p[:, 1])]
+        if not len(out):
+            return poly
+        # one sample per occupied 0.05° cell is enough to hold them all within that
+        key = np.unique(np.floor(out / 0.05).astype(np.int64), axis=0, return_index=True)[1]
+        lines = shapely.shortest_line(poly, shapely.points(out[key]))
+        strips = shapely.buffer(lines, 0.01, quad_segs=1)
+        merged = shapely.union_all([poly, *strips])
+        pieces = list(getattr(merged, "geoms", [merged]))
+        return shapely.Polygon(max(pieces, key=lambda g: g.area).exterior)
 
     def _bridge(self, pieces):
         """Join pieces of the region that the trajectory did not join (a lobe the limb was only
