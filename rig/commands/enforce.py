@@ -31,6 +31,9 @@ import click
 @click.option("--targets", required=True, metavar="SOURCE",
               help="PATH.csv (t_s,w,x,y,z), script:slow|sweep|adversarial|hold[?seed=N], or "
                    "mirror / mirror:RIG (an IMU-worn limb through the orientation sources).")
+@click.option("--frames", type=click.Choice(["rig", "isb"]), default=None,
+              help="Segment frames of a targets file's joint orientations: rig (default) or "
+                   "isb (+Y proximal, +X anterior, +Z right).")
 @click.option("--rate", type=float, default=200.0, show_default=True, metavar="HZ",
               help="Loop rate.")
 @click.option("--duration", type=float, default=None, metavar="S",
@@ -67,13 +70,14 @@ import click
               help="A target older than this holds the last safe goal.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of scripted targets.")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
-def enforce(rig_name, model_path, targets, rate, duration, telemetry_path, summary_path, db,
-            session_id, patient, constraint_path, force_model, safe_state, tolerance_deg,
-            max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, stale_target_ms, seed,
-            quiet) -> None:
+def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_path,
+            summary_path, db, session_id, patient, constraint_path, force_model, safe_state,
+            tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms,
+            stale_target_ms, seed, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     code = run_enforce(
-        rig=rig_name, model=model_path, targets=targets, rate_hz=rate, duration_s=duration,
+        rig=rig_name, model=model_path, targets=targets, frames=frames, rate_hz=rate,
+        duration_s=duration,
         telemetry=telemetry_path, summary_json=summary_path, db=db, session_id=session_id,
         patient=patient, constraint=constraint_path, force_model=force_model,
         safe_state=safe_state, tolerance_deg=tolerance_deg,
@@ -98,7 +102,8 @@ def _check_out_path(option: str, value) -> Path | None:
     return p
 
 
-def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetry=None,
+def run_enforce(*, rig, model, targets, frames=None, rate_hz=200.0, duration_s=None,
+                telemetry=None,
                 summary_json=None, db=None, session_id=None, patient=None, constraint=None,
                 force_model=False, safe_state="hold", tolerance_deg=1.0,
                 max_velocity_deg_s=120.0, max_accel_deg_s2=1200.0, stale_servo_ms=100.0,
@@ -190,7 +195,7 @@ def run_enforce(*, rig, model, targets, rate_hz=200.0, duration_s=None, telemetr
         for m in binding.mismatches:
             echo(f"warning: {m} (--force-model)")
         oracle = ConstraintOracle(binding.constraint)
-        src = open_targets(targets, oracle=oracle, rig=rig_cfg, seed=seed)
+        src = open_targets(targets, oracle=oracle, rig=rig_cfg, seed=seed, frames=frames)
         if alignment is not None and hasattr(src, "alignment"):
             from models import quaternion as Q
 

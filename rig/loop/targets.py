@@ -139,11 +139,18 @@ class CsvTrajectory(TargetSource):
     path : str or Path
         ``t_s,w,x,y,z`` CSV (see :func:`load_trajectory`); ``t_s`` is relative to the loop's
         start.
+    frames : "rig" or "isb"
+        Segment-frame convention of the file's joint orientations (:mod:`calibration.frames`);
+        converted to the rig's on loading.
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, frames: str = "rig"):
+        from calibration.frames import joint_to_rig
+
         self.path = Path(path)
         self.t_s, q = load_trajectory(self.path)
+        with np.errstate(invalid="ignore"):
+            q = joint_to_rig(q, frames)  # NaN / zero rows stay invalid for the supervisor
         self._q = [tuple(float(v) for v in row) for row in q]
         self.duration_s = float(self.t_s[-1])
         self.description = f"csv {self.path} ({len(self._q)} rows, {self.duration_s:.3g} s)"
@@ -498,10 +505,12 @@ class MirrorTargets(TargetSource):
 
 
 # ---------------------------------------------------------------------------------------------
-def open_targets(spec: str, *, oracle, rig=None, seed: int = 0) -> TargetSource:
+def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
+                 frames: str | None = None) -> TargetSource:
     """A target source from a ``--targets`` string.
 
-    ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory`;
+    ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory` (its joint orientations in
+    ``frames``, default the rig's);
     ``script:NAME[?seed=N&period_s=S&segment_s=S&hold_s=S]`` → :class:`ScriptedTargets`;
     ``mirror`` (the rig configuration's sensors) → :class:`MirrorTargets`.
 
@@ -513,6 +522,10 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0) -> TargetSource:
     if not isinstance(spec, str) or not spec.strip():
         raise RigConfigError("--targets: expected PATH.csv, script:NAME or mirror")
     spec = spec.strip()
+    is_file = not spec.startswith("script:") and not (spec == "mirror"
+                                                      or spec.startswith("mirror:"))
+    if frames is not None and not is_file:
+        raise RigConfigError(f"--frames applies to a targets file, not to --targets {spec}")
     if spec.startswith("script:"):
         body = spec[len("script:"):]
         name, _, query = body.partition("?")
@@ -539,7 +552,7 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0) -> TargetSource:
     if path.suffix.lower() == ".csv" or path.exists():
         if not path.exists():
             raise FileNotFoundError(2, "no such targets file", str(path))
-        return CsvTrajectory(path)
+        return CsvTrajectory(path, frames or "rig")
     raise RigConfigError(f"--targets {spec!r}: expected PATH.csv, script:NAME "
                          f"({'|'.join(SCRIPTS)}) or mirror")
 

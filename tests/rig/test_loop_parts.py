@@ -87,6 +87,31 @@ def test_csv_trajectory_zero_order_hold_against_the_loop_clock(tmp_path):
     assert math.isnan(q[0]) and t == 101.0
 
 
+def test_csv_trajectory_in_isb_frames_is_the_same_motion_in_rig_frames(tmp_path):
+    from calibration.frames import joint_to_rig
+    from models import quaternion as Q
+
+    rng = np.random.default_rng(4)
+    q_isb = Q.random_quaternions(3, rng)
+    rows = "".join(f"{0.1 * k},{','.join(repr(float(v)) for v in row)}\n"
+                   for k, row in enumerate(q_isb))
+    p = _write(tmp_path / "isb.csv", "t_s,w,x,y,z\n" + rows + "0.3,nan,0,0,0\n")
+    src = CsvTrajectory(p, frames="isb")
+    src.start(0.0)
+    _, q = src.latest(0.15)
+    np.testing.assert_allclose(q, joint_to_rig(q_isb[1], "isb"), atol=1e-12)
+    # the same joint orientation: the limb's long axis (-Y in ISB) lands on the rig's +X
+    np.testing.assert_allclose(Q.rotate(np.array(q), np.array([1.0, 0.0, 0.0])),
+                               Q.rotate(q_isb[1], np.array([0.0, -1.0, 0.0])) @ np.array(
+                                   [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+                               atol=1e-12)
+    _, q = src.latest(0.35)
+    assert math.isnan(q[0])  # an invalid row stays invalid for the supervisor
+    with pytest.raises(RigConfigError, match="--frames applies to a targets file"):
+        open_targets("script:sweep", oracle=ConstraintOracle(load_shape("original")),
+                     frames="isb")
+
+
 @pytest.mark.parametrize(("text", "message"), [
     ("", "empty file"),
     ("t,w,x,y,z\n0,1,0,0,0\n", "missing column(s) t_s"),
