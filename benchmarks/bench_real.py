@@ -46,7 +46,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calibration.boundary import boundary_distance
 from calibration.clinical import range_of_motion
 from calibration.frames import segment_to_rig
-from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.oracle import ConstraintOracle
 from rig.commands.boundary import extract, load_joint_orientations
