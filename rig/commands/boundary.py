@@ -42,6 +42,7 @@ class RecordingFacts:
     sectors: int | None = None
     sufficient: bool | None = None
     simulated: bool | None = None
+    unmeasured_drift: bool = False  # IMU orientations with no neutral checkpoint accepted
 
     @property
     def coverage(self) -> float | None:
@@ -60,13 +61,18 @@ class RecordingFacts:
             out.append(f"coverage {self.explored} of {self.sectors} directions explored: "
                        "where a limit was not reached, the boundary and the peaks understate "
                        "the range")
+        if self.unmeasured_drift:
+            out.append("no neutral checkpoint was accepted: the IMUs' relative heading drift is "
+                       "neither removed nor measured, so the rotations (and the boundary with "
+                       "the arm raised) may be overstated by it")
         return out
 
     def as_dict(self) -> dict[str, Any]:
         return {"status": self.status, "interrupted": self.interrupted,
                 "coverage": None if self.coverage is None else round(self.coverage, 4),
                 "explored_sectors": self.explored, "sectors": self.sectors,
-                "coverage_sufficient": self.sufficient, "simulated": self.simulated}
+                "coverage_sufficient": self.sufficient, "simulated": self.simulated,
+                "unmeasured_drift": self.unmeasured_drift}
 
 
 @dataclass
@@ -320,9 +326,12 @@ def joint_orientations_from_store(store, session_id: int,
             q, prov["heading_correction"] = _heading_correction(
                 q, times, status, checkpoints, cal["data"], session_id)
     side = sess.get("side")
+    facts = _session_facts(store, sess, sensors)
+    if not is_joint.any() and not (prov.get("heading_correction") or {}).get("accepted"):
+        facts = replace(facts, unmeasured_drift=True)
     return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
                      sess.get("pseudonym"), sess.get("joint"), np.asarray(t, dtype=np.float64),
-                     _session_facts(store, sess, sensors))
+                     facts)
 
 
 def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:

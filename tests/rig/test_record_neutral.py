@@ -173,3 +173,18 @@ def test_inactive_without_a_schedule_or_on_a_servo_rig():
     assert not NeutralCheckpoints(sim, display=CountingDisplay()).active
     old = types.SimpleNamespace(kind="imu", simulated=True, patients=[object()])  # before A
     assert not NeutralCheckpoints(old, display=CountingDisplay()).active
+
+
+def test_the_heading_uncertainty_is_measured_and_without_checkpoints_it_is_said(recorded):
+    # the read path passes the heading correction's own uncertainty to the extractor as the
+    # measured slow error; read without the correction, the drift is neither removed nor
+    # measured, and the facts say so
+    res = recorded.res
+    with open_store(recorded.db, create=False) as store:
+        on = joint_orientations_from_store(store, res.session_id)
+        off = joint_orientations_from_store(store, res.session_id, heading=False)
+    u = on.provenance["heading_correction"]["uncertainty_deg"]
+    assert 0.0 < u < 5.0 and on.slow_error_deg == u
+    assert not on.facts().unmeasured_drift
+    assert off.slow_error_deg is None and off.facts().unmeasured_drift
+    assert any("neutral checkpoint" in w for w in off.facts().warnings())
