@@ -625,26 +625,58 @@ def align_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]]
     return OrientationTable(time=tr[idx], columns=cols), int(tr.size - idx.size)
 
 
+def _series_times(t: np.ndarray, device_t: np.ndarray, anchors: dict) -> tuple[np.ndarray, str]:
+    """Strictly increasing times for one sensor's samples (in recording order), and which
+    clock they are: the host's when its times already increase; else the device's own clock
+    (a stream board stamps every frame; the host stamps a whole batch with one time), moved
+    onto the host clock by the median host − device offset (one offset per device clock, so
+    sensors of one board stay on common times); else, with neither, the host times with each
+    run of repeated times spread evenly up to the next one."""
+    if t.size < 2 or (np.diff(t) > 0).all():
+        return t, "host"
+    if np.isfinite(device_t).all() and (np.diff(device_t) > 0).all():
+        key = device_t.tobytes()
+        if key not in anchors:
+            anchors[key] = float(np.median(t - device_t))
+        return device_t + anchors[key], "device clock on the host clock"
+    out = t.astype(np.float64, copy=True)
+    start = np.flatnonzero(np.r_[True, np.diff(t) > 0])
+    ends = np.r_[start[1:], t.size]
+    period = float(np.median(np.diff(t[start]))) if start.size > 1 else 1e-3
+    for a, b in zip(start, ends, strict=True):
+        if b - a > 1:
+            nxt = t[b] if b < t.size else t[a] + period
+            out[a:b] = t[a] + (nxt - t[a]) * np.arange(b - a) / (b - a)
+    if not (np.diff(out) > 0).all():
+        raise RigConfigError("sample times go back: cannot export them as a time series")
+    return out, "host, repeated times spread evenly"
+
+
 def session_table(store: Store, session_id: int) -> tuple[OrientationTable, int]:
     """A session's samples as a table: one column per sensor (``<name>_imu``) or joint
-    (``<name>``), aligned by :func:`align_series`. Returns (table, reference rows dropped)."""
+    (``<name>``), aligned by :func:`align_series`, each on strictly increasing times
+    (:func:`_series_times`; the clock used is in ``meta["rig_time"]``). Returns (table,
+    reference rows dropped)."""
     s = store.samples(session_id)
     if s["t"].size == 0:
         raise RigConfigError(f"session {session_id} has no samples to export")
-    series = {}
+    series, clocks, anchors = {}, set(), {}
     for nm in dict.fromkeys(s["name"].tolist()):
         sel = s["name"] == nm
         kind = s["kind"][sel][0]
         label = nm if (kind == "joint" or nm.endswith("_imu")) else f"{nm}_imu"
-        t, q = s["t"][sel], s["q"][sel]
-        order = np.argsort(t, kind="stable")
-        series[label] = (t[order], q[order])
+        t, dt, q = s["t"][sel], s["device_t"][sel], s["q"][sel]
+        order = np.lexsort((dt, t)) if not np.isfinite(dt).all() else np.argsort(dt, kind="stable")
+        t, clock = _series_times(t[order], dt[order], anchors)
+        clocks.add(clock)
+        series[label] = (t, q[order])
     table, dropped = align_series(series)
     sess = store.get_session(session_id)
     table.meta.update({
         "rig_session": str(session_id),
         "rig_patient": str(sess["pseudonym"]),
         "rig_version": __version__,
+        "rig_time": "; ".join(sorted(clocks)),
     })
     if sess.get("joint"):
         table.meta["rig_joint"] = str(sess["joint"])

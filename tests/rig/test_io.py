@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rig.cli import main
 from rig.errors import RigConfigError
 from rig.store import open_store
 from rig.store import schema as S
@@ -263,6 +264,39 @@ def test_session_export_aligns_sensors_with_their_own_clocks(tmp_path):
         empty = store.start_session(store.ensure_patient("P-77"))
         with pytest.raises(RigConfigError, match="no samples"):
             export_session(store, empty, "sto", tmp_path / "e.sto")
+
+
+@pytest.mark.parametrize("device_clock", [True, False])
+def test_session_with_batch_timestamps_exports_as_sto(tmp_path, device_clock, capsys):
+    # a reader stamps each batch of frames with one host time (an IMU session has ~18
+    # repeated times a minute per sensor); the device stamps every frame, when it has a clock
+    rng = np.random.default_rng(13)
+    n = 240
+    t = 30.0 + np.repeat(np.arange(n // 8) * 8 / 400.0, 8)  # one host time per batch of 8
+    dev = np.arange(n) / 400.0 + 7.0 if device_clock else np.full(n, np.nan)
+    q = {"thorax": _unit(rng, n), "humerus": _unit(rng, n)}
+    db = tmp_path / "b.db"
+    with open_store(db) as store:
+        sid = store.start_session(store.add_patient("P-78"), rig_name="sim-imu")
+        with store.sample_writer(sid) as w:
+            for k in range(n):
+                w.add(t[k], dev[k], "thorax", "sensor", q["thorax"][k], 3)
+                w.add(t[k], dev[k], "humerus", "sensor", q["humerus"][k], 3)
+        store.end_session(sid)
+    with pytest.raises(SystemExit) as info:
+        main(["export", "--db", str(db), "--session", str(sid), "--format", "sto", "--out",
+              str(tmp_path / "b.sto")])
+    assert info.value.code == 0, capsys.readouterr().err
+    table = read_sto(tmp_path / "b.sto")
+    assert len(table) == n and (np.diff(table.time) > 0).all()
+    np.testing.assert_array_equal(table.get("thorax"), q["thorax"])
+    np.testing.assert_array_equal(table.get("humerus"), q["humerus"])
+    if device_clock:  # the device's own spacing, on the host clock
+        np.testing.assert_allclose(np.diff(table.time), 1 / 400.0, atol=1e-9)
+        assert table.meta["rig_time"] == "device clock on the host clock"
+    else:  # no device clock: each batch spread evenly up to the next
+        assert table.meta["rig_time"] == "host, repeated times spread evenly"
+        np.testing.assert_allclose(table.time[:8], 30.0 + np.arange(8) / 400.0, atol=1e-12)
 
 
 def _samples_with_raw(rng, n=300):
