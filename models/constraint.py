@@ -10,7 +10,8 @@ split by swing-twist about the limb axis (``q = swing ⊗ twist``, see :mod:`mod
 - the **twist** limit is an interval of the twist angle about the limb axis — constant, or
   depending smoothly on the swing direction (``by_swing``, below).
 
-File format (YAML, read with ``yaml.safe_load``; full reference in ``docs/constraint-format.md``)::
+File format (YAML, read with :func:`models.yamlio.safe_load_yaml`: safe, no anchors or
+aliases; full reference in ``docs/constraint-format.md``)::
 
     name: right-shoulder-example
     limb_axis: [1, 0, 0]                         # optional, default +X
@@ -70,6 +71,7 @@ import yaml
 from models.errors import ConstraintError, GeometryError
 from models.geometry import check_polygon, polygon_area
 from models.quaternion import LIMB_AXIS
+from models.yamlio import safe_load_yaml
 
 __all__ = [
     "SIDES",
@@ -576,7 +578,7 @@ class JointConstraint:
 def loads_constraint(text: str, source: str | None = None) -> JointConstraint:
     """Parse constraint YAML text (``source`` names it in error messages)."""
     try:
-        data = yaml.safe_load(text)
+        data = safe_load_yaml(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -49,6 +49,7 @@ from onnx import TensorProto, helper, numpy_helper
 from models.errors import ModelFileError
 from models.nn import activations as act
 from models.nn.gmlp import GMLP, frame_matrices
+from models.yamlio import safe_load_yaml
 
 FORMAT = "jointlimits-correction/1"
 INPUT = "orientation"
@@ -382,9 +383,9 @@ def _as_constraint_dict(c) -> Any:
     if c is None:
         return None
     if hasattr(c, "to_yaml"):
-        return yaml.safe_load(c.to_yaml())
+        return safe_load_yaml(c.to_yaml())
     if isinstance(c, str):
-        return yaml.safe_load(c)
+        return safe_load_yaml(c)
     return c
 
 
@@ -466,7 +467,7 @@ class CorrectionModel:
     def check_constraint(self, expected) -> None:
         """Raise :class:`ModelFileError` unless the embedded constraint equals ``expected``."""
         try:
-            mine = yaml.safe_load(self.constraint_yaml)
+            mine = safe_load_yaml(self.constraint_yaml)
         except yaml.YAMLError:
             mine = None
         if hasattr(expected, "to_yaml"):  # a JointConstraint: compare limits, ignore the name

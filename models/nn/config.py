@@ -56,6 +56,7 @@ import yaml
 
 from models.errors import ModelsError
 from models.nn import activations as act
+from models.yamlio import safe_load_yaml
 
 
 class ConfigError(ModelsError, ValueError):
@@ -253,10 +254,11 @@ def get_config(preset: str = "field", override: dict[str, Any] | None = None,
 
 
 def load_config(path: str, preset: str = "field") -> dict[str, Any]:
-    """Read a YAML override file (``yaml.safe_load``) and apply it to ``preset``."""
+    """Read a YAML override file (:func:`models.yamlio.safe_load_yaml`) and apply it to
+    ``preset``."""
     with open(path, encoding="utf-8") as fh:
         try:
-            data = yaml.safe_load(fh)
+            data = safe_load_yaml(fh)
         except yaml.YAMLError as err:
             raise ConfigError(f"{path}: not valid YAML ({err})".replace("\n", " ")) from None
     if data is None:

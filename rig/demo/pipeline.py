@@ -231,9 +231,9 @@ def patient_constraint():
 def _shipped_config(name: str) -> dict:
     from importlib import resources
 
-    import yaml
+    from models.yamlio import safe_load_yaml
 
-    return yaml.safe_load(resources.files("rig").joinpath("configs", f"{name}.yaml").read_text())
+    return safe_load_yaml(resources.files("rig").joinpath("configs", f"{name}.yaml").read_text())
 
 
 def _with_query(url: str, **keys: Any) -> str:

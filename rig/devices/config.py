@@ -1,6 +1,6 @@
 """Rig configuration files: which joint, which sensors and servos on which ports.
 
-YAML read with ``yaml.safe_load`` and validated field by field; **unknown keys are rejected at
+YAML read with :func:`models.yamlio.safe_load_yaml` (safe, no anchors or aliases) and validated field by field; **unknown keys are rejected at
 every level, naming the key** (a misspelt safety setting must never be silently ignored).
 Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
 (``--rig sim-shoulder``); anything else is a file path. Reference::
@@ -53,6 +53,7 @@ from typing import Any
 import yaml
 
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
+from models.yamlio import safe_load_yaml
 from rig.devices.kinematics import ChainKinematics, ServoJoint
 from rig.errors import RigConfigError
 
@@ -293,7 +294,7 @@ def loads_rig_config(text: str, source: str = "<rig config>",
     """Parse and validate rig-config YAML ``text`` (``source`` names it in errors)."""
     ctx = _Ctx(source)
     try:
-        data = yaml.safe_load(text)
+        data = safe_load_yaml(text)
     except yaml.YAMLError as err:
         raise RigConfigError(f"{source}: not valid YAML: {str(err).splitlines()[0]}") from err
     d = ctx.mapping(data, "top level", {"name", "joint"},

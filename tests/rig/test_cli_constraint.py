@@ -94,3 +94,35 @@ def test_entry_points_report_version_and_help():
         [sys.executable, "-m", "rig", "--version"], capture_output=True, text=True, timeout=60
     )
     assert r.stdout.startswith("rig, version ")
+
+
+#: a "billion laughs" document: nine levels of nine aliases each, under provenance
+BOMB = GOOD + "provenance:\n  a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
+    f"  a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 9)}]\n" for k in range(1, 9))
+
+
+@pytest.mark.parametrize("argv", [
+    ["constraint", "check", "{path}"],
+    ["train", "--constraint", "{path}", "--out", "{tmp}/m.onnx"],
+    ["rom", "--constraint", "{path}"],
+])
+def test_yaml_anchors_and_aliases_are_refused_with_one_line(tmp_path, capsys, argv):
+    path = tmp_path / "bomb.yaml"
+    path.write_text(BOMB)
+    argv = [a.format(path=path, tmp=tmp_path) for a in argv]
+    code, _, err = run(argv, capsys)
+    assert code == 2
+    assert err.startswith("rig: error: ") and len(err.strip().splitlines()) == 1
+    assert str(path) in err and "anchors are not accepted" in err
+    assert not (tmp_path / "m.onnx").exists()
+
+
+def test_a_rig_config_with_an_alias_is_refused(tmp_path, capsys):
+    path = tmp_path / "rig.yaml"
+    path.write_text("name: &n my-rig\njoint: {name: *n, side: right, parent: thorax, "
+                    "child: humerus}\n")
+    code, _, err = run(["record", "--rig", str(path), "--db", str(tmp_path / "x.db"),
+                        "--patient", "P-1", "--duration", "1"], capsys)
+    assert code == 2 and "anchors are not accepted" in err and str(path) in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.db").exists()
