@@ -59,7 +59,7 @@ import click
 @click.option("--safe-state", type=click.Choice(["hold", "torque-off"]), default="hold",
               show_default=True, help="What faults and Ctrl-C leave the servos in.")
 @click.option("--tolerance-deg", type=float, default=1.0, show_default=True,
-              help="No command is sent further than this outside the boundary.")
+              help="No command is sent further than this outside the boundary (0.25-10°).")
 @click.option("--max-velocity-deg-s", type=float, default=120.0, show_default=True,
               help="Goal angular velocity limit.")
 @click.option("--max-accel-deg-s2", type=float, default=1200.0, show_default=True,
@@ -86,6 +86,10 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
         echo=(lambda m: None) if quiet else click.echo, install_signals=True)
     if code:
         sys.exit(code)
+
+
+#: Largest ``--tolerance-deg``: a goal may leave the boundary by at most this much.
+MAX_TOLERANCE_DEG = 10.0
 
 
 def _check_out_path(option: str, value) -> Path | None:
@@ -148,6 +152,10 @@ def run_enforce(*, rig, model, targets, frames=None, rate_hz=200.0, duration_s=N
     if tolerance_deg <= 0.25:
         raise RigConfigError(f"--tolerance-deg {tolerance_deg}: must exceed 0.25° (the room "
                              "kept for rounding goals to encoder ticks)")
+    if tolerance_deg > MAX_TOLERANCE_DEG:
+        raise RigConfigError(f"--tolerance-deg {tolerance_deg}: at most {MAX_TOLERANCE_DEG:g}° "
+                             "(further outside than that, the boundary no longer limits the "
+                             "limb)")
     tel_path = _check_out_path("--telemetry", telemetry)
     sum_path = _check_out_path("--summary-json", summary_json)
     if session_id is not None and db is None:

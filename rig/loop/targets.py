@@ -94,37 +94,48 @@ def load_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     FileNotFoundError
     """
     path = Path(path)
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+    if path.is_dir():
+        raise RigConfigError(f"{path}: is a directory, not a t_s,w,x,y,z CSV file")
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            return _read_trajectory(path, fh)
+    except UnicodeDecodeError as err:
+        raise RigConfigError(f"{path}: not a text CSV file ({err.reason} at byte "
+                             f"{err.start}); expected a header t_s,w,x,y,z") from None
+
+
+def _read_trajectory(path: Path, fh) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of an opened ``t_s,w,x,y,z`` CSV (see :func:`load_trajectory`)."""
+    reader = csv.reader(fh)
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise RigConfigError(f"{path}: empty file; expected a header t_s,w,x,y,z") from None
+    need = ["t_s", "w", "x", "y", "z"]
+    missing = [c for c in need if c not in header]
+    if missing:
+        raise RigConfigError(f"{path}:1: missing column(s) {', '.join(missing)}; expected "
+                             f"a header t_s,w,x,y,z (got {','.join(header)})")
+    idx = [header.index(c) for c in need]
+    rows = []
+    last_t = -math.inf
+    for line_no, row in enumerate(reader, start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
         try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise RigConfigError(f"{path}: empty file; expected a header t_s,w,x,y,z") from None
-        need = ["t_s", "w", "x", "y", "z"]
-        missing = [c for c in need if c not in header]
-        if missing:
-            raise RigConfigError(f"{path}:1: missing column(s) {', '.join(missing)}; expected "
-                                 f"a header t_s,w,x,y,z (got {','.join(header)})")
-        idx = [header.index(c) for c in need]
-        rows = []
-        last_t = -math.inf
-        for line_no, row in enumerate(reader, start=2):
-            if not row or all(not c.strip() for c in row):
-                continue
-            try:
-                vals = [float(row[i]) for i in idx]
-            except IndexError:
-                raise RigConfigError(f"{path}:{line_no}: expected {len(header)} columns, got "
-                                     f"{len(row)}") from None
-            except ValueError as err:
-                raise RigConfigError(f"{path}:{line_no}: not a number ({err})") from None
-            if not math.isfinite(vals[0]):
-                raise RigConfigError(f"{path}:{line_no}: t_s must be finite, got {row[idx[0]]}")
-            if vals[0] < last_t:
-                raise RigConfigError(f"{path}:{line_no}: t_s goes back in time "
-                                     f"({vals[0]} after {last_t})")
-            last_t = vals[0]
-            rows.append(vals)
+            vals = [float(row[i]) for i in idx]
+        except IndexError:
+            raise RigConfigError(f"{path}:{line_no}: expected {len(header)} columns, got "
+                                 f"{len(row)}") from None
+        except ValueError as err:
+            raise RigConfigError(f"{path}:{line_no}: not a number ({err})") from None
+        if not math.isfinite(vals[0]):
+            raise RigConfigError(f"{path}:{line_no}: t_s must be finite, got {row[idx[0]]}")
+        if vals[0] < last_t:
+            raise RigConfigError(f"{path}:{line_no}: t_s goes back in time "
+                                 f"({vals[0]} after {last_t})")
+        last_t = vals[0]
+        rows.append(vals)
     if not rows:
         raise RigConfigError(f"{path}: no rows after the header")
     arr = np.array(rows, dtype=np.float64)

@@ -67,6 +67,8 @@ def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="s
     ("bad-port", "/dev/ttyUSB97"),
     ("unknown-script-key", "unknown key 'speed'"),
     ("db-no-patient", "--db: say whose run this is"),
+    ("tolerance", "--tolerance-deg 720.0: at most 10°"),
+    ("binary-targets", "img.png: not a text CSV file"),
 ])
 def test_user_mistakes_are_one_line(files, tmp_path, capsys, case, message):
     argv = {
@@ -85,7 +87,10 @@ def test_user_mistakes_are_one_line(files, tmp_path, capsys, case, message):
         "bad-port": _argv(files, rig=str(tmp_path / "rig.yaml")),
         "unknown-script-key": _argv(files, targets="script:slow?speed=3"),
         "db-no-patient": _argv(files, "--db", str(tmp_path / "x.db"), "--duration", "0.2"),
+        "tolerance": _argv(files, "--tolerance-deg", "720"),
+        "binary-targets": _argv(files, targets=str(tmp_path / "img.png")),
     }[case]
+    (tmp_path / "img.png").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe" * 8)
     (tmp_path / "bad.csv").write_text("t_s,w,x,y,z\n0,1,0,0,0\n0.1,1,x,0,0\n")
     rig_text = (ROOT / "rig/configs/sim-shoulder.yaml").read_text()
     start = rig_text.index('  port: "sim://')
