@@ -275,7 +275,9 @@ def joint_orientations_from_store(store, session_id: int,
         cal = next((c for c in reversed(cals) if c["kind"] == "imu-alignment"), None)
         if cal is None:
             raise RigConfigError(
-                f"session {session_id} has IMU samples but no imu-alignment calibration"
+                f"session {session_id} has IMU samples but no imu-alignment calibration (it "
+                "was recorded without the calibration steps): its orientations are the "
+                "sensors' frames, not anatomical ones; record again with calibration"
             )
         try:
             model = ImuJointCalibration.from_dict(cal["data"])

@@ -137,6 +137,9 @@ def render_html(data: ReportData) -> str:
     for w in data.warnings:
         out.append(f"<p class='warn'>Warning: {_e(w)}.</p>")
 
+    if not data.rom_rows and data.rom_note:  # no range of motion: say why
+        out.append("<h2>Range of motion</h2>")
+        out.append(f"<p class='warn'>No range of motion: {_e(data.rom_note)}</p>")
     if data.rom_rows:
         out.append("<h2>Range of motion</h2>")
         out.append("<table><tr><th>Movement</th><th>Measured (°)</th><th>AAOS normal (°)</th>"

@@ -130,3 +130,39 @@ def test_report_of_a_recorded_session_renders_in_headless_chromium(recorded):
     assert pixels_near(img, "#762a83", 0.06) > 30
     # the "ok" verdict of the enforcement section is styled
     assert pixels_near(img, "#1b7837", 0.08) > 20
+
+
+def test_a_report_says_why_it_has_no_range_and_when_a_session_was_cut_short(tmp_path):
+    import numpy as np
+
+    from rig.report.session import report_for_session
+    from rig.sim.patients import patient_limb, record_servo, star_patient
+
+    rec = record_servo(patient_limb(star_patient(7), 7), 60.0, 50.0)
+    db = tmp_path / "r.db"
+    with open_store(db) as store:
+        pid = store.add_patient("P-CUT")
+        # an IMU session recorded without the calibration steps
+        raw = store.start_session(pid, rig_name="sim-imu", joint="shoulder", side="right")
+        for name in ("thorax", "humerus"):
+            store.add_sensor(raw, name, segment=name, kind="sensor", port="sim://imu-stream")
+        with store.sample_writer(raw) as w:
+            w.add_many(rec.t, rec.t, "thorax", "sensor", rec.thorax, 0xFF)
+            w.add_many(rec.t, rec.t, "humerus", "sensor", rec.limb, 0xFF)
+        store.end_session(raw, status="completed", meta={"simulated": True})
+        # a servo session stopped by Ctrl-C
+        cut = store.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        store.add_sensor(cut, "shoulder", segment="humerus", kind="joint",
+                         port="sim://dynamixel")
+        with store.sample_writer(cut) as w:
+            w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
+        store.end_session(cut, status="interrupted", meta={"simulated": True})
+        page = report_for_session(store, raw, tmp_path / "raw.html", eval_n=200)
+        html = page.read_text()
+        assert ">Range of motion</h2>" in html and "No range of motion" in html
+        assert "without the calibration steps" in html
+        data = report_data_for_session(store, cut, eval_n=200)
+        assert any("cut short" in w and "'interrupted'" in w for w in data.warnings)
+        assert data.rom_rows and np.isfinite(data.rom_rows[0].measured_deg)
+        html = report_for_session(store, cut, tmp_path / "cut.html", eval_n=200).read_text()
+        assert "Warning: the session was cut short" in html
