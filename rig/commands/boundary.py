@@ -542,6 +542,13 @@ def boundary(file, db, session_id, reference, limb, limb_axis, frames, out, name
     """
     check_source(file, db, session_id, reference, limb, frames)
     _parse_axis(limb_axis)
+    if db is not None and store_result:
+        from rig.store import open_store
+
+        with open_store(db, create=False) as st:
+            if st.readonly:
+                raise RigConfigError(f"--db {db} is read-only: add --no-store to extract the "
+                                     "boundary without storing it in the session")
     out_path = Path(out)
     if not out_path.parent.is_dir():
         raise RigConfigError(f"--out {out}: directory {out_path.parent} does not exist")

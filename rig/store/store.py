@@ -22,6 +22,17 @@ SQLite set-up (applied to every connection) and why:
 
 A new SQLite file is created owner-only (``0600``) before SQLite opens it; SQLite gives its
 ``-wal`` and ``-shm`` files the permissions of the database file.
+
+**Read-only files.** A database file this process may read but not write (an archived copy, a
+colleague's file) is opened read-only (SQLite ``mode=ro``; ``immutable=1`` when even that needs
+a ``-shm`` file the directory will not take): every reading command works, and a command that
+would write says so in one line. It is not migrated: an older schema is refused with the way
+out (copy it somewhere writable once). ``open_store(..., readonly=True)`` asks for the same on
+any file.
+
+**Another application's database.** A SQLite file that holds tables but not the rig's
+``schema_version`` (with its columns) is refused untouched, naming a few of its tables; only an
+empty file (or a new one) becomes a rig database.
 """
 
 from __future__ import annotations
@@ -121,11 +132,59 @@ def _create_owner_only(path: Path) -> None:
         os.close(fd)
 
 
-def _sqlite_engine(path: str, create: bool) -> Engine:
+def _readonly_connect(p: Path):
+    """A ``connect`` for SQLAlchemy's ``creator``: the file opened read-only (``mode=ro``),
+    else (a WAL database whose ``-shm`` cannot be created) as immutable."""
+    import sqlite3
+    from urllib.parse import quote
+
+    uri = f"file:{quote(str(p.resolve()))}?mode=ro"
+
+    def connect():
+        try:
+            conn = sqlite3.connect(uri, uri=True, check_same_thread=False, timeout=10.0)
+            conn.execute("SELECT count(*) FROM sqlite_master").fetchall()
+            return conn
+        except sqlite3.OperationalError:
+            return sqlite3.connect(uri + "&immutable=1", uri=True, check_same_thread=False)
+
+    return connect
+
+
+def _refuse_foreign_file(p: Path, shown: str) -> None:
+    """Refuse, before anything writes to it (not even the switch to WAL), a SQLite file that
+    holds tables but no rig ``schema_version``; a file that is not SQLite at all too."""
+    import sqlite3
+    from urllib.parse import quote
+
+    if p.stat().st_size == 0:
+        return  # a new, empty file: it becomes a rig database
+    try:
+        conn = sqlite3.connect(f"file:{quote(str(p.resolve()))}?mode=ro", uri=True)
+        try:
+            tables = sorted(r[0] for r in conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'"))
+            cols = ({r[1] for r in conn.execute("PRAGMA table_info(schema_version)")}
+                    if "schema_version" in tables else set())
+        finally:
+            conn.close()
+    except sqlite3.DatabaseError as err:
+        raise RigConfigError(f"--db {shown}: not a database the rig can read ({err})") from None
+    if tables and not {"version", "applied_at", "description"} <= cols:
+        listed = ", ".join(tables[:5]) + (", ..." if len(tables) > 5 else "")
+        raise RigConfigError(
+            f"--db {shown}: not a rig database (it holds another application's tables: "
+            f"{listed}); left untouched — give a new file or a rig database")
+
+
+def _sqlite_engine(path: str, create: bool, readonly: bool | None) -> tuple[Engine, bool]:
+    """The engine of a SQLite file, and whether it is read-only (``readonly=None``: when the
+    file exists and this process may not write it)."""
     if path == ":memory:":
         engine = create_engine(
             "sqlite://", poolclass=StaticPool, connect_args={"check_same_thread": False}
         )
+        readonly = False
     else:
         p = Path(path).expanduser()
         if p.is_dir():
@@ -145,17 +204,26 @@ def _sqlite_engine(path: str, create: bool) -> Engine:
                 raise RigConfigError(f"--db {path}: cannot create: {err.strerror}") from err
         elif not os.access(p, os.R_OK):
             raise RigConfigError(f"--db {path}: permission denied")
-        engine = create_engine(
-            f"sqlite:///{p}",
-            connect_args={"check_same_thread": False, "timeout": 10.0},
-        )
+        if p.exists():
+            _refuse_foreign_file(p, path)
+        if readonly is None:
+            readonly = p.exists() and not os.access(p, os.W_OK)
+        if readonly:
+            if not p.exists():
+                raise RigConfigError(f"no database at {path}")
+            engine = create_engine("sqlite://", creator=_readonly_connect(p))
+        else:
+            engine = create_engine(
+                f"sqlite:///{p}",
+                connect_args={"check_same_thread": False, "timeout": 10.0},
+            )
 
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_conn, _record):  # pragma: no cover - exercised by every test
         # the store opens transactions itself (see _begin): no implicit ones from pysqlite
         dbapi_conn.isolation_level = None
         cur = dbapi_conn.cursor()
-        if path != ":memory:":
+        if path != ":memory:" and not readonly:
             cur.execute("PRAGMA journal_mode=WAL")
         cur.execute("PRAGMA synchronous=FULL")
         cur.execute("PRAGMA foreign_keys=ON")
@@ -167,7 +235,7 @@ def _sqlite_engine(path: str, create: bool) -> Engine:
         write = conn.get_execution_options().get("rig_write", False)
         conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
 
-    return engine
+    return engine, bool(readonly)
 
 
 def _postgres_engine(s: str) -> Engine:
@@ -183,7 +251,8 @@ def _postgres_engine(s: str) -> Engine:
         ) from err
 
 
-def open_store(url_or_path: str | os.PathLike, *, create: bool = True) -> Store:
+def open_store(url_or_path: str | os.PathLike, *, create: bool = True,
+               readonly: bool | None = None) -> Store:
     """Open (and create or migrate) the store at ``url_or_path``.
 
     Parameters
@@ -195,16 +264,21 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True) -> Store:
     create : bool
         Create a missing SQLite file (owner-only, 0600). ``False`` makes a missing file a
         :class:`~rig.errors.RigConfigError` -- for commands that only read.
+    readonly : bool or None
+        Open a SQLite file read-only; None (default): when this process may not write it.
+        A read-only store refuses every write with a one-line error.
 
     Returns
     -------
     Store
-        Migrated to :data:`~rig.store.schema.SCHEMA_VERSION`; close it (or use ``with``).
+        Migrated to :data:`~rig.store.schema.SCHEMA_VERSION` (a read-only one must already
+        be); close it (or use ``with``).
 
     Raises
     ------
     RigConfigError
-        Bad URL or path, missing file with ``create=False``, a database newer than this code.
+        Bad URL or path, missing file with ``create=False``, a database newer than this code,
+        another application's database, a read-only database of an older schema.
     RigConnectionError
         The database server cannot be reached or the file cannot be opened.
     """
@@ -212,8 +286,9 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True) -> Store:
     if not s:
         raise RigConfigError("--db: empty database path")
     path = _sqlite_path(s)
+    ro = False
     if path is not None:
-        engine = _sqlite_engine(path, create)
+        engine, ro = _sqlite_engine(path, create, readonly)
     elif s.startswith(("postgresql://", "postgresql+", "postgres://")):
         engine = _postgres_engine(s)
     else:
@@ -222,7 +297,7 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True) -> Store:
             f"--db {describe_url(s)}: unsupported scheme {scheme!r}; use a file path, "
             "sqlite:///PATH or postgresql://USER@HOST/DB"
         )
-    store = Store(engine, describe_url(s))
+    store = Store(engine, describe_url(s), readonly=ro)
     try:
         store._migrate()
     except BaseException:
@@ -238,10 +313,11 @@ class Store:
     transaction. Use :meth:`sample_writer` / :meth:`telemetry_writer` for high-rate rows.
     """
 
-    def __init__(self, engine: Engine, display: str) -> None:
+    def __init__(self, engine: Engine, display: str, *, readonly: bool = False) -> None:
         self.engine = engine
         self.url = display
         self.dialect = engine.dialect.name  # "sqlite" | "postgresql"
+        self.readonly = bool(readonly)
         self._closed = False
 
     # -- plumbing ------------------------------------------------------------------------
@@ -265,6 +341,9 @@ class Store:
         """One transaction; database errors become :class:`RigConnectionError`."""
         if self._closed:
             raise RigConnectionError(f"store {self.url} is closed")
+        if write and self.readonly:
+            raise RigConfigError(f"database {self.url} is read-only (no write permission): "
+                                 "this would change it; copy it somewhere writable first")
         try:
             with self.engine.connect() as conn:
                 if write:
@@ -282,7 +361,18 @@ class Store:
 
     def _migrate(self, target: int | None = None) -> None:
         target = S.SCHEMA_VERSION if target is None else target
+        if self.readonly:
+            with self._tx(write=False) as conn:
+                self._refuse_foreign(conn)
+                have = S.current_version(conn)
+            if have != S.SCHEMA_VERSION:
+                raise RigConfigError(
+                    f"database {self.url} is read-only and has schema version {have}; this "
+                    f"rig reads version {S.SCHEMA_VERSION}: copy it somewhere writable and "
+                    "open it there once to upgrade it")
+            return
         with self._tx(write=True) as conn:
+            self._refuse_foreign(conn)
             if self.dialect == "postgresql":
                 # one migrator at a time across processes
                 conn.execute(text("SELECT pg_advisory_xact_lock(7274420)"))
@@ -294,6 +384,22 @@ class Store:
                 )
             if have < target:
                 S.apply_migrations(conn, have, target)
+
+    def _refuse_foreign(self, conn: Connection) -> None:
+        """Refuse, untouched, a database that holds tables but is not a rig store."""
+        from sqlalchemy import inspect
+
+        ins = inspect(conn)
+        tables = sorted(ins.get_table_names())
+        if not tables:
+            return
+        ours = "schema_version" in tables and {"version", "applied_at", "description"} <= {
+            c["name"] for c in ins.get_columns("schema_version")}
+        if not ours:
+            shown = ", ".join(tables[:5]) + (", ..." if len(tables) > 5 else "")
+            raise RigConfigError(
+                f"--db {self.url}: not a rig database (it holds another application's tables: "
+                f"{shown}); left untouched — give a new file or a rig database")
 
     def schema_version(self) -> int:
         """The database's schema version."""

@@ -208,3 +208,91 @@ def test_close_on_postgresql(pg_server, capsys):
     assert code == 0 and "closed as interrupted: 5 samples" in out
     with open_store(url, create=False) as store:
         assert store.get_session(2)["status"] == "interrupted"
+
+
+def _servo_db(path):
+    """A small servo-limb recording (joint samples), ended, in a new store."""
+    from rig.sim.patients import patient_limb, record_servo, star_patient
+
+    rec = record_servo(patient_limb(star_patient(7), 7), 40.0, 50.0)
+    with open_store(path) as store:
+        sid = store.start_session(store.add_patient("P-RO"), rig_name="sim-shoulder",
+                                  joint="shoulder", side="right")
+        store.add_sensor(sid, "shoulder", segment="humerus", kind="joint",
+                         port="sim://dynamixel")
+        with store.sample_writer(sid) as w:
+            w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
+        store.end_session(sid, status="completed")
+        store.start_session(store.add_patient("P-RUN"), rig_name="sim-shoulder")  # not ended
+    return sid
+
+
+def test_a_read_only_store_reads_and_refuses_writes_in_one_line(tmp_path):
+    sid = _servo_db(tmp_path / "a.db")
+    with open_store(tmp_path / "a.db", create=False, readonly=True) as store:
+        assert store.readonly and store.list_sessions()[0]["samples"] > 1000
+        assert store.samples(sid)["q"].shape[1] == 4
+        with pytest.raises(Exception, match="is read-only") as err:
+            store.add_patient("P-NEW")
+        assert "\n" not in str(err.value)
+
+
+def test_an_archived_file_we_may_not_write_is_read_read_only(tmp_path):
+    # the user can read the file but not write it (as root, that takes another user)
+    share = tmp_path / "share"
+    share.mkdir()
+    db = share / "archive.db"
+    sid = _servo_db(db)
+    os.chmod(db, 0o444)
+    immutable = False
+    if os.geteuid() == 0:  # root writes any file it may read: make it immutable instead
+        r = subprocess.run(["chattr", "+i", str(db)], capture_output=True, text=True)
+        if r.returncode != 0:
+            pytest.skip(f"cannot make a file read-only for root here: {r.stderr.strip()}")
+        immutable = True
+    assert not os.access(db, os.W_OK)
+    before = db.read_bytes()
+
+    def rig(*args):
+        return subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True,
+                              text=True, cwd=share, timeout=120)
+
+    try:
+        _read_only_commands(rig, db, sid, share)
+        assert db.read_bytes() == before  # nothing changed
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(db)], check=True)
+
+
+def _read_only_commands(rig, db, sid, share):
+    r = rig("session", "list", "--db", str(db))
+    assert r.returncode == 0, r.stderr
+    assert "P-RO" in r.stdout
+    r = rig("rom", "--db", str(db), "--session", str(sid), "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["flexion"] is not None
+    r = rig("boundary", "--db", str(db), "--session", str(sid), "--out", str(share / "b.yaml"))
+    assert r.returncode == 2 and "read-only: add --no-store" in r.stderr
+    assert r.stderr.count("\n") == 1
+    r = rig("session", "close", "--db", str(db), "--session", str(sid + 1), "--force")
+    assert r.returncode == 2 and "read-only" in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_another_applications_database_is_refused_untouched(tmp_path, capsys):
+    import sqlite3
+
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as conn:
+        conn.execute("CREATE TABLE invoices (id INTEGER PRIMARY KEY, total REAL)")
+        conn.execute("INSERT INTO invoices (total) VALUES (12.5)")
+    before = other.read_bytes()
+    code, _, err = run(["record", "--rig", "sim-shoulder", "--db", str(other), "--patient",
+                        "P-1", "--duration", "1"], capsys)
+    assert code == 2 and "not a rig database" in err and "invoices" in err
+    assert err.count("\n") == 1
+    code, _, err = run(["session", "list", "--db", str(other)], capsys)
+    assert code == 2 and "not a rig database" in err
+    assert other.read_bytes() == before
+    with sqlite3.connect(other) as conn:
+        assert [r[0] for r in conn.execute("SELECT name FROM sqlite_master")] == ["invoices"]
