@@ -1,7 +1,8 @@
 """Rig configuration files: which joint, which sensors and servos on which ports.
 
-YAML read with :func:`models.yamlio.safe_load_yaml` (safe, no anchors or aliases) and validated field by field; **unknown keys are rejected at
-every level, naming the key** (a misspelt safety setting must never be silently ignored).
+YAML read with :func:`models.yamlio.safe_load_yaml` (safe, no anchors or aliases) and
+validated field by field; **unknown keys are rejected at every level, naming the key** (a
+misspelt safety setting must never be silently ignored).
 Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
 (``--rig sim-shoulder``); anything else is a file path. Reference::
 
