@@ -69,6 +69,7 @@ import numpy as np
 import yaml
 
 from models.errors import ConstraintError, GeometryError
+from models.fileio import write_owner_only
 from models.geometry import check_polygon, polygon_area
 from models.quaternion import LIMB_AXIS
 from models.yamlio import safe_load_yaml
@@ -609,11 +610,9 @@ def load_constraint(path: str | Path) -> JointConstraint:
 
 
 def dump_constraint(constraint: JointConstraint, path: str | Path) -> None:
-    """Write a constraint file (atomically: a partial file never replaces a good one)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(constraint.to_yaml(), encoding="utf-8")
-    tmp.replace(path)
+    """Write a constraint file atomically (a partial file never replaces a good one) and
+    owner-only (it may name a patient: :func:`models.fileio.write_owner_only`)."""
+    write_owner_only(Path(path), constraint.to_yaml())
 
 
 # -- validation helpers -----------------------------------------------------------------------

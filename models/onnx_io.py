@@ -37,7 +37,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +46,7 @@ import yaml
 from onnx import TensorProto, helper, numpy_helper
 
 from models.errors import ModelFileError
+from models.fileio import write_owner_only
 from models.nn import activations as act
 from models.nn.gmlp import GMLP, frame_matrices
 from models.yamlio import safe_load_yaml
@@ -369,14 +369,8 @@ def export_onnx(network: GMLP, path: str | Path, **kw) -> Path:
     path = Path(path)
     model = to_onnx(network, **kw)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # write then rename: an interrupted export never leaves a half-written model behind
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(model.SerializeToString())
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    # atomic and owner-only: the metadata embeds the constraint, patient pseudonym included
+    return write_owner_only(path, model.SerializeToString())
 
 
 def _as_constraint_dict(c) -> Any:

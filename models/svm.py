@@ -19,6 +19,7 @@ rotation); ``"direction"`` — the limb direction ``R(q) X`` (3-D, ignores twist
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from models import quaternion as quat
 from models.errors import ModelFileError
+from models.fileio import write_owner_only
 
 KERNELS = ("linear", "poly", "rbf", "sigmoid")
 FEATURES = ("quaternion", "direction")
@@ -118,8 +120,10 @@ class BinaryConstraintSVM:
         base = Path(path).with_suffix("")
         base.parent.mkdir(parents=True, exist_ok=True)
         npz, meta = base.with_suffix(".npz"), base.with_suffix(".json")
-        np.savez(npz, support_vectors=self.support_vectors_, dual_coef=self.dual_coef_)
-        meta.write_text(json.dumps({
+        buf = io.BytesIO()  # the constraint may name a patient: both files owner-only
+        np.savez(buf, support_vectors=self.support_vectors_, dual_coef=self.dual_coef_)
+        write_owner_only(npz, buf.getvalue())
+        write_owner_only(meta, json.dumps({
             "format": FORMAT, "kernel": self.kernel, "C": self.C, "gamma": self.gamma_,
             "degree": self.degree, "coef0": self.coef0, "feature": self.feature,
             "intercept": self.intercept_, "constraint": constraint_yaml,

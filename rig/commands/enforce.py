@@ -299,7 +299,9 @@ def _run_with_devices(*, rig_cfg, mdl, binding, oracle, src, cfg, tel_path, sum_
                 summary["session_id"] = enforce_session
                 summary["run_id"] = run_id
             if sum_path is not None:
-                sum_path.write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+                from models.fileio import write_owner_only
+
+                write_owner_only(sum_path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
             if result is not None:
                 result["summary"] = summary
                 result["telemetry"] = telemetry

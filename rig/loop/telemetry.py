@@ -120,7 +120,9 @@ class Telemetry:
         self.error: BaseException | None = None
         if self.csv_path is not None:
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = self.csv_path.open("w", newline="")
+            from models.fileio import open_owner_only
+
+            self._fh = open_owner_only(self.csv_path, "w", newline="")  # names the run
             self._csv = csv.writer(self._fh)
             self._csv.writerow(COLUMNS)
         self._thread = None

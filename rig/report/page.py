@@ -211,10 +211,10 @@ def render_html(data: ReportData) -> str:
 
 
 def write_report(data: ReportData, path: str | Path) -> Path:
-    """Write the report atomically (temporary file, then rename); returns the path."""
+    """Write the report atomically and owner-only (it names the patient,
+    :func:`models.fileio.write_owner_only`); returns the path."""
+    from models.fileio import write_owner_only
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(render_html(data), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return write_owner_only(path, render_html(data))
