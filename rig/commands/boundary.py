@@ -259,7 +259,7 @@ def joint_orientations_from_store(store, session_id: int,
     cals = store.calibrations(session_id)
     if s["t"].size == 0:
         raise RigConfigError(f"session {session_id} has no samples")
-    prov: dict[str, Any] = {"session": int(session_id)}
+    prov: dict[str, Any] = {"session": int(session_id), "started_at": sess.get("started_at")}
     is_joint = s["kind"] == "joint"
     if is_joint.any():
         if fusion != "auto":
@@ -605,8 +605,17 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
 
 
 def _default_name(data: JointData) -> str:
+    """``<patient>-session-<id>-<start, UTC>`` for a session (unique across databases: session
+    ids restart in each), the file's stem for a file."""
     if "session" in data.provenance:
-        return f"session-{data.provenance['session']}"
+        import datetime as dt
+
+        name = f"session-{data.provenance['session']}"
+        started = data.provenance.get("started_at")
+        if started is not None:
+            stamp = dt.datetime.fromtimestamp(float(started), dt.timezone.utc)
+            name += stamp.strftime("-%Y%m%dT%H%M%SZ")
+        return f"{data.patient}-{name}" if data.patient else name
     return Path(str(data.provenance.get("file", "recording"))).stem
 
 

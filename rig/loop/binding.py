@@ -54,6 +54,12 @@ class Binding:
     mismatches: list[str] = field(default_factory=list)
 
 
+def _who(c, patient: str | None = None) -> str:
+    """A constraint as a person reads it: its name and, when known, its patient."""
+    p = c.patient or patient
+    return f"{c.name!r}" + (f" of patient {p!r}" if p else "")
+
+
 def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--constraint",
                session_constraint=None, session_id=None, session_patient: str | None = None,
                force: bool = False) -> Binding:
@@ -104,9 +110,11 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
         problems.append(f"{path}: the model embeds no constraint, so it cannot be checked "
                         f"against {source}")
     else:
-        if enforced is not embedded and embedded != enforced:
-            problems.append(f"{path}: model trained for constraint {embedded.name!r}, which "
-                            f"differs from {source} ({enforced.name!r})")
+        # the person first: a model made for someone else is the mistake that matters most
+        if (embedded.patient is not None and session_patient is not None
+                and embedded.patient != session_patient):
+            problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
+                            f"{session_id} is patient {session_patient!r}")
         joint = getattr(getattr(rig, "joint", None), "name", None)
         side = getattr(getattr(rig, "joint", None), "side", None)
         if embedded.joint is not None and joint is not None and embedded.joint != joint:
@@ -115,10 +123,9 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
         if embedded.side is not None and side is not None and embedded.side != side:
             problems.append(f"{path}: model is for the {embedded.side} side, rig "
                             f"{rig.name!r} is the {side} side")
-        if (embedded.patient is not None and session_patient is not None
-                and embedded.patient != session_patient):
-            problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
-                            f"{session_id} is patient {session_patient!r}")
+        if enforced is not embedded and embedded != enforced:
+            problems.append(f"{path}: model trained for constraint {_who(embedded)}, which "
+                            f"differs from {source} ({_who(enforced, session_patient)})")
     if problems and not force:
         raise ModelBindingError(f"{problems[0]}; use --force-model to run it anyway (the "
                                 "supervisor still enforces the constraint)")

@@ -64,6 +64,10 @@ def test_boundary_from_a_session_is_stored(servo_patient, tmp_path, capsys):
     assert code == 0, err
     c = load_constraint(out)
     assert c.provenance["session"] == sid and c.patient == "P-001"
+    # named after the patient, the session and when it started: unique across databases
+    import re
+
+    assert re.fullmatch(rf"P-001-session-{sid}-\d{{8}}T\d{{6}}Z", c.name), c.name
     code, stdout, err = run(["rom", "--db", str(db), "--session", str(sid), "--age", "50",
                              "--sex", "female"], capsys)
     assert code == 0, err

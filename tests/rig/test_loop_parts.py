@@ -269,6 +269,14 @@ def test_binding_authority_and_refusals():
     with pytest.raises(ModelBindingError, match="patient 'P-7'"):
         bind_model(_FakeModel(p7), rig=_rig(constraint=None), session_constraint=cone,
                    session_id=3, session_patient="P-8")
+    # another patient's model with other limits: the refusal speaks of the patients
+    with pytest.raises(ModelBindingError) as err:
+        bind_model(_FakeModel(p7), rig=_rig(constraint=None), session_constraint=orig,
+                   session_id=3, session_patient="P-8")
+    assert "model is for patient 'P-7', session 3 is patient 'P-8'" in str(err.value)
+    b = bind_model(_FakeModel(p7), rig=_rig(constraint=None), session_constraint=orig,
+                   session_id=3, session_patient="P-8", force=True)
+    assert any("'c50' of patient 'P-7'" in m and "of patient 'P-8'" in m for m in b.mismatches)
     # no rig constraint: the model's own is enforced
     b = bind_model(_FakeModel(cone), rig=_rig(constraint=None))
     assert b.constraint == cone and b.source == "the model's embedded constraint"
