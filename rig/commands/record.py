@@ -3,8 +3,10 @@
 A thin layer over :func:`rig.record.record`: options → :class:`~rig.record.RecordOptions`, a
 display (rich on a terminal, plain lines otherwise), and the exit status:
 
-- 0 — the session ended as asked (``--duration`` reached, Ctrl-C or SIGTERM);
+- 0 — the session ended as asked (``--duration`` reached);
 - 1 — the device vanished mid-session (everything up to then is kept, status ``device_lost``);
+- 130 / 143 — ended by Ctrl-C (SIGINT) / SIGTERM: everything recorded is kept (status
+  ``interrupted``), the status says it was stopped, as for every rig command;
 - 2 — a user mistake (bad option, config, unknown key, wrong port), one line, nothing recorded.
 """
 
@@ -88,3 +90,5 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom,
         click.echo(f"rig: error: device lost during the recording: {result.error}; "
                    f"session {result.session_id} kept with everything recorded so far", err=True)
         sys.exit(1)
+    if result.signal is not None:  # kept everything, but say it was stopped (as train does)
+        sys.exit(128 + int(result.signal))

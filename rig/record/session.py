@@ -184,6 +184,7 @@ class RecordResult:
     rom: dict | None = None
     rom_table: str | None = None
     rom_note: str | None = None
+    signal: int | None = None  # SIGINT / SIGTERM that ended the session, if one did
 
     @property
     def dropped(self) -> int:
@@ -353,7 +354,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                         "(thorax sensor⁻¹ ⊗ arm sensor), not anatomical ones")
     display.start()
     try:
-        with _Stop(stop):
+        with _Stop(stop) as stopper:
             pump.start()
             if calibrate:
                 calib.begin(stop)
@@ -420,6 +421,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                             break
                 if stop.is_set():
                     result.status = "interrupted"
+                    result.signal = stopper.signal
                     break
                 if pump.finished:
                     if pump.error is not None:

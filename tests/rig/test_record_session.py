@@ -166,7 +166,8 @@ def test_vanished_device_ends_the_session_cleanly(tmp_path):
         assert len(store.samples(res.session_id)["t"]) == res.samples
 
 
-def test_sigint_ends_rig_record_cleanly(tmp_path):
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_ends_rig_record_cleanly_and_says_so(tmp_path, sig, code):
     db = tmp_path / "s.db"
     proc = subprocess.Popen(
         [sys.executable, "-m", "rig", "record", "--rig", "sim-imu", "--db", str(db),
@@ -183,13 +184,14 @@ def test_sigint_ends_rig_record_cleanly(tmp_path):
                 committed += 1
                 if committed >= 2:
                     break
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         rest, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 0, err
+    # everything kept, and the exit status says it was stopped (128 + the signal)
+    assert proc.returncode == code, err
     end = json.loads(rest.strip().splitlines()[-1])
     assert end["event"] == "end" and end["status"] == "interrupted"
     with open_store(db) as store:
