@@ -50,7 +50,13 @@ from rig.errors import (
 )
 from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention, Supervisor, SupervisorConfig
-from rig.loop.telemetry import Fault, Telemetry, intervention_counts, summarise
+from rig.loop.telemetry import (
+    Fault,
+    Telemetry,
+    intervention_counts,
+    rate_limited_count,
+    summarise,
+)
 
 __all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_chain"]
 
@@ -433,6 +439,7 @@ class EnforcementLoop:
             "tolerance_deg": self.config.supervisor.tolerance_deg,
             "interventions": int(interventions),
             "interventions_by_kind": intervention_counts(dict(self.intervention_bits)),
+            "rate_limited": rate_limited_count(dict(self.intervention_bits)),
             "faults": dict(sorted(fc.items())),
             "safe_state": self.config.safe_state,
             "safe_state_entries": self.safe_state_entries,

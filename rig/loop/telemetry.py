@@ -244,7 +244,9 @@ def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_
     Keys: ``rate_hz`` (configured), ``achieved_hz``, ``cycles``, ``duration_s``,
     ``p50_cycle_ms``, ``p99_cycle_ms``, ``max_cycle_ms``, ``p50_late_ms``, ``p99_late_ms``,
     ``overruns``, ``skipped_deadlines``, ``p50_compute_us``, ``max_violation_deg``,
-    ``interventions`` (cycles with any safety intervention), ``interventions_by_kind``,
+    ``interventions`` (cycles with any safety intervention), ``interventions_by_kind`` (each
+    such cycle under one kind: they add up to ``interventions``), ``rate_limited`` (cycles the
+    velocity / acceleration limits shaped; not interventions),
     ``faults`` (counts by kind), ``safe_state_entries``, ``safe_state_reason``, plus ``extra``.
     """
     cyc = telemetry.cycle_ms()
@@ -280,14 +282,29 @@ def _jsonable(o):
     return str(o)
 
 
+#: The kind an intervention cycle is counted under when it carries several safety flags: the
+#: most consequential first (a goal held back outranks one steered or projected).
+INTERVENTION_PRIORITY = (Intervention.GUARD_HOLD, Intervention.UNREACHABLE,
+                         Intervention.HOLD_STALE, Intervention.HOLD_INVALID,
+                         Intervention.MODEL_INVALID, Intervention.RECOVERY,
+                         Intervention.REPROJECTED, Intervention.PROJECTED)
+
+
 def intervention_counts(bits_seen: dict[int, int]) -> dict[str, int]:
-    """Counts by :class:`Intervention` name from a histogram of bit patterns."""
+    """Intervention cycles by kind, from a histogram of bit patterns: each cycle with a safety
+    flag counted once, under its first flag in :data:`INTERVENTION_PRIORITY`, so the counts add
+    up to the number of intervention cycles. Rate limiting alone is not an intervention."""
     out: dict[str, int] = {}
     for bits, n in bits_seen.items():
-        for f in Intervention:
-            if f.value and bits & f.value:
-                out[f.name.lower()] = out.get(f.name.lower(), 0) + n
+        kind = next((f for f in INTERVENTION_PRIORITY if bits & f.value), None)
+        if kind is not None:
+            out[kind.name.lower()] = out.get(kind.name.lower(), 0) + n
     return out
+
+
+def rate_limited_count(bits_seen: dict[int, int]) -> int:
+    """Cycles whose goal the velocity / acceleration limits shaped (any other flags too)."""
+    return int(sum(n for bits, n in bits_seen.items() if bits & Intervention.RATE_LIMITED))
 
 
 def is_intervention(bits: int) -> bool:

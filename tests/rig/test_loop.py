@@ -31,6 +31,7 @@ from rig.loop import (
     SupervisorConfig,
 )
 from rig.loop.runner import prepare_chain
+from rig.loop.supervisor import SAFETY_FLAGS
 from rig.sim.clock import ManualClock
 
 URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
@@ -125,6 +126,10 @@ def test_adversarial_targets_never_commanded_beyond_tolerance(models, which):
     assert (bits & Intervention.HOLD_INVALID).sum() > 25
     assert (bits & Intervention.HOLD_STALE).sum() > 25
     assert summary["interventions"] > 0 and summary["safe_state_entries"] == 0
+    # the breakdown adds up to the total, and both agree with the telemetry's own bits
+    assert sum(summary["interventions_by_kind"].values()) == summary["interventions"]
+    assert summary["interventions"] == int((bits & SAFETY_FLAGS != 0).sum())
+    assert summary["rate_limited"] == int((bits & Intervention.RATE_LIMITED != 0).sum())
     if which == "wrong-model":
         assert (bits & (Intervention.PROJECTED | Intervention.REPROJECTED)).sum() > 50
 
