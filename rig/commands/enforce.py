@@ -75,6 +75,10 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms,
             stale_target_ms, seed, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
+    from rig.store.store import pseudonym_warning
+
+    if pseudonym_warning(patient):
+        click.echo(f"warning: {pseudonym_warning(patient)}", err=True)
     code = run_enforce(
         rig=rig_name, model=model_path, targets=targets, frames=frames, rate_hz=rate,
         duration_s=duration,

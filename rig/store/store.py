@@ -42,6 +42,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import stat
 import time
 from collections.abc import Iterator, Mapping
@@ -1013,6 +1014,46 @@ def file_sha256(path: str | os.PathLike) -> str:
 def file_mode(path: str | os.PathLike) -> int:
     """Permission bits of a file (``0o600`` for a store created here)."""
     return stat.S_IMODE(os.stat(path).st_mode)
+
+
+_DATE = re.compile(r"(?<!\d)(\d{4}[-./]\d{1,2}[-./]\d{1,2}|\d{1,2}[-./]\d{1,2}[-./]\d{2,4}"
+                   r"|(19|20)\d{2}(0[1-9]|1[0-2])(0[1-9]|[12]\d|3[01]))(?!\d)")
+
+
+def pseudonym_concerns(pseudonym: str) -> list[str]:
+    """What in a pseudonym looks like it identifies a person (empty when nothing does): a date
+    (a birth date), two or more capitalised words (a name), an e-mail address or a phone
+    number. Used to warn at the command line; the store keeps whatever it is given."""
+    out = []
+    if _DATE.search(pseudonym):
+        out.append("a date (a birth date identifies a person)")
+    words = [w for w in re.split(r"[\s,;_]+", pseudonym) if w]
+    if sum(_name_like(w) for w in words) >= 2:
+        out.append("a person's name")
+    if re.search(r"[^@\s]+@[^@\s]+\.[a-z]{2,}", pseudonym, re.I):
+        out.append("an e-mail address")
+    if re.search(r"(\+|00)\d[\d ./-]{7,}", pseudonym) or re.search(r"\d{3}[ .-]\d{3,4}[ .-]\d{3,4}",
+                                                                 pseudonym):
+        out.append("a phone number")
+    return out
+
+
+def pseudonym_warning(pseudonym: str | None) -> str | None:
+    """The warning a command prints for a pseudonym that looks like it identifies the person
+    (:func:`pseudonym_concerns`), or None."""
+    concerns = pseudonym_concerns(pseudonym) if pseudonym else []
+    if not concerns:
+        return None
+    return (f"--patient {pseudonym!r} looks like it holds {' and '.join(concerns)}: the store "
+            "is meant for pseudonyms only (e.g. P-0042); keep the link to the person outside it")
+
+
+def _name_like(word: str) -> bool:
+    """A capitalised word of letters (hyphenated parts too: Anna-Lena, O'Brien)."""
+    parts = re.split(r"[-'’]", word)
+    return len(word) >= 2 and parts[0] != "" and all(
+        p.isalpha() and p[:1].isupper() and (len(p) == 1 or p[1:].islower())
+        for p in parts if p)
 
 
 def _check_text(what: str, value: Any, max_len: int) -> str:

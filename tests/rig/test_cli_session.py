@@ -296,3 +296,27 @@ def test_another_applications_database_is_refused_untouched(tmp_path, capsys):
     assert other.read_bytes() == before
     with sqlite3.connect(other) as conn:
         assert [r[0] for r in conn.execute("SELECT name FROM sqlite_master")] == ["invoices"]
+
+
+@pytest.mark.parametrize(("pseudonym", "what"), [
+    ("John Smith 1970-01-01", "a date (a birth date identifies a person) and a person's name"),
+    ("P-19700101", "a date"), ("Anna-Lena Müller", "a person's name"),
+    ("jsmith@clinic.org", "an e-mail address"), ("+44 20 7946 0958", "a phone number"),
+])
+def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, capsys, pseudonym, what):
+    from rig.store.store import pseudonym_concerns
+
+    assert pseudonym_concerns(pseudonym)[0].startswith(what.split(" and ")[0][:6])
+    code, out, err = run(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
+                          "--patient", pseudonym, "--duration", "0.3", "--no-calibration",
+                          "--no-rom", "--display", "plain"], capsys)
+    assert code == 0, err
+    warnings = [ln for ln in err.splitlines() if ln.startswith("warning: --patient")]
+    assert len(warnings) == 1 and what in warnings[0] and "pseudonyms only" in warnings[0]
+
+
+@pytest.mark.parametrize("pseudonym", ["P-0042", "SIM-0000", "IMU-7", "patient 12", "BENCH"])
+def test_ordinary_pseudonyms_are_not_warned_about(pseudonym):
+    from rig.store.store import pseudonym_concerns, pseudonym_warning
+
+    assert pseudonym_concerns(pseudonym) == [] and pseudonym_warning(pseudonym) is None
