@@ -115,6 +115,8 @@ class GenerationStats:
     best_hidden: int
     best_links: int
     elapsed_s: float
+    run: int = 1  #: which of the ``repeats`` evolutions (1-based)
+    runs: int = 1
 
 
 @dataclass
@@ -288,7 +290,8 @@ class Evolver:
 
     def run(self, x, t, xv, tv, rng: np.random.Generator,
             progress: Callable[[GenerationStats], None] | None = None,
-            canonical_ref: np.ndarray | None = None) -> EvolutionResult:
+            canonical_ref: np.ndarray | None = None, run: int = 1,
+            runs: int = 1) -> EvolutionResult:
         """Evolve for the configured generations; returns the best network seen.
 
         Parameters
@@ -318,7 +321,7 @@ class Evolver:
                         int(res.epochs[k]))
             st = GenerationStats(gen, best[0], float(np.mean(fit)), best[2],
                                  best[1].n_hidden, best[1].n_links,
-                                 time.perf_counter() - start)
+                                 time.perf_counter() - start, run, runs)
             history.append(st)
             if progress is not None:
                 progress(st)
@@ -338,8 +341,9 @@ def evolve(config: dict, x, t, xv, tv, rng: np.random.Generator, progress=None,
     """Run ``config['evolution']['repeats']`` evolutions, return the best by fitness."""
     ev = Evolver(config, x.shape[1], t.shape[1])
     best = None
-    for _ in range(config["evolution"]["repeats"]):
-        r = ev.run(x, t, xv, tv, rng, progress, canonical_ref)
+    runs = int(config["evolution"]["repeats"])
+    for k in range(runs):
+        r = ev.run(x, t, xv, tv, rng, progress, canonical_ref, run=k + 1, runs=runs)
         if best is None or r.fitness > best.fitness:
             best = r
     return best

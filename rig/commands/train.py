@@ -111,8 +111,9 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="field", se
              f"{cfg['training']['max_epochs']} epochs, {cfg['evolution']['repeats']} run(s){src}")
 
     def progress(st):
-        echo(f"  generation {st.generation:3d}/{gens}  best fitness {st.best_fitness:.6f}  "
-             f"val MSE {st.best_val_mse:.3e}  hidden {st.best_hidden:2d}  "
+        run = f"run {st.run}/{st.runs}  " if st.runs > 1 else ""
+        echo(f"  {run}generation {st.generation:3d}/{gens}  best fitness {st.best_fitness:.6f}"
+             f"  val MSE {st.best_val_mse:.3e}  hidden {st.best_hidden:2d}  "
              f"elapsed {st.elapsed_s:6.1f} s")
 
     t0 = time.perf_counter()
@@ -129,7 +130,33 @@ def run_train(constraint_path, out_path, *, config_path=None, preset="field", se
     echo(f"wrote {path} ({what}) in {time.perf_counter() - t0:.1f} s; training-data sha256 "
          f"{model.data_sha256[:16]}…; held-out metrics:")
     _print_metrics(model.metrics, echo)
+    for w in enforcement_warnings(model.metrics):
+        echo(f"warning: {w}")
     return model
+
+
+#: What a model must reach on held-out orientations to be used for enforcement as is (the
+#: targets the report's verdict uses, :data:`rig.report.session.MODEL_TARGETS`).
+ENFORCEMENT_TARGETS = {"frac_invalid_violating_1deg": 0.01, "mean_3d_error_pct": 0.8}
+
+
+def enforcement_warnings(metrics: dict) -> list[str]:
+    """Why a freshly trained model should not be trusted to enforce limits (empty when it
+    meets :data:`ENFORCEMENT_TARGETS`): the live supervisor still projects every goal, but the
+    model's corrections would be overridden on every such input."""
+    out = []
+    frac = metrics.get("frac_invalid_violating_1deg")
+    if frac is not None and frac > ENFORCEMENT_TARGETS["frac_invalid_violating_1deg"]:
+        worst = metrics.get("max_violation_deg")
+        out.append(f"this model leaves {100 * frac:.1f} % of the held-out invalid "
+                   "orientations more than 1° outside the constraint"
+                   + (f" (worst {worst:.0f}°)" if worst is not None else "")
+                   + "; for enforcement use the default preset 'field', which does not")
+    err = metrics.get("mean_3d_error_pct")
+    if err is not None and err > ENFORCEMENT_TARGETS["mean_3d_error_pct"] and not out:
+        out.append(f"this model's mean 3-D error is {err:.2f} % (the target for enforcement "
+                   "is 0.8 %); for enforcement use the default preset 'field'")
+    return out
 
 
 @click.command()
