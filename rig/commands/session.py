@@ -43,12 +43,13 @@ def format_sessions(rows: list[dict], db: str = "DB") -> str:
     writer is gone but that is not closed yet."""
     if not rows:
         return "no sessions"
-    head = ("id", "patient", "kind", "joint", "started", "duration", "samples", "last sample",
+    head = ("id", "patient", "kind", "joint", "started", "recorded", "samples", "last sample",
             "dropped", "status")
     table = []
     notes = []
     for r in rows:
-        dur = "-" if r["ended_at"] is None else f"{r['ended_at'] - r['started_at']:.1f} s"
+        span = r.get("recording_s")  # the time the samples span (the patient's time)
+        dur = "-" if span is None else f"{span:.1f} s"
         by = ", ".join(f"{k} {v}" for k, v in r["samples_by_sensor"].items())
         samples = f"{r['samples']}" + (f" ({by})" if by else "")
         if r["runs"]:
@@ -75,22 +76,47 @@ def _check_stale(stale_after: float) -> float:
     return stale_after
 
 
+def _since(text: str | None) -> float | None:
+    """``--since``: a date ``YYYY-MM-DD`` (local midnight) or date and time, as Unix time."""
+    import datetime as dt
+
+    from rig.errors import RigConfigError
+
+    if text is None:
+        return None
+    try:
+        return dt.datetime.fromisoformat(text.strip()).timestamp()
+    except ValueError:
+        raise RigConfigError(f"--since {text!r}: expected a date YYYY-MM-DD or "
+                             "YYYY-MM-DDTHH:MM") from None
+
+
 @session.command("list")
 @click.option("--db", "db", required=True, help=_DB_HELP)
+@click.option("--patient", default=None, metavar="PSEUDONYM", help="Only this patient's.")
+@click.option("--since", default=None, metavar="DATE",
+              help="Only sessions started on or after this date (YYYY-MM-DD[THH:MM]).")
+@click.option("--limit", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Only the newest N sessions (of those selected).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--stale-after", type=float, default=STALE_AFTER_S, show_default=True,
               metavar="SECONDS", help=_STALE_HELP)
-def list_(db: str, as_json: bool, stale_after: float) -> None:
-    """List sessions: patient pseudonym, kind, start, sample counts, last sample, status.
+def list_(db: str, patient: str | None, since: str | None, limit: int | None, as_json: bool,
+          stale_after: float) -> None:
+    """List sessions: patient pseudonym, kind, start, recorded time, sample counts, last
+    sample, status (oldest first).
 
     A session still marked running whose writer is gone (killed, power cut) shows as
-    'interrupted (not closed)'.
+    'interrupted (not closed)'. 'recorded' is the time the samples span (the patient's time,
+    also for a recording made faster than real time).
     """
     from rig.store import open_store
 
     _check_stale(stale_after)
+    since_t = _since(since)
     with open_store(db, create=False) as store:
-        rows = store.list_sessions(stale_after_s=stale_after)
+        rows = store.list_sessions(stale_after_s=stale_after, patient=patient, since=since_t,
+                                   limit=limit)
     if as_json:
         click.echo(json.dumps(rows, indent=1, sort_keys=True))
     else:

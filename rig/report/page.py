@@ -122,9 +122,9 @@ def render_html(data: ReportData) -> str:
         f"<tr><td>Patient (pseudonym)</td><td><b>{_e(data.patient)}</b></td></tr>",
         f"<tr><td>Session</td><td>{_e(data.session_id)}</td></tr>",
     ]
-    meta = (("Recorded", _e(data.started) if data.started else None),
+    meta = (("Started", _e(data.started) if data.started else None),
             ("Rig", _e(data.rig) if data.rig else None),
-            ("Duration", f"{data.duration_s:.0f} s" if data.duration_s else None),
+            ("Recorded", f"{data.duration_s:.0f} s of motion" if data.duration_s else None),
             ("Samples", _fmt(data.samples) if data.samples is not None else None),
             ("Dropped samples", _fmt(data.dropped) if data.dropped is not None else None))
     for label, value in meta:

@@ -243,8 +243,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
                       joint=sess.get("joint") or "shoulder", side=sess.get("side"),
                       rig=sess.get("rig_name"), started=_iso(sess.get("started_at")),
                       software=f"rig {__version__}")
-    if sess.get("ended_at") and sess.get("started_at"):
-        data.duration_s = float(sess["ended_at"]) - float(sess["started_at"])
+    data.duration_s = store.recording_span(session_id)  # the samples' span, not wall time
     data.samples = int(store.sample_count(session_id))
     data.dropped = sess.get("dropped")
     rec_id = _recording_session(store, sess)

@@ -265,6 +265,24 @@ def _v4_tables(md: MetaData) -> None:
     _v4_raw_index(md.tables["samples"])  # attaches itself to the table
 
 
+def _v5_sensor_columns() -> list[Column]:
+    """Version-5 columns of ``sensors``, frozen: how many samples the stream has and the time
+    they span (host ``t`` and the device's own clock), kept by the sample writer in the
+    transaction that inserts them, so a listing costs per session, not per sample."""
+    return [
+        Column("n_samples", BigInteger, nullable=False, server_default="0"),
+        Column("first_t", Double),
+        Column("last_t", Double),
+        Column("first_device_t", Double),
+        Column("last_device_t", Double),
+    ]
+
+
+def _v5_tables(md: MetaData) -> None:
+    for col in _v5_sensor_columns():
+        md.tables["sensors"].append_column(col)
+
+
 def _m1(conn: Connection) -> None:
     md = MetaData()
     _v1_tables(md)
@@ -301,6 +319,26 @@ def _m4(conn: Connection) -> None:
     _v4_raw_index(md.tables["samples"]).create(conn)  # empty: no old sample has raw
 
 
+def _m5(conn: Connection) -> None:
+    prep = conn.dialect.identifier_preparer
+    for col in _v5_sensor_columns():
+        default = " NOT NULL DEFAULT 0" if col.name == "n_samples" else ""
+        conn.execute(text(
+            f"ALTER TABLE sensors ADD COLUMN {prep.quote(col.name)} "
+            f"{col.type.compile(dialect=conn.dialect)}{default}"
+        ))
+    # the existing samples, counted once (each sensor's rows through the session/sensor index)
+    match = "samples.session_id = sensors.session_id AND samples.sensor_id = sensors.id"
+    conn.execute(text(
+        "UPDATE sensors SET "
+        f"n_samples = (SELECT count(*) FROM samples WHERE {match}), "
+        f"first_t = (SELECT min(t) FROM samples WHERE {match}), "
+        f"last_t = (SELECT max(t) FROM samples WHERE {match}), "
+        f"first_device_t = (SELECT min(device_t) FROM samples WHERE {match}), "
+        f"last_device_t = (SELECT max(device_t) FROM samples WHERE {match})"
+    ))
+
+
 #: Ordered, append-only: (version, description, function).
 MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
@@ -308,6 +346,7 @@ MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (2, "live loop: runs, telemetry", _m2),
     (3, "sessions: writer (host, pid, process start) and heartbeat", _m3),
     (4, "samples: raw accelerometer, gyroscope, magnetometer (acc_x..mag_z)", _m4),
+    (5, "sensors: sample counts and time spans, kept by the writer", _m5),
 ]
 
 #: The version this code reads and writes.
@@ -320,6 +359,7 @@ _v1_tables(metadata)
 _v2_tables(metadata)
 _v3_tables(metadata)
 _v4_tables(metadata)
+_v5_tables(metadata)
 
 schema_version = metadata.tables["schema_version"]
 patients = metadata.tables["patients"]

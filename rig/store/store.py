@@ -563,40 +563,57 @@ class Store:
         return out
 
     def list_sessions(self, *, stale_after_s: float = STALE_AFTER_S, now: float | None = None,
-                      host: str | None = None, probe: Probe = probe_process) -> list[dict]:
-        """Every session, oldest first, with its patient's pseudonym and sample counts.
+                      host: str | None = None, probe: Probe = probe_process,
+                      patient: str | None = None, since: float | None = None,
+                      limit: int | None = None) -> list[dict]:
+        """Sessions, oldest first, with their patient's pseudonym and sample counts.
+
+        ``patient`` keeps one pseudonym's, ``since`` those started at or after that Unix time,
+        ``limit`` the newest that many (of those). The counts are the sensors' own (schema v5,
+        kept by the sample writer), so a listing costs per session, not per sample.
 
         Each dict has the session columns plus ``pseudonym``, ``samples`` (total),
-        ``samples_by_sensor`` ({name: count}), ``runs`` (number of live-loop runs),
+        ``samples_by_sensor`` ({name: count}), ``recording_s`` (the time the samples span: the
+        devices' own clock where they stamp their samples, else the host's — for a recording
+        made faster than real time, the patient's time), ``runs`` (number of live-loop runs),
         ``last_sample_at`` (Unix time of the newest sample, None when unknown) and
         ``liveness`` (``{"state", "reason"}``: for a ``running`` session ``live``,
         ``interrupted`` or ``unknown`` by :func:`rig.store.liveness.judge` with the keyword
         arguments given; ``ended`` otherwise).
         """
-        q = (
-            select(S.sessions, S.patients.c.pseudonym)
-            .join(S.patients, S.patients.c.id == S.sessions.c.patient_id)
-            .order_by(S.sessions.c.id)
-        )
-        counts = (
-            select(S.samples.c.session_id, S.samples.c.sensor_id, func.count().label("n"))
-            .group_by(S.samples.c.session_id, S.samples.c.sensor_id)
-            .subquery()
-        )
-        cq = select(counts.c.session_id, S.sensors.c.name, counts.c.n).join(
-            S.sensors, S.sensors.c.id == counts.c.sensor_id
-        )
-        rq = select(S.runs.c.session_id, func.count()).group_by(S.runs.c.session_id)
+        sc = S.sessions.c
+        q = (select(S.sessions, S.patients.c.pseudonym)
+             .join(S.patients, S.patients.c.id == sc.patient_id))
+        if patient is not None:
+            q = q.where(S.patients.c.pseudonym == patient)
+        if since is not None:
+            q = q.where(sc.started_at >= float(since))
+        q = q.order_by(sc.id.desc())
+        if limit is not None:
+            q = q.limit(int(limit))
+        c = S.sensors.c
         with self._tx(write=False) as conn:
-            rows = [dict(r) for r in conn.execute(q).mappings()]
-            by_sensor: dict[int, dict[str, int]] = {}
-            for sid, name, n in conn.execute(cq):
-                by_sensor.setdefault(int(sid), {})[name] = int(n)
-            nruns = {int(sid): int(n) for sid, n in conn.execute(rq)}
+            rows = [dict(r) for r in conn.execute(q).mappings()][::-1]
+            ids = [r["id"] for r in rows]
+            sensors: dict[int, list] = {}
+            nruns: dict[int, int] = {}
+            for chunk in range(0, len(ids), 900):  # bound the IN list
+                part = ids[chunk:chunk + 900]
+                for row in conn.execute(
+                        select(c.session_id, c.name, c.n_samples, c.first_t, c.last_t,
+                               c.first_device_t, c.last_device_t)
+                        .where(c.session_id.in_(part))):
+                    sensors.setdefault(int(row[0]), []).append(row[1:])
+                for sid, n in conn.execute(select(S.runs.c.session_id, func.count())
+                                           .where(S.runs.c.session_id.in_(part))
+                                           .group_by(S.runs.c.session_id)):
+                    nruns[int(sid)] = int(n)
         for r in rows:
+            mine = sensors.get(r["id"], [])
             r["meta"] = _loads(r["meta"])
-            r["samples_by_sensor"] = dict(sorted(by_sensor.get(r["id"], {}).items()))
+            r["samples_by_sensor"] = dict(sorted((nm, int(n)) for nm, n, *_ in mine if n))
             r["samples"] = sum(r["samples_by_sensor"].values())
+            r["recording_s"] = _span(mine)
             r["runs"] = nruns.get(r["id"], 0)
             r["last_sample_at"] = _last_sample_at(r)
             r["liveness"] = judge(r, host=host, now=now, stale_after_s=stale_after_s,
@@ -770,11 +787,23 @@ class Store:
             "raw": _nan_where_null(a[:, 8:17]) if raw else np.full((len(rows), 9), np.nan),
         }
 
+    def recording_span(self, session_id: int) -> float | None:
+        """The time a session's samples span, seconds (devices' clock where every stream has
+        one, else the host's): the patient's time, also for a recording made faster than
+        real time. None without samples."""
+        c = S.sensors.c
+        with self._tx(write=False) as conn:
+            rows = conn.execute(select(c.name, c.n_samples, c.first_t, c.last_t,
+                                       c.first_device_t, c.last_device_t)
+                                .where(c.session_id == int(session_id))).all()
+        return _span([tuple(r) for r in rows])
+
     def sample_count(self, session_id: int) -> int:
+        """Samples of a session (the sensors' counts: no scan of the samples)."""
         with self._tx(write=False) as conn:
             return int(conn.execute(
-                select(func.count()).select_from(S.samples)
-                .where(S.samples.c.session_id == int(session_id))
+                select(func.coalesce(func.sum(S.sensors.c.n_samples), 0))
+                .where(S.sensors.c.session_id == int(session_id))
             ).scalar_one())
 
     # -- calibrations, annotations, boundaries, models -------------------------------------
@@ -957,6 +986,18 @@ class Store:
             else:
                 out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
         return out
+
+
+def _span(sensors: list) -> float | None:
+    """The time a session's samples span (seconds) from its sensors' (name, n, first_t, last_t,
+    first_device_t, last_device_t): on the devices' clock when every sensor with samples has
+    one, else on the host's."""
+    have = [x for x in sensors if x[1]]
+    if not have:
+        return None
+    if all(x[4] is not None and x[5] is not None for x in have):
+        return float(max(x[5] for x in have) - min(x[4] for x in have))
+    return float(max(x[3] for x in have) - min(x[2] for x in have))
 
 
 def _last_sample_at(row: Mapping[str, Any]) -> float | None:

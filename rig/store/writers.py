@@ -331,6 +331,7 @@ class SampleWriter(_BatchWriter):
                 for p, r in zip(params, rows, strict=True):
                     p.update(zip(S.RAW_COLUMNS, _NO_RAW if r[9] is None else r[9], strict=True))
             conn.execute(S.samples.insert(), params)
+            _count(conn, params)
             t_max = max(self._t_max, max(r[0] for r in rows))
             # the newest sample's t on the Unix clock, never after this commit
             wall, mono = time.time(), time.monotonic()
@@ -349,6 +350,34 @@ class SampleWriter(_BatchWriter):
             with self._store._tx() as conn:
                 self._heartbeat(conn, dropped=int(dropped))
             self._dropped_written = dropped
+
+
+def _count(conn, params: list[dict]) -> None:
+    """Add the inserted rows to their sensors' counts and time spans (schema v5), in the
+    inserting transaction: one UPDATE per sensor in the batch."""
+    from sqlalchemy import case, literal
+
+    per: dict[int, list] = {}
+    for p in params:
+        per.setdefault(p["sensor_id"], []).append((p["t"], p["device_t"]))
+    c = S.sensors.c
+    for sensor_id, tt in per.items():
+        t = [x for x, _ in tt]
+        dev = [d for _, d in tt if d is not None and math.isfinite(d)]
+
+        def lower(col, v):
+            return col if v is None else case(((col.is_(None)) | (col > v), literal(v)),
+                                              else_=col)
+
+        def upper(col, v):
+            return col if v is None else case(((col.is_(None)) | (col < v), literal(v)),
+                                              else_=col)
+
+        conn.execute(S.sensors.update().where(c.id == sensor_id).values(
+            n_samples=c.n_samples + len(tt),
+            first_t=lower(c.first_t, min(t)), last_t=upper(c.last_t, max(t)),
+            first_device_t=lower(c.first_device_t, min(dev) if dev else None),
+            last_device_t=upper(c.last_device_t, max(dev) if dev else None)))
 
 
 def _raw_row(raw: Sequence[float] | np.ndarray, name: str, t: float) -> tuple | None:

@@ -44,12 +44,24 @@ def db(tmp_path):
     return path
 
 
+def test_session_list_filters_and_pages(db, capsys):
+    code, out, err = run(["session", "list", "--db", str(db), "--patient", "P-0002"], capsys)
+    assert code == 0 and "P-0002" in out and "P-0001" not in out
+    code, out, _ = run(["session", "list", "--db", str(db), "--limit", "1", "--json"], capsys)
+    assert [r["pseudonym"] for r in json.loads(out)] == ["P-0002"]  # the newest
+    code, out, _ = run(["session", "list", "--db", str(db), "--since", "2999-01-01"], capsys)
+    assert code == 0 and out.strip() == "no sessions"
+    code, _, err = run(["session", "list", "--db", str(db), "--since", "yesterday"], capsys)
+    assert code == 2 and "--since 'yesterday'" in err and err.count("\n") == 1
+
+
 def test_session_list_shows_pseudonym_kind_counts_status(db, capsys):
     code, out, err = run(["session", "list", "--db", str(db)], capsys)
     assert code == 0 and err == ""
     lines = out.splitlines()
-    assert lines[0].split() == ["id", "patient", "kind", "joint", "started", "duration",
+    assert lines[0].split() == ["id", "patient", "kind", "joint", "started", "recorded",
                                 "samples", "last", "sample", "dropped", "status"]
+    assert "0.5 s" in lines[1]  # the samples' span (0 to 199/400 s), not the wall clock
     assert "P-0001" in lines[1] and "record" in lines[1] and "right shoulder" in lines[1]
     assert "400 (humerus 200, thorax 200)" in lines[1] and "completed" in lines[1]
     assert "P-0002" in lines[2] and "enforce" in lines[2] and "1 run" in lines[2]
@@ -307,7 +319,7 @@ def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, capsys, 
     from rig.store.store import pseudonym_concerns
 
     assert pseudonym_concerns(pseudonym)[0].startswith(what.split(" and ")[0][:6])
-    code, out, err = run(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
+    code, _, err = run(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
                           "--patient", pseudonym, "--duration", "0.3", "--no-calibration",
                           "--no-rom", "--display", "plain"], capsys)
     assert code == 0, err

@@ -342,7 +342,7 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == SCHEMA_VERSION == 4
+        assert store.schema_version() == SCHEMA_VERSION == 5
         [row] = store.list_sessions()
         assert row["pseudonym"] == "OLD-1" and row["samples"] == 10 and row["runs"] == 0
         rid = store.start_run(row["id"])  # the v2 tables work on the migrated database
@@ -351,8 +351,8 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         assert store.telemetry(rid)["t_s"].tolist() == [0.0]
         _assert_schema_is_current(store)
     with open_store(db_url, create=False) as store:  # a second open migrates nothing
-        assert store.schema_version() == 4
-        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4]
+        assert store.schema_version() == 5
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5]
 
 
 def _assert_schema_is_current(store):
@@ -404,7 +404,7 @@ def test_v2_database_is_migrated_and_its_running_session_closed(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 4
+        assert store.schema_version() == 5
         _assert_schema_is_current(store)
         rows = {r["id"]: r for r in store.list_sessions()}
         assert rows[done]["status"] == "completed" and rows[done]["meta"] == {"a": 1}
@@ -463,12 +463,12 @@ def test_v3_database_gains_raw_columns_with_its_samples_intact(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 4
+        assert store.schema_version() == 5
         _assert_schema_is_current(store)
         cols = [c for c in inspect(store.engine).get_columns("samples")]
         assert tuple(c["name"] for c in cols) == v3_samples + S.RAW_COLUMNS  # appended
         assert all(c["nullable"] for c in cols[len(v3_samples):])
-        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4]
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5]
         s = store.samples(sid)
         np.testing.assert_array_equal(s["q"], q)
         np.testing.assert_array_equal(s["t"], 5.0 + np.arange(12) / 400)
@@ -563,3 +563,73 @@ def test_two_processes_worth_of_connections_share_a_file(tmp_path):
                            np.tile([1.0, 0, 0, 0], (100, 1)))
                 w.flush()
                 assert viewer.list_sessions()[0]["samples"] == 100 * (k + 1)
+
+
+def test_v4_database_gains_sensor_counts_kept_by_the_writer(db_url):
+    """A version-4 store migrates to v5: each sensor's sample count and time span (host and
+    device clocks) are counted once from its samples, then kept by the writer; the listing and
+    sample_count read them instead of the samples."""
+    url = db_url if "://" in db_url else f"sqlite:///{db_url}"
+    engine = create_engine(url)
+    rng = np.random.default_rng(9)
+    q = _unit(rng, 20)
+    try:
+        with engine.begin() as conn:
+            assert S.apply_migrations(conn, 0, 4) == [1, 2, 3, 4]
+            pid = conn.execute(S.patients.insert().values(
+                pseudonym="OLD-4", created_at=1.0)).inserted_primary_key[0]
+            sid = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="completed", started_at=1000.0,
+                ended_at=1010.0, meta="{}")).inserted_primary_key[0]
+            ids = [conn.execute(S.sensors.insert().values(
+                session_id=sid, name=nm, kind="sensor")).inserted_primary_key[0]
+                for nm in ("thorax", "humerus")]
+            conn.execute(S.samples.insert(), [
+                {"session_id": sid, "sensor_id": ids[k % 2], "t": 5.0 + (k // 2) / 10,
+                 "device_t": 100.0 + (k // 2) / 400, "w": q[k, 0], "x": q[k, 1],
+                 "y": q[k, 2], "z": q[k, 3], "status": 3} for k in range(20)])
+            empty = conn.execute(S.sessions.insert().values(
+                patient_id=pid, kind="record", status="completed", started_at=2000.0,
+                meta="{}")).inserted_primary_key[0]
+    finally:
+        engine.dispose()
+    with open_store(db_url, create=False) as store:
+        assert store.schema_version() == 5
+        _assert_schema_is_current(store)
+        rows = {r["id"]: r for r in store.list_sessions()}
+        assert rows[sid]["samples_by_sensor"] == {"humerus": 10, "thorax": 10}
+        assert rows[sid]["recording_s"] == pytest.approx(9 / 400)  # the device clock's span
+        assert rows[empty]["samples"] == 0 and rows[empty]["recording_s"] is None
+        sens = {r["name"]: r for r in store.sensors(sid)}
+        assert sens["thorax"]["first_t"] == 5.0 and sens["thorax"]["last_t"] == 5.9
+        # the writer keeps them: counts, and the spans widened both ways
+        with store.sample_writer(sid) as w:
+            w.add_many(np.array([4.0, 7.0]), np.array([99.0, 101.0]), "thorax", "sensor",
+                       q[:2])
+            w.add(8.0, None, "elbow", "sensor", q[0])
+        assert store.sample_count(sid) == 23
+        sens = {r["name"]: r for r in store.sensors(sid)}
+        assert sens["thorax"]["n_samples"] == 12
+        assert (sens["thorax"]["first_t"], sens["thorax"]["last_t"]) == (4.0, 7.0)
+        assert (sens["thorax"]["first_device_t"], sens["thorax"]["last_device_t"]) == (99.0,
+                                                                                       101.0)
+        assert sens["elbow"]["n_samples"] == 1 and sens["elbow"]["first_device_t"] is None
+        # a sensor without a device clock: the session's span falls back to the host's
+        assert store.list_sessions()[0]["recording_s"] == pytest.approx(8.0 - 4.0)
+
+
+def test_session_listing_filters(tmp_path):
+    with open_store(tmp_path / "f.db") as store:
+        made = []
+        for k in range(6):
+            pid = store.ensure_patient(f"P-{k % 2}")
+            sid = store.start_session(pid)
+            store.end_session(sid)
+            made.append(sid)
+        starts = {r["id"]: r["started_at"] for r in store.list_sessions()}
+        assert [r["id"] for r in store.list_sessions(limit=2)] == made[-2:]  # newest, in order
+        assert {r["pseudonym"] for r in store.list_sessions(patient="P-1")} == {"P-1"}
+        assert len(store.list_sessions(patient="P-1")) == 3
+        later = [i for i in made if starts[i] >= starts[made[4]]]
+        assert [r["id"] for r in store.list_sessions(since=starts[made[4]])] == later
+        assert store.list_sessions(patient="nobody") == []
