@@ -191,22 +191,34 @@ def fuse_vqf(t, raw, *, params: dict | None = None, max_gap_s: float = 0.5) -> F
         tp, rp = t[a:b], raw[a:b]
         m = math.floor((tp[-1] - tp[0]) / ts + 1e-9) + 1
         grid = tp[0] + ts * np.arange(m + (1 if tp[0] + ts * (m - 1) < tp[-1] else 0))
-        g = np.column_stack([np.interp(grid, tp, rp[:, j]) for j in range(9)])
-        res = vqf.offlineVQF(np.ascontiguousarray(g[:, 3:6]), np.ascontiguousarray(g[:, 0:3]),
-                             np.ascontiguousarray(g[:, 6:9]), ts, dict(p))
+        # each sensor's three axes resampled straight into the contiguous arrays VQF takes
+        acc, gyr, mag = (np.empty((len(grid), 3)) for _ in range(3))
+        for j in range(9):
+            (acc, gyr, mag)[j // 3][:, j % 3] = np.interp(grid, tp, rp[:, j])
+        res = vqf.offlineVQF(gyr, acc, mag, ts, dict(p))
+        del acc, gyr, mag
         qg = np.asarray(res["quat9D"], dtype=np.float64)
-        # back to the sample times: nlerp between the two neighbouring grid orientations
-        u = np.clip((tp - grid[0]) / ts, 0.0, len(grid) - 1.0)
-        i0 = np.minimum(np.floor(u).astype(np.int64), len(grid) - 1)
-        i1 = np.minimum(i0 + 1, len(grid) - 1)
-        w = (u - i0)[:, None]
-        q0, q1 = qg[i0], qg[i1]
-        q1 = q1 * np.where(np.sum(q0 * q1, axis=1, keepdims=True) < 0, -1.0, 1.0)
-        q = (1.0 - w) * q0 + w * q1
-        out_q[a:b] = q / np.linalg.norm(q, axis=1, keepdims=True)
-        near = np.where(w[:, 0] < 0.5, i0, i1)
-        dist[a:b] = np.asarray(res["magDistDetected"], bool)[near]
-        rest[a:b] = np.asarray(res["restDetected"], bool)[near]
-        bias[a:b] = np.asarray(res["bias"], dtype=np.float64)[near]
+        flags = (np.asarray(res["magDistDetected"], bool), np.asarray(res["restDetected"], bool),
+                 np.asarray(res["bias"], dtype=np.float64))
+        del res  # VQF's other outputs (6-D quaternion, bias sigma, ...) are not kept
+        # back to the sample times, a chunk at a time: nlerp between the two neighbouring
+        # grid orientations
+        for c in range(0, b - a, _CHUNK):
+            tc = tp[c:c + _CHUNK]
+            u = np.clip((tc - grid[0]) / ts, 0.0, len(grid) - 1.0)
+            i0 = np.minimum(np.floor(u).astype(np.int64), len(grid) - 1)
+            i1 = np.minimum(i0 + 1, len(grid) - 1)
+            w = (u - i0)[:, None]
+            q0, q1 = qg[i0], qg[i1]
+            q1 *= np.where(np.sum(q0 * q1, axis=1, keepdims=True) < 0, -1.0, 1.0)
+            q = (1.0 - w) * q0 + w * q1
+            sl = slice(a + c, a + c + len(tc))
+            out_q[sl] = q / np.linalg.norm(q, axis=1, keepdims=True)
+            near = np.where(w[:, 0] < 0.5, i0, i1)
+            dist[sl], rest[sl], bias[sl] = (f[near] for f in flags)
     return FusionResult(Q.canonical(out_q), dist, rest, bias, 1.0 / ts, len(bounds) - 1,
                         dict(p))
+
+
+#: Samples per chunk when fused orientations are interpolated back to the sample times.
+_CHUNK = 65536

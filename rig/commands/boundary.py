@@ -254,21 +254,23 @@ def joint_orientations_from_store(store, session_id: int,
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
     axis = _parse_axis(None) if axis is None else axis
     sess = store.get_session(session_id)
-    s = store.samples(session_id)
     sensors = store.sensors(session_id)
     cals = store.calibrations(session_id)
-    if s["t"].size == 0:
+    names = [r["name"] for r in sensors if r.get("n_samples")]
+    if not names:
         raise RigConfigError(f"session {session_id} has no samples")
     prov: dict[str, Any] = {"session": int(session_id), "started_at": sess.get("started_at")}
-    is_joint = s["kind"] == "joint"
-    if is_joint.any():
+    is_joint = any(r["kind"] == "joint" for r in sensors if r.get("n_samples"))
+    if is_joint:
         if fusion != "auto":
             raise RigConfigError(
                 f"session {session_id} holds joint samples (a servo limb), not IMU ones: "
                 f"--fusion {fusion} applies to IMU sessions"
             )
-        q = s["q"][is_joint]
-        t = s["t"][is_joint]
+        s = store.samples(session_id)
+        sel = s["kind"] == "joint"
+        q, t = s["q"][sel], s["t"][sel]
+        del s
         status = None
         prov["source"] = "joint samples"
     else:
@@ -283,22 +285,24 @@ def joint_orientations_from_store(store, session_id: int,
             model = ImuJointCalibration.from_dict(cal["data"])
         except CalibrationError as err:
             raise RigConfigError(f"session {session_id}: {err}") from err
-        parent, child = _segments(sess, sensors, s, session_id)
+        parent, child = _segments(sess, sensors, names, session_id)
+        # the orientations first; a sensor's raw readings only while it is fused
+        per = {nm: store.samples(session_id, name=nm, raw=False) for nm in (parent, child)}
         # pair the two sensors' samples by the device timestamp when the device gives one (the
         # readings of one frame share it; host times are per batch and repeat), else host time
-        key_name = "device_t" if np.isfinite(s["device_t"]).all() else "t"
-        key = s[key_name]
-        use_vqf, why = _vqf_usable(s, key, parent, child, cal["data"])
+        key_name = ("device_t" if all(np.isfinite(p["device_t"]).all() for p in per.values())
+                    else "t")
+        use_vqf, why = _vqf_usable(store, session_id, per, key_name, cal["data"])
         if fusion == "vqf" and not use_vqf:
             raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
         use_vqf = use_vqf and fusion != "device"
-        q_all, fusion_prov = s["q"], {"method": "device"}
+        fusion_prov: dict[str, Any] = {"method": "device"}
         if use_vqf:
-            q_all, fusion_prov = _fuse_sensors(s, key, parent, child, session_id)
+            fusion_prov = _fuse_sensors(store, session_id, per, key_name)
         elif fusion == "auto":
             fusion_prov["auto"] = why
-        tp, qp, sp = (a[s["name"] == parent] for a in (key, q_all, s["status"]))
-        tc, qc, sc = (a[s["name"] == child] for a in (key, q_all, s["status"]))
+        tp, qp, sp = (per[parent][k] for k in (key_name, "q", "status"))
+        tc, qc, sc = (per[child][k] for k in (key_name, "q", "status"))
         _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
         if len(ip) < 0.5 * min(len(tp), len(tc)):
             # different clocks: nearest-in-time pairing through the store's aligner
@@ -311,7 +315,8 @@ def joint_orientations_from_store(store, session_id: int,
             qpar, qchi = qp[ip], qc[ic]
             status = np.minimum(sp[ip], sc[ic])
             # the child's times in the pairing clock first, its host times too
-            times = {key_name: tc[ic], "t": s["t"][s["name"] == child][ic]}
+            times = {key_name: tc[ic], "t": per[child]["t"][ic]}
+        del per, tp, qp, sp, tc, qc, sc, ip, ic
         if use_vqf:
             status = None  # the devices' status bytes do not describe the host's fusion
             model = _refit(qpar, qchi, times, cal["data"], session_id)
@@ -329,7 +334,7 @@ def joint_orientations_from_store(store, session_id: int,
                 q, times, status, checkpoints, cal["data"], session_id)
     side = sess.get("side")
     facts = _session_facts(store, sess, sensors)
-    if not is_joint.any() and not (prov.get("heading_correction") or {}).get("accepted"):
+    if not is_joint and not (prov.get("heading_correction") or {}).get("accepted"):
         facts = replace(facts, unmeasured_drift=True)
     return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
                      sess.get("pseudonym"), sess.get("joint"), np.asarray(t, dtype=np.float64),
@@ -356,19 +361,17 @@ def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
     return facts
 
 
-def _vqf_usable(s: dict, key: np.ndarray, parent: str, child: str,
+def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
                 cal_data: dict) -> tuple[bool, str]:
-    """Can the session's IMU samples be fused on the host? (yes/no, why not)."""
-    raw = s.get("raw")
-    if raw is None:
-        return False, "the store has no raw samples (schema before v4)"
-    for name in (parent, child):
-        sel = s["name"] == name
-        have = np.isfinite(raw[sel]).all(axis=1)
-        if not have.all():
-            return False, (f"sensor {name!r} has no raw samples for {int((~have).sum())} of "
-                           f"{int(sel.sum())} samples (record with sensors.raw: true)")
-        if (np.diff(key[sel]) <= 0).any():
+    """Can the two sensors' samples (``per``: name → samples, without raw) be fused on the
+    host? (yes/no, why not); the raw readings are counted by the store, not fetched."""
+    for name, s in per.items():
+        n = len(s["t"])
+        have = store.complete_raw_count(session_id, name)
+        if have < n:
+            return False, (f"sensor {name!r} has no raw samples for {n - have} of {n} samples "
+                           "(record with sensors.raw: true)")
+        if (np.diff(s[key_name]) <= 0).any():
             return False, f"sensor {name!r}: sample times repeat (no device clock to fuse on)"
     origin = (cal_data.get("protocol") or {}).get("origin")
     if not origin or not (cal_data.get("windows_s") or {}):
@@ -377,31 +380,31 @@ def _vqf_usable(s: dict, key: np.ndarray, parent: str, child: str,
     return True, ""
 
 
-def _fuse_sensors(s: dict, key: np.ndarray, parent: str, child: str,
-                  session_id: int) -> tuple[np.ndarray, dict]:
-    """Every sample's ``q`` of the two sensors replaced by its VQF orientation; provenance."""
+def _fuse_sensors(store, session_id: int, per: dict[str, dict], key_name: str) -> dict:
+    """Each sensor's ``q`` (in ``per``: name → samples) replaced by its VQF orientation, one
+    sensor at a time (its raw readings read for it and released); returns the provenance."""
     from importlib.metadata import version
 
     from calibration.errors import CalibrationError
     from calibration.fusion import fuse_vqf
 
-    q = np.array(s["q"], dtype=np.float64, copy=True)
     prov: dict[str, Any] = {"method": "vqf", "library": f"vqf {version('vqf')}"}
-    per: dict[str, dict] = {}
-    for name in (parent, child):
-        sel = s["name"] == name
+    info: dict[str, dict] = {}
+    for name, s in per.items():
+        raw = store.raw(session_id, name)
         try:
-            res = fuse_vqf(key[sel], s["raw"][sel])
+            res = fuse_vqf(s[key_name], raw)
         except CalibrationError as err:
             raise RigConfigError(f"session {session_id}: sensor {name!r}: {err}") from err
-        q[sel] = res.q
+        del raw
+        s["q"] = res.q
         prov["params"] = res.params
-        per[name] = {"rate_hz": round(res.rate_hz, 3), "pieces": res.pieces,
-                     "mag_disturbed_share": round(res.disturbed_share, 4),
-                     "gyro_bias_dps": res.bias_dps}
-    prov["sensors"] = per
+        info[name] = {"rate_hz": round(res.rate_hz, 3), "pieces": res.pieces,
+                      "mag_disturbed_share": round(res.disturbed_share, 4),
+                      "gyro_bias_dps": res.bias_dps}
+    prov["sensors"] = info
     prov["status_filter"] = "none (VQF rejects magnetic disturbances itself)"
-    return q, prov
+    return prov
 
 
 def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal_data: dict,
@@ -488,8 +491,9 @@ def _window(w) -> list[float] | None:
     return [a, b] if np.isfinite([a, b]).all() and a <= b else None
 
 
-def _segments(sess: dict, sensors: list[dict], s: dict, session_id: int) -> tuple[str, str]:
-    names = list(dict.fromkeys(s["name"].tolist()))
+def _segments(sess: dict, sensors: list[dict], names: list[str],
+              session_id: int) -> tuple[str, str]:
+    """(thorax sensor, limb sensor) of an IMU session; ``names``: the sensors with samples."""
     meta = sess.get("meta") or {}
     parent, child = meta.get("parent"), meta.get("child")
     if parent in names and child in names:

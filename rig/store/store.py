@@ -730,8 +730,10 @@ class Store:
         self.get_session(session_id)
         return SampleWriter(self, int(session_id), flush_interval_s=flush_interval_s)
 
-    def samples(self, session_id: int, name: str | None = None) -> dict[str, np.ndarray]:
-        """Recorded samples of a session, in arrival order.
+    def samples(self, session_id: int, name: str | None = None, *,
+                raw: bool = True) -> dict[str, np.ndarray]:
+        """Recorded samples of a session, in arrival order (``raw=False``: without the raw
+        readings, which are then a read-only NaN view costing nothing).
 
         Returns
         -------
@@ -756,36 +758,56 @@ class Store:
         if name is not None:
             sel = [int(r["id"]) for r in sensors if r["name"] == name]
             q = q.where(S.samples.c.sensor_id == (sel[0] if sel else -1))
+        else:
+            sel = list(by_id)
+        # the sensors' counts (schema v5) size the arrays; rows are converted a chunk at a
+        # time, so the driver's Python tuples never hold more than one chunk
+        n = sum(int(by_id[i].get("n_samples") or 0) for i in sel)
+        out = _SampleArrays(n, by_id)
         # Nine more cells per row double the driver's fetch time even when they are all NULL,
         # so they are fetched only when some sample has a raw reading.
         with self._tx(write=False) as conn:
-            raw = conn.execute(_raw_probe(q.whereclause)).first() is not None
+            raw = raw and conn.execute(_raw_probe(q.whereclause)).first() is not None
             if raw:
                 q = q.add_columns(*(S.samples.c[c] for c in S.RAW_COLUMNS))
-            rows = _fetch_tuples(conn, q)
-        if not rows:
-            return {
-                "t": np.zeros(0), "device_t": np.zeros(0), "name": np.zeros(0, dtype=object),
-                "kind": np.zeros(0, dtype=object), "q": np.zeros((0, 4)),
-                "status": np.zeros(0, dtype=np.int64), "raw": np.zeros((0, 9)),
-            }
-        a = np.array(rows, dtype=object)  # (N, 8 or 17); one pass over the rows, columns below
-        dev = a[:, 1]
-        missing = np.equal(dev, None)
-        if missing.any():
-            dev = np.where(missing, np.nan, dev)
-        uniq, inv = np.unique(a[:, 2].astype(np.int64), return_inverse=True)
-        names = np.array([by_id[int(u)]["name"] for u in uniq], dtype=object)[inv]
-        kinds = np.array([by_id[int(u)]["kind"] for u in uniq], dtype=object)[inv]
-        return {
-            "t": a[:, 0].astype(np.float64),
-            "device_t": dev.astype(np.float64),
-            "name": names,
-            "kind": kinds,
-            "q": a[:, 3:7].astype(np.float64),
-            "status": a[:, 7].astype(np.int64),
-            "raw": _nan_where_null(a[:, 8:17]) if raw else np.full((len(rows), 9), np.nan),
-        }
+            for rows in _fetch_chunks(conn, q):
+                out.add(rows, raw)
+        return out.result()
+
+    def raw(self, session_id: int, name: str) -> np.ndarray:
+        """(N, 9) the raw readings of sensor ``name``'s samples, in arrival order (as in
+        :meth:`samples`: NaN where none was stored), and nothing else — the columns the host's
+        fusion needs, fetched a chunk at a time into one array."""
+        c = S.samples.c
+        sensors = {r["name"]: r for r in self.sensors(session_id)}
+        row = sensors.get(name)
+        if row is None:
+            return np.zeros((0, 9))
+        out = np.empty((int(row.get("n_samples") or 0), 9))
+        q = (select(*(c[k] for k in S.RAW_COLUMNS))
+             .where((c.session_id == int(session_id)) & (c.sensor_id == int(row["id"])))
+             .order_by(c.id))
+        k = 0
+        with self._tx(write=False) as conn:
+            for rows in _fetch_chunks(conn, q):
+                if k + len(rows) > len(out):  # more than the count said
+                    out = np.concatenate((out[:k], np.empty((k + len(rows), 9))))
+                out[k:k + len(rows)] = _nan_where_null(np.array(rows, dtype=object))
+                k += len(rows)
+        return out[:k]
+
+    def complete_raw_count(self, session_id: int, name: str) -> int:
+        """How many of sensor ``name``'s samples have all nine raw readings (counted by the
+        database, nothing fetched)."""
+        c = S.samples.c
+        sid = select(S.sensors.c.id).where((S.sensors.c.session_id == int(session_id))
+                                           & (S.sensors.c.name == name)).scalar_subquery()
+        where = (c.session_id == int(session_id)) & (c.sensor_id == sid)
+        for col in S.RAW_COLUMNS:
+            where = where & c[col].is_not(None)
+        with self._tx(write=False) as conn:
+            return int(conn.execute(select(func.count()).select_from(S.samples)
+                                    .where(where)).scalar_one())
 
     def recording_span(self, session_id: int) -> float | None:
         """The time a session's samples span, seconds (devices' clock where every stream has
@@ -1024,6 +1046,75 @@ def _nan_where_null(cols: np.ndarray) -> np.ndarray:
     null = np.equal(cols, None)
     return np.where(null, np.nan, cols).astype(np.float64) if null.any() \
         else cols.astype(np.float64)
+
+
+class _SampleArrays:
+    """The arrays :meth:`Store.samples` returns, filled chunk by chunk (grown if the sensors'
+    counts fall short, trimmed if they overshoot)."""
+
+    def __init__(self, n: int, by_id: dict[int, dict]) -> None:
+        self.n = 0
+        self.ids = np.array(sorted(by_id), dtype=np.int64)
+        self.names = np.array([by_id[int(i)]["name"] for i in self.ids] + [None], dtype=object)
+        self.kinds = np.array([by_id[int(i)]["kind"] for i in self.ids] + [None], dtype=object)
+        self.cols = self._alloc(max(n, 0))
+
+    @staticmethod
+    def _alloc(n: int) -> dict[str, np.ndarray]:
+        return {"t": np.empty(n), "device_t": np.empty(n), "sensor": np.empty(n, np.int64),
+                "q": np.empty((n, 4)), "status": np.empty(n, np.int64)}
+
+    def add(self, rows: list[tuple], raw: bool) -> None:
+        k, m = self.n, len(rows)
+        if k + m > len(self.cols["t"]):  # more rows than the counts said: grow
+            bigger = self._alloc(max(2 * (k + m), 1024))
+            if "raw" in self.cols:
+                bigger["raw"] = np.full((len(bigger["t"]), 9), np.nan)
+            for key, a in self.cols.items():
+                bigger[key][:k] = a[:k]
+            self.cols = bigger
+        if raw and "raw" not in self.cols:  # only sessions with raw readings pay for them
+            self.cols["raw"] = np.full((len(self.cols["t"]), 9), np.nan)
+        a = np.array(rows, dtype=object)
+        c = self.cols
+        c["t"][k:k + m] = a[:, 0].astype(np.float64)
+        dev = a[:, 1]
+        missing = np.equal(dev, None)
+        c["device_t"][k:k + m] = np.where(missing, np.nan, dev).astype(np.float64) \
+            if missing.any() else dev.astype(np.float64)
+        c["sensor"][k:k + m] = a[:, 2].astype(np.int64)
+        c["q"][k:k + m] = a[:, 3:7].astype(np.float64)
+        c["status"][k:k + m] = a[:, 7].astype(np.int64)
+        if raw:
+            c["raw"][k:k + m] = _nan_where_null(a[:, 8:17])
+        self.n = k + m
+
+    def result(self) -> dict[str, np.ndarray]:
+        n, c = self.n, self.cols
+        at = np.searchsorted(self.ids, c["sensor"][:n])
+        # no raw reading at all: a read-only view of NaN, no memory per sample
+        raw = c["raw"][:n] if "raw" in c else np.broadcast_to(np.nan, (n, 9))
+        return {"t": c["t"][:n], "device_t": c["device_t"][:n], "name": self.names[at],
+                "kind": self.kinds[at], "q": c["q"][:n], "status": c["status"][:n],
+                "raw": raw}
+
+
+def _fetch_chunks(conn: Connection, stmt, size: int = 65536):
+    """Rows of a SELECT as lists of plain tuples, ``size`` at a time, from the driver's cursor
+    in the caller's transaction (see :func:`_fetch_tuples`)."""
+    comp = stmt.compile(dialect=conn.dialect)
+    params = (tuple(comp.params[k] for k in comp.positiontup) if comp.positional
+              else comp.params)
+    cur = conn.connection.dbapi_connection.cursor()
+    try:
+        cur.execute(comp.string, params)
+        while True:
+            rows = cur.fetchmany(size)
+            if not rows:
+                return
+            yield rows
+    finally:
+        cur.close()
 
 
 def _fetch_tuples(conn: Connection, stmt) -> list[tuple]:

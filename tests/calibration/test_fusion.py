@@ -125,12 +125,29 @@ class _Store:
         return {"id": sid, "side": "right", "pseudonym": "P-1", "joint": "shoulder",
                 "meta": {"parent": "thorax_imu", "child": "humerus_imu"}}
 
-    def samples(self, sid):
-        return dict(self._s)
+    def samples(self, sid, name=None, raw=True):
+        s = dict(self._s)
+        if not raw:
+            s.pop("raw", None)
+        if name is None:
+            return s
+        sel = s["name"] == name
+        return {k: v[sel] for k, v in s.items()}
+
+    def raw(self, sid, name):
+        return self.samples(sid, name)["raw"]
+
+    def complete_raw_count(self, sid, name):
+        if "raw" not in self._s:
+            return 0
+        sel = self._s["name"] == name
+        return int(np.isfinite(self._s["raw"][sel]).all(axis=1).sum())
 
     def sensors(self, sid):
-        return [{"name": "thorax_imu", "segment": "thorax"},
-                {"name": "humerus_imu", "segment": "humerus"}]
+        n = len(self._s["t"]) // 2
+        return [{"name": "thorax_imu", "segment": "thorax", "kind": "sensor", "n_samples": n},
+                {"name": "humerus_imu", "segment": "humerus", "kind": "sensor",
+                 "n_samples": n}]
 
     def calibrations(self, sid):
         return [{"id": 1, "kind": "imu-alignment", "data": self._cal, "residual_deg": 1.0}]
@@ -185,7 +202,8 @@ def test_read_path_without_raw(session):
     limb, t, q, raw, _, _, status = session
     cal = _stored_calibration(limb, t, q)
     none = _Store(t, q, None, status, cal)
-    with pytest.raises(RigConfigError, match="--fusion vqf: the store has no raw samples"):
+    with pytest.raises(RigConfigError,
+                       match="--fusion vqf: sensor 'thorax_imu' has no raw samples for 8000 of"):
         joint_orientations_from_store(none, 1, fusion="vqf")
     auto = joint_orientations_from_store(none, 1)
     assert auto.provenance["fusion"]["method"] == "device"

@@ -224,3 +224,19 @@ def test_identity_when_nothing_is_accepted_and_errors():
         HeadingCorrection().fit(t, q, [[5.0, 4.0]])
     with pytest.raises(CalibrationError, match="times for"):
         HeadingCorrection().fit(t[:-1], q, [[1.0, 2.0]])
+
+
+def test_a_long_session_is_corrected_through_a_grid_equal_to_the_process():
+    # an hour at 50 Hz with a checkpoint every 20 s: the drift is evaluated on a grid and
+    # interpolated (memory linear in the samples); it equals the process's own prediction
+    rng = np.random.default_rng(21)
+    t = np.arange(0.0, 3600.0, 1.0 / RATE)
+    w = _windows(t[-1])
+    rec = _drifted(_truth(t, w, 1.0, rng), _ou(t, 1.5, 60.0, rng))
+    hc = HeadingCorrection().fit(t, rec, w, anchors=[0.0])
+    assert hc.drift_model_["method"] == "gp" and len(hc.times_) > 150
+    psi = hc.psi_deg(t)
+    some = rng.choice(len(t), 3000, replace=False)
+    exact = hc._gp.predict(t[some].reshape(-1, 1)) + hc._gp_mean
+    np.testing.assert_allclose(psi[some], exact, atol=0.01)
+    assert hc.uncertainty_deg(t[0], t[-1]) > 0.0

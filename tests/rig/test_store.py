@@ -633,3 +633,23 @@ def test_session_listing_filters(tmp_path):
         later = [i for i in made if starts[i] >= starts[made[4]]]
         assert [r["id"] for r in store.list_sessions(since=starts[made[4]])] == later
         assert store.list_sessions(patient="nobody") == []
+
+
+def test_raw_readings_alone_and_their_complete_count(tmp_path):
+    rng = np.random.default_rng(10)
+    q = _unit(rng, 6)
+    raw = _raw(rng, 6)
+    raw[2, 4] = np.nan  # one sample with its gyroscope's y missing
+    with open_store(tmp_path / "r.db") as store:
+        sid = store.start_session(store.add_patient("P-R"))
+        with store.sample_writer(sid) as w:
+            w.add_many(np.arange(6.0), None, "humerus", "sensor", q, raw=raw)
+            w.add_many(np.arange(6.0), None, "thorax", "sensor", q)
+        got = store.raw(sid, "humerus")
+        np.testing.assert_array_equal(got, store.samples(sid, name="humerus")["raw"])
+        np.testing.assert_array_equal(got, raw)
+        assert store.complete_raw_count(sid, "humerus") == 5
+        assert store.complete_raw_count(sid, "thorax") == 0
+        assert np.isnan(store.raw(sid, "thorax")).all() and store.raw(sid, "none").shape == (0, 9)
+        lean = store.samples(sid, name="humerus", raw=False)
+        assert np.isnan(lean["raw"]).all() and not lean["raw"].flags.writeable
