@@ -77,6 +77,8 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.store.store import pseudonym_warning
 
+    result: dict = {}
+
     if pseudonym_warning(patient):
         click.echo(f"warning: {pseudonym_warning(patient)}", err=True)
     code = run_enforce(
@@ -87,9 +89,21 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
         safe_state=safe_state, tolerance_deg=tolerance_deg,
         max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2,
         stale_servo_ms=stale_servo_ms, stale_target_ms=stale_target_ms, seed=seed,
-        echo=(lambda m: None) if quiet else click.echo, install_signals=True)
+        echo=(lambda m: None) if quiet else click.echo, install_signals=True, result=result)
+    if quiet and "summary" in result:
+        click.echo(summary_line(result["summary"]))
     if code:
         sys.exit(code)
+
+
+def summary_line(s: dict) -> str:
+    """The end-of-run summary on one line (``--quiet``)."""
+    hz = s.get("achieved_hz")
+    line = (f"cycles {s['cycles']} at {'n/a' if hz is None else f'{hz:.1f}'} Hz, max violation "
+            f"{s['max_violation_deg']:.3f}° (tolerance {s['tolerance_deg']:g}°), interventions "
+            f"{s['interventions']}, overruns {s['overruns']}, safe-state entries "
+            f"{s['safe_state_entries']}, end {s['end_reason']}")
+    return line
 
 
 #: Largest ``--tolerance-deg``: a goal may leave the boundary by at most this much.

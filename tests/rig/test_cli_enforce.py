@@ -251,3 +251,11 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
                          "--targets", "script:hold", "--db", str(db), "--session", str(sid)],
                         capsys)
     assert code == 2 and "model is for patient 'P-2', session" in err and "P-1" in err
+
+
+def test_quiet_prints_only_the_summary_line(files, capsys):
+    code, out, err = _run(_argv(files, "--duration", "0.3", "--quiet"), capsys)
+    assert code == 0, err
+    lines = out.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cycles ") and "max violation" in lines[0]
+    assert "safe-state entries 0" in lines[0] and "end completed" in lines[0]
