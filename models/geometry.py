@@ -26,12 +26,28 @@ complement.
 
 *Simplicity.* Two arcs cross where their great circles meet (``± g_a × g_b``) at a point on
 both arcs; arcs on one great circle overlap if an end or midpoint of one lies strictly inside
-the other.
+the other. Only pairs of edges that come within reach of each other are tested: every edge is
+cut into *pieces* (arcs of length ``≤ h``, ``h`` about the median edge length; a point of a
+piece is within its half-length ``r`` of the piece's midpoint), and two arcs can share a point
+only if two of their pieces' midpoints are within ``r_a + r_b`` — a k-d tree over the
+midpoints lists those pairs in O(M log M).
 
-*Speed.* :class:`SphericalPolygon` finds the nearest edge through a cube-map grid over S²: for
-every cell it precomputes the edges that can be nearest to *any* point of the cell (edges whose
-distance from the cell centre is within ``D + 2ρ`` of the nearest, ``ρ`` the cell's angular
-radius), so the search is exact yet touches only a handful of edges per query.
+*Speed.* :class:`SphericalPolygon` finds the nearest edge exactly, through two structures that
+both only ever drop edges that cannot be nearest:
+
+- a cube-map grid over S²: for every cell it precomputes the edges that can be nearest to
+  *any* point of the cell (edges whose distance from the cell centre is within ``D + 2ρ`` of
+  the nearest, ``ρ`` the cell's angular radius), so a query touches a handful of edges;
+- a tree of bounding caps over the pieces in boundary order (a piece's cap: its midpoint and
+  half-length; a node's cap contains its two children's), searched level by level: a node is
+  dropped when ``∠(p, centre) − radius`` exceeds ``U``, the distance from ``p`` to the nearest
+  piece midpoint seen so far (a boundary point, so ``U ≥ D``). Cells whose grid list would be
+  long — far from the boundary of a polygon with many vertices, where a list holds on the order
+  of ``√(Dρ)`` / (edge length) edges — are answered by the tree instead, which touches on the
+  order of ``√(D / edge length)`` edges per query.
+
+Both rank the surviving edges of a point by the same per-pair key, so the answer is the
+brute-force one, bit for bit, whichever structure served the point.
 
 Determinism: several boundary points exactly equidistant → the edge with the lowest index wins.
 """
@@ -41,6 +57,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from models.errors import GeometryError
 
@@ -84,14 +101,15 @@ def check_polygon(vertices, interior=None) -> None:
         raise GeometryError(f"expected at least 3 vertices of shape (M, 3), got {verts.shape}")
     m = len(verts)
     gap = _angle(verts, np.roll(verts, -1, axis=0))
-    for i in range(m):
+    bad = np.flatnonzero((gap < COINCIDENT) | (gap > math.pi - 1e-6))
+    if len(bad):  # the first defective edge, as a walk along the boundary meets it
+        i = int(bad[0])
         j = (i + 1) % m
         if gap[i] < COINCIDENT:
             raise GeometryError(f"vertices {i} and {j} coincide (zero-length edge)")
-        if gap[i] > math.pi - 1e-6:
-            raise GeometryError(
-                f"vertices {i} and {j} are antipodal: the edge between them is undefined"
-            )
+        raise GeometryError(
+            f"vertices {i} and {j} are antipodal: the edge between them is undefined"
+        )
     # all on one great circle -> zero area, inside undefined
     if np.linalg.svd(verts, compute_uv=False)[-1] < 1e-9:
         raise GeometryError("all vertices lie on one great circle (zero area)")
@@ -108,7 +126,9 @@ def check_polygon(vertices, interior=None) -> None:
 def first_crossing(vertices) -> tuple[int, int] | None:
     """First pair ``(i, j)``, ``i < j``, of non-adjacent edges that cross or overlap, else None.
 
-    O(M²) pairs, vectorised in chunks (a 500-vertex polygon takes a few tens of ms).
+    "First" orders by ``i``, then ``j``. Only pairs of edges within reach of each other are
+    tested (module docstring, *Simplicity*): O(M log M) for a boundary that does not pack many
+    edges into one spot.
     """
     verts = np.asarray(vertices, dtype=np.float64)
     m = len(verts)
@@ -116,20 +136,48 @@ def first_crossing(vertices) -> tuple[int, int] | None:
     a1 = np.roll(verts, -1, axis=0)
     n = np.cross(a0, a1)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    i, j = np.triu_indices(m, k=2)
-    keep = ~((i == 0) & (j == m - 1))  # first and last edges share vertex 0
-    i, j = i[keep], j[keep]
-    if len(i) == 0:
+    mid, half, edge = _arc_pieces(a0, a1, _angle(a0, a1))
+    # two pieces share a point only if their midpoints are within r_a + r_b; the margin covers
+    # rounding and the 1e-12 tolerance of _on_arc
+    reach = min(2.0 * float(half.max()) + 1e-9, math.pi)
+    pairs = cKDTree(mid).query_pairs(2.0 * math.sin(reach / 2.0) + 1e-12, output_type="ndarray")
+    if len(pairs) == 0:
         return None
-    hits = np.zeros(len(i), dtype=bool)
+    ea, eb = edge[pairs[:, 0]], edge[pairs[:, 1]]
+    i, j = np.minimum(ea, eb), np.maximum(ea, eb)
+    keep = (j - i >= 2) & ~((i == 0) & (j == m - 1))  # first and last edges share vertex 0
+    code = np.unique(i[keep] * m + j[keep])  # sorted by i, then j
+    i, j = code // m, code % m
     chunk = 200_000
     for s in range(0, len(i), chunk):
         ii, jj = i[s : s + chunk], j[s : s + chunk]
-        hits[s : s + chunk] = _arcs_cross(a0[ii], a1[ii], n[ii], a0[jj], a1[jj], n[jj])
-    if hits.any():
-        k = int(np.argmax(hits))
-        return int(i[k]), int(j[k])
+        hits = _arcs_cross(a0[ii], a1[ii], n[ii], a0[jj], a1[jj], n[jj])
+        if hits.any():
+            k = int(np.argmax(hits))
+            return int(ii[k]), int(jj[k])
     return None
+
+
+def _arc_pieces(v0: np.ndarray, v1: np.ndarray, theta: np.ndarray):
+    """Edges cut into pieces of length ``≤ h``, in boundary order.
+
+    ``h`` is the median edge length, but at least half the mean (so there are at most 3M
+    pieces). Returns the pieces' midpoints (P, 3), unit, their half-lengths (P,), radians — every
+    point of a piece lies within that angle of its midpoint — and their edges (P,), int64.
+    """
+    m = len(theta)
+    h = max(float(np.median(theta)), 0.5 * float(theta.sum()) / m, 1e-12)
+    k = np.maximum(np.ceil(theta / h), 1.0).astype(np.int64)
+    edge = np.repeat(np.arange(m), k)
+    first = np.cumsum(k) - k
+    t = (np.arange(len(edge)) - first[edge] + 0.5) / k[edge]
+    th = theta[edge]
+    # slerp without the 1/sin θ factor (normalised below), so short edges stay accurate
+    mid = np.sin((1.0 - t) * th)[:, None] * v0[edge] + np.sin(t * th)[:, None] * v1[edge]
+    norm = np.linalg.norm(mid, axis=1, keepdims=True)
+    ok = norm > 0.0
+    mid = np.where(ok, mid / np.where(ok, norm, 1.0), v0[edge])  # a zero-length edge: its vertex
+    return mid, 0.5 * (theta / k)[edge], edge
 
 
 def _on_arc(p, a0, a1, n, tol=1e-12):
@@ -237,6 +285,104 @@ def densify(vertices, max_step_deg: float = 1.0) -> np.ndarray:
 
 
 # -- nearest boundary point -------------------------------------------------------------------
+class _ArcTree:
+    """Bounding caps over the boundary's pieces, for exact candidate search at any vertex count.
+
+    Leaves are the pieces of :func:`_arc_pieces` in boundary order (cap = midpoint, half-length);
+    a node of the level above joins two neighbours (cap centre: the normalised sum of theirs,
+    radius: enough to hold both caps). Consecutive pieces are close on S², so the caps stay
+    tight. Every node also carries a *rep*, a boundary point inside it (its first piece's
+    midpoint), whose distance bounds ``D`` from above. Below the root every level has an even
+    length (an odd one gets a dummy that is never kept: NaN centre), so node ``i``'s children
+    are ``2i`` and ``2i + 1``.
+    """
+
+    #: added to every pruning bound (radians): covers rounding in caps, chords and angles
+    SLACK = 2e-9
+    #: margin on dot products and squared chords: covers their rounding (unit vectors)
+    DOT_MARGIN = 1e-15
+
+    def __init__(self, v0: np.ndarray, v1: np.ndarray):
+        centre, radius, edge = _arc_pieces(v0, v1, _angle(v0, v1))
+        rep = centre
+        levels = []
+        while True:
+            # one row per node: centre | rep | cos r | sin r | r
+            rows = np.hstack((centre, rep, np.cos(radius)[:, None], np.sin(radius)[:, None],
+                              radius[:, None]))
+            if len(centre) % 2 and len(centre) > 1:  # pad: a dummy whose tests never pass
+                dummy = np.r_[np.full(3, np.nan), rep[-1], np.nan, np.nan, -np.inf]
+                rows = np.vstack((rows, dummy))
+            levels.append(rows)
+            if len(centre) == 1:
+                break
+            n2 = len(centre) // 2
+            a, b = centre[0 : 2 * n2 : 2], centre[1 : 2 * n2 : 2]
+            s = a + b
+            sn = np.linalg.norm(s, axis=1, keepdims=True)
+            c = np.where(sn > 1e-12, s / np.where(sn > 1e-12, sn, 1.0), a)
+            r = np.maximum(
+                _angle(c, a) + radius[0 : 2 * n2 : 2], _angle(c, b) + radius[1 : 2 * n2 : 2]
+            )
+            rp = rep[0 : 2 * n2 : 2]
+            if len(centre) % 2:  # the odd one out moves up unchanged
+                c = np.concatenate((c, centre[-1:]))
+                r = np.concatenate((r, radius[-1:]))
+                rp = np.concatenate((rp, rep[-1:]))
+            centre, radius, rep = c, np.minimum(r, math.pi), rp
+        self.levels = levels[::-1]  # root first
+        self.edge = np.append(edge, edge[-1]) if len(edge) % 2 else edge
+
+    def search(self, p: np.ndarray, pad, limit: int | None = None):
+        """Every piece whose cap comes within ``D + pad`` of its point, as edge candidates.
+
+        Parameters
+        ----------
+        p : (N, 3) float64, unit
+        pad : float or (N,) float64, radians, >= 0
+            0 for a nearest-edge search; ``2ρ`` lists what a grid cell of radius ρ needs.
+        limit : int, optional
+            Give up (return None) when more than this many (point, node) pairs are alive.
+
+        Returns
+        -------
+        owner, edge : (K,) int64
+            Pairs sorted by owner (every point has at least one), edges non-decreasing within
+            an owner (an edge may repeat: one entry per piece). Every edge within ``D + pad`` of
+            a point is among its pairs.
+
+        A node survives when ``∠(p, centre) ≤ U + pad + radius``, tested as
+        ``p·centre ≥ cos(U + pad + radius)`` (with :attr:`DOT_MARGIN`), where ``U`` is the
+        angle to the nearest rep seen so far, rounded up.
+        """
+        n = len(p)
+        pad = np.broadcast_to(np.asarray(pad, dtype=np.float64), (n,)) + self.SLACK
+        owner = np.arange(n)
+        node = np.zeros(n, dtype=np.int64)
+        best = np.full(n, -1.0)  # largest p·rep seen: the nearest boundary point so far
+        margin = self.DOT_MARGIN
+        last = len(self.levels) - 1
+        for depth, rows in enumerate(self.levels):
+            g = rows[node]
+            dots = np.einsum("kij,kj->ki", g[:, :6].reshape(-1, 2, 3), p[owner])  # centre, rep
+            first = np.flatnonzero(np.diff(owner, prepend=-1))  # owner is sorted
+            who = owner[first]
+            best[who] = np.maximum(best[who], np.maximum.reduceat(dots[:, 1], first))
+            chord2 = np.maximum(2.0 - 2.0 * best, 0.0) + margin
+            u = 2.0 * np.arcsin(np.minimum(np.sqrt(chord2) * 0.5, 1.0)) + pad  # U + pad >= D
+            cu, su = np.cos(u), np.sin(u)
+            far = u[owner] + g[:, 8] >= math.pi  # the cap reaches every point
+            keep = far | (dots[:, 0] >= cu[owner] * g[:, 6] - su[owner] * g[:, 7] - margin)
+            owner, node = owner[keep], node[keep]
+            if depth == last:
+                break
+            owner = np.repeat(owner, 2)
+            node = (2 * node[:, None] + np.arange(2)).ravel()
+            if limit is not None and len(owner) > limit:
+                return None
+        return owner, self.edge[node]
+
+
 class SphericalPolygon:
     """A simple spherical polygon: exact signed distance and nearest boundary point.
 
@@ -247,11 +393,28 @@ class SphericalPolygon:
         A point strictly inside; None builds only what unsigned distances need (no grid,
         :meth:`brute_nearest` only — used during validation).
     grid : int, optional
-        Initial cube-map resolution (refined automatically).
+        Kept for compatibility; the cube-map resolution is chosen automatically.
+
+    Attributes
+    ----------
+    G : int
+        Cube-map cells per face side.
+    cell_ptr, cell_edges : (6G² + 1,) int64, (K,) int64
+        Candidate edges of cell ``c``: ``cell_edges[cell_ptr[c]:cell_ptr[c + 1]]``, ascending.
+    cell_tree : (6G²,) bool
+        Cells whose points :meth:`nearest` sends to the tree of bounding caps.
+    mean_candidates : float
+        Mean list length over the other cells (NaN when every cell goes to the tree).
+    tree_fraction : float
+        Fraction of the cells marked in ``cell_tree``.
 
     The polygon is assumed simple (see :func:`check_polygon`); distances are angles in
     radians, negative inside. ``nearest`` and ``nearest_one`` give identical answers (the
-    batched and the per-sample path).
+    batched and the per-sample path): each takes a set of candidate edges that holds every
+    edge nearest to the point (its cell's list, or the tree's search), ranks them by the same
+    per-pair key (:meth:`_pair_keys`) and keeps the lowest key, the lowest edge index on ties —
+    which is the answer of :meth:`brute_nearest`, whatever the set. Set-up and memory grow as
+    M log M with the vertex count M.
     """
 
     def __init__(self, vertices, interior=None, grid: int | None = None):
@@ -273,7 +436,11 @@ class SphericalPolygon:
         if self.brute_nearest(np.asarray(interior, dtype=np.float64)[None, :])[0][0] > 0.0:
             self.orient = -1.0
             self._set_pseudo_normals()
-        self.G = grid if grid is not None else int(np.clip(round(3.0 * math.sqrt(self.m)), 8, 64))
+        self._tree = _ArcTree(self.v0, self.v1)
+        # edge caps (the arc's midpoint and half-length) for pruning long lists
+        mid = self.v0 + self.v1
+        self._emid = mid / np.linalg.norm(mid, axis=1, keepdims=True)
+        self._ehalf = 0.5 * _angle(self.v0, self.v1)
         self._build_grid()
 
     def _set_pseudo_normals(self):
@@ -330,6 +497,12 @@ class SphericalPolygon:
     def brute_nearest(self, p: np.ndarray, need_point: bool = False):
         """:meth:`nearest` by trying every edge (set-up, validation, and a reference for tests)."""
         n = len(p)
+        step = max(1, self.BRUTE_PAIRS // self.m)  # points per block: bounds the N×M temporaries
+        if n > step:
+            parts = [self.brute_nearest(p[s : s + step], need_point) for s in range(0, n, step)]
+            dist = np.concatenate([x[0] for x in parts])
+            pts = np.concatenate([x[1] for x in parts]) if need_point else None
+            return dist, pts
         pi = np.repeat(np.arange(n), self.m)
         e = np.tile(np.arange(self.m), n)
         key, in_arc, s, end1 = self._pair_keys(p[pi], e)
@@ -337,11 +510,20 @@ class SphericalPolygon:
         sel = np.arange(n) * self.m + best
         return self._finish(p, best, key[sel], in_arc[sel], s[sel], end1[sel], need_point)
 
+    #: (point, edge) pairs per block of :meth:`brute_nearest`
+    BRUTE_PAIRS = 1_000_000
+
     # -- grid ------------------------------------------------------------------------------
     #: finest grid and the candidate count below which refining stops paying
     MAX_GRID = 128
     TARGET_CANDIDATES = 6.0
     MAX_BUILD_PAIRS = 4_000_000
+    #: a cell with more candidates than this is answered by the cap tree instead
+    CELL_CAP = 96
+    #: points per block of a tree search (bounds the (point, node) pairs alive at once)
+    TREE_CHUNK = 2048
+    #: :meth:`nearest_one` prunes a cell list longer than this by edge caps before ranking
+    PRUNE_ONE = 48
 
     def _cell_index(self, p: np.ndarray, G: int | None = None) -> np.ndarray:
         G = self.G if G is None else G
@@ -359,12 +541,24 @@ class SphericalPolygon:
 
     def _build_grid(self):
         """Candidate edges per cube-map cell, refined level by level (each cell's list is a
-        subset of its parent's, so a level only searches its parent's candidates)."""
+        subset of its parent's, so a level only searches its parent's candidates).
+
+        The first level (8×8 per face) comes from the cap tree; refining stops at
+        :attr:`MAX_GRID`, at :attr:`TARGET_CANDIDATES` per cell on average, or when the next
+        level would test more than :attr:`MAX_BUILD_PAIRS` pairs. Cells left with more than
+        :attr:`CELL_CAP` candidates are marked in ``cell_tree``: :meth:`nearest` sends their
+        points to the tree (for many points a tree search is cheaper than a long list);
+        :meth:`nearest_one` still uses the list, pruned by edge caps first.
+        """
         G = 8
-        ptr = np.arange(6 * G * G + 1) * self.m
-        edges = np.tile(np.arange(self.m), 6 * G * G)
-        while True:
-            ptr, edges = self._refine(G, ptr, edges)
+        lists = self._first_level(G)
+        if lists is None:  # too many edges near the cells for lists to pay: the tree only
+            ptr, edges = np.zeros(6 * G * G + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+            tree = np.ones(6 * G * G, dtype=bool)
+        else:
+            ptr, edges = lists
+            tree = np.zeros(6 * G * G, dtype=bool)
+        while not tree.all():
             mean = (ptr[-1]) / (len(ptr) - 1)
             if (
                 G >= self.MAX_GRID
@@ -382,10 +576,47 @@ class SphericalPolygon:
             owner = np.repeat(np.arange(len(parent)), counts)
             edges = edges[np.arange(new_ptr[-1]) - new_ptr[owner] + starts[owner]]
             ptr, G = new_ptr, G2
+            ptr, edges = self._refine(G, ptr, edges)
+        self._lists = not tree.all()  # False: no lists at all, every query goes to the tree
+        counts = np.diff(ptr)
+        if self._lists:
+            tree = counts > self.CELL_CAP
         self.G = G
         self.cell_ptr = ptr
         self.cell_edges = edges
-        self.mean_candidates = float(ptr[-1] / (len(ptr) - 1))
+        self.cell_tree = tree
+        #: mean list length over the cells the batched search serves from their lists
+        self.mean_candidates = float(counts[~tree].mean()) if not tree.all() else float("nan")
+        self.tree_fraction = float(tree.mean())  # of the cells
+
+    def _first_level(self, G: int):
+        """Cell lists of a G-grid from the tree: the edges within ``D + 2ρ`` of each centre.
+
+        Returns ``(ptr, edges)``, or None when the lists would hold more than
+        :attr:`MAX_BUILD_PAIRS` entries. Cells go to the tree a few at a time (bounded memory).
+        """
+        centres, radii = _cube_cells(G)
+        counts, kept, total = [], [], 0
+        step = 16
+        for s in range(0, len(centres), step):
+            c, r = centres[s : s + step], radii[s : s + step]
+            found = self._tree.search(c, 2.0 * r, limit=self.MAX_BUILD_PAIRS)
+            if found is None:
+                return None
+            owner, e = found
+            key = self._pair_keys(c[owner], e)[0]
+            angles = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
+            first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+            bound = np.minimum.reduceat(angles, first) + 2.0 * r + 1e-9
+            keep = angles <= bound[owner]
+            keep[1:] &= (owner[1:] != owner[:-1]) | (e[1:] != e[:-1])  # one entry per edge
+            counts.append(np.bincount(owner[keep], minlength=len(c)))
+            kept.append(e[keep])
+            total += len(kept[-1])
+            if total > self.MAX_BUILD_PAIRS:
+                return None
+        ptr = np.concatenate(([0], np.cumsum(np.concatenate(counts))))
+        return ptr, np.concatenate(kept)
 
     def _refine(self, G: int, ptr: np.ndarray, edges: np.ndarray):
         """Keep, per cell of a G-grid, the edges that can be nearest to some point of the cell."""
@@ -394,7 +625,7 @@ class SphericalPolygon:
         counts = np.diff(ptr)
         owner = np.repeat(np.arange(n_cells), counts)
         angles = np.empty(len(edges))
-        chunk = 1_000_000
+        chunk = 250_000  # pairs per block: bounds the (K, 5, 3) gather
         for s in range(0, len(edges), chunk):
             key = self._pair_keys(centres[owner[s : s + chunk]], edges[s : s + chunk])[0]
             angles[s : s + chunk] = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
@@ -404,6 +635,30 @@ class SphericalPolygon:
         keep = angles <= bound[owner]
         new_counts = np.add.reduceat(keep.astype(np.int64), starts)
         return np.concatenate(([0], np.cumsum(new_counts))), edges[keep]
+
+    # -- search ------------------------------------------------------------------------------
+    def _pick(self, p, owner, e, need_point):
+        """The lowest key of each point's candidates (owner sorted, every point present; edges
+        non-decreasing per point, so the first lowest key is the lowest edge index)."""
+        n = len(p)
+        key, in_arc, s, end1 = self._pair_keys(p[owner], e)
+        starts = np.searchsorted(owner, np.arange(n))
+        best_key = np.minimum.reduceat(key, starts)
+        hit = np.flatnonzero(key == best_key[owner])
+        first = hit[np.searchsorted(owner[hit], np.arange(n))]
+        return self._finish(
+            p, e[first], key[first], in_arc[first], s[first], end1[first], need_point
+        )
+
+    def _grid_candidates(self, p: np.ndarray, cell: np.ndarray):
+        start = self.cell_ptr[cell]
+        counts = self.cell_ptr[cell + 1] - start
+        n = len(p)
+        offsets = np.zeros(n, dtype=np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        total = int(offsets[-1] + counts[-1]) if n else 0
+        owner = np.repeat(np.arange(n), counts)
+        return owner, self.cell_edges[np.arange(total) - (offsets - start)[owner]]
 
     def nearest(self, p: np.ndarray, need_point: bool = True, chunk: int = 16384):
         """Signed distance (N,) and nearest boundary point (N, 3) of unit directions ``p`` (N, 3).
@@ -420,24 +675,31 @@ class SphericalPolygon:
             pts = np.concatenate([x[1] for x in parts]) if need_point else None
             return dist, pts
         cell = self._cell_index(p)
-        start = self.cell_ptr[cell]
-        counts = self.cell_ptr[cell + 1] - start
-        offsets = np.zeros(n, dtype=np.int64)
-        np.cumsum(counts[:-1], out=offsets[1:])
-        total = int(offsets[-1] + counts[-1]) if n else 0
-        owner = np.repeat(np.arange(n), counts)
-        pos = np.arange(total) - (offsets - start)[owner]
-        e = self.cell_edges[pos]
-        key, in_arc, s, end1 = self._pair_keys(p[owner], e)
-        best_key = np.minimum.reduceat(key, offsets)
-        hit = np.flatnonzero(key == best_key[owner])
-        first = hit[np.searchsorted(owner[hit], np.arange(n))]  # lowest edge index on ties
-        return self._finish(
-            p, e[first], key[first], in_arc[first], s[first], end1[first], need_point
-        )
+        by_tree = self.cell_tree[cell]
+        if not by_tree.any():
+            return self._pick(p, *self._grid_candidates(p, cell), need_point)
+        dist = np.empty(n)
+        pts = np.empty((n, 3)) if need_point else None
+        parts = [np.flatnonzero(~by_tree)] if not by_tree.all() else []
+        listed = len(parts)
+        tree_idx = np.flatnonzero(by_tree)
+        step = self.TREE_CHUNK
+        parts += [tree_idx[s : s + step] for s in range(0, len(tree_idx), step)]
+        for k, idx in enumerate(parts):
+            q = p[idx]
+            if k < listed:
+                found = self._grid_candidates(q, cell[idx])
+            else:
+                found = self._tree.search(q, 0.0)
+            d, b = self._pick(q, *found, need_point)
+            dist[idx] = d
+            if need_point:
+                pts[idx] = b
+        return dist, pts
 
     def nearest_one(self, d: tuple[float, float, float]):
-        """Scalar twin of :meth:`nearest` for one direction (one gather of the cell's edges)."""
+        """Scalar twin of :meth:`nearest` for one direction: the same candidates, ranked by the
+        same keys (so the same edge wins); the winner's distance and point in plain floats."""
         px, py, pz = d
         ab = (abs(px), abs(py), abs(pz))
         ax = 0 if ab[0] >= ab[1] and ab[0] >= ab[2] else (1 if ab[1] >= ab[2] else 2)
@@ -448,32 +710,34 @@ class SphericalPolygon:
         i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
         j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
         cell = ((2 * ax + (major < 0)) * G + i) * G + j
-        cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
-        # all five dot products of every candidate edge in one product; the end chords come
-        # from 2 - 2 p·v here (ranking only: the winner's distance is recomputed exactly below)
-        dots = self._table[cand] @ np.array(d)
-        s = dots[:, 0]
-        s2 = s * s
-        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (s2 < (1.0 - 1e-12) ** 2)
-        key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
-        k01 = 2.0 - 2.0 * dots[:, 3:]
-        k = int(np.argmin(np.where(in_arc, key_in, k01.min(axis=1))))  # ties: lowest edge
+        p = np.array(d, dtype=np.float64)
+        if self._lists:
+            cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
+            if len(cand) > self.PRUNE_ONE:
+                # drop edges whose cap lies beyond the nearest edge midpoint (a boundary
+                # point): ∠(p, mid) − half > U >= D; the nearest edges all survive
+                diff = self._emid[cand] - p
+                chord = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+                ang = 2.0 * np.arcsin(np.minimum(chord * 0.5, 1.0))
+                cand = cand[ang - self._ehalf[cand] <= ang.min() + _ArcTree.SLACK]
+        else:
+            cand = self._tree.search(p[None, :], 0.0)[1]
+        key, in_arc, s, end1 = self._pair_keys(np.tile(p, (len(cand), 1)), cand)
+        k = int(np.argmin(key))  # first minimum: lowest edge index on ties
         e = int(cand[k])
+        sk = float(s[k])
         if in_arc[k]:
-            sk = float(s[k])
-            key = 2.0 * sk * sk / (1.0 + math.sqrt(max(1.0 - sk * sk, 0.0)))
             inside = self.orient * sk >= 0.0
             g = self._g_list[e]
             f = (px - sk * g[0], py - sk * g[1], pz - sk * g[2])
             fn = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) or 1.0
             b = (f[0] / fn, f[1] / fn, f[2] / fn)
         else:
-            vi = (e + 1) % self.m if k01[k, 1] < k01[k, 0] else e
+            vi = (e + 1) % self.m if end1[k] else e
             b = self._v_list[vi]
-            key = (px - b[0]) ** 2 + (py - b[1]) ** 2 + (pz - b[2]) ** 2
             mv = self._vn_list[vi]
             inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
-        theta = 2.0 * math.asin(min(math.sqrt(key) * 0.5, 1.0))
+        theta = 2.0 * math.asin(min(math.sqrt(float(key[k])) * 0.5, 1.0))
         return (-theta if inside else theta), b
 
     # -- conveniences ----------------------------------------------------------------------

@@ -29,8 +29,11 @@ Twist intervals live on the circle: ``φ`` is inside ``[lo, hi]`` when ``φ``, `
 ``φ + 2π`` is (so a twist of exactly ``±π`` is inside ``[−π, …]`` and ``[…, π]`` alike).
 
 So ``project(q) = Δ ⊗ q ⊗ τ`` and ``correction(q) = project(q) ⊗ q⁻¹`` (identity for a valid
-``q``; returned with ``w ≥ 0``). For swing-only constraints the correction angle equals the
-angular distance ``θ`` from ``d`` to the swing boundary.
+``q``; returned with ``w ≥ 0``, the representative :func:`models.quaternion.canonical` picks).
+For swing-only constraints the correction angle equals the angular distance ``θ`` from ``d`` to
+the swing boundary. A correction of half a turn has ``w = 0`` only up to rounding, and the sign
+rule then follows the rounding: the batched and the single-orientation path may return ``c``
+and ``−c`` for it — the same rotation; compare corrections as rotations there.
 
 Signed distance: for an invalid ``q``, the angle of its correction (> 0); for a valid one,
 ``−min(swing margin, twist margin)`` (≤ 0), where the swing margin is the angle from ``d`` to
@@ -54,8 +57,11 @@ Determinism at discontinuities (thesis's "correctional" and "concave-region" dis
 Speed
 -----
 A polygon's nearest edge is found through the cube-map candidate grid of
-:class:`models.geometry.SphericalPolygon`; the single-orientation path uses plain floats and one
-small numpy gather (and one 3×K product for a ``by_swing`` table).
+:class:`models.geometry.SphericalPolygon` (or its tree of bounding caps, where a cell's list
+would be long: set-up and memory grow as M log M with the vertex count M); the
+single-orientation path ranks the same candidates by the same keys as the batched one, so the
+same edge wins, and works in plain floats otherwise (and one 3×K product for a ``by_swing``
+table).
 """
 
 from __future__ import annotations
@@ -99,6 +105,7 @@ class OracleResult:
     distance : (N,) float64, radians; > 0 outside (correction angle), <= 0 inside (-margin)
     projected : (N, 4) float64, nearest valid orientation, same sign as the input
     correction : (N, 4) float64, ``projected ⊗ q⁻¹`` with ``w >= 0``; identity when valid
+        (a half-turn correction's sign is the rounding's: see the module docstring)
     swing_distance : (N,) float64, radians, signed distance of the limb direction to the swing
         boundary (negative inside; ``-inf`` when swing is unconstrained)
     twist : (N,) float64, radians, twist angle of the input about the limb axis

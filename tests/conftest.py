@@ -2,7 +2,9 @@
 
 ``no_leaks`` (autouse) fails any test that leaves a thread, a child process or a pseudo-terminal
 running: simulators must be shut down by the test (context managers, fixtures), never left to
-the interpreter's exit.
+the interpreter's exit. ``pg_server`` / ``db_url``: the store on SQLite and on a private
+PostgreSQL server. Hypothesis runs derandomized, without an example database (the ``ci``
+profile, at the end of this file).
 """
 
 from __future__ import annotations
@@ -235,3 +237,41 @@ def db_url(request, tmp_path) -> str:
     if request.param == "sqlite":
         return str(tmp_path / "rig.db")
     return request.getfixturevalue("pg_server").new_database()
+
+
+# =============================================================================================
+# Hypothesis: deterministic property tests.
+#
+# The project rule is "tests are deterministic; property tests derandomized in CI". The ``ci``
+# profile is therefore loaded by default, for plain ``pytest`` too: ``derandomize=True`` (the
+# examples follow from each test's name, the same on every run and machine), no example
+# database (a failure found once is not replayed on every later run from a ``.hypothesis/``
+# directory; it is fixed at its root and, if worth keeping, pinned with ``@example``) and no
+# deadline (shared CI machines are slow). ``HYPOTHESIS_PROFILE=dev`` opts out: fresh random
+# examples on every run, still without a database; a failure prints its ``@reproduce_failure``
+# line. Hypothesis's own cache files (e.g. the constants it collects from the code under test)
+# go to a temporary directory removed at exit, never into the tree — unless
+# HYPOTHESIS_STORAGE_DIRECTORY names a place for them.
+#
+# Note: Hypothesis also draws constants found in the project's modules that are imported at the
+# time; a run of one file and a run of the whole suite may therefore try different examples —
+# each is reproducible on its own.
+# =============================================================================================
+import atexit as _atexit  # noqa: E402  (this block is appended; see its header)
+
+from hypothesis import settings as _hyp_settings  # noqa: E402
+from hypothesis.configuration import set_hypothesis_home_dir as _set_hyp_home  # noqa: E402
+
+_hyp_settings.register_profile(
+    "ci", derandomize=True, database=None, deadline=None, print_blob=True
+)
+_hyp_settings.register_profile(
+    "dev", derandomize=False, database=None, deadline=None, print_blob=True
+)
+_hyp_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or "ci")
+
+if not os.environ.get("HYPOTHESIS_STORAGE_DIRECTORY"):
+    _hyp_home = _tempfile.mkdtemp(prefix="rig-hypothesis-")
+    os.environ["HYPOTHESIS_STORAGE_DIRECTORY"] = _hyp_home  # child processes too
+    _set_hyp_home(_hyp_home)
+    _atexit.register(_shutil.rmtree, _hyp_home, True)
