@@ -72,7 +72,7 @@ from models.errors import ConstraintError, GeometryError
 from models.fileio import write_owner_only
 from models.geometry import check_polygon, polygon_area
 from models.quaternion import LIMB_AXIS
-from models.yamlio import safe_load_yaml
+from models.yamlio import safe_dump_yaml, safe_load_yaml
 
 __all__ = [
     "SIDES",
@@ -522,7 +522,7 @@ class JointConstraint:
 
     def to_yaml(self) -> str:
         """The constraint as YAML text that :func:`loads_constraint` reads back identically."""
-        return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None)
+        return safe_dump_yaml(self.to_dict(), sort_keys=False, default_flow_style=None)
 
     def __eq__(self, other: object) -> bool:
         """Same limits (name, binding and provenance are ignored)."""
