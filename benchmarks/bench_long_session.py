@@ -145,7 +145,7 @@ def listing(counts: list[int], samples: int, out: Path, repeats: int) -> None:
     print(f"rig session list; stores of N sessions x {samples} samples")
     print(f"{'sessions':>9s} {'command':>28s} {'time s':>8s} {'peak MiB':>9s}")
     for n in counts:
-        db = out / f"list-{n}.db"
+        db = out / f"list-{n}x{samples}.db"
         if not db.exists():
             t0 = time.perf_counter()
             build_store(db, n, samples)
