@@ -7,6 +7,8 @@
     free motion with a return to the neutral pose every 20 s (neutral checkpoints), on a
     lockstep clock faster than real time — into ``--dir`` (default ``/tmp/rig-long``), one
     SQLite file per length (``long-<minutes>.db``). A 60-minute session is ~2.9 M samples.
+    ``--rom`` records as ``rig record`` does by default, with the range of motion computed at
+    the end, and prints the recorder's peak resident memory.
 ``measure``
     For each of those files, the commands a clinician runs on the session, each as its own
     process (``rig boundary … --no-store``, ``rig rom``, ``rig report``), timed, with the peak
@@ -44,7 +46,7 @@ sys.path.insert(0, str(ROOT))
 RIG = [sys.executable, "-m", "rig"]
 
 
-def make(minutes: list[float], out: Path, rate: int = 400) -> None:
+def make(minutes: list[float], out: Path, rate: int = 400, rom: bool = False) -> None:
     from models.constraint import dump_constraint
     from rig.record import RecordOptions, record_session
     from rig.record.lockstep import CountingDisplay, LockstepClock
@@ -53,7 +55,7 @@ def make(minutes: list[float], out: Path, rate: int = 400) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     for m in minutes:
-        db = out / f"long-{m:g}.db"
+        db = out / (f"long-{m:g}-rom.db" if rom else f"long-{m:g}.db")
         if db.exists():
             print(f"{db} exists, kept")
             continue
@@ -72,12 +74,15 @@ def make(minutes: list[float], out: Path, rate: int = 400) -> None:
                            step_s=0.02, window_s=0.1) as lock:
             res = record_session(
                 RecordOptions(rig=str(cfg), db=str(db), patient="LONG-1", duration_s=60.0 * m,
-                              rom=False),
+                              rom=rom),
                 display=shown, rig=rig,
                 on_event=lambda name, info: name == "session" and lock.start())
         print(f"{db}: {res.status}, {res.samples} samples, dropped {res.dropped}, "
-              f"{os.path.getsize(db) / 1e6:.0f} MB, {time.perf_counter() - t0:.0f} s to record",
-              flush=True)
+              f"{os.path.getsize(db) / 1e6:.0f} MB, {time.perf_counter() - t0:.0f} s to record"
+              + (f", range of motion at the end: {'stored' if res.rom else 'none'}; peak "
+                 f"resident memory of this process so far "
+                 f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB"
+                 if rom else ""), flush=True)
 
 
 def _timed(argv: list[str]) -> tuple[float, float, str]:
@@ -166,6 +171,12 @@ def main() -> None:
         p.add_argument("--minutes", type=float, nargs="+", default=[10, 30, 60, 120])
         p.add_argument("--dir", type=Path, default=Path("/tmp/rig-long"))
         p.add_argument("--repeats", type=int, default=3)
+        if name == "make":
+            p.add_argument("--rom", action="store_true",
+                           help="record as `rig record` does by default: the range of motion "
+                                "computed at the end (files long-<minutes>-rom.db); prints the "
+                                "recorder's peak resident memory (one length per run for a "
+                                "figure per length)")
     p = sub.add_parser("list")
     p.add_argument("--sessions", type=int, nargs="+", default=[500, 20000])
     p.add_argument("--samples", type=int, default=100)
@@ -174,7 +185,7 @@ def main() -> None:
     a = ap.parse_args()
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     if a.what == "make":
-        make(a.minutes, a.dir)
+        make(a.minutes, a.dir, rom=a.rom)
     elif a.what == "measure":
         measure(a.minutes, a.dir, a.repeats)
     else:
