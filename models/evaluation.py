@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
+from models.oracle import ConstraintOracle
 
 __all__ = [
     "RADII_DEG",
@@ -53,11 +53,6 @@ SHAPE_TWISTS_DEG = {"original": (-45.0, 70.0), "small": (-30.0, 30.0), "large": 
 HELD_OUT_SEED = 9_000
 
 
-def _oracle(constraint):
-    from models.oracle import ConstraintOracle
-
-    return ConstraintOracle(constraint)
-
 
 def held_out_orientations(constraint, n: int, rng: np.random.Generator | int, *,
                           band_deg: float = 20.0, oracle=None) -> np.ndarray:
@@ -77,7 +72,7 @@ def held_out_orientations(constraint, n: int, rng: np.random.Generator | int, *,
     (n, 4) float64, unit, scalar-first, both signs, shuffled.
     """
     rng = np.random.default_rng(rng)
-    oracle = oracle or _oracle(constraint)
+    oracle = oracle or ConstraintOracle(constraint)
     n_uni = n // 2
     n_near = n - n_uni
     uni = quat.random_quaternions(n_uni, rng)
@@ -169,17 +164,14 @@ def regular_boundaries(radii=RADII_DEG) -> dict[str, Any]:
 
 
 def _predictor(model, constraint) -> Callable[[np.ndarray], np.ndarray]:
-    if isinstance(model, (str, Path)):
-        from models.onnx_io import load_model
-
-        model = load_model(model, expected_constraint=constraint)
     if hasattr(model, "correction"):
         return model.correction
     if hasattr(model, "predict"):
         return model.predict
     if callable(model):
         return model
-    raise TypeError(f"model: expected a path, a CorrectionModel or a callable, got {model!r}")
+    raise TypeError(f"model: expected a CorrectionModel (models.onnx_io.load_model), an object "
+                    f"with predict or a callable, got {model!r}")
 
 
 def evaluate_model(model, constraint, *, n: int = 10_000, seed: int = 12_345,
@@ -189,9 +181,8 @@ def evaluate_model(model, constraint, *, n: int = 10_000, seed: int = 12_345,
 
     Parameters
     ----------
-    model : path, CorrectionModel, object with ``predict`` or callable
-        An ONNX path is opened with :func:`models.onnx_io.load_model` (its embedded constraint
-        must match) and run through onnxruntime.
+    model : CorrectionModel, object with ``predict`` or callable
+        An ONNX model opened with :func:`models.onnx_io.load_model` runs through onnxruntime.
     constraint : JointConstraint
     n, seed, band_deg
         :func:`held_out_orientations` parameters (ignored when ``q`` is given).
@@ -203,7 +194,7 @@ def evaluate_model(model, constraint, *, n: int = 10_000, seed: int = 12_345,
     -------
     dict of float: :func:`models.metrics.evaluate`'s metrics plus ``valid_fraction``.
     """
-    oracle = oracle or _oracle(constraint)
+    oracle = oracle or ConstraintOracle(constraint)
     if q is None:
         q = held_out_orientations(constraint, n, seed, band_deg=band_deg, oracle=oracle)
     out = M.evaluate(_predictor(model, constraint), oracle, q)

@@ -41,15 +41,11 @@ from typing import Any
 import numpy as np
 
 from models import quaternion as quat
+from models.oracle import ConstraintOracle
 
 #: Default grid resolution (nodes per diamond side): node spacing ~0.5°.
 DEFAULT_GRID = 400
 
-
-def _oracle(constraint):
-    from models.oracle import ConstraintOracle
-
-    return ConstraintOracle(constraint)
 
 
 def grid_directions(grid: int) -> np.ndarray:
@@ -141,7 +137,7 @@ class FieldModel:
         t0 = time.perf_counter()
         table = None
         if constraint.swing is not None:
-            oracle = oracle or _oracle(constraint)
+            oracle = oracle or ConstraintOracle(constraint)
             n = grid_directions(grid)
             b = oracle.nearest_swing_point(n)
             table = quat.from_two_vectors(n, b)  # identity where b == n (inside)

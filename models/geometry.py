@@ -67,12 +67,25 @@ __all__ = [
     "boundary_distance",
     "check_polygon",
     "densify",
+    "fibonacci_sphere",
     "first_crossing",
     "polygon_area",
 ]
 
 #: Two directions closer than this (radians) are "the same point" for validation purposes.
 COINCIDENT = 1e-9
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """``n`` nearly uniform unit vectors ``(n, 3)``: the golden-angle spiral from +Z to −Z
+    (point ``i`` at ``z = 1 − (2i + 1)/n``, azimuth ``π(3 − √5)(i + ½)``), deterministic."""
+    if n < 2:
+        raise ValueError(f"need at least 2 points, got {n}")
+    i = np.arange(n, dtype=np.float64) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * i
+    return np.stack((r * np.cos(phi), r * np.sin(phi), z), axis=1)
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -82,6 +82,7 @@ from models.datasets._common import (
 )
 from models.datasets._dataset import REGION_NAMES, Dataset, created_by
 from models.errors import DatasetError
+from models.geometry import fibonacci_sphere
 from models.oracle import ConstraintOracle
 
 __all__ = [
@@ -105,15 +106,6 @@ _MAX_ROUNDS = 60
 _MAX_BATCH = 400_000
 _GIVE_UP = 2_000_000  # candidates tried without a single hit: the region is empty
 _X = np.array([1.0, 0.0, 0.0])
-
-
-def _fibonacci_sphere(m: int) -> np.ndarray:
-    """``m`` nearly uniform unit vectors (deterministic)."""
-    i = np.arange(m) + 0.5
-    z = 1.0 - 2.0 * i / m
-    phi = math.pi * (1.0 + math.sqrt(5.0)) * i
-    s = np.sqrt(1.0 - z * z)
-    return np.stack((s * np.cos(phi), s * np.sin(phi), z), axis=1)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
@@ -146,7 +138,9 @@ class _Sampler:
             pts /= np.linalg.norm(pts, axis=1, keepdims=True)
             edge = float(Q.angle_between(v0, v1).max())
             self.theta_max = float(Q.angle_between(pts, self.centre).max()) + edge / 32 + 1e-9
-            grid = np.concatenate((_fibonacci_sphere(4000), [self.centre, -self.centre]))
+            # the spiral turning the other way (y mirrored), as this generator always used
+            grid = np.concatenate((fibonacci_sphere(4000) * (1.0, -1.0, 1.0),
+                                   [self.centre, -self.centre]))
             s = self.oracle.swing_distance(grid)
             depth_in, depth_out = float(-s.min()), float(s.max())
         else:  # twist-only constraint: limb directions are unconstrained

@@ -31,17 +31,17 @@ import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
+from models.geometry import fibonacci_sphere
 from models.nn.evolution import EvolutionResult, GenerationStats, evolve
 from models.nn.gmlp import GMLP, swing_of
+from models.oracle import ConstraintOracle
 
 #: Directions searched for a polygon's centre frame (:func:`centre_frame`).
 FRAME_GRID = 20_000
 
+#: (x, y, z) → (z, x, −y): the Fibonacci spiral from +X to −X, turning as the search always did.
+_SPIRAL_ABOUT_X = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
-def _oracle(constraint):
-    from models.oracle import ConstraintOracle
-
-    return ConstraintOracle(constraint)
 
 
 def _centre_direction(constraint) -> np.ndarray:
@@ -73,13 +73,6 @@ def canonicalise(q: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
     return q * np.where(q @ ref >= 0.0, 1.0, -1.0)[:, None]
 
 
-def _fibonacci_sphere(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    phi = np.arccos(1.0 - 2.0 * i / n)
-    th = math.pi * (1.0 + math.sqrt(5.0)) * i
-    return np.stack((np.cos(phi), np.sin(phi) * np.cos(th), np.sin(phi) * np.sin(th)), axis=1)
-
-
 def centre_frame(constraint, oracle=None, n_grid: int = FRAME_GRID) -> np.ndarray:
     """Centre-frame rotation ``R_c`` (4,): the minimal rotation limb axis → constraint centre.
 
@@ -108,8 +101,8 @@ def centre_frame(constraint, oracle=None, n_grid: int = FRAME_GRID) -> np.ndarra
     sw = constraint.swing
     if sw is None or hasattr(sw, "centre"):
         return quat.from_two_vectors(axis, quat.check_vectors(_centre_direction(constraint)))
-    oracle = oracle or _oracle(constraint)
-    g = _fibonacci_sphere(n_grid)
+    oracle = oracle or ConstraintOracle(constraint)
+    g = fibonacci_sphere(n_grid) @ _SPIRAL_ABOUT_X  # the spiral about +X, as it always was
     d = oracle.signed_distance(quat.from_two_vectors(np.broadcast_to(axis, g.shape), g))
     return quat.from_two_vectors(axis, -g[int(np.argmax(d))])
 
@@ -236,7 +229,7 @@ def train_correction(constraint, config: dict, rng: np.random.Generator,
         generated ones; split into train / validation in the configured proportion, and the
         model records their hash.
     """
-    oracle = oracle or _oracle(constraint)
+    oracle = oracle or ConstraintOracle(constraint)
     if config.get("model", {}).get("method") == "field":
         return _train_field(constraint, config, rng, oracle, patterns)
     mode = config["network"]["canonicalise"]

@@ -7,14 +7,14 @@ record_session(options, ...) -> RecordResult
 RecordOptions, RecordResult, Annotation, parse_annotation
 CoverageMap, CoverageSummary
     Coverage of the swing sphere near the boundary, per azimuthal sector
-    (:mod:`rig.record.coverage`).
+    (:mod:`calibration.coverage`).
 SamplePump
     Reader thread + bounded queue (:mod:`rig.record.pump`).
 make_display, PlainDisplay, LiveDisplay
     What the clinician sees (:mod:`rig.record.display`).
 """
 
-from rig.record.coverage import CoverageMap, CoverageSummary, SectorCoverage
+from calibration.coverage import CoverageMap, CoverageSummary, SectorCoverage
 from rig.record.display import LiveDisplay, PlainDisplay, RecordStatus, make_display
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.session import (

@@ -18,7 +18,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TextIO
 
-from rig.record.coverage import CoverageSummary
+from calibration.coverage import CoverageSummary
 
 __all__ = ["LiveDisplay", "PlainDisplay", "RecordStatus", "make_display"]
 

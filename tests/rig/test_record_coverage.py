@@ -1,4 +1,5 @@
-"""Live coverage (rig.record.coverage) and its display, on seeded simulated-limb motion."""
+"""Coverage of the swing sphere (calibration.coverage) as the recorder shows it live
+(rig.record.display), on seeded simulated-limb motion."""
 
 from __future__ import annotations
 
@@ -8,9 +9,10 @@ import math
 import numpy as np
 import pytest
 
+from calibration.coverage import CoverageMap
 from models import quaternion as Q
 from models.constraint import JointConstraint
-from rig.record.coverage import CoverageMap, fibonacci_sphere
+from models.geometry import fibonacci_sphere
 from rig.record.display import PlainDisplay, RecordStatus, make_display, progress_line, render
 from rig.sim.limb import NoiseModel, SimulatedLimb
 

@@ -1,4 +1,5 @@
-"""Live coverage of the swing sphere near the range-of-motion boundary.
+"""Coverage of the swing sphere near the range-of-motion boundary: live while recording
+(:class:`CoverageMap`), and of a whole recording (:func:`coverage_of`).
 
 Geometry
 --------
@@ -42,19 +43,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from models import quaternion as Q
+from models.geometry import fibonacci_sphere
 
-__all__ = ["CoverageMap", "CoverageSummary", "SectorCoverage", "coverage_of", "fibonacci_sphere"]
-
-
-def fibonacci_sphere(n: int) -> np.ndarray:
-    """``n`` nearly uniform unit vectors ``(n, 3)`` (golden-angle spiral)."""
-    if n < 2:
-        raise ValueError(f"need at least 2 points, got {n}")
-    i = np.arange(n, dtype=np.float64) + 0.5
-    z = 1.0 - 2.0 * i / n
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = math.pi * (3.0 - math.sqrt(5.0)) * i
-    return np.stack((r * np.cos(phi), r * np.sin(phi), z), axis=1)
+__all__ = ["CoverageMap", "CoverageSummary", "SectorCoverage", "coverage_of"]
 
 
 @dataclass(frozen=True)
