@@ -15,7 +15,7 @@ VQF's world is ENU: Z up, heading from magnetic north (+Y north). It is the same
 sensor fused here (the earth's field is the reference), unlike device fusion, where each IMU
 keeps its own heading; a calibration fitted on device quaternions (whose mounts absorbed the
 device worlds' heading offset) therefore does not apply to VQF quaternions, and the read path
-re-fits it (:func:`rig.commands.boundary.joint_orientations_from_store`).
+re-fits it (:func:`rig.readback.joint_orientations_from_store`).
 
 Irregular sample times
 ----------------------

@@ -17,6 +17,7 @@ import click
 
 from rig import __version__
 from rig.commands._lazy import lazy_group_class
+from rig.errors import user_errors
 
 # name -> (module, attribute, one-line help). Imported only when the command is used.
 _COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -79,27 +80,6 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
 @click.version_option(__version__, "--version", prog_name="rig")
 def cli() -> None:
     """Learn patient-specific joint limits and enforce them on a servo limb."""
-
-
-def user_errors() -> tuple[type[BaseException], ...]:
-    """Exception types that mean "the user gave something wrong", shown without a traceback."""
-    from models.errors import ModelsError
-    from rig.errors import RigError
-
-    kinds: list[type[BaseException]] = [
-        ModelsError,
-        RigError,
-        FileNotFoundError,
-        PermissionError,
-        IsADirectoryError,
-    ]
-    try:
-        from firmware_protocol.errors import ProtocolError
-
-        kinds.append(ProtocolError)
-    except ImportError:  # pragma: no cover - protocol package not built yet
-        pass
-    return tuple(kinds)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -19,12 +19,20 @@ Hierarchy::
 
 Every error may carry ``port``, ``dxl_id``, ``actual`` and ``expected`` (keyword arguments);
 those given are named in the message (``"sim://dynamixel?ids=1: ID 2: no answer (got ...,
-expected ...)"``), the style of dynamixel2-rs's error type. The CLI turns any :class:`RigError`
-into one line on stderr and exit status 2.
+expected ...)"``), the style of dynamixel2-rs's error type.
+
+The other packages keep their own roots, as libraries usable alone must:
+:class:`models.errors.ModelsError` (constraints, quaternions, datasets, model files),
+:class:`calibration.errors.CalibrationError` (calibration and extraction data that cannot
+determine a result) and :class:`firmware_protocol.errors.ProtocolError` (bytes that are not a
+frame). :func:`user_errors` names them all, with the file errors a user's path causes: the
+one mapping the CLI (:func:`rig.cli.main`: one line ``rig: error: ...``, exit status 2, no
+traceback) and the application's own "did the user give something wrong?" checks use.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,6 +46,7 @@ __all__ = [
     "RigTimeoutError",
     "SafetyError",
     "UnreachableError",
+    "user_errors",
 ]
 
 _UNSET: Any = object()
@@ -171,3 +180,17 @@ class HardwareAlertError(RigError):
     def __init__(self, alert: HardwareAlert) -> None:
         self.alert = alert
         super().__init__(alert.message)
+
+
+
+@functools.cache
+def user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that mean "the user gave something wrong" — a file, an option, a port, a
+    recording that cannot give the answer asked of it: shown as one line, never a traceback.
+    (The packages' roots are imported on the first call: ``rig --help`` stays fast.)"""
+    from calibration.errors import CalibrationError
+    from firmware_protocol.errors import ProtocolError
+    from models.errors import ModelsError
+
+    return (RigError, ModelsError, CalibrationError, ProtocolError,
+            FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError)

@@ -42,7 +42,7 @@ def demo(out_dir, seed, quick, rate_hz, dxl_port, dxl_ids, dxl_baud, imu_port) -
     """Run the whole job on the simulated rig and write a report (no hardware needed)."""
     from rich.console import Console
 
-    from rig.demo import DemoOptions, run_demo
+    from rig.demo import DemoOptions, parse_ids, run_demo
 
     ids = parse_ids(dxl_ids)
     console = Console(highlight=False)
@@ -52,24 +52,6 @@ def demo(out_dir, seed, quick, rate_hz, dxl_port, dxl_ids, dxl_baud, imu_port) -
     print_summary(result, console)
     if not result.ok:
         sys.exit(1)
-
-
-def parse_ids(text: str) -> list[int]:
-    """``"1,2,3"`` → ``[1, 2, 3]``; RigConfigError (one line) on anything else."""
-    from rig.errors import RigConfigError
-
-    try:
-        ids = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError as err:
-        raise RigConfigError(f"--dxl-ids {text!r}: expected comma-separated integers") from err
-    if not ids or any(not 0 <= i <= 252 for i in ids):
-        raise RigConfigError(f"--dxl-ids {text!r}: IDs must be 0..252")
-    if len(set(ids)) != len(ids):
-        dup = next(i for i in ids if ids.count(i) > 1)
-        raise RigConfigError(f"--dxl-ids {text!r}: duplicate ID {dup}")
-    if len(ids) > 3:
-        raise RigConfigError(f"--dxl-ids {text!r}: a servo chain has 1 to 3 joints")
-    return ids
 
 
 _STYLE = {"PASS": "bold green", "WARN": "bold yellow", "FAIL": "bold red", "INFO": "cyan",

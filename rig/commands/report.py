@@ -1,5 +1,6 @@
 """``rig report --db DB --session ID [--model M.onnx] [--out report.html]``: the clinician's
-report of any session, one self-contained HTML page (:mod:`rig.report.session`).
+report of any session, one self-contained HTML page (click code over
+:func:`rig.report.run_report`).
 
 Sections without data are left out: a session without a boundary or usable samples has no
 range-of-motion table, one without a model no model section, one without enforcement runs no
@@ -8,9 +9,9 @@ enforcement summary.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
+
+from rig.readback.data import FUSION_CHOICES
 
 
 @click.command("report")
@@ -30,36 +31,13 @@ import click
 @click.option("--reference", "reference_path", default=None, type=click.Path(dir_okay=False),
               metavar="C.yaml", help="A constraint drawn dashed for comparison (e.g. a "
                                      "simulated patient's true range).")
-@click.option("--fusion", type=click.Choice(["auto", "device", "vqf"]), default="auto",
+@click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto",
               show_default=True, help="IMU recordings: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
 def report(db, session_id, model_path, out_path, age, sex, reference_path, fusion) -> None:
     """Write the clinician's HTML report of a session."""
-    path = run_report(db, session_id, out_path, model=model_path, age=age, sex=sex,
-                      reference=reference_path, fusion=fusion)
-    click.echo(f"wrote {path}")
+    from rig.report import ReportRequest, run_report
 
-
-def run_report(db, session_id: int, out_path, *, model=None, age=None, sex=None,
-               reference=None, fusion: str = "auto") -> Path:
-    """What ``rig report`` does; checks every file and the session before drawing anything."""
-    from rig.errors import RigConfigError
-    from rig.report.session import report_for_session
-    from rig.store import open_store
-
-    out = Path(out_path)
-    if out.is_dir():
-        raise RigConfigError(f"--out {out_path}: is a directory")
-    if not out.parent.is_dir():
-        raise RigConfigError(f"--out {out_path}: directory {out.parent} does not exist")
-    if model is not None and not Path(model).is_file():
-        raise RigConfigError(f"--model {model}: no such file")
-    ref = None
-    if reference is not None:
-        from models.constraint import load_constraint
-
-        ref = load_constraint(reference)
-    with open_store(db, create=False) as store:
-        store.get_session(session_id)  # "no session N in DB" before any work
-        return report_for_session(store, session_id, out, model=model, age=age, sex=sex,
-                                  reference=ref, fusion=fusion)
+    result = run_report(ReportRequest(db, session_id, out_path, model=model_path, age=age,
+                                      sex=sex, reference=reference_path, fusion=fusion))
+    click.echo(f"wrote {result.path}")

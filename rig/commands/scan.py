@@ -1,6 +1,6 @@
 """``rig scan PORT [--baud B]``: which Dynamixel servos answer on a bus, at which baud rate.
 
-Per-ID PINGs through ``dynamixel_sdk`` (:func:`rig.devices.dynamixel.scan`); every X-series
+Per-ID PINGs through ``dynamixel_sdk`` (:func:`rig.devices.dynamixel.find_servos`); every X-series
 rate the SDK can set when no ``--baud`` is given, fastest first. The model name comes from the
 SDK's control-table files. Nothing answering is an error (exit 2), with the rates tried.
 """
@@ -43,39 +43,16 @@ def parse_id_ranges(text: str) -> list[int]:
                    "timer; 50 ms on a simulator).")
 def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None) -> None:
     """List the servos answering on PORT (/dev/ttyUSB0, COM3 or sim://dynamixel?...)."""
-    run_scan(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms)
+    from rig.devices.dynamixel import find_servos
 
+    header = False
 
-def run_scan(port: str, *, baud: int | None = None, ids=range(253), latency_ms=None,
-             echo=click.echo) -> list:
-    """What ``rig scan`` does; returns the :class:`~rig.devices.dynamixel.ServoInfo` found."""
-    from rig.devices.dynamixel import SCAN_BAUDS
-    from rig.devices.dynamixel import scan as scan_bus
-    from rig.devices.latency import latency_advice
-    from rig.devices.ports import open_port
-    from rig.errors import RigConfigError, RigConnectionError
+    def show(info) -> None:
+        nonlocal header
+        if not header:
+            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}")
+            header = True
+        click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}")
 
-    if baud is not None and baud not in SCAN_BAUDS:
-        raise RigConfigError(f"--baud {baud}: not an X-series rate dynamixel_sdk can set "
-                             f"({', '.join(map(str, SCAN_BAUDS))})")
-    bauds = [baud] if baud is not None else sorted(SCAN_BAUDS, reverse=True)
-    with open_port(port, baud=bauds[0]) as p:
-        if not p.is_simulated:
-            tip = latency_advice(p.path)
-            if tip:
-                echo(f"rig: note: {tip}", err=True)
-        header = False
-
-        def show(info) -> None:
-            nonlocal header
-            if not header:
-                echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}")
-                header = True
-            echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}")
-
-        found = scan_bus(p, bauds, ids, latency_ms=latency_ms, on_found=show)
-    if not found:
-        raise RigConnectionError(f"no servo answered (IDs {ids[0]}..{ids[-1]} at "
-                                 f"{', '.join(map(str, bauds))} bit/s); check power, wiring "
-                                 f"and the port", port=port)
-    return found
+    find_servos(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms,
+                on_found=show, on_note=lambda tip: click.echo(f"rig: note: {tip}", err=True))

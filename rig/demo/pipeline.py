@@ -15,20 +15,20 @@ Stages (each calls the library function behind the corresponding ``rig`` command
 3. **record servo limb** — ``rig record`` on ``sim-shoulder``: the patient back-drives the
    three servos (torque off); joint orientations by forward kinematics, read through
    ``dynamixel_sdk``; patient time scaled the same way.
-4. **boundary** — ``rig boundary`` (:func:`rig.commands.boundary.extract` on
-   :func:`~rig.commands.boundary.joint_orientations_from_store`) for every recording that yields
-   joint orientations (the IMU one only when its calibration was performed), stored with the
-   session and written to ``boundary.yaml``. Verdicts against the patient's truth: mean boundary
+4. **boundary** — ``rig boundary`` (:func:`rig.readback.run_boundary`) for every recording
+   that yields joint orientations (the IMU one only when its calibration was performed),
+   stored with the session and written to ``boundary.yaml`` (``boundary-imu.yaml``). Verdicts
+   against the patient's truth: mean boundary
    distance ≤ 2°, twist range within 3°, clinical peaks (``rig rom``) within 2°.
-5. **train** — ``rig train`` with its default preset (:func:`rig.commands.train.run_train`),
+5. **train** — ``rig train`` with its default preset (:func:`rig.training.run_train`),
    ONNX export, the model registered with the session.
-6. **evaluate** — ``rig evaluate`` (:func:`models.evaluation.evaluate_model`, onnxruntime) on
+6. **evaluate** — ``rig evaluate`` (:func:`rig.training.run_evaluate`, onnxruntime) on
    fresh held-out orientations; verdict against issue 9's targets.
-7. **enforce** — ``rig enforce`` (:func:`rig.commands.enforce.run_enforce`) on the simulated
+7. **enforce** — ``rig enforce`` (:func:`rig.loop.run_enforce`) on the simulated
    servo limb (torque on, real time) against the ``adversarial`` scripted targets (far outside,
    across the notch, twist excursions, NaN and stale inputs); verdict: no command beyond the
    supervisor's tolerance.
-8. **report** — ``rig report`` (:func:`rig.report.session.report_for_session`): ``report.html``.
+8. **report** — ``rig report`` (:func:`rig.report.run_report`): ``report.html``.
 
 Everything goes into one store, ``<out>/rig.db``. The sizes (recording lengths, evaluation
 sets, loop duration) are :data:`SIZES` — ``full`` for ``rig demo``, ``quick`` for the test suite.
@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["SIZES", "DemoOptions", "DemoResult", "DemoSize", "StageResult", "check_hardware",
-           "run_demo"]
+           "parse_ids", "run_demo"]
 
 #: Targets the verdicts use (issue 7 and 10).
 BOUNDARY_MEAN_DEG = 2.0
@@ -317,6 +317,24 @@ class _RecordingDisplay:
 
 
 # -- the pipeline --------------------------------------------------------------------------------
+def parse_ids(text: str) -> list[int]:
+    """``"1,2,3"`` → ``[1, 2, 3]``; RigConfigError (one line) on anything else."""
+    from rig.errors import RigConfigError
+
+    try:
+        ids = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError as err:
+        raise RigConfigError(f"--dxl-ids {text!r}: expected comma-separated integers") from err
+    if not ids or any(not 0 <= i <= 252 for i in ids):
+        raise RigConfigError(f"--dxl-ids {text!r}: IDs must be 0..252")
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise RigConfigError(f"--dxl-ids {text!r}: duplicate ID {dup}")
+    if len(ids) > 3:
+        raise RigConfigError(f"--dxl-ids {text!r}: a servo chain has 1 to 3 joints")
+    return ids
+
+
 def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
     """Run every stage (see the module docstring); returns the stages and what they produced.
 
@@ -332,8 +350,6 @@ def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
         A bad option or an unreachable device given by port, before anything is written.
     """
     from rich.console import Console
-
-    from rig.commands.demo import parse_ids
 
     console = console if console is not None else Console()
     size = SIZES["quick" if options.quick else "full"]
@@ -474,47 +490,40 @@ class _Ctx:
     def boundary(self, st: StageResult) -> None:
         from calibration.boundary import boundary_distance
         from calibration.clinical import range_of_motion
-        from models.constraint import dump_constraint
-        from rig.commands.boundary import extract, joint_orientations_from_store
-        from rig.errors import RigConfigError
-        from rig.store import open_store
+        from rig.errors import user_errors
+        from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 
         per: dict[str, dict] = {}
         notes = []
-        with open_store(self.db, create=False) as store:
-            for label, sid in (("servo", self.servo_session), ("imu", self.imu_session)):
-                try:
-                    joint = joint_orientations_from_store(store, sid)
-                except RigConfigError as err:
-                    notes.append(f"IMU session {sid}: no boundary ({err})" if label == "imu"
-                                 else f"servo session {sid}: {err}")
-                    continue
-                ex = extract(joint)
-                c = ex.constraint_
-                rep = ex.report()
-                bid = store.add_boundary(sid, c.to_yaml(), {"path": str(self.boundary_file)
-                                                            if label == "servo" else None,
-                                                            **rep})
-                dist = boundary_distance(c, self.truth)
-                rom_est = range_of_motion(c, "right", directions=joint.directions).to_dict()
-                rom_true = range_of_motion(self.truth, "right").to_dict()
-                peaks = {m: abs(rom_est[m] - rom_true[m]) for m in rom_true
-                         if m != "side" and rom_est.get(m) is not None
-                         and rom_true.get(m) is not None}
-                tw = (abs(c.twist.min_deg - self.truth.twist.min_deg),
-                      abs(c.twist.max_deg - self.truth.twist.max_deg))
-                per[label] = {"session_id": sid, "boundary_id": bid,
-                              "mean_distance_deg": dist["mean_deg"],
-                              "hausdorff_deg": dist["hausdorff_deg"],
-                              "twist_deg": [c.twist.min_deg, c.twist.max_deg],
-                              "twist_error_deg": max(tw),
-                              "peak_error_deg": max(peaks.values()) if peaks else None,
-                              "peaks_deg": {m: rom_est[m] for m in peaks},
-                              "sparse_arcs": len(rep.get("sparse_arcs") or []),
-                              "samples": rep.get("samples")}
-                if label == "servo":
-                    dump_constraint(c, self.boundary_file)
-                    self.boundary_id = bid
+        for label, sid in (("servo", self.servo_session), ("imu", self.imu_session)):
+            out = self.boundary_file if label == "servo" else self.out / "boundary-imu.yaml"
+            try:
+                res = run_boundary(BoundaryRequest(RecordingSource(db=str(self.db),
+                                                                   session_id=sid), out))
+            except user_errors() as err:
+                notes.append(f"IMU session {sid}: no boundary ({err})" if label == "imu"
+                             else f"servo session {sid}: {err}")
+                continue
+            c, rep = res.constraint, res.extractor.report()
+            dist = boundary_distance(c, self.truth)
+            rom_est = range_of_motion(c, "right", directions=res.data.directions).to_dict()
+            rom_true = range_of_motion(self.truth, "right").to_dict()
+            peaks = {m: abs(rom_est[m] - rom_true[m]) for m in rom_true
+                     if m != "side" and rom_est.get(m) is not None
+                     and rom_true.get(m) is not None}
+            tw = (abs(c.twist.min_deg - self.truth.twist.min_deg),
+                  abs(c.twist.max_deg - self.truth.twist.max_deg))
+            per[label] = {"session_id": sid, "boundary_id": res.boundary_id,
+                          "mean_distance_deg": dist["mean_deg"],
+                          "hausdorff_deg": dist["hausdorff_deg"],
+                          "twist_deg": [c.twist.min_deg, c.twist.max_deg],
+                          "twist_error_deg": max(tw),
+                          "peak_error_deg": max(peaks.values()) if peaks else None,
+                          "peaks_deg": {m: rom_est[m] for m in peaks},
+                          "sparse_arcs": len(rep.get("sparse_arcs") or []),
+                          "samples": rep.get("samples")}
+            if label == "servo":
+                self.boundary_id = res.boundary_id
         st.figures.update(per)
         parts, ok = [], True
         for label, f in per.items():
@@ -538,27 +547,26 @@ class _Ctx:
 
     # -- model -------------------------------------------------------------------------------
     def train(self, st: StageResult) -> None:
-        from rig.commands.train import run_train, train
         from rig.store import open_store
+        from rig.training import TrainRequest, run_train
 
-        preset = next(p.default for p in train.params if p.name == "preset")
-        lines: list[str] = []
-        model = run_train(str(self.boundary_file), str(self.model_file), preset=preset,
-                          seed=self.options.seed, echo=lines.append)
+        request = TrainRequest(self.model_file, constraint=str(self.boundary_file),
+                               seed=self.options.seed)
+        model = run_train(request).model
         with open_store(self.db, create=False) as store:
             mid = store.add_model(self.model_file, metrics=model.metrics,
                                   boundary_id=self.boundary_id, session_id=self.servo_session)
-        st.figures.update({"preset": preset, "model_id": mid, "metrics": model.metrics})
+        st.figures.update({"preset": request.preset, "model_id": mid, "metrics": model.metrics})
         st.verdict = "INFO"
-        st.detail = f"preset {preset!r} (the `rig train` default) → {self.model_file}"
+        st.detail = f"preset {request.preset!r} (the `rig train` default) → {self.model_file}"
 
     def evaluate(self, st: StageResult) -> None:
-        from rig.commands.train import run_evaluate
         from rig.report.session import model_verdict
+        from rig.training import EvaluateRequest, run_evaluate
 
-        metrics = run_evaluate(str(self.model_file), str(self.boundary_file),
-                               n=self.size.eval_n, seed=self.options.seed + 99,
-                               echo=lambda s: None)
+        metrics = run_evaluate(EvaluateRequest(str(self.model_file), str(self.boundary_file),
+                                               n=self.size.eval_n,
+                                               seed=self.options.seed + 99)).metrics
         ok, verdict = model_verdict(metrics)
         st.figures.update(metrics)
         st.verdict = "PASS" if ok else "WARN"
@@ -571,9 +579,8 @@ class _Ctx:
 
     # -- live loop ---------------------------------------------------------------------------
     def enforce(self, st: StageResult) -> None:
-        from rig.commands.enforce import run_enforce
+        from rig.loop import EnforceHooks, EnforceRequest, run_enforce
 
-        res: dict[str, Any] = {}
         self.progress.update(self.task, total=self.size.enforce_s,
                              description=f"enforce: adversarial targets at "
                                          f"{self.options.rate_hz:g} Hz")
@@ -584,18 +591,18 @@ class _Ctx:
                 self.progress.update(self.task, completed=min(self.size.enforce_s,
                                                               time.perf_counter() - t0))
 
-        code = run_enforce(rig=str(self.rigs["sim-shoulder-live"]), model=str(self.model_file),
-                           targets="script:adversarial", rate_hz=self.options.rate_hz,
-                           duration_s=self.size.enforce_s, db=str(self.db),
-                           session_id=self.servo_session, seed=self.options.seed,
-                           echo=lambda s: None, result=res, on_cycle=on_cycle)
-        s = res.get("summary", {})
+        res = run_enforce(EnforceRequest(
+            rig=str(self.rigs["sim-shoulder-live"]), model=str(self.model_file),
+            targets="script:adversarial", rate_hz=self.options.rate_hz,
+            duration_s=self.size.enforce_s, db=str(self.db), session_id=self.servo_session,
+            seed=self.options.seed), hooks=EnforceHooks(on_cycle=on_cycle))
+        s = res.summary
         self.result.sessions["enforce"] = s.get("session_id")
         st.figures.update({k: s.get(k) for k in (
             "achieved_hz", "cycles", "p99_cycle_ms", "overruns", "max_violation_deg",
             "tolerance_deg", "interventions", "interventions_by_kind", "faults",
             "safe_state_entries", "safe_state_reason", "end_reason", "session_id", "run_id")})
-        st.figures["exit_status"] = code
+        st.figures["exit_status"] = res.exit_status
         viol, tol = s.get("max_violation_deg"), s.get("tolerance_deg")
         safe = viol is not None and tol is not None and viol <= tol
         st.detail = (f"{s.get('cycles', 0):,} cycles at {s.get('achieved_hz') or 0:.0f} Hz "
@@ -613,13 +620,11 @@ class _Ctx:
 
     # -- report ------------------------------------------------------------------------------
     def report(self, st: StageResult) -> None:
-        from rig.report.session import report_for_session
-        from rig.store import open_store
+        from rig.report import ReportRequest, run_report
 
-        with open_store(self.db, create=False) as store:
-            path = report_for_session(store, self.servo_session, self.out / "report.html",
-                                      model=self.model_file, reference=self.truth,
-                                      eval_n=self.size.report_eval_n)
+        path = run_report(ReportRequest(self.db, self.servo_session, self.out / "report.html",
+                                        model=self.model_file, reference=self.truth,
+                                        eval_n=self.size.report_eval_n)).path
         self.result.report = path
         st.figures["path"] = str(path)
         st.verdict = "INFO"

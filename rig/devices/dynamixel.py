@@ -61,7 +61,8 @@ from rig.errors import (
     UnreachableError,
 )
 
-__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelChain", "ServoInfo", "scan"]
+__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelChain", "ServoInfo", "find_servos",
+           "scan"]
 
 ALERT_BIT = 0x80
 FAST_SYNC_READ_FIRMWARE = 45
@@ -709,3 +710,35 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
     finally:
         if own:
             p.close()
+
+
+def find_servos(port: str, *, baud: int | None = None, ids: Sequence[int] = range(253),
+                latency_ms: float | None = None, on_found=None,
+                on_note=None) -> list[ServoInfo]:
+    """``rig scan`` as a library: :func:`scan` of ``port`` at ``baud`` (default: every rate of
+    :data:`SCAN_BAUDS`, fastest first), with the adapter's latency advice passed to
+    ``on_note`` (hardware only) and an error when nothing answers.
+
+    Raises
+    ------
+    RigConfigError
+        ``baud`` is not a rate the SDK can set.
+    RigConnectionError
+        The port cannot be opened, or no servo answered (the IDs and rates tried named).
+    """
+    if baud is not None and baud not in SCAN_BAUDS:
+        raise RigConfigError(f"--baud {baud}: not an X-series rate dynamixel_sdk can set "
+                             f"({', '.join(map(str, SCAN_BAUDS))})")
+    bauds = [baud] if baud is not None else sorted(SCAN_BAUDS, reverse=True)
+    ids = list(ids)
+    with open_port(port, baud=bauds[0]) as p:
+        if not p.is_simulated and on_note is not None:
+            tip = latency_advice(p.path)
+            if tip:
+                on_note(tip)
+        found = scan(p, bauds, ids, latency_ms=latency_ms, on_found=on_found)
+    if not found:
+        raise RigConnectionError(f"no servo answered (IDs {ids[0]}..{ids[-1]} at "
+                                 f"{', '.join(map(str, bauds))} bit/s); check power, wiring "
+                                 f"and the port", port=port)
+    return found

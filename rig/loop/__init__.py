@@ -8,12 +8,15 @@
 - :mod:`rig.loop.runner` — the cycle, faults and safe states;
 - :mod:`rig.loop.telemetry` — per-cycle rows, CSV / store writer thread, the run summary;
 - :mod:`rig.loop.binding` — which constraint is enforced and whether the model matches it;
-- :mod:`rig.loop.backstop` — servo position limits from the boundary.
+- :mod:`rig.loop.backstop` — servo position limits from the boundary;
+- :mod:`rig.loop.enforce` — ``rig enforce`` as a library (:func:`run_enforce`:
+  :class:`EnforceRequest` → :class:`EnforceResult`): checks, devices, store, the run.
 
 ``docs/loop.md`` describes the whole.
 """
 
 from rig.loop.binding import Binding, ModelBindingError, bind_model
+from rig.loop.enforce import EnforceHooks, EnforceRequest, EnforceResult, run_enforce
 from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig
 from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import Intervention, Supervisor, SupervisorConfig
@@ -25,6 +28,9 @@ __all__ = [
     "SAFE_STATES",
     "Binding",
     "CsvTrajectory",
+    "EnforceHooks",
+    "EnforceRequest",
+    "EnforceResult",
     "EnforcementLoop",
     "Fault",
     "Intervention",
@@ -38,4 +44,5 @@ __all__ = [
     "Telemetry",
     "bind_model",
     "open_targets",
+    "run_enforce",
 ]

@@ -13,7 +13,7 @@ Sequence (every step that can fail on a user mistake comes before anything is re
    performs them); on hardware the clinician is prompted and presses Enter. The calibration and
    its residual are stored (``store.add_calibration``).
 4. **Recording** until ``duration_s`` of sample time, Ctrl-C / SIGTERM, or a vanished device.
-   Joint orientations (calibrated) feed the live :class:`~rig.record.coverage.CoverageMap`.
+   Joint orientations (calibrated) feed the live :class:`~calibration.coverage.CoverageMap`.
    On a calibrated IMU rig the patient's returns to the neutral pose are marked as
    **neutral checkpoints** (:class:`~rig.record.guided.NeutralCheckpoints`: the simulated
    patient's schedule, or Enter on hardware), each stored as it ends
@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.coverage import CoverageMap
 from rig.errors import RigConfigError, RigConnectionError, RigError
-from rig.record.coverage import CoverageMap
 from rig.record.display import PlainDisplay, RecordStatus
 from rig.record.guided import (
     CalibrationResult,
@@ -105,7 +105,7 @@ class RecordOptions:
         motion (:func:`calibration.clinical.range_of_motion`) in the session's metadata
         (``rom``) — only for calibrated recordings (IMU) or joint samples (servo limb).
     coverage : dict
-        Keyword arguments of :class:`~rig.record.coverage.CoverageMap`.
+        Keyword arguments of :class:`~calibration.coverage.CoverageMap`.
     source_options : dict
         Extra keyword arguments for opening the orientation source.
     """
@@ -296,7 +296,7 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         return
     try:
         from calibration.clinical import format_rom_table, range_of_motion
-        from rig.commands.boundary import extract, joint_orientations_from_store
+        from rig.readback import extract, joint_orientations_from_store
 
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
         data = joint_orientations_from_store(store, result.session_id)

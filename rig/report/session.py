@@ -1,4 +1,5 @@
-"""Assemble the clinician's report of one session from the store.
+"""Assemble the clinician's report of one session from the store; ``rig report`` as a library is
+:func:`run_report` (:class:`ReportRequest` → :class:`ReportResult`).
 
 What each section is made of (a section with no data is left out):
 
@@ -31,14 +32,17 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rig.errors import RigConfigError
 from rig.report.page import ReportData, RomRow, write_report
 
-__all__ = ["MODEL_TARGETS", "model_verdict", "report_data_for_session", "report_for_session"]
+__all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
+           "report_data_for_session", "report_for_session", "run_report"]
 
 #: Targets of the learned model (issue 9), metric → (limit, label, unit).
 MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
@@ -135,7 +139,7 @@ def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
         return c, dict(b.get("meta") or {}), f"boundary {b['id']} stored with the session"
     if joint is None:
         return None, {}, ""
-    from rig.commands.boundary import extract
+    from rig.readback import extract
 
     ex = extract(joint)
     return ex.constraint_, ex.report(), "extracted from the recorded samples for this report"
@@ -232,10 +236,10 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         Held-out orientations for the model section.
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from when its boundary is extracted
-        (:func:`rig.commands.boundary.joint_orientations_from_store`).
+        (:func:`rig.readback.joint_orientations_from_store`).
     """
     from rig import __version__
-    from rig.errors import RigConfigError
+    from rig.errors import user_errors
 
     sess = store.get_session(session_id)
     side = sess.get("side") or "right"
@@ -249,12 +253,12 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
     rec_id = _recording_session(store, sess)
 
     if rec_id is not None:
-        from rig.commands.boundary import joint_orientations_from_store
+        from rig.readback import joint_orientations_from_store
 
         joint = None
         try:
             joint = joint_orientations_from_store(store, rec_id, fusion=fusion)
-        except RigConfigError as err:
+        except user_errors() as err:  # a recording that cannot give joint orientations
             data.rom_note = f"Samples not usable for the boundary: {err}."
         rec_meta = store.get_session(rec_id).get("meta") or {}
         data.simulated = bool(rec_meta.get("simulated"))
@@ -356,10 +360,65 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
-    """Write the HTML report of a session (:func:`report_data_for_session`); returns its path."""
+    """Write the HTML report of a session in an opened store (:func:`report_data_for_session`);
+    returns its path."""
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n, fusion=fusion)
     return write_report(data, out_path)
+
+
+@dataclass(frozen=True)
+class ReportRequest:
+    """What ``rig report`` is asked: the store and session, the HTML file to write, a model to
+    evaluate (default: the last registered with the session), the patient's age and sex (the
+    population reference band), a constraint drawn dashed for comparison (a file path or a
+    :class:`~models.constraint.JointConstraint`), the held-out orientations of the model
+    section and where an IMU recording's orientations come from."""
+
+    db: str | Path
+    session_id: int
+    out: str | Path = "report.html"
+    model: str | Path | None = None
+    age: int | None = None
+    sex: str | None = None
+    reference: Any = None
+    eval_n: int = 4000
+    fusion: str = "auto"
+
+    def check(self) -> None:
+        """The files given, before anything is drawn (one-line errors)."""
+        out = Path(self.out)
+        if out.is_dir():
+            raise RigConfigError(f"--out {self.out}: is a directory")
+        if not out.parent.is_dir():
+            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+        if self.model is not None and not Path(self.model).is_file():
+            raise RigConfigError(f"--model {self.model}: no such file")
+
+
+@dataclass
+class ReportResult:
+    """The report written."""
+
+    path: Path
+
+
+def run_report(request: ReportRequest) -> ReportResult:
+    """Check the request and the session (``no session N`` before any work), then write the
+    report."""
+    from rig.store import open_store
+
+    request.check()
+    ref = request.reference
+    if isinstance(ref, (str, Path)):
+        from models.constraint import load_constraint
+
+        ref = load_constraint(ref)
+    with open_store(request.db, create=False) as store:
+        store.get_session(request.session_id)
+        return ReportResult(report_for_session(
+            store, request.session_id, Path(request.out), model=request.model, age=request.age,
+            sex=request.sex, reference=ref, eval_n=request.eval_n, fusion=request.fusion))
 
 
 def _calibration_rows(cals: list[dict]) -> list[dict]:

@@ -1,5 +1,5 @@
 """Host-side VQF fusion of raw IMU samples (calibration.fusion) and the store read path with
-``fusion="auto"|"device"|"vqf"`` (rig.commands.boundary.joint_orientations_from_store).
+``fusion="auto"|"device"|"vqf"`` (rig.readback.joint_orientations_from_store).
 
 The recordings come from the simulated limb's raw measurements (``Measurement.accel``,
 ``gyro``, ``mag``). The patient's range is a cone: its projection is continuous, so the arm
@@ -174,7 +174,7 @@ def _joint_error_deg(q, truth):
 
 
 def test_read_path_fuses_refits_and_records_provenance(session):
-    from rig.commands.boundary import joint_orientations_from_store
+    from rig.readback import joint_orientations_from_store
 
     limb, t, q, raw, _, joint, status = session
     store = _Store(t, q, raw, status, _stored_calibration(limb, t, q))
@@ -197,7 +197,7 @@ def test_read_path_fuses_refits_and_records_provenance(session):
 
 
 def test_read_path_without_raw(session):
-    from rig.commands.boundary import joint_orientations_from_store
+    from rig.readback import joint_orientations_from_store
 
     limb, t, q, raw, _, _, status = session
     cal = _stored_calibration(limb, t, q)

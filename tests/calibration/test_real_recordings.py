@@ -18,10 +18,10 @@ from scipy.spatial import cKDTree
 from calibration.frames import segment_to_rig
 from models import quaternion as Q
 from models.constraint import JointConstraint, load_constraint
+from models.geometry import fibonacci_sphere
 from models.oracle import ConstraintOracle
 from rig.cli import main
-from rig.commands.boundary import extract, load_joint_orientations
-from rig.record.coverage import fibonacci_sphere
+from rig.readback import extract, load_joint_orientations
 from rig.store.io import OrientationTable, read_sto, write_sto
 
 DATA = Path(__file__).parent / "data" / "real"

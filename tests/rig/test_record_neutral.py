@@ -3,7 +3,7 @@
 A seeded patient on a simulated stream board on a real pty (noise, heading drift, magnetic
 disturbances, straps 25° off) returns to the neutral pose every 20 s (``neutral=20``); the
 recorder marks each return from the patient's schedule and stores it; the read path
-(:func:`rig.commands.boundary.joint_orientations_from_store`) re-zeroes the relative heading at
+(:func:`rig.readback.joint_orientations_from_store`) re-zeroes the relative heading at
 each one (:class:`calibration.heading.HeadingCorrection`). Simulated time runs in lockstep with
 the recorder (no wall-clock condition). Seed 3 is not a held-out seed of the benchmarks.
 """
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
-from rig.commands.boundary import joint_orientations_from_store
+from rig.readback import joint_orientations_from_store
 from rig.record import PlainDisplay, RecordOptions, RecordStatus, record_session
 from rig.record.guided import NeutralCheckpoints
 from rig.record.lockstep import CountingDisplay, LockstepClock

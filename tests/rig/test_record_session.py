@@ -130,7 +130,7 @@ def test_sim_imu_records_calibrates_and_completes(tmp_path):
         assert notes == ["start note", "one second in"]
         # every frame's two readings are paired (by their shared device timestamp: host times
         # are per batch and repeat), and the calibration status comes along for the extractor
-        from rig.commands.boundary import joint_orientations_from_store
+        from rig.readback import joint_orientations_from_store
         joint = joint_orientations_from_store(store, res.session_id)
         assert len(joint.q) == res.samples // 2
         assert joint.status is not None and len(joint.status) == len(joint.q)

@@ -10,12 +10,12 @@ import pytest
 
 from models.constraint import dump_constraint
 from rig.cli import main
-from rig.commands.enforce import run_enforce
-from rig.commands.train import run_train
 from rig.demo.pipeline import SIZES, patient_constraint, write_rig_configs
+from rig.loop import EnforceRequest, run_enforce
 from rig.record import PlainDisplay, RecordOptions, record_session
 from rig.report.session import report_data_for_session
 from rig.store import open_store
+from rig.training import TrainRequest, run_train
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 
@@ -37,14 +37,14 @@ def recorded(tmp_path_factory):
         main(["boundary", "--db", str(db), "--session", str(sid), "--out",
               str(tmp / "boundary.yaml")])
     assert info.value.code == 0
-    run_train(str(tmp / "boundary.yaml"), str(tmp / "model.onnx"), echo=lambda s: None)
+    run_train(TrainRequest(tmp / "model.onnx", constraint=str(tmp / "boundary.yaml")))
     with open_store(db) as store:
         store.add_model(tmp / "model.onnx", session_id=sid)
         empty = store.start_session(store.ensure_patient("P-EMPTY"), kind="record")
         store.end_session(empty)
-    code = run_enforce(rig=str(rigs["sim-shoulder-live"]), model=str(tmp / "model.onnx"),
-                       targets="script:adversarial", duration_s=1.0, db=str(db),
-                       session_id=sid, echo=lambda s: None)
+    code = run_enforce(EnforceRequest(rig=str(rigs["sim-shoulder-live"]),
+                                      model=str(tmp / "model.onnx"), targets="script:adversarial",
+                                      duration_s=1.0, db=str(db), session_id=sid)).exit_status
     assert code in (0, 1)  # 1: a safe state on a loaded machine; the run is stored either way
     return {"tmp": tmp, "db": db, "session": sid, "empty": empty, "truth": truth}
 

@@ -1,0 +1,398 @@
+"""``rig enforce`` as a library: keep a servo-driven limb inside a patient's range in a real-time
+loop (:func:`run_enforce`: :class:`EnforceRequest` → :class:`EnforceResult`).
+
+Everything is checked, and the devices opened, before the loop starts: a bad option, file,
+model, constraint mismatch, rig configuration or port raises a user error (the CLI's one line,
+exit status 2) before anything moves. The exit status after the loop: 0 when it ran to its end,
+1 when a fault put the limb in the safe state, 130 / 143 after SIGINT / SIGTERM (the limb left
+in the safe state).
+
+With a store (``db``) the run and its telemetry are stored in an ``enforce`` session; with a
+recording ``session_id`` its last boundary is the constraint enforced (unless ``constraint``
+names one) and its patient must be the model's.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rig.errors import RigConfigError
+
+__all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
+           "run_enforce"]
+
+#: Largest ``tolerance_deg``: a goal may leave the boundary by at most this much.
+MAX_TOLERANCE_DEG = 10.0
+
+
+def _silent(_: str) -> None:
+    pass
+
+
+@dataclass(frozen=True)
+class EnforceRequest:
+    """What ``rig enforce`` is asked (the options of the command, same names and units).
+
+    Attributes
+    ----------
+    rig, model, targets : str
+        Rig configuration with a servo chain (name or file), the ONNX model, the target source
+        (:func:`rig.loop.targets.open_targets`).
+    frames : {"rig", "isb"}, optional
+        Segment frames of a targets file.
+    rate_hz, duration_s : float
+        Loop rate; seconds to run (None: a CSV's length, else until stopped).
+    telemetry, summary_json : str, optional
+        Per-cycle CSV, end-of-run summary JSON (both owner-only).
+    db, session_id, patient : optional
+        Store, recording session, pseudonym of the stored run.
+    constraint : str, optional
+        Constraint file to enforce (default: the session's boundary, the rig's, the model's).
+    force_model : bool
+        Run a model made for another constraint / joint / side / patient.
+    safe_state : {"hold", "torque-off"}
+    tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, stale_target_ms
+        The supervisor's limits.
+    seed : int
+        Seed of scripted targets.
+    """
+
+    rig: str
+    model: str
+    targets: str
+    frames: str | None = None
+    rate_hz: float = 200.0
+    duration_s: float | None = None
+    telemetry: str | None = None
+    summary_json: str | None = None
+    db: str | None = None
+    session_id: int | None = None
+    patient: str | None = None
+    constraint: str | None = None
+    force_model: bool = False
+    safe_state: str = "hold"
+    tolerance_deg: float = 1.0
+    max_velocity_deg_s: float = 120.0
+    max_accel_deg_s2: float = 1200.0
+    stale_servo_ms: float = 100.0
+    stale_target_ms: float = 100.0
+    seed: int = 0
+
+    def loop_config(self):
+        """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
+        from rig.loop.runner import SAFE_STATES, LoopConfig
+        from rig.loop.supervisor import SupervisorConfig
+
+        for name, v in (("--rate", self.rate_hz), ("--duration", self.duration_s),
+                        ("--tolerance-deg", self.tolerance_deg),
+                        ("--max-velocity-deg-s", self.max_velocity_deg_s),
+                        ("--max-accel-deg-s2", self.max_accel_deg_s2),
+                        ("--stale-servo-ms", self.stale_servo_ms),
+                        ("--stale-target-ms", self.stale_target_ms)):
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise RigConfigError(f"{name} {v}: expected a positive number")
+        if self.rate_hz > 5000:
+            raise RigConfigError(f"--rate {self.rate_hz}: at most 5000 Hz")
+        if self.tolerance_deg <= 0.25:
+            raise RigConfigError(f"--tolerance-deg {self.tolerance_deg}: must exceed 0.25° (the "
+                                 "room kept for rounding goals to encoder ticks)")
+        if self.tolerance_deg > MAX_TOLERANCE_DEG:
+            raise RigConfigError(f"--tolerance-deg {self.tolerance_deg}: at most "
+                                 f"{MAX_TOLERANCE_DEG:g}° (further outside than that, the "
+                                 "boundary no longer limits the limb)")
+        if self.safe_state not in SAFE_STATES:
+            raise RigConfigError(f"--safe-state {self.safe_state!r}: expected one of "
+                                 f"{', '.join(SAFE_STATES)}")
+        if self.session_id is not None and self.db is None:
+            raise RigConfigError("--session needs --db")
+        if self.patient is not None and self.db is None:
+            raise RigConfigError("--patient needs --db")
+        _out_path("--telemetry", self.telemetry)
+        _out_path("--summary-json", self.summary_json)
+        return LoopConfig(
+            rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
+            supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
+                                        max_velocity_deg_s=float(self.max_velocity_deg_s),
+                                        max_accel_deg_s2=float(self.max_accel_deg_s2),
+                                        stale_present_s=float(self.stale_servo_ms) / 1e3,
+                                        stale_target_s=float(self.stale_target_ms) / 1e3))
+
+
+@dataclass
+class EnforceHooks:
+    """What tests, benchmarks and the demo attach to a run (the CLI attaches only signals).
+
+    ``on_cycle(loop, k)`` runs after each cycle; ``clock`` (a
+    :class:`rig.sim.clock.ManualClock`) replaces real time; ``ports`` maps port strings to
+    already opened :class:`~rig.devices.ports.Port` (fault injection); ``install_signals``
+    turns SIGINT / SIGTERM into the loop's safe state; ``keep_telemetry`` keeps the rows in
+    memory (:attr:`EnforceResult.telemetry`)."""
+
+    on_cycle: Callable[[Any, int], None] | None = None
+    clock: Any = None
+    ports: dict[str, Any] | None = None
+    install_signals: bool = False
+    keep_telemetry: bool = False
+
+
+@dataclass
+class EnforceResult:
+    """How the run ended: the exit status, the summary (:func:`rig.loop.telemetry.summarise`
+    plus the model, constraint, targets and, with a store, ``session_id`` / ``run_id``), the
+    loop, its telemetry and the servo port."""
+
+    exit_status: int
+    summary: dict
+    loop: Any = None
+    telemetry: Any = None
+    port: Any = None
+
+    def summary_line(self) -> str:
+        """The summary on one line (``--quiet``)."""
+        s = self.summary
+        hz = s.get("achieved_hz")
+        return (f"cycles {s['cycles']} at {'n/a' if hz is None else f'{hz:.1f}'} Hz, max "
+                f"violation {s['max_violation_deg']:.3f}° (tolerance {s['tolerance_deg']:g}°), "
+                f"interventions {s['interventions']}, overruns {s['overruns']}, safe-state "
+                f"entries {s['safe_state_entries']}, end {s['end_reason']}")
+
+    def summary_text(self) -> str:
+        """The summary as ``rig enforce`` prints it (three lines)."""
+        s = self.summary
+
+        def f(v, fmt="{:.3f}"):
+            return "n/a" if v is None else fmt.format(v)
+
+        return "\n".join([
+            f"cycles {s['cycles']} at {f(s.get('achieved_hz'), '{:.1f}')} Hz (asked "
+            f"{s['rate_hz']:g}); cycle p50 {f(s['p50_cycle_ms'])} ms, p99 "
+            f"{f(s['p99_cycle_ms'])} ms; overruns {s['overruns']}; compute p50 "
+            f"{f(s['p50_compute_us'], '{:.0f}')} µs",
+            f"max violation {s['max_violation_deg']:.3f}° (tolerance {s['tolerance_deg']:g}°); "
+            f"interventions {s['interventions']} {s['interventions_by_kind']}",
+            f"faults {s['faults'] or 'none'}; safe-state entries {s['safe_state_entries']}"
+            + (f" ({s['safe_state_reason']})" if s.get("safe_state_reason") else "")
+            + f"; end: {s['end_reason']}",
+        ])
+
+
+def _out_path(option: str, value) -> Path | None:
+    if value is None:
+        return None
+    p = Path(value)
+    if p.exists() and p.is_dir():
+        raise RigConfigError(f"{option} {value}: is a directory")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.exists():
+        raise RigConfigError(f"{option} {value}: directory {parent} does not exist")
+    return p
+
+
+@dataclass
+class _Prepared:
+    """Everything checked and loaded before the devices are opened."""
+
+    request: EnforceRequest
+    cfg: Any  # LoopConfig
+    rig_cfg: Any
+    model: Any
+    binding: Any
+    oracle: Any
+    targets: Any
+    store: Any = None
+    session_patient: str | None = None
+
+
+def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silent,
+                hooks: EnforceHooks | None = None) -> EnforceResult:
+    """Check, load, open the devices, run the loop, store and summarise; ``echo`` receives
+    what ``rig enforce`` prints.
+
+    Raises
+    ------
+    RigError, ModelsError, FileNotFoundError
+        User mistakes, before anything moves.
+    """
+    from models.constraint import load_constraint, loads_constraint
+    from models.onnx_io import load_model
+    from models.oracle import ConstraintOracle
+    from rig.devices.config import load_rig_config
+    from rig.loop.binding import bind_model
+    from rig.loop.targets import open_targets
+
+    hooks = hooks or EnforceHooks()
+    cfg = request.loop_config()
+    rig_cfg = load_rig_config(request.rig)
+    if rig_cfg.servos is None:
+        raise RigConfigError(f"--rig {request.rig}: rig {rig_cfg.name!r} has no servo chain to "
+                             "drive")
+    mdl = load_model(request.model)
+    store = None
+    session_constraint = session_patient = alignment = None
+    try:
+        if request.db is not None:
+            from rig.store import open_store
+
+            store = open_store(request.db)
+            if request.session_id is not None:
+                sid = request.session_id
+                session_patient = store.get_session(sid).get("pseudonym")
+                bounds = store.boundaries(sid)
+                if bounds:
+                    session_constraint = loads_constraint(
+                        bounds[-1]["constraint_yaml"],
+                        source=f"boundary {bounds[-1]['id']} of session {sid}")
+                for cal in store.calibrations(sid):
+                    data = cal.get("data") or {}
+                    if "thorax_mount" in data and "limb_mount" in data:
+                        alignment = data
+        explicit = (load_constraint(request.constraint) if request.constraint is not None
+                    else None)
+        binding = bind_model(mdl, rig=rig_cfg, constraint=explicit,
+                             constraint_source=f"--constraint {request.constraint}",
+                             session_constraint=session_constraint,
+                             session_id=request.session_id, session_patient=session_patient,
+                             force=request.force_model)
+        for m in binding.mismatches:
+            echo(f"warning: {m} (--force-model)")
+        oracle = ConstraintOracle(binding.constraint)
+        src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
+                           frames=request.frames)
+        if alignment is not None and hasattr(src, "alignment"):
+            from models import quaternion as Q
+
+            src.alignment = {
+                rig_cfg.joint.parent: tuple(Q.conjugate(alignment["thorax_mount"]).tolist()),
+                rig_cfg.joint.child: tuple(Q.conjugate(alignment["limb_mount"]).tolist())}
+        prep = _Prepared(request, cfg, rig_cfg, mdl, binding, oracle, src, store,
+                         session_patient)
+        return _run_with_devices(prep, echo, hooks)
+    finally:
+        if store is not None:
+            store.close()
+
+
+def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
+                      hooks: EnforceHooks) -> EnforceResult:
+    from rig.devices.ports import open_port
+    from rig.loop.runner import EnforcementLoop, prepare_chain
+    from rig.loop.telemetry import Telemetry
+
+    req, cfg, store, binding, src = prep.request, prep.cfg, prep.store, prep.binding, prep.targets
+    servos = prep.rig_cfg.servos
+    ports = dict(hooks.ports or {})
+    own_port = servos.port not in ports
+    port = ports.get(servos.port)
+    chain = telemetry = None
+    run_id = enforce_session = None
+    try:
+        with src:
+            if own_port:
+                port = open_port(servos.port, baud=servos.baud)
+            chain = prepare_chain(port, servos, prep.oracle, log=echo)
+            for tip in getattr(chain, "advice", []):
+                echo(f"note: {tip}")
+            # -- the store: an 'enforce' session and a run ------------------------------------
+            store_writer = None
+            if store is not None:
+                pseudonym = req.patient or prep.session_patient or binding.constraint.patient
+                if pseudonym is None:
+                    raise RigConfigError("--db: say whose run this is: --patient PSEUDONYM or "
+                                         "--session ID")
+                pid = store.ensure_patient(pseudonym)
+                enforce_session = store.start_session(
+                    pid, rig_name=prep.rig_cfg.name, joint=prep.rig_cfg.joint.name,
+                    side=prep.rig_cfg.joint.side, kind="enforce",
+                    meta={"model": str(prep.model.path), "targets": req.targets,
+                          "constraint_source": binding.source,
+                          "recording_session": req.session_id})
+                run_id = store.start_run(enforce_session, {
+                    "rate_hz": cfg.rate_hz, "safe_state": cfg.safe_state,
+                    "tolerance_deg": cfg.supervisor.tolerance_deg,
+                    "constraint": binding.constraint.to_yaml()
+                    if hasattr(binding.constraint, "to_yaml") else None,
+                    "model": str(prep.model.path), "targets": req.targets})
+                store_writer = store.telemetry_writer(run_id)
+            telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
+                                  keep=hooks.keep_telemetry)
+            kw = {} if hooks.clock is None else {"clock": hooks.clock,
+                                                 "sleep": hooks.clock.sleep}
+            loop = EnforcementLoop(chain, prep.model, prep.oracle, src, cfg, telemetry=telemetry,
+                                   on_cycle=hooks.on_cycle, log=echo, **kw)
+            echo(f"enforcing {binding.constraint.name!r} ({binding.source}) on rig "
+                 f"{prep.rig_cfg.name!r} at {cfg.rate_hz:g} Hz; model {prep.model.path}; "
+                 f"targets {src.description}; safe state {cfg.safe_state}")
+            loop.setup()
+            restore = _install_signals(loop) if hooks.install_signals else None
+            try:
+                summary = loop.run()
+            finally:
+                if restore is not None:
+                    restore()
+            telemetry.close()
+            summary["model"] = str(prep.model.path)
+            summary["constraint"] = binding.constraint.name
+            summary["constraint_source"] = binding.source
+            summary["targets"] = src.description
+            if hasattr(src, "dropped"):
+                summary["target_samples_dropped"] = int(src.dropped)
+            if store is not None:
+                status = ("completed" if loop.safe_state_entries == 0 else
+                          "interrupted" if loop.stop_reason else "safe_state")
+                store.end_run(run_id, summary, status=status)
+                store.end_session(enforce_session, status="completed" if status == "completed"
+                                  else "interrupted" if status == "interrupted" else "failed",
+                                  meta={"run_id": run_id})
+                summary["session_id"] = enforce_session
+                summary["run_id"] = run_id
+            sum_path = _out_path("--summary-json", req.summary_json)
+            if sum_path is not None:
+                from models.fileio import write_owner_only
+
+                write_owner_only(sum_path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
+            if loop.stop_reason is not None:
+                code = 143 if "SIGTERM" in loop.stop_reason else 130
+            else:
+                code = 1 if loop.safe_state_entries else 0
+            result = EnforceResult(code, summary, loop, telemetry, port)
+            echo(result.summary_text())
+            return result
+    except BaseException:
+        if store is not None and run_id is not None:
+            try:
+                store.end_run(run_id, {"error": "aborted"}, status="failed")
+                store.end_session(enforce_session, status="failed")
+            except Exception:  # the original error matters more
+                pass
+        raise
+    finally:
+        if telemetry is not None:
+            telemetry.close()
+        if chain is not None:
+            chain.close()
+        if own_port and port is not None:
+            port.close()
+
+
+def _install_signals(loop):
+    """SIGINT / SIGTERM → the loop's safe state; returns a function restoring the handlers."""
+    def handler(signum, frame):
+        loop.request_stop(signal.Signals(signum).name)
+
+    old = {}
+    for s in (signal.SIGINT, signal.SIGTERM):
+        try:
+            old[s] = signal.signal(s, handler)
+        except ValueError:  # not the main thread
+            pass
+
+    def restore():
+        for s, h in old.items():
+            signal.signal(s, h)
+    return restore

@@ -1,0 +1,194 @@
+"""``rig boundary`` as a library: a patient-specific constraint file from a recording.
+
+:func:`run_boundary` takes a :class:`BoundaryRequest` (which recording, the extractor's
+parameters, where to write) and returns a :class:`BoundaryResult`; :func:`extract` runs the
+extractor (:class:`calibration.boundary.BoundaryExtractor`) on joint orientations already
+loaded (the recorder's range of motion, the report, the demo). The constraint records its
+provenance (session or file, parameters, sample counts, sparse arcs, the recording's facts) and
+its binding (patient, joint, side).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rig.errors import RigConfigError
+from rig.readback.data import JointData
+from rig.readback.source import RecordingSource
+
+__all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "default_name", "describe",
+           "extract", "run_boundary"]
+
+#: ``--by-swing``: swing-dependent twist limits when the data supports them, always, never.
+BY_SWING_CHOICES = ("auto", "on", "off")
+
+
+@dataclass(frozen=True)
+class BoundaryRequest:
+    """What ``rig boundary`` is asked.
+
+    Attributes
+    ----------
+    source : RecordingSource
+        The recording.
+    out : str or Path
+        Constraint file to write (YAML, owner-only).
+    name : str, optional
+        Constraint name (default: :func:`default_name`).
+    side : {"left", "right"}, optional
+        Side recorded in the constraint (default: the session's or file's).
+    alpha_deg, max_vertices, by_swing
+        The extractor's alpha-shape radius, vertex budget and swing-dependent twist choice.
+    store : bool
+        With a session: also store the boundary in the session's database (the database must
+        be writable; checked first).
+    """
+
+    source: RecordingSource
+    out: str | Path
+    name: str | None = None
+    side: str | None = None
+    alpha_deg: float = 4.0
+    max_vertices: int = 64
+    by_swing: str = "auto"
+    store: bool = True
+
+    def check(self) -> None:
+        """Everything that can be checked before reading the recording (one-line errors)."""
+        self.source.check()
+        if self.by_swing not in BY_SWING_CHOICES:
+            raise RigConfigError(f"--by-swing {self.by_swing!r}: expected one of "
+                                 f"{', '.join(BY_SWING_CHOICES)}")
+        if self.side not in (None, "left", "right"):
+            raise RigConfigError(f"--side {self.side!r}: expected left or right")
+        out = Path(self.out)
+        if out.is_dir():
+            raise RigConfigError(f"--out {self.out}: is a directory")
+        if not out.parent.is_dir():
+            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+        if self.source.db is not None and self.store:
+            from rig.store import open_store
+
+            with open_store(self.source.db, create=False) as st:
+                if st.readonly:
+                    raise RigConfigError(f"--db {self.source.db} is read-only: add --no-store "
+                                         "to extract the boundary without storing it in the "
+                                         "session")
+
+
+@dataclass
+class BoundaryResult:
+    """What ``rig boundary`` produced: the fitted extractor (its ``constraint_`` and
+    ``report()``), the joint orientations it saw, the file written, the stored boundary's id
+    (None when not stored) and the reasons to doubt the recording (one line each)."""
+
+    extractor: Any
+    data: JointData
+    path: Path
+    boundary_id: int | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def constraint(self):
+        """The :class:`~models.constraint.JointConstraint` written."""
+        return self.extractor.constraint_
+
+    def describe(self) -> str:
+        """The summary ``rig boundary`` prints (:func:`describe`)."""
+        return describe(self.extractor, self.path)
+
+
+def run_boundary(request: BoundaryRequest) -> BoundaryResult:
+    """Check the request, read the recording, extract, write the constraint file (and store
+    it with the session when asked)."""
+    from models.constraint import dump_constraint
+
+    request.check()
+    data = request.source.load()
+    ex = extract(data, name=request.name, side=request.side, alpha_deg=request.alpha_deg,
+                 max_vertices=request.max_vertices, by_swing=request.by_swing)
+    path = Path(request.out)
+    dump_constraint(ex.constraint_, path)
+    result = BoundaryResult(ex, data, path, warnings=data.facts().warnings())
+    src = request.source
+    if src.db is not None and request.store:
+        from rig.store import open_store
+
+        with open_store(src.db, create=False) as st:
+            result.boundary_id = st.add_boundary(src.session_id, ex.constraint_.to_yaml(),
+                                                 {"path": str(path), **ex.report()})
+    return result
+
+
+def extract(data: JointData, *, name: str | None = None, side: str | None = None,
+            alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto"):
+    """The fitted :class:`~calibration.boundary.BoundaryExtractor` of loaded joint
+    orientations, its constraint named (:func:`default_name`) and bound to the recording's
+    patient, joint and side."""
+    from calibration.boundary import BoundaryExtractor
+    from models.constraint import JointConstraint
+
+    bs = {"auto": "auto", "on": True, "off": False}[by_swing]
+    ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
+                           limb_axis=data.limb_axis, name=name or default_name(data))
+    prov = dict(data.provenance)
+    prov["recording"] = data.facts().as_dict()
+    ex.fit(data.q, status=data.status, t=data.t, provenance=prov,
+           slow_error_deg=data.slow_error_deg)
+    binding = {"side": side or data.side, "joint": data.joint, "patient": data.patient}
+    binding = {k: v for k, v in binding.items() if v}
+    if binding:
+        d = ex.constraint_.to_dict()
+        d.update(binding)
+        try:
+            ex.constraint_ = JointConstraint.from_dict(d)
+        except ValueError:  # a binding the format refuses (a file's joint): kept in provenance
+            d = ex.constraint_.to_dict()
+            d.setdefault("provenance", {}).update(binding)
+            ex.constraint_ = JointConstraint.from_dict(d)
+    return ex
+
+
+def default_name(data: JointData) -> str:
+    """``<patient>-session-<id>-<start, UTC>`` for a session (unique across databases: session
+    ids restart in each), the file's stem for a file."""
+    if "session" in data.provenance:
+        name = f"session-{data.provenance['session']}"
+        started = data.provenance.get("started_at")
+        if started is not None:
+            stamp = dt.datetime.fromtimestamp(float(started), dt.timezone.utc)
+            name += stamp.strftime("-%Y%m%dT%H%M%SZ")
+        return f"{data.patient}-{name}" if data.patient else name
+    return Path(str(data.provenance.get("file", "recording"))).stem
+
+
+def describe(ex, out_path: Path | None = None) -> str:
+    """What an extraction gave, for people: samples used and dropped, the polygon, how much of
+    the recording is inside, the twist range and the sparse arcs."""
+    r = ex.report()
+    lines = []
+    if out_path is not None:
+        lines.append(f"wrote {out_path}")
+    lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
+                 f"{r['dropped_status']} dropped for IMU status, "
+                 f"{r['spikes']} isolated spikes, {r['glitch_cluster_samples']} in glitch "
+                 "clusters)")
+    lines.append(f"  swing       polygon, {r['vertices']} vertices, alpha "
+                 f"{r['alpha_used_deg']:.1f} deg, noise inset {r['noise_inset_deg']:.2f} deg")
+    lines.append(f"  inside      {100 * r['inside']:.2f} % of the {r['directions']} recorded "
+                 f"directions inside the boundary written, {100 * r['inside_1deg']:.2f} % "
+                 "within 1 deg")
+    tw = r["twist_deg"]
+    extra = f", {r['by_swing_points']} swing regions" if r["by_swing_points"] else ""
+    lines.append(f"  twist       {tw[0]:.1f} .. {tw[1]:.1f} deg{extra}")
+    if r["sparse_arcs"]:
+        lines.append(f"  sparse      {len(r['sparse_arcs'])} boundary arcs "
+                     f"({r['sparse_length_deg']:.0f} deg) with fewer than "
+                     f"{ex.sparse_min_samples} samples within {ex.sparse_deg:g} deg: "
+                     "the boundary there is interpolated; record more there")
+    else:
+        lines.append("  sparse      none: every part of the boundary has samples nearby")
+    return "\n".join(lines)

@@ -1,0 +1,114 @@
+"""``rig rom`` as a library: the clinical range of motion of a recording or a constraint.
+
+Peaks (flexion, extension, abduction, adduction, horizontal adduction, internal and external
+rotation) come from the patient's boundary (:func:`calibration.clinical.range_of_motion`):
+extracted from the recording as ``rig boundary`` does (:func:`rig.readback.boundary.extract`),
+or read from a constraint file; with a recording, each peak is the smaller of the boundary's and
+the recorded samples' reading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rig.errors import RigConfigError
+from rig.readback.data import RecordingFacts
+from rig.readback.source import RecordingSource
+
+__all__ = ["RomRequest", "RomResult", "run_rom"]
+
+
+@dataclass(frozen=True)
+class RomRequest:
+    """A recording (``source``) or a constraint file (``constraint``), and the side (default:
+    the recording's or the constraint's, else right)."""
+
+    source: RecordingSource | None = None
+    constraint: str | None = None
+    side: str | None = None
+
+    def check(self) -> None:
+        """Option combinations and files, before any work (one-line errors)."""
+        if self.constraint is None:
+            if self.source is None:
+                raise RigConfigError("give a recording or --constraint")
+            self.source.check()
+            return
+        src = self.source
+        if src is not None and (src.file is not None or src.db is not None
+                                or src.session_id is not None):
+            raise RigConfigError("give either --constraint or a recording, not both")
+        if src is not None and src.frames is not None:
+            raise RigConfigError("--frames applies to orientation files, not to --constraint")
+        if not Path(self.constraint).is_file():
+            raise RigConfigError(f"{self.constraint}: no such file")
+
+
+@dataclass
+class RomResult:
+    """The range of motion (:class:`calibration.clinical.RangeOfMotion`), the joint, what it
+    was read from (for people) and, for a recording, its facts."""
+
+    rom: Any
+    joint: str | None
+    source: str
+    facts: RecordingFacts | None = None
+
+    @property
+    def warnings(self) -> list[str]:
+        """Reasons to doubt the figures (one line each; none for a constraint file)."""
+        return [] if self.facts is None else self.facts.warnings()
+
+    def table(self, *, age: int | None = None, sex: str | None = None) -> str:
+        """What ``rig rom`` prints: the source, the warnings, the table against the AAOS
+        values and the population reference for ``age`` / ``sex``."""
+        from calibration.clinical import format_rom_table
+
+        lines = [self.source, *(f"warning: {w}" for w in self.warnings)]
+        lines.append(format_rom_table(self.rom, age=age, sex=sex))
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        """``rig rom --json``: movement (snake_case, as in the table) → degrees (2 decimals) or
+        None, plus ``joint``, ``side``, ``coverage`` (share of the swing sphere's sectors
+        explored, 0-1; None for a constraint file), ``interrupted`` (None when unknown: files
+        and constraints), ``neutral_outside_deg``, ``warnings`` and ``source``."""
+        r, facts = self.rom, self.facts
+        out: dict = {"joint": self.joint or "shoulder", "side": r.side}
+        for m in r.MOVEMENTS:
+            v = getattr(r, m)
+            out[m] = None if v is None else round(float(v), 2)
+        out["coverage"] = (None if facts is None or facts.coverage is None
+                           else round(facts.coverage, 4))
+        out["interrupted"] = None if facts is None else facts.interrupted
+        out["neutral_outside_deg"] = round(float(r.neutral_outside_deg), 2)
+        out["warnings"] = self.warnings
+        out["source"] = self.source
+        return out
+
+
+def run_rom(request: RomRequest) -> RomResult:
+    """Check the request, then read the constraint or extract the recording's boundary, and
+    compute the clinical peaks."""
+    from calibration.clinical import range_of_motion
+
+    request.check()
+    if request.constraint is not None:
+        from models.constraint import load_constraint
+
+        constraint = load_constraint(request.constraint)
+        side = request.side or getattr(constraint, "side", None) or "right"
+        return RomResult(range_of_motion(constraint, side), getattr(constraint, "joint", None),
+                         request.constraint)
+    from rig.readback.boundary import extract
+
+    data = request.source.load()
+    side = request.side or data.side or "right"
+    constraint = extract(data, side=side).constraint_
+    source = request.source.label
+    if data.orientations is not None:
+        source += f" (IMU orientations {data.orientations})"
+    return RomResult(range_of_motion(constraint, side, directions=data.directions), data.joint,
+                     source, data.facts())

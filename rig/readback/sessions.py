@@ -1,0 +1,339 @@
+"""Joint orientations of a recorded session: joint samples of a servo limb as recorded, or two
+IMUs' orientations through the session's calibration — fused on the host by VQF from the raw
+samples where the session has them (the calibration re-fitted on the fused orientations), and
+the sensors' relative heading drift removed at the neutral checkpoints.
+
+Every step's :class:`~calibration.errors.CalibrationError` reaches the caller named with the
+session and the step (:func:`_about`); the CLI shows it as one line like every user error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from rig.errors import RigConfigError
+from rig.readback.data import CUT_SHORT, FUSION_CHOICES, JointData, RecordingFacts, parse_axis
+
+__all__ = ["joint_orientations_from_store", "read_session"]
+
+
+def read_session(db: str, session_id: int, axis: np.ndarray | None = None,
+                 fusion: str = "auto") -> JointData:
+    """:func:`joint_orientations_from_store` on the store at ``db`` (opened as it is: never
+    created, read-only when the file is)."""
+    from rig.store import open_store
+
+    with open_store(db, create=False) as store:
+        return joint_orientations_from_store(store, session_id, axis, fusion=fusion)
+
+
+@contextlib.contextmanager
+def _about(session_id: int, step: str | None = None) -> Iterator[None]:
+    """A :class:`CalibrationError` raised inside, named with the session (and the step)."""
+    try:
+        yield
+    except CalibrationError as err:
+        where = f"session {session_id}: " + (f"{step}: " if step else "")
+        raise CalibrationError(where + str(err)) from err
+
+
+def joint_orientations_from_store(store, session_id: int,
+                                  axis: np.ndarray | None = None, *,
+                                  heading: bool = True, fusion: str = "auto") -> JointData:
+    """Joint orientations of a session in an opened store (joint samples as recorded; IMU
+    samples through the session's ``imu-alignment`` calibration). Used by ``rig boundary``,
+    ``rig rom``, the recorder's range of motion and the report.
+
+    ``fusion`` chooses where IMU orientations come from:
+
+    - ``"device"``: the quaternions the devices fused (stored ``q``), through the stored
+      calibration;
+    - ``"vqf"``: each sensor's raw samples (the store's ``raw``: acc, gyr, mag) fused on the
+      host (:func:`calibration.fusion.fuse_vqf`, in the pairing clock: ``device_t`` where the
+      device has one); the stored calibration's mounts absorbed the *device* worlds' heading
+      offset, so :class:`~calibration.alignment.ImuJointCalibration` is re-fitted from the
+      fused orientations on the calibration's own windows (``windows_s`` placed on the
+      samples' clock by ``protocol.origin``). Fused samples are not filtered by the devices'
+      status bytes (they describe the devices' fusion; VQF detects and rejects magnetic
+      disturbances itself): ``JointData.status`` is None. Needs raw samples for every sample
+      of both sensors and a calibration with ``protocol.origin``; otherwise a one-line error;
+    - ``"auto"`` (default): ``"vqf"`` when those needs are met, else ``"device"``.
+
+    The provenance's ``fusion`` entry records the method (and for VQF the library version, the
+    parameters that differ from VQF's defaults, the resampling rate, each sensor's share of
+    samples flagged as magnetically disturbed and final gyroscope bias, and the re-fit's
+    residuals; for ``auto`` falling back to the device, why).
+
+    IMU sessions with ``neutral-checkpoint`` calibrations (the patient back in the neutral pose
+    during the recording, :mod:`rig.record.guided`) also have the two sensors' relative
+    heading drift removed (:class:`calibration.heading.HeadingCorrection`, anchored at ψ = 0
+    at the centre of the calibration's static window); ``heading=False`` leaves it in. The
+    provenance says how many checkpoints were used (``heading_correction``).
+    """
+    if fusion not in FUSION_CHOICES:
+        raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
+    axis = parse_axis(None) if axis is None else axis
+    sess = store.get_session(session_id)
+    sensors = store.sensors(session_id)
+    names = [r["name"] for r in sensors if r.get("n_samples")]
+    if not names:
+        raise RigConfigError(f"session {session_id} has no samples")
+    prov: dict[str, Any] = {"session": int(session_id), "started_at": sess.get("started_at")}
+    is_joint = any(r["kind"] == "joint" for r in sensors if r.get("n_samples"))
+    if is_joint:
+        q, t, status = _joint_samples(store, session_id, fusion)
+        prov["source"] = "joint samples"
+    else:
+        q, t, status = _imu_orientations(store, session_id, sess, sensors, names,
+                                         fusion=fusion, heading=heading, prov=prov)
+    side = sess.get("side")
+    facts = _session_facts(store, sess, sensors)
+    if not is_joint and not (prov.get("heading_correction") or {}).get("accepted"):
+        facts = replace(facts, unmeasured_drift=True)
+    return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
+                     sess.get("pseudonym"), sess.get("joint"), np.asarray(t, dtype=np.float64),
+                     facts)
+
+
+def _joint_samples(store, session_id: int, fusion: str):
+    """(q, t, status=None) of a servo-limb session's joint samples."""
+    if fusion != "auto":
+        raise RigConfigError(
+            f"session {session_id} holds joint samples (a servo limb), not IMU ones: "
+            f"--fusion {fusion} applies to IMU sessions"
+        )
+    s = store.samples(session_id)
+    sel = s["kind"] == "joint"
+    return s["q"][sel], s["t"][sel], None
+
+
+def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
+                      names: list[str], *, fusion: str, heading: bool, prov: dict):
+    """(q, t, status) of an IMU session: the thorax and limb sensors paired in time, through
+    the calibration (re-fitted on VQF orientations when fused on the host), the heading drift
+    removed at the neutral checkpoints; ``prov`` receives the provenance entries."""
+    from calibration.alignment import ImuJointCalibration
+
+    cals = store.calibrations(session_id)
+    cal = next((c for c in reversed(cals) if c["kind"] == "imu-alignment"), None)
+    if cal is None:
+        raise RigConfigError(
+            f"session {session_id} has IMU samples but no imu-alignment calibration (it "
+            "was recorded without the calibration steps): its orientations are the "
+            "sensors' frames, not anatomical ones; record again with calibration"
+        )
+    with _about(session_id):
+        model = ImuJointCalibration.from_dict(cal["data"])
+    parent, child = _segments(sess, sensors, names, session_id)
+    # the orientations first; a sensor's raw readings only while it is fused
+    per = {nm: store.samples(session_id, name=nm, raw=False) for nm in (parent, child)}
+    # pair the two sensors' samples by the device timestamp when the device gives one (the
+    # readings of one frame share it; host times are per batch and repeat), else host time
+    key_name = ("device_t" if all(np.isfinite(p["device_t"]).all() for p in per.values())
+                else "t")
+    use_vqf, why = _vqf_usable(store, session_id, per, key_name, cal["data"])
+    if fusion == "vqf" and not use_vqf:
+        raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
+    use_vqf = use_vqf and fusion != "device"
+    fusion_prov: dict[str, Any] = {"method": "device"}
+    if use_vqf:
+        fusion_prov = _fuse_sensors(store, session_id, per, key_name)
+    elif fusion == "auto":
+        fusion_prov["auto"] = why
+    tp, qp, sp = (per[parent][k] for k in (key_name, "q", "status"))
+    tc, qc, sc = (per[child][k] for k in (key_name, "q", "status"))
+    _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
+    if len(ip) < 0.5 * min(len(tp), len(tc)):
+        # different clocks: nearest-in-time pairing through the store's aligner
+        from rig.store.io import align_series
+
+        table, _ = align_series({parent: (tp, qp), child: (tc, qc)})
+        qpar, qchi, status = table.columns[parent], table.columns[child], None
+        times = {key_name: np.asarray(table.time)}
+    else:
+        qpar, qchi = qp[ip], qc[ic]
+        status = np.minimum(sp[ip], sc[ic])
+        # the child's times in the pairing clock first, its host times too
+        times = {key_name: tc[ic], "t": per[child]["t"][ic]}
+    del per, tp, qp, sp, tc, qc, sc, ip, ic
+    if use_vqf:
+        status = None  # the devices' status bytes do not describe the host's fusion
+        model = _refit(qpar, qchi, times, cal["data"], session_id)
+        fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
+        fusion_prov["refit_residuals_deg"] = {k: round(float(v), 3)
+                                              for k, v in model.residuals_.items()}
+    q = model.transform(qpar, qchi)
+    t = times[key_name]
+    prov.update({"source": "imu samples", "calibration_id": int(cal["id"]),
+                 "calibration_residual_deg": cal.get("residual_deg"),
+                 "fusion": fusion_prov})
+    checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
+    if heading and checkpoints:
+        q, prov["heading_correction"] = _heading_correction(
+            q, times, status, checkpoints, cal["data"], session_id)
+    return q, t, status
+
+
+def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
+    """Status, interruption and the recorder's own final coverage of a session."""
+    status = sess.get("status")
+    cut = status in CUT_SHORT
+    if status == "running":  # a recorder that died without closing it counts as cut short
+        cut = store.session_liveness(int(sess["id"])).state != "live"
+    cov = (sess.get("meta") or {}).get("coverage") or {}  # the recorder's own, when it ended
+    sectors = cov.get("sectors")
+    meta = sess.get("meta") or {}
+    simulated = meta.get("simulated")
+    if simulated is None:
+        ports = [str(r.get("port") or "") for r in sensors]
+        simulated = bool(ports) and all(p.startswith("sim://") for p in ports)
+    facts = RecordingFacts(status=status, interrupted=bool(cut), simulated=bool(simulated))
+    if isinstance(sectors, list) and sectors and "explored_sectors" in cov:
+        facts = replace(facts, explored=int(cov["explored_sectors"]), sectors=len(sectors),
+                        sufficient=bool(cov.get("sufficient")))
+    return facts
+
+
+def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
+                cal_data: dict) -> tuple[bool, str]:
+    """Can the two sensors' samples (``per``: name → samples, without raw) be fused on the
+    host? (yes/no, why not); the raw readings are counted by the store, not fetched."""
+    for name, s in per.items():
+        n = len(s["t"])
+        have = store.complete_raw_count(session_id, name)
+        if have < n:
+            return False, (f"sensor {name!r} has no raw samples for {n - have} of {n} samples "
+                           "(record with sensors.raw: true)")
+        if (np.diff(s[key_name]) <= 0).any():
+            return False, f"sensor {name!r}: sample times repeat (no device clock to fuse on)"
+    origin = (cal_data.get("protocol") or {}).get("origin")
+    if not origin or not (cal_data.get("windows_s") or {}):
+        return False, ("the imu-alignment calibration does not say where its windows are on "
+                       "the samples' clock (protocol.origin), so it cannot be re-fitted")
+    return True, ""
+
+
+def _fuse_sensors(store, session_id: int, per: dict[str, dict], key_name: str) -> dict:
+    """Each sensor's ``q`` (in ``per``: name → samples) replaced by its VQF orientation, one
+    sensor at a time (its raw readings read for it and released); returns the provenance."""
+    from importlib.metadata import version
+
+    from calibration.fusion import fuse_vqf
+
+    prov: dict[str, Any] = {"method": "vqf", "library": f"vqf {version('vqf')}"}
+    info: dict[str, dict] = {}
+    for name, s in per.items():
+        raw = store.raw(session_id, name)
+        with _about(session_id, f"sensor {name!r}"):
+            res = fuse_vqf(s[key_name], raw)
+        del raw
+        s["q"] = res.q
+        prov["params"] = res.params
+        info[name] = {"rate_hz": round(res.rate_hz, 3), "pieces": res.pieces,
+                      "mag_disturbed_share": round(res.disturbed_share, 4),
+                      "gyro_bias_dps": res.bias_dps}
+    prov["sensors"] = info
+    prov["status_filter"] = "none (VQF rejects magnetic disturbances itself)"
+    return prov
+
+
+def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal_data: dict,
+           session_id: int):
+    """:class:`~calibration.alignment.ImuJointCalibration` fitted on the paired (fused)
+    orientations inside the stored calibration's static and functional windows."""
+    from calibration.alignment import ImuJointCalibration
+
+    origin = cal_data["protocol"]["origin"]
+    clock = times.get(origin.get("time"))
+    if clock is None:
+        raise RigConfigError(f"session {session_id}: the calibration's windows are on the "
+                             f"{origin.get('time')} clock, which the pairing did not keep")
+    t0 = float(origin["t0"])
+    sel = {}
+    for name in ("static", "functional"):
+        w = _window((cal_data["windows_s"] or {}).get(name))
+        if w is None:
+            raise RigConfigError(f"session {session_id}: the calibration has no {name} window")
+        sel[name] = (clock >= t0 + w[0]) & (clock <= t0 + w[1])
+    with _about(session_id, "re-fitting the calibration on the VQF orientations"):
+        return ImuJointCalibration().fit(qpar[sel["static"]], qchi[sel["static"]],
+                                         qpar[sel["functional"]], qchi[sel["functional"]])
+
+
+def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, checkpoints,
+                        cal_data: dict, session_id: int):
+    """Fit and apply :class:`~calibration.heading.HeadingCorrection` on a session's joint
+    orientations; the windows are taken in the clock they were stored in (``time``: the
+    samples' ``device_t`` or host ``t``), checkpoints in a clock the pairing did not keep are
+    rejected. The axis is +X whatever ``--limb-axis`` says: the IMU calibration's segment
+    frames have +X along gravity in the neutral pose, the thorax vertical the drift turns
+    about. Returns the corrected orientations and the provenance entry."""
+    from calibration.heading import HeadingCorrection
+
+    base = next(iter(times))
+    t = times[base]
+    windows, unusable = [], []
+    for c in checkpoints:
+        d = c.get("data") or {}
+        w, clock = _window(d.get("window")), d.get("time", "t")
+        if w is not None and clock != base:
+            other = times.get(clock)
+            # stored in another clock: its window through the samples (both clocks known)
+            inside = (other >= w[0]) & (other <= w[1]) if other is not None else None
+            w = ([float(t[inside].min()), float(t[inside].max())]
+                 if inside is not None and inside.any() else None)
+        if w is None:
+            unusable.append({"window": d.get("window"),
+                             "reason": f"no samples in its window ({clock} clock)"})
+        else:
+            windows.append(w)
+    anchors = []
+    origin = (cal_data.get("protocol") or {}).get("origin") or {}
+    static = (cal_data.get("windows_s") or {}).get("static")
+    if origin.get("time") == base and static is not None:
+        anchors.append(float(origin["t0"]) + 0.5 * (float(static[0]) + float(static[1])))
+    hc = HeadingCorrection((1.0, 0.0, 0.0))
+    with _about(session_id, "neutral checkpoints"):
+        hc.fit(t, q, np.asarray(windows, dtype=np.float64).reshape(-1, 2), status=status,
+               anchors=anchors)
+    rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
+    uncertainty = hc.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
+    prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
+            "rejected": rejected, "anchored": bool(anchors), "clock": base,
+            "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_],
+            "drift_model": dict(hc.drift_model_),
+            "uncertainty_deg": None if uncertainty is None else round(uncertainty, 3)}
+    return hc.apply(t, q), prov
+
+
+def _window(w) -> list[float] | None:
+    try:
+        a, b = (float(x) for x in w)
+    except (TypeError, ValueError):
+        return None
+    return [a, b] if np.isfinite([a, b]).all() and a <= b else None
+
+
+def _segments(sess: dict, sensors: list[dict], names: list[str],
+              session_id: int) -> tuple[str, str]:
+    """(thorax sensor, limb sensor) of an IMU session; ``names``: the sensors with samples."""
+    meta = sess.get("meta") or {}
+    parent, child = meta.get("parent"), meta.get("child")
+    if parent in names and child in names:
+        return parent, child
+    by_segment = {r.get("segment"): r.get("name") for r in sensors}
+    parent = by_segment.get("thorax")
+    others = [n for n in names if n != parent]
+    if parent in names and len(others) == 1:
+        return parent, others[0]
+    raise RigConfigError(
+        f"session {session_id}: cannot tell the thorax and limb sensors apart "
+        f"(samples from {', '.join(names)})"
+    )
+

@@ -1,0 +1,86 @@
+"""Which recording to read: a session in a store or an orientation file
+(:class:`RecordingSource`, the part of ``rig boundary`` / ``rig rom`` / the report's requests
+that names it), checked before any work and loaded as :class:`~rig.readback.data.JointData`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from rig.errors import RigConfigError
+from rig.readback.data import FUSION_CHOICES, JointData, parse_axis
+from rig.readback.files import joint_orientations_from_file
+from rig.readback.sessions import read_session
+
+__all__ = ["FUSION_CHOICES", "RecordingSource", "load_joint_orientations"]
+
+
+@dataclass(frozen=True)
+class RecordingSource:
+    """A session (``db`` + ``session_id``) or an orientation file (``file`` with ``limb`` and
+    optionally ``reference``, in ``frames`` conventions: ``"rig"`` by default or ``"isb"``).
+
+    ``limb_axis`` is ``x,y,z`` text in the file's frame convention (default: the long axis,
+    +X in rig frames, −Y in ISB frames); ``fusion`` applies to IMU sessions
+    (:data:`FUSION_CHOICES`)."""
+
+    file: str | None = None
+    db: str | None = None
+    session_id: int | None = None
+    reference: str | None = None
+    limb: str | None = None
+    limb_axis: str | None = None
+    frames: str | None = None
+    fusion: str = "auto"
+
+    def check(self) -> None:
+        """Option combinations and the file's existence, before any work (one-line errors)."""
+        file = self.file
+        if file is not None and (self.db is not None or self.session_id is not None):
+            raise RigConfigError("give either FILE or --db/--session, not both")
+        if file is None and (self.db is None or self.session_id is None):
+            raise RigConfigError("give a recording: FILE.sto|FILE.csv, or --db DB --session ID")
+        if file is not None:
+            if self.limb is None:
+                raise RigConfigError(f"{file}: --limb COLUMN is required with a file")
+            if not Path(file).is_file():
+                raise RigConfigError(f"{file}: no such file")
+        elif self.reference is not None or self.limb is not None:
+            raise RigConfigError("--reference/--limb apply to files; a session knows its "
+                                 "segments")
+        elif self.frames is not None:
+            raise RigConfigError("--frames applies to files; a session is in the rig's frames")
+        if self.fusion not in FUSION_CHOICES:
+            raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
+                                 f"{self.fusion!r}")
+        parse_axis(self.limb_axis)
+
+    @property
+    def label(self) -> str:
+        """The recording for people: the file's path or ``session N``."""
+        return self.file if self.file is not None else f"session {self.session_id}"
+
+    def load(self) -> JointData:
+        """The joint orientations, in rig frames (sessions:
+        :func:`~rig.readback.sessions.read_session`; files:
+        :func:`~rig.readback.files.joint_orientations_from_file`)."""
+        self.check()
+        if self.file is not None:
+            frames = self.frames or "rig"
+            axis = parse_axis(self.limb_axis)
+            if self.limb_axis is not None:
+                from calibration.frames import direction_to_rig
+
+                axis = direction_to_rig(axis, frames)
+            return joint_orientations_from_file(self.file, self.reference, self.limb, axis,
+                                                frames)
+        return read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion)
+
+
+def load_joint_orientations(file: str | None = None, *, db: str | None = None,
+                            session_id: int | None = None, reference: str | None = None,
+                            limb: str | None = None, limb_axis: str | None = None,
+                            fusion: str = "auto", frames: str | None = None) -> JointData:
+    """``RecordingSource(...).load()`` with the options as keywords."""
+    return RecordingSource(file, db, session_id, reference, limb, limb_axis, frames,
+                           fusion).load()

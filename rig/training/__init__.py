@@ -1,0 +1,30 @@
+"""Models for the live loop, from constraint files: checking a constraint, making the thesis's
+datasets, training a corrective model and exporting it to ONNX, evaluating it on held-out
+orientations — the application's side of :mod:`models`.
+
+Modules
+-------
+:mod:`~rig.training.train`
+    :func:`run_train` (:class:`TrainRequest` → :class:`TrainResult`), ``rig train``.
+:mod:`~rig.training.evaluate`
+    :func:`run_evaluate` (:class:`EvaluateRequest` → :class:`EvaluateResult`), ``rig evaluate``.
+:mod:`~rig.training.datasets`
+    ``rig dataset make`` / ``info``.
+:mod:`~rig.training.constraints`
+    ``rig constraint check``.
+"""
+
+from rig.training.evaluate import EvaluateRequest, EvaluateResult, run_evaluate
+from rig.training.train import (
+    ENFORCEMENT_TARGETS,
+    PRESET_NAMES,
+    TrainRequest,
+    TrainResult,
+    enforcement_warnings,
+    metric_lines,
+    run_train,
+)
+
+__all__ = ["ENFORCEMENT_TARGETS", "PRESET_NAMES", "EvaluateRequest", "EvaluateResult",
+           "TrainRequest", "TrainResult", "enforcement_warnings", "metric_lines",
+           "run_evaluate", "run_train"]

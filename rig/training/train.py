@@ -1,0 +1,184 @@
+"""``rig train`` as a library: a corrective-constraint model from a constraint or a dataset,
+exported to ONNX with its metadata (:func:`run_train`: :class:`TrainRequest` →
+:class:`TrainResult`).
+
+The default preset ``field`` builds :mod:`models.field` (a swing field on a grid + the exact
+twist clamp); the others evolve and train a GMLP (:mod:`models.nn`), reporting one progress
+line per generation. The ONNX file's metadata holds the constraint, the training-data hash and
+the held-out metrics (:func:`models.onnx_io.export_onnx`). ``data`` takes a dataset written by
+``rig dataset make`` (its constraint comes from the file; the model records the dataset's
+content hash, the one ``rig dataset info`` prints).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ENFORCEMENT_TARGETS", "PRESET_NAMES", "TrainRequest", "TrainResult",
+           "enforcement_warnings", "metric_lines", "run_train"]
+
+#: ``--preset`` values (:mod:`models.nn.config`); ``field`` is the default.
+PRESET_NAMES = ("field", "best", "compact", "thesis", "fixed")
+
+#: What a model must reach on held-out orientations to be used for enforcement as is (the
+#: targets the report's verdict uses, :data:`rig.report.session.MODEL_TARGETS`).
+ENFORCEMENT_TARGETS = {"frac_invalid_violating_1deg": 0.01, "mean_3d_error_pct": 0.8}
+
+_LABELS = {
+    "mse": "MSE (correction quaternion)",
+    "mean_3d_error_pct": "mean 3-D error (% of 2.0)",
+    "max_3d_error_pct": "max 3-D error (% of 2.0)",
+    "frac_above_2pct": "patterns > 2 % error",
+    "frac_above_7_5pct": "patterns > 7.5 % error",
+    "mean_angular_error_deg": "mean angular error (deg)",
+    "p99_angular_error_deg": "99th pct angular error (deg)",
+    "frac_invalid_violating_1deg": "invalid inputs left > 1 deg outside",
+    "mean_violation_deg": "mean violation (deg)",
+    "max_violation_deg": "max violation (deg)",
+    "mean_identity_error_deg": "mean identity error, valid inputs (deg)",
+    "max_identity_error_deg": "max identity error, valid inputs (deg)",
+}
+
+
+def _silent(_: str) -> None:
+    pass
+
+
+def metric_lines(metrics: dict) -> list[str]:
+    """Held-out metrics for people, one labelled line each (fractions in %)."""
+    out = []
+    for key, label in _LABELS.items():
+        if key in metrics:
+            v = metrics[key]
+            text = f"{100 * v:.3f} %" if key.startswith("frac_") else f"{v:.6g}"
+            out.append(f"  {label:<42} {text}")
+    return out
+
+
+@dataclass(frozen=True)
+class TrainRequest:
+    """What ``rig train`` is asked: a constraint file and/or a dataset (``data``; then the
+    constraint is optional and must match the dataset's), the ONNX file to write, the preset,
+    an optional YAML overriding its fields (``config``) and the seed."""
+
+    out: str | Path
+    constraint: str | None = None
+    data: str | None = None
+    config: str | None = None
+    preset: str = "field"
+    seed: int = 0
+
+
+@dataclass
+class TrainResult:
+    """The trained model (:class:`models.nn.train.TrainedModel`), the ONNX file written, how
+    long it took and why it should not be trusted to enforce limits (empty when it meets
+    :data:`ENFORCEMENT_TARGETS`)."""
+
+    model: Any
+    path: Path
+    seconds: float
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def metrics(self) -> dict:
+        return self.model.metrics
+
+
+def _load_data(data_path, constraint_path):
+    """(constraint, (inputs, targets, content hash)) of a dataset file; checks the constraint."""
+    from models.constraint import load_constraint
+    from models.datasets import load_dataset
+    from models.errors import DatasetError
+
+    ds = load_dataset(data_path)
+    c = ds.constraint()
+    if c is None or ds.inputs.shape[1:] != (4,) or ds.targets.shape[1:] != (4,):
+        raise DatasetError(f"--data: {data_path} is not a quaternion dataset with a constraint "
+                           "(make one with `rig dataset make --kind quaternion`)")
+    if constraint_path is not None and load_constraint(constraint_path) != c:
+        raise DatasetError(f"--data: {data_path} was made for constraint {c.name!r}, which "
+                           f"differs from --constraint {constraint_path}")
+    return c, (ds.inputs, ds.targets, ds.content_hash())
+
+
+def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -> TrainResult:
+    """Build or train the model, export it; ``echo`` receives the progress lines and the
+    summary (what ``rig train`` prints)."""
+    import numpy as np
+
+    from models.constraint import load_constraint
+    from models.errors import ConstraintError
+    from models.nn.config import get_config, load_config
+    from models.nn.train import train_correction
+    from models.onnx_io import export_onnx
+
+    preset = request.preset
+    cfg = load_config(request.config, preset) if request.config else get_config(preset)
+    patterns = None
+    if request.data is not None:
+        constraint, patterns = _load_data(request.data, request.constraint)
+    elif request.constraint is None:
+        raise ConstraintError("--constraint: required (or --data with a dataset file)")
+    else:
+        constraint = load_constraint(request.constraint)
+    is_field = cfg["model"]["method"] == "field"
+    gens = cfg["evolution"]["generations"]
+    src = f" on {len(patterns[0])} patterns of {request.data}" if patterns is not None else ""
+    if is_field:
+        echo(f"building {constraint.name!r}: preset {preset}, swing field on a "
+             f"{cfg['model']['grid']}-node grid + exact twist clamp{src}")
+    else:
+        echo(f"training {constraint.name!r}: preset {preset}, population "
+             f"{cfg['evolution']['population']}, {gens} generations, ≤ "
+             f"{cfg['training']['max_epochs']} epochs, {cfg['evolution']['repeats']} run(s){src}")
+
+    def progress(st):
+        run = f"run {st.run}/{st.runs}  " if st.runs > 1 else ""
+        echo(f"  {run}generation {st.generation:3d}/{gens}  best fitness {st.best_fitness:.6f}"
+             f"  val MSE {st.best_val_mse:.3e}  hidden {st.best_hidden:2d}  "
+             f"elapsed {st.elapsed_s:6.1f} s")
+
+    t0 = time.perf_counter()
+    model = train_correction(constraint, cfg, np.random.default_rng(request.seed), progress,
+                             patterns=patterns)
+    extra = {"preset": preset, "seed": request.seed, "config": cfg}
+    if request.data is not None:
+        extra["data_file"] = str(request.data)
+    path = export_onnx(model.network, request.out, constraint_yaml=constraint.to_yaml(),
+                       training_data_sha256=model.data_sha256, metrics=model.metrics,
+                       extra=extra)
+    seconds = time.perf_counter() - t0
+    what = ("swing field" if is_field else
+            f"{model.network.n_hidden} hidden nodes, {model.network.n_links} links")
+    echo(f"wrote {path} ({what}) in {seconds:.1f} s; training-data sha256 "
+         f"{model.data_sha256[:16]}…; held-out metrics:")
+    for line in metric_lines(model.metrics):
+        echo(line)
+    result = TrainResult(model, Path(path), seconds, enforcement_warnings(model.metrics))
+    for w in result.warnings:
+        echo(f"warning: {w}")
+    return result
+
+
+def enforcement_warnings(metrics: dict) -> list[str]:
+    """Why a freshly trained model should not be trusted to enforce limits (empty when it
+    meets :data:`ENFORCEMENT_TARGETS`): the live supervisor still projects every goal, but the
+    model's corrections would be overridden on every such input."""
+    out = []
+    frac = metrics.get("frac_invalid_violating_1deg")
+    if frac is not None and frac > ENFORCEMENT_TARGETS["frac_invalid_violating_1deg"]:
+        worst = metrics.get("max_violation_deg")
+        out.append(f"this model leaves {100 * frac:.1f} % of the held-out invalid "
+                   "orientations more than 1° outside the constraint"
+                   + (f" (worst {worst:.0f}°)" if worst is not None else "")
+                   + "; for enforcement use the default preset 'field', which does not")
+    err = metrics.get("mean_3d_error_pct")
+    if err is not None and err > ENFORCEMENT_TARGETS["mean_3d_error_pct"] and not out:
+        out.append(f"this model's mean 3-D error is {err:.2f} % (the target for enforcement "
+                   "is 0.8 %); for enforcement use the default preset 'field'")
+    return out
