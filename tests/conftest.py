@@ -3,7 +3,8 @@
 ``no_leaks`` (autouse) fails any test that leaves a thread, a child process or a pseudo-terminal
 running: simulators must be shut down by the test (context managers, fixtures), never left to
 the interpreter's exit. ``pg_server`` / ``db_url``: the store on SQLite and on a private
-PostgreSQL server. Hypothesis runs derandomized, without an example database (the ``ci``
+PostgreSQL server. ``rig_cli``: runs ``rig ARGS`` in-process and returns (exit status, stdout,
+stderr). Hypothesis runs derandomized, without an example database (the ``ci``
 profile, at the end of this file).
 """
 
@@ -14,6 +15,21 @@ import threading
 import time
 
 import pytest
+
+
+@pytest.fixture
+def rig_cli(capsys):
+    """``rig_cli(args)`` runs ``rig`` with ``args`` in this process (the entry point
+    :func:`rig.cli.main`, which always exits) and returns ``(exit status, stdout, stderr)``."""
+    from rig.cli import main
+
+    def run(args):
+        with pytest.raises(SystemExit) as exc:
+            main([str(a) for a in args])
+        out = capsys.readouterr()
+        return exc.value.code, out.out, out.err
+
+    return run
 
 
 def _open_ptys() -> set[str]:

@@ -7,8 +7,6 @@ import sys
 
 import pytest
 
-from rig.cli import main
-
 GOOD = (
     "name: demo\n"
     "swing: {cone: {centre: [1, 0, 0], radius_deg: 60}}\n"
@@ -16,17 +14,10 @@ GOOD = (
 )
 
 
-def run(argv, capsys):
-    with pytest.raises(SystemExit) as info:
-        main(argv)
-    out, err = capsys.readouterr()
-    return info.value.code, out, err
-
-
-def test_check_summarises_a_good_file(tmp_path, capsys):
+def test_check_summarises_a_good_file(tmp_path, rig_cli):
     path = tmp_path / "good.yaml"
     path.write_text(GOOD)
-    code, out, err = run(["constraint", "check", str(path), "--samples", "20000"], capsys)
+    code, out, err = rig_cli(["constraint", "check", str(path), "--samples", "20000"])
     assert code == 0, err
     assert "OK" in out and "radius 60 deg" in out and "-45 .. 45 deg" in out
     # valid fraction of a 60° cone with ±45° twist: (1 - cos 60°)/2 * 90/360 = 6.25 %
@@ -48,17 +39,17 @@ def test_check_summarises_a_good_file(tmp_path, capsys):
         ),
     ],
 )
-def test_check_reports_bad_files_in_one_line(tmp_path, capsys, content, expected):
+def test_check_reports_bad_files_in_one_line(tmp_path, content, expected, rig_cli):
     path = tmp_path / "bad.yaml"
     path.write_text(content)
-    code, _, err = run(["constraint", "check", str(path)], capsys)
+    code, _, err = rig_cli(["constraint", "check", str(path)])
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("rig: error: ")
     assert str(path) in err and expected in err
     assert "Traceback" not in err
 
 
-def test_check_summarises_swing_dependent_twist_and_binding(tmp_path, capsys):
+def test_check_summarises_swing_dependent_twist_and_binding(tmp_path, rig_cli):
     path = tmp_path / "table.yaml"
     path.write_text(
         "name: table\njoint: shoulder\nside: left\npatient: P-3\n"
@@ -69,7 +60,7 @@ def test_check_summarises_swing_dependent_twist_and_binding(tmp_path, capsys):
         "      - {direction: [0, 1, 0], min_deg: -10, max_deg: 10}\n"
         "provenance: {session: 7, samples: 1200}\n"
     )
-    code, out, err = run(["constraint", "check", str(path), "--samples", "20000"], capsys)
+    code, out, err = rig_cli(["constraint", "check", str(path), "--samples", "20000"])
     assert code == 0, err
     assert "by swing    2 points, bandwidth 30 deg" in out
     assert "bound to    joint shoulder, side left, patient P-3" in out
@@ -79,8 +70,8 @@ def test_check_summarises_swing_dependent_twist_and_binding(tmp_path, capsys):
     assert 0.5 < frac < 6.25
 
 
-def test_check_missing_file(tmp_path, capsys):
-    code, _, err = run(["constraint", "check", str(tmp_path / "none.yaml")], capsys)
+def test_check_missing_file(tmp_path, rig_cli):
+    code, _, err = rig_cli(["constraint", "check", str(tmp_path / "none.yaml")])
     assert code == 2 and "file not found" in err
 
 
@@ -106,23 +97,23 @@ BOMB = GOOD + "provenance:\n  a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, l
     ["train", "--constraint", "{path}", "--out", "{tmp}/m.onnx"],
     ["rom", "--constraint", "{path}"],
 ])
-def test_yaml_anchors_and_aliases_are_refused_with_one_line(tmp_path, capsys, argv):
+def test_yaml_anchors_and_aliases_are_refused_with_one_line(tmp_path, argv, rig_cli):
     path = tmp_path / "bomb.yaml"
     path.write_text(BOMB)
     argv = [a.format(path=path, tmp=tmp_path) for a in argv]
-    code, _, err = run(argv, capsys)
+    code, _, err = rig_cli(argv)
     assert code == 2
     assert err.startswith("rig: error: ") and len(err.strip().splitlines()) == 1
     assert str(path) in err and "anchors are not accepted" in err
     assert not (tmp_path / "m.onnx").exists()
 
 
-def test_a_rig_config_with_an_alias_is_refused(tmp_path, capsys):
+def test_a_rig_config_with_an_alias_is_refused(tmp_path, rig_cli):
     path = tmp_path / "rig.yaml"
     path.write_text("name: &n my-rig\njoint: {name: *n, side: right, parent: thorax, "
                     "child: humerus}\n")
-    code, _, err = run(["record", "--rig", str(path), "--db", str(tmp_path / "x.db"),
-                        "--patient", "P-1", "--duration", "1"], capsys)
+    code, _, err = rig_cli(["record", "--rig", str(path), "--db", str(tmp_path / "x.db"),
+                            "--patient", "P-1", "--duration", "1"])
     assert code == 2 and "anchors are not accepted" in err and str(path) in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.db").exists()

@@ -10,24 +10,15 @@ from pathlib import Path
 import pytest
 
 from models.datasets import load_dataset
-from rig.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-def run(argv, capsys):
-    with pytest.raises(SystemExit) as exc:
-        main(argv)
-    out = capsys.readouterr()
-    return exc.value.code, out.out, out.err
-
-
-def test_make_quaternion_with_split_and_info(tmp_path, capsys):
+def test_make_quaternion_with_split_and_info(tmp_path, rig_cli):
     out = tmp_path / "c.npz"
-    code, text, err = run(
+    code, text, err = rig_cli(
         ["dataset", "make", "--shape", "c-shape", "--n", "400", "--seed", "5",
          "--split", "0.5,0.25,0.25", "--hemisphere", "centre", "--out", str(out)],
-        capsys,
     )  # fmt: skip
     assert code == 0, err
     for part, size in (("train", 200), ("validation", 100), ("test", 100)):
@@ -37,7 +28,7 @@ def test_make_quaternion_with_split_and_info(tmp_path, capsys):
         assert len(ds) == size and ds.meta["split"] == part
         assert ds.meta["generator"]["hemisphere"] == "centre" and ds.meta["seed"] == 5
     assert "inner-valid" in text and "valid fraction 0.500" in text
-    code, text, err = run(["dataset", "info", str(tmp_path / "c-train.npz")], capsys)
+    code, text, err = rig_cli(["dataset", "info", str(tmp_path / "c-train.npz")])
     assert code == 0, err
     assert "c-shape" in text and "PCA of 200 quaternions" in text and "PC4" in text
 
@@ -53,9 +44,9 @@ def test_make_quaternion_with_split_and_info(tmp_path, capsys):
          "quaternion", (4, 4)),
     ],
 )  # fmt: skip
-def test_make_each_kind(tmp_path, capsys, args, kind, dims):
+def test_make_each_kind(tmp_path, args, kind, dims, rig_cli):
     out = tmp_path / "d.npz"
-    code, text, err = run(["dataset", "make", "--n", "50", "--out", str(out), *args], capsys)
+    code, text, err = rig_cli(["dataset", "make", "--n", "50", "--out", str(out), *args])
     assert code == 0, err
     ds = load_dataset(out)
     assert ds.meta["kind"] == kind and (ds.inputs.shape[1], ds.targets.shape[1]) == dims
@@ -82,21 +73,21 @@ def test_make_each_kind(tmp_path, capsys, args, kind, dims):
         (["--constraint", "/nonexistent/c.yaml", "--n", "10"], "/nonexistent/c.yaml"),
     ],
 )
-def test_bad_make_requests_are_one_line(tmp_path, capsys, args, word):
-    code, _, err = run(["dataset", "make", "--out", str(tmp_path / "x.npz"), *args], capsys)
+def test_bad_make_requests_are_one_line(tmp_path, args, word, rig_cli):
+    code, _, err = rig_cli(["dataset", "make", "--out", str(tmp_path / "x.npz"), *args])
     assert code == 2
     assert err.startswith("rig: error: ") and err.count("\n") == 1, err
     assert word in err and "Traceback" not in err
     assert not (tmp_path / "x.npz").exists()
 
 
-def test_missing_out_and_bad_info_files(tmp_path, capsys):
-    code, _, err = run(["dataset", "make", "--cone-radius", "20", "--n", "10"], capsys)
+def test_missing_out_and_bad_info_files(tmp_path, rig_cli):
+    code, _, err = rig_cli(["dataset", "make", "--cone-radius", "20", "--n", "10"])
     assert code == 2 and "--out" in err and err.count("\n") == 1
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"\x00" * 64)
     for path in (bad, tmp_path / "absent.npz"):
-        code, _, err = run(["dataset", "info", str(path)], capsys)
+        code, _, err = rig_cli(["dataset", "info", str(path)])
         assert code == 2 and str(path) in err and err.count("\n") == 1, err
 
 

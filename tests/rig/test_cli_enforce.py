@@ -23,13 +23,6 @@ from rig.sim.dynamixel import start_servo_bus
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as exc:
-        main(argv)
-    out = capsys.readouterr()
-    return exc.value.code, out.out, out.err
-
-
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("enforce")
@@ -70,7 +63,7 @@ def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="s
     ("tolerance", "--tolerance-deg 720.0: at most 10°"),
     ("binary-targets", "img.png: not a text CSV file"),
 ])
-def test_user_mistakes_are_one_line(files, tmp_path, capsys, case, message):
+def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
     argv = {
         "no-model": _argv(files, model="missing.onnx"),
         "not-onnx": _argv(files, model="cone.yaml"),
@@ -97,7 +90,7 @@ def test_user_mistakes_are_one_line(files, tmp_path, capsys, case, message):
     end = rig_text.index("\n", start)
     (tmp_path / "rig.yaml").write_text(rig_text[:start] + "  port: /dev/ttyUSB97"
                                        + rig_text[end:])
-    code, out, err = _run(argv, capsys)
+    code, out, err = rig_cli(argv)
     assert code == 2, (out, err)
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("rig: error: "), err
@@ -107,13 +100,13 @@ def test_user_mistakes_are_one_line(files, tmp_path, capsys, case, message):
     assert "enforcing" not in out and "cycles" not in out, out
 
 
-def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, capsys):
+def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, rig_cli):
     from rig.store import open_store
 
     tel, summ, db = tmp_path / "t.csv", tmp_path / "s.json", tmp_path / "rig.db"
-    code, out, err = _run(_argv(files, "--duration", "1", "--telemetry", str(tel),
-                                "--summary-json", str(summ), "--db", str(db),
-                                "--patient", "P-0042"), capsys)
+    code, out, err = rig_cli(_argv(files, "--duration", "1", "--telemetry", str(tel),
+                                  "--summary-json", str(summ), "--db", str(db),
+                                  "--patient", "P-0042"))
     assert code == 0, err
     assert "enforcing 'original'" in out and "max violation" in out
     s = json.loads(summ.read_text())
@@ -140,7 +133,7 @@ def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, capsys):
         assert sess["kind"] == "enforce" and sess["pseudonym"] == "P-0042"
 
 
-def test_csv_targets_and_force_model(files, tmp_path, capsys):
+def test_csv_targets_and_force_model(files, tmp_path, rig_cli):
     lines = ["t_s,w,x,y,z"]
     for k in range(40):  # 0.4 s: a swing out past the boundary, then a NaN row
         a = np.radians(2.0 * k)
@@ -148,8 +141,8 @@ def test_csv_targets_and_force_model(files, tmp_path, capsys):
     lines.append("0.40,nan,nan,nan,nan")
     (tmp_path / "traj.csv").write_text("\n".join(lines) + "\n")
     summ = tmp_path / "s.json"
-    code, out, err = _run(_argv(files, "--summary-json", str(summ), "--force-model",
-                                model="cone.onnx", targets=str(tmp_path / "traj.csv")), capsys)
+    code, out, err = rig_cli(_argv(files, "--summary-json", str(summ), "--force-model",
+                                  model="cone.onnx", targets=str(tmp_path / "traj.csv")))
     assert code == 0, err
     assert "warning:" in out and "--force-model" in out
     s = json.loads(summ.read_text())
@@ -196,10 +189,10 @@ def test_sigint_leaves_the_servos_held(files, tmp_path):
         bus.close()
 
 
-def test_mirroring_an_imu_worn_limb(files, tmp_path, capsys):
+def test_mirroring_an_imu_worn_limb(files, tmp_path, rig_cli):
     tel = tmp_path / "t.csv"
-    code, out, err = _run(_argv(files, "--duration", "1.5", "--telemetry", str(tel),
-                                targets="mirror:sim-imu"), capsys)
+    code, out, err = rig_cli(_argv(files, "--duration", "1.5", "--telemetry", str(tel),
+                                  targets="mirror:sim-imu"))
     if code != 0 and tel.exists():  # say what the bus did
         with tel.open() as fh:
             tail = [(r["cycle"], r["t_s"], r["faults"], r["read_ms"], r["cycle_ms"])
@@ -216,7 +209,7 @@ def test_mirroring_an_imu_worn_limb(files, tmp_path, capsys):
     assert max(float(r["violation_deg"]) for r in rows) <= 1.0
 
 
-def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys):
+def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys, rig_cli):
     from models.shapes import load_shape
     from rig.store import open_store
 
@@ -228,8 +221,8 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
         store.add_boundary(sid, orig.to_yaml(), {"source": "test"})
         store.end_session(sid)
     summ = tmp_path / "s.json"
-    code, _, err = _run(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
-                              str(sid), "--summary-json", str(summ)), capsys)
+    code, _, err = rig_cli(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
+                                str(sid), "--summary-json", str(summ)))
     assert code == 0, err
     s = json.loads(summ.read_text())
     assert s["constraint_source"] == f"session {sid}"
@@ -247,14 +240,14 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
               str(tmp_path / "p2.onnx")])
     assert exc.value.code == 0
     capsys.readouterr()
-    code, _, err = _run(["enforce", "--rig", "sim-shoulder", "--model", str(tmp_path / "p2.onnx"),
-                         "--targets", "script:hold", "--db", str(db), "--session", str(sid)],
-                        capsys)
+    code, _, err = rig_cli(["enforce", "--rig", "sim-shoulder", "--model",
+                            str(tmp_path / "p2.onnx"), "--targets", "script:hold", "--db",
+                            str(db), "--session", str(sid)])
     assert code == 2 and "model is for patient 'P-2', session" in err and "P-1" in err
 
 
-def test_quiet_prints_only_the_summary_line(files, capsys):
-    code, out, err = _run(_argv(files, "--duration", "0.3", "--quiet"), capsys)
+def test_quiet_prints_only_the_summary_line(files, rig_cli):
+    code, out, err = rig_cli(_argv(files, "--duration", "0.3", "--quiet"))
     assert code == 0, err
     lines = out.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("cycles ") and "max violation" in lines[0]

@@ -4,27 +4,17 @@ from __future__ import annotations
 
 import pytest
 
-from rig.cli import main
 
-
-def run(args, capsys):
-    with pytest.raises(SystemExit) as info:
-        main(args)
-    out = capsys.readouterr()
-    return info.value.code, out.out, out.err
-
-
-def test_scan_finds_servos_at_their_baud_rate(capsys):
-    code, out, err = run(["scan", "sim://dynamixel?ids=1,3&baud=57600&model=XL430-W250",
-                          "--ids", "0-3", "--latency-ms", "50"], capsys)
+def test_scan_finds_servos_at_their_baud_rate(rig_cli):
+    code, out, err = rig_cli(["scan", "sim://dynamixel?ids=1,3&baud=57600&model=XL430-W250",
+                              "--ids", "0-3", "--latency-ms", "50"])
     assert code == 0, err
     rows = [line.split() for line in out.splitlines()[1:]]
     assert rows == [["1", "XL430-W250", "48", "57600"], ["3", "XL430-W250", "48", "57600"]]
 
 
-def test_scan_one_baud(capsys):
-    code, out, _ = run(["scan", "sim://dynamixel?ids=2", "--baud", "1000000", "--ids", "1-2"],
-                       capsys)
+def test_scan_one_baud(rig_cli):
+    code, out, _ = rig_cli(["scan", "sim://dynamixel?ids=2", "--baud", "1000000", "--ids", "1-2"])
     assert code == 0 and out.splitlines()[1].split()[:2] == ["2", "XM430-W350"]
 
 
@@ -37,7 +27,7 @@ def test_scan_one_baud(capsys):
     (["scan", "sim://dynamixel", "--ids", "1-x"], "--ids"),
     (["scan", "sim://dynamixel?idz=1"], "unknown key 'idz'"),
 ])
-def test_scan_mistakes_are_one_line(args, match, capsys):
-    code, _, err = run(args, capsys)
+def test_scan_mistakes_are_one_line(args, match, rig_cli):
+    code, _, err = rig_cli(args)
     assert code == 2
     assert err.startswith("rig: error: ") and err.count("\n") == 1 and match in err

@@ -10,17 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from rig.cli import main
 from rig.store import open_store
 from rig.store import schema as S
 from rig.store.io import read_samples_csv, read_sto
-
-
-def run(args, capsys):
-    with pytest.raises(SystemExit) as exc:
-        main(args)
-    out, err = capsys.readouterr()
-    return exc.value.code, out, err
 
 
 @pytest.fixture
@@ -44,19 +36,19 @@ def db(tmp_path):
     return path
 
 
-def test_session_list_filters_and_pages(db, capsys):
-    code, out, err = run(["session", "list", "--db", str(db), "--patient", "P-0002"], capsys)
+def test_session_list_filters_and_pages(db, rig_cli):
+    code, out, err = rig_cli(["session", "list", "--db", str(db), "--patient", "P-0002"])
     assert code == 0 and "P-0002" in out and "P-0001" not in out
-    code, out, _ = run(["session", "list", "--db", str(db), "--limit", "1", "--json"], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db), "--limit", "1", "--json"])
     assert [r["pseudonym"] for r in json.loads(out)] == ["P-0002"]  # the newest
-    code, out, _ = run(["session", "list", "--db", str(db), "--since", "2999-01-01"], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db), "--since", "2999-01-01"])
     assert code == 0 and out.strip() == "no sessions"
-    code, _, err = run(["session", "list", "--db", str(db), "--since", "yesterday"], capsys)
+    code, _, err = rig_cli(["session", "list", "--db", str(db), "--since", "yesterday"])
     assert code == 2 and "--since 'yesterday'" in err and err.count("\n") == 1
 
 
-def test_session_list_shows_pseudonym_kind_counts_status(db, capsys):
-    code, out, err = run(["session", "list", "--db", str(db)], capsys)
+def test_session_list_shows_pseudonym_kind_counts_status(db, rig_cli):
+    code, out, err = rig_cli(["session", "list", "--db", str(db)])
     assert code == 0 and err == ""
     lines = out.splitlines()
     assert lines[0].split() == ["id", "patient", "kind", "joint", "started", "recorded",
@@ -66,28 +58,28 @@ def test_session_list_shows_pseudonym_kind_counts_status(db, capsys):
     assert "400 (humerus 200, thorax 200)" in lines[1] and "completed" in lines[1]
     assert "P-0002" in lines[2] and "enforce" in lines[2] and "1 run" in lines[2]
     assert "running (not ended)" in lines[2]  # written by this process: alive
-    code, out, _ = run(["session", "list", "--db", str(db), "--json"], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db), "--json"])
     rows = json.loads(out)
     assert [r["samples"] for r in rows] == [400, 0] and rows[0]["dropped"] == 2
 
 
-def test_missing_database_is_an_error_not_a_new_file(tmp_path, capsys):
+def test_missing_database_is_an_error_not_a_new_file(tmp_path, rig_cli):
     missing = tmp_path / "typo.db"
-    code, out, err = run(["session", "list", "--db", str(missing)], capsys)
+    code, out, err = rig_cli(["session", "list", "--db", str(missing)])
     assert code == 2 and out == ""
     assert err.startswith("rig: error: no database at") and err.count("\n") == 1
     assert not missing.exists()
 
 
-def test_export_sto_and_csv(db, tmp_path, capsys):
-    code, out, _ = run(["export", "--db", str(db), "--session", "1", "--format", "sto",
-                        "--out", str(tmp_path / "s1.sto")], capsys)
+def test_export_sto_and_csv(db, tmp_path, rig_cli):
+    code, out, _ = rig_cli(["export", "--db", str(db), "--session", "1", "--format", "sto",
+                            "--out", str(tmp_path / "s1.sto")])
     assert code == 0 and "wrote 200 rows (thorax_imu, humerus_imu)" in out
     table = read_sto(tmp_path / "s1.sto")
     with open_store(db, create=False) as store:
         np.testing.assert_array_equal(table.get("humerus"), store.samples(1, "humerus")["q"])
-    code, out, _ = run(["export", "--db", str(db), "--session", "1",
-                        "--out", str(tmp_path / "s1.csv")], capsys)  # format from the suffix
+    code, out, _ = rig_cli(["export", "--db", str(db), "--session", "1",
+                            "--out", str(tmp_path / "s1.csv")])  # format from the suffix
     assert code == 0 and "wrote 400 rows" in out
     assert read_samples_csv(tmp_path / "s1.csv")["t"].size == 400
 
@@ -101,17 +93,16 @@ def test_export_sto_and_csv(db, tmp_path, capsys):
         (["--session", "1"], "cannot tell the format from the suffix"),
     ],
 )
-def test_export_mistakes_are_one_line_exit_2(db, tmp_path, capsys, args, message):
-    code, out, err = run(["export", "--db", str(db), *args, "--out", str(tmp_path / "x.out")],
-                         capsys)
+def test_export_mistakes_are_one_line_exit_2(db, tmp_path, args, message, rig_cli):
+    code, out, err = rig_cli(["export", "--db", str(db), *args, "--out", str(tmp_path / "x.out")])
     assert code == 2, (out, err)
     assert err.startswith("rig: error:") and message in err and err.count("\n") == 1
     assert not (tmp_path / "x.out").exists()
 
 
-def test_export_into_a_missing_directory(db, tmp_path, capsys):
-    code, _, err = run(["export", "--db", str(db), "--session", "1", "--format", "sto",
-                        "--out", str(tmp_path / "nope" / "x.sto")], capsys)
+def test_export_into_a_missing_directory(db, tmp_path, rig_cli):
+    code, _, err = rig_cli(["export", "--db", str(db), "--session", "1", "--format", "sto",
+                            "--out", str(tmp_path / "nope" / "x.sto")])
     assert code == 2 and "does not exist" in err
 
 
@@ -127,13 +118,13 @@ def test_session_list_through_the_console_script(db):
     assert r.returncode == 0 and "P-0001" in r.stdout
 
 
-def test_session_list_on_postgresql(pg_server, capsys):
+def test_session_list_on_postgresql(pg_server, rig_cli):
     url = pg_server.new_database()
     with open_store(url) as store:
         sid = store.start_session(store.add_patient("PG-1"))
         with store.sample_writer(sid) as w:
             w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
-    code, out, _ = run(["session", "list", "--db", url], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", url])
     assert code == 0 and "PG-1" in out and "1 (humerus 1)" in out
 
 
@@ -154,20 +145,20 @@ def _orphan(url, pid):
             conn.execute(S.sessions.update().where(S.sessions.c.id == 2).values(writer_pid=pid))
 
 
-def test_killed_session_is_listed_interrupted_and_closed(db, capsys):
+def test_killed_session_is_listed_interrupted_and_closed(db, rig_cli):
     _orphan(db, _dead_pid())
-    code, out, _ = run(["session", "list", "--db", str(db)], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db)])
     assert code == 0
     lines = out.splitlines()
     assert "interrupted (not closed)" in lines[2] and "5 (humerus 5)" in lines[2]
     assert lines[3].startswith("session 2: writer pid ") and "is gone" in lines[3]
     assert f"rig session close --db {db} --session 2" in lines[3]
-    code, out, _ = run(["session", "list", "--db", str(db), "--json"], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db), "--json"])
     row = json.loads(out)[1]
     assert row["status"] == "running" and row["liveness"]["state"] == "interrupted"
     assert row["samples"] == 5 and row["last_sample_at"] is not None
 
-    code, out, err = run(["session", "close", "--db", str(db), "--session", "2"], capsys)
+    code, out, err = rig_cli(["session", "close", "--db", str(db), "--session", "2"])
     assert code == 0 and err == ""
     assert out.startswith("session 2 closed as interrupted: 5 samples, ended at its last "
                           "sample")
@@ -175,10 +166,10 @@ def test_killed_session_is_listed_interrupted_and_closed(db, capsys):
         s = store.get_session(2)
         assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
         assert [r["status"] for r in store.runs(2)] == ["completed"]  # it had ended
-    code, out, _ = run(["session", "list", "--db", str(db)], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", str(db)])
     assert out.splitlines()[2].endswith("interrupted") and len(out.splitlines()) == 3
-    code, out, _ = run(["export", "--db", str(db), "--session", "2", "--format", "csv",
-                        "--out", str(db.parent / "s2.csv")], capsys)
+    code, out, _ = rig_cli(["export", "--db", str(db), "--session", "2", "--format", "csv",
+                            "--out", str(db.parent / "s2.csv")])
     assert code == 0 and "wrote 5 rows" in out
 
 
@@ -191,22 +182,21 @@ def test_killed_session_is_listed_interrupted_and_closed(db, capsys):
         (["--session", "2", "--stale-after", "0"], "--stale-after must be > 0 seconds"),
     ],
 )
-def test_close_mistakes_are_one_line_exit_2(db, capsys, args, message):
-    code, out, err = run(["session", "close", "--db", str(db), *args], capsys)
+def test_close_mistakes_are_one_line_exit_2(db, args, message, rig_cli):
+    code, out, err = rig_cli(["session", "close", "--db", str(db), *args])
     assert code == 2 and out == ""
     assert err.startswith("rig: error:") and message in err and err.count("\n") == 1
     with open_store(db, create=False) as store:
         assert store.get_session(2)["status"] == "running"
 
 
-def test_close_live_session_with_force(db, capsys):
-    code, out, _ = run(["session", "close", "--db", str(db), "--session", "2", "--force"],
-                       capsys)
+def test_close_live_session_with_force(db, rig_cli):
+    code, out, _ = rig_cli(["session", "close", "--db", str(db), "--session", "2", "--force"])
     assert code == 0 and "closed as interrupted: 0 samples" in out
     assert f"writer pid {os.getpid()}" in out
 
 
-def test_close_on_postgresql(pg_server, capsys):
+def test_close_on_postgresql(pg_server, rig_cli):
     url = pg_server.new_database()
     with open_store(url) as store:
         s1 = store.start_session(store.add_patient("PG-1"))
@@ -214,9 +204,9 @@ def test_close_on_postgresql(pg_server, capsys):
         sid = store.start_session(store.add_patient("PG-2"))
         assert sid == 2
     _orphan(url, _dead_pid())
-    code, out, _ = run(["session", "list", "--db", url], capsys)
+    code, out, _ = rig_cli(["session", "list", "--db", url])
     assert code == 0 and "interrupted (not closed)" in out.splitlines()[2]
-    code, out, _ = run(["session", "close", "--db", url, "--session", "2"], capsys)
+    code, out, _ = rig_cli(["session", "close", "--db", url, "--session", "2"])
     assert code == 0 and "closed as interrupted: 5 samples" in out
     with open_store(url, create=False) as store:
         assert store.get_session(2)["status"] == "interrupted"
@@ -291,7 +281,7 @@ def _read_only_commands(rig, db, sid, share):
     assert r.returncode == 2 and "read-only" in r.stderr and r.stderr.count("\n") == 1
 
 
-def test_another_applications_database_is_refused_untouched(tmp_path, capsys):
+def test_another_applications_database_is_refused_untouched(tmp_path, rig_cli):
     import sqlite3
 
     other = tmp_path / "other.db"
@@ -299,11 +289,11 @@ def test_another_applications_database_is_refused_untouched(tmp_path, capsys):
         conn.execute("CREATE TABLE invoices (id INTEGER PRIMARY KEY, total REAL)")
         conn.execute("INSERT INTO invoices (total) VALUES (12.5)")
     before = other.read_bytes()
-    code, _, err = run(["record", "--rig", "sim-shoulder", "--db", str(other), "--patient",
-                        "P-1", "--duration", "1"], capsys)
+    code, _, err = rig_cli(["record", "--rig", "sim-shoulder", "--db", str(other), "--patient",
+                            "P-1", "--duration", "1"])
     assert code == 2 and "not a rig database" in err and "invoices" in err
     assert err.count("\n") == 1
-    code, _, err = run(["session", "list", "--db", str(other)], capsys)
+    code, _, err = rig_cli(["session", "list", "--db", str(other)])
     assert code == 2 and "not a rig database" in err
     assert other.read_bytes() == before
     with sqlite3.connect(other) as conn:
@@ -315,13 +305,13 @@ def test_another_applications_database_is_refused_untouched(tmp_path, capsys):
     ("P-19700101", "a date"), ("Anna-Lena Müller", "a person's name"),
     ("jsmith@clinic.org", "an e-mail address"), ("+44 20 7946 0958", "a phone number"),
 ])
-def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, capsys, pseudonym, what):
+def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, pseudonym, what, rig_cli):
     from rig.store.store import pseudonym_concerns
 
     assert pseudonym_concerns(pseudonym)[0].startswith(what.split(" and ")[0][:6])
-    code, _, err = run(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
-                          "--patient", pseudonym, "--duration", "0.3", "--no-calibration",
-                          "--no-rom", "--display", "plain"], capsys)
+    code, _, err = rig_cli(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
+                              "--patient", pseudonym, "--duration", "0.3", "--no-calibration",
+                              "--no-rom", "--display", "plain"])
     assert code == 0, err
     warnings = [ln for ln in err.splitlines() if ln.startswith("warning: --patient")]
     assert len(warnings) == 1 and what in warnings[0] and "pseudonyms only" in warnings[0]

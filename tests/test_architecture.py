@@ -1,0 +1,162 @@
+"""The rooms and arrows of the code (docs/architecture in README.md's map): computed from the
+source's import statements, every one of them — at module level and inside functions, since a
+lazy import is still a dependency — except those under ``if TYPE_CHECKING:``.
+
+- no import cycle between modules anywhere (importing ``a.b.c`` from outside ``a.b`` runs
+  ``a.b``'s ``__init__``: that edge counts too);
+- ``firmware_protocol`` and ``models`` import nothing of ours, ``calibration`` only ``models``;
+- nothing in ``rig/`` imports the CLI (``rig.commands``, ``rig.cli``) but the CLI itself and
+  ``python -m rig`` (``rig/__main__.py``).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("firmware_protocol", "models", "calibration", "rig")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _type_checking_lines(tree: ast.AST) -> set[int]:
+    lines: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            for sub in node.body:
+                lines.update(range(sub.lineno, (sub.end_lineno or sub.lineno) + 1))
+    return lines
+
+
+def _imports(name: str, path: Path) -> set[str]:
+    """The modules of ours that ``name`` imports (each resolved to the longest module name)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    skip = _type_checking_lines(tree)
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if getattr(node, "lineno", None) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in MODULES else mod
+                       for a in node.names]
+        else:
+            continue
+        for t in targets:
+            while t and t not in MODULES:
+                t = t.rpartition(".")[0]
+            if not t or t == name:
+                continue
+            found.add(t)
+            parent = t.rpartition(".")[0]
+            while parent and not (name == parent or name.startswith(parent + ".")):
+                if parent in MODULES:
+                    found.add(parent)
+                parent = parent.rpartition(".")[0]
+    return found
+
+
+GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    out: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            for w in children:
+                if w not in index:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        out.append(sorted(comp))
+    return out
+
+
+def test_the_graph_sees_the_imports_it_should():
+    # a known arrow of each kind: module level, inside a function, relative, a package's init
+    assert "rig.errors" in GRAPH["rig.cli"]
+    assert "rig.readback" in GRAPH["rig.record.session"]  # imported inside a function
+    assert "rig.readback.boundary" in GRAPH["rig.commands.boundary"]
+    assert "rig.readback" in GRAPH["rig.commands.boundary"]  # the package's __init__ runs too
+    assert "models.quaternion" in GRAPH["calibration.coverage"]
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles():
+    cycles = _cycles(GRAPH)
+    assert not cycles, "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
+
+
+@pytest.mark.parametrize("package, allowed", [
+    ("firmware_protocol", {"firmware_protocol"}),
+    ("models", {"models"}),
+    ("calibration", {"calibration", "models"}),
+])
+def test_library_packages_import_only_downwards(package, allowed):
+    wrong = sorted(f"{m} imports {t}" for m, ts in GRAPH.items()
+                   if m.split(".")[0] == package for t in ts if t.split(".")[0] not in allowed)
+    assert not wrong, wrong
+
+
+def test_nothing_in_rig_imports_the_cli():
+    def is_cli(m: str) -> bool:
+        return m in ("rig.cli", "rig.commands") or m.startswith("rig.commands.")
+
+    wrong = sorted(f"{m} imports {t}" for m, ts in GRAPH.items()
+                   if m.startswith("rig.") and not is_cli(m) and m != "rig.__main__"
+                   for t in ts if is_cli(t))
+    assert not wrong, wrong
