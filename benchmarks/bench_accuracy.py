@@ -19,26 +19,23 @@ thesis-style test patterns): ``presets``, ``activations``, ``capacity``, ``sweep
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"
-
 import argparse
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from bench_onnx import single_latencies_ns  # benchmarks/ is on the path when run as a script
-from bench_peer import VanDenBergenClamp
+from common import single_latencies_ns
+from peers import VanDenBergenClamp
 
 from models import metrics as M
 from models.constraint import JointConstraint
 from models.nn.config import get_config
-from models.nn.train import _oracle, train_correction, training_patterns
+from models.nn.train import train_correction, training_patterns
 from models.onnx_io import export_onnx, load_model
+from models.oracle import ConstraintOracle
 from models.shapes import load_shape
 
 
@@ -63,7 +60,7 @@ def run(label, c, preset, override, seed, quick) -> dict:
     t0 = time.perf_counter()
     m = train_correction(c, cfg, np.random.default_rng(seed))
     train_s = time.perf_counter() - t0
-    oracle = _oracle(c)
+    oracle = ConstraintOracle(c)
     with tempfile.TemporaryDirectory() as d:
         p = export_onnx(m.network, Path(d) / "m.onnx", constraint_yaml=c.to_yaml(),
                         training_data_sha256=m.data_sha256, metrics=m.metrics)
@@ -174,7 +171,7 @@ def targets(args) -> None:
     times: dict[tuple[str, str], list] = {}
     for sname, cs in sets.items():
         for i, (name, c) in enumerate(cs.items()):
-            oracle = _oracle(c)
+            oracle = ConstraintOracle(c)
             q = held_out_orientations(c, args.n, 50_000 + i, oracle=oracle)
             for meth in methods:
                 model, dt = _build(meth, c, i)

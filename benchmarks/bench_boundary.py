@@ -31,20 +31,13 @@ Run::
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
 import math
-import sys
+import os
 import time
-from pathlib import Path
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calibration import (
     BoundaryExtractor,

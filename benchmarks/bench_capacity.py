@@ -9,15 +9,11 @@ Run: python benchmarks/bench_capacity.py original 160 4000 3000 [--overshoot 0] 
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"  # one core, before numpy loads
-
 import argparse
 import json
 import time
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
 from models.nn.config import get_config

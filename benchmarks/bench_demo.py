@@ -16,11 +16,10 @@ import argparse
 import io
 import os
 import statistics
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 
 
 def main(argv=None) -> None:

@@ -23,14 +23,11 @@ import statistics
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from bench_dxl_loop import run_loop
+from common import child_env
+from common import raw_sync_loop as run_loop
 
 from rig.devices import DynamixelChain, load_rig_config
 
@@ -62,7 +59,7 @@ def driver_loop(port: str, cycles: int) -> tuple[list[float], list[float]]:
 
 
 def child_bus():
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = child_env()
     proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
                              "sim://dynamixel?ids=1,2,3&return_delay_us=0"],
                             stdout=subprocess.PIPE, text=True, env=env)

@@ -17,64 +17,14 @@ Run: ``python benchmarks/bench_dxl_loop.py [--cycles 1000] [--runs 3]``.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
-import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from dynamixel_sdk import (
-    COMM_SUCCESS,
-    GroupSyncRead,
-    GroupSyncWrite,
-    PacketHandler,
-    PortHandler,
-)
+from common import IDS, child_env
+from common import raw_sync_loop as run_loop
 
 from rig.sim.dynamixel import start_servo_bus
-
-IDS = (1, 2, 3)
-TORQUE, RETURN_DELAY, GOAL_POS, PRESENT_POS = 64, 9, 116, 132
-
-
-def run_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
-    """Cycle times in seconds; raises if any exchange fails."""
-    port = PortHandler(port_name)
-    if not port.openPort():
-        raise RuntimeError(f"cannot open {port_name}")
-    try:
-        ph = PacketHandler(2.0)
-        for i in IDS:
-            result, error = ph.write1ByteTxRx(port, i, TORQUE, 1)
-            if result != COMM_SUCCESS or error:
-                raise RuntimeError(f"torque on id {i}: {ph.getTxRxResult(result)} error {error}")
-        reader = GroupSyncRead(port, ph, PRESENT_POS, 4)
-        writer = GroupSyncWrite(port, ph, GOAL_POS, 4)
-        for i in IDS:
-            reader.addParam(i)
-            writer.addParam(i, [0, 8, 0, 0])
-        times = []
-        failures = 0
-        for k in range(cycles):
-            t0 = time.perf_counter()
-            result = reader.fastSyncRead() if fast else reader.txRxPacket()
-            if result != COMM_SUCCESS:
-                failures += 1
-            positions = [reader.getData(i, PRESENT_POS, 4) for i in IDS]
-            goal = 2048 + (k % 200) - 100
-            for i, _ in zip(IDS, positions, strict=True):
-                writer.changeParam(i, list(goal.to_bytes(4, "little")))
-            writer.txPacket()
-            times.append(time.perf_counter() - t0)
-        if failures:
-            print(f"    ({failures} failed reads)")
-        return times
-    finally:
-        port.closePort()
 
 
 def summarise(label: str, runs: list[list[float]]) -> None:
@@ -96,7 +46,7 @@ def in_thread(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[fl
 
 def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[float]]:
     out = []
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = child_env()
     for _ in range(runs):
         proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
                                  f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}"],

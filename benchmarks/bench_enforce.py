@@ -35,10 +35,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
+from common import child_env
 
 from models import quaternion as Q
 from models.onnx_io import load_model
@@ -61,7 +60,7 @@ SIM_URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
 def _train(constraint_path: Path, out: Path) -> Path:
     subprocess.run([sys.executable, "-m", "rig", "train", "--constraint", str(constraint_path),
                     "--out", str(out)], check=True, capture_output=True,
-                   env=dict(os.environ, PYTHONPATH=str(ROOT)))
+                   env=child_env())
     return out
 
 
@@ -72,7 +71,7 @@ class ChildBus:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "rig", "sim", "servos",
              "sim://dynamixel?ids=1,2,3&return_delay_us=0"], stdout=subprocess.PIPE, text=True,
-            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+            env=child_env())
         self.port = self.proc.stdout.readline().strip()
         return self
 

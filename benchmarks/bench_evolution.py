@@ -13,15 +13,11 @@ CPU time (the honest one-core figure on a shared machine). Never asserts on time
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"
-
 import argparse
 import statistics
 import time
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
 from models.constraint import JointConstraint

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
 from calibration.alignment import ImuJointCalibration

@@ -28,12 +28,8 @@ Figures, never assertions. Usage::
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
+import os
 import resource
 import statistics
 import subprocess
@@ -41,8 +37,8 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+
 RIG = [sys.executable, "-m", "rig"]
 
 

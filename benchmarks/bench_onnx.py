@@ -13,18 +13,15 @@ Never asserts on time.
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"
-
 import argparse
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
+from common import single_latencies_ns
 
 from models import quaternion as quat
 from models.nn import activations as act
@@ -39,19 +36,6 @@ def _network(kind: str, rng, h: int = 20) -> GMLP:
         return GMLP.from_population(init_params(spec, rng), spec, 0, input_map="swing")
     return GMLP.from_population(init_params(spec, rng), spec, 0,
                                 canonical_ref=np.array([1.0, 0.0, 0.0, 0.0]))
-
-
-def single_latencies_ns(model, qs: np.ndarray, warmup: int = 2000) -> list[int]:
-    """Per-call latency (ns) of ``model.correct_one`` over the orientations ``qs`` (N, 4)."""
-    rows = [tuple(map(float, r)) for r in qs]
-    for r in rows[:warmup]:
-        model.correct_one(*r)
-    lat = []
-    for r in rows:
-        t0 = time.perf_counter_ns()
-        model.correct_one(*r)
-        lat.append(time.perf_counter_ns() - t0)
-    return lat
 
 
 def bench(path: Path, calls: int) -> None:

@@ -8,15 +8,11 @@ Run: python benchmarks/bench_oracle.py [--repeats 7] [--n 200000]
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"  # one core, before numpy loads
-
 import argparse
 import statistics
 import time
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
 from models import quaternion as Q

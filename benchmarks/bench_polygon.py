@@ -22,12 +22,8 @@ Run::
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"  # one core, before numpy loads (the children inherit it)
-
 import argparse
+import os
 import resource
 import statistics
 import subprocess
@@ -36,10 +32,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 import yaml
-
-ROOT = Path(__file__).resolve().parents[1]
+from common import ROOT
 
 
 def star_vertices(m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -3,7 +3,7 @@
 For every recording (OpenSim ``.sto`` of segment orientations; by default the excerpts in
 ``tests/calibration/data/real``, whose README names their sources) and every joint its columns
 allow — shoulders (``thorax`` → ``humerus_r/l``), hips (``pelvis`` → ``femur_r/l``) — the
-boundary ``rig boundary`` writes (:func:`rig.commands.boundary.extract`, default parameters) is
+boundary ``rig boundary`` writes (:func:`rig.readback.extract`, default parameters) is
 measured with the exact oracle:
 
 - ``inside%``: recorded directions inside the written swing region (every sample of the file);
@@ -27,29 +27,23 @@ Usage::
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
 import math
 import sys
 import tempfile
 from pathlib import Path
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 from scipy.spatial import cKDTree
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calibration.boundary import boundary_distance
 from calibration.clinical import range_of_motion
 from calibration.frames import segment_to_rig
 from models.constraint import JointConstraint
+from models.geometry import fibonacci_sphere
 from models.oracle import ConstraintOracle
-from rig.commands.boundary import extract, load_joint_orientations
-from rig.record.coverage import fibonacci_sphere
+from rig.readback import extract, load_joint_orientations
 from rig.store.io import OrientationTable, read_sto, write_sto
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "calibration" / "data" / "real"

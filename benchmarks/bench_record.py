@@ -38,19 +38,14 @@ Usage::
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import argparse
+import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 
 from rig.record import RecordOptions, record_session
 from rig.record.lockstep import CountingDisplay, LockstepClock

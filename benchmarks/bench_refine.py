@@ -10,13 +10,9 @@ Run: python benchmarks/bench_refine.py [--taus 0,1,2,4]
 
 from __future__ import annotations
 
-import os
-
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"
-
 import argparse
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
 from models import metrics as M

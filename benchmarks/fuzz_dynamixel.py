@@ -17,10 +17,10 @@ import collections
 import random
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 
+from firmware_protocol import fuzzing
 from firmware_protocol.dynamixel import (
     StreamDecoder,
     decode_packet,
@@ -43,20 +43,9 @@ def valid_frame(rng: random.Random) -> bytes:
 
 
 def mutate(frame: bytes, rng: random.Random) -> bytes:
-    data = bytearray(frame)
-    for _ in range(rng.randint(1, 3)):
-        op = rng.randrange(5)
-        if op == 0 and data:
-            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
-        elif op == 1 and data:
-            del data[rng.randrange(len(data)):]
-        elif op == 2:
-            data.insert(rng.randrange(len(data) + 1), rng.randrange(256))
-        elif op == 3 and len(data) > 6:  # corrupt the length field
-            data[5 + rng.randrange(2)] = rng.randrange(256)
-        elif data:
-            data[rng.randrange(len(data))] = rng.choice((0xFF, 0xFD, 0x00))
-    return bytes(data)
+    """:func:`firmware_protocol.fuzzing.mutate` with Protocol 2.0's header bytes and its length
+    field (bytes 5-6)."""
+    return fuzzing.mutate(frame, rng, special=b"\xff\xfd\x00", fields=((5, 2),))
 
 
 def main() -> int:

@@ -25,7 +25,10 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+
 from firmware_protocol.errors import ProtocolError
+from firmware_protocol.fuzzing import mutate
 from firmware_protocol.imu import bno055 as B
 from firmware_protocol.imu import cobs
 from firmware_protocol.imu import stream as S
@@ -77,30 +80,10 @@ def _valid_stream_frames(rng: random.Random, n: int) -> list[bytes]:
     return out
 
 
-def _mutate(rng: random.Random, frame: bytes) -> bytes:
-    buf = bytearray(frame)
-    for _ in range(rng.randint(1, 3)):
-        op = rng.randrange(6)
-        pos = rng.randrange(len(buf)) if buf else 0
-        if op == 0 and buf:
-            buf[pos] ^= 1 << rng.randrange(8)  # bit flip
-        elif op == 1 and buf:
-            buf[pos] = rng.randrange(256)  # byte replaced
-        elif op == 2:
-            del buf[pos:]  # truncated
-        elif op == 3:
-            buf[pos:pos] = rng.randbytes(rng.randint(1, 8))  # garbage inserted
-        elif op == 4 and buf:
-            buf[pos:pos] = buf[pos:pos + rng.randint(1, 4)]  # bytes duplicated
-        else:
-            buf[pos:pos] = b"\x00"  # stray delimiter
-    return bytes(buf)
-
-
 def _recrc(rng: random.Random, wire: bytes) -> bytes:
     """Mutate a stream frame's body, then fix its CRC: reaches the field checks behind it."""
     body = bytearray(cobs.decode(wire[:-1]))
-    payload = _mutate(rng, bytes(body[1:-4]))
+    payload = mutate(bytes(body[1:-4]), rng)
     body = bytearray([body[0] if rng.random() < 0.9 else rng.randrange(256)]) + payload
     body += S.crc32(body).to_bytes(4, "little")
     return cobs.encode(bytes(body)) + b"\x00"
@@ -112,7 +95,7 @@ def _inputs(rng: random.Random, pool: list[bytes], n: int, deep: Callable | None
     for k in range(n):
         kind = k % kinds
         if kind == 0:
-            yield _mutate(rng, rng.choice(pool))
+            yield mutate(rng.choice(pool), rng)
         elif kind == 1:
             yield rng.randbytes(rng.randint(1, 80))
         else:

@@ -29,6 +29,7 @@ from firmware_protocol.dynamixel import (
 )
 from firmware_protocol.dynamixel.framing import CRC_TABLE
 from firmware_protocol.errors import ChecksumError, FramingError, PacketError, ProtocolError
+from firmware_protocol.fuzzing import mutate
 
 
 def h(text: str) -> bytes:
@@ -283,26 +284,12 @@ def test_fast_read_reply_layout():
     assert instructions.parse_fast_status(status, [4, 4]) == entries
 
 
-def _mutate(frame: bytes, rng: random.Random) -> bytes:
-    data = bytearray(frame)
-    for _ in range(rng.randint(1, 3)):
-        op = rng.randrange(4)
-        if op == 0 and data:
-            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
-        elif op == 1 and data:
-            del data[rng.randrange(len(data)):]
-        elif op == 2:
-            data.insert(rng.randrange(len(data) + 1), rng.randrange(256))
-        elif data:
-            data[rng.randrange(len(data))] = rng.choice((0xFF, 0xFD, 0x00))
-    return bytes(data)
-
-
 @settings(max_examples=400, deadline=None)
 @given(st.binary(max_size=80), st.randoms(use_true_random=False))
 def test_fuzz_only_protocol_errors_escape(blob, rng):
     frame = encode_instruction(rng.randrange(256), rng.randrange(256), blob[:20])
-    for data in (blob, _mutate(frame, rng), b"\xff\xff\xfd\x00" + blob):
+    broken = mutate(frame, rng, special=b"\xff\xfd\x00", fields=((5, 2),))  # the length field
+    for data in (blob, broken, b"\xff\xff\xfd\x00" + blob):
         try:
             decode_packet(data)
         except ProtocolError:

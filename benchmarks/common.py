@@ -1,0 +1,99 @@
+"""What the benchmark scripts share. Each imports it first (``import common``): Python puts a
+script's own folder on ``sys.path``, so scripts reach shared code through this module, never
+through each other or a path edit of their own.
+
+On import:
+
+- one BLAS / OpenMP thread, set before numpy loads (figures per core, comparable between
+  machines; child processes inherit it);
+- :data:`ROOT`, the checkout this file is in, first on ``sys.path``: a script measures the code
+  beside it, not another installed copy. :func:`child_env` passes it to child processes.
+
+Shared pieces: :func:`single_latencies_ns` (one ONNX call at a time) and :func:`raw_sync_loop`
+(the raw ``dynamixel_sdk`` control cycle: the peer figure of the driver and live-loop
+benchmarks).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path[:1]:
+    sys.path.insert(0, str(ROOT))
+
+__all__ = ["IDS", "ROOT", "child_env", "raw_sync_loop", "single_latencies_ns"]
+
+#: Servo IDs of the simulated 3-servo chain the loop benchmarks drive.
+IDS = (1, 2, 3)
+_TORQUE, _GOAL_POS, _PRESENT_POS = 64, 116, 132
+
+
+def child_env() -> dict[str, str]:
+    """The environment for a child process that must import this checkout."""
+    return dict(os.environ, PYTHONPATH=str(ROOT))
+
+
+def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
+    """Per-call latency (ns) of ``model.correct_one`` over the orientations ``qs`` (N, 4)."""
+    rows = [tuple(map(float, r)) for r in qs]
+    for r in rows[:warmup]:
+        model.correct_one(*r)
+    lat = []
+    for r in rows:
+        t0 = time.perf_counter_ns()
+        model.correct_one(*r)
+        lat.append(time.perf_counter_ns() - t0)
+    return lat
+
+
+def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
+    """The raw SDK control cycle on ``port_name``: GroupSyncRead of Present Position (fast
+    sync read when ``fast``) + GroupSyncWrite of Goal Position for :data:`IDS`, no other work;
+    cycle times in seconds. Raises if torque cannot be enabled."""
+    from dynamixel_sdk import (
+        COMM_SUCCESS,
+        GroupSyncRead,
+        GroupSyncWrite,
+        PacketHandler,
+        PortHandler,
+    )
+
+    port = PortHandler(port_name)
+    if not port.openPort():
+        raise RuntimeError(f"cannot open {port_name}")
+    try:
+        ph = PacketHandler(2.0)
+        for i in IDS:
+            result, error = ph.write1ByteTxRx(port, i, _TORQUE, 1)
+            if result != COMM_SUCCESS or error:
+                raise RuntimeError(f"torque on id {i}: {ph.getTxRxResult(result)} error {error}")
+        reader = GroupSyncRead(port, ph, _PRESENT_POS, 4)
+        writer = GroupSyncWrite(port, ph, _GOAL_POS, 4)
+        for i in IDS:
+            reader.addParam(i)
+            writer.addParam(i, [0, 8, 0, 0])
+        times = []
+        failures = 0
+        for k in range(cycles):
+            t0 = time.perf_counter()
+            result = reader.fastSyncRead() if fast else reader.txRxPacket()
+            if result != COMM_SUCCESS:
+                failures += 1
+            positions = [reader.getData(i, _PRESENT_POS, 4) for i in IDS]
+            goal = 2048 + (k % 200) - 100
+            for i, _ in zip(IDS, positions, strict=True):
+                writer.changeParam(i, list(goal.to_bytes(4, "little")))
+            writer.txPacket()
+            times.append(time.perf_counter() - t0)
+        if failures:
+            print(f"    ({failures} failed reads)")
+        return times
+    finally:
+        port.closePort()
