@@ -38,7 +38,7 @@ def test_exact_without_sensor_errors_despite_misplaced_sensors():
     # motion is the script smoothed (rig.sim.limb: cubic B-spline), a rotation about the same
     # axis, so only the flexion angle differs a little
     u = np.linspace(0.0, limb.calibration_protocol.duration_s, 500)
-    np.testing.assert_allclose(limb._closed_joint(limb.protocol_start_s + u, limb._plan),
+    np.testing.assert_allclose(limb.target(limb.protocol_start_s + u),
                                limb.calibration_protocol.joint(u), atol=1e-12)
     performed = limb.joint(limb.protocol_start_s + u)
     off = Q.angle(Q.multiply(Q.conjugate(performed), limb.calibration_protocol.joint(u)))

@@ -16,7 +16,7 @@ def _speed_dps(q, dt):
 
 def test_speed_is_bounded_at_1_khz_and_the_limb_stays_in_range():
     limb = patient_limb(star_patient(204), 204, protocol=None)
-    assert limb._radial is not None  # the star patient is star-shaped about its centre
+    assert limb.motion.radial_stop  # the star patient is star-shaped about its centre
     t = np.arange(0.0, 120.0, 1e-3)
     q = limb.joint(t)
     # the nearest-point projection of the same motion jumps (thousands of deg/s)
@@ -34,7 +34,7 @@ def test_large_ranges_move_continuously_too():
     # raw push passes near the centre's antipode (it saturates below 170°): before, the arm
     # jumped there at over 100,000 deg/s
     limb = patient_limb(star_patient(232), 232, protocol=None)
-    assert limb._radial is not None
+    assert limb.motion.radial_stop
     verts = np.asarray(limb.constraint.swing.vertices, dtype=float)
     assert np.degrees(np.arccos(verts @ limb.centre)).max() > 90.0
     t = np.arange(0.0, 120.0, 2e-3)
@@ -95,3 +95,17 @@ def test_the_gyro_integrates_to_the_truth_and_the_accelerometer_stays_physical()
     lin = np.abs(np.linalg.norm(np.stack([m.accel[1] for m in ms]), axis=1) - 9.81)
     assert np.percentile(lin, 99) < 5.0  # m/s²: arm motion, not impacts
     assert (lin > 20.0).mean() < 1e-3  # jolts at concave limits stay rare
+
+
+def test_scattered_requests_beyond_the_control_point_cache():
+    # more knots than the motion keeps (4096): making room must not drop points a request
+    # still needs (it did: a KeyError), and no value changes
+    c = star_patient(204)
+    a, b = patient_limb(c, 204, protocol=None), patient_limb(c, 204, protocol=None)
+    t = np.arange(0.0, 400.0, 0.05)  # 10,000 knots of 40 ms
+    whole = a.joint(t)
+    order = np.random.default_rng(2).permutation(len(t))
+    parts = np.empty_like(whole)
+    for chunk in np.array_split(order, 40):
+        parts[chunk] = b.joint(t[chunk])
+    assert np.array_equal(whole, parts)

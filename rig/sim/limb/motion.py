@@ -1,0 +1,321 @@
+"""How the simulated patient's segments move: the root segment's posture and a joint's motion
+through its range of motion.
+
+Free motion
+-----------
+A ball joint's swing direction is a 2-D excursion ``s(t)`` in the tangent plane at the centre
+``c`` of the range of motion (exponential map: ``d = cos|s| c + sin|s| ŝ``), its twist ``φ(t)``
+an excursion about the middle of the twist range; both are sums of sinusoids with seeded random
+frequencies (0.03-0.3 Hz) and phases (:class:`Sinusoids`), so the motion is smooth, closed-form
+and evaluable at any time (the swing angle saturates smoothly between 120° and 170° from the
+centre: a push through the centre's antipode would flip its azimuth). Each axis's RMS is
+``excursion`` times the reach of the range (cone radius, or the largest centre-to-vertex angle
+of a polygon; half the twist range), so with ``excursion = 1`` about a third of the time the
+raw motion lies outside the range; it is then brought onto the boundary (below), and the limb
+slides **along the limit** — the motion a boundary recording needs
+(:meth:`JointMotion.free`).
+
+Continuity
+----------
+The nearest-point projection of a target outside a concave boundary jumps where the target
+crosses the exterior's medial axis (on ``star_patient(204)``: up to 16,000°/s at 100 Hz; the
+arm would teleport, and a gyroscope or accelerometer could not follow). Two things keep the
+arm's motion physical:
+
+- **Radial stop** (:meth:`JointMotion.project`). For a polygon range star-shaped about the
+  motion's centre (every seeded star patient; checked at construction,
+  :attr:`JointMotion.radial_stop`) a swing direction outside moves back along the great circle
+  towards the centre onto the boundary, continuous in the target: the arm stops where its push
+  meets the limit and slides along it as the push turns. Other ranges use the oracle's
+  nearest point (a cone's is radial anyway). The twist is then clamped by the oracle
+  (:class:`models.oracle.ConstraintOracle`, the one implementation the datasets, the
+  evaluation and the live supervisor use too).
+- **Smoothing** (:class:`SmoothPath`). The performed joint orientation is the uniform cubic
+  B-spline with knots every ``step_s`` (40 ms) whose control points are the projected target
+  on the global grid ``i · step_s``, brought into the range once more by the same projection
+  (a B-spline cuts a concave corner): twice continuously differentiable except where that last
+  projection acts, so the accelerometer sees finite accelerations (a brief jolt of tens of m/s²
+  where the arm meets a concave limit, a few samples per minute) and the gyroscope integrates to
+  the truth. Stateless: a value does not depend on what else is evaluated, or in which order.
+
+Measured on star patients 201/204/212 at 1 kHz: angular speed p99 160-210°/s, max 180-320°/s;
+evaluating 120 s at 1 kHz takes ~0.2 s.
+
+Posture
+-------
+The root segment (thorax) relative to world is a fixed orientation times a slow postural sway
+of ±``sway_deg`` about its first two axes, two more rows of the same seeded sinusoids
+(:class:`Posture`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from models import quaternion as Q
+from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.oracle import ConstraintOracle
+from rig.sim.limb._rotations import exp_map, tangent_basis
+
+__all__ = ["JointMotion", "Posture", "Sinusoids", "SmoothPath", "StarRadial", "describe_range"]
+
+_PUSH_KNEE = math.radians(120.0)  # raw swing angle from the centre beyond which it saturates
+_PUSH_ROOM = math.radians(50.0)  # ... towards 170°
+_CP_CACHE = 4096  # control points of a SmoothPath kept
+
+
+@dataclass(frozen=True, eq=False)
+class Sinusoids:
+    """Seeded sums of sinusoids, one per row, each of unit RMS:
+    ``x_r(t) = Σ_j a_rj sin(2π f_rj t + φ_rj)``.
+
+    Attributes
+    ----------
+    freq : (R, 4) float64, Hz
+    phase : (R, 4) float64, rad
+    amp : (R, 4) float64, with ``Σ_j a_rj² / 2 = 1``
+    """
+
+    freq: np.ndarray
+    phase: np.ndarray
+    amp: np.ndarray
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, rows: int, speed: float = 1.0) -> Sinusoids:
+        """``rows`` series: frequencies uniform in 0.03-0.3 Hz times ``speed``, uniform phases,
+        weights uniform in 0.5-1 (three draws of ``(rows, 4)`` from ``rng``, in that order)."""
+        freq = rng.uniform(0.03, 0.3, size=(rows, 4)) * speed
+        phase = rng.uniform(0.0, 2.0 * math.pi, size=(rows, 4))
+        w = rng.uniform(0.5, 1.0, size=(rows, 4))
+        # RMS of Σ a sin(...) is sqrt(Σ a²/2): scale so every row has unit RMS
+        amp = w * np.sqrt(2.0 / np.sum(w**2, axis=1, keepdims=True))
+        return cls(freq, phase, amp)
+
+    def rows(self, start: int, stop: int) -> Sinusoids:
+        """The series ``start .. stop - 1``."""
+        return Sinusoids(self.freq[start:stop], self.phase[start:stop], self.amp[start:stop])
+
+    def __call__(self, row: int, t: np.ndarray) -> np.ndarray:
+        """Series ``row`` at times ``t`` (N,) seconds, (N,)."""
+        arg = 2.0 * math.pi * self.freq[row] * t[:, None] + self.phase[row]
+        # a row-wise sum, not a matrix product: BLAS may round differently with the batch size,
+        # and a value must not depend on what else is evaluated with it
+        return (np.sin(arg) * self.amp[row]).sum(axis=1)
+
+
+class Posture:
+    """The root segment relative to world: ``world_from_root ⊗ exp(sway)``, the sway
+    ``sway_deg × (x_0(t), x_1(t), 0)`` (two rows of ``series``)."""
+
+    def __init__(self, world_from_root: Sequence[float], sway_deg: float,
+                 series: Sinusoids) -> None:
+        self.world_from_root = Q.check_quaternions(world_from_root, name="world_from_thorax")
+        self.sway = math.radians(sway_deg)
+        self.series = series
+
+    def __call__(self, t) -> np.ndarray:
+        """Root segment relative to world (N, 4) at times ``t`` (N,) seconds."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        sway = np.stack((self.sway * self.series(0, t), self.sway * self.series(1, t),
+                         np.zeros_like(t)), axis=-1)
+        return Q.multiply(self.world_from_root, exp_map(sway))
+
+
+def describe_range(constraint: JointConstraint
+                   ) -> tuple[np.ndarray | None, float, tuple[float, float]]:
+    """Centre, reach (deg) and twist interval (deg) the motion should explore."""
+    centre, reach, twist = None, 60.0, (-45.0, 45.0)
+    swing = constraint.swing
+    if isinstance(swing, ConeSwing):
+        centre, reach = np.asarray(swing.centre, float), float(swing.radius_deg)
+    elif isinstance(swing, PolygonSwing):
+        centre = Q.check_vectors(swing.interior)
+        verts = Q.check_vectors(swing.vertices)
+        reach = float(np.degrees(np.max(Q.angle_between(verts, centre))))
+    if constraint.twist is not None:
+        twist = (float(constraint.twist.min_deg), float(constraint.twist.max_deg))
+    return centre, reach, twist
+
+
+class JointMotion:
+    """A ball joint's free motion through its range, and the stop at its limits.
+
+    Parameters
+    ----------
+    constraint : JointConstraint
+        The range of motion (child segment relative to parent).
+    series : Sinusoids
+        Three rows: the swing's two tangent components and the twist.
+    centre : (3,) array_like, optional
+        Centre of the motion (parent frame); default: the cone centre / polygon interior of
+        the constraint, else the limb axis.
+    reach_deg : float, optional
+        Angular reach of the range from ``centre``; default from the constraint (60° if its
+        swing is unlimited).
+    twist_deg : (float, float), optional
+        Twist interval the motion explores; default from the constraint or (-45, 45).
+    excursion : float
+        RMS of the raw motion relative to the reach.
+    """
+
+    def __init__(self, constraint: JointConstraint, series: Sinusoids, *,
+                 centre: Sequence[float] | None = None, reach_deg: float | None = None,
+                 twist_deg: tuple[float, float] | None = None, excursion: float = 1.0) -> None:
+        self.constraint = constraint
+        self.oracle = ConstraintOracle(constraint)
+        self.series = series
+        self.limb_axis = Q.check_vectors(constraint.limb_axis)
+        c_default, reach_default, twist_default = describe_range(constraint)
+        self.centre = Q.check_vectors(centre if centre is not None else
+                                      (c_default if c_default is not None else self.limb_axis))
+        self.reach = math.radians(reach_deg if reach_deg is not None else reach_default)
+        tw = twist_deg if twist_deg is not None else twist_default
+        self.twist_centre = math.radians(0.5 * (tw[0] + tw[1]))
+        self.twist_half = math.radians(max(0.5 * (tw[1] - tw[0]), 5.0))
+        self.excursion = float(excursion)
+        self._u, self._v = tangent_basis(self.centre)
+        self._radial = StarRadial.of(constraint, self.centre)
+
+    @property
+    def radial_stop(self) -> bool:
+        """Whether a swing outside the range stops radially (the range is a polygon
+        star-shaped about :attr:`centre`); else the oracle's nearest point."""
+        return self._radial is not None
+
+    def free(self, t) -> np.ndarray:
+        """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        sigma = self.excursion * self.reach / math.sqrt(2.0)
+        su = sigma * self.series(0, t)
+        sv = sigma * self.series(1, t)
+        ang = np.hypot(su, sv)
+        safe = np.where(ang > 1e-12, ang, 1.0)
+        dirn = (su[:, None] * self._u + sv[:, None] * self._v) / safe[:, None]
+        # beyond 120° from the centre the push saturates smoothly (C1) below 170°: a push
+        # through the centre's antipode would flip its azimuth, and the arm with it
+        over = np.maximum(ang - _PUSH_KNEE, 0.0)
+        ang = np.minimum(ang, _PUSH_KNEE) + _PUSH_ROOM * np.tanh(over / _PUSH_ROOM)
+        d = np.cos(ang)[:, None] * self.centre + np.sin(ang)[:, None] * dirn
+        swing = Q.from_two_vectors(self.limb_axis, d)
+        phi = self.twist_centre + self.excursion * self.twist_half * self.series(2, t)
+        return Q.multiply(swing, Q.from_axis_angle(self.limb_axis, phi))
+
+    def project(self, q) -> np.ndarray:
+        """Orientations (N, 4) brought into the range the way the patient's arm stops: the
+        radial stop (:attr:`radial_stop`), then the oracle's projection (the twist clamp; the
+        nearest point for other ranges)."""
+        q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+        if self._radial is not None:
+            d = Q.rotate(q, self.limb_axis)
+            out = self.oracle.swing_distance(d) > 0.0
+            if out.any():
+                p = self._radial.boundary(d[out])
+                old = Q.from_two_vectors(self.limb_axis, d[out])
+                new = Q.from_two_vectors(self.limb_axis, p)
+                q = q.copy()
+                q[out] = Q.multiply(new, Q.multiply(Q.conjugate(old), q[out]))
+        q = self.oracle.project(q, normalize=True).reshape(-1, 4)
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+class SmoothPath:
+    """The uniform cubic B-spline with knots every ``step_s`` through control points on the
+    global grid ``i · step_s`` (module docstring, "Smoothing").
+
+    The control points are a pure function of the grid index for a given ``key`` (the
+    patient's schedule): the last few thousand are kept (a simulator sampling at 200 Hz asks
+    for each about 40 times), and dropped when the key changes. Thread-safe.
+    """
+
+    def __init__(self, step_s: float) -> None:
+        if not (math.isfinite(step_s) and step_s > 0):
+            raise ValueError(f"smooth_s must be > 0, got {step_s!r}")
+        self.step_s = float(step_s)
+        self._cache: dict[int, np.ndarray] = {}
+        self._key: object = None
+        self._lock = threading.Lock()
+
+    def __call__(self, t, control: Callable[[np.ndarray], np.ndarray],
+                 key: Hashable) -> np.ndarray:
+        """The spline (N, 4) at times ``t`` (N,) seconds (not normalised), its control points
+        ``control(i · step_s)`` (M, 4)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if not len(t):
+            return np.empty((0, 4))
+        x = t / self.step_s
+        i0 = np.floor(x)
+        f = (x - i0)[:, None]
+        idx = i0[:, None] + np.arange(-1.0, 3.0)  # (N, 4) control points of each span
+        uniq, inv = np.unique(idx, return_inverse=True)
+        c = self._control_points(uniq, control, key)[inv.reshape(-1)].reshape(len(t), 4, 4)
+        c = c * np.where(np.sum(c * c[:, 1:2], axis=-1) < 0.0, -1.0, 1.0)[..., None]
+        w = np.concatenate(((1.0 - f) ** 3, 3.0 * f**3 - 6.0 * f**2 + 4.0,
+                            -3.0 * f**3 + 3.0 * f**2 + 3.0 * f + 1.0, f**3), axis=1) / 6.0
+        # term by term (elementwise, so a row's value does not depend on the batch)
+        return w[:, 0:1] * c[:, 0] + w[:, 1:2] * c[:, 1] + w[:, 2:3] * c[:, 2] + w[:, 3:4] * c[:, 3]
+
+    def _control_points(self, index: np.ndarray, control, key) -> np.ndarray:
+        keys = index.astype(np.int64).tolist()
+        with self._lock:
+            cache = self._cache
+            if self._key is not key:  # a new schedule changes the target everywhere
+                cache.clear()
+                self._key = key
+            missing = [k for k in keys if k not in cache]
+            if missing:
+                vals = control(np.asarray(missing, dtype=np.float64) * self.step_s)
+                if len(cache) > _CP_CACHE:  # the older half, but none this request needs
+                    wanted = set(keys)
+                    old = [k for k in cache if k not in wanted]
+                    for k in old[:len(cache) // 2]:
+                        del cache[k]
+                cache.update(zip(missing, vals, strict=True))
+            return np.array([cache[k] for k in keys])
+
+
+class StarRadial:
+    """Radial projection onto a spherical polygon star-shaped about a centre ``c``: the
+    boundary point on the great circle from ``c`` through a direction. The vertices' azimuths
+    about ``c`` turn monotonically once round, so each azimuth meets exactly one edge and the
+    projection is continuous in the direction."""
+
+    def __init__(self, vertices: np.ndarray, centre: np.ndarray, u: np.ndarray,
+                 v: np.ndarray, az: np.ndarray) -> None:
+        self.c, self.u, self.v, self.az = centre, u, v, az  # az ascending, one turn
+        self.normal = np.cross(vertices, np.roll(vertices, -1, axis=0))  # edge k: k → k+1
+
+    @classmethod
+    def of(cls, constraint: JointConstraint, centre: np.ndarray) -> StarRadial | None:
+        """The projection, or None when the range is not a polygon star-shaped about
+        ``centre`` (the oracle's nearest point is used then)."""
+        swing = constraint.swing
+        if not isinstance(swing, PolygonSwing):
+            return None
+        verts = Q.check_vectors(swing.vertices)
+        if np.any(verts @ centre <= -1.0 + 1e-9):
+            return None  # a vertex at the centre's antipode has no azimuth
+        u, v = tangent_basis(centre)
+        az = np.unwrap(np.arctan2(verts @ v, verts @ u))
+        if az[-1] < az[0]:  # clockwise about the centre: walk it the other way
+            verts = verts[::-1]
+            az = np.unwrap(np.arctan2(verts @ v, verts @ u))
+        steps = np.diff(np.r_[az, az[0] + 2.0 * math.pi])
+        if not np.all(steps > 0.0):
+            return None  # not star-shaped about the centre
+        return cls(verts, centre, u, v, az)
+
+    def boundary(self, d: np.ndarray) -> np.ndarray:
+        """Boundary points (N, 3) on the great circles from the centre through ``d`` (N, 3)."""
+        a = np.arctan2(d @ self.v, d @ self.u)
+        a = self.az[0] + (a - self.az[0]) % (2.0 * math.pi)
+        k = np.clip(np.searchsorted(self.az, a, side="right") - 1, 0, len(self.az) - 1)
+        p = np.cross(np.cross(self.c, d), self.normal[k])
+        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        tangent = d - (d @ self.c)[:, None] * self.c
+        return p * np.where(np.sum(p * tangent, axis=1) < 0.0, -1.0, 1.0)[:, None]
