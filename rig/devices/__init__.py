@@ -4,8 +4,9 @@ Above :mod:`rig.devices.ports` no code knows whether a port is hardware or a sim
 
 Public API
 ----------
-:func:`open_port`, :class:`Port`
-    Port strings (``/dev/ttyUSB0``, ``sim://dynamixel?...``) -> an opened port.
+:func:`open_port`, :class:`Port`, :class:`SimulatedPatient`
+    Port strings (``/dev/ttyUSB0``, ``sim://dynamixel?...``) -> an opened port; what code
+    above the seam may ask of a simulated port's patient.
 :class:`Device`
     Base class of the drivers (template method, retries, typed errors).
 :class:`DynamixelChain`, :func:`scan`
@@ -26,7 +27,7 @@ from rig.devices.bno055 import Bno055
 from rig.devices.config import RigConfig, ServosConfig, load_rig_config, rig_config_names
 from rig.devices.dynamixel import DynamixelChain, ServoInfo, scan
 from rig.devices.kinematics import ChainKinematics, ServoJoint
-from rig.devices.ports import Port, open_port
+from rig.devices.ports import Port, SimulatedPatient, open_port
 from rig.devices.sources import (
     ImuSetSource,
     OrientationSample,
@@ -51,6 +52,7 @@ __all__ = [
     "ServoInfo",
     "ServoJoint",
     "ServosConfig",
+    "SimulatedPatient",
     "StreamImu",
     "load_rig_config",
     "open_port",

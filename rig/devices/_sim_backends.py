@@ -1,9 +1,11 @@
 """``sim://`` backends of :func:`rig.devices.ports.open_port` (imported only when used).
 
-Each opener starts a simulator from :mod:`rig.sim` on a pseudo-terminal and returns a
-:class:`~rig.devices.ports.Port` whose ``close`` stops it. The simulated patient
-(``patient=``) is a :class:`rig.sim.limb.SimulatedLimb` whose range of motion is a constraint
-file or a shipped shape (:mod:`models.shapes`).
+:func:`open_sim_port` starts the simulator a port string names (:data:`rig.sim.urls.SIM_DEVICES`)
+on a pseudo-terminal and returns a :class:`~rig.devices.ports.Port` whose ``close`` stops it,
+with the :class:`~rig.devices.ports.SimulatedPatient` view of its patient. The query is parsed
+once, by :class:`rig.sim.urls.SimUrl`; the simulated patient (``patient=`` and the other patient
+keys) is resolved by :func:`rig.sim.patients.patient_from_url`, for the IMU simulators and the
+back-driven servo chain alike.
 
 Back-driving (``sim://dynamixel?...&patient=...``): each servo's hand position is a function of
 the simulator's clock, ``ticks_i(t) = IK(limb.joint(t - t0))_i`` with the chain's closed-form
@@ -16,59 +18,41 @@ keeps the joint angles continuous. While torque is off, Present Position follows
 from __future__ import annotations
 
 import threading
-import urllib.parse
 from typing import Any
 
 import numpy as np
 
-from rig.devices.ports import Port, _closing
+from rig.devices.ports import Port, SimulatedPatient
 from rig.errors import RigConfigError, UnreachableError
 
-_DXL_OWN_KEYS = frozenset({"patient", "chain", "speed", "excursion"})
+BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
+"""The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
+(``seed`` is the bus's, shared)."""
 
 
-def load_patient(spec: str, *, sensors: int = 2, seed: int = 0, noise: str = "default",
-                 speed: float = 1.0, excursion: float = 1.0, url: str = "") -> Any:
-    """A :class:`~rig.sim.limb.SimulatedLimb` for ``patient=<shape name | constraint path>``."""
-    from models.constraint import load_constraint
-    from models.errors import ModelsError
-    from models.shapes import SHAPES, load_shape
-    from rig.sim.limb import NoiseModel, SimulatedLimb
+def open_sim_port(url: str, *, baud: int | None = None) -> Port:
+    """The port of the simulator ``url`` names (``baud``: the host's line speed, which a
+    simulated Dynamixel chain without ``baud=`` runs at)."""
+    from rig.sim.urls import sim_device_of
 
-    try:
-        constraint = load_shape(spec) if spec in SHAPES else load_constraint(spec)
-    except FileNotFoundError as err:
-        raise RigConfigError(f"port {url!r}: patient {spec!r} is neither a shape "
-                             f"({', '.join(SHAPES)}) nor a constraint file") from err
-    except ModelsError as err:
-        raise RigConfigError(f"port {url!r}: patient {spec!r}: {err}") from err
-    if noise not in ("default", "ideal"):
-        raise RigConfigError(f"port {url!r}: noise must be 'default' or 'ideal', got {noise!r}")
-    model = NoiseModel.ideal() if noise == "ideal" else NoiseModel()
-    try:
-        return SimulatedLimb.from_constraint(constraint, sensors=sensors, seed=seed, noise=model,
-                                             speed=speed, excursion=excursion)
-    except ValueError as err:
-        raise RigConfigError(f"port {url!r}: {err}") from err
+    device = sim_device_of(url)
+    if device.name == "dynamixel":
+        return _open_dynamixel(url, baud, device.kind)
+    return _open_imu(url, device.start(url), device.kind)
 
 
-def _patient_t0(clock: Any, t0: float) -> float:
-    """:attr:`Port.patient_t0 <rig.devices.ports.Port.patient_t0>` of a patient whose motion
-    time is 0 when the simulator's ``clock`` reads ``t0``: host monotonic time on the real clock
-    and on a :class:`~rig.sim.clock.ScaledClock` (its ``host_time``), the clock's own reading on
-    a :class:`~rig.sim.clock.ManualClock` (whose time no host time corresponds to)."""
-    host_time = getattr(clock, "host_time", None)
-    return float(host_time(t0)) if host_time is not None else float(t0)
+def _patient(limb: Any, clock: Any, clock_t0: float, **kwargs: Any) -> SimulatedPatient:
+    """The view of a patient whose motion time is 0 when the simulator's ``clock`` reads
+    ``clock_t0``: :attr:`~rig.devices.ports.SimulatedPatient.t0` is host monotonic time on the
+    real clock and on a :class:`~rig.sim.clock.ScaledClock` (its ``host_time``), the clock's own
+    reading on a :class:`~rig.sim.clock.ManualClock` (whose time no host time corresponds to)."""
+    from rig.sim.clock import ScaledClock
 
-
-def _num(one: dict[str, str], key: str, default: Any, kind: type, url: str) -> Any:
-    if key not in one:
-        return default
-    try:
-        return kind(one[key])
-    except ValueError:
-        raise RigConfigError(f"port {url!r}: {key}={one[key]!r} is not a "
-                             f"{'number' if kind is float else 'whole number'}") from None
+    if isinstance(clock, ScaledClock):
+        t0, scale = float(clock.host_time(clock_t0)), clock.scale
+    else:
+        t0, scale = float(clock_t0), 1.0
+    return SimulatedPatient(limb, clock=clock, clock_t0=clock_t0, t0=t0, scale=scale, **kwargs)
 
 
 class _BackDrive:
@@ -118,73 +102,73 @@ class _BackDrive:
         return lambda now: float(self.ticks(now)[index])
 
 
-def open_sim_dynamixel(url: str, *, baud: int | None = None) -> Port:
-    from rig.sim.dynamixel import bus_from_url
+def _open_dynamixel(url: str, baud: int | None, kind: str) -> Port:
+    from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
+    from rig.sim.urls import SimUrl
 
-    parts = urllib.parse.urlsplit(url)
-    query = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
-    own = {k: v[-1] for k, v in query.items() if k in _DXL_OWN_KEYS}
     overrides: dict[str, Any] = {}
-    if "baud" not in query and baud is not None:
-        overrides["baud_rate"] = int(baud)
     try:
-        bus = bus_from_url(url, also_known=tuple(sorted(_DXL_OWN_KEYS)), **overrides)
+        q = SimUrl(url, DEVICES, (*KEYS, *BACKDRIVE_KEYS), EXAMPLE)
+        if "baud" not in q and baud is not None:
+            overrides["baud_rate"] = int(baud)
+        bus = bus_from_query(q, **overrides)
     except RigConfigError as err:  # every message names the URL
         raise RigConfigError(str(err) if url in str(err) else f"{url}: {err}") from err
-    port = Port(url=url, path=bus.port, simulator=bus, kind="sim-dynamixel")
-    port._closers.append(_closing(bus))
-    if "patient" not in own:
+    port = Port(url=url, path=bus.port, simulator=bus, kind=kind)
+    port.add_closer(bus.close)
+    own = [k for k in BACKDRIVE_KEYS if k in q]
+    if "patient" not in q:
         if own:
             port.close()
-            raise RigConfigError(f"port {url!r}: {', '.join(sorted(own))} need patient=")
+            raise RigConfigError(f"{url}: {', '.join(sorted(own))} need patient=")
         return port
     try:
-        from rig.devices.config import load_rig_config
-
-        chain_name = own.get("chain", "sim-shoulder")
-        cfg = load_rig_config(chain_name)
-        if cfg.servos is None:
-            raise RigConfigError(f"port {url!r}: chain={chain_name!r} has no servo chain")
-        kin = cfg.servos.kinematics()
-        missing = [i for i in kin.ids if i not in bus.servos]
-        if missing:
-            raise RigConfigError(f"port {url!r}: chain {chain_name!r} needs servo IDs "
-                                 f"{list(kin.ids)}, the simulated bus has no ID {missing[0]}")
-        seed = _num({k: v[-1] for k, v in query.items()}, "seed", 0, int, url)
-        limb = load_patient(own["patient"], sensors=2, seed=seed,
-                            speed=_num(own, "speed", 1.0, float, url),
-                            excursion=_num(own, "excursion", 1.0, float, url), url=url)
-        t0 = bus.clock()
-        drive = _BackDrive(limb, kin, t0)
-        for k, dxl_id in enumerate(kin.ids):
-            bus.set_hand(dxl_id, drive.hand(k))
-        port.patient = limb
-        port.patient_t0 = _patient_t0(bus.clock, t0)
-        port.backdrive = drive  # type: ignore[attr-defined]
+        port.simulated_patient = _back_driving_patient(q, bus)
     except BaseException:
         port.close()
         raise
     return port
 
 
-def open_sim_bno055(url: str, *, baud: int | None = None) -> Port:
-    """``sim://bno055?...``: :func:`rig.sim.imu.bno055_from_url` (keys documented there)."""
-    from rig.sim.imu import bno055_from_url
+def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
+    """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` kinematics."""
+    from rig.devices.config import load_rig_config
+    from rig.sim.patients import patient_from_url
 
-    return _open_sim_imu(url, bno055_from_url, "sim-bno055")
+    url = q.url
+    chain_name = q.text("chain", "sim-shoulder")
+    cfg = load_rig_config(chain_name)
+    if cfg.servos is None:
+        raise RigConfigError(f"{url}: chain={chain_name!r} has no servo chain")
+    kin = cfg.servos.kinematics()
+    missing = [i for i in kin.ids if i not in bus.servos]
+    if missing:
+        raise RigConfigError(f"{url}: chain {chain_name!r} needs servo IDs {list(kin.ids)}, "
+                             f"the simulated bus has no ID {missing[0]}")
+    # a servo limb wears no IMU: the default straps (the motion does not depend on them)
+    limb = patient_from_url(q, sensors=2, misplaced_straps=False)
+    t0 = bus.clock()
+    drive = _BackDrive(limb, kin, t0)
+    for k, dxl_id in enumerate(kin.ids):
+        bus.set_hand(dxl_id, drive.hand(k))
+    return _patient(limb, bus.clock, t0, backdrive=drive)
 
 
-def open_sim_imu_stream(url: str, *, baud: int | None = None) -> Port:
-    """``sim://imu-stream?...``: :func:`rig.sim.imu.stream_from_url` (keys documented there)."""
-    from rig.sim.imu import stream_from_url
+def _open_imu(url: str, sim: Any, kind: str) -> Port:
+    from rig.sim.imu import StreamImuSimulator
+    from rig.sim.urls import query_keys
 
-    return _open_sim_imu(url, stream_from_url, "sim-imu-stream")
-
-
-def _open_sim_imu(url: str, start: Any, kind: str) -> Port:
-    sim = start(url)
-    # the simulator samples its patient at clock() - started_at (its device time)
-    port = Port(url=url, path=sim.port, simulator=sim, kind=kind, patient=sim.limb,
-                patient_t0=_patient_t0(sim.clock, sim.started_at))
-    port._closers.append(_closing(sim))
+    port = Port(url=url, path=sim.port, simulator=sim, kind=kind)
+    port.add_closer(sim.close)
+    try:
+        # the simulator samples its patient at clock() - started_at (its device time); a
+        # stream board's samples carry that time, from its timestamp offset
+        device_t0 = (sim.timestamp_offset_us / 1e6 if isinstance(sim, StreamImuSimulator)
+                     else 0.0)
+        port.simulated_patient = _patient(sim.limb, sim.clock, sim.started_at,
+                                          device_t0=device_t0,
+                                          protocol_pinned="calibrate" in query_keys(url))
+    except BaseException:
+        port.close()
+        raise
     return port

@@ -24,25 +24,126 @@ Port strings
     A simulated multi-IMU board speaking the rig stream protocol
     (:func:`rig.sim.imu.stream_from_url`). Sensor 0 is on the thorax, 1.. on the upper arm.
 
-Unknown query keys are errors naming the key. A simulator is started by :func:`open_port` and
-stopped by :meth:`Port.close`.
+Unknown query keys are errors naming the key (one parser for every ``sim://`` string:
+:class:`rig.sim.urls.SimUrl`; the simulated devices: :data:`rig.sim.urls.SIM_DEVICES`). A
+simulator is started by :func:`open_port` and stopped by :meth:`Port.close`.
+
+What code above the seam may ask of a simulated port
+----------------------------------------------------
+:attr:`Port.simulated_patient` is a :class:`SimulatedPatient` (None on hardware and on a
+simulator nobody drives): the ground-truth limb, the patient's time for a host time, whether the
+port back-drives servos (:meth:`SimulatedPatient.follow`), and having the patient start the
+calibration protocol (:meth:`SimulatedPatient.start_protocol`). Nothing above this module looks
+into a simulator object for these.
 """
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import os
 import stat
 import threading
-import urllib.parse
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from rig.errors import RigConfigError, RigConnectionError
 
-__all__ = ["BACKENDS", "Port", "open_port", "parse_sim_url"]
+if TYPE_CHECKING:
+    from rig.sim.limb import SimulatedLimb
+
+__all__ = ["Port", "SimulatedPatient", "open_port"]
+
+
+class SimulatedPatient:
+    """A simulated port's patient, as code above the seam may see it.
+
+    Parameters
+    ----------
+    limb : rig.sim.limb.SimulatedLimb
+        The patient (ground truth).
+    clock : callable
+        The simulator's clock (seconds).
+    clock_t0 : float
+        The reading of ``clock`` at patient time 0.
+    t0 : float
+        Host time at patient time 0 (:attr:`t0`).
+    scale : float
+        Patient seconds per host second.
+    device_t0 : float
+        Device time (s) at patient time 0 of a device that timestamps its samples with the
+        patient's time (the stream board); 0 otherwise.
+    backdrive : object, optional
+        What moves a servo chain with the patient (``follow(joint_q) -> (chain_q, missed)``).
+    protocol_pinned : bool
+        The port string says whether the patient performs the calibration protocol
+        (``calibrate=on|off``): a recorder leaves that as it is.
+
+    Attributes
+    ----------
+    limb : rig.sim.limb.SimulatedLimb
+    t0 : float
+        When the patient's motion time was 0. On the real clock (the default) and a
+        ``time_scale=`` one: host monotonic time, ``limb.joint((t - t0) * scale)`` is the truth
+        at host time ``t`` (:meth:`time_at`). On a ``clock=manual`` simulator host time does not
+        move the patient: it is the simulator clock's reading, and :meth:`now` is the
+        patient's time.
+    scale : float
+    device_t0 : float
+    protocol_pinned : bool
+    """
+
+    def __init__(self, limb: SimulatedLimb, *, clock: Callable[[], float], clock_t0: float,
+                 t0: float, scale: float = 1.0, device_t0: float = 0.0,
+                 backdrive: Any = None, protocol_pinned: bool = False) -> None:
+        self.limb = limb
+        self.t0 = float(t0)
+        self.scale = float(scale)
+        self.device_t0 = float(device_t0)
+        self.protocol_pinned = bool(protocol_pinned)
+        self._clock = clock
+        self._clock_t0 = float(clock_t0)
+        self._backdrive = backdrive
+
+    def time_at(self, host_t) -> np.ndarray:
+        """The patient's time (s) at host monotonic times ``host_t`` (N,)."""
+        return (np.asarray(host_t, dtype=np.float64) - self.t0) * self.scale
+
+    def now(self) -> float:
+        """The patient's time now (s), on the simulator's clock."""
+        return float(self._clock()) - self._clock_t0
+
+    @property
+    def back_drives(self) -> bool:
+        """Whether the patient moves a servo chain (torque off) through its kinematics."""
+        return self._backdrive is not None
+
+    def follow(self, joint_q) -> tuple[np.ndarray, int]:
+        """The orientations (N, 4) the back-driven chain takes, from its zero, while the
+        patient moves through ``joint_q`` (N, 4), unquantised, and how many of them were out
+        of the chain's reach.
+
+        Raises
+        ------
+        ValueError
+            The port does not back-drive servos (:attr:`back_drives`).
+        """
+        if self._backdrive is None:
+            raise ValueError("this port's simulated patient back-drives no servo chain")
+        return self._backdrive.follow(np.asarray(joint_q, dtype=np.float64).reshape(-1, 4))
+
+    def start_protocol(self, protocol, lead_s: float = 2.0) -> None:
+        """Have the patient perform ``protocol`` from ``lead_s`` seconds of patient time after
+        now (the simulators sample the patient lazily: the change applies from their next
+        sample on)."""
+        self.limb.perform_protocol(protocol, start_s=max(0.0, self.now()) + float(lead_s))
+
+
+_SIM_BACKEND = "rig.devices._sim_backends:open_sim_port"
+"""Opens every ``sim://`` port (it builds :class:`Port` objects: imported by name, and only when
+a simulator is asked for)."""
 
 
 @dataclass
@@ -60,24 +161,36 @@ class Port:
         The simulator serving :attr:`path` (fault injection in tests), None for hardware.
     kind : str
         ``"hardware"``, ``"sim-dynamixel"``, ``"sim-bno055"`` or ``"sim-imu-stream"``.
-    patient : object or None
-        The :class:`rig.sim.limb.SimulatedLimb` driving a simulator (ground truth), if any.
-    patient_t0 : float
-        When the patient's motion time was 0. On the real clock (the default) and a
-        ``time_scale=`` one: host monotonic time, ``limb.joint((t - patient_t0) * scale)`` is
-        the truth at host time ``t`` (``scale``: the simulator clock's, 1 on real time). On a
-        ``clock=manual`` simulator host time does not move the patient: it is the simulator
-        clock's reading, ``limb.joint(simulator.clock() - patient_t0)`` is the truth now.
+    simulated_patient : SimulatedPatient or None
+        The simulated patient driving the simulator, if any (what code above the seam may ask
+        of it).
     """
 
     url: str
     path: str
     simulator: Any = None
     kind: str = "hardware"
-    patient: Any = None
-    patient_t0: float = 0.0
+    simulated_patient: SimulatedPatient | None = None
     _closers: list[Callable[[], None]] = field(default_factory=list, repr=False)
     _closed: bool = field(default=False, repr=False)
+
+    @property
+    def patient(self) -> SimulatedLimb | None:
+        """The :class:`rig.sim.limb.SimulatedLimb` driving the simulator (ground truth), or
+        None: ``simulated_patient.limb``."""
+        sp = self.simulated_patient
+        return None if sp is None else sp.limb
+
+    @property
+    def patient_t0(self) -> float:
+        """When the patient's motion time was 0 (:attr:`SimulatedPatient.t0`); 0 without a
+        patient."""
+        sp = self.simulated_patient
+        return 0.0 if sp is None else sp.t0
+
+    def add_closer(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` (once) when the port is closed; closers run in reverse order."""
+        self._closers.append(_Once(fn))
 
     @property
     def is_simulated(self) -> bool:
@@ -117,30 +230,6 @@ class Port:
         return self.url
 
 
-#: scheme netloc -> (module, function) opening that simulator; imported only when used.
-BACKENDS: dict[str, tuple[str, str]] = {
-    "dynamixel": ("rig.devices._sim_backends", "open_sim_dynamixel"),
-    "dxl": ("rig.devices._sim_backends", "open_sim_dynamixel"),
-    "bno055": ("rig.devices._sim_backends", "open_sim_bno055"),
-    "imu-stream": ("rig.devices._sim_backends", "open_sim_imu_stream"),
-    "stream": ("rig.devices._sim_backends", "open_sim_imu_stream"),  # short form
-}
-
-
-def parse_sim_url(url: str, known: set[str] | frozenset[str]) -> dict[str, str]:
-    """Query of a ``sim://`` URL as ``{key: last value}``; unknown keys are errors naming them."""
-    parts = urllib.parse.urlsplit(url)
-    try:
-        query = urllib.parse.parse_qs(parts.query, keep_blank_values=True, strict_parsing=False)
-    except ValueError as err:
-        raise RigConfigError(f"port {url!r}: bad query ({err})") from err
-    unknown = sorted(set(query) - set(known))
-    if unknown:
-        raise RigConfigError(f"port {url!r}: unknown key {unknown[0]!r}; known keys: "
-                             f"{', '.join(sorted(known))}")
-    return {k: v[-1] for k, v in query.items()}
-
-
 def open_port(url: str, *, baud: int | None = None) -> Port:
     """Resolve a port string: check a hardware path, or start a simulator.
 
@@ -168,17 +257,15 @@ def open_port(url: str, *, baud: int | None = None) -> Port:
         raise RigConfigError(f"port {url!r}: expected a device path or a sim:// URL")
     url = url.strip()
     if "://" in url:
-        scheme, rest = url.split("://", 1)
+        from rig.sim.urls import SIM_DEVICES
+
+        scheme = url.split("://", 1)[0]
         if scheme != "sim":
+            hosts = ",".join(sorted(SIM_DEVICES))
             raise RigConfigError(f"port {url!r}: unknown scheme {scheme!r}; use a device path "
-                                 f"(/dev/ttyUSB0, COM3) or sim://{{{','.join(sorted(BACKENDS))}}}")
-        device = rest.split("?", 1)[0].strip("/")
-        if device not in BACKENDS:
-            raise RigConfigError(f"port {url!r}: unknown simulated device {device!r}; known: "
-                                 f"{', '.join(sorted(BACKENDS))}")
-        module, attr = BACKENDS[device]
-        opener = getattr(importlib.import_module(module), attr)
-        return opener(url, baud=baud)
+                                 f"(/dev/ttyUSB0, COM3) or sim://{{{hosts}}}")
+        module, func = _SIM_BACKEND.split(":")
+        return getattr(importlib.import_module(module), func)(url, baud=baud)
     check_hardware_path(url)
     return Port(url=url, path=url)
 
@@ -229,10 +316,3 @@ class _Once:
             fn, self._fn = self._fn, None
         if fn is not None:
             fn()
-
-
-def _closing(obj: Any) -> Callable[[], None]:
-    def close() -> None:
-        with contextlib.suppress(AttributeError):
-            obj.close()
-    return _Once(close)

@@ -525,7 +525,7 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
     log = log or (lambda msg: None)
     if latency_ms is None:
         latency_ms = servos.latency_ms
-    if latency_ms is None and getattr(port, "is_simulated", False):
+    if latency_ms is None and port.is_simulated:
         latency_ms = SIM_LOOP_LATENCY_MS
     chain = _open_chain(DynamixelChain, port, servos, servos.latency_ms)
     limits = None

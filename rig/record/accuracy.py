@@ -245,7 +245,7 @@ def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: floa
     n = len(s["t"])
     batch = SampleBatch(s["t"], np.full(n, np.nan), s["name"], s["kind"], s["q"], s["status"])
     truth_q = limb.joint(rig.patient_time(batch))
-    chain_q, unreachable = rig.ports[0].backdrive.follow(truth_q)
+    chain_q, unreachable = rig.simulated_patients[0].follow(truth_q)
     return _compare(constraint.name or f"star-{seed}", "servo", res, db, constraint, truth_q,
                     recorded_q=chain_q, unreachable_pct=100.0 * unreachable / max(n, 1))
 

@@ -78,7 +78,7 @@ class GuidedCalibration:
         self.rig = rig
         self.display = display
         if protocol is None and rig.simulated:
-            protocol = getattr(rig, "protocol", None)  # the one the simulated patient performs
+            protocol = rig.protocol  # the one the simulated patient performs
         self.protocol = protocol if protocol is not None else CalibrationProtocol()
         self.stdin = stdin if stdin is not None else sys.stdin
         self.parent = config.joint.parent
@@ -128,8 +128,7 @@ class GuidedCalibration:
 
     def _protocol_time(self, batch: SampleBatch) -> np.ndarray:
         if self.rig.simulated:
-            return self.rig.patient_time(batch) - float(getattr(self.rig, "protocol_start_s",
-                                                                0.0))
+            return self.rig.patient_time(batch) - self.rig.protocol_start_s
         clock = batch.time()
         if self._origin is None:
             self._origin = float(clock[0])
@@ -450,13 +449,11 @@ def patient_performs_protocol(rig) -> bool:
     """Whether every simulated patient of ``rig`` follows the calibration protocol.
 
     A :class:`rig.sim.limb.SimulatedLimb` that performs it exposes the protocol it follows as
-    ``calibration_protocol`` (None or absent: it moves freely from time 0, and calibrating
-    against it would fit noise).
+    ``calibration_protocol`` (None: it moves freely from time 0, and calibrating against it
+    would fit noise).
     """
-    patients = [getattr(p, "patient", None) for p in getattr(rig, "ports", [])]
-    patients = [p for p in patients if p is not None]
-    return bool(patients) and all(
-        getattr(p, "calibration_protocol", None) is not None for p in patients)
+    patients = rig.patients
+    return bool(patients) and all(p.calibration_protocol is not None for p in patients)
 
 
 def _pairs(b: SampleBatch, parent: str, child: str

@@ -58,37 +58,41 @@ class OpenRig:
         return bool(self.simulators)
 
     @property
+    def simulated_patients(self) -> list:
+        """The :class:`rig.devices.ports.SimulatedPatient` views of the ports' patients."""
+        return [p.simulated_patient for p in self.ports if p.simulated_patient is not None]
+
+    @property
     def patients(self) -> list:
         """The simulated patients (:class:`rig.sim.limb.SimulatedLimb`) behind the ports."""
-        return [p.patient for p in self.ports if getattr(p, "patient", None) is not None]
+        return [sp.limb for sp in self.simulated_patients]
 
     @property
     def protocol(self):
         """The calibration protocol the simulated patient performs, or None."""
         pats = self.patients
-        return getattr(pats[0], "calibration_protocol", None) if pats else None
+        return pats[0].calibration_protocol if pats else None
 
     @property
     def protocol_start_s(self) -> float:
         """Patient time (s) at which the simulated patient starts the protocol (0 if none)."""
         pats = self.patients
-        return float(getattr(pats[0], "protocol_start_s", 0.0)) if pats else 0.0
+        return float(pats[0].protocol_start_s) if pats else 0.0
 
     def patient_time(self, batch) -> np.ndarray:
         """The simulated patient's own time (s) at each sample of ``batch`` (N,).
 
         A stream IMU simulator timestamps samples with the patient's time (its device clock
         starts with the patient), so ``device_t`` is used where present; otherwise host time
-        since the port's ``patient_t0``, times the simulator clock's ``scale`` (a
+        through the port's :meth:`~rig.devices.ports.SimulatedPatient.time_at` (a
         ``time_scale=`` simulator runs the patient faster than the host's clock).
         """
-        if not self.ports:
+        pats = self.simulated_patients
+        if not pats:
             raise ValueError("patient_time: not a simulated rig")
         if self.kind == "imu" and not np.isnan(batch.device_t).any():
             return batch.device_t - self.device_t0
-        port = self.ports[0]
-        scale = float(getattr(getattr(port.simulator, "clock", None), "scale", 1.0))
-        return (batch.t - float(getattr(port, "patient_t0", 0.0))) * scale
+        return pats[0].time_at(batch.t)
 
     def close(self) -> None:
         """Close the source and its ports (idempotent)."""
@@ -113,10 +117,10 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
     """Open the rig's ports, devices and orientation source.
 
     ``calibrate``: a simulated patient performs the guided calibration protocol
-    (:class:`calibration.protocol.CalibrationProtocol`) before moving freely — IMU simulators
-    get ``calibrate=on`` unless their port string says otherwise (``calibrate=off``); a
-    back-driven servo limb's patient is given the protocol to start 2 s (patient time) after
-    opening. Without it a simulated patient moves freely from the start (hardware: no effect).
+    (:class:`calibration.protocol.CalibrationProtocol`) before moving freely, starting 2 s
+    (patient time) after opening (:meth:`rig.devices.ports.SimulatedPatient.start_protocol`),
+    unless its port string says whether it does (``calibrate=on|off`` of the IMU simulators).
+    Without it a simulated patient moves freely from the start (hardware: no effect).
 
     The ports are opened here (:func:`rig.devices.ports.open_port`) and handed to
     :func:`rig.devices.sources.open_source`, so the simulators behind ``sim://`` ports stay
@@ -141,11 +145,10 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
             baud = config.servos.baud
         ports = {}
         for url in urls:
-            ports[url] = stack.enter_context(open_port(_with_protocol(url, calibrate),
-                                                       baud=baud))
-        if calibrate and which != "sensors":
+            ports[url] = stack.enter_context(open_port(url, baud=baud))
+        if calibrate:
             for port in ports.values():
-                _servo_patient_protocol(port)
+                _patient_performs_protocol(port)
         source = open_source(config, which, rate_hz=rate_hz, ports=ports)
         stack.callback(source.close)  # LIFO: the source closes before its ports
         if which == "sensors":
@@ -162,41 +165,23 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
         if sims and len(sims) != len(port_list):
             sims = []  # a mixed rig counts as hardware: the clinician is prompted
         device_t0 = 0.0
-        if kind == "imu" and sims:
-            device_t0 = float(getattr(sims[0], "timestamp_offset_us", 0)) / 1e6
+        first = port_list[0].simulated_patient
+        if kind == "imu" and sims and first is not None:
+            device_t0 = first.device_t0
         return OpenRig(config, source, sensors, sims, kind, stack, port_list, device_t0)
     except BaseException:
         stack.close()
         raise
 
 
-_PATIENT_SCHEMES = ("sim://imu-stream", "sim://stream", "sim://bno055")
-
-
-def _with_protocol(url: str, calibrate: bool) -> str:
-    """``url`` with ``calibrate=on`` added for a simulated IMU patient (unless it says)."""
-    import urllib.parse
-
-    if not calibrate or not url.startswith(_PATIENT_SCHEMES):
-        return url
-    query = urllib.parse.parse_qs(urllib.parse.urlsplit(url).query, keep_blank_values=True)
-    if "calibrate" in query:
-        return url
-    return url + ("&" if "?" in url else "?") + "calibrate=on"
-
-
-def _servo_patient_protocol(port) -> None:
-    """The back-driving patient of a ``sim://dynamixel?...&patient=`` port performs the
-    protocol, starting 2 s of patient time from now (it is sampled lazily, so the change
-    takes effect from the next servo read on)."""
-    limb = getattr(port, "patient", None)
-    drive = getattr(port, "backdrive", None)
-    sim = getattr(port, "simulator", None)
-    if limb is None or drive is None or sim is None:
-        return
-    if getattr(limb, "calibration_protocol", None) is not None:
+def _patient_performs_protocol(port) -> None:
+    """The simulated patient behind ``port`` (if any) performs the calibration protocol,
+    starting 2 s of patient time from now (the simulators sample it lazily, so the change
+    takes effect from their next sample on) — unless it already does, or the port string says
+    whether it does."""
+    sp = port.simulated_patient
+    if sp is None or sp.protocol_pinned or sp.limb.calibration_protocol is not None:
         return
     from calibration.protocol import CalibrationProtocol
 
-    now = float(sim.clock()) - float(drive.t0)
-    limb.perform_protocol(CalibrationProtocol(), start_s=max(0.0, now) + 2.0)
+    sp.start_protocol(CalibrationProtocol(), lead_s=2.0)

@@ -13,36 +13,29 @@ clock
     :class:`~rig.sim.clock.ManualClock` / :class:`~rig.sim.clock.ScaledClock`: simulated time
     faster than real time.
 urls
-    ``sim://`` port-string parsing shared by the simulators.
+    ``sim://`` port strings: the table of simulators (:data:`~rig.sim.urls.SIM_DEVICES`) and
+    the one parser of their query, shared by the simulators and the port backends.
 dynamixel
     A chain of Dynamixel X-series servos (Protocol 2.0) behind a simulated U2D2.
 imu
     Simulated IMUs (BNO055 UART and the rig stream protocol).
 limb
-    The simulated patient: shoulder motion inside a constraint, sensor placement and errors.
+    The simulated patient: shoulder motion inside a constraint (``limb.motion``), what it does
+    when (``limb.schedule``), sensor placement and errors (``limb.sensors``), composed by
+    :class:`~rig.sim.limb.SimulatedLimb`.
 patients
     The factory of simulated patients with a known range (seeded star polygons, misplaced
-    straps, the calibration protocol) and offline IMU / servo recordings of them.
+    straps, the calibration protocol), the one resolver of a port string's patient keys, and
+    offline IMU / servo recordings.
 
 :func:`from_url` starts the simulator a ``sim://`` port string names.
 """
 
 from __future__ import annotations
 
-import urllib.parse
-
-from rig.errors import RigConfigError
+from rig.sim.urls import SIM_DEVICES, sim_device_of
 
 __all__ = ["SIM_DEVICES", "from_url"]
-
-SIM_DEVICES = {
-    "dynamixel": "rig.sim.dynamixel:bus_from_url",
-    "dxl": "rig.sim.dynamixel:bus_from_url",
-    "bno055": "rig.sim.imu:bno055_from_url",
-    "imu-stream": "rig.sim.imu:stream_from_url",
-    "stream": "rig.sim.imu:stream_from_url",
-}
-"""``sim://<device>`` -> the entry point that starts it (imported lazily)."""
 
 
 def from_url(url: str, **overrides: object):
@@ -59,12 +52,4 @@ def from_url(url: str, **overrides: object):
     RigConfigError
         Not a ``sim://`` URL of a known device, or a bad key or value (named).
     """
-    import importlib
-
-    parts = urllib.parse.urlsplit(url)
-    target = SIM_DEVICES.get(parts.netloc) if parts.scheme == "sim" else None
-    if target is None:
-        raise RigConfigError(f"{url!r} names no simulator; known: "
-                             f"{', '.join(f'sim://{k}' for k in SIM_DEVICES)}")
-    module, func = target.split(":")
-    return getattr(importlib.import_module(module), func)(url, **overrides)
+    return sim_device_of(url).start(url, **overrides)

@@ -43,9 +43,9 @@ from firmware_protocol.errors import ChecksumError, FramingError, PacketError
 from firmware_protocol.imu import bno055 as B
 from firmware_protocol.imu import stream as S
 from models import quaternion as Q
-from rig.errors import RigConfigError
 from rig.sim.clock import real_delay
-from rig.sim.limb import Measurement, NoiseModel, SimulatedLimb
+from rig.sim.limb import Measurement, SimulatedLimb
+from rig.sim.patients import PATIENT_KEYS, patient_from_url
 from rig.sim.pty_server import PtyServer
 from rig.sim.urls import SimUrl
 
@@ -53,7 +53,6 @@ __all__ = [
     "Bno055Simulator",
     "StreamImuSimulator",
     "bno055_from_url",
-    "resolve_patient",
     "stream_from_url",
 ]
 
@@ -619,81 +618,15 @@ def _frame_type(frame) -> int:
 # ---------------------------------------------------------------------------------------------
 # port strings
 
-_LIMB_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate",
-              "neutral", "neutral_sd")
-_NEUTRAL_HOLD_S = 2.0  # SimulatedLimb's defaults: neutral hold and ramp, seconds
-_NEUTRAL_RAMP_S = 1.5
 BNO055_EXAMPLE = "sim://bno055?seed=1&rate=100&patient=original"
 STREAM_EXAMPLE = "sim://imu-stream?sensors=2&rate=200&patient=original&seed=1"
-
-
-def resolve_patient(value: str, *, key: str = "patient", url: str = ""):
-    """The constraint of a simulated patient: a shipped shape name or a constraint file.
-
-    Parameters
-    ----------
-    value : str
-        One of :data:`models.shapes.SHAPES` (``original``, ``c-shape``, ...) or a path to a
-        constraint YAML file.
-
-    Returns
-    -------
-    models.constraint.JointConstraint
-
-    Raises
-    ------
-    RigConfigError
-        Neither a shape nor a readable, valid constraint file (names ``key``).
-    """
-    from models.constraint import load_constraint
-    from models.shapes import SHAPES, load_shape
-
-    prefix = f"{url}: " if url else ""
-    if value in SHAPES:
-        return load_shape(value)
-    try:
-        return load_constraint(value)
-    except FileNotFoundError:
-        raise RigConfigError(f"{prefix}{key}={value!r}: not a shape name ({', '.join(SHAPES)}) "
-                             f"nor an existing constraint file") from None
-    except (OSError, ValueError) as err:  # ConstraintError is a ValueError
-        raise RigConfigError(f"{prefix}{key}={value!r}: {err}") from err
-
-
-def _limb_from_query(q: SimUrl, sensors: int) -> SimulatedLimb:
-    """The simulated patient described by the URL's patient keys."""
-    seed = q.integer("seed", 0)
-    patient = q.text("patient")
-    constraint = resolve_patient(patient, url=q.url) if patient is not None else None
-    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
-    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
-    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
-    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
-    neutral = q.number("neutral", 0.0, 0.0)
-    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
-    if 0.0 < neutral < least:
-        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
-                             f"checkpoint interval >= {least:g} s")
-    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
-    protocol = None
-    if q.flag("calibrate", False):
-        from calibration.protocol import CalibrationProtocol
-
-        protocol = CalibrationProtocol()
-    from rig.sim.patients import misplaced_mounts
-
-    # mounts: independent of the motion draws
-    mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace, sensors)
-    return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
-                         speed=speed, seed=seed, calibration_protocol=protocol,
-                         neutral_every_s=neutral, neutral_hold_s=_NEUTRAL_HOLD_S,
-                         neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
 
 
 def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
     """Start a simulated BNO055 described by a port string.
 
-    ``sim://bno055?seed=1&rate=100&patient=original`` — every key optional:
+    ``sim://bno055?seed=1&rate=100&patient=original`` — every key optional (the patient
+    keys are read by :func:`rig.sim.patients.patient_from_url`, for every simulator alike):
 
     ================  ===========================================================  ==========
     key               meaning                                                      default
@@ -733,14 +666,14 @@ def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
     RigConfigError
         Not ``sim://bno055``, unknown key, bad value (the message names the key).
     """
-    q = SimUrl(url, ("bno055",), (*_LIMB_KEYS, "sensor", "rate"), BNO055_EXAMPLE)
+    q = SimUrl(url, ("bno055",), (*PATIENT_KEYS, "sensor", "rate"), BNO055_EXAMPLE)
     kwargs: dict[str, object] = {
         "sensor": q.integer("sensor", 1, 0, 1),
         "rate_hz": q.number("rate", 100.0, 0.0, 1000.0, open_lo=True),
         "clock": q.clock(),
     }
     if "limb" not in overrides:
-        kwargs["limb"] = _limb_from_query(q, 2)
+        kwargs["limb"] = patient_from_url(q, sensors=2)
     kwargs.update(overrides)
     return Bno055Simulator(**kwargs)  # type: ignore[arg-type]
 
@@ -777,7 +710,8 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         Not ``sim://imu-stream``, unknown key, bad value (the message names the key).
     """
     q = SimUrl(url, ("imu-stream", "stream"),
-               (*_LIMB_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"), STREAM_EXAMPLE)
+               (*PATIENT_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"),
+               STREAM_EXAMPLE)
     sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
     rate = q.integer("rate", 100, 1, 0xFFFF)
     kwargs: dict[str, object] = {
@@ -790,6 +724,6 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         "clock": q.clock(),
     }
     if "limb" not in overrides:
-        kwargs["limb"] = _limb_from_query(q, sensors)
+        kwargs["limb"] = patient_from_url(q, sensors=sensors)
     kwargs.update(overrides)
     return StreamImuSimulator(**kwargs)  # type: ignore[arg-type]

@@ -19,6 +19,11 @@ the simulators on real ptys).
   calibration protocol (:class:`calibration.protocol.CalibrationProtocol`) through
   :class:`~rig.sim.limb.SimulatedLimb`'s own ``calibration_protocol`` support, then moving
   freely.
+- :func:`patient_from_url`: the one resolver of a port string's patient keys (``patient=<shape
+  name | constraint file>``, ``seed``, ``noise``, ...; :data:`PATIENT_KEYS`) into a
+  :class:`~rig.sim.limb.SimulatedLimb`, for the IMU simulators and the back-driven servo chain
+  (:mod:`rig.devices._sim_backends`); :func:`resolve_patient` the shape-or-file part. Errors are
+  one-line :class:`~rig.errors.RigConfigError` naming the port and the key.
 - :func:`record_imu` / :func:`record_servo`: offline recordings (no pty, no driver) for fast
   tests and benchmarks — the two IMUs through the sensor error model (noise, drift, magnetic
   disturbances, misplaced straps; :meth:`~rig.sim.limb.SimulatedLimb.measure_many`), or the
@@ -34,12 +39,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
+from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb, default_mounts
+from rig.sim.urls import SimUrl
 
-__all__ = ["Recording", "misplaced_mounts", "patient_limb", "record_imu", "record_servo",
-           "star_patient"]
+__all__ = ["PATIENT_KEYS", "Recording", "misplaced_mounts", "patient_from_url", "patient_limb",
+           "record_imu", "record_servo", "resolve_patient", "star_patient"]
 
 _ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
+
+PATIENT_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate",
+                "neutral", "neutral_sd")
+"""The port-string keys of a simulated patient (:func:`patient_from_url`); a simulator accepts
+those it lists as known."""
+_NEUTRAL_HOLD_S = 2.0  # SimulatedLimb's defaults: neutral hold and ramp, seconds
+_NEUTRAL_RAMP_S = 1.5
 
 
 def star_patient(seed: int, *, max_tilt_deg: float = 10.0):
@@ -119,6 +133,103 @@ def patient_limb(constraint, seed: int, *, noise: NoiseModel | None = None,
     return SimulatedLimb(constraint, sensors=mounts, noise=noise, seed=seed,
                          calibration_protocol=protocol, protocol_start_s=protocol_start_s,
                          **kwargs)
+
+
+def resolve_patient(value: str, *, url: str, key: str = "patient"):
+    """The range of motion a port string's ``patient=`` names: a shipped shape or a
+    constraint file.
+
+    Parameters
+    ----------
+    value : str
+        One of :data:`models.shapes.SHAPES` (``original``, ``c-shape``, ...) or a path to a
+        constraint YAML file.
+    url : str
+        The port string (named in errors).
+
+    Returns
+    -------
+    models.constraint.JointConstraint
+
+    Raises
+    ------
+    RigConfigError
+        Neither a shape nor a readable, valid constraint file: one line naming the port, the
+        key and the value.
+    """
+    from models.constraint import load_constraint
+    from models.shapes import SHAPES, load_shape
+
+    if value in SHAPES:
+        return load_shape(value)
+    try:
+        return load_constraint(value)
+    except FileNotFoundError:
+        raise RigConfigError(f"{url}: {key}={value!r}: not a shape name ({', '.join(SHAPES)}) "
+                             f"nor an existing constraint file") from None
+    except (OSError, ValueError) as err:  # ConstraintError is a ValueError
+        raise RigConfigError(f"{url}: {key}={value!r}: {_one_line(err)}") from err
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())
+
+
+def patient_from_url(q: SimUrl, *, sensors: int = 2,
+                     misplaced_straps: bool = True) -> SimulatedLimb:
+    """The simulated patient a port string's patient keys describe (the keys the URL's
+    simulator accepts among :data:`PATIENT_KEYS`; absent keys take their defaults).
+
+    ``patient`` (a shape or a constraint file, :func:`resolve_patient`; default the 60° cone
+    :data:`rig.sim.limb.DEFAULT_CONSTRAINT`), ``seed`` (0), ``noise`` (on: ``NoiseModel()``;
+    off: ``NoiseModel.ideal()``), ``misplace_deg`` (5: each strap turned this far,
+    :func:`misplaced_mounts` of ``default_rng([seed, 0x5EA7])``), ``excursion`` (1, in
+    (0, 3]), ``speed`` (1, in (0, 20]), ``calibrate`` (off: the guided calibration protocol
+    from 2 s), ``neutral`` (0 or a checkpoint interval >= 6 s), ``neutral_sd`` (2°, 0..10).
+
+    Parameters
+    ----------
+    q : SimUrl
+        The parsed port string.
+    sensors : int
+        Sensors the patient wears (0 on the thorax, the others on the limb).
+    misplaced_straps : bool
+        Straps drawn by ``misplace_deg`` (IMU simulators); False: the default mountings
+        (:func:`rig.sim.limb.default_mounts`; a servo limb wears no IMU).
+
+    Raises
+    ------
+    RigConfigError
+        A bad value or patient, one line naming the port and the key.
+    """
+    seed = q.integer("seed", 0)
+    patient = q.text("patient")
+    constraint = resolve_patient(patient, url=q.url) if patient is not None else None
+    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0) if misplaced_straps else None
+    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
+    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    neutral = q.number("neutral", 0.0, 0.0)
+    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
+    if 0.0 < neutral < least:
+        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
+                             f"checkpoint interval >= {least:g} s")
+    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
+    protocol = None
+    if q.flag("calibrate", False):
+        from calibration.protocol import CalibrationProtocol
+
+        protocol = CalibrationProtocol()
+    mounts: int | list[SensorMount] = sensors
+    if misplace is not None:  # drawn from a stream of their own: the motion is unchanged
+        mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace, sensors)
+    try:
+        return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
+                             speed=speed, seed=seed, calibration_protocol=protocol,
+                             neutral_every_s=neutral, neutral_hold_s=_NEUTRAL_HOLD_S,
+                             neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
+    except ValueError as err:
+        raise RigConfigError(f"{q.url}: patient={patient!r}: {_one_line(err)}") from err
 
 
 @dataclass

@@ -1,8 +1,11 @@
-"""``sim://`` port strings: parsing and typed, named validation shared by every simulator.
+"""``sim://`` port strings: the simulators they name, and the one parser of their query.
 
-``sim://<device>?key=value&key=value`` — the device (URL host) chooses the simulator, the query
-its settings. Every key is checked: an unknown key, a key given twice or a bad value raises
-:class:`~rig.errors.RigConfigError` naming the key and what it accepts.
+``sim://<device>?key=value&key=value`` — the device (URL host) chooses the simulator
+(:data:`SIM_DEVICES`, the one table of them), the query its settings. Every key is checked: an
+unknown key, a key given twice or a bad value raises :class:`~rig.errors.RigConfigError`
+naming the key and what it accepts (:class:`SimUrl`, used by every simulator and by the port
+backends of :mod:`rig.devices`). :func:`with_keys` edits a port string's query (the demo
+re-points shipped rig configurations with it).
 
 Keys every simulator accepts (time):
 
@@ -17,20 +20,119 @@ Keys every simulator accepts (time):
 
 from __future__ import annotations
 
+import importlib
 import math
 import time
 import urllib.parse
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 from rig.errors import RigConfigError
 from rig.sim.clock import Clock, ManualClock, ScaledClock
 
-__all__ = ["TIME_KEYS", "SimUrl", "sim_device"]
+__all__ = ["SIM_DEVICES", "TIME_KEYS", "SimDevice", "SimUrl", "query_keys", "sim_device",
+           "sim_device_of", "with_keys"]
 
 TIME_KEYS = frozenset({"clock", "time_scale"})
 
 _TRUE = {"1", "on", "true", "yes"}
 _FALSE = {"0", "off", "false", "no"}
+
+
+@dataclass(frozen=True)
+class SimDevice:
+    """A simulator a ``sim://`` port string can name.
+
+    Attributes
+    ----------
+    name : str
+        The URL host (``dynamixel``, ``bno055``, ``imu-stream``).
+    aliases : tuple of str
+        Other hosts naming it (``dxl``, ``stream``).
+    entry : str
+        ``module:function`` starting it from a URL (imported only when used).
+    """
+
+    name: str
+    aliases: tuple[str, ...]
+    entry: str
+
+    @property
+    def kind(self) -> str:
+        """:attr:`rig.devices.ports.Port.kind` of its ports: ``sim-<name>``."""
+        return f"sim-{self.name}"
+
+    def start(self, url: str, **overrides: object):
+        """Start the simulator ``url`` describes (``overrides`` win over the URL)."""
+        module, func = self.entry.split(":")
+        return getattr(importlib.import_module(module), func)(url, **overrides)
+
+
+_DEVICES = (
+    SimDevice("dynamixel", ("dxl",), "rig.sim.dynamixel:bus_from_url"),
+    SimDevice("bno055", (), "rig.sim.imu:bno055_from_url"),
+    SimDevice("imu-stream", ("stream",), "rig.sim.imu:stream_from_url"),
+)
+SIM_DEVICES: dict[str, SimDevice] = {host: d for d in _DEVICES for host in (d.name, *d.aliases)}
+"""``sim://<host>`` -> the simulator it names (aliases included)."""
+
+
+def sim_device_of(url: str) -> SimDevice:
+    """The simulator a ``sim://`` URL names.
+
+    Raises
+    ------
+    RigConfigError
+        Not ``sim://`` one of :data:`SIM_DEVICES`.
+    """
+    parts = urllib.parse.urlsplit(url)
+    device = SIM_DEVICES.get(parts.netloc) if parts.scheme == "sim" else None
+    if device is None:
+        raise RigConfigError(f"port {url!r} names no simulator: unknown simulated device "
+                             f"{parts.netloc!r}; known: "
+                             f"{', '.join(f'sim://{k}' for k in SIM_DEVICES)}")
+    return device
+
+
+def _pieces(query: str) -> list[str]:
+    """The ``key=value`` pieces of a query, as written (empty ones dropped)."""
+    return [p for p in query.split("&") if p]
+
+
+def _decode(piece: str) -> tuple[str, str]:
+    """Key and value of a query piece, percent- and ``+``-decoded (a key without ``=`` has the
+    value ``""``) — as :func:`urllib.parse.parse_qsl` with ``keep_blank_values``."""
+    key, _, value = piece.partition("=")
+    return urllib.parse.unquote_plus(key), urllib.parse.unquote_plus(value)
+
+
+def query_keys(url: str) -> frozenset[str]:
+    """The keys ``url``'s query gives (not checked)."""
+    return frozenset(_decode(p)[0] for p in _pieces(urllib.parse.urlsplit(url).query))
+
+
+def with_keys(url: str, **keys: object) -> str:
+    """``url`` with query keys replaced (in place) or added (at the end).
+
+    Each value is ``str(value)`` percent-quoted with ``/`` kept (a file path stays readable);
+    the rest of the URL, the other keys included, is kept as written.
+
+    Examples
+    --------
+    >>> with_keys("sim://imu-stream?sensors=2&seed=1", seed=7, patient="/tmp/p q.yaml")
+    'sim://imu-stream?sensors=2&seed=7&patient=/tmp/p%20q.yaml'
+    """
+    head, _, query = url.partition("?")
+    pieces = _pieces(query)
+    names = [p.partition("=")[0] for p in pieces]
+    for key, value in keys.items():
+        item = f"{key}={urllib.parse.quote(str(value), safe='/')}"
+        if key in names:
+            pieces[names.index(key)] = item
+        else:
+            pieces.append(item)
+            names.append(key)
+    return head + "?" + "&".join(pieces)
 
 
 def sim_device(url: str, devices: Iterable[str], example: str, what: str | None = None) -> str:
@@ -73,9 +175,7 @@ class SimUrl:
                  example: str) -> None:
         self.url = url
         self.device = sim_device(url, devices, example)
-        parts = urllib.parse.urlsplit(url)
-        pairs = urllib.parse.parse_qsl(parts.query, keep_blank_values=True,
-                                       strict_parsing=False)
+        pairs = [_decode(p) for p in _pieces(urllib.parse.urlsplit(url).query)]
         known_set = set(known) | TIME_KEYS
         self._values: dict[str, str] = {}
         for key, value in pairs:

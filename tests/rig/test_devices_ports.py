@@ -97,3 +97,61 @@ def test_sim_stream_is_the_short_form_of_imu_stream():
         assert port.kind == "sim-imu-stream" and port.path.startswith("/dev/")
     finally:
         port.close()
+
+
+def test_simulated_patient_of_a_back_driven_port():
+    from calibration.protocol import CalibrationProtocol
+    from models import quaternion as Q
+    from rig.devices import load_rig_config
+
+    servos = load_rig_config("sim-shoulder").servos
+    with open_port(servos.port + "&clock=manual&wire_time=off", baud=servos.baud) as port:
+        sp = port.simulated_patient
+        assert sp.back_drives and sp.limb is port.patient and sp.t0 == port.patient_t0
+        clock = port.simulator.clock
+        assert sp.now() == 0.0
+        clock.advance(1.5)
+        assert sp.now() == 1.5 and sp.time_at([clock()])[0] == 1.5  # manual: scale 1
+        truth = sp.limb.joint(np.arange(0.0, 3.0, 0.01))
+        chain_q, missed = sp.follow(truth)
+        assert missed == 0
+        assert np.degrees(Q.angle(Q.multiply(chain_q, Q.conjugate(truth)))).max() < 1e-6
+        sp.start_protocol(CalibrationProtocol())
+        assert sp.limb.protocol_start_s == 3.5  # 2 s of patient time after now
+
+
+def test_simulated_patient_of_imu_ports_and_none_elsewhere():
+    with open_port("sim://imu-stream?sensors=2&clock=manual") as port:
+        sp = port.simulated_patient
+        assert not sp.back_drives and not sp.protocol_pinned
+        assert sp.limb is port.simulator.limb and sp.device_t0 == 0.0
+        with pytest.raises(ValueError, match="back-drives no servo chain"):
+            sp.follow(np.array([[1.0, 0.0, 0.0, 0.0]]))
+    with open_port("sim://bno055?calibrate=off&clock=manual") as port:
+        assert port.simulated_patient.protocol_pinned
+    with open_port("sim://dynamixel?ids=1") as port:
+        assert port.simulated_patient is None and port.patient is None
+        assert port.patient_t0 == 0.0
+
+
+def test_simulated_patient_time_on_a_scaled_clock():
+    import time
+
+    with open_port("sim://imu-stream?sensors=1&time_scale=8") as port:
+        sp, sim = port.simulated_patient, port.simulator
+        assert sp.scale == 8.0
+        host = time.monotonic()
+        assert sp.time_at([host])[0] == pytest.approx(sim.clock.at(host) - sim.started_at,
+                                                      abs=1e-6)
+
+
+def test_port_closers_run_once_in_reverse_order():
+    from rig.devices.ports import Port
+
+    calls = []
+    port = Port(url="x", path="x")
+    port.add_closer(lambda: calls.append(1))
+    port.add_closer(lambda: calls.append(2))
+    port.close()
+    port.close()
+    assert calls == [2, 1] and port.closed

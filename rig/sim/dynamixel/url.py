@@ -24,11 +24,12 @@ from __future__ import annotations
 from rig.sim.dynamixel.bus import DynamixelBus, start_servo_bus
 from rig.sim.urls import SimUrl
 
-__all__ = ["DEVICES", "EXAMPLE", "bus_from_url"]
+__all__ = ["DEVICES", "EXAMPLE", "KEYS", "bus_from_query", "bus_from_url"]
 
 DEVICES = ("dynamixel", "dxl")
 EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
-_KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time")
+KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time")
+"""The bus's own keys (:data:`rig.sim.urls.TIME_KEYS` too)."""
 
 
 def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
@@ -57,7 +58,12 @@ def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
         Not a ``sim://dynamixel`` URL, unknown key, bad value (the message names the key), or
         a configuration the bus refuses (unknown model, duplicate IDs, ...).
     """
-    q = SimUrl(url, DEVICES, (*_KEYS, *also_known), EXAMPLE)
+    return bus_from_query(SimUrl(url, DEVICES, (*KEYS, *also_known), EXAMPLE), **overrides)
+
+
+def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
+    """Start the simulated chain of a parsed ``sim://dynamixel`` URL (its bus keys, above;
+    other keys the URL may carry are the caller's). ``overrides`` as :func:`bus_from_url`."""
     kwargs: dict[str, object] = {
         "ids": q.int_list("ids", [1]),
         "model": q.text("model", "XM430-W350"),
