@@ -17,7 +17,9 @@ Conventions (the whole project, every file, API and model)
 - ``q`` and ``-q`` are the same rotation. Functions that return a rotation "as a rotation"
   (:func:`canonical`) pick ``w >= 0``; functions that transform an orientation keep its sign.
 - **Angles wrap to (-π, π]** (:func:`wrap_angle`, scalar twin :func:`wrap_angle1`): a twist of
-  exactly half a turn is ``+π`` for ``q`` and ``-q`` alike, on every path.
+  exactly half a turn is ``+π`` for ``q`` and ``-q`` alike, on every path. Differences about a
+  centre, where the end of the interval does not matter, may use the plain modulo formula
+  (:func:`wrap_angle_mod`, to [-π, π)).
 
 scipy's :class:`scipy.spatial.transform.Rotation` is used for conversions (it is scalar-last by
 default: always go through :func:`to_rotation` / :func:`from_rotation`, which pass
@@ -60,11 +62,13 @@ __all__ = [
     "random_unit_vectors",
     "rotate",
     "swing_twist",
+    "tangent_basis",
     "to_rotation",
     "twist_angle",
     "twist_angle1",
     "wrap_angle",
     "wrap_angle1",
+    "wrap_angle_mod",
 ]
 
 _PI = math.pi
@@ -244,6 +248,27 @@ def perpendicular(v: np.ndarray) -> np.ndarray:
 _perpendicular = perpendicular  # former private name
 
 
+def tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An orthonormal basis ``(u, v)`` of the plane tangent to the sphere at one unit ``c``.
+
+    ``u`` is ``c`` crossed with the basis axis least aligned with it (as in
+    :func:`perpendicular`; ties: lowest index), normalised; ``v = c × u``, so ``(u, v, c)`` is
+    right-handed. Deterministic: the azimuth ``atan2(d·v, d·u)`` of a direction ``d`` about
+    ``c`` is the same on every call.
+
+    Parameters
+    ----------
+    c : (3,) float64, unit
+
+    Returns
+    -------
+    u, v : (3,) float64, unit, perpendicular to ``c`` and to each other
+    """
+    u = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
+    u /= np.linalg.norm(u)
+    return u, np.cross(c, u)
+
+
 def from_two_vectors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Minimal rotation taking unit vectors ``a`` to ``b`` (axis ``a × b``), ``w >= 0``.
 
@@ -303,6 +328,16 @@ def wrap_angle1(phi: float) -> float:
         return phi
     out = (phi + _PI) % _TWO_PI - _PI
     return _PI if out == -_PI else out
+
+
+def wrap_angle_mod(phi) -> np.ndarray:
+    """Wrap angles (radians) to [-π, π) by the modulo formula ``(φ + π) mod 2π − π``.
+
+    Every value goes through the formula (one inside may move by an ulp), and ``π`` maps to
+    ``-π``: for angles about a centre (twist about its circular mean, residuals), where the end
+    of the interval does not matter. Orientation angles follow :func:`wrap_angle`, (-π, π].
+    """
+    return (np.asarray(phi, dtype=np.float64) + _PI) % _TWO_PI - _PI
 
 
 _wrap_pi = wrap_angle  # former private name
