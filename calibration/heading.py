@@ -101,10 +101,6 @@ def _log_prior(log_sigma: float, log_tau: float, log_noise: float) -> float:
                    + (log_noise - math.log(1.5)) ** 2)
 
 
-def _wrap(a):
-    return (np.asarray(a, dtype=np.float64) + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class HeadingCorrection:
     """Relative heading drift ψ(t) from neutral checkpoints, and its removal (module doc).
 
@@ -233,7 +229,7 @@ class HeadingCorrection:
         for i, (win, p) in enumerate(cands):
             others = np.delete(psis, i)
             if len(others):
-                jump = math.degrees(abs(float(np.median(_wrap(others - p)))))
+                jump = math.degrees(abs(float(np.median(Q.wrap_angle_mod(others - p)))))
                 if jump > self.max_jump_deg:
                     self.rejected_.append((win, f"heading {math.degrees(p):.1f}° is {jump:.1f}° "
                                                 f"from the others' (> {self.max_jump_deg:g}°)"))

@@ -76,7 +76,7 @@ class ServoChainCalibration:
     def _padded_axes(self) -> np.ndarray:
         a = list(self.axes)
         if len(a) == 1:
-            b = Q._perpendicular(a[0])
+            b = Q.perpendicular(a[0])
             a += [b, np.cross(a[0], b)]
         elif len(a) == 2:
             a.append(np.cross(a[0], a[1]) / np.linalg.norm(np.cross(a[0], a[1])))
