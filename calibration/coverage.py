@@ -227,9 +227,7 @@ class CoverageMap:
     def summary(self) -> CoverageSummary:
         """Current coverage per sector (also records the reaches for the stability test)."""
         c = self.centre()
-        u = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
-        u /= np.linalg.norm(u)
-        v = np.cross(c, u)
+        u, v = Q.tangent_basis(c)
         occ = np.flatnonzero(self.counts_ >= self.min_count)
         p = self.grid_[occ]
         rho = np.degrees(Q.angle_between(p, c))
