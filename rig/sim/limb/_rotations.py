@@ -17,14 +17,6 @@ def exp_map(rotvec: np.ndarray) -> np.ndarray:
     return np.concatenate((np.cos(half), k * rotvec), axis=-1)
 
 
-def tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal ``(u, v)`` of the plane tangent to the sphere at unit ``c`` (3,), with
-    ``(u, v, c)`` right-handed."""
-    u = np.cross(c, np.eye(3)[int(np.argmin(np.abs(c)))])
-    u /= np.linalg.norm(u)
-    return u, np.cross(c, u)
-
-
 def slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Spherical interpolation ``a ⊗ exp(w log(a* ⊗ b))`` (N, 4), shortest arc, ``w`` (N,)."""
     rel = Q.multiply(Q.conjugate(a), b)

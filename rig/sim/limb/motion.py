@@ -60,7 +60,7 @@ import numpy as np
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.oracle import ConstraintOracle
-from rig.sim.limb._rotations import exp_map, tangent_basis
+from rig.sim.limb._rotations import exp_map
 
 __all__ = ["JointMotion", "Posture", "Sinusoids", "SmoothPath", "StarRadial", "describe_range"]
 
@@ -178,7 +178,7 @@ class JointMotion:
         self.twist_centre = math.radians(0.5 * (tw[0] + tw[1]))
         self.twist_half = math.radians(max(0.5 * (tw[1] - tw[0]), 5.0))
         self.excursion = float(excursion)
-        self._u, self._v = tangent_basis(self.centre)
+        self._u, self._v = Q.tangent_basis(self.centre)
         self._radial = StarRadial.of(constraint, self.centre)
 
     @property
@@ -300,7 +300,7 @@ class StarRadial:
         verts = Q.check_vectors(swing.vertices)
         if np.any(verts @ centre <= -1.0 + 1e-9):
             return None  # a vertex at the centre's antipode has no azimuth
-        u, v = tangent_basis(centre)
+        u, v = Q.tangent_basis(centre)
         az = np.unwrap(np.arctan2(verts @ v, verts @ u))
         if az[-1] < az[0]:  # clockwise about the centre: walk it the other way
             verts = verts[::-1]

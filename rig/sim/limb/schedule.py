@@ -42,7 +42,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from rig.sim.limb._rotations import exp_map, slerp, smoothstep, tangent_basis
+from models import quaternion as Q
+from rig.sim.limb._rotations import exp_map, slerp, smoothstep
 
 __all__ = ["NeutralCheckpoints", "NeutralPoses", "Schedule"]
 
@@ -131,7 +132,7 @@ class NeutralPoses:
         if np.any(ks < 1):
             raise ValueError("neutral checkpoints are numbered from 1")
         sd = math.radians(self.sd_deg)
-        u, v = tangent_basis(self.axis)
+        u, v = Q.tangent_basis(self.axis)
         out = np.empty((len(ks), 4))
         ss = self.seed
         for i, kk in enumerate(ks.tolist()):
