@@ -236,22 +236,6 @@ def _shipped_config(name: str) -> dict:
     return safe_load_yaml(resources.files("rig").joinpath("configs", f"{name}.yaml").read_text())
 
 
-def _with_query(url: str, **keys: Any) -> str:
-    """``url`` with query keys replaced or added (values percent-quoted, ``/`` kept)."""
-    import urllib.parse
-
-    head, _, query = url.partition("?")
-    pairs = [p for p in query.split("&") if p]
-    names = [p.partition("=")[0] for p in pairs]
-    for k, v in keys.items():
-        item = f"{k}={urllib.parse.quote(str(v), safe='/')}"
-        if k in names:
-            pairs[names.index(k)] = item
-        else:
-            pairs.append(item)
-    return head + "?" + "&".join(pairs)
-
-
 def write_rig_configs(out: Path, patient_file: Path, seed: int, size: DemoSize) -> dict[str, Path]:
     """The shipped ``sim-imu`` / ``sim-shoulder`` configurations re-pointed at the demo's
     patient and seed, with scaled patient time for recording; a real-time servo configuration
@@ -259,6 +243,7 @@ def write_rig_configs(out: Path, patient_file: Path, seed: int, size: DemoSize) 
     import yaml
 
     from rig.devices.config import load_rig_config
+    from rig.sim.urls import with_keys
 
     rigs = out / "rigs"
     rigs.mkdir(parents=True, exist_ok=True)
@@ -267,7 +252,7 @@ def write_rig_configs(out: Path, patient_file: Path, seed: int, size: DemoSize) 
 
     imu = _shipped_config("sim-imu")
     imu["constraint"] = patient
-    imu["sensors"]["port"] = _with_query(
+    imu["sensors"]["port"] = with_keys(
         imu["sensors"]["port"], patient=patient, seed=seed + 1,
         time_scale=f"{size.imu_time_scale:g}", flow="on")
     imu["description"] = "demo: sim-imu worn by the demo's simulated patient, scaled time"
@@ -276,10 +261,10 @@ def write_rig_configs(out: Path, patient_file: Path, seed: int, size: DemoSize) 
     live = _shipped_config("sim-shoulder")
     live["constraint"] = patient
     base = servo["servos"]["port"]
-    servo["servos"]["port"] = _with_query(base, patient=patient, seed=seed + 1,
+    servo["servos"]["port"] = with_keys(base, patient=patient, seed=seed + 1,
                                           time_scale=f"{size.servo_time_scale:g}")
     servo["description"] = "demo: sim-shoulder back-driven by the demo's patient, scaled time"
-    live["servos"]["port"] = _with_query(base, patient=patient, seed=seed + 1)
+    live["servos"]["port"] = with_keys(base, patient=patient, seed=seed + 1)
     live["description"] = "demo: sim-shoulder in real time for the live loop"
     for name, cfg in (("sim-imu", imu), ("sim-shoulder", servo), ("sim-shoulder-live", live)):
         p = rigs / f"{name}.yaml"

@@ -264,7 +264,7 @@ class NeutralCheckpoints:
 
     The patient returns to the neutral pose between movements; each return lets the read path
     re-zero the two sensors' relative heading (:class:`calibration.heading.HeadingCorrection`,
-    :func:`rig.commands.boundary.joint_orientations_from_store`).
+    :func:`rig.readback.joint_orientations_from_store`).
 
     - **Simulated rig**: the windows are the simulated patient's schedule
       (``neutral_windows(t_end)`` of :class:`rig.sim.limb.SimulatedLimb`, patient time, turned

@@ -4,7 +4,7 @@ A simulated patient is a known range of motion (a :class:`models.constraint.Join
 worn by a :class:`rig.sim.limb.SimulatedLimb`. Everything that needs a patient whose truth is
 known builds it here: the calibration tests (``tests/calibration``), the boundary benchmark
 (``benchmarks/bench_boundary.py``, offline recordings), and the end-to-end accuracy check of
-``rig record`` (:mod:`rig.record.accuracy`, ``benchmarks/bench_record.py accuracy``, through
+``rig record`` (``benchmarks/record_accuracy.py``, ``benchmarks/bench_record.py accuracy``, through
 the simulators on real ptys).
 
 - :func:`star_patient`: a seeded random concave star polygon

@@ -11,7 +11,7 @@ are ``benchmarks/bench_record.py accuracy`` (other seeds; this one is seed 7).
 
 from __future__ import annotations
 
-from rig.record.accuracy import record_imu_patient
+from benchmarks.record_accuracy import record_imu_patient
 from rig.sim.patients import star_patient
 from rig.store import open_store
 

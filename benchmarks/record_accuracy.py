@@ -6,8 +6,8 @@ magnetic disturbances and misplaced straps on a lockstep manual clock, or the ba
 limb ``sim://dynamixel?...&patient=`` on a scaled clock) → the real driver and orientation
 source → :func:`rig.record.record_session` (guided calibration performed by the simulated
 patient, store) → joint orientations read back from the store through the stored calibration
-(:func:`rig.commands.boundary.joint_orientations_from_store`) → boundary extraction
-(:func:`rig.commands.boundary.extract`, i.e. :class:`calibration.boundary.BoundaryExtractor`) →
+(:func:`rig.readback.joint_orientations_from_store`) → boundary extraction
+(:func:`rig.readback.extract`, i.e. :class:`calibration.boundary.BoundaryExtractor`) →
 compared with the patient's truth:
 
 - ``mean_deg`` / ``hausdorff_deg``: symmetric mean / largest distance between the extracted and
@@ -29,7 +29,8 @@ compared with the patient's truth:
   samples the extractor keeps): how much of ``twist_deg`` is a constant offset (the heading
   misalignment at calibration) and how much drifts during the session.
 
-Used by ``benchmarks/bench_record.py accuracy`` (held-out seeds) and one fast seeded test.
+A benchmark harness, not part of the product: used by ``benchmarks/bench_record.py accuracy``
+(held-out seeds) and one fast seeded test (``tests/rig/test_record_accuracy.py``).
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def _compare(name, path, res, store_path, truth, truth_q, recorded_q=None,
              unreachable_pct: float = 0.0, fusion: str = "auto") -> AccuracyResult:
     from calibration.boundary import boundary_distance, outside_fraction
     from calibration.clinical import range_of_motion
-    from rig.commands.boundary import extract, joint_orientations_from_store
+    from rig.readback import extract, joint_orientations_from_store
     from rig.store import open_store
 
     with open_store(store_path, create=False) as store:
@@ -221,14 +222,14 @@ def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: floa
     from models.constraint import dump_constraint
     from rig.record import PlainDisplay, RecordOptions, record_session
     from rig.record.rigio import load_config, open_rig
+    from rig.sim.urls import with_keys
 
     tmp = Path(tmp)
     cpath = tmp / f"patient-{seed}.yaml"
     dump_constraint(constraint, cpath)
     base = load_config("sim-shoulder")
     text = resources.files("rig").joinpath("configs", "sim-shoulder.yaml").read_text()
-    url = (base.servos.port.replace("patient=original", f"patient={cpath}")
-           .replace("seed=1", f"seed={seed}") + f"&time_scale={time_scale:g}")
+    url = with_keys(base.servos.port, patient=cpath, seed=seed, time_scale=f"{time_scale:g}")
     cfg = _rig_yaml(tmp, text.replace(base.servos.port, url))
     db = tmp / f"servo-{seed}.db"
     rig = open_rig(load_config(str(cfg)), rate_hz=rate_hz, calibrate=True)
