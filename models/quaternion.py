@@ -245,9 +245,6 @@ def perpendicular(v: np.ndarray) -> np.ndarray:
     return p.reshape(v.shape)
 
 
-_perpendicular = perpendicular  # former private name
-
-
 def tangent_basis(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An orthonormal basis ``(u, v)`` of the plane tangent to the sphere at one unit ``c``.
 
@@ -285,7 +282,7 @@ def from_two_vectors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     anti = w < 1e-12
     if np.any(anti):
         q = q.copy()
-        perp = _perpendicular(a[anti] if a.ndim > 1 else a)
+        perp = perpendicular(a[anti] if a.ndim > 1 else a)
         q[anti] = np.concatenate((np.zeros((*perp.shape[:-1], 1)), perp), axis=-1)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
@@ -338,9 +335,6 @@ def wrap_angle_mod(phi) -> np.ndarray:
     of the interval does not matter. Orientation angles follow :func:`wrap_angle`, (-π, π].
     """
     return (np.asarray(phi, dtype=np.float64) + _PI) % _TWO_PI - _PI
-
-
-_wrap_pi = wrap_angle  # former private name
 
 
 def swing_twist(q: np.ndarray, axis: np.ndarray = LIMB_AXIS) -> tuple[np.ndarray, np.ndarray]:

@@ -32,24 +32,6 @@ def _disc(n: int, radius_deg: float) -> np.ndarray:
     return Projection.about(X).inverse(np.column_stack((r * np.cos(ang), r * np.sin(ang))))
 
 
-def test_tangent_basis_is_orthonormal_and_right_handed():
-    rng = np.random.default_rng(1)
-    for c in Q.random_unit_vectors(50, rng):
-        u, v = Q.tangent_basis(c)
-        assert np.allclose([u @ u, v @ v, u @ c, v @ c, u @ v], [1, 1, 0, 0, 0], atol=1e-12)
-        assert np.allclose(np.cross(u, v), c, atol=1e-12)
-        assert np.allclose(u, Q.perpendicular(c), atol=1e-15)
-
-
-def test_wrap_angle_mod_is_half_open_below():
-    x = np.array([-math.pi, math.pi, 3 * math.pi, -0.5, 7.0])
-    out = Q.wrap_angle_mod(x)
-    assert out[0] == -math.pi and out[1] == -math.pi and out[2] == -math.pi
-    assert np.all((out >= -math.pi) & (out < math.pi))
-    assert np.allclose(np.cos(out), np.cos(x)) and np.allclose(np.sin(out), np.sin(x))
-    assert Q.wrap_angle(np.array([-math.pi]))[0] == math.pi  # the other convention
-
-
 def test_projection_round_trip_and_exact_distance_from_the_centre():
     rng = np.random.default_rng(2)
     d = Q.random_unit_vectors(2000, rng)
