@@ -20,13 +20,11 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
-import sys
 import time
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from common import child_env
+from common import child_servos
 from common import raw_sync_loop as run_loop
 
 from rig.devices import DynamixelChain, load_rig_config
@@ -58,20 +56,6 @@ def driver_loop(port: str, cycles: int) -> tuple[list[float], list[float]]:
         return times, kin_times
 
 
-def child_bus():
-    env = child_env()
-    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
-                             "sim://dynamixel?ids=1,2,3&return_delay_us=0"],
-                            stdout=subprocess.PIPE, text=True, env=env)
-    return proc, proc.stdout.readline().strip()
-
-
-def stop(proc) -> None:
-    proc.terminate()
-    proc.wait()
-    proc.stdout.close()
-
-
 def med(xs):
     return statistics.median(xs)
 
@@ -95,12 +79,9 @@ def main() -> None:
                 with open_port(URL) as port:
                     drv, kin = driver_loop(port, args.cycles)
             else:
-                proc, path = child_bus()
-                try:
+                with child_servos() as path:
                     raw = run_loop(path, args.cycles, True)
                     drv, kin = driver_loop(path, args.cycles)
-                finally:
-                    stop(proc)
             raw_meds.append(med(raw))
             drv_meds.append(med(drv))
             kin_meds.append(med(kin))

@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import subprocess
-import sys
 
-from common import IDS, child_env
+from common import IDS, child_servos
 from common import raw_sync_loop as run_loop
 
 from rig.sim.dynamixel import start_servo_bus
@@ -46,18 +44,9 @@ def in_thread(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[fl
 
 def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[float]]:
     out = []
-    env = child_env()
     for _ in range(runs):
-        proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos",
-                                 f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}"],
-                                stdout=subprocess.PIPE, text=True, env=env)
-        try:
-            port_name = proc.stdout.readline().strip()
+        with child_servos(f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}") as port_name:
             out.append(run_loop(port_name, cycles, fast))
-        finally:
-            proc.terminate()
-            proc.wait()
-            proc.stdout.close()
     return out
 
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from common import child_env
+from common import child_env, child_servos
 
 from models import quaternion as Q
 from models.onnx_io import load_model
@@ -62,23 +62,6 @@ def _train(constraint_path: Path, out: Path) -> Path:
                     "--out", str(out)], check=True, capture_output=True,
                    env=child_env())
     return out
-
-
-class ChildBus:
-    """``rig sim servos`` in a child process; ``.port`` is its pty."""
-
-    def __enter__(self):
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "rig", "sim", "servos",
-             "sim://dynamixel?ids=1,2,3&return_delay_us=0"], stdout=subprocess.PIPE, text=True,
-            env=child_env())
-        self.port = self.proc.stdout.readline().strip()
-        return self
-
-    def __exit__(self, *exc):
-        self.proc.terminate()
-        self.proc.wait()
-        self.proc.stdout.close()
 
 
 def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None, clock=None):
@@ -140,8 +123,8 @@ def main() -> None:
 
     # 1. sustained rate ----------------------------------------------------------------------
     print(f"\n1. sustained 200 Hz, 3 servos, adversarial targets, {args.duration:g} s")
-    with ChildBus() as bus:
-        servos = dataclasses.replace(rig.servos, port=bus.port)
+    with child_servos() as child_port:
+        servos = dataclasses.replace(rig.servos, port=child_port)
         s, t = run_loop(servos, oracle, model, ScriptedTargets("adversarial", oracle, seed=1),
                         rate=200.0, duration=args.duration)
         _rate_line("simulator in a child process", s, t)

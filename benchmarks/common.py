@@ -9,16 +9,19 @@ On import:
 - :data:`ROOT`, the checkout this file is in, first on ``sys.path``: a script measures the code
   beside it, not another installed copy. :func:`child_env` passes it to child processes.
 
-Shared pieces: :func:`single_latencies_ns` (one ONNX call at a time) and :func:`raw_sync_loop`
+Shared pieces: :func:`single_latencies_ns` (one ONNX call at a time), :func:`raw_sync_loop`
 (the raw ``dynamixel_sdk`` control cycle: the peer figure of the driver and live-loop
-benchmarks).
+benchmarks) and :func:`child_servos` (a simulated chain in its own process, as hardware is).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -28,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path[:1]:
     sys.path.insert(0, str(ROOT))
 
-__all__ = ["IDS", "ROOT", "child_env", "raw_sync_loop", "single_latencies_ns"]
+__all__ = ["IDS", "ROOT", "child_env", "child_servos", "raw_sync_loop", "single_latencies_ns"]
 
 #: Servo IDs of the simulated 3-servo chain the loop benchmarks drive.
 IDS = (1, 2, 3)
@@ -38,6 +41,19 @@ _TORQUE, _GOAL_POS, _PRESENT_POS = 64, 116, 132
 def child_env() -> dict[str, str]:
     """The environment for a child process that must import this checkout."""
     return dict(os.environ, PYTHONPATH=str(ROOT))
+
+
+@contextlib.contextmanager
+def child_servos(url: str = "sim://dynamixel?ids=1,2,3&return_delay_us=0") -> Iterator[str]:
+    """``rig sim servos URL`` in a child process for the duration; yields its pty path."""
+    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", url],
+                            stdout=subprocess.PIPE, text=True, env=child_env())
+    try:
+        yield proc.stdout.readline().strip()
+    finally:
+        proc.terminate()
+        proc.wait()
+        proc.stdout.close()
 
 
 def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
