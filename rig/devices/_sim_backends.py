@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.devices.ports import Port, SimulatedPatient
+from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, UnreachableError
 
 BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")

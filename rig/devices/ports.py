@@ -39,195 +39,13 @@ into a simulator object for these.
 
 from __future__ import annotations
 
-import importlib
 import os
 import stat
-import threading
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
+from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError
 
-if TYPE_CHECKING:
-    from rig.sim.limb import SimulatedLimb
-
-__all__ = ["Port", "SimulatedPatient", "open_port"]
-
-
-class SimulatedPatient:
-    """A simulated port's patient, as code above the seam may see it.
-
-    Parameters
-    ----------
-    limb : rig.sim.limb.SimulatedLimb
-        The patient (ground truth).
-    clock : callable
-        The simulator's clock (seconds).
-    clock_t0 : float
-        The reading of ``clock`` at patient time 0.
-    t0 : float
-        Host time at patient time 0 (:attr:`t0`).
-    scale : float
-        Patient seconds per host second.
-    device_t0 : float
-        Device time (s) at patient time 0 of a device that timestamps its samples with the
-        patient's time (the stream board); 0 otherwise.
-    backdrive : object, optional
-        What moves a servo chain with the patient (``follow(joint_q) -> (chain_q, missed)``).
-    protocol_pinned : bool
-        The port string says whether the patient performs the calibration protocol
-        (``calibrate=on|off``): a recorder leaves that as it is.
-
-    Attributes
-    ----------
-    limb : rig.sim.limb.SimulatedLimb
-    t0 : float
-        When the patient's motion time was 0. On the real clock (the default) and a
-        ``time_scale=`` one: host monotonic time, ``limb.joint((t - t0) * scale)`` is the truth
-        at host time ``t`` (:meth:`time_at`). On a ``clock=manual`` simulator host time does not
-        move the patient: it is the simulator clock's reading, and :meth:`now` is the
-        patient's time.
-    scale : float
-    device_t0 : float
-    protocol_pinned : bool
-    """
-
-    def __init__(self, limb: SimulatedLimb, *, clock: Callable[[], float], clock_t0: float,
-                 t0: float, scale: float = 1.0, device_t0: float = 0.0,
-                 backdrive: Any = None, protocol_pinned: bool = False) -> None:
-        self.limb = limb
-        self.t0 = float(t0)
-        self.scale = float(scale)
-        self.device_t0 = float(device_t0)
-        self.protocol_pinned = bool(protocol_pinned)
-        self._clock = clock
-        self._clock_t0 = float(clock_t0)
-        self._backdrive = backdrive
-
-    def time_at(self, host_t) -> np.ndarray:
-        """The patient's time (s) at host monotonic times ``host_t`` (N,)."""
-        return (np.asarray(host_t, dtype=np.float64) - self.t0) * self.scale
-
-    def now(self) -> float:
-        """The patient's time now (s), on the simulator's clock."""
-        return float(self._clock()) - self._clock_t0
-
-    @property
-    def back_drives(self) -> bool:
-        """Whether the patient moves a servo chain (torque off) through its kinematics."""
-        return self._backdrive is not None
-
-    def follow(self, joint_q) -> tuple[np.ndarray, int]:
-        """The orientations (N, 4) the back-driven chain takes, from its zero, while the
-        patient moves through ``joint_q`` (N, 4), unquantised, and how many of them were out
-        of the chain's reach.
-
-        Raises
-        ------
-        ValueError
-            The port does not back-drive servos (:attr:`back_drives`).
-        """
-        if self._backdrive is None:
-            raise ValueError("this port's simulated patient back-drives no servo chain")
-        return self._backdrive.follow(np.asarray(joint_q, dtype=np.float64).reshape(-1, 4))
-
-    def start_protocol(self, protocol, lead_s: float = 2.0) -> None:
-        """Have the patient perform ``protocol`` from ``lead_s`` seconds of patient time after
-        now (the simulators sample the patient lazily: the change applies from their next
-        sample on)."""
-        self.limb.perform_protocol(protocol, start_s=max(0.0, self.now()) + float(lead_s))
-
-
-_SIM_BACKEND = "rig.devices._sim_backends:open_sim_port"
-"""Opens every ``sim://`` port (it builds :class:`Port` objects: imported by name, and only when
-a simulator is asked for)."""
-
-
-@dataclass
-class Port:
-    """An opened port string.
-
-    Attributes
-    ----------
-    url : str
-        The port string as given.
-    path : str
-        What ``dynamixel_sdk.PortHandler`` / ``serial.Serial`` open (``/dev/ttyUSB0`` or the
-        simulator's ``/dev/pts/N``).
-    simulator : object or None
-        The simulator serving :attr:`path` (fault injection in tests), None for hardware.
-    kind : str
-        ``"hardware"``, ``"sim-dynamixel"``, ``"sim-bno055"`` or ``"sim-imu-stream"``.
-    simulated_patient : SimulatedPatient or None
-        The simulated patient driving the simulator, if any (what code above the seam may ask
-        of it).
-    """
-
-    url: str
-    path: str
-    simulator: Any = None
-    kind: str = "hardware"
-    simulated_patient: SimulatedPatient | None = None
-    _closers: list[Callable[[], None]] = field(default_factory=list, repr=False)
-    _closed: bool = field(default=False, repr=False)
-
-    @property
-    def patient(self) -> SimulatedLimb | None:
-        """The :class:`rig.sim.limb.SimulatedLimb` driving the simulator (ground truth), or
-        None: ``simulated_patient.limb``."""
-        sp = self.simulated_patient
-        return None if sp is None else sp.limb
-
-    @property
-    def patient_t0(self) -> float:
-        """When the patient's motion time was 0 (:attr:`SimulatedPatient.t0`); 0 without a
-        patient."""
-        sp = self.simulated_patient
-        return 0.0 if sp is None else sp.t0
-
-    def add_closer(self, fn: Callable[[], None]) -> None:
-        """Run ``fn`` (once) when the port is closed; closers run in reverse order."""
-        self._closers.append(_Once(fn))
-
-    @property
-    def is_simulated(self) -> bool:
-        return self.simulator is not None
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
-    def current_path(self) -> str:
-        """The path to (re)open now: a simulator's adapter replug opens a new pty."""
-        sim_port = getattr(self.simulator, "port", None)
-        return sim_port if isinstance(sim_port, str) and sim_port else self.path
-
-    def close(self) -> None:
-        """Stop the simulator (if any); idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        errors = []
-        for fn in reversed(self._closers):
-            try:
-                fn()
-            except Exception as err:  # keep closing the rest
-                errors.append(err)
-        self._closers.clear()
-        if errors:
-            raise errors[0]
-
-    def __enter__(self) -> Port:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __str__(self) -> str:
-        return self.url
+__all__ = ["Port", "SimulatedPatient", "check_hardware_path", "open_port"]
 
 
 def open_port(url: str, *, baud: int | None = None) -> Port:
@@ -264,8 +82,9 @@ def open_port(url: str, *, baud: int | None = None) -> Port:
             hosts = ",".join(sorted(SIM_DEVICES))
             raise RigConfigError(f"port {url!r}: unknown scheme {scheme!r}; use a device path "
                                  f"(/dev/ttyUSB0, COM3) or sim://{{{hosts}}}")
-        module, func = _SIM_BACKEND.split(":")
-        return getattr(importlib.import_module(module), func)(url, baud=baud)
+        from rig.devices._sim_backends import open_sim_port  # only when a simulator is asked for
+
+        return open_sim_port(url, baud=baud)
     check_hardware_path(url)
     return Port(url=url, path=url)
 
@@ -302,17 +121,3 @@ def check_hardware_path(path: str) -> None:
             raise RigConnectionError("not a serial port (not a terminal device)", port=path)
     finally:
         os.close(fd)
-
-
-class _Once:
-    """A callable that runs ``fn`` once (thread-safe)."""
-
-    def __init__(self, fn: Callable[[], None]) -> None:
-        self._fn: Callable[[], None] | None = fn
-        self._lock = threading.Lock()
-
-    def __call__(self) -> None:
-        with self._lock:
-            fn, self._fn = self._fn, None
-        if fn is not None:
-            fn()
