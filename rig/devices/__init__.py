@@ -1,6 +1,9 @@
 """Devices: port strings, drivers, the rig configuration and orientation sources.
 
-Above :mod:`rig.devices.ports` no code knows whether a port is hardware or a simulator.
+Above :mod:`rig.devices.ports`, code asks a :class:`Port` for its path and, on a simulator, for
+its :attr:`Port.simulated_patient` (ground truth, patient time, back-driving, the calibration
+protocol); it never looks into a simulator for these. The simulator object itself
+(``Port.simulator``) is for tests and benchmarks (fault injection, a manual clock).
 
 Public API
 ----------
