@@ -72,6 +72,20 @@ class TrainRequest:
     preset: str = "field"
     seed: int = 0
 
+    def check(self) -> None:
+        """Before any training (a GMLP preset runs for minutes): the output's folder exists (it
+        is never created: a misspelled folder is a mistake), the preset is known."""
+        from models.errors import ModelFileError
+
+        out = Path(self.out)
+        if out.is_dir():
+            raise ModelFileError(f"--out {self.out}: is a directory")
+        if not out.parent.is_dir():
+            raise ModelFileError(f"--out {self.out}: directory {out.parent} does not exist")
+        if self.preset not in PRESET_NAMES:
+            raise ModelFileError(f"--preset {self.preset!r}: expected one of "
+                                 f"{', '.join(PRESET_NAMES)}")
+
 
 @dataclass
 class TrainResult:
@@ -117,6 +131,7 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     from models.nn.train import train_correction
     from models.onnx_io import export_onnx
 
+    request.check()
     preset = request.preset
     cfg = load_config(request.config, preset) if request.config else get_config(preset)
     patterns = None

@@ -130,6 +130,17 @@ def test_train_user_errors_are_one_line(files, setup, message, rig_cli):
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_train_refuses_a_missing_output_folder_before_training(files, tmp_path, rig_cli):
+    _, c, _ = files
+    out = tmp_path / "no-such-folder" / "m.onnx"
+    code, out_text, err = rig_cli(["train", "--constraint", str(c), "--out", str(out)])
+    assert code == 2 and err.strip() == (f"rig: error: --out {out}: directory {out.parent} does "
+                                         "not exist")
+    assert not out.parent.exists() and "building" not in out_text  # nothing created, no work
+    code, _, err = rig_cli(["train", "--constraint", str(c), "--out", str(tmp_path)])
+    assert code == 2 and "is a directory" in err
+
+
 def test_evaluate_refuses_wrong_files(files, rig_cli):
     tmp, c, _ = files
     code, _, err = rig_cli(["evaluate", "--model", str(c), "--constraint", str(c)])
