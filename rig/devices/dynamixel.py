@@ -26,11 +26,21 @@ Timeouts: the SDK's packet timeout is ``tx_time × bytes + 2 × LATENCY_TIMER + 
 module constant ``LATENCY_TIMER = 16`` measured on ``time.time()``; the port class here uses the
 same formula with a per-chain latency (the adapter's detected USB latency timer, see
 :mod:`rig.devices.latency`) and the monotonic clock.
+
+Receiving: the SDK's receive loops (``rxPacket``, ``fastSyncRead``, ``broadcastPing``) call
+``PortHandler.readPort`` on a port opened with ``timeout=0`` until the packet is complete or
+its deadline passes — a busy loop that takes a whole core (and, with a simulator in the same
+process, the GIL) while a reply is on its way. The port class here keeps the SDK as the protocol
+engine and changes only that extension point: when no byte is waiting, ``readPort`` waits in
+``select`` for the first byte or the packet's deadline, whichever comes first, then returns what
+arrived (POSIX; elsewhere the SDK's own loop runs unchanged).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import select
 import termios
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -108,6 +118,20 @@ class _SdkPort(sdk.PortHandler):
 
     def getCurrentTime(self):
         return time.monotonic() * 1000.0
+
+    def readPort(self, length):
+        """Up to ``length`` bytes; when none is waiting, first wait (``select``, the GIL
+        released) for one to arrive or for the packet's deadline (see the module docstring)."""
+        ser = self.ser
+        if _CAN_SELECT and not ser.in_waiting:
+            remaining_ms = self.packet_timeout - self.getTimeSinceStart()
+            if remaining_ms > 0.0:
+                select.select((ser.fileno(),), (), (), remaining_ms / 1000.0)
+        return ser.read(length)
+
+
+#: ``select`` works on serial file descriptors (POSIX); elsewhere the SDK's busy loop stays.
+_CAN_SELECT = os.name == "posix"
 
 
 def _model_name(model_number: int) -> str:

@@ -72,6 +72,25 @@ def test_sync_read_matches_single_reads(bus, fast):
         assert np.linalg.norm(q) == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("fast", [False, True])
+def test_the_receive_waits_for_bytes_instead_of_spinning(bus, fast):
+    """The SDK's receive loop calls ``readPort`` until its packet is complete; ours waits in
+    ``select`` while nothing has arrived, so a reply that takes half a millisecond (return
+    delay 500 µs) costs a call or two per status packet, not hundreds of empty polls."""
+    port, ids, baud = bus
+    slow = port if isinstance(port, str) else \
+        "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=500"
+    with DynamixelChain(slow, joints(ids), baud=baud, fast=fast) as chain:
+        sdk_port = chain._sdk_port
+        calls = []
+        read = sdk_port.readPort
+        sdk_port.readPort = lambda n: calls.append(n) or read(n)
+        for _ in range(20):
+            chain.read_ticks()
+    packets = 20 * (1 if fast else len(ids))
+    assert len(calls) <= 4 * packets, len(calls) / packets  # busy polling: ~300 per packet
+
+
 def test_bulk_read_and_torque_state(bus):
     port, ids, baud = bus
     with DynamixelChain(port, joints(ids), baud=baud) as chain:
