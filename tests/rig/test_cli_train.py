@@ -24,6 +24,7 @@ def files(tmp_path):
 def test_train_then_evaluate_gmlp(files, rig_cli):
     tmp, c, cfg = files
     model = tmp / "out" / "m.onnx"
+    model.parent.mkdir()  # rig train writes into a folder that exists, never makes one
     code, out, _ = rig_cli(["train", "--constraint", str(c), "--out", str(model), "--preset",
                            "best", "--config", str(cfg), "--seed", "3"])
     assert code == 0, out
