@@ -468,6 +468,8 @@ class SphericalPolygon:
         self._g_list = [tuple(r) for r in self.g.tolist()]
         self._v_list = [tuple(r) for r in self.v0.tolist()]
         self._vn_list = [tuple(r) for r in self.vertex_normal.tolist()]
+        self._row_list = [tuple(map(tuple, r)) for r in self._table.tolist()]
+        self._cell_lists: list[tuple[int, ...]] | None = None  # built by nearest_one
 
     # -- per (point, edge) pair ----------------------------------------------------------------
     def _pair_keys(self, p: np.ndarray, e: np.ndarray):
@@ -723,34 +725,64 @@ class SphericalPolygon:
         i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
         j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
         cell = ((2 * ax + (major < 0)) * G + i) * G + j
-        p = np.array(d, dtype=np.float64)
         if self._lists:
+            cells = self._cell_lists
+            if cells is None:
+                ptr, edges = self.cell_ptr.tolist(), self.cell_edges.tolist()
+                cells = self._cell_lists = [tuple(edges[ptr[c]:ptr[c + 1]])
+                                            for c in range(len(ptr) - 1)]
+            short = cells[cell]
+            if len(short) <= self.PRUNE_ONE:
+                return self._rank_one(d, short)
+            p = np.array(d, dtype=np.float64)
             cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
-            if len(cand) > self.PRUNE_ONE:
-                # drop edges whose cap lies beyond the nearest edge midpoint (a boundary
-                # point): ∠(p, mid) − half > U >= D; the nearest edges all survive
-                diff = self._emid[cand] - p
-                chord = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-                ang = 2.0 * np.arcsin(np.minimum(chord * 0.5, 1.0))
-                cand = cand[ang - self._ehalf[cand] <= ang.min() + _ArcTree.SLACK]
+            # drop edges whose cap lies beyond the nearest edge midpoint (a boundary
+            # point): ∠(p, mid) − half > U >= D; the nearest edges all survive
+            diff = self._emid[cand] - p
+            chord = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+            ang = 2.0 * np.arcsin(np.minimum(chord * 0.5, 1.0))
+            cand = cand[ang - self._ehalf[cand] <= ang.min() + _ArcTree.SLACK]
         else:
+            p = np.array(d, dtype=np.float64)
             cand = self._tree.search(p[None, :], 0.0)[1]
-        key, in_arc, s, end1 = self._pair_keys(np.tile(p, (len(cand), 1)), cand)
-        k = int(np.argmin(key))  # first minimum: lowest edge index on ties
-        e = int(cand[k])
-        sk = float(s[k])
-        if in_arc[k]:
+        return self._rank_one(d, cand.tolist())
+
+    def _rank_one(self, d: tuple[float, float, float], cand) -> tuple[float, tuple]:
+        """The nearest of the candidate edges ``cand`` to direction ``d``, in plain floats:
+        :meth:`_pair_keys` and :meth:`_finish` for one point (the same keys, the first minimum
+        winning, so the same edge as the batched path)."""
+        px, py, pz = d
+        best = math.inf
+        win = None
+        for e in cand:
+            g, t0, t1, v0, v1 = self._row_list[e]
+            s = g[0] * px + g[1] * py + g[2] * pz
+            in_arc = (t0[0] * px + t0[1] * py + t0[2] * pz >= 0.0
+                      and t1[0] * px + t1[1] * py + t1[2] * pz >= 0.0 and abs(s) < 1.0 - 1e-12)
+            a0, a1, a2 = v0[0] - px, v0[1] - py, v0[2] - pz
+            b0, b1, b2 = v1[0] - px, v1[1] - py, v1[2] - pz
+            k0 = a0 * a0 + a1 * a1 + a2 * a2
+            k1 = b0 * b0 + b1 * b1 + b2 * b2
+            if in_arc:
+                s2 = s * s
+                key = 2.0 * s2 / (1.0 + math.sqrt(max(1.0 - s2, 0.0)))
+            else:
+                key = k0 if k0 <= k1 else k1
+            if key < best:
+                best, win = key, (e, in_arc, s, k1 < k0)
+        e, in_arc, sk, end1 = win
+        if in_arc:
             inside = self.orient * sk >= 0.0
             g = self._g_list[e]
             f = (px - sk * g[0], py - sk * g[1], pz - sk * g[2])
             fn = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) or 1.0
             b = (f[0] / fn, f[1] / fn, f[2] / fn)
         else:
-            vi = (e + 1) % self.m if end1[k] else e
+            vi = (e + 1) % self.m if end1 else e
             b = self._v_list[vi]
             mv = self._vn_list[vi]
             inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
-        theta = 2.0 * math.asin(min(math.sqrt(float(key[k])) * 0.5, 1.0))
+        theta = 2.0 * math.asin(min(math.sqrt(best) * 0.5, 1.0))
         return (-theta if inside else theta), b
 
     # -- conveniences ----------------------------------------------------------------------
