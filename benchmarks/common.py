@@ -10,15 +10,15 @@ On import:
   beside it, not another installed copy. :func:`child_env` passes it to child processes.
 
 Shared pieces: :func:`single_latencies_ns` (one ONNX call at a time), :func:`raw_sync_loop`
-(the raw ``dynamixel_sdk`` control cycle: the peer figure of the driver and live-loop
-benchmarks) and :func:`child_servos` (a simulated chain in its own process, as hardware is).
+and :func:`raw_paced_loop` (the raw ``dynamixel_sdk`` control cycle, back to back or at a fixed
+rate: the peer figure of the driver and live-loop benchmarks) and :func:`child_servos` (a
+simulated chain in its own process, as hardware is).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -31,7 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path[:1]:
     sys.path.insert(0, str(ROOT))
 
-__all__ = ["IDS", "ROOT", "child_env", "child_servos", "raw_sync_loop", "single_latencies_ns"]
+__all__ = ["IDS", "ROOT", "child_env", "child_servos", "raw_paced_loop", "raw_sync_loop",
+           "single_latencies_ns"]
 
 #: Servo IDs of the simulated 3-servo chain the loop benchmarks drive.
 IDS = (1, 2, 3)
@@ -45,15 +46,12 @@ def child_env() -> dict[str, str]:
 
 @contextlib.contextmanager
 def child_servos(url: str = "sim://dynamixel?ids=1,2,3&return_delay_us=0") -> Iterator[str]:
-    """``rig sim servos URL`` in a child process for the duration; yields its pty path."""
-    proc = subprocess.Popen([sys.executable, "-m", "rig", "sim", "servos", url],
-                            stdout=subprocess.PIPE, text=True, env=child_env())
-    try:
-        yield proc.stdout.readline().strip()
-    finally:
-        proc.terminate()
-        proc.wait()
-        proc.stdout.close()
+    """A simulated chain served from a process of its own for the duration (the product's
+    ``process=on`` port, as ``rig enforce`` opens it); yields its pty path."""
+    from rig.devices.ports import open_port
+
+    with open_port(url, separate_process=True) as port:
+        yield port.path
 
 
 def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
@@ -69,10 +67,10 @@ def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
     return lat
 
 
-def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
-    """The raw SDK control cycle on ``port_name``: GroupSyncRead of Present Position (fast
-    sync read when ``fast``) + GroupSyncWrite of Goal Position for :data:`IDS`, no other work;
-    cycle times in seconds. Raises if torque cannot be enabled."""
+@contextlib.contextmanager
+def _raw_bus(port_name: str) -> Iterator[tuple]:
+    """The raw SDK on ``port_name``: torque on for :data:`IDS`; yields (reader, writer) — a
+    GroupSyncRead of Present Position and a GroupSyncWrite of Goal Position."""
     from dynamixel_sdk import (
         COMM_SUCCESS,
         GroupSyncRead,
@@ -95,21 +93,60 @@ def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
         for i in IDS:
             reader.addParam(i)
             writer.addParam(i, [0, 8, 0, 0])
+        yield reader, writer
+    finally:
+        port.closePort()
+
+
+def _raw_cycle(reader, writer, k: int, fast: bool) -> bool:
+    """One raw control cycle (read, then write a goal); False when the read failed."""
+    from dynamixel_sdk import COMM_SUCCESS
+
+    result = reader.fastSyncRead() if fast else reader.txRxPacket()
+    positions = [reader.getData(i, _PRESENT_POS, 4) for i in IDS]
+    goal = 2048 + (k % 200) - 100
+    for i, _ in zip(IDS, positions, strict=True):
+        writer.changeParam(i, list(goal.to_bytes(4, "little")))
+    writer.txPacket()
+    return result == COMM_SUCCESS
+
+
+def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
+    """The raw SDK control cycle on ``port_name``: GroupSyncRead of Present Position (fast
+    sync read when ``fast``) + GroupSyncWrite of Goal Position for :data:`IDS`, no other work,
+    back to back; cycle times in seconds. Raises if torque cannot be enabled."""
+    with _raw_bus(port_name) as (reader, writer):
         times = []
         failures = 0
         for k in range(cycles):
             t0 = time.perf_counter()
-            result = reader.fastSyncRead() if fast else reader.txRxPacket()
-            if result != COMM_SUCCESS:
-                failures += 1
-            positions = [reader.getData(i, _PRESENT_POS, 4) for i in IDS]
-            goal = 2048 + (k % 200) - 100
-            for i, _ in zip(IDS, positions, strict=True):
-                writer.changeParam(i, list(goal.to_bytes(4, "little")))
-            writer.txPacket()
+            failures += not _raw_cycle(reader, writer, k, fast)
             times.append(time.perf_counter() - t0)
         if failures:
             print(f"    ({failures} failed reads)")
         return times
-    finally:
-        port.closePort()
+
+
+def raw_paced_loop(port_name: str, rate_hz: float, duration_s: float,
+                   fast: bool = True) -> dict:
+    """The raw SDK control cycle (as :func:`raw_sync_loop`) paced at ``rate_hz`` for
+    ``duration_s`` by the live loop's own scheduler (absolute deadlines, no catch-up): the peer
+    of the supervised loop at the same rate. Returns cycles, overruns, failed reads and the
+    lateness (ms) of every cycle."""
+    from rig.loop.scheduler import Scheduler
+
+    with _raw_bus(port_name) as (reader, writer):
+        sched = Scheduler(rate_hz)
+        t0 = sched.start()
+        late = []
+        failures = 0
+        k = 0
+        while True:
+            k, due, start = sched.wait()
+            late.append(1e3 * (start - due))
+            failures += not _raw_cycle(reader, writer, k, fast)
+            sched.finish()
+            if start - t0 >= duration_s:
+                break
+        return {"cycles": len(late), "overruns": sched.overruns, "failed_reads": failures,
+                "late_ms": late}

@@ -16,16 +16,22 @@ until SIGINT or SIGTERM, closes the simulator and exits 0. Open the path with
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
+import sys
+import threading
 
 import click
 
 from rig.errors import RigConfigError
 
 
-def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = None) -> None:
+def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = None, *,
+          stop_on_stdin_eof: bool = False) -> None:
     """Start the simulator ``url`` names (one of ``devices``), print its port, serve until
-    SIGINT/SIGTERM, close it.
+    SIGINT/SIGTERM (or, with ``stop_on_stdin_eof``, until stdin closes: the parent process
+    that started it ended), close it.
 
     Raises
     ------
@@ -41,9 +47,12 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
     try:
         from rig.devices.ports import open_port
         from rig.sim.clock import ManualClock
-        from rig.sim.urls import sim_device
+        from rig.sim.urls import query_keys, sim_device
 
         sim_device(url, devices, example, what)
+        if "process" in query_keys(url):
+            raise RigConfigError(f"{url}: process= is for a port opened by another program "
+                                 f"(this command is already the simulator's own process)")
         with open_port(url) as port:
             if isinstance(port.simulator.clock, ManualClock):
                 raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of "
@@ -51,9 +60,20 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
                                      f"faster than real time)")
             click.echo(port.path)
             click.get_text_stream("stdout").flush()
+            if stop_on_stdin_eof:
+                threading.Thread(target=_stop_at_eof, daemon=True,
+                                 name="stdin-eof").start()
             signal.sigwait(stop)
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+
+
+def _stop_at_eof() -> None:
+    """Read stdin to its end, then stop the process (SIGTERM to itself: ``sigwait`` takes it)."""
+    with contextlib.suppress(OSError, ValueError):
+        while sys.stdin.buffer.read1(4096):
+            pass
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 @click.group()
@@ -66,16 +86,19 @@ def sim() -> None:
 
 @sim.command("servos", short_help="Simulated Dynamixel servo chain (sim://dynamixel?...).")
 @click.argument("url", default="sim://dynamixel")
-def servos(url: str) -> None:
+@click.option("--stop-on-stdin-eof", is_flag=True, hidden=True,
+              help="Stop when stdin closes (a parent process's ``process=on`` port).")
+def servos(url: str, stop_on_stdin_eof: bool) -> None:
     """Simulated Dynamixel Protocol 2.0 servo chain, e.g. 'sim://dynamixel?ids=1,2,3'.
 
-    Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, time_scale; patient,
-    chain, speed, excursion (a simulated patient back-drives the chain). Default: one
+    Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, usb_latency_ms,
+    time_scale; patient, chain, speed, excursion (a simulated patient back-drives the chain).
+    Default: one
     XM430-W350 (ID 1) at 1 000 000 bit/s.
     """
     from rig.sim.dynamixel.url import EXAMPLE
 
-    serve(url, ("dynamixel", "dxl"), EXAMPLE)
+    serve(url, ("dynamixel", "dxl"), EXAMPLE, stop_on_stdin_eof=stop_on_stdin_eof)
 
 
 @sim.command("imu", short_help="Simulated IMU (sim://imu-stream?... or sim://bno055?...).")

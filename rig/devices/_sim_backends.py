@@ -13,11 +13,30 @@ inverse kinematics (:class:`rig.devices.kinematics.ChainKinematics`), evaluated 
 millisecond of simulated time and shared by the servos; the IK solution nearest the previous one
 keeps the joint angles continuous. While torque is off, Present Position follows it
 (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`), as a clinician moving a back-drivable limb.
+
+A bus of its own (``sim://dynamixel?...&process=on``): the chain is served by ``rig sim servos``
+in a child process, as hardware is outside the host process — the simulator's thread then takes
+neither the interpreter lock nor the scheduling of the process that drives it. ``open_port(...,
+separate_process=True)`` asks for it unless the URL says ``process=off`` (the live loop does).
+The port has no ``simulator`` object (nothing to inject faults into) and no patient view: a
+``patient=`` moves the limb in the child while torque is off, as a real patient moves a real
+limb, unseen by this process. Closing the port stops the child, and so does the parent's end
+(the child stops when its stdin closes). The child runs in
+a session of its own: a Ctrl-C at the terminal reaches the driving process, which still has a
+bus to command its safe state on.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import select
+import subprocess
+import sys
+import tempfile
 import threading
+import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,15 +48,23 @@ BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
 (``seed`` is the bus's, shared)."""
 
+PROCESS_KEY = "process"
+"""``process=on``: serve the chain from a child process (see the module docstring)."""
 
-def open_sim_port(url: str, *, baud: int | None = None) -> Port:
+#: How long a child simulator may take to start (import, open its pty) before the port fails.
+CHILD_START_S = 60.0
+
+
+def open_sim_port(url: str, *, baud: int | None = None,
+                  separate_process: bool = False) -> Port:
     """The port of the simulator ``url`` names (``baud``: the host's line speed, which a
-    simulated Dynamixel chain without ``baud=`` runs at)."""
+    simulated Dynamixel chain without ``baud=`` runs at; ``separate_process``: a servo chain's
+    default for ``process=``)."""
     from rig.sim.urls import sim_device_of
 
     device = sim_device_of(url)
     if device.name == "dynamixel":
-        return _open_dynamixel(url, baud, device.kind)
+        return _open_dynamixel(url, baud, device.kind, separate_process)
     return _open_imu(url, device.start(url), device.kind)
 
 
@@ -102,13 +129,15 @@ class _BackDrive:
         return lambda now: float(self.ticks(now)[index])
 
 
-def _open_dynamixel(url: str, baud: int | None, kind: str) -> Port:
+def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: bool) -> Port:
     from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
     from rig.sim.urls import SimUrl
 
     overrides: dict[str, Any] = {}
     try:
-        q = SimUrl(url, DEVICES, (*KEYS, *BACKDRIVE_KEYS), EXAMPLE)
+        q = SimUrl(url, DEVICES, (*KEYS, *BACKDRIVE_KEYS, PROCESS_KEY), EXAMPLE)
+        if q.flag(PROCESS_KEY, separate_process):
+            return _open_dynamixel_process(q, baud, kind)
         if "baud" not in q and baud is not None:
             overrides["baud_rate"] = int(baud)
         bus = bus_from_query(q, **overrides)
@@ -128,6 +157,85 @@ def _open_dynamixel(url: str, baud: int | None, kind: str) -> Port:
         port.close()
         raise
     return port
+
+
+def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
+    """``rig sim servos`` serving ``q``'s chain in a child process; the port of its pty."""
+    from rig.sim.urls import with_keys, without_keys
+
+    url = q.url
+    if q.text("clock") == "manual":
+        raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of a "
+                             f"simulator in its own process")
+    child_url = without_keys(url, PROCESS_KEY)
+    if "baud" not in q and baud is not None:
+        child_url = with_keys(child_url, baud=int(baud))
+    root = str(Path(__file__).resolve().parents[2])  # the folder holding the rig package
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    err = tempfile.TemporaryFile()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rig", "sim", "servos", "--stop-on-stdin-eof", child_url],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, env=env,
+        start_new_session=True)
+    closer = _ChildCloser(proc, err)
+    try:
+        path = _first_line(proc, CHILD_START_S)
+        if not path:
+            proc.wait(timeout=CHILD_START_S)
+            err.seek(0)
+            lines = [ln.strip() for ln in err.read().decode(errors="replace").splitlines()
+                     if ln.strip()]
+            last = lines[-1] if lines else f"exit status {proc.returncode}"
+            raise RigConfigError(f"{url}: the simulator process did not start: "
+                                 f"{last.removeprefix('rig: error: ')}")
+    except BaseException:
+        closer()
+        raise
+    port = Port(url=url, path=path, simulator=None, kind=kind)
+    port.add_closer(closer)
+    return port
+
+
+def _first_line(proc: subprocess.Popen, timeout: float) -> str:
+    """The child's first stdout line (its pty path), "" if it ended or said nothing in time."""
+    fd = proc.stdout.fileno()
+    buf = b""
+    end = time.monotonic() + timeout
+    while b"\n" not in buf:
+        left = end - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return ""
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            return ""
+        buf += chunk
+    return buf.split(b"\n", 1)[0].decode().strip()
+
+
+class _ChildCloser:
+    """Stops a child simulator: stdin closed (it stops), SIGTERM after 5 s, SIGKILL after 5 more."""
+
+    def __init__(self, proc: subprocess.Popen, err: Any) -> None:
+        self.proc = proc
+        self.err = err
+
+    def __call__(self) -> None:
+        proc = self.proc
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
+        try:
+            proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        finally:
+            proc.stdout.close()
+            self.err.close()
 
 
 def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:

@@ -113,7 +113,8 @@ class Port:
         What ``dynamixel_sdk.PortHandler`` / ``serial.Serial`` open (``/dev/ttyUSB0`` or the
         simulator's ``/dev/pts/N``).
     simulator : object or None
-        The simulator serving :attr:`path` (fault injection in tests), None for hardware.
+        The simulator serving :attr:`path` in this process (fault injection in tests); None
+        for hardware and for a simulator in a process of its own (``process=on``).
     kind : str
         ``"hardware"``, ``"sim-dynamixel"``, ``"sim-bno055"`` or ``"sim-imu-stream"``.
     simulated_patient : SimulatedPatient or None
@@ -149,7 +150,8 @@ class Port:
 
     @property
     def is_simulated(self) -> bool:
-        return self.simulator is not None
+        """A simulator serves the port (in this process or another one)."""
+        return self.kind != "hardware"
 
     @property
     def closed(self) -> bool:

@@ -17,7 +17,9 @@ Port strings
     (torque off) from a :class:`rig.sim.limb.SimulatedLimb` through the inverse kinematics of
     ``chain=<rig config name | file>`` (default ``sim-shoulder``), so a recording of the
     servo limb sees a patient's motion; ``speed`` scales that motion's frequencies,
-    ``excursion`` its reach.
+    ``excursion`` its reach. ``usb_latency_ms`` is the USB adapter's latency timer (default 1,
+    a U2D2 set as the SDK recommends); ``process=on`` serves the chain from a child process, as
+    hardware is outside the host (:mod:`rig.devices._sim_backends`).
 ``sim://bno055?patient=original&seed=0&rate=100&sensor=1&noise=on|off``
     A simulated BNO055 on its UART (:func:`rig.sim.imu.bno055_from_url` lists the keys).
 ``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&flow=off`` (or ``sim://stream?...``)
@@ -48,7 +50,7 @@ from rig.errors import RigConfigError, RigConnectionError
 __all__ = ["Port", "SimulatedPatient", "check_hardware_path", "open_port"]
 
 
-def open_port(url: str, *, baud: int | None = None) -> Port:
+def open_port(url: str, *, baud: int | None = None, separate_process: bool = False) -> Port:
     """Resolve a port string: check a hardware path, or start a simulator.
 
     Parameters
@@ -58,6 +60,10 @@ def open_port(url: str, *, baud: int | None = None) -> Port:
     baud : int, optional
         The line speed the host will use (a simulated Dynamixel chain without ``baud=`` in its
         URL runs its servos at this rate).
+    separate_process : bool
+        Serve a simulated servo chain from a process of its own unless its URL says
+        ``process=off`` (a real-time loop's bus, as hardware is, outside the host process);
+        nothing changes for hardware and the IMU simulators.
 
     Returns
     -------
@@ -84,7 +90,7 @@ def open_port(url: str, *, baud: int | None = None) -> Port:
                                  f"(/dev/ttyUSB0, COM3) or sim://{{{hosts}}}")
         from rig.devices._sim_backends import open_sim_port  # only when a simulator is asked for
 
-        return open_sim_port(url, baud=baud)
+        return open_sim_port(url, baud=baud, separate_process=separate_process)
     check_hardware_path(url)
     return Port(url=url, path=url)
 

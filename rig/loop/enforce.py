@@ -61,6 +61,10 @@ class EnforceRequest:
         The supervisor's limits.
     seed : int
         Seed of scripted targets.
+    realtime : bool
+        Ask for real-time scheduling of the loop's thread (:mod:`rig.loop.realtime`).
+    cpu : int, optional
+        Pin the loop's thread to this CPU.
     """
 
     rig: str
@@ -83,6 +87,8 @@ class EnforceRequest:
     stale_servo_ms: float = 100.0
     stale_target_ms: float = 100.0
     seed: int = 0
+    realtime: bool = False
+    cpu: int | None = None
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
@@ -115,6 +121,9 @@ class EnforceRequest:
             raise RigConfigError("--patient needs --db")
         _out_path("--telemetry", self.telemetry)
         _out_path("--summary-json", self.summary_json)
+        from rig.loop.realtime import check_cpu
+
+        check_cpu(self.cpu)
         return LoopConfig(
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
             supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
@@ -172,7 +181,7 @@ class EnforceResult:
         return "\n".join([
             f"cycles {s['cycles']} at {f(s.get('achieved_hz'), '{:.1f}')} Hz (asked "
             f"{s['rate_hz']:g}); cycle p50 {f(s['p50_cycle_ms'])} ms, p99 "
-            f"{f(s['p99_cycle_ms'])} ms; overruns {s['overruns']}; compute p50 "
+            f"{f(s['p99_cycle_ms'])} ms; overruns {s['overruns']}{_causes(s)}; compute p50 "
             f"{f(s['p50_compute_us'], '{:.0f}')} µs",
             f"max violation {s['max_violation_deg']:.3f}° (tolerance {s['tolerance_deg']:g}°); "
             f"interventions {s['interventions']} {s['interventions_by_kind']}",
@@ -180,6 +189,12 @@ class EnforceResult:
             + (f" ({s['safe_state_reason']})" if s.get("safe_state_reason") else "")
             + f"; end: {s['end_reason']}",
         ])
+
+
+def _causes(s: dict) -> str:
+    """`` (bus 2, scheduler 1)``: the summary's overruns by cause, those that occurred."""
+    by = {k: v for k, v in (s.get("overruns_by_cause") or {}).items() if v}
+    return f" ({', '.join(f'{k} {v}' for k, v in by.items())})" if by else ""
 
 
 def _out_path(option: str, value) -> Path | None:
@@ -293,8 +308,9 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     run_id = enforce_session = None
     try:
         with src:
-            if own_port:
-                port = open_port(servos.port, baud=servos.baud)
+            if own_port:  # a simulated chain in a process of its own, as hardware is
+                port = open_port(servos.port, baud=servos.baud,
+                                 separate_process=hooks.clock is None)
             chain = prepare_chain(port, servos, prep.oracle, log=echo)
             for tip in getattr(chain, "advice", []):
                 echo(f"note: {tip}")
@@ -330,9 +346,15 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                  f"targets {src.description}; safe state {cfg.safe_state}")
             loop.setup()
             restore = _install_signals(loop) if hooks.install_signals else None
+            from rig.loop import realtime
+
+            unpin, notes = realtime.apply(realtime=req.realtime, cpu=req.cpu)
+            for note in notes:
+                echo(f"note: {note}")
             try:
                 summary = loop.run()
             finally:
+                unpin()
                 if restore is not None:
                     restore()
             telemetry.close()

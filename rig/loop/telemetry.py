@@ -43,7 +43,8 @@ import numpy as np
 
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention
 
-__all__ = ["COLUMNS", "Fault", "Telemetry", "summarise"]
+__all__ = ["CAUSES", "COLUMNS", "Fault", "Telemetry", "count_causes", "late_causes",
+           "summarise"]
 
 
 class Fault(IntFlag):
@@ -114,6 +115,8 @@ class Telemetry:
         self._cycle_ms = np.empty(1 << 14)
         self._late_ms = np.empty(1 << 14)
         self._compute_ms = np.empty(1 << 14)
+        self._bus_ms = np.empty(1 << 14)
+        self._faults = np.empty(1 << 14, dtype=np.int64)
         self._q: queue.Queue = queue.Queue()
         self._fh = None
         self._csv = None
@@ -142,6 +145,8 @@ class Telemetry:
         self._cycle_ms[n] = row[24]
         self._late_ms[n] = row[25]
         self._compute_ms[n] = row[22]
+        self._bus_ms[n] = row[21] + row[23]
+        self._faults[n] = row[27]
         self.rows = n + 1
         i += 1
         if i == CHUNK:
@@ -151,9 +156,9 @@ class Telemetry:
         self._i = i
 
     def _grow(self) -> None:
-        for name in ("_cycle_ms", "_late_ms", "_compute_ms"):
+        for name in ("_cycle_ms", "_late_ms", "_compute_ms", "_bus_ms", "_faults"):
             a = getattr(self, name)
-            b = np.empty(2 * len(a))
+            b = np.empty(2 * len(a), dtype=a.dtype)
             b[:len(a)] = a
             setattr(self, name, b)
 
@@ -232,6 +237,68 @@ class Telemetry:
     def compute_ms(self) -> np.ndarray:
         return self._compute_ms[: self.rows].copy()
 
+    def bus_ms(self) -> np.ndarray:
+        """Sync read + sync write time per cycle, ms."""
+        return self._bus_ms[: self.rows].copy()
+
+    def faults(self) -> np.ndarray:
+        """:class:`Fault` bits per cycle."""
+        return self._faults[: self.rows].copy()
+
+
+#: The causes a late cycle is put down to (:func:`late_causes`).
+CAUSES = ("scheduler", "bus", "compute")
+
+#: A cycle that starts this much after its deadline is *late* (ms): a 5 ms period's 10 %.
+LATE_START_MS = 0.5
+
+
+def late_causes(late_ms, bus_ms, compute_ms, overrun) -> np.ndarray:
+    """The cause of each cycle's lateness, an index into :data:`CAUSES` (-1: on time).
+
+    A cycle that **overran** (ended after the next deadline) is put down to the part of its
+    span that exceeded its run median by the most: its start's lateness (``scheduler``: the
+    host woke the loop late), the sync read + sync write (``bus``: replies slow or retried), or
+    the model + supervisor + kinematics (``compute``). A cycle that **started late**
+    (> :data:`LATE_START_MS`) without overrunning inherits the cause of the overrun before it,
+    if any, else ``scheduler`` (the host woke the loop late).
+
+    Parameters
+    ----------
+    late_ms, bus_ms, compute_ms : array (N,)
+        Telemetry columns ``late_ms``, ``read_ms + write_ms``, ``compute_ms``.
+    overrun : array of bool (N,)
+        The :attr:`Fault.OVERRUN` bit.
+
+    Returns
+    -------
+    array of int (N,)
+    """
+    late = np.asarray(late_ms, dtype=np.float64)
+    bus = np.asarray(bus_ms, dtype=np.float64)
+    comp = np.asarray(compute_ms, dtype=np.float64)
+    over = np.asarray(overrun, dtype=bool)
+    out = np.full(len(late), -1, dtype=np.int64)
+    if len(late) == 0:
+        return out
+    excess = np.stack([late - np.median(late), bus - np.median(bus),
+                       comp - np.median(comp)], axis=1)
+    out[over] = np.argmax(excess[over], axis=1)
+    started_late = (late > LATE_START_MS) & ~over
+    idx = np.flatnonzero(started_late)
+    prev = idx - 1
+    inherit = (prev >= 0) & over[np.maximum(prev, 0)]
+    out[idx] = np.where(inherit, out[np.maximum(prev, 0)], 0)
+    return out
+
+
+def count_causes(causes: np.ndarray, mask=None) -> dict[str, int]:
+    """``{cause: cycles}`` of :func:`late_causes` (only where ``mask``), every cause listed."""
+    c = np.asarray(causes)
+    if mask is not None:
+        c = c[np.asarray(mask, dtype=bool)]
+    return {name: int(np.count_nonzero(c == k)) for k, name in enumerate(CAUSES)}
+
 
 def _pct(a: np.ndarray, p: float) -> float | None:
     return None if len(a) == 0 else float(np.percentile(a, p))
@@ -243,7 +310,9 @@ def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_
 
     Keys: ``rate_hz`` (configured), ``achieved_hz``, ``cycles``, ``duration_s``,
     ``p50_cycle_ms``, ``p99_cycle_ms``, ``max_cycle_ms``, ``p50_late_ms``, ``p99_late_ms``,
-    ``overruns``, ``skipped_deadlines``, ``p50_compute_us``, ``max_violation_deg``,
+    ``overruns``, ``overruns_by_cause`` and ``late_starts_by_cause`` (:func:`late_causes`: the
+    overruns, and the cycles that started more than :data:`LATE_START_MS` late without
+    overrunning, by cause), ``skipped_deadlines``, ``p50_compute_us``, ``max_violation_deg``,
     ``interventions`` (cycles with any safety intervention), ``interventions_by_kind`` (each
     such cycle under one kind: they add up to ``interventions``), ``rate_limited`` (cycles the
     velocity / acceleration limits shaped; not interventions),
@@ -265,6 +334,10 @@ def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_
         "p99_late_ms": _pct(late, 99),
         "p50_compute_us": None if n == 0 else 1e3 * float(np.median(comp)),
     }
+    over = (telemetry.faults() & int(Fault.OVERRUN)) != 0
+    causes = late_causes(late, telemetry.bus_ms(), comp, over)
+    out["overruns_by_cause"] = count_causes(causes, over)
+    out["late_starts_by_cause"] = count_causes(causes, ~over)
     out.update(counters)
     if extra:
         out.update(extra)

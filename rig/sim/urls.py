@@ -31,7 +31,7 @@ from rig.errors import RigConfigError
 from rig.sim.clock import Clock, ManualClock, ScaledClock
 
 __all__ = ["SIM_DEVICES", "TIME_KEYS", "SimDevice", "SimUrl", "query_keys", "sim_device",
-           "sim_device_of", "with_keys"]
+           "sim_device_of", "with_keys", "without_keys"]
 
 TIME_KEYS = frozenset({"clock", "time_scale"})
 
@@ -133,6 +133,20 @@ def with_keys(url: str, **keys: object) -> str:
             pieces.append(item)
             names.append(key)
     return head + "?" + "&".join(pieces)
+
+
+def without_keys(url: str, *keys: str) -> str:
+    """``url`` without the query keys ``keys`` (the rest kept as written).
+
+    Examples
+    --------
+    >>> without_keys("sim://dynamixel?ids=1,2&process=on&seed=3", "process")
+    'sim://dynamixel?ids=1,2&seed=3'
+    """
+    head, _, query = url.partition("?")
+    drop = set(keys)
+    kept = [p for p in _pieces(query) if _decode(p)[0] not in drop]
+    return head + ("?" + "&".join(kept) if kept else "")
 
 
 def sim_device(url: str, devices: Iterable[str], example: str, what: str | None = None) -> str:

@@ -62,6 +62,7 @@ def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="s
     ("db-no-patient", "--db: say whose run this is"),
     ("tolerance", "--tolerance-deg 720.0: at most 10°"),
     ("binary-targets", "img.png: not a text CSV file"),
+    ("cpu", "--cpu 4096: not a CPU this process may run on"),
 ])
 def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
     argv = {
@@ -82,6 +83,7 @@ def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
         "db-no-patient": _argv(files, "--db", str(tmp_path / "x.db"), "--duration", "0.2"),
         "tolerance": _argv(files, "--tolerance-deg", "720"),
         "binary-targets": _argv(files, targets=str(tmp_path / "img.png")),
+        "cpu": _argv(files, "--cpu", "4096"),
     }[case]
     (tmp_path / "img.png").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe" * 8)
     (tmp_path / "bad.csv").write_text("t_s,w,x,y,z\n0,1,0,0,0\n0.1,1,x,0,0\n")
@@ -115,6 +117,9 @@ def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, rig_cli):
         assert key in s, key
     assert s["rate_hz"] == 200.0 and s["safe_state_entries"] == 0
     assert s["max_violation_deg"] <= 1.0
+    # every overrun under one cause
+    assert sum(s["overruns_by_cause"].values()) == s["overruns"]
+    assert set(s["late_starts_by_cause"]) == {"scheduler", "bus", "compute"}
     with tel.open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == s["cycles"] > 0

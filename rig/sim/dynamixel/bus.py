@@ -10,11 +10,23 @@ the servo's Return Delay Time, and occupies ``bytes × 10 / baud``; sync/bulk re
 one another in request order (an absent servo is skipped). A new instruction cancels replies
 not yet sent. A half-received packet is abandoned after :data:`PACKET_TIMEOUT` without bytes.
 Packets with a bad CRC are ignored — no status, no effect, no watchdog reset (see
-``docs/sim.md`` for the evidence). The USB adapter's own latency is not modelled.
+``docs/sim.md`` for the evidence).
+
+USB latency (``usb_latency_s`` > 0): the adapter's USB-serial chip (the U2D2's FT232H) holds
+the bytes it receives from the servos until its latency timer expires; the host sees them only
+then. Modelled as a free-running timer started with the bus: a status packet whose last byte is
+on the wire at ``t`` reaches the host at the first timer tick at or after ``t`` (packets that
+complete within one period arrive together). A U2D2 on Linux with its latency timer set to
+1 ms (``/sys/bus/usb-serial/devices/ttyUSBn/latency_timer``, what the Dynamixel SDK
+recommends) is ``usb_latency_s=0.001``, the default of ``sim://dynamixel`` with wire time on.
+Host-to-servo bytes are not delayed (a bulk OUT transfer leaves within the USB frame), and a
+packet is never split by the chip's 64-byte buffer (every status packet of a small chain is
+shorter).
 """
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -35,7 +47,7 @@ from rig.sim.dynamixel.faults import FaultInjection, Faults
 from rig.sim.dynamixel.servo import TICKS_PER_REV, SimServo
 from rig.sim.pty_server import PtyServer
 
-__all__ = ["PACKET_TIMEOUT", "DynamixelBus", "start_servo_bus"]
+__all__ = ["PACKET_TIMEOUT", "DynamixelBus", "latency_timer_tick", "start_servo_bus"]
 
 PACKET_TIMEOUT = 0.02
 """Inter-byte timeout after which a servo abandons a half-received packet, s (modelling
@@ -45,6 +57,16 @@ _READS = frozenset({Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_RE
                     Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ})
 _GROUP_READS = frozenset({Instruction.SYNC_READ, Instruction.FAST_SYNC_READ,
                           Instruction.BULK_READ, Instruction.FAST_BULK_READ})
+
+
+def latency_timer_tick(t: float, epoch: float, period: float) -> float:
+    """When bytes on the wire by ``t`` reach the host through a USB adapter whose latency timer
+    (``period`` s, free-running since ``epoch``) sends what it holds at each tick: the first
+    tick at or after ``t`` (``t`` itself when ``period`` is 0). A billionth of a period of
+    slack keeps a packet that ends on a tick (up to float rounding) on that tick."""
+    if period <= 0.0:
+        return t
+    return epoch + math.ceil((t - epoch) / period - 1e-9) * period
 
 
 class DynamixelBus(FaultInjection, PtyServer):
@@ -59,6 +81,9 @@ class DynamixelBus(FaultInjection, PtyServer):
         :class:`~rig.sim.clock.ManualClock` makes them exact in tests).
     model_wire_time : bool, default True
         Delay replies by the time the bytes take on the wire at the servo's baud rate.
+    usb_latency_s : float, default 0
+        The USB adapter's latency timer, s (see the module docstring); 0: bytes reach the host
+        as soon as they are on the wire.
 
     Attributes
     ----------
@@ -82,14 +107,18 @@ class DynamixelBus(FaultInjection, PtyServer):
     thread_name = "dxl-sim"
 
     def __init__(self, servos: Sequence[SimServo], *, clock: Clock = time.monotonic,
-                 model_wire_time: bool = True):
+                 model_wire_time: bool = True, usb_latency_s: float = 0.0):
         ids = [s.id for s in servos]
+        if not (math.isfinite(usb_latency_s) and usb_latency_s >= 0.0):
+            raise ValueError(f"usb latency must be a finite number >= 0 s, got {usb_latency_s}")
         if not ids:
             raise ValueError("a servo bus needs at least one servo")
         if len(set(ids)) != len(ids):
             raise ValueError(f"servo ids must be distinct, got {ids}")
         self.servos: dict[int, SimServo] = {s.id: s for s in servos}
         self.model_wire_time = model_wire_time
+        self.usb_latency_s = float(usb_latency_s)
+        self._usb_epoch = time.monotonic()  # the adapter's free-running latency timer
         self._faults = Faults()
         self._decoder = StreamDecoder()
         self._last_rx = 0.0
@@ -218,9 +247,12 @@ class DynamixelBus(FaultInjection, PtyServer):
         end = begin + len(packet) * byte_time
         out, extra = self._faults.outgoing(packet)
         if out is not None:
-            self._outbox.append((end + extra, out))
+            self._outbox.append((self._usb_delivery(end + extra), out))
             self._outbox.sort(key=lambda e: e[0])
         return end
+
+    def _usb_delivery(self, t: float) -> float:
+        return latency_timer_tick(t, self._usb_epoch, self.usb_latency_s)
 
     def _dispatch(self, pkt: InstructionPacket, t_rx: float) -> None:
         now = self.clock()
@@ -371,7 +403,8 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
                     return_delay_us: int | None = None, noise_ticks: float = 0.0,
                     seed: int = 0, positions: Sequence[float] | None = None,
                     clock: Clock = time.monotonic,
-                    model_wire_time: bool = True) -> DynamixelBus:
+                    model_wire_time: bool = True,
+                    usb_latency_ms: float = 0.0) -> DynamixelBus:
     """Start a simulated servo chain on a new pty.
 
     Parameters
@@ -394,6 +427,8 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
         Simulated clock, seconds.
     model_wire_time : bool
         Model the time bytes take on the wire.
+    usb_latency_ms : float
+        The USB adapter's latency timer, ms (0: none; see :class:`DynamixelBus`).
 
     Returns
     -------
@@ -413,7 +448,8 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
                            position=positions[k] if positions is not None else 2048.0,
                            noise_ticks=noise_ticks, rng=random.Random(seed + i))
                   for k, (i, m) in enumerate(specs)]
-        return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time)
+        return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time,
+                            usb_latency_s=float(usb_latency_ms) / 1e3)
     except ValueError as err:
         raise RigConfigError(str(err)) from err
 

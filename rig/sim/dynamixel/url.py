@@ -12,6 +12,11 @@ key                 meaning                                         default
 ``noise``           encoder noise standard deviation, ticks         0
 ``seed``            seed of the encoder noise                       0
 ``wire_time``       model the time bytes take on the wire (on/off)  on
+``usb_latency_ms``  the USB adapter's latency timer, ms: replies    1 (0 with
+                    reach the host at its ticks (0: at once)        ``wire_time=off``)
+``process``         serve the bus from a process of its own         off
+                    (``on``: as hardware is, outside the host
+                    process; :mod:`rig.devices._sim_backends`)
 ``clock``,          simulated time (:mod:`rig.sim.urls`)            real time
 ``time_scale``
 ==================  ==============================================  =====================
@@ -21,6 +26,7 @@ key                 meaning                                         default
 
 from __future__ import annotations
 
+from rig.errors import RigConfigError
 from rig.sim.dynamixel.bus import DynamixelBus, start_servo_bus
 from rig.sim.urls import SimUrl
 
@@ -28,7 +34,8 @@ __all__ = ["DEVICES", "EXAMPLE", "KEYS", "bus_from_query", "bus_from_url"]
 
 DEVICES = ("dynamixel", "dxl")
 EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
-KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time")
+KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time",
+        "usb_latency_ms")
 """The bus's own keys (:data:`rig.sim.urls.TIME_KEYS` too)."""
 
 
@@ -74,5 +81,11 @@ def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
         "model_wire_time": q.flag("wire_time", True),
         "clock": q.clock(),
     }
+    wire = kwargs["model_wire_time"]
+    latency = q.number("usb_latency_ms", 1.0 if wire else 0.0, 0.0, 255.0)
+    if latency and not wire:
+        raise RigConfigError(f"{q.url}: usb_latency_ms={latency:g} needs wire_time=on (without "
+                             f"wire time, replies reach the host at once)")
+    kwargs["usb_latency_ms"] = latency
     kwargs.update(overrides)
     return start_servo_bus(**kwargs)  # type: ignore[arg-type]
