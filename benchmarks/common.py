@@ -68,9 +68,11 @@ def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
 
 
 @contextlib.contextmanager
-def _raw_bus(port_name: str) -> Iterator[tuple]:
+def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
     """The raw SDK on ``port_name``: torque on for :data:`IDS`; yields (reader, writer) — a
-    GroupSyncRead of Present Position and a GroupSyncWrite of Goal Position."""
+    GroupSyncRead of Present Position and a GroupSyncWrite of Goal Position. ``waiting``: the
+    SDK on the driver's ``PortHandler`` subclass, which waits in ``select`` for a reply instead
+    of polling (everything else the stock SDK)."""
     from dynamixel_sdk import (
         COMM_SUCCESS,
         GroupSyncRead,
@@ -79,7 +81,12 @@ def _raw_bus(port_name: str) -> Iterator[tuple]:
         PortHandler,
     )
 
-    port = PortHandler(port_name)
+    if waiting:
+        from rig.devices.dynamixel import _SdkPort  # the driver's port: the SDK's own, waiting
+
+        port = _SdkPort(port_name, latency_ms=4.0)
+    else:
+        port = PortHandler(port_name)
     if not port.openPort():
         raise RuntimeError(f"cannot open {port_name}")
     try:
@@ -128,14 +135,14 @@ def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
 
 
 def raw_paced_loop(port_name: str, rate_hz: float, duration_s: float,
-                   fast: bool = True) -> dict:
+                   fast: bool = True, waiting: bool = False) -> dict:
     """The raw SDK control cycle (as :func:`raw_sync_loop`) paced at ``rate_hz`` for
     ``duration_s`` by the live loop's own scheduler (absolute deadlines, no catch-up): the peer
     of the supervised loop at the same rate. Returns cycles, overruns, failed reads and the
-    lateness (ms) of every cycle."""
+    lateness (ms) of every cycle. ``waiting``: see :func:`_raw_bus`."""
     from rig.loop.scheduler import Scheduler
 
-    with _raw_bus(port_name) as (reader, writer):
+    with _raw_bus(port_name, waiting) as (reader, writer):
         sched = Scheduler(rate_hz)
         t0 = sched.start()
         late = []

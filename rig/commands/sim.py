@@ -17,6 +17,7 @@ until SIGINT or SIGTERM, closes the simulator and exits 0. Open the path with
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import signal
 import sys
@@ -58,6 +59,10 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
                 raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of "
                                      f"a simulator in its own process (time_scale= runs it "
                                      f"faster than real time)")
+            # what is alive now (the simulator, its patient, numpy) leaves the cyclic garbage
+            # collector's view: a full collection would otherwise hold a reply for milliseconds
+            gc.collect()
+            gc.freeze()
             click.echo(port.path)
             click.get_text_stream("stdout").flush()
             if stop_on_stdin_eof:

@@ -65,6 +65,8 @@ class EnforceRequest:
         Ask for real-time scheduling of the loop's thread (:mod:`rig.loop.realtime`).
     cpu : int, optional
         Pin the loop's thread to this CPU.
+    busy_wait : bool
+        Spin between cycles instead of sleeping (:class:`~rig.loop.LoopConfig`).
     """
 
     rig: str
@@ -89,6 +91,7 @@ class EnforceRequest:
     seed: int = 0
     realtime: bool = False
     cpu: int | None = None
+    busy_wait: bool = False
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
@@ -126,6 +129,7 @@ class EnforceRequest:
         check_cpu(self.cpu)
         return LoopConfig(
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
+            busy_wait=bool(self.busy_wait),
             supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
                                         max_velocity_deg_s=float(self.max_velocity_deg_s),
                                         max_accel_deg_s2=float(self.max_accel_deg_s2),

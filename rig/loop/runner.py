@@ -2,17 +2,20 @@
 
 One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler`)::
 
-    sync read (fast sync read where supported) → present ticks → FK → present orientation
-    [faults: timeout / garbled → retry while the cycle budget allows; adapter gone → safe state;
-     hardware alert on any servo → safe state; servo data older than the watchdog → safe state]
     latest target (source.latest(t)) → supervisor.admit (NaN / zero / stale → hold)
     model correction (onnxruntime, one session, single-sample path) → supervisor.step
     IK (nearest the previous goal) → goal ticks → FK → supervisor.accept (final exact check)
-    one sync write of the goal ticks
+    sync read (fast sync read where supported) → present ticks → FK → present orientation
+    [faults: timeout / garbled → retry while the cycle budget allows; adapter gone → safe state;
+     hardware alert on any servo → safe state; servo data older than the watchdog → safe state]
+    one sync write of the goal ticks (none when a fault sends the limb to the safe state)
     telemetry row (preallocated chunk; written by another thread)
 
-The present orientation is read before the goal is computed, so the cycle's telemetry pairs
-the target with the limb's state at the cycle's start. Latency columns are measured with
+The goal needs the target and the last goal, not the present position: it is computed first,
+straight after the wait (a busy-waiting loop computes on a hot CPU), and the read follows
+within microseconds, so the cycle's telemetry still pairs the target with the limb's state at
+the cycle's start. A goal computed in a cycle that ends in the safe state is never sent (its
+telemetry row shows the last command sent). Latency columns are measured with
 ``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
 or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
 While it runs, the objects alive at start are frozen out of the cyclic garbage collector
@@ -85,8 +88,12 @@ class LoopConfig:
         it (the limb reaches the last target).
     switch_interval_s : float
         Python's thread switch interval while the loop runs (``sys.setswitchinterval``; the
-        default 5 ms would let a busy thread — the SDK's busy-polling receive loop, a simulator
-        thread — hold the interpreter for a whole cycle).
+        default 5 ms would let another thread hold the interpreter for a whole cycle).
+    busy_wait : bool
+        Spin between cycles instead of sleeping. The loop then keeps a whole core; in exchange
+        no context switch precedes the cycle's compute, which runs as fast as it does alone
+        (after a sleep the CPU's caches, TLB and branch predictors are cold: the same work takes
+        2-3 times as long). For a core of its own (``--cpu N``).
     """
 
     rate_hz: float = 200.0
@@ -97,6 +104,7 @@ class LoopConfig:
     watchdog_ms: int | None = None
     settle_s: float = 0.5
     switch_interval_s: float = 0.0005
+    busy_wait: bool = False
 
     def __post_init__(self):
         if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
@@ -153,8 +161,9 @@ class EnforcementLoop:
         self.config = config or LoopConfig()
         self.clock = clock
         manual = clock is not time.monotonic
+        spin = 1.0 / self.config.rate_hz if self.config.busy_wait else 0.0003
         self.scheduler = Scheduler(self.config.rate_hz, clock=clock, sleep=sleep,
-                                   spin_s=0.0 if manual else 0.0003)
+                                   spin_s=0.0 if manual else spin)
         self.supervisor = Supervisor(oracle, self.config.supervisor,
                                      period_s=self.scheduler.period)
         self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True)
@@ -253,9 +262,6 @@ class EnforcementLoop:
         duration = cfg.duration_s
         if duration is None and getattr(targets, "duration_s", None) is not None:
             duration = targets.duration_s + cfg.settle_s
-        t0 = sched.start()
-        targets.start(t0)
-        sup.reset(t0, self._present)
         self.end_reason = "completed"
         self._driver_retries = getattr(chain, "retries", 0)
         if hasattr(chain, "retries"):
@@ -263,9 +269,13 @@ class EnforcementLoop:
         old_switch = sys.getswitchinterval()
         sys.setswitchinterval(min(old_switch, cfg.switch_interval_s))
         # everything alive now (numpy, onnxruntime, the SDK, ...) leaves the cyclic garbage
-        # collector's view: a full collection in the middle of a cycle then has little to scan
+        # collector's view: a full collection in the middle of a cycle then has little to scan.
+        # Before cycle 0's deadline is set: the collection itself takes tens of milliseconds.
         gc.collect()
         gc.freeze()
+        t0 = sched.start()
+        targets.start(t0)
+        sup.reset(t0, self._present)
         try:
             self._cycles(sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0)
         finally:
@@ -299,7 +309,32 @@ class EnforcementLoop:
             if self.on_cycle is not None:
                 self.on_cycle(self, k)
             faults = 0
-            # -- 1. present positions: one sync read, retried within the cycle budget --------
+            # -- 1. target → model → supervisor → IK (what the goal needs is at hand: the target
+            # and the last goal, not this cycle's read; computed first, straight after the wait,
+            # so a busy-waiting loop computes on a hot CPU) ----------------------------------
+            c2 = perf()
+            target_t, target = targets.latest(start)
+            tq = sup.admit(start, target, target_t)
+            prev_commanded, prev_d = commanded, sup.last_commanded_distance
+            goal_ticks = self._goal_ticks
+            corr = _NAN4
+            if tq is not None and model is not None:
+                cv = model.correct_one(tq[0], tq[1], tq[2], tq[3])
+                corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
+                goal = sup.step(start, tq, corr)
+            else:
+                goal = sup.step(start, tq, None)
+            try:
+                gt = kin.inverse(goal, goal_ticks)
+                cq = kin.forward(gt)
+                cand = (float(cq[0]), float(cq[1]), float(cq[2]), float(cq[3]))
+                if sup.accept(cand):
+                    goal_ticks = gt
+                    commanded = cand
+            except UnreachableError:
+                sup.revert(commanded, Intervention.UNREACHABLE)
+            c3 = perf()
+            # -- 2. present positions: one sync read, retried within the cycle budget --------
             fresh = False
             lost = False
             for attempt in range(read_attempts):
@@ -353,29 +388,13 @@ class EnforcementLoop:
                     and sup.flags & Intervention.HOLD_STALE:
                 faults |= Fault.TARGET_LOST
                 reason = f"target source failed: {targets.error}"
-            # -- 2. target → model → supervisor → IK ----------------------------------------
-            c2 = perf()
-            target_t, target = targets.latest(start)
-            tq = sup.admit(start, target, target_t)
-            corr = _NAN4
             if reason is None:
-                if tq is not None and model is not None:
-                    cv = model.correct_one(tq[0], tq[1], tq[2], tq[3])
-                    corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
-                    goal = sup.step(start, tq, corr)
-                else:
-                    goal = sup.step(start, tq, None)
-                try:
-                    gt = kin.inverse(goal, self._goal_ticks)
-                    cq = kin.forward(gt)
-                    cand = (float(cq[0]), float(cq[1]), float(cq[2]), float(cq[3]))
-                    if sup.accept(cand):
-                        self._goal_ticks = gt
-                        commanded = cand
-                except UnreachableError:
-                    sup.revert(commanded, Intervention.UNREACHABLE)
-            c3 = perf()
+                self._goal_ticks = goal_ticks
+            else:  # nothing of this cycle's goal is sent: the telemetry says what was
+                commanded = prev_commanded
+                sup.last_commanded_distance = prev_d
             # -- 3. one sync write ---------------------------------------------------------
+            cw = perf()
             if reason is None:
                 try:
                     chain.write_goal_ticks(self._goal_ticks)
@@ -409,7 +428,7 @@ class EnforcementLoop:
                 commanded[0], commanded[1], commanded[2], commanded[3],
                 present[0], present[1], present[2], present[3],
                 math.degrees(sup.last_correction_angle), math.degrees(viol), math.degrees(d),
-                1e3 * (c1 - c0), 1e3 * (c3 - c2), 1e3 * (c4 - c3), 1e3 * (perf() - c0),
+                1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw), 1e3 * (perf() - c0),
                 1e3 * (start - due),
                 bits, int(faults), 1 if self.safe else 0,
             ))

@@ -36,6 +36,7 @@ import json
 import math
 import queue
 import threading
+import time
 from enum import IntFlag
 from pathlib import Path
 
@@ -82,6 +83,10 @@ _INT_COLUMNS = frozenset({"cycle", "intervention", "faults", "safe_state"})
 _STORE_DROP = ("faults", "safe_state")
 
 CHUNK = 2048
+_SLICE = 64  # rows the writer formats before it pauses
+_PAUSE_S = 0.0005
+#: one CSV row (what ``csv.writer`` wrote: integers, floats to 9 significant digits, CRLF)
+_ROW_FORMAT = ",".join("%d" if c in _INT_COLUMNS else "%.9g" for c in COLUMNS) + "\r\n"
 
 
 def _fault_names(bits: int) -> str | None:
@@ -180,21 +185,25 @@ class Telemetry:
                 self.error = err
 
     def _write(self, block: np.ndarray) -> None:
-        if self._csv is not None:
-            for r in block:
-                self._csv.writerow([int(v) if c in _INT_COLUMNS else f"{v:.9g}"
-                                    for c, v in zip(COLUMNS, r, strict=True)])
+        # in slices, pausing between them: the loop's thread never waits long for the
+        # interpreter lock while a block is formatted (one %-format per CSV row)
+        for lo in range(0, len(block), _SLICE):
+            part = block[lo:lo + _SLICE]
+            if self._fh is not None:
+                self._fh.write("".join(_ROW_FORMAT % tuple(r) for r in part.tolist()))
+            if self.store_writer is not None:
+                rows = []
+                for r in part.tolist():
+                    d = {c: (int(v) if c in _INT_COLUMNS else float(v))
+                         for c, v in zip(COLUMNS, r, strict=True) if c not in _STORE_DROP}
+                    d["fault"] = _fault_names(int(r[27]))
+                    d["intervention_flags"] = int(r[26])
+                    d["safe_state"] = int(r[28])
+                    rows.append(d)
+                self.store_writer.add_many(rows)
+            time.sleep(_PAUSE_S)
+        if self._fh is not None:
             self._fh.flush()
-        if self.store_writer is not None:
-            rows = []
-            for r in block:
-                d = {c: (int(v) if c in _INT_COLUMNS else float(v))
-                     for c, v in zip(COLUMNS, r, strict=True) if c not in _STORE_DROP}
-                d["fault"] = _fault_names(int(r[27]))
-                d["intervention_flags"] = int(r[26])
-                d["safe_state"] = int(r[28])
-                rows.append(d)
-            self.store_writer.add_many(rows)
 
     def flush_partial(self) -> None:
         """Hand the rows recorded so far over (end of run)."""
@@ -310,6 +319,7 @@ def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_
 
     Keys: ``rate_hz`` (configured), ``achieved_hz``, ``cycles``, ``duration_s``,
     ``p50_cycle_ms``, ``p99_cycle_ms``, ``max_cycle_ms``, ``p50_late_ms``, ``p99_late_ms``,
+    ``max_late_ms``,
     ``overruns``, ``overruns_by_cause`` and ``late_starts_by_cause`` (:func:`late_causes`: the
     overruns, and the cycles that started more than :data:`LATE_START_MS` late without
     overrunning, by cause), ``skipped_deadlines``, ``p50_compute_us``, ``max_violation_deg``,
@@ -332,6 +342,7 @@ def summarise(*, rate_hz: float, telemetry: Telemetry, counters: dict, duration_
         "max_cycle_ms": None if n == 0 else float(cyc.max()),
         "p50_late_ms": _pct(late, 50),
         "p99_late_ms": _pct(late, 99),
+        "max_late_ms": None if n == 0 else float(late.max()),
         "p50_compute_us": None if n == 0 else 1e3 * float(np.median(comp)),
     }
     over = (telemetry.faults() & int(Fault.OVERRUN)) != 0
