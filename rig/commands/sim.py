@@ -29,10 +29,12 @@ from rig.errors import RigConfigError
 
 
 def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = None, *,
-          stop_on_stdin_eof: bool = False) -> None:
+          stop_on_stdin_eof: bool = False, realtime: bool = False) -> None:
     """Start the simulator ``url`` names (one of ``devices``), print its port, serve until
     SIGINT/SIGTERM (or, with ``stop_on_stdin_eof``, until stdin closes: the parent process
-    that started it ended), close it.
+    that started it ended), close it. With ``realtime`` its threads run under ``SCHED_FIFO``
+    when the system allows it (a simulator standing in for hardware answers on time whatever
+    the host does; silently normal priority otherwise).
 
     Raises
     ------
@@ -45,6 +47,9 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
     # receives them (sigwait: no polling, no handler races)
     stop = {signal.SIGINT, signal.SIGTERM}
     old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+    if realtime and hasattr(os, "SCHED_FIFO"):  # before any thread starts: they inherit it
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SIM_RT_PRIORITY))
     try:
         from rig.devices.ports import open_port
         from rig.sim.clock import ManualClock
@@ -73,6 +78,11 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
         signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
 
 
+#: SCHED_FIFO priority of a simulator standing in for hardware: above the live loop's
+#: (:data:`rig.loop.realtime.RT_PRIORITY`), as a servo answers whatever the host is doing.
+SIM_RT_PRIORITY = 45
+
+
 def _stop_at_eof() -> None:
     """Read stdin to its end, then stop the process (SIGTERM to itself: ``sigwait`` takes it)."""
     with contextlib.suppress(OSError, ValueError):
@@ -93,7 +103,9 @@ def sim() -> None:
 @click.argument("url", default="sim://dynamixel")
 @click.option("--stop-on-stdin-eof", is_flag=True, hidden=True,
               help="Stop when stdin closes (a parent process's ``process=on`` port).")
-def servos(url: str, stop_on_stdin_eof: bool) -> None:
+@click.option("--realtime", is_flag=True, hidden=True,
+              help="SCHED_FIFO when permitted (a parent process's ``process=on`` port).")
+def servos(url: str, stop_on_stdin_eof: bool, realtime: bool) -> None:
     """Simulated Dynamixel Protocol 2.0 servo chain, e.g. 'sim://dynamixel?ids=1,2,3'.
 
     Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, usb_latency_ms,
@@ -103,7 +115,8 @@ def servos(url: str, stop_on_stdin_eof: bool) -> None:
     """
     from rig.sim.dynamixel.url import EXAMPLE
 
-    serve(url, ("dynamixel", "dxl"), EXAMPLE, stop_on_stdin_eof=stop_on_stdin_eof)
+    serve(url, ("dynamixel", "dxl"), EXAMPLE, stop_on_stdin_eof=stop_on_stdin_eof,
+          realtime=realtime)
 
 
 @sim.command("imu", short_help="Simulated IMU (sim://imu-stream?... or sim://bno055?...).")

@@ -16,7 +16,9 @@ keeps the joint angles continuous. While torque is off, Present Position follows
 
 A bus of its own (``sim://dynamixel?...&process=on``): the chain is served by ``rig sim servos``
 in a child process, as hardware is outside the host process — the simulator's thread then takes
-neither the interpreter lock nor the scheduling of the process that drives it. ``open_port(...,
+neither the interpreter lock nor the scheduling of the process that drives it; where the system
+allows it the child runs under ``SCHED_FIFO``, since the hardware it stands in for answers on
+time whatever the host does. ``open_port(...,
 separate_process=True)`` asks for it unless the URL says ``process=off`` (the live loop does).
 The port has no ``simulator`` object (nothing to inject faults into) and no patient view: a
 ``patient=`` moves the limb in the child while torque is off, as a real patient moves a real
@@ -175,7 +177,8 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
         p for p in (root, os.environ.get("PYTHONPATH")) if p))
     err = tempfile.TemporaryFile()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rig", "sim", "servos", "--stop-on-stdin-eof", child_url],
+        [sys.executable, "-m", "rig", "sim", "servos", "--stop-on-stdin-eof", "--realtime",
+         child_url],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, env=env,
         start_new_session=True)
     closer = _ChildCloser(proc, err)

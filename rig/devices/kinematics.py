@@ -273,40 +273,64 @@ class ChainKinematics:
         if len(near) != self.n:
             raise ValueError(f"near_ticks must have {self.n} values, got {len(near)}")
         near_theta = self.angles(near)
-        best: tuple[float, tuple[float, ...]] | None = None
+        # the cheap test first: each solution's ticks within the limits and their cost; then
+        # the residual of the cheapest ones, in order, until one passes (the same answer as
+        # checking every solution: the cheapest passing one, the first on ties)
+        solutions = self._solutions(qq, near_theta)
+        ranked = []
+        for order, theta in enumerate(solutions):
+            placed = self._placed(theta, near)
+            if placed is not None:
+                ranked.append((placed[0], order, placed[1], theta))
+        ranked.sort()
+        for _, _, ticks, theta in ranked:
+            if self._residual(theta, qq) <= self.tolerance:
+                return np.array(ticks)
+        return self._unreachable(qq, solutions)
+
+    def _placed(self, theta, near) -> tuple[float, tuple[float, ...]] | None:
+        """(cost, ticks) of joint angles ``theta`` placed nearest ``near`` within the tick
+        limits, or None when a joint cannot reach its angle."""
+        ticks = []
+        cost = 0.0
+        for i, t in enumerate(theta):
+            base = self._zero[i] + self._dir[i] * t / RAD_PER_TICK
+            k_lo = math.ceil((self._lo[i] - base) / TICKS_PER_REV - 1e-9)
+            k_hi = math.floor((self._hi[i] - base) / TICKS_PER_REV + 1e-9)
+            if k_lo > k_hi:
+                return None
+            k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)
+            tick = min(max(base + k * TICKS_PER_REV, self._lo[i]), self._hi[i])
+            ticks.append(tick)
+            cost += (tick - near[i]) ** 2
+        return cost, tuple(ticks)
+
+    def _residual(self, theta, qq) -> float:
+        """Angle between the target and what the joint angles ``theta`` reach, rad."""
+        r: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
+        for a, t in zip(self._axes, theta, strict=True):
+            r = qs.mul(r, qs.axis_angle(a, t))
+        return _angle_between(r, qq)
+
+    def _unreachable(self, qq, solutions) -> np.ndarray:
+        """Raise the :class:`UnreachableError` that says why no solution serves ``qq``."""
         why = "the chain's axes cannot reach it"
         residual_deg = None
-        for theta in self._solutions(qq, near_theta):
-            # residual: distance of the target from what these angles reach
-            r: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
-            for a, t in zip(self._axes, theta, strict=True):
-                r = qs.mul(r, qs.axis_angle(a, t))
-            res = _angle_between(r, qq)
+        for theta in solutions:
+            res = self._residual(theta, qq)
             if res > self.tolerance:
                 residual_deg = math.degrees(res)
                 continue
-            ticks = []
-            cost = 0.0
             for i, t in enumerate(theta):
                 base = self._zero[i] + self._dir[i] * t / RAD_PER_TICK
-                k_lo = math.ceil((self._lo[i] - base) / TICKS_PER_REV - 1e-9)
-                k_hi = math.floor((self._hi[i] - base) / TICKS_PER_REV + 1e-9)
-                if k_lo > k_hi:
+                if math.ceil((self._lo[i] - base) / TICKS_PER_REV - 1e-9) > \
+                        math.floor((self._hi[i] - base) / TICKS_PER_REV + 1e-9):
                     why = (f"ID {self.ids[i]} would need {base % TICKS_PER_REV:.0f} ticks "
                            f"(mod 4096), outside its limits {self._lo[i]:.0f}..{self._hi[i]:.0f}")
                     break
-                k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)
-                tick = min(max(base + k * TICKS_PER_REV, self._lo[i]), self._hi[i])
-                ticks.append(tick)
-                cost += (tick - near[i]) ** 2
-            else:
-                if best is None or cost < best[0]:
-                    best = (cost, tuple(ticks))
-        if best is None:
-            if residual_deg is not None and why.startswith("the chain"):
-                why = f"{residual_deg:.2f}° from the nearest orientation the axes reach"
-            raise UnreachableError(f"IK target {np.round(qq, 4).tolist()} unreachable: {why}")
-        return np.array(best[1])
+        if residual_deg is not None and why.startswith("the chain"):
+            why = f"{residual_deg:.2f}° from the nearest orientation the axes reach"
+        raise UnreachableError(f"IK target {np.round(qq, 4).tolist()} unreachable: {why}")
 
     def inverse(self, q: Sequence[float], near_ticks: Sequence[float]) -> np.ndarray:
         """Goal ticks (n,) int64 for limb orientation ``q``, nearest ``near_ticks``.
