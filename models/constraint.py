@@ -75,8 +75,11 @@ from models.quaternion import LIMB_AXIS
 from models.yamlio import safe_dump_yaml, safe_load_yaml
 
 __all__ = [
+    "KINDS",
     "SIDES",
+    "TWO_AXIS_MAX_TWIST_DEG",
     "ConeSwing",
+    "HingeLimits",
     "JointConstraint",
     "PolygonSwing",
     "SwingTwistTable",
@@ -90,7 +93,15 @@ __all__ = [
 SIDES = ("left", "right")
 
 #: Top-level keys of a constraint file.
-_TOP_KEYS = ("name", "limb_axis", "joint", "side", "patient", "swing", "twist", "provenance")
+_TOP_KEYS = ("name", "kind", "limb_axis", "joint", "side", "patient", "swing", "twist", "hinge",
+             "provenance")
+
+#: Joint kinds (``kind:``): a ball joint (swing region + twist), a hinge (one axis, an angle
+#: interval) and a two-axis joint (a swing region with a fixed or narrow twist).
+KINDS = ("ball", "hinge", "two-axis")
+
+#: Widest twist interval of a ``two-axis`` joint, degrees (wider: it is a ball joint).
+TWO_AXIS_MAX_TWIST_DEG = 30.0
 
 #: Rows per block when evaluating the twist table on many directions (bounds the N×K temporary).
 _TABLE_CHUNK = 32768
@@ -356,6 +367,41 @@ class TwistLimits:
 
 
 @dataclass(frozen=True, eq=False)
+class HingeLimits:
+    """A hinge: the joint's allowed orientations are the rotations ``axis_angle(axis, θ)`` with
+    ``min_deg <= θ <= max_deg`` (degrees, ``-180 <= min_deg <= max_deg <= 180``), about a unit
+    ``axis`` of the parent frame (the child's frame coincides with the parent's at 0)."""
+
+    axis: np.ndarray
+    min_deg: float
+    max_deg: float
+
+    @property
+    def min(self) -> float:
+        """Minimum angle, radians."""
+        return math.radians(self.min_deg)
+
+    @property
+    def max(self) -> float:
+        """Maximum angle, radians."""
+        return math.radians(self.max_deg)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"axis": _vec_out(self.axis), "min_deg": float(self.min_deg),
+                "max_deg": float(self.max_deg)}
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, HingeLimits)
+            and np.allclose(self.axis, other.axis, atol=1e-12)
+            and math.isclose(self.min_deg, other.min_deg, abs_tol=1e-12)
+            and math.isclose(self.max_deg, other.max_deg, abs_tol=1e-12)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False)
 class JointConstraint:
     """A swing region and an optional twist interval for one joint.
 
@@ -374,6 +420,10 @@ class JointConstraint:
     provenance : dict
         Free-form record of where the boundary came from (session or file, parameters, sample
         count), kept verbatim.
+    kind : {"ball", "hinge", "two-axis"}
+        :data:`KINDS`; ``ball`` when the file says nothing.
+    hinge : HingeLimits or None
+        The limits of a ``hinge`` (its ``swing`` and ``twist`` are None).
     """
 
     name: str
@@ -384,8 +434,28 @@ class JointConstraint:
     side: str | None = None
     patient: str | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
+    kind: str = "ball"
+    hinge: HingeLimits | None = None
 
     # -- construction ---------------------------------------------------------------------
+    @classmethod
+    def hinge_joint(
+        cls,
+        axis=(0.0, 0.0, 1.0),
+        min_deg: float = 0.0,
+        max_deg: float = 140.0,
+        *,
+        name: str = "hinge",
+        limb_axis=(1.0, 0.0, 0.0),
+        **binding: Any,
+    ) -> JointConstraint:
+        """A hinge (``binding`` as in :meth:`cone`)."""
+        d: dict[str, Any] = {"name": name, "kind": "hinge", "limb_axis": list(limb_axis),
+                             "hinge": {"axis": list(axis), "min_deg": min_deg,
+                                       "max_deg": max_deg}}
+        d.update({k: v for k, v in binding.items() if v is not None})
+        return cls.from_dict(_plain(d, "constraint"))
+
     @classmethod
     def cone(
         cls,
@@ -469,12 +539,40 @@ class JointConstraint:
             raise ConstraintError(
                 f"expected a mapping (free-form), got {provenance!r}", "provenance", source
             )
-        swing = _parse_swing(data.get("swing"), source)
-        twist = _parse_twist(data.get("twist"), source)
-        if swing is None and twist is None:
-            raise ConstraintError(
-                "a constraint needs a 'swing' limit, a 'twist' limit, or both", source=source
-            )
+        kind = data.get("kind", "ball")
+        if kind not in KINDS:
+            raise ConstraintError(f"must be one of {', '.join(KINDS)}, got {kind!r}", "kind",
+                                  source)
+        hinge = None
+        if kind == "hinge":
+            for key in ("swing", "twist"):
+                if data.get(key) is not None:
+                    raise ConstraintError(
+                        "a hinge has no swing or twist limits (its 'hinge' axis and interval "
+                        "are the whole limit)", key, source)
+            hinge = _parse_hinge(data.get("hinge"), source)
+            swing = twist = None
+        else:
+            if data.get("hinge") is not None:
+                raise ConstraintError(f"only 'kind: hinge' takes a hinge (this is kind {kind})",
+                                      "hinge", source)
+            swing = _parse_swing(data.get("swing"), source)
+            twist = _parse_twist(data.get("twist"), source)
+            if swing is None and twist is None:
+                raise ConstraintError(
+                    "a constraint needs a 'swing' limit, a 'twist' limit, or both",
+                    source=source
+                )
+        if kind == "two-axis":
+            if swing is None or twist is None:
+                raise ConstraintError("a two-axis joint needs a 'swing' region and a (fixed or "
+                                      "narrow) 'twist' interval", source=source)
+            width = twist.max_deg - twist.min_deg
+            if width > TWO_AXIS_MAX_TWIST_DEG:
+                raise ConstraintError(
+                    f"a two-axis joint's twist interval is at most "
+                    f"{TWO_AXIS_MAX_TWIST_DEG:g} degrees wide, got {width:g} (a wider twist "
+                    f"is a ball joint: kind: ball)", "twist", source)
         return cls(
             name=name,
             swing=swing,
@@ -484,9 +582,19 @@ class JointConstraint:
             side=side,
             patient=patient,
             provenance=dict(provenance),
+            kind=kind,
+            hinge=hinge,
         )
 
     # -- queries --------------------------------------------------------------------------
+    def require_kind(self, what: str, kinds: tuple[str, ...] = ("ball", "two-axis")) -> None:
+        """Raise :class:`ConstraintError` unless this joint's kind is one of ``kinds`` (what a
+        tool built for swing-twist joints says of a hinge, whose exact oracle exists but whose
+        learned models and simulated patients do not yet)."""
+        if self.kind not in kinds:
+            raise ConstraintError(f"{what} handles {' and '.join(kinds)} joints; "
+                                  f"{self.name!r} is a {self.kind} joint", "kind")
+
     def twist_limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
         """Twist limits (radians) at limb directions; ``(-π, π)`` when twist is unconstrained.
 
@@ -508,7 +616,10 @@ class JointConstraint:
 
     # -- output ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"name": self.name, "limb_axis": _vec_out(self.limb_axis)}
+        out: dict[str, Any] = {"name": self.name}
+        if self.kind != "ball":  # a ball joint's file stays as it always was
+            out["kind"] = self.kind
+        out["limb_axis"] = _vec_out(self.limb_axis)
         for key in ("joint", "side", "patient"):
             if getattr(self, key) is not None:
                 out[key] = getattr(self, key)
@@ -516,6 +627,8 @@ class JointConstraint:
             out["swing"] = self.swing.to_dict()
         if self.twist is not None:
             out["twist"] = self.twist.to_dict()
+        if self.hinge is not None:
+            out["hinge"] = self.hinge.to_dict()
         if self.provenance:
             out["provenance"] = _plain(self.provenance, "provenance")
         return out
@@ -528,8 +641,10 @@ class JointConstraint:
         """Same limits (name, binding and provenance are ignored)."""
         return (
             isinstance(other, JointConstraint)
+            and self.kind == other.kind
             and self.swing == other.swing
             and self.twist == other.twist
+            and self.hinge == other.hinge
             and np.allclose(self.limb_axis, other.limb_axis, atol=1e-12)
         )
 
@@ -543,6 +658,15 @@ class JointConstraint:
         ]
         if bound:
             lines.append(f"  bound to    {', '.join(bound)}")
+        if self.hinge is not None:
+            h = self.hinge
+            lines.append(f"  kind        hinge, axis {_fmt_vec(h.axis)}, "
+                         f"{h.min_deg:g} .. {h.max_deg:g} deg")
+            if self.provenance:
+                lines.append(f"  provenance  {_fmt_provenance(self.provenance)}")
+            return "\n".join(lines)
+        if self.kind != "ball":
+            lines.append(f"  kind        {self.kind}")
         if isinstance(self.swing, ConeSwing):
             lines.append(
                 f"  swing       cone, centre {_fmt_vec(self.swing.centre)}, "
@@ -727,6 +851,16 @@ def _twist_interval(body: dict, where: str, source: str | None) -> tuple[float, 
     if lo > hi:
         raise ConstraintError(f"min_deg ({lo:g}) is greater than max_deg ({hi:g})", where, source)
     return lo, hi
+
+
+def _parse_hinge(value: Any, source: str | None) -> HingeLimits:
+    if not isinstance(value, dict):
+        raise ConstraintError(f"expected {{axis, min_deg, max_deg}}, got {value!r}", "hinge",
+                              source)
+    _require(value, ("axis", "min_deg", "max_deg"), "hinge", source)
+    axis = _vector(value["axis"], "hinge.axis", source)
+    lo, hi = _twist_interval(value, "hinge", source)
+    return HingeLimits(axis=axis, min_deg=lo, max_deg=hi)
 
 
 def _parse_twist(value: Any, source: str | None) -> TwistLimits | None:

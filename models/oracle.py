@@ -147,6 +147,10 @@ class ConstraintOracle:
         self._table = tw.by_swing if tw is not None else None
         # can an interval reach the ±π seam (so the twist test must look across it)?
         self._wraps = tw is not None and _reaches_seam(tw.min, tw.max)
+        h = constraint.hinge
+        self._hinge = (None if h is None else
+                       (tuple(float(v) for v in h.axis), h.min, h.max,
+                        _reaches_seam(h.min, h.max)))
 
     # -- public API ------------------------------------------------------------------------
     def evaluate(self, q, *, normalize: bool = False) -> OracleResult:
@@ -171,6 +175,9 @@ class ConstraintOracle:
         if isinstance(q, np.ndarray) and q.shape == (4,) and q.dtype.kind in "fiu":
             return self._evaluate_one(q, normalize).valid
         q2, single = self._prep(q, normalize)
+        if self._hinge is not None:
+            valid = self._evaluate_hinge(q2).valid
+            return valid[0] if single else valid
         d = Q.rotate(q2, self.axis)
         valid = self._swing_dist(d) <= BOUNDARY_TOLERANCE
         if self._twist is not None:
@@ -239,6 +246,8 @@ class ConstraintOracle:
         ):
             Q.check_quaternions(q, normalize=normalize)  # raises with the precise message
         qt = (w / nrm, x / nrm, y / nrm, z / nrm)
+        if self._hinge is not None:
+            return self._evaluate_hinge_one(qt)
         ax = self._axis_t
         d = _rot1(qt, ax)
         proj = qt
@@ -311,7 +320,73 @@ class ConstraintOracle:
             return np.full(len(d), -np.inf)
         return self._swing.nearest(d, need_point=False)[0]
 
+    # -- hinge joints -------------------------------------------------------------------------
+    # The allowed set is the arc {h(θ) = (cos θ/2, sin θ/2 · a) : lo <= θ <= hi}. For a unit
+    # q = (w, v), |<q, h(θ)>| = c |cos((θ − φ)/2)| with c = sqrt(w² + (v·a)²) and φ the twist of
+    # q about a: the geodesic distance to h(θ) grows with |θ − φ| (wrapped), so the nearest
+    # allowed rotation is h(φ) when φ is inside the interval and the nearer end otherwise (the
+    # upper one on a tie). The off-axis part of q (its swing about a) is corrected with it.
+    def _evaluate_hinge(self, q: np.ndarray) -> OracleResult:
+        axis_t, lo, hi, wraps = self._hinge
+        a = np.asarray(axis_t)
+        phi = Q.twist_angle(q, a)
+        inside = _twist_inside(phi, lo, hi, wraps)
+        d_lo = np.abs(Q.wrap_angle(phi - lo))
+        d_hi = np.abs(Q.wrap_angle(phi - hi))
+        theta = np.where(inside, phi, np.where(d_lo < d_hi, lo, hi))
+        h = Q.from_axis_angle(a, theta)
+        dot = np.einsum("ij,ij->i", h, q)
+        h = np.where((dot < 0.0)[:, None], -h, h)  # the input's sign
+        c = Q.multiply(h, Q.conjugate(q))
+        c = Q.canonical(c / np.linalg.norm(c, axis=1, keepdims=True))
+        gap = Q.angle(c)
+        invalid = gap > BOUNDARY_TOLERANCE
+        n = len(q)
+        corr = np.where(invalid[:, None], c, np.tile(Q.IDENTITY, (n, 1)))
+        projected = np.where(invalid[:, None], h, q)
+        margin = np.minimum(phi - lo, hi - phi)
+        distance = np.where(invalid, gap, -np.maximum(margin, 0.0))
+        p = q[:, 1:] @ a
+        off = 2.0 * np.arctan2(np.sqrt(np.maximum(1.0 - (q[:, 0] ** 2 + p * p), 0.0)),
+                               np.sqrt(q[:, 0] ** 2 + p * p))
+        return OracleResult(valid=~invalid, distance=distance, projected=projected,
+                            correction=corr, swing_distance=off, twist=phi)
+
+    def _evaluate_hinge_one(self, qt: tuple[float, float, float, float]) -> OracleResult:
+        """Scalar twin of :meth:`_evaluate_hinge` (same maths, same tie rules)."""
+        axis_t, lo, hi, wraps = self._hinge
+        phi = _twist1(qt, axis_t)
+        t = BOUNDARY_TOLERANCE
+        inside = lo - t <= phi <= hi + t or (wraps and _across_seam1(phi, lo, hi))
+        if inside:
+            theta = phi
+        else:
+            theta = lo if abs(_wrap1(phi - lo)) < abs(_wrap1(phi - hi)) else hi
+        ch, sh = math.cos(0.5 * theta), math.sin(0.5 * theta)
+        h = (ch, sh * axis_t[0], sh * axis_t[1], sh * axis_t[2])
+        if h[0] * qt[0] + h[1] * qt[1] + h[2] * qt[2] + h[3] * qt[3] < 0.0:
+            h = (-h[0], -h[1], -h[2], -h[3])
+        c = _mul1(h, (qt[0], -qt[1], -qt[2], -qt[3]))
+        cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
+        sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
+        c = (sign * c[0] / cn, sign * c[1] / cn, sign * c[2] / cn, sign * c[3] / cn)
+        gap = 2.0 * math.atan2(math.sqrt(c[1] * c[1] + c[2] * c[2] + c[3] * c[3]), abs(c[0]))
+        invalid = gap > t
+        if invalid:
+            corr, proj, distance = c, h, gap
+        else:
+            corr, proj = (1.0, 0.0, 0.0, 0.0), qt
+            distance = -max(min(phi - lo, hi - phi), 0.0)
+        p = qt[1] * axis_t[0] + qt[2] * axis_t[1] + qt[3] * axis_t[2]
+        r2 = qt[0] * qt[0] + p * p
+        off = 2.0 * math.atan2(math.sqrt(max(1.0 - r2, 0.0)), math.sqrt(r2))
+        return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
+                            projected=np.array(proj), correction=np.array(corr),
+                            swing_distance=np.float64(off), twist=np.float64(phi))
+
     def _evaluate(self, q: np.ndarray) -> OracleResult:
+        if self._hinge is not None:
+            return self._evaluate_hinge(q)
         n = len(q)
         d = Q.rotate(q, self.axis)
         projected = q.copy()

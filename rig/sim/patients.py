@@ -163,7 +163,9 @@ def resolve_patient(value: str, *, url: str, key: str = "patient"):
     if value in SHAPES:
         return load_shape(value)
     try:
-        return load_constraint(value)
+        c = load_constraint(value)
+        c.require_kind("a simulated patient")
+        return c
     except FileNotFoundError:
         raise RigConfigError(f"{url}: {key}={value!r}: not a shape name ({', '.join(SHAPES)}) "
                              f"nor an existing constraint file") from None

@@ -16,6 +16,11 @@ def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     from models.oracle import ConstraintOracle
 
     c = load_constraint(path)
+    if c.hinge is not None:  # a curve in SO(3): no fraction of orientations to sample
+        return "\n".join([f"{path}: OK", c.summary(),
+                          f"  valid       the rotations about the axis within "
+                          f"{c.hinge.max_deg - c.hinge.min_deg:g} deg (a curve: 0 % of all "
+                          f"orientations; the oracle corrects every other one onto it)"])
     oracle = ConstraintOracle(c)
     rng = np.random.default_rng(seed)
     q = Q.random_quaternions(samples, rng)

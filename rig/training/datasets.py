@@ -65,7 +65,9 @@ def _constraint(constraint: str | None, shape: str | None, radius: str | None, c
     if len(given) > 1:
         raise DatasetError(f"{' and '.join(given)}: give only one constraint source")
     if constraint is not None:
-        return load_constraint(constraint)
+        c = load_constraint(constraint)
+        c.require_kind("rig dataset make")
+        return c
     if shape is not None:
         return load_shape(shape)
     if radius is not None:

@@ -54,6 +54,7 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
         raise DatasetError(f"--distribution {request.distribution!r}: expected one of "
                            f"{', '.join(DISTRIBUTIONS)}")
     constraint = load_constraint(request.constraint)
+    constraint.require_kind("rig evaluate")
     model = load_model(request.model, expected_constraint=constraint)
     oracle = ConstraintOracle(constraint)
     n, seed, distribution = request.n, request.seed, request.distribution
