@@ -99,6 +99,7 @@ def run_rom(request: RomRequest) -> RomResult:
         from models.constraint import load_constraint
 
         constraint = load_constraint(request.constraint)
+        constraint.require_kind("rig rom")
         side = request.side or getattr(constraint, "side", None) or "right"
         return RomResult(range_of_motion(constraint, side), getattr(constraint, "joint", None),
                          request.constraint)
