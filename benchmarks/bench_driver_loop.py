@@ -29,7 +29,7 @@ from common import raw_sync_loop as run_loop
 
 from rig.devices import DynamixelChain, load_rig_config
 
-URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
+URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0&usb_latency_ms=0"
 
 
 def driver_loop(port: str, cycles: int) -> tuple[list[float], list[float]]:

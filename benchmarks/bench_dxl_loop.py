@@ -45,7 +45,8 @@ def in_thread(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[fl
 def in_process(cycles: int, runs: int, delay_us: int, fast: bool) -> list[list[float]]:
     out = []
     for _ in range(runs):
-        with child_servos(f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}") as port_name:
+        url = f"sim://dynamixel?ids=1,2,3&return_delay_us={delay_us}&usb_latency_ms=0"
+        with child_servos(url) as port_name:
             out.append(run_loop(port_name, cycles, fast))
     return out
 

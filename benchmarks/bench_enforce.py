@@ -28,7 +28,7 @@ Prints (figures, never assertions); each section can be run alone (``--sections`
     the model trained for the constraint and with a model trained for another one.
 
 Run: ``python benchmarks/bench_enforce.py [--minutes 10] [--runs 50] [--sections long,sweep]
-[--busy-wait]``.
+[--busy-wait] [--realtime]``.
 The model defaults to ``rig train`` (preset ``field``) on the rig's constraint, trained first.
 """
 
@@ -78,6 +78,7 @@ def _train(constraint_path: Path, out: Path) -> Path:
 
 
 BUSY_WAIT = False  # --busy-wait: every supervised loop spins between cycles
+REALTIME = False  # --realtime: every supervised loop's thread under SCHED_FIFO when permitted
 
 
 def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None, clock=None):
@@ -89,7 +90,15 @@ def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None
         try:
             loop = EnforcementLoop(chain, model, oracle, targets, cfg, **kw)
             loop.setup()
-            summary = loop.run(max_cycles=cycles)
+            from rig.loop import realtime
+
+            restore, notes = realtime.apply(realtime=REALTIME, cpu=None)
+            for note in notes:
+                print(f"  note: {note}")
+            try:
+                summary = loop.run(max_cycles=cycles)
+            finally:
+                restore()
         finally:
             chain.close()
     return summary, loop.telemetry.table()
@@ -103,7 +112,7 @@ def rig_enforce(model_path: Path, out: Path, duration_s: float, *, seed: int,
     cmd = [sys.executable, "-m", "rig", "enforce", "--rig", "sim-shoulder", "--model",
            str(model_path), "--targets", f"script:adversarial?seed={seed}", "--duration",
            str(duration_s), "--summary-json", str(summary), "--quiet", *extra,
-           *(["--busy-wait"] if BUSY_WAIT else [])]
+           *(["--busy-wait"] if BUSY_WAIT else []), *(["--realtime"] if REALTIME else [])]
     if telemetry:
         cmd += ["--telemetry", str(out.with_suffix(".csv"))]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env())
@@ -168,11 +177,14 @@ def main() -> None:
     ap.add_argument("--model", default=None)
     ap.add_argument("--busy-wait", action="store_true",
                     help="the supervised loops spin between cycles (rig enforce --busy-wait)")
+    ap.add_argument("--realtime", action="store_true",
+                    help="the supervised loops under SCHED_FIFO when permitted (rig enforce "
+                         "--realtime)")
     ap.add_argument("--sections", default=",".join(SECTIONS),
                     help=f"comma-separated, of {', '.join(SECTIONS)}")
     args = ap.parse_args()
-    global BUSY_WAIT
-    BUSY_WAIT = args.busy_wait
+    global BUSY_WAIT, REALTIME
+    BUSY_WAIT, REALTIME = args.busy_wait, args.realtime
     sections = set(args.sections.split(","))
     unknown = sections - set(SECTIONS)
     if unknown:
@@ -192,7 +204,8 @@ def main() -> None:
     print(f"rig {rig.name}: constraint {constraint.name!r}, model {model_path} "
           f"(preset {model.network_info.get('preset', '?')}); "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; supervised loops "
-          f"{'busy-wait' if BUSY_WAIT else 'sleep'} between cycles")
+          f"{'busy-wait' if BUSY_WAIT else 'sleep'} between cycles"
+          f"{', real-time priority' if REALTIME else ''}")
     compute_us = None
 
     if "long" in sections:

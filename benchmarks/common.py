@@ -34,6 +34,10 @@ if str(ROOT) not in sys.path[:1]:
 __all__ = ["IDS", "ROOT", "child_env", "child_servos", "raw_paced_loop", "raw_sync_loop",
            "single_latencies_ns"]
 
+#: The driver benchmarks' bus: 3 servos, return delay 0, an instantaneous USB adapter (their
+#: figures compare drivers, not adapters; ``bench_enforce.py`` adds the latency timer).
+CHILD_URL = "sim://dynamixel?ids=1,2,3&return_delay_us=0&usb_latency_ms=0"
+
 #: Servo IDs of the simulated 3-servo chain the loop benchmarks drive.
 IDS = (1, 2, 3)
 _TORQUE, _GOAL_POS, _PRESENT_POS = 64, 116, 132
@@ -45,9 +49,10 @@ def child_env() -> dict[str, str]:
 
 
 @contextlib.contextmanager
-def child_servos(url: str = "sim://dynamixel?ids=1,2,3&return_delay_us=0") -> Iterator[str]:
+def child_servos(url: str = CHILD_URL) -> Iterator[str]:
     """A simulated chain served from a process of its own for the duration (the product's
-    ``process=on`` port, as ``rig enforce`` opens it); yields its pty path."""
+    ``process=on`` port, as ``rig enforce`` opens it); yields its pty path. The default bus
+    has no USB latency (:data:`CHILD_URL`)."""
     from rig.devices.ports import open_port
 
     with open_port(url, separate_process=True) as port:
