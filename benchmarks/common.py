@@ -86,6 +86,7 @@ def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
         PortHandler,
     )
 
+    assert COMM_SUCCESS == _COMM_SUCCESS
     if waiting:
         from rig.devices.dynamixel import _SdkPort  # the driver's port: the SDK's own, waiting
 
@@ -110,17 +111,19 @@ def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
         port.closePort()
 
 
+#: ``dynamixel_sdk.COMM_SUCCESS`` (the SDK is imported only when a raw loop runs)
+_COMM_SUCCESS = 0
+
+
 def _raw_cycle(reader, writer, k: int, fast: bool) -> bool:
     """One raw control cycle (read, then write a goal); False when the read failed."""
-    from dynamixel_sdk import COMM_SUCCESS
-
     result = reader.fastSyncRead() if fast else reader.txRxPacket()
     positions = [reader.getData(i, _PRESENT_POS, 4) for i in IDS]
     goal = 2048 + (k % 200) - 100
     for i, _ in zip(IDS, positions, strict=True):
         writer.changeParam(i, list(goal.to_bytes(4, "little")))
     writer.txPacket()
-    return result == COMM_SUCCESS
+    return result == _COMM_SUCCESS
 
 
 def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:

@@ -310,8 +310,30 @@ class SwingTwistTable:
     __hash__ = None  # type: ignore[assignment]
 
 
+class _DegreeInterval:
+    """``min`` / ``max`` in radians of a class's ``min_deg`` / ``max_deg`` (twist envelope,
+    hinge interval)."""
+
+    min_deg: float
+    max_deg: float
+
+    @property
+    def min(self) -> float:
+        """Lower limit, radians."""
+        return math.radians(self.min_deg)
+
+    @property
+    def max(self) -> float:
+        """Upper limit, radians."""
+        return math.radians(self.max_deg)
+
+    def _same_interval(self, other: _DegreeInterval) -> bool:
+        return (math.isclose(self.min_deg, other.min_deg, abs_tol=1e-12)
+                and math.isclose(self.max_deg, other.max_deg, abs_tol=1e-12))
+
+
 @dataclass(frozen=True, eq=False)
-class TwistLimits:
+class TwistLimits(_DegreeInterval):
     """Twist interval about the limb axis, degrees, ``-180 <= min_deg <= max_deg <= 180``.
 
     Attributes
@@ -325,16 +347,6 @@ class TwistLimits:
     min_deg: float
     max_deg: float
     by_swing: SwingTwistTable | None = None
-
-    @property
-    def min(self) -> float:
-        """Envelope minimum, radians."""
-        return math.radians(self.min_deg)
-
-    @property
-    def max(self) -> float:
-        """Envelope maximum, radians."""
-        return math.radians(self.max_deg)
 
     def limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
         """Twist limits (radians) at limb directions (N, 3) (unit, parent frame) → (N,), (N,).
@@ -358,8 +370,7 @@ class TwistLimits:
     def __eq__(self, other: object) -> bool:
         return (
             isinstance(other, TwistLimits)
-            and math.isclose(self.min_deg, other.min_deg, abs_tol=1e-12)
-            and math.isclose(self.max_deg, other.max_deg, abs_tol=1e-12)
+            and self._same_interval(other)
             and self.by_swing == other.by_swing
         )
 
@@ -367,7 +378,7 @@ class TwistLimits:
 
 
 @dataclass(frozen=True, eq=False)
-class HingeLimits:
+class HingeLimits(_DegreeInterval):
     """A hinge: the joint's allowed orientations are the rotations ``axis_angle(axis, θ)`` with
     ``min_deg <= θ <= max_deg`` (degrees, ``-180 <= min_deg <= max_deg <= 180``), about a unit
     ``axis`` of the parent frame (the child's frame coincides with the parent's at 0)."""
@@ -375,16 +386,6 @@ class HingeLimits:
     axis: np.ndarray
     min_deg: float
     max_deg: float
-
-    @property
-    def min(self) -> float:
-        """Minimum angle, radians."""
-        return math.radians(self.min_deg)
-
-    @property
-    def max(self) -> float:
-        """Maximum angle, radians."""
-        return math.radians(self.max_deg)
 
     def to_dict(self) -> dict[str, Any]:
         return {"axis": _vec_out(self.axis), "min_deg": float(self.min_deg),
@@ -394,8 +395,7 @@ class HingeLimits:
         return (
             isinstance(other, HingeLimits)
             and np.allclose(self.axis, other.axis, atol=1e-12)
-            and math.isclose(self.min_deg, other.min_deg, abs_tol=1e-12)
-            and math.isclose(self.max_deg, other.max_deg, abs_tol=1e-12)
+            and self._same_interval(other)
         )
 
     __hash__ = None  # type: ignore[assignment]

@@ -289,16 +289,10 @@ class ConstraintOracle:
             else:
                 invalid = True
         if invalid:
-            c = _mul1(proj, (qt[0], -qt[1], -qt[2], -qt[3]))
-            cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
-            sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
-            corr = (sign * c[0] / cn, sign * c[1] / cn, sign * c[2] / cn, sign * c[3] / cn)
+            corr, distance = _correction1(proj, qt)
             p0, p1, p2, p3 = proj
             pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
             proj = (p0 / pn, p1 / pn, p2 / pn, p3 / pn)
-            distance = 2.0 * math.atan2(
-                math.sqrt(corr[1] * corr[1] + corr[2] * corr[2] + corr[3] * corr[3]), abs(corr[0])
-            )
         else:
             corr = (1.0, 0.0, 0.0, 0.0)
             distance = -max(margin, 0.0)
@@ -366,11 +360,7 @@ class ConstraintOracle:
         h = (ch, sh * axis_t[0], sh * axis_t[1], sh * axis_t[2])
         if h[0] * qt[0] + h[1] * qt[1] + h[2] * qt[2] + h[3] * qt[3] < 0.0:
             h = (-h[0], -h[1], -h[2], -h[3])
-        c = _mul1(h, (qt[0], -qt[1], -qt[2], -qt[3]))
-        cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
-        sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
-        c = (sign * c[0] / cn, sign * c[1] / cn, sign * c[2] / cn, sign * c[3] / cn)
-        gap = 2.0 * math.atan2(math.sqrt(c[1] * c[1] + c[2] * c[2] + c[3] * c[3]), abs(c[0]))
+        c, gap = _correction1(h, qt)
         invalid = gap > t
         if invalid:
             corr, proj, distance = c, h, gap
@@ -490,6 +480,16 @@ _twist1 = Q.twist_angle1
 
 _mul1 = qs.mul
 _rot1 = qs.rotate
+
+
+def _correction1(proj, qt) -> tuple[tuple[float, float, float, float], float]:
+    """The correction ``proj ⊗ qt⁻¹`` (unit, ``w >= 0``: :func:`models.quaternion.canonical`'s
+    rule) and its angle, radians."""
+    c = _mul1(proj, (qt[0], -qt[1], -qt[2], -qt[3]))
+    cn = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3])
+    sign = -1.0 if c[0] < 0.0 or (c[0] == 0.0 and _first_nonzero_negative(c)) else 1.0
+    c = (sign * c[0] / cn, sign * c[1] / cn, sign * c[2] / cn, sign * c[3] / cn)
+    return c, 2.0 * math.atan2(math.sqrt(c[1] * c[1] + c[2] * c[2] + c[3] * c[3]), abs(c[0]))
 _two_vectors1 = qs.from_two_vectors
 
 

@@ -280,17 +280,17 @@ class ChainKinematics:
         ranked = []
         for order, theta in enumerate(solutions):
             placed = self._placed(theta, near)
-            if placed is not None:
+            if not isinstance(placed, int):
                 ranked.append((placed[0], order, placed[1], theta))
         ranked.sort()
         for _, _, ticks, theta in ranked:
             if self._residual(theta, qq) <= self.tolerance:
                 return np.array(ticks)
-        return self._unreachable(qq, solutions)
+        return self._unreachable(qq, near, solutions)
 
-    def _placed(self, theta, near) -> tuple[float, tuple[float, ...]] | None:
+    def _placed(self, theta, near) -> tuple[float, tuple[float, ...]] | int:
         """(cost, ticks) of joint angles ``theta`` placed nearest ``near`` within the tick
-        limits, or None when a joint cannot reach its angle."""
+        limits, or the index of the first joint that cannot reach its angle."""
         ticks = []
         cost = 0.0
         for i, t in enumerate(theta):
@@ -298,7 +298,7 @@ class ChainKinematics:
             k_lo = math.ceil((self._lo[i] - base) / TICKS_PER_REV - 1e-9)
             k_hi = math.floor((self._hi[i] - base) / TICKS_PER_REV + 1e-9)
             if k_lo > k_hi:
-                return None
+                return i
             k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)
             tick = min(max(base + k * TICKS_PER_REV, self._lo[i]), self._hi[i])
             ticks.append(tick)
@@ -312,7 +312,7 @@ class ChainKinematics:
             r = qs.mul(r, qs.axis_angle(a, t))
         return _angle_between(r, qq)
 
-    def _unreachable(self, qq, solutions) -> np.ndarray:
+    def _unreachable(self, qq, near, solutions) -> np.ndarray:
         """Raise the :class:`UnreachableError` that says why no solution serves ``qq``."""
         why = "the chain's axes cannot reach it"
         residual_deg = None
@@ -321,13 +321,11 @@ class ChainKinematics:
             if res > self.tolerance:
                 residual_deg = math.degrees(res)
                 continue
-            for i, t in enumerate(theta):
-                base = self._zero[i] + self._dir[i] * t / RAD_PER_TICK
-                if math.ceil((self._lo[i] - base) / TICKS_PER_REV - 1e-9) > \
-                        math.floor((self._hi[i] - base) / TICKS_PER_REV + 1e-9):
-                    why = (f"ID {self.ids[i]} would need {base % TICKS_PER_REV:.0f} ticks "
-                           f"(mod 4096), outside its limits {self._lo[i]:.0f}..{self._hi[i]:.0f}")
-                    break
+            i = self._placed(theta, near)
+            if isinstance(i, int):
+                base = self._zero[i] + self._dir[i] * theta[i] / RAD_PER_TICK
+                why = (f"ID {self.ids[i]} would need {base % TICKS_PER_REV:.0f} ticks "
+                       f"(mod 4096), outside its limits {self._lo[i]:.0f}..{self._hi[i]:.0f}")
         if residual_deg is not None and why.startswith("the chain"):
             why = f"{residual_deg:.2f}° from the nearest orientation the axes reach"
         raise UnreachableError(f"IK target {np.round(qq, 4).tolist()} unreachable: {why}")

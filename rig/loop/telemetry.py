@@ -31,7 +31,6 @@ Columns (:data:`COLUMNS`; orientations scalar-first joint orientations, parent f
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import queue
@@ -85,7 +84,7 @@ _STORE_DROP = ("faults", "safe_state")
 CHUNK = 2048
 _SLICE = 64  # rows the writer formats before it pauses
 _PAUSE_S = 0.0005
-#: one CSV row (what ``csv.writer`` wrote: integers, floats to 9 significant digits, CRLF)
+#: one CSV row (as ``csv.writer`` writes it: integers, floats to 9 significant digits, CRLF)
 _ROW_FORMAT = ",".join("%d" if c in _INT_COLUMNS else "%.9g" for c in COLUMNS) + "\r\n"
 
 
@@ -124,15 +123,13 @@ class Telemetry:
         self._faults = np.empty(1 << 14, dtype=np.int64)
         self._q: queue.Queue = queue.Queue()
         self._fh = None
-        self._csv = None
         self.error: BaseException | None = None
         if self.csv_path is not None:
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
             from models.fileio import open_owner_only
 
             self._fh = open_owner_only(self.csv_path, "w", newline="")  # names the run
-            self._csv = csv.writer(self._fh)
-            self._csv.writerow(COLUMNS)
+            self._fh.write(",".join(COLUMNS) + "\r\n")
         self._thread = None
         if self._fh is not None or store_writer is not None:
             self._thread = threading.Thread(target=self._run, name="rig-loop-telemetry",
