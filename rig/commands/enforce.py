@@ -65,8 +65,9 @@ import click
               help="A target older than this holds the last safe goal.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of scripted targets.")
 @click.option("--realtime", is_flag=True,
-              help="Run the loop's thread with real-time priority (SCHED_FIFO) when the system "
-                   "allows it (one line says when it does not).")
+              help="Run the loop's thread with real-time priority (SCHED_FIFO) and hold idle "
+                   "CPUs awake (PM QoS CPU latency 0) for the run, when the system allows it "
+                   "(one line says what it does not allow).")
 @click.option("--cpu", type=int, default=None, metavar="N",
               help="Pin the loop's thread to CPU N.")
 @click.option("--busy-wait", is_flag=True,

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -180,14 +181,37 @@ def test_realtime_and_affinity_are_undone():
     restore, notes = realtime.apply(realtime=True, cpu=cpu)
     try:
         assert os.sched_getaffinity(0) == {cpu}
-        if notes:  # not permitted here: one line saying so, the loop at normal priority
-            assert len(notes) == 1 and "normal priority" in notes[0]
+        fifo_notes = [n for n in notes if "normal priority" in n]
+        qos_notes = [n for n in notes if realtime.CPU_LATENCY_DEVICE in n]
+        assert len(notes) == len(fifo_notes) + len(qos_notes) and len(qos_notes) <= 1
+        if fifo_notes:  # not permitted here: one line saying so, the loop at normal priority
+            assert len(fifo_notes) == 1
             assert os.sched_getscheduler(0) == policy
         else:
             assert os.sched_getscheduler(0) == os.SCHED_FIFO
     finally:
         restore()
     assert os.sched_getscheduler(0) == policy and os.sched_getaffinity(0) == cpus
+
+
+def test_the_cpu_latency_request_is_written_and_held_until_released(tmp_path):
+    """The PM QoS request is the 32-bit value written to the device, held while the file is
+    open (a regular file stands in for /dev/cpu_dma_latency: the bytes are the same)."""
+    dev = tmp_path / "cpu_dma_latency"
+    dev.write_bytes(b"")
+    before = set(os.listdir("/proc/self/fd"))
+    release, note = realtime.hold_cpu_latency(0, device=str(dev))
+    assert note is None
+    assert dev.read_bytes() == (0).to_bytes(4, sys.byteorder, signed=True)
+    assert len(set(os.listdir("/proc/self/fd")) - before) == 1  # held open
+    release()
+    assert set(os.listdir("/proc/self/fd")) == before
+
+
+def test_a_system_without_the_cpu_latency_device_gets_one_line(tmp_path):
+    release, note = realtime.hold_cpu_latency(0, device=str(tmp_path / "missing"))
+    release()
+    assert note is not None and "\n" not in note and "does not exist" in note
 
 
 # --------------------------------------------------------------------------- host stalls
