@@ -37,11 +37,18 @@ _EXPORTS: dict[str, tuple[str, str | None]] = {
     "load_constraint": ("models.constraint", "load_constraint"),
     "loads_constraint": ("models.constraint", "loads_constraint"),
     "dump_constraint": ("models.constraint", "dump_constraint"),
+    # limb files (chains of joints, couplings)
+    "Limb": ("models.limb", "Limb"),
+    "load_limb": ("models.limb", "load_limb"),
+    "loads_limb": ("models.limb", "loads_limb"),
+    "dump_limb": ("models.limb", "dump_limb"),
     # exact answers
     "ConstraintOracle": ("models.oracle", "ConstraintOracle"),
     "OracleResult": ("models.oracle", "OracleResult"),
     "BOUNDARY_TOLERANCE": ("models.oracle", "BOUNDARY_TOLERANCE"),
     "SphericalPolygon": ("models.geometry", "SphericalPolygon"),
+    "LimbOracle": ("models.limb_oracle", "LimbOracle"),
+    "LimbResult": ("models.limb_oracle", "LimbResult"),
     # shipped example boundaries
     "SHAPES": ("models.shapes", "SHAPES"),
     "load_shape": ("models.shapes", "load_shape"),
@@ -76,6 +83,9 @@ __all__ = [
     "FieldModel",
     "GeometryError",
     "JointConstraint",
+    "Limb",
+    "LimbOracle",
+    "LimbResult",
     "ModelFileError",
     "ModelsError",
     "OracleResult",
@@ -85,15 +95,18 @@ __all__ = [
     "SwingTwistTable",
     "TwistLimits",
     "dump_constraint",
+    "dump_limb",
     "evaluate_model",
     "evaluation",
     "export_onnx",
     "geometry",
     "held_out_orientations",
     "load_constraint",
+    "load_limb",
     "load_model",
     "load_shape",
     "loads_constraint",
+    "loads_limb",
     "quaternion",
 ]
 
@@ -136,6 +149,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from models.evaluation import evaluate_model, held_out_orientations
     from models.field import FieldModel
     from models.geometry import SphericalPolygon
+    from models.limb import Limb, dump_limb, load_limb, loads_limb
+    from models.limb_oracle import LimbOracle, LimbResult
     from models.onnx_io import CorrectionModel, export_onnx, load_model
     from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle, OracleResult
     from models.shapes import SHAPES, load_shape

@@ -396,6 +396,75 @@ class _ArcTree:
         return owner, self.edge[node]
 
 
+def _pair_keys(t: np.ndarray, p: np.ndarray):
+    """The per-(point, edge) kernel of :class:`SphericalPolygon`: ``t`` (K, 5, 3) holds each
+    pair's edge as rows g, t0, t1, v0, v1; ``p`` (K, 3) its point. See
+    :meth:`SphericalPolygon._pair_keys` for what is returned."""
+    dots = np.einsum("kij,kj->ki", t[:, :3], p)
+    s = dots[:, 0]
+    in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
+    s2 = s * s
+    key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+    # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
+    diff = t[:, 3:] - p[:, None, :]
+    k01 = np.einsum("kij,kij->ki", diff, diff)
+    end_is_1 = k01[:, 1] < k01[:, 0]
+    key = np.where(in_arc, key_in, np.minimum(k01[:, 0], k01[:, 1]))
+    return key, in_arc, s, end_is_1
+
+
+def nearest_on_polygons(vertices: np.ndarray, points: np.ndarray, chunk_pairs: int = 400_000):
+    """Signed distance and nearest boundary point of each point to **its own** polygon.
+
+    For polygons that differ from point to point (a coupled joint's boundary interpolated at
+    each sample's coupling angle). Every polygon is searched by brute force with the kernel of
+    :class:`SphericalPolygon` (same keys, same lowest-index rule on ties, same pseudo-normal
+    sign), so a polygon's answers are :meth:`SphericalPolygon.brute_nearest`'s.
+
+    Parameters
+    ----------
+    vertices : (N, M, 3) float64
+        Unit vertices of each point's polygon, **oriented**: the region is on the side of each
+        edge's normal ``v_i × v_{i+1}`` (to the left walking along the boundary, seen from
+        outside the sphere). Consecutive vertices distinct and not antipodal.
+    points : (N, 3) float64, unit
+
+    Returns
+    -------
+    dist : (N,) radians, negative inside
+    nearest : (N, 3) the nearest boundary point
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    n, m = v.shape[:2]
+    step = max(1, chunk_pairs // m)
+    dist = np.empty(n)
+    near = np.empty((n, 3))
+    for a in range(0, n, step):
+        vb, pb = v[a:a + step], p[a:a + step]
+        k = len(vb)
+        v1 = np.roll(vb, -1, axis=1)
+        g = np.cross(vb, v1)
+        g /= np.linalg.norm(g, axis=2, keepdims=True)
+        table = np.stack((g, np.cross(g, vb), np.cross(v1, g), vb, v1), axis=2)  # (k, m, 5, 3)
+        key, in_arc, s, end1 = _pair_keys(table.reshape(k * m, 5, 3), np.repeat(pb, m, axis=0))
+        best = np.argmin(key.reshape(k, m), axis=1)  # first minimum: lowest edge index
+        sel = np.arange(k) * m + best
+        key, in_arc, s, end1 = key[sel], in_arc[sel], s[sel], end1[sel]
+        rows = np.arange(k)
+        vidx = np.where(end1, (best + 1) % m, best)
+        theta = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
+        vnormal = g[rows, vidx] + g[rows, (vidx - 1) % m]  # inward normals of its two edges
+        inside = np.where(in_arc, s >= 0.0, np.einsum("ij,ij->i", pb, vnormal) >= 0.0)
+        dist[a:a + k] = np.where(inside, -theta, theta)
+        ge = g[rows, best]
+        foot = pb - s[:, None] * ge
+        fn = np.linalg.norm(foot, axis=1, keepdims=True)
+        foot = foot / np.where(fn < 1e-300, 1.0, fn)
+        near[a:a + k] = np.where(in_arc[:, None], foot, vb[rows, vidx])
+    return dist, near
+
+
 class SphericalPolygon:
     """A simple spherical polygon: exact signed distance and nearest boundary point.
 
@@ -480,18 +549,7 @@ class SphericalPolygon:
         of the angle to the edge's great circle, signed by the geometric normal) and
         ``end_is_1`` (when an end is nearest: is it the edge's second vertex).
         """
-        t = self._table[e]  # (K, 5, 3): g, t0, t1, v0, v1 of each pair's edge
-        dots = np.einsum("kij,kj->ki", t[:, :3], p)
-        s = dots[:, 0]
-        in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
-        s2 = s * s
-        key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
-        # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
-        diff = t[:, 3:] - p[:, None, :]
-        k01 = np.einsum("kij,kij->ki", diff, diff)
-        end_is_1 = k01[:, 1] < k01[:, 0]
-        key = np.where(in_arc, key_in, np.minimum(k01[:, 0], k01[:, 1]))
-        return key, in_arc, s, end_is_1
+        return _pair_keys(self._table[e], p)
 
     def _finish(self, p, e, key, in_arc, s, end_is_1, need_point):
         """Signed distance (and nearest point) from the winning edge of each point."""

@@ -81,6 +81,8 @@ __all__ = [
     "TWIST_SINGULARITY",
     "ConstraintOracle",
     "OracleResult",
+    "evaluate_ball",
+    "evaluate_hinge",
     "polygon_area_sr",
     "polygon_boundary_distance",
 ]
@@ -322,29 +324,7 @@ class ConstraintOracle:
     # upper one on a tie). The off-axis part of q (its swing about a) is corrected with it.
     def _evaluate_hinge(self, q: np.ndarray) -> OracleResult:
         axis_t, lo, hi, wraps = self._hinge
-        a = np.asarray(axis_t)
-        phi = Q.twist_angle(q, a)
-        inside = _twist_inside(phi, lo, hi, wraps)
-        d_lo = np.abs(Q.wrap_angle(phi - lo))
-        d_hi = np.abs(Q.wrap_angle(phi - hi))
-        theta = np.where(inside, phi, np.where(d_lo < d_hi, lo, hi))
-        h = Q.from_axis_angle(a, theta)
-        dot = np.einsum("ij,ij->i", h, q)
-        h = np.where((dot < 0.0)[:, None], -h, h)  # the input's sign
-        c = Q.multiply(h, Q.conjugate(q))
-        c = Q.canonical(c / np.linalg.norm(c, axis=1, keepdims=True))
-        gap = Q.angle(c)
-        invalid = gap > BOUNDARY_TOLERANCE
-        n = len(q)
-        corr = np.where(invalid[:, None], c, np.tile(Q.IDENTITY, (n, 1)))
-        projected = np.where(invalid[:, None], h, q)
-        margin = np.minimum(phi - lo, hi - phi)
-        distance = np.where(invalid, gap, -np.maximum(margin, 0.0))
-        p = q[:, 1:] @ a
-        off = 2.0 * np.arctan2(np.sqrt(np.maximum(1.0 - (q[:, 0] ** 2 + p * p), 0.0)),
-                               np.sqrt(q[:, 0] ** 2 + p * p))
-        return OracleResult(valid=~invalid, distance=distance, projected=projected,
-                            correction=corr, swing_distance=off, twist=phi)
+        return evaluate_hinge(q, np.asarray(axis_t), lo, hi, wraps)
 
     def _evaluate_hinge_one(self, qt: tuple[float, float, float, float]) -> OracleResult:
         """Scalar twin of :meth:`_evaluate_hinge` (same maths, same tie rules)."""
@@ -377,68 +357,114 @@ class ConstraintOracle:
     def _evaluate(self, q: np.ndarray) -> OracleResult:
         if self._hinge is not None:
             return self._evaluate_hinge(q)
-        n = len(q)
-        d = Q.rotate(q, self.axis)
-        projected = q.copy()
-        if self._swing is not None:
-            sdist, b = self._swing.nearest(d)
-            out = sdist > BOUNDARY_TOLERANCE
-            if out.any():
-                delta = Q.from_two_vectors(d[out], b[out])
-                projected[out] = Q.multiply(delta, q[out])
-        else:
-            sdist = np.full(n, -np.inf)
-            out = np.zeros(n, dtype=bool)
-            b = d
-        phi = Q.twist_angle(q, self.axis)
-        margin = -sdist
-        if self._twist is not None:
-            any_out = bool(out.any())
-            if self._table is not None:
-                e = np.where(out[:, None], b, d) if any_out else d  # corrected limb direction
-                lo, hi = self._table.limits_at(e)
-            else:
-                lo, hi = self._twist
-            lo = np.broadcast_to(lo, (n,))
-            hi = np.broadcast_to(hi, (n,))
-            phi_p = Q.twist_angle(projected, self.axis) if any_out else phi
-            bad_tw = ~_twist_inside(phi_p, lo, hi, self._wraps)
-            if bad_tw.any():
-                bad_tw &= ~_singular(projected, self.axis)
-            if bad_tw.any():
-                f = phi_p[bad_tw]
-                lo_b, hi_b = lo[bad_tw], hi[bad_tw]
-                d_lo = np.abs(Q.wrap_angle(f - lo_b))
-                d_hi = np.abs(Q.wrap_angle(f - hi_b))
-                target = np.where(d_lo < d_hi, lo_b, hi_b)
-                tau = Q.from_axis_angle(self.axis, Q.wrap_angle(target - f))
-                projected[bad_tw] = Q.multiply(projected[bad_tw], tau)
-            # the plain margin; across the seam a valid twist is within the tolerance of a
-            # limit, and the distance clips the margin at 0 anyway
-            margin = np.minimum(margin, np.minimum(phi - lo, hi - phi))
-            tw_bad = ~_twist_inside(phi, lo, hi, self._wraps)
-            if tw_bad.any():
-                sing = _singular(q, self.axis)
-                if sing.any():
-                    tw_bad &= ~sing
-                    margin = np.where(sing, np.minimum(margin, 0.0), margin)
-            invalid = out | tw_bad
-        else:
-            invalid = out
-        corr = np.tile(Q.IDENTITY, (n, 1))
-        if invalid.any():
-            c = Q.multiply(projected[invalid], Q.conjugate(q[invalid]))
-            corr[invalid] = Q.canonical(c / np.linalg.norm(c, axis=1, keepdims=True))
-            projected[invalid] /= np.linalg.norm(projected[invalid], axis=1, keepdims=True)
-        distance = np.where(invalid, Q.angle(corr), -np.maximum(margin, 0.0))
-        return OracleResult(
-            valid=~invalid,
-            distance=distance,
-            projected=projected,
-            correction=corr,
-            swing_distance=sdist,
-            twist=phi,
-        )
+        return evaluate_ball(q, self.axis,
+                             None if self._swing is None else self._swing.nearest,
+                             None if self._twist is None else self._limits, self._wraps)
+
+
+def evaluate_ball(q: np.ndarray, axis: np.ndarray, nearest, limits, wraps: bool = True
+                  ) -> OracleResult:
+    """The ball (and two-axis) joint oracle, batched, given its swing and twist as functions.
+
+    Parameters
+    ----------
+    q : (N, 4) unit orientations
+    axis : (3,) the limb axis
+    nearest : callable or None
+        ``nearest(d) -> (signed distance (N,), nearest boundary point (N, 3))`` for limb
+        directions ``d`` (N, 3); None: the swing is unconstrained.
+    limits : callable or None
+        ``limits(e) -> (lo, hi)`` twist limits (radians, floats or (N,) arrays) at the corrected
+        limb directions ``e``; None: the twist is unconstrained.
+    wraps : bool
+        An interval may reach the ±π seam (False only speeds the twist test up).
+    """
+    n = len(q)
+    d = Q.rotate(q, axis)
+    projected = q.copy()
+    if nearest is not None:
+        sdist, b = nearest(d)
+        out = sdist > BOUNDARY_TOLERANCE
+        if out.any():
+            delta = Q.from_two_vectors(d[out], b[out])
+            projected[out] = Q.multiply(delta, q[out])
+    else:
+        sdist = np.full(n, -np.inf)
+        out = np.zeros(n, dtype=bool)
+        b = d
+    phi = Q.twist_angle(q, axis)
+    margin = -sdist
+    if limits is not None:
+        any_out = bool(out.any())
+        lo, hi = limits(np.where(out[:, None], b, d) if any_out else d)  # corrected direction
+        lo = np.broadcast_to(lo, (n,))
+        hi = np.broadcast_to(hi, (n,))
+        phi_p = Q.twist_angle(projected, axis) if any_out else phi
+        bad_tw = ~_twist_inside(phi_p, lo, hi, wraps)
+        if bad_tw.any():
+            bad_tw &= ~_singular(projected, axis)
+        if bad_tw.any():
+            f = phi_p[bad_tw]
+            lo_b, hi_b = lo[bad_tw], hi[bad_tw]
+            d_lo = np.abs(Q.wrap_angle(f - lo_b))
+            d_hi = np.abs(Q.wrap_angle(f - hi_b))
+            target = np.where(d_lo < d_hi, lo_b, hi_b)
+            tau = Q.from_axis_angle(axis, Q.wrap_angle(target - f))
+            projected[bad_tw] = Q.multiply(projected[bad_tw], tau)
+        # the plain margin; across the seam a valid twist is within the tolerance of a
+        # limit, and the distance clips the margin at 0 anyway
+        margin = np.minimum(margin, np.minimum(phi - lo, hi - phi))
+        tw_bad = ~_twist_inside(phi, lo, hi, wraps)
+        if tw_bad.any():
+            sing = _singular(q, axis)
+            if sing.any():
+                tw_bad &= ~sing
+                margin = np.where(sing, np.minimum(margin, 0.0), margin)
+        invalid = out | tw_bad
+    else:
+        invalid = out
+    corr = np.tile(Q.IDENTITY, (n, 1))
+    if invalid.any():
+        c = Q.multiply(projected[invalid], Q.conjugate(q[invalid]))
+        corr[invalid] = Q.canonical(c / np.linalg.norm(c, axis=1, keepdims=True))
+        projected[invalid] /= np.linalg.norm(projected[invalid], axis=1, keepdims=True)
+    distance = np.where(invalid, Q.angle(corr), -np.maximum(margin, 0.0))
+    return OracleResult(
+        valid=~invalid,
+        distance=distance,
+        projected=projected,
+        correction=corr,
+        swing_distance=sdist,
+        twist=phi,
+    )
+
+
+def evaluate_hinge(q: np.ndarray, a: np.ndarray, lo, hi, wraps: bool = True) -> OracleResult:
+    """The hinge oracle, batched: ``q`` (N, 4) unit, hinge axis ``a`` (3,), the interval
+    ``[lo, hi]`` (radians, floats or (N,) arrays: one interval per orientation, as a coupled
+    joint's are). See :class:`ConstraintOracle` for the maths."""
+    phi = Q.twist_angle(q, a)
+    inside = _twist_inside(phi, lo, hi, wraps)
+    d_lo = np.abs(Q.wrap_angle(phi - lo))
+    d_hi = np.abs(Q.wrap_angle(phi - hi))
+    theta = np.where(inside, phi, np.where(d_lo < d_hi, lo, hi))
+    h = Q.from_axis_angle(a, theta)
+    dot = np.einsum("ij,ij->i", h, q)
+    h = np.where((dot < 0.0)[:, None], -h, h)  # the input's sign
+    c = Q.multiply(h, Q.conjugate(q))
+    c = Q.canonical(c / np.linalg.norm(c, axis=1, keepdims=True))
+    gap = Q.angle(c)
+    invalid = gap > BOUNDARY_TOLERANCE
+    n = len(q)
+    corr = np.where(invalid[:, None], c, np.tile(Q.IDENTITY, (n, 1)))
+    projected = np.where(invalid[:, None], h, q)
+    margin = np.minimum(phi - lo, hi - phi)
+    distance = np.where(invalid, gap, -np.maximum(margin, 0.0))
+    p = q[:, 1:] @ a
+    off = 2.0 * np.arctan2(np.sqrt(np.maximum(1.0 - (q[:, 0] ** 2 + p * p), 0.0)),
+                           np.sqrt(q[:, 0] ** 2 + p * p))
+    return OracleResult(valid=~invalid, distance=distance, projected=projected,
+                        correction=corr, swing_distance=off, twist=phi)
 
 
 # -- twist intervals on the circle (both paths) -------------------------------------------------

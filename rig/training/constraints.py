@@ -1,4 +1,4 @@
-"""``rig constraint check`` as a library: validate a constraint file and describe it."""
+"""``rig constraint check`` as a library: validate a constraint or limb file and describe it."""
 
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     from models.constraint import load_constraint
     from models.oracle import ConstraintOracle
 
+    if _is_limb(path):
+        return _summarise_limb(path, samples, seed)
     c = load_constraint(path)
     if c.hinge is not None:  # a curve in SO(3): no fraction of orientations to sample
         return "\n".join([f"{path}: OK", c.summary(),
@@ -34,3 +36,43 @@ def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
         f"({samples} uniform samples)"
     )
     return "\n".join(lines)
+
+
+def _is_limb(path: str) -> bool:
+    """A limb file (a mapping with ``joints``)? Unreadable or malformed files are left to the
+    constraint reader, whose errors name them."""
+    import yaml
+
+    from models.limb import is_limb_file
+    from models.yamlio import safe_load_yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return is_limb_file(safe_load_yaml(fh))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):  # load_constraint names them
+        return False
+
+
+def _summarise_limb(path: str, samples: int, seed: int) -> str:
+    """A limb file: its joints, couplings, and the fraction of random postures each swing
+    joint allows (a coupled joint judged at its source's corrected angle)."""
+    from models import quaternion as Q
+    from models.limb import load_limb
+    from models.limb_oracle import LimbOracle
+
+    limb = load_limb(path)
+    oracle = LimbOracle(limb)
+    n = len(limb.joints)
+    rng = np.random.default_rng(seed)
+    q = Q.random_quaternions(samples * n, rng).reshape(samples, n, 4)
+    valid = oracle.is_valid(q)
+    parts = []
+    for j, joint in enumerate(limb.joints):
+        if joint.kind == "hinge":
+            lo = joint.loosest().hinge
+            parts.append(f"{joint.name} hinge {lo.min_deg:g}..{lo.max_deg:g} deg")
+        else:
+            parts.append(f"{joint.name} {100 * float(valid[:, j].mean()):.2f} %")
+    return "\n".join([f"{path}: OK", limb.summary(),
+                      f"  valid       {'; '.join(parts)} of all orientations "
+                      f"({samples} uniform postures)"])

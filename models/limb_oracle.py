@@ -1,0 +1,213 @@
+"""The exact limb oracle: validity, corrections and distances of every joint of a limb.
+
+The judge of everything learned about limbs (datasets, evaluation) and the check a live limb
+supervisor makes. Input: orientations ``(N, J, 4)`` — joint ``j``'s child segment relative to its
+parent, scalar-first, in the limb file's joint order — or ``(J, 4)`` for one posture.
+
+Hierarchical correction (``models.limb``): joints are evaluated in :attr:`Limb.order`; a joint
+without a coupling is answered by :class:`models.oracle.ConstraintOracle` (the single-joint
+oracle, unchanged); a coupled joint by the same maths (:func:`models.oracle.evaluate_ball`,
+:func:`models.oracle.evaluate_hinge`) with its limits interpolated at the coupling angle of
+**the corrected** source joint — the hinge angle of the source's projected orientation. So the
+corrected limb is valid in every joint (the source's correction does not move again; the
+dependant is valid at that angle), and a valid limb is left as it is.
+
+One implementation serves a batch and a single posture (a posture is a batch of one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from models import quaternion as Q
+from models.constraint import ConeSwing, PolygonSwing
+from models.errors import QuaternionError
+from models.geometry import nearest_on_polygons
+from models.limb import InterpolatedLimits, Limb
+from models.oracle import ConstraintOracle, OracleResult, evaluate_ball, evaluate_hinge
+
+__all__ = ["LimbOracle", "LimbResult", "check_postures", "end_points", "segment_directions"]
+
+
+@dataclass(frozen=True)
+class LimbResult:
+    """The oracle's answers for a batch of postures (leading shape N; one posture: none).
+
+    Attributes
+    ----------
+    valid : (N, J) bool
+    distance : (N, J) radians; > 0 outside (the joint's correction angle), <= 0 inside
+    projected : (N, J, 4) the corrected orientations (same sign as the input)
+    correction : (N, J, 4) ``projected ⊗ q⁻¹``, ``w >= 0``; identity where valid
+    coupling_angle : (N, J) radians: the corrected source's angle a coupled joint was judged
+        at; NaN for joints without a coupling
+    """
+
+    valid: np.ndarray
+    distance: np.ndarray
+    projected: np.ndarray
+    correction: np.ndarray
+    coupling_angle: np.ndarray
+
+    @property
+    def limb_valid(self) -> np.ndarray:
+        """(N,) bool: every joint valid."""
+        return self.valid.all(axis=-1)
+
+
+def check_postures(q, n_joints: int, *, normalize: bool = False) -> np.ndarray:
+    """Validate postures ``(N, J, 4)`` or ``(J, 4)``; float64, unit (see
+    :func:`models.quaternion.check_quaternions`)."""
+    arr = np.asarray(q, dtype=np.float64) if not isinstance(q, np.ndarray) else q
+    if arr.ndim not in (2, 3) or arr.shape[-2:] != (n_joints, 4):
+        raise QuaternionError(f"postures: expected shape (N, {n_joints}, 4) or ({n_joints}, 4) "
+                              f"(one scalar-first quaternion per joint), got {arr.shape}")
+    flat = Q.check_quaternions(arr.reshape(-1, 4), normalize=normalize, name="postures")
+    return flat.reshape(arr.shape)
+
+
+def segment_directions(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """Each segment's long axis in the root segment's frame, ``(N, J, 3)``: segment ``j``
+    (joint ``j``'s child) points along ``(q_0 ⊗ … ⊗ q_j) · axes[j]``."""
+    n, j = q.shape[:2]
+    out = np.empty((n, j, 3))
+    acc = q[:, 0]
+    out[:, 0] = Q.rotate(acc, axes[0])
+    for k in range(1, j):
+        acc = Q.multiply(acc, q[:, k])
+        out[:, k] = Q.rotate(acc, axes[k])
+    return out
+
+
+def end_points(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The limb's end point (hand, foot) ``(N, 3)`` with unit segment lengths, root frame."""
+    return segment_directions(q, axes).sum(axis=1)
+
+
+class _CoupledJoint:
+    """A coupled joint's oracle: limits interpolated at a coupling angle per sample."""
+
+    def __init__(self, limits: InterpolatedLimits, axis: np.ndarray):
+        self.lim = limits
+        self.axis = axis
+        first = limits.keyframes[0]
+        self.hinge_axis = None if first.hinge is None else np.asarray(first.hinge.axis)
+        self.swing = type(first.swing)
+        self.twist = first.twist is not None
+
+    def evaluate(self, q: np.ndarray, angle: np.ndarray) -> OracleResult:
+        lim = self.lim
+        k, t = lim.locate(angle)
+        if self.hinge_axis is not None:
+            lo, hi = lim.interval(k, t)
+            return evaluate_hinge(q, self.hinge_axis, lo, hi, True)
+        nearest = None
+        if self.swing is ConeSwing:
+            def nearest(d):
+                return _cones_nearest(d, *lim.cones(k, t))
+        elif self.swing is PolygonSwing:
+            def nearest(d):
+                dist = np.empty(len(d))
+                pts = np.empty((len(d), 3))
+                for seg in np.unique(k):
+                    rows = np.nonzero(k == seg)[0]
+                    a, b = lim.polygons[seg]
+                    tt = t[rows][:, None, None]
+                    v = (1.0 - tt) * a[None] + tt * b[None]
+                    v /= np.linalg.norm(v, axis=2, keepdims=True)
+                    dist[rows], pts[rows] = nearest_on_polygons(v, d[rows])
+                return dist, pts
+        limits = None
+        if self.twist:
+            lo, hi = lim.interval(k, t)
+
+            def limits(e):
+                return lo, hi
+        return evaluate_ball(q, self.axis, nearest, limits, True)
+
+
+def _cones_nearest(d: np.ndarray, c: np.ndarray, r: np.ndarray):
+    """:class:`models.oracle._ConeSolver`'s closed form with one cone (centre, radius) per row."""
+    cos_t = np.einsum("ij,ij->i", d, c)
+    tang = d - cos_t[:, None] * c
+    sin_t = np.linalg.norm(tang, axis=1)
+    dist = np.arctan2(sin_t, cos_t) - r
+    tiny = sin_t < 1e-15
+    u = tang / np.where(tiny, 1.0, sin_t)[:, None]
+    if tiny.any():
+        u[tiny] = Q.perpendicular(c[tiny])
+    b = np.cos(r)[:, None] * c + np.sin(r)[:, None] * u
+    return dist, b
+
+
+class LimbOracle:
+    """Exact answers for one :class:`~models.limb.Limb`.
+
+    Parameters
+    ----------
+    limb : Limb
+    """
+
+    def __init__(self, limb: Limb):
+        self.limb = limb
+        self.n_joints = len(limb.joints)
+        self.axes = np.array([j.limb_axis for j in limb.joints])
+        self._joint: list[ConstraintOracle | _CoupledJoint] = []
+        for j in limb.joints:
+            if j.coupling is None:
+                self._joint.append(ConstraintOracle(j.constraint))
+            else:
+                self._joint.append(_CoupledJoint(j.coupling.limits, np.asarray(j.limb_axis)))
+        self._source = [None if j.coupling is None else limb.index(j.coupling.by)
+                        for j in limb.joints]
+        self._hinge_axis = [None if j.kind != "hinge" else np.asarray(
+            (j.constraint or j.coupling.keyframes[0]).hinge.axis) for j in limb.joints]
+
+    def evaluate(self, orientations, *, normalize: bool = False) -> LimbResult:
+        """Validity, distance, projection and correction of every joint, hierarchically."""
+        q = check_postures(orientations, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        q3 = q[None] if single else q
+        n, jn = q3.shape[:2]
+        valid = np.empty((n, jn), dtype=bool)
+        dist = np.empty((n, jn))
+        proj = np.empty((n, jn, 4))
+        corr = np.empty((n, jn, 4))
+        angle = np.full((n, jn), np.nan)
+        for j in self.limb.order:
+            oracle = self._joint[j]
+            qj = np.ascontiguousarray(q3[:, j])
+            if isinstance(oracle, ConstraintOracle):
+                r = oracle.evaluate(qj)
+            else:
+                src = self._source[j]
+                angle[:, j] = Q.twist_angle(proj[:, src], self._hinge_axis[src])
+                r = oracle.evaluate(qj, angle[:, j])
+            valid[:, j], dist[:, j] = r.valid, r.distance
+            proj[:, j], corr[:, j] = r.projected, r.correction
+        res = LimbResult(valid, dist, proj, corr, angle)
+        if single:
+            res = LimbResult(*(x[0] for x in (valid, dist, proj, corr, angle)))
+        return res
+
+    def correction(self, orientations, *, normalize: bool = False) -> np.ndarray:
+        """Corrective quaternions ``(N, J, 4)``: ``corrected_j = correction_j ⊗ q_j``."""
+        return self.evaluate(orientations, normalize=normalize).correction
+
+    def project(self, orientations, *, normalize: bool = False) -> np.ndarray:
+        """The nearest valid posture, joint by joint in the hierarchy's order."""
+        return self.evaluate(orientations, normalize=normalize).projected
+
+    def is_valid(self, orientations, *, normalize: bool = False) -> np.ndarray:
+        """``(N, J)`` bool: each joint within its limits (a coupled joint at the corrected
+        source's angle — for a valid source, its own angle)."""
+        return self.evaluate(orientations, normalize=normalize).valid
+
+    def end_points(self, orientations, *, normalize: bool = False) -> np.ndarray:
+        """The limb's end point with unit segment lengths, ``(N, 3)`` (root segment's frame)."""
+        q = check_postures(orientations, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        p = end_points(q[None] if single else q, self.axes)
+        return p[0] if single else p
