@@ -595,7 +595,8 @@ class Limb:
         d = self.to_dict()
         for key in ("name", "side", "patient", "provenance"):
             d.pop(key, None)
-        text = safe_dump_yaml(d, sort_keys=True)
+        # rounded to 1e-9: a file written and read back (vectors renormalised) hashes alike
+        text = safe_dump_yaml(_rounded(d), sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
 
     def summary(self) -> str:
@@ -610,6 +611,16 @@ class Limb:
                          f"{', '.join(f'{a:g}' for a in j.coupling.at_deg)} deg")
             lines.append(head)
         return "\n".join(lines)
+
+
+def _rounded(value: Any) -> Any:
+    if isinstance(value, float):
+        return round(value, 9) + 0.0  # + 0.0: no negative zero
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_rounded(v) for v in value]
+    return value
 
 
 def _evaluation_order(n: int, deps: dict[int, int], names: list[str],
