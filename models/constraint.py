@@ -700,16 +700,35 @@ class JointConstraint:
 
 
 # -- file I/O ---------------------------------------------------------------------------------
-def loads_constraint(text: str, source: str | None = None) -> JointConstraint:
-    """Parse constraint YAML text (``source`` names it in error messages)."""
+def parse_yaml(text: str, source: str | None = None) -> Any:
+    """YAML text of a constraint or limb file → plain data (:class:`ConstraintError` naming
+    the line when it is not YAML)."""
     try:
-        data = safe_load_yaml(text)
+        return safe_load_yaml(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(err, "problem", None) or "malformed YAML"
         raise ConstraintError(f"not valid YAML{where}: {problem}", source=source) from err
-    return JointConstraint.from_dict(data, source=source)
+
+
+def read_text(path: str | Path, what: str = "a constraint file") -> str:
+    """A constraint or limb file's text (:class:`ConstraintError` naming the file when it is
+    missing, a folder or unreadable)."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        raise ConstraintError("file not found", source=str(path)) from err
+    except IsADirectoryError as err:
+        raise ConstraintError(f"is a directory, not {what}", source=str(path)) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConstraintError(f"cannot read: {err}", source=str(path)) from err
+
+
+def loads_constraint(text: str, source: str | None = None) -> JointConstraint:
+    """Parse constraint YAML text (``source`` names it in error messages)."""
+    return JointConstraint.from_dict(parse_yaml(text, source), source=source)
 
 
 def load_constraint(path: str | Path) -> JointConstraint:
@@ -721,16 +740,7 @@ def load_constraint(path: str | Path) -> JointConstraint:
         The file is missing, unreadable, not YAML, or fails validation (the message names the
         file and the field).
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise ConstraintError("file not found", source=str(path)) from err
-    except IsADirectoryError as err:
-        raise ConstraintError("is a directory, not a constraint file", source=str(path)) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConstraintError(f"cannot read: {err}", source=str(path)) from err
-    return loads_constraint(text, source=str(path))
+    return loads_constraint(read_text(path), source=str(path))
 
 
 def dump_constraint(constraint: JointConstraint, path: str | Path) -> None:

@@ -48,7 +48,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from models import quaternion as Q
 from models.constraint import (
@@ -57,11 +56,14 @@ from models.constraint import (
     JointConstraint,
     PolygonSwing,
     _plain,
+    _reject_unknown,
+    parse_yaml,
+    read_text,
 )
 from models.errors import ConstraintError, GeometryError
 from models.fileio import write_owner_only
 from models.geometry import SphericalPolygon, check_polygon
-from models.yamlio import safe_dump_yaml, safe_load_yaml
+from models.yamlio import safe_dump_yaml
 
 __all__ = [
     "CHECK_STEPS",
@@ -88,16 +90,6 @@ _COUPLED_KEYS = ("by", "keyframes")
 _KEYFRAME_KEYS = ("at_deg", "constraint")
 # what a joint's inline constraint may not say (the limb says it)
 _BOUND_KEYS = ("joint", "side", "patient")
-
-
-def _reject_unknown(body: dict, allowed: tuple[str, ...], where: str, source: str | None):
-    for key in body:
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            path = f"{where}.{key}" if where else str(key)
-            raise ConstraintError(f"unknown key '{key}'{hint}; allowed here: "
-                                  f"{', '.join(allowed)}", path, source)
 
 
 def _mapping(value: Any, where: str, source: str | None) -> dict:
@@ -134,7 +126,7 @@ def _joint_constraint(value: Any, where: str, source: str | None) -> JointConstr
 # ---------------------------------------------------------------------------------------------
 # Interpolation between keyframes
 # ---------------------------------------------------------------------------------------------
-def _oriented(swing: PolygonSwing) -> np.ndarray:
+def oriented_vertices(swing: PolygonSwing) -> np.ndarray:
     """The polygon's vertices ordered so that the region lies to the left of every edge (the
     side of ``v_i × v_{i+1}``)."""
     sp = SphericalPolygon(swing.vertices, swing.interior)
@@ -183,8 +175,8 @@ def corresponding_polygons(a: PolygonSwing, b: PolygonSwing) -> tuple[np.ndarray
     if np.linalg.norm(centre) < 1e-9:
         centre = a.interior
     centre = centre / np.linalg.norm(centre)
-    va = _anchored(_oriented(a), centre)
-    vb = _anchored(_oriented(b), centre)
+    va = _anchored(oriented_vertices(a), centre)
+    vb = _anchored(oriented_vertices(b), centre)
     ua, _ = _arc_params(va)
     ub, _ = _arc_params(vb)
     u = np.unique(np.concatenate((ua, ub)))
@@ -650,28 +642,12 @@ def _evaluation_order(n: int, deps: dict[int, int], names: list[str],
 # -- file I/O ---------------------------------------------------------------------------------
 def loads_limb(text: str, source: str | None = None) -> Limb:
     """Parse limb YAML text (``source`` names it in error messages)."""
-    try:
-        data = safe_load_yaml(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(err, "problem", None) or "malformed YAML"
-        raise ConstraintError(f"not valid YAML{where}: {problem}", source=source) from err
-    return Limb.from_dict(data, source=source)
+    return Limb.from_dict(parse_yaml(text, source), source=source)
 
 
 def load_limb(path: str | Path) -> Limb:
     """Read and validate a limb file (:class:`ConstraintError` naming the file and field)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise ConstraintError("file not found", source=str(path)) from err
-    except IsADirectoryError as err:
-        raise ConstraintError("is a directory, not a limb file", source=str(path)) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConstraintError(f"cannot read: {err}", source=str(path)) from err
-    return loads_limb(text, source=str(path))
+    return loads_limb(read_text(path, "a limb file"), source=str(path))
 
 
 def dump_limb(limb: Limb, path: str | Path) -> None:

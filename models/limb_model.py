@@ -46,15 +46,17 @@ from onnx import TensorProto, helper
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.errors import ModelFileError
 from models.fileio import write_owner_only
-from models.geometry import SphericalPolygon
-from models.limb import Limb, loads_limb
+from models.limb import Limb, loads_limb, oriented_vertices
 from models.onnx_io import (
     OPSET,
     _bilinear,
     _Graph,
     _product_tensor,
     _rotation_tensor,
+    latency_session,
     package_version,
+    read_onnx,
+    twist_clamp,
 )
 
 __all__ = ["FORMAT", "INPUT", "OUTPUT", "LimbModel", "export_limb_model", "limb_to_onnx",
@@ -114,7 +116,6 @@ def _clamp_pair(g: _Graph, t: str, lims) -> tuple[str, str]:
         cm, sm = math.cos(mid / 2), math.sin(mid / 2)
         u = g.op("MatMul", [tn, g.const([[cm, -sm], [sm, cm]])])  # t e^{-i mid/2}
         cr, sr = g.const(math.cos(half / 2)), g.const(math.sin(half / 2))
-        cm_, sm_ = g.const(cm), g.const(sm)
     else:
         mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # (mid/2, half/2)
         cmr, smr = g.op("Cos", [mh]), g.op("Sin", [mh])
@@ -123,17 +124,7 @@ def _clamp_pair(g: _Graph, t: str, lims) -> tuple[str, str]:
         sm_, sr = g.op("MatMul", [smr, first]), g.op("MatMul", [smr, second])
         u = g.op("Add", [g.op("Mul", [tn, cm_]),
                          g.op("Mul", [g.op("MatMul", [tn, g.const(rot90)]), sm_])])
-    ab = g.op("Abs", [u])
-    ux = g.op("MatMul", [ab, g.const([[0.0], [1.0]])])
-    valid = g.op("LessOrEqual", [ux, sr])
-    # clamping rotation (relative): e = target · ū with target = (cr, ±sr)
-    swapped = g.op("MatMul", [ab, g.const([[0.0, 1.0], [1.0, 0.0]])])
-    mr = g.op("Add", [g.op("Mul", [ab, g.op("Mul", [cr, g.const([[1.0, -1.0]])])]),
-                      g.op("Mul", [swapped, sr])])
-    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[1], keepdims=1),
-                                   g.const(0.0)])
-    ms = g.op("Where", [side, mr, g.op("Mul", [mr, g.const([[1.0, -1.0]])])])
-    e = g.op("Where", [valid, g.const([[1.0, 0.0]]), ms])
+    e = twist_clamp(g, u, cr, sr)
     # the clamped pair itself: e ⊗ tn (complex product)
     e_w = g.op("MatMul", [e, g.const([[1.0], [0.0]])])
     e_x = g.op("MatMul", [e, g.const([[0.0], [1.0]])])
@@ -196,11 +187,6 @@ def _polygon_tables(v: np.ndarray) -> dict[str, np.ndarray]:
     gn /= np.linalg.norm(gn, axis=1, keepdims=True)
     return {"v0": v, "v1": v1, "g": gn, "t0": np.cross(gn, v), "t1": np.cross(v1, gn),
             "vn": gn + np.roll(gn, 1, axis=0)}
-
-
-def _oriented(swing: PolygonSwing) -> np.ndarray:
-    sp = SphericalPolygon(swing.vertices, swing.interior)
-    return swing.vertices if sp.orient > 0 else swing.vertices[::-1].copy()
 
 
 def _pad(a: np.ndarray, b: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -318,7 +304,7 @@ def _swing_joint(g: _Graph, q: str, axis: np.ndarray, nearest, lims) -> str:
 
 
 def _constant_polygon(g: _Graph, swing: PolygonSwing):
-    tabs = _polygon_tables(_oriented(swing))
+    tabs = _polygon_tables(oriented_vertices(swing))
     m = len(tabs["v0"])
     names = {k: g.const(v[None]) for k, v in tabs.items()}
     return lambda d: _nearest_polygon(g, d, names, m)
@@ -462,18 +448,8 @@ class LimbModel:
     """
 
     def __init__(self, path: str | Path, expected_limb: Limb | None = None):
-        import onnxruntime as ort
-
         self.path = Path(path)
-        try:
-            raw = self.path.read_bytes()
-        except OSError as err:
-            raise ModelFileError(f"{path}: cannot read model file ({err.strerror})") from None
-        try:
-            model = onnx.load_model_from_string(raw)
-            onnx.checker.check_model(model)
-        except Exception as err:
-            raise ModelFileError(f"{path}: not an ONNX model ({type(err).__name__})") from None
+        raw, model = read_onnx(self.path)
         self.metadata = {p.key: p.value for p in model.metadata_props}
         if self.metadata.get("jointlimits.format") != FORMAT:
             got = self.metadata.get("jointlimits.format")
@@ -490,14 +466,7 @@ class LimbModel:
         if expected_limb is not None and expected_limb.content_hash() != self.limb.content_hash():
             raise ModelFileError(f"{path}: the model was made for other limits (limb "
                                  f"{self.limb.name!r}); export one for this limb file")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = 1
-        opts.inter_op_num_threads = 1
-        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        self.session = ort.InferenceSession(raw, sess_options=opts,
-                                            providers=["CPUExecutionProvider"])
+        self.session = latency_session(raw)
         self._run = self.session._sess.run
         self.n_joints = len(self.joints)
         self._one = np.zeros((1, self.n_joints, 4), dtype=np.float32)

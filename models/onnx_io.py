@@ -170,6 +170,23 @@ def _bilinear(g: _Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") 
     return g.op("MatMul", [prod, g.const(s)], stem=stem)
 
 
+def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
+    """The twist clamp on half-angle pairs: ``u`` (N, 2) unit, taken relative to the middle of
+    the interval; ``cr``, ``sr`` the cosine and sine of its half-width / 2 (scalars or (N, 1)).
+    Returns ``e`` (N, 2), the half-angle pair of the clamping rotation: ``(1, 0)`` inside,
+    else ``target · ū`` with target ``(cr, ±sr)`` on the side of ``sign(u_w u_x)`` (a twist
+    exactly opposite the interval goes to ``max``, the oracle's tie rule)."""
+    ab = g.op("Abs", [u])
+    valid = g.op("LessOrEqual", [g.op("MatMul", [ab, g.const([[0.0], [1.0]])]), sr])
+    swapped = g.op("MatMul", [ab, g.const([[0.0, 1.0], [1.0, 0.0]])])
+    mr = g.op("Add", [g.op("Mul", [ab, g.op("Mul", [cr, g.const([[1.0, -1.0]])])]),
+                      g.op("Mul", [swapped, sr])])
+    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[1], keepdims=1),
+                                   g.const(0.0)])
+    ms = g.op("Where", [side, mr, g.op("Mul", [mr, g.const([[1.0, -1.0]])])])
+    return g.op("Where", [valid, g.const([[1.0, 0.0]]), ms], stem="twist_clamp")
+
+
 def _field_graph(g: _Graph, model) -> None:
     """The swing-field + twist-clamp graph of :class:`models.field.FieldModel` (its docstring)."""
     from models.field import _encode_bias, _encode_matrix, _index_weights
@@ -207,11 +224,7 @@ def _field_graph(g: _Graph, model) -> None:
             u = _bilinear(g, delta, INPUT, tmap @ turn, "twist")
         u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
                                          g.const(1e-12)])])
-        cr, sr = math.cos(half / 2), math.sin(half / 2)
-        ab = g.op("Abs", [u])
-        valid = g.op("LessOrEqual", [g.op("MatMul", [ab, g.const([[0.0], [1.0]])]),
-                                     g.const(sr)])
-        mr = g.op("MatMul", [ab, g.const([[cr, sr], [sr, -cr]])])
+        cr, sr = g.const(math.cos(half / 2)), g.const(math.sin(half / 2))
     else:  # limits interpolated at the corrected direction b = R(q') a (contract 3)
         qp = INPUT if delta is None else _bilinear(g, delta, INPUT, prod, "corrected")
         b = _bilinear(g, qp, qp, _rotation_tensor(axis), "corrected_direction")
@@ -231,16 +244,7 @@ def _field_graph(g: _Graph, model) -> None:
                          g.op("Mul", [g.op("MatMul", [t, g.const(rot90)]), sm])])
         u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
                                          g.const(1e-12)])])
-        ab = g.op("Abs", [u])
-        valid = g.op("LessOrEqual", [g.op("MatMul", [ab, g.const([[0.0], [1.0]])]), sr])
-        swapped = g.op("MatMul", [ab, g.const([[0.0, 1.0], [1.0, 0.0]])])
-        mr = g.op("Add", [g.op("Mul", [ab, g.op("Mul", [cr, g.const([[1.0, -1.0]])])]),
-                          g.op("Mul", [swapped, sr])])
-    # clamp: valid → e = 1; else e = (cr a + sr b, ±(sr a − cr b)), side = sign(u_w u_x)
-    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[1], keepdims=1),
-                                   g.const(0.0)])
-    ms = g.op("Where", [side, mr, g.op("Mul", [mr, g.const([[1.0, -1.0]])])])
-    e = g.op("Where", [valid, g.const([[1.0, 0.0]]), ms], stem="twist_clamp")
+    e = twist_clamp(g, u, cr, sr)
     # τ = (e_w, e_x d) = (1, d) ⊙ (e_w, e_x, e_x, e_x): the twist clamp about the limb
     d1 = g.op("Pad", [d, g.const([0, 1, 0, 0], dtype=np.int64), g.const(1.0)])
     tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])],
@@ -383,6 +387,34 @@ def _as_constraint_dict(c) -> Any:
     return c
 
 
+def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
+    """A model file's bytes and its checked ONNX graph (:class:`ModelFileError` in one line
+    when it cannot be read or is not ONNX)."""
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise ModelFileError(f"{path}: cannot read model file ({err.strerror})") from None
+    try:
+        model = onnx.load_model_from_string(raw)
+        onnx.checker.check_model(model)
+    except Exception as err:  # protobuf raises various types
+        raise ModelFileError(f"{path}: not an ONNX model ({type(err).__name__})") from None
+    return raw, model
+
+
+def latency_session(raw: bytes):
+    """An onnxruntime session tuned for latency: one thread, sequential, no spinning."""
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.inter_op_num_threads = 1
+    opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    return ort.InferenceSession(raw, sess_options=opts, providers=["CPUExecutionProvider"])
+
+
 class CorrectionModel:
     """An exported correction model run by onnxruntime, tuned for latency.
 
@@ -401,18 +433,8 @@ class CorrectionModel:
     """
 
     def __init__(self, path: str | Path, expected_constraint=None):
-        import onnxruntime as ort
-
         self.path = Path(path)
-        try:
-            raw = self.path.read_bytes()
-        except OSError as err:
-            raise ModelFileError(f"{path}: cannot read model file ({err.strerror})") from None
-        try:
-            model = onnx.load_model_from_string(raw)
-            onnx.checker.check_model(model)
-        except Exception as err:  # protobuf raises various types
-            raise ModelFileError(f"{path}: not an ONNX model ({type(err).__name__})") from None
+        raw, model = read_onnx(self.path)
         self._check_io(model)
         self.metadata = {p.key: p.value for p in model.metadata_props}
         if self.metadata.get("jointlimits.format") != FORMAT:
@@ -422,14 +444,7 @@ class CorrectionModel:
         self.constraint_yaml = self.metadata.get("jointlimits.constraint", "")
         if expected_constraint is not None:
             self.check_constraint(expected_constraint)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = 1
-        opts.inter_op_num_threads = 1
-        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        self.session = ort.InferenceSession(raw, sess_options=opts,
-                                            providers=["CPUExecutionProvider"])
+        self.session = latency_session(raw)
         self._one = np.zeros((1, 4), dtype=np.float32)
         self._run = self.session._sess.run  # skips the Python-side checks of session.run
         self._outs = [OUTPUT]
