@@ -453,16 +453,30 @@ def nearest_on_polygons(vertices: np.ndarray, points: np.ndarray, chunk_pairs: i
         key, in_arc, s, end1 = key[sel], in_arc[sel], s[sel], end1[sel]
         rows = np.arange(k)
         vidx = np.where(end1, (best + 1) % m, best)
-        theta = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
         vnormal = g[rows, vidx] + g[rows, (vidx - 1) % m]  # inward normals of its two edges
-        inside = np.where(in_arc, s >= 0.0, np.einsum("ij,ij->i", pb, vnormal) >= 0.0)
-        dist[a:a + k] = np.where(inside, -theta, theta)
-        ge = g[rows, best]
-        foot = pb - s[:, None] * ge
-        fn = np.linalg.norm(foot, axis=1, keepdims=True)
-        foot = foot / np.where(fn < 1e-300, 1.0, fn)
-        near[a:a + k] = np.where(in_arc[:, None], foot, vb[rows, vidx])
+        dist[a:a + k], near[a:a + k] = _finish(pb, key, in_arc, s, 1.0, vnormal,
+                                               (g[rows, best], vb[rows, vidx]))
     return dist, near
+
+
+def _finish(p, key, in_arc, s, orient, vertex_normal, point_from):
+    """Signed distance (and nearest point) of points from their winning edge's pair keys.
+
+    ``s``: the sine to the edge's great circle (signed by its geometric normal); ``orient``:
+    +1 when the region is on that normal's side, else -1; ``vertex_normal``: the pseudo-normal
+    of the nearer end; ``point_from``: None, or (the edge's geometric normal, the nearer end)
+    to build the nearest point."""
+    theta = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
+    inside = np.where(in_arc, orient * s >= 0.0,
+                      np.einsum("ij,ij->i", p, vertex_normal) >= 0.0)
+    dist = np.where(inside, -theta, theta)
+    if point_from is None:
+        return dist, None
+    g_edge, end = point_from
+    foot = p - s[:, None] * g_edge
+    fn = np.linalg.norm(foot, axis=1, keepdims=True)
+    foot = foot / np.where(fn < 1e-300, 1.0, fn)
+    return dist, np.where(in_arc[:, None], foot, end)
 
 
 class SphericalPolygon:
@@ -553,19 +567,9 @@ class SphericalPolygon:
 
     def _finish(self, p, e, key, in_arc, s, end_is_1, need_point):
         """Signed distance (and nearest point) from the winning edge of each point."""
-        theta = 2.0 * np.arcsin(np.minimum(np.sqrt(key) * 0.5, 1.0))
         vidx = np.where(end_is_1, (e + 1) % self.m, e)
-        inside_edge = self.orient * s >= 0.0
-        inside_vertex = np.einsum("ij,ij->i", p, self.vertex_normal[vidx]) >= 0.0
-        inside = np.where(in_arc, inside_edge, inside_vertex)
-        dist = np.where(inside, -theta, theta)
-        if not need_point:
-            return dist, None
-        foot = p - s[:, None] * self.g[e]
-        fn = np.linalg.norm(foot, axis=1, keepdims=True)
-        foot = foot / np.where(fn < 1e-300, 1.0, fn)
-        b = np.where(in_arc[:, None], foot, self.v0[vidx])
-        return dist, b
+        return _finish(p, key, in_arc, s, self.orient, self.vertex_normal[vidx],
+                       (self.g[e], self.v0[vidx]) if need_point else None)
 
     def brute_nearest(self, p: np.ndarray, need_point: bool = False):
         """:meth:`nearest` by trying every edge (set-up, validation, and a reference for tests)."""

@@ -55,6 +55,7 @@ from models.constraint import (
     ConeSwing,
     JointConstraint,
     PolygonSwing,
+    _label,
     _plain,
     _reject_unknown,
     parse_yaml,
@@ -99,11 +100,12 @@ def _mapping(value: Any, where: str, source: str | None) -> dict:
 
 
 def _text(value: Any, where: str, source: str | None) -> str:
-    if isinstance(value, bool) or not isinstance(value, (str, int)) or not str(value).strip() \
-            or "\n" in str(value):
-        raise ConstraintError(f"expected a non-empty single-line text, got {value!r}", where,
+    """A required short text (:func:`models.constraint._label`'s rules)."""
+    text = _label(value, where, source)
+    if text is None:
+        raise ConstraintError("expected a non-empty single-line text, got nothing", where,
                               source)
-    return str(value).strip()
+    return text
 
 
 def _joint_constraint(value: Any, where: str, source: str | None) -> JointConstraint:
@@ -229,11 +231,13 @@ class InterpolatedLimits:
         c /= np.linalg.norm(c, axis=1, keepdims=True)
         return c, self._lerp(k, t, lambda j: j.swing.radius)
 
-    def polygon_at(self, k: int, t: float) -> np.ndarray:
-        """The oriented interpolated polygon (K, 3) of keyframe interval ``k`` at ``t``."""
+    def polygon_at(self, k: int, t) -> np.ndarray:
+        """The oriented interpolated polygon (M, 3) of keyframe interval ``k`` at ``t``; for
+        an array of fractions (n,), one polygon per fraction (n, M, 3)."""
         a, b = self.polygons[k]
-        v = (1.0 - t) * a + t * b
-        return v / np.linalg.norm(v, axis=1, keepdims=True)
+        tt = np.asarray(t, dtype=np.float64)[..., None, None]
+        v = (1.0 - tt) * a + tt * b
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def _interpolation(kf: list[tuple[float, JointConstraint]], where: str, by: str,
@@ -305,14 +309,18 @@ class Coupling:
     by : str
         The hinge joint whose angle the limits depend on.
     at_deg : tuple of float, increasing (at least 2)
-    keyframes : tuple of JointConstraint (same length)
     limits : InterpolatedLimits
+        The keyframes' constraints and their interpolation (:attr:`keyframes`).
     """
 
     by: str
     at_deg: tuple[float, ...]
-    keyframes: tuple[JointConstraint, ...]
     limits: InterpolatedLimits
+
+    @property
+    def keyframes(self) -> tuple[JointConstraint, ...]:
+        """The limits at each of :attr:`at_deg`."""
+        return self.limits.keyframes
 
     def to_dict(self) -> dict[str, Any]:
         return {"by": self.by, "keyframes": [
@@ -560,8 +568,7 @@ class Limb:
                                       f"{kinds[by]} joint", f"{w}.coupled.by", source)
             limits = _interpolation(kf, f"{w}.coupled", by, source)
             joints.append(LimbJoint(p["name"], p["parent"], p["child"], coupling=Coupling(
-                by=by, at_deg=tuple(a for a, _ in kf), keyframes=limits.keyframes,
-                limits=limits)))
+                by=by, at_deg=tuple(a for a, _ in kf), limits=limits)))
             deps[i] = names.index(by)
         order = _evaluation_order(len(joints), deps, names, source)
         return cls(name=name, joints=tuple(joints), order=order, limb=limb, side=side,

@@ -133,13 +133,12 @@ def _clamp_pair(g: _Graph, t: str, lims) -> tuple[str, str]:
     return e, target
 
 
-def _interval_at(g: _Graph, kt, values_rad: np.ndarray) -> str:
-    """(N, 2) per-sample (lo, hi) linear between keyframes: ``values_rad`` (K, 2)."""
+def _keyframe_lerp(g: _Graph, kt, values: np.ndarray) -> str:
+    """(N, C) per-sample rows linear between keyframes' rows ``values`` (K, C) (intervals
+    (lo, hi), cone centres, radii) at the located interval and fraction ``kt``."""
     k, t = kt
-    lo = g.op("Gather", [g.const(values_rad[:-1]), k], axis=0)  # (N, 1, 2)
-    hi = g.op("Gather", [g.const(values_rad[1:]), k], axis=0)
-    lo = g.op("Squeeze", [lo, _i(g, [1])])
-    hi = g.op("Squeeze", [hi, _i(g, [1])])
+    lo = g.op("Squeeze", [g.op("Gather", [g.const(values[:-1]), k], axis=0), _i(g, [1])])
+    hi = g.op("Squeeze", [g.op("Gather", [g.const(values[1:]), k], axis=0), _i(g, [1])])
     return g.op("Add", [lo, g.op("Mul", [g.op("Sub", [hi, lo]), t])])
 
 
@@ -351,18 +350,11 @@ def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt):
     kf = coupling.keyframes
     if coupling.limits.kind == "hinge":
         vals = np.array([[k.hinge.min, k.hinge.max] for k in kf])
-        return _hinge(g, q, np.asarray(kf[0].hinge.axis), _interval_at(g, kt, vals))
+        return _hinge(g, q, np.asarray(kf[0].hinge.axis), _keyframe_lerp(g, kt, vals))
     first = kf[0]
     if isinstance(first.swing, ConeSwing):
-        cs = np.array([k.swing.centre for k in kf])
-        rs = np.array([[k.swing.radius] for k in kf])
-        k_, t_ = kt
-        ca = g.op("Squeeze", [g.op("Gather", [g.const(cs[:-1]), k_], axis=0), _i(g, [1])])
-        cb = g.op("Squeeze", [g.op("Gather", [g.const(cs[1:]), k_], axis=0), _i(g, [1])])
-        centre = _normalize(g, g.op("Add", [ca, g.op("Mul", [g.op("Sub", [cb, ca]), t_])]))
-        ra = g.op("Squeeze", [g.op("Gather", [g.const(rs[:-1]), k_], axis=0), _i(g, [1])])
-        rb = g.op("Squeeze", [g.op("Gather", [g.const(rs[1:]), k_], axis=0), _i(g, [1])])
-        radius = g.op("Add", [ra, g.op("Mul", [g.op("Sub", [rb, ra]), t_])])
+        centre = _normalize(g, _keyframe_lerp(g, kt, np.array([k.swing.centre for k in kf])))
+        radius = _keyframe_lerp(g, kt, np.array([[k.swing.radius] for k in kf]))
 
         def nearest(d):
             return _nearest_cone(g, d, centre, radius)
@@ -373,7 +365,7 @@ def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt):
     lims = None
     if first.twist is not None:
         vals = np.array([[k.twist.min, k.twist.max] for k in kf])
-        lims = _interval_at(g, kt, vals)
+        lims = _keyframe_lerp(g, kt, vals)
     return _swing_joint(g, q, np.asarray(first.limb_axis), nearest, lims), None
 
 

@@ -113,11 +113,8 @@ class _CoupledJoint:
                 pts = np.empty((len(d), 3))
                 for seg in np.unique(k):
                     rows = np.nonzero(k == seg)[0]
-                    a, b = lim.polygons[seg]
-                    tt = t[rows][:, None, None]
-                    v = (1.0 - tt) * a[None] + tt * b[None]
-                    v /= np.linalg.norm(v, axis=2, keepdims=True)
-                    dist[rows], pts[rows] = nearest_on_polygons(v, d[rows])
+                    dist[rows], pts[rows] = nearest_on_polygons(lim.polygon_at(seg, t[rows]),
+                                                                d[rows])
                 return dist, pts
         limits = None
         if self.twist:

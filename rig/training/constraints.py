@@ -12,12 +12,14 @@ __all__ = ["summarise"]
 def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     """Validate ``path`` and describe it: limits, and the fraction of orientations it allows."""
     from models import quaternion as Q
-    from models.constraint import load_constraint
+    from models.constraint import JointConstraint, parse_yaml, read_text
+    from models.limb import Limb, is_limb_file
     from models.oracle import ConstraintOracle
 
-    if _is_limb(path):
-        return _summarise_limb(path, samples, seed)
-    c = load_constraint(path)
+    data = parse_yaml(read_text(path), source=path)  # read and parsed once, either kind
+    if is_limb_file(data):
+        return _summarise_limb(path, Limb.from_dict(data, source=path), samples, seed)
+    c = JointConstraint.from_dict(data, source=path)
     if c.hinge is not None:  # a curve in SO(3): no fraction of orientations to sample
         return "\n".join([f"{path}: OK", c.summary(),
                           f"  valid       the rotations about the axis within "
@@ -38,29 +40,12 @@ def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     return "\n".join(lines)
 
 
-def _is_limb(path: str) -> bool:
-    """A limb file (a mapping with ``joints``)? Unreadable or malformed files are left to the
-    constraint reader, whose errors name them."""
-    import yaml
-
-    from models.limb import is_limb_file
-    from models.yamlio import safe_load_yaml
-
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return is_limb_file(safe_load_yaml(fh))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):  # load_constraint names them
-        return False
-
-
-def _summarise_limb(path: str, samples: int, seed: int) -> str:
+def _summarise_limb(path: str, limb, samples: int, seed: int) -> str:
     """A limb file: its joints, couplings, and the fraction of random postures each swing
     joint allows (a coupled joint judged at its source's corrected angle)."""
     from models import quaternion as Q
-    from models.limb import load_limb
     from models.limb_oracle import LimbOracle
 
-    limb = load_limb(path)
     oracle = LimbOracle(limb)
     n = len(limb.joints)
     rng = np.random.default_rng(seed)
