@@ -665,3 +665,12 @@ def dump_limb(limb: Limb, path: str | Path) -> None:
 def is_limb_file(data: Any) -> bool:
     """Does a parsed YAML document look like a limb file (a mapping with ``joints``)?"""
     return isinstance(data, dict) and "joints" in data
+
+
+def load_limits(path: str | Path) -> Limb | JointConstraint:
+    """A constraint file or a limb file, read and parsed once: the :class:`Limb` or the
+    :class:`~models.constraint.JointConstraint` it describes (for the tools that take either)."""
+    data = parse_yaml(read_text(path), source=str(path))
+    if is_limb_file(data):
+        return Limb.from_dict(data, source=str(path))
+    return JointConstraint.from_dict(data, source=str(path))

@@ -11,8 +11,17 @@ YAML), ``jointlimits.limb_sha256`` (:meth:`models.limb.Limb.content_hash`),
 ``jointlimits.joints`` (JSON list of the joint names, in order), ``jointlimits.method``,
 ``jointlimits.version``.
 
-Method ``geometric`` (this module): the exact limb oracle (:mod:`models.limb_oracle`) compiled
-into the graph, in float32 — no table, no training; its size grows with the vertex count only.
+Method ``network`` (the default of ``rig train`` on a limb file): every coupled polygon swing
+by its trained distance field (:mod:`models.nn.ndf`): ``f(d, τ)`` with ``τ`` the source's
+corrected angle mapped to [-1, 1]; ``outside = f(d, τ) > 0``; ``b`` after the field's
+projection steps ``d ← cos(αf⁺) d − sin(αf⁺) ĝ`` (``ĝ`` the unit tangent of the analytic input
+gradient; step fractions ``α`` 0.5, 0.5, 0.5, 1, 1), all in the graph as matrix products;
+the hinges, the twist clamps (intervals interpolated at ``τ``'s angle) and every uncoupled joint
+exactly as below. Metadata ``jointlimits.training`` (JSON) holds the seed, the postures' count
+(and the dataset's hash when trained from one), the network's size and the training time.
+
+Method ``geometric``: the exact limb oracle (:mod:`models.limb_oracle`) compiled into the
+graph, in float32 — no table, no training; its size grows with the vertex count only.
 Per joint, in the hierarchy's order:
 
 - **hinge**: the half-angle pair ``(w, a·v)`` of its orientation about the axis, clamped to the
@@ -332,8 +341,58 @@ def _coupled_polygon(g: _Graph, pairs, kt):
     return lambda d: _nearest_polygon(g, d, tabs, m)
 
 
-def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt):
-    """Correction (and the corrected angle for a hinge) of one joint."""
+def _field_nearest(g: _Graph, tau: str, net):
+    """``nearest(d) -> (outside, b)`` of a coupled swing by its trained distance field
+    (:class:`models.nn.ndf.DistanceField`): ``outside`` where ``f(d, τ) > 0``, ``b`` after the
+    field's projection steps (the same computation as :meth:`DistanceField.project`)."""
+    nf = net.b.shape[1]
+    f32 = np.float32
+    bd, bt = g.const(net.b[:3].astype(f32)), g.const(net.b[3:4].astype(f32))
+    w1_fd = g.const(net.w1[:nf + 3].astype(f32))           # rows of sin(u) and d
+    w2, w3 = g.const(net.w2.astype(f32)), g.const(net.w3[:, None].astype(f32))
+    w1_ft = g.const(net.w1[:nf].T.astype(f32).copy())       # (H, F)
+    w1_dt = g.const(net.w1[nf:nf + 3].T.astype(f32).copy())  # (H, 3)
+    w2t, w3r = g.const(net.w2.T.astype(f32).copy()), g.const(net.w3[None].astype(f32))
+    bdt = g.const(net.b[:3].T.astype(f32).copy())            # (F, 3)
+    one = g.const(1.0)
+    # the terms of τ are the same at every step
+    u_t = g.op("Add", [g.op("Mul", [tau, bt]), g.const(net.c[None].astype(f32))])
+    a1_t = g.op("Add", [g.op("Mul", [tau, g.const(net.w1[nf + 3:nf + 4].astype(f32))]),
+                        g.const(net.b1[None].astype(f32))])
+
+    def evaluate(x: str) -> tuple[str, str]:
+        u = g.op("Add", [g.op("MatMul", [x, bd]), u_t])
+        h1 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [
+            g.op("Concat", [g.op("Sin", [u]), x], axis=1), w1_fd]), a1_t])])
+        h2 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [h1, w2]),
+                                        g.const(net.b2[None].astype(f32))])])
+        f = g.op("Add", [g.op("MatMul", [h2, w3]), g.const(net.b3[None].astype(f32))])
+        g2 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h2, h2])]), w3r])
+        g1 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h1, h1])]), g.op("MatMul", [g2, w2t])])
+        grad = g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
+                                                         g.op("Cos", [u])]), bdt]),
+                            g.op("MatMul", [g1, w1_dt])])
+        return f, grad
+
+    def nearest(d: str) -> tuple[str, str]:
+        x = d
+        outside = None
+        for frac in net.steps:
+            f, grad = evaluate(x)
+            if outside is None:
+                outside = g.op("Greater", [f, g.const(0.0)])
+            tang = _normalize(g, g.op("Sub", [grad, g.op("Mul", [_dot(g, grad, x), x])]))
+            step = g.op("Mul", [g.op("Relu", [f]), g.const(float(frac))])
+            x = _normalize(g, g.op("Sub", [g.op("Mul", [g.op("Cos", [step]), x]),
+                                           g.op("Mul", [g.op("Sin", [step]), tang])]))
+        return outside, x
+    return nearest
+
+
+def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt, field=None,
+                 tau=None):
+    """Correction (and the corrected angle for a hinge) of one joint; ``field``: the trained
+    distance field of a coupled polygon swing (method ``network``) and ``tau`` its input."""
     if coupling is None:
         if c.kind == "hinge":
             return _hinge(g, q, np.asarray(c.hinge.axis), (c.hinge.min, c.hinge.max))
@@ -359,7 +418,8 @@ def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt):
         def nearest(d):
             return _nearest_cone(g, d, centre, radius)
     elif isinstance(first.swing, PolygonSwing):
-        nearest = _coupled_polygon(g, coupling.limits.polygons, kt)
+        nearest = (_coupled_polygon(g, coupling.limits.polygons, kt) if field is None else
+                   _field_nearest(g, tau, field))
     else:
         nearest = None
     lims = None
@@ -369,8 +429,18 @@ def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt):
     return _swing_joint(g, q, np.asarray(first.limb_axis), nearest, lims), None
 
 
-def limb_to_onnx(limb: Limb) -> onnx.ModelProto:
-    """The ``geometric`` limb model of ``limb`` (module docstring)."""
+def limb_to_onnx(limb: Limb, fields: dict | None = None,
+                 training: dict | None = None) -> onnx.ModelProto:
+    """The limb model of ``limb`` (module docstring): method ``geometric`` without ``fields``;
+    method ``network`` with ``fields`` (joint name → :class:`models.nn.ndf.DistanceField`, one
+    per coupled polygon swing, :func:`models.nn.ndf.fit_limb_fields`), ``training`` its facts
+    (seed, samples, seconds; stored as ``jointlimits.training``)."""
+    fields = fields or {}
+    need = {j.name for j in limb.joints if j.coupling is not None and isinstance(
+        j.coupling.keyframes[0].swing, PolygonSwing)}
+    if fields and set(fields) != need:
+        raise ValueError(f"fields: expected one per coupled polygon swing {sorted(need)}, "
+                         f"got {sorted(fields)}")
     g = _Graph()
     jn = len(limb.joints)
     corr: dict[int, str] = {}
@@ -380,11 +450,17 @@ def limb_to_onnx(limb: Limb) -> onnx.ModelProto:
         q = g.op("Squeeze", [g.op("Gather", [INPUT, _i(g, [j])], axis=1), _i(g, [1])],
                  stem=f"q_{joint.name}")
         q = _normalize(g, q)
-        kt = None
+        kt = tau = None
+        field = fields.get(joint.name)
         if joint.coupling is not None:
             src = limb.index(joint.coupling.by)
             kt = _locate(g, angle[src], np.radians(np.asarray(joint.coupling.at_deg)))
-        c, a = _joint_graph(g, q, joint.constraint, joint.coupling, kt)
+            if field is not None:  # τ = 2 (θ − at0) / (at1 − at0) − 1, clamped
+                span = field.at1 - field.at0
+                tau = g.op("Clip", [g.op("Add", [g.op("Mul", [angle[src], g.const(2.0 / span)]),
+                                                 g.const(-1.0 - 2.0 * field.at0 / span)]),
+                                    g.const(-1.0), g.const(1.0)])
+        c, a = _joint_graph(g, q, joint.constraint, joint.coupling, kt, field, tau)
         corr[j] = c
         if a is not None:
             angle[j] = a
@@ -409,17 +485,21 @@ def limb_to_onnx(limb: Limb) -> onnx.ModelProto:
         "jointlimits.limb": limb_yaml,
         "jointlimits.limb_sha256": limb.content_hash(),
         "jointlimits.joints": json.dumps(list(limb.joint_names)),
-        "jointlimits.method": "geometric",
+        "jointlimits.method": "network" if fields else "geometric",
         "jointlimits.version": package_version(),
+        **({"jointlimits.training": json.dumps(training or {}, sort_keys=True)}
+           if fields else {}),
     })
     onnx.checker.check_model(model)
     return model
 
 
-def export_limb_model(limb: Limb, path: str | Path) -> Path:
-    """Write the limb model to ``path`` (owner-only: it embeds the patient's limits)."""
+def export_limb_model(limb: Limb, path: str | Path, fields: dict | None = None,
+                      training: dict | None = None) -> Path:
+    """Write the limb model to ``path`` (owner-only: it embeds the patient's limits);
+    ``fields``/``training`` as :func:`limb_to_onnx`."""
     path = Path(path)
-    write_owner_only(path, limb_to_onnx(limb).SerializeToString())
+    write_owner_only(path, limb_to_onnx(limb, fields, training).SerializeToString())
     return path
 
 

@@ -4,7 +4,8 @@ Chapter 3 (:mod:`models.datasets._chapter3`): 1-D interval (eq. 45-47), 2-D/3-D 
 (eq. 48-49), circle on the unit sphere with a vector or quaternion correction (eq. 50-56).
 Chapter 4 (:mod:`models.datasets._chapter4`): orientation quaternion → corrective quaternion
 for regular (cone, eq. 59-68) and irregular (polygon) boundaries, with the thesis's pattern
-distributions (Fig. 34), orders (TABLE X) and hemisphere rules (TABLE IV).
+distributions (Fig. 34), orders (TABLE X) and hemisphere rules (TABLE IV). Limbs
+(:mod:`models.datasets._limb`): postures of a limb file with the exact limb oracle's corrections.
 :class:`Dataset` (:mod:`models.datasets._dataset`) holds the arrays, the region labels and the
 provenance, and defines the ``.npz`` file format (no pickle).
 
@@ -39,6 +40,14 @@ from models.datasets._dataset import (
     Dataset,
     load_dataset,
 )
+from models.datasets._limb import (
+    coupled_samples,
+    field_joints,
+    field_samples,
+    limb_dataset,
+    limb_postures,
+    training_postures,
+)
 from models.datasets._split import SPLIT_NAMES, split_dataset
 
 __all__ = [
@@ -55,10 +64,16 @@ __all__ = [
     "ball_dataset",
     "common_test_set",
     "cone_constraint",
+    "coupled_samples",
+    "field_joints",
+    "field_samples",
     "interval_dataset",
+    "limb_dataset",
+    "limb_postures",
     "load_dataset",
     "quaternion_dataset",
     "sphere_quaternion_dataset",
     "sphere_vector_dataset",
     "split_dataset",
+    "training_postures",
 ]

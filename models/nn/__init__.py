@@ -12,7 +12,9 @@ Modules: :mod:`~models.nn.activations` (node functions, spline templates),
 :mod:`~models.nn.gmlp` (stacked forward/backward), :mod:`~models.nn.rprop` (population
 iRprop−/+), :mod:`~models.nn.evolution` (NetGEN-style GA), :mod:`~models.nn.config` (presets,
 YAML), :mod:`~models.nn.train` (patterns from :mod:`models.datasets` → evolution →
-metrics). Exact oracles: :mod:`models.oracle`.
+metrics), :mod:`~models.nn.ndf` (the distance field of a coupled swing: the trained limb
+model), :mod:`~models.nn.sdf` (the earlier single-joint distance MLP). Exact oracles:
+:mod:`models.oracle`, :mod:`models.limb_oracle`.
 """
 
 from models.nn.config import PRESETS, ConfigError, get_config, load_config

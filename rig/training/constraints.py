@@ -12,14 +12,12 @@ __all__ = ["summarise"]
 def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     """Validate ``path`` and describe it: limits, and the fraction of orientations it allows."""
     from models import quaternion as Q
-    from models.constraint import JointConstraint, parse_yaml, read_text
-    from models.limb import Limb, is_limb_file
+    from models.limb import Limb, load_limits
     from models.oracle import ConstraintOracle
 
-    data = parse_yaml(read_text(path), source=path)  # read and parsed once, either kind
-    if is_limb_file(data):
-        return _summarise_limb(path, Limb.from_dict(data, source=path), samples, seed)
-    c = JointConstraint.from_dict(data, source=path)
+    c = load_limits(path)  # read and parsed once, either kind
+    if isinstance(c, Limb):
+        return _summarise_limb(path, c, samples, seed)
     if c.hinge is not None:  # a curve in SO(3): no fraction of orientations to sample
         return "\n".join([f"{path}: OK", c.summary(),
                           f"  valid       the rotations about the axis within "

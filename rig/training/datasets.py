@@ -19,7 +19,7 @@ from models.errors import DatasetError
 
 __all__ = ["KINDS", "dataset_info", "make_dataset"]
 
-KINDS = ("quaternion", "interval", "ball2", "ball3", "sphere-vector", "sphere-quaternion")
+KINDS = ("quaternion", "limb", "interval", "ball2", "ball3", "sphere-vector", "sphere-quaternion")
 
 
 def _int(value: str | None, option: str, *, default: int | None = None) -> int:
@@ -140,7 +140,7 @@ def _make(
     rng = _int(seed, "--seed", default=0)
     if rng < 0:
         raise DatasetError(f"--seed: must be >= 0, got {rng}")
-    if kind != "quaternion":
+    if kind not in ("quaternion", "limb"):
         for option, value in (
             ("--distribution", distribution),
             ("--order", order),
@@ -151,6 +151,21 @@ def _make(
         ):
             if value is not None:
                 raise DatasetError(f"{option}: only for --kind quaternion, not {kind!r}")
+    if kind in ("quaternion", "limb") and constraint is not None:
+        from models.limb import Limb, load_limits
+
+        limits = load_limits(constraint)
+        if isinstance(limits, Limb):
+            return _limb(limits, target_path=out, n=count, seed=rng, split=split, others=(
+                ("--shape", shape), ("--cone-radius", cone_radius),
+                ("--distribution", distribution), ("--order", order),
+                ("--hemisphere", hemisphere), ("--twist", twist or None),
+                ("--band-deg", band_deg)))
+        if kind == "limb":
+            raise DatasetError(f"--kind limb: {constraint} is a single-joint constraint file, "
+                               "not a limb file")
+    if kind == "limb":
+        raise DatasetError("--kind limb: needs --constraint LIMB.yaml (a limb file)")
     if kind == "quaternion":
         c = _constraint(constraint, shape, cone_radius, cone_centre)
         ds = D.quaternion_dataset(
@@ -181,6 +196,24 @@ def _make(
             _float(cone_radius, "--cone-radius", 45.0),  # type: ignore[arg-type]
             band_deg=_float(band_deg, "--band-deg"),
         )
+    return _save(ds, out, split, rng)
+
+
+def _limb(limb, *, target_path: str, n: int, seed: int, split: str | None,
+          others) -> list[tuple[Path, Any]]:
+    """A limb dataset (:func:`models.datasets.limb_dataset`)."""
+    from models import datasets as D
+
+    for option, value in others:
+        if value is not None:
+            raise DatasetError(f"{option}: not for a limb file (limb datasets take --n, "
+                               "--seed, --split, --out)")
+    return _save(D.limb_dataset(limb, n, seed), target_path, split, seed)
+
+
+def _save(ds, out: str, split: str | None, rng: int) -> list[tuple[Path, Any]]:
+    from models import datasets as D
+
     target = Path(out)
     if split is None:
         return [(ds.save(target), ds)]
@@ -199,6 +232,11 @@ def dataset_info(path: str) -> str:
 
     ds = load_dataset(path)
     lines = [f"{path}", ds.summary()]
+    if ds.meta.get("kind") == "limb":
+        from models.datasets import limb_postures
+
+        lines.append(limb_postures(ds)[0].summary())
+        return "\n".join(lines)
     c = ds.constraint()
     if c is not None:
         lines.append(c.summary())

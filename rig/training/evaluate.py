@@ -8,7 +8,7 @@ SO(3), half within 20° of the boundary; the others are the thesis's pattern dis
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 __all__ = ["DISTRIBUTIONS", "EvaluateRequest", "EvaluateResult", "run_evaluate"]
 
@@ -31,11 +31,13 @@ class EvaluateRequest:
 
 @dataclass
 class EvaluateResult:
-    """The metrics (:func:`models.evaluation.evaluate_model`) and what they were measured on,
-    for people (``description``)."""
+    """The metrics (:func:`models.evaluation.evaluate_model`, or
+    :func:`models.limb_evaluation.evaluate_limb_model` for a limb) and what they were measured
+    on, for people (``description``, then ``lines``)."""
 
     metrics: dict
     description: str
+    lines: list[str] = field(default_factory=list)
 
 
 def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
@@ -43,17 +45,26 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
     the model through onnxruntime and compare with the exact oracle."""
     import numpy as np
 
-    from models.constraint import load_constraint
     from models.errors import DatasetError
     from models.evaluation import evaluate_model, held_out_orientations
+    from models.limb import Limb, load_limits
     from models.nn.train import training_patterns
     from models.onnx_io import load_model
     from models.oracle import ConstraintOracle
+    from rig.training.train import metric_lines
 
     if request.distribution not in DISTRIBUTIONS:
         raise DatasetError(f"--distribution {request.distribution!r}: expected one of "
                            f"{', '.join(DISTRIBUTIONS)}")
-    constraint = load_constraint(request.constraint)
+    constraint = load_limits(request.constraint)
+    if isinstance(constraint, Limb):
+        from rig.training.limb import evaluate_limb, limb_metric_lines
+
+        if request.distribution != "held-out" or request.twist:
+            raise DatasetError("--distribution/--twist: a limb model is evaluated on held-out "
+                               "postures only")
+        metrics, what = evaluate_limb(request.model, constraint, request.n, request.seed)
+        return EvaluateResult(metrics, what, limb_metric_lines(metrics, constraint.joint_names))
     constraint.require_kind("rig evaluate")
     model = load_model(request.model, expected_constraint=constraint)
     oracle = ConstraintOracle(constraint)
@@ -72,4 +83,4 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
             if distribution == "held-out" else f"{distribution} orientations")
     twist = " with twist" if request.twist and distribution != "held-out" else ""
     return EvaluateResult(metrics, f"{request.model}: {what}, {len(q)} held-out {kind}{twist} "
-                                   f"of {constraint.name!r}")
+                                   f"of {constraint.name!r}", metric_lines(metrics))

@@ -61,15 +61,16 @@ def metric_lines(metrics: dict) -> list[str]:
 
 @dataclass(frozen=True)
 class TrainRequest:
-    """What ``rig train`` is asked: a constraint file and/or a dataset (``data``; then the
-    constraint is optional and must match the dataset's), the ONNX file to write, the preset,
-    an optional YAML overriding its fields (``config``) and the seed."""
+    """What ``rig train`` is asked: a constraint or limb file and/or a dataset (``data``; then
+    the file is optional and must match the dataset's), the ONNX file to write, the preset
+    (None: ``field`` for a joint, ``network`` for a limb), an optional YAML overriding a
+    single-joint preset's fields (``config``) and the seed."""
 
     out: str | Path
     constraint: str | None = None
     data: str | None = None
     config: str | None = None
-    preset: str = "field"
+    preset: str | None = None
     seed: int = 0
 
     def check(self) -> None:
@@ -82,9 +83,11 @@ class TrainRequest:
             raise ModelFileError(f"--out {self.out}: is a directory")
         if not out.parent.is_dir():
             raise ModelFileError(f"--out {self.out}: directory {out.parent} does not exist")
-        if self.preset not in PRESET_NAMES:
+        from rig.training.limb import LIMB_PRESETS
+
+        if self.preset is not None and self.preset not in PRESET_NAMES + LIMB_PRESETS:
             raise ModelFileError(f"--preset {self.preset!r}: expected one of "
-                                 f"{', '.join(PRESET_NAMES)}")
+                                 f"{', '.join(PRESET_NAMES + LIMB_PRESETS)}")
 
 
 @dataclass
@@ -120,19 +123,65 @@ def _load_data(data_path, constraint_path):
     return c, (ds.inputs, ds.targets, ds.content_hash())
 
 
+def _limb_source(request: TrainRequest):
+    """``(limb, postures, data)`` when the request is about a limb (a limb file, or a limb
+    dataset — postures and ``{"file", "sha256"}``); else ``(None, constraint or None, None)``
+    with the constraint file read once."""
+    from models.errors import DatasetError, ModelFileError
+    from models.limb import Limb, load_limits
+
+    limits = load_limits(request.constraint) if request.constraint is not None else None
+    if request.data is not None:
+        from models.datasets import limb_postures, load_dataset
+
+        ds = load_dataset(request.data)
+        if ds.meta.get("kind") != "limb":
+            if isinstance(limits, Limb):
+                raise DatasetError(f"--data: {request.data} is not a limb dataset (make one "
+                                   f"with `rig dataset make --constraint {request.constraint}`)")
+            return None, limits, None
+        limb, postures = limb_postures(ds)
+        if limits is not None and (not isinstance(limits, Limb)
+                                   or limits.content_hash() != limb.content_hash()):
+            raise DatasetError(f"--data: {request.data} was made for limb {limb.name!r}, "
+                               f"which differs from --constraint {request.constraint}")
+        data = {"file": str(request.data), "sha256": ds.content_hash()}
+    elif isinstance(limits, Limb):
+        limb, postures, data = limits, None, None
+    else:
+        return None, limits, None
+    if request.config is not None:
+        raise ModelFileError("--config: for single-joint presets; a limb model takes none")
+    return limb, postures, data
+
+
 def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -> TrainResult:
     """Build or train the model, export it; ``echo`` receives the progress lines and the
     summary (what ``rig train`` prints)."""
     import numpy as np
 
-    from models.constraint import load_constraint
-    from models.errors import ConstraintError
+    from models.errors import ConstraintError, ModelFileError
     from models.nn.config import get_config, load_config
     from models.nn.train import train_correction
     from models.onnx_io import export_onnx
 
     request.check()
-    preset = request.preset
+    limb, source, data = _limb_source(request)
+    if limb is not None:
+        from rig.training.limb import limb_warnings, train_limb
+
+        t0 = time.perf_counter()
+        trained, path = train_limb(limb, request.out, preset=request.preset,
+                                   seed=request.seed, postures=source, data=data, echo=echo)
+        result = TrainResult(trained, path, time.perf_counter() - t0,
+                             limb_warnings(trained.metrics))
+        for w in result.warnings:
+            echo(f"warning: {w}")
+        return result
+    preset = request.preset or "field"
+    if preset not in PRESET_NAMES:
+        raise ModelFileError(f"--preset {preset}: for a limb file only; for a single joint use "
+                             f"{', '.join(PRESET_NAMES)}")
     cfg = load_config(request.config, preset) if request.config else get_config(preset)
     patterns = None
     if request.data is not None:
@@ -140,7 +189,7 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     elif request.constraint is None:
         raise ConstraintError("--constraint: required (or --data with a dataset file)")
     else:
-        constraint = load_constraint(request.constraint)
+        constraint = source  # the constraint file, read once by _limb_source
     constraint.require_kind("rig train")
     is_field = cfg["model"]["method"] == "field"
     gens = cfg["evolution"]["generations"]
