@@ -8,6 +8,10 @@ Modules
     :func:`run_train` (:class:`TrainRequest` → :class:`TrainResult`), ``rig train``.
 :mod:`~rig.training.evaluate`
     :func:`run_evaluate` (:class:`EvaluateRequest` → :class:`EvaluateResult`), ``rig evaluate``.
+:mod:`~rig.training.limb`
+    both on limb files: the limb model (``--preset network|geometric``) and its scores.
+:mod:`~rig.training.metrics`
+    the metrics as labelled lines.
 :mod:`~rig.training.datasets`
     ``rig dataset make`` / ``info``.
 :mod:`~rig.training.constraints`

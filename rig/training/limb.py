@@ -49,13 +49,11 @@ class LimbTrained:
 
 
 def limb_metric_lines(metrics: dict, joints) -> list[str]:
-    """The limb metrics for people, one labelled line each (fractions in %)."""
-    out = []
-    for key, label in _LABELS.items():
-        if key in metrics:
-            v = metrics[key]
-            text = f"{100 * v:.3f} %" if key.startswith("frac_") else f"{v:.6g}"
-            out.append(f"  {label:<44} {text}")
+    """The limb metrics for people, one labelled line each (fractions in %), then each
+    joint's mean direction error."""
+    from rig.training.metrics import labelled_lines
+
+    out = labelled_lines(metrics, _LABELS, 44)
     for name, err in zip(joints, metrics.get("joint_mean_direction_error_deg", ()),
                          strict=False):
         out.append(f"  {'mean direction error, ' + name + ' (deg)':<44} {err:.6g}")

@@ -50,13 +50,9 @@ def _silent(_: str) -> None:
 
 def metric_lines(metrics: dict) -> list[str]:
     """Held-out metrics for people, one labelled line each (fractions in %)."""
-    out = []
-    for key, label in _LABELS.items():
-        if key in metrics:
-            v = metrics[key]
-            text = f"{100 * v:.3f} %" if key.startswith("frac_") else f"{v:.6g}"
-            out.append(f"  {label:<42} {text}")
-    return out
+    from rig.training.metrics import labelled_lines
+
+    return labelled_lines(metrics, _LABELS, 42)
 
 
 @dataclass(frozen=True)
