@@ -41,7 +41,8 @@ from models.datasets._dataset import (
     load_dataset,
 )
 from models.datasets._limb import (
-    coupled_samples,
+    coupled_directions,
+    coupled_targets,
     field_joints,
     field_samples,
     limb_dataset,
@@ -64,7 +65,8 @@ __all__ = [
     "ball_dataset",
     "common_test_set",
     "cone_constraint",
-    "coupled_samples",
+    "coupled_directions",
+    "coupled_targets",
     "field_joints",
     "field_samples",
     "interval_dataset",

@@ -23,8 +23,8 @@ from models.datasets._common import check_n, label_regions, make_rng
 from models.datasets._dataset import Dataset
 from models.geometry import nearest_on_polygons
 
-__all__ = ["coupled_samples", "field_joints", "field_samples", "limb_dataset", "limb_postures",
-           "training_postures"]
+__all__ = ["coupled_directions", "coupled_targets", "field_joints", "field_samples",
+           "limb_dataset", "limb_postures", "training_postures"]
 
 #: Near-boundary band of the region labels (degrees), as the quaternion datasets' even band.
 BAND_DEG = 10.0
@@ -75,24 +75,18 @@ def field_joints(limb) -> list[str]:
             and isinstance(j.coupling.keyframes[0].swing, PolygonSwing)]
 
 
-def coupled_samples(limits, angle: np.ndarray, rng: np.random.Generator,
-                    uniform: float = 0.5):
-    """Directions for a coupled polygon swing at coupling angles ``angle`` (n,) radians, with
-    their exact targets: ``(d (n, 3), s (n,), g (n, 3))`` — signed distances and unit tangent
-    gradients (away from the nearest boundary point outside, towards it inside).
-
-    A fraction ``uniform`` of the directions is uniform on the sphere, the rest scattered
-    about boundary points of the polygon at each angle (geodesic offsets log-uniform in
-    0.1°-40°): where the projection's answers are decided.
-    """
+def coupled_directions(limits, angle: np.ndarray, rng: np.random.Generator,
+                       uniform: float = 0.5) -> np.ndarray:
+    """Directions (n, 3) for a coupled polygon swing at coupling angles ``angle`` (n,) radians:
+    a fraction ``uniform`` uniform on the sphere, the rest scattered about boundary points of
+    the polygon at each angle (geodesic offsets log-uniform in 0.1°-40°) — where the
+    projection's answers are decided."""
     n = len(angle)
     k, t = limits.locate(angle)
-    d = np.empty((n, 3))
-    s = np.empty(n)
-    g = np.empty((n, 3))
-    uni_all = rng.random(n) < uniform
-    for seg in np.unique(k):
-        rows = np.flatnonzero(k == seg)
+    d = quat.random_unit_vectors(n, rng)
+    near = rng.random(n) >= uniform
+    for seg in np.unique(k[near]):
+        rows = np.flatnonzero(near & (k == seg))
         poly = limits.polygon_at(int(seg), t[rows])           # (r, M, 3)
         r, m = poly.shape[:2]
         e = rng.integers(0, m, r)
@@ -104,19 +98,26 @@ def coupled_samples(limits, angle: np.ndarray, rng: np.random.Generator,
         tan = quat.random_unit_vectors(r, rng)
         tan -= (tan * p).sum(1, keepdims=True) * p
         tan /= np.linalg.norm(tan, axis=1, keepdims=True)
-        x = np.cos(off)[:, None] * p + np.sin(off)[:, None] * tan
-        uni = uni_all[rows]
-        x[uni] = quat.random_unit_vectors(int(uni.sum()), rng)
-        d[rows] = x
-        s[rows], g[rows] = _targets(poly, x)
-    return d, s, g
+        d[rows] = np.cos(off)[:, None] * p + np.sin(off)[:, None] * tan
+    return d
 
 
-def _targets(poly: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    s, near = nearest_on_polygons(poly, x)
-    tang = near - (near * x).sum(1, keepdims=True) * x   # towards the nearest point
-    norm = np.linalg.norm(tang, axis=1, keepdims=True)
-    return s, -np.sign(s)[:, None] * tang / np.maximum(norm, 1e-12)
+def coupled_targets(limits, angle: np.ndarray, d: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The exact targets of directions ``d`` (n, 3) at coupling angles ``angle`` (n,):
+    signed distances (n,) radians and unit tangent gradients (n, 3) — away from the nearest
+    boundary point outside, towards it inside."""
+    k, t = limits.locate(angle)
+    s = np.empty(len(d))
+    g = np.empty((len(d), 3))
+    for seg in np.unique(k):
+        rows = np.flatnonzero(k == seg)
+        s[rows], near = nearest_on_polygons(limits.polygon_at(int(seg), t[rows]), d[rows])
+        x = d[rows]
+        tang = near - (near * x).sum(1, keepdims=True) * x   # towards the nearest point
+        norm = np.linalg.norm(tang, axis=1, keepdims=True)
+        g[rows] = -np.sign(s[rows])[:, None] * tang / np.maximum(norm, 1e-12)
+    return s, g
 
 
 def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = 0.5
@@ -125,7 +126,7 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = 0
 
     Each hinge that drives a coupling on its axis at an angle uniform over its loosest
     interval (so its corrected angle is its own); each :func:`field_joints` joint's direction
-    from :func:`coupled_samples` at that angle, its twist uniform within its interval there (so
+    from :func:`coupled_directions` at that angle, its twist uniform within its interval there (so
     its validity is its swing's); every other joint uniform on SO(3).
     """
     jn = len(limb.joints)
@@ -138,7 +139,7 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = 0
             h = limb.joints[src].loosest().hinge
             angle[src] = rng.uniform(h.min, h.max, n)
             q[:, src] = quat.from_axis_angle(np.asarray(h.axis), angle[src])
-        d, _, _ = coupled_samples(joint.coupling.limits, angle[src], rng, uniform)
+        d = coupled_directions(joint.coupling.limits, angle[src], rng, uniform)
         axis = np.asarray(joint.limb_axis)
         lim = joint.coupling.limits
         lo, hi = (-np.pi, np.pi) if lim.keyframes[0].twist is None else lim.interval(
@@ -149,21 +150,15 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = 0
     return q
 
 
-def field_samples(limb, name: str, postures: np.ndarray, oracle=None):
+def field_samples(limb, name: str, postures: np.ndarray, result=None):
     """A field joint's training samples from postures: ``(d, angle, s, g)`` — its limb
-    direction, its source's corrected angle (the limb oracle's), the exact targets."""
+    direction, its source's corrected angle (``result``: the limb oracle's answers for
+    ``postures``, computed when not given), the exact targets."""
     from models.limb_oracle import LimbOracle
 
-    oracle = oracle or LimbOracle(limb)
+    result = result or LimbOracle(limb).evaluate(postures)
     j = limb.index(name)
     joint = limb.joints[j]
-    angle = oracle.evaluate(postures).coupling_angle[:, j]
+    angle = result.coupling_angle[:, j]
     d = quat.rotate(np.ascontiguousarray(postures[:, j]), np.asarray(joint.limb_axis))
-    lim = joint.coupling.limits
-    k, t = lim.locate(angle)
-    s = np.empty(len(d))
-    g = np.empty((len(d), 3))
-    for seg in np.unique(k):
-        rows = np.flatnonzero(k == seg)
-        s[rows], g[rows] = _targets(lim.polygon_at(int(seg), t[rows]), d[rows])
-    return d, angle, s, g
+    return (d, angle, *coupled_targets(joint.coupling.limits, angle, d))

@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from models.datasets._limb import (
-    coupled_samples,
+    coupled_directions,
+    coupled_targets,
     field_joints,
     field_samples,
     training_postures,
@@ -83,7 +84,7 @@ class DistanceField:
     b3: np.ndarray          # (1,)
     at0: float
     at1: float
-    steps: tuple[float, ...] = (0.5, 0.5, 0.5, 1.0, 1.0)
+    steps: tuple[float, ...]  #: projection step fractions (:attr:`FieldSpec.steps`)
     info: dict = field(default_factory=dict)
 
     @classmethod
@@ -121,16 +122,20 @@ class DistanceField:
         z = np.concatenate((d, np.asarray(tau)[:, None]), axis=1).astype(self.w1.dtype)
         return self._forward(z)[0]
 
+    def _input_gradient(self, u, h1, h2):
+        """The input gradient's chain: ``(g2, p1, g1, ∂f/∂d (N, 3))``."""
+        g2 = (1 - h2 * h2) * self.w3
+        p1 = g2 @ self.w2.T
+        g1 = (1 - h1 * h1) * p1
+        gf = g1 @ self.w1.T
+        nf = self.b.shape[1]
+        return g2, p1, g1, (gf[:, :nf] * np.cos(u)) @ self.b[:3].T + gf[:, nf:nf + 3]
+
     def value_and_gradient(self, d: np.ndarray, tau: np.ndarray):
         """Values (N,) and gradients (N, 3) with respect to the direction."""
         z = np.concatenate((d, np.asarray(tau)[:, None]), axis=1).astype(self.w1.dtype)
         f, (u, _, h1, h2) = self._forward(z)
-        g2 = (1 - h2 * h2) * self.w3
-        g1 = (1 - h1 * h1) * (g2 @ self.w2.T)
-        gf = g1 @ self.w1.T
-        nf = self.b.shape[1]
-        gd = (gf[:, :nf] * np.cos(u)) @ self.b[:3].T + gf[:, nf:nf + 3]
-        return f, gd
+        return f, self._input_gradient(u, h1, h2)[3]
 
     def project(self, d: np.ndarray, angle) -> tuple[np.ndarray, np.ndarray]:
         """``(outside (N,) bool, projected direction (N, 3))`` — the graph's computation."""
@@ -189,7 +194,6 @@ class DistanceField:
 
     def gradients(self, zb, sb, gb, lam, wb=None) -> tuple[np.ndarray, ...]:
         """The loss's gradients with respect to ``(w1, b1, w2, b2, w3, b3)`` on one batch."""
-        nf = self.b.shape[1]
         bd = self.b[:3]
         nb = zb.dtype.type(len(zb))
         wb = np.ones(len(zb), zb.dtype) if wb is None else wb
@@ -197,12 +201,7 @@ class DistanceField:
         f, (u, feats, h1, h2) = self._forward(zb)
         s1, s2 = 1 - h1 * h1, 1 - h2 * h2
         cu = np.cos(u)
-        # input gradient (value_and_gradient), tangent part
-        g2 = s2 * self.w3
-        p1 = g2 @ self.w2.T
-        g1 = s1 * p1
-        gf = g1 @ self.w1.T
-        gd = (gf[:, :nf] * cu) @ bd.T + gf[:, nf:nf + 3]
+        g2, p1, g1, gd = self._input_gradient(u, h1, h2)  # tangent part below
         gt = gd - (gd * d).sum(1, keepdims=True) * d
         r = (2 * lam / nb) * (gt - gb) * wb[:, None]
         r -= (r * d).sum(1, keepdims=True) * d
@@ -243,13 +242,13 @@ class DistanceField:
 def fit_coupled_field(limits, rng: np.random.Generator, spec: FieldSpec = FieldSpec(),
                       samples=None) -> DistanceField:
     """Train a :class:`DistanceField` for a coupled polygon swing (``InterpolatedLimits``) on
-    ``samples`` ``(d, angle, s, g)`` (default: :func:`coupled_samples` at uniform angles)."""
+    ``samples`` ``(d, angle, s, g)`` (default: :func:`coupled_directions` at uniform angles)."""
     t0 = time.perf_counter()
     net = DistanceField.initial(spec, limits.at[0], limits.at[-1], rng)
     if samples is None:
         angle = rng.uniform(limits.at[0], limits.at[-1], spec.samples)
-        d, s, g = coupled_samples(limits, angle, rng, spec.uniform)
-        samples = (d, angle, s, g)
+        d = coupled_directions(limits, angle, rng, spec.uniform)
+        samples = (d, angle, *coupled_targets(limits, angle, d))
     d, angle, s, g = samples
     z = np.concatenate((d, net.tau(angle)[:, None]), axis=1)
     net.fit(z, s, g, spec, rng)
@@ -268,12 +267,12 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
     rng = np.random.default_rng(seed)
     if postures is None:
         postures = training_postures(limb, spec.samples, rng, spec.uniform)
-    oracle = LimbOracle(limb)
+    result = LimbOracle(limb).evaluate(postures)  # once, for every field's source angles
     fields: dict[str, DistanceField] = {}
     t0 = time.perf_counter()
     for name in field_joints(limb):
         net = fit_coupled_field(limb.joints[limb.index(name)].coupling.limits, rng, spec,
-                                field_samples(limb, name, postures, oracle))
+                                field_samples(limb, name, postures, result))
         fields[name] = net
         if progress is not None:
             progress(name, net.info["train_s"])

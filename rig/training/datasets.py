@@ -52,8 +52,9 @@ def _floats(value: str, option: str, count: int | None = None) -> tuple[float, .
     return out
 
 
-def _constraint(constraint: str | None, shape: str | None, radius: str | None, centre: str):
-    from models.constraint import load_constraint
+def _constraint(constraint: str | None, loaded, shape: str | None, radius: str | None,
+                centre: str):
+    """The quaternion dataset's constraint; ``loaded``: the ``--constraint`` file's content."""
     from models.datasets import cone_constraint
     from models.shapes import load_shape
 
@@ -65,9 +66,8 @@ def _constraint(constraint: str | None, shape: str | None, radius: str | None, c
     if len(given) > 1:
         raise DatasetError(f"{' and '.join(given)}: give only one constraint source")
     if constraint is not None:
-        c = load_constraint(constraint)
-        c.require_kind("rig dataset make")
-        return c
+        loaded.require_kind("rig dataset make")
+        return loaded
     if shape is not None:
         return load_shape(shape)
     if radius is not None:
@@ -151,10 +151,11 @@ def _make(
         ):
             if value is not None:
                 raise DatasetError(f"{option}: only for --kind quaternion, not {kind!r}")
+    limits = None
     if kind in ("quaternion", "limb") and constraint is not None:
         from models.limb import Limb, load_limits
 
-        limits = load_limits(constraint)
+        limits = load_limits(constraint)  # read once, either kind
         if isinstance(limits, Limb):
             return _limb(limits, target_path=out, n=count, seed=rng, split=split, others=(
                 ("--shape", shape), ("--cone-radius", cone_radius),
@@ -167,7 +168,7 @@ def _make(
     if kind == "limb":
         raise DatasetError("--kind limb: needs --constraint LIMB.yaml (a limb file)")
     if kind == "quaternion":
-        c = _constraint(constraint, shape, cone_radius, cone_centre)
+        c = _constraint(constraint, limits, shape, cone_radius, cone_centre)
         ds = D.quaternion_dataset(
             c,
             count,

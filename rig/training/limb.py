@@ -107,7 +107,6 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
         fields, facts = fit_limb_fields(
             limb, seed, spec, postures=postures,
             progress=lambda name, s: echo(f"  {name}: trained in {s:.1f} s"))
-        facts["seed"] = seed
         if data:
             facts.update({"data_file": data["file"], "data_sha256": data["sha256"]})
     else:

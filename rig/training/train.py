@@ -102,18 +102,16 @@ class TrainResult:
         return self.model.metrics
 
 
-def _load_data(data_path, constraint_path):
-    """(constraint, (inputs, targets, content hash)) of a dataset file; checks the constraint."""
-    from models.constraint import load_constraint
-    from models.datasets import load_dataset
+def _load_data(ds, data_path, given, constraint_path):
+    """(constraint, (inputs, targets, content hash)) of a loaded quaternion dataset ``ds``;
+    checks it against ``given``, the constraint file's content (None without one)."""
     from models.errors import DatasetError
 
-    ds = load_dataset(data_path)
     c = ds.constraint()
     if c is None or ds.inputs.shape[1:] != (4,) or ds.targets.shape[1:] != (4,):
         raise DatasetError(f"--data: {data_path} is not a quaternion dataset with a constraint "
                            "(make one with `rig dataset make --kind quaternion`)")
-    if constraint_path is not None and load_constraint(constraint_path) != c:
+    if given is not None and given != c:
         raise DatasetError(f"--data: {data_path} was made for constraint {c.name!r}, which "
                            f"differs from --constraint {constraint_path}")
     return c, (ds.inputs, ds.targets, ds.content_hash())
@@ -121,8 +119,8 @@ def _load_data(data_path, constraint_path):
 
 def _limb_source(request: TrainRequest):
     """``(limb, postures, data)`` when the request is about a limb (a limb file, or a limb
-    dataset — postures and ``{"file", "sha256"}``); else ``(None, constraint or None, None)``
-    with the constraint file read once."""
+    dataset — postures and ``{"file", "sha256"}``); else ``(None, constraint or None, dataset
+    or None)``: each file read once."""
     from models.errors import DatasetError, ModelFileError
     from models.limb import Limb, load_limits
 
@@ -135,7 +133,7 @@ def _limb_source(request: TrainRequest):
             if isinstance(limits, Limb):
                 raise DatasetError(f"--data: {request.data} is not a limb dataset (make one "
                                    f"with `rig dataset make --constraint {request.constraint}`)")
-            return None, limits, None
+            return None, limits, ds
         limb, postures = limb_postures(ds)
         if limits is not None and (not isinstance(limits, Limb)
                                    or limits.content_hash() != limb.content_hash()):
@@ -162,7 +160,7 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     from models.onnx_io import export_onnx
 
     request.check()
-    limb, source, data = _limb_source(request)
+    limb, source, data = _limb_source(request)  # a joint's: (None, constraint, dataset)
     if limb is not None:
         from rig.training.limb import limb_warnings, train_limb
 
@@ -181,11 +179,11 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     cfg = load_config(request.config, preset) if request.config else get_config(preset)
     patterns = None
     if request.data is not None:
-        constraint, patterns = _load_data(request.data, request.constraint)
+        constraint, patterns = _load_data(data, request.data, source, request.constraint)
     elif request.constraint is None:
         raise ConstraintError("--constraint: required (or --data with a dataset file)")
     else:
-        constraint = source  # the constraint file, read once by _limb_source
+        constraint = source
     constraint.require_kind("rig train")
     is_field = cfg["model"]["method"] == "field"
     gens = cfg["evolution"]["generations"]

@@ -76,10 +76,11 @@ def test_input_gradient_matches_finite_differences():
 def test_field_samples_are_the_limb_oracles_distances(leg):
     rng = np.random.default_rng(0)
     q = training_postures(leg, 500, rng)
-    oracle = LimbOracle(leg)
     (name,) = field_joints(leg)
-    d, angle, s, g = field_samples(leg, name, q, oracle)
-    res = oracle.evaluate(q)
+    d, angle, s, g = field_samples(leg, name, q)  # the oracle's answers computed inside
+    res = LimbOracle(leg).evaluate(q)
+    assert [np.array_equal(a, b) for a, b in zip(
+        field_samples(leg, name, q, res), (d, angle, s, g), strict=True)] == [True] * 4
     j = leg.index(name)
     # outside, the distance is how far the oracle moves the limb direction (twist aside)
     moved = Q.angle_between(d, Q.rotate(res.projected[:, j], np.asarray(leg.joints[j].limb_axis)))
