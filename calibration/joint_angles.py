@@ -1,0 +1,199 @@
+"""Clinical angles of the elbow, wrist, hip, knee and ankle: ISB / Grood-Suntay Cardan angles,
+peaks per movement, normative values (issue 21, part 3; the shoulder has its own,
+:mod:`calibration.clinical`).
+
+Frames
+------
+Every segment's rig frame (:mod:`calibration.frames`) has +X along the segment pointing
+distally, +Y anterior, +Z to the body's right — except the **foot**, whose long axis lies
+horizontal in standing: +X towards the toes (its long axis, anterior), +Y superior, +Z right,
+which is the ISB calcaneus frame itself (Wu et al. 2002 §3.1). With ``M_s`` the rig axes of
+segment ``s`` in its ISB frame (:data:`SEGMENT_TO_ISB`: :data:`calibration.frames.RIG_TO_ISB`,
+the identity for the foot), a joint orientation (child ``c`` relative to parent ``p``, rig
+frames) is ``J_isb = M_p J_rig M_cᵀ`` in ISB frames. So the ankle's neutral joint orientation
+in rig frames is not the identity but ``M_shankᵀ``: the foot's long axis along the shank's +Y
+(anterior). **Left limbs** are mirrored through the sagittal plane first (``(w, x, y, z) →
+(w, −x, −y, z)``, as for the shoulder), so every sign below holds for either side.
+
+Angles (:func:`joint_angles`)
+-----------------------------
+All five joints use the Z-X'-Y'' Cardan sequence of the joint coordinate system,
+``J_isb = Rz(α) Rx(β) Ry(γ)``: ``α`` about the proximal segment's medio-lateral axis (Z), ``γ``
+about the distal segment's long axis (Y), ``β`` about the floating axis between them:
+
+===========  ==========================  ==============================  ===========================
+joint        α (Z, proximal)             β (floating)                    γ (Y, distal)
+===========  ==========================  ==============================  ===========================
+elbow        flexion + / extension −     varus + / valgus −              pronation + / supination −
+wrist        flexion + / extension −     ulnar + / radial deviation −    pronation + / supination −
+hip          flexion + / extension −     adduction + / abduction −       internal + / external rot.
+knee         flexion + / extension −     adduction + / abduction −       internal + / external rot.
+ankle        dorsiflexion + / plantar −  inversion + / eversion −        internal + / external rot.
+===========  ==========================  ==============================  ===========================
+
+Sources: elbow (humerus–forearm) and wrist (hand–radius): Wu et al. 2005, *J Biomech* 38:981,
+§3.4 and §4.4; hip and ankle (calcaneus–tibia): Wu et al. 2002, *J Biomech* 35:543, §2.4 and
+§3.4; knee: Grood & Suntay 1983, *J Biomech Eng* 105:136 (flexion about the femur's
+medio-lateral axis, tibial rotation about the tibia's long axis, ab/adduction about the
+floating axis — the same Z-X'-Y'' sequence in these frames). The knee flexes the other way
+about +Z than the hip, elbow and wrist (the shank swings backwards), so its ``α`` is negated:
+knee flexion is positive, as Grood & Suntay report it.
+
+Peaks (:func:`angle_peaks`)
+---------------------------
+Per movement, the farthest angle reached in its direction (0 when never reached), after a
+running median over ``window`` samples (default 5) so that an isolated spike is not a peak: a
+goniometer reads a position the patient held, not one sample.
+
+Normative values (:data:`NORMATIVE`)
+------------------------------------
+AAOS 1965 (*Joint motion: method of measuring and recording*, American Academy of Orthopaedic
+Surgeons), the table clinics use as "normal": elbow flexion 150°, extension 0°; forearm
+pronation 80°, supination 80°; wrist flexion 80°, extension 70°, radial deviation 20°, ulnar
+deviation 30°; hip flexion 120°, extension 30°, abduction 45°, adduction 30°, internal and
+external rotation 45°; knee flexion 135°, extension 0°; ankle dorsiflexion 20°, plantarflexion
+50°; inversion 35°, eversion 15° (the AAOS measures these at the subtalar and midtarsal joints
+together, so the ankle's Cardan β is shown beside them, not compared).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration.frames import RIG_TO_ISB
+from models import quaternion as Q
+
+__all__ = ["JOINT_ANGLES", "NORMATIVE", "SEGMENT_TO_ISB", "JointAngleSet", "angle_peaks",
+           "from_angles", "joint_angles"]
+
+#: Rig axes of each segment in its ISB frame (columns), see the module doc.
+SEGMENT_TO_ISB: dict[str, np.ndarray] = {
+    **{s: RIG_TO_ISB for s in ("thorax", "upper-arm", "forearm", "hand", "pelvis", "thigh",
+                               "shank")},
+    "foot": np.eye(3),
+}
+
+
+@dataclass(frozen=True)
+class JointAngleSet:
+    """One joint's Cardan angles: the segments, and per angle (α, β, γ) its movement names
+    (positive, negative) and the sign turning the Cardan angle into the positive movement."""
+
+    parent: str
+    child: str
+    movements: tuple[tuple[str, str], tuple[str, str], tuple[str, str]]
+    signs: tuple[float, float, float]
+    source: str
+
+
+_WU2005 = "Wu et al. 2005, J Biomech 38:981"
+_WU2002 = "Wu et al. 2002, J Biomech 35:543"
+
+#: The joints and their angles (module doc).
+JOINT_ANGLES: dict[str, JointAngleSet] = {
+    "elbow": JointAngleSet("upper-arm", "forearm", (("flexion", "extension"), ("varus", "valgus"),
+                                                    ("pronation", "supination")),
+                           (1.0, 1.0, 1.0), f"{_WU2005} §3.4"),
+    "wrist": JointAngleSet("forearm", "hand", (("flexion", "extension"),
+                                               ("ulnar_deviation", "radial_deviation"),
+                                               ("pronation", "supination")),
+                           (1.0, 1.0, 1.0), f"{_WU2005} §4.4"),
+    "hip": JointAngleSet("pelvis", "thigh", (("flexion", "extension"), ("adduction", "abduction"),
+                                             ("internal_rotation", "external_rotation")),
+                         (1.0, 1.0, 1.0), f"{_WU2002} §2.4"),
+    "knee": JointAngleSet("thigh", "shank", (("flexion", "extension"), ("adduction", "abduction"),
+                                             ("internal_rotation", "external_rotation")),
+                          (-1.0, 1.0, 1.0), "Grood & Suntay 1983, J Biomech Eng 105:136"),
+    "ankle": JointAngleSet("shank", "foot", (("dorsiflexion", "plantarflexion"),
+                                             ("inversion", "eversion"),
+                                             ("internal_rotation", "external_rotation")),
+                           (1.0, 1.0, 1.0), f"{_WU2002} §3.4"),
+}
+
+_AAOS = "AAOS 1965, Joint motion: method of measuring and recording"
+
+#: Normative values (degrees) per joint and movement, and which are shown but not compared.
+NORMATIVE: dict = {
+    "source": _AAOS,
+    "aaos": {
+        "elbow": {"flexion": 150.0, "extension": 0.0, "pronation": 80.0, "supination": 80.0},
+        "wrist": {"flexion": 80.0, "extension": 70.0, "radial_deviation": 20.0,
+                  "ulnar_deviation": 30.0},
+        "hip": {"flexion": 120.0, "extension": 30.0, "abduction": 45.0, "adduction": 30.0,
+                "internal_rotation": 45.0, "external_rotation": 45.0},
+        "knee": {"flexion": 135.0, "extension": 0.0},
+        "ankle": {"dorsiflexion": 20.0, "plantarflexion": 50.0, "inversion": 35.0,
+                  "eversion": 15.0},
+    },
+    "not_comparable": {
+        ("ankle", "inversion"): "AAOS measures the subtalar and midtarsal joints together",
+        ("ankle", "eversion"): "AAOS measures the subtalar and midtarsal joints together",
+    },
+}
+
+
+def _joint(name: str) -> JointAngleSet:
+    if name not in JOINT_ANGLES:
+        raise ValueError(f"joint must be one of {', '.join(JOINT_ANGLES)}, got {name!r}")
+    return JOINT_ANGLES[name]
+
+
+def _side(q: np.ndarray, side: str) -> np.ndarray:
+    if side not in ("right", "left"):
+        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+    if side == "left":
+        q = q.copy()
+        q[..., 1:3] *= -1.0
+    return q
+
+
+def joint_angles(q, joint: str, side: str = "right") -> dict[str, np.ndarray]:
+    """Cardan angles (degrees, (N,) each) of joint orientations ``q`` (N, 4) or (4,) (child
+    relative to parent, rig frames, scalar-first): ``{"alpha", "beta", "gamma"}`` signed as the
+    positive movements of :data:`JOINT_ANGLES` (knee flexion positive)."""
+    js = _joint(joint)
+    q = _side(Q.check_quaternions(np.atleast_2d(q), normalize=True, name="joint orientation"),
+              side)
+    mp, mc = SEGMENT_TO_ISB[js.parent], SEGMENT_TO_ISB[js.child]
+    r = Q.to_rotation(q).as_matrix()
+    isb = mp @ r @ mc.T
+    from scipy.spatial.transform import Rotation
+
+    a, b, c = np.degrees(Rotation.from_matrix(isb).as_euler("ZXY")).T
+    return {"alpha": js.signs[0] * a, "beta": js.signs[1] * b, "gamma": js.signs[2] * c}
+
+
+def from_angles(alpha, beta, gamma, joint: str, side: str = "right") -> np.ndarray:
+    """Joint orientations (N, 4) (rig frames) with the given clinical angles (degrees, signed as
+    :func:`joint_angles` returns them) — its inverse, for simulated patients and tests."""
+    from scipy.spatial.transform import Rotation
+
+    js = _joint(joint)
+    ang = np.stack(np.broadcast_arrays(np.asarray(alpha, float) * js.signs[0],
+                                       np.asarray(beta, float) * js.signs[1],
+                                       np.asarray(gamma, float) * js.signs[2]), axis=-1)
+    isb = Rotation.from_euler("ZXY", np.atleast_2d(ang), degrees=True).as_matrix()
+    mp, mc = SEGMENT_TO_ISB[js.parent], SEGMENT_TO_ISB[js.child]
+    q = Q.from_rotation(Rotation.from_matrix(mp.T @ isb @ mc))
+    return _side(q, side)
+
+
+def angle_peaks(angles: dict[str, np.ndarray], joint: str, window: int = 5) -> dict[str, float]:
+    """Peak per movement (degrees, ≥ 0) of :func:`joint_angles` output over a recording (module
+    doc: running median over ``window`` samples first)."""
+    from scipy.ndimage import median_filter
+
+    js = _joint(joint)
+    if window < 1:
+        raise ValueError(f"window must be >= 1, got {window}")
+    out: dict[str, float] = {}
+    for key, (pos, neg) in zip(("alpha", "beta", "gamma"), js.movements, strict=True):
+        a = np.asarray(angles[key], dtype=float)
+        if a.size == 0:
+            raise ValueError("no samples")
+        a = median_filter(a, size=min(window, a.size), mode="nearest")
+        out[pos] = float(max(0.0, a.max()))
+        out[neg] = float(max(0.0, -a.min()))
+    return out
