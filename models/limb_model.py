@@ -22,7 +22,12 @@ exactly as below. Metadata ``jointlimits.training`` (JSON) holds the seed, the p
 
 Method ``geometric``: the exact limb oracle (:mod:`models.limb_oracle`) compiled into the
 graph, in float32 — no table, no training; its size grows with the vertex count only.
-Per joint, in the hierarchy's order:
+
+The graph runs the joints in stages of the hierarchy (a joint after the joints its limits
+depend on, as late as its dependents allow), and the joints of one kind in one stage as one
+group — tensors (K, N, ·), a row per joint, per-joint constants — so the node count, which is
+what one posture costs in onnxruntime (~0.3 µs a node), grows with the kinds rather than the
+joints (a leg: 264 nodes). Per joint:
 
 - **hinge**: the half-angle pair ``(w, a·v)`` of its orientation about the axis, clamped to the
   interval on the circle (the twist clamp of :mod:`models.field`: relative to the interval's
@@ -33,8 +38,10 @@ Per joint, in the hierarchy's order:
 - **swing** (ball, two-axis): limb direction ``d = R(q) a``; nearest boundary point ``b`` of a
   cone (closed form) or a polygon by the kernel of :class:`models.geometry.SphericalPolygon`
   over every edge (key = squared chord, lowest index on ties — ``ArgMin`` returns the first —,
-  pseudo-normal sign); swing correction ``Δ`` = the minimal rotation ``d → b`` where outside;
-  then the twist of ``Δ ⊗ q`` clamped as for a hinge about ``d`` (``τ``); correction ``Δ ⊗ τ``;
+  pseudo-normal sign; every edge's products with ``d`` in one ``MatMul``, the nearest edge's
+  rows by a one-hot ``MatMul``); swing correction ``Δ`` = the minimal rotation ``d → b`` where
+  outside; then the twist of ``Δ ⊗ q`` clamped as for a hinge about ``d`` (``τ``); correction
+  ``Δ ⊗ τ``;
 - **coupled** joints: keyframe interval ``k`` and fraction ``t`` of the source's corrected angle
   (clamped to the keyframes' range), intervals ``min``/``max`` linear in ``t``, cones by
   normalised interpolation of the centre and linear radius, polygons as the normalised mix of
@@ -46,13 +53,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import onnx
 from onnx import TensorProto, helper
 
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import ConeSwing, PolygonSwing
 from models.errors import ModelFileError
 from models.fileio import write_owner_only
 from models.limb import Limb, loads_limb, oriented_vertices
@@ -80,66 +89,94 @@ _I64 = np.int64
 
 
 # ---------------------------------------------------------------------------------------------
-# Graph pieces
+# Graph pieces. Joints of one kind at one level of the hierarchy run as one group: tensors
+# (K, N, ·) with one row per joint and per-joint constants (K, 1, ·) or (K, ·, ·), so the node
+# count (what a single call costs in onnxruntime) grows with the kinds, not the joints.
 # ---------------------------------------------------------------------------------------------
+_ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # (w, x) @ _ROT90 = (x, -w)
+_CROSS = np.zeros((3, 3, 3))
+for _a, _b, _c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _CROSS[_a, _b, _c], _CROSS[_b, _a, _c] = 1.0, -1.0
+
+
 def _i(g: _Graph, v) -> str:
     return g.const(np.asarray(v), dtype=_I64)
 
 
-def _dot(g: _Graph, a: str, b: str, axis: int = -1) -> str:
-    return g.op("ReduceSum", [g.op("Mul", [a, b]), _i(g, [axis])], keepdims=1)
+def _dot(g: _Graph, a: str, b: str) -> str:
+    return g.op("ReduceSum", [g.op("Mul", [a, b]), _i(g, [-1])], keepdims=1)
 
 
-def _normalize(g: _Graph, a: str, axis: int = -1) -> str:
-    n = g.op("Sqrt", [_dot(g, a, a, axis)])
-    return g.op("Div", [a, g.op("Max", [n, g.const(1e-30)])])
+def _normalize(g: _Graph, a: str) -> str:
+    """Unit rows over the last axis (a zero row stays zero)."""
+    return g.op("LpNormalization", [a], axis=-1, p=2)
 
 
 def _cross(g: _Graph, a: str, b: str) -> str:
     """a × b over the last axis (length 3)."""
-    yzx, zxy = _i(g, [1, 2, 0]), _i(g, [2, 0, 1])
-    a1, a2 = g.op("Gather", [a, yzx], axis=-1), g.op("Gather", [a, zxy], axis=-1)
-    b1, b2 = g.op("Gather", [b, yzx], axis=-1), g.op("Gather", [b, zxy], axis=-1)
-    return g.op("Sub", [g.op("Mul", [a1, b2]), g.op("Mul", [a2, b1])])
+    return _bilinear(g, a, b, _CROSS, "cross")
+
+
+def _first(g: _Graph, a: str) -> str:
+    """The first component over the last axis (…, 1)."""
+    return g.op("Slice", [a, _i(g, [0]), _i(g, [1]), _i(g, [-1])])
 
 
 def _canonical(g: _Graph, q: str) -> str:
-    """``q`` with ``w >= 0`` (N, 4)."""
-    w = g.op("Slice", [q, _i(g, [0]), _i(g, [1]), _i(g, [1])])
-    return g.op("Mul", [q, g.op("Where", [g.op("Less", [w, g.const(0.0)]), g.const(-1.0),
-                                          g.const(1.0)])])
+    """``q`` with ``w >= 0``."""
+    return g.op("Mul", [q, g.op("Where", [g.op("Less", [_first(g, q), g.const(0.0)]),
+                                         g.const(-1.0), g.const(1.0)])])
 
 
-def _clamp_pair(g: _Graph, t: str, lims) -> tuple[str, str]:
-    """Clamp the half-angle pair ``t`` (N, 2) (its angle ``φ/2``) to ``[lo, hi]`` on the circle.
+def _rows(g: _Graph, group: str, k: int, size: int) -> str:
+    """Row ``k`` (N, ·) of a group tensor (K, N, ·)."""
+    one = group if size == 1 else g.op("Gather", [group, _i(g, [k])], axis=0)
+    return g.op("Squeeze", [one, _i(g, [0])])
 
-    ``lims``: a (lo, hi) pair of floats (radians) or a tensor (N, 2). Returns ``(e, u_full)``:
-    ``e`` (N, 2) the half-angle pair of the clamping rotation (``(1, 0)`` inside), and the
-    clamped target pair (N, 2) in absolute terms (``t`` normalised where inside).
-    """
-    rot90 = np.array([[0.0, -1.0], [1.0, 0.0]])
-    tn = _normalize(g, t)
-    if isinstance(lims, tuple):
-        lo, hi = lims
-        mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-        cm, sm = math.cos(mid / 2), math.sin(mid / 2)
-        u = g.op("MatMul", [tn, g.const([[cm, -sm], [sm, cm]])])  # t e^{-i mid/2}
-        cr, sr = g.const(math.cos(half / 2)), g.const(math.sin(half / 2))
-    else:
-        mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # (mid/2, half/2)
-        cmr, smr = g.op("Cos", [mh]), g.op("Sin", [mh])
-        first, second = g.const([[1.0], [0.0]]), g.const([[0.0], [1.0]])
-        cm_, cr = g.op("MatMul", [cmr, first]), g.op("MatMul", [cmr, second])
-        sm_, sr = g.op("MatMul", [smr, first]), g.op("MatMul", [smr, second])
-        u = g.op("Add", [g.op("Mul", [tn, cm_]),
-                         g.op("Mul", [g.op("MatMul", [tn, g.const(rot90)]), sm_])])
-    e = twist_clamp(g, u, cr, sr)
-    # the clamped pair itself: e ⊗ tn (complex product)
-    e_w = g.op("MatMul", [e, g.const([[1.0], [0.0]])])
-    e_x = g.op("MatMul", [e, g.const([[0.0], [1.0]])])
-    target = g.op("Add", [g.op("Mul", [tn, e_w]),
-                          g.op("Mul", [g.op("MatMul", [tn, g.const(rot90.T)]), e_x])])
-    return e, target
+
+def _stack(g: _Graph, parts: list[str]) -> str:
+    """Rows (N, ·) stacked into a group tensor (K, N, ·)."""
+    ups = [g.op("Unsqueeze", [p, _i(g, [0])]) for p in parts]
+    return ups[0] if len(ups) == 1 else g.op("Concat", ups, axis=0)
+
+
+class _Limits:
+    """Per-joint intervals of a group (hinge angles or twists, radians): each a (lo, hi) pair
+    of floats, None (no limit: the whole circle) or a tensor (N, 2) (coupled)."""
+
+    def __init__(self, items: list):
+        self.items = [(-math.pi, math.pi) if x is None else x for x in items]
+
+    def clamp(self, g: _Graph, t: str, target: bool) -> tuple[str, str | None]:
+        """Clamp half-angle pairs ``t`` (K, N, 2) (angle ``φ/2``) to the intervals on the circle
+        (relative to each interval's middle, nearer end, a tie to ``max``: the oracle's rule).
+        Returns ``e`` (K, N, 2), the half-angle pair of the clamping rotation (``(1, 0)``
+        inside), and with ``target`` the clamped pair in absolute terms."""
+        tn = _normalize(g, t)
+        if all(isinstance(x, tuple) for x in self.items):
+            lo, hi = np.array(self.items, dtype=float).T
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            cm, sm = np.cos(mid / 2), np.sin(mid / 2)
+            rot = np.stack([np.stack([cm, -sm], -1), np.stack([sm, cm], -1)], 1)  # (K, 2, 2)
+            u = g.op("MatMul", [tn, g.const(rot)])  # t e^{-i mid/2}
+            cr, sr = g.const(np.cos(half / 2)[:, None, None]), g.const(
+                np.sin(half / 2)[:, None, None])
+        else:
+            ref = next(x for x in self.items if isinstance(x, str))
+            shape = g.op("Shape", [ref])
+            lims = _stack(g, [x if isinstance(x, str) else g.op("Expand", [
+                g.const(np.array(x)[None]), shape]) for x in self.items])
+            mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # mid/2, half/2
+            cm, cr = g.ops("Split", [g.op("Cos", [mh])], 2, axis=-1)
+            sm, sr = g.ops("Split", [g.op("Sin", [mh])], 2, axis=-1)
+            u = g.op("Add", [g.op("Mul", [tn, cm]),
+                             g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90)]), sm])])
+        e = twist_clamp(g, u, cr, sr)
+        if not target:
+            return e, None
+        e_w, e_x = g.ops("Split", [e], 2, axis=-1)  # the clamped pair: e ⊗ tn (complex)
+        return e, g.op("Add", [g.op("Mul", [tn, e_w]),
+                               g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90.T)]), e_x])])
 
 
 def _keyframe_lerp(g: _Graph, kt, values: np.ndarray) -> str:
@@ -167,25 +204,76 @@ def _locate(g: _Graph, angle: str, at: np.ndarray) -> tuple[str, str]:
     return k, t
 
 
-def _hinge(g: _Graph, q: str, axis: np.ndarray, lims) -> tuple[str, str]:
-    """Correction (N, 4) and corrected angle (N, 1) of a hinge joint."""
-    tmap = np.zeros((4, 2))
-    tmap[0, 0] = 1.0
-    tmap[1:, 1] = axis
-    t = g.op("MatMul", [q, g.const(tmap)])
-    _, target = _clamp_pair(g, t, lims)
-    target = g.op("Mul", [target, g.op("Where", [
-        g.op("Less", [g.op("MatMul", [target, g.const([[1.0], [0.0]])]), g.const(0.0)]),
-        g.const(-1.0), g.const(1.0)])])
-    c = g.op("MatMul", [target, g.const([[1.0], [0.0]])])
-    s = g.op("MatMul", [target, g.const([[0.0], [1.0]])])
+def _hinge_group(g: _Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[str, str]:
+    """Corrections (K, N, 4) and corrected angles (K, N, 1) of hinges ``q`` (K, N, 4) about
+    ``axes`` (K, 3): the half-angle pair ``(w, a·v)`` clamped, the pure rotation about the axis
+    with the clamped angle (the geodesic correction: out-of-axis motion is removed too)."""
+    tmap = np.zeros((len(axes), 4, 2))
+    tmap[:, 0, 0] = 1.0
+    tmap[:, 1:, 1] = axes
+    _, target = lims.clamp(g, g.op("MatMul", [q, g.const(tmap)]), True)
+    target = _canonical(g, target)
+    c, s = g.ops("Split", [target], 2, axis=-1)
     angle = g.op("Mul", [g.op("Atan", [g.op("Div", [s, g.op("Add", [c, g.const(1.0)])])]),
                          g.const(4.0)])
-    # h = (c, s a); correction = h ⊗ q⁻¹
-    h = g.op("MatMul", [target, g.const(np.array([[1.0, 0, 0, 0], [0, *axis]]))])
-    qinv = g.op("Mul", [q, g.const([[1.0, -1.0, -1.0, -1.0]])])
+    hmap = np.zeros((len(axes), 2, 4))
+    hmap[:, 0, 0] = 1.0
+    hmap[:, 1, 1:] = axes
+    h = g.op("MatMul", [target, g.const(hmap)])  # (c, s a); correction = h ⊗ q⁻¹
+    qinv = g.op("Mul", [q, g.const([1.0, -1.0, -1.0, -1.0])])
     corr = _bilinear(g, h, qinv, _PROD, "hinge_correction")
     return _canonical(g, _normalize(g, corr)), angle
+
+
+def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list,
+                 lims: _Limits | None) -> str:
+    """Corrections (K, N, 4) of ball / two-axis joints ``q`` (K, N, 4) with limb axes ``axes``
+    (K, 3): limb direction ``d``; per joint ``nearest(d (N, 3)) -> (outside (N, 1), b (N, 3))``
+    or None; swing correction ``Δ`` = the minimal rotation ``d → b`` where outside; the twist of
+    ``Δ ⊗ q`` about ``d`` clamped (``τ``; ``lims`` None: no joint of the group has a twist
+    limit); correction ``Δ ⊗ τ``."""
+    k = len(axes)
+    d = _normalize(g, _bilinear(g, q, q, np.stack([_rotation_tensor(a) for a in axes]),
+                                "limb_direction"))
+    delta = None
+    if any(n is not None for n in nearests):
+        outs, bs = [], []
+        for j, nearest in enumerate(nearests):
+            dj = _rows(g, d, j, k)
+            if nearest is None:
+                outs.append(g.op("Greater", [_first(g, dj), g.const(2.0)]))  # never
+                bs.append(dj)
+            else:
+                o, b = nearest(dj)
+                outs.append(o)
+                bs.append(b)
+        outside, b = _stack(g, outs), _stack(g, bs)
+        cosb1 = g.op("Add", [_dot(g, d, b), g.const(1.0)])
+        raw = g.op("Concat", [cosb1, _cross(g, d, b)], axis=-1)
+        # d exactly opposite b: half a turn about any axis perpendicular to d
+        ref = g.op("Where", [g.op("Less", [g.op("Abs", [_first(g, d)]), g.const(0.9)]),
+                             g.const([1.0, 0.0, 0.0]), g.const([0.0, 1.0, 0.0])])
+        flip = g.op("Concat", [g.op("Mul", [cosb1, g.const(0.0)]),
+                               _normalize(g, _cross(g, d, ref))], axis=-1)
+        raw = g.op("Where", [g.op("Less", [cosb1, g.const(1e-7)]), flip, raw])
+        delta = g.op("Where", [outside, _normalize(g, raw), g.const([1.0, 0.0, 0.0, 0.0])])
+    if lims is None:
+        if delta is None:
+            return g.op("Add", [g.op("Mul", [q, g.const(0.0)]), g.const([1.0, 0, 0, 0])])
+        return delta
+    tmap = np.stack([np.concatenate((_PROD[..., :1], (_PROD[..., 1:] @ a)[..., None]), axis=-1)
+                     for a in axes])  # (K, 4, 4, 2): twist pair of p ⊗ q about a
+    if delta is None:
+        t = g.op("MatMul", [q, g.const(tmap[:, 0])])
+    else:
+        t = _bilinear(g, delta, q, tmap, "twist_pair")
+    e, _ = lims.clamp(g, t, False)
+    d1 = g.op("Concat", [g.op("Add", [g.op("Mul", [_first(g, d), g.const(0.0)]),
+                                      g.const(1.0)]), d], axis=-1)
+    tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])])
+    if delta is None:
+        return _canonical(g, tau)
+    return _canonical(g, _normalize(g, _bilinear(g, delta, tau, _PROD, "swing_twist")))
 
 
 def _polygon_tables(v: np.ndarray) -> dict[str, np.ndarray]:
@@ -211,14 +299,19 @@ def _pad(a: np.ndarray, b: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
-def _nearest_polygon(g: _Graph, d: str, tab: dict[str, str], m: int) -> tuple[str, str, str]:
-    """Kernel of SphericalPolygon over all edges. ``d`` (N, 3); tables (1 or N, M, 3).
+_DOTS = ("g", "t0", "t1", "v0", "v1")  # the columns of a polygon's dot table, in order
+_ROWS = ("g", "v0", "v1", "vn", "vn1")  # the columns of its row table
 
-    Returns ``(outside (N, 1) bool, b (N, 3), dist_sign_inside (N,1) bool)``."""
-    d3 = g.op("Unsqueeze", [d, _i(g, [1])])  # (N, 1, 3)
-    s = g.op("ReduceSum", [g.op("Mul", [tab["g"], d3]), _i(g, [2])], keepdims=0)  # (N, M)
-    a0 = g.op("ReduceSum", [g.op("Mul", [tab["t0"], d3]), _i(g, [2])], keepdims=0)
-    a1 = g.op("ReduceSum", [g.op("Mul", [tab["t1"], d3]), _i(g, [2])], keepdims=0)
+
+def _nearest_polygon(g: _Graph, d: str, dots: str, rows: str, m: int) -> tuple[str, str]:
+    """Kernel of :class:`models.geometry.SphericalPolygon` over all ``m`` edges. ``d`` (N, 3);
+    ``dots`` (1|N, 3, 5m) the tables :data:`_DOTS` side by side (one product gives every
+    edge's plane side, arc coordinates and end cosines); ``rows`` (1|N, m, 15) the tables
+    :data:`_ROWS` (``vn1`` the next edge's ``vn``): the nearest edge's rows by one one-hot
+    product. Key = squared chord of the nearest point of each edge (lowest index on ties —
+    ``ArgMin`` returns the first —), pseudo-normal sign. Returns ``(outside (N, 1), b)``."""
+    p = g.op("MatMul", [g.op("Unsqueeze", [d, _i(g, [1])]), dots])  # (N, 1, 5m)
+    s, a0, a1, c0, c1 = g.ops("Split", [p], 5, axis=-1)
     s2 = g.op("Mul", [s, s])
     in_arc = g.op("And", [g.op("And", [g.op("GreaterOrEqual", [a0, g.const(0.0)]),
                                        g.op("GreaterOrEqual", [a1, g.const(0.0)])]),
@@ -226,96 +319,43 @@ def _nearest_polygon(g: _Graph, d: str, tab: dict[str, str], m: int) -> tuple[st
     key_in = g.op("Div", [g.op("Mul", [s2, g.const(2.0)]), g.op("Add", [
         g.const(1.0), g.op("Sqrt", [g.op("Max", [g.op("Sub", [g.const(1.0), s2]),
                                                  g.const(0.0)])])])])
-    e0 = g.op("Sub", [tab["v0"], d3])
-    e1 = g.op("Sub", [tab["v1"], d3])
-    k0 = g.op("ReduceSum", [g.op("Mul", [e0, e0]), _i(g, [2])], keepdims=0)
-    k1 = g.op("ReduceSum", [g.op("Mul", [e1, e1]), _i(g, [2])], keepdims=0)
-    key = g.op("Where", [in_arc, key_in, g.op("Min", [k0, k1])])
-    best = g.op("ArgMin", [key], axis=1, keepdims=1, select_last_index=0)  # (N, 1)
-    sb = g.op("GatherElements", [s, best], axis=1)
-    arc_b = g.op("GatherElements", [in_arc, best], axis=1)
-    end1 = g.op("Less", [g.op("GatherElements", [k1, best], axis=1),
-                         g.op("GatherElements", [k0, best], axis=1)])
-    nxt = g.op("Mod", [g.op("Add", [best, _i(g, [[1]])]), _i(g, [[m]])])
-    vidx = g.op("Where", [end1, nxt, best])
-
-    def rows(table: str, idx: str) -> str:  # table (1|N, M, 3) at idx (N, 1) -> (N, 3)
-        shape = g.op("Shape", [d])  # (N, 3)
-        full = g.op("Expand", [table, g.op("Concat", [
-            g.op("Slice", [shape, _i(g, [0]), _i(g, [1])]), _i(g, [m, 3])], axis=0)])
-        ix = g.op("Expand", [g.op("Unsqueeze", [idx, _i(g, [2])]), g.op("Concat", [
-            g.op("Slice", [shape, _i(g, [0]), _i(g, [1])]), _i(g, [1, 3])], axis=0)])
-        return g.op("Squeeze", [g.op("GatherElements", [full, ix], axis=1), _i(g, [1])])
-
-    gb = rows(tab["g"], best)
-    vn = rows(tab["vn"], vidx)
-    vv = rows(tab["v0"], vidx)
-    inside = g.op("Or", [
-        g.op("And", [arc_b, g.op("GreaterOrEqual", [sb, g.const(0.0)])]),
-        g.op("And", [g.op("Not", [arc_b]),
-                     g.op("GreaterOrEqual", [_dot(g, d, vn), g.const(0.0)])])])
+    key_end = g.op("Sub", [g.const(2.0), g.op("Mul", [g.op("Max", [c0, c1]), g.const(2.0)])])
+    best = g.op("ArgMin", [g.op("Where", [in_arc, key_in, key_end])], axis=-1, keepdims=1)
+    onehot = g.op("Cast", [g.op("Equal", [best, _i(g, np.arange(m))])], to=TensorProto.FLOAT)
+    gb, v0, v1, vn0, vn1 = g.ops("Split", [g.op("Squeeze", [
+        g.op("MatMul", [onehot, rows]), _i(g, [1])])], 5, axis=-1)
+    at = g.op("Add", [best, _i(g, [0, 3 * m, 4 * m])])  # s, c0, c1 of the nearest edge
+    sb, cb0, cb1 = g.ops("Split", [g.op("Squeeze", [
+        g.op("GatherElements", [p, at], axis=-1), _i(g, [1])])], 3, axis=-1)
+    arc = g.op("Squeeze", [g.op("GatherElements", [in_arc, best], axis=-1), _i(g, [1])])
+    end1 = g.op("Greater", [cb1, cb0])  # the edge's end nearer than its start
+    vn = g.op("Where", [end1, vn1, vn0])
+    side = g.op("Where", [arc, sb, _dot(g, d, vn)])
     foot = _normalize(g, g.op("Sub", [d, g.op("Mul", [sb, gb])]))
-    b = g.op("Where", [arc_b, foot, vv])
-    return g.op("Not", [inside]), b
+    return g.op("Less", [side, g.const(0.0)]), g.op("Where", [arc, foot, g.op("Where", [
+        end1, v1, v0])])
 
 
 def _nearest_cone(g: _Graph, d: str, c: str, r: str) -> tuple[str, str]:
     """Cone(s) of centre ``c`` and radius ``r`` (constants or (N, 3) / (N, 1))."""
     cos_t = _dot(g, d, c)
     tang = g.op("Sub", [d, g.op("Mul", [cos_t, c])])
-    sin_t = g.op("Sqrt", [_dot(g, tang, tang)])
     dm = g.op("Sub", [d, c])
     dp = g.op("Add", [d, c])
     theta = g.op("Mul", [g.op("Atan", [g.op("Div", [
         g.op("Sqrt", [_dot(g, dm, dm)]), g.op("Sqrt", [_dot(g, dp, dp)])])]), g.const(2.0)])
-    outside = g.op("Greater", [theta, r])
-    u = g.op("Div", [tang, g.op("Max", [sin_t, g.const(1e-30)])])
-    b = g.op("Add", [g.op("Mul", [g.op("Cos", [r]), c]), g.op("Mul", [g.op("Sin", [r]), u])])
-    return outside, b
-
-
-def _swing_joint(g: _Graph, q: str, axis: np.ndarray, nearest, lims) -> str:
-    """Correction (N, 4) of a ball / two-axis joint: ``nearest(d) -> (outside, b)`` or None,
-    twist ``lims``: None, (lo, hi) floats or an (N, 2) tensor."""
-    d = _bilinear(g, q, q, _rotation_tensor(axis), "limb_direction")
-    d = _normalize(g, d)
-    delta = None
-    if nearest is not None:
-        outside, b = nearest(d)
-        cosb = _dot(g, d, b)
-        axis_v = _cross(g, d, b)
-        raw = g.op("Concat", [g.op("Add", [cosb, g.const(1.0)]), axis_v], axis=1)
-        # d exactly opposite b: half a turn about any axis perpendicular to d
-        perp = _normalize(g, _cross(g, d, g.op("Where", [
-            g.op("Less", [g.op("Abs", [g.op("MatMul", [d, g.const([[1.0], [0.0], [0.0]])])]),
-                          g.const(0.9)]), g.const([[1.0, 0.0, 0.0]]), g.const([[0.0, 1.0, 0.0]])])))
-        flip = g.op("Concat", [g.op("Mul", [cosb, g.const(0.0)]), perp], axis=1)
-        raw = g.op("Where", [g.op("Less", [g.op("Add", [cosb, g.const(1.0)]), g.const(1e-7)]),
-                             flip, raw])
-        delta = g.op("Where", [outside, _normalize(g, raw), g.const([[1.0, 0.0, 0.0, 0.0]])])
-    if lims is None:
-        if delta is None:
-            return g.op("Add", [g.op("Mul", [q, g.const(0.0)]), g.const([[1.0, 0, 0, 0]])])
-        return delta
-    tmap = np.concatenate((_PROD[..., :1], (_PROD[..., 1:] @ axis)[..., None]), axis=-1)
-    if delta is None:
-        t = g.op("MatMul", [q, g.const(tmap[0])])
-    else:
-        t = _bilinear(g, delta, q, tmap, "twist_pair")
-    e, _ = _clamp_pair(g, t, lims)
-    d1 = g.op("Concat", [g.op("Add", [g.op("Mul", [g.op("MatMul", [
-        d, g.const([[1.0], [0.0], [0.0]])]), g.const(0.0)]), g.const(1.0)]), d], axis=1)
-    tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])])
-    if delta is None:
-        return _canonical(g, tau)
-    return _canonical(g, _normalize(g, _bilinear(g, delta, tau, _PROD, "swing_twist")))
+    b = g.op("Add", [g.op("Mul", [g.op("Cos", [r]), c]),
+                     g.op("Mul", [g.op("Sin", [r]), _normalize(g, tang)])])
+    return g.op("Greater", [theta, r]), b
 
 
 def _constant_polygon(g: _Graph, swing: PolygonSwing):
-    tabs = _polygon_tables(oriented_vertices(swing))
-    m = len(tabs["v0"])
-    names = {k: g.const(v[None]) for k, v in tabs.items()}
-    return lambda d: _nearest_polygon(g, d, names, m)
+    tab = _polygon_tables(oriented_vertices(swing))
+    tab["vn1"] = np.roll(tab["vn"], -1, axis=0)
+    m = len(tab["v0"])
+    dots = g.const(np.concatenate([tab[k].T for k in _DOTS], axis=1)[None])
+    rows = g.const(np.concatenate([tab[k] for k in _ROWS], axis=1)[None])
+    return lambda d: _nearest_polygon(g, d, dots, rows, m)
 
 
 def _coupled_polygon(g: _Graph, pairs, kt):
@@ -324,21 +364,23 @@ def _coupled_polygon(g: _Graph, pairs, kt):
     a_st = np.stack([a for a, _ in padded])
     b_st = np.stack([b for _, b in padded])
     k, t = kt
+    t3 = g.op("Unsqueeze", [t, _i(g, [2])])  # (N, 1, 1)
+    ga = g.op("Squeeze", [g.op("Gather", [g.const(a_st), k], axis=0), _i(g, [1])])
+    gb = g.op("Squeeze", [g.op("Gather", [g.const(b_st), k], axis=0), _i(g, [1])])
+    v0 = _normalize(g, g.op("Add", [ga, g.op("Mul", [g.op("Sub", [gb, ga]), t3])]))  # (N, m, 3)
 
-    def mix(arr_a, arr_b) -> str:
-        ga = g.op("Squeeze", [g.op("Gather", [g.const(arr_a), k], axis=0), _i(g, [1])])
-        gb = g.op("Squeeze", [g.op("Gather", [g.const(arr_b), k], axis=0), _i(g, [1])])
-        t3 = g.op("Unsqueeze", [t, _i(g, [2])])  # (N, 1, 1)
-        return _normalize(g, g.op("Add", [ga, g.op("Mul", [g.op("Sub", [gb, ga]), t3])]))
+    def roll(x: str, by: int) -> str:
+        return g.op("Gather", [x, _i(g, np.roll(np.arange(m), -by))], axis=1)
 
-    v0 = mix(a_st, b_st)
-    v1 = mix(np.roll(a_st, -1, axis=1), np.roll(b_st, -1, axis=1))
+    v1 = roll(v0, 1)
     gn = _normalize(g, _cross(g, v0, v1))
-    prev = mix(np.roll(a_st, 1, axis=1), np.roll(b_st, 1, axis=1))
-    gprev = _normalize(g, _cross(g, prev, v0))
-    tabs = {"v0": v0, "v1": v1, "g": gn, "t0": _cross(g, gn, v0), "t1": _cross(g, v1, gn),
-            "vn": g.op("Add", [gn, gprev])}
-    return lambda d: _nearest_polygon(g, d, tabs, m)
+    vn = g.op("Add", [gn, roll(gn, -1)])
+    tab = {"v0": v0, "v1": v1, "g": gn, "t0": _cross(g, gn, v0), "t1": _cross(g, v1, gn),
+           "vn": vn, "vn1": roll(vn, 1)}
+    dots = g.op("Transpose", [g.op("Concat", [tab[k_] for k_ in _DOTS], axis=1)],
+                perm=[0, 2, 1])
+    rows = g.op("Concat", [tab[k_] for k_ in _ROWS], axis=2)
+    return lambda d: _nearest_polygon(g, d, dots, rows, m)
 
 
 def _field_nearest(g: _Graph, tau: str, net):
@@ -347,16 +389,18 @@ def _field_nearest(g: _Graph, tau: str, net):
     field's projection steps (the same computation as :meth:`DistanceField.project`)."""
     nf = net.b.shape[1]
     f32 = np.float32
-    bd, bt = g.const(net.b[:3].astype(f32)), g.const(net.b[3:4].astype(f32))
+    bd = g.const(net.b[:3].astype(f32))
     w1_fd = g.const(net.w1[:nf + 3].astype(f32))           # rows of sin(u) and d
     w2, w3 = g.const(net.w2.astype(f32)), g.const(net.w3[:, None].astype(f32))
     w1_ft = g.const(net.w1[:nf].T.astype(f32).copy())       # (H, F)
     w1_dt = g.const(net.w1[nf:nf + 3].T.astype(f32).copy())  # (H, 3)
     w2t, w3r = g.const(net.w2.T.astype(f32).copy()), g.const(net.w3[None].astype(f32))
     bdt = g.const(net.b[:3].T.astype(f32).copy())            # (F, 3)
+    b2, b3 = g.const(net.b2[None].astype(f32)), g.const(net.b3[None].astype(f32))
     one = g.const(1.0)
     # the terms of τ are the same at every step
-    u_t = g.op("Add", [g.op("Mul", [tau, bt]), g.const(net.c[None].astype(f32))])
+    u_t = g.op("Add", [g.op("Mul", [tau, g.const(net.b[3:4].astype(f32))]),
+                       g.const(net.c[None].astype(f32))])
     a1_t = g.op("Add", [g.op("Mul", [tau, g.const(net.w1[nf + 3:nf + 4].astype(f32))]),
                         g.const(net.b1[None].astype(f32))])
 
@@ -364,9 +408,8 @@ def _field_nearest(g: _Graph, tau: str, net):
         u = g.op("Add", [g.op("MatMul", [x, bd]), u_t])
         h1 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [
             g.op("Concat", [g.op("Sin", [u]), x], axis=1), w1_fd]), a1_t])])
-        h2 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [h1, w2]),
-                                        g.const(net.b2[None].astype(f32))])])
-        f = g.op("Add", [g.op("MatMul", [h2, w3]), g.const(net.b3[None].astype(f32))])
+        h2 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [h1, w2]), b2])])
+        f = g.op("Add", [g.op("MatMul", [h2, w3]), b3])
         g2 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h2, h2])]), w3r])
         g1 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h1, h1])]), g.op("MatMul", [g2, w2t])])
         grad = g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
@@ -389,44 +432,108 @@ def _field_nearest(g: _Graph, tau: str, net):
     return nearest
 
 
-def _joint_graph(g: _Graph, q: str, c: JointConstraint | None, coupling, kt, field=None,
-                 tau=None):
-    """Correction (and the corrected angle for a hinge) of one joint; ``field``: the trained
-    distance field of a coupled polygon swing (method ``network``) and ``tau`` its input."""
-    if coupling is None:
-        if c.kind == "hinge":
-            return _hinge(g, q, np.asarray(c.hinge.axis), (c.hinge.min, c.hinge.max))
-        sw = c.swing
-        if isinstance(sw, ConeSwing):
-            def nearest(d):
-                return _nearest_cone(g, d, g.const(sw.centre[None, :]), g.const(sw.radius))
-        elif isinstance(sw, PolygonSwing):
-            nearest = _constant_polygon(g, sw)
+def _levels(limb: Limb) -> list[int]:
+    """Each joint's stage: after the joints its limits depend on, as late as the joints that
+    depend on it allow (a joint nothing depends on joins the last stage, so joints of one kind
+    share a group where the hierarchy allows)."""
+    n = len(limb.joints)
+    src = [None if j.coupling is None else limb.index(j.coupling.by) for j in limb.joints]
+    early = [0] * n
+    for j in limb.order:
+        if src[j] is not None:
+            early[j] = early[src[j]] + 1
+    late = [max(early)] * n
+    for j in reversed(limb.order):
+        if src[j] is not None:
+            late[src[j]] = min(late[src[j]], late[j] - 1)
+    return late
+
+
+def _is_hinge(joint) -> bool:
+    return (joint.coupling.limits.kind if joint.coupling is not None
+            else joint.constraint.kind) == "hinge"
+
+
+def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
+    """Every joint's correction into ``OUTPUT``: the groups of :func:`_levels` × kind in the
+    hierarchy's order; a coupled joint reads its source's corrected angle."""
+    level = _levels(limb)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for j in sorted(range(len(limb.joints)), key=lambda j: level[j]):
+        groups.setdefault((level[j], 0 if _is_hinge(limb.joints[j]) else 1), []).append(j)
+    qt = g.op("Transpose", [INPUT], perm=[1, 0, 2])  # (J, N, 4)
+    angles: dict[int, tuple[str, int, int]] = {}  # hinge → (its group's angles, row, size)
+    cache: dict[int, str] = {}
+
+    def angle_of(j: int) -> str:
+        if j not in cache:
+            cache[j] = _rows(g, *angles[j])
+        return cache[j]
+
+    outputs, order = [], []
+    for (_, cls), js in sorted(groups.items()):
+        same = js == list(range(len(limb.joints)))
+        q = _normalize(g, qt if same else g.op("Gather", [qt, _i(g, js)], axis=0))
+        items, axes, nearests, twisted = [], [], [], False
+        for j in js:
+            joint = limb.joints[j]
+            c, cp = joint.constraint, joint.coupling
+            kt = src = None
+            if cp is not None:
+                src = angle_of(limb.index(cp.by))
+                kt = _locate(g, src, np.radians(np.asarray(cp.at_deg)))
+                c = cp.keyframes[0]
+            if cls == 0:
+                axes.append(c.hinge.axis)
+                items.append((c.hinge.min, c.hinge.max) if cp is None else _keyframe_lerp(
+                    g, kt, np.array([[k.hinge.min, k.hinge.max] for k in cp.keyframes])))
+                continue
+            axes.append(c.limb_axis)
+            nearests.append(_swing_nearest(g, joint, kt, src, fields.get(joint.name)))
+            twisted |= c.twist is not None
+            items.append(None if c.twist is None else (c.twist.min, c.twist.max) if cp is None
+                         else _keyframe_lerp(g, kt, np.array([[k.twist.min, k.twist.max]
+                                                               for k in cp.keyframes])))
+        axes = np.asarray(axes, dtype=float)
+        if cls == 0:
+            corr, ang = _hinge_group(g, q, axes, _Limits(items))
+            for r, j in enumerate(js):
+                angles[j] = (ang, r, len(js))
         else:
-            nearest = None
-        lims = None if c.twist is None else (c.twist.min, c.twist.max)
-        return _swing_joint(g, q, np.asarray(c.limb_axis), nearest, lims), None
-    kf = coupling.keyframes
-    if coupling.limits.kind == "hinge":
-        vals = np.array([[k.hinge.min, k.hinge.max] for k in kf])
-        return _hinge(g, q, np.asarray(kf[0].hinge.axis), _keyframe_lerp(g, kt, vals))
-    first = kf[0]
-    if isinstance(first.swing, ConeSwing):
+            corr = _swing_group(g, q, axes, nearests, _Limits(items) if twisted else None)
+        outputs.append(corr)
+        order.extend(js)
+    out = outputs[0] if len(outputs) == 1 else g.op("Concat", outputs, axis=0)
+    if order != sorted(order):
+        out = g.op("Gather", [out, _i(g, np.argsort(order))], axis=0)
+    g.op("Transpose", [out], perm=[1, 0, 2], out=OUTPUT)
+
+
+def _swing_nearest(g: _Graph, joint, kt, src: str | None, field):
+    """``nearest(d)`` of a ball / two-axis joint's swing (None: no swing limit); a coupled one
+    at keyframe interval and fraction ``kt`` of its source's corrected angle ``src``."""
+    cp = joint.coupling
+    if cp is None:
+        sw = joint.constraint.swing
+        if isinstance(sw, ConeSwing):
+            return lambda d: _nearest_cone(g, d, g.const(sw.centre[None, :]), g.const(sw.radius))
+        if isinstance(sw, PolygonSwing):
+            return _constant_polygon(g, sw)
+        return None
+    kf = cp.keyframes
+    if isinstance(kf[0].swing, ConeSwing):
         centre = _normalize(g, _keyframe_lerp(g, kt, np.array([k.swing.centre for k in kf])))
         radius = _keyframe_lerp(g, kt, np.array([[k.swing.radius] for k in kf]))
-
-        def nearest(d):
-            return _nearest_cone(g, d, centre, radius)
-    elif isinstance(first.swing, PolygonSwing):
-        nearest = (_coupled_polygon(g, coupling.limits.polygons, kt) if field is None else
-                   _field_nearest(g, tau, field))
-    else:
-        nearest = None
-    lims = None
-    if first.twist is not None:
-        vals = np.array([[k.twist.min, k.twist.max] for k in kf])
-        lims = _keyframe_lerp(g, kt, vals)
-    return _swing_joint(g, q, np.asarray(first.limb_axis), nearest, lims), None
+        return lambda d: _nearest_cone(g, d, centre, radius)
+    if isinstance(kf[0].swing, PolygonSwing):
+        if field is None:
+            return _coupled_polygon(g, cp.limits.polygons, kt)
+        span = field.at1 - field.at0  # τ = 2 (θ − at0) / (at1 − at0) − 1, clamped
+        tau = g.op("Clip", [g.op("Add", [
+            g.op("Mul", [src, g.const(2.0 / span)]),
+            g.const(-1.0 - 2.0 * field.at0 / span)]), g.const(-1.0), g.const(1.0)])
+        return _field_nearest(g, tau, field)
+    return None
 
 
 def limb_to_onnx(limb: Limb, fields: dict | None = None,
@@ -443,30 +550,7 @@ def limb_to_onnx(limb: Limb, fields: dict | None = None,
                          f"got {sorted(fields)}")
     g = _Graph()
     jn = len(limb.joints)
-    corr: dict[int, str] = {}
-    angle: dict[int, str] = {}
-    for j in limb.order:
-        joint = limb.joints[j]
-        q = g.op("Squeeze", [g.op("Gather", [INPUT, _i(g, [j])], axis=1), _i(g, [1])],
-                 stem=f"q_{joint.name}")
-        q = _normalize(g, q)
-        kt = tau = None
-        field = fields.get(joint.name)
-        if joint.coupling is not None:
-            src = limb.index(joint.coupling.by)
-            kt = _locate(g, angle[src], np.radians(np.asarray(joint.coupling.at_deg)))
-            if field is not None:  # τ = 2 (θ − at0) / (at1 − at0) − 1, clamped
-                span = field.at1 - field.at0
-                tau = g.op("Clip", [g.op("Add", [g.op("Mul", [angle[src], g.const(2.0 / span)]),
-                                                 g.const(-1.0 - 2.0 * field.at0 / span)]),
-                                    g.const(-1.0), g.const(1.0)])
-        c, a = _joint_graph(g, q, joint.constraint, joint.coupling, kt, field, tau)
-        corr[j] = c
-        if a is not None:
-            angle[j] = a
-    stacked = g.op("Concat", [g.op("Unsqueeze", [corr[j], _i(g, [1])]) for j in range(jn)],
-                   axis=1)
-    g.op("Identity", [stacked], out=OUTPUT)
+    _limb_graph(g, limb, fields)
     used = {name for node in g.nodes for name in node.input}
     g.inits = [t for t in g.inits if t.name in used]
     graph = helper.make_graph(
@@ -504,7 +588,10 @@ def export_limb_model(limb: Limb, path: str | Path, fields: dict | None = None,
 
 
 class LimbModel:
-    """An exported limb model run by onnxruntime (one thread, no spinning).
+    """An exported limb model run by onnxruntime: one posture on the calling thread (one
+    onnxruntime thread, no spinning); a batch of more than :attr:`CHUNK` postures in chunks of
+    :attr:`CHUNK` on one worker thread per core for the call (the session is shared;
+    onnxruntime releases the GIL while it runs, and chunks of this size stay in the cache).
 
     Parameters
     ----------
@@ -544,6 +631,8 @@ class LimbModel:
         self._one = np.zeros((1, self.n_joints, 4), dtype=np.float32)
         self._feed = {INPUT: self._one}
 
+    CHUNK = 1024  #: postures per onnxruntime call in a batch
+
     @property
     def size_bytes(self) -> int:
         return self.path.stat().st_size
@@ -552,8 +641,19 @@ class LimbModel:
         """Corrections (N, J, 4) float32 of postures (N, J, 4) (or (J, 4) → (J, 4))."""
         q = np.ascontiguousarray(postures, dtype=np.float32)
         single = q.ndim == 2
-        out = self._run([OUTPUT], {INPUT: q.reshape(-1, self.n_joints, 4)}, None)[0]
-        return out[0] if single else out
+        q = q.reshape(-1, self.n_joints, 4)
+        workers = min(os.cpu_count() or 1, 8)
+        if len(q) <= self.CHUNK or workers == 1:
+            out = self._run([OUTPUT], {INPUT: q}, None)[0]
+            return out[0] if single else out
+        out = np.empty(q.shape, dtype=np.float32)
+
+        def chunk(k: int) -> None:
+            out[k:k + self.CHUNK] = self._run([OUTPUT], {INPUT: q[k:k + self.CHUNK]}, None)[0]
+        starts = range(0, len(q), self.CHUNK)
+        with ThreadPoolExecutor(min(workers, len(starts)), thread_name_prefix="limb-model") as pool:
+            list(pool.map(chunk, starts))
+        return out
 
     def correct_one(self, posture) -> np.ndarray:
         """One posture (J, 4) through a preallocated input buffer: (J, 4) float32."""

@@ -95,6 +95,12 @@ class _Graph:
         self.nodes.append(helper.make_node(op_type, inputs, [out], **attrs))
         return out
 
+    def ops(self, op_type: str, inputs: list[str], n: int, **attrs) -> list[str]:
+        """A node of ``n`` outputs (``Split``)."""
+        outs = [self.name(op_type.lower()) for _ in range(n)]
+        self.nodes.append(helper.make_node(op_type, inputs, outs, **attrs))
+        return outs
+
 
 def _activation(g: _Graph, kind: int, z: str, templates: np.ndarray | None = None,
                 coef: np.ndarray | None = None) -> str:
@@ -155,19 +161,24 @@ def _rotation_tensor(axis: np.ndarray) -> np.ndarray:
 
 
 def _bilinear(g: _Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") -> str:
-    """``out_k = Σ_ij p_i q_j t[i, j, k]`` for (N, I), (N, J) inputs: 4 nodes, zero pairs pruned."""
-    ni, nj, _ = t.shape
+    """``out_k = Σ_ij p_i q_j t[i, j, k]`` over the last axis: 4 nodes, zero pairs pruned.
+
+    ``t`` (I, J, O) for inputs (..., I), (..., J); or (K, I, J, O), one form per row of a
+    leading axis of K (inputs (K, N, I), (K, N, J): a group of joints, one tensor each)."""
+    ts = t[None] if t.ndim == 3 else t
     if p == q:  # a quadratic form: fold t[j, i] into t[i, j] (i < j)
-        t = np.triu(np.moveaxis(t + np.swapaxes(t, 0, 1), -1, 0) * 0.5, 0)
-        t = np.moveaxis(t + np.triu(t, 1), 0, -1)
-    pairs = [(i, j) for i in range(ni) for j in range(nj) if np.any(t[i, j] != 0.0)]
+        sym = 0.5 * (ts + np.swapaxes(ts, 1, 2))
+        ts = np.moveaxis(np.triu(np.moveaxis(sym, (1, 2), (-2, -1)), 0), (-2, -1), (1, 2))
+        ts = ts + np.moveaxis(np.triu(np.moveaxis(ts, (1, 2), (-2, -1)), 1), (-2, -1), (1, 2))
+    _, ni, nj, _ = ts.shape
+    pairs = [(i, j) for i in range(ni) for j in range(nj) if np.any(ts[:, i, j] != 0.0)]
     a = np.zeros((ni, len(pairs)))
     b = np.zeros((nj, len(pairs)))
-    s = np.stack([t[i, j] for i, j in pairs])
+    s = np.stack([ts[:, i, j] for i, j in pairs], axis=1)  # (K, P, O)
     for n, (i, j) in enumerate(pairs):
         a[i, n] = b[j, n] = 1.0
     prod = g.op("Mul", [g.op("MatMul", [p, g.const(a)]), g.op("MatMul", [q, g.const(b)])])
-    return g.op("MatMul", [prod, g.const(s)], stem=stem)
+    return g.op("MatMul", [prod, g.const(s[0] if t.ndim == 3 else s)], stem=stem)
 
 
 def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
@@ -181,7 +192,7 @@ def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
     swapped = g.op("MatMul", [ab, g.const([[0.0, 1.0], [1.0, 0.0]])])
     mr = g.op("Add", [g.op("Mul", [ab, g.op("Mul", [cr, g.const([[1.0, -1.0]])])]),
                       g.op("Mul", [swapped, sr])])
-    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[1], keepdims=1),
+    side = g.op("GreaterOrEqual", [g.op("ReduceProd", [u], axes=[-1], keepdims=1),
                                    g.const(0.0)])
     ms = g.op("Where", [side, mr, g.op("Mul", [mr, g.const([[1.0, -1.0]])])])
     return g.op("Where", [valid, g.const([[1.0, 0.0]]), ms], stem="twist_clamp")

@@ -92,6 +92,11 @@ def test_one_posture_metadata_and_file_mode(leg_model, tmp_path):
     for i in range(5):  # the same graph; float32 kernels may round a batch differently
         np.testing.assert_allclose(model.correct_one(q[i]), batch[i], atol=1e-6)
         np.testing.assert_allclose(model.correction(q[i]), batch[i], atol=1e-6)
+    # a batch larger than a chunk runs in chunks on worker threads: the same corrections,
+    # in order, as one call on the whole batch
+    big = held_out_postures(limb, 2 * model.CHUNK + 37, 14, oracle=oracle).astype(np.float32)
+    whole = model.session.run(None, {"orientations": big})[0]
+    np.testing.assert_allclose(model.correction(big), whole, atol=1e-6)
     assert model.metadata["jointlimits.format"] == FORMAT
     assert model.joints == ("hip", "knee", "ankle")
     assert model.metadata["jointlimits.method"] == "geometric"
