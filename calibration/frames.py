@@ -39,6 +39,7 @@ from models import quaternion as Q
 __all__ = [
     "FRAMES",
     "RIG_TO_ISB",
+    "SEGMENT_TO_ISB",
     "direction_to_rig",
     "joint_to_rig",
     "segment_to_rig",
@@ -49,6 +50,16 @@ FRAMES = ("rig", "isb")
 
 #: Columns: the rig's X, Y, Z axes in ISB coordinates (see module doc).
 RIG_TO_ISB = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+#: Each segment's rig axes in its ISB frame (columns): :data:`RIG_TO_ISB`, except the foot,
+#: whose long axis lies horizontal in standing: its rig frame has +X towards the toes, +Y
+#: superior, +Z right — the ISB calcaneus frame itself (Wu et al. 2002 §3.1). A joint
+#: orientation (child ``c`` relative to parent ``p``) is then ``M_p J_rig M_cᵀ`` in ISB frames.
+SEGMENT_TO_ISB: dict[str, np.ndarray] = {
+    **{s: RIG_TO_ISB for s in ("thorax", "upper-arm", "forearm", "hand", "pelvis", "thigh",
+                               "shank")},
+    "foot": np.eye(3),
+}
 
 #: ``m``: the quaternion of :data:`RIG_TO_ISB` (−90° about Z), scalar-first.
 _M = np.array([math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)])

@@ -8,7 +8,7 @@ Every segment's rig frame (:mod:`calibration.frames`) has +X along the segment p
 distally, +Y anterior, +Z to the body's right — except the **foot**, whose long axis lies
 horizontal in standing: +X towards the toes (its long axis, anterior), +Y superior, +Z right,
 which is the ISB calcaneus frame itself (Wu et al. 2002 §3.1). With ``M_s`` the rig axes of
-segment ``s`` in its ISB frame (:data:`SEGMENT_TO_ISB`: :data:`calibration.frames.RIG_TO_ISB`,
+segment ``s`` in its ISB frame (:data:`calibration.frames.SEGMENT_TO_ISB`: ``RIG_TO_ISB``,
 the identity for the foot), a joint orientation (child ``c`` relative to parent ``p``, rig
 frames) is ``J_isb = M_p J_rig M_cᵀ`` in ISB frames. So the ankle's neutral joint orientation
 in rig frames is not the identity but ``M_shankᵀ``: the foot's long axis along the shank's +Y
@@ -62,19 +62,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.frames import RIG_TO_ISB
+from calibration.clinical import _check_side, mirror_quaternions
+from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
-__all__ = ["JOINT_ANGLES", "NORMATIVE", "SEGMENT_TO_ISB", "JointAngleSet", "angle_peaks",
-           "from_angles", "joint_angles"]
-
-#: Rig axes of each segment in its ISB frame (columns), see the module doc.
-SEGMENT_TO_ISB: dict[str, np.ndarray] = {
-    **{s: RIG_TO_ISB for s in ("thorax", "upper-arm", "forearm", "hand", "pelvis", "thigh",
-                               "shank")},
-    "foot": np.eye(3),
-}
-
+__all__ = ["JOINT_ANGLES", "NORMATIVE", "JointAngleSet", "angle_peaks", "from_angles",
+           "joint_angles"]
 
 @dataclass(frozen=True)
 class JointAngleSet:
@@ -141,12 +134,7 @@ def _joint(name: str) -> JointAngleSet:
 
 
 def _side(q: np.ndarray, side: str) -> np.ndarray:
-    if side not in ("right", "left"):
-        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
-    if side == "left":
-        q = q.copy()
-        q[..., 1:3] *= -1.0
-    return q
+    return mirror_quaternions(q) if _check_side(side) == "left" else q
 
 
 def joint_angles(q, joint: str, side: str = "right") -> dict[str, np.ndarray]:

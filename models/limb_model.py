@@ -71,10 +71,11 @@ from models.onnx_io import (
     _Graph,
     _product_tensor,
     _rotation_tensor,
+    interval_clamp,
     latency_session,
     package_version,
     read_onnx,
-    twist_clamp,
+    twist_rotation,
 )
 
 __all__ = ["FORMAT", "INPUT", "OUTPUT", "LimbModel", "export_limb_model", "limb_to_onnx",
@@ -89,11 +90,10 @@ _I64 = np.int64
 
 
 # ---------------------------------------------------------------------------------------------
-# Graph pieces. Joints of one kind at one level of the hierarchy run as one group: tensors
+# Graph pieces. Joints of one kind at one stage of the hierarchy run as one group: tensors
 # (K, N, ·) with one row per joint and per-joint constants (K, 1, ·) or (K, ·, ·), so the node
 # count (what a single call costs in onnxruntime) grows with the kinds, not the joints.
 # ---------------------------------------------------------------------------------------------
-_ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # (w, x) @ _ROT90 = (x, -w)
 _CROSS = np.zeros((3, 3, 3))
 for _a, _b, _c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _CROSS[_a, _b, _c], _CROSS[_b, _a, _c] = 1.0, -1.0
@@ -145,38 +145,18 @@ class _Limits:
     of floats, None (no limit: the whole circle) or a tensor (N, 2) (coupled)."""
 
     def __init__(self, items: list):
+        self.limited = any(x is not None for x in items)  #: any joint with a limit
         self.items = [(-math.pi, math.pi) if x is None else x for x in items]
 
     def clamp(self, g: _Graph, t: str, target: bool) -> tuple[str, str | None]:
-        """Clamp half-angle pairs ``t`` (K, N, 2) (angle ``φ/2``) to the intervals on the circle
-        (relative to each interval's middle, nearer end, a tie to ``max``: the oracle's rule).
-        Returns ``e`` (K, N, 2), the half-angle pair of the clamping rotation (``(1, 0)``
-        inside), and with ``target`` the clamped pair in absolute terms."""
-        tn = _normalize(g, t)
+        """:func:`models.onnx_io.interval_clamp` of half-angle pairs ``t`` (K, N, 2), each row
+        to its joint's interval (constants folded; per-sample ones stacked to (K, N, 2))."""
         if all(isinstance(x, tuple) for x in self.items):
-            lo, hi = np.array(self.items, dtype=float).T
-            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-            cm, sm = np.cos(mid / 2), np.sin(mid / 2)
-            rot = np.stack([np.stack([cm, -sm], -1), np.stack([sm, cm], -1)], 1)  # (K, 2, 2)
-            u = g.op("MatMul", [tn, g.const(rot)])  # t e^{-i mid/2}
-            cr, sr = g.const(np.cos(half / 2)[:, None, None]), g.const(
-                np.sin(half / 2)[:, None, None])
-        else:
-            ref = next(x for x in self.items if isinstance(x, str))
-            shape = g.op("Shape", [ref])
-            lims = _stack(g, [x if isinstance(x, str) else g.op("Expand", [
-                g.const(np.array(x)[None]), shape]) for x in self.items])
-            mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # mid/2, half/2
-            cm, cr = g.ops("Split", [g.op("Cos", [mh])], 2, axis=-1)
-            sm, sr = g.ops("Split", [g.op("Sin", [mh])], 2, axis=-1)
-            u = g.op("Add", [g.op("Mul", [tn, cm]),
-                             g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90)]), sm])])
-        e = twist_clamp(g, u, cr, sr)
-        if not target:
-            return e, None
-        e_w, e_x = g.ops("Split", [e], 2, axis=-1)  # the clamped pair: e ⊗ tn (complex)
-        return e, g.op("Add", [g.op("Mul", [tn, e_w]),
-                               g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90.T)]), e_x])])
+            return interval_clamp(g, t, tuple(np.array(self.items, dtype=float).T), target)
+        ref = next(x for x in self.items if isinstance(x, str))
+        shape = g.op("Shape", [ref])
+        return interval_clamp(g, t, _stack(g, [x if isinstance(x, str) else g.op("Expand", [
+            g.const(np.array(x)[None]), shape]) for x in self.items]), target)
 
 
 def _keyframe_lerp(g: _Graph, kt, values: np.ndarray) -> str:
@@ -225,13 +205,12 @@ def _hinge_group(g: _Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[st
     return _canonical(g, _normalize(g, corr)), angle
 
 
-def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list,
-                 lims: _Limits | None) -> str:
+def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list, lims: _Limits) -> str:
     """Corrections (K, N, 4) of ball / two-axis joints ``q`` (K, N, 4) with limb axes ``axes``
     (K, 3): limb direction ``d``; per joint ``nearest(d (N, 3)) -> (outside (N, 1), b (N, 3))``
     or None; swing correction ``Δ`` = the minimal rotation ``d → b`` where outside; the twist of
-    ``Δ ⊗ q`` about ``d`` clamped (``τ``; ``lims`` None: no joint of the group has a twist
-    limit); correction ``Δ ⊗ τ``."""
+    ``Δ ⊗ q`` about ``d`` clamped (``τ``; none when no joint of the group has a twist limit);
+    correction ``Δ ⊗ τ``."""
     k = len(axes)
     d = _normalize(g, _bilinear(g, q, q, np.stack([_rotation_tensor(a) for a in axes]),
                                 "limb_direction"))
@@ -257,7 +236,7 @@ def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list,
                                _normalize(g, _cross(g, d, ref))], axis=-1)
         raw = g.op("Where", [g.op("Less", [cosb1, g.const(1e-7)]), flip, raw])
         delta = g.op("Where", [outside, _normalize(g, raw), g.const([1.0, 0.0, 0.0, 0.0])])
-    if lims is None:
+    if not lims.limited:
         if delta is None:
             return g.op("Add", [g.op("Mul", [q, g.const(0.0)]), g.const([1.0, 0, 0, 0])])
         return delta
@@ -268,9 +247,7 @@ def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list,
     else:
         t = _bilinear(g, delta, q, tmap, "twist_pair")
     e, _ = lims.clamp(g, t, False)
-    d1 = g.op("Concat", [g.op("Add", [g.op("Mul", [_first(g, d), g.const(0.0)]),
-                                      g.const(1.0)]), d], axis=-1)
-    tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])])
+    tau = twist_rotation(g, d, e, rank=3)
     if delta is None:
         return _canonical(g, tau)
     return _canonical(g, _normalize(g, _bilinear(g, delta, tau, _PROD, "swing_twist")))
@@ -474,7 +451,7 @@ def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
     for (_, cls), js in sorted(groups.items()):
         same = js == list(range(len(limb.joints)))
         q = _normalize(g, qt if same else g.op("Gather", [qt, _i(g, js)], axis=0))
-        items, axes, nearests, twisted = [], [], [], False
+        items, axes, nearests = [], [], []
         for j in js:
             joint = limb.joints[j]
             c, cp = joint.constraint, joint.coupling
@@ -490,7 +467,6 @@ def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
                 continue
             axes.append(c.limb_axis)
             nearests.append(_swing_nearest(g, joint, kt, src, fields.get(joint.name)))
-            twisted |= c.twist is not None
             items.append(None if c.twist is None else (c.twist.min, c.twist.max) if cp is None
                          else _keyframe_lerp(g, kt, np.array([[k.twist.min, k.twist.max]
                                                                for k in cp.keyframes])))
@@ -500,7 +476,7 @@ def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
             for r, j in enumerate(js):
                 angles[j] = (ang, r, len(js))
         else:
-            corr = _swing_group(g, q, axes, nearests, _Limits(items) if twisted else None)
+            corr = _swing_group(g, q, axes, nearests, _Limits(items))
         outputs.append(corr)
         order.extend(js)
     out = outputs[0] if len(outputs) == 1 else g.op("Concat", outputs, axis=0)

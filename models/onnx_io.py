@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -198,6 +197,52 @@ def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
     return g.op("Where", [valid, g.const([[1.0, 0.0]]), ms], stem="twist_clamp")
 
 
+_ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # (w, x) @ _ROT90 = (x, -w)
+
+
+def interval_clamp(g: _Graph, t: str, lims, target: bool = False) -> tuple[str, str | None]:
+    """Clamp half-angle pairs ``t`` (..., 2) (the angle ``φ/2`` of a rotation about an axis) to
+    intervals on the circle: relative to each interval's middle, nearer end, a tie to ``max``
+    (:func:`twist_clamp`, the oracle's rule).
+
+    ``lims``: radians, either ``(lo, hi)`` constants — floats, or arrays (K,) for inputs
+    (K, N, 2), one interval per row of the leading axis — or a tensor (..., 2) per sample.
+    Returns ``e`` (..., 2), the half-angle pair of the clamping rotation (``(1, 0)`` inside),
+    and with ``target`` the clamped pair itself (``e ⊗ t̂``), else None."""
+    tn = g.op("LpNormalization", [t], axis=-1, p=2)
+    if isinstance(lims, str):
+        mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # mid/2, half/2
+        cm, cr = g.ops("Split", [g.op("Cos", [mh])], 2, axis=-1)
+        sm, sr = g.ops("Split", [g.op("Sin", [mh])], 2, axis=-1)
+        u = g.op("Add", [g.op("Mul", [tn, cm]),
+                         g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90)]), sm])])
+    else:
+        lo, hi = (np.asarray(x, dtype=float) for x in lims)
+        mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        cm, sm = np.cos(mid / 2), np.sin(mid / 2)
+        turn = np.stack([np.stack([cm, -sm], -1), np.stack([sm, cm], -1)], -2)
+        u = g.op("MatMul", [tn, g.const(turn)])  # t e^{-i mid/2}
+        if np.ndim(half):  # (K,) → (K, 1, 1): one per row of the leading axis
+            half = half[:, None, None]
+        cr, sr = g.const(np.cos(half / 2)), g.const(np.sin(half / 2))
+    e = twist_clamp(g, u, cr, sr)
+    if not target:
+        return e, None
+    e_w, e_x = g.ops("Split", [e], 2, axis=-1)  # e ⊗ t̂ (complex product)
+    return e, g.op("Add", [g.op("Mul", [tn, e_w]),
+                           g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90.T)]), e_x])])
+
+
+def twist_rotation(g: _Graph, d: str, e: str, rank: int = 2) -> str:
+    """The rotation of half-angle pair ``e`` (..., 2) about the unit direction ``d`` (..., 3):
+    ``(1, d) ⊙ (e_w, e_x, e_x, e_x)`` (..., 4); ``rank`` of the inputs."""
+    pads = [0] * (2 * rank)
+    pads[rank - 1] = 1  # one leading component on the last axis
+    d1 = g.op("Pad", [d, g.const(pads, dtype=np.int64), g.const(1.0)])
+    return g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])],
+                stem="twist_rotation")
+
+
 def _field_graph(g: _Graph, model) -> None:
     """The swing-field + twist-clamp graph of :class:`models.field.FieldModel` (its docstring)."""
     from models.field import _encode_bias, _encode_matrix, _index_weights
@@ -224,18 +269,10 @@ def _field_graph(g: _Graph, model) -> None:
     # twist half-angle pair t = (w', a·v') of q' = Δ ⊗ q
     tmap = np.concatenate((prod[..., :1], (prod[..., 1:] @ axis)[..., None]), axis=-1)
     by_swing = getattr(tw, "by_swing", None)
-    rot90 = np.array([[0.0, -1.0], [1.0, 0.0]])
     if by_swing is None:
-        mid, half = 0.5 * (tw.min + tw.max), 0.5 * (tw.max - tw.min)
-        cm, sm = math.cos(mid / 2), math.sin(mid / 2)
-        turn = np.array([[cm, -sm], [sm, cm]])  # u = t e^{-i mid/2}
-        if delta is None:
-            u = g.op("MatMul", [INPUT, g.const(tmap[0] @ turn)])
-        else:
-            u = _bilinear(g, delta, INPUT, tmap @ turn, "twist")
-        u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
-                                         g.const(1e-12)])])
-        cr, sr = g.const(math.cos(half / 2)), g.const(math.sin(half / 2))
+        t = (g.op("MatMul", [INPUT, g.const(tmap[0])]) if delta is None
+             else _bilinear(g, delta, INPUT, tmap, "twist"))
+        e, _ = interval_clamp(g, t, (tw.min, tw.max))
     else:  # limits interpolated at the corrected direction b = R(q') a (contract 3)
         qp = INPUT if delta is None else _bilinear(g, delta, INPUT, prod, "corrected")
         b = _bilinear(g, qp, qp, _rotation_tensor(axis), "corrected_direction")
@@ -245,21 +282,9 @@ def _field_graph(g: _Graph, model) -> None:
         lims = g.op("Div", [g.op("MatMul", [w, g.const(np.radians(np.stack(
             (by_swing.min_deg, by_swing.max_deg), axis=1)))]),
             g.op("ReduceSum", [w, g.const([1], dtype=np.int64)], keepdims=1)])
-        mh = g.op("MatMul", [lims, g.const([[0.25, -0.25], [0.25, 0.25]])])  # (mid/2, half/2)
-        cmr, smr = g.op("Cos", [mh]), g.op("Sin", [mh])
-        first, second = g.const([[1.0], [0.0]]), g.const([[0.0], [1.0]])
-        cm, cr = g.op("MatMul", [cmr, first]), g.op("MatMul", [cmr, second])
-        sm, sr = g.op("MatMul", [smr, first]), g.op("MatMul", [smr, second])
-        t = g.op("MatMul", [qp, g.const(tmap[0])])  # (w', a·v') of q'
-        u = g.op("Add", [g.op("Mul", [t, cm]),
-                         g.op("Mul", [g.op("MatMul", [t, g.const(rot90)]), sm])])
-        u = g.op("Div", [u, g.op("Max", [g.op("ReduceL2", [u], axes=[1], keepdims=1),
-                                         g.const(1e-12)])])
-    e = twist_clamp(g, u, cr, sr)
-    # τ = (e_w, e_x d) = (1, d) ⊙ (e_w, e_x, e_x, e_x): the twist clamp about the limb
-    d1 = g.op("Pad", [d, g.const([0, 1, 0, 0], dtype=np.int64), g.const(1.0)])
-    tau = g.op("Mul", [d1, g.op("MatMul", [e, g.const([[1.0, 0, 0, 0], [0, 1.0, 1.0, 1.0]])])],
-               stem="twist_correction")
+        e, _ = interval_clamp(g, g.op("MatMul", [qp, g.const(tmap[0])]), lims)
+    # τ: the twist clamp about the limb
+    tau = twist_rotation(g, d, e)
     if delta is None:
         g.op("Identity", [tau], out=OUTPUT)
         return
