@@ -27,7 +27,7 @@ The graph runs the joints in stages of the hierarchy (a joint after the joints i
 depend on, as late as its dependents allow), and the joints of one kind in one stage as one
 group — tensors (K, N, ·), a row per joint, per-joint constants — so the node count, which is
 what one posture costs in onnxruntime (~0.3 µs a node), grows with the kinds rather than the
-joints (a leg: 264 nodes). Per joint:
+joints (a leg: 261 nodes). Per joint:
 
 - **hinge**: the half-angle pair ``(w, a·v)`` of its orientation about the axis, clamped to the
   interval on the circle (the twist clamp of :mod:`models.field`: relative to the interval's
