@@ -14,7 +14,8 @@ Public API
   gyroscope and magnetometer samples with VQF (:mod:`calibration.fusion`).
 - :class:`HeadingCorrection` — relative heading drift of the two IMUs removed at neutral-pose
   checkpoints (:mod:`calibration.heading`).
-- :class:`CalibrationProtocol` — the guided calibration movements (:mod:`calibration.protocol`).
+- :class:`CalibrationProtocol`, :class:`LimbCalibrationProtocol` — the guided calibration
+  movements of the shoulder and of a whole arm or leg (:mod:`calibration.protocol`).
 - :class:`ServoChainCalibration` — servo zero offsets and directions (:mod:`calibration.servo`).
 - :class:`BoundaryExtractor`, :func:`boundary_distance`, :func:`outside_fraction` —
   recording → constraint, and its accuracy measures (:mod:`calibration.boundary`).
@@ -29,7 +30,7 @@ from calibration.clinical import NORMATIVE, format_rom_table, isb_angles, range_
 from calibration.errors import CalibrationError
 from calibration.fusion import FusionResult, fuse_vqf
 from calibration.heading import HeadingCorrection
-from calibration.protocol import CalibrationProtocol
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from calibration.servo import ServoChainCalibration
 
 __all__ = [
@@ -40,6 +41,7 @@ __all__ = [
     "FusionResult",
     "HeadingCorrection",
     "ImuJointCalibration",
+    "LimbCalibrationProtocol",
     "ServoChainCalibration",
     "boundary_distance",
     "format_rom_table",
