@@ -43,7 +43,8 @@ from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb, default_mounts
 from rig.sim.urls import SimUrl
 
-__all__ = ["PATIENT_KEYS", "Recording", "misplaced_mounts", "patient_from_url", "patient_limb",
+__all__ = ["PATIENT_KEYS", "Recording", "anatomical_limb", "misplaced_mounts", "patient_from_url",
+           "patient_limb",
            "record_imu", "record_servo", "resolve_patient", "star_patient"]
 
 _ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
@@ -300,3 +301,252 @@ def record_servo(limb: SimulatedLimb, duration_s: float, rate_hz: float = 100.0)
     fk = Q.from_rotation(Rotation.from_euler("ZYX", ticks * step))
     return Recording(t, np.tile(Q.IDENTITY, (n, 1)), fk, np.full(n, 0xFF), truth,
                      limb.calibration_protocol, limb.protocol_start_s)
+
+
+# ---------------------------------------------------------------------------------------------
+# Anatomical arms and legs (limb constraints with couplings)
+
+_CHAINS = {"arm": (("shoulder", "thorax", "upper-arm"), ("elbow", "upper-arm", "forearm"),
+                   ("wrist", "forearm", "hand")),
+           "leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"),
+                   ("ankle", "shank", "foot"))}
+_AZ_STEP_DEG = 10  # swing polygons: a vertex every 10° of azimuth about the neutral direction
+
+
+def _clinical_basis(joint: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Right side, rig frames of the parent segment: the child's long axis (+X) in the neutral
+    pose ``n``, and the tangent directions in which it moves with the positive clinical
+    movements: ``e1`` flexion (ankle: dorsiflexion), ``e2`` adduction (wrist: ulnar deviation;
+    ankle: the toes turned medially, inversion with internal rotation).
+
+    The shoulder's are the rig's own (arm hanging along +X, flexion about +Z, abduction towards
+    +Z, :class:`calibration.protocol.CalibrationProtocol`); the others come from
+    :func:`calibration.joint_angles.from_angles` (pure α and pure β, or γ for the ankle, whose β
+    turns the foot about its own long axis: a twist, not a swing)."""
+    from calibration.joint_angles import from_angles
+
+    x = np.array([1.0, 0.0, 0.0])
+    if joint == "shoulder":
+        return x, np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, -1.0])
+
+    def axis(a, b, g):
+        return Q.rotate(from_angles(a, b, g, joint)[0], x)
+
+    second = (0.0, 0.0, 90.0) if joint == "ankle" else (0.0, 90.0, 0.0)
+    return axis(0.0, 0.0, 0.0), axis(90.0, 0.0, 0.0), axis(*second)
+
+
+def _swing_polygon(joint: str, radii: tuple[float, float, float, float],
+                   notches: list[tuple[float, float, float]], jitter: np.ndarray) -> dict:
+    """A swing polygon star-shaped about the neutral direction (right side): vertex ``k`` at
+    azimuth ``10° k`` (0° flexion, 90° adduction, 180° extension, 270° abduction: :func:
+    `_clinical_basis`) and angle ``ρ(ψ)`` from the neutral direction. ``radii`` are ``ρ`` at the
+    four cardinal azimuths (the clinical limits of the pure movements, exactly: those vertices
+    lie on the movements' great circles); between them ``ρ`` follows an ellipse in each quadrant,
+    times ``jitter`` (per vertex, 1 at the cardinal ones), minus the ``notches`` ``(azimuth
+    deg, width deg, depth fraction)`` (Gaussian dents: the polygon is concave)."""
+    n, e1, e2 = _clinical_basis(joint)
+    psi = np.radians(np.arange(0, 360, _AZ_STEP_DEG, dtype=np.float64))
+    quad = np.minimum((psi // (0.5 * math.pi)).astype(int), 3)
+    u = psi - quad * 0.5 * math.pi
+    ra = np.radians(np.asarray(radii))[quad]
+    rb = np.radians(np.asarray(radii))[(quad + 1) % 4]
+    rho = 1.0 / np.sqrt(np.cos(u) ** 2 / ra**2 + np.sin(u) ** 2 / rb**2) * jitter
+    for at, width, depth in notches:
+        d = np.angle(np.exp(1j * (psi - math.radians(at))))
+        rho = rho * (1.0 - depth * np.exp(-0.5 * (d / math.radians(width)) ** 2))
+    tangent = np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2
+    v = np.cos(rho)[:, None] * n + np.sin(rho)[:, None] * tangent
+    return {"polygon": {"vertices": v.tolist(), "interior": n.tolist()}}
+
+
+def _notches(rng: np.random.Generator, count: int) -> list[tuple[float, float, float]]:
+    """``count`` notches in distinct quadrants, 30-60° from the cardinal azimuths and narrow
+    (σ 6-9°), so that the clinical limits of the pure movements stay where they are drawn (to
+    0.5 %)."""
+    quads = rng.permutation(4)[:count]
+    return [(float(90 * q + 10 * rng.integers(3, 7)), float(rng.uniform(6.0, 9.0)),
+             float(rng.uniform(0.15, 0.3))) for q in quads]
+
+
+def _jitter(rng: np.random.Generator) -> np.ndarray:
+    j = rng.uniform(0.97, 1.03, size=360 // _AZ_STEP_DEG)
+    j[:: 90 // _AZ_STEP_DEG] = 1.0
+    return j
+
+
+def _mirror_constraint(c: dict) -> dict:
+    """A right limb's joint constraint mirrored to the left (:func:`calibration.clinical.
+    mirror_directions`: directions ``(x, y, z) → (x, y, −z)``; a rotation's axis
+    ``(x, y, z) → (−x, −y, z)`` with the same angle, so a twist about +X changes sign)."""
+    from calibration.clinical import mirror_directions
+
+    out = dict(c)
+    if "swing" in c:
+        p = c["swing"]["polygon"]
+        out["swing"] = {"polygon": {"vertices": mirror_directions(p["vertices"]).tolist(),
+                                    "interior": mirror_directions(p["interior"]).tolist()}}
+    if "twist" in c:
+        out["twist"] = {"min_deg": -c["twist"]["max_deg"], "max_deg": -c["twist"]["min_deg"]}
+    if "hinge" in c:
+        ax = c["hinge"]["axis"]
+        out["hinge"] = {**c["hinge"], "axis": [-ax[0], -ax[1], ax[2]]}
+    return out
+
+
+def _mirror_joint(j: dict) -> dict:
+    out = dict(j)
+    if "constraint" in j:
+        out["constraint"] = _mirror_constraint(j["constraint"])
+    else:
+        out["coupled"] = {"by": j["coupled"]["by"], "keyframes": [
+            {"at_deg": k["at_deg"], "constraint": _mirror_constraint(k["constraint"])}
+            for k in j["coupled"]["keyframes"]]}
+    return out
+
+
+def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
+    return float(rng.uniform(lo, hi))
+
+
+def _leg(rng: np.random.Generator) -> tuple[list[dict], dict]:
+    # hip (AAOS 1965: flexion 120, extension 30, abduction 45, adduction 30, rotation 45 each)
+    flex, slr = _u(rng, 100.0, 125.0), _u(rng, 60.0, 80.0)
+    ext, add, abd = _u(rng, 10.0, 30.0), _u(rng, 15.0, 30.0), _u(rng, 30.0, 50.0)
+    internal, external = _u(rng, 30.0, 45.0), _u(rng, 35.0, 50.0)
+    hip_notches, hip_jitter = _notches(rng, int(rng.integers(1, 3))), _jitter(rng)
+    # knee (Grood-Suntay flexion = the hinge angle about (0, 0, -1))
+    knee_lo, knee_hi = -_u(rng, 0.0, 5.0), _u(rng, 130.0, 150.0)
+    # ankle: dorsiflexion (more with the knee bent: the gastrocnemius), plantarflexion, the toes
+    # turned medially (inversion) and laterally (eversion), a narrow twist
+    dorsi, dorsi_bent, plantar = _u(rng, 10.0, 17.0), _u(rng, 5.0, 8.0), _u(rng, 40.0, 55.0)
+    inv, ev, ankle_tw = _u(rng, 20.0, 35.0), _u(rng, 10.0, 20.0), _u(rng, 3.0, 6.0)
+    ankle_notches, ankle_jitter = _notches(rng, 1), _jitter(rng)
+    hip_twist = {"min_deg": -internal, "max_deg": external}
+    hip_kf = []
+    for at, f in ((0.0, slr), (45.0, slr + 0.5 * (flex - slr)), (90.0, flex)):
+        hip_kf.append({"at_deg": at, "constraint": {
+            "swing": _swing_polygon("hip", (f, add, ext, abd), hip_notches, hip_jitter),
+            "twist": dict(hip_twist)}})
+    ankle_kf = []
+    for at, d in ((0.0, dorsi), (90.0, dorsi + dorsi_bent)):
+        ankle_kf.append({"at_deg": at, "constraint": {
+            "kind": "two-axis",
+            "swing": _swing_polygon("ankle", (d, inv, plantar, ev), ankle_notches, ankle_jitter),
+            "twist": {"min_deg": -ankle_tw, "max_deg": ankle_tw}}})
+    joints = [
+        {"coupled": {"by": "knee", "keyframes": hip_kf}},
+        {"constraint": {"kind": "hinge", "hinge": {"axis": [0.0, 0.0, -1.0],
+                                                   "min_deg": knee_lo, "max_deg": knee_hi}}},
+        {"coupled": {"by": "knee", "keyframes": ankle_kf}},
+    ]
+    clinical = {"hip": {"flexion": flex, "flexion_knee_straight": slr, "extension": ext,
+                        "abduction": abd, "adduction": add, "internal_rotation": internal,
+                        "external_rotation": external},
+                "knee": {"flexion": knee_hi, "extension": -knee_lo},
+                "ankle": {"dorsiflexion": dorsi, "dorsiflexion_knee_bent": dorsi + dorsi_bent,
+                          "plantarflexion": plantar, "inversion": inv, "eversion": ev,
+                          "twist": ankle_tw}}
+    return joints, clinical
+
+
+def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
+    # shoulder (AAOS 1965: flexion 180, extension 60, abduction 180, adduction 30-ish); below 175°
+    # so that no vertex nears the neutral direction's antipode
+    flex, abd = _u(rng, 150.0, 172.0), _u(rng, 150.0, 172.0)
+    ext, ext_straight = _u(rng, 45.0, 60.0), _u(rng, 10.0, 20.0)
+    add = _u(rng, 20.0, 40.0)
+    internal, external = _u(rng, 55.0, 75.0), _u(rng, 60.0, 90.0)
+    sh_notches, sh_jitter = _notches(rng, int(rng.integers(1, 3))), _jitter(rng)
+    elbow_lo, elbow_hi = -_u(rng, 0.0, 5.0), _u(rng, 135.0, 150.0)
+    wflex, wext = _u(rng, 60.0, 80.0), _u(rng, 50.0, 70.0)
+    radial, ulnar, wrist_tw = _u(rng, 15.0, 25.0), _u(rng, 25.0, 35.0), _u(rng, 3.0, 6.0)
+    wr_notches, wr_jitter = _notches(rng, 1), _jitter(rng)
+    sh_twist = {"min_deg": -internal, "max_deg": external}
+    sh_kf = []
+    for at, e in ((0.0, ext - ext_straight), (45.0, ext - 0.5 * ext_straight), (90.0, ext)):
+        sh_kf.append({"at_deg": at, "constraint": {
+            "swing": _swing_polygon("shoulder", (flex, add, e, abd), sh_notches, sh_jitter),
+            "twist": dict(sh_twist)}})
+    joints = [
+        {"coupled": {"by": "elbow", "keyframes": sh_kf}},
+        {"constraint": {"kind": "hinge", "hinge": {"axis": [0.0, 0.0, 1.0],
+                                                   "min_deg": elbow_lo, "max_deg": elbow_hi}}},
+        {"constraint": {"kind": "two-axis",
+                        "swing": _swing_polygon("wrist", (wflex, ulnar, wext, radial),
+                                                wr_notches, wr_jitter),
+                        "twist": {"min_deg": -wrist_tw, "max_deg": wrist_tw}}},
+    ]
+    clinical = {"shoulder": {"flexion": flex, "extension": ext,
+                             "extension_elbow_straight": ext - ext_straight, "abduction": abd,
+                             "adduction": add, "internal_rotation": internal,
+                             "external_rotation": external},
+                "elbow": {"flexion": elbow_hi, "extension": -elbow_lo},
+                "wrist": {"flexion": wflex, "extension": wext, "radial_deviation": radial,
+                          "ulnar_deviation": ulnar, "twist": wrist_tw}}
+    return joints, clinical
+
+
+def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
+    """A seeded, physiologically plausible arm or leg with couplings: the ground truth of a
+    :class:`~rig.sim.limb.SimulatedChain` patient.
+
+    Rig segment frames (:mod:`calibration.frames`, :mod:`calibration.joint_angles`): every
+    segment +X along it distally, +Y anterior, +Z to the right; the foot +X to the toes, +Y
+    superior. Clinical ranges (degrees, uniform per seed; AAOS 1965 as the reference of what is
+    normal, ``calibration.joint_angles.NORMATIVE``):
+
+    - **leg** — hip: a ball joint, the thigh's direction in a concave polygon about the thigh
+      hanging down (flexion 100-125, extension 10-30, abduction 30-50, adduction 15-30, one or
+      two notches), twist internal 30-45 / external 35-50 rotation; **coupled to the knee**
+      (the hamstrings): keyframes at knee 0, 45 and 90°, hip flexion 60-80 (the straight-leg
+      raise) with the knee straight, half-way at 45°, full from 90°. Knee: a hinge about
+      ``(0, 0, −1)``, so its angle is Grood-Suntay knee flexion, ``[−(0..5), 130..150]``.
+      Ankle: two-axis, the toes' direction in a polygon about the shank's +Y (the neutral pose)
+      — dorsiflexion 10-17 with the knee straight, 5-8 more from knee 90° (**coupled to the
+      knee**: the gastrocnemius), plantarflexion 40-55, the toes turned medially 20-35
+      (inversion with internal rotation) and laterally 10-20 (eversion) — twist ±3-6°.
+    - **arm** — shoulder: a ball joint, polygon about the arm hanging down (flexion 150-172,
+      abduction 150-172, adduction 20-40, extension 45-60 with the elbow bent), twist internal
+      55-75 / external 60-90; **coupled to the elbow** (the biceps' long head): keyframes at
+      elbow 0, 45, 90°, extension 10-20° less with the elbow straight. Elbow: a hinge about
+      ``(0, 0, 1)`` (its angle is elbow flexion), ``[−(0..5), 135..150]``. Wrist: two-axis,
+      flexion 60-80, extension 50-70, radial 15-25, ulnar deviation 25-35, twist ±3-6°.
+
+    Each pure movement's limit is a polygon vertex on that movement's great circle, so
+    :func:`calibration.joint_angles.joint_angles` of the boundary reads it back; the neutral
+    pose (every clinical angle 0) is inside every joint's limits. A left limb is the right one
+    mirrored (:func:`calibration.clinical.mirror_directions`; twist intervals change sign).
+
+    Parameters
+    ----------
+    seed : int
+    limb : {"arm", "leg"}
+    side : {"right", "left"}
+
+    Returns
+    -------
+    models.limb.Limb
+        Named ``sim-<limb>-<seed>``, its ``provenance`` holding the drawn clinical limits
+        (degrees, ``provenance["clinical"]``).
+    """
+    from models.limb import Limb
+
+    if limb not in _CHAINS:
+        raise ValueError(f"limb must be 'arm' or 'leg', got {limb!r}")
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    rng = np.random.default_rng([seed, 0x11B, 0 if limb == "arm" else 1])
+    joints, clinical = (_arm if limb == "arm" else _leg)(rng)
+    doc_joints = []
+    for (name, parent, child), body in zip(_CHAINS[limb], joints, strict=True):
+        j = {"name": name, "parent": parent, "child": child, **body}
+        doc_joints.append(_mirror_joint(j) if side == "left" else j)
+    doc = {"name": f"sim-{limb}-{seed}", "limb": limb, "side": side, "joints": doc_joints,
+           "provenance": {"generator": "rig.sim.patients.anatomical_limb", "seed": int(seed),
+                          "clinical": _rounded(clinical)}}
+    return Limb.from_dict(doc, source=f"anatomical {side} {limb} {seed}")
+
+
+def _rounded(d: dict) -> dict:
+    return {k: _rounded(v) if isinstance(v, dict) else round(float(v), 3) for k, v in d.items()}

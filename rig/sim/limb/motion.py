@@ -243,8 +243,9 @@ class SmoothPath:
 
     def __call__(self, t, control: Callable[[np.ndarray], np.ndarray],
                  key: Hashable) -> np.ndarray:
-        """The spline (N, 4) at times ``t`` (N,) seconds (not normalised), its control points
-        ``control(i · step_s)`` (M, 4)."""
+        """The spline (N, ..., 4) at times ``t`` (N,) seconds (not normalised), its control
+        points ``control(i · step_s)`` (M, ..., 4): one quaternion per time (a joint), or
+        several (a chain's joints, (M, J, 4)), each splined on its own."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         if not len(t):
             return np.empty((0, 4))
@@ -253,10 +254,12 @@ class SmoothPath:
         f = (x - i0)[:, None]
         idx = i0[:, None] + np.arange(-1.0, 3.0)  # (N, 4) control points of each span
         uniq, inv = np.unique(idx, return_inverse=True)
-        c = self._control_points(uniq, control, key)[inv.reshape(-1)].reshape(len(t), 4, 4)
+        cp = self._control_points(uniq, control, key)
+        c = cp[inv.reshape(-1)].reshape(len(t), 4, *cp.shape[1:])
         c = c * np.where(np.sum(c * c[:, 1:2], axis=-1) < 0.0, -1.0, 1.0)[..., None]
         w = np.concatenate(((1.0 - f) ** 3, 3.0 * f**3 - 6.0 * f**2 + 4.0,
                             -3.0 * f**3 + 3.0 * f**2 + 3.0 * f + 1.0, f**3), axis=1) / 6.0
+        w = w.reshape(len(t), 4, *([1] * (c.ndim - 3)))
         # term by term (elementwise, so a row's value does not depend on the batch)
         return w[:, 0:1] * c[:, 0] + w[:, 1:2] * c[:, 1] + w[:, 2:3] * c[:, 2] + w[:, 3:4] * c[:, 3]
 

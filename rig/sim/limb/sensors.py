@@ -128,15 +128,16 @@ class NoiseModel:
 
 @dataclass(frozen=True)
 class SensorMount:
-    """Where a sensor sits: ``segment`` is ``"thorax"`` or ``"limb"``; ``mount`` (4,) is the
-    sensor frame relative to the segment frame."""
+    """Where a sensor sits: ``segment`` names the segment (the shoulder patient's ``"thorax"``
+    or ``"limb"``; a chain's segment names, :class:`rig.sim.limb.chain.SimulatedChain`);
+    ``mount`` (4,) is the sensor frame relative to the segment frame."""
 
     segment: str
     mount: tuple[float, float, float, float]
 
     def __post_init__(self) -> None:
-        if self.segment not in ("thorax", "limb"):
-            raise ValueError(f"segment must be 'thorax' or 'limb', got {self.segment!r}")
+        if not isinstance(self.segment, str) or not self.segment:
+            raise ValueError(f"segment must be a segment name, got {self.segment!r}")
 
 
 def default_mounts(n: int, rng: np.random.Generator) -> list[SensorMount]:
@@ -172,6 +173,9 @@ class SensorPlacement:
         self.mounts = list(mounts)
         if not self.mounts:
             raise ValueError("need at least one sensor")
+        for m in self.mounts:
+            if m.segment not in ("thorax", "limb"):
+                raise ValueError(f"segment must be 'thorax' or 'limb', got {m.segment!r}")
         self.mount_q = Q.check_quaternions(np.array([m.mount for m in self.mounts]),
                                            normalize=True, name="mount")
         self.on_limb = np.array([m.segment == "limb" for m in self.mounts])
@@ -266,10 +270,13 @@ class SensorErrors:
         rate = self.noise.disturbance_rate_hz
         return float(self._rng.exponential(1.0 / rate)) if rate > 0 else math.inf
 
-    def one(self, t: float, sensors: np.ndarray, elapsed: float) -> Readings:
+    def one(self, t: float, sensors: np.ndarray, elapsed: float,
+            positions: np.ndarray | None = None) -> Readings:
         """Readings (K = 1) at time ``t`` from the true sensor orientations ``sensors``
         (3, S, 4) at ``t``, ``t + h``, ``t - h`` (h = :data:`RAW_STEP_S`); ``elapsed``: time
-        the sensors have been fusing (calibration progress)."""
+        the sensors have been fusing (calibration progress); ``positions`` (3, S, 3): the
+        sensors' world positions at those times relative to world-fixed points, when the
+        placement's fixed lever arms do not give them (a chain of segments)."""
         t = float(t)
         if self._last_t is not None and t < self._last_t:
             raise ValueError(f"measure() went back in time: {t} < {self._last_t}")
@@ -294,13 +301,14 @@ class SensorErrors:
         disturbed = np.abs(heading) > _DISTURBED_RAD
         calib = np.array([_calibration_byte(err.calib_times, elapsed, bool(d))
                           for err, d in zip(self._sensors, disturbed, strict=True)])
-        accel, mag = self._raw(q_true, sensors[1], sensors[2], heading)
+        accel, mag = self._raw(q_true, sensors[1], sensors[2], heading, positions)
         return Readings(out_q[None], gyro[None], calib[None], accel[None], mag[None])
 
     def many(self, ts: np.ndarray, q_true: np.ndarray, q_next: np.ndarray,
-             q_prev: np.ndarray) -> Readings:
+             q_prev: np.ndarray, positions: np.ndarray | None = None) -> Readings:
         """Readings at increasing times ``ts`` (K,), vectorised, from the true sensor
-        orientations (K, S, 4) at ``ts``, ``ts + h``, ``ts - h``; calibration progress is
+        orientations (K, S, 4) at ``ts``, ``ts + h``, ``ts - h`` (and optionally their world
+        positions ``positions`` (3, K, S, 3), as in :meth:`one`); calibration progress is
         ``ts``. The same error processes as ``K`` calls of :meth:`one` (the random draws are
         made in another order, so the numbers differ)."""
         k = len(ts)
@@ -341,13 +349,14 @@ class SensorErrors:
                        levels[..., 2])
         system = np.minimum(np.minimum(levels[..., 0], levels[..., 1]), mag)
         calib = (system << 6) | (levels[..., 0] << 4) | (levels[..., 1] << 2) | mag
-        accel, field_ = self._raw(q_true, q_next, q_prev, heading)
+        accel, field_ = self._raw(q_true, q_next, q_prev, heading, positions)
         return Readings(out_q, gyro, calib, accel, field_)
 
     def _raw(self, q_true: np.ndarray, q_next: np.ndarray, q_prev: np.ndarray,
-             heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+             heading: np.ndarray, positions: np.ndarray | None
+             ) -> tuple[np.ndarray, np.ndarray]:
         accel, mag = specific_force_and_field(q_true, q_next, q_prev, self.placement.lever,
-                                              heading, self.noise.earth_field)
+                                              heading, self.noise.earth_field, positions)
         noise = self._rng_raw.standard_normal((*heading.shape, 6))
         return (accel + self.noise.accel_noise * noise[..., :3],
                 mag + self.noise.mag_noise_ut * noise[..., 3:])
@@ -379,7 +388,8 @@ def _rate(q: np.ndarray, q_next: np.ndarray) -> np.ndarray:
 
 
 def specific_force_and_field(q_true: np.ndarray, q_next: np.ndarray, q_prev: np.ndarray,
-                             lever: np.ndarray, heading: np.ndarray, earth_field: np.ndarray
+                             lever: np.ndarray | None, heading: np.ndarray,
+                             earth_field: np.ndarray, positions: np.ndarray | None = None
                              ) -> tuple[np.ndarray, np.ndarray]:
     """Error-free accelerometer (m/s²) and magnetometer (µT) readings (..., S, 3), sensor frame.
 
@@ -387,16 +397,24 @@ def specific_force_and_field(q_true: np.ndarray, q_next: np.ndarray, q_prev: np.
     ----------
     q_true, q_next, q_prev : (..., S, 4) float64
         Sensor relative to world at ``t``, ``t + h``, ``t - h`` (h = :data:`RAW_STEP_S`).
-    lever : (S, 3) float64, m
-        Each sensor's position relative to its world-fixed pivot, sensor frame.
+    lever : (S, 3) float64, m, or None
+        Each sensor's position relative to its world-fixed pivot, sensor frame (a sensor on
+        one segment turning about a fixed point); unused when ``positions`` is given.
     heading : (..., S) float64, rad
         The heading disturbance of the device-fusion model.
     earth_field : (3,) float64, µT, world frame
+    positions : (3, ..., S, 3) float64, m, optional
+        The sensors' world positions at ``t``, ``t + h``, ``t - h`` relative to world-fixed
+        points (a sensor on a chain of segments, :mod:`rig.sim.limb.chain`); default from
+        ``lever``.
     """
     h = RAW_STEP_S
     # sensor positions relative to their world-fixed pivots; central second difference
-    p0 = Q.rotate(q_true, lever)
-    a_lin = (Q.rotate(q_next, lever) - 2.0 * p0 + Q.rotate(q_prev, lever)) / (h * h)
+    if positions is None:
+        p0 = Q.rotate(q_true, lever)
+        a_lin = (Q.rotate(q_next, lever) - 2.0 * p0 + Q.rotate(q_prev, lever)) / (h * h)
+    else:
+        a_lin = (positions[1] - 2.0 * positions[0] + positions[2]) / (h * h)
     f_world = a_lin + GRAVITY * _Z
     # magnetometer: the earth field with its horizontal part turned by -h(t) about world Z:
     # a field the device's fusion follows fully reads as a heading error of +h(t)
