@@ -63,6 +63,7 @@ SEGMENT_TO_ISB: dict[str, np.ndarray] = {
 
 #: ``m``: the quaternion of :data:`RIG_TO_ISB` (−90° about Z), scalar-first.
 _M = np.array([math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)])
+_IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
 def _check(frames: str) -> str:
@@ -71,26 +72,40 @@ def _check(frames: str) -> str:
     return frames
 
 
-def segment_to_rig(q, frames: str) -> np.ndarray:
-    """Segment orientations (N, 4) (segment → lab, scalar-first) in ``frames`` → rig frames."""
+def _m(segment: str | None) -> np.ndarray:
+    """The quaternion of ``segment``'s rig axes in its ISB frame (:data:`SEGMENT_TO_ISB`;
+    None: a limb segment, :data:`RIG_TO_ISB`)."""
+    if segment is None:
+        return _M
+    if segment not in SEGMENT_TO_ISB:
+        raise ValueError(f"segment must be one of {', '.join(SEGMENT_TO_ISB)}, got {segment!r}")
+    return _IDENTITY if segment == "foot" else _M
+
+
+def segment_to_rig(q, frames: str, segment: str | None = None) -> np.ndarray:
+    """Segment orientations (N, 4) (segment → lab, scalar-first) in ``frames`` → rig frames
+    (``segment``: its name in :data:`SEGMENT_TO_ISB`, for the foot; None: a limb segment)."""
     q = np.asarray(q, dtype=np.float64)
     if _check(frames) == "rig":
         return q
-    return Q.multiply(q, np.broadcast_to(_M, q.shape))
+    return Q.multiply(q, np.broadcast_to(_m(segment), q.shape))
 
 
-def joint_to_rig(q, frames: str) -> np.ndarray:
-    """Joint orientations (N, 4) (child relative to parent) in ``frames`` → rig frames."""
+def joint_to_rig(q, frames: str, parent: str | None = None,
+                 child: str | None = None) -> np.ndarray:
+    """Joint orientations (N, 4) (child relative to parent) in ``frames`` → rig frames:
+    ``m_p* ⊗ J ⊗ m_c`` (the segments' names as in :func:`segment_to_rig`)."""
     q = np.asarray(q, dtype=np.float64)
     if _check(frames) == "rig":
         return q
-    m = np.broadcast_to(_M, q.shape)
-    return Q.multiply(Q.conjugate(m), Q.multiply(q, m))
+    mp = np.broadcast_to(_m(parent), q.shape)
+    mc = np.broadcast_to(_m(child), q.shape)
+    return Q.multiply(Q.conjugate(mp), Q.multiply(q, mc))
 
 
-def direction_to_rig(v, frames: str) -> np.ndarray:
+def direction_to_rig(v, frames: str, segment: str | None = None) -> np.ndarray:
     """A direction (3,) or (N, 3) in segment coordinates of ``frames`` → rig coordinates."""
     v = np.asarray(v, dtype=np.float64)
     if _check(frames) == "rig":
         return v
-    return v @ RIG_TO_ISB  # Mᵀ v, row-wise
+    return v @ (SEGMENT_TO_ISB[segment] if segment is not None else RIG_TO_ISB)  # Mᵀ v

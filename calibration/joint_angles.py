@@ -66,8 +66,9 @@ from calibration.clinical import _check_side, mirror_quaternions
 from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
-__all__ = ["JOINT_ANGLES", "NORMATIVE", "JointAngleSet", "angle_peaks", "from_angles",
-           "joint_angles"]
+__all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "JointAngleSet",
+           "JointRangeOfMotion", "angle_peaks", "constraint_rom", "from_angles", "joint_angles",
+           "recorded_rom"]
 
 @dataclass(frozen=True)
 class JointAngleSet:
@@ -185,3 +186,150 @@ def angle_peaks(angles: dict[str, np.ndarray], joint: str, window: int = 5) -> d
         out[pos] = float(max(0.0, a.max()))
         out[neg] = float(max(0.0, -a.min()))
     return out
+
+
+#: The movements a clinic reports per joint (the others' Cardan angles are computed, not
+#: tabulated: an elbow's varus/valgus or a knee's ab/adduction is not a range of motion).
+CLINICAL_MOVEMENTS: dict[str, tuple[str, ...]] = {
+    "elbow": ("flexion", "extension", "pronation", "supination"),
+    "wrist": ("flexion", "extension", "radial_deviation", "ulnar_deviation"),
+    "hip": ("flexion", "extension", "abduction", "adduction", "internal_rotation",
+            "external_rotation"),
+    "knee": ("flexion", "extension"),
+    "ankle": ("dorsiflexion", "plantarflexion", "inversion", "eversion"),
+}
+
+
+@dataclass(frozen=True)
+class JointRangeOfMotion:
+    """One joint's range of motion in clinical terms: the peak per movement (degrees, None
+    when the source does not tell it — a hinge constraint says nothing of forearm rotation),
+    and the arc of the primary angle α (flexion for the elbow, knee, hip, wrist; dorsiflexion
+    for the ankle) from its lowest to its highest value."""
+
+    joint: str
+    side: str
+    peaks: dict[str, float | None]
+    arc: tuple[float, float] | None = None
+
+    def table(self) -> str:
+        """The clinical table as text: movement, measured peak, AAOS (:data:`NORMATIVE`)."""
+        aaos = NORMATIVE["aaos"][self.joint]
+        rows = [("movement", "measured", "AAOS")]
+        for m in CLINICAL_MOVEMENTS[self.joint]:
+            v = self.peaks.get(m)
+            ref = aaos.get(m)
+            comparable = (self.joint, m) not in NORMATIVE["not_comparable"]
+            rows.append((m.replace("_", " "), "-" if v is None else f"{v:.1f}°",
+                         "-" if ref is None or not comparable else f"{ref:.0f}°"))
+        widths = [max(len(r[i]) for r in rows) for i in range(3)]
+        lines = [f"{self.joint} range of motion ({self.side} side)"]
+        for k, r in enumerate(rows):
+            lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                                   for i, (c, w) in enumerate(zip(r, widths, strict=True))))
+            if k == 0:
+                lines.append("  ".join("-" * w for w in widths))
+        if self.arc is not None:
+            pos, neg = JOINT_ANGLES[self.joint].movements[0]
+            lines.append(f"arc: {pos} from {self.arc[0]:.1f}° to {self.arc[1]:.1f}° "
+                         f"(negative: {neg})")
+        for (j, m), why in NORMATIVE["not_comparable"].items():
+            if j == self.joint:
+                lines.append(f"note: {m} not compared with AAOS: {why}")
+        lines.append(f"sources: angles = {JOINT_ANGLES[self.joint].source}; "
+                     f"AAOS = {NORMATIVE['source']}")
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        """Plain types: movement → degrees (2 decimals) or None, ``arc``, joint, side."""
+        out: dict = {"joint": self.joint, "side": self.side}
+        for m in CLINICAL_MOVEMENTS[self.joint]:
+            v = self.peaks.get(m)
+            out[m] = None if v is None else round(float(v), 2)
+        out["arc"] = None if self.arc is None else [round(float(v), 2) for v in self.arc]
+        return out
+
+
+def _in_band(ang: dict[str, np.ndarray], k: int, band_deg: float) -> np.ndarray:
+    """Samples at which angle ``k`` (0 α, 1 β, 2 γ) reads as a goniometer reads it: the other
+    swing angle within ``band_deg`` of zero for α and β (axial rotation free: it does not move
+    the segment's direction), both swing angles for γ."""
+    a, b = np.abs(ang["alpha"]), np.abs(ang["beta"])
+    return {0: b <= band_deg, 1: a <= band_deg, 2: (a <= band_deg) & (b <= band_deg)}[k]
+
+
+def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
+                 band_deg: float = 5.0) -> JointRangeOfMotion:
+    """The range of motion of recorded joint orientations ``q`` (N, 4) (rig frames): each
+    movement's farthest angle after a running median over ``window`` samples (an isolated
+    spike is not a peak; :func:`angle_peaks`), among the samples at which a goniometer reads
+    it (:func:`_in_band`, as :func:`constraint_rom`; a hinge's other angles are out-of-axis
+    motion, not positions, and do not restrict its flexion). A movement with no sample in its
+    band is None."""
+    from scipy.ndimage import median_filter
+
+    from calibration.joints import JOINTS
+
+    js = _joint(joint)
+    raw = joint_angles(q, joint, side)
+    n = len(raw["alpha"])
+    ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}
+    hinge = JOINTS[joint].kind == "hinge"
+    peaks: dict[str, float | None] = {}
+    for k, key in enumerate(("alpha", "beta", "gamma")):
+        sel = np.ones(n, bool) if hinge else _in_band(ang, k, band_deg)
+        pos, neg = js.movements[k]
+        v = ang[key][sel]
+        peaks[pos] = float(max(0.0, v.max())) if v.size else None
+        peaks[neg] = float(max(0.0, -v.min())) if v.size else None
+    return JointRangeOfMotion(joint, _check_side(side),
+                              {m: peaks.get(m) for m in CLINICAL_MOVEMENTS[joint]},
+                              (float(ang["alpha"].min()), float(ang["alpha"].max())))
+
+
+def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: float = 5.0,
+                   step_deg: float = 0.5) -> JointRangeOfMotion:
+    """The range of motion a constraint allows (:class:`models.constraint.JointConstraint`,
+    rig frames), read as a goniometer reads a position: each angle's farthest value among the
+    allowed orientations at which a goniometer reads it (:func:`_in_band`: the other swing
+    angle within ``band_deg`` of zero for α and β, any axial rotation the joint allows; both
+    swing angles for γ). Angles on a ``step_deg`` grid (the band on 1°, γ on 5° where free). A
+    hinge reads its interval (its other angles are zero); movements a constraint does not
+    model are None."""
+    from models.oracle import ConstraintOracle
+
+    js = _joint(joint)
+    side = _check_side(side)
+    if constraint.kind == "hinge":
+        h = constraint.hinge
+        theta = np.arange(h.min_deg, h.max_deg + 1e-9, min(step_deg, 0.1))
+        q = Q.from_axis_angle(np.asarray(h.axis, float), np.radians(theta))
+        ang = joint_angles(q, joint, side)
+        peaks = angle_peaks(ang, joint, window=1)
+        named = {m for m in js.movements[0]}
+        return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named else None)
+                                                for m in CLINICAL_MOVEMENTS[joint]},
+                                  (float(ang["alpha"].min()), float(ang["alpha"].max())))
+    oracle = ConstraintOracle(constraint)
+    grid = np.arange(-180.0, 180.0, step_deg)
+    band = np.arange(-band_deg, band_deg + 1e-9, 1.0)
+    twist = np.arange(-180.0, 180.0, 5.0)
+    out: dict[str, float] = {}
+    arc = None
+    for k in range(3):
+        others = [band, band] if k == 2 else [band, twist]
+        a, b, c = np.meshgrid(grid, *others, indexing="ij")
+        angles = [None, None, None]
+        angles[k] = a.ravel()
+        rest = [i for i in range(3) if i != k]
+        angles[rest[0]], angles[rest[1]] = b.ravel(), c.ravel()
+        q = from_angles(*angles, joint, side)
+        ok = oracle.is_valid(q)
+        pos, neg = js.movements[k]
+        hit = angles[k][ok]
+        out[pos] = float(max(0.0, hit.max())) if hit.size else None
+        out[neg] = float(max(0.0, -hit.min())) if hit.size else None
+        if k == 0 and hit.size:
+            arc = (float(hit.min()), float(hit.max()))
+    return JointRangeOfMotion(joint, side, {m: out.get(m) for m in CLINICAL_MOVEMENTS[joint]},
+                              arc)

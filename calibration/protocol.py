@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.joints import LIMB_CHAINS
 from models import quaternion as Q
 
 __all__ = ["LIMB_CHAINS", "CalibrationProtocol", "LimbCalibrationProtocol"]
@@ -80,15 +81,6 @@ class CalibrationProtocol:
         """Scripted joint orientation (N, 4), limb relative to thorax, at times ``t`` (N,)."""
         return Q.from_axis_angle(_Z, self.flexion_angle(t))
 
-
-#: The chains a limb protocol knows: limb → ((joint, parent segment, child segment), ...),
-#: proximal to distal (the segment names of :data:`calibration.frames.SEGMENT_TO_ISB` and of
-#: limb files).
-LIMB_CHAINS: dict[str, tuple[tuple[str, str, str], ...]] = {
-    "arm": (("shoulder", "thorax", "upper-arm"), ("elbow", "upper-arm", "forearm"),
-            ("wrist", "forearm", "hand")),
-    "leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"), ("ankle", "shank", "foot")),
-}
 
 #: Default amplitudes (flexion, extension) of each joint's functional movement, degrees: a
 #: comfortable part of every adult's range (AAOS 1965); the elbow and the knee only flex (their

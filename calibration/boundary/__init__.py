@@ -30,12 +30,14 @@ step  what                                        module
 7     sparse arcs                                 :mod:`~calibration.boundary.sparse`
 8     what a boundary holds; boundary distance    :mod:`~calibration.boundary.compare`
 all   the orchestrator                            :mod:`~calibration.boundary.extractor`
+1-2,6 a hinge's interval (elbow, knee)            :mod:`~calibration.boundary.hinge`
 ====  ==========================================  ============================================
 
 Imports point one way: ``planar`` → ``inset``, ``region`` → ``alpha``; ``projection`` →
 ``simplify``, ``twist``; ``inset`` → ``twist``; ``compare`` → ``sparse``; all → ``extractor``.
 
-Public API: :class:`BoundaryExtractor`, :class:`SparseArc`, and the accuracy measures
+Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`HingeExtractor`,
+:class:`SparseArc`, and the accuracy measures
 :func:`boundary_distance` (symmetric mean boundary distance), :func:`boundary_points`,
 :func:`outside_fraction`.
 """
@@ -44,10 +46,12 @@ from __future__ import annotations
 
 from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
 from calibration.boundary.extractor import BoundaryExtractor
+from calibration.boundary.hinge import HingeExtractor
 from calibration.boundary.sparse import SparseArc
 
 __all__ = [
     "BoundaryExtractor",
+    "HingeExtractor",
     "SparseArc",
     "boundary_distance",
     "boundary_points",

@@ -176,7 +176,10 @@ class BoundaryExtractor:
         twist_dwell_min_runs: int = 5,
         limb_axis=(1.0, 0.0, 0.0),
         name: str = "recorded",
+        kind: str = "ball",
     ) -> None:
+        if kind not in ("ball", "two-axis"):
+            raise ValueError(f"kind must be 'ball' or 'two-axis', got {kind!r}")
         if by_swing not in (True, False, "auto"):
             raise ValueError(f"by_swing must be True, False or 'auto', got {by_swing!r}")
         for label, val in (("alpha_deg", alpha_deg), ("cell_deg", cell_deg),
@@ -217,6 +220,7 @@ class BoundaryExtractor:
         self.twist_dwell_min_runs = int(twist_dwell_min_runs)
         self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
         self.name = name
+        self.kind = kind
 
     def params(self) -> dict[str, Any]:
         """The hyper-parameters as plain types (recorded in the provenance)."""
@@ -383,8 +387,26 @@ class BoundaryExtractor:
         self.inside_ = written.inside.share
         self.inside_1deg_ = written.inside.within_1deg
         self.outside_max_deg_ = written.inside.farthest_outside_deg
-        self.constraint_ = written.constraint
+        self.constraint_ = self._with_kind(written.constraint)
         return self
+
+    def _with_kind(self, constraint):
+        """The written constraint as a ``two-axis`` joint when asked and the recorded twist is
+        narrow enough for one (:data:`models.constraint.TWO_AXIS_MAX_TWIST_DEG`); otherwise
+        the ball joint, with the reason in its provenance (``kind_note``)."""
+        from models.constraint import TWO_AXIS_MAX_TWIST_DEG, JointConstraint
+
+        if self.kind == "ball":
+            return constraint
+        d = constraint.to_dict()
+        width = self.twist_deg_[1] - self.twist_deg_[0]
+        if width <= TWO_AXIS_MAX_TWIST_DEG:
+            d["kind"] = "two-axis"
+        else:
+            d.setdefault("provenance", {})["kind_note"] = (
+                f"recorded twist {width:.1f} deg wide (a two-axis joint allows "
+                f"{TWO_AXIS_MAX_TWIST_DEG:g}): written as a ball joint")
+        return JointConstraint.from_dict(d)
 
     def _write(self, polygon: SphericalPolygon, proj: Projection, d: np.ndarray,
                twist: TwistEnvelope, recorded: np.ndarray, provenance: dict) -> _Written:
@@ -448,4 +470,5 @@ class BoundaryExtractor:
             "by_swing_points": 0 if self.by_swing_ is None else len(self.by_swing_["points"]),
             "sparse_arcs": [a.to_dict() for a in self.sparse_arcs_],
             "sparse_length_deg": float(sum(a.length_deg for a in self.sparse_arcs_)),
+            "kind": self.constraint_.kind,
         }

@@ -11,8 +11,11 @@ from __future__ import annotations
 import click
 
 from calibration.frames import FRAMES
+from calibration.joints import JOINTS
 from rig.readback.boundary import BY_SWING_CHOICES
 from rig.readback.data import FUSION_CHOICES
+
+JOINT_NAMES = tuple(JOINTS)
 
 
 @click.command()
@@ -25,6 +28,9 @@ from rig.readback.data import FUSION_CHOICES
               "when --reference is not given).")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
               "(default: the long axis of --frames, 1,0,0 in rig frames).")
+@click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
+              help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
+              "segments are --reference and --limb (a session: the joint it recorded).")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -32,7 +38,7 @@ from rig.readback.data import FUSION_CHOICES
               help="Constraint file to write (YAML).")
 @click.option("--name", default=None, help="Constraint name (default from the source).")
 @click.option("--side", type=click.Choice(["left", "right"]), default=None,
-              help="Arm side recorded in the constraint (default: the session's).")
+              help="Body side recorded in the constraint (default: the session's).")
 @click.option("--alpha-deg", default=4.0, show_default=True, type=click.FloatRange(min=0.5),
               help="Alpha-shape radius: concavities narrower than ~2x this are bridged.")
 @click.option("--max-vertices", default=64, show_default=True, type=click.IntRange(min=3),
@@ -44,8 +50,8 @@ from rig.readback.data import FUSION_CHOICES
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
-def boundary(file, db, session_id, reference, limb, limb_axis, frames, out, name, side,
-             alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
+def boundary(file, db, session_id, reference, limb, limb_axis, joint, frames, out, name,
+             side, alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
@@ -53,7 +59,8 @@ def boundary(file, db, session_id, reference, limb, limb_axis, frames, out, name
     from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 
     result = run_boundary(BoundaryRequest(
-        RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion),
+        RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
+                        joint),
         out, name=name, side=side, alpha_deg=alpha_deg, max_vertices=max_vertices,
         by_swing=by_swing, store=store_result))
     click.echo(result.describe())

@@ -10,7 +10,10 @@ import json
 import click
 
 from calibration.frames import FRAMES
+from calibration.joints import JOINTS
 from rig.readback.data import FUSION_CHOICES
+
+JOINT_NAMES = tuple(JOINTS)
 
 
 @click.command()
@@ -23,6 +26,9 @@ from rig.readback.data import FUSION_CHOICES
               "when --reference is not given).")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
               "(default: the long axis of --frames).")
+@click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
+              help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
+              "segments are --reference and --limb (a session: the joint it recorded).")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -30,7 +36,7 @@ from rig.readback.data import FUSION_CHOICES
               type=click.Path(dir_okay=False), help="Use this constraint file instead of a "
               "recording.")
 @click.option("--side", type=click.Choice(["left", "right"]), default=None,
-              help="Arm side (default: the session's or the constraint's, else right).")
+              help="Body side (default: the session's or the constraint's, else right).")
 @click.option("--age", type=click.IntRange(min=18, max=110), default=None,
               help="Patient age, for the population reference band.")
 @click.option("--sex", type=click.Choice(["female", "male"]), default=None,
@@ -41,11 +47,12 @@ from rig.readback.data import FUSION_CHOICES
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object: movement -> degrees or null, plus joint, side, "
               "coverage, interrupted.")
-def rom(file, db, session_id, reference, limb, limb_axis, frames, constraint_path, side, age,
-        sex, fusion, as_json) -> None:
+def rom(file, db, session_id, reference, limb, limb_axis, joint, frames, constraint_path, side,
+        age, sex, fusion, as_json) -> None:
     """Print the clinical range of motion (ISB angles, peaks, normative values)."""
     from rig.readback import RecordingSource, RomRequest, run_rom
 
-    source = RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion)
-    result = run_rom(RomRequest(source, constraint=constraint_path, side=side))
+    source = RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
+                             joint)
+    result = run_rom(RomRequest(source, constraint=constraint_path, side=side, joint=joint))
     click.echo(json.dumps(result.to_json()) if as_json else result.table(age=age, sex=sex))

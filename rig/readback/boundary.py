@@ -125,17 +125,25 @@ def run_boundary(request: BoundaryRequest) -> BoundaryResult:
 
 def extract(data: JointData, *, name: str | None = None, side: str | None = None,
             alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto"):
-    """The fitted :class:`~calibration.boundary.BoundaryExtractor` of loaded joint
-    orientations, its constraint named (:func:`default_name`) and bound to the recording's
-    patient, joint and side."""
-    from calibration.boundary import BoundaryExtractor
+    """The fitted extractor of loaded joint orientations — a
+    :class:`~calibration.boundary.HingeExtractor` for a hinge (elbow, knee), else a
+    :class:`~calibration.boundary.BoundaryExtractor` (a ``two-axis`` joint for the wrist and
+    the ankle when the recorded twist is narrow enough) — its constraint named
+    (:func:`default_name`) and bound to the recording's patient, joint and side."""
+    from calibration.boundary import BoundaryExtractor, HingeExtractor
+    from calibration.joints import JOINTS
     from models.constraint import JointConstraint
 
-    bs = {"auto": "auto", "on": True, "off": False}[by_swing]
-    ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
-                           limb_axis=data.limb_axis, name=name or default_name(data))
     prov = dict(data.provenance)
     prov["recording"] = data.facts().as_dict()
+    label = name or default_name(data)
+    if data.kind == "hinge":
+        ex = HingeExtractor(JOINTS[data.joint].hinge_axis, limb_axis=data.limb_axis,
+                            name=label)
+    else:
+        bs = {"auto": "auto", "on": True, "off": False}[by_swing]
+        ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
+                               limb_axis=data.limb_axis, name=label, kind=data.kind)
     ex.fit(data.q, status=data.status, t=data.t, provenance=prov,
            slow_error_deg=data.slow_error_deg)
     binding = {"side": side or data.side, "joint": data.joint, "patient": data.patient}
@@ -166,12 +174,29 @@ def default_name(data: JointData) -> str:
 
 
 def describe(ex, out_path: Path | None = None) -> str:
-    """What an extraction gave, for people: samples used and dropped, the polygon, how much of
-    the recording is inside, the twist range and the sparse arcs."""
+    """What an extraction gave, for people: samples used and dropped, the polygon (or a
+    hinge's interval), how much of the recording is inside, the twist range and the sparse
+    arcs."""
     r = ex.report()
     lines = []
     if out_path is not None:
         lines.append(f"wrote {out_path}")
+    if r.get("kind") == "hinge":
+        lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
+                     f"{r['dropped_status']} dropped for IMU status, "
+                     f"{r['spikes']} isolated spikes)")
+        lo, hi = r["hinge_deg"]
+        inset = r["noise_inset_deg"]
+        lines.append(f"  hinge       {lo:.1f} .. {hi:.1f} deg about "
+                     f"{', '.join(f'{v:g}' for v in ex.axis)} (noise inset {inset[0]:.2f} / "
+                     f"{inset[1]:.2f} deg)")
+        lines.append(f"  inside      {100 * r['inside']:.2f} % of the {r['samples_used']} "
+                     f"recorded angles inside the interval written, "
+                     f"{100 * r['inside_1deg']:.2f} % within 1 deg")
+        lines.append(f"  off-axis    {r['off_axis_rms_deg']:.1f} deg RMS, "
+                     f"{r['off_axis_p99_deg']:.1f} deg p99 (motion about other axes: "
+                     "corrected to the hinge, not a limit)")
+        return "\n".join(lines)
     lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
                  f"{r['dropped_status']} dropped for IMU status, "
                  f"{r['spikes']} isolated spikes, {r['glitch_cluster_samples']} in glitch "
@@ -184,6 +209,9 @@ def describe(ex, out_path: Path | None = None) -> str:
     tw = r["twist_deg"]
     extra = f", {r['by_swing_points']} swing regions" if r["by_swing_points"] else ""
     lines.append(f"  twist       {tw[0]:.1f} .. {tw[1]:.1f} deg{extra}")
+    note = ex.constraint_.provenance.get("kind_note")
+    if r.get("kind", "ball") != "ball" or note:
+        lines.append(f"  kind        {r['kind']}" + (f" ({note})" if note else ""))
     if r["sparse_arcs"]:
         lines.append(f"  sparse      {len(r['sparse_arcs'])} boundary arcs "
                      f"({r['sparse_length_deg']:.0f} deg) with fewer than "

@@ -91,6 +91,9 @@ class JointData:
         computed from the joint orientations when the recorder stored none)."""
         if self.recording is None:
             self.recording = RecordingFacts()
+        if self.recording.sectors is None and self.kind == "hinge":
+            # one angle: no swing sphere to cover (the interval's ends are the evidence)
+            self.recording = replace(self.recording, explored=0, sectors=0)
         if self.recording.sectors is None:
             from calibration.coverage import coverage_of
 
@@ -98,6 +101,15 @@ class JointData:
             self.recording = replace(self.recording, explored=cov.explored,
                                      sectors=len(cov.sectors), sufficient=cov.sufficient)
         return self.recording
+
+    @property
+    def kind(self) -> str:
+        """The joint's kind (:data:`calibration.joints.JOINTS`; a joint it does not list, such
+        as an older recording's name, is read as a ball joint)."""
+        from calibration.joints import JOINTS
+
+        spec = JOINTS.get(self.joint or "shoulder")
+        return "ball" if spec is None else spec.kind
 
     @property
     def directions(self) -> np.ndarray:

@@ -15,27 +15,34 @@ __all__ = ["joint_orientations_from_file"]
 
 
 def joint_orientations_from_file(file: str, reference: str | None, limb: str, axis: np.ndarray,
-                                 frames: str = "rig") -> JointData:
+                                 frames: str = "rig", joint: str | None = None) -> JointData:
     """Joint orientations (rig frames) of ``file``'s ``limb`` column relative to its
     ``reference`` column (``limb`` alone: the column holds joint orientations already);
-    ``frames`` is the file's segment-frame convention, ``axis`` the limb axis in rig frames."""
+    ``frames`` is the file's segment-frame convention, ``axis`` the limb axis in rig frames,
+    ``joint`` the joint (:data:`calibration.joints.JOINTS`; None: the file's, else the
+    shoulder) whose segments the columns are."""
     from calibration.alignment import joint_orientation
     from calibration.frames import joint_to_rig, segment_to_rig
+    from calibration.joints import JOINTS
     from rig.store.io import read_orientations
 
     table = read_orientations(file)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
     child = table.get(limb)
+    named = table.meta.get("rig_joint")
+    if joint is None:
+        joint = named if named in JOINTS else None
+    spec = JOINTS[joint or "shoulder"]
     if reference is not None:
-        q = joint_orientation(segment_to_rig(table.get(reference), frames),
-                              segment_to_rig(child, frames))
+        q = joint_orientation(segment_to_rig(table.get(reference), frames, spec.parent),
+                              segment_to_rig(child, frames, spec.child))
     else:
-        q = joint_to_rig(child, frames)
+        q = joint_to_rig(child, frames, spec.parent, spec.child)
     prov = {"file": str(Path(file).name), "limb": limb, "frames": frames}
     if reference is not None:
         prov["reference"] = reference
     side = table.meta.get("rig_side")
     return JointData(q, None, axis, side if side in ("left", "right") else None, prov,
-                     table.meta.get("rig_patient"), table.meta.get("rig_joint"),
+                     table.meta.get("rig_patient"), joint or named,
                      np.asarray(table.time, dtype=np.float64))

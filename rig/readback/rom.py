@@ -1,10 +1,14 @@
 """``rig rom`` as a library: the clinical range of motion of a recording or a constraint.
 
-Peaks (flexion, extension, abduction, adduction, horizontal adduction, internal and external
-rotation) come from the patient's boundary (:func:`calibration.clinical.range_of_motion`):
-extracted from the recording as ``rig boundary`` does (:func:`rig.readback.boundary.extract`),
-or read from a constraint file; with a recording, each peak is the smaller of the boundary's and
-the recorded samples' reading.
+The elbow, wrist, hip, knee and ankle (``joint``): the ISB / Grood-Suntay angles' peaks per
+movement (:func:`calibration.joint_angles.recorded_rom` of the recording's samples,
+:func:`~calibration.joint_angles.constraint_rom` of a constraint file), against the AAOS values.
+
+The shoulder's peaks (flexion, extension, abduction, adduction, horizontal adduction, internal
+and external rotation) come from the patient's boundary
+(:func:`calibration.clinical.range_of_motion`): extracted from the recording as ``rig boundary``
+does (:func:`rig.readback.boundary.extract`), or read from a constraint file; with a recording,
+each peak is the smaller of the boundary's and the recorded samples' reading.
 """
 
 from __future__ import annotations
@@ -28,9 +32,16 @@ class RomRequest:
     source: RecordingSource | None = None
     constraint: str | None = None
     side: str | None = None
+    joint: str | None = None
 
     def check(self) -> None:
         """Option combinations and files, before any work (one-line errors)."""
+        if self.joint is not None:
+            from calibration.joints import JOINTS
+
+            if self.joint not in JOINTS:
+                raise RigConfigError(f"--joint {self.joint!r}: expected one of "
+                                     f"{', '.join(JOINTS)}")
         if self.constraint is None:
             if self.source is None:
                 raise RigConfigError("give a recording or --constraint")
@@ -63,12 +74,21 @@ class RomResult:
 
     def table(self, *, age: int | None = None, sex: str | None = None) -> str:
         """What ``rig rom`` prints: the source, the warnings, the table against the AAOS
-        values and the population reference for ``age`` / ``sex``."""
+        values and (the shoulder) the population reference for ``age`` / ``sex``."""
         from calibration.clinical import format_rom_table
 
         lines = [self.source, *(f"warning: {w}" for w in self.warnings)]
-        lines.append(format_rom_table(self.rom, age=age, sex=sex))
+        if self.is_shoulder:
+            lines.append(format_rom_table(self.rom, age=age, sex=sex))
+        else:
+            lines.append(self.rom.table())
         return "\n".join(lines)
+
+    @property
+    def is_shoulder(self) -> bool:
+        """The shoulder's table (:class:`calibration.clinical.RangeOfMotion`), not another
+        joint's (:class:`calibration.joint_angles.JointRangeOfMotion`)."""
+        return not hasattr(self.rom, "peaks")
 
     def to_json(self) -> dict:
         """``rig rom --json``: movement (snake_case, as in the table) → degrees (2 decimals) or
@@ -76,14 +96,18 @@ class RomResult:
         explored, 0-1; None for a constraint file), ``interrupted`` (None when unknown: files
         and constraints), ``neutral_outside_deg``, ``warnings`` and ``source``."""
         r, facts = self.rom, self.facts
-        out: dict = {"joint": self.joint or "shoulder", "side": r.side}
-        for m in r.MOVEMENTS:
-            v = getattr(r, m)
-            out[m] = None if v is None else round(float(v), 2)
+        if self.is_shoulder:
+            out: dict = {"joint": self.joint or "shoulder", "side": r.side}
+            for m in r.MOVEMENTS:
+                v = getattr(r, m)
+                out[m] = None if v is None else round(float(v), 2)
+        else:
+            out = r.to_json()
         out["coverage"] = (None if facts is None or facts.coverage is None
                            else round(facts.coverage, 4))
         out["interrupted"] = None if facts is None else facts.interrupted
-        out["neutral_outside_deg"] = round(float(r.neutral_outside_deg), 2)
+        if self.is_shoulder:
+            out["neutral_outside_deg"] = round(float(r.neutral_outside_deg), 2)
         out["warnings"] = self.warnings
         out["source"] = self.source
         return out
@@ -99,17 +123,36 @@ def run_rom(request: RomRequest) -> RomResult:
         from models.constraint import load_constraint
 
         constraint = load_constraint(request.constraint)
-        constraint.require_kind("rig rom")
         side = request.side or getattr(constraint, "side", None) or "right"
+        joint = request.joint or getattr(constraint, "joint", None) or "shoulder"
+        if joint != "shoulder":
+            from calibration.joint_angles import JOINT_ANGLES, constraint_rom
+
+            if joint not in JOINT_ANGLES:
+                raise RigConfigError(f"{request.constraint}: joint {joint!r} has no clinical "
+                                     f"angles; give --joint (one of shoulder, "
+                                     f"{', '.join(JOINT_ANGLES)})")
+            return RomResult(constraint_rom(constraint, joint, side), joint, request.constraint)
+        constraint.require_kind("rig rom")
         return RomResult(range_of_motion(constraint, side), getattr(constraint, "joint", None),
                          request.constraint)
     from rig.readback.boundary import extract
 
-    data = request.source.load()
+    src = request.source
+    if request.joint is not None and src.joint is None:
+        from dataclasses import replace
+
+        src = replace(src, joint=request.joint)
+    data = src.load()
     side = request.side or data.side or "right"
-    constraint = extract(data, side=side).constraint_
-    source = request.source.label
+    source = src.label
     if data.orientations is not None:
         source += f" (IMU orientations {data.orientations})"
+    from calibration.joint_angles import JOINT_ANGLES, recorded_rom
+
+    if data.joint in JOINT_ANGLES:
+        return RomResult(recorded_rom(data.q, data.joint, side), data.joint, source,
+                         data.facts())
+    constraint = extract(data, side=side).constraint_
     return RomResult(range_of_motion(constraint, side, directions=data.directions), data.joint,
                      source, data.facts())

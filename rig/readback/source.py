@@ -21,8 +21,11 @@ class RecordingSource:
     optionally ``reference``, in ``frames`` conventions: ``"rig"`` by default or ``"isb"``).
 
     ``limb_axis`` is ``x,y,z`` text in the file's frame convention (default: the long axis,
-    +X in rig frames, −Y in ISB frames); ``fusion`` applies to IMU sessions
-    (:data:`FUSION_CHOICES`)."""
+    +X in rig frames, −Y in ISB frames; the foot's +X in either); ``fusion`` applies to IMU
+    sessions (:data:`FUSION_CHOICES`). ``joint`` names the joint
+    (:data:`calibration.joints.JOINTS`; None: the recording's own, else the shoulder): its
+    segments say how a file's ISB frames turn into the rig's, its kind how the boundary is
+    extracted and which clinical angles are read."""
 
     file: str | None = None
     db: str | None = None
@@ -32,6 +35,7 @@ class RecordingSource:
     limb_axis: str | None = None
     frames: str | None = None
     fusion: str = "auto"
+    joint: str | None = None
 
     def check(self) -> None:
         """Option combinations and the file's existence, before any work (one-line errors)."""
@@ -54,6 +58,12 @@ class RecordingSource:
             raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
                                  f"{self.fusion!r}")
         parse_axis(self.limb_axis)
+        if self.joint is not None:
+            from calibration.joints import JOINTS
+
+            if self.joint not in JOINTS:
+                raise RigConfigError(f"--joint {self.joint!r}: expected one of "
+                                     f"{', '.join(JOINTS)}")
 
     @property
     def label(self) -> str:
@@ -66,21 +76,29 @@ class RecordingSource:
         :func:`~rig.readback.files.joint_orientations_from_file`)."""
         self.check()
         if self.file is not None:
+            from calibration.joints import JOINTS
+
             frames = self.frames or "rig"
+            spec = JOINTS[self.joint or "shoulder"]
             axis = parse_axis(self.limb_axis)
             if self.limb_axis is not None:
                 from calibration.frames import direction_to_rig
 
-                axis = direction_to_rig(axis, frames)
+                axis = direction_to_rig(axis, frames, spec.child)
             return joint_orientations_from_file(self.file, self.reference, self.limb, axis,
-                                                frames)
-        return read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion)
+                                                frames, self.joint)
+        data = read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion)
+        if self.joint is not None and self.joint != (data.joint or "shoulder"):
+            raise RigConfigError(f"session {self.session_id} recorded the "
+                                 f"{data.joint or 'shoulder'}, not the {self.joint}")
+        return data
 
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,
                             session_id: int | None = None, reference: str | None = None,
                             limb: str | None = None, limb_axis: str | None = None,
-                            fusion: str = "auto", frames: str | None = None) -> JointData:
+                            fusion: str = "auto", frames: str | None = None,
+                            joint: str | None = None) -> JointData:
     """``RecordingSource(...).load()`` with the options as keywords."""
     return RecordingSource(file, db, session_id, reference, limb, limb_axis, frames,
-                           fusion).load()
+                           fusion, joint).load()
