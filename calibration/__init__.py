@@ -10,6 +10,9 @@ Public API
 - :class:`ImuJointCalibration` — two-IMU calibration (static pose + flexion/extension), joint
   orientation ``thorax⁻¹ ⊗ humerus`` in segment frames (:mod:`calibration.alignment`).
 - :func:`joint_orientation`, :func:`status_ok` — helpers of the same module.
+- :class:`LimbImuCalibration` — one IMU per segment of an arm or a leg (static pose + each
+  joint's flexion/extension): mounts, heading offsets, joint orientations
+  (:mod:`calibration.limb_calibration`).
 - :func:`fuse_vqf`, :class:`FusionResult` — 9-D fusion of one sensor's raw accelerometer,
   gyroscope and magnetometer samples with VQF (:mod:`calibration.fusion`).
 - :class:`HeadingCorrection` — relative heading drift of the two IMUs removed at neutral-pose
@@ -30,6 +33,7 @@ from calibration.clinical import NORMATIVE, format_rom_table, isb_angles, range_
 from calibration.errors import CalibrationError
 from calibration.fusion import FusionResult, fuse_vqf
 from calibration.heading import HeadingCorrection
+from calibration.limb_calibration import LimbImuCalibration
 from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from calibration.servo import ServoChainCalibration
 
@@ -42,6 +46,7 @@ __all__ = [
     "HeadingCorrection",
     "ImuJointCalibration",
     "LimbCalibrationProtocol",
+    "LimbImuCalibration",
     "ServoChainCalibration",
     "boundary_distance",
     "format_rom_table",
