@@ -34,9 +34,9 @@ Frames (quaternions scalar-first, Hamilton, conventions of :mod:`models.quaterni
 Calibration (the two-step functional calibration of :mod:`calibration.alignment` — Luinge et
 al. 2007, *J Biomech* 40:78; de Vries et al. 2010, *Gait Posture* 31:120; Favre et al. 2009,
 *J Biomech* 42:2330 — with the heading offsets between the sensors' worlds estimated from the
-movements, as in the magnetometer-free joint calibrations of Seel et al. 2014, *Sensors*
-14:6891, and Laidig et al. 2017, *Proc. IEEE EMBC*: two sensors rotating together see one
-rotation axis, written in worlds that differ by their heading offset)
+movements: two sensors turning together see one rotation axis, written in worlds that differ
+by their heading offset; compare the heading offset of a hinge joint's two sensors found from
+its kinematic constraint by Laidig, Schauer & Seel 2017, *Proc. IEEE ICORR*, 971)
 ----------------------------------------------------------------------------------------------
 1. **Static neutral pose**: gravity in each sensor's frame (:func:`~calibration.alignment.\
 gravity_axis`) is the segment direction that points down in the neutral pose, in sensor
@@ -337,7 +337,10 @@ class LimbImuCalibration:
         if missing:
             raise CalibrationError(f"functional: no movement of the {', '.join(missing)} "
                                    "(each joint's flexion/extension is needed)")
-        fok = functional_ok or {}
+        fok = {} if functional_ok is None else functional_ok
+        if not isinstance(fok, dict) or set(fok) - set(self.joints_):
+            raise CalibrationError("functional_ok: expected a dict {joint: (M,) bool} with "
+                                   f"joints of the {self.limb} ({', '.join(self.joints_)})")
         fn = {}
         for joint in self.joints_:
             a = _check_sensors(functional[joint], f"functional[{joint!r}]", n_seg)
@@ -465,7 +468,7 @@ class LimbImuCalibration:
 
     # -- transform ----------------------------------------------------------------------------
 
-    def segments(self, sensors) -> np.ndarray:
+    def segment_orientations(self, sensors) -> np.ndarray:
         """Segment orientations (N, 4, 4) relative to the root sensor's world, rig frames.
 
         Parameters
@@ -486,7 +489,7 @@ class LimbImuCalibration:
         sensors : (N, 4, 4) array_like
             Sensor-relative-to-world orientations of the four segments, proximal to distal.
         """
-        s = self.segments(sensors)
+        s = self.segment_orientations(sensors)
         return Q.multiply(Q.conjugate(s[:, :-1]), s[:, 1:])
 
     def joints(self, sensors) -> dict[str, np.ndarray]:
