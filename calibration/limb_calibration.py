@@ -38,9 +38,10 @@ movements: two sensors turning together see one rotation axis, written in worlds
 by their heading offset; compare the heading offset of a hinge joint's two sensors found from
 its kinematic constraint by Laidig, Schauer & Seel 2017, *Proc. IEEE ICORR*, 971)
 ----------------------------------------------------------------------------------------------
-1. **Static neutral pose**: gravity in each sensor's frame (:func:`~calibration.alignment.\
-gravity_axis`) is the segment direction that points down in the neutral pose, in sensor
-   coordinates: +X, the foot's −Y. Its spread is the ``gravity`` residual.
+1. **Static neutral pose**: gravity in each sensor's frame
+   (:func:`~calibration.alignment.gravity_axis`) is the segment direction that points down in
+   the neutral pose, in sensor coordinates: +X, the foot's −Y. Its spread is the ``gravity``
+   residual.
 2. **Heading offsets from the movements**: while joint ``j`` flexes, every segment distal to
    it moves with its child as one rigid body (the other joints rest at zero), so the sensors
    on them turn by one rotation ``G(t)``, seen in world_k as ``H_k G H_k⁻¹``: the rotation
@@ -62,9 +63,9 @@ gravity_axis`) is the segment direction that points down in the neutral pose, in
    middle segment's from two movements (as the child of its proximal joint and as the parent
    of its distal one), averaged with weights ``Σ s²`` (the squared flexion angles of each
    movement: the inverse variance of an axis fitted to rotation vectors with white noise);
-   the angle between the two is the ``axes`` residual. Both must point the same way: if one
-   joint's sign disagrees with both neighbours (a movement begun with extension) it is
-   flipped and named in ``flipped_``.
+   the angle between the two is the ``axes`` residual. Both must point the same way: if they
+   do not (more than 90° apart), the fewest joints whose flip makes every pair agree (a
+   movement begun with extension) are flipped and named in ``flipped_``.
 5. **Orthonormalise**, gravity trusted more: the angle removed from Z is the
    ``orthogonality`` residual.
 6. **Heading alignment from the neutral pose**: proximal to distal, ``ψ_k`` is the rotation
