@@ -453,7 +453,7 @@ def _leg(rng: np.random.Generator) -> tuple[list[dict], dict]:
 def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
     # shoulder (AAOS 1965: flexion 180, extension 60, abduction 180, adduction 30-ish); below 175°
     # so that no vertex nears the neutral direction's antipode
-    flex, abd = _u(rng, 150.0, 172.0), _u(rng, 150.0, 172.0)
+    flex, abd = _u(rng, 150.0, 162.0), _u(rng, 150.0, 162.0)
     ext, ext_straight = _u(rng, 45.0, 60.0), _u(rng, 10.0, 20.0)
     add = _u(rng, 20.0, 40.0)
     internal, external = _u(rng, 55.0, 75.0), _u(rng, 60.0, 90.0)

@@ -31,18 +31,26 @@ Modules (each part a small object or pure functions; :class:`SimulatedLimb` comp
 :mod:`~rig.sim.limb.simulated`
     :class:`SimulatedLimb`, the facade: one joint, its schedule and its sensors; the
     :class:`LimbState` / :class:`Measurement` it returns.
+:mod:`~rig.sim.limb.chain`
+    :class:`SimulatedChain`: a whole arm or leg (four segments, three joints, a sensor on each
+    segment) moving inside a limb constraint (:class:`models.limb.Limb`) with the same parts;
+    its :class:`ChainState`.
 """
 
+from rig.sim.limb.chain import ChainState, SimulatedChain, chain_mounts
 from rig.sim.limb.sensors import GRAVITY, NoiseModel, SensorMount, default_mounts
 from rig.sim.limb.simulated import DEFAULT_CONSTRAINT, LimbState, Measurement, SimulatedLimb
 
 __all__ = [
     "DEFAULT_CONSTRAINT",
     "GRAVITY",
+    "ChainState",
     "LimbState",
     "Measurement",
     "NoiseModel",
     "SensorMount",
+    "SimulatedChain",
     "SimulatedLimb",
+    "chain_mounts",
     "default_mounts",
 ]

@@ -1,0 +1,655 @@
+""":class:`SimulatedChain`: a simulated patient's whole arm or leg — four segments, three joints,
+an IMU on each segment — moving inside a known limb constraint (:class:`models.limb.Limb`).
+
+Frames (rig segment frames, :mod:`calibration.frames`, :mod:`calibration.joint_angles`)
+---------------------------------------------------------------------------------------
+Segments, proximal to distal: thorax, upper arm, forearm, hand (arm) or pelvis, thigh, shank,
+foot (leg). Every segment has +X along it distally, +Y anterior, +Z to the body's right; the
+foot +X to the toes, +Y superior. Joint ``j`` (shoulder, elbow, wrist / hip, knee, ankle) is
+its child segment relative to its parent, ``q_j`` (the limb file's orientation). The root
+segment (thorax or pelvis) relative to world is :class:`~rig.sim.limb.motion.Posture`: a fixed
+orientation (default: heading 35°, and a 90° pitch so that +X hangs down) times a slow sway.
+Segment ``k``'s orientation is ``root(t) ⊗ q_0 ⊗ … ⊗ q_{k−1}``; sensor ``i`` strapped on segment
+``k`` with the mounting ``mount_i`` (:class:`~rig.sim.limb.sensors.SensorMount`, its ``segment``
+the segment's name) is at ``root(t) ⊗ q_0 ⊗ … ⊗ q_{k−1} ⊗ mount_i``.
+
+Motion (the shoulder patient's recipe, :mod:`rig.sim.limb.motion`, on every joint)
+----------------------------------------------------------------------------------
+- **Free motion.** A ball or two-axis joint swings about a motion centre (the mean direction of
+  its loosest keyframe's region) with seeded sinusoids as
+  :class:`~rig.sim.limb.motion.JointMotion`'s (RMS ``excursion`` times the region's reach, at
+  most 90°; twist about the middle of its interval, RMS ``excursion`` times half of it); a
+  hinge turns about its axis, ``mid + excursion · half · x(t)`` over its interval (saturating
+  smoothly 170° from the middle). With ``excursion = 1`` every joint is pushed beyond its
+  limits often, independently, so the patient presses into every limit, the coupled ones at
+  many knee or elbow angles.
+- **Stop at the limits.** A swing direction outside its region moves back along the great
+  circle towards the motion centre onto the boundary (bisection on the limb oracle's verdict,
+  the other joints as the oracle corrects them: a coupled region at its hinge's corrected
+  angle), then the exact hierarchical projection of the limb oracle
+  (:meth:`models.limb_oracle.LimbOracle.project`: the hinge first, the joints coupled to it
+  against their limits at the corrected hinge angle; the twist clamp). The oracle's nearest
+  point alone jumps where a target crosses the medial axis of a concave notch or of a region's
+  excluded cap (a shoulder's): measured on seeds 3, 5, 8 at 50 Hz over 240 s, the leg's joints
+  then move at most 250-490°/s (p99 135-260°/s); the shoulder at p99 250-300°/s with a few
+  samples in a thousand above 500°/s, where the arm, raised overhead, passes near the limb
+  axis's antipode and the swing-twist decomposition (hence the twist limit) turns fast.
+- **Smoothing.** :class:`~rig.sim.limb.motion.SmoothPath`: the uniform cubic B-spline (knots every
+  ``smooth_s``) through the projected target on the global grid, each joint splined on its own,
+  then projected once more. Stateless: a value does not depend on what else is evaluated.
+- **Schedule.** :class:`~rig.sim.limb.schedule.Schedule` per joint: the calibration protocol
+  (:class:`calibration.protocol.LimbCalibrationProtocol`: neutral pose, then each joint's
+  flexion/extension; a single-joint :class:`~calibration.protocol.CalibrationProtocol` is
+  performed by the proximal joint, the others at their neutral) from ``protocol_start_s``, the
+  neutral pose before it, a smoothstep hand-over to free motion over ``blend_s``; optional
+  neutral checkpoints, each joint's neutral pose (clinical zero,
+  :func:`calibration.joint_angles.from_angles`) perturbed by the patient's repeatability. The
+  scripted poses go through the projection too: the patient performs them within its limits.
+
+Sensors (:mod:`rig.sim.limb.sensors`)
+-------------------------------------
+The same error processes as the shoulder patient's (:class:`~rig.sim.limb.sensors.SensorErrors`:
+white noise, drift, magnetic disturbances, calibration status, raw gyroscope, accelerometer and
+magnetometer). The accelerometers' linear acceleration comes from the chain's geometry: the
+proximal joint centre (shoulder, hip) is fixed in the world, as the shoulder patient's is;
+segment ``k ≥ 1``'s sensor sits half-way along it, at ``Σ_{m<k} R_m L_m x̂ + R_k L_k x̂ / 2``
+from that centre (``R_m`` segment ``m``'s orientation, ``L_m`` its length,
+:data:`SEGMENT_LENGTHS_M`: upper arm 0.30 m, forearm 0.26, hand 0.08; thigh 0.43, shank 0.42,
+foot 0.15); the root's sensor its length above a world-fixed pivot (thorax 0.30 m, pelvis
+0.15 m; along the root's −X, superior).
+
+Random streams, all from ``seed``: the motion's sinusoids, then the sensor errors draw from the
+seeded generator in that order; the neutral poses and the accelerometer/magnetometer noise have
+seed sequences of their own (nothing drawn from the generator). Misplaced straps are drawn by
+the caller (:func:`chain_mounts`, as :func:`rig.sim.patients.chain_patient` does).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from models import quaternion as Q
+from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.limb import Limb
+from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
+from rig.sim.limb.motion import JointMotion, Posture, Sinusoids, SmoothPath
+from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule
+from rig.sim.limb.sensors import RAW_STEP_S, NoiseModel, SensorErrors, SensorMount
+from rig.sim.limb.simulated import Measurement
+
+__all__ = ["CHAIN_SEGMENTS", "SEGMENT_LENGTHS_M", "ChainState", "SimulatedChain", "chain_mounts"]
+
+_X = np.array([1.0, 0.0, 0.0])
+_Y = np.array([0.0, 1.0, 0.0])
+_Z = np.array([0.0, 0.0, 1.0])
+_CHAIN_KEY = 0x4368  # spawn-key word of each joint's neutral-pose seed sequence
+
+#: The chains a :class:`SimulatedChain` wears: limb → joints and segments, proximal to distal
+#: (:data:`calibration.protocol.LIMB_CHAINS`).
+CHAIN_SEGMENTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "arm": (("shoulder", "elbow", "wrist"), ("thorax", "upper-arm", "forearm", "hand")),
+    "leg": (("hip", "knee", "ankle"), ("pelvis", "thigh", "shank", "foot")),
+}
+
+#: Segment lengths (m), proximal to distal; the root's is its sensor's height above the
+#: root's world-fixed pivot. Adult segment lengths of the order of Winter's anthropometric
+#: proportions (Winter, *Biomechanics and Motor Control of Human Movement*, 4th ed., 2009,
+#: Fig. 4.1: upper arm 0.186 H, forearm 0.146 H, hand 0.108 H to the fingertips, thigh 0.245 H,
+#: leg 0.246 H, foot length 0.152 H; H ≈ 1.7 m, the hand to the knuckles).
+SEGMENT_LENGTHS_M: dict[str, tuple[float, float, float, float]] = {
+    "arm": (0.30, 0.30, 0.26, 0.08),
+    "leg": (0.15, 0.43, 0.42, 0.15),
+}
+
+# nominal straps, sensor frame relative to segment frame: the root's as the shoulder patient's
+# thorax sensor (rig.sim.limb.default_mounts), the limb segments' on their lateral sides
+_NOMINAL = (((_Z, -90.0),), ((_X, 90.0), (_Y, 7.0)), ((_X, 80.0), (_Y, -4.0)),
+            ((_X, 100.0), (_Z, 5.0)))
+
+
+def chain_mounts(segments: Sequence[str], rng: np.random.Generator | None = None,
+                 misplace_deg: float = 0.0) -> list[SensorMount]:
+    """One sensor per segment (sensor ``i`` on ``segments[i]``) at nominal straps (none the
+    identity, as straps are in practice), each turned by ``misplace_deg`` about a random axis
+    (``mount ⊗ exp(misplace_deg · axis)``, sensor frame, axes drawn from ``rng``) — the draws
+    of :func:`rig.sim.patients.misplaced_mounts`."""
+    if len(segments) != len(_NOMINAL):
+        raise ValueError(f"a chain wears {len(_NOMINAL)} sensors, got {len(segments)} segments")
+    out = []
+    for seg, parts in zip(segments, _NOMINAL, strict=True):
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+        for axis, deg in parts:
+            q = Q.multiply(q, Q.from_axis_angle(axis, math.radians(deg)))
+        if misplace_deg:
+            if rng is None:
+                raise ValueError("misplaced straps need a random generator")
+            axis = rng.standard_normal(3)
+            axis /= np.linalg.norm(axis)
+            q = Q.multiply(q, Q.from_axis_angle(axis, math.radians(misplace_deg)))
+        out.append(SensorMount(seg, tuple(Q.canonical(q))))
+    return out
+
+
+@dataclass(frozen=True)
+class ChainState:
+    """Ground truth at times ``t`` (N,).
+
+    Attributes
+    ----------
+    t : (N,) float64, seconds since the simulation started
+    joints : (N, J, 4) float64, each joint's child segment relative to its parent (the limb
+        file's joint order)
+    root : (N, 4) float64, the root segment (thorax, pelvis) relative to world
+    segments : (N, J + 1, 4) float64, every segment relative to world
+    sensors : (N, S, 4) float64, each sensor relative to world (error-free)
+    """
+
+    t: np.ndarray
+    joints: np.ndarray
+    root: np.ndarray
+    segments: np.ndarray
+    sensors: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class _JointScript:
+    """One joint's part of a protocol, as :class:`~rig.sim.limb.schedule.Schedule` takes it
+    (``joint(u) -> (N, 4)``, ``duration_s``): a limb protocol's joint ``index``
+    (``joint_orientations``), or a single-joint protocol (``joint``) performed by the proximal
+    joint while the others hold ``neutral``."""
+
+    protocol: object
+    index: int
+    side: str
+    neutral: np.ndarray
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.protocol.duration_s)
+
+    def joint(self, u) -> np.ndarray:
+        u = np.atleast_1d(np.asarray(u, dtype=np.float64))
+        if hasattr(self.protocol, "joint_orientations"):
+            return self.protocol.joint_orientations(u, self.side)[:, self.index]
+        if self.index == 0:
+            return np.asarray(self.protocol.joint(u), dtype=np.float64).reshape(-1, 4)
+        return np.tile(self.neutral, (len(u), 1))
+
+
+@dataclass(frozen=True, eq=False)
+class _ChainSchedule:
+    """Each joint's :class:`~rig.sim.limb.schedule.Schedule` (one object: a protocol set
+    meanwhile applies to the whole chain from the next call, and keys the spline's cache)."""
+
+    joints: tuple[Schedule, ...]
+
+    @property
+    def first(self) -> Schedule:
+        return self.joints[0]
+
+
+def _loosest(joint) -> JointConstraint:
+    """A swing joint's constraint, or its coupled keyframe with the largest region."""
+    if joint.constraint is not None:
+        return joint.constraint
+
+    def size(c: JointConstraint) -> float:
+        if isinstance(c.swing, PolygonSwing):
+            return c.swing.area_sr()
+        if isinstance(c.swing, ConeSwing):
+            return c.swing.radius
+        return 0.0
+
+    return max(joint.coupling.keyframes, key=size)
+
+
+def _region_centre(c: JointConstraint) -> np.ndarray:
+    """The mean direction of a swing region (4,096 fixed directions on the sphere, those inside
+    averaged): a centre for the motion that lies deep in the region even when it spans more than
+    a hemisphere (a shoulder). Falls back to the polygon's interior point or the cone's centre."""
+    swing = c.swing
+    if isinstance(swing, ConeSwing):
+        return Q.check_vectors(swing.centre)
+    fallback = Q.check_vectors(swing.interior) if isinstance(swing, PolygonSwing) else (
+        Q.check_vectors(c.limb_axis))
+    d = Q.random_unit_vectors(4096, np.random.default_rng(0x5EED))
+    inside = ConstraintOracle(c).swing_distance(d) <= 0.0
+    m = d[inside].sum(axis=0)
+    if inside.sum() < 16 or np.linalg.norm(m) < 1e-3 * inside.sum():
+        return fallback
+    m /= np.linalg.norm(m)
+    return m if ConstraintOracle(c).swing_distance(m[None])[0] < 0.0 else fallback
+
+
+@dataclass(frozen=True)
+class _Placement:
+    """What :class:`~rig.sim.limb.sensors.SensorErrors` asks of a placement: the number of
+    sensors; no fixed lever arms (a chain gives the sensors' positions with each call)."""
+
+    n: int
+    lever: None = None
+
+    def __len__(self) -> int:
+        return self.n
+
+
+_REACH_CAP = math.radians(90.0)  # the swing's RMS is excursion times its reach, at most this
+_PUSH_KNEE = math.radians(110.0)  # a swing's raw angle from its centre saturates beyond this
+_PUSH_ROOM = math.radians(30.0)  # ... towards this much more
+_HINGE_ROOM = math.radians(170.0)  # a hinge's raw excursion from its middle saturates below
+_STOP_STEPS = 14  # bisection halvings of the radial stop: 2^-14 of the arc (< 0.01°)
+
+
+def _arc(c: np.ndarray, d: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points (N, 3) a fraction ``s`` (N,) of the way along the great circle from ``c`` to
+    ``d`` (both (N, 3), unit, not antipodal)."""
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", c, d), -1.0, 1.0))
+    sa = np.sin(ang)
+    safe = np.where(sa > 1e-12, sa, 1.0)
+    wa = np.where(sa > 1e-12, np.sin((1.0 - s) * ang) / safe, 1.0 - s)
+    wb = np.where(sa > 1e-12, np.sin(s * ang) / safe, s)
+    p = wa[:, None] * c + wb[:, None] * d
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def _free(m, t: np.ndarray) -> np.ndarray:
+    """A joint's free orientation (N, 4) at times ``t``: a hinge's own; a swing joint's as
+    :meth:`~rig.sim.limb.motion.JointMotion.free` draws it (the same sinusoids, reach and
+    twist about the motion centre), except that the reach counts up to 90° (a shoulder's
+    region spans more than a hemisphere: at its full reach the arm would swing at several
+    hundred °/s) and the push saturates smoothly from ``min(reach, 110°)`` towards 30° more
+    (not 120° → 170°): the radial stop aims from the centre, and a direction near the
+    centre's antipode has no steady azimuth about it."""
+    if isinstance(m, _HingeMotion):
+        return m.free(t)
+    sigma = m.excursion * min(m.reach, _REACH_CAP) / math.sqrt(2.0)
+    su = sigma * m.series(0, t)
+    sv = sigma * m.series(1, t)
+    ang = np.hypot(su, sv)
+    safe = np.where(ang > 1e-12, ang, 1.0)
+    u, v = Q.tangent_basis(m.centre)
+    dirn = (su[:, None] * u + sv[:, None] * v) / safe[:, None]
+    knee = min(m.reach, _PUSH_KNEE)
+    over = np.maximum(ang - knee, 0.0)
+    ang = np.minimum(ang, knee) + _PUSH_ROOM * np.tanh(over / _PUSH_ROOM)
+    d = np.cos(ang)[:, None] * m.centre + np.sin(ang)[:, None] * dirn
+    swing = Q.from_two_vectors(m.limb_axis, d)
+    phi = m.twist_centre + m.excursion * m.twist_half * m.series(2, t)
+    return Q.multiply(swing, Q.from_axis_angle(m.limb_axis, phi))
+
+
+class _HingeMotion:
+    """A hinge's free motion about its axis: ``mid + L tanh(excursion · half · x(t) / L)``
+    (radians), ``L`` = 170°: nearly linear over the interval and past it, but never round to
+    the far side of the circle, where the clamp would flip to the other end."""
+
+    def __init__(self, c: JointConstraint, series: Sinusoids, excursion: float) -> None:
+        self.axis = Q.check_vectors(c.hinge.axis)
+        self.mid = 0.5 * (c.hinge.min + c.hinge.max)
+        self.half = 0.5 * (c.hinge.max - c.hinge.min)
+        self.series = series
+        self.excursion = float(excursion)
+
+    def free(self, t: np.ndarray) -> np.ndarray:
+        room = _HINGE_ROOM
+        angle = self.mid + room * np.tanh(self.excursion * self.half * self.series(0, t) / room)
+        return Q.from_axis_angle(self.axis, angle)
+
+
+class SimulatedChain:
+    """A patient's arm or leg — its segments' motion within a known limb constraint, four
+    sensors and their errors; seeded and reproducible (module docstring).
+
+    The interface of :class:`~rig.sim.limb.SimulatedLimb` that the IMU simulators use:
+    :attr:`n_sensors`, :attr:`mounts`, :meth:`measure`, :meth:`measure_many` and :meth:`truth`
+    (a :class:`ChainState`: the joint orientations (N, J, 4), the root, segments and sensors).
+
+    Parameters
+    ----------
+    limb : models.limb.Limb
+        The ground truth: an arm (shoulder, elbow, wrist) or a leg (hip, knee, ankle) in rig
+        segment frames (:func:`rig.sim.patients.anatomical_limb`, or a limb file); its ``side``
+        (default right) sets the protocol's and the neutral poses' side.
+    sensors : sequence of SensorMount, optional
+        Where the sensors sit, each ``segment`` one of :attr:`segments`; default one per
+        segment at the nominal straps (:func:`chain_mounts`).
+    noise : NoiseModel, optional
+        Default :class:`~rig.sim.limb.NoiseModel` (noise, drift, disturbances on).
+    excursion : float
+        RMS of each joint's raw motion relative to its range (module docstring).
+    speed : float
+        Multiplies every motion frequency (1: 0.03-0.3 Hz components).
+    world_from_root : (4,) array_like, optional
+        Fixed part of the root segment's orientation (default: heading 35°, +X down).
+    sway_deg : float
+        Amplitude of the root's postural sway.
+    seed : int or numpy Generator
+    calibration_protocol : LimbCalibrationProtocol or CalibrationProtocol, optional
+        Performed from ``protocol_start_s`` (neutral pose before it), then a hand-over of
+        ``blend_s`` to free motion; None: free motion from time 0.
+    protocol_start_s, blend_s : float
+    neutral_every_s, neutral_hold_s, neutral_ramp_s, neutral_sd_deg : float
+        Neutral checkpoints, as :class:`~rig.sim.limb.SimulatedLimb`'s (every joint at its
+        clinical zero, each perturbed about its child's long axis by ``neutral_sd_deg``).
+    lengths_m : (4,) float, optional
+        Segment lengths, proximal to distal, the root's its sensor's lever (default
+        :data:`SEGMENT_LENGTHS_M`).
+    smooth_s : float
+        Knot spacing of the motion's B-spline, seconds.
+    """
+
+    def __init__(
+        self,
+        limb: Limb,
+        *,
+        sensors: Sequence[SensorMount] | None = None,
+        noise: NoiseModel | None = None,
+        excursion: float = 1.0,
+        speed: float = 1.0,
+        world_from_root: Sequence[float] | None = None,
+        sway_deg: float = 2.0,
+        seed: int | np.random.Generator | None = 0,
+        calibration_protocol=None,
+        protocol_start_s: float = 2.0,
+        blend_s: float = 3.0,
+        neutral_every_s: float = 0.0,
+        neutral_hold_s: float = 2.0,
+        neutral_ramp_s: float = 1.5,
+        neutral_sd_deg: float = 2.0,
+        lengths_m: Sequence[float] | None = None,
+        smooth_s: float = 0.04,
+    ) -> None:
+        if not isinstance(limb, Limb):
+            raise TypeError(f"limb must be a models.limb.Limb, got {type(limb).__name__}")
+        kind = limb.limb if limb.limb in CHAIN_SEGMENTS else None
+        joint_names = tuple(j.name for j in limb.joints)
+        if kind is None:  # a limb file without 'limb:': tell it by its joints
+            kind = next((k for k, (js, _) in CHAIN_SEGMENTS.items() if js == joint_names), None)
+        if kind is None or CHAIN_SEGMENTS[kind][0] != joint_names:
+            raise ValueError(f"a simulated chain is an arm (shoulder, elbow, wrist) or a leg "
+                             f"(hip, knee, ankle); limb {limb.name!r} has joints "
+                             f"{', '.join(joint_names)}")
+        if not excursion > 0 or not speed > 0:
+            raise ValueError("excursion and speed must be > 0")
+        self.limb = limb
+        self.kind = kind
+        self.side = limb.side or "right"
+        self.segments: tuple[str, ...] = (limb.joints[0].parent,
+                                          *(j.child for j in limb.joints))
+        self.oracle = LimbOracle(limb)
+        self.excursion = float(excursion)
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        ss = getattr(rng.bit_generator, "seed_seq", None)
+        seed_seq = ss if isinstance(ss, np.random.SeedSequence) else np.random.SeedSequence(0)
+        # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway
+        rows = [1 if j.kind == "hinge" else 3 for j in limb.joints]
+        series = Sinusoids.draw(rng, sum(rows) + 2, speed)
+        self.motions: list[JointMotion | _HingeMotion] = []
+        r = 0
+        for j, n in zip(limb.joints, rows, strict=True):
+            if j.kind == "hinge":
+                self.motions.append(_HingeMotion(j.loosest(), series.rows(r, r + 1), excursion))
+            else:
+                c = _loosest(j)
+                self.motions.append(JointMotion(c, series.rows(r, r + 3),
+                                                centre=_region_centre(c),
+                                                excursion=excursion))
+            r += n
+        if world_from_root is None:
+            world_from_root = Q.multiply(Q.from_axis_angle(_Z, math.radians(35.0)),
+                                         Q.from_axis_angle(_Y, math.radians(90.0)))
+        self.posture = Posture(world_from_root, sway_deg, series.rows(r, r + 2))
+        from calibration.protocol import LimbCalibrationProtocol
+
+        self.neutral = LimbCalibrationProtocol(kind).joint_orientations([-1.0], self.side)[0]
+        self._neutral = [
+            NeutralPoses(neutral_sd_deg, np.random.SeedSequence(
+                seed_seq.entropy, spawn_key=(*seed_seq.spawn_key, _CHAIN_KEY, i)),
+                Q.check_vectors(j.limb_axis))
+            for i, j in enumerate(limb.joints)]
+        mounts = list(sensors) if sensors is not None else chain_mounts(self.segments)
+        for m in mounts:
+            if m.segment not in self.segments:
+                raise ValueError(f"sensor on segment {m.segment!r}: not a segment of the "
+                                 f"{kind} ({', '.join(self.segments)})")
+        self.mounts = mounts
+        self._sensor_segment = np.array([self.segments.index(m.segment) for m in mounts])
+        self._mount_q = Q.check_quaternions(np.array([m.mount for m in mounts]), normalize=True,
+                                            name="mount")
+        lengths = SEGMENT_LENGTHS_M[kind] if lengths_m is None else tuple(lengths_m)
+        if len(lengths) != len(self.segments) or not all(
+                math.isfinite(v) and v >= 0 for v in lengths):
+            raise ValueError(f"lengths_m: {len(self.segments)} lengths >= 0 expected, got "
+                             f"{lengths!r}")
+        self.lengths_m = tuple(float(v) for v in lengths)
+        self._axes = [Q.check_vectors(j.limb_axis) for j in limb.joints]
+        checkpoints = NeutralCheckpoints(neutral_every_s, neutral_hold_s, neutral_ramp_s)
+        self._schedule = _ChainSchedule(tuple(
+            Schedule(blend_s=blend_s, checkpoints=checkpoints) for _ in limb.joints))
+        if calibration_protocol is not None:
+            self.perform_protocol(calibration_protocol, protocol_start_s)
+        self.noise = noise if noise is not None else NoiseModel()
+        self.sensor_errors = SensorErrors(self.noise, _Placement(len(mounts)), rng, seed_seq)
+        self._path = SmoothPath(smooth_s)
+
+    @property
+    def n_sensors(self) -> int:
+        return len(self.mounts)
+
+    @property
+    def schedule(self) -> Schedule:
+        """The proximal joint's schedule (every joint's has the same times)."""
+        return self._schedule.first
+
+    @property
+    def calibration_protocol(self):
+        """The protocol the patient performs, or None."""
+        p = self._schedule.first.protocol
+        return None if p is None else p.protocol
+
+    @property
+    def protocol_start_s(self) -> float:
+        """Patient time (s) at which the protocol starts; 0 without one."""
+        return self._schedule.first.start_s
+
+    @property
+    def protocol_end_s(self) -> float:
+        """Patient time at which the protocol has ended (free motion, blended, follows); 0
+        without a protocol."""
+        return self._schedule.first.protocol_end_s
+
+    @property
+    def blend_s(self) -> float:
+        return self._schedule.first.blend_s
+
+    @property
+    def neutral_start_s(self) -> float:
+        """Patient time from which neutral checkpoints are counted (as
+        :attr:`rig.sim.limb.SimulatedLimb.neutral_start_s`)."""
+        return self._schedule.first.neutral_start_s
+
+    @property
+    def smooth_s(self) -> float:
+        return self._path.step_s
+
+    # -- schedule ----------------------------------------------------------------------------
+    def perform_protocol(self, protocol, start_s: float = 2.0) -> None:
+        """Have the patient perform ``protocol`` from patient time ``start_s`` (seconds): a
+        :class:`calibration.protocol.LimbCalibrationProtocol` of this limb, or a single-joint
+        protocol (``joint(u)``, ``duration_s``) performed by the proximal joint with the others
+        at their clinical zero; None returns to free motion from time 0. Changes the motion at
+        every time (call it before sampling times after ``min(start_s, now)``)."""
+        if protocol is not None and getattr(protocol, "limb", self.kind) != self.kind:
+            raise ValueError(f"a {protocol.limb} protocol for a {self.kind} patient")
+        scheds = []
+        for i, s in enumerate(self._schedule.joints):
+            script = None if protocol is None else _JointScript(protocol, i, self.side,
+                                                                self.neutral[i])
+            scheds.append(s.with_protocol(script, start_s))
+        self._schedule = _ChainSchedule(tuple(scheds))  # one assignment: threads see either
+
+    def protocol_windows(self) -> dict[str, tuple[float, float]]:
+        """The protocol's phase windows in patient time (``{}`` without a protocol)."""
+        p = self.calibration_protocol
+        if p is None:
+            return {}
+        t0 = self.protocol_start_s
+        return {k: (t0 + a, t0 + b) for k, (a, b) in p.windows().items()}
+
+    def neutral_windows(self, t_end: float) -> np.ndarray:
+        """Hold windows (K, 2) of the neutral checkpoints that end by patient time ``t_end``."""
+        return self._schedule.first.neutral_windows(t_end)
+
+    def neutral_poses(self, k) -> np.ndarray:
+        """Every joint's neutral pose at checkpoints ``k`` (K, J, 4), before the projection."""
+        return np.stack([Q.multiply(self.neutral[i], self._neutral[i](k))
+                         for i in range(len(self._neutral))], axis=1)
+
+    # -- ground truth --------------------------------------------------------------------------
+    def raw_joints(self, t) -> np.ndarray:
+        """Unconstrained joint orientations (N, J, 4) at times ``t`` (N,): the free motion."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        return np.stack([_free(m, t) for m in self.motions], axis=1)
+
+    def project(self, q) -> np.ndarray:
+        """Postures (N, J, 4) brought into the limb's range the way the patient stops: each
+        swing joint's direction outside its region moved back along the great circle towards
+        its motion centre onto the boundary (:meth:`_radial_stop`), then the oracle's exact
+        hierarchical projection (normalised first)."""
+        q = np.asarray(q, dtype=np.float64)
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        q = self._radial_stop(q)
+        p = self.oracle.project(q, normalize=True)
+        return p / np.linalg.norm(p, axis=-1, keepdims=True)
+
+    def _radial_stop(self, q: np.ndarray) -> np.ndarray:
+        """Swing joints' directions outside their regions, moved along the great circle from
+        the motion centre onto the boundary (bisection on the limb oracle's verdict for the
+        pure swing, :data:`_STOP_STEPS` halvings, with every other joint as the oracle corrects
+        it: a coupled region at its source's corrected angle), the twist kept. Continuous in
+        the target where the region is star-shaped about the centre, unlike the nearest point,
+        which jumps across a concave notch's (or an excluded cap's) medial axis."""
+        base = self.oracle.project(q, normalize=True)
+        out = q.copy()
+        for j, m in enumerate(self.motions):
+            if not isinstance(m, JointMotion):
+                continue
+            axis = m.limb_axis
+            d = Q.rotate(q[:, j], axis)
+            trial = base.copy()
+            trial[:, j] = Q.from_two_vectors(axis, d)
+            rows = np.nonzero(~self.oracle.is_valid(trial)[:, j])[0]
+            if not len(rows):
+                continue
+            c = np.broadcast_to(m.centre, (len(rows), 3))
+            dd = d[rows]
+            lo, hi = np.zeros(len(rows)), np.ones(len(rows))
+            sub = trial[rows]
+            for _ in range(_STOP_STEPS):
+                mid = 0.5 * (lo + hi)
+                p = _arc(c, dd, mid)
+                sub[:, j] = Q.from_two_vectors(axis, p)
+                ok = self.oracle.is_valid(sub)[:, j]
+                lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+            p = _arc(c, dd, lo)
+            old = Q.from_two_vectors(axis, dd)
+            new = Q.from_two_vectors(axis, p)
+            out[rows, j] = Q.multiply(new, Q.multiply(Q.conjugate(old), q[rows, j]))
+        return out
+
+    def target(self, t) -> np.ndarray:
+        """The patient's target (N, J, 4) at times ``t`` before the smoothing: the free motion
+        with the protocol and the checkpoints blended in, projected."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        return self._target(t, self._schedule)
+
+    def _target(self, t: np.ndarray, schedule: _ChainSchedule) -> np.ndarray:
+        free = self.raw_joints(t)
+        q = np.stack([s.target(t, free[:, i], self._neutral_pose(i))
+                      for i, s in enumerate(schedule.joints)], axis=1)
+        return self.project(q)
+
+    def _neutral_pose(self, i: int):
+        def pose(k):
+            return Q.multiply(self.neutral[i], self._neutral[i](k))
+        return pose
+
+    def joints(self, t) -> np.ndarray:
+        """Joint orientations (N, J, 4) inside the limb's range at times ``t`` (N,) seconds:
+        the B-spline through :meth:`target` on the knot grid, projected once more."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if not len(t):
+            return np.empty((0, len(self.limb.joints), 4))
+        schedule = self._schedule  # one snapshot
+        q = self._path(t, lambda ts: self._target(ts, schedule), schedule)
+        return self.project(q)
+
+    def root(self, t) -> np.ndarray:
+        """The root segment (thorax, pelvis) relative to world (N, 4)."""
+        return self.posture(t)
+
+    def truth(self, t) -> ChainState:
+        """Error-free state at times ``t`` (scalar or (N,), seconds)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        joints = self.joints(t)
+        root = self.root(t)
+        segs = [root]
+        for i in range(joints.shape[1]):
+            segs.append(Q.multiply(segs[-1], joints[:, i]))
+        segments = np.stack(segs, axis=1)
+        sensors = Q.multiply(segments[:, self._sensor_segment], self._mount_q[None])
+        return ChainState(t=t, joints=joints, root=root, segments=segments, sensors=sensors)
+
+    def positions(self, segments: np.ndarray) -> np.ndarray:
+        """Each sensor's world position (N, S, 3), m, from the segments' orientations
+        (N, J + 1, 4): the root's sensor above its world-fixed pivot, the others from the
+        world-fixed proximal joint centre (module docstring)."""
+        n = len(segments)
+        mid = np.empty((n, len(self.segments), 3))
+        mid[:, 0] = Q.rotate(segments[:, 0], -self.lengths_m[0] * _X)
+        base = np.zeros((n, 3))  # segment k's proximal end; segment 1's is the fixed centre
+        for k in range(1, len(self.segments)):
+            along = Q.rotate(segments[:, k], self.lengths_m[k] * self._axes[k - 1])
+            mid[:, k] = base + 0.5 * along
+            base = base + along
+        return mid[:, self._sensor_segment]
+
+    # -- measurements ----------------------------------------------------------------------------
+    def measure(self, t: float, calibration_elapsed_s: float | None = None) -> Measurement:
+        """Sensor outputs at time ``t`` (seconds; calls must not go back in time), as
+        :meth:`rig.sim.limb.SimulatedLimb.measure` (``truth`` a :class:`ChainState`)."""
+        t = float(t)
+        h = RAW_STEP_S
+        truth = self.truth(np.array([t, t + h, t - h]))
+        elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
+        pos = self.positions(truth.segments)
+        r = self.sensor_errors.one(t, truth.sensors, elapsed, positions=pos)
+        return Measurement(t=t, quaternions=r.quaternions[0], gyro=r.gyro[0],
+                           calibration=r.calibration[0], truth=_first(truth, 0, 1),
+                           accel=r.accel[0], mag=r.mag[0])
+
+    def measure_many(self, ts) -> list[Measurement]:
+        """Sensor outputs at increasing times ``ts`` (K,), vectorised (as
+        :meth:`rig.sim.limb.SimulatedLimb.measure_many`)."""
+        ts = np.atleast_1d(np.asarray(ts, dtype=np.float64))
+        k = len(ts)
+        if k == 0:
+            return []
+        h = RAW_STEP_S
+        truth = self.truth(np.concatenate((ts, ts + h, ts - h)))
+        s = truth.sensors
+        pos = self.positions(truth.segments).reshape(3, k, -1, 3)
+        r = self.sensor_errors.many(ts, s[:k], s[k:2 * k], s[2 * k:], positions=pos)
+        return [Measurement(t=float(ts[i]), quaternions=r.quaternions[i], gyro=r.gyro[i],
+                            calibration=r.calibration[i], truth=_first(truth, i, i + 1),
+                            accel=r.accel[i], mag=r.mag[i])
+                for i in range(k)]
+
+
+def _first(s: ChainState, a: int, b: int) -> ChainState:
+    return ChainState(s.t[a:b], s.joints[a:b], s.root[a:b], s.segments[a:b], s.sensors[a:b])
