@@ -11,11 +11,12 @@ from __future__ import annotations
 import click
 
 from calibration.frames import FRAMES
-from calibration.joints import JOINTS
+from calibration.joints import JOINTS, LIMB_CHAINS
 from rig.readback.boundary import BY_SWING_CHOICES
 from rig.readback.data import FUSION_CHOICES
 
 JOINT_NAMES = tuple(JOINTS)
+CHAINS = tuple(LIMB_CHAINS)
 
 
 @click.command()
@@ -31,6 +32,11 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
               "segments are --reference and --limb (a session: the joint it recorded).")
+@click.option("--chain", "chain", type=click.Choice(CHAINS), default=None,
+              help="A whole arm or leg from FILE's segment columns: writes a limb file, with a "
+              "coupling where the recording supports one.")
+@click.option("--segments", default=None, help="With --chain: the segment columns proximal to "
+              "distal, COL,COL,COL (after --reference) or all four.")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -50,13 +56,34 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
-def boundary(file, db, session_id, reference, limb, limb_axis, joint, frames, out, name,
-             side, alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
+def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, segments, frames,
+             out, name, side, alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
     """
+    from rig.errors import RigConfigError
     from rig.readback import BoundaryRequest, RecordingSource, run_boundary
+
+    if chain is not None or segments is not None:
+        from rig.readback import ChainRequest, run_chain
+
+        if chain is None:
+            raise RigConfigError("--segments applies with --chain arm|leg")
+        if file is None or db is not None or session_id is not None:
+            raise RigConfigError("--chain reads an orientation file's segment columns (FILE "
+                                 "--segments ...); sessions of a whole limb are not recorded "
+                                 "yet")
+        for flag, value in (("--joint", joint), ("--limb", limb), ("--limb-axis", limb_axis)):
+            if value is not None:
+                raise RigConfigError(f"{flag} does not apply with --chain (the chain names its "
+                                     "joints and segments)")
+        if segments is None:
+            raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")
+        result = run_chain(ChainRequest(file, chain, segments, out, reference=reference,
+                                        frames=frames, name=name, side=side))
+        click.echo(result.describe())
+        return
 
     result = run_boundary(BoundaryRequest(
         RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,

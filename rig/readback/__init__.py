@@ -15,7 +15,9 @@ Modules
 :mod:`~rig.readback.data`
     :class:`JointData` (orientations + provenance) and :class:`RecordingFacts`.
 :mod:`~rig.readback.boundary`
-    :func:`run_boundary` (:class:`BoundaryRequest` → :class:`BoundaryResult`), :func:`extract`.
+    :func:`run_boundary` (:class:`BoundaryRequest` → :class:`BoundaryResult`), :func:`extract`;
+    a limb file from a file's segment columns: :func:`run_chain` (:class:`ChainRequest` →
+    :class:`ChainResult`).
 :mod:`~rig.readback.rom`
     :func:`run_rom` (:class:`RomRequest` → :class:`RomResult`).
 """
@@ -23,9 +25,12 @@ Modules
 from rig.readback.boundary import (
     BoundaryRequest,
     BoundaryResult,
+    ChainRequest,
+    ChainResult,
     describe,
     extract,
     run_boundary,
+    run_chain,
 )
 from rig.readback.data import JointData, RecordingFacts
 from rig.readback.rom import RomRequest, RomResult, run_rom
@@ -36,6 +41,8 @@ __all__ = [
     "FUSION_CHOICES",
     "BoundaryRequest",
     "BoundaryResult",
+    "ChainRequest",
+    "ChainResult",
     "JointData",
     "RecordingFacts",
     "RecordingSource",
@@ -47,5 +54,6 @@ __all__ = [
     "load_joint_orientations",
     "read_session",
     "run_boundary",
+    "run_chain",
     "run_rom",
 ]

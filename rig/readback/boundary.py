@@ -15,12 +15,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rig.errors import RigConfigError
 from rig.readback.data import JointData
 from rig.readback.source import RecordingSource
 
-__all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "default_name", "describe",
-           "extract", "run_boundary"]
+__all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "ChainRequest",
+           "ChainResult", "default_name", "describe", "extract", "run_boundary", "run_chain"]
 
 #: ``--by-swing``: swing-dependent twist limits when the data supports them, always, never.
 BY_SWING_CHOICES = ("auto", "on", "off")
@@ -220,3 +222,122 @@ def describe(ex, out_path: Path | None = None) -> str:
     else:
         lines.append("  sparse      none: every part of the boundary has samples nearby")
     return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class ChainRequest:
+    """``rig boundary --chain arm|leg``: a limb file from an orientation file's segment
+    columns.
+
+    Attributes
+    ----------
+    file : str
+        OpenSim ``.sto`` or CSV orientation file.
+    limb : {"arm", "leg"}
+    segments : str
+        The segment columns proximal to distal, comma-separated: four (thorax or pelvis first),
+        or three when ``reference`` names the first.
+    reference : str, optional
+        The root segment's column (thorax / pelvis).
+    frames : {"rig", "isb"}, optional
+        The file's segment frames (default rig).
+    out, name, side
+        Limb file to write, its name (default: the file's stem and the limb), the body side.
+    """
+
+    file: str
+    limb: str
+    segments: str
+    out: str | Path
+    reference: str | None = None
+    frames: str | None = None
+    name: str | None = None
+    side: str | None = None
+
+    def columns(self) -> list[str]:
+        """The four segment columns, proximal to distal."""
+        cols = [c.strip() for c in self.segments.split(",") if c.strip()]
+        if self.reference is not None:
+            cols = [self.reference, *cols]
+        if len(cols) != 4 or len(set(cols)) != 4:
+            raise RigConfigError(f"--segments {self.segments!r}: expected the {self.limb}'s four "
+                                 "segment columns proximal to distal (or three with "
+                                 "--reference), all different")
+        return cols
+
+    def check(self) -> None:
+        """Everything that can be checked before reading the file (one-line errors)."""
+        from calibration.joints import LIMB_CHAINS
+
+        if self.limb not in LIMB_CHAINS:
+            raise RigConfigError(f"--chain {self.limb!r}: expected one of "
+                                 f"{', '.join(LIMB_CHAINS)}")
+        self.columns()
+        if not Path(self.file).is_file():
+            raise RigConfigError(f"{self.file}: no such file")
+        if self.side not in (None, "left", "right"):
+            raise RigConfigError(f"--side {self.side!r}: expected left or right")
+        out = Path(self.out)
+        if out.is_dir():
+            raise RigConfigError(f"--out {self.out}: is a directory")
+        if not out.parent.is_dir():
+            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+
+
+@dataclass
+class ChainResult:
+    """The fitted :class:`~calibration.boundary.ChainExtractor` and the file written."""
+
+    extractor: Any
+    path: Path
+
+    def describe(self) -> str:
+        """What ``rig boundary --chain`` prints."""
+        ex = self.extractor
+        r = ex.report()
+        lines = [f"wrote {self.path}", f"  limb        {ex.limb}, {len(ex.limb_.joints)} joints"]
+        for j in ex.limb_.joints:
+            rep = r["joints"].get(j.name, {})
+            if j.coupling is not None:
+                what = (f"coupled to the {j.coupling.by}: keyframes at "
+                        f"{', '.join(f'{a:.0f}' for a in j.coupling.at_deg)} deg")
+            elif j.kind == "hinge":
+                lo, hi = rep["hinge_deg"]
+                what = f"hinge {lo:.1f} .. {hi:.1f} deg"
+            else:
+                what = (f"{j.constraint.kind}, polygon of {rep.get('vertices', '?')} vertices, "
+                        f"twist {rep['twist_deg'][0]:.1f} .. {rep['twist_deg'][1]:.1f} deg")
+            lines.append(f"  {j.name:<11} {what}; {100 * r['inside'][j.name]:.2f} % of the "
+                         "recorded postures inside")
+        lines.append(f"  coupling    {'yes' if r['coupled'] else 'no'}: {r['coupling']}")
+        lines.append(f"  inside      {100 * r['inside']['limb']:.2f} % of the recorded postures "
+                     "inside in every joint")
+        return "\n".join(lines)
+
+
+def run_chain(request: ChainRequest) -> ChainResult:
+    """Check the request, read the segment columns, extract the limb and write it."""
+    from calibration.alignment import joint_orientation
+    from calibration.boundary import ChainExtractor
+    from calibration.frames import segment_to_rig
+    from calibration.joints import LIMB_CHAINS
+    from models.limb import dump_limb
+    from rig.store.io import read_orientations
+
+    request.check()
+    cols = request.columns()
+    frames = request.frames or "rig"
+    table = read_orientations(request.file)
+    chain = LIMB_CHAINS[request.limb]
+    names = [chain[0][1], *(c for _, _, c in chain)]
+    seg = [segment_to_rig(table.get(c), frames, s) for c, s in zip(cols, names, strict=True)]
+    q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
+    side = request.side or table.meta.get("rig_side")
+    side = side if side in ("left", "right") else None
+    name = request.name or f"{Path(request.file).stem}-{request.limb}"
+    prov = {"file": Path(request.file).name, "segments": cols, "frames": frames}
+    ex = ChainExtractor(request.limb, name=name).fit(
+        q, t=np.asarray(table.time, dtype=np.float64), side=side, provenance=prov)
+    path = Path(request.out)
+    dump_limb(ex.limb_, path)
+    return ChainResult(ex, path)

@@ -1,0 +1,318 @@
+"""A whole limb's limits from a recording of its chain: :class:`ChainExtractor` → a limb file
+(:mod:`models.limb`), with a coupling where the recording supports one.
+
+Input: joint orientations ``q`` (N, 3, 4) of an arm (shoulder, elbow, wrist) or a leg (hip,
+knee, ankle), each child relative to its parent in rig segment frames
+(:data:`calibration.joints.JOINTS`), in recording order with their sample times.
+
+Each joint alone
+----------------
+Each joint's limits are extracted from its own orientations as ``rig boundary --joint`` does:
+the hinge (elbow, knee) by :class:`~calibration.boundary.HingeExtractor`, the others by
+:class:`~calibration.boundary.BoundaryExtractor` (the distal joint as a ``two-axis`` joint when
+its recorded twist allows).
+
+The coupling (the proximal joint's limits against the hinge's angle)
+--------------------------------------------------------------------
+Two-joint muscles make the hip's range depend on the knee's angle (the hamstrings) and the
+shoulder's on the elbow's (the biceps' long head). Keyframes are placed evenly over the hinge's
+extracted interval, at least ``keyframe_spacing_deg`` apart (at most ``max_keyframes``); each
+keyframe's limits are extracted from the proximal joint's samples recorded with the hinge within
+``keyframe_band_deg`` of its angle (that band decides whether a keyframe is supported; its
+limits are then extracted from every sample nearer its angle than another supported keyframe's,
+so that every recorded posture is evidence for the limits it is judged by). **The data supports
+a coupling** when
+
+1. at least two keyframes are *supported*: each has at least ``min_keyframe_samples`` samples
+   and those samples reached their limit in at least ``min_keyframe_coverage`` of the swing
+   sphere's sectors around their centre (:mod:`calibration.coverage`: the limit reached and
+   left standing, not a band of the range the patient never pushed against), and
+2. the supported keyframes' boundaries differ: the largest symmetric mean boundary distance
+   (:func:`~calibration.boundary.boundary_distance`) between two of them is at least
+   ``min_difference_deg`` (otherwise the limits do not depend on the hinge, as far as the
+   recording shows), and
+3. the coupled limits hold what was recorded: at least ``min_held`` of the recorded postures
+   lie inside the proximal joint's limits at their own hinge angle, or within 1° of them (the
+   interpolation between keyframes is linear in the angle; the limits need not be, so a few
+   postures between keyframes may lie just outside). A recording that is not a
+   range-of-motion test (a dance, a walk) shows where the limb went at each hinge angle, which
+   differs with the angle without being a limit that depends on it; limits interpolated from
+   such keyframes would leave recorded postures outside, and are not written.
+
+Unsupported keyframes are left out (the limits between supported ones are interpolated, and
+clamped beyond the end ones, :mod:`models.limb`). Without support the proximal joint's limits
+are extracted from all of its samples, uncoupled, and the report says which test failed.
+
+What the limb file holds is measured on it (:class:`models.limb_oracle.LimbOracle`): the share
+of recorded postures valid in every joint, per joint (a coupled joint at its recorded hinge
+angle), and for hinges the share of recorded hinge angles inside the interval (out-of-axis
+motion of a hinge is corrected, not a limit: :mod:`calibration.boundary.hinge`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from models import quaternion as Q
+from models.errors import ConstraintError
+
+__all__ = ["ChainExtractor"]
+
+
+class ChainExtractor:
+    """Recorded limb postures → a limb file with its coupling (module doc).
+
+    Parameters
+    ----------
+    limb : {"arm", "leg"}
+    keyframe_spacing_deg, max_keyframes, keyframe_band_deg
+        Where keyframes go and which samples each is extracted from.
+    min_keyframe_samples, min_keyframe_coverage, min_difference_deg, min_held
+        The test of "the data supports a coupling".
+    alpha_deg, max_vertices
+        The swing extraction's alpha radius and vertex budget (each joint and keyframe).
+    name : str
+
+    Attributes
+    ----------
+    limb_ : models.limb.Limb
+    coupled_ : bool
+    keyframes_ : list of dict, every candidate keyframe: ``at_deg``, ``samples``, ``coverage``,
+        ``supported``
+    inside_ : dict, joint → share of the recorded postures valid in that joint (hinges: their
+        angle inside the interval); ``limb``: valid in every joint
+    reports_ : dict, joint → its extractor's report
+    """
+
+    def __init__(self, limb: str = "leg", *, keyframe_spacing_deg: float = 30.0,
+                 max_keyframes: int = 5, keyframe_band_deg: float = 10.0,
+                 min_keyframe_samples: int = 300, min_keyframe_coverage: float = 0.75,
+                 min_difference_deg: float = 3.0, min_held: float = 0.99,
+                 alpha_deg: float = 4.0,
+                 max_vertices: int = 64, name: str = "recorded-limb") -> None:
+        from calibration.joints import LIMB_CHAINS
+
+        if limb not in LIMB_CHAINS:
+            raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)}, got {limb!r}")
+        if max_keyframes < 2:
+            raise ValueError(f"max_keyframes must be >= 2, got {max_keyframes}")
+        for label, v in (("keyframe_spacing_deg", keyframe_spacing_deg),
+                         ("keyframe_band_deg", keyframe_band_deg)):
+            if not v > 0:
+                raise ValueError(f"{label} must be > 0, got {v!r}")
+        self.limb = limb
+        self.keyframe_spacing_deg = float(keyframe_spacing_deg)
+        self.max_keyframes = int(max_keyframes)
+        self.keyframe_band_deg = float(keyframe_band_deg)
+        self.min_keyframe_samples = int(min_keyframe_samples)
+        self.min_keyframe_coverage = float(min_keyframe_coverage)
+        self.min_difference_deg = float(min_difference_deg)
+        self.min_held = float(min_held)
+        self.alpha_deg = float(alpha_deg)
+        self.max_vertices = int(max_vertices)
+        self.name = name
+
+    def params(self) -> dict[str, Any]:
+        return {"limb": self.limb, "keyframe_spacing_deg": self.keyframe_spacing_deg,
+                "max_keyframes": self.max_keyframes,
+                "keyframe_band_deg": self.keyframe_band_deg,
+                "min_keyframe_samples": self.min_keyframe_samples,
+                "min_keyframe_coverage": self.min_keyframe_coverage,
+                "min_difference_deg": self.min_difference_deg, "min_held": self.min_held,
+                "alpha_deg": self.alpha_deg,
+                "max_vertices": self.max_vertices}
+
+    # -- the parts --------------------------------------------------------------------------
+    def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
+                         by_swing: bool | str = "auto"):
+        from calibration.boundary.extractor import BoundaryExtractor
+        from calibration.boundary.hinge import HingeExtractor
+
+        if spec.kind == "hinge":
+            return HingeExtractor(spec.hinge_axis, limb_axis=spec.limb_axis, name=name)
+        return BoundaryExtractor(alpha_deg=self.alpha_deg,
+                                 max_vertices=max_vertices or self.max_vertices,
+                                 limb_axis=spec.limb_axis, name=name, kind=spec.kind,
+                                 by_swing=by_swing)
+
+    def _keyframe_angles(self, lo: float, hi: float) -> np.ndarray:
+        k = int(min(self.max_keyframes, np.floor((hi - lo) / self.keyframe_spacing_deg) + 1))
+        return np.linspace(lo, hi, max(k, 1)) if k >= 2 else np.array([0.5 * (lo + hi)])
+
+    def fit(self, q, *, t=None, status=None, side: str | None = None,
+            provenance: dict | None = None) -> ChainExtractor:
+        """Extract the limb (module doc) from postures ``q`` (N, 3, 4), sample times ``t``
+        (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors)."""
+        from calibration.boundary.compare import boundary_distance
+        from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
+        from models.limb_oracle import LimbOracle
+
+        q = np.asarray(q, dtype=np.float64)
+        if q.ndim != 3 or q.shape[1:] != (3, 4):
+            raise CalibrationError(f"expected postures of shape (N, 3, 4), got {q.shape}")
+        chain = LIMB_CHAINS[self.limb]
+        specs = [JOINTS[name] for name, _, _ in chain]
+        prox, hinge, dist = specs
+        self.reports_: dict[str, dict] = {}
+        constraints: dict[str, Any] = {}
+        for spec in (hinge, dist):
+            ex = self._joint_extractor(spec, spec.name).fit(q[:, specs.index(spec)], t=t,
+                                                            status=status)
+            constraints[spec.name] = ex.constraint_
+            self.reports_[spec.name] = ex.report()
+        h = constraints[hinge.name].hinge
+        theta = hinge_angles(q[:, 1], hinge.hinge_axis)
+        at = self._keyframe_angles(h.min_deg, h.max_deg)
+        self.keyframes_: list[dict] = []
+        chosen: list[np.ndarray] = []
+        for a in at:
+            sel = np.abs(theta - a) <= self.keyframe_band_deg
+            info: dict[str, Any] = {"at_deg": round(float(a), 3), "samples": int(sel.sum()),
+                                    "coverage": None, "supported": False}
+            if sel.sum() >= self.min_keyframe_samples:
+                share = _sector_share(Q.rotate(q[sel, 0], np.asarray(prox.limb_axis)))
+                info["coverage"] = round(float(share), 3)
+                info["supported"] = share >= self.min_keyframe_coverage
+            if info["supported"]:
+                chosen.append(sel)
+            self.keyframes_.append(info)
+        ts = None if t is None else np.asarray(t)
+        st = None if status is None else np.asarray(status)
+        self.limb_ = None
+        self.difference_deg_ = 0.0
+        note = f"{len(chosen)} supported keyframe(s) of {len(at)} (need 2)"
+        # smoother keyframe boundaries (fewer vertices) when the interpolation between two of
+        # them would cross itself
+        for budget in dict.fromkeys((self.max_vertices, min(self.max_vertices, 32), 16)):
+            if len(chosen) < 2:
+                break
+            supported = [k for k in self.keyframes_ if k["supported"]]
+            at_s = [float(k["at_deg"]) for k in supported]
+            cells = _cells(theta, at_s)
+            kept = self._keyframes(prox, q, ts, st, supported, cells, budget)
+            if len(kept) < 2:
+                note = f"{len(kept)} keyframe(s) could be extracted (need 2)"
+                break
+            diff = max(boundary_distance(a[1], b[1])["mean_deg"]
+                       for i, a in enumerate(kept) for b in kept[i + 1:])
+            self.difference_deg_ = float(diff)
+            if diff < self.min_difference_deg:
+                note = (f"keyframe boundaries differ by at most {diff:.1f} deg "
+                        f"(< {self.min_difference_deg:g}): no dependence on the {hinge.name}")
+                break
+            try:
+                limb = self._limb(chain, specs, constraints, kept, side, provenance)
+            except ConstraintError as err:
+                note = f"keyframes could not be interpolated ({err})"
+                continue
+            dist = LimbOracle(limb).evaluate(q, normalize=True).distance[:, 0]
+            held = float(np.mean(dist <= np.radians(1.0)))
+            if held < self.min_held:
+                note = (f"the coupled limits would hold {100 * held:.1f} % of the recorded "
+                        f"postures within 1 deg (< {100 * self.min_held:g} %): the recording "
+                        "shows where the "
+                        f"{prox.name} went at each {hinge.name} angle, not a limit that depends "
+                        "on it")
+                break
+            self.limb_ = limb
+            note = (f"{len(kept)} keyframes, boundaries differing by up to {diff:.1f} deg"
+                    + ("" if budget == self.max_vertices else f", {budget} vertices each"))
+            break
+        self.coupled_ = self.limb_ is not None
+        self.coupling_note_ = note
+        if not self.coupled_:
+            ex = self._joint_extractor(prox, prox.name).fit(q[:, 0], t=t, status=status)
+            constraints[prox.name] = ex.constraint_
+            self.reports_[prox.name] = ex.report()
+            self.limb_ = self._limb(chain, specs, constraints, None, side, provenance)
+        # what the file holds, measured on it
+        res = LimbOracle(self.limb_).evaluate(q, normalize=True)
+        self.inside_ = {}
+        for i, spec in enumerate(specs):
+            if spec.kind == "hinge":
+                ok = (theta >= h.min_deg) & (theta <= h.max_deg)
+            else:
+                ok = np.asarray(res.valid)[:, i]
+            self.inside_[spec.name] = float(np.mean(ok))
+        self.inside_["limb"] = float(np.mean(np.all(np.stack(
+            [(theta >= h.min_deg) & (theta <= h.max_deg) if s.kind == "hinge"
+             else np.asarray(res.valid)[:, i] for i, s in enumerate(specs)]), axis=0)))
+        return self
+
+    def _keyframes(self, prox, q, ts, st, supported, cells, budget) -> list:
+        """(angle, constraint) of each supported keyframe whose samples (``cells``) extract."""
+        kept = []
+        for info, sel in zip(supported, cells, strict=True):
+            ex = self._joint_extractor(prox, f"{prox.name}-at-{info['at_deg']:.0f}",
+                                       max_vertices=budget, by_swing=False)
+            try:
+                ex.fit(q[sel, 0], t=None if ts is None else ts[sel],
+                       status=None if st is None else st[sel])
+            except CalibrationError as err:
+                info["error"] = str(err)
+                continue
+            kept.append((float(info["at_deg"]), ex.constraint_))
+        return kept
+
+    def _limb(self, chain, specs, constraints, kept, side, provenance):
+        """The limb file's contents as a validated :class:`models.limb.Limb`."""
+        from models.limb import Limb
+
+        prox, hinge = specs[0], specs[1]
+        joints = []
+        for spec, (name, parent, child) in zip(specs, chain, strict=True):
+            entry: dict[str, Any] = {"name": name, "parent": parent, "child": child}
+            if spec is prox and kept is not None:
+                entry["coupled"] = {"by": hinge.name, "keyframes": [
+                    {"at_deg": a, "constraint": _body(c)} for a, c in kept]}
+            else:
+                entry["constraint"] = _body(constraints[name])
+            joints.append(entry)
+        prov = dict(provenance or {})
+        prov.update({"method": "calibration.boundary.ChainExtractor", "parameters": self.params(),
+                     "keyframes": self.keyframes_})
+        doc = {"name": self.name, "limb": self.limb, "joints": joints, "provenance": prov}
+        if side is not None:
+            doc["side"] = side
+        return Limb.from_dict(doc, source="extracted limb")
+
+    def report(self) -> dict[str, Any]:
+        """What the extraction did, as plain types."""
+        return {"limb": self.limb, "coupled": self.coupled_, "coupling": self.coupling_note_,
+                "keyframes": self.keyframes_, "inside": dict(self.inside_),
+                "joints": self.reports_}
+
+
+def _body(constraint) -> dict:
+    """A joint's constraint as a limb file's inline mapping (without what the limb gives)."""
+    d = constraint.to_dict()
+    for key in ("joint", "side", "patient", "name"):
+        d.pop(key, None)
+    return d
+
+
+def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> float:
+    """Share of the ``sectors`` azimuth sectors about the mean of directions ``d`` (N, 3) that
+    hold at least ``min_samples`` of them (0 when the directions average out)."""
+    m = d.mean(axis=0)
+    if np.linalg.norm(m) < 1e-6:
+        return 0.0
+    c = m / np.linalg.norm(m)
+    e1 = Q.perpendicular(c)
+    e2 = np.cross(c, e1)
+    az = np.arctan2(d @ e2, d @ e1)
+    k = np.floor((az + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
+    return float(np.mean(np.bincount(k, minlength=sectors) >= min_samples))
+
+
+def _cells(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:
+    """Each keyframe's samples: those whose hinge angle ``theta`` is nearer its angle than any
+    other keyframe's (the end keyframes take everything beyond them), so that every recorded
+    posture is evidence for the keyframe its limits are interpolated from."""
+    a = np.asarray(at, dtype=np.float64)
+    mids = 0.5 * (a[1:] + a[:-1])
+    k = np.searchsorted(mids, theta)
+    return [k == i for i in range(len(a))]
