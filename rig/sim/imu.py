@@ -45,7 +45,7 @@ from firmware_protocol.imu import stream as S
 from models import quaternion as Q
 from rig.sim.clock import real_delay
 from rig.sim.limb import Measurement, SimulatedLimb
-from rig.sim.patients import PATIENT_KEYS, patient_from_url
+from rig.sim.patients import CHAIN_KEYS, PATIENT_KEYS, chain_from_url, patient_from_url
 from rig.sim.pty_server import PtyServer
 from rig.sim.urls import SimUrl
 
@@ -342,9 +342,10 @@ class StreamImuSimulator(PtyServer):
 
     Parameters
     ----------
-    limb : SimulatedLimb, optional
+    limb : SimulatedLimb or SimulatedChain, optional
         Motion source; default ``SimulatedLimb(sensors=sensors, seed=seed)``. Sensor ``i`` of
-        the protocol is ``limb.mounts[i]``.
+        the protocol is ``limb.mounts[i]`` (anything with ``n_sensors``, ``mounts``,
+        ``measure_many`` and ``truth``: a :class:`~rig.sim.limb.SimulatedChain` too).
     sensors : int
         Sensors present when ``limb`` is not given (1..16).
     rate_hz : int
@@ -699,6 +700,13 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
                   ``off`` unread bytes are lost like on a UART
     ``protocol``  stream protocol version the board speaks: ``1.1`` (raw samples on   1.1
                   request) or ``1.0`` (an older firmware: no SET_FIELDS)
+    ``limb``      ``arm`` or ``leg``: the board is worn by a whole arm or leg, one    (none)
+                  sensor per segment (:class:`~rig.sim.limb.SimulatedChain`,
+                  :func:`rig.sim.patients.anatomical_limb` of ``seed``); ``sensors``
+                  must then be 4 (its default); ``calibrate=on`` performs the limb
+                  calibration protocol. ``patient=`` a limb file does the same with
+                  the file's limits. Absent: the shoulder patient
+    ``side``      ``right`` or ``left``, with ``limb``                                right
     ============  ==================================================================  ========
 
     A benchmark that must not lose a sample at any speed:
@@ -710,8 +718,9 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         Not ``sim://imu-stream``, unknown key, bad value (the message names the key).
     """
     q = SimUrl(url, ("imu-stream", "stream"),
-               (*PATIENT_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"),
+               (*PATIENT_KEYS, *CHAIN_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"),
                STREAM_EXAMPLE)
+    sensors_given = "sensors" in q
     sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
     rate = q.integer("rate", 100, 1, 0xFFFF)
     kwargs: dict[str, object] = {
@@ -724,6 +733,7 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         "clock": q.clock(),
     }
     if "limb" not in overrides:
-        kwargs["limb"] = patient_from_url(q, sensors=sensors)
+        chain = chain_from_url(q, sensors=sensors if sensors_given else None)
+        kwargs["limb"] = chain if chain is not None else patient_from_url(q, sensors=sensors)
     kwargs.update(overrides)
     return StreamImuSimulator(**kwargs)  # type: ignore[arg-type]

@@ -43,9 +43,10 @@ from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb, default_mounts
 from rig.sim.urls import SimUrl
 
-__all__ = ["PATIENT_KEYS", "Recording", "anatomical_limb", "misplaced_mounts", "patient_from_url",
-           "patient_limb",
-           "record_imu", "record_servo", "resolve_patient", "star_patient"]
+__all__ = ["CHAIN_KEYS", "PATIENT_KEYS", "ChainRecording", "Recording", "anatomical_limb",
+           "chain_from_url", "chain_patient", "misplaced_mounts", "patient_from_url",
+           "patient_limb", "record_chain_imu", "record_imu", "record_servo", "resolve_patient",
+           "star_patient"]
 
 _ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
 
@@ -53,6 +54,8 @@ PATIENT_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed"
                 "neutral", "neutral_sd")
 """The port-string keys of a simulated patient (:func:`patient_from_url`); a simulator accepts
 those it lists as known."""
+CHAIN_KEYS = ("limb", "side")
+"""The port-string keys of a chain patient (:func:`chain_from_url`; ``sim://imu-stream`` only)."""
 _NEUTRAL_HOLD_S = 2.0  # SimulatedLimb's defaults: neutral hold and ramp, seconds
 _NEUTRAL_RAMP_S = 1.5
 
@@ -451,8 +454,8 @@ def _leg(rng: np.random.Generator) -> tuple[list[dict], dict]:
 
 
 def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
-    # shoulder (AAOS 1965: flexion 180, extension 60, abduction 180, adduction 30-ish); below 175°
-    # so that no vertex nears the neutral direction's antipode
+    # shoulder (AAOS 1965: flexion 180, extension 60, abduction 180, adduction 30-ish); below 165°
+    # so that no vertex nears the neutral direction's antipode (swing-twist is singular there)
     flex, abd = _u(rng, 150.0, 162.0), _u(rng, 150.0, 162.0)
     ext, ext_straight = _u(rng, 45.0, 60.0), _u(rng, 10.0, 20.0)
     add = _u(rng, 20.0, 40.0)
@@ -507,7 +510,9 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
       knee**: the gastrocnemius), plantarflexion 40-55, the toes turned medially 20-35
       (inversion with internal rotation) and laterally 10-20 (eversion) — twist ±3-6°.
     - **arm** — shoulder: a ball joint, polygon about the arm hanging down (flexion 150-172,
-      abduction 150-172, adduction 20-40, extension 45-60 with the elbow bent), twist internal
+      abduction 150-162 — below 165° so that the arm raised stays away from the limb axis's
+      antipode, where the swing-twist twist is singular —, adduction 20-40, extension 45-60
+      with the elbow bent), twist internal
       55-75 / external 60-90; **coupled to the elbow** (the biceps' long head): keyframes at
       elbow 0, 45, 90°, extension 10-20° less with the elbow straight. Elbow: a hinge about
       ``(0, 0, 1)`` (its angle is elbow flexion), ``[−(0..5), 135..150]``. Wrist: two-axis,
@@ -550,3 +555,211 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
 
 def _rounded(d: dict) -> dict:
     return {k: _rounded(v) if isinstance(v, dict) else round(float(v), 3) for k, v in d.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Chain patients (arm, leg): factory, port strings, offline recordings
+
+
+def chain_patient(seed: int, limb="leg", side: str = "right", *, noise: NoiseModel | None = None,
+                  misplace_deg: float = 25.0, calibrate: bool = True,
+                  protocol_start_s: float = 5.0, neutral: float = 0.0, **kwargs):
+    """A :class:`~rig.sim.limb.SimulatedChain` patient: the arm or leg
+    :func:`anatomical_limb` ``(seed, limb, side)`` (or a given :class:`models.limb.Limb`)
+    wearing four misplaced IMUs, performing the limb calibration protocol, then moving freely.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the limits, the motion and the sensor errors; the straps are drawn from
+        ``default_rng([seed, 0x5EA7])`` (as ``sim://imu-stream?limb=...&seed=...`` draws them).
+    limb : {"arm", "leg"} or models.limb.Limb
+    side : {"right", "left"}
+        The side of an anatomical limb (a given Limb's own side is kept).
+    noise : NoiseModel, optional
+        Default: :class:`~rig.sim.limb.NoiseModel` (noise, drift, disturbances on).
+    misplace_deg : float
+        How far each strap is turned off its nominal mounting
+        (:func:`rig.sim.limb.chain_mounts`).
+    calibrate : bool
+        Perform :class:`calibration.protocol.LimbCalibrationProtocol` from ``protocol_start_s``
+        (5 s: the sensors' calibration status has reached 3 by then).
+    neutral : float
+        Neutral checkpoints every this many seconds (0: none).
+    **kwargs
+        Further :class:`~rig.sim.limb.SimulatedChain` keywords.
+    """
+    from models.limb import Limb
+    from rig.sim.limb import SimulatedChain, chain_mounts
+
+    truth = limb if isinstance(limb, Limb) else anatomical_limb(seed, limb, side)
+    protocol = None
+    if calibrate:
+        from calibration.protocol import LimbCalibrationProtocol
+
+        protocol = LimbCalibrationProtocol(_chain_kind(truth))
+    segments = (truth.joints[0].parent, *(j.child for j in truth.joints))
+    mounts = chain_mounts(segments, np.random.default_rng([seed, 0x5EA7]), misplace_deg)
+    return SimulatedChain(truth, sensors=mounts, noise=noise, seed=seed,
+                          calibration_protocol=protocol, protocol_start_s=protocol_start_s,
+                          neutral_every_s=neutral, **kwargs)
+
+
+def _chain_kind(limb) -> str:
+    from rig.sim.limb.chain import CHAIN_SEGMENTS
+
+    names = tuple(j.name for j in limb.joints)
+    for kind, (joints, _) in CHAIN_SEGMENTS.items():
+        if names == joints:
+            return kind
+    raise ValueError(f"limb {limb.name!r}: joints {', '.join(names)} are neither an arm "
+                     f"(shoulder, elbow, wrist) nor a leg (hip, knee, ankle)")
+
+
+def chain_from_url(q: SimUrl, *, sensors: int | None = None):
+    """The chain patient a port string describes, or None when it names none: ``limb=arm|leg``
+    (an :func:`anatomical_limb` of ``seed`` and ``side``) or ``patient=`` a limb file
+    (:func:`models.limb.load_limits`; ``side`` is then the file's). The other patient keys as
+    :func:`patient_from_url` reads them (``seed``, ``noise``, ``misplace_deg``, ``excursion``,
+    ``speed``, ``calibrate``: the limb calibration protocol from 2 s, ``neutral``,
+    ``neutral_sd``).
+
+    Parameters
+    ----------
+    q : SimUrl
+    sensors : int or None
+        The port's ``sensors`` value: a chain wears 4.
+
+    Raises
+    ------
+    RigConfigError
+        A bad value, ``side`` without a limb, a sensor count other than 4, an unreadable limb
+        file: one line naming the port and the key.
+    """
+    limb_key = q.text("limb")
+    side_key = q.text("side")
+    patient = q.text("patient")
+    truth = None
+    if limb_key is None and patient is not None and patient.endswith((".yaml", ".yml")):
+        truth = _limb_file(patient, q.url)
+    if limb_key is None and truth is None:
+        if side_key is not None:
+            raise RigConfigError(f"{q.url}: side={side_key!r}: needs limb=arm|leg (the "
+                                 f"shoulder patient's side is its constraint's)")
+        return None
+    if limb_key is not None:
+        kind = q.choice("limb", "leg", ("arm", "leg"))
+        if patient is not None:
+            raise RigConfigError(f"{q.url}: patient={patient!r}: limb={kind} draws the "
+                                 f"patient's limits; give one of them")
+    side = q.choice("side", "right", ("left", "right"))
+    if truth is not None and side_key is not None and truth.side not in (None, side):
+        raise RigConfigError(f"{q.url}: side={side_key!r}: the limb file is a {truth.side} "
+                             f"{truth.limb or 'limb'}")
+    if sensors is not None and sensors != 4:
+        raise RigConfigError(f"{q.url}: sensors={q.text('sensors')!r}: an arm or leg "
+                             f"patient wears 4 sensors (one per segment)")
+    seed = q.integer("seed", 0)
+    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
+    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
+    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    neutral = q.number("neutral", 0.0, 0.0)
+    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
+    if 0.0 < neutral < least:
+        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
+                             f"checkpoint interval >= {least:g} s")
+    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
+    calibrate = q.flag("calibrate", False)
+    if truth is None:
+        truth = anatomical_limb(seed, kind, side)
+    try:
+        return chain_patient(seed, truth, noise=noise, misplace_deg=misplace,
+                             calibrate=calibrate, protocol_start_s=2.0, neutral=neutral,
+                             excursion=excursion, speed=speed, neutral_hold_s=_NEUTRAL_HOLD_S,
+                             neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
+    except ValueError as err:
+        key = "patient" if limb_key is None else "limb"
+        raise RigConfigError(f"{q.url}: {key}={q.text(key)!r}: {_one_line(err)}") from err
+
+
+def _limb_file(path: str, url: str):
+    """The :class:`models.limb.Limb` a ``patient=`` limb file holds, or None when the file is a
+    constraint file (the shoulder patient's)."""
+    from models.limb import Limb, load_limits
+
+    try:
+        limits = load_limits(path)
+    except FileNotFoundError:
+        return None  # resolve_patient names it
+    except (OSError, ValueError) as err:
+        raise RigConfigError(f"{url}: patient={path!r}: {_one_line(err)}") from err
+    return limits if isinstance(limits, Limb) else None
+
+
+@dataclass
+class ChainRecording:
+    """Samples of one simulated chain session, offline (arrays over N instants, S = 4 sensors).
+
+    Attributes
+    ----------
+    t : (N,) s, patient time
+    quaternions : (N, S, 4) each sensor in its world, with errors
+    gyro, accel, mag : (N, S, 3) raw readings, sensor frames (rad/s, m/s², µT)
+    status : (N, S) CALIB_STAT bytes
+    joints : (N, J, 4) ground-truth joint orientations
+    root : (N, 4) ground-truth root segment relative to world
+    sensors_true : (N, S, 4) error-free sensor orientations
+    segments : tuple of str, the sensors' segments, proximal to distal
+    windows : dict phase -> (t0, t1), the protocol's phase windows in recording time
+    start_s, end_s : when the protocol started and ended (0 and 0 without one)
+    """
+
+    t: np.ndarray
+    quaternions: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    mag: np.ndarray
+    status: np.ndarray
+    joints: np.ndarray
+    root: np.ndarray
+    sensors_true: np.ndarray
+    segments: tuple[str, ...]
+    windows: dict
+    start_s: float
+    end_s: float
+
+    def window(self, phase: str) -> np.ndarray:
+        """Mask of the samples in a protocol phase (``"static"``, a joint's name) or of the
+        free motion after the protocol (``"free"``)."""
+        if phase == "free":
+            return self.t >= self.end_s
+        if phase not in self.windows:
+            raise ValueError(f"no phase {phase!r}; phases: {', '.join(self.windows) or 'none'}")
+        a, b = self.windows[phase]
+        return (self.t >= a) & (self.t <= b)
+
+
+def record_chain_imu(chain, duration_s: float, rate_hz: float = 100.0,
+                     chunk: int = 2000) -> ChainRecording:
+    """Sample a :class:`~rig.sim.limb.SimulatedChain`'s sensors at ``rate_hz`` from time 0 to
+    the end of its protocol plus ``duration_s`` seconds, through the sensor error model
+    (:meth:`~rig.sim.limb.SimulatedChain.measure_many`, ``chunk`` samples per call; no pty)."""
+    n = round((chain.protocol_end_s + duration_s) * rate_hz)
+    t = np.arange(n) / rate_hz
+    parts: dict[str, list] = {k: [] for k in ("q", "g", "a", "m", "c", "j", "r", "s")}
+    for i in range(0, n, chunk):
+        ms = chain.measure_many(t[i:i + chunk])
+        parts["q"].append(np.stack([m.quaternions for m in ms]))
+        parts["g"].append(np.stack([m.gyro for m in ms]))
+        parts["a"].append(np.stack([m.accel for m in ms]))
+        parts["m"].append(np.stack([m.mag for m in ms]))
+        parts["c"].append(np.stack([m.calibration for m in ms]).astype(np.int64))
+        parts["j"].append(np.concatenate([m.truth.joints for m in ms]))
+        parts["r"].append(np.concatenate([m.truth.root for m in ms]))
+        parts["s"].append(np.concatenate([m.truth.sensors for m in ms]))
+    cat = {k: (np.concatenate(v) if v else None) for k, v in parts.items()}
+    return ChainRecording(t, cat["q"], cat["g"], cat["a"], cat["m"], cat["c"], cat["j"],
+                          cat["r"], cat["s"], tuple(m.segment for m in chain.mounts),
+                          chain.protocol_windows(), chain.protocol_start_s,
+                          chain.protocol_end_s)
