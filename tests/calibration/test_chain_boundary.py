@@ -1,0 +1,53 @@
+"""A limb file from a recording of a whole arm or leg (rig boundary --chain): each joint's
+limits, and a coupling only where the data supports one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from models.limb import load_limb
+from rig.cli import main
+
+DATA = Path(__file__).parent / "data" / "real"
+
+
+def run(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
+@pytest.mark.parametrize("file, chain, segments, side", [
+    ("cmu_60_02_salsa.sto", "arm", "thorax,humerus_r,ulna_r,hand_r", "right"),
+    ("xio_ximu3_lower_body.sto", "leg", "pelvis,femur_l,tibia_l,calcn_l", "left"),
+])
+def test_a_real_limb_holds_what_was_recorded(file, chain, segments, side, tmp_path, capsys):
+    out = tmp_path / "limb.yaml"
+    code, stdout, err = run(["boundary", str(DATA / file), "--chain", chain, "--segments",
+                             segments, "--frames", "isb", "--side", side, "--out", str(out)],
+                            capsys)
+    assert code == 0, err
+    limb = load_limb(out)
+    assert limb.limb == chain and limb.side == side
+    assert [j.kind for j in limb.joints][1] == "hinge"
+    # a dance or a walk is not a range-of-motion test: no coupling, and the reason is printed
+    assert limb.coupled == ()
+    assert "coupling    no:" in stdout
+    assert "100.00 % of the recorded postures inside in every joint" in stdout
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--segments", "a,b,c"], "--segments applies with --chain"),
+    (["--chain", "leg", "--segments", "pelvis,femur_l,tibia_l"], "four segment columns"),
+    (["--chain", "leg", "--segments", "pelvis,femur_l,tibia_l,calcn_l", "--joint", "knee"],
+     "--joint does not apply"),
+    (["--chain", "leg"], "--chain needs --segments"),
+])
+def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
+    code, _, err = run(["boundary", str(DATA / "xio_ximu3_lower_body.sto"), "--frames", "isb",
+                        "--out", str(tmp_path / "x.yaml"), *args], capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and needle in lines[0], err
