@@ -450,6 +450,19 @@ _LABELS = {
 }
 
 
+def text_table(rows: list[tuple[str, ...]]) -> list[str]:
+    """Lines of a plain-text table: the first row a header underlined with dashes, the first
+    column left-aligned, the others right-aligned."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for k, r in enumerate(rows):
+        lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                               for i, (c, w) in enumerate(zip(r, widths, strict=True))))
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return lines
+
+
 def format_rom_table(rom: RangeOfMotion, *, age: int | None = None,
                      sex: str | None = None) -> str:
     """The clinical table as text: movement, measured peak, AAOS, population reference (the
@@ -469,13 +482,7 @@ def format_rom_table(rom: RangeOfMotion, *, age: int | None = None,
             "-" if aaos is None else f"{aaos:.0f}°",
             "-" if pop is None else pop,
         ))
-    widths = [max(len(r[i]) for r in rows) for i in range(4)]
-    lines = [f"shoulder range of motion ({rom.side} arm)"]
-    for k, r in enumerate(rows):
-        lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(r, widths, strict=True))))
-        if k == 0:
-            lines.append("  ".join("-" * w for w in widths))
+    lines = [f"shoulder range of motion ({rom.side} arm)", *text_table(rows)]
     if rom.neutral_outside_deg > 0:
         lines.append(f"note: the arm at the side is {rom.neutral_outside_deg:.1f}° outside the "
                      "recorded range: the rotations at the side were not recorded (the twist "

@@ -62,7 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.clinical import _check_side, mirror_quaternions
+from calibration.clinical import _check_side, mirror_quaternions, text_table
 from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
@@ -222,13 +222,7 @@ class JointRangeOfMotion:
             comparable = (self.joint, m) not in NORMATIVE["not_comparable"]
             rows.append((m.replace("_", " "), "-" if v is None else f"{v:.1f}°",
                          "-" if ref is None or not comparable else f"{ref:.0f}°"))
-        widths = [max(len(r[i]) for r in rows) for i in range(3)]
-        lines = [f"{self.joint} range of motion ({self.side} side)"]
-        for k, r in enumerate(rows):
-            lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                                   for i, (c, w) in enumerate(zip(r, widths, strict=True))))
-            if k == 0:
-                lines.append("  ".join("-" * w for w in widths))
+        lines = [f"{self.joint} range of motion ({self.side} side)", *text_table(rows)]
         if self.arc is not None:
             pos, neg = JOINT_ANGLES[self.joint].movements[0]
             lines.append(f"arc: {pos} from {self.arc[0]:.1f}° to {self.arc[1]:.1f}° "

@@ -64,13 +64,7 @@ class BoundaryRequest:
         if self.by_swing not in BY_SWING_CHOICES:
             raise RigConfigError(f"--by-swing {self.by_swing!r}: expected one of "
                                  f"{', '.join(BY_SWING_CHOICES)}")
-        if self.side not in (None, "left", "right"):
-            raise RigConfigError(f"--side {self.side!r}: expected left or right")
-        out = Path(self.out)
-        if out.is_dir():
-            raise RigConfigError(f"--out {self.out}: is a directory")
-        if not out.parent.is_dir():
-            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+        _check_side_and_out(self.side, self.out)
         if self.source.db is not None and self.store:
             from rig.store import open_store
 
@@ -101,6 +95,17 @@ class BoundaryResult:
     def describe(self) -> str:
         """The summary ``rig boundary`` prints (:func:`describe`)."""
         return describe(self.extractor, self.path)
+
+
+def _check_side_and_out(side: str | None, out: str | Path) -> None:
+    """``--side`` and ``--out`` (a file in an existing directory), before any work."""
+    if side not in (None, "left", "right"):
+        raise RigConfigError(f"--side {side!r}: expected left or right")
+    path = Path(out)
+    if path.is_dir():
+        raise RigConfigError(f"--out {out}: is a directory")
+    if not path.parent.is_dir():
+        raise RigConfigError(f"--out {out}: directory {path.parent} does not exist")
 
 
 def run_boundary(request: BoundaryRequest) -> BoundaryResult:
@@ -275,13 +280,7 @@ class ChainRequest:
         self.columns()
         if not Path(self.file).is_file():
             raise RigConfigError(f"{self.file}: no such file")
-        if self.side not in (None, "left", "right"):
-            raise RigConfigError(f"--side {self.side!r}: expected left or right")
-        out = Path(self.out)
-        if out.is_dir():
-            raise RigConfigError(f"--out {self.out}: is a directory")
-        if not out.parent.is_dir():
-            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+        _check_side_and_out(self.side, self.out)
 
 
 @dataclass

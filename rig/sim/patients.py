@@ -181,6 +181,21 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split())
 
 
+def _motion_keys(q: SimUrl) -> tuple[NoiseModel, float, float, float, float]:
+    """The keys every simulated patient reads alike: ``noise``, ``excursion``, ``speed``,
+    ``neutral`` (0 or a checkpoint interval long enough for the ramps and the hold) and
+    ``neutral_sd``; one-line errors naming the port and the key."""
+    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
+    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
+    neutral = q.number("neutral", 0.0, 0.0)
+    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
+    if 0.0 < neutral < least:
+        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
+                             f"checkpoint interval >= {least:g} s")
+    return noise, excursion, speed, neutral, q.number("neutral_sd", 2.0, 0.0, 10.0)
+
+
 def patient_from_url(q: SimUrl, *, sensors: int = 2,
                      misplaced_straps: bool = True) -> SimulatedLimb:
     """The simulated patient a port string's patient keys describe (the keys the URL's
@@ -211,16 +226,8 @@ def patient_from_url(q: SimUrl, *, sensors: int = 2,
     seed = q.integer("seed", 0)
     patient = q.text("patient")
     constraint = resolve_patient(patient, url=q.url) if patient is not None else None
-    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    noise, excursion, speed, neutral, neutral_sd = _motion_keys(q)
     misplace = q.number("misplace_deg", 5.0, 0.0, 90.0) if misplaced_straps else None
-    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
-    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
-    neutral = q.number("neutral", 0.0, 0.0)
-    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
-    if 0.0 < neutral < least:
-        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
-                             f"checkpoint interval >= {least:g} s")
-    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
     protocol = None
     if q.flag("calibrate", False):
         from calibration.protocol import CalibrationProtocol
@@ -660,16 +667,8 @@ def chain_from_url(q: SimUrl, *, sensors: int | None = None):
         raise RigConfigError(f"{q.url}: sensors={q.text('sensors')!r}: an arm or leg "
                              f"patient wears 4 sensors (one per segment)")
     seed = q.integer("seed", 0)
-    noise = NoiseModel() if q.flag("noise", True) else NoiseModel.ideal()
+    noise, excursion, speed, neutral, neutral_sd = _motion_keys(q)
     misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
-    excursion = q.number("excursion", 1.0, 0.0, 3.0, open_lo=True)
-    speed = q.number("speed", 1.0, 0.0, 20.0, open_lo=True)
-    neutral = q.number("neutral", 0.0, 0.0)
-    least = 2.0 * _NEUTRAL_RAMP_S + _NEUTRAL_HOLD_S + 1.0
-    if 0.0 < neutral < least:
-        raise RigConfigError(f"{q.url}: neutral={q.text('neutral')!r}: must be 0 (off) or a "
-                             f"checkpoint interval >= {least:g} s")
-    neutral_sd = q.number("neutral_sd", 2.0, 0.0, 10.0)
     calibrate = q.flag("calibrate", False)
     if truth is None:
         truth = anatomical_limb(seed, kind, side)
