@@ -497,10 +497,14 @@ def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationRes
     (a wrong zero offset or direction shows here), the functional movement as a rotation about
     one axis. No correction is applied: the chain's zeros are the rig configuration's."""
     from calibration.alignment import functional_axis
+    from calibration.errors import CalibrationError
 
     qs = static.q[static.kind == "joint"]
     qf = functional.q[functional.kind == "joint"]
-    zero = np.degrees(Q.angle(qs)) if len(qs) else np.array([math.nan])
+    if not len(qs):
+        raise CalibrationError("no joint samples arrived during the static pose: the chain's "
+                               "zeros cannot be checked")
+    zero = np.degrees(Q.angle(qs))
     static_rms = float(np.sqrt(np.mean(zero**2)))
     data = {"kind": "servo-chain-check", "static_rms_deg": static_rms,
             "static_max_deg": float(np.max(zero))}
