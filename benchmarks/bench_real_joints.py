@@ -70,21 +70,16 @@ def main() -> None:
                 print(f"{path.name:<28} {joint:<6} {s:>4} {100 * inside:8.2f}  {detail}")
     print()
     print(f"{'recording':<28} {'chain':<6} side {'inside%':>8}  coupling")
-    from calibration.alignment import joint_orientation
-    from calibration.frames import segment_to_rig
-    from calibration.joints import LIMB_CHAINS
+    from rig.readback.files import chain_orientations_from_file
 
     for path in sorted(DATA.glob("*.sto")):
-        table = read_orientations(str(path))
+        have = set(read_orientations(str(path)).columns)
         for limb, names in CHAINS.items():
             for s, side in (("r", "right"), ("l", "left")):
                 cols = [n.format(s) for n in names]
-                if not set(cols) <= set(table.columns):
+                if not set(cols) <= have:
                     continue
-                segs = [LIMB_CHAINS[limb][0][1], *(c for _, _, c in LIMB_CHAINS[limb])]
-                seg = [segment_to_rig(table.get(c), "isb", n) for c, n in zip(cols, segs,
-                                                                            strict=True)]
-                q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
+                q, table = chain_orientations_from_file(str(path), cols, limb, "isb")
                 ex = ChainExtractor(limb).fit(q, t=np.asarray(table.time), side=side)
                 print(f"{path.name:<28} {limb:<6} {s:>4} {100 * ex.inside_['limb']:8.2f}  "
                       f"{'yes' if ex.coupled_ else 'no'}: {ex.coupling_note_}")

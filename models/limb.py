@@ -74,6 +74,7 @@ __all__ = [
     "Limb",
     "LimbJoint",
     "dump_limb",
+    "inline_constraint",
     "is_limb_file",
     "load_limb",
     "loads_limb",
@@ -324,7 +325,7 @@ class Coupling:
 
     def to_dict(self) -> dict[str, Any]:
         return {"by": self.by, "keyframes": [
-            {"at_deg": float(a), "constraint": _constraint_out(c)}
+            {"at_deg": float(a), "constraint": inline_constraint(c)}
             for a, c in zip(self.at_deg, self.keyframes, strict=True)]}
 
     def at(self, angle_deg: float) -> JointConstraint:
@@ -404,13 +405,15 @@ class LimbJoint:
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "parent": self.parent, "child": self.child}
         if self.constraint is not None:
-            out["constraint"] = _constraint_out(self.constraint)
+            out["constraint"] = inline_constraint(self.constraint)
         else:
             out["coupled"] = self.coupling.to_dict()
         return out
 
 
-def _constraint_out(c: JointConstraint) -> dict[str, Any]:
+def inline_constraint(c: JointConstraint) -> dict[str, Any]:
+    """A joint's constraint as a limb file writes it inline: without the binding the limb gives
+    (joint, side, patient) and without its own name."""
     d = c.to_dict()
     for key in (*_BOUND_KEYS, "name"):
         d.pop(key, None)

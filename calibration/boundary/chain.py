@@ -24,9 +24,11 @@ so that every recorded posture is evidence for the limits it is judged by). **Th
 a coupling** when
 
 1. at least two keyframes are *supported*: each has at least ``min_keyframe_samples`` samples
-   and those samples reached their limit in at least ``min_keyframe_coverage`` of the swing
-   sphere's sectors around their centre (:mod:`calibration.coverage`: the limit reached and
-   left standing, not a band of the range the patient never pushed against), and
+   with the hinge within ``keyframe_band_deg`` of its angle, spread all round their centre — at
+   least ``min_keyframe_coverage`` of the 12 azimuth sectors about their mean direction hold 5
+   samples or more (samples on one side of the range would give a boundary that is only a band
+   of it; :mod:`calibration.coverage`'s test of a reached limit needs a trajectory in time,
+   which one keyframe's samples are not), and
 2. the supported keyframes' boundaries differ: the largest symmetric mean boundary distance
    (:func:`~calibration.boundary.boundary_distance`) between two of them is at least
    ``min_difference_deg`` (otherwise the limits do not depend on the hinge, as far as the
@@ -140,7 +142,7 @@ class ChainExtractor:
 
     def _keyframe_angles(self, lo: float, hi: float) -> np.ndarray:
         k = int(min(self.max_keyframes, np.floor((hi - lo) / self.keyframe_spacing_deg) + 1))
-        return np.linspace(lo, hi, max(k, 1)) if k >= 2 else np.array([0.5 * (lo + hi)])
+        return np.linspace(lo, hi, k) if k >= 2 else np.array([0.5 * (lo + hi)])
 
     def fit(self, q, *, t=None, status=None, side: str | None = None,
             provenance: dict | None = None) -> ChainExtractor:
@@ -167,7 +169,6 @@ class ChainExtractor:
         theta = hinge_angles(q[:, 1], hinge.hinge_axis)
         at = self._keyframe_angles(h.min_deg, h.max_deg)
         self.keyframes_: list[dict] = []
-        chosen: list[np.ndarray] = []
         for a in at:
             sel = np.abs(theta - a) <= self.keyframe_band_deg
             info: dict[str, Any] = {"at_deg": round(float(a), 3), "samples": int(sel.sum()),
@@ -175,23 +176,19 @@ class ChainExtractor:
             if sel.sum() >= self.min_keyframe_samples:
                 share = _sector_share(Q.rotate(q[sel, 0], np.asarray(prox.limb_axis)))
                 info["coverage"] = round(float(share), 3)
-                info["supported"] = share >= self.min_keyframe_coverage
-            if info["supported"]:
-                chosen.append(sel)
+                info["supported"] = bool(share >= self.min_keyframe_coverage)
             self.keyframes_.append(info)
         ts = None if t is None else np.asarray(t)
         st = None if status is None else np.asarray(status)
         self.limb_ = None
         self.difference_deg_ = 0.0
-        note = f"{len(chosen)} supported keyframe(s) of {len(at)} (need 2)"
+        supported = [k for k in self.keyframes_ if k["supported"]]
+        cells = _cells(theta, [float(k["at_deg"]) for k in supported])
+        note = f"{len(supported)} supported keyframe(s) of {len(at)} (need 2)"
         # smoother keyframe boundaries (fewer vertices) when the interpolation between two of
         # them would cross itself
-        for budget in dict.fromkeys((self.max_vertices, min(self.max_vertices, 32), 16)):
-            if len(chosen) < 2:
-                break
-            supported = [k for k in self.keyframes_ if k["supported"]]
-            at_s = [float(k["at_deg"]) for k in supported]
-            cells = _cells(theta, at_s)
+        budgets = dict.fromkeys((self.max_vertices, min(self.max_vertices, 32), 16))
+        for budget in budgets if len(supported) >= 2 else ():
             kept = self._keyframes(prox, q, ts, st, supported, cells, budget)
             if len(kept) < 2:
                 note = f"{len(kept)} keyframe(s) could be extracted (need 2)"
@@ -229,17 +226,11 @@ class ChainExtractor:
             self.reports_[prox.name] = ex.report()
             self.limb_ = self._limb(chain, specs, constraints, None, side, provenance)
         # what the file holds, measured on it
-        res = LimbOracle(self.limb_).evaluate(q, normalize=True)
-        self.inside_ = {}
-        for i, spec in enumerate(specs):
-            if spec.kind == "hinge":
-                ok = (theta >= h.min_deg) & (theta <= h.max_deg)
-            else:
-                ok = np.asarray(res.valid)[:, i]
-            self.inside_[spec.name] = float(np.mean(ok))
-        self.inside_["limb"] = float(np.mean(np.all(np.stack(
-            [(theta >= h.min_deg) & (theta <= h.max_deg) if s.kind == "hinge"
-             else np.asarray(res.valid)[:, i] for i, s in enumerate(specs)]), axis=0)))
+        valid = LimbOracle(self.limb_).evaluate(q, normalize=True).valid
+        ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg) if s.kind == "hinge"
+                       else valid[:, i] for i, s in enumerate(specs)], axis=1)
+        self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
+        self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
         return self
 
     def _keyframes(self, prox, q, ts, st, supported, cells, budget) -> list:
@@ -259,7 +250,7 @@ class ChainExtractor:
 
     def _limb(self, chain, specs, constraints, kept, side, provenance):
         """The limb file's contents as a validated :class:`models.limb.Limb`."""
-        from models.limb import Limb
+        from models.limb import Limb, inline_constraint
 
         prox, hinge = specs[0], specs[1]
         joints = []
@@ -267,9 +258,9 @@ class ChainExtractor:
             entry: dict[str, Any] = {"name": name, "parent": parent, "child": child}
             if spec is prox and kept is not None:
                 entry["coupled"] = {"by": hinge.name, "keyframes": [
-                    {"at_deg": a, "constraint": _body(c)} for a, c in kept]}
+                    {"at_deg": a, "constraint": inline_constraint(c)} for a, c in kept]}
             else:
-                entry["constraint"] = _body(constraints[name])
+                entry["constraint"] = inline_constraint(constraints[name])
             joints.append(entry)
         prov = dict(provenance or {})
         prov.update({"method": "calibration.boundary.ChainExtractor", "parameters": self.params(),
@@ -284,14 +275,6 @@ class ChainExtractor:
         return {"limb": self.limb, "coupled": self.coupled_, "coupling": self.coupling_note_,
                 "keyframes": self.keyframes_, "inside": dict(self.inside_),
                 "joints": self.reports_}
-
-
-def _body(constraint) -> dict:
-    """A joint's constraint as a limb file's inline mapping (without what the limb gives)."""
-    d = constraint.to_dict()
-    for key in ("joint", "side", "patient", "name"):
-        d.pop(key, None)
-    return d
 
 
 def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> float:

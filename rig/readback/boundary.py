@@ -316,21 +316,14 @@ class ChainResult:
 
 def run_chain(request: ChainRequest) -> ChainResult:
     """Check the request, read the segment columns, extract the limb and write it."""
-    from calibration.alignment import joint_orientation
     from calibration.boundary import ChainExtractor
-    from calibration.frames import segment_to_rig
-    from calibration.joints import LIMB_CHAINS
     from models.limb import dump_limb
-    from rig.store.io import read_orientations
+    from rig.readback.files import chain_orientations_from_file
 
     request.check()
     cols = request.columns()
     frames = request.frames or "rig"
-    table = read_orientations(request.file)
-    chain = LIMB_CHAINS[request.limb]
-    names = [chain[0][1], *(c for _, _, c in chain)]
-    seg = [segment_to_rig(table.get(c), frames, s) for c, s in zip(cols, names, strict=True)]
-    q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
+    q, table = chain_orientations_from_file(request.file, cols, request.limb, frames)
     side = request.side or table.meta.get("rig_side")
     side = side if side in ("left", "right") else None
     name = request.name or f"{Path(request.file).stem}-{request.limb}"

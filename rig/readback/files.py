@@ -11,7 +11,7 @@ import numpy as np
 from rig.errors import RigConfigError
 from rig.readback.data import JointData
 
-__all__ = ["joint_orientations_from_file"]
+__all__ = ["chain_orientations_from_file", "joint_orientations_from_file"]
 
 
 def joint_orientations_from_file(file: str, reference: str | None, limb: str, axis: np.ndarray,
@@ -46,3 +46,24 @@ def joint_orientations_from_file(file: str, reference: str | None, limb: str, ax
     return JointData(q, None, axis, side if side in ("left", "right") else None, prov,
                      table.meta.get("rig_patient"), joint or named,
                      np.asarray(table.time, dtype=np.float64))
+
+
+def chain_orientations_from_file(file: str, columns: list[str], limb: str,
+                                 frames: str = "rig"):
+    """A whole limb's postures from ``file``'s four segment ``columns`` (proximal to distal, the
+    segments of :data:`calibration.joints.LIMB_CHAINS` ``[limb]``): the joint orientations
+    (N, 3, 4), rig frames, each child relative to its parent, and the file's table (times,
+    metadata)."""
+    from calibration.alignment import joint_orientation
+    from calibration.frames import segment_to_rig
+    from calibration.joints import LIMB_CHAINS
+    from rig.store.io import read_orientations
+
+    table = read_orientations(file)
+    if len(table) < 1:
+        raise RigConfigError(f"{file}: no samples")
+    chain = LIMB_CHAINS[limb]
+    names = [chain[0][1], *(c for _, _, c in chain)]
+    seg = [segment_to_rig(table.get(c), frames, n) for c, n in zip(columns, names, strict=True)]
+    q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
+    return q, table

@@ -267,20 +267,7 @@ def _free(m, t: np.ndarray) -> np.ndarray:
     centre's antipode has no steady azimuth about it."""
     if isinstance(m, _HingeMotion):
         return m.free(t)
-    sigma = m.excursion * min(m.reach, _REACH_CAP) / math.sqrt(2.0)
-    su = sigma * m.series(0, t)
-    sv = sigma * m.series(1, t)
-    ang = np.hypot(su, sv)
-    safe = np.where(ang > 1e-12, ang, 1.0)
-    u, v = Q.tangent_basis(m.centre)
-    dirn = (su[:, None] * u + sv[:, None] * v) / safe[:, None]
-    knee = min(m.reach, _PUSH_KNEE)
-    over = np.maximum(ang - knee, 0.0)
-    ang = np.minimum(ang, knee) + _PUSH_ROOM * np.tanh(over / _PUSH_ROOM)
-    d = np.cos(ang)[:, None] * m.centre + np.sin(ang)[:, None] * dirn
-    swing = Q.from_two_vectors(m.limb_axis, d)
-    phi = m.twist_centre + m.excursion * m.twist_half * m.series(2, t)
-    return Q.multiply(swing, Q.from_axis_angle(m.limb_axis, phi))
+    return m.free(t, reach_cap=_REACH_CAP, knee=min(m.reach, _PUSH_KNEE), room=_PUSH_ROOM)
 
 
 class _HingeMotion:

@@ -187,19 +187,23 @@ class JointMotion:
         star-shaped about :attr:`centre`); else the oracle's nearest point."""
         return self._radial is not None
 
-    def free(self, t) -> np.ndarray:
-        """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds."""
+    def free(self, t, *, reach_cap: float = math.inf, knee: float = _PUSH_KNEE,
+             room: float = _PUSH_ROOM) -> np.ndarray:
+        """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds.
+
+        The swing's RMS is ``excursion`` times the reach (at most ``reach_cap``, radians);
+        beyond ``knee`` from the centre (default 120°) the push saturates smoothly (C1)
+        towards ``room`` more (default 50°, so below 170°): a push through the centre's
+        antipode would flip its azimuth, and the arm with it."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        sigma = self.excursion * self.reach / math.sqrt(2.0)
+        sigma = self.excursion * min(self.reach, reach_cap) / math.sqrt(2.0)
         su = sigma * self.series(0, t)
         sv = sigma * self.series(1, t)
         ang = np.hypot(su, sv)
         safe = np.where(ang > 1e-12, ang, 1.0)
         dirn = (su[:, None] * self._u + sv[:, None] * self._v) / safe[:, None]
-        # beyond 120° from the centre the push saturates smoothly (C1) below 170°: a push
-        # through the centre's antipode would flip its azimuth, and the arm with it
-        over = np.maximum(ang - _PUSH_KNEE, 0.0)
-        ang = np.minimum(ang, _PUSH_KNEE) + _PUSH_ROOM * np.tanh(over / _PUSH_ROOM)
+        over = np.maximum(ang - knee, 0.0)
+        ang = np.minimum(ang, knee) + room * np.tanh(over / room)
         d = np.cos(ang)[:, None] * self.centre + np.sin(ang)[:, None] * dirn
         swing = Q.from_two_vectors(self.limb_axis, d)
         phi = self.twist_centre + self.excursion * self.twist_half * self.series(2, t)
