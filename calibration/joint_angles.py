@@ -169,22 +169,31 @@ def from_angles(alpha, beta, gamma, joint: str, side: str = "right") -> np.ndarr
     return _side(q, side)
 
 
-def angle_peaks(angles: dict[str, np.ndarray], joint: str, window: int = 5) -> dict[str, float]:
+def _pair(v: np.ndarray, pos: str, neg: str) -> dict[str, float | None]:
+    """A movement pair's peaks from one angle's values: the farthest positive and negative
+    (≥ 0; 0 when never reached), None when there are no values."""
+    if not v.size:
+        return {pos: None, neg: None}
+    return {pos: float(max(0.0, v.max())), neg: float(max(0.0, -v.min()))}
+
+
+def angle_peaks(angles: dict[str, np.ndarray], joint: str, window: int = 5,
+                where: dict[str, np.ndarray] | None = None) -> dict[str, float | None]:
     """Peak per movement (degrees, ≥ 0) of :func:`joint_angles` output over a recording (module
-    doc: running median over ``window`` samples first)."""
+    doc: running median over ``window`` samples first), over the samples ``where[key]`` selects
+    for each angle when given (None for a movement with no sample selected)."""
     from scipy.ndimage import median_filter
 
     js = _joint(joint)
     if window < 1:
         raise ValueError(f"window must be >= 1, got {window}")
-    out: dict[str, float] = {}
+    out: dict[str, float | None] = {}
     for key, (pos, neg) in zip(("alpha", "beta", "gamma"), js.movements, strict=True):
         a = np.asarray(angles[key], dtype=float)
         if a.size == 0:
             raise ValueError("no samples")
         a = median_filter(a, size=min(window, a.size), mode="nearest")
-        out[pos] = float(max(0.0, a.max()))
-        out[neg] = float(max(0.0, -a.min()))
+        out.update(_pair(a if where is None else a[where[key]], pos, neg))
     return out
 
 
@@ -244,38 +253,32 @@ class JointRangeOfMotion:
         return out
 
 
-def _in_band(ang: dict[str, np.ndarray], k: int, band_deg: float) -> np.ndarray:
-    """Samples at which angle ``k`` (0 α, 1 β, 2 γ) reads as a goniometer reads it: the other
-    swing angle within ``band_deg`` of zero for α and β (axial rotation free: it does not move
-    the segment's direction), both swing angles for γ."""
+def _in_band(ang: dict[str, np.ndarray], band_deg: float) -> dict[str, np.ndarray]:
+    """Per angle, the samples at which a goniometer reads it: α (flexion, dorsiflexion) at any
+    other angle (the first Cardan angle is the sagittal-plane angle itself); β with α within
+    ``band_deg`` of zero (abduction is measured without flexion; axial rotation does not move
+    the segment's direction); γ with both swing angles within ``band_deg`` of zero."""
     a, b = np.abs(ang["alpha"]), np.abs(ang["beta"])
-    return {0: b <= band_deg, 1: a <= band_deg, 2: (a <= band_deg) & (b <= band_deg)}[k]
+    return {"alpha": np.ones(a.shape, bool), "beta": a <= band_deg,
+            "gamma": (a <= band_deg) & (b <= band_deg)}
 
 
 def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
                  band_deg: float = 5.0) -> JointRangeOfMotion:
     """The range of motion of recorded joint orientations ``q`` (N, 4) (rig frames): each
     movement's farthest angle after a running median over ``window`` samples (an isolated
-    spike is not a peak; :func:`angle_peaks`), among the samples at which a goniometer reads
-    it (:func:`_in_band`, as :func:`constraint_rom`; a hinge's other angles are out-of-axis
-    motion, not positions, and do not restrict its flexion). A movement with no sample in its
-    band is None."""
+    spike is not a peak), among the samples at which a goniometer reads it (:func:`_in_band`,
+    as :func:`constraint_rom`; a hinge's other angles are out-of-axis motion, not positions,
+    and restrict nothing). A movement with no sample in its band is None."""
     from scipy.ndimage import median_filter
 
     from calibration.joints import JOINTS
 
-    js = _joint(joint)
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])
     ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}
-    hinge = JOINTS[joint].kind == "hinge"
-    peaks: dict[str, float | None] = {}
-    for k, key in enumerate(("alpha", "beta", "gamma")):
-        sel = np.ones(n, bool) if hinge else _in_band(ang, k, band_deg)
-        pos, neg = js.movements[k]
-        v = ang[key][sel]
-        peaks[pos] = float(max(0.0, v.max())) if v.size else None
-        peaks[neg] = float(max(0.0, -v.min())) if v.size else None
+    where = None if JOINTS[joint].kind == "hinge" else _in_band(ang, band_deg)
+    peaks = angle_peaks(ang, joint, window=1, where=where)
     return JointRangeOfMotion(joint, _check_side(side),
                               {m: peaks.get(m) for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
@@ -285,11 +288,10 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
                    step_deg: float = 0.5) -> JointRangeOfMotion:
     """The range of motion a constraint allows (:class:`models.constraint.JointConstraint`,
     rig frames), read as a goniometer reads a position: each angle's farthest value among the
-    allowed orientations at which a goniometer reads it (:func:`_in_band`: the other swing
-    angle within ``band_deg`` of zero for α and β, any axial rotation the joint allows; both
-    swing angles for γ). Angles on a ``step_deg`` grid (the band on 1°, γ on 5° where free). A
-    hinge reads its interval (its other angles are zero); movements a constraint does not
-    model are None."""
+    allowed orientations at which a goniometer reads it (:func:`_in_band`). The angle read on
+    a ``step_deg`` grid (α on 1°), the others on the band's 1° or, where free, β on 2° and γ
+    on 10°. A hinge reads its interval (its other angles are zero); movements a constraint
+    does not model are None."""
     from models.oracle import ConstraintOracle
 
     js = _joint(joint)
@@ -300,29 +302,30 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
         q = Q.from_axis_angle(np.asarray(h.axis, float), np.radians(theta))
         ang = joint_angles(q, joint, side)
         peaks = angle_peaks(ang, joint, window=1)
-        named = {m for m in js.movements[0]}
+        named = set(js.movements[0])
         return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named else None)
                                                 for m in CLINICAL_MOVEMENTS[joint]},
                                   (float(ang["alpha"].min()), float(ang["alpha"].max())))
     oracle = ConstraintOracle(constraint)
-    grid = np.arange(-180.0, 180.0, step_deg)
     band = np.arange(-band_deg, band_deg + 1e-9, 1.0)
-    twist = np.arange(-180.0, 180.0, 5.0)
-    out: dict[str, float] = {}
+    free = {"beta": np.arange(-90.0, 90.0 + 1e-9, 2.0), "gamma": np.arange(-180.0, 180.0, 10.0)}
+    primary = {"alpha": np.arange(-180.0, 180.0, 1.0),
+               "beta": np.arange(-90.0, 90.0 + 1e-9, step_deg),
+               "gamma": np.arange(-180.0, 180.0, step_deg)}
+    out: dict[str, float | None] = {}
     arc = None
-    for k in range(3):
-        others = [band, band] if k == 2 else [band, twist]
-        a, b, c = np.meshgrid(grid, *others, indexing="ij")
-        angles = [None, None, None]
-        angles[k] = a.ravel()
+    for k, key in enumerate(("alpha", "beta", "gamma")):
+        # the other angles as _in_band has them: α at any β and γ, β at α in the band and any
+        # γ, γ at α and β in the band
+        others = {"alpha": (free["beta"], free["gamma"]), "beta": (band, free["gamma"]),
+                  "gamma": (band, band)}[key]
+        grids = np.meshgrid(primary[key], *others, indexing="ij")
         rest = [i for i in range(3) if i != k]
-        angles[rest[0]], angles[rest[1]] = b.ravel(), c.ravel()
-        q = from_angles(*angles, joint, side)
-        ok = oracle.is_valid(q)
-        pos, neg = js.movements[k]
-        hit = angles[k][ok]
-        out[pos] = float(max(0.0, hit.max())) if hit.size else None
-        out[neg] = float(max(0.0, -hit.min())) if hit.size else None
+        angles: list = [None, None, None]
+        angles[k] = grids[0].ravel()
+        angles[rest[0]], angles[rest[1]] = grids[1].ravel(), grids[2].ravel()
+        hit = angles[k][oracle.is_valid(from_angles(*angles, joint, side))]
+        out.update(_pair(hit, *js.movements[k]))
         if k == 0 and hit.size:
             arc = (float(hit.min()), float(hit.max()))
     return JointRangeOfMotion(joint, side, {m: out.get(m) for m in CLINICAL_MOVEMENTS[joint]},

@@ -19,14 +19,15 @@ from typing import Any
 
 from rig.errors import RigConfigError
 from rig.readback.data import RecordingFacts
-from rig.readback.source import RecordingSource
+from rig.readback.source import RecordingSource, check_joint
 
 __all__ = ["RomRequest", "RomResult", "run_rom"]
 
 
 @dataclass(frozen=True)
 class RomRequest:
-    """A recording (``source``) or a constraint file (``constraint``), and the side (default:
+    """A recording (``source``, which names its joint) or a constraint file (``constraint``,
+    with ``joint``: default the constraint's own, else the shoulder), and the side (default:
     the recording's or the constraint's, else right)."""
 
     source: RecordingSource | None = None
@@ -36,12 +37,7 @@ class RomRequest:
 
     def check(self) -> None:
         """Option combinations and files, before any work (one-line errors)."""
-        if self.joint is not None:
-            from calibration.joints import JOINTS
-
-            if self.joint not in JOINTS:
-                raise RigConfigError(f"--joint {self.joint!r}: expected one of "
-                                     f"{', '.join(JOINTS)}")
+        check_joint(self.joint)
         if self.constraint is None:
             if self.source is None:
                 raise RigConfigError("give a recording or --constraint")
@@ -88,7 +84,9 @@ class RomResult:
     def is_shoulder(self) -> bool:
         """The shoulder's table (:class:`calibration.clinical.RangeOfMotion`), not another
         joint's (:class:`calibration.joint_angles.JointRangeOfMotion`)."""
-        return not hasattr(self.rom, "peaks")
+        from calibration.joint_angles import JointRangeOfMotion
+
+        return not isinstance(self.rom, JointRangeOfMotion)
 
     def to_json(self) -> dict:
         """``rig rom --json``: movement (snake_case, as in the table) → degrees (2 decimals) or
@@ -139,10 +137,6 @@ def run_rom(request: RomRequest) -> RomResult:
     from rig.readback.boundary import extract
 
     src = request.source
-    if request.joint is not None and src.joint is None:
-        from dataclasses import replace
-
-        src = replace(src, joint=request.joint)
     data = src.load()
     side = request.side or data.side or "right"
     source = src.label

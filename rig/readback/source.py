@@ -12,7 +12,16 @@ from rig.readback.data import FUSION_CHOICES, JointData, parse_axis
 from rig.readback.files import joint_orientations_from_file
 from rig.readback.sessions import read_session
 
-__all__ = ["FUSION_CHOICES", "RecordingSource", "load_joint_orientations"]
+__all__ = ["FUSION_CHOICES", "RecordingSource", "check_joint", "load_joint_orientations"]
+
+
+def check_joint(joint: str | None) -> None:
+    """``--joint``: None or a joint of :data:`calibration.joints.JOINTS` (one-line error)."""
+    if joint is not None:
+        from calibration.joints import JOINTS
+
+        if joint not in JOINTS:
+            raise RigConfigError(f"--joint {joint!r}: expected one of {', '.join(JOINTS)}")
 
 
 @dataclass(frozen=True)
@@ -58,12 +67,7 @@ class RecordingSource:
             raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
                                  f"{self.fusion!r}")
         parse_axis(self.limb_axis)
-        if self.joint is not None:
-            from calibration.joints import JOINTS
-
-            if self.joint not in JOINTS:
-                raise RigConfigError(f"--joint {self.joint!r}: expected one of "
-                                     f"{', '.join(JOINTS)}")
+        check_joint(self.joint)
 
     @property
     def label(self) -> str:

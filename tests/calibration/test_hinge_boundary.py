@@ -98,3 +98,21 @@ def test_rom_of_a_two_axis_wrist_reads_its_corners(side):
     for m, v in (("flexion", 70.0), ("extension", 60.0), ("ulnar_deviation", 30.0),
                  ("radial_deviation", 20.0)):
         assert rom.peaks[m] == pytest.approx(v, abs=1.5), m
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_hip_flexion_reads_whatever_the_abduction(side):
+    """A knee raised to 90° of hip flexion with 25° of abduction (as in the x-io recording's
+    high-knee raise) is 90° of flexion; abduction is read only near zero flexion and the
+    rotations only near the neutral swing."""
+    t = np.linspace(0.0, 1.0, 200)
+    up = 90.0 * np.sin(np.pi * t)
+    z = np.zeros(200)
+    # a knee raise (abducted while flexed), then abduction, then external rotation at neutral
+    a = np.concatenate([up, z, z])
+    b = np.concatenate([np.where(up > 45.0, -25.0, 0.0), -8.0 * np.sin(np.pi * t), z])
+    g = np.concatenate([z, z, 30.0 * np.sin(np.pi * t)])
+    rom = recorded_rom(from_angles(a, b, -g, "hip", side), "hip", side)
+    assert rom.peaks["flexion"] == pytest.approx(90.0, abs=0.1)
+    assert rom.peaks["abduction"] == pytest.approx(8.0, abs=0.1)
+    assert rom.peaks["external_rotation"] == pytest.approx(30.0, abs=0.1)
