@@ -69,6 +69,8 @@ __all__ = [
     "functional_axis",
     "gravity_axis",
     "joint_orientation",
+    "mean_rotation",
+    "mount_from_axes",
     "rotation_vectors",
     "status_ok",
 ]
@@ -190,29 +192,42 @@ def functional_axis(delta, *, min_angle_deg: float = 10.0) -> tuple[np.ndarray, 
     return axis, math.degrees(float(np.sqrt(np.mean(off**2)))), math.degrees(float(np.ptp(s)))
 
 
-def _mount_from_axes(x_s: np.ndarray, z_s: np.ndarray) -> tuple[np.ndarray, float]:
-    """Mount (sensor relative to segment) from the segment's X and Z axes in sensor coordinates.
+def mount_from_axes(down_s: np.ndarray, z_s: np.ndarray, down_seg=(1.0, 0.0, 0.0), *,
+                    what: str = "functional movement") -> tuple[np.ndarray, float]:
+    """Mount (sensor relative to segment) from two of the segment's directions in sensor
+    coordinates: ``down_s``, the one gravity gives in the neutral pose (kept exactly), and
+    ``z_s``, the segment's +Z (the functional movement's axis, made orthogonal to it).
+    ``down_seg`` is the direction pointing down in segment coordinates (+X, the long axis,
+    for every segment but the foot, whose −Y points down).
 
-    Returns the mount (4,) and the angle (degrees) removed from ``z`` to make it orthogonal.
+    Returns the mount (4,), ``w ≥ 0``, and the angle (degrees) removed from ``z_s`` to make it
+    orthogonal; CalibrationError naming ``what`` when the two are within 20° of each other.
     """
-    z = z_s - (z_s @ x_s) * x_s
-    nz = float(np.linalg.norm(z))
-    if nz < math.sin(math.radians(20.0)):
+    rs, n = _triad(down_s, z_s)
+    if n < math.sin(math.radians(20.0)):
         raise CalibrationError(
-            "functional movement: its axis is within 20 deg of the long axis (gravity); "
-            "flex/extend the arm in front of the body, not a rotation about the arm"
+            f"{what}: its axis is within 20 deg of the long axis (gravity); flex/extend the "
+            "joint, not a rotation of the segment about itself"
         )
-    z /= nz
-    removed = math.degrees(math.asin(min(1.0, abs(float(z_s @ x_s)))))
-    y = np.cross(z, x_s)
-    segment_in_sensor = np.column_stack((x_s, y, z))  # columns: segment axes, sensor coords
+    rb, _ = _triad(np.asarray(down_seg, dtype=np.float64), np.array([0.0, 0.0, 1.0]))
     from scipy.spatial.transform import Rotation
 
-    m_inv = Q.from_rotation(Rotation.from_matrix(segment_in_sensor))
+    m_inv = Q.from_rotation(Rotation.from_matrix(rs @ rb.T))  # segment → sensor coordinates
+    removed = math.degrees(math.asin(min(1.0, abs(float(z_s @ down_s)))))
     return Q.canonical(Q.conjugate(m_inv)), removed
 
 
-def _mean_rotation(q: np.ndarray) -> np.ndarray:
+def _triad(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, float]:
+    """Orthonormal basis (columns) from ``v1`` (kept) and ``v2`` (made orthogonal), and
+    ``|v2⊥|`` (the sine of their angle for unit inputs)."""
+    b1 = v1 / np.linalg.norm(v1)
+    b2 = v2 - (v2 @ b1) * b1
+    n = float(np.linalg.norm(b2))
+    b2 = b2 / max(n, 1e-12)
+    return np.column_stack((b1, b2, np.cross(b1, b2))), n
+
+
+def mean_rotation(q: np.ndarray) -> np.ndarray:
     """Chordal L2 mean of unit quaternions (Markley et al. 2007), sign-invariant."""
     _, vecs = np.linalg.eigh(q.T @ q)
     return Q.canonical(vecs[:, -1])
@@ -284,13 +299,13 @@ class ImuJointCalibration:
             ft, fl = ft[np.asarray(functional_ok, bool)], fl[np.asarray(functional_ok, bool)]
         x_t, g_t = gravity_axis(st)
         x_l, g_l = gravity_axis(sl)
-        r0 = _mean_rotation(Q.multiply(Q.conjugate(st), sl))  # limb sensor in thorax sensor
+        r0 = mean_rotation(Q.multiply(Q.conjugate(st), sl))  # limb sensor in thorax sensor
         rel = Q.multiply(Q.conjugate(ft), fl)
         delta = Q.multiply(Q.conjugate(r0), rel)  # about the flexion axis, limb-sensor coords
         z_l, functional_res, flex_range = functional_axis(delta, min_angle_deg=self.min_flexion_deg)
-        self.limb_mount_, ortho = _mount_from_axes(x_l, z_l)
+        self.limb_mount_, ortho = mount_from_axes(x_l, z_l)
         z_t = Q.rotate(r0, z_l)
-        self.thorax_mount_, _ = _mount_from_axes(x_t, z_t)
+        self.thorax_mount_, _ = mount_from_axes(x_t, z_t)
         static_angle = np.degrees(Q.angle(self.transform(st, sl)))
         self.residuals_ = {
             "static": float(np.sqrt(np.mean(static_angle**2))),

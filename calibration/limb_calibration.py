@@ -115,9 +115,10 @@ import math
 import numpy as np
 
 from calibration.alignment import (
-    _mean_rotation,
     functional_axis,
     gravity_axis,
+    mean_rotation,
+    mount_from_axes,
     rotation_vectors,
 )
 from calibration.errors import CalibrationError
@@ -165,46 +166,6 @@ def _mask(ok, n: int, name: str) -> np.ndarray:
     if ok.shape != (n,):
         raise CalibrationError(f"{name}: one flag per sample expected ({n}), got {ok.shape}")
     return ok.astype(bool)
-
-
-def _triad(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, float]:
-    """Orthonormal basis (columns) from ``v1`` (kept) and ``v2`` (made orthogonal), and
-    ``|v2⊥|`` (the sine of their angle for unit inputs)."""
-    b1 = v1 / np.linalg.norm(v1)
-    b2 = v2 - (v2 @ b1) * b1
-    n = float(np.linalg.norm(b2))
-    b2 = b2 / max(n, 1e-12)
-    return np.column_stack((b1, b2, np.cross(b1, b2))), n
-
-
-def _mount(g_s, z_s, g_seg, name: str) -> tuple[np.ndarray, float]:
-    """Mount (sensor relative to segment) from the down direction and +Z in sensor coordinates.
-
-    Parameters
-    ----------
-    g_s, z_s : (3,) unit, sensor coordinates
-        Gravity (static pose) and the segment's +Z (functional movements).
-    g_seg : (3,) unit, segment coordinates
-        The segment direction that points down in the neutral pose (+X; the foot's −Y).
-
-    Returns
-    -------
-    mount : (4,), ``w ≥ 0``
-    removed_deg : float
-        Angle removed from ``z_s`` to make it orthogonal to gravity.
-    """
-    rs, n = _triad(g_s, z_s)
-    if n < math.sin(math.radians(_MIN_AXIS_GRAVITY_DEG)):
-        raise CalibrationError(
-            f"{name}: its flexion axis is within {_MIN_AXIS_GRAVITY_DEG:g} deg of its long axis "
-            "(gravity); flex/extend the joint, do not rotate the segment about itself"
-        )
-    rb, _ = _triad(g_seg, _Z)
-    from scipy.spatial.transform import Rotation
-
-    m_inv = Q.from_rotation(Rotation.from_matrix(rs @ rb.T))  # segment → sensor coordinates
-    removed = math.degrees(math.asin(min(1.0, abs(float(z_s @ g_s)))))
-    return Q.canonical(Q.conjugate(m_inv)), removed
 
 
 def _heading_sums(rv_a: np.ndarray, rv_b: np.ndarray) -> np.ndarray:
@@ -357,7 +318,7 @@ class LimbImuCalibration:
                 raise CalibrationError(f"{seg}: {err}") from err
             g_s.append(axis)
             res_seg[seg]["gravity"] = spread
-        qbar = np.stack([_mean_rotation(st[:, k]) for k in range(n_seg)])
+        qbar = np.stack([mean_rotation(st[:, k]) for k in range(n_seg)])
         g_seg = Q.rotate(Q.conjugate(self._chain(self.neutral_)), _X)  # down, segment coords
 
         # 2. heading offsets between adjacent sensors from the movements they share
@@ -379,7 +340,7 @@ class LimbImuCalibration:
             hp, hc = h_mov[j], h_mov[j + 1]
             rel_st = Q.multiply(Q.conjugate(Q.multiply(hp, st[:, j])),
                                 Q.multiply(hc, st[:, j + 1]))
-            r0 = _mean_rotation(rel_st)
+            r0 = mean_rotation(rel_st)
             f = fn[joint]
             rel = Q.multiply(Q.conjugate(Q.multiply(hp, f[:, j])), Q.multiply(hc, f[:, j + 1]))
             delta = Q.multiply(Q.conjugate(r0), rel)
@@ -431,7 +392,7 @@ class LimbImuCalibration:
         # 5. mounts
         mounts = []
         for k, seg in enumerate(self.segments_):
-            m, removed = _mount(g_s[k], z_s[k], g_seg[k], seg)
+            m, removed = mount_from_axes(g_s[k], z_s[k], g_seg[k], what=seg)
             mounts.append(m)
             res_seg[seg]["orthogonality"] = removed
         self.mounts_ = np.stack(mounts)
