@@ -273,7 +273,9 @@ class Recording:
         return (self.t >= self.start_s + a) & (self.t <= self.start_s + b)
 
 
-def _times(limb: SimulatedLimb, duration_s: float, rate_hz: float) -> np.ndarray:
+def _times(limb, duration_s: float, rate_hz: float) -> np.ndarray:
+    """Sample times from 0 to the end of the patient's protocol plus ``duration_s`` (a
+    :class:`SimulatedLimb` or a :class:`~rig.sim.limb.SimulatedChain`)."""
     n = round((limb.protocol_end_s + duration_s) * rate_hz)
     return np.arange(n) / rate_hz
 
@@ -744,10 +746,9 @@ def record_chain_imu(chain, duration_s: float, rate_hz: float = 100.0,
     """Sample a :class:`~rig.sim.limb.SimulatedChain`'s sensors at ``rate_hz`` from time 0 to
     the end of its protocol plus ``duration_s`` seconds, through the sensor error model
     (:meth:`~rig.sim.limb.SimulatedChain.measure_many`, ``chunk`` samples per call; no pty)."""
-    n = round((chain.protocol_end_s + duration_s) * rate_hz)
-    t = np.arange(n) / rate_hz
+    t = _times(chain, duration_s, rate_hz)
     parts: dict[str, list] = {k: [] for k in ("q", "g", "a", "m", "c", "j", "r", "s")}
-    for i in range(0, n, chunk):
+    for i in range(0, len(t), chunk):
         ms = chain.measure_many(t[i:i + chunk])
         parts["q"].append(np.stack([m.quaternions for m in ms]))
         parts["g"].append(np.stack([m.gyro for m in ms]))
