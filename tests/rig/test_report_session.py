@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import re
+from dataclasses import replace
 
 import pytest
 
@@ -21,15 +22,17 @@ from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """A 4 s servo-limb recording (patient time ×20), its boundary (``rig boundary``), a model
+    """A 6 s servo-limb recording (patient time ×10: the static calibration window is 0.4 s of
+    host time, so a pause of the loaded host does not empty it), its boundary (``rig boundary``), a model
     (``rig train``) and a 1 s enforcement run (``rig enforce``), in one temp store."""
     tmp = tmp_path_factory.mktemp("report")
     truth = patient_constraint()
     dump_constraint(truth, tmp / "patient.yaml")
-    rigs = write_rig_configs(tmp, tmp / "patient.yaml", 5, SIZES["quick"])
+    rigs = write_rig_configs(tmp, tmp / "patient.yaml", 5,
+                             replace(SIZES["quick"], servo_time_scale=10.0))
     db = tmp / "rig.db"
     res = record_session(RecordOptions(rig=str(rigs["sim-shoulder"]), db=str(db),
-                                       patient="P-REPORT", duration_s=4.0,
+                                       patient="P-REPORT", duration_s=6.0,
                                        source_options={"rate_hz": 200.0}),
                          display=PlainDisplay(io.StringIO()))
     sid = res.session_id
