@@ -54,10 +54,41 @@ deviation 30°; hip flexion 120°, extension 30°, abduction 45°, adduction 30�
 external rotation 45°; knee flexion 135°, extension 0°; ankle dorsiflexion 20°, plantarflexion
 50°; inversion 35°, eversion 15° (the AAOS measures these at the subtalar and midtarsal joints
 together, so the ankle's Cardan β is shown beside them, not compared).
+
+Population values (:data:`POPULATION`, :func:`population_reference`)
+---------------------------------------------------------------------
+Measured means of healthy people, by sex and age band, one published source per joint (the
+shoulder's are Gill et al. 2020, :mod:`calibration.clinical`):
+
+- hip, knee, ankle: Soucie JM, Wang C, Forsyth A, Funk S, Denny M, Roach KE, Boone D, and the
+  Hemophilia Treatment Center Network. Range of motion measurements: reference values and a
+  database for comparison studies. *Haemophilia* 2011;17(3):500-507
+  (doi:10.1111/j.1365-2516.2010.02399.x). CDC Normal Joint Range of Motion Study: 674 healthy
+  subjects aged 2-69 (53.6 % female), passive motion, universal goniometer, nine physical
+  therapists; mean and 95 % confidence interval per sex and age group (2-8, 9-19, 20-44, 45-69).
+  Hip flexion and extension, knee flexion and extension, ankle dorsiflexion and
+  plantarflexion. No hip ab/adduction or rotation, no ankle inversion or eversion (shown "—").
+  The 2-8 band was read on the CDC study page; the 20-44 and 45-69 values as quoted from the
+  CDC table in public notes (named per value); no 9-19 values were found, so a patient of 9-19
+  has none. Knee extension is tabulated for 2-8 only, plantarflexion for 20-44 only.
+- elbow (flexion, extension, pronation, supination) and wrist (flexion, extension, radial and
+  ulnar deviation): Boone DC, Azen SP. Normal range of motion of joints in male subjects.
+  *J Bone Joint Surg Am* 1979;61(5):756-759 (109 men, 18 months to 54 years, active motion,
+  goniometer) for men; Macedo LG, Magee DJ. Differences in range of motion between dominant and
+  nondominant sides of upper and lower extremities. *J Manipulative Physiol Ther*
+  2008;31(8):577-582 (90 healthy women aged 18-59, goniometer) for women. Means only, one band
+  per sex, as tabulated side by side (TABLE A.1 "Shoulder, Elbow, Forearm, and Wrist Motion:
+  Mean Values in Degrees", F.A. Davis PT collection; its bands, 1-54 and 18-59, are shown).
+
+Where each number was read is recorded beside it (:class:`PopulationValue` ``where``). The
+selection (:func:`population_band`): the band of the patient's sex containing the age; past the
+oldest adult band, the oldest; age unknown, the band containing an adult of
+:data:`UNKNOWN_AGE` years (the text names the band, so the choice shows).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,9 +97,10 @@ from calibration.clinical import _check_side, mirror_quaternions, text_table
 from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
-__all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "JointAngleSet",
-           "JointRangeOfMotion", "angle_peaks", "constraint_rom", "from_angles", "joint_angles",
-           "recorded_rom"]
+__all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "POPULATION", "UNKNOWN_AGE",
+           "JointAngleSet", "JointRangeOfMotion", "PopulationValue", "angle_peaks",
+           "constraint_rom", "from_angles", "joint_angles", "population_band",
+           "population_reference", "recorded_rom"]
 
 @dataclass(frozen=True)
 class JointAngleSet:
@@ -126,6 +158,214 @@ NORMATIVE: dict = {
         ("ankle", "eversion"): "AAOS measures the subtalar and midtarsal joints together",
     },
 }
+
+
+# -- population values --------------------------------------------------------------------------
+_SOUCIE = ("Soucie JM, Wang C, Forsyth A, Funk S, Denny M, Roach KE, Boone D; Hemophilia "
+           "Treatment Center Network. Range of motion measurements: reference values and a "
+           "database for comparison studies. Haemophilia 2011;17(3):500-507 "
+           "(doi:10.1111/j.1365-2516.2010.02399.x)")
+_BOONE_MACEDO = ("men: Boone DC, Azen SP. Normal range of motion of joints in male subjects. "
+                 "J Bone Joint Surg Am 1979;61(5):756-759; women: Macedo LG, Magee DJ. "
+                 "Differences in range of motion between dominant and nondominant sides of upper "
+                 "and lower extremities. J Manipulative Physiol Ther 2008;31(8):577-582")
+_SOUCIE_CITE = "Soucie JM et al. 2011, Haemophilia 17:500-507"
+_BOONE_MACEDO_CITE = ("Boone DC & Azen SP 1979, J Bone Joint Surg Am 61:756-759 (men); Macedo LG "
+                      "& Magee DJ 2008, J Manipulative Physiol Ther 31:577-582 (women)")
+
+# Where the numbers were read (the stored public text, not recalled):
+#: the CDC study page; its stored copy holds the 2-8 band (the 9-19, 20-44 and 45-69 bands
+#: follow on the page but were not in the copy read here)
+_CDC = "https://archive.cdc.gov/www_cdc_gov/ncbddd/jointrom/index.html (age 2-8 table)"
+#: the 20-44 and 45-69 bands as quoted from the CDC page or data in public repository notes (each
+#: value read in the note named, which names the CDC study as its source; the notes agree where
+#: they overlap)
+_CDC_Q_TRACE = ("CDC table, age 20-44, as quoted in the note \"Biological Joint Range Reference "
+                "Trace\" (mfbailey91/Function_Generators_in_Open_Chains, docs/research/literature/"
+                "BIOLOGICAL_JOINT_RANGE_REFERENCE_TRACE.md); the same values in a public "
+                "exercise-figure note (\"28 — Figury ruchu\")")
+_CDC_Q_FIG = ("CDC table, age 20-44, as quoted in a public exercise-figure note (\"28 — "
+              "Figury ruchu\", joint-range test limits) citing "
+              "archive.cdc.gov/www_cdc_gov/ncbddd/jointrom")
+_CDC_Q_REHAB = ("CDC data, age 45-69, mean (95 % CI) as tabulated in a public "
+                "stroke-rehabilitation design note (\"Layer 2a: normal range of motion\", "
+                "SOUCIE2011 rows)")
+_CDC_Q_AGE = ("Soucie 2011 values quoted in a public research note (\"Joint range of motion by "
+              "age and sex\"), citing the CDC page (hip extension 45-69) and PMC9517286 (ankle "
+              "dorsiflexion)")
+#: TABLE A.1 "Shoulder, Elbow, Forearm, and Wrist Motion: Mean Values in Degrees" (columns Boone
+#: and Azen, 1-54 yr, n = 109 M; Macedo and Magee, 18-59 yr, n = 90 F)
+_TABLE_A1 = "http://fadavispt.mhmedical.com/downloadCitation.aspx?sectionid=158980269 (TABLE A.1)"
+
+#: With the age unknown, the band containing an adult of this age (years) is shown.
+UNKNOWN_AGE = 30
+
+
+@dataclass(frozen=True)
+class PopulationValue:
+    """One published value: mean (degrees) of one sex in one age band (years, inclusive), its
+    standard deviation and 95 % confidence interval where published, and where it was read."""
+
+    sex: str
+    age_lo: int
+    age_hi: int
+    mean: float
+    sd: float | None = None
+    ci95: tuple[float, float] | None = None
+    where: str = ""
+
+    def to_json(self) -> dict:
+        """Plain types: sex, age band, mean, sd and ci95 (None where not published)."""
+        return {"sex": self.sex, "age": [self.age_lo, self.age_hi], "mean": self.mean,
+                "sd": self.sd, "ci95": None if self.ci95 is None else list(self.ci95)}
+
+
+def _pv(sex: str, band: tuple[int, int], mean: float, ci95=None,
+        where: str = "") -> PopulationValue:
+    return PopulationValue(sex, band[0], band[1], mean, None, ci95, where)
+
+
+_F, _M = "female", "male"
+_A2_8, _A20_44, _A45_69 = (2, 8), (20, 44), (45, 69)
+_BOONE_BAND, _MACEDO_BAND = (1, 54), (18, 59)
+
+#: Population values per joint: ``source`` (full reference), ``cite`` (short, for the table),
+#: ``short`` (name), ``measured`` (how), ``movements``:
+#: movement → list of :class:`PopulationValue`. A movement absent here has no published value in
+#: the joint's source; a joint absent has no source (its table column shows "—").
+POPULATION: dict[str, dict] = {
+    "hip": {
+        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
+        "measured": "passive, goniometer",
+        "movements": {
+            "flexion": [
+                _pv(_F, _A2_8, 140.8, (139.2, 142.4), _CDC),
+                _pv(_M, _A2_8, 131.1, (129.4, 132.8), _CDC),
+                _pv(_F, _A20_44, 133.8, None, _CDC_Q_FIG),
+                _pv(_M, _A20_44, 130.4, None, _CDC_Q_FIG),
+                _pv(_F, _A45_69, 130.8, (129.2, 132.4), _CDC_Q_REHAB),
+                _pv(_M, _A45_69, 127.2, (125.7, 128.7), _CDC_Q_REHAB),
+            ],
+            "extension": [
+                _pv(_F, _A2_8, 26.2, (23.9, 28.5), _CDC),
+                _pv(_M, _A2_8, 28.3, (27.2, 29.4), _CDC),
+                _pv(_F, _A20_44, 18.1, None, _CDC_Q_FIG),
+                _pv(_M, _A20_44, 17.4, None, _CDC_Q_FIG),
+                _pv(_F, _A45_69, 16.7, None, _CDC_Q_AGE),
+                _pv(_M, _A45_69, 13.5, None, _CDC_Q_AGE),
+            ],
+        },
+    },
+    "knee": {
+        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
+        "measured": "passive, goniometer",
+        "movements": {
+            "flexion": [
+                _pv(_F, _A2_8, 152.6, (151.2, 154.0), _CDC),
+                _pv(_M, _A2_8, 147.8, (146.6, 149.0), _CDC),
+                _pv(_F, _A20_44, 141.9, None, _CDC_Q_TRACE),
+                _pv(_M, _A20_44, 137.7, None, _CDC_Q_TRACE),
+                _pv(_F, _A45_69, 137.8, (136.5, 139.1), _CDC_Q_REHAB),
+                _pv(_M, _A45_69, 132.9, (131.6, 134.2), _CDC_Q_REHAB),
+            ],
+            "extension": [
+                _pv(_F, _A2_8, 5.4, (3.9, 6.9), _CDC),
+                _pv(_M, _A2_8, 1.6, (0.9, 2.3), _CDC),
+            ],
+        },
+    },
+    "ankle": {
+        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
+        "measured": "passive, goniometer",
+        "movements": {
+            "dorsiflexion": [
+                _pv(_F, _A2_8, 24.8, (22.5, 27.1), _CDC),
+                # the stored page copy breaks off inside this interval ("21.3 – 24"): no CI kept
+                _pv(_M, _A2_8, 22.8, None, _CDC),
+                _pv(_F, _A20_44, 13.8, None, _CDC_Q_AGE),
+                _pv(_M, _A20_44, 12.7, None, _CDC_Q_AGE),
+                _pv(_F, _A45_69, 11.6, None, _CDC_Q_AGE),
+                _pv(_M, _A45_69, 11.9, None, _CDC_Q_AGE),
+            ],
+            "plantarflexion": [
+                _pv(_F, _A20_44, 62.1, None, _CDC_Q_FIG),
+                _pv(_M, _A20_44, 54.6, None, _CDC_Q_FIG),
+            ],
+        },
+    },
+    "elbow": {
+        "source": _BOONE_MACEDO, "cite": _BOONE_MACEDO_CITE,
+        "short": "Boone 1979 (men) / Macedo 2008 (women)",
+        "measured": "goniometer; Boone & Azen active motion",
+        "movements": {
+            "flexion": [_pv(_M, _BOONE_BAND, 143.0, None, _TABLE_A1),
+                        _pv(_F, _MACEDO_BAND, 149.0, None, _TABLE_A1)],
+            "extension": [_pv(_M, _BOONE_BAND, 1.0, None, _TABLE_A1),
+                          _pv(_F, _MACEDO_BAND, 2.0, None, _TABLE_A1)],
+            "pronation": [_pv(_M, _BOONE_BAND, 76.0, None, _TABLE_A1),
+                          _pv(_F, _MACEDO_BAND, 92.0, None, _TABLE_A1)],
+            "supination": [_pv(_M, _BOONE_BAND, 82.0, None, _TABLE_A1),
+                           _pv(_F, _MACEDO_BAND, 96.0, None, _TABLE_A1)],
+        },
+    },
+    "wrist": {
+        "source": _BOONE_MACEDO, "cite": _BOONE_MACEDO_CITE,
+        "short": "Boone 1979 (men) / Macedo 2008 (women)",
+        "measured": "goniometer; Boone & Azen active motion",
+        "movements": {
+            "flexion": [_pv(_M, _BOONE_BAND, 76.0, None, _TABLE_A1),
+                        _pv(_F, _MACEDO_BAND, 93.0, None, _TABLE_A1)],
+            "extension": [_pv(_M, _BOONE_BAND, 75.0, None, _TABLE_A1),
+                          _pv(_F, _MACEDO_BAND, 86.0, None, _TABLE_A1)],
+            "radial_deviation": [_pv(_M, _BOONE_BAND, 22.0, None, _TABLE_A1),
+                                 _pv(_F, _MACEDO_BAND, 18.0, None, _TABLE_A1)],
+            "ulnar_deviation": [_pv(_M, _BOONE_BAND, 36.0, None, _TABLE_A1),
+                                _pv(_F, _MACEDO_BAND, 41.0, None, _TABLE_A1)],
+        },
+    },
+}
+
+_WORD = {"female": "women", "male": "men"}
+
+
+def _check_who(age, sex) -> None:
+    if sex is not None and sex not in _WORD:
+        raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
+    if age is not None and not (isinstance(age, int | float) and 0 <= age < 150):
+        raise ValueError(f"age must be years (0-149), got {age!r}")
+
+
+def population_band(joint: str, movement: str, *, age: float | None = None,
+                    sex: str | None = None) -> list[PopulationValue]:
+    """The published values that apply to a patient (:data:`POPULATION`): per sex (both, women
+    first, when ``sex`` is None) the band containing ``age``; past the oldest band, the oldest
+    when it is an adult band; age unknown, the band containing :data:`UNKNOWN_AGE`. Empty when
+    the joint has no source or the movement no value for that age."""
+    _joint(joint)
+    _check_who(age, sex)
+    values = (POPULATION.get(joint) or {}).get("movements", {}).get(movement, [])
+    years = math.floor(UNKNOWN_AGE if age is None else age)  # 44.5 is in the 20-44 band
+    out = []
+    for sx in (sex,) if sex is not None else ("female", "male"):
+        bands = sorted((v for v in values if v.sex == sx), key=lambda v: v.age_lo)
+        hit = next((v for v in bands if v.age_lo <= years <= v.age_hi), None)
+        if hit is None and bands and years > bands[-1].age_hi and bands[-1].age_hi >= 18:
+            hit = bands[-1]
+        if hit is not None:
+            out.append(hit)
+    return out
+
+
+def population_reference(joint: str, movement: str, *, age: float | None = None,
+                         sex: str | None = None) -> str | None:
+    """The population reference of one movement as text, as the shoulder's
+    (:func:`calibration.clinical.population_reference`): the mean of the patient's sex and age
+    band, e.g. ``"138 (women, 45-69)"``; sex unknown, women and men apart,
+    ``"142 (women, 20-44) / 138 (men, 20-44)"`` (:func:`population_band`). None when no
+    published value applies."""
+    parts = [f"{v.mean:.0f} ({_WORD[v.sex]}, {v.age_lo}-{v.age_hi})"
+             for v in population_band(joint, movement, age=age, sex=sex)]
+    return " / ".join(parts) if parts else None
 
 
 def _joint(name: str) -> JointAngleSet:
@@ -221,16 +461,26 @@ class JointRangeOfMotion:
     peaks: dict[str, float | None]
     arc: tuple[float, float] | None = None
 
-    def table(self) -> str:
-        """The clinical table as text: movement, measured peak, AAOS (:data:`NORMATIVE`)."""
+    def table(self, *, age: float | None = None, sex: str | None = None) -> str:
+        """The clinical table as text: movement, measured peak, AAOS (:data:`NORMATIVE`) and the
+        population reference for ``age`` / ``sex`` (:func:`population_reference`; women and men
+        apart when the sex is unknown, "—" where no published value applies)."""
+        _check_who(age, sex)
         aaos = NORMATIVE["aaos"][self.joint]
-        rows = [("movement", "measured", "AAOS")]
+        who = ", ".join(x for x in (_WORD.get(sex or ""),
+                                    None if age is None else f"age {age:g}") if x)
+        rows = [("movement", "measured", "AAOS", "population" + (f" ({who})" if who else ""))]
+        missing = []
         for m in CLINICAL_MOVEMENTS[self.joint]:
             v = self.peaks.get(m)
             ref = aaos.get(m)
             comparable = (self.joint, m) not in NORMATIVE["not_comparable"]
+            pop = population_reference(self.joint, m, age=age, sex=sex)
+            if pop is None:
+                missing.append(m.replace("_", " "))
             rows.append((m.replace("_", " "), "-" if v is None else f"{v:.1f}°",
-                         "-" if ref is None or not comparable else f"{ref:.0f}°"))
+                         "-" if ref is None or not comparable else f"{ref:.0f}°",
+                         "—" if pop is None else pop))
         lines = [f"{self.joint} range of motion ({self.side} side)", *text_table(rows)]
         if self.arc is not None:
             pos, neg = JOINT_ANGLES[self.joint].movements[0]
@@ -239,17 +489,41 @@ class JointRangeOfMotion:
         for (j, m), why in NORMATIVE["not_comparable"].items():
             if j == self.joint:
                 lines.append(f"note: {m} not compared with AAOS: {why}")
+        pop_src = POPULATION.get(self.joint)
+        if pop_src is None:
+            lines.append(f"note: no published population values found for the {self.joint}")
+        elif missing:
+            lines.append(f"note: no population value for {', '.join(missing)}"
+                         + ("" if age is None else f" at age {age:g}") + f" in {pop_src['short']}")
+        if pop_src is not None and age is None:
+            lines.append(f"note: age unknown: the population band of a {UNKNOWN_AGE}-year-old "
+                         "is shown")
         lines.append(f"sources: angles = {JOINT_ANGLES[self.joint].source}; "
-                     f"AAOS = {NORMATIVE['source']}")
+                     f"AAOS = {NORMATIVE['source']}"
+                     + ("" if pop_src is None else
+                        f"; population = {pop_src['cite']} ({pop_src['measured']})"))
         return "\n".join(lines)
 
-    def to_json(self) -> dict:
-        """Plain types: movement → degrees (2 decimals) or None, ``arc``, joint, side."""
+    def to_json(self, *, age: float | None = None, sex: str | None = None) -> dict:
+        """Plain types: movement → degrees (2 decimals) or None, ``arc``, joint, side; and the
+        population reference for ``age`` / ``sex``: ``population`` (movement → text or None, as
+        the table), ``population_values`` (movement → the published values applied,
+        :meth:`PopulationValue.to_json`), ``population_source`` (the reference, None when the
+        joint has none) and ``population_for`` (the age and sex asked)."""
+        _check_who(age, sex)
         out: dict = {"joint": self.joint, "side": self.side}
         for m in CLINICAL_MOVEMENTS[self.joint]:
             v = self.peaks.get(m)
             out[m] = None if v is None else round(float(v), 2)
         out["arc"] = None if self.arc is None else [round(float(v), 2) for v in self.arc]
+        out["population"] = {m: population_reference(self.joint, m, age=age, sex=sex)
+                             for m in CLINICAL_MOVEMENTS[self.joint]}
+        out["population_values"] = {
+            m: [p.to_json() for p in population_band(self.joint, m, age=age, sex=sex)]
+            for m in CLINICAL_MOVEMENTS[self.joint]}
+        src = POPULATION.get(self.joint)
+        out["population_source"] = None if src is None else src["source"]
+        out["population_for"] = {"age": age, "sex": sex}
         return out
 
 

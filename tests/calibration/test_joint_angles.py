@@ -4,15 +4,24 @@ peaks per movement, and the mistakes a caller can make."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from calibration import joint_angles as ja
 from calibration.joint_angles import (
+    CLINICAL_MOVEMENTS,
     JOINT_ANGLES,
     NORMATIVE,
+    POPULATION,
+    UNKNOWN_AGE,
+    JointRangeOfMotion,
     angle_peaks,
     from_angles,
     joint_angles,
+    population_band,
+    population_reference,
 )
 from models import quaternion as Q
 
@@ -96,3 +105,117 @@ def test_mistakes_are_named():
         angle_peaks({"alpha": [1.0], "beta": [0.0], "gamma": [0.0]}, "knee", window=0)
     with pytest.raises(ValueError):
         joint_angles([np.nan, 0, 0, 0], "knee")
+
+
+# -- population values ----------------------------------------------------------------------------
+def test_population_values_read_back_as_published():
+    # Soucie 2011 / CDC, age 2-8, read on the CDC page
+    assert population_reference("knee", "flexion", age=5, sex="female") == "153 (women, 2-8)"
+    (v,) = population_band("hip", "extension", age=5, sex="male")
+    assert (v.mean, v.ci95, v.age_lo, v.age_hi) == (28.3, (27.2, 29.4), 2, 8)
+    # Boone & Azen 1979 (men) and Macedo & Magee 2008 (women), TABLE A.1
+    assert population_reference("elbow", "supination", sex="male") == "82 (men, 1-54)"
+    assert population_reference("wrist", "ulnar_deviation", sex="female") == "41 (women, 18-59)"
+    assert population_band("elbow", "flexion", sex="female")[0].mean == 149.0
+
+
+def test_every_population_value_is_a_clinical_movement_with_a_source_and_a_place():
+    for joint, src in POPULATION.items():
+        assert src["source"] and src["cite"] and src["measured"]
+        for movement, values in src["movements"].items():
+            assert movement in CLINICAL_MOVEMENTS[joint], (joint, movement)
+            for v in values:
+                assert v.sex in ("female", "male") and v.age_lo <= v.age_hi and v.where
+                assert v.ci95 is None or v.ci95[0] <= v.mean <= v.ci95[1]
+            bands = [(v.sex, v.age_lo) for v in values]
+            assert len(bands) == len(set(bands)), (joint, movement)  # one value a band
+
+
+def test_sex_and_age_select_the_band():
+    assert population_reference("knee", "flexion", age=52, sex="female") == "138 (women, 45-69)"
+    assert population_reference("knee", "flexion", age=52, sex="male") == "133 (men, 45-69)"
+    assert population_reference("knee", "flexion", age=30, sex="male") == "138 (men, 20-44)"
+    assert population_reference("knee", "flexion", age=44.9, sex="male") == "138 (men, 20-44)"
+    # sex unknown: women and men apart
+    assert (population_reference("hip", "flexion", age=60)
+            == "131 (women, 45-69) / 127 (men, 45-69)")
+    # age unknown: the adult band of UNKNOWN_AGE, named in the text
+    assert UNKNOWN_AGE == 30
+    assert (population_reference("ankle", "plantarflexion")
+            == "62 (women, 20-44) / 55 (men, 20-44)")
+    # past the oldest adult band: the oldest, named
+    assert population_reference("hip", "extension", age=80, sex="female") == "17 (women, 45-69)"
+    assert (population_reference("elbow", "pronation", age=70)
+            == "92 (women, 18-59) / 76 (men, 1-54)")
+    # between bands (Soucie 9-19 not tabulated here), under the youngest, or a child-only band
+    # for an adult: nothing
+    assert population_reference("knee", "flexion", age=12, sex="female") is None
+    assert population_reference("ankle", "dorsiflexion", age=1) is None
+    assert population_reference("knee", "extension", age=40) is None
+    assert population_reference("elbow", "flexion", age=10) == "143 (men, 1-54)"  # women 18-59
+
+
+def test_a_joint_or_movement_with_no_source_shows_a_dash_and_says_so(monkeypatch):
+    rom = JointRangeOfMotion("hip", "right", {m: 20.0 for m in CLINICAL_MOVEMENTS["hip"]})
+    assert population_reference("hip", "abduction", age=30, sex="male") is None
+    lines = rom.table(age=30, sex="male").splitlines()
+    row = next(x for x in lines if x.startswith("abduction"))
+    assert row.rstrip().endswith("—")
+    assert any(x.startswith("note: no population value for abduction, adduction") for x in lines)
+    # a joint without a source
+    monkeypatch.setattr(ja, "POPULATION", {k: v for k, v in POPULATION.items() if k != "wrist"})
+    wrist = JointRangeOfMotion("wrist", "left", {m: 10.0 for m in CLINICAL_MOVEMENTS["wrist"]})
+    assert population_reference("wrist", "flexion", sex="female") is None
+    text = wrist.table(sex="female")
+    rows = text.splitlines()[3:7]
+    assert len(rows) == 4 and all(r.rstrip().endswith("—") for r in rows)
+    assert "note: no published population values found for the wrist" in text
+    assert "population =" not in text
+    out = wrist.to_json(sex="female")
+    assert out["population_source"] is None
+    assert set(out["population"].values()) == {None}
+
+
+def test_table_has_the_population_column_and_its_source():
+    rom = JointRangeOfMotion("knee", "right", {"flexion": 130.0, "extension": 2.0}, (-2.0, 130.0))
+    text = rom.table(age=52, sex="female")
+    header = text.splitlines()[1]
+    assert header.split()[:3] == ["movement", "measured", "AAOS"]
+    assert "population (women, age 52)" in header
+    assert "138 (women, 45-69)" in text
+    assert "population = Soucie JM et al. 2011, Haemophilia 17:500-507" in text
+    assert "age unknown" not in text
+    assert "age unknown: the population band of a 30-year-old" in rom.table()
+    assert "135°" in rom.table()  # AAOS column unchanged
+
+
+def test_json_keeps_its_keys_adds_the_population_and_round_trips():
+    rom = JointRangeOfMotion("elbow", "left", {"flexion": 140.123, "extension": 0.0,
+                                               "pronation": None, "supination": 80.0},
+                             (-0.5, 140.1))
+    old = {"joint", "side", "arc", *CLINICAL_MOVEMENTS["elbow"]}
+    plain = rom.to_json()
+    assert old <= set(plain) and plain["flexion"] == 140.12 and plain["pronation"] is None
+    out = rom.to_json(age=40, sex="male")
+    assert {k: out[k] for k in old} == {k: plain[k] for k in old}
+    assert out["population"]["flexion"] == "143 (men, 1-54)"
+    assert out["population_values"]["supination"] == [
+        {"sex": "male", "age": [1, 54], "mean": 82.0, "sd": None, "ci95": None}]
+    assert out["population_source"].startswith("men: Boone DC, Azen SP.")
+    assert out["population_for"] == {"age": 40, "sex": "male"}
+    assert json.loads(json.dumps(out)) == out
+    knee = JointRangeOfMotion("knee", "right", {"flexion": 120.0, "extension": 0.0})
+    k = json.loads(json.dumps(knee.to_json(age=5)))
+    assert k["population_values"]["flexion"][0]["ci95"] == [151.2, 154.0]
+    assert k == knee.to_json(age=5)
+
+
+def test_population_mistakes_are_named():
+    with pytest.raises(ValueError, match="sex must be"):
+        population_reference("knee", "flexion", sex="f")
+    with pytest.raises(ValueError, match="age must be"):
+        population_reference("knee", "flexion", age=-3)
+    with pytest.raises(ValueError, match="joint must be one of"):
+        population_reference("shoulder", "flexion")
+    with pytest.raises(ValueError, match="sex must be"):
+        JointRangeOfMotion("knee", "right", {}).table(sex="x")
