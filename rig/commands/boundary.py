@@ -33,8 +33,9 @@ CHAINS = tuple(LIMB_CHAINS)
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
               "segments are --reference and --limb (a session: the joint it recorded).")
 @click.option("--chain", "chain", type=click.Choice(CHAINS), default=None,
-              help="A whole arm or leg from FILE's segment columns: writes a limb file, with a "
-              "coupling where the recording supports one.")
+              help="A whole arm or leg from FILE's segment columns (--segments) or from a session "
+              "recorded on an arm or leg rig: writes a limb file, with a coupling where the "
+              "recording supports one.")
 @click.option("--segments", default=None, help="With --chain: the segment columns proximal to "
               "distal, COL,COL,COL (after --reference) or all four.")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
@@ -70,18 +71,13 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, seg
 
         if chain is None:
             raise RigConfigError("--segments applies with --chain arm|leg")
-        if file is None or db is not None or session_id is not None:
-            raise RigConfigError("--chain reads an orientation file's segment columns (FILE "
-                                 "--segments ...); sessions of a whole limb are not recorded "
-                                 "yet")
         for flag, value in (("--joint", joint), ("--limb", limb), ("--limb-axis", limb_axis)):
             if value is not None:
                 raise RigConfigError(f"{flag} does not apply with --chain (the chain names its "
                                      "joints and segments)")
-        if segments is None:
-            raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")
         result = run_chain(ChainRequest(file, chain, segments, out, reference=reference,
-                                        frames=frames, name=name, side=side))
+                                        frames=frames, name=name, side=side, db=db,
+                                        session_id=session_id, fusion=fusion))
         click.echo(result.describe())
         return
 

@@ -28,6 +28,9 @@ import click
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the simulated patient's motion, training and targets.")
 @click.option("--quick", is_flag=True, help="Smoke-test size (short recordings and loop).")
+@click.option("--limb", type=click.Choice(["arm", "leg"]), default=None,
+              help="A whole simulated arm or leg (4 IMUs, coupled limits) instead of the "
+              "shoulder: recorded, extracted, trained, evaluated and reported.")
 @click.option("--rate", "rate_hz", type=float, default=200.0, show_default=True,
               help="Rate of the live enforcement loop, Hz.")
 @click.option("--dxl-port", envvar="RIG_DXL_PORT", default=None,
@@ -38,14 +41,24 @@ import click
               help="Dynamixel bus baud rate (X-series factory default: 57600).")
 @click.option("--imu-port", envvar="RIG_IMU_PORT", default=None,
               help="A BNO055 UART port to check first (hardware or sim://). Env: RIG_IMU_PORT.")
-def demo(out_dir, seed, quick, rate_hz, dxl_port, dxl_ids, dxl_baud, imu_port) -> None:
+def demo(out_dir, seed, quick, limb, rate_hz, dxl_port, dxl_ids, dxl_baud, imu_port) -> None:
     """Run the whole job on the simulated rig and write a report (no hardware needed)."""
     from rich.console import Console
 
     from rig.demo import DemoOptions, parse_ids, run_demo
 
-    ids = parse_ids(dxl_ids)
     console = Console(highlight=False)
+    if limb is not None:
+        from rig.demo.limb import run_limb_demo
+
+        result = run_limb_demo(DemoOptions(out=Path(out_dir), seed=seed, quick=quick,
+                                           dxl_port=dxl_port, imu_port=imu_port), limb,
+                               console=console)
+        print_summary(result, console)
+        if not result.ok:
+            sys.exit(1)
+        return
+    ids = parse_ids(dxl_ids)
     result = run_demo(DemoOptions(out=Path(out_dir), seed=seed, quick=quick, dxl_port=dxl_port,
                                   dxl_ids=tuple(ids), dxl_baud=dxl_baud, imu_port=imu_port,
                                   rate_hz=rate_hz), console=console)

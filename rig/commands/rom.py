@@ -55,4 +55,5 @@ def rom(file, db, session_id, reference, limb, limb_axis, joint, frames, constra
     source = RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
                              joint)
     result = run_rom(RomRequest(source, constraint=constraint_path, side=side, joint=joint))
-    click.echo(json.dumps(result.to_json()) if as_json else result.table(age=age, sex=sex))
+    click.echo(json.dumps(result.to_json(age=age, sex=sex)) if as_json
+               else result.table(age=age, sex=sex))

@@ -302,6 +302,39 @@ class _RecordingDisplay:
 
 
 # -- the pipeline --------------------------------------------------------------------------------
+def run_stages(ctx, named, stages: list[StageResult], console, log) -> None:
+    """Run ``named`` ((name, method(StageResult)), ...) in order under one progress display,
+    appending each stage's result to ``stages``: a stage that raises is FAIL and the rest are
+    SKIP (the summary is still shown). ``ctx.progress`` / ``ctx.task`` are set for the
+    recording display."""
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
+                  TimeElapsedColumn(), console=console, transient=True) as progress:
+        ctx.progress = progress
+        failed: str | None = None
+        for name, fn in named:
+            st = StageResult(name)
+            task = progress.add_task(name, total=None)
+            ctx.task = task
+            t = time.perf_counter()
+            if failed:
+                st.verdict, st.detail = "SKIP", f"not run: {failed} failed"
+            else:
+                try:
+                    fn(st)
+                except Exception as err:  # a stage that breaks ends the run, summary still shown
+                    st.verdict = "FAIL"
+                    done = f"{st.detail}; " if st.detail else ""
+                    st.detail = f"{done}{type(err).__name__}: {err}"
+                    failed = name
+                finally:
+                    st.seconds = time.perf_counter() - t
+                    progress.remove_task(task)
+            stages.append(st)
+            log(f"[{st.verdict}] {name} ({st.seconds:.1f} s): {st.detail}")
+
+
 def parse_ids(text: str) -> list[int]:
     """``"1,2,3"`` → ``[1, 2, 3]``; RigConfigError (one line) on anything else."""
     from rig.errors import RigConfigError
@@ -384,36 +417,11 @@ def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
                f"{PATIENT_TWIST_DEG[1]:g}°, seed {options.seed}: {patient_file}"))
     pseudonym = f"SIM-{options.seed:04d}"
 
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
-                  TimeElapsedColumn(), console=console, transient=True) as progress:
-        ctx = _Ctx(options, size, out, db, rigs, truth, pseudonym, progress, log, result)
-        failed: str | None = None
-        for name, fn in (("record IMUs", ctx.record_imu),
-                         ("record servo limb", ctx.record_servo),
-                         ("boundary", ctx.boundary), ("train", ctx.train),
-                         ("evaluate", ctx.evaluate), ("enforce", ctx.enforce),
-                         ("report", ctx.report)):
-            st = StageResult(name)
-            task = progress.add_task(name, total=None)
-            ctx.task = task
-            t = time.perf_counter()
-            if failed:
-                st.verdict, st.detail = "SKIP", f"not run: {failed} failed"
-            else:
-                try:
-                    fn(st)
-                except Exception as err:  # a stage that breaks ends the run, summary still shown
-                    st.verdict = "FAIL"
-                    done = f"{st.detail}; " if st.detail else ""
-                    st.detail = f"{done}{type(err).__name__}: {err}"
-                    failed = name
-                finally:
-                    st.seconds = time.perf_counter() - t
-                    progress.remove_task(task)
-            stages.append(st)
-            log(f"[{st.verdict}] {name} ({st.seconds:.1f} s): {st.detail}")
+    ctx = _Ctx(options, size, out, db, rigs, truth, pseudonym, None, log, result)
+    run_stages(ctx, (("record IMUs", ctx.record_imu), ("record servo limb", ctx.record_servo),
+                     ("boundary", ctx.boundary), ("train", ctx.train),
+                     ("evaluate", ctx.evaluate), ("enforce", ctx.enforce),
+                     ("report", ctx.report)), stages, console, log)
     result.total_s = time.perf_counter() - t_all
     return result
 

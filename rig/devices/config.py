@@ -13,6 +13,9 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       side: right                          #   left | right
       parent: thorax                       #   segment names (str)
       child: humerus
+    limb: arm                              # optional: arm | leg — the sensors are worn on the
+                                           #   whole limb (sensors.segments maps its four
+                                           #   segments; joint is its proximal joint)
     constraint: original                   # optional: shipped shape name or constraint file
                                            #   (relative to this file); the patient / default
     sensors:                               # optional (IMU rigs)
@@ -125,6 +128,7 @@ class RigConfig:
     servos: ServosConfig | None = None
     description: str = ""
     source: str | None = field(default=None, compare=False)
+    limb: str | None = None  # "arm" | "leg": IMUs on the whole limb (calibration.joints)
 
     def load_constraint(self):
         """The constraint (:class:`models.constraint.JointConstraint`) or None."""
@@ -299,9 +303,10 @@ def loads_rig_config(text: str, source: str = "<rig config>",
     except yaml.YAMLError as err:
         raise RigConfigError(f"{source}: not valid YAML: {str(err).splitlines()[0]}") from err
     d = ctx.mapping(data, "top level", {"name", "joint"},
-                    {"description", "constraint", "sensors", "servos"})
+                    {"description", "constraint", "sensors", "servos", "limb"})
     name = ctx.string(d["name"], "name")
     joint = _joint(ctx, d["joint"])
+    limb = _limb(ctx, d["limb"], joint, d.get("sensors")) if d.get("limb") is not None else None
     constraint = None
     if d.get("constraint") is not None:
         constraint = ctx.string(d["constraint"], "constraint")
@@ -320,7 +325,27 @@ def loads_rig_config(text: str, source: str = "<rig config>",
     if sensors is None and servos is None:
         raise ctx.fail("top level", "needs 'sensors' or 'servos' (or both)")
     desc = ctx.string(d["description"], "description") if d.get("description") else ""
-    return RigConfig(name, joint, constraint, sensors, servos, desc, source)
+    return RigConfig(name, joint, constraint, sensors, servos, desc, source, limb)
+
+
+def _limb(ctx: _Ctx, value: Any, joint: JointInfo, sensors: Any) -> str:
+    """``limb``: arm | leg, its proximal joint the rig's ``joint``, one sensor per segment."""
+    from calibration.joints import LIMB_CHAINS
+
+    limb = ctx.string(value, "limb")
+    if limb not in LIMB_CHAINS:
+        raise ctx.fail("limb", f"expected one of {', '.join(LIMB_CHAINS)}, got {limb!r}")
+    chain = LIMB_CHAINS[limb]
+    if joint.name != chain[0][0] or (joint.parent, joint.child) != chain[0][1:]:
+        raise ctx.fail("joint", f"the {limb} rig's joint must be its proximal one: name "
+                                f"{chain[0][0]}, parent {chain[0][1]}, child {chain[0][2]}")
+    segs = sensors.get("segments") if isinstance(sensors, Mapping) else None
+    need = [chain[0][1], *(c for _, _, c in chain)]
+    missing = [s for s in need if not isinstance(segs, Mapping) or s not in segs]
+    if missing:
+        raise ctx.fail("sensors.segments", f"the {limb} rig needs a sensor on each of "
+                                           f"{', '.join(need)}; missing {', '.join(missing)}")
+    return limb
 
 
 def rig_config_names() -> list[str]:

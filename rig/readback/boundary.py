@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from rig.errors import RigConfigError
-from rig.readback.data import JointData
+from rig.readback.data import FUSION_CHOICES, JointData
 from rig.readback.source import RecordingSource
 
 __all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "ChainRequest",
@@ -232,36 +232,45 @@ def describe(ex, out_path: Path | None = None) -> str:
 @dataclass(frozen=True)
 class ChainRequest:
     """``rig boundary --chain arm|leg``: a limb file from an orientation file's segment
-    columns.
+    columns, or from a whole-limb session.
 
     Attributes
     ----------
-    file : str
-        OpenSim ``.sto`` or CSV orientation file.
+    file : str or None
+        OpenSim ``.sto`` or CSV orientation file (or ``db`` + ``session_id``).
     limb : {"arm", "leg"}
-    segments : str
-        The segment columns proximal to distal, comma-separated: four (thorax or pelvis first),
-        or three when ``reference`` names the first.
+    segments : str or None
+        A file's segment columns proximal to distal, comma-separated: four (thorax or pelvis
+        first), or three when ``reference`` names the first. None for a session.
     reference : str, optional
         The root segment's column (thorax / pelvis).
     frames : {"rig", "isb"}, optional
         The file's segment frames (default rig).
     out, name, side
-        Limb file to write, its name (default: the file's stem and the limb), the body side.
+        Limb file to write, its name (default: the file's stem or ``session-N``, and the limb),
+        the body side.
+    db, session_id
+        A session recorded on a ``limb:`` rig (:func:`rig.readback.sessions.
+        chain_orientations_from_store`), instead of ``file``.
+    fusion : str
+        Sessions: where the IMU orientations come from (:data:`FUSION_CHOICES`).
     """
 
-    file: str
+    file: str | None
     limb: str
-    segments: str
+    segments: str | None
     out: str | Path
     reference: str | None = None
     frames: str | None = None
     name: str | None = None
     side: str | None = None
+    db: str | None = None
+    session_id: int | None = None
+    fusion: str = "auto"
 
     def columns(self) -> list[str]:
         """The four segment columns, proximal to distal."""
-        cols = [c.strip() for c in self.segments.split(",") if c.strip()]
+        cols = [c.strip() for c in (self.segments or "").split(",") if c.strip()]
         if self.reference is not None:
             cols = [self.reference, *cols]
         if len(cols) != 4 or len(set(cols)) != 4:
@@ -271,15 +280,32 @@ class ChainRequest:
         return cols
 
     def check(self) -> None:
-        """Everything that can be checked before reading the file (one-line errors)."""
+        """Everything that can be checked before reading the recording (one-line errors)."""
         from calibration.joints import LIMB_CHAINS
 
         if self.limb not in LIMB_CHAINS:
             raise RigConfigError(f"--chain {self.limb!r}: expected one of "
                                  f"{', '.join(LIMB_CHAINS)}")
-        self.columns()
-        if not Path(self.file).is_file():
-            raise RigConfigError(f"{self.file}: no such file")
+        if self.file is not None and (self.db is not None or self.session_id is not None):
+            raise RigConfigError("give either FILE or --db/--session, not both")
+        if self.file is None:
+            if self.db is None or self.session_id is None:
+                raise RigConfigError("--chain needs a recording: FILE --segments COL,COL,COL, "
+                                     "or --db DB --session ID")
+            for flag, value in (("--segments", self.segments), ("--reference", self.reference),
+                                ("--frames", self.frames)):
+                if value is not None:
+                    raise RigConfigError(f"{flag} applies to files; a session knows its "
+                                         "segments")
+            if self.fusion not in FUSION_CHOICES:
+                raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
+                                     f"{self.fusion!r}")
+        else:
+            if self.segments is None:
+                raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")
+            self.columns()
+            if not Path(self.file).is_file():
+                raise RigConfigError(f"{self.file}: no such file")
         _check_side_and_out(self.side, self.out)
 
 
@@ -321,15 +347,28 @@ def run_chain(request: ChainRequest) -> ChainResult:
     from rig.readback.files import chain_orientations_from_file
 
     request.check()
-    cols = request.columns()
-    frames = request.frames or "rig"
-    q, table = chain_orientations_from_file(request.file, cols, request.limb, frames)
-    side = request.side or table.meta.get("rig_side")
+    status = None
+    if request.file is None:
+        from rig.readback.sessions import read_chain
+
+        chain = read_chain(request.db, request.session_id, request.fusion)
+        if chain.limb != request.limb:
+            raise RigConfigError(f"session {request.session_id} recorded the {chain.limb}, not "
+                                 f"the {request.limb}")
+        q, t, status, side = chain.q, chain.t, chain.status, request.side or chain.side
+        name = request.name or f"session-{request.session_id}-{request.limb}"
+        prov = {k: chain.provenance[k] for k in ("session", "calibration_id", "fusion")}
+    else:
+        cols = request.columns()
+        frames = request.frames or "rig"
+        q, table = chain_orientations_from_file(request.file, cols, request.limb, frames)
+        t = np.asarray(table.time, dtype=np.float64)
+        side = request.side or table.meta.get("rig_side")
+        name = request.name or f"{Path(request.file).stem}-{request.limb}"
+        prov = {"file": Path(request.file).name, "segments": cols, "frames": frames}
     side = side if side in ("left", "right") else None
-    name = request.name or f"{Path(request.file).stem}-{request.limb}"
-    prov = {"file": Path(request.file).name, "segments": cols, "frames": frames}
-    ex = ChainExtractor(request.limb, name=name).fit(
-        q, t=np.asarray(table.time, dtype=np.float64), side=side, provenance=prov)
+    ex = ChainExtractor(request.limb, name=name).fit(q, t=t, status=status, side=side,
+                                                     provenance=prov)
     path = Path(request.out)
     dump_limb(ex.limb_, path)
     return ChainResult(ex, path)

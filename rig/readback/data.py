@@ -11,7 +11,8 @@ import numpy as np
 
 from rig.errors import RigConfigError
 
-__all__ = ["CUT_SHORT", "FUSION_CHOICES", "JointData", "RecordingFacts", "parse_axis"]
+__all__ = ["CUT_SHORT", "FUSION_CHOICES", "ChainData", "JointData", "RecordingFacts",
+           "parse_axis"]
 
 #: Session statuses that mean the recording stopped before its planned end.
 CUT_SHORT = ("interrupted", "device_lost", "failed")
@@ -131,6 +132,39 @@ class JointData:
         method = (self.provenance.get("fusion") or {}).get("method")
         return {"vqf": "fused on the host by VQF from the raw samples",
                 "device": "as fused by the devices"}.get(method)
+
+
+@dataclass
+class ChainData:
+    """A whole limb's postures from a session: every joint's orientation at the same instants
+    (child relative to parent, rig frames), and where they came from.
+
+    ``q`` is (N, J, 4) in the order of ``joints`` (:data:`calibration.joints.LIMB_CHAINS`
+    ``[limb]``, proximal to distal); ``t`` (N,) seconds; ``status`` (N,) the lowest of the
+    sensors' calibration bytes or None."""
+
+    q: np.ndarray
+    t: np.ndarray
+    limb: str
+    joints: tuple[str, ...]
+    side: str | None
+    status: np.ndarray | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    patient: str | None = None
+    recording: RecordingFacts | None = None
+
+    def joint(self, name: str, axis: np.ndarray | None = None) -> JointData:
+        """One joint's :class:`JointData` (its facts: the session's, coverage from its own
+        orientations)."""
+        if name not in self.joints:
+            raise RigConfigError(f"the {self.limb} has no {name} (its joints: "
+                                 f"{', '.join(self.joints)})")
+        facts = self.recording
+        if facts is not None:  # coverage is the joint's own, not the recorder's live one
+            facts = replace(facts, explored=None, sectors=None, sufficient=None)
+        return JointData(self.q[:, self.joints.index(name)], self.status,
+                         parse_axis(None) if axis is None else axis, self.side,
+                         {**self.provenance, "joint": name}, self.patient, name, self.t, facts)
 
 
 def parse_axis(text: str | None) -> np.ndarray:

@@ -77,7 +77,7 @@ class RomResult:
         if self.is_shoulder:
             lines.append(format_rom_table(self.rom, age=age, sex=sex))
         else:
-            lines.append(self.rom.table())
+            lines.append(self.rom.table(age=age, sex=sex))
         return "\n".join(lines)
 
     @property
@@ -88,7 +88,7 @@ class RomResult:
 
         return not isinstance(self.rom, JointRangeOfMotion)
 
-    def to_json(self) -> dict:
+    def to_json(self, *, age: int | None = None, sex: str | None = None) -> dict:
         """``rig rom --json``: movement (snake_case, as in the table) → degrees (2 decimals) or
         None, plus ``joint``, ``side``, ``coverage`` (share of the swing sphere's sectors
         explored, 0-1; None for a constraint file), ``interrupted`` (None when unknown: files
@@ -100,7 +100,7 @@ class RomResult:
                 v = getattr(r, m)
                 out[m] = None if v is None else round(float(v), 2)
         else:
-            out = r.to_json()
+            out = r.to_json(age=age, sex=sex)
         out["coverage"] = (None if facts is None or facts.coverage is None
                            else round(facts.coverage, 4))
         out["interrupted"] = None if facts is None else facts.interrupted

@@ -18,19 +18,108 @@ import numpy as np
 
 from calibration.errors import CalibrationError
 from rig.errors import RigConfigError
-from rig.readback.data import CUT_SHORT, FUSION_CHOICES, JointData, RecordingFacts, parse_axis
+from rig.readback.data import (
+    CUT_SHORT,
+    FUSION_CHOICES,
+    ChainData,
+    JointData,
+    RecordingFacts,
+    parse_axis,
+)
 
-__all__ = ["joint_orientations_from_store", "read_session"]
+__all__ = ["chain_orientations_from_store", "joint_orientations_from_store", "read_chain",
+           "read_session", "session_limb"]
 
 
 def read_session(db: str, session_id: int, axis: np.ndarray | None = None,
-                 fusion: str = "auto") -> JointData:
+                 fusion: str = "auto", joint: str | None = None) -> JointData:
     """:func:`joint_orientations_from_store` on the store at ``db`` (opened as it is: never
     created, read-only when the file is)."""
     from rig.store import open_store
 
     with open_store(db, create=False) as store:
-        return joint_orientations_from_store(store, session_id, axis, fusion=fusion)
+        return joint_orientations_from_store(store, session_id, axis, fusion=fusion,
+                                             joint=joint)
+
+
+def read_chain(db: str, session_id: int, fusion: str = "auto") -> ChainData:
+    """:func:`chain_orientations_from_store` on the store at ``db`` (never created)."""
+    from rig.store import open_store
+
+    with open_store(db, create=False) as store:
+        return chain_orientations_from_store(store, session_id, fusion=fusion)
+
+
+def session_limb(sess: dict) -> str | None:
+    """The limb (``arm``/``leg``) a session recorded whole, or None (one joint)."""
+    limb = (sess.get("meta") or {}).get("limb")
+    return limb if limb in ("arm", "leg") else None
+
+
+def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto") -> ChainData:
+    """Every joint of a whole-limb session (one IMU per segment, ``limb`` in the rig
+    configuration): the four sensors' orientations at the instants all of them have a sample
+    (paired by the device timestamp where there is one), through the session's ``imu-limb``
+    calibration (:class:`calibration.limb_calibration.LimbImuCalibration`).
+
+    Orientations are the devices' (``fusion`` ``auto`` or ``device``; host fusion of a limb's
+    raw samples is not implemented: ``vqf`` is a one-line error), and no heading-drift
+    correction is applied (the facts say so).
+    """
+    from calibration.limb_calibration import LimbImuCalibration
+
+    if fusion not in FUSION_CHOICES:
+        raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
+    sess = store.get_session(session_id)
+    limb = session_limb(sess)
+    if limb is None:
+        raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
+                             ", not a whole arm or leg (no --chain)")
+    if fusion == "vqf":
+        raise RigConfigError(f"session {session_id}: --fusion vqf is not available for whole-limb "
+                             "sessions yet (the devices' orientations are used)")
+    cal = next((c for c in reversed(store.calibrations(session_id)) if c["kind"] == "imu-limb"),
+               None)
+    if cal is None:
+        raise RigConfigError(
+            f"session {session_id} has no imu-limb calibration (it was recorded without the "
+            "calibration steps): its orientations are the sensors' frames, not anatomical "
+            "ones; record again with calibration")
+    with _about(session_id, "limb calibration"):
+        model = LimbImuCalibration.from_dict(cal["data"])
+    segs = model.segments_
+    sensors = store.sensors(session_id)
+    by_segment = {r.get("segment"): r.get("name") for r in sensors if r.get("n_samples")}
+    missing = [s for s in segs if s not in by_segment]
+    if missing:
+        raise RigConfigError(f"session {session_id}: no samples from the "
+                             f"{', '.join(missing)} sensor(s)")
+    per = [store.samples(session_id, name=by_segment[s], raw=False) for s in segs]
+    key = "device_t" if all(np.isfinite(p["device_t"]).all() for p in per) else "t"
+    common = per[0][key]
+    for p in per[1:]:
+        common = np.intersect1d(common, p[key])
+    if not len(common):
+        raise RigConfigError(f"session {session_id}: the {limb}'s sensors have no sample time in "
+                             "common")
+    q = np.empty((len(common), len(segs), 4))
+    status = np.full(len(common), 255, dtype=np.int64)
+    for k, p in enumerate(per):
+        uniq, first = np.unique(p[key], return_index=True)
+        idx = first[np.searchsorted(uniq, common)]
+        q[:, k] = p["q"][idx]
+        status = np.minimum(status, p["status"][idx])
+    del per
+    joints = model.transform(q)
+    side = sess.get("side")
+    prov = {"session": int(session_id), "started_at": sess.get("started_at"),
+            "source": "imu samples", "limb": limb, "calibration_id": int(cal["id"]),
+            "calibration_residual_deg": cal.get("residual_deg"),
+            "fusion": {"method": "device"}}
+    facts = replace(_session_facts(store, sess, sensors), unmeasured_drift=True)
+    return ChainData(joints, np.asarray(common, dtype=np.float64), limb, tuple(model.joints_),
+                     side if side in ("left", "right") else None, status, prov,
+                     sess.get("pseudonym"), facts)
 
 
 @contextlib.contextmanager
@@ -45,7 +134,8 @@ def _about(session_id: int, step: str | None = None) -> Iterator[None]:
 
 def joint_orientations_from_store(store, session_id: int,
                                   axis: np.ndarray | None = None, *,
-                                  heading: bool = True, fusion: str = "auto") -> JointData:
+                                  heading: bool = True, fusion: str = "auto",
+                                  joint: str | None = None) -> JointData:
     """Joint orientations of a session in an opened store (joint samples as recorded; IMU
     samples through the session's ``imu-alignment`` calibration). Used by ``rig boundary``,
     ``rig rom``, the recorder's range of motion and the report.
@@ -65,6 +155,10 @@ def joint_orientations_from_store(store, session_id: int,
       of both sensors and a calibration with ``protocol.origin``; otherwise a one-line error;
     - ``"auto"`` (default): ``"vqf"`` when those needs are met, else ``"device"``.
 
+    A whole-limb session (:func:`session_limb`) gives the orientations of ``joint`` (default
+    its proximal joint) from :func:`chain_orientations_from_store`; a one-joint session must
+    be asked for its own joint (``joint`` None or its name).
+
     The provenance's ``fusion`` entry records the method (and for VQF the library version, the
     parameters that differ from VQF's defaults, the resampling rate, each sensor's share of
     samples flagged as magnetically disturbed and final gyroscope bias, and the re-fit's
@@ -80,6 +174,13 @@ def joint_orientations_from_store(store, session_id: int,
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
     axis = parse_axis(None) if axis is None else axis
     sess = store.get_session(session_id)
+    limb = session_limb(sess)
+    if limb is not None:
+        chain = chain_orientations_from_store(store, session_id, fusion=fusion)
+        return chain.joint(chain.joints[0] if joint is None else joint, axis)
+    if joint is not None and joint != (sess.get("joint") or "shoulder"):
+        raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
+                             f", not the {joint}")
     sensors = store.sensors(session_id)
     names = [r["name"] for r in sensors if r.get("n_samples")]
     if not names:

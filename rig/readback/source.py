@@ -91,11 +91,8 @@ class RecordingSource:
                 axis = direction_to_rig(axis, frames, spec.child)
             return joint_orientations_from_file(self.file, self.reference, self.limb, axis,
                                                 frames, self.joint)
-        data = read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion)
-        if self.joint is not None and self.joint != (data.joint or "shoulder"):
-            raise RigConfigError(f"session {self.session_id} recorded the "
-                                 f"{data.joint or 'shoulder'}, not the {self.joint}")
-        return data
+        return read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion,
+                            self.joint)
 
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,

@@ -14,6 +14,12 @@ rig's :meth:`~rig.record.rigio.OpenRig.patient_time`. On hardware the clinician 
 gets the patient into the neutral pose and presses Enter: protocol time starts at the first
 sample after that, and the display says when to start the flexion/extension.
 
+**Whole limbs.** A rig configuration with ``limb: arm|leg`` (one IMU per segment) follows
+:class:`calibration.protocol.LimbCalibrationProtocol` instead: the static pose, then each
+joint's flexion/extension in turn (proximal first), announced as it starts; the maths is
+:class:`calibration.limb_calibration.LimbImuCalibration`, stored as an ``imu-limb``
+calibration. The live joint orientations (coverage, checkpoints) are the proximal joint's.
+
 Everything recorded during the protocol is also in the store; the windows used are in the
 calibration's data.
 """
@@ -72,20 +78,31 @@ class GuidedCalibration:
     """
 
     def __init__(self, config, rig, *, display, protocol=None, stdin=None) -> None:
-        from calibration.protocol import CalibrationProtocol
+        from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 
         self.config = config
         self.rig = rig
         self.display = display
+        self.limb = getattr(config, "limb", None)
         if protocol is None and rig.simulated:
             protocol = rig.protocol  # the one the simulated patient performs
-        self.protocol = protocol if protocol is not None else CalibrationProtocol()
+        if protocol is None:
+            protocol = (CalibrationProtocol() if self.limb is None
+                        else LimbCalibrationProtocol(self.limb))
+        if (self.limb is not None) != isinstance(protocol, LimbCalibrationProtocol) or (
+                self.limb is not None and protocol.limb != self.limb):
+            from calibration.errors import CalibrationError
+
+            what = "a whole-limb" if isinstance(protocol, LimbCalibrationProtocol) else "a joint"
+            raise CalibrationError(f"the {self.limb or config.joint.name} rig was given {what} "
+                                   "calibration protocol")
+        self.protocol = protocol
         self.stdin = stdin if stdin is not None else sys.stdin
         self.parent = config.joint.parent
         self.child = config.joint.child
         self._origin: float | None = None  # hardware: sample time at which the protocol began
         self._armed = False
-        self._said_functional = False
+        self._said = 0  # movement phases announced (_phases)
         self._done = False
         self._batches: list[tuple[np.ndarray, SampleBatch]] = []  # (protocol time, batch)
         self._enter = threading.Event()
@@ -101,16 +118,37 @@ class GuidedCalibration:
             return "calibrated"
         if not self._armed:
             return "calibration: neutral pose, press Enter when ready"
-        return ("calibration: flexion/extension" if self._said_functional
-                else "calibration: neutral pose, hold still")
+        if not self._said:
+            return "calibration: neutral pose, hold still"
+        return f"calibration: {self._phases()[self._said - 1][2]}"
+
+    def _phases(self) -> list[tuple[float, str, str]]:
+        """The movement phases after the static pose: (start, what to say, short prompt)."""
+        p = self.protocol
+        if self.limb is None:
+            return [(p.static_s, "now flexion/extension: raise the straight arm forwards, then "
+                     f"behind, slowly ({p.functional_s:g} s)", "flexion/extension")]
+        out = []
+        for i, joint in enumerate(p.joints):
+            what = _LIMB_MOVEMENTS[joint]
+            out.append((p.static_s + i * p.movement_s,
+                        f"now the {joint}: {what}, slowly, the rest still ({p.movement_s:g} s)",
+                        f"{joint} flexion/extension"))
+        return out
 
     def begin(self, stop: threading.Event) -> None:
         """Announce the protocol; on hardware wait (in the background) for Enter."""
         p = self.protocol
-        self.display.message(
-            f"calibration — 1) neutral pose: patient upright, arm hanging relaxed at the side, "
-            f"forearm forward; hold still {p.static_s:g} s. 2) then raise the straight arm "
-            f"forwards and lower it behind (flexion/extension) for {p.functional_s:g} s")
+        if self.limb is None:
+            self.display.message(
+                f"calibration — 1) neutral pose: patient upright, arm hanging relaxed at the "
+                f"side, forearm forward; hold still {p.static_s:g} s. 2) then raise the straight "
+                f"arm forwards and lower it behind (flexion/extension) for {p.functional_s:g} s")
+        else:
+            self.display.message(
+                f"calibration of the {self.limb} — 1) neutral pose: {_LIMB_NEUTRAL[self.limb]}; "
+                f"hold still {p.static_s:g} s. 2) then flex and extend each joint in turn, "
+                f"{', '.join(p.joints)}, {p.movement_s:g} s each")
         if self.rig.simulated:
             self._armed = True
             self.display.message("simulated patient: the steps advance by themselves")
@@ -146,10 +184,10 @@ class GuidedCalibration:
         pt = self._protocol_time(batch)
         self._batches.append((pt, batch))
         last = float(pt[-1])
-        if not self._said_functional and last >= self.protocol.static_s:
-            self._said_functional = True
-            self.display.message("now flexion/extension: raise the straight arm forwards, then "
-                                 f"behind, slowly ({self.protocol.functional_s:g} s)")
+        phases = self._phases()
+        while self._said < len(phases) and last >= phases[self._said][0]:
+            self.display.message(phases[self._said][1])
+            self._said += 1
         if last >= self.protocol.duration_s:
             self._done = True
         return self._done
@@ -162,7 +200,8 @@ class GuidedCalibration:
 
     # -- solving ---------------------------------------------------------------------------
     def window(self, name: str) -> SampleBatch:
-        """Samples inside protocol window ``name`` (``"static"`` or ``"functional"``)."""
+        """Samples inside protocol window ``name`` (``"static"``, ``"functional"``; a limb's
+        joints)."""
         lo, hi = self.protocol.windows()[name]
         parts = [b.select((pt >= lo) & (pt <= hi)) for pt, b in self._batches]
         return _concat(parts)
@@ -170,15 +209,20 @@ class GuidedCalibration:
     def finish(self) -> CalibrationResult:
         """Compute the calibration from the recorded protocol."""
         static = self.window("static")
-        functional = self.window("functional")
-        if self.rig.kind == "servo":
-            result = _servo_check(static, functional)
+        if self.limb is not None:
+            result = _solve_limb(static, {j: self.window(j) for j in self.protocol.joints},
+                                 self.limb, self.config.joint.side, self.protocol)
+            fields = ("limb", "static_s", "movement_s", "period_s", "settle_s")
         else:
-            result = _solve_imu(static, functional, self.parent, self.child)
+            functional = self.window("functional")
+            if self.rig.kind == "servo":
+                result = _servo_check(static, functional)
+            else:
+                result = _solve_imu(static, functional, self.parent, self.child)
+            fields = ("static_s", "functional_s", "flexion_deg", "extension_deg", "period_s",
+                      "settle_s")
         result.data = {**result.data,
-                       "protocol": {k: getattr(self.protocol, k) for k in (
-                           "static_s", "functional_s", "flexion_deg", "extension_deg",
-                           "period_s", "settle_s")},
+                       "protocol": {k: getattr(self.protocol, k) for k in fields},
                        "windows_s": {k: list(v) for k, v in self.protocol.windows().items()}}
         origin = self._clock_origin()
         if origin is not None:  # where the windows are on the samples' clock
@@ -237,7 +281,8 @@ class GuidedCalibration:
             self._last_parent = batch.q[np.flatnonzero(is_parent)[-1]]
         child_q = batch.q[child_rows]
         if self._result is not None and self._result.model is not None:
-            q = _apply_imu(self._result.model, parent_q, child_q)
+            apply = _apply_imu if self.limb is None else _apply_limb
+            q = apply(self._result.model, parent_q, child_q)
         else:
             q = Q.multiply(Q.conjugate(parent_q), child_q)
         return q, batch.time()[child_rows]
@@ -490,6 +535,63 @@ def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child:
 
 def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
     return model.transform(parent_q, child_q)
+
+
+#: What the patient does for each joint's calibration movement, and the limb's neutral pose.
+_LIMB_MOVEMENTS = {
+    "shoulder": "raise the straight arm forwards, then back behind",
+    "elbow": "bend and straighten the elbow, palm forwards",
+    "wrist": "bend the wrist up and down",
+    "hip": "raise the straight leg forwards, then back behind",
+    "knee": "bend and straighten the knee",
+    "ankle": "point the foot down, then pull the toes up",
+}
+_LIMB_NEUTRAL = {
+    "arm": "standing, arm hanging relaxed at the side, palm forwards, fingers straight",
+    "leg": "standing upright on both feet, knees straight, feet forwards",
+}
+
+
+def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The sensors ``names`` (proximal to distal) at the instants all of them have a sample
+    (M, S, 4), and whether every sensor's status is trustworthy there (M,)."""
+    from calibration.alignment import status_ok
+
+    clock = b.time()
+    common = None
+    for n in names:
+        c = clock[b.name == n]
+        common = c if common is None else np.intersect1d(common, c)
+    q = np.empty((len(common), len(names), 4))
+    st = np.empty((len(common), len(names)), dtype=np.int64)
+    for k, n in enumerate(names):
+        sel = b.name == n
+        _, first = np.unique(clock[sel], return_index=True)  # one sample per instant
+        idx = first[np.searchsorted(np.unique(clock[sel]), common)]
+        q[:, k], st[:, k] = b.q[sel][idx], b.status[sel][idx]
+    return q, status_ok(st) if len(common) else np.zeros(0, bool)
+
+
+def _solve_limb(static: SampleBatch, movements: dict[str, SampleBatch], limb: str, side: str,
+                protocol) -> CalibrationResult:
+    from calibration.limb_calibration import LimbImuCalibration
+
+    segs = protocol.segments
+    st, sok = _chain_samples(static, segs)
+    moves = {j: _chain_samples(b, segs) for j, b in movements.items()}
+    cal = LimbImuCalibration(limb, side if side in ("left", "right") else "right",
+                             protocol=protocol).fit(
+        st, {j: q for j, (q, _) in moves.items()}, static_ok=_usable(sok),
+        functional_ok={j: ok for j, (_, ok) in moves.items() if _usable(ok) is not None})
+    return CalibrationResult("imu-limb", cal.to_dict(), float(cal.residual_deg_), cal)
+
+
+def _apply_limb(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
+    """The limb's proximal joint from its first two sensors (each segment is its sensor's
+    orientation turned by its heading and mount alone: :meth:`LimbImuCalibration.
+    segment_orientations`)."""
+    seg = model.segment_orientations(np.stack([parent_q, child_q, parent_q, parent_q], axis=1))
+    return Q.multiply(Q.conjugate(seg[:, 0]), seg[:, 1])
 
 
 def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationResult:

@@ -148,7 +148,7 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
             ports[url] = stack.enter_context(open_port(url, baud=baud))
         if calibrate:
             for port in ports.values():
-                _patient_performs_protocol(port)
+                _patient_performs_protocol(port, config.limb)
         source = open_source(config, which, rate_hz=rate_hz, ports=ports)
         stack.callback(source.close)  # LIFO: the source closes before its ports
         if which == "sensors":
@@ -174,14 +174,15 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
         raise
 
 
-def _patient_performs_protocol(port) -> None:
-    """The simulated patient behind ``port`` (if any) performs the calibration protocol,
-    starting 2 s of patient time from now (the simulators sample it lazily, so the change
-    takes effect from their next sample on) — unless it already does, or the port string says
-    whether it does."""
+def _patient_performs_protocol(port, limb: str | None = None) -> None:
+    """The simulated patient behind ``port`` (if any) performs the calibration protocol (the
+    joint's, or the whole ``limb``'s), starting 2 s of patient time from now (the simulators
+    sample it lazily, so the change takes effect from their next sample on) — unless it
+    already does, or the port string says whether it does."""
     sp = port.simulated_patient
     if sp is None or sp.protocol_pinned or sp.limb.calibration_protocol is not None:
         return
-    from calibration.protocol import CalibrationProtocol
+    from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 
-    sp.start_protocol(CalibrationProtocol(), lead_s=2.0)
+    sp.start_protocol(CalibrationProtocol() if limb is None else LimbCalibrationProtocol(limb),
+                      lead_s=2.0)

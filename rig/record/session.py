@@ -294,6 +294,9 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         result.rom_note = ("no range of motion: the recording is not calibrated (sensor frames, "
                            "not anatomical ones)")
         return
+    if config.limb is not None:
+        _limb_range_of_motion(store, result, config)
+        return
     try:
         from calibration.clinical import format_rom_table, range_of_motion
         from rig.readback import extract, joint_orientations_from_store
@@ -312,6 +315,39 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
                       meta={"rom": result.rom, "rom_source": "extracted boundary"})
 
 
+def _limb_range_of_motion(store, result: RecordResult, config) -> None:
+    """Every joint's clinical peaks (:func:`calibration.joint_angles.recorded_rom`; the
+    shoulder's from its extracted boundary as for a shoulder session), stored in the session's
+    metadata as ``rom`` = ``{joint: table}``."""
+    try:
+        from calibration.clinical import format_rom_table, range_of_motion
+        from calibration.joint_angles import JOINT_ANGLES, recorded_rom
+        from rig.readback import extract
+        from rig.readback.sessions import chain_orientations_from_store
+
+        side = config.joint.side if config.joint.side in ("left", "right") else "right"
+        chain = chain_orientations_from_store(store, result.session_id)
+        roms, tables = {}, []
+        for k, j in enumerate(chain.joints):
+            if j in JOINT_ANGLES:
+                r = recorded_rom(chain.q[:, k], j, side)
+                roms[j], table = r.to_json(), r.table()
+            else:  # the shoulder: peaks of its boundary, as for a shoulder session
+                data = chain.joint(j)
+                r = range_of_motion(extract(data, side=side).constraint_, side,
+                                    directions=data.directions)
+                roms[j], table = r.to_dict(), f"{j} ({side})\n{format_rom_table(r)}"
+            tables.append(table)
+    except Exception as err:  # too few samples: say so, keep the session
+        result.rom_note = f"no range of motion: {err}"
+        return
+    result.rom = roms
+    result.rom_table = "\n".join([*(f"warning: {w}" for w in chain.recording.warnings()),
+                                  *tables])
+    store.end_session(result.session_id, status=result.status,
+                      meta={"rom": result.rom, "rom_source": "recorded joint angles"})
+
+
 def _close(store) -> None:
     close = getattr(store, "close", None)
     if close is not None:
@@ -323,6 +359,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     patient_id = int(store.ensure_patient(options.patient.strip(), side=joint.side))
     meta = {"rig": config.name, "simulated": rig.simulated,
             "duration_s": options.duration_s, "sensors": [s.name for s in rig.sensors]}
+    if config.limb is not None:  # the whole limb: every joint is read back from the session
+        meta["limb"] = config.limb
     session_id = int(store.start_session(patient_id, rig_name=config.name, joint=joint.name,
                                          side=joint.side, kind="record", meta=meta))
     for s in rig.sensors:

@@ -1,0 +1,344 @@
+"""``rig demo --limb arm|leg``: a whole simulated arm or leg, recorded, extracted, trained,
+evaluated and reported, stage by stage with a verdict per stage.
+
+Stages (each calls the library function behind the corresponding ``rig`` command):
+
+1. **patient** — the seeded anatomical limb :func:`rig.sim.patients.anatomical_limb`
+   (``seed``, right side) with its couplings (leg: hip and ankle limits at keyframes of the
+   knee angle; arm: shoulder limits at keyframes of the elbow angle), written as
+   ``patient-<limb>.yaml``; the shipped ``sim-arm`` / ``sim-leg`` configuration re-pointed at
+   that seed with scaled patient time in ``rigs/``.
+2. **record** — ``rig record`` (:func:`rig.record.record_session`): four IMUs (noise, drift,
+   misplaced straps) through the stream protocol; the limb calibration protocol (static pose,
+   then each joint's flexion/extension), then free motion for ``motion_s`` of patient time.
+   PASS: completed, nothing dropped, calibration residual reported.
+3. **boundary** — ``rig boundary --chain`` on the session (:func:`rig.readback.run_chain`):
+   the limb file ``<limb>.yaml``. Verdicts against the truth: hinge interval ends within 2°,
+   ball / two-axis boundaries within 2° mean distance (an extracted coupling's keyframes
+   within 3° of the truth at the same angle; an uncoupled boundary against the truth at the
+   coupling angle it matches best: the recording's union), ≥ 97 % of the recorded postures
+   inside every joint within 1°; whether the truth's coupling was found is stated.
+4. **train** — ``rig train`` on the limb file (:func:`rig.training.run_train`): preset
+   ``network`` (a trained distance field for the coupled swing), or ``geometric`` (the exact
+   oracle compiled, no training) at the quick size.
+5. **evaluate** — ``rig evaluate`` (onnxruntime) on fresh held-out postures; verdict against
+   issue 20's targets (:data:`rig.training.limb.LIMB_TARGETS`).
+6. **report** — the clinician's report of the limb (:mod:`rig.report.limb`): ``report.html``.
+
+Everything goes into one store, ``<out>/rig.db``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rig.demo.pipeline import (
+    DemoOptions,
+    DemoResult,
+    StageResult,
+    _RecordingDisplay,
+    _shipped_config,
+    run_stages,
+)
+
+__all__ = ["LIMB_SIZES", "LimbDemoSize", "run_limb_demo", "write_limb_rig"]
+
+#: Verdict targets of the boundary stage (issue 21), degrees or shares.
+HINGE_DEG = 2.0
+BOUNDARY_MEAN_DEG = 2.0
+KEYFRAME_DEG = 3.0
+INSIDE_1DEG = 0.97
+
+
+@dataclass(frozen=True)
+class LimbDemoSize:
+    """How much the limb demo records and evaluates.
+
+    Attributes
+    ----------
+    motion_s : float
+        Free motion after the calibration protocol, seconds of patient time.
+    time_scale : float
+        Patient time runs this many times faster than the host's clock.
+    rate_hz : int
+        Each IMU's sample rate (patient time).
+    preset : str
+        ``rig train`` preset for the limb.
+    eval_n : int
+        Held-out postures for ``rig evaluate``.
+    """
+
+    motion_s: float
+    time_scale: float
+    rate_hz: int
+    preset: str
+    eval_n: int
+
+
+LIMB_SIZES = {
+    "full": LimbDemoSize(motion_s=600.0, time_scale=10.0, rate_hz=100, preset="network",
+                         eval_n=6000),
+    "quick": LimbDemoSize(motion_s=150.0, time_scale=10.0, rate_hz=100, preset="geometric",
+                          eval_n=1500),
+}
+
+
+def write_limb_rig(out: Path, limb: str, seed: int, size: LimbDemoSize) -> Path:
+    """The shipped ``sim-<limb>`` configuration worn by the patient of ``seed``, patient time
+    scaled; validated like any ``--rig FILE``."""
+    import yaml
+
+    from rig.devices.config import load_rig_config
+    from rig.sim.urls import with_keys
+
+    cfg = _shipped_config(f"sim-{limb}")
+    cfg["sensors"]["port"] = with_keys(cfg["sensors"]["port"], seed=seed, rate=size.rate_hz,
+                                       time_scale=f"{size.time_scale:g}")
+    cfg["sensors"]["rate_hz"] = size.rate_hz
+    cfg["description"] = f"demo: sim-{limb} worn by the demo's simulated patient, scaled time"
+    rigs = out / "rigs"
+    rigs.mkdir(parents=True, exist_ok=True)
+    path = rigs / f"sim-{limb}.yaml"
+    path.write_text("# written by `rig demo --limb`\n" + yaml.safe_dump(cfg, sort_keys=False))
+    load_rig_config(str(path))
+    return path
+
+
+def run_limb_demo(options: DemoOptions, limb: str, *, console=None) -> DemoResult:
+    """Run every stage of the limb demo (module docstring)."""
+    from rich.console import Console
+
+    from calibration.joints import LIMB_CHAINS
+    from models.limb import dump_limb
+    from rig.errors import RigConfigError
+    from rig.sim.patients import anatomical_limb
+
+    if limb not in LIMB_CHAINS:
+        raise RigConfigError(f"--limb {limb!r}: expected one of {', '.join(LIMB_CHAINS)}")
+    if options.dxl_port is not None or options.imu_port is not None:
+        raise RigConfigError("--limb runs on the simulated limb: --dxl-port / --imu-port apply "
+                             "to the shoulder demo")
+    console = console if console is not None else Console()
+    size = LIMB_SIZES["quick" if options.quick else "full"]
+    out = Path(options.out)
+    t_all = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    stages: list[StageResult] = []
+    result = DemoResult(out=out, db=out / "rig.db", stages=stages)
+
+    def log(text: str) -> None:
+        console.print(text, highlight=False, markup=False)
+
+    t0 = time.perf_counter()
+    truth = anatomical_limb(options.seed, limb, "right")
+    patient_file = out / f"patient-{limb}.yaml"
+    dump_limb(truth, patient_file)
+    rig = write_limb_rig(out, limb, options.seed, size)
+    coupled = [f"{j.name} by the {j.coupling.by} ({len(j.coupling.at_deg)} keyframes)"
+               for j in truth.joints if j.coupling is not None]
+    stages.append(StageResult(
+        "patient", seconds=time.perf_counter() - t0, verdict="INFO",
+        detail=f"anatomical right {limb}, seed {options.seed}: "
+               f"{', '.join(f'{j.name} {j.kind}' for j in truth.joints)}; coupled: "
+               f"{', '.join(coupled) or 'none'}: {patient_file}"))
+    ctx = _LimbCtx(options, size, limb, out, result, rig, truth, log)
+    run_stages(ctx, (("record", ctx.record), ("boundary", ctx.boundary), ("train", ctx.train),
+                     ("evaluate", ctx.evaluate), ("report", ctx.report)), stages, console, log)
+    result.total_s = time.perf_counter() - t_all
+    return result
+
+
+class _LimbCtx:
+    """State shared by the limb demo's stages — one method per stage."""
+
+    def __init__(self, options, size, limb, out, result, rig, truth, log) -> None:
+        self.options, self.size, self.limb, self.out = options, size, limb, out
+        self.result, self.rig, self.truth, self.log = result, rig, truth, log
+        self.progress = self.task = None
+        self.session: int | None = None
+        self.limb_file = out / f"{limb}.yaml"
+        self.model_file = out / f"{limb}.onnx"
+        self.extracted = None
+        self.calibration: dict | None = None
+        self.metrics: dict | None = None
+
+    def record(self, st: StageResult) -> None:
+        from rig.record import RecordOptions, record_session
+
+        display = _RecordingDisplay(self.progress, self.task, f"IMUs on the {self.limb}",
+                                    self.log)
+        res = record_session(RecordOptions(rig=str(self.rig), db=str(self.result.db),
+                                           patient=f"SIM-{self.limb.upper()}-"
+                                                   f"{self.options.seed:04d}",
+                                           duration_s=self.size.motion_s),
+                             display=display)
+        self.session = res.session_id
+        self.result.sessions[self.limb] = res.session_id
+        cal = res.calibration
+        if cal is not None:
+            self.calibration = cal.data.get("residuals_deg")
+        st.figures.update({"session_id": res.session_id, "status": res.status,
+                           "samples": res.samples, "dropped": res.dropped,
+                           "calibration_residual_deg": None if cal is None else cal.residual_deg})
+        st.detail = (f"session {res.session_id}: {res.samples:,} samples from 4 IMUs, "
+                     f"{res.span_s:.0f} s of patient time (×{self.size.time_scale:g}), dropped "
+                     f"{res.dropped}; " + ("limb calibration not performed" if cal is None else
+                                           f"limb calibration residual {cal.residual_deg:.2f}°"))
+        st.verdict = ("PASS" if res.status == "completed" and res.dropped == 0 and cal is not None
+                      else "WARN" if res.status == "completed" else "FAIL")
+
+    def boundary(self, st: StageResult) -> None:
+        from rig.readback import ChainRequest, run_chain
+
+        res = run_chain(ChainRequest(None, self.limb, None, self.limb_file,
+                                     db=str(self.result.db), session_id=self.session))
+        self.extracted = res.extractor.limb_
+        rep = res.extractor.report()
+        figs = compare_limbs(self.extracted, self.truth)
+        figs["inside_within_1deg"] = _inside_within(self.extracted, self.result.db, self.session)
+        st.figures.update(figs)
+        parts, ok = [], True
+        for name, f in figs["joints"].items():
+            if "hinge_error_deg" in f:
+                good = f["hinge_error_deg"] <= HINGE_DEG
+                parts.append(f"{name} hinge ends {f['hinge_error_deg']:.2f}° off")
+            elif "keyframe_mean_deg" in f:
+                good = max(f["keyframe_mean_deg"]) <= KEYFRAME_DEG
+                parts.append(f"{name} keyframes at {', '.join(f'{a:.0f}' for a in f['at_deg'])}°"
+                             f": {', '.join(f'{d:.2f}' for d in f['keyframe_mean_deg'])}° mean "
+                             "distance")
+            else:
+                good = f["mean_deg"] <= BOUNDARY_MEAN_DEG
+                parts.append(f"{name} {f['mean_deg']:.2f}° mean distance"
+                             + (f" (truth at {f['matched_at_deg']:.0f}°)"
+                                if f.get("matched_at_deg") is not None else ""))
+            ok &= good
+        inside = figs["inside_within_1deg"]
+        ok &= inside >= INSIDE_1DEG
+        found = rep["coupled"]
+        truth_coupled = any(j.coupling is not None for j in self.truth.joints)
+        st.verdict = "PASS" if ok else "WARN"
+        st.detail = (f"{self.limb_file}: {'; '.join(parts)}; {100 * inside:.1f} % of postures "
+                     f"within 1° in every joint (≥ {100 * INSIDE_1DEG:g} %); coupling "
+                     f"{'found' if found else 'not found'}"
+                     + ("" if found == truth_coupled else f" ({rep['coupling']})"))
+
+    def train(self, st: StageResult) -> None:
+        from rig.training import TrainRequest, run_train
+
+        res = run_train(TrainRequest(self.model_file, constraint=str(self.limb_file),
+                                     preset=self.size.preset, seed=self.options.seed))
+        st.figures.update({"path": str(res.path), "preset": self.size.preset,
+                           "seconds": res.seconds})
+        st.verdict = "PASS"
+        st.detail = (f"{res.path} ({res.path.stat().st_size / 1e3:.0f} kB), preset "
+                     f"{self.size.preset}" + (" (the exact oracle compiled; --quick does not "
+                                              "train)" if self.size.preset == "geometric"
+                                              else ""))
+
+    def evaluate(self, st: StageResult) -> None:
+        from models.limb import load_limb
+        from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
+
+        limb = load_limb(self.limb_file)
+        metrics, what = evaluate_limb(str(self.model_file), limb, self.size.eval_n,
+                                      self.options.seed + 77)
+        self.metrics = metrics
+        st.figures.update({k: metrics.get(k) for k in LIMB_TARGETS})
+        misses = limb_warnings(metrics)
+        st.verdict = "PASS" if not misses else "WARN"
+        st.detail = (f"{self.size.eval_n} held-out postures: end-point mean 3-D error "
+                     f"{metrics['end_mean_3d_error_pct']:.3f} % (≤ 0.5), invalid left > 1° "
+                     f"{100 * metrics['frac_invalid_left_1deg']:.2f} % (≤ 1), valid moved "
+                     f"{metrics['valid_moved_deg']:.3f}° (≤ 0.1), p99 end-point direction "
+                     f"{metrics['end_p99_direction_error_deg']:.2f}° (≤ 3)"
+                     + ("" if not misses else "; " + "; ".join(misses)))
+        del what
+
+    def report(self, st: StageResult) -> None:
+        from rig.report.limb import report_for_limb_session
+
+        path = report_for_limb_session(self.result.db, self.session, self.out / "report.html",
+                                       limb_file=self.limb_file, reference=self.truth,
+                                       evaluation=self.metrics)
+        self.result.report = path
+        st.figures["path"] = str(path)
+        st.verdict = "INFO"
+        st.detail = f"{path} ({path.stat().st_size / 1024:.0f} KiB, figures embedded)"
+
+
+def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:
+    """Share of the session's postures within ``tol_deg`` of ``limb``'s limits in every joint:
+    a hinge by its angle (its out-of-axis motion is corrected, not limited), the others by the
+    exact limb oracle's distance."""
+    import numpy as np
+
+    from calibration.joints import hinge_angles
+    from models.limb_oracle import LimbOracle
+    from rig.readback.sessions import read_chain
+
+    chain = read_chain(str(db), session)
+    d = np.degrees(LimbOracle(limb).evaluate(chain.q, normalize=True).distance)
+    for j, joint in enumerate(limb.joints):
+        if joint.kind == "hinge" and joint.constraint is not None:
+            h = joint.constraint.hinge
+            a = hinge_angles(chain.q[:, j], h.axis)
+            d[:, j] = np.maximum(h.min_deg - a, a - h.max_deg)
+    return float(np.mean((d <= tol_deg).all(axis=1)))
+
+
+def compare_limbs(extracted, truth) -> dict[str, Any]:
+    """Per joint, how far an extracted limb's limits are from the truth's (degrees).
+
+    - a hinge: ``hinge_error_deg``, the larger of the two ends' differences (against the
+      truth's loosest interval when the truth's hinge is coupled);
+    - a coupled extracted joint: ``keyframe_mean_deg``, the mean boundary distance of each
+      keyframe to the truth's limits at the same angle (``at_deg``);
+    - an uncoupled ball / two-axis joint: ``mean_deg`` against the truth's own constraint, or
+      against the truth's limits at the keyframe it matches best (``matched_at_deg``) when the
+      truth is coupled (the recording's union of angles);
+    and ``twist_error_deg`` for ball / two-axis joints.
+    """
+    from calibration.boundary import boundary_distance
+
+    out: dict[str, Any] = {"joints": {}}
+    for e, t in zip(extracted.joints, truth.joints, strict=True):
+        f: dict[str, Any] = {}
+        if e.kind == "hinge":
+            ec, tc = e.loosest(), t.loosest()
+            f["hinge_deg"] = [ec.hinge.min_deg, ec.hinge.max_deg]
+            f["hinge_error_deg"] = max(abs(ec.hinge.min_deg - tc.hinge.min_deg),
+                                       abs(ec.hinge.max_deg - tc.hinge.max_deg))
+        elif e.coupling is not None:
+            f["at_deg"] = list(e.coupling.at_deg)
+            f["keyframe_mean_deg"] = [
+                boundary_distance(kf, _truth_at(t, a))["mean_deg"]
+                for a, kf in zip(e.coupling.at_deg, e.coupling.keyframes, strict=True)]
+        else:
+            c = e.constraint
+            if t.coupling is None:
+                f["mean_deg"] = boundary_distance(c, t.constraint)["mean_deg"]
+                f["twist_error_deg"] = _twist_error(c, t.constraint)
+            else:
+                best = min(((boundary_distance(c, kf)["mean_deg"], a, kf) for a, kf in
+                            zip(t.coupling.at_deg, t.coupling.keyframes, strict=True)),
+                           key=lambda x: x[0])
+                f["mean_deg"], f["matched_at_deg"] = best[0], best[1]
+                f["twist_error_deg"] = _twist_error(c, best[2])
+        out["joints"][e.name] = f
+    return out
+
+
+def _truth_at(joint, angle_deg: float):
+    return joint.constraint if joint.coupling is None else joint.coupling.at(angle_deg)
+
+
+def _twist_error(a, b) -> float | None:
+    ta, tb = getattr(a, "twist", None), getattr(b, "twist", None)
+    if ta is None or tb is None:
+        return None
+    return float(max(abs(ta.min_deg - tb.min_deg), abs(ta.max_deg - tb.max_deg)))
+

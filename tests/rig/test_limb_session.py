@@ -1,0 +1,129 @@
+"""Whole-limb sessions (issue 21): a rig with ``limb: arm|leg`` records four IMUs through the
+limb calibration protocol into the store; every joint reads back from the session
+(``rig boundary|rom --joint``, ``rig boundary --chain``); ``rig demo --limb`` runs it end to
+end. The recordings are made once per module by the limb demo (``--quick`` size, shortened)."""
+
+from __future__ import annotations
+
+import io
+import re
+from importlib import resources
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import yaml
+
+from calibration.joints import LIMB_CHAINS
+from models.limb import load_limb
+from rig.demo import DemoOptions
+from rig.demo import limb as limb_demo
+from rig.devices.config import load_rig_config
+from rig.errors import RigConfigError
+from rig.readback.sessions import read_chain
+from rig.store import open_store
+
+
+@pytest.fixture(scope="module")
+def leg_demo(tmp_path_factory):
+    """``rig demo --limb leg --quick`` with 60 s of motion instead of 150 s."""
+    out = tmp_path_factory.mktemp("leg-demo")
+    sizes = dict(limb_demo.LIMB_SIZES)
+    limb_demo.LIMB_SIZES["quick"] = replace(sizes["quick"], motion_s=60.0, eval_n=600)
+    try:
+        from rich.console import Console
+
+        console = Console(file=io.StringIO(), width=200)
+        result = limb_demo.run_limb_demo(DemoOptions(out=out, seed=5, quick=True), "leg",
+                                         console=console)
+        text = console.file.getvalue()
+    finally:
+        limb_demo.LIMB_SIZES.update(sizes)
+    return {"out": out, "result": result, "text": text, "db": out / "rig.db",
+            "session": result.sessions["leg"]}
+
+
+def test_limb_demo_runs_every_stage(leg_demo):
+    result, text = leg_demo["result"], leg_demo["text"]
+    verdicts = {s.name: s.verdict for s in result.stages}
+    assert list(verdicts) == ["patient", "record", "boundary", "train", "evaluate", "report"]
+    assert "FAIL" not in verdicts.values() and "SKIP" not in verdicts.values(), text
+    assert verdicts["record"] == "PASS" and verdicts["evaluate"] == "PASS"
+    out = leg_demo["out"]
+    for name in ("patient-leg.yaml", "rigs/sim-leg.yaml", "leg.yaml", "leg.onnx", "report.html"):
+        assert (out / name).is_file(), name
+    # the limb file written from the session is the leg, its joints in order
+    limb = load_limb(out / "leg.yaml")
+    assert limb.joint_names == ("hip", "knee", "ankle")
+    b = result.stage("boundary").figures
+    assert set(b["joints"]) == {"hip", "knee", "ankle"}
+    assert b["joints"]["knee"]["hinge_error_deg"] < 10.0  # gross failures only at this length
+    assert 0.5 < b["inside_within_1deg"] <= 1.0
+
+
+def test_limb_session_in_the_store(leg_demo):
+    with open_store(leg_demo["db"], create=False) as store:
+        sess = store.get_session(leg_demo["session"])
+        assert sess["meta"]["limb"] == "leg" and sess["status"] == "completed"
+        listed = next(s for s in store.list_sessions() if s["id"] == leg_demo["session"])
+        assert set(listed["samples_by_sensor"]) == {"pelvis", "thigh", "shank", "foot"}
+        cal = [c for c in store.calibrations(leg_demo["session"]) if c["kind"] == "imu-limb"]
+        assert len(cal) == 1 and set(cal[0]["data"]["windows_s"]) == {"static", "hip", "knee",
+                                                                       "ankle"}
+        # the recorder's range of motion: every joint's table
+        assert set(sess["meta"]["rom"]) == {"hip", "knee", "ankle"}
+        assert sess["meta"]["rom"]["knee"]["flexion"] > 60.0
+    chain = read_chain(str(leg_demo["db"]), leg_demo["session"])
+    assert chain.limb == "leg" and chain.joints == ("hip", "knee", "ankle")
+    assert chain.q.shape[1:] == (3, 4) and len(chain.q) == len(chain.t) > 1000
+    np.testing.assert_allclose(np.linalg.norm(chain.q, axis=-1), 1.0, atol=1e-9)
+
+
+def test_every_joint_reads_back_from_the_session(leg_demo, rig_cli, tmp_path):
+    db, sid = leg_demo["db"], leg_demo["session"]
+    code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--joint", "knee",
+                              "--out", tmp_path / "knee.yaml", "--no-store"])
+    assert code == 0, err
+    assert re.search(r"hinge\s+-?[0-9.]+ \.\. [0-9.]+ deg about 0, 0, -1", out)
+    code, out, err = rig_cli(["rom", "--db", db, "--session", sid, "--joint", "ankle"])
+    assert code == 0, err
+    assert "ankle range of motion" in out and "dorsiflexion" in out
+    code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--chain", "leg",
+                              "--out", tmp_path / "leg.yaml"])
+    assert code == 0, err
+    assert "hip" in out and "knee" in out and "ankle" in out
+    assert load_limb(tmp_path / "leg.yaml").joint_names == ("hip", "knee", "ankle")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["boundary", "--joint", "elbow"], "the leg has no elbow (its joints: hip, knee, ankle)"),
+    (["boundary", "--chain", "arm"], "recorded the leg, not the arm"),
+    (["boundary", "--chain", "leg", "--segments", "a,b,c"], "--segments applies to files"),
+    (["boundary", "--chain", "leg", "--fusion", "vqf"], "--fusion vqf is not available"),
+])
+def test_wrong_requests_of_a_limb_session_are_one_line_errors(leg_demo, rig_cli, tmp_path,
+                                                              args, message):
+    code, _, err = rig_cli([*args, "--db", leg_demo["db"], "--session", leg_demo["session"],
+                            "--out", tmp_path / "x.yaml"])
+    assert code == 2 and message in err and "Traceback" not in err
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_limb_rig_configs(tmp_path):
+    for name, limb in (("sim-arm", "arm"), ("sim-leg", "leg"), ("hardware-leg-template", "leg")):
+        cfg = load_rig_config(name)
+        assert cfg.limb == limb
+        assert cfg.joint.name == LIMB_CHAINS[limb][0][0]
+        assert set(cfg.sensors.segments) == {LIMB_CHAINS[limb][0][1],
+                                             *(c for _, _, c in LIMB_CHAINS[limb])}
+    base = yaml.safe_load(resources.files("rig").joinpath("configs", "sim-leg.yaml").read_text())
+    for change, message in (
+        ({"limb": "tail"}, "limb: expected one of arm, leg, got 'tail'"),
+        ({"limb": "arm"}, "the arm rig's joint must be its proximal one"),
+        ({"sensors": {**base["sensors"], "segments": {"pelvis": 0, "thigh": 1, "shank": 2}}},
+         "missing foot"),
+    ):
+        path = tmp_path / "rig.yaml"
+        path.write_text(yaml.safe_dump({**base, **change}))
+        with pytest.raises(RigConfigError, match=re.escape(message)):
+            load_rig_config(str(path))
