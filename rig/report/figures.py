@@ -5,6 +5,14 @@ motion: a direction ``d`` at angle ``θ`` from the centre ``c`` and azimuth ``α
 basis ``(u, v)`` of ``c`` is drawn at radius ``2 sin(θ/2)`` (equal areas on the sphere stay
 equal on the page, so sample density and region sizes read honestly) and angle ``α``. Rings
 mark 30°, 60°, … from the centre. Great-circle edges are densified by slerp before drawing.
+The map is seen from outside the sphere, superior up (anterior up when it looks along the
+vertical); anatomical directions are marked where they fall (:func:`anatomical_directions` for
+the shoulder's report, :func:`joint_directions` for any joint of an arm or leg: the child's
+long axis after 90° of each pure movement, in the parent segment's rig frame, so a left limb's
+lateral lies on the other side of the map).
+
+A hinge is drawn as an interval bar (:func:`hinge_figure`), a coupling as a joint's limit
+against its hinge's angle (:func:`coupling_figure`).
 """
 
 from __future__ import annotations
@@ -22,7 +30,12 @@ __all__ = [
     "EqualAreaMap",
     "anatomical_directions",
     "boundary_figure",
+    "coupling_figure",
     "error_map_figure",
+    "hinge_figure",
+    "joint_directions",
+    "map_side_of",
+    "swing_map",
     "to_png",
 ]
 
@@ -107,8 +120,9 @@ def _grid(ax, max_deg: float) -> None:
     for deg in range(30, int(max_deg) + 1, 30):
         r = EqualAreaMap.ring_radius(deg)
         ax.add_patch(plt.Circle((0, 0), r, fill=False, lw=0.6, color="0.75", zorder=0))
-        ax.text(r * math.cos(math.radians(80)), r * math.sin(math.radians(80)), f"{deg}°",
-                fontsize=7, color="0.45")
+        if deg <= 150:  # the rings crowd towards the antipode
+            ax.text(r * math.cos(math.radians(80)), r * math.sin(math.radians(80)), f"{deg}°",
+                    fontsize=7, color="0.45")
     lim = EqualAreaMap.ring_radius(max_deg) * 1.04
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
@@ -148,11 +162,81 @@ def anatomical_directions(side: str | None) -> dict[str, np.ndarray]:
             "lateral": np.array([0.0, 0.0, lateral]), "medial": np.array([0.0, 0.0, -lateral])}
 
 
-def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float, side: str | None) -> None:
+#: The pure movements (clinical angles α, β, γ of :func:`calibration.joint_angles.from_angles`,
+#: degrees) whose directions label a joint's map, with the anatomical direction they point to.
+_JOINT_LABELS: dict[str, tuple[tuple[str, tuple[float, float, float]], ...]] = {
+    "hip": (("flexion / anterior", (90.0, 0.0, 0.0)), ("extension / posterior", (-90.0, 0, 0)),
+            ("adduction / medial", (0.0, 90.0, 0.0)), ("abduction / lateral", (0.0, -90.0, 0))),
+    "wrist": (("flexion / palmar", (90.0, 0.0, 0.0)), ("extension / dorsal", (-90.0, 0, 0)),
+              ("ulnar deviation / medial", (0.0, 90.0, 0.0)),
+              ("radial deviation / lateral", (0.0, -90.0, 0.0))),
+    # the ankle's β turns the foot about its own long axis: the toes go medially with γ
+    "ankle": (("dorsiflexion / toes up", (90.0, 0.0, 0.0)),
+              ("plantarflexion / toes down", (-90.0, 0.0, 0.0)),
+              ("toes medial / inversion", (0.0, 0.0, 90.0)),
+              ("toes lateral / eversion", (0.0, 0.0, -90.0))),
+}
+
+
+def joint_directions(joint: str, side: str | None) -> dict[str, np.ndarray]:
+    """Label → unit direction (parent segment's rig frame) of the anatomical directions a
+    joint's child segment can point to, for its map: ``"neutral"`` (every clinical angle 0)
+    and each pure movement at 90° named with where it points (``"flexion / anterior"``,
+    ``"abduction / lateral"``, …), mirrored for a left limb. The shoulder's are the thorax's
+    (:func:`anatomical_directions`) named by movement; a joint without clinical angles gets
+    :func:`anatomical_directions`."""
+    if joint == "shoulder":
+        a = anatomical_directions(side)
+        return {"neutral (at side)": a["inferior (at side)"], "overhead": a["superior"],
+                "flexion / anterior": a["anterior"], "extension / posterior": a["posterior"],
+                "abduction / lateral": a["lateral"], "adduction / medial": a["medial"]}
+    if joint not in _JOINT_LABELS:
+        return anatomical_directions(side)
+    from calibration.joint_angles import from_angles
+    from models import quaternion as Q
+
+    s = "left" if side == "left" else "right"
+    x = np.array([1.0, 0.0, 0.0])  # every rig segment's long axis, the foot's too
+    out = {"neutral": Q.rotate(from_angles(0.0, 0.0, 0.0, joint, s)[0], x)}
+    for label, angles in _JOINT_LABELS[joint]:
+        out[label] = Q.rotate(from_angles(*angles, joint, s)[0], x)
+    return out
+
+
+def swing_map(centre, side: str | None = None) -> EqualAreaMap:
+    """The map :func:`boundary_figure` draws about ``centre``: superior (−X of the parent
+    segment) up, unless the map looks along the vertical (a range about the limb hanging
+    down): then anterior (+Y) up."""
+    anat = anatomical_directions(side)
+    c = np.asarray(centre, dtype=np.float64)
+    c = c / np.linalg.norm(c)
+    up = anat["superior"] if abs(float(c @ anat["superior"])) < math.cos(math.radians(45.0)) \
+        else anat["anterior"]
+    return EqualAreaMap(c, up=up)
+
+
+def map_side_of(m: EqualAreaMap, direction) -> str:
+    """Where ``direction`` lies on the page from the map's centre: ``"up"``, ``"down"``,
+    ``"left"``, ``"right"`` (the larger page component), or ``"centre"`` / ``"opposite"``
+    within 5° of the centre or of its antipode."""
+    d = np.asarray(direction, dtype=np.float64)
+    theta = math.degrees(math.acos(max(-1.0, min(1.0, float(d @ m.centre)))))
+    if theta < 5.0:
+        return "centre"
+    if theta > 175.0:
+        return "opposite"
+    x, y = float(d @ m.u), float(d @ m.v)
+    if abs(x) >= abs(y):
+        return "right" if x > 0 else "left"
+    return "up" if y > 0 else "down"
+
+
+def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float,
+                       labels: dict[str, np.ndarray]) -> None:
     """Each anatomical direction marked where it falls on the map, or named at the map's edge
     in its direction (with an arrow) when it lies beyond the map."""
     rim = EqualAreaMap.ring_radius(max_deg)
-    for label, d in anatomical_directions(side).items():
+    for label, d in labels.items():
         theta = math.degrees(math.acos(max(-1.0, min(1.0, float(d @ m.centre)))))
         x, y = m.project(d[None, :])[0]
         if theta <= max_deg and theta < 150.0:
@@ -171,6 +255,10 @@ def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float, side: str | None) ->
                         color="#762a83", ha="center", va="center")
 
 
+#: Colours of further boundaries on a map (a coupled joint's keyframes), in order.
+OUTLINE_COLOURS = ("#222222", "#009988", "#ee7733", "#ee3377", "#0077bb")
+
+
 def boundary_figure(
     directions: np.ndarray,
     swing,
@@ -181,6 +269,10 @@ def boundary_figure(
     reference_swing=None,
     max_points: int = 20000,
     seed: int = 0,
+    labels: dict[str, np.ndarray] | None = None,
+    outlines: list[tuple[object, str]] | None = None,
+    reference_outlines: list[object] | None = None,
+    title: str | None = None,
 ) -> bytes:
     """The recorded limb directions and the extracted swing boundary on an equal-area map.
 
@@ -188,10 +280,11 @@ def boundary_figure(
     ----------
     directions : (N, 3) float
         Recorded limb directions, parent (thorax) frame, unit.
-    swing : ConeSwing or PolygonSwing
-        The extracted boundary.
+    swing : ConeSwing or PolygonSwing or None
+        The extracted boundary (None: only ``outlines``).
     centre : (3,), optional
-        Map centre; default the polygon's interior point or the cone centre.
+        Map centre; default the polygon's interior point or the cone centre (of the first
+        outline when ``swing`` is None).
     side : "right", "left" or None
         The limb's side: the map is drawn with superior up and the anatomical directions
         (superior, inferior, anterior, posterior, lateral, medial) labelled.
@@ -201,29 +294,36 @@ def boundary_figure(
         A second boundary drawn dashed (e.g. the simulated patient's true range).
     max_points : int
         Samples drawn at most (a seeded random subset beyond that).
+    labels : dict of label → (3,), optional
+        The directions to label instead of :func:`anatomical_directions` (e.g.
+        :func:`joint_directions`).
+    outlines : list of (swing, label), optional
+        Further boundaries, each in its own colour (:data:`OUTLINE_COLOURS`) and named in the
+        legend: a coupled joint's limits at its keyframes.
+    reference_outlines : list of swing, optional
+        The reference boundary matching each of ``outlines``, dashed in the same colour.
+    title : str, optional
+        Instead of the default title.
     """
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    first = swing if swing is not None else (outlines[0][0] if outlines else None)
     if centre is None:
-        centre = getattr(swing, "interior", None)
+        centre = getattr(first, "interior", None)
         if centre is None:
-            centre = getattr(swing, "centre", None)
+            centre = getattr(first, "centre", None)
         if centre is None:
             centre = d.mean(axis=0) if len(d) else np.array([1.0, 0.0, 0.0])
-    anat = anatomical_directions(side)
-    c = np.asarray(centre, dtype=np.float64) / np.linalg.norm(centre)
-    # superior up, unless the map looks along the vertical (a range about the arm at the
-    # side): then anterior up
-    up = anat["superior"] if abs(float(c @ anat["superior"])) < math.cos(math.radians(45.0)) \
-        else anat["anterior"]
-    m = EqualAreaMap(centre, up=up)
+    m = swing_map(centre, side)
     if len(d) > max_points:
         d = d[np.random.default_rng(seed).choice(len(d), max_points, replace=False)]
     outline = swing_outline(swing)
     ref = swing_outline(reference_swing)
+    extra = [(swing_outline(s), label) for s, label in (outlines or [])]
+    extra_ref = [swing_outline(s) for s in (reference_outlines or [])]
     fig, ax = plt.subplots(figsize=(5.4, 5.4))
-    extent = _extent_deg(m, d, outline, ref)
+    extent = _extent_deg(m, d, outline, ref, *(o for o, _ in extra), *extra_ref)
     _grid(ax, extent)
-    _anatomical_labels(ax, m, extent, side)
+    _anatomical_labels(ax, m, extent, anatomical_directions(side) if labels is None else labels)
     if len(d):
         p = m.project(d)
         ax.scatter(p[:, 0], p[:, 1], s=2.5, c="#4477aa", alpha=0.4, linewidths=0,
@@ -231,16 +331,169 @@ def boundary_figure(
     if ref is not None:
         p = m.project(ref)
         ax.plot(p[:, 0], p[:, 1], "--", color="0.35", lw=1.0, label="reference range")
+    for k, r in enumerate(extra_ref):
+        if r is not None:
+            p = m.project(r)
+            ax.plot(p[:, 0], p[:, 1], "--", color=OUTLINE_COLOURS[k % len(OUTLINE_COLOURS)],
+                    lw=0.9, alpha=0.8, label="reference range" if k == 0 else None)
     if outline is not None:
         p = m.project(outline)
         ax.plot(p[:, 0], p[:, 1], "-", color="#222222", lw=1.6, label="recorded boundary")
+    for k, (o, label) in enumerate(extra):
+        if o is not None:
+            p = m.project(o)
+            ax.plot(p[:, 0], p[:, 1], "-", color=OUTLINE_COLOURS[k % len(OUTLINE_COLOURS)],
+                    lw=1.5, label=label)
     for k, (a, b) in enumerate(sparse_arcs or []):
         p = m.project(densify_arc(a, b))
         ax.plot(p[:, 0], p[:, 1], "-", color="#cc3311", lw=3.2, alpha=0.85,
                 label="sparsely sampled" if k == 0 else None)
     ax.plot([0], [0], "+", color="k", ms=8)
     ax.legend(loc="lower left", fontsize=7, frameon=False)
-    ax.set_title("Swing range on an equal-area map (rings: degrees from centre)", fontsize=9)
+    ax.set_title(title or "Swing range on an equal-area map (rings: degrees from centre)",
+                 fontsize=9)
+    return to_png(fig)
+
+
+def hinge_figure(
+    angles_deg: np.ndarray,
+    interval: tuple[float, float],
+    *,
+    label: str = "hinge angle (°)",
+    norm: tuple[float, float] | None = None,
+    reference: tuple[float, float] | None = None,
+    off_axis_deg: np.ndarray | None = None,
+    title: str | None = None,
+) -> bytes:
+    """A hinge's allowed interval as a bar, with the recorded hinge angles' distribution and
+    extremes above it.
+
+    Parameters
+    ----------
+    angles_deg : (N,) float
+        Recorded hinge angles (:func:`calibration.joints.hinge_angles`), degrees.
+    interval : (min, max)
+        The allowed interval, degrees.
+    label : str
+        The angle's name (x axis).
+    norm : (min, max), optional
+        The normal range (e.g. AAOS), drawn as a thin green band under the bar.
+    reference : (min, max), optional
+        A reference interval (the simulated patient's truth), dashed.
+    off_axis_deg : (N,) float, optional
+        Out-of-axis motion (:func:`calibration.joints.off_axis_angles`): its median, 95th
+        percentile and largest value are written on the figure.
+    """
+    a = np.asarray(angles_deg, dtype=np.float64).reshape(-1)
+    lo, hi = (float(v) for v in interval)
+    spans = [lo, hi, *(norm or ()), *(reference or ())]
+    if len(a):
+        spans += [float(a.min()), float(a.max())]
+    x0, x1 = min(spans), max(spans)
+    pad = max(5.0, 0.06 * (x1 - x0))
+    fig, (ax_h, ax_b) = plt.subplots(2, 1, figsize=(6.4, 2.9), sharex=True,
+                                     gridspec_kw={"height_ratios": [2.2, 1.0], "hspace": 0.05})
+    if len(a):
+        bins = np.arange(math.floor(x0 - pad), math.ceil(x1 + pad) + 2.5, 2.5)
+        ax_h.hist(a, bins=bins, color="#4477aa", alpha=0.75, label=f"recorded ({len(a):,})")
+        for v, name in ((float(a.min()), "min"), (float(a.max()), "max")):
+            ax_h.axvline(v, color="#4477aa", lw=1.0, ls=":")
+            ax_h.annotate(f"{name} {v:.1f}°", (v, 1.0), xycoords=("data", "axes fraction"),
+                          xytext=(3 if name == "max" else -3, -10), textcoords="offset points",
+                          ha="left" if name == "max" else "right", fontsize=7, color="#4477aa")
+    ax_h.set_yticks([])
+    ax_h.set_ylabel("samples", fontsize=7)
+    for s in ("top", "right", "left"):
+        ax_h.spines[s].set_visible(False)
+    head = title or "Hinge range: allowed interval and recorded angles"
+    if off_axis_deg is not None and len(off_axis_deg):
+        o = np.asarray(off_axis_deg, dtype=np.float64)
+        head += (f"\noff-axis motion: median {np.median(o):.1f}°, 95th percentile "
+                 f"{np.percentile(o, 95):.1f}°, max {o.max():.1f}°")
+    ax_b.barh([0.0], [hi - lo], left=[lo], height=0.5, color="0.85", edgecolor="#222222",
+              lw=1.4, label=f"allowed {lo:.1f}° … {hi:.1f}°")
+    if norm is not None:
+        ax_b.barh([-0.5], [norm[1] - norm[0]], left=[norm[0]], height=0.14, color="#1b7837",
+                  alpha=0.6, label=f"normal {norm[0]:.0f}° … {norm[1]:.0f}°")
+    if reference is not None:
+        ax_b.barh([0.0], [reference[1] - reference[0]], left=[reference[0]], height=0.62,
+                  fill=False, edgecolor="0.35", ls="--", lw=1.0, label="reference range")
+    if len(a):
+        ax_b.plot([a.min(), a.max()], [0.42, 0.42], "|-", color="#4477aa", ms=9, lw=1.2,
+                  label="recorded extremes")
+    ax_b.set_ylim(-0.8, 0.8)
+    ax_b.set_yticks([])
+    for s in ("top", "right", "left"):
+        ax_b.spines[s].set_visible(False)
+    ax_b.set_xlim(x0 - pad, x1 + pad)
+    ax_b.set_xlabel(label, fontsize=8)
+    ax_b.legend(loc="upper center", bbox_to_anchor=(0.5, -0.55), ncol=4, fontsize=7,
+                frameon=False)
+    ax_h.set_title(head, fontsize=9)
+    return to_png(fig)
+
+
+def coupling_figure(
+    angle_deg: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    *,
+    keyframes_deg=(),
+    recorded: tuple[np.ndarray, np.ndarray] | None = None,
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    xlabel: str = "coupling angle (°)",
+    ylabel: str = "limit (°)",
+    title: str | None = None,
+    max_points: int = 6000,
+    seed: int = 0,
+) -> bytes:
+    """A coupled joint's limits against its hinge's angle: the allowed band between ``lower``
+    and ``upper`` (its interpolation between keyframes, clamped beyond them), the keyframes
+    marked, the recorded postures scattered.
+
+    Parameters
+    ----------
+    angle_deg : (M,) float, increasing
+        Coupling angles at which the limits were evaluated.
+    lower, upper : (M,) float
+        The dependent joint's limits there (NaN where it has none).
+    keyframes_deg : sequence of float
+        The coupling's keyframe angles (dotted verticals, limits marked).
+    recorded : ((N,), (N,)), optional
+        Recorded coupling angles and the dependent joint's angle at each.
+    reference : ((K,), (K,), (K,)), optional
+        A reference's angles, lower and upper limits, dashed.
+    """
+    x = np.asarray(angle_deg, dtype=np.float64)
+    lo = np.asarray(lower, dtype=np.float64)
+    hi = np.asarray(upper, dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    ax.fill_between(x, lo, hi, color="0.88", label="allowed", lw=0)
+    ax.plot(x, hi, "-", color="#222222", lw=1.5, label="limits")
+    ax.plot(x, lo, "-", color="#222222", lw=1.5)
+    if reference is not None:
+        rx, rlo, rhi = (np.asarray(v, dtype=np.float64) for v in reference)
+        ax.plot(rx, rhi, "--", color="0.35", lw=1.0, label="reference limits")
+        ax.plot(rx, rlo, "--", color="0.35", lw=1.0)
+    if recorded is not None and len(recorded[0]):
+        rx, ry = (np.asarray(v, dtype=np.float64).reshape(-1) for v in recorded)
+        if len(rx) > max_points:
+            keep = np.random.default_rng(seed).choice(len(rx), max_points, replace=False)
+            rx, ry = rx[keep], ry[keep]
+        ax.scatter(rx, ry, s=3, c="#4477aa", alpha=0.45, linewidths=0,
+                   label=f"recorded postures ({len(recorded[0]):,})", rasterized=True)
+    for k, a in enumerate(keyframes_deg):
+        ax.axvline(a, color="#ee7733", lw=0.9, ls=":", label="keyframes" if k == 0 else None)
+        for v in (np.interp(a, x, hi), np.interp(a, x, lo)):
+            if np.isfinite(v):
+                ax.plot([a], [v], "o", color="#ee7733", ms=5)
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(True, color="0.9", lw=0.5)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, fontsize=7,
+              frameon=False)
+    ax.set_title(title or "Coupled limits against the hinge angle", fontsize=9)
     return to_png(fig)
 
 

@@ -5,6 +5,11 @@ terms next to normative values; the recorded swing boundary on an equal-area map
 samples and the sparsely sampled arcs; calibration residuals; the trained model's accuracy with
 its error map; the live enforcement summary. No external resources: the page can be filed,
 mailed or printed as is.
+
+The page's parts — :func:`page_head` (styles, heading, facts), :func:`warnings_html`,
+:func:`rom_table_html`, :func:`kv_table`, :func:`img_tag`, :func:`verdict_html`,
+:func:`page_foot`, :func:`write_page` — are shared with a limb's report
+(:mod:`rig.report.limb`).
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ReportData", "RomRow", "render_html", "write_report"]
+__all__ = ["ReportData", "RomRow", "escape", "fmt", "img_tag", "kv_table", "page_foot", "page_head",
+           "render_html", "rom_table_html", "verdict_html", "warnings_html", "write_page",
+           "write_report"]
 
 
 @dataclass
@@ -28,6 +35,8 @@ class RomRow:
     aaos_deg: float | None = None  # None where AAOS measured it in another position
     population: str | None = None  # e.g. "152 (women, 45-49), Gill 2020"
     note: str | None = None  # why there is no AAOS comparison, e.g. "AAOS: at 90° abduction"
+    allowed_deg: float | None = None  # what the joint's limits allow (a limb's report)
+    extra: dict[str, Any] = field(default_factory=dict)  # further reference columns, by title
 
 
 @dataclass
@@ -75,11 +84,16 @@ gap:1em;align-items:flex-start}.figs img{max-width:100%;height:auto}
 """
 
 
-def _e(x: Any) -> str:
+def escape(x: Any) -> str:
+    """``x`` as HTML text."""
     return html.escape(str(x))
 
 
-def _fmt(v: Any, digits: int = 1) -> str:
+_e = escape
+
+
+def fmt(v: Any, digits: int = 1) -> str:
+    """A table cell: numbers with ``digits`` decimals, None as a dash, text escaped."""
     if v is None:
         return "–"
     if isinstance(v, bool):
@@ -87,87 +101,132 @@ def _fmt(v: Any, digits: int = 1) -> str:
     if isinstance(v, int):
         return f"{v:,}"
     if isinstance(v, float):
-        return f"{v:,.{digits}f}"
+        return "–" if v != v else f"{v:,.{digits}f}"
     return _e(v)
 
 
-def _img(png: bytes, alt: str) -> str:
+def img_tag(png: bytes, alt: str) -> str:
+    """An ``<img>`` with the PNG embedded as a data URI (no external resource)."""
     b64 = base64.b64encode(png).decode("ascii")
     return f'<img alt="{_e(alt)}" src="data:image/png;base64,{b64}">'
 
 
-def _kv_table(rows: dict[str, Any], digits: int = 2) -> str:
-    body = "".join(f"<tr><th>{_e(k)}</th><td>{_fmt(v, digits)}</td></tr>"
+def kv_table(rows: dict[str, Any], digits: int = 2) -> str:
+    """A two-column table: one row per key."""
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{fmt(v, digits)}</td></tr>"
                    for k, v in rows.items())
     return f"<table>{body}</table>"
 
 
-def _verdict(text: str | None) -> str:
+def verdict_html(text: str | None) -> str:
+    """A verdict line, green when it starts with ok / pass / within, orange otherwise."""
     if not text:
         return ""
     cls = "ok" if text.lower().startswith(("ok", "pass", "within")) else "warn"
     return f'<p class="{cls}">{_e(text)}</p>'
 
 
-def render_html(data: ReportData) -> str:
-    """The whole report as one HTML string."""
-    out: list[str] = [
-        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
-        f"<title>Range of motion report: {_e(data.patient)}, session {_e(data.session_id)}"
-        "</title>",
-        f"<style>{_CSS}</style></head><body>",
-        f"<h1>Range of motion report — {_e(data.joint)}"
-        f"{' (' + _e(data.side) + ')' if data.side else ''}</h1>",
-        "<table class='meta'>",
-        f"<tr><td>Patient (pseudonym)</td><td><b>{_e(data.patient)}</b></td></tr>",
-        f"<tr><td>Session</td><td>{_e(data.session_id)}</td></tr>",
-    ]
-    meta = (("Started", _e(data.started) if data.started else None),
-            ("Rig", _e(data.rig) if data.rig else None),
-            ("Recorded", f"{data.duration_s:.0f} s of motion" if data.duration_s else None),
-            ("Samples", _fmt(data.samples) if data.samples is not None else None),
-            ("Dropped samples", _fmt(data.dropped) if data.dropped is not None else None))
+def page_head(title: str, heading: str, meta: list[tuple[str, str | None]]) -> list[str]:
+    """The page's start: title, styles, the heading and the table of facts (label, HTML
+    value; rows whose value is None left out)."""
+    out = ["<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+           f"<title>{_e(title)}</title>",
+           f"<style>{_CSS}</style></head><body>",
+           f"<h1>{_e(heading)}</h1>",
+           "<table class='meta'>"]
     for label, value in meta:
         if value is not None:
-            out.append(f"<tr><td>{label}</td><td>{value}</td></tr>")
+            out.append(f"<tr><td>{_e(label)}</td><td>{value}</td></tr>")
     out.append("</table>")
-    if data.simulated:
+    return out
+
+
+def warnings_html(warnings, simulated: bool = False) -> list[str]:
+    """Reasons to doubt the figures, at the top of the page."""
+    out = []
+    if simulated:
         out.append("<p class='warn'>Simulated patient: these figures come from the rig's "
                    "simulator, not from a person.</p>")
-    for w in data.warnings:
+    for w in warnings:
         out.append(f"<p class='warn'>Warning: {_e(w)}.</p>")
+    return out
+
+
+def rom_table_html(rows: list[RomRow], note: str | None = None, *,
+                   measured: str = "Measured (°)", population: bool = True) -> list[str]:
+    """The range-of-motion table: movement, measured, what the limits allow (when a row has
+    it), AAOS and the measured share of it, the population reference (``population``: always;
+    otherwise when a row has one), every further reference column the rows carry
+    (:attr:`RomRow.extra`); footnotes for the AAOS values not compared."""
+    allowed = any(r.allowed_deg is not None for r in rows)
+    pop = population or any(r.population for r in rows)
+    extra: list[str] = []
+    for r in rows:
+        extra += [k for k in r.extra if k not in extra]
+    out = ["<table><tr><th>Movement</th>"
+           f"<th>{_e(measured)}</th>" + ("<th>Allowed by the limits (°)</th>" if allowed else "")
+           + "<th>AAOS normal (°)</th><th>% of AAOS</th>"
+           + ("<th>Population reference</th>" if pop else "")
+           + "".join(f"<th>{_e(k)}</th>" for k in extra) + "</tr>"]
+    notes = []
+    for r in rows:
+        pct = (100.0 * r.measured_deg / r.aaos_deg
+               if r.measured_deg is not None and r.aaos_deg else None)
+        aaos = fmt(r.aaos_deg, 0)
+        if r.note:
+            notes.append(f"{r.movement}: {r.note}")
+            aaos = f"{aaos}<sup>{len(notes)}</sup>"
+        out.append(f"<tr><td>{_e(r.movement)}</td><td>{fmt(r.measured_deg)}</td>"
+                   + (f"<td>{fmt(r.allowed_deg)}</td>" if allowed else "")
+                   + f"<td>{aaos}</td><td>{fmt(pct, 0)}</td>"
+                   + (f"<td>{_e(r.population or '–')}</td>" if pop else "")
+                   + "".join(f"<td>{fmt(r.extra.get(k))}</td>" for k in extra) + "</tr>")
+    out.append("</table>")
+    for k, n in enumerate(notes, 1):
+        out.append(f"<p class='small'><sup>{k}</sup> {_e(n)}</p>")
+    if note:
+        out.append(f"<p class='small'>{_e(note)}</p>")
+    return out
+
+
+def page_foot(software: str | None, angles: str) -> list[str]:
+    """The page's end: when and by what it was made, the angle conventions (``angles``, one
+    sentence), the research-software caveat."""
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    return [f"<p class='small'>Generated {stamp}"
+            f"{' by ' + _e(software) if software else ''}. {_e(angles)} "
+            "Research software: verify clinical decisions independently.</p>",
+            "</body></html>"]
+
+
+def render_html(data: ReportData) -> str:
+    """The whole report as one HTML string."""
+    meta = [("Patient (pseudonym)", f"<b>{_e(data.patient)}</b>"),
+            ("Session", _e(data.session_id)),
+            ("Started", _e(data.started) if data.started else None),
+            ("Rig", _e(data.rig) if data.rig else None),
+            ("Recorded", f"{data.duration_s:.0f} s of motion" if data.duration_s else None),
+            ("Samples", fmt(data.samples) if data.samples is not None else None),
+            ("Dropped samples", fmt(data.dropped) if data.dropped is not None else None)]
+    out = page_head(f"Range of motion report: {data.patient}, session {data.session_id}",
+                    f"Range of motion report — {data.joint}"
+                    f"{' (' + data.side + ')' if data.side else ''}", meta)
+    out += warnings_html(data.warnings, data.simulated)
 
     if not data.rom_rows and data.rom_note:  # no range of motion: say why
         out.append("<h2>Range of motion</h2>")
         out.append(f"<p class='warn'>No range of motion: {_e(data.rom_note)}</p>")
     if data.rom_rows:
         out.append("<h2>Range of motion</h2>")
-        out.append("<table><tr><th>Movement</th><th>Measured (°)</th><th>AAOS normal (°)</th>"
-                   "<th>% of AAOS</th><th>Population reference</th></tr>")
-        notes = []
-        for r in data.rom_rows:
-            pct = (100.0 * r.measured_deg / r.aaos_deg
-                   if r.measured_deg is not None and r.aaos_deg else None)
-            aaos = _fmt(r.aaos_deg, 0)
-            if r.note:
-                notes.append(f"{r.movement}: {r.note}")
-                aaos = f"{aaos}<sup>{len(notes)}</sup>"
-            out.append(f"<tr><td>{_e(r.movement)}</td><td>{_fmt(r.measured_deg)}</td>"
-                       f"<td>{aaos}</td><td>{_fmt(pct, 0)}</td>"
-                       f"<td>{_e(r.population or '–')}</td></tr>")
-        out.append("</table>")
-        for k, n in enumerate(notes, 1):
-            out.append(f"<p class='small'><sup>{k}</sup> {_e(n)}</p>")
-        if data.rom_note:
-            out.append(f"<p class='small'>{_e(data.rom_note)}</p>")
+        out += rom_table_html(data.rom_rows, data.rom_note)
 
     if data.boundary_png is not None or data.boundary_facts:
         out.append("<h2>Recorded boundary</h2><div class='figs'>")
         if data.boundary_png is not None:
-            out.append(_img(data.boundary_png, "recorded swing boundary and samples"))
+            out.append(img_tag(data.boundary_png, "recorded swing boundary and samples"))
         out.append("<div>")
         if data.boundary_facts:
-            out.append(_kv_table(data.boundary_facts, 1))
+            out.append(kv_table(data.boundary_facts, 1))
         if data.sparse_arcs_deg or data.sparse_arcs_text:
             arcs = "; ".join([f"{a:.0f}°–{b:.0f}°" for a, b in data.sparse_arcs_deg]
                              + list(data.sparse_arcs_text))
@@ -183,38 +242,40 @@ def render_html(data: ReportData) -> str:
         out.append("<h2>Calibration</h2><table><tr><th>Step</th><th>Residual (°)</th></tr>")
         for c in data.calibrations:
             out.append(f"<tr><td>{_e(c.get('kind', '?'))}</td>"
-                       f"<td>{_fmt(c.get('residual_deg'), 2)}</td></tr>")
+                       f"<td>{fmt(c.get('residual_deg'), 2)}</td></tr>")
         out.append("</table>")
 
     if data.model_metrics or data.error_map_png is not None:
         out.append("<h2>Learned constraint model</h2>")
-        out.append(_verdict(data.model_verdict))
+        out.append(verdict_html(data.model_verdict))
         out.append("<div class='figs'>")
         if data.error_map_png is not None:
-            out.append(_img(data.error_map_png, "model error map"))
+            out.append(img_tag(data.error_map_png, "model error map"))
         if data.model_metrics:
-            out.append(_kv_table(data.model_metrics, 3))
+            out.append(kv_table(data.model_metrics, 3))
         out.append("</div>")
 
     if data.enforcement:
         out.append("<h2>Live enforcement</h2>")
-        out.append(_verdict(data.enforcement_verdict))
-        out.append(_kv_table(data.enforcement, 2))
+        out.append(verdict_html(data.enforcement_verdict))
+        out.append(kv_table(data.enforcement, 2))
 
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    out.append(f"<p class='small'>Generated {stamp}"
-               f"{' by ' + _e(data.software) if data.software else ''}. Angles follow the ISB "
-               "recommendation (Wu et al. 2005) for the humerus relative to the thorax. "
-               "Research software: verify clinical decisions independently.</p>")
-    out.append("</body></html>")
+    out += page_foot(data.software, "Angles follow the ISB recommendation (Wu et al. 2005) "
+                     "for the humerus relative to the thorax.")
     return "\n".join(out)
 
 
-def write_report(data: ReportData, path: str | Path) -> Path:
-    """Write the report atomically and owner-only (it names the patient,
+def write_page(text: str, path: str | Path) -> Path:
+    """Write an HTML page atomically and owner-only (a report names the patient,
     :func:`models.fileio.write_owner_only`); returns the path."""
     from models.fileio import write_owner_only
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_owner_only(path, render_html(data))
+    return write_owner_only(path, text)
+
+
+def write_report(data: ReportData, path: str | Path) -> Path:
+    """Write the report atomically and owner-only (it names the patient,
+    :func:`write_page`); returns the path."""
+    return write_page(render_html(data), path)
