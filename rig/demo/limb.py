@@ -259,11 +259,11 @@ class _LimbCtx:
         del what
 
     def report(self, st: StageResult) -> None:
-        from rig.report.limb import report_for_limb_session
+        from rig.report import ReportRequest, run_report
 
-        path = report_for_limb_session(self.result.db, self.session, self.out / "report.html",
-                                       limb_file=self.limb_file, reference=self.truth,
-                                       evaluation=self.metrics)
+        path = run_report(ReportRequest(self.result.db, self.session, self.out / "report.html",
+                                        model=self.model_file, reference=self.truth,
+                                        eval_n=self.size.eval_n)).path
         self.result.report = path
         st.figures["path"] = str(path)
         st.verdict = "INFO"

@@ -42,7 +42,8 @@ from rig.errors import RigConfigError
 from rig.report.page import ReportData, RomRow, write_report
 
 __all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
-           "report_data_for_session", "report_for_session", "run_report"]
+           "report_data_for_session", "report_for_limb_session", "report_for_session",
+           "run_report"]
 
 #: Targets of the learned model (issue 9), metric → (limit, label, unit).
 MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
@@ -367,6 +368,50 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     return write_report(data, out_path)
 
 
+def report_for_limb_session(store, session_id: int, out_path, *, model=None, age=None,
+                            sex=None, reference=None, eval_n: int = 4000,
+                            fusion: str = "auto") -> Path:
+    """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
+
+    The joints' orientations come from :func:`rig.readback.sessions.
+    chain_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
+    the limb file it was made for; it is scored on ``eval_n`` held-out postures of it), else
+    extracted from the session as ``rig boundary --chain`` does. ``reference``: a
+    :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
+    from calibration.boundary import ChainExtractor
+    from rig.readback.sessions import chain_orientations_from_store
+    from rig.report.limb import limb_report_data, write_limb_report
+
+    chain = chain_orientations_from_store(store, session_id, fusion=fusion)
+    evaluation = None
+    if model is not None:
+        from models.limb_model import load_limb_model
+        from rig.training.limb import evaluate_limb
+
+        limb = load_limb_model(str(model)).limb
+        if limb.joint_names != chain.joints:
+            raise RigConfigError(f"--model {model}: a model of the joints "
+                                 f"{', '.join(limb.joint_names)}, the session recorded "
+                                 f"{', '.join(chain.joints)}")
+        evaluation, _ = evaluate_limb(str(model), limb, eval_n, 12345)
+    else:
+        limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
+            chain.q, t=chain.t, status=chain.status, side=chain.side).limb_
+    cal = next((c for c in reversed(store.calibrations(session_id)) if c["kind"] == "imu-limb"),
+               None)
+    sess = store.get_session(session_id)
+    data = limb_report_data(
+        limb, {j: chain.q[:, k] for k, j in enumerate(chain.joints)},
+        side=chain.side or "right", patient=chain.patient,
+        session_label=f"session {session_id} ({sess.get('rig_name')}, started "
+                      f"{sess.get('started_at')}, {len(chain.t):,} postures)",
+        warnings=chain.recording.warnings(), reference=reference,
+        calibration=None if cal is None else cal["data"].get("residuals_deg"),
+        evaluation=evaluation, age=age, sex=sex)
+    data.simulated = bool(chain.recording.simulated)
+    return write_limb_report(data, out_path)
+
+
 @dataclass(frozen=True)
 class ReportRequest:
     """What ``rig report`` is asked: the store and session, the HTML file to write, a model to
@@ -406,16 +451,26 @@ class ReportResult:
 def run_report(request: ReportRequest) -> ReportResult:
     """Check the request and the session (``no session N`` before any work), then write the
     report."""
+    from rig.readback.sessions import session_limb
     from rig.store import open_store
 
     request.check()
     ref = request.reference
-    if isinstance(ref, (str, Path)):
-        from models.constraint import load_constraint
-
-        ref = load_constraint(ref)
     with open_store(request.db, create=False) as store:
-        store.get_session(request.session_id)
+        sess = store.get_session(request.session_id)
+        if session_limb(sess) is not None:
+            if isinstance(ref, (str, Path)):
+                from models.limb import load_limb
+
+                ref = load_limb(ref)
+            return ReportResult(report_for_limb_session(
+                store, request.session_id, Path(request.out), model=request.model,
+                age=request.age, sex=request.sex, reference=ref, eval_n=request.eval_n,
+                fusion=request.fusion))
+        if isinstance(ref, (str, Path)):
+            from models.constraint import load_constraint
+
+            ref = load_constraint(ref)
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=ref, eval_n=request.eval_n, fusion=request.fusion))

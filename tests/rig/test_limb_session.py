@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import io
 import re
-from importlib import resources
 from dataclasses import replace
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -22,6 +22,7 @@ from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
 from rig.readback.sessions import read_chain
 from rig.store import open_store
+from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 
 @pytest.fixture(scope="module")
@@ -127,3 +128,16 @@ def test_limb_rig_configs(tmp_path):
         path.write_text(yaml.safe_dump({**base, **change}))
         with pytest.raises(RigConfigError, match=re.escape(message)):
             load_rig_config(str(path))
+
+
+def test_the_limb_demo_report_renders_in_headless_chromium(leg_demo, tmp_path):
+    page = leg_demo["out"] / "report.html"
+    html = page.read_text()
+    # every joint's section, the coupling section (or the line saying there is none), the
+    # calibration residuals and the limb model's scores against issue 20's targets
+    for text in ("hip", "knee", "ankle", "calibration", "end-point"):
+        assert text in html, text
+    img = screenshot(page, tmp_path, height=6600)
+    assert dark_fraction(img) > 0.002  # text, tables, outlines
+    assert pixels_near(img, "#4477aa", 0.12) > 200  # recorded postures and hinge angles
+    assert pixels_near(img, "#762a83", 0.06) > 30  # the maps' anatomical labels

@@ -23,8 +23,9 @@ from tests.rig.browser import dark_fraction, pixels_near, screenshot
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """A 6 s servo-limb recording (patient time ×10: the static calibration window is 0.4 s
-    of host time, so a pause of the loaded host does not empty it), its boundary (``rig boundary``), a model
-    (``rig train``) and a 1 s enforcement run (``rig enforce``), in one temp store."""
+    of host time, so a pause of the loaded host does not empty it), its boundary
+    (``rig boundary``), a model (``rig train``) and a 1 s enforcement run (``rig enforce``), in
+    one temp store."""
     tmp = tmp_path_factory.mktemp("report")
     truth = patient_constraint()
     dump_constraint(truth, tmp / "patient.yaml")
