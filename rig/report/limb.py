@@ -17,7 +17,7 @@ Sections, per joint in the limb's order:
   objects carry. A coupled swing joint's allowed range is read at its widest keyframe (the
   largest swing region), a coupled hinge's at the hull of its intervals; the coupling plot
   shows how the limits change. The shoulder's rows are the shoulder report's
-  (:func:`rig.report.session.rom_rows`: the region's and the recording's reading, the smaller
+  (:func:`rig.report.page.rom_rows`: the region's and the recording's reading, the smaller
   of the two), beside the region's own reading;
 - **ball and two-axis joints**: the recorded directions of the child segment's long axis and
   the limits' swing boundary (each keyframe's, for a coupled joint) on the shoulder report's
@@ -324,7 +324,7 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits, at: str | None,
     where = f" at {at}" if at else ""
     if name == "shoulder":
         from calibration.clinical import range_of_motion
-        from rig.report.session import rom_rows
+        from rig.report.page import rom_rows
 
         rows = rom_rows(limits, side, age=None if age is None else int(age), sex=sex,
                         directions=Q.limb_direction(q, limits.limb_axis))

@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["ReportData", "RomRow", "escape", "fmt", "img_tag", "kv_table", "page_foot", "page_head",
-           "render_html", "rom_table_html", "verdict_html", "warnings_html", "write_page",
-           "write_report"]
+           "render_html", "rom_rows", "rom_table_html", "verdict_html", "warnings_html",
+           "write_page", "write_report"]
 
 
 @dataclass
@@ -279,3 +279,39 @@ def write_report(data: ReportData, path: str | Path) -> Path:
     """Write the report atomically and owner-only (it names the patient,
     :func:`write_page`); returns the path."""
     return write_page(render_html(data), path)
+
+
+#: The shoulder's movements as the report names them.
+_ROM_LABELS = {
+    "flexion": "Flexion", "extension": "Extension", "abduction": "Abduction",
+    "adduction": "Adduction", "horizontal_adduction": "Horizontal adduction",
+    "internal_rotation": "Internal rotation (arm at side)",
+    "external_rotation": "External rotation (arm at side)",
+}
+
+
+def rom_rows(constraint, side: str, *, age: int | None = None,
+             sex: str | None = None, directions=None) -> list[RomRow]:
+    """The range-of-motion table of a boundary and, when given, the recorded limb directions
+    (:func:`calibration.clinical.range_of_motion`). AAOS values measured in another position
+    (the rotations: at 90° abduction) are not compared; the population reference is the age
+    band and sex when known, women and men apart otherwise."""
+    from calibration.clinical import (
+        AAOS_NOT_COMPARABLE,
+        NORMATIVE,
+        population_reference,
+        range_of_motion,
+    )
+
+    rom = range_of_motion(constraint, side, directions=directions)
+    rows = []
+    for m in rom.MOVEMENTS:
+        pop = population_reference(m, age=age, sex=sex)
+        other = AAOS_NOT_COMPARABLE.get(m)
+        rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m),
+                           None if other else NORMATIVE["aaos"].get(m),
+                           None if pop is None else f"{pop}, Gill 2020",
+                           None if other is None else
+                           f"not compared with AAOS ({NORMATIVE['aaos'][m]:.0f}°): {other}; "
+                           "measured here with the arm at the side"))
+    return rows

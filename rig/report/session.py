@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from rig.errors import RigConfigError
-from rig.report.page import ReportData, RomRow, write_report
+from rig.report.page import ReportData, rom_rows, write_report
 
 __all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
            "report_data_for_session", "report_for_limb_session", "report_for_session",
@@ -53,12 +53,6 @@ MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
     "p99_angular_error_deg": (5.0, "p99 direction error", "°"),
 }
 
-_ROM_LABELS = {
-    "flexion": "Flexion", "extension": "Extension", "abduction": "Abduction",
-    "adduction": "Adduction", "horizontal_adduction": "Horizontal adduction",
-    "internal_rotation": "Internal rotation (arm at side)",
-    "external_rotation": "External rotation (arm at side)",
-}
 
 
 def model_verdict(metrics: dict[str, float]) -> tuple[bool, str]:
@@ -83,33 +77,6 @@ def _iso(t: float | None) -> str | None:
     if t is None:
         return None
     return _dt.datetime.fromtimestamp(float(t), _dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-
-
-def rom_rows(constraint, side: str, *, age: int | None = None,
-             sex: str | None = None, directions=None) -> list[RomRow]:
-    """The range-of-motion table of a boundary and, when given, the recorded limb directions
-    (:func:`calibration.clinical.range_of_motion`). AAOS values measured in another position
-    (the rotations: at 90° abduction) are not compared; the population reference is the age
-    band and sex when known, women and men apart otherwise."""
-    from calibration.clinical import (
-        AAOS_NOT_COMPARABLE,
-        NORMATIVE,
-        population_reference,
-        range_of_motion,
-    )
-
-    rom = range_of_motion(constraint, side, directions=directions)
-    rows = []
-    for m in rom.MOVEMENTS:
-        pop = population_reference(m, age=age, sex=sex)
-        other = AAOS_NOT_COMPARABLE.get(m)
-        rows.append(RomRow(_ROM_LABELS[m], getattr(rom, m),
-                           None if other else NORMATIVE["aaos"].get(m),
-                           None if pop is None else f"{pop}, Gill 2020",
-                           None if other is None else
-                           f"not compared with AAOS ({NORMATIVE['aaos'][m]:.0f}°): {other}; "
-                           "measured here with the arm at the side"))
-    return rows
 
 
 def _arc_text(arc: dict, side: str) -> str:
