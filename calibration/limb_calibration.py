@@ -45,20 +45,28 @@ its kinematic constraint by Laidig, Schauer & Seel 2017, *Proc. IEEE ICORR*, 971
 2. **Heading offsets from the movements**: while joint ``j`` flexes, every segment distal to
    it moves with its child as one rigid body (the other joints rest at zero), so the sensors
    on them turn by one rotation ``G(t)``, seen in world_k as ``H_k G H_k⁻¹``: the rotation
-   vectors of ``q_k(t) ⊗ q̄_k⁻¹`` (``q̄_k`` the static mean) of two such sensors differ by
+   vectors of ``q_k(t) ⊗ q̄_k⁻¹`` (``q̄_k`` the sensor's mean over that movement, not over the
+   static pose: a sensor whose heading drifted since the static pose would add the drift to
+   every rotation and bias the offset by half of it) of two such sensors differ by
    their heading offset, found in closed form (2-D Procrustes of the horizontal components,
    pooled over every movement both sensors share). The flexion axes are horizontal in the
    neutral pose, so this is well determined; the offset between the root and the first
    segment is not (the root never moves with another segment): as for the shoulder, it is
    absorbed in the root's mount (``ψ_0 = ψ_1``), exact while the root stays upright.
 3. **Flexion axis of each joint**: with the heading-corrected sensors, the child's rotation
-   relative to the parent from the neutral pose, ``Δ(t) = R̄₀⁻¹ ⊗ R(t)``, ``R = q_p⁻¹ ⊗ q_c``,
-   is a rotation about the joint's medio-lateral axis in child-sensor coordinates; its
-   principal axis (:func:`~calibration.alignment.functional_axis`, first large excursion
-   positive: flexion first, by protocol) gives the child's ±Z, the sign from the protocol's
-   own script (the knee's flexion is about −Z). The off-axis RMS is the ``functional``
-   residual, the peak-to-peak angle the ``range`` (not an error). Carried through the mean
-   static relative orientation ``R̄₀`` it gives the parent's ±Z too.
+   relative to the parent, ``R = q_p⁻¹ ⊗ q_c``, about its mean over the movement,
+   ``Δ(t) = R̄⁻¹ ⊗ R(t)``, is a rotation about the joint's medio-lateral axis in child-sensor
+   coordinates; its principal axis (:func:`~calibration.alignment.functional_axis`) gives the
+   child's ±Z, signed so that the first large excursion from the static pose (``R̄₀⁻¹ ⊗ R``,
+   ``R̄₀`` the static mean) is positive — flexion first, by protocol — and then by the
+   protocol's own script (the knee's flexion is about −Z). About the movement's own mean, not
+   the static pose: a change of the two sensors' relative heading since the static pose
+   (drift) is a constant factor on the parent's side, which drops out of ``R̄⁻¹ ⊗ R`` but
+   tilts an axis fitted to ``R̄₀⁻¹ ⊗ R`` (test
+   ``test_heading_drift_after_the_static_pose_leaves_the_mounts_exact``: up to 2° of axis
+   and 5° of joint error for 4° of drift). The off-axis RMS is the ``functional`` residual,
+   the peak-to-peak angle the ``range`` (not an error). Carried through ``R̄`` it gives the
+   parent's ±Z too.
 4. **Combine**: the root's Z comes from its child's movement (as the shoulder's thorax); a
    middle segment's from two movements (as the child of its proximal joint and as the parent
    of its distal one), averaged with weights ``Σ s²`` (the squared flexion angles of each
@@ -93,12 +101,12 @@ median / max, degrees, arm and leg alike (either side):
 joint                  protocol's movements        60 s random motion
 =====================  ==========================  ==========================
 shoulder / hip         0.48 / 1.38                 0.69 / 2.01
-elbow / knee           0.13 / 0.19                 0.15 / 0.38
-wrist / ankle          0.06 / 0.36                 0.10 / 0.56
+elbow / knee           0.13 / 0.23                 0.16 / 0.40
+wrist / ankle          0.06 / 0.33                 0.09 / 0.48
 =====================  ==========================  ==========================
 
 Adding the sensors' own noise, every joint is at 1.1-1.3° median, 3.1-4.1° max (the noise of
-two sensors). The non-root mounts are recovered within 0.53°; ``residual_deg_`` is 1.24-1.33°
+two sensors). The non-root mounts are recovered within 0.44°; ``residual_deg_`` is 1.24-1.33°
 (the noise). Without noise and sway the calibration is exact (< 1e-6°). The root joint's larger
 error is the absorbed heading offset (step 2): a root leaning by ``s`` from its static pose
 turns the first joint by about ``2 sin(δ/2) |s|``, ``δ`` the offset between the root's and
@@ -327,15 +335,18 @@ class LimbImuCalibration:
             sums = np.zeros(2)
             for j in range(k):  # joint j moves segments j+1 ... together
                 f = fn[self.joints_[j]]
-                rv_a = rotation_vectors(Q.multiply(f[:, k], Q.conjugate(qbar[k])))
-                rv_b = rotation_vectors(Q.multiply(f[:, k + 1], Q.conjugate(qbar[k + 1])))
+                # about each sensor's mean over the movement, not its static mean: a sensor
+                # whose heading drifted since the static pose then still turns by H G H⁻¹
+                rv_a = rotation_vectors(Q.multiply(f[:, k], Q.conjugate(mean_rotation(f[:, k]))))
+                rv_b = rotation_vectors(Q.multiply(f[:, k + 1],
+                                                   Q.conjugate(mean_rotation(f[:, k + 1]))))
                 sums += _heading_sums(rv_a, rv_b)
             psi_mov[k + 1] = psi_mov[k] + math.atan2(sums[0], sums[1])
         h_mov = _rz(psi_mov)
 
         # 3. each joint's flexion axis in its child sensor's coordinates
         axes, weights, res_joint = [], [], {j: {} for j in self.joints_}
-        r0s = []
+        r_movs = []
         for j, joint in enumerate(self.joints_):
             hp, hc = h_mov[j], h_mov[j + 1]
             rel_st = Q.multiply(Q.conjugate(Q.multiply(hp, st[:, j])),
@@ -350,7 +361,14 @@ class LimbImuCalibration:
                     f"{joint} movement: the joint must flex/extend by at least "
                     f"{self.min_flexion_deg:g} deg (got {peak:.1f} deg)"
                 )
-            a, fres, frange = functional_axis(delta, min_angle_deg=self.min_flexion_deg)
+            # step 3: the axis from the movement's own relative rotations (about their mean),
+            # signed by the excursion from the static pose (flexion first)
+            r_mov = mean_rotation(rel)
+            own = Q.multiply(Q.conjugate(r_mov), rel)
+            a, fres, frange = functional_axis(own, min_angle_deg=0.0)
+            s0 = rotation_vectors(delta) @ a
+            first = s0[np.flatnonzero(np.abs(s0) >= 0.5 * np.abs(s0).max())[0]]
+            a = a if first >= 0 else -a
             child = self.segments_[j + 1]
             if abs(float(a @ g_s[j + 1])) > math.cos(math.radians(_MIN_AXIS_GRAVITY_DEG)):
                 raise CalibrationError(
@@ -361,13 +379,13 @@ class LimbImuCalibration:
             s = rotation_vectors(delta) @ a
             axes.append(a * signs[j])  # the child's +Z, child-sensor coordinates
             weights.append(float(s @ s))
-            r0s.append(r0)
+            r_movs.append(r_mov)
             res_joint[joint]["functional"] = fres
             res_joint[joint]["range"] = frange
 
         # 4. +Z of each segment: own (as a child) and carried (as a parent)
         own = [None, *axes]
-        carried = [Q.rotate(r0s[j], axes[j]) for j in range(len(self.joints_))] + [None]
+        carried = [Q.rotate(r_movs[j], axes[j]) for j in range(len(self.joints_))] + [None]
         conflict = [float(own[k] @ carried[k]) < 0 for k in range(1, n_seg - 1)]
         flip = set()
         if all(conflict):
