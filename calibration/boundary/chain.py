@@ -41,6 +41,23 @@ a coupling** when
    differs with the angle without being a limit that depends on it; limits interpolated from
    such keyframes would leave recorded postures outside, and are not written.
 
+   Where two keyframes share a stretch of boundary but differ in length elsewhere, the
+   interpolation, which pairs boundary points by normalised arc length (:mod:`models.limb`),
+   slides along that stretch and cuts its corners: postures both keyframes hold then lie
+   outside the limits between them. That is the file format's interpolation, not evidence
+   against the coupling (on simulated range-of-motion tests with a true coupling,
+   ``rig.sim.patients.chain_patient``, it left 1-5 % of the postures out, up to 6°, and
+   refused most couplings), so the test is made in two steps. First the evidence: at least
+   ``min_held`` of the postures lie within 1° of the limits or of both keyframes that bracket
+   their hinge angle (of the end keyframe beyond it) — a dance's postures lie outside the
+   neighbouring keyframe, not only outside the interpolation (the CMU dances: 97.0-98.6 %).
+   Then, while the limits leave more than ``1 − min_held`` of the postures more than 1° out,
+   a keyframe is added half-way between the two that leave most out — when the recording
+   supports one there (test 1), the two are at least twice ``keyframe_band_deg`` apart and
+   the file then holds more — and the samples are shared out among the keyframes again (up
+   to twice ``max_keyframes``; listed with ``added``); the limits so written must hold
+   ``min_held`` as stated above.
+
 Unsupported keyframes are left out (the limits between supported ones are interpolated, and
 clamped beyond the end ones, :mod:`models.limb`). Without support the proximal joint's limits
 are extracted from all of its samples, uncoupled, and the report says which test failed.
@@ -83,7 +100,7 @@ class ChainExtractor:
     limb_ : models.limb.Limb
     coupled_ : bool
     keyframes_ : list of dict, every candidate keyframe: ``at_deg``, ``samples``, ``coverage``,
-        ``supported``
+        ``supported`` (and ``added``: placed where the interpolation left postures out)
     inside_ : dict, joint → share of the recorded postures valid in that joint (hinges: their
         angle inside the interval); ``limb``: valid in every joint
     reports_ : dict, joint → its extractor's report
@@ -168,16 +185,7 @@ class ChainExtractor:
         h = constraints[hinge.name].hinge
         theta = hinge_angles(q[:, 1], hinge.hinge_axis)
         at = self._keyframe_angles(h.min_deg, h.max_deg)
-        self.keyframes_: list[dict] = []
-        for a in at:
-            sel = np.abs(theta - a) <= self.keyframe_band_deg
-            info: dict[str, Any] = {"at_deg": round(float(a), 3), "samples": int(sel.sum()),
-                                    "coverage": None, "supported": False}
-            if sel.sum() >= self.min_keyframe_samples:
-                share = _sector_share(Q.rotate(q[sel, 0], np.asarray(prox.limb_axis)))
-                info["coverage"] = round(float(share), 3)
-                info["supported"] = bool(share >= self.min_keyframe_coverage)
-            self.keyframes_.append(info)
+        self.keyframes_: list[dict] = [self._support(a, theta, q[:, 0], prox) for a in at]
         ts = None if t is None else np.asarray(t)
         st = None if status is None else np.asarray(status)
         self.limb_ = None
@@ -206,15 +214,26 @@ class ChainExtractor:
                 note = f"keyframes could not be interpolated ({err})"
                 continue
             dist = LimbOracle(limb).evaluate(q, normalize=True).distance[:, 0]
-            held = float(np.mean(dist <= np.radians(1.0)))
+            held = float(np.mean((dist <= np.radians(1.0))
+                                 | _held_by_keyframes(q[:, 0], theta, kept)))
             if held < self.min_held:
-                note = (f"the coupled limits would hold {100 * held:.1f} % of the recorded "
-                        f"postures within 1 deg (< {100 * self.min_held:g} %): the recording "
-                        "shows where the "
+                note = (f"the coupled limits and their keyframes would hold {100 * held:.1f} % "
+                        f"of the recorded postures within 1 deg (< {100 * self.min_held:g} %): "
+                        "the recording shows where the "
                         f"{prox.name} went at each {hinge.name} angle, not a limit that depends "
                         "on it")
                 break
+            kept, limb, held, added = self._refine(chain, specs, constraints, q, ts, st,
+                                                   theta, supported, kept, limb, budget, side,
+                                                   provenance)
+            if held < self.min_held:
+                note = (f"the coupled limits would hold {100 * held:.1f} % of the recorded "
+                        f"postures within 1 deg (< {100 * self.min_held:g} %) with "
+                        f"{len(kept)} keyframes: the interpolation between them, or keyframes "
+                        "extracted from too few samples, cut the recorded range")
+                break
             self.limb_ = limb
+            self.keyframes_ = sorted([*self.keyframes_, *added], key=lambda x: x["at_deg"])
             note = (f"{len(kept)} keyframes, boundaries differing by up to {diff:.1f} deg"
                     + ("" if budget == self.max_vertices else f", {budget} vertices each"))
             break
@@ -232,6 +251,62 @@ class ChainExtractor:
         self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
         self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
         return self
+
+    def _support(self, a: float, theta: np.ndarray, q0: np.ndarray, prox) -> dict[str, Any]:
+        """A candidate keyframe at hinge angle ``a``: its samples within the band, their
+        coverage all round, and whether that supports it (module doc, test 1)."""
+        sel = np.abs(theta - a) <= self.keyframe_band_deg
+        info: dict[str, Any] = {"at_deg": round(float(a), 3), "samples": int(sel.sum()),
+                                "coverage": None, "supported": False}
+        if sel.sum() >= self.min_keyframe_samples:
+            share = _sector_share(Q.rotate(q0[sel], np.asarray(prox.limb_axis)))
+            info["coverage"] = round(float(share), 3)
+            info["supported"] = bool(share >= self.min_keyframe_coverage)
+        return info
+
+    def _refine(self, chain, specs, constraints, q, ts, st, theta, supported, kept, limb,
+                budget, side, provenance):
+        """Keyframes added half-way between two whose interpolation leaves recorded postures
+        more than 1° out (module doc), while fewer than ``min_held`` are held and the
+        recording supports one there; each addition kept only if the file then holds more."""
+        from models.limb_oracle import LimbOracle
+
+        prox = specs[0]
+        tol = np.radians(1.0)
+
+        def holds(lb) -> tuple[np.ndarray, float]:
+            out = LimbOracle(lb).evaluate(q, normalize=True).distance[:, 0] > tol
+            return out, float(np.mean(~out))
+
+        out, held = holds(limb)
+        added: list[dict] = []
+        while held < self.min_held and len(kept) < 2 * self.max_keyframes:
+            a = np.array([angle for angle, _ in kept])
+            between = (theta > a[0]) & (theta < a[-1]) & out
+            k = np.searchsorted(a, theta[between], side="right") - 1
+            counts = np.bincount(k, minlength=len(a) - 1)
+            i = int(np.argmax(counts))  # the interval leaving most out
+            if counts[i] == 0 or a[i + 1] - a[i] < 2 * self.keyframe_band_deg:
+                break
+            info = self._support(0.5 * (a[i] + a[i + 1]), theta, q[:, 0], prox)
+            if not info["supported"]:
+                break
+            trial = sorted([*supported, info], key=lambda x: x["at_deg"])
+            new = self._keyframes(prox, q, ts, st, trial,
+                                  _cells(theta, [float(x["at_deg"]) for x in trial]), budget)
+            if len(new) != len(trial):
+                break
+            try:
+                new_limb = self._limb(chain, specs, constraints, new, side, provenance)
+            except ConstraintError:
+                break
+            new_out, new_held = holds(new_limb)
+            if new_held <= held:
+                break
+            info["added"] = True
+            added.append(info)
+            supported, kept, limb, out, held = trial, new, new_limb, new_out, new_held
+        return kept, limb, held, added
 
     def _keyframes(self, prox, q, ts, st, supported, cells, budget) -> list:
         """(angle, constraint) of each supported keyframe whose samples (``cells``) extract."""
@@ -289,6 +364,26 @@ def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> flo
     az = np.arctan2(d @ e2, d @ e1)
     k = np.floor((az + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
     return float(np.mean(np.bincount(k, minlength=sectors) >= min_samples))
+
+
+def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list) -> np.ndarray:
+    """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within 1° of both keyframes
+    that bracket their hinge angle ``theta`` (beyond the end keyframes: of the end one).
+
+    Such a posture may still lie outside the limits interpolated between the two keyframes:
+    the interpolation pairs boundary points by normalised arc length (:mod:`models.limb`), so
+    where two keyframes share a stretch of boundary but differ in length elsewhere, the
+    interpolated boundary slides along that stretch and cuts its corners. That is the file
+    format's interpolation, not evidence against the coupling (module doc, test 3)."""
+    from models.oracle import ConstraintOracle
+
+    a = np.array([angle for angle, _ in kept])
+    near = np.stack([ConstraintOracle(c).signed_distance(q, normalize=True) <= np.radians(1.0)
+                     for _, c in kept], axis=1)
+    k = np.clip(np.searchsorted(a, theta, side="right") - 1, 0, len(a) - 2)
+    rows = np.arange(len(q))
+    both = near[rows, k] & near[rows, k + 1]
+    return np.where(theta < a[0], near[:, 0], np.where(theta > a[-1], near[:, -1], both))
 
 
 def _cells(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:

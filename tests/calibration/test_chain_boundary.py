@@ -51,3 +51,33 @@ def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
                         "--out", str(tmp_path / "x.yaml"), *args], capsys)
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and needle in lines[0], err
+
+
+def test_a_simulated_range_of_motion_test_is_coupled():
+    """A simulated arm whose shoulder's extension depends on the elbow's angle (the biceps'
+    long head, ``rig.sim.patients.anatomical_limb``), pressed into every limit at every elbow
+    angle: the coupling is written, each keyframe within 3° of the true limits at its angle.
+    Between two keyframes that share a stretch of boundary, the interpolation cuts its corners
+    (boundary points paired by arc length, models.limb): postures both keyframes hold are not
+    counted against the coupling (counted, 98.8 % were held: refused), and a keyframe is added
+    where the interpolation left most out, so the file holds 99 % within 1°."""
+    import numpy as np
+
+    from calibration.boundary import ChainExtractor, boundary_distance
+    from models.limb_oracle import LimbOracle
+    from rig.sim.limb import NoiseModel
+    from rig.sim.patients import anatomical_limb, chain_patient
+
+    chain = chain_patient(1, "arm", noise=NoiseModel.ideal())
+    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
+    q = chain.joints(t)
+    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    assert ex.coupled_, ex.coupling_note_
+    truth = anatomical_limb(1, "arm").joints[0].coupling
+    got = ex.limb_.joints[0].coupling
+    for a, c in zip(got.at_deg, got.keyframes, strict=True):
+        assert boundary_distance(c, truth.at(a))["mean_deg"] < 3.0, a
+    assert any(k.get("added") for k in ex.keyframes_)
+    dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
+    assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
+    assert ex.inside_["elbow"] == ex.inside_["wrist"] == 1.0
