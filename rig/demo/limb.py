@@ -41,6 +41,7 @@ from rig.demo.pipeline import (
     StageResult,
     _RecordingDisplay,
     _shipped_config,
+    report_stage,
     run_stages,
 )
 
@@ -244,7 +245,7 @@ class _LimbCtx:
         from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
 
         limb = load_limb(self.limb_file)
-        metrics, what = evaluate_limb(str(self.model_file), limb, self.size.eval_n,
+        metrics, _ = evaluate_limb(str(self.model_file), limb, self.size.eval_n,
                                       self.options.seed + 77)
         self.metrics = metrics
         st.figures.update({k: metrics.get(k) for k in LIMB_TARGETS})
@@ -256,18 +257,10 @@ class _LimbCtx:
                      f"{metrics['valid_moved_deg']:.3f}° (≤ 0.1), p99 end-point direction "
                      f"{metrics['end_p99_direction_error_deg']:.2f}° (≤ 3)"
                      + ("" if not misses else "; " + "; ".join(misses)))
-        del what
 
     def report(self, st: StageResult) -> None:
-        from rig.report import ReportRequest, run_report
-
-        path = run_report(ReportRequest(self.result.db, self.session, self.out / "report.html",
-                                        model=self.model_file, reference=self.truth,
-                                        eval_n=self.size.eval_n)).path
-        self.result.report = path
-        st.figures["path"] = str(path)
-        st.verdict = "INFO"
-        st.detail = f"{path} ({path.stat().st_size / 1024:.0f} KiB, figures embedded)"
+        report_stage(st, self.result, self.session, self.model_file, self.truth,
+                     self.size.eval_n)
 
 
 def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:

@@ -613,12 +613,19 @@ class _Ctx:
 
     # -- report ------------------------------------------------------------------------------
     def report(self, st: StageResult) -> None:
-        from rig.report import ReportRequest, run_report
+        report_stage(st, self.result, self.servo_session, self.model_file, self.truth,
+                     self.size.report_eval_n)
 
-        path = run_report(ReportRequest(self.db, self.servo_session, self.out / "report.html",
-                                        model=self.model_file, reference=self.truth,
-                                        eval_n=self.size.report_eval_n)).path
-        self.result.report = path
-        st.figures["path"] = str(path)
-        st.verdict = "INFO"
-        st.detail = f"{path} ({path.stat().st_size / 1024:.0f} KiB, figures embedded)"
+
+def report_stage(st: StageResult, result: DemoResult, session: int, model: Path, truth,
+                 eval_n: int) -> None:
+    """The demos' report stage: ``rig report`` of ``session`` into ``<out>/report.html``, the
+    ``model`` scored on ``eval_n`` held-out inputs, ``truth`` drawn dashed."""
+    from rig.report import ReportRequest, run_report
+
+    path = run_report(ReportRequest(result.db, session, result.out / "report.html",
+                                    model=model, reference=truth, eval_n=eval_n)).path
+    result.report = path
+    st.figures["path"] = str(path)
+    st.verdict = "INFO"
+    st.detail = f"{path} ({path.stat().st_size / 1024:.0f} KiB, figures embedded)"

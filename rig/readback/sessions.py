@@ -96,19 +96,14 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
                              f"{', '.join(missing)} sensor(s)")
     per = [store.samples(session_id, name=by_segment[s], raw=False) for s in segs]
     key = "device_t" if all(np.isfinite(p["device_t"]).all() for p in per) else "t"
-    common = per[0][key]
-    for p in per[1:]:
-        common = np.intersect1d(common, p[key])
+    from rig.store.io import shared_instants
+
+    common, idx = shared_instants([p[key] for p in per])
     if not len(common):
         raise RigConfigError(f"session {session_id}: the {limb}'s sensors have no sample time in "
                              "common")
-    q = np.empty((len(common), len(segs), 4))
-    status = np.full(len(common), 255, dtype=np.int64)
-    for k, p in enumerate(per):
-        uniq, first = np.unique(p[key], return_index=True)
-        idx = first[np.searchsorted(uniq, common)]
-        q[:, k] = p["q"][idx]
-        status = np.minimum(status, p["status"][idx])
+    q = np.stack([p["q"][i] for p, i in zip(per, idx, strict=True)], axis=1)
+    status = np.min(np.stack([p["status"][i] for p, i in zip(per, idx, strict=True)]), axis=0)
     del per
     joints = model.transform(q)
     side = sess.get("side")

@@ -556,19 +556,13 @@ def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, 
     """The sensors ``names`` (proximal to distal) at the instants all of them have a sample
     (M, S, 4), and whether every sensor's status is trustworthy there (M,)."""
     from calibration.alignment import status_ok
+    from rig.store.io import shared_instants
 
     clock = b.time()
-    common = None
-    for n in names:
-        c = clock[b.name == n]
-        common = c if common is None else np.intersect1d(common, c)
-    q = np.empty((len(common), len(names), 4))
-    st = np.empty((len(common), len(names)), dtype=np.int64)
-    for k, n in enumerate(names):
-        sel = b.name == n
-        _, first = np.unique(clock[sel], return_index=True)  # one sample per instant
-        idx = first[np.searchsorted(np.unique(clock[sel]), common)]
-        q[:, k], st[:, k] = b.q[sel][idx], b.status[sel][idx]
+    sel = [b.name == n for n in names]
+    common, idx = shared_instants([clock[m] for m in sel])
+    q = np.stack([b.q[m][i] for m, i in zip(sel, idx, strict=True)], axis=1)
+    st = np.stack([b.status[m][i] for m, i in zip(sel, idx, strict=True)], axis=1)
     return q, status_ok(st) if len(common) else np.zeros(0, bool)
 
 

@@ -46,7 +46,7 @@ import contextlib
 import math
 import os
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -576,6 +576,21 @@ def read_orientations(path: str | os.PathLike) -> OrientationTable:
 
 # ---------------------------------------------------------------------------------------------
 # sessions
+
+
+def shared_instants(times: Sequence[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The instants every series has a sample at (sorted, (M,)) and, per series, the index of
+    its first sample at each of them (exact matches: frames of one device share a timestamp;
+    :func:`align_series` pairs series of different clocks by nearest time)."""
+    common = np.asarray(times[0], dtype=np.float64)
+    for t in times[1:]:
+        common = np.intersect1d(common, t)
+    common = np.unique(common)
+    idx = []
+    for t in times:
+        uniq, first = np.unique(t, return_index=True)
+        idx.append(first[np.searchsorted(uniq, common)])
+    return common, idx
 
 
 def align_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]]
