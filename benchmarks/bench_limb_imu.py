@@ -101,6 +101,7 @@ from calibration import (
     status_ok,
 )
 from calibration.boundary import ChainExtractor
+from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import constraint_rom, recorded_rom
 from calibration.joints import JOINTS
 from models import quaternion as Q
@@ -215,7 +216,7 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> di
         if tj.name == "shoulder":
             mine = range_of_motion(loosest(gj), side, directions=Q.rotate(q[:, j], X)).to_dict()
         else:
-            mine = recorded_rom(q[:, j], tj.name, side).peaks
+            mine = recorded_rom(q[:, j], tj.name, side, status=status).peaks
         row["rec"], row["rec_m"] = _peak_error(mine, truth.rec_peaks[j])
         row["con"], row["con_m"] = _peak_error(mine, truth.con_peaks[j])
         joints.append(row)
@@ -224,11 +225,25 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> di
             "coupled": ex.coupled_, "note": ex.coupling_note_, "t_ext": t_ext}
 
 
+def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray) -> np.ndarray:
+    """The recording's sensors with their heading drift removed at the neutral checkpoints
+    (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the static window's
+    centre, as the read path does); unchanged without checkpoints."""
+    if not len(windows):
+        return rec.quaternions
+    a, b = rec.windows["static"]
+    hc = LimbHeadingCorrection(cal).fit(rec.t, rec.quaternions, windows,
+                                        status=rec.status.min(axis=1), anchors=[0.5 * (a + b)])
+    return hc.apply(rec.t, rec.quaternions)
+
+
 def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
-             paths: list[str]) -> dict:
+             paths: list[str], neutral: float = 20.0) -> dict:
     """One patient: record, then every path."""
     t0 = time.perf_counter()
-    rec = record_chain_imu(chain_patient(seed, limb, side), duration, rate)
+    chain = chain_patient(seed, limb, side, neutral=neutral)
+    rec = record_chain_imu(chain, duration, rate)
+    windows = np.asarray(chain.neutral_windows(float(rec.t[-1])), dtype=np.float64).reshape(-1, 2)
     t_rec = time.perf_counter() - t0
     free = rec.window("free")
     truth = Truth(seed, limb, side, rec.joints[free])
@@ -242,7 +257,8 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
             else:
                 src = fused(rec) if path == "vqf" else rec
                 cal = calibrate(src, limb, side)
-                r = analyse(truth, cal.transform(src.quaternions[free]), rec.t[free],
+                q = heading_corrected(src, cal, windows)
+                r = analyse(truth, cal.transform(q[free]), rec.t[free],
                             rec.status[free].min(axis=1), limb)
                 r["residual"] = cal.residual_deg_
         except CalibrationError as err:  # a failure is a figure too
@@ -356,6 +372,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=300.0, help="free motion, s")
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate, Hz")
     ap.add_argument("--paths", default="imu,truth", help="imu, truth, vqf (comma-separated)")
+    ap.add_argument("--neutral", type=float, default=20.0,
+                    help="neutral checkpoints every this many seconds (0: none, no heading "
+                         "correction)")
     ap.add_argument("--quick", action="store_true", help="the first seed, 120 s, right only")
     a = ap.parse_args()
     seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
@@ -372,7 +391,7 @@ def main() -> None:
     t0 = time.perf_counter()
     patients = []
     for seed, limb, side in runs:
-        p = evaluate(seed, limb, side, a.duration, a.rate, paths)
+        p = evaluate(seed, limb, side, a.duration, a.rate, paths, a.neutral)
         patients.append(p)
         for path in paths:
             show(p, path)

@@ -74,8 +74,10 @@ import numpy as np
 from calibration.errors import CalibrationError
 from models import quaternion as Q
 
-__all__ = ["HeadingCorrection"]
+__all__ = ["HeadingCorrection", "LimbHeadingCorrection"]
 
+
+_Z = np.array([0.0, 0.0, 1.0])
 
 #: Spacing (s) of the grid the drift estimate is evaluated on before interpolating to samples.
 GRID_S = 0.25
@@ -359,4 +361,114 @@ class HeadingCorrection:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "times_"):
+            raise CalibrationError("heading correction: call fit() first")
+
+
+class LimbHeadingCorrection:
+    """The heading drift of a whole limb's sensors, removed at neutral checkpoints.
+
+    Each of the four IMUs (:mod:`calibration.limb_calibration`: one per segment) fuses its own
+    heading, which drifts: sensor ``k``'s world turns about the vertical by ``d_k(t)``,
+    ``q_k = Rz(d_k) ⊗ q_k⁰``. A joint sees only its two sensors' difference, and for a distal
+    joint that difference is a rotation about the vertical *in the world*, which in the parent
+    segment's frame is a different axis at every pose (the upper arm raised, the forearm's
+    drift turns about the upper arm's +Y, not its +X): :class:`HeadingCorrection`'s joint-level
+    ``R_X(−ψ) ⊗ q`` holds for a joint whose parent stays upright (the shoulder, the hip) only.
+    So the drift is removed where it happens, at each sensor, relative to the root's:
+    ``δ_k = d_k − d_0``, and ``Rz(−δ_k(t)) ⊗ q_k`` turns sensor ``k`` back into the root's
+    drifting world; the root's own drift cancels in every joint.
+
+    The measurement: with every joint at its neutral ``N_j`` (a checkpoint), each segment is the
+    root's times the neutral chain ``C_k`` (``σ_k = σ_0 ⊗ C_k``, ``σ`` the calibration's
+    :meth:`~calibration.limb_calibration.LimbImuCalibration.segment_orientations`), so
+    ``σ_k ⊗ C_k⁻¹ ⊗ σ_0⁻¹ = Rz(δ_k)`` up to the patient's repeatability. For each ``k ≥ 1``
+    that product is given to a :class:`HeadingCorrection` about +Z (the worlds' vertical):
+    the same windows, acceptance tests (its swing test reads how far the segment's vertical is
+    from the root's neutral chain: the patient not at neutral), outlier rejection, anchors (the
+    calibration's static window: ψ = 0 there by construction) and drift estimator.
+
+    Parameters
+    ----------
+    calibration : calibration.limb_calibration.LimbImuCalibration
+        Fitted.
+    **kwargs
+        :class:`HeadingCorrection`'s (``max_swing_deg``, ``max_jump_deg``, ``min_samples``,
+        ``min_system``, ``drift``), the same for every sensor.
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    sensors_ : dict
+        ``{segment: HeadingCorrection}`` for the segments after the root.
+    """
+
+    def __init__(self, calibration, **kwargs) -> None:
+        calibration._check_fitted()
+        self.calibration = calibration
+        self.kwargs = kwargs
+        HeadingCorrection(**kwargs)  # its argument checks, now
+
+    def fit(self, t, sensors, windows, *, status=None, anchors=()) -> LimbHeadingCorrection:
+        """Estimate each sensor's heading relative to the root's at the checkpoint windows.
+
+        Parameters
+        ----------
+        t : (N,) array_like
+            Sample times (the windows' clock).
+        sensors : (N, 4, 4) array_like
+            The four sensors' orientations (sensor relative to its world), proximal to distal.
+        windows : (K, 2) array_like
+            Neutral checkpoint windows.
+        status : (N,) array_like of int, optional
+            The lowest of the four sensors' calibration bytes per sample.
+        anchors : sequence of float
+            Times at which every ``δ_k`` is 0 (the calibration's static window centre).
+        """
+        cal = self.calibration
+        seg = cal.segment_orientations(sensors)
+        chain = cal.neutral_chain()
+        self.sensors_ = {}
+        for k in range(1, seg.shape[1]):
+            # parent-relative: Rz(δ_k − δ_{k−1}) at neutral
+            rel = Q.multiply(Q.multiply(seg[:, k], Q.conjugate(chain[k])),
+                             Q.multiply(chain[k - 1], Q.conjugate(seg[:, k - 1])))
+            self.sensors_[cal.segments_[k]] = HeadingCorrection((0.0, 0.0, 1.0), **self.kwargs).fit(
+                t, rel, windows, status=status, anchors=anchors)
+        return self
+
+    def psi_deg(self, t) -> np.ndarray:
+        """δ_k(t) (N, 4) degrees, the root's column 0."""
+        self._check_fitted()
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        rel = [np.zeros(len(t)), *(hc.psi_deg(t) for hc in self.sensors_.values())]
+        return np.cumsum(np.stack(rel, axis=1), axis=1)
+
+    def apply(self, t, sensors) -> np.ndarray:
+        """The sensors (N, 4, 4) with each one's drift relative to the root's removed:
+        ``Rz(−δ_k(t)) ⊗ q_k`` (the root's unchanged)."""
+        self._check_fitted()
+        q = np.array(sensors, dtype=np.float64)
+        psi = np.radians(self.psi_deg(t))
+        for k in range(1, q.shape[1]):
+            q[:, k] = Q.multiply(Q.from_axis_angle(_Z, -psi[:, k]), q[:, k])
+        return q
+
+    @property
+    def accepted_count_(self) -> int:
+        """Checkpoints accepted for every sensor (the fewest over the sensors)."""
+        self._check_fitted()
+        return min(hc.accepted_count_ for hc in self.sensors_.values())
+
+    def uncertainty_deg(self, t0: float, t1: float) -> float | None:
+        """The largest of the sensors' :meth:`HeadingCorrection.uncertainty_deg`."""
+        self._check_fitted()
+        u = [hc.uncertainty_deg(t0, t1) for hc in self.sensors_.values()]
+        return None if any(x is None for x in u) else max(u)
+
+    def to_dict(self) -> dict:
+        """JSON-able summary: each sensor's :meth:`HeadingCorrection.to_dict`."""
+        self._check_fitted()
+        return {seg: hc.to_dict() for seg, hc in self.sensors_.items()}
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "sensors_"):
             raise CalibrationError("heading correction: call fit() first")

@@ -538,16 +538,28 @@ def _in_band(ang: dict[str, np.ndarray], band_deg: float) -> dict[str, np.ndarra
 
 
 def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
-                 band_deg: float = 5.0) -> JointRangeOfMotion:
+                 band_deg: float = 5.0, status=None) -> JointRangeOfMotion:
     """The range of motion of recorded joint orientations ``q`` (N, 4) (rig frames): each
     movement's farthest angle after a running median over ``window`` samples (an isolated
     spike is not a peak), among the samples at which a goniometer reads it (:func:`_in_band`,
     as :func:`constraint_rom`; a hinge's other angles are out-of-axis motion, not positions,
-    and restrict nothing). A movement with no sample in its band is None."""
+    and restrict nothing). A movement with no sample in its band is None.
+
+    ``status`` (N,) — the IMUs' calibration bytes per sample (the lowest of the sensors'),
+    when the orientations come from IMUs: samples the sensors flag
+    (:func:`calibration.alignment.status_ok`: a magnetic disturbance drops the system level)
+    are left out, as the boundary extraction leaves them out — a peak is the farthest value,
+    so one disturbed stretch would otherwise be the peak. All are used when none passes."""
     from scipy.ndimage import median_filter
 
     from calibration.joints import JOINTS
 
+    if status is not None:
+        from calibration.alignment import status_ok
+
+        ok = status_ok(np.asarray(status).reshape(-1))
+        if ok.any() and len(ok) == len(q):
+            q = np.asarray(q)[ok]
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])
     ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}

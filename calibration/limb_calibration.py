@@ -446,6 +446,12 @@ class LimbImuCalibration:
             out.append(Q.multiply(out[-1], q))
         return np.stack(out)
 
+    def neutral_chain(self) -> np.ndarray:
+        """(4, 4): each segment relative to the root in the neutral pose (the protocol's
+        neutral joints, composed proximal to distal)."""
+        self._check_fitted()
+        return self._chain(self.neutral_)
+
     # -- transform ----------------------------------------------------------------------------
 
     def segment_orientations(self, sensors) -> np.ndarray:

@@ -20,7 +20,8 @@ import click
 
 @click.command("record")
 @click.option("--rig", "rig_name", required=True, metavar="NAME|FILE",
-              help="Rig configuration: a shipped name (sim-imu, sim-shoulder) or a YAML file.")
+              help="Rig configuration: a shipped name (sim-imu, sim-shoulder, sim-arm, "
+                   "sim-leg) or a YAML file.")
 @click.option("--db", required=True, metavar="DB",
               help="Session store: a SQLite path, sqlite:///... or postgresql://...")
 @click.option("--patient", required=True, metavar="PSEUDONYM",
@@ -41,10 +42,11 @@ import click
               help="Print machine-readable JSON lines (session id, commits) on stdout.")
 def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom, display,
            events):
-    """Calibrate, then record a patient's shoulder moving to its limits.
+    """Calibrate, then record a patient's shoulder (or whole arm or leg, on a rig with
+    `limb:`) moving to its limits.
 
-    Shows the coverage of the boundary per direction while recording; stop with Ctrl-C once it
-    says COVERAGE SUFFICIENT (or give --duration).
+    Shows the coverage of the (proximal joint's) boundary per direction while recording; stop
+    with Ctrl-C once it says COVERAGE SUFFICIENT (or give --duration).
     """
     from rig.record import RecordOptions, make_display, parse_annotation, record_session
 

@@ -145,8 +145,8 @@ def run_rom(request: RomRequest) -> RomResult:
     from calibration.joint_angles import JOINT_ANGLES, recorded_rom
 
     if data.joint in JOINT_ANGLES:
-        return RomResult(recorded_rom(data.q, data.joint, side), data.joint, source,
-                         data.facts())
+        return RomResult(recorded_rom(data.q, data.joint, side, status=data.status), data.joint,
+                         source, data.facts())
     constraint = extract(data, side=side).constraint_
     return RomResult(range_of_motion(constraint, side, directions=data.directions), data.joint,
                      source, data.facts())

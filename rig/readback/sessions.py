@@ -42,12 +42,13 @@ def read_session(db: str, session_id: int, axis: np.ndarray | None = None,
                                              joint=joint)
 
 
-def read_chain(db: str, session_id: int, fusion: str = "auto") -> ChainData:
+def read_chain(db: str, session_id: int, fusion: str = "auto", *,
+               heading: bool = True) -> ChainData:
     """:func:`chain_orientations_from_store` on the store at ``db`` (never created)."""
     from rig.store import open_store
 
     with open_store(db, create=False) as store:
-        return chain_orientations_from_store(store, session_id, fusion=fusion)
+        return chain_orientations_from_store(store, session_id, fusion=fusion, heading=heading)
 
 
 def session_limb(sess: dict) -> str | None:
@@ -56,15 +57,20 @@ def session_limb(sess: dict) -> str | None:
     return limb if limb in ("arm", "leg") else None
 
 
-def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto") -> ChainData:
+def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto",
+                                  heading: bool = True) -> ChainData:
     """Every joint of a whole-limb session (one IMU per segment, ``limb`` in the rig
     configuration): the four sensors' orientations at the instants all of them have a sample
     (paired by the device timestamp where there is one), through the session's ``imu-limb``
     calibration (:class:`calibration.limb_calibration.LimbImuCalibration`).
 
     Orientations are the devices' (``fusion`` ``auto`` or ``device``; host fusion of a limb's
-    raw samples is not implemented: ``vqf`` is a one-line error), and no heading-drift
-    correction is applied (the facts say so).
+    raw samples is not implemented: ``vqf`` is a one-line error). With ``heading`` (default)
+    and ``neutral-checkpoint`` calibrations in the session, each sensor's heading drift
+    relative to its proximal neighbour is removed
+    (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the calibration's static
+    window; provenance ``heading_correction``); with none accepted the facts say the drift
+    was neither removed nor measured.
     """
     from calibration.limb_calibration import LimbImuCalibration
 
@@ -78,8 +84,8 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     if fusion == "vqf":
         raise RigConfigError(f"session {session_id}: --fusion vqf is not available for whole-limb "
                              "sessions yet (the devices' orientations are used)")
-    cal = next((c for c in reversed(store.calibrations(session_id)) if c["kind"] == "imu-limb"),
-               None)
+    cals = store.calibrations(session_id)
+    cal = next((c for c in reversed(cals) if c["kind"] == "imu-limb"), None)
     if cal is None:
         raise RigConfigError(
             f"session {session_id} has no imu-limb calibration (it was recorded without the "
@@ -105,14 +111,21 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     q = np.stack([p["q"][i] for p, i in zip(per, idx, strict=True)], axis=1)
     status = np.min(np.stack([p["status"][i] for p, i in zip(per, idx, strict=True)]), axis=0)
     del per
-    joints = model.transform(q)
-    side = sess.get("side")
+    common = np.asarray(common, dtype=np.float64)
     prov = {"session": int(session_id), "started_at": sess.get("started_at"),
             "source": "imu samples", "limb": limb, "calibration_id": int(cal["id"]),
             "calibration_residual_deg": cal.get("residual_deg"),
             "fusion": {"method": "device"}}
-    facts = replace(_session_facts(store, sess, sensors), unmeasured_drift=True)
-    return ChainData(joints, np.asarray(common, dtype=np.float64), limb, tuple(model.joints_),
+    checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
+    if heading and checkpoints:
+        q, prov["heading_correction"] = _limb_heading_correction(
+            model, q, common, key, status, checkpoints, cal["data"], session_id)
+    joints = model.transform(q)
+    side = sess.get("side")
+    facts = _session_facts(store, sess, sensors)
+    if not (prov.get("heading_correction") or {}).get("accepted"):
+        facts = replace(facts, unmeasured_drift=True)
+    return ChainData(joints, common, limb, tuple(model.joints_),
                      side if side in ("left", "right") else None, status, prov,
                      sess.get("pseudonym"), facts)
 
@@ -171,7 +184,8 @@ def joint_orientations_from_store(store, session_id: int,
     sess = store.get_session(session_id)
     limb = session_limb(sess)
     if limb is not None:
-        chain = chain_orientations_from_store(store, session_id, fusion=fusion)
+        chain = chain_orientations_from_store(store, session_id, fusion=fusion,
+                                              heading=heading)
         return chain.joint(chain.joints[0] if joint is None else joint, axis)
     if joint is not None and joint != (sess.get("joint") or "shoulder"):
         raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
@@ -362,16 +376,13 @@ def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal
                                          qpar[sel["functional"]], qchi[sel["functional"]])
 
 
-def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, checkpoints,
-                        cal_data: dict, session_id: int):
-    """Fit and apply :class:`~calibration.heading.HeadingCorrection` on a session's joint
-    orientations; the windows are taken in the clock they were stored in (``time``: the
-    samples' ``device_t`` or host ``t``), checkpoints in a clock the pairing did not keep are
-    rejected. The axis is +X whatever ``--limb-axis`` says: the IMU calibration's segment
-    frames have +X along gravity in the neutral pose, the thorax vertical the drift turns
-    about. Returns the corrected orientations and the provenance entry."""
-    from calibration.heading import HeadingCorrection
-
+def _checkpoint_windows(times: dict[str, np.ndarray], checkpoints, cal_data: dict
+                        ) -> tuple[np.ndarray, list[dict], list[float]]:
+    """A session's neutral checkpoint windows in the pairing clock (the first of ``times``;
+    each stored in the clock named by its ``time``: ``device_t`` or host ``t``, converted through
+    the samples when it is another one), the unusable ones with their reason, and the anchor:
+    the centre of the calibration's static window (ψ = 0 there by construction) when its
+    protocol origin is in the pairing clock."""
     base = next(iter(times))
     t = times[base]
     windows, unusable = [], []
@@ -394,17 +405,56 @@ def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, che
     static = (cal_data.get("windows_s") or {}).get("static")
     if origin.get("time") == base and static is not None:
         anchors.append(float(origin["t0"]) + 0.5 * (float(static[0]) + float(static[1])))
+    return np.asarray(windows, dtype=np.float64).reshape(-1, 2), unusable, anchors
+
+
+def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, checkpoints,
+                        cal_data: dict, session_id: int):
+    """Fit and apply :class:`~calibration.heading.HeadingCorrection` on a session's joint
+    orientations (windows and anchor: :func:`_checkpoint_windows`). The axis is +X whatever
+    ``--limb-axis`` says: the IMU calibration's segment frames have +X along gravity in the
+    neutral pose, the thorax vertical the drift turns about. Returns the corrected
+    orientations and the provenance entry."""
+    from calibration.heading import HeadingCorrection
+
+    t = times[next(iter(times))]
+    windows, unusable, anchors = _checkpoint_windows(times, checkpoints, cal_data)
     hc = HeadingCorrection((1.0, 0.0, 0.0))
     with _about(session_id, "neutral checkpoints"):
-        hc.fit(t, q, np.asarray(windows, dtype=np.float64).reshape(-1, 2), status=status,
-               anchors=anchors)
+        hc.fit(t, q, windows, status=status, anchors=anchors)
     rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
     uncertainty = hc.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
     prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
-            "rejected": rejected, "anchored": bool(anchors), "clock": base,
+            "rejected": rejected, "anchored": bool(anchors), "clock": next(iter(times)),
             "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_],
             "drift_model": dict(hc.drift_model_),
             "uncertainty_deg": None if uncertainty is None else round(uncertainty, 3)}
+    return hc.apply(t, q), prov
+
+
+def _limb_heading_correction(model, q: np.ndarray, t: np.ndarray, key: str, status,
+                             checkpoints, cal_data: dict, session_id: int):
+    """Fit and apply :class:`~calibration.heading.LimbHeadingCorrection` on a limb session's
+    four sensors (N, 4, 4) at times ``t`` (clock ``key``); the corrected sensors and the
+    provenance entry (per segment after the root: accepted checkpoints, rejected ones with
+    their reason, ψ per window, the drift model, the uncertainty left)."""
+    from calibration.heading import LimbHeadingCorrection
+
+    windows, unusable, anchors = _checkpoint_windows({key: t}, checkpoints, cal_data)
+    hc = LimbHeadingCorrection(model)
+    with _about(session_id, "neutral checkpoints"):
+        hc.fit(t, q, windows, status=status, anchors=anchors)
+    per = {}
+    for seg, c in hc.sensors_.items():
+        u = c.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
+        per[seg] = {"accepted": c.accepted_count_,
+                    "rejected": [{"window": [a, b], "reason": r} for (a, b), r in c.rejected_],
+                    "psi_deg": [round(float(x), 2) for x in c.psi_window_deg_],
+                    "drift_model": dict(c.drift_model_),
+                    "uncertainty_deg": None if u is None else round(u, 3)}
+    prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
+            "rejected": unusable, "anchored": bool(anchors), "clock": key,
+            "relative_to": "each sensor's proximal neighbour", "segments": per}
     return hc.apply(t, q), prov
 
 

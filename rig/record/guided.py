@@ -304,6 +304,14 @@ class Checkpoint:
     residual_deg: float | None
 
 
+#: The neutral pose a checkpoint asks for, by the rig's ``limb`` (None: the shoulder rigs).
+_NEUTRAL_WORDS = {
+    None: "arm hanging at the side, forearm forward",
+    "arm": "arm hanging at the side, palm facing the thigh, fingers down",
+    "leg": "standing straight, foot flat and pointing forward",
+}
+
+
 class NeutralCheckpoints:
     """Marks neutral-pose checkpoints during the free recording of an IMU rig.
 
@@ -341,6 +349,8 @@ class NeutralCheckpoints:
         self.hold_s = float(hold_s)
         self.lead_s = float(lead_s)
         self.count = 0
+        self._pose = _NEUTRAL_WORDS.get(getattr(getattr(rig, "config", None), "limb", None),
+                                        _NEUTRAL_WORDS[None])
         self._limb = None
         if rig.simulated:
             pats = rig.patients
@@ -375,7 +385,7 @@ class NeutralCheckpoints:
             every = float(self._limb.neutral_every_s)
             self.display.message(
                 f"neutral checkpoints: the simulated patient returns to the neutral pose every "
-                f"{every:g} s (arm hanging at the side, forearm forward) and holds it "
+                f"{every:g} s ({self._pose}) and holds it "
                 f"{float(getattr(self._limb, 'neutral_hold_s', 2.0)):g} s")
             return
         try:
@@ -385,7 +395,7 @@ class NeutralCheckpoints:
             return
         self.display.message(
             "neutral checkpoints: between movements bring the patient back to the neutral pose "
-            f"(arm hanging at the side, forearm forward) and press Enter; hold still "
+            f"({self._pose}) and press Enter; hold still "
             f"{self.hold_s:g} s")
         self._reader = threading.Thread(target=self._read_enter, name="rig-record-neutral",
                                         daemon=True)
@@ -462,7 +472,7 @@ class NeutralCheckpoints:
                 continue
             self._prompt = "return to neutral"
             self.display.message(f"neutral checkpoint {self.count + 1}: return to the neutral "
-                                 "pose (arm hanging at the side, forearm forward) and hold still")
+                                 f"pose ({self._pose}) and hold still")
         while self._next < self._announced and now >= sched[self._next, 0]:
             t0, t1 = sched[self._next]
             self._open.append([float(t0 + offset), float(t1 + offset)])

@@ -330,7 +330,7 @@ def _limb_range_of_motion(store, result: RecordResult, config) -> None:
         roms, tables = {}, []
         for k, j in enumerate(chain.joints):
             if j in JOINT_ANGLES:
-                r = recorded_rom(chain.q[:, k], j, side)
+                r = recorded_rom(chain.q[:, k], j, side, status=chain.status)
                 roms[j], table = r.to_json(), r.table()
             else:  # the shoulder: peaks of its boundary, as for a shoulder session
                 data = chain.joint(j)

@@ -367,11 +367,22 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     cal = next((c for c in reversed(store.calibrations(session_id)) if c["kind"] == "imu-limb"),
                None)
     sess = store.get_session(session_id)
+    # the postures the sensors vouch for (as the extraction and the peaks use them)
+    ok = np.ones(len(chain.t), bool)
+    if chain.status is not None:
+        from calibration.alignment import status_ok
+
+        ok = status_ok(chain.status)
+        if not ok.any():
+            ok[:] = True
+    used = (f"{len(chain.t):,} postures" if ok.all() else
+            f"{int(ok.sum()):,} of {len(chain.t):,} postures: those the sensors flagged "
+            "(magnetic disturbance, uncalibrated) left out")
     data = limb_report_data(
-        limb, {j: chain.q[:, k] for k, j in enumerate(chain.joints)},
+        limb, {j: chain.q[ok, k] for k, j in enumerate(chain.joints)},
         side=chain.side or "right", patient=chain.patient,
         session_label=f"session {session_id} ({sess.get('rig_name')}, started "
-                      f"{sess.get('started_at')}, {len(chain.t):,} postures)",
+                      f"{sess.get('started_at')}, {used})",
         warnings=chain.recording.warnings(), reference=reference,
         calibration=None if cal is None else cal["data"].get("residuals_deg"),
         evaluation=evaluation, age=age, sex=sex)

@@ -219,3 +219,20 @@ def test_population_mistakes_are_named():
         population_reference("shoulder", "flexion")
     with pytest.raises(ValueError, match="sex must be"):
         JointRangeOfMotion("knee", "right", {}).table(sex="x")
+
+
+def test_recorded_rom_leaves_out_the_samples_the_sensors_flag():
+    """A stretch recorded during a magnetic disturbance (the sensors' system calibration level
+    down to 1) is not a peak: with ``status`` the knee's flexion peak is the undisturbed
+    recording's; without, the disturbed stretch's."""
+    alpha = np.concatenate([np.linspace(0.0, 90.0, 400), np.full(50, 120.0),
+                            np.linspace(90.0, 0.0, 400)])
+    q = ja.from_angles(alpha, np.zeros_like(alpha), np.zeros_like(alpha), "knee", "right")
+    status = np.full(len(alpha), 0xFF)
+    status[400:450] = (1 << 6) | 0x3F  # system level 1: disturbed
+    assert ja.recorded_rom(q, "knee", "right").peaks["flexion"] == pytest.approx(120.0, abs=0.01)
+    flagged = ja.recorded_rom(q, "knee", "right", status=status)
+    assert flagged.peaks["flexion"] == pytest.approx(90.0, abs=0.3)  # running median of 5
+    # nothing trustworthy at all: every sample is used rather than none
+    none_ok = ja.recorded_rom(q, "knee", "right", status=np.zeros(len(alpha), int))
+    assert none_ok.peaks["flexion"] == pytest.approx(120.0, abs=0.01)

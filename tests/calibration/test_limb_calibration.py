@@ -457,3 +457,65 @@ def test_a_twist_instead_of_a_flexion_is_refused():
     rec = _recording("arm", "right", 10, joints=twist)
     with pytest.raises(CalibrationError, match="elbow movement: its axis is within 20 deg"):
         _fit(rec)
+
+
+# -- heading drift after calibration, removed at neutral checkpoints ---------------------------
+
+
+DRIFT_DPS = np.array([0.05, -0.08, 0.06, 0.1])  # each sensor's heading drift: 3-6° a minute
+
+
+def _drifting_session(limb: str, seed: int):
+    """An exact calibration, then 60 s of random motion with the limb back at neutral over
+    [10, 12], [30, 32], [50, 52] s, while every sensor's world turns about the vertical at its
+    own constant rate (the root's too): (calibration, t, sensors, truth, windows)."""
+    rec = _recording(limb, "right", seed, noise_deg=0.0, sway_deg=0.0)
+    cal = LimbImuCalibration(limb).fit(*rec.fit_data())
+    truth, _, _ = rec.random_motion(60.0)
+    t = np.arange(len(truth)) / RATE_HZ
+    windows = np.array([[10.0, 12.0], [30.0, 32.0], [50.0, 52.0]])
+    for a, b in windows:
+        truth[(t >= a) & (t <= b)] = cal.neutral_[None]
+    root = Q.multiply(_sway(t, rec.rng, 0.0), rec.root[0])
+    _, clean = rec.measure(truth, root)
+    rate = np.radians(DRIFT_DPS)
+    sensors = Q.multiply(Q.from_axis_angle(np.array([0.0, 0.0, 1.0]),
+                                           rate[None] * t[:, None]), clean)
+    return cal, t, sensors, truth, windows
+
+
+@pytest.mark.parametrize("limb", ["arm", "leg"])
+def test_limb_heading_drift_is_removed_exactly_at_neutral_checkpoints(limb):
+    """A drift linear in time between checkpoints is removed exactly (``drift="linear"``, the
+    calibration's static pose an anchor at t = 0), the distal joints too: the drift of a
+    distal sensor turns about the world's vertical, which in the parent segment's frame is a
+    different axis at every pose, so it is removed at the sensors, not as a rotation of the
+    joint about a fixed axis. Without the correction the joints are degrees off."""
+    from calibration.heading import LimbHeadingCorrection
+
+    cal, t, sensors, truth, windows = _drifting_session(limb, 3)
+    hc = LimbHeadingCorrection(cal, drift="linear").fit(t, sensors, windows, anchors=[0.0])
+    assert hc.accepted_count_ == 3
+    inside = t <= 51.0  # linear between the nodes (0, 11, 31, 51 s); constant after the last
+    err = _err_deg(cal.transform(hc.apply(t, sensors)), truth)
+    assert err[inside].max() < 1e-6
+    raw = _err_deg(cal.transform(sensors), truth)
+    assert np.median(raw[inside], axis=0).min() > 0.5
+    # each sensor's estimate relative to its proximal neighbour, the root's zero
+    psi = hc.psi_deg(np.array([31.0]))[0]
+    np.testing.assert_allclose(psi, (DRIFT_DPS - DRIFT_DPS[0]) * 31.0, atol=1e-6)
+    assert set(hc.to_dict()) == set(cal.segments_[1:])
+
+
+def test_limb_heading_correction_rejects_checkpoints_away_from_neutral():
+    """A window in which the patient was not at neutral is rejected with its reason (the
+    swing test of :class:`~calibration.heading.HeadingCorrection`), not used."""
+    from calibration.heading import LimbHeadingCorrection
+
+    cal, t, sensors, _, windows = _drifting_session("leg", 4)
+    bad = np.vstack([windows, [[40.0, 42.0]]])  # free motion there
+    hc = LimbHeadingCorrection(cal, drift="linear").fit(t, sensors, bad, anchors=[0.0])
+    reasons = [r for c in hc.sensors_.values() for w, r in c.rejected_ if w == (40.0, 42.0)]
+    assert reasons and any("not at neutral" in r or "from the others" in r for r in reasons)
+    with pytest.raises(CalibrationError, match="call fit"):
+        LimbHeadingCorrection(cal).apply(t, sensors)

@@ -74,7 +74,18 @@ def test_limb_session_in_the_store(leg_demo):
         # the recorder's range of motion: every joint's table
         assert set(sess["meta"]["rom"]) == {"hip", "knee", "ankle"}
         assert sess["meta"]["rom"]["knee"]["flexion"] > 60.0
+        # the simulated patient's returns to neutral, marked as they ended
+        ck = [c for c in store.calibrations(leg_demo["session"])
+              if c["kind"] == "neutral-checkpoint"]
+        assert len(ck) >= 2 and all(c["data"]["time"] in ("device_t", "t") for c in ck)
     chain = read_chain(str(leg_demo["db"]), leg_demo["session"])
+    # each sensor's heading drift removed there, relative to its proximal neighbour
+    hc = chain.provenance["heading_correction"]
+    assert hc["neutral_checkpoints"] == len(ck) and hc["anchored"]
+    assert set(hc["segments"]) == {"thigh", "shank", "foot"} and hc["accepted"] >= 2
+    assert not chain.recording.unmeasured_drift
+    assert "heading_correction" not in read_chain(str(leg_demo["db"]), leg_demo["session"],
+                                                  heading=False).provenance
     assert chain.limb == "leg" and chain.joints == ("hip", "knee", "ankle")
     assert chain.q.shape[1:] == (3, 4) and len(chain.q) == len(chain.t) > 1000
     np.testing.assert_allclose(np.linalg.norm(chain.q, axis=-1), 1.0, atol=1e-9)

@@ -461,6 +461,21 @@ class SimulatedChain:
         return self._schedule.first.neutral_start_s
 
     @property
+    def neutral_every_s(self) -> float:
+        """Interval between neutral checkpoints, seconds (0: none)."""
+        return self._schedule.first.checkpoints.every_s
+
+    @property
+    def neutral_hold_s(self) -> float:
+        """How long each checkpoint's neutral pose is held, seconds."""
+        return self._schedule.first.checkpoints.hold_s
+
+    @property
+    def neutral_ramp_s(self) -> float:
+        """How long the patient takes to reach the neutral pose, seconds."""
+        return self._schedule.first.checkpoints.ramp_s
+
+    @property
     def smooth_s(self) -> float:
         return self._path.step_s
 
