@@ -88,6 +88,7 @@ oldest adult band, the oldest; age unknown, the band containing an adult of
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -397,16 +398,32 @@ def joint_angles(q, joint: str, side: str = "right") -> dict[str, np.ndarray]:
 def from_angles(alpha, beta, gamma, joint: str, side: str = "right") -> np.ndarray:
     """Joint orientations (N, 4) (rig frames) with the given clinical angles (degrees, signed as
     :func:`joint_angles` returns them) — its inverse, for simulated patients and tests."""
-    from scipy.spatial.transform import Rotation
-
     js = _joint(joint)
     ang = np.stack(np.broadcast_arrays(np.asarray(alpha, float) * js.signs[0],
                                        np.asarray(beta, float) * js.signs[1],
                                        np.asarray(gamma, float) * js.signs[2]), axis=-1)
-    isb = Rotation.from_euler("ZXY", np.atleast_2d(ang), degrees=True).as_matrix()
-    mp, mc = SEGMENT_TO_ISB[js.parent], SEGMENT_TO_ISB[js.child]
-    q = Q.from_rotation(Rotation.from_matrix(mp.T @ isb @ mc))
-    return _side(q, side)
+    ang = np.radians(np.atleast_2d(ang))
+    # the intrinsic Z-X-Y Cardan sequence, Rz(α) Rx(β) Ry(γ), as one quaternion product
+    isb = Q.multiply(Q.multiply(Q.from_axis_angle(_E[2], ang[:, 0]),
+                                Q.from_axis_angle(_E[0], ang[:, 1])),
+                     Q.from_axis_angle(_E[1], ang[:, 2]))
+    # the matrix Mpᵀ · R · Mc of the segment-to-ISB frames
+    q = Q.multiply(Q.multiply(Q.conjugate(_isb_quaternion(js.parent)), isb),
+                   _isb_quaternion(js.child))
+    return _side(Q.canonical(q), side)
+
+
+_E = np.eye(3)
+
+
+@functools.lru_cache(maxsize=None)
+def _isb_quaternion(segment: str) -> np.ndarray:
+    """:data:`SEGMENT_TO_ISB` ``[segment]`` as a quaternion (the same rotation)."""
+    from scipy.spatial.transform import Rotation
+
+    q = Q.from_rotation(Rotation.from_matrix(SEGMENT_TO_ISB[segment]))
+    q.setflags(write=False)
+    return q
 
 
 def _pair(v: np.ndarray, pos: str, neg: str) -> dict[str, float | None]:
