@@ -416,7 +416,7 @@ def from_angles(alpha, beta, gamma, joint: str, side: str = "right") -> np.ndarr
 _E = np.eye(3)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _isb_quaternion(segment: str) -> np.ndarray:
     """:data:`SEGMENT_TO_ISB` ``[segment]`` as a quaternion (the same rotation)."""
     from scipy.spatial.transform import Rotation
