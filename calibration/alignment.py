@@ -73,6 +73,7 @@ __all__ = [
     "mount_from_axes",
     "rotation_vectors",
     "status_ok",
+    "trusted_samples",
 ]
 
 #: World "down" (the sensors' worlds are Z up).
@@ -114,6 +115,18 @@ def status_ok(status, min_system: int = 2) -> np.ndarray:
     st = np.asarray(status).astype(np.int64)
     ok = ((st >> 6) & 3) >= min_system
     return ok if ok.ndim == 1 else ok.all(axis=1)
+
+
+def trusted_samples(status, n: int, min_system: int = 2) -> np.ndarray:
+    """(n,) mask of the samples to read figures from: :func:`status_ok` where ``status`` is
+    given (None: every sample); every sample when none passes (a figure from all of them
+    rather than none)."""
+    if status is None:
+        return np.ones(n, bool)
+    ok = status_ok(status, min_system)
+    if len(ok) != n:
+        raise ValueError(f"status: {len(ok)} values for {n} samples")
+    return ok if ok.any() else np.ones(n, bool)
 
 
 def rotation_vectors(q) -> np.ndarray:

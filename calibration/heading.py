@@ -458,12 +458,6 @@ class LimbHeadingCorrection:
         self._check_fitted()
         return min(hc.accepted_count_ for hc in self.sensors_.values())
 
-    def uncertainty_deg(self, t0: float, t1: float) -> float | None:
-        """The largest of the sensors' :meth:`HeadingCorrection.uncertainty_deg`."""
-        self._check_fitted()
-        u = [hc.uncertainty_deg(t0, t1) for hc in self.sensors_.values()]
-        return None if any(x is None for x in u) else max(u)
-
     def to_dict(self) -> dict:
         """JSON-able summary: each sensor's :meth:`HeadingCorrection.to_dict`."""
         self._check_fitted()

@@ -572,11 +572,9 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     from calibration.joints import JOINTS
 
     if status is not None:
-        from calibration.alignment import status_ok
+        from calibration.alignment import trusted_samples
 
-        ok = status_ok(np.asarray(status).reshape(-1))
-        if ok.any() and len(ok) == len(q):
-            q = np.asarray(q)[ok]
+        q = np.asarray(q)[trusted_samples(np.asarray(status).reshape(-1), len(q))]
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])
     ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}

@@ -51,6 +51,12 @@ def read_chain(db: str, session_id: int, fusion: str = "auto", *,
         return chain_orientations_from_store(store, session_id, fusion=fusion, heading=heading)
 
 
+def latest_calibration(cals: list[dict], kind: str) -> dict | None:
+    """The last stored calibration of ``kind`` among a session's (``store.calibrations``), or
+    None."""
+    return next((c for c in reversed(cals) if c["kind"] == kind), None)
+
+
 def session_limb(sess: dict) -> str | None:
     """The limb (``arm``/``leg``) a session recorded whole, or None (one joint)."""
     limb = (sess.get("meta") or {}).get("limb")
@@ -85,7 +91,7 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
         raise RigConfigError(f"session {session_id}: --fusion vqf is not available for whole-limb "
                              "sessions yet (the devices' orientations are used)")
     cals = store.calibrations(session_id)
-    cal = next((c for c in reversed(cals) if c["kind"] == "imu-limb"), None)
+    cal = latest_calibration(cals, "imu-limb")
     if cal is None:
         raise RigConfigError(
             f"session {session_id} has no imu-limb calibration (it was recorded without the "
@@ -231,7 +237,7 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
     from calibration.alignment import ImuJointCalibration
 
     cals = store.calibrations(session_id)
-    cal = next((c for c in reversed(cals) if c["kind"] == "imu-alignment"), None)
+    cal = latest_calibration(cals, "imu-alignment")
     if cal is None:
         raise RigConfigError(
             f"session {session_id} has IMU samples but no imu-alignment calibration (it "
@@ -422,14 +428,22 @@ def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, che
     hc = HeadingCorrection((1.0, 0.0, 0.0))
     with _about(session_id, "neutral checkpoints"):
         hc.fit(t, q, windows, status=status, anchors=anchors)
-    rejected = [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_] + unusable
-    uncertainty = hc.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
-    prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
-            "rejected": rejected, "anchored": bool(anchors), "clock": next(iter(times)),
+    prov = {"neutral_checkpoints": len(checkpoints), **_fitted(hc, t), "anchored": bool(anchors),
+            "clock": next(iter(times))}
+    prov["rejected"] += unusable
+    return hc.apply(t, q), prov
+
+
+def _fitted(hc, t: np.ndarray) -> dict:
+    """Provenance of one fitted :class:`~calibration.heading.HeadingCorrection` over the
+    samples' times ``t``: checkpoints accepted, rejected (with their reason), ψ at each, the
+    drift model and the uncertainty it leaves."""
+    u = hc.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
+    return {"accepted": hc.accepted_count_,
+            "rejected": [{"window": [a, b], "reason": r} for (a, b), r in hc.rejected_],
             "psi_deg": [round(float(x), 2) for x in hc.psi_window_deg_],
             "drift_model": dict(hc.drift_model_),
-            "uncertainty_deg": None if uncertainty is None else round(uncertainty, 3)}
-    return hc.apply(t, q), prov
+            "uncertainty_deg": None if u is None else round(u, 3)}
 
 
 def _limb_heading_correction(model, q: np.ndarray, t: np.ndarray, key: str, status,
@@ -444,14 +458,7 @@ def _limb_heading_correction(model, q: np.ndarray, t: np.ndarray, key: str, stat
     hc = LimbHeadingCorrection(model)
     with _about(session_id, "neutral checkpoints"):
         hc.fit(t, q, windows, status=status, anchors=anchors)
-    per = {}
-    for seg, c in hc.sensors_.items():
-        u = c.uncertainty_deg(float(t.min()), float(t.max())) if len(t) else None
-        per[seg] = {"accepted": c.accepted_count_,
-                    "rejected": [{"window": [a, b], "reason": r} for (a, b), r in c.rejected_],
-                    "psi_deg": [round(float(x), 2) for x in c.psi_window_deg_],
-                    "drift_model": dict(c.drift_model_),
-                    "uncertainty_deg": None if u is None else round(u, 3)}
+    per = {seg: _fitted(c, t) for seg, c in hc.sensors_.items()}
     prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
             "rejected": unusable, "anchored": bool(anchors), "clock": key,
             "relative_to": "each sensor's proximal neighbour", "segments": per}

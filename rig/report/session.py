@@ -346,7 +346,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     extracted from the session as ``rig boundary --chain`` does. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
     from calibration.boundary import ChainExtractor
-    from rig.readback.sessions import chain_orientations_from_store
+    from rig.readback.sessions import chain_orientations_from_store, latest_calibration
     from rig.report.limb import limb_report_data, write_limb_report
 
     chain = chain_orientations_from_store(store, session_id, fusion=fusion)
@@ -364,17 +364,12 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     else:
         limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
             chain.q, t=chain.t, status=chain.status, side=chain.side).limb_
-    cal = next((c for c in reversed(store.calibrations(session_id)) if c["kind"] == "imu-limb"),
-               None)
+    cal = latest_calibration(store.calibrations(session_id), "imu-limb")
     sess = store.get_session(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)
-    ok = np.ones(len(chain.t), bool)
-    if chain.status is not None:
-        from calibration.alignment import status_ok
+    from calibration.alignment import trusted_samples
 
-        ok = status_ok(chain.status)
-        if not ok.any():
-            ok[:] = True
+    ok = trusted_samples(chain.status, len(chain.t))
     used = (f"{len(chain.t):,} postures" if ok.all() else
             f"{int(ok.sum()):,} of {len(chain.t):,} postures: those the sensors flagged "
             "(magnetic disturbance, uncalibrated) left out")

@@ -80,7 +80,7 @@ from models.oracle import ConstraintOracle
 from rig.sim.limb.motion import JointMotion, Posture, Sinusoids, SmoothPath
 from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule
 from rig.sim.limb.sensors import RAW_STEP_S, NoiseModel, SensorErrors, SensorMount
-from rig.sim.limb.simulated import Measurement
+from rig.sim.limb.simulated import Measurement, _forward
 
 __all__ = ["CHAIN_SEGMENTS", "SEGMENT_LENGTHS_M", "ChainState", "SimulatedChain", "chain_mounts"]
 
@@ -460,20 +460,12 @@ class SimulatedChain:
         :attr:`rig.sim.limb.SimulatedLimb.neutral_start_s`)."""
         return self._schedule.first.neutral_start_s
 
-    @property
-    def neutral_every_s(self) -> float:
-        """Interval between neutral checkpoints, seconds (0: none)."""
-        return self._schedule.first.checkpoints.every_s
-
-    @property
-    def neutral_hold_s(self) -> float:
-        """How long each checkpoint's neutral pose is held, seconds."""
-        return self._schedule.first.checkpoints.hold_s
-
-    @property
-    def neutral_ramp_s(self) -> float:
-        """How long the patient takes to reach the neutral pose, seconds."""
-        return self._schedule.first.checkpoints.ramp_s
+    neutral_every_s = _forward("_schedule.first.checkpoints.every_s",
+                               "Interval between neutral checkpoints, seconds (0: none).")
+    neutral_hold_s = _forward("_schedule.first.checkpoints.hold_s",
+                              "How long each checkpoint's neutral pose is held, seconds.")
+    neutral_ramp_s = _forward("_schedule.first.checkpoints.ramp_s",
+                              "How long the patient takes to reach the neutral pose, seconds.")
 
     @property
     def smooth_s(self) -> float:
