@@ -181,13 +181,17 @@ class ConstraintOracle:
             valid = self._evaluate_hinge(q2).valid
             return valid[0] if single else valid
         d = Q.rotate(q2, self.axis)
-        valid = self._swing_dist(d) <= BOUNDARY_TOLERANCE
-        if self._twist is not None:
-            lo, hi = self._limits(d)
-            ok = _twist_inside(Q.twist_angle(q2, self.axis), lo, hi, self._wraps)
-            if not ok.all():
-                ok |= _singular(q2, self.axis)
-            valid &= ok
+        if self._twist is None:
+            valid = self._swing_dist(d) <= BOUNDARY_TOLERANCE
+            return valid[0] if single else valid
+        lo, hi = self._limits(d)
+        valid = _twist_inside(Q.twist_angle(q2, self.axis), lo, hi, self._wraps)
+        if not valid.all():
+            valid |= _singular(q2, self.axis)
+        # the swing's nearest-edge search (the costly part) only where the twist passes
+        rows = np.flatnonzero(valid)
+        if len(rows):
+            valid[rows] = self._swing_dist(d[rows]) <= BOUNDARY_TOLERANCE
         return valid[0] if single else valid
 
     def project(self, q, *, normalize: bool = False) -> np.ndarray:

@@ -90,7 +90,7 @@ class DemoSize:
 SIZES = {
     "full": DemoSize(imu_s=120.0, imu_time_scale=10.0, servo_s=30.0, servo_time_scale=20.0,
                      servo_rate_hz=200.0, eval_n=10_000, report_eval_n=4000, enforce_s=15.0),
-    "quick": DemoSize(imu_s=20.0, imu_time_scale=10.0, servo_s=16.0, servo_time_scale=20.0,
+    "quick": DemoSize(imu_s=20.0, imu_time_scale=10.0, servo_s=10.0, servo_time_scale=20.0,
                       servo_rate_hz=200.0, eval_n=2000, report_eval_n=1500, enforce_s=3.0),
 }
 

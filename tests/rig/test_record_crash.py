@@ -37,7 +37,7 @@ def _rig_yaml(tmp_path: Path) -> Path:
     return sim_imu_yaml(tmp_path, port_suffix="&time_scale=4", name="crash-imu")
 
 
-def test_kill_9_loses_at_most_one_second(tmp_path):
+def test_kill_9_loses_at_most_one_second(tmp_path, rig_cli):
     db = tmp_path / "crash.db"
     rate = load_config("sim-imu").sensors.rate_hz
     proc = subprocess.Popen(
@@ -84,42 +84,38 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         assert np.all(steps == 1), np.unique(steps)
 
     # the dead recorder's session: listed as interrupted, with its samples and last sample
-    listed = _rig("session", "list", "--db", str(db), "--json")
-    assert listed.returncode == 0, listed.stderr
-    [row] = [r for r in json.loads(listed.stdout) if r["id"] == session_id]
+    code, out, err = rig_cli(["session", "list", "--db", db, "--json"])
+    assert code == 0, err
+    [row] = [r for r in json.loads(out) if r["id"] == session_id]
     assert row["status"] == "running" and row["liveness"]["state"] == "interrupted"
     assert f"writer pid {proc.pid} on " in row["liveness"]["reason"]
     assert row["samples"] == len(t) and row["last_sample_at"] is not None
     assert row["started_at"] <= row["last_sample_at"] <= row["heartbeat_at"]
-    table = _rig("session", "list", "--db", str(db))
-    [line] = [ln for ln in table.stdout.splitlines() if ln.startswith(f"{session_id} ")]
+    _, table, _ = rig_cli(["session", "list", "--db", db])
+    [line] = [ln for ln in table.splitlines() if ln.startswith(f"{session_id} ")]
     assert "interrupted (not closed)" in line and f" {len(t)} (" in line
 
-    closed = _rig("session", "close", "--db", str(db), "--session", str(session_id))
-    assert closed.returncode == 0, closed.stderr
-    assert f"closed as interrupted: {len(t)} samples, ended at its last sample" in closed.stdout
+    code, out, err = rig_cli(["session", "close", "--db", db, "--session", session_id])
+    assert code == 0, err
+    assert f"closed as interrupted: {len(t)} samples, ended at its last sample" in out
     with open_store(db, create=False) as store:
         s = store.get_session(session_id)
         assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
         assert s["meta"]["recovered"]["liveness"] == "interrupted"
         assert len(store.calibrations(session_id)) == 1
-    again = _rig("session", "close", "--db", str(db), "--session", str(session_id))
-    assert again.returncode == 2 and again.stderr.count("\n") == 1
-    assert "is not running: it ended as 'interrupted'" in again.stderr
+    code, _, err = rig_cli(["session", "close", "--db", db, "--session", session_id])
+    assert code == 2 and err.count("\n") == 1
+    assert "is not running: it ended as 'interrupted'" in err
 
     out = tmp_path / "crash.csv"
-    res = _rig("export", "--db", str(db), "--session", str(session_id), "--format", "csv",
-               "--out", str(out))
-    assert res.returncode == 0, res.stderr
+    code, _, err = rig_cli(["export", "--db", db, "--session", session_id, "--format", "csv",
+                            "--out", out])
+    assert code == 0, err
     rows = [ln for ln in out.read_text().splitlines() if ln and not ln.startswith("#")]
     assert len(rows) == len(t) + 1  # header + every sample
     # the closed session is a recording like any other for rig boundary
-    res = _rig("boundary", "--db", str(db), "--session", str(session_id), "--out",
-               str(tmp_path / "crash-boundary.yaml"))
-    assert res.returncode == 0, res.stderr
+    code, _, err = rig_cli(["boundary", "--db", db, "--session", session_id, "--out",
+                            tmp_path / "crash-boundary.yaml"])
+    assert code == 0, err
     assert (tmp_path / "crash-boundary.yaml").read_text().strip()
 
-
-def _rig(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True, text=True,
-                          cwd=REPO, timeout=120)
