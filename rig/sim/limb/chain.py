@@ -19,10 +19,11 @@ Motion (the shoulder patient's recipe, :mod:`rig.sim.limb.motion`, on every join
   its loosest keyframe's region) with seeded sinusoids as
   :class:`~rig.sim.limb.motion.JointMotion`'s (RMS ``excursion`` times the region's reach, at
   most 90°; twist about the middle of its interval, RMS ``excursion`` times half of it); a
-  hinge turns about its axis, ``mid + excursion · half · x(t)`` over its interval (saturating
-  smoothly 170° from the middle). With ``excursion = 1`` every joint is pushed beyond its
-  limits often, independently, so the patient presses into every limit, the coupled ones at
-  many knee or elbow angles.
+  hinge turns about its axis, ``mid + excursion · half · x(t)`` over its interval; a hinge's
+  angle and a twist saturate smoothly 170° from the middle (never through the middle of the
+  excluded arc, where the clamp would change ends). With ``excursion = 1`` every joint is
+  pushed beyond its limits often, independently, so the patient presses into every limit,
+  the coupled ones at many knee or elbow angles.
 - **Stop at the limits.** A swing direction outside its region moves back along the great
   circle towards the motion centre onto the boundary (bisection on the limb oracle's verdict,
   the other joints as the oracle corrects them: a coupled region at its hinge's corrected
@@ -34,9 +35,25 @@ Motion (the shoulder patient's recipe, :mod:`rig.sim.limb.motion`, on every join
   then move at most 250-490°/s (p99 135-260°/s); the shoulder at p99 250-300°/s with a few
   samples in a thousand above 500°/s, where the arm, raised overhead, passes near the limb
   axis's antipode and the swing-twist decomposition (hence the twist limit) turns fast.
-- **Smoothing.** :class:`~rig.sim.limb.motion.SmoothPath`: the uniform cubic B-spline (knots every
-  ``smooth_s``) through the projected target on the global grid, each joint splined on its own,
-  then projected once more. Stateless: a value does not depend on what else is evaluated.
+- **Following.** :class:`~rig.sim.limb.motion.RateLimit` on the knot grid (every
+  ``smooth_s``): the limb is on the projected target while the arc to the next one stays in
+  range, and otherwise moves towards it at most ``max_speed_dps`` per joint (400°/s), around
+  the range in steps of 1° each brought into it by the oracle's nearest point. The target
+  itself can jump (the radial stop where a ray grazes a non-star-shaped region, a coupled
+  region changing with its hinge, the swing-twist decomposition near the limb axis's
+  antipode): measured on arm 102 before the follower, joint speeds of 3,100°/s for a few
+  samples, gyroscope readings of 3,270°/s and specific forces of 7,800 m/s², which a host
+  fusion could not follow (tilt 30-77° off for a minute).
+- **Smoothing.** :class:`~rig.sim.limb.motion.SmoothPath`: the uniform cubic B-spline through
+  the followed knots, each joint splined on its own, normalised — and **not** projected again:
+  the nearest point of a spline value outside jumps across a notch's medial axis (0.7-2.7° in
+  a sample on arm 101; a position step a few milliseconds wide is a spike of thousands of
+  m/s² at an accelerometer, and biases a fusion's tilt for seconds). So the limb overshoots
+  its limits a little where the spline rounds a corner or slides along a concave limit, as
+  soft tissue gives: on arms and legs 101-103 over 300 s, 1-5 % of the samples lie outside by
+  more than 0.01°, p99 of those 0.24-0.73°, at most 1.4°; hinges never. Stateless: a value does
+  not depend on what else is evaluated (the knots are computed in order from the start and
+  kept).
 - **Schedule.** :class:`~rig.sim.limb.schedule.Schedule` per joint: the calibration protocol
   (:class:`calibration.protocol.LimbCalibrationProtocol`: neutral pose, then each joint's
   flexion/extension; a single-joint :class:`~calibration.protocol.CalibrationProtocol` is
@@ -77,7 +94,7 @@ from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.limb import Limb
 from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
-from rig.sim.limb.motion import JointMotion, Posture, Sinusoids, SmoothPath
+from rig.sim.limb.motion import JointMotion, Posture, RateLimit, Sinusoids, SmoothPath
 from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule
 from rig.sim.limb.sensors import RAW_STEP_S, NoiseModel, SensorErrors, SensorMount
 from rig.sim.limb.simulated import Measurement, _forward
@@ -242,7 +259,9 @@ _REACH_CAP = math.radians(90.0)  # the swing's RMS is excursion times its reach,
 _PUSH_KNEE = math.radians(110.0)  # a swing's raw angle from its centre saturates beyond this
 _PUSH_ROOM = math.radians(30.0)  # ... towards this much more
 _HINGE_ROOM = math.radians(170.0)  # a hinge's raw excursion from its middle saturates below
+_TWIST_ROOM = math.radians(170.0)  # ... and a swing joint's twist from the middle of its range
 _STOP_STEPS = 14  # bisection halvings of the radial stop: 2^-14 of the arc (< 0.01°)
+_CHORD_TOL = math.radians(0.1)  # the arc between two targets counts as in range this close
 
 
 def _arc(c: np.ndarray, d: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -267,7 +286,8 @@ def _free(m, t: np.ndarray) -> np.ndarray:
     centre's antipode has no steady azimuth about it."""
     if isinstance(m, _HingeMotion):
         return m.free(t)
-    return m.free(t, reach_cap=_REACH_CAP, knee=min(m.reach, _PUSH_KNEE), room=_PUSH_ROOM)
+    return m.free(t, reach_cap=_REACH_CAP, knee=min(m.reach, _PUSH_KNEE), room=_PUSH_ROOM,
+                  twist_room=_TWIST_ROOM)
 
 
 class _HingeMotion:
@@ -327,7 +347,9 @@ class SimulatedChain:
         Segment lengths, proximal to distal, the root's its sensor's lever (default
         :data:`SEGMENT_LENGTHS_M`).
     smooth_s : float
-        Knot spacing of the motion's B-spline, seconds.
+        Knot spacing of the motion's B-spline (and of its follower), seconds.
+    max_speed_dps : float
+        The follower's speed limit per joint, °/s (module docstring, "Following").
     """
 
     def __init__(
@@ -350,6 +372,7 @@ class SimulatedChain:
         neutral_sd_deg: float = 2.0,
         lengths_m: Sequence[float] | None = None,
         smooth_s: float = 0.04,
+        max_speed_dps: float = 400.0,
     ) -> None:
         if not isinstance(limb, Limb):
             raise TypeError(f"limb must be a models.limb.Limb, got {type(limb).__name__}")
@@ -423,6 +446,8 @@ class SimulatedChain:
         self.noise = noise if noise is not None else NoiseModel()
         self.sensor_errors = SensorErrors(self.noise, _Placement(len(mounts)), rng, seed_seq)
         self._path = SmoothPath(smooth_s)
+        self._follow = RateLimit(smooth_s, math.radians(max_speed_dps), self._nearest,
+                                 self._near_range)
 
     @property
     def n_sensors(self) -> int:
@@ -557,13 +582,15 @@ class SimulatedChain:
         return out
 
     def target(self, t) -> np.ndarray:
-        """The patient's target (N, J, 4) at times ``t`` before the smoothing: the free motion
-        with the protocol and the checkpoints blended in, projected."""
+        """The patient's target (N, J, 4) at times ``t`` before the following and smoothing:
+        the free motion projected, the protocol and the checkpoints blended in (between
+        postures in range: a hinge's blend towards neutral from beyond its far end would
+        otherwise cross the excluded arc), projected again."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         return self._target(t, self._schedule)
 
     def _target(self, t: np.ndarray, schedule: _ChainSchedule) -> np.ndarray:
-        free = self.raw_joints(t)
+        free = self.project(self.raw_joints(t))  # blends run between postures in range
         q = np.stack([s.target(t, free[:, i], self._neutral_pose(i))
                       for i, s in enumerate(schedule.joints)], axis=1)
         return self.project(q)
@@ -574,14 +601,30 @@ class SimulatedChain:
         return pose
 
     def joints(self, t) -> np.ndarray:
-        """Joint orientations (N, J, 4) inside the limb's range at times ``t`` (N,) seconds:
-        the B-spline through :meth:`target` on the knot grid, projected once more."""
+        """Joint orientations (N, J, 4) at times ``t`` (N,) seconds: the B-spline through the
+        followed :meth:`target` on the knot grid (module docstring: in range but for the
+        spline's overshoot, under 1.5°)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         if not len(t):
             return np.empty((0, len(self.limb.joints), 4))
         schedule = self._schedule  # one snapshot
-        q = self._path(t, lambda ts: self._target(ts, schedule), schedule)
-        return self.project(q)
+
+        def knots(ts):
+            return self._follow(ts, lambda u: self._target(u, schedule), schedule)
+
+        q = self._path(t, knots, schedule)
+        return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+    def _near_range(self, q: np.ndarray) -> np.ndarray:
+        """(N, J) bool: each joint within :data:`_CHORD_TOL` of its range."""
+        return self.oracle.evaluate(q, normalize=True).distance <= _CHORD_TOL
+
+    def _nearest(self, q: np.ndarray) -> np.ndarray:
+        """Postures (N, J, 4) brought into range by the oracle's nearest point (normalised):
+        for postures near the range (a follower's step, a spline between valid knots), where
+        the nearest point does not jump."""
+        p = self.oracle.project(q, normalize=True)
+        return p / np.linalg.norm(p, axis=-1, keepdims=True)
 
     def root(self, t) -> np.ndarray:
         """The root segment (thorax, pelvis) relative to world (N, 4)."""

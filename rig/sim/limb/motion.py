@@ -60,9 +60,10 @@ import numpy as np
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.oracle import ConstraintOracle
-from rig.sim.limb._rotations import exp_map
+from rig.sim.limb._rotations import exp_map, slerp
 
-__all__ = ["JointMotion", "Posture", "Sinusoids", "SmoothPath", "StarRadial", "describe_range"]
+__all__ = ["JointMotion", "KnotCache", "Posture", "RateLimit", "Sinusoids", "SmoothPath",
+           "StarRadial", "describe_range"]
 
 _PUSH_KNEE = math.radians(120.0)  # raw swing angle from the centre beyond which it saturates
 _PUSH_ROOM = math.radians(50.0)  # ... towards 170°
@@ -188,13 +189,16 @@ class JointMotion:
         return self._radial is not None
 
     def free(self, t, *, reach_cap: float = math.inf, knee: float = _PUSH_KNEE,
-             room: float = _PUSH_ROOM) -> np.ndarray:
+             room: float = _PUSH_ROOM, twist_room: float = math.inf) -> np.ndarray:
         """Unconstrained joint orientation (N, 4) at times ``t`` (N,) seconds.
 
         The swing's RMS is ``excursion`` times the reach (at most ``reach_cap``, radians);
         beyond ``knee`` from the centre (default 120°) the push saturates smoothly (C1)
         towards ``room`` more (default 50°, so below 170°): a push through the centre's
-        antipode would flip its azimuth, and the arm with it."""
+        antipode would flip its azimuth, and the arm with it. The twist's excursion from the
+        middle of its range saturates as ``twist_room · tanh(x / twist_room)`` (radians; none
+        by default): below π it never reaches the middle of the excluded twists, where the
+        clamp would change ends."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         sigma = self.excursion * min(self.reach, reach_cap) / math.sqrt(2.0)
         su = sigma * self.series(0, t)
@@ -206,7 +210,10 @@ class JointMotion:
         ang = np.minimum(ang, knee) + room * np.tanh(over / room)
         d = np.cos(ang)[:, None] * self.centre + np.sin(ang)[:, None] * dirn
         swing = Q.from_two_vectors(self.limb_axis, d)
-        phi = self.twist_centre + self.excursion * self.twist_half * self.series(2, t)
+        phi = self.excursion * self.twist_half * self.series(2, t)
+        if math.isfinite(twist_room):
+            phi = twist_room * np.tanh(phi / twist_room)
+        phi = self.twist_centre + phi
         return Q.multiply(swing, Q.from_axis_angle(self.limb_axis, phi))
 
     def project(self, q) -> np.ndarray:
@@ -233,17 +240,14 @@ class SmoothPath:
     global grid ``i · step_s`` (module docstring, "Smoothing").
 
     The control points are a pure function of the grid index for a given ``key`` (the
-    patient's schedule): the last few thousand are kept (a simulator sampling at 200 Hz asks
-    for each about 40 times), and dropped when the key changes. Thread-safe.
+    patient's schedule), kept in a :class:`KnotCache`. Thread-safe.
     """
 
     def __init__(self, step_s: float) -> None:
         if not (math.isfinite(step_s) and step_s > 0):
             raise ValueError(f"smooth_s must be > 0, got {step_s!r}")
         self.step_s = float(step_s)
-        self._cache: dict[int, np.ndarray] = {}
-        self._key: object = None
-        self._lock = threading.Lock()
+        self._knots = KnotCache(step_s)
 
     def __call__(self, t, control: Callable[[np.ndarray], np.ndarray],
                  key: Hashable) -> np.ndarray:
@@ -258,7 +262,7 @@ class SmoothPath:
         f = (x - i0)[:, None]
         idx = i0[:, None] + np.arange(-1.0, 3.0)  # (N, 4) control points of each span
         uniq, inv = np.unique(idx, return_inverse=True)
-        cp = self._control_points(uniq, control, key)
+        cp = self._knots(uniq, control, key)
         c = cp[inv.reshape(-1)].reshape(len(t), 4, *cp.shape[1:])
         c = c * np.where(np.sum(c * c[:, 1:2], axis=-1) < 0.0, -1.0, 1.0)[..., None]
         w = np.concatenate(((1.0 - f) ** 3, 3.0 * f**3 - 6.0 * f**2 + 4.0,
@@ -267,8 +271,22 @@ class SmoothPath:
         # term by term (elementwise, so a row's value does not depend on the batch)
         return w[:, 0:1] * c[:, 0] + w[:, 1:2] * c[:, 1] + w[:, 2:3] * c[:, 2] + w[:, 3:4] * c[:, 3]
 
-    def _control_points(self, index: np.ndarray, control, key) -> np.ndarray:
-        keys = index.astype(np.int64).tolist()
+
+class KnotCache:
+    """Values of a pure function of the knot index ``i`` on the grid ``i · step_s``, for one
+    ``key`` at a time: the last few thousand are kept (a simulator sampling at 200 Hz asks for
+    each about 40 times), and dropped when the key changes. Thread-safe."""
+
+    def __init__(self, step_s: float) -> None:
+        self.step_s = float(step_s)
+        self._cache: dict[int, np.ndarray] = {}
+        self._key: object = None
+        self._lock = threading.Lock()
+
+    def __call__(self, index: np.ndarray, compute: Callable[[np.ndarray], np.ndarray],
+                 key: Hashable) -> np.ndarray:
+        """``compute(i · step_s)`` at knot indices ``index`` (M,), stacked (M, ...)."""
+        keys = np.asarray(index).astype(np.int64).tolist()
         with self._lock:
             cache = self._cache
             if self._key is not key:  # a new schedule changes the target everywhere
@@ -276,7 +294,7 @@ class SmoothPath:
                 self._key = key
             missing = [k for k in keys if k not in cache]
             if missing:
-                vals = control(np.asarray(missing, dtype=np.float64) * self.step_s)
+                vals = compute(np.asarray(missing, dtype=np.float64) * self.step_s)
                 if len(cache) > _CP_CACHE:  # the older half, but none this request needs
                     wanted = set(keys)
                     old = [k for k in cache if k not in wanted]
@@ -284,6 +302,111 @@ class SmoothPath:
                         del cache[k]
                 cache.update(zip(missing, vals, strict=True))
             return np.array([cache[k] for k in keys])
+
+
+class RateLimit:
+    """A target on the knot grid followed the way a limb follows it: at a bounded speed, and
+    around the range rather than through it, where the target jumps (a projection into a
+    concave or coupled range switching branches, a twist clamp changing ends, a blend towards a
+    pose on the far side) or where the straight way between two targets leaves the range.
+
+    Knot ``i``'s value is the target's while the follower is on it and the shortest arc to the
+    next target stays in the range (``inside`` at its thirds: a tolerance there keeps a
+    target sliding along a limit on it); otherwise the follower moves
+    towards the next target in steps of at most ``substep`` (rad) per joint, ``max_speed``
+    (rad/s) in all, each step brought into the range by ``project`` ((n, J, 4) → (n, J, 4)).
+    From a valid posture a step of ε lands within ε of the range, so its nearest point moves
+    at most 2ε: the follower does not jump, not even across a notch's medial axis.
+
+    The knots are computed in order from knot ``start`` and kept (a pure function of the knot
+    index: a value does not depend on what else was evaluated, or in which order), ``chunk``
+    targets at a time; dropped when the key (the patient's schedule) changes. Thread-safe."""
+
+    def __init__(self, step_s: float, max_speed: float,
+                 project: Callable[[np.ndarray], np.ndarray],
+                 inside: Callable[[np.ndarray], np.ndarray], *,
+                 substep: float = math.radians(1.0), start: int = -4, chunk: int = 512) -> None:
+        if not (math.isfinite(max_speed) and max_speed > 0):
+            raise ValueError(f"max_speed must be > 0, got {max_speed!r}")
+        self.step_s = float(step_s)
+        self.max_step = float(max_speed) * self.step_s
+        self.substep = float(substep)
+        self.project, self.inside = project, inside
+        self.start, self.chunk = int(start), int(chunk)
+        self._key: object = None
+        self._values: np.ndarray | None = None  # knots start, start + 1, ... (capacity)
+        self._n = 0
+        self._last: tuple[np.ndarray, bool] | None = None  # last target, follower on it
+        self._lock = threading.Lock()
+
+    def __call__(self, ts, target: Callable[[np.ndarray], np.ndarray],
+                 key: Hashable) -> np.ndarray:
+        """The followed postures (M, J, 4) at knot times ``ts`` (M,), the targets
+        ``target(times) -> (n, J, 4)`` (in range)."""
+        idx = np.rint(np.asarray(ts, dtype=np.float64) / self.step_s).astype(np.int64)
+        early = idx < self.start  # before the follower starts: the target itself
+        with self._lock:
+            if self._key is not key:
+                self._key, self._values, self._n, self._last = key, None, 0, None
+            if (~early).any():
+                self._extend(int(idx.max()) - self.start + 1, target)
+            out = np.empty((len(idx), *self._values.shape[1:]) if self._values is not None
+                           else (len(idx), *target(np.zeros(1)).shape[1:]))
+            if (~early).any():
+                out[~early] = self._values[idx[~early] - self.start]
+        if early.any():
+            out[early] = target(idx[early] * self.step_s)
+        return out
+
+    def _extend(self, n: int, target) -> None:
+        while self._n < n:
+            first = self.start + self._n
+            k = max(self.chunk, 0)
+            tg = target(np.arange(first, first + k, dtype=np.float64) * self.step_s)
+            tg = tg / np.linalg.norm(tg, axis=-1, keepdims=True)
+            if self._values is None:
+                self._values = np.empty((max(4 * k, n), *tg.shape[1:]))
+            if self._n + k > len(self._values):
+                grown = np.empty((2 * (self._n + k), *tg.shape[1:]))
+                grown[:self._n] = self._values[:self._n]
+                self._values = grown
+            self._values[self._n:self._n + k] = self._follow(tg)
+            self._n += k
+
+    def _follow(self, tg: np.ndarray) -> np.ndarray:
+        prev, on = self._last if self._last is not None else (tg[0], True)
+        seq = np.concatenate((prev[None], tg))  # the arcs prev → tg[0] → tg[1] → ...
+        a, b = seq[:-1], seq[1:]
+        n, nj = a.shape[:2]
+        step = Q.angle(Q.multiply(Q.conjugate(a), b))  # (n, J)
+        thirds = [slerp(a.reshape(-1, 4), b.reshape(-1, 4), np.full(n * nj, w)).reshape(n, nj, 4)
+                  for w in (1.0 / 3.0, 2.0 / 3.0)]
+        clear = (step <= self.max_step).all(axis=1)
+        for m in thirds:
+            clear &= self.inside(m).all(axis=1)
+        out = np.empty_like(tg)
+        f = prev
+        for i in range(n):
+            if on and clear[i]:
+                f = tg[i]
+            else:
+                f, on = self._towards(f, tg[i])
+            out[i] = f
+        self._last = (tg[-1], on)
+        return out
+
+    def _towards(self, f: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, bool]:
+        """One knot's worth of following from ``f`` (J, 4) towards ``goal``: the follower and
+        whether it is on the goal."""
+        ang = Q.angle(Q.multiply(Q.conjugate(f), goal))  # (J,)
+        move = np.minimum(ang, self.max_step)
+        n = max(1, math.ceil(float(move.max()) / self.substep))
+        for _ in range(n):
+            ang = Q.angle(Q.multiply(Q.conjugate(f), goal))
+            w = np.where(ang > 1e-12, np.minimum(1.0, (move / n) / np.maximum(ang, 1e-12)), 1.0)
+            f = self.project(slerp(f, goal, w)[None])[0]
+        on = bool((Q.angle(Q.multiply(Q.conjugate(f), goal)) < 1e-9).all())
+        return (goal if on else f), on
 
 
 class StarRadial:

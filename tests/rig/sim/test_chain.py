@@ -160,7 +160,10 @@ def leg_motion(leg):
 def test_chain_motion_is_valid_and_reaches_every_limit(leg, leg_motion):
     _, q = leg_motion
     res = leg.oracle.evaluate(q)
-    assert res.valid.all()
+    # in range, but for the B-spline's overshoot where it rounds a corner or slides along a
+    # concave limit (module docstring of rig.sim.limb.chain): under 1.5°, rarely over 0.1°
+    over = np.degrees(np.nan_to_num(res.distance, nan=-1.0))
+    assert over.max() < 1.5 and (over > 0.1).mean() < 0.02 and (over > 0.5).mean() < 0.005
     # the knee's both ends within 2°
     knee = leg.limb.joints[1].constraint.hinge
     ang = np.degrees(Q.twist_angle(q[:, 1], np.array([0.0, 0.0, -1.0])))
@@ -186,6 +189,65 @@ def test_chain_motion_is_smooth(leg, leg_motion):
     speed = np.degrees(2 * np.arccos(np.clip(np.abs(rel[..., 0]), 0, 1))) / np.diff(t)[:, None]
     assert np.percentile(speed, 99, axis=0).max() < 400  # °/s
     assert (speed > 800).mean() < 1e-3
+
+
+def test_sensors_see_a_continuous_limb():
+    """Arm 102 used to jump where the projection into its coupled, concave ranges switched
+    branches (3,100°/s at 100 Hz, specific forces of 7,800 m/s²) and a host fusion of its raw
+    samples lost the jumps (tilt 30-77° off): now the gyroscope integrates to the truth from
+    sample to sample, and the accelerometer's linear acceleration averages out as a limb held
+    at the shoulder must (its velocity stays bounded)."""
+    chain = chain_patient(102, "arm", noise=NoiseModel.ideal(), neutral=20.0)
+    rec = record_chain_imu(chain, 100.0, 100.0)
+    t = rec.t
+    for k in range(1, 4):
+        s = rec.sensors_true[:, k]
+        w = 0.5 * (rec.gyro[:-1, k] + rec.gyro[1:, k])
+        pred = Q.multiply(s[:-1], Q.from_axis_angle(
+            w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12),
+            np.linalg.norm(w, axis=1) * np.diff(t)))
+        step_err = np.degrees(Q.angle(Q.multiply(Q.conjugate(pred), s[1:])))
+        assert step_err.max() < 0.5, (k, step_err.max())
+        assert np.degrees(np.linalg.norm(rec.gyro[:, k], axis=1)).max() < 1000.0
+        gravity = Q.rotate(Q.conjugate(s), np.broadcast_to([0.0, 0.0, 9.81], (len(t), 3)))
+        lin = Q.rotate(s, rec.accel[:, k] - gravity)  # world frame
+        mean3s = np.stack([np.convolve(lin[:, i], np.ones(300) / 300, "valid")
+                           for i in range(3)], axis=1)
+        assert np.linalg.norm(mean3s, axis=1).max() < 1.5, k
+
+
+def test_a_jumping_target_is_followed_at_bounded_speed_around_the_range():
+    """RateLimit: a target that jumps 150° is followed at the speed limit, every knot in
+    range, and the values do not depend on the order they are asked in."""
+    from rig.sim.limb.motion import RateLimit
+
+    chain = SimulatedChain(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
+    neutral = _neutral(chain.limb)
+    far = chain.project(np.array([[Q.from_axis_angle(Z, math.radians(150.0)), *neutral[1:]]]))
+    step_s, speed = 0.04, math.radians(300.0)
+
+    def target(ts):
+        return np.where((np.asarray(ts) >= 1.0)[:, None, None], far, neutral[None])
+
+    def limiter():
+        return RateLimit(step_s, speed, chain._nearest, chain._near_range, chunk=16)
+
+    key = object()
+    ts = np.arange(0.0, 4.0, step_s)
+    q = limiter()(ts, target, key)
+    rel = Q.angle(Q.multiply(Q.conjugate(q[:-1]), q[1:]))
+    # a step, and the projection's: within the step in the oracle's swing-and-twist metric,
+    # a little more as a rotation angle
+    assert rel.max() <= speed * step_s * 3.0
+    assert np.allclose(q[ts < 1.0 - 1e-9], neutral) and np.allclose(q[-1], far[0])
+    arrived = ts[np.all(np.isclose(np.abs(np.sum(q * far, axis=-1)), 1.0), axis=1)][0]
+    apart = Q.angle(Q.multiply(Q.conjugate(neutral[0]), far[0, 0]))
+    assert apart > math.radians(60.0)
+    assert arrived >= 1.0 + apart / (3.0 * speed) - step_s  # no faster than the limit allows
+    assert chain.oracle.is_valid(q).all()
+    late_first = limiter()
+    later = late_first(ts[::-1][:10], target, key)
+    assert np.allclose(later, q[::-1][:10])
 
 
 def test_protocol_is_followed_within_limits():
@@ -250,7 +312,8 @@ def test_offline_recording():
     assert rec.segments == ("thorax", "upper-arm", "forearm", "hand")
     assert set(rec.windows) == {"static", "shoulder", "elbow", "wrist"}
     assert rec.window("elbow").sum() > 0 and rec.window("free").sum() == 5 * 50
-    assert LimbOracle(chain.limb).is_valid(rec.joints).all()
+    over = LimbOracle(chain.limb).evaluate(rec.joints).distance
+    assert np.nanmax(over) < np.radians(1.5)  # the B-spline's brief overshoot at most
     # the same seed twice: the same recording (noise, drift, disturbances included)
     again = record_chain_imu(chain_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
     assert np.array_equal(rec.quaternions, again.quaternions)
