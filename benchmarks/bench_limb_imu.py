@@ -132,9 +132,10 @@ def limits_at(joint, angle_deg: float):
     return joint.constraint if joint.coupling is None else joint.coupling.at(angle_deg)
 
 
-def calibrate(rec, limb: str, side: str) -> LimbImuCalibration:
-    """The limb calibration from the recording's protocol windows (status-checked samples)."""
-    ok = status_ok(rec.status)
+def calibrate(rec, limb: str, side: str, status: bool = True) -> LimbImuCalibration:
+    """The limb calibration from the recording's protocol windows (status-checked samples
+    unless ``status`` is False: the devices' status bytes do not describe a host fusion)."""
+    ok = status_ok(rec.status) if status else np.ones(len(rec.t), dtype=bool)
     st = rec.window("static")
     names = [j for j in rec.windows if j != "static"]
     fn = {j: rec.quaternions[rec.window(j)] for j in names}
@@ -225,7 +226,8 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> di
             "coupled": ex.coupled_, "note": ex.coupling_note_, "t_ext": t_ext}
 
 
-def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray) -> np.ndarray:
+def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray,
+                      status: np.ndarray | None) -> np.ndarray:
     """The recording's sensors with their heading drift removed at the neutral checkpoints
     (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the static window's
     centre, as the read path does); unchanged without checkpoints."""
@@ -233,7 +235,7 @@ def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray) -> np.n
         return rec.quaternions
     a, b = rec.windows["static"]
     hc = LimbHeadingCorrection(cal).fit(rec.t, rec.quaternions, windows,
-                                        status=rec.status.min(axis=1), anchors=[0.5 * (a + b)])
+                                        status=status, anchors=[0.5 * (a + b)])
     return hc.apply(rec.t, rec.quaternions)
 
 
@@ -255,11 +257,13 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
                 r = analyse(truth, rec.joints[free], rec.t[free], None, limb)
                 r["residual"] = math.nan
             else:
-                src = fused(rec) if path == "vqf" else rec
-                cal = calibrate(src, limb, side)
-                q = heading_corrected(src, cal, windows)
+                host = path == "vqf"  # as the read path: no status bytes for a host fusion
+                src = fused(rec) if host else rec
+                status = None if host else rec.status.min(axis=1)
+                cal = calibrate(src, limb, side, status=not host)
+                q = heading_corrected(src, cal, windows, status)
                 r = analyse(truth, cal.transform(q[free]), rec.t[free],
-                            rec.status[free].min(axis=1), limb)
+                            None if status is None else status[free], limb)
                 r["residual"] = cal.residual_deg_
         except CalibrationError as err:  # a failure is a figure too
             r = {"error": str(err)}
@@ -371,7 +375,9 @@ def main() -> None:
     ap.add_argument("--limbs", default="arm,leg")
     ap.add_argument("--duration", type=float, default=300.0, help="free motion, s")
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate, Hz")
-    ap.add_argument("--paths", default="imu,truth", help="imu, truth, vqf (comma-separated)")
+    ap.add_argument("--paths", default="vqf,imu,truth",
+                    help="vqf (the read path's default for sessions with raw samples), imu (the "
+                         "devices' quaternions), truth; comma-separated")
     ap.add_argument("--neutral", type=float, default=20.0,
                     help="neutral checkpoints every this many seconds (0: none, no heading "
                          "correction)")

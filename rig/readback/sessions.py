@@ -70,8 +70,11 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     (paired by the device timestamp where there is one), through the session's ``imu-limb``
     calibration (:class:`calibration.limb_calibration.LimbImuCalibration`).
 
-    Orientations are the devices' (``fusion`` ``auto`` or ``device``; host fusion of a limb's
-    raw samples is not implemented: ``vqf`` is a one-line error). With ``heading`` (default)
+    ``fusion`` as for one joint (:func:`joint_orientations_from_store`): ``vqf`` fuses each
+    sensor's raw samples on the host and re-fits the limb calibration on the fused
+    orientations inside its stored windows; ``auto`` does so when every sensor has raw samples
+    and the calibration says where its windows are, else uses the devices' orientations
+    (``device``). With ``heading`` (default)
     and ``neutral-checkpoint`` calibrations in the session, each sensor's heading drift
     relative to its proximal neighbour is removed
     (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the calibration's static
@@ -87,9 +90,6 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     if limb is None:
         raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
                              ", not a whole arm or leg (no --chain)")
-    if fusion == "vqf":
-        raise RigConfigError(f"session {session_id}: --fusion vqf is not available for whole-limb "
-                             "sessions yet (the devices' orientations are used)")
     cals = store.calibrations(session_id)
     cal = latest_calibration(cals, "imu-limb")
     if cal is None:
@@ -106,8 +106,19 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     if missing:
         raise RigConfigError(f"session {session_id}: no samples from the "
                              f"{', '.join(missing)} sensor(s)")
-    per = [store.samples(session_id, name=by_segment[s], raw=False) for s in segs]
+    by_name = {by_segment[s]: store.samples(session_id, name=by_segment[s], raw=False)
+               for s in segs}
+    per = list(by_name.values())
     key = "device_t" if all(np.isfinite(p["device_t"]).all() for p in per) else "t"
+    use_vqf, why = _vqf_usable(store, session_id, by_name, key, cal["data"])
+    if fusion == "vqf" and not use_vqf:
+        raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
+    use_vqf = use_vqf and fusion != "device"
+    fusion_prov: dict[str, Any] = {"method": "device"}
+    if use_vqf:
+        fusion_prov = _fuse_sensors(store, session_id, by_name, key)
+    elif fusion == "auto":
+        fusion_prov["auto"] = why
     from rig.store.io import shared_instants
 
     common, idx = shared_instants([p[key] for p in per])
@@ -116,12 +127,16 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
                              "common")
     q = np.stack([p["q"][i] for p, i in zip(per, idx, strict=True)], axis=1)
     status = np.min(np.stack([p["status"][i] for p, i in zip(per, idx, strict=True)]), axis=0)
-    del per
+    del per, by_name
     common = np.asarray(common, dtype=np.float64)
+    if use_vqf:
+        status = None  # the devices' status bytes do not describe the host's fusion
+        model = _refit_limb(q, {key: common}, cal["data"], session_id)
+        fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
     prov = {"session": int(session_id), "started_at": sess.get("started_at"),
             "source": "imu samples", "limb": limb, "calibration_id": int(cal["id"]),
             "calibration_residual_deg": cal.get("residual_deg"),
-            "fusion": {"method": "device"}}
+            "fusion": fusion_prov}
     checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
     if heading and checkpoints:
         q, prov["heading_correction"] = _limb_heading_correction(
@@ -318,7 +333,7 @@ def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
 
 def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
                 cal_data: dict) -> tuple[bool, str]:
-    """Can the two sensors' samples (``per``: name → samples, without raw) be fused on the
+    """Can the sensors' samples (``per``: name → samples, without raw) be fused on the
     host? (yes/no, why not); the raw readings are counted by the store, not fetched."""
     for name, s in per.items():
         n = len(s["t"])
@@ -330,7 +345,7 @@ def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
             return False, f"sensor {name!r}: sample times repeat (no device clock to fuse on)"
     origin = (cal_data.get("protocol") or {}).get("origin")
     if not origin or not (cal_data.get("windows_s") or {}):
-        return False, ("the imu-alignment calibration does not say where its windows are on "
+        return False, ("the calibration does not say where its windows are on "
                        "the samples' clock (protocol.origin), so it cannot be re-fitted")
     return True, ""
 
@@ -380,6 +395,39 @@ def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal
     with _about(session_id, "re-fitting the calibration on the VQF orientations"):
         return ImuJointCalibration().fit(qpar[sel["static"]], qchi[sel["static"]],
                                          qpar[sel["functional"]], qchi[sel["functional"]])
+
+
+def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int):
+    """:class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the four sensors'
+    (fused) orientations ``q`` (N, 4, 4) inside the stored calibration's static and movement
+    windows, with the protocol it stored."""
+    from calibration.limb_calibration import LimbImuCalibration
+    from calibration.protocol import LimbCalibrationProtocol
+
+    stored = cal_data["protocol"]
+    origin = stored["origin"]
+    clock = times.get(origin.get("time"))
+    if clock is None:
+        raise RigConfigError(f"session {session_id}: the calibration's windows are on the "
+                             f"{origin.get('time')} clock, which the pairing did not keep")
+    t0 = float(origin["t0"])
+    sel = {}
+    for name, w in (cal_data.get("windows_s") or {}).items():
+        w = _window(w)
+        if w is None:
+            raise RigConfigError(f"session {session_id}: the calibration's {name} window is "
+                                 f"not a time interval")
+        sel[name] = (clock >= t0 + w[0]) & (clock <= t0 + w[1])
+    with _about(session_id, "re-fitting the limb calibration on the VQF orientations"):
+        try:
+            protocol = LimbCalibrationProtocol(**{k: v for k, v in stored.items()
+                                                  if k != "origin"})
+        except (TypeError, ValueError) as err:
+            raise CalibrationError(f"stored protocol: {err}") from err
+        if "static" not in sel:
+            raise CalibrationError("the calibration has no static window")
+        model = LimbImuCalibration(cal_data["limb"], cal_data["side"], protocol=protocol)
+        return model.fit(q[sel["static"]], {j: q[sel[j]] for j in protocol.joints if j in sel})
 
 
 def _checkpoint_windows(times: dict[str, np.ndarray], checkpoints, cal_data: dict

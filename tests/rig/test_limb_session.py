@@ -79,6 +79,13 @@ def test_limb_session_in_the_store(leg_demo):
               if c["kind"] == "neutral-checkpoint"]
         assert len(ck) >= 2 and all(c["data"]["time"] in ("device_t", "t") for c in ck)
     chain = read_chain(str(leg_demo["db"]), leg_demo["session"])
+    # the raw samples fused on the host (auto), the calibration re-fitted on them
+    fused = chain.provenance["fusion"]
+    assert fused["method"] == "vqf" and set(fused["sensors"]) == {"pelvis", "thigh", "shank",
+                                                                   "foot"}
+    assert 0.0 <= fused["refit_residual_deg"] < 10.0 and chain.status is None
+    device = read_chain(str(leg_demo["db"]), leg_demo["session"], fusion="device")
+    assert device.provenance["fusion"]["method"] == "device" and device.status is not None
     # each sensor's heading drift removed there, relative to its proximal neighbour
     hc = chain.provenance["heading_correction"]
     assert hc["neutral_checkpoints"] == len(ck) and hc["anchored"]
@@ -111,7 +118,6 @@ def test_every_joint_reads_back_from_the_session(leg_demo, rig_cli, tmp_path):
     (["boundary", "--joint", "elbow"], "the leg has no elbow (its joints: hip, knee, ankle)"),
     (["boundary", "--chain", "arm"], "recorded the leg, not the arm"),
     (["boundary", "--chain", "leg", "--segments", "a,b,c"], "--segments applies to files"),
-    (["boundary", "--chain", "leg", "--fusion", "vqf"], "--fusion vqf is not available"),
 ])
 def test_wrong_requests_of_a_limb_session_are_one_line_errors(leg_demo, rig_cli, tmp_path,
                                                               args, message):
