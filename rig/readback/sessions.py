@@ -109,16 +109,7 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     by_name = {by_segment[s]: store.samples(session_id, name=by_segment[s], raw=False)
                for s in segs}
     per = list(by_name.values())
-    key = "device_t" if all(np.isfinite(p["device_t"]).all() for p in per) else "t"
-    use_vqf, why = _vqf_usable(store, session_id, by_name, key, cal["data"])
-    if fusion == "vqf" and not use_vqf:
-        raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
-    use_vqf = use_vqf and fusion != "device"
-    fusion_prov: dict[str, Any] = {"method": "device"}
-    if use_vqf:
-        fusion_prov = _fuse_sensors(store, session_id, by_name, key)
-    elif fusion == "auto":
-        fusion_prov["auto"] = why
+    key, use_vqf, fusion_prov = _fuse_if_asked(store, session_id, by_name, fusion, cal["data"])
     from rig.store.io import shared_instants
 
     common, idx = shared_instants([p[key] for p in per])
@@ -264,19 +255,7 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
     parent, child = _segments(sess, sensors, names, session_id)
     # the orientations first; a sensor's raw readings only while it is fused
     per = {nm: store.samples(session_id, name=nm, raw=False) for nm in (parent, child)}
-    # pair the two sensors' samples by the device timestamp when the device gives one (the
-    # readings of one frame share it; host times are per batch and repeat), else host time
-    key_name = ("device_t" if all(np.isfinite(p["device_t"]).all() for p in per.values())
-                else "t")
-    use_vqf, why = _vqf_usable(store, session_id, per, key_name, cal["data"])
-    if fusion == "vqf" and not use_vqf:
-        raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
-    use_vqf = use_vqf and fusion != "device"
-    fusion_prov: dict[str, Any] = {"method": "device"}
-    if use_vqf:
-        fusion_prov = _fuse_sensors(store, session_id, per, key_name)
-    elif fusion == "auto":
-        fusion_prov["auto"] = why
+    key_name, use_vqf, fusion_prov = _fuse_if_asked(store, session_id, per, fusion, cal["data"])
     tp, qp, sp = (per[parent][k] for k in (key_name, "q", "status"))
     tc, qc, sc = (per[child][k] for k in (key_name, "q", "status"))
     _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
@@ -331,6 +310,25 @@ def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
     return facts
 
 
+def _fuse_if_asked(store, session_id: int, per: dict[str, dict], fusion: str,
+                   cal_data: dict) -> tuple[str, bool, dict[str, Any]]:
+    """The pairing clock of the sensors' samples (``per``: name → samples, without raw) —
+    the device timestamp when every sample has one (the readings of one frame share it; host
+    times are per batch and repeat), else host time — and, as ``fusion`` asks, each sensor's
+    ``q`` replaced by its VQF orientation: (clock, fused on the host?, provenance)."""
+    key = "device_t" if all(np.isfinite(p["device_t"]).all() for p in per.values()) else "t"
+    use_vqf, why = _vqf_usable(store, session_id, per, key, cal_data)
+    if fusion == "vqf" and not use_vqf:
+        raise RigConfigError(f"session {session_id}: --fusion vqf: {why}")
+    use_vqf = use_vqf and fusion != "device"
+    prov: dict[str, Any] = {"method": "device"}
+    if use_vqf:
+        prov = _fuse_sensors(store, session_id, per, key)
+    elif fusion == "auto":
+        prov["auto"] = why
+    return key, use_vqf, prov
+
+
 def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
                 cal_data: dict) -> tuple[bool, str]:
     """Can the sensors' samples (``per``: name → samples, without raw) be fused on the
@@ -380,32 +378,20 @@ def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal
     orientations inside the stored calibration's static and functional windows."""
     from calibration.alignment import ImuJointCalibration
 
-    origin = cal_data["protocol"]["origin"]
-    clock = times.get(origin.get("time"))
-    if clock is None:
-        raise RigConfigError(f"session {session_id}: the calibration's windows are on the "
-                             f"{origin.get('time')} clock, which the pairing did not keep")
-    t0 = float(origin["t0"])
-    sel = {}
+    sel = _in_windows(times, cal_data, session_id)
     for name in ("static", "functional"):
-        w = _window((cal_data["windows_s"] or {}).get(name))
-        if w is None:
+        if name not in sel:
             raise RigConfigError(f"session {session_id}: the calibration has no {name} window")
-        sel[name] = (clock >= t0 + w[0]) & (clock <= t0 + w[1])
     with _about(session_id, "re-fitting the calibration on the VQF orientations"):
         return ImuJointCalibration().fit(qpar[sel["static"]], qchi[sel["static"]],
                                          qpar[sel["functional"]], qchi[sel["functional"]])
 
 
-def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int):
-    """:class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the four sensors'
-    (fused) orientations ``q`` (N, 4, 4) inside the stored calibration's static and movement
-    windows, with the protocol it stored."""
-    from calibration.limb_calibration import LimbImuCalibration
-    from calibration.protocol import LimbCalibrationProtocol
-
-    stored = cal_data["protocol"]
-    origin = stored["origin"]
+def _in_windows(times: dict[str, np.ndarray], cal_data: dict, session_id: int
+                ) -> dict[str, np.ndarray]:
+    """Each stored calibration window (``windows_s``, on the clock its ``protocol.origin``
+    names) as a mask over the samples' times in that clock (``times``: clock → times)."""
+    origin = cal_data["protocol"]["origin"]
     clock = times.get(origin.get("time"))
     if clock is None:
         raise RigConfigError(f"session {session_id}: the calibration's windows are on the "
@@ -416,8 +402,20 @@ def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, ses
         w = _window(w)
         if w is None:
             raise RigConfigError(f"session {session_id}: the calibration's {name} window is "
-                                 f"not a time interval")
+                                 "not a time interval")
         sel[name] = (clock >= t0 + w[0]) & (clock <= t0 + w[1])
+    return sel
+
+
+def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int):
+    """:class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the four sensors'
+    (fused) orientations ``q`` (N, 4, 4) inside the stored calibration's static and movement
+    windows, with the protocol it stored."""
+    from calibration.limb_calibration import LimbImuCalibration
+    from calibration.protocol import LimbCalibrationProtocol
+
+    stored = cal_data["protocol"]
+    sel = _in_windows(times, cal_data, session_id)
     with _about(session_id, "re-fitting the limb calibration on the VQF orientations"):
         try:
             protocol = LimbCalibrationProtocol(**{k: v for k, v in stored.items()
