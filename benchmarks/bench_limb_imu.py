@@ -51,10 +51,10 @@ Comparison conventions (columns)
     Per extracted keyframe at angle ``a``, the boundary distance to the truth's limits at
     ``a``; the largest over the keyframes (each is listed below the table).
 ``found`` (extracted / true)
-    Whether the joint's limits were written coupled, and whether the truth's are.
-    ``ChainExtractor`` tests the proximal joint's coupling only (shoulder, hip); the ankle's
-    coupling to the knee (the gastrocnemius: 5-8° more dorsiflexion with the knee bent) is
-    not looked for.
+    Whether the joint's limits were written coupled, and whether the truth's are
+    (``ChainExtractor`` tests the shoulder, hip, wrist and ankle; the truth couples the
+    shoulder and hip, and the ankle: the gastrocnemius, 5-8° more dorsiflexion with the knee
+    bent).
 ``rec°`` / ``con°`` (clinical peaks; target ≤ 2°)
     Elbow, wrist, hip, knee, ankle: :func:`calibration.joint_angles.recorded_rom` of the
     calibrated joint orientations against that of the true ones (``rec``), and against
@@ -361,9 +361,13 @@ def summary(patients: list[dict], path: str) -> None:
         true_c = [j for j in js if j.get("truth_coupled")]
         if true_c:
             n = sum(j["found"] for j in true_c)
-            why = " (not looked for: distal joint)" if name in ("ankle", "wrist") else ""
             print(f"  {'coupling found where true':30s} {name:9s} {n}/{len(true_c)}"
-                  f"{why:34s}{'MET' if n == len(true_c) else 'NOT MET'}")
+                  f"{'':34s}{'MET' if n == len(true_c) else 'NOT MET'}")
+        false_c = [j for j in js if "found" in j and not j.get("truth_coupled")]
+        if false_c:
+            n = sum(j["found"] for j in false_c)
+            print(f"  {'no coupling where none':30s} {name:9s} {len(false_c) - n}/"
+                  f"{len(false_c)}{'':34s}{'MET' if n == 0 else 'NOT MET'}")
 
 
 def main() -> None:

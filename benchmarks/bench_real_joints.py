@@ -81,8 +81,10 @@ def main() -> None:
                     continue
                 q, table = chain_orientations_from_file(str(path), cols, limb, "isb")
                 ex = ChainExtractor(limb).fit(q, t=np.asarray(table.time), side=side)
-                print(f"{path.name:<28} {limb:<6} {s:>4} {100 * ex.inside_['limb']:8.2f}  "
-                      f"{'yes' if ex.coupled_ else 'no'}: {ex.coupling_note_}")
+                for k, (joint, c) in enumerate(ex.couplings_.items()):
+                    head = (f"{path.name:<28} {limb:<6} {s:>4} {100 * ex.inside_['limb']:8.2f}"
+                            if k == 0 else " " * 48)
+                    print(f"{head}  {joint}: {'yes' if c['coupled'] else 'no'}: {c['note']}")
 
 
 if __name__ == "__main__":

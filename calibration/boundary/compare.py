@@ -102,7 +102,9 @@ def boundary_distance(a: JointConstraint, b: JointConstraint, step_deg: float = 
     Returns
     -------
     dict with ``mean_deg`` (the symmetric mean ``D``), ``a_to_b_deg``, ``b_to_a_deg`` (directed
-    arc-length-weighted means), ``hausdorff_deg`` (largest point distance either way).
+    arc-length-weighted means), ``hausdorff_deg`` (largest point distance either way),
+    ``p95_deg`` (the point distance either way exceeded along 5 % of the two boundaries'
+    length: a difference over a stretch of boundary, not at one spike).
     """
     oa, sa = swing_oracle(a)
     ob, sb = swing_oracle(b)
@@ -112,8 +114,12 @@ def boundary_distance(a: JointConstraint, b: JointConstraint, step_deg: float = 
     db = np.degrees(np.abs(oa.swing_distance(pb)))
     ab = float(np.sum(da * la) / la.sum())
     ba = float(np.sum(db * lb) / lb.sum())
+    d, w = np.concatenate((da, db)), np.concatenate((la, lb))
+    order = np.argsort(d)
+    cum = np.cumsum(w[order])
+    p95 = float(d[order][min(np.searchsorted(cum, 0.95 * cum[-1]), len(d) - 1)])
     return {"mean_deg": 0.5 * (ab + ba), "a_to_b_deg": ab, "b_to_a_deg": ba,
-            "hausdorff_deg": float(max(da.max(), db.max()))}
+            "hausdorff_deg": float(max(da.max(), db.max())), "p95_deg": p95}
 
 
 def outside_fraction(constraint: JointConstraint, directions, tolerance_deg: float = 1.0) -> float:

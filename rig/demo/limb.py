@@ -219,13 +219,18 @@ class _LimbCtx:
             ok &= good
         inside = figs["inside_within_1deg"]
         ok &= inside >= INSIDE_1DEG
-        found = rep["coupled"]
-        truth_coupled = any(j.coupling is not None for j in self.truth.joints)
+        couplings = []
+        for name, c in rep["couplings"].items():
+            truth_coupled = self.truth.joints[self.truth.joint_names.index(name)].coupling
+            said = f"{name} coupling {'found' if c['coupled'] else 'not found'}"
+            if c["coupled"] != (truth_coupled is not None):
+                said += f" ({c['note']})"
+                ok = False
+            couplings.append(said)
         st.verdict = "PASS" if ok else "WARN"
         st.detail = (f"{self.limb_file}: {'; '.join(parts)}; {100 * inside:.1f} % of postures "
-                     f"within 1° in every joint (≥ {100 * INSIDE_1DEG:g} %); coupling "
-                     f"{'found' if found else 'not found'}"
-                     + ("" if found == truth_coupled else f" ({rep['coupling']})"))
+                     f"within 1° in every joint (≥ {100 * INSIDE_1DEG:g} %); "
+                     + "; ".join(couplings))
 
     def train(self, st: StageResult) -> None:
         from rig.training import TrainRequest, run_train

@@ -334,7 +334,8 @@ class ChainResult:
                         f"twist {rep['twist_deg'][0]:.1f} .. {rep['twist_deg'][1]:.1f} deg")
             lines.append(f"  {j.name:<11} {what}; {100 * r['inside'][j.name]:.2f} % of the "
                          "recorded postures inside")
-        lines.append(f"  coupling    {'yes' if r['coupled'] else 'no'}: {r['coupling']}")
+        for name, c in r["couplings"].items():
+            lines.append(f"  coupling    {name}: {'yes' if c['coupled'] else 'no'}: {c['note']}")
         lines.append(f"  inside      {100 * r['inside']['limb']:.2f} % of the recorded postures "
                      "inside in every joint")
         return "\n".join(lines)
