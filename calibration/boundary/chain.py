@@ -37,11 +37,13 @@ a coupling** when
    ``min_difference_deg``, or they differ locally — along 5 % of the two boundaries' length
    (``p95_deg``) by at least ``min_local_difference_deg`` (the ankle's dependence is 5-8° of
    dorsiflexion in one direction: about 1° on average, 4.6-5.6° there, on simulated legs),
-   a lone outlier left out (with three or more keyframes, one differing from every other by
-   that much while the others agree to within half of it is that keyframe's samples falling
-   short of part of the limit — seen on a simulated wrist, 4.5° against 0.2° — not a
-   dependence, which shows as graded differences); otherwise the limits do not depend on the
-   hinge, as far as the recording shows, and
+   provided the differences are graded (for keyframes at angles ``a < b < c``, the
+   difference ``a``–``c`` at least the larger of ``a``–``b`` and ``b``–``c`` less half the
+   threshold) and not one keyframe's alone (one differing from every other by the threshold
+   while the others agree to within half of it): a keyframe whose samples fell short of part
+   of the limit differs out of step with the angle (simulated wrists, arms 3 and 101: one
+   keyframe 4.5-7.8° from its neighbours, which were 0.2-3.4° apart); otherwise the limits do
+   not depend on the hinge, as far as the recording shows, and
 3. the coupled limits hold what was recorded: at least ``min_held`` of the recorded postures
    lie inside the proximal joint's limits at their own hinge angle, or within 1° of them (the
    interpolation between keyframes is linear in the angle; the limits need not be, so a few
@@ -285,9 +287,12 @@ class ChainExtractor:
             info["difference_deg"], info["local_difference_deg"] = float(diff), float(local)
             if diff < self.min_difference_deg and local < self.min_local_difference_deg:
                 note = (f"keyframe boundaries differ by at most {diff:.1f} deg on average "
-                        f"(< {self.min_difference_deg:g}) and {local:.1f} deg along 5 % of "
-                        f"them (< {self.min_local_difference_deg:g}): no dependence on the "
-                        f"{hinge.name}")
+                        f"(< {self.min_difference_deg:g}) and "
+                        + (f"{local:.1f} deg along 5 % of them (< "
+                           f"{self.min_local_difference_deg:g})" if local > 0 else
+                           "locally not step by step with the hinge angle (a keyframe whose "
+                           "samples fell short of part of the limit)")
+                        + f": no dependence on the {hinge.name}")
                 break
             try:
                 limb = self._limb(chain, specs, constraints, {**fixed, j: kept}, side,
@@ -467,18 +472,28 @@ def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list) -> np.ndarr
 
 def _local_difference(pairs: dict[tuple[int, int], dict], n: int, threshold: float) -> float:
     """The keyframes' local difference (module doc, test 2): the largest ``p95_deg`` between
-    two of them — leaving out a lone outlier: with three or more keyframes, one that differs
-    from every other by ``threshold`` or more while the others agree among themselves to
-    within half of it is that keyframe's shortfall (its samples not reaching part of the
-    limit), not a dependence on the hinge, which shows as graded differences."""
+    two of them (keyframes in the order of their hinge angle), when the differences are
+    graded — a dependence on the hinge moves the limits step by step, so for keyframes
+    ``i < m < k`` the difference ``i``–``k`` is at least the larger of ``i``–``m`` and
+    ``m``–``k`` less half the threshold — and not one keyframe's alone (with three or more,
+    one that differs from every other by ``threshold`` or more while the others agree to
+    within half of it). Otherwise 0: the differences are keyframes' samples falling short of
+    part of the limit, not a dependence."""
     top = max(d["p95_deg"] for d in pairs.values())
     if n < 3:
         return top
+    p = {key: d["p95_deg"] for key, d in pairs.items()}
+    slack = 0.5 * threshold
+    for i in range(n):
+        for m in range(i + 1, n):
+            for k in range(m + 1, n):
+                if p[i, k] < max(p[i, m], p[m, k]) - slack:
+                    return 0.0
     for out in range(n):
-        mine = [d["p95_deg"] for (i, k), d in pairs.items() if out in (i, k)]
-        rest = [d["p95_deg"] for (i, k), d in pairs.items() if out not in (i, k)]
-        if min(mine) >= threshold and max(rest) < 0.5 * threshold:
-            return max(rest)
+        mine = [v for key, v in p.items() if out in key]
+        rest = [v for key, v in p.items() if out not in key]
+        if min(mine) >= threshold and max(rest) < slack:
+            return 0.0
     return top
 
 

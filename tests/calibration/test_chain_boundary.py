@@ -115,10 +115,11 @@ def test_the_ankle_is_coupled_to_the_knee():
 
 
 def test_one_keyframe_short_of_the_limit_is_not_a_dependence():
-    """Test 2's lone outlier: one keyframe 4.5° from every other along 5 % of the boundary,
-    the others within 0.2° of each other (a simulated wrist at one elbow angle whose samples
-    fell short of part of its limit) is not a dependence; graded differences (an ankle's:
-    2.3° between neighbours, 5.5° end to end) are."""
+    """Test 2's local difference: one keyframe 4.5° from every other along 5 % of the
+    boundary while the others agree to 0.2°, or one out of step with the hinge angle (a
+    simulated wrist at one elbow angle whose samples fell short of part of its limit), is not
+    a dependence; graded differences (an ankle's: 2.3° between neighbours, 5.5° end to end)
+    are."""
     from calibration.boundary.chain import _local_difference
 
     def pairs(m):
@@ -127,7 +128,13 @@ def test_one_keyframe_short_of_the_limit_is_not_a_dependence():
 
     lone = [[0, 0.14, 0.18, 4.48, 0.17], [0, 0, 0.21, 4.52, 0.20], [0, 0, 0, 4.50, 0.16],
             [0, 0, 0, 0, 4.51], [0, 0, 0, 0, 0]]
-    assert _local_difference(pairs(lone), 5, 4.0) == 0.21
+    assert _local_difference(pairs(lone), 5, 4.0) == 0.0
+    at_the_end = [[0, 4.5, 4.5, 4.6], [0, 0, 0.2, 0.3], [0, 0, 0, 0.2], [0, 0, 0, 0]]
+    assert _local_difference(pairs(at_the_end), 4, 4.0) == 0.0
+    # arm 101's wrist: the keyframe at elbow 34° 5.3-7.8° from the others, out of step
+    out_of_step = [[0, 5.31, 3.08, 3.21, 3.36], [0, 0, 7.84, 7.83, 7.85], [0, 0, 0, 0.37, 1.91],
+                   [0, 0, 0, 0, 1.96], [0, 0, 0, 0, 0]]
+    assert _local_difference(pairs(out_of_step), 5, 4.0) == 0.0
     graded = [[0, 2.37, 4.45, 5.52, 5.55], [0, 0, 2.27, 3.13, 3.16], [0, 0, 0, 1.05, 1.03],
               [0, 0, 0, 0, 0.19], [0, 0, 0, 0, 0]]
     assert _local_difference(pairs(graded), 5, 4.0) == 5.55
