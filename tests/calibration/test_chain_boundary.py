@@ -101,7 +101,7 @@ def test_the_ankle_is_coupled_to_the_knee():
     from rig.sim.patients import chain_patient
 
     chain = chain_patient(3, "leg", noise=NoiseModel.ideal())
-    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
+    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 200.0, 0.05)
     ex = ChainExtractor("leg").fit(chain.joints(t), t=t, side="right")
     ankle = ex.couplings_["ankle"]
     assert ankle["coupled"], ankle["note"]
