@@ -4,8 +4,9 @@
 running: simulators must be shut down by the test (context managers, fixtures), never left to
 the interpreter's exit. ``pg_server`` / ``db_url``: the store on SQLite and on a private
 PostgreSQL server. ``rig_cli``: runs ``rig ARGS`` in-process and returns (exit status, stdout,
-stderr). Hypothesis runs derandomized, without an example database (the ``ci``
-profile, at the end of this file).
+stderr). ``sim_leg`` / ``sim_leg_motion``: a simulated leg and 180 s of its motion, shared.
+Hypothesis runs derandomized, without an example database (the ``ci`` profile, at the end of
+this file).
 """
 
 from __future__ import annotations
@@ -30,6 +31,25 @@ def rig_cli(capsys):
         return exc.value.code, out.out, out.err
 
     return run
+
+
+@pytest.fixture(scope="session")
+def sim_leg():
+    """A simulated leg (``anatomical_limb(11, "leg")``: the hip and ankle coupled to the knee)
+    without sensor errors."""
+    from rig.sim.limb import NoiseModel, SimulatedChain
+    from rig.sim.patients import anatomical_limb
+
+    return SimulatedChain(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
+
+
+@pytest.fixture(scope="session")
+def sim_leg_motion(sim_leg):
+    """``(t, q)``: 180 s of :func:`sim_leg`'s true joint orientations at 25 Hz."""
+    import numpy as np
+
+    t = np.arange(0.0, 180.0, 0.04)
+    return t, sim_leg.joints(t)
 
 
 def _open_ptys() -> set[str]:

@@ -89,24 +89,19 @@ def test_a_simulated_range_of_motion_test_is_coupled():
     assert ex.limb_.joints[2].coupling is None
 
 
-def test_the_ankle_is_coupled_to_the_knee():
+def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
     """The gastrocnemius: a simulated ankle with 5-8° more dorsiflexion with the knee bent,
     the rest of its boundary the same (about 1° apart on average, under the 3° the mean test
     resolves): found by the local test (test 2: the difference along 5 % of the boundaries),
     each keyframe within 1.5° of the true limits at its knee angle; the hip's coupling too."""
-    import numpy as np
-
     from calibration.boundary import ChainExtractor, boundary_distance
-    from rig.sim.limb import NoiseModel
-    from rig.sim.patients import chain_patient
 
-    chain = chain_patient(3, "leg", noise=NoiseModel.ideal())
-    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 200.0, 0.05)
-    ex = ChainExtractor("leg").fit(chain.joints(t), t=t, side="right")
+    t, q = sim_leg_motion
+    ex = ChainExtractor("leg").fit(q, t=t, side="right")
     ankle = ex.couplings_["ankle"]
     assert ankle["coupled"], ankle["note"]
     assert ankle["difference_deg"] < 3.0 <= 4.0 <= ankle["local_difference_deg"]
-    truth = chain.limb.joints[2].coupling
+    truth = sim_leg.limb.joints[2].coupling
     got = ex.limb_.joints[2].coupling
     assert got.by == "knee" and len(got.at_deg) >= 3
     for a, c in zip(got.at_deg, got.keyframes, strict=True):

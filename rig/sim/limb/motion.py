@@ -325,7 +325,7 @@ class RateLimit:
     def __init__(self, step_s: float, max_speed: float,
                  project: Callable[[np.ndarray], np.ndarray],
                  inside: Callable[[np.ndarray], np.ndarray], *,
-                 substep: float = math.radians(1.0), start: int = -4, chunk: int = 64) -> None:
+                 substep: float = math.radians(1.0), start: int = -4, chunk: int = 256) -> None:
         if not (math.isfinite(max_speed) and max_speed > 0):
             raise ValueError(f"max_speed must be > 0, got {max_speed!r}")
         self.step_s = float(step_s)

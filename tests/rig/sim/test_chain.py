@@ -146,19 +146,9 @@ def test_arm_clinical_ranges(side):
 
 
 # -- the chain's motion -----------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def leg():
-    return SimulatedChain(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
-
-
-@pytest.fixture(scope="module")
-def leg_motion(leg):
-    t = np.arange(0.0, 180.0, 0.04)
-    return t, leg.joints(t)
-
-
-def test_chain_motion_is_valid_and_reaches_every_limit(leg, leg_motion):
-    _, q = leg_motion
+def test_chain_motion_is_valid_and_reaches_every_limit(sim_leg, sim_leg_motion):
+    leg = sim_leg
+    _, q = sim_leg_motion
     res = leg.oracle.evaluate(q)
     # in range, but for the B-spline's overshoot where it rounds a corner or slides along a
     # concave limit (module docstring of rig.sim.limb.chain): under 1.5°, rarely over 0.1°
@@ -183,8 +173,8 @@ def test_chain_motion_is_valid_and_reaches_every_limit(leg, leg_motion):
     assert len(np.unique(np.clip(knee_there, 0, 135) // 15)) >= 6
 
 
-def test_chain_motion_is_smooth(leg, leg_motion):
-    t, q = leg_motion
+def test_chain_motion_is_smooth(sim_leg_motion):
+    t, q = sim_leg_motion
     rel = Q.multiply(Q.conjugate(q[:-1]), q[1:])
     speed = np.degrees(2 * np.arccos(np.clip(np.abs(rel[..., 0]), 0, 1))) / np.diff(t)[:, None]
     assert np.percentile(speed, 99, axis=0).max() < 400  # °/s
