@@ -421,7 +421,7 @@ class ChainExtractor:
         prov = dict(provenance or {})
         prov.update({"method": "calibration.boundary.ChainExtractor", "parameters": self.params(),
                      "couplings": {k: {"coupled": v["coupled"], "keyframes": v["keyframes"]}
-                                   for k, v in getattr(self, "couplings_", {}).items()}})
+                                   for k, v in self.couplings_.items()}})
         doc = {"name": self.name, "limb": self.limb, "joints": joints, "provenance": prov}
         if side is not None:
             doc["side"] = side

@@ -593,7 +593,10 @@ class SimulatedChain:
         free = self.project(self.raw_joints(t))  # blends run between postures in range
         q = np.stack([s.target(t, free[:, i], self._neutral_pose(i))
                       for i, s in enumerate(schedule.joints)], axis=1)
-        return self.project(q)
+        blended = np.any(q != free, axis=(1, 2))  # the rest are in range already
+        if blended.any():
+            q[blended] = self.project(q[blended])
+        return q
 
     def _neutral_pose(self, i: int):
         def pose(k):

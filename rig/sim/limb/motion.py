@@ -328,6 +328,8 @@ class RateLimit:
                  substep: float = math.radians(1.0), start: int = -4, chunk: int = 256) -> None:
         if not (math.isfinite(max_speed) and max_speed > 0):
             raise ValueError(f"max_speed must be > 0, got {max_speed!r}")
+        if chunk < 1:
+            raise ValueError(f"chunk must be >= 1, got {chunk!r}")
         self.step_s = float(step_s)
         self.max_step = float(max_speed) * self.step_s
         self.substep = float(substep)
@@ -345,33 +347,33 @@ class RateLimit:
         ``target(times) -> (n, J, 4)`` (in range)."""
         idx = np.rint(np.asarray(ts, dtype=np.float64) / self.step_s).astype(np.int64)
         early = idx < self.start  # before the follower starts: the target itself
-        with self._lock:
-            if self._key is not key:
-                self._key, self._values, self._n, self._last = key, None, 0, None
-            if (~early).any():
-                self._extend(int(idx.max()) - self.start + 1, target)
-            out = np.empty((len(idx), *self._values.shape[1:]) if self._values is not None
-                           else (len(idx), *target(np.zeros(1)).shape[1:]))
-            if (~early).any():
-                out[~early] = self._values[idx[~early] - self.start]
+        parts = []
         if early.any():
-            out[early] = target(idx[early] * self.step_s)
+            parts.append((early, target(idx[early] * self.step_s)))
+        if not early.all():
+            with self._lock:
+                if self._key is not key:
+                    self._key, self._values, self._n, self._last = key, None, 0, None
+                self._extend(int(idx.max()) - self.start + 1, target)
+                parts.append((~early, self._values[idx[~early] - self.start].copy()))
+        out = np.empty((len(idx), *parts[0][1].shape[1:]))
+        for rows, values in parts:
+            out[rows] = values
         return out
 
     def _extend(self, n: int, target) -> None:
+        """Knots ``start`` … ``start + n − 1`` followed (in order, ``chunk`` at a time)."""
         while self._n < n:
             first = self.start + self._n
-            k = max(self.chunk, 0)
-            tg = target(np.arange(first, first + k, dtype=np.float64) * self.step_s)
+            tg = target(np.arange(first, first + self.chunk, dtype=np.float64) * self.step_s)
             tg = tg / np.linalg.norm(tg, axis=-1, keepdims=True)
-            if self._values is None:
-                self._values = np.empty((max(4 * k, n), *tg.shape[1:]))
-            if self._n + k > len(self._values):
-                grown = np.empty((2 * (self._n + k), *tg.shape[1:]))
-                grown[:self._n] = self._values[:self._n]
+            if self._values is None or self._n + self.chunk > len(self._values):
+                grown = np.empty((2 * (self._n + self.chunk), *tg.shape[1:]))
+                if self._values is not None:
+                    grown[:self._n] = self._values[:self._n]
                 self._values = grown
-            self._values[self._n:self._n + k] = self._follow(tg)
-            self._n += k
+            self._values[self._n:self._n + self.chunk] = self._follow(tg)
+            self._n += self.chunk
 
     def _follow(self, tg: np.ndarray) -> np.ndarray:
         prev, on = self._last if self._last is not None else (tg[0], True)
