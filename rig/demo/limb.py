@@ -80,9 +80,9 @@ class LimbDemoSize:
 
 
 LIMB_SIZES = {
-    "full": LimbDemoSize(motion_s=600.0, time_scale=10.0, rate_hz=100, preset="network",
+    "full": LimbDemoSize(motion_s=600.0, time_scale=20.0, rate_hz=100, preset="network",
                          eval_n=6000),
-    "quick": LimbDemoSize(motion_s=150.0, time_scale=10.0, rate_hz=100, preset="geometric",
+    "quick": LimbDemoSize(motion_s=150.0, time_scale=20.0, rate_hz=100, preset="geometric",
                           eval_n=1500),
 }
 

@@ -150,3 +150,24 @@ def test_fields_must_match_the_limbs_coupled_swings(leg, trained):
     fields, _ = trained
     with pytest.raises(ValueError, match="one per coupled polygon swing"):
         limb_to_onnx(leg, {"knee": next(iter(fields.values()))})
+
+
+def test_fields_train_side_by_side_as_they_do_one_after_another():
+    """Two coupled swings (the anatomical leg's hip and ankle): each field has its own
+    generator, so training them on two threads gives the weights of training them in turn."""
+    from rig.sim.patients import anatomical_limb
+
+    leg2 = anatomical_limb(0, "leg", "right")
+    assert field_joints(leg2) == ["hip", "ankle"]
+    tiny = FieldSpec(features=16, hidden=16, samples=3000, epochs=2, batch=256)
+    seen = []
+    one, facts1 = fit_limb_fields(leg2, seed=5, spec=tiny, workers=1)
+    two, facts2 = fit_limb_fields(leg2, seed=5, spec=tiny, workers=2,
+                                  progress=lambda name, s: seen.append(name))
+    assert (facts1["workers"], facts2["workers"]) == (1, 2)
+    assert seen == ["hip", "ankle"]
+    for name in ("hip", "ankle"):
+        for k in ("b", "w1", "b1", "w2", "b2", "w3", "b3"):
+            np.testing.assert_allclose(getattr(one[name], k), getattr(two[name], k),
+                                       rtol=1e-4, atol=1e-5)
+    assert not np.allclose(one["hip"].w1, one["ankle"].w1)
