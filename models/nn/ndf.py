@@ -19,8 +19,8 @@ input gradient is analytic (:meth:`DistanceField.value_and_gradient`), so the pr
 in ONNX as matrix products. Training (Sobolev): minibatch Adam on the squared error of the
 value plus ``λ`` times that of the tangent gradient against the exact one, weighted by
 ``1 + 3|s|`` (a gradient error ``δ`` at distance ``s`` lands ``s·δ`` along the boundary), float32,
-one thread per field (fields of one limb side by side), a cosine-decayed rate; samples half uniform on the sphere, half within 40° of the
-boundary (:func:`models.datasets.training_postures`).
+one thread per field (a limb's fields side by side), a cosine-decayed rate; samples half
+uniform on the sphere, half within 40° of the boundary (:func:`models.datasets.training_postures`).
 
 Projection (:meth:`DistanceField.project`): geodesic steps ``d ← cos(αf⁺) d − sin(αf⁺) ĝ``
 (``ĝ`` the unit tangent gradient, ``f⁺ = max(f, 0)``) with fractions ``α`` = 0.5, 0.5, 0.5, 1, 1:
