@@ -585,16 +585,69 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
 
 
-def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: float = 5.0,
-                   step_deg: float = 0.5) -> JointRangeOfMotion:
-    """The range of motion a constraint allows (:class:`models.constraint.JointConstraint`,
-    rig frames), read as a goniometer reads a position: each angle's farthest value among the
-    allowed orientations at which a goniometer reads it (:func:`_in_band`). The angle read on
-    a ``step_deg`` grid (α on 1°), the others on the band's 1° or, where free, β on 2° and γ
-    on 10°. A hinge reads its interval (its other angles are zero); movements a constraint
-    does not model are None."""
+def _swing_boundary(swing, step_rad: float) -> np.ndarray:
+    """Points along a swing region's boundary (M, 3), at most ``step_rad`` apart; none for an
+    unconstrained swing."""
+    from models.constraint import ConeSwing
+    from models.geometry import densify
+
+    if swing is None:
+        return np.zeros((0, 3))
+    if not isinstance(swing, ConeSwing):
+        return densify(swing.vertices, math.degrees(step_rad))
+    c = np.asarray(swing.centre, dtype=np.float64)
+    u = np.cross(c, _E[0] if abs(c[0]) < 0.9 else _E[1])
+    u /= np.linalg.norm(u)
+    w = np.cross(c, u)
+    phi = np.arange(0.0, 2 * math.pi, step_rad / max(math.sin(swing.radius), 1e-3))
+    ring = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w
+    return math.cos(swing.radius) * c + math.sin(swing.radius) * ring
+
+
+def allowed_boundary_samples(constraint, step_deg: float = 0.25,
+                             interior: int = 80_000) -> np.ndarray:
+    """Orientations (N, 4) on the boundary of the set a ball or two-axis constraint allows —
+    where every joint angle takes its extremes (a Cardan angle has no extreme inside the
+    set): each limb direction along the swing boundary (``step_deg`` apart) at twists across
+    its interval (``step_deg`` apart), and each direction inside the swing region (a
+    Fibonacci grid of ``interior`` points on the sphere, ~0.8°) at its two twist limits
+    (an unconstrained twist: at twists 2° apart along the boundary, 10° inside).
+    Orientations are ``swing ⊗ twist``, the oracle's decomposition about the limb axis, so
+    every one is allowed."""
+    from models.geometry import fibonacci_sphere
     from models.oracle import ConstraintOracle
 
+    oracle = ConstraintOracle(constraint)
+    axis = np.asarray(constraint.limb_axis, dtype=np.float64)
+    step = math.radians(step_deg)
+    grid = fibonacci_sphere(interior)
+    inside = grid if constraint.swing is None else grid[oracle.swing_distance(grid) <= 0.0]
+    edge = _swing_boundary(constraint.swing, step)
+    # an unconstrained twist has no ends: every direction at twists 2° (edge) / 10° apart
+    free = constraint.twist is None
+    parts = []
+    for d, tw_step in ((edge, math.radians(2.0) if free else step),
+                       (inside, math.radians(10.0) if free else None)):
+        if not len(d):
+            continue
+        lo, hi = (np.broadcast_to(x, (len(d),)) for x in oracle.twist_limits_at(d))
+        m = 2 if tw_step is None else math.ceil(float((hi - lo).max()) / tw_step) + 1
+        tw = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, m)[None, :]
+        sw = Q.from_two_vectors(np.broadcast_to(axis, d.shape), d)
+        parts.append(Q.multiply(np.repeat(sw, m, axis=0),
+                                Q.from_axis_angle(axis, tw.ravel())))
+    return np.concatenate(parts)
+
+
+def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: float = 5.0,
+                   step_deg: float = 0.25) -> JointRangeOfMotion:
+    """The range of motion a constraint allows (:class:`models.constraint.JointConstraint`,
+    rig frames), read as a goniometer reads a position: each angle's farthest value among the
+    allowed orientations at which a goniometer reads it (:func:`_in_band`). Swing joints: the
+    angles of :func:`allowed_boundary_samples` (``step_deg`` apart along the boundary; a
+    Cardan grid read a narrow twist interval only where a grid line crossed it: a simulated
+    ankle's inversion 4.5-6° short). A hinge reads its interval (its other angles are zero);
+    movements a constraint does not model are None."""
     js = _joint(joint)
     side = _check_side(side)
     if constraint.kind == "hinge":
@@ -607,27 +660,10 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
         return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named else None)
                                                 for m in CLINICAL_MOVEMENTS[joint]},
                                   (float(ang["alpha"].min()), float(ang["alpha"].max())))
-    oracle = ConstraintOracle(constraint)
-    band = np.arange(-band_deg, band_deg + 1e-9, 1.0)
-    free = {"beta": np.arange(-90.0, 90.0 + 1e-9, 2.0), "gamma": np.arange(-180.0, 180.0, 10.0)}
-    primary = {"alpha": np.arange(-180.0, 180.0, 1.0),
-               "beta": np.arange(-90.0, 90.0 + 1e-9, step_deg),
-               "gamma": np.arange(-180.0, 180.0, step_deg)}
+    ang = joint_angles(allowed_boundary_samples(constraint, step_deg), joint, side)
+    where = _in_band(ang, band_deg)
     out: dict[str, float | None] = {}
-    arc = None
     for k, key in enumerate(("alpha", "beta", "gamma")):
-        # the other angles as _in_band has them: α at any β and γ, β at α in the band and any
-        # γ, γ at α and β in the band
-        others = {"alpha": (free["beta"], free["gamma"]), "beta": (band, free["gamma"]),
-                  "gamma": (band, band)}[key]
-        grids = np.meshgrid(primary[key], *others, indexing="ij")
-        rest = [i for i in range(3) if i != k]
-        angles: list = [None, None, None]
-        angles[k] = grids[0].ravel()
-        angles[rest[0]], angles[rest[1]] = grids[1].ravel(), grids[2].ravel()
-        hit = angles[k][oracle.is_valid(from_angles(*angles, joint, side))]
-        out.update(_pair(hit, *js.movements[k]))
-        if k == 0 and hit.size:
-            arc = (float(hit.min()), float(hit.max()))
+        out.update(_pair(ang[key][where[key]], *js.movements[k]))
     return JointRangeOfMotion(joint, side, {m: out.get(m) for m in CLINICAL_MOVEMENTS[joint]},
-                              arc)
+                              (float(ang["alpha"].min()), float(ang["alpha"].max())))

@@ -116,3 +116,31 @@ def test_hip_flexion_reads_whatever_the_abduction(side):
     assert rom.peaks["flexion"] == pytest.approx(90.0, abs=0.1)
     assert rom.peaks["abduction"] == pytest.approx(8.0, abs=0.1)
     assert rom.peaks["external_rotation"] == pytest.approx(30.0, abs=0.1)
+
+
+def test_rom_of_a_narrow_twist_ankle_reaches_what_its_constraint_allows():
+    """The simulated ankle (twist held to a few degrees): the orientations the peaks are read
+    from are all allowed, and no allowed orientation near them (2° of random rotation, kept
+    where the oracle allows it) reads farther; each peak is within 1° of the farthest of those
+    (a Cardan grid at 10° of rotation read the inversion 4.5° short)."""
+    from calibration.joint_angles import _in_band, allowed_boundary_samples, joint_angles
+    from models.oracle import ConstraintOracle
+    from rig.sim.patients import anatomical_limb
+
+    joint = anatomical_limb(1, "leg", "right").joints[2]
+    c = joint.coupling.at(float(joint.coupling.at_deg[0]))
+    oracle = ConstraintOracle(c)
+    q = allowed_boundary_samples(c)
+    assert oracle.is_valid(q).all()
+    rng = np.random.default_rng(7)
+    near = Q.multiply(Q.from_axis_angle(Q.random_unit_vectors(len(q), rng),
+                                        np.radians(rng.uniform(0.0, 2.0, len(q)))), q)
+    near = near[oracle.is_valid(near)]
+    ang = joint_angles(near, "ankle")
+    where = _in_band(ang, 5.0)
+    rom = constraint_rom(c, "ankle")
+    for key, (pos, neg) in (("alpha", ("dorsiflexion", "plantarflexion")),
+                            ("beta", ("inversion", "eversion"))):
+        v = ang[key][where[key]]
+        assert v.max() <= rom.peaks[pos] + 0.05 and -v.min() <= rom.peaks[neg] + 0.05, key
+        assert v.max() >= rom.peaks[pos] - 1.0 and -v.min() >= rom.peaks[neg] - 1.0, key
