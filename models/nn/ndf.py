@@ -19,8 +19,9 @@ input gradient is analytic (:meth:`DistanceField.value_and_gradient`), so the pr
 in ONNX as matrix products. Training (Sobolev): minibatch Adam on the squared error of the
 value plus ``λ`` times that of the tangent gradient against the exact one, weighted by
 ``1 + 3|s|`` (a gradient error ``δ`` at distance ``s`` lands ``s·δ`` along the boundary), float32,
-one thread per field (a limb's fields side by side), a cosine-decayed rate; samples half
-uniform on the sphere, half within 40° of the boundary (:func:`models.datasets.training_postures`).
+one thread per field (a limb's fields side by side), a cosine-decayed rate; directions 70 %
+uniform on the sphere, the rest within 40° of the boundary
+(:func:`models.datasets.training_postures`).
 
 Projection (:meth:`DistanceField.project`): geodesic steps ``d ← cos(αf⁺) d − sin(αf⁺) ĝ``
 (``ĝ`` the unit tangent gradient, ``f⁺ = max(f, 0)``) with fractions ``α`` = 0.5, 0.5, 0.5, 1, 1:
@@ -39,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from models.datasets._limb import (
+    UNIFORM,
     coupled_directions,
     coupled_targets,
     field_joints,
@@ -63,7 +65,7 @@ class FieldSpec:
     lr: float = 2e-3
     steps: tuple[float, ...] = (0.5, 0.5, 0.5, 1.0, 1.0)  #: projection step fractions
     grad_weight: float = 0.05   #: λ, weight of the gradient term (Sobolev training)
-    uniform: float = 0.5        #: fraction of training directions uniform on the sphere
+    uniform: float = UNIFORM    #: fraction of training directions uniform on the sphere
     far_weight: float = 3.0     #: gradient term weighted by (1 + far_weight·|s|)
 
 
