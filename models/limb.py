@@ -25,13 +25,21 @@ Coupling semantics
 - Swing polygons may differ in vertex count. Both keyframes' boundaries are oriented alike
   (region to the left), parametrised by normalised arc length from an **anchor** (the vertex
   nearest in azimuth to a reference direction about the keyframes' mean interior point), and
-  resampled at the union of both vertex parameter sets, so each keeps all of its own vertices
-  (every added point lies on one of its edges: the same boundary). Vertex ``i`` of the
-  interpolated polygon is the normalised ``(1 − t) a_i + t b_i``. At ``t = 0`` and ``t = 1`` the
-  polygon is the keyframe's own boundary; every vertex moves continuously with ``t``, so the
-  region does (in the Hausdorff distance): the limits are well defined and continuous in the
-  coupling angle. Each interpolation is checked for self-intersection at
-  :data:`CHECK_STEPS` steps between keyframes when the file is read.
+  **matched**: sampled at :data:`MATCH_POINTS` points each, the monotone pairing of those
+  points with the least summed geodesic distance (dynamic time warping, from the anchors)
+  gives a strictly increasing map between the two parameters (piecewise linear through the
+  mean of each run where one boundary advances while the other waits). Both are resampled at
+  the union of the first's vertex parameters and the second's mapped back, so each keeps all
+  of its own vertices (every added point lies on one of its edges: the same boundary). Vertex
+  ``i`` of the interpolated polygon is the normalised ``(1 − t) a_i + t b_i``. A stretch of
+  boundary the two keyframes share is matched onto itself, so every limit between them holds
+  it (pairing by arc length alone slid along such a stretch wherever the boundaries'
+  lengths differed elsewhere, and cut its corners: a simulated shoulder's coupled limits left
+  1.6 % of the recorded postures more than 1° out, 86 % of them inside both keyframes).
+  At ``t = 0`` and ``t = 1`` the polygon is the keyframe's own boundary; every vertex moves
+  continuously with ``t``, so the region does (in the Hausdorff distance): the limits are well
+  defined and continuous in the coupling angle. Each interpolation is checked for
+  self-intersection at :data:`CHECK_STEPS` steps between keyframes when the file is read.
 - Correction is **hierarchical** (``models.limb_oracle``): a joint on which another depends is
   corrected by its own limits first; the dependent joint is then corrected against its limits
   interpolated at the **corrected** angle. Joints are evaluated in an order where every
@@ -171,6 +179,44 @@ def _anchored(v: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return np.roll(v, -int(np.argmin(np.abs(az))), axis=0)
 
 
+#: Points per boundary on which two keyframes' boundaries are matched (:func:`_match`).
+MATCH_POINTS = 160
+
+
+def _match(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
+    """The monotone matching of two closed boundaries sampled at ``n`` points each from
+    corresponding anchors that minimises the summed geodesic distance of matched points
+    (dynamic time warping): the path ``(i, j)`` pairs (K, 2) from (0, 0) to (n−1, n−1), ties
+    resolved towards the diagonal."""
+    cost = np.arctan2(np.linalg.norm(np.cross(pa[:, None], pb[None]), axis=2), pa @ pb.T)
+    n, m = cost.shape
+    acc = np.full((n + 1, m + 1), np.inf)
+    acc[0, 0] = 0.0
+    for d in range(2, n + m + 1):  # one anti-diagonal at a time
+        i = np.arange(max(1, d - m), min(n, d - 1) + 1)
+        j = d - i
+        acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j - 1],
+                                                               acc[i - 1, j]), acc[i, j - 1])
+    i, j, path = n, m, []
+    while i > 0 and j > 0:
+        path.append((i - 1, j - 1))
+        step = int(np.argmin((acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1])))
+        i, j = (i - 1, j - 1) if step == 0 else (i - 1, j) if step == 1 else (i, j - 1)
+    return np.array(path[::-1])
+
+
+def _warp(path: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A strictly increasing piecewise-linear map between the two boundaries' parameters from
+    a matching path: knots ``(u_a, u_b)`` at (0, 0), at the mean of each run of the path
+    between diagonal steps (where one boundary advances while the other waits), and (1, 1)."""
+    diagonal = np.all(np.diff(path, axis=0) == 1, axis=1)
+    group = np.concatenate(([0], np.cumsum(diagonal)))
+    count = np.bincount(group)
+    ua = np.bincount(group, weights=path[:, 0]) / count / n
+    ub = np.bincount(group, weights=path[:, 1]) / count / n
+    return np.concatenate(([0.0], ua[1:], [1.0])), np.concatenate(([0.0], ub[1:], [1.0]))
+
+
 def corresponding_polygons(a: PolygonSwing, b: PolygonSwing) -> tuple[np.ndarray, np.ndarray]:
     """Two keyframe polygons resampled to vertices in correspondence (see the module
     docstring): ``(A, B)``, both (K, 3), oriented, each holding all of its own vertices."""
@@ -180,12 +226,14 @@ def corresponding_polygons(a: PolygonSwing, b: PolygonSwing) -> tuple[np.ndarray
     centre = centre / np.linalg.norm(centre)
     va = _anchored(oriented_vertices(a), centre)
     vb = _anchored(oriented_vertices(b), centre)
+    s = np.arange(MATCH_POINTS) / MATCH_POINTS
+    ka, kb = _warp(_match(_resample(va, s), _resample(vb, s)), MATCH_POINTS)
     ua, _ = _arc_params(va)
     ub, _ = _arc_params(vb)
-    u = np.unique(np.concatenate((ua, ub)))
+    u = np.unique(np.concatenate((ua, np.interp(ub, kb, ka))))
     keep = np.concatenate(([True], np.diff(u) > 1e-12))
     u = u[keep]
-    return _resample(va, u), _resample(vb, u)
+    return _resample(va, u), _resample(vb, np.interp(u, ka, kb))
 
 
 @dataclass(frozen=True, eq=False)
