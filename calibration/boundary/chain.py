@@ -52,13 +52,14 @@ a coupling** when
    differs with the angle without being a limit that depends on it; limits interpolated from
    such keyframes would leave recorded postures outside, and are not written.
 
-   Where two keyframes share a stretch of boundary but differ in length elsewhere, the
-   interpolation, which pairs boundary points by normalised arc length (:mod:`models.limb`),
-   slides along that stretch and cuts its corners: postures both keyframes hold then lie
-   outside the limits between them. That is the file format's interpolation, not evidence
-   against the coupling (on simulated range-of-motion tests with a true coupling,
-   ``rig.sim.patients.chain_patient``, it left 1-5 % of the postures out, up to 6°, and
-   refused most couplings), so the test is made in two steps. First the evidence: at least
+   Postures both keyframes hold may still lie outside the limits between them where the
+   limits are not linear in the angle, or where the interpolation (:mod:`models.limb`)
+   cuts a corner of a stretch both keyframes share. Boundaries are matched along such
+   stretches (dynamic time warping) since e741674; paired by arc length alone they slid
+   along them and cut their corners (on simulated range-of-motion tests with a true
+   coupling, ``rig.sim.patients.chain_patient``, 1-5 % of the postures out, up to 6°, and
+   most couplings refused). That is the file format's interpolation, not evidence against
+   the coupling, so the test is made in two steps. First the evidence: at least
    ``min_held`` of the postures lie within 1° of the limits or of both keyframes that bracket
    their hinge angle (of the end keyframe beyond it) — a dance's postures lie outside the
    neighbouring keyframe, not only outside the interpolation (the CMU dances: 97.0-98.6 %).
@@ -454,11 +455,10 @@ def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list) -> np.ndarr
     """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within 1° of both keyframes
     that bracket their hinge angle ``theta`` (beyond the end keyframes: of the end one).
 
-    Such a posture may still lie outside the limits interpolated between the two keyframes:
-    the interpolation pairs boundary points by normalised arc length (:mod:`models.limb`), so
-    where two keyframes share a stretch of boundary but differ in length elsewhere, the
-    interpolated boundary slides along that stretch and cuts its corners. That is the file
-    format's interpolation, not evidence against the coupling (module doc, test 3)."""
+    Such a posture may still lie outside the limits interpolated between the two keyframes
+    (where the limits are not linear in the angle, or the interpolation cuts a corner of a
+    shared stretch): the file format's interpolation, not evidence against the coupling
+    (module doc, test 3)."""
     from models.oracle import ConstraintOracle
 
     a = np.array([angle for angle, _ in kept])
