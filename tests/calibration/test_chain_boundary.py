@@ -56,7 +56,21 @@ def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
     assert code == 2 and len(lines) == 1 and needle in lines[0], err
 
 
-def test_a_simulated_range_of_motion_test_is_coupled():
+@pytest.fixture(scope="module")
+def ideal_arm():
+    """Arm 1 (``rig.sim.patients.chain_patient``, ideal sensors) pressed into its limits at
+    every elbow angle: 300 s of true joint orientations at 25 Hz and their times."""
+    import numpy as np
+
+    from rig.sim.limb import NoiseModel
+    from rig.sim.patients import chain_patient
+
+    chain = chain_patient(1, "arm", noise=NoiseModel.ideal())
+    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
+    return chain.joints(t), t
+
+
+def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     """A simulated arm whose shoulder's extension depends on the elbow's angle (the biceps'
     long head, ``rig.sim.patients.anatomical_limb``), pressed into every limit at every elbow
     angle: the coupling is written, each keyframe within 3° of the true limits at its angle.
@@ -68,12 +82,9 @@ def test_a_simulated_range_of_motion_test_is_coupled():
 
     from calibration.boundary import ChainExtractor, boundary_distance
     from models.limb_oracle import LimbOracle
-    from rig.sim.limb import NoiseModel
-    from rig.sim.patients import anatomical_limb, chain_patient
+    from rig.sim.patients import anatomical_limb
 
-    chain = chain_patient(1, "arm", noise=NoiseModel.ideal())
-    t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
-    q = chain.joints(t)
+    q, t = ideal_arm
     ex = ChainExtractor("arm").fit(q, t=t, side="right")
     assert ex.coupled_, ex.coupling_note_
     truth = anatomical_limb(1, "arm").joints[0].coupling
@@ -87,6 +98,37 @@ def test_a_simulated_range_of_motion_test_is_coupled():
     # the wrist's limits do not depend on the elbow: tested, and not coupled
     assert not ex.couplings_["wrist"]["coupled"], ex.couplings_["wrist"]["note"]
     assert ex.limb_.joints[2].coupling is None
+
+
+def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_arm, monkeypatch):
+    """The refinement of test 3: where postures both bracketing keyframes hold lie outside the
+    limits between them, a keyframe is added half-way between the two that leave most out.
+    The limb format now matches keyframe boundaries, so this arm needs none; with boundary
+    points paired by arc length alone (the format before e741674, substituted here) the
+    interpolation cuts the corners the keyframes share, and the extractor must add one."""
+    import numpy as np
+
+    import models.limb as limb_format
+    from calibration.boundary import ChainExtractor
+    from models.limb_oracle import LimbOracle
+
+    def by_arc_length(a, b):
+        centre = a.interior + b.interior
+        centre = centre / np.linalg.norm(centre)
+        va = limb_format._anchored(limb_format.oriented_vertices(a), centre)
+        vb = limb_format._anchored(limb_format.oriented_vertices(b), centre)
+        u = np.unique(np.concatenate((limb_format._arc_params(va)[0],
+                                      limb_format._arc_params(vb)[0])))
+        return limb_format._resample(va, u), limb_format._resample(vb, u)
+
+    monkeypatch.setattr(limb_format, "corresponding_polygons", by_arc_length)
+    q, t = ideal_arm
+    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    assert ex.coupled_, ex.coupling_note_
+    added = [k for k in ex.keyframes_ if k.get("added")]
+    assert added and all(k["supported"] for k in added)
+    dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
+    assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
 
 
 def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
