@@ -111,6 +111,73 @@ class RomResult:
         return out
 
 
+def _limits_rom(request: RomRequest) -> RomResult:
+    """The range of motion a constraint file allows, or one joint's in a limb file (a
+    coupled joint: the largest over its keyframes, movement by movement — what it allows at
+    some angle of the joint it depends on)."""
+    from calibration.clinical import range_of_motion
+    from calibration.joint_angles import JOINT_ANGLES, constraint_rom
+    from models.limb import Limb, load_limits
+
+    path = request.constraint
+    limits = load_limits(path)
+    source = path
+    if isinstance(limits, Limb):
+        names = ", ".join(limits.joint_names)
+        if request.joint is None:
+            raise RigConfigError(f"{path}: a limb file (joints {names}): give --joint")
+        if request.joint not in limits.joint_names:
+            raise RigConfigError(f"{path}: limb {limits.name!r} has no joint "
+                                 f"{request.joint!r} (it has {names})")
+        lj = limits.joints[limits.index(request.joint)]
+        constraints = [lj.constraint] if lj.coupling is None else list(lj.coupling.keyframes)
+        side = request.side or limits.side or "right"
+        source = f"{path}: the {lj.name} of limb {limits.name!r}"
+        if lj.coupling is not None:
+            at = ", ".join(f"{a:.1f}" for a in lj.coupling.at_deg)
+            source += (f", the largest over its keyframes at {lj.coupling.by} {at} deg "
+                       "(the range depends on that joint's angle)")
+        joint = named = request.joint
+    else:
+        constraints = [limits]
+        side = request.side or getattr(limits, "side", None) or "right"
+        joint = request.joint or getattr(limits, "joint", None) or "shoulder"
+        named = joint if joint != "shoulder" else getattr(limits, "joint", None)
+    if joint != "shoulder":
+        if joint not in JOINT_ANGLES:
+            raise RigConfigError(f"{path}: joint {joint!r} has no clinical angles; give "
+                                 f"--joint (one of shoulder, {', '.join(JOINT_ANGLES)})")
+        roms = [constraint_rom(c, joint, side) for c in constraints]
+    else:
+        for c in constraints:
+            c.require_kind("rig rom")
+        roms = [range_of_motion(c, side) for c in constraints]
+    return RomResult(_largest(roms), named, source)
+
+
+def _largest(roms: list):
+    """Movement by movement, the largest of several ranges of motion of one joint (None where
+    every one is None); the arc's widest ends; the shoulder's least ``neutral_outside_deg``."""
+    import dataclasses
+
+    if len(roms) == 1:
+        return roms[0]
+
+    def top(values):
+        got = [v for v in values if v is not None]
+        return max(got) if got else None
+
+    first = roms[0]
+    if hasattr(first, "peaks"):
+        arcs = [r.arc for r in roms if r.arc is not None]
+        return dataclasses.replace(
+            first, peaks={m: top(r.peaks[m] for r in roms) for m in first.peaks},
+            arc=(min(a[0] for a in arcs), max(a[1] for a in arcs)) if arcs else None)
+    return dataclasses.replace(
+        first, neutral_outside_deg=min(r.neutral_outside_deg for r in roms),
+        **{m: top(getattr(r, m) for r in roms) for m in first.MOVEMENTS})
+
+
 def run_rom(request: RomRequest) -> RomResult:
     """Check the request, then read the constraint or extract the recording's boundary, and
     compute the clinical peaks."""
@@ -118,22 +185,7 @@ def run_rom(request: RomRequest) -> RomResult:
 
     request.check()
     if request.constraint is not None:
-        from models.constraint import load_constraint
-
-        constraint = load_constraint(request.constraint)
-        side = request.side or getattr(constraint, "side", None) or "right"
-        joint = request.joint or getattr(constraint, "joint", None) or "shoulder"
-        if joint != "shoulder":
-            from calibration.joint_angles import JOINT_ANGLES, constraint_rom
-
-            if joint not in JOINT_ANGLES:
-                raise RigConfigError(f"{request.constraint}: joint {joint!r} has no clinical "
-                                     f"angles; give --joint (one of shoulder, "
-                                     f"{', '.join(JOINT_ANGLES)})")
-            return RomResult(constraint_rom(constraint, joint, side), joint, request.constraint)
-        constraint.require_kind("rig rom")
-        return RomResult(range_of_motion(constraint, side), getattr(constraint, "joint", None),
-                         request.constraint)
+        return _limits_rom(request)
     from rig.readback.boundary import extract
 
     src = request.source

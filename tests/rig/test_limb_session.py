@@ -155,3 +155,31 @@ def test_the_limb_demo_report_renders_in_headless_chromium(leg_demo, tmp_path):
     assert dark_fraction(img) > 0.002  # text, tables, outlines
     assert pixels_near(img, "#4477aa", 0.12) > 200  # recorded postures and hinge angles
     assert pixels_near(img, "#762a83", 0.06) > 30  # the maps' anatomical labels
+
+
+def test_rom_of_a_joint_in_a_limb_file(leg_demo, rig_cli):
+    """`rig rom --constraint LIMB.yaml --joint NAME`: a coupled joint's range is, movement by
+    movement, the largest over its keyframes (what it allows at some knee angle); a limb file
+    without --joint, or with a joint it lacks, is a one-line error."""
+    import json
+
+    from calibration.joint_angles import constraint_rom
+
+    path = leg_demo["out"] / "patient-leg.yaml"
+    ankle = load_limb(path).joints[2]
+    code, out, err = rig_cli(["rom", "--constraint", path, "--joint", "ankle", "--json"])
+    assert code == 0, err
+    got = json.loads(out)
+    each = [constraint_rom(c, "ankle").peaks for c in ankle.coupling.keyframes]
+    for m in ("dorsiflexion", "plantarflexion", "inversion", "eversion"):
+        assert got[m] == pytest.approx(max(p[m] for p in each), abs=0.01), m
+    # the gastrocnemius: more dorsiflexion with the knee bent than straight
+    assert each[-1]["dorsiflexion"] > each[0]["dorsiflexion"] + 2.0
+    code, out, err = rig_cli(["rom", "--constraint", path, "--joint", "ankle"])
+    assert code == 0 and "the largest over its keyframes at knee" in out
+    for args, message in ((["rom", "--constraint", path], "a limb file (joints hip, knee, "
+                                                           "ankle): give --joint"),
+                          (["rom", "--constraint", path, "--joint", "elbow"],
+                           "has no joint 'elbow' (it has hip, knee, ankle)")):
+        code, _, err = rig_cli(args)
+        assert code == 2 and message in err and "Traceback" not in err
