@@ -585,25 +585,6 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
 
 
-def _swing_boundary(swing, step_rad: float) -> np.ndarray:
-    """Points along a swing region's boundary (M, 3), at most ``step_rad`` apart; none for an
-    unconstrained swing."""
-    from models.constraint import ConeSwing
-    from models.geometry import densify
-
-    if swing is None:
-        return np.zeros((0, 3))
-    if not isinstance(swing, ConeSwing):
-        return densify(swing.vertices, math.degrees(step_rad))
-    c = np.asarray(swing.centre, dtype=np.float64)
-    u = np.cross(c, _E[0] if abs(c[0]) < 0.9 else _E[1])
-    u /= np.linalg.norm(u)
-    w = np.cross(c, u)
-    phi = np.arange(0.0, 2 * math.pi, step_rad / max(math.sin(swing.radius), 1e-3))
-    ring = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w
-    return math.cos(swing.radius) * c + math.sin(swing.radius) * ring
-
-
 def allowed_boundary_samples(constraint, step_deg: float = 0.25,
                              interior: int = 80_000) -> np.ndarray:
     """Orientations (N, 4) on the boundary of the set a ball or two-axis constraint allows —
@@ -614,6 +595,7 @@ def allowed_boundary_samples(constraint, step_deg: float = 0.25,
     (an unconstrained twist: at twists 2° apart along the boundary, 10° inside).
     Orientations are ``swing ⊗ twist``, the oracle's decomposition about the limb axis, so
     every one is allowed."""
+    from calibration.boundary.compare import swing_boundary_points
     from models.geometry import fibonacci_sphere
     from models.oracle import ConstraintOracle
 
@@ -622,7 +604,8 @@ def allowed_boundary_samples(constraint, step_deg: float = 0.25,
     step = math.radians(step_deg)
     grid = fibonacci_sphere(interior)
     inside = grid if constraint.swing is None else grid[oracle.swing_distance(grid) <= 0.0]
-    edge = _swing_boundary(constraint.swing, step)
+    edge = (np.zeros((0, 3)) if constraint.swing is None
+            else swing_boundary_points(constraint.swing, step_deg)[0])
     # an unconstrained twist has no ends: every direction at twists 2° (edge) / 10° apart
     free = constraint.twist is None
     parts = []
