@@ -57,13 +57,17 @@ Comparison conventions (columns)
     bent).
 ``rec°`` / ``con°`` (clinical peaks; target ≤ 2°)
     Elbow, wrist, hip, knee, ankle: :func:`calibration.joint_angles.recorded_rom` of the
-    calibrated joint orientations against that of the true ones (``rec``), and against
-    :func:`~calibration.joint_angles.constraint_rom` of the truth's loosest limits (``con``).
-    Shoulder: :func:`calibration.clinical.range_of_motion` of the extracted loosest limits
-    with the calibrated directions (as ``rig rom`` reads a session) against the truth's
-    loosest limits with the true directions (``rec``) and without them (``con``). The largest
-    error over the movements both report. ``con`` on the ``truth`` path is the gap between
-    where the patient went and the truth's constraint as ``constraint_rom`` reads it.
+    calibrated joint orientations against that of the true ones (``rec``), and against what
+    the truth's limits allow (``con``, :func:`~calibration.joint_angles.allowed_rom`: a
+    coupled joint's largest over its keyframes, movement by movement).
+    Shoulder: :func:`~calibration.joint_angles.allowed_rom` of the extracted limits (a coupled
+    shoulder's largest over its keyframes, as ``rig rom`` reads a limb file) with the
+    calibrated directions against the truth's limits with the true directions (``rec``) and
+    without them (``con``). The largest error over the movements both report. ``con`` on the
+    ``truth`` path is the gap between where the patient went and the truth's limits. (Until
+    2026-11-25 the shoulder's peaks were read at each side's keyframe with the largest swing
+    region: an extracted keyframe whose samples fell short of one movement read it short,
+    up to 15° on the truth path.)
 ``in%`` / ``in1%`` ("no recorded region left out")
     Share of the **true** joint orientations of the free motion that the extracted limb file
     accepts (:class:`models.limb_oracle.LimbOracle`, exact: swing and twist; a coupled joint at
@@ -97,12 +101,11 @@ from calibration import (
     CalibrationError,
     LimbImuCalibration,
     boundary_distance,
-    range_of_motion,
     status_ok,
 )
 from calibration.boundary import ChainExtractor
 from calibration.heading import LimbHeadingCorrection
-from calibration.joint_angles import constraint_rom, recorded_rom
+from calibration.joint_angles import allowed_rom, recorded_rom
 from calibration.joints import JOINTS
 from models import quaternion as Q
 from models.constraint import PolygonSwing
@@ -125,6 +128,12 @@ def loosest(joint):
     if joint.coupling is None:
         return joint.constraint
     return max(joint.coupling.keyframes, key=_area)
+
+
+def keyframes(joint) -> list:
+    """A joint's constraint, or its coupled keyframes' (read as ``rig rom`` reads a limb file:
+    movement by movement the largest over them, :func:`calibration.joint_angles.allowed_rom`)."""
+    return [joint.constraint] if joint.coupling is None else list(joint.coupling.keyframes)
 
 
 def limits_at(joint, angle_deg: float):
@@ -169,14 +178,14 @@ class Truth:
         self.q = q_true
         self.rec_peaks, self.con_peaks = [], []
         for j, joint in enumerate(self.limb.joints):
-            c = loosest(joint)
+            c = keyframes(joint)
             if joint.name == "shoulder":
-                self.rec_peaks.append(range_of_motion(c, side, directions=Q.rotate(
+                self.rec_peaks.append(allowed_rom(c, "shoulder", side, directions=Q.rotate(
                     q_true[:, j], X)).to_dict())
-                self.con_peaks.append(range_of_motion(c, side).to_dict())
+                self.con_peaks.append(allowed_rom(c, "shoulder", side).to_dict())
             else:
                 self.rec_peaks.append(recorded_rom(q_true[:, j], joint.name, side).peaks)
-                self.con_peaks.append(constraint_rom(c, joint.name, side).peaks)
+                self.con_peaks.append(allowed_rom(c, joint.name, side).peaks)
 
 
 def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> dict:
@@ -215,7 +224,8 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> di
                                                   strict=True)]
                 row["kf"] = max(d for _, d in row["kf_list"])
         if tj.name == "shoulder":
-            mine = range_of_motion(loosest(gj), side, directions=Q.rotate(q[:, j], X)).to_dict()
+            mine = allowed_rom(keyframes(gj), "shoulder", side,
+                               directions=Q.rotate(q[:, j], X)).to_dict()
         else:
             mine = recorded_rom(q[:, j], tj.name, side, status=status).peaks
         row["rec"], row["rec_m"] = _peak_error(mine, truth.rec_peaks[j])

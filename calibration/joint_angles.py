@@ -99,9 +99,9 @@ from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
 __all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "POPULATION", "UNKNOWN_AGE",
-           "JointAngleSet", "JointRangeOfMotion", "PopulationValue", "angle_peaks",
-           "constraint_rom", "from_angles", "joint_angles", "population_band",
-           "population_reference", "recorded_rom"]
+           "JointAngleSet", "JointRangeOfMotion", "PopulationValue", "allowed_rom",
+           "angle_peaks", "constraint_rom", "from_angles", "joint_angles", "largest_rom",
+           "population_band", "population_reference", "recorded_rom"]
 
 @dataclass(frozen=True)
 class JointAngleSet:
@@ -650,3 +650,52 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
         out.update(_pair(ang[key][where[key]], *js.movements[k]))
     return JointRangeOfMotion(joint, side, {m: out.get(m) for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
+
+
+def largest_rom(roms: list):
+    """Movement by movement, the largest of several ranges of motion of one joint (None where
+    every one is None): a :class:`JointRangeOfMotion`'s arc its widest ends, a shoulder's
+    (:class:`calibration.clinical.RangeOfMotion`) ``neutral_outside_deg`` the least."""
+    import dataclasses
+
+    if not roms:
+        raise ValueError("largest_rom: no ranges of motion")
+    if len(roms) == 1:
+        return roms[0]
+
+    def top(values):
+        got = [v for v in values if v is not None]
+        return max(got) if got else None
+
+    first = roms[0]
+    if hasattr(first, "peaks"):
+        arcs = [r.arc for r in roms if r.arc is not None]
+        return dataclasses.replace(
+            first, peaks={m: top(r.peaks[m] for r in roms) for m in first.peaks},
+            arc=(min(a[0] for a in arcs), max(a[1] for a in arcs)) if arcs else None)
+    return dataclasses.replace(
+        first, neutral_outside_deg=min(r.neutral_outside_deg for r in roms),
+        **{m: top(getattr(r, m) for r in roms) for m in first.MOVEMENTS})
+
+
+def allowed_rom(constraints, joint: str, side: str = "right", *, directions=None):
+    """The clinical range of motion limits allow: one constraint's, or a coupled joint's (its
+    keyframes' constraints, at several angles of the joint it depends on) — what it allows at
+    *some* angle of that joint, movement by movement the largest over the keyframes (a
+    movement a keyframe's recording did not reach would otherwise read short: a simulated
+    shoulder's widest keyframe, by area, read its abduction 15° short).
+
+    The shoulder: :func:`calibration.clinical.range_of_motion` (with the recorded limb
+    ``directions``, each peak the smaller of the limits' and the recording's reading — the
+    same recording for every keyframe, so the largest of the smaller is the smaller of the
+    largest); the other joints: :func:`constraint_rom`. ``rig rom --constraint``, the limb
+    report and the IMU-path benchmark read coupled joints here."""
+    from calibration.clinical import range_of_motion
+    from models.constraint import JointConstraint
+
+    if isinstance(constraints, JointConstraint):
+        constraints = [constraints]
+    if joint == "shoulder":
+        return largest_rom([range_of_motion(c, side, directions=directions)
+                            for c in constraints])
+    return largest_rom([constraint_rom(c, joint, side) for c in constraints])

@@ -115,8 +115,7 @@ def _limits_rom(request: RomRequest) -> RomResult:
     """The range of motion a constraint file allows, or one joint's in a limb file (a
     coupled joint: the largest over its keyframes, movement by movement — what it allows at
     some angle of the joint it depends on)."""
-    from calibration.clinical import range_of_motion
-    from calibration.joint_angles import JOINT_ANGLES, constraint_rom
+    from calibration.joint_angles import JOINT_ANGLES, allowed_rom
     from models.limb import Limb, load_limits
 
     path = request.constraint
@@ -147,35 +146,10 @@ def _limits_rom(request: RomRequest) -> RomResult:
         if joint not in JOINT_ANGLES:
             raise RigConfigError(f"{path}: joint {joint!r} has no clinical angles; give "
                                  f"--joint (one of shoulder, {', '.join(JOINT_ANGLES)})")
-        roms = [constraint_rom(c, joint, side) for c in constraints]
     else:
         for c in constraints:
             c.require_kind("rig rom")
-        roms = [range_of_motion(c, side) for c in constraints]
-    return RomResult(_largest(roms), named, source)
-
-
-def _largest(roms: list):
-    """Movement by movement, the largest of several ranges of motion of one joint (None where
-    every one is None); the arc's widest ends; the shoulder's least ``neutral_outside_deg``."""
-    import dataclasses
-
-    if len(roms) == 1:
-        return roms[0]
-
-    def top(values):
-        got = [v for v in values if v is not None]
-        return max(got) if got else None
-
-    first = roms[0]
-    if hasattr(first, "peaks"):
-        arcs = [r.arc for r in roms if r.arc is not None]
-        return dataclasses.replace(
-            first, peaks={m: top(r.peaks[m] for r in roms) for m in first.peaks},
-            arc=(min(a[0] for a in arcs), max(a[1] for a in arcs)) if arcs else None)
-    return dataclasses.replace(
-        first, neutral_outside_deg=min(r.neutral_outside_deg for r in roms),
-        **{m: top(getattr(r, m) for r in roms) for m in first.MOVEMENTS})
+    return RomResult(allowed_rom(constraints, joint, side), named, source)
 
 
 def run_rom(request: RomRequest) -> RomResult:

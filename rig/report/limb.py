@@ -14,11 +14,12 @@ Sections, per joint in the limb's order:
   (:func:`~calibration.joint_angles.recorded_rom`), what the limits allow
   (:func:`~calibration.joint_angles.constraint_rom`), the AAOS normal value and the recorded
   share of it, and every further reference column the normative table or the range-of-motion
-  objects carry. A coupled swing joint's allowed range is read at its widest keyframe (the
-  largest swing region), a coupled hinge's at the hull of its intervals; the coupling plot
-  shows how the limits change. The shoulder's rows are the shoulder report's
-  (:func:`rig.report.page.rom_rows`: the region's and the recording's reading, the smaller
-  of the two), beside the region's own reading;
+  objects carry. A coupled swing joint's allowed range is, movement by movement, the largest
+  over its keyframes (:func:`~calibration.joint_angles.allowed_rom`: what it allows at some
+  angle of the joint it depends on, as ``rig rom --constraint`` reads it), a coupled hinge's
+  the hull of its intervals; the coupling plot shows how the limits change. The shoulder's
+  rows are the shoulder report's (:func:`rig.report.page.rom_rows`: the region's and the
+  recording's reading, the smaller of the two), beside the region's own reading;
 - **ball and two-axis joints**: the recorded directions of the child segment's long axis and
   the limits' swing boundary (each keyframe's, for a coupled joint) on the shoulder report's
   equal-area map (:func:`rig.report.figures.boundary_figure`), labelled with the anatomical
@@ -310,25 +311,27 @@ def _json_columns(rom_json: Mapping[str, Any], movement: str) -> dict[str, Any]:
     return out
 
 
-def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits, at: str | None, *,
+def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str | None, *,
                     age: float | None, sex: str | None) -> tuple[list[RomRow], str | None]:
-    """The range-of-motion rows of one joint (module doc) and the note under them."""
+    """The range-of-motion rows of one joint (module doc) and the note under them; ``limits``
+    its constraint, or a coupled joint's keyframes (the largest over them)."""
     from calibration.joint_angles import (
         CLINICAL_MOVEMENTS,
         NORMATIVE,
         POPULATION,
         UNKNOWN_AGE,
+        allowed_rom,
+        largest_rom,
         recorded_rom,
     )
 
-    where = f" at {at}" if at else ""
+    where = f" ({at})" if at else ""
     if name == "shoulder":
-        from calibration.clinical import range_of_motion
         from rig.report.page import rom_rows
 
-        rows = rom_rows(limits, side, age=None if age is None else int(age), sex=sex,
-                        directions=Q.limb_direction(q, limits.limb_axis))
-        allowed = range_of_motion(limits, side)
+        rows = rom_rows(allowed_rom(limits, name, side, directions=Q.limb_direction(
+            q, limits[0].limb_axis)), age=None if age is None else int(age), sex=sex)
+        allowed = allowed_rom(limits, name, side)
         for r, m in zip(rows, allowed.MOVEMENTS, strict=True):  # rom_rows' order
             r.allowed_deg = getattr(allowed, m)
         return rows, ("Recorded: the farthest reach along each clinical plane (within 5°) of "
@@ -339,7 +342,7 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits, at: str | None,
     if name not in CLINICAL_MOVEMENTS:
         return [], f"No clinical angles are defined for a joint named {name!r}."
     rec = recorded_rom(q, name, side)
-    allowed = _constraint_rom(limits, name, side)
+    allowed = largest_rom([_constraint_rom(c, name, side) for c in limits])
     rec_json = rec.to_json(age=age, sex=sex)
     pop_src = POPULATION.get(name)
     aaos = NORMATIVE["aaos"].get(name, {})
@@ -718,12 +721,16 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                           software=f"rig {__version__}")
     for j, joint in enumerate(limb.joints):
         sec = JointSection(joint.name, joint.kind, _heading(limb, joint))
-        widest, at = _widest(joint)
-        where = None if at is None else (f"{joint.coupling.by} {at:g}° (its widest keyframe; "
-                                         "the coupling plot shows how its limits change)")
+        limits, where = [joint.constraint], None
         if joint.coupling is not None and joint.kind == "hinge":
-            where = "the hull of its keyframes"
-        sec.rom_rows, sec.rom_note = _joint_rom_rows(joint.name, q[:, j], side, widest, where,
+            limits, where = [joint.loosest()], "the hull of its keyframes"
+        elif joint.coupling is not None:
+            cp = joint.coupling
+            limits = list(cp.keyframes)
+            where = (f"the largest over its keyframes at {cp.by} "
+                     + ", ".join(f"{a:g}" for a in cp.at_deg)
+                     + "°; the coupling plot shows how its limits change")
+        sec.rom_rows, sec.rom_note = _joint_rom_rows(joint.name, q[:, j], side, limits, where,
                                                      age=age, sex=sex)
         if joint.kind == "hinge":
             _hinge_section(sec, limb, j, q[:, j], side, result, reference)

@@ -290,20 +290,19 @@ _ROM_LABELS = {
 }
 
 
-def rom_rows(constraint, side: str, *, age: int | None = None,
-             sex: str | None = None, directions=None) -> list[RomRow]:
-    """The range-of-motion table of a boundary and, when given, the recorded limb directions
-    (:func:`calibration.clinical.range_of_motion`). AAOS values measured in another position
-    (the rotations: at 90° abduction) are not compared; the population reference is the age
-    band and sex when known, women and men apart otherwise."""
+def rom_rows(rom, *, age: int | None = None, sex: str | None = None) -> list[RomRow]:
+    """The range-of-motion table of a shoulder's range of motion
+    (:class:`calibration.clinical.RangeOfMotion`: a boundary's reading and, when it was given
+    the recorded limb directions, the smaller of that and the recording's). AAOS values
+    measured in another position (the rotations: at 90° abduction) are not compared; the
+    population reference is the age band and sex when known, women and men apart
+    otherwise."""
     from calibration.clinical import (
         AAOS_NOT_COMPARABLE,
         NORMATIVE,
         population_reference,
-        range_of_motion,
     )
 
-    rom = range_of_motion(constraint, side, directions=directions)
     rows = []
     for m in rom.MOVEMENTS:
         pop = population_reference(m, age=age, sex=sex)

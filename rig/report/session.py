@@ -206,6 +206,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         Where an IMU recording's orientations come from when its boundary is extracted
         (:func:`rig.readback.joint_orientations_from_store`).
     """
+    from calibration.clinical import range_of_motion
     from rig import __version__
     from rig.errors import user_errors
 
@@ -236,8 +237,9 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.warnings = facts.warnings()
         constraint, rep, origin = _boundary(store, rec_id, joint)
         if constraint is not None:
-            data.rom_rows = rom_rows(constraint, side, age=age, sex=sex,
-                                     directions=None if joint is None else joint.directions)
+            data.rom_rows = rom_rows(range_of_motion(
+                constraint, side, directions=None if joint is None else joint.directions),
+                age=age, sex=sex)
             note = ("Peaks: the farthest reach along each clinical plane (within 5°) of the "
                     f"recorded boundary ({origin}) and of the recorded samples, the smaller of "
                     "the two; rotations with the arm at the side.")

@@ -17,9 +17,12 @@ from calibration.joint_angles import (
     POPULATION,
     UNKNOWN_AGE,
     JointRangeOfMotion,
+    allowed_rom,
     angle_peaks,
+    constraint_rom,
     from_angles,
     joint_angles,
+    largest_rom,
     population_band,
     population_reference,
 )
@@ -236,3 +239,34 @@ def test_recorded_rom_leaves_out_the_samples_the_sensors_flag():
     # nothing trustworthy at all: every sample is used rather than none
     none_ok = ja.recorded_rom(q, "knee", "right", status=np.zeros(len(alpha), int))
     assert none_ok.peaks["flexion"] == pytest.approx(120.0, abs=0.01)
+
+
+def test_a_coupled_joint_allows_the_largest_over_its_keyframes():
+    """What a coupled joint allows at some angle of the joint it depends on: movement by
+    movement the largest over its keyframes, not one keyframe's reading (the straight-leg
+    raise reads the hip's flexion 30-50° short; the straight elbow the shoulder's extension
+    10-20° short)."""
+    from calibration.clinical import range_of_motion
+    from rig.sim.patients import anatomical_limb
+
+    leg, arm = anatomical_limb(4, "leg", "right"), anatomical_limb(4, "arm", "right")
+    hip = list(leg.joints[0].coupling.keyframes)
+    truth = leg.provenance["clinical"]["hip"]
+    got = allowed_rom(hip, "hip", "right")
+    assert abs(got.peaks["flexion"] - truth["flexion"]) < 1.0
+    assert abs(constraint_rom(hip[0], "hip").peaks["flexion"]
+               - truth["flexion_knee_straight"]) < 1.0
+    shoulder = list(arm.joints[0].coupling.keyframes)
+    truth = arm.provenance["clinical"]["shoulder"]
+    got = allowed_rom(shoulder, "shoulder", "right")
+    assert abs(got.extension - truth["extension"]) < 0.5
+    assert abs(range_of_motion(shoulder[0]).extension - truth["extension_elbow_straight"]) < 0.5
+    assert allowed_rom(shoulder[0], "shoulder") == range_of_motion(shoulder[0])
+    # with a recording, each peak the smaller of the limits' (largest) and the recording's
+    d = Q.rotate(Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.radians([-10.0, -20.0, 30.0])),
+                 np.array([1.0, 0.0, 0.0]))
+    rec = allowed_rom(shoulder, "shoulder", "right", directions=d)
+    assert rec.extension == range_of_motion(shoulder[-1], directions=d).extension
+    assert rec.extension is not None and rec.extension < 35.0 and rec.flexion < 35.0
+    with pytest.raises(ValueError, match="no ranges"):
+        largest_rom([])
