@@ -106,7 +106,7 @@ from calibration import (
 from calibration.boundary import ChainExtractor
 from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom, recorded_rom
-from calibration.joints import JOINTS
+from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
 from models.constraint import PolygonSwing
 from models.limb_oracle import LimbOracle
@@ -188,11 +188,13 @@ class Truth:
                 self.con_peaks.append(allowed_rom(c, joint.name, side).peaks)
 
 
-def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> dict:
-    """Extract the limb from joint orientations ``q`` (N, 3, 4) and compare with the truth."""
+def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str,
+            slow: dict | None = None) -> dict:
+    """Extract the limb from joint orientations ``q`` (N, 3, 4) and compare with the truth
+    (``slow``: each joint's measured slow error, as the read path passes it)."""
     side = truth.side
     t0 = time.perf_counter()
-    ex = ChainExtractor(limb).fit(q, t=t, status=status, side=side)
+    ex = ChainExtractor(limb).fit(q, t=t, status=status, side=side, slow_error_deg=slow)
     t_ext = time.perf_counter() - t0
     got = ex.limb_
     res = LimbOracle(got).evaluate(truth.q, normalize=True)
@@ -237,16 +239,21 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str) -> di
 
 
 def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray,
-                      status: np.ndarray | None) -> np.ndarray:
+                      status: np.ndarray | None) -> tuple[np.ndarray, dict]:
     """The recording's sensors with their heading drift removed at the neutral checkpoints
     (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the static window's
-    centre, as the read path does); unchanged without checkpoints."""
+    centre, as the read path does; unchanged without checkpoints), and each joint's slow error
+    as the read path measures it (:attr:`rig.readback.data.ChainData.slow_error_deg`: the
+    correction's uncertainty for the joint's distal sensor over the recording)."""
     if not len(windows):
-        return rec.quaternions
+        return rec.quaternions, {}
     a, b = rec.windows["static"]
     hc = LimbHeadingCorrection(cal).fit(rec.t, rec.quaternions, windows,
                                         status=status, anchors=[0.5 * (a + b)])
-    return hc.apply(rec.t, rec.quaternions)
+    t0, t1 = float(rec.t.min()), float(rec.t.max())
+    slow = {name: hc.sensors_[child].uncertainty_deg(t0, t1) if child in hc.sensors_ else None
+            for name, _, child in LIMB_CHAINS[cal.limb]}
+    return hc.apply(rec.t, rec.quaternions), slow
 
 
 def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
@@ -271,9 +278,10 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
                 src = fused(rec) if host else rec
                 status = None if host else rec.status.min(axis=1)
                 cal = calibrate(src, limb, side, status=not host)
-                q = heading_corrected(src, cal, windows, status)
+                q, slow = heading_corrected(src, cal, windows, status)
                 r = analyse(truth, cal.transform(q[free]), rec.t[free],
-                            None if status is None else status[free], limb)
+                            None if status is None else status[free], limb, slow)
+                r["slow"] = slow
                 r["residual"] = cal.residual_deg_
         except CalibrationError as err:  # a failure is a figure too
             r = {"error": str(err)}

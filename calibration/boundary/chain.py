@@ -77,6 +77,30 @@ smoothing that large would be as large as the dependence the coupling is to show
 simulated arms with 3° of slow sensor error: a shoulder's keyframes at 16 vertices lay 4-13°
 from the recorded ones, and the coupling written from them 8-15° from the truth).
 
+Measured errors
+---------------
+``slow_error_deg`` (per joint: the slow error left in its orientations, as measured — in an
+IMU session the heading correction's own uncertainty for the joint's distal sensor relative
+to its proximal one) is given to each joint's and keyframe's extractor, which then move the
+limits in by what those errors explain (:mod:`calibration.boundary.inset`,
+:mod:`calibration.boundary.twist`: the closest approach of visits to the swing limit, dwells
+at a twist limit, and the twist's singularity at the arm or thigh raised). A keyframe holds
+a share of its joint's samples, too few visits and dwells for estimates of its own:
+estimated per keyframe, they differed from keyframe to keyframe by more than the dependence
+test 2 resolves (a simulated wrist, arm 6: keyframes 4.3° apart along 5 % of their
+boundaries, a coupling where the truth has none), and most keyframes found fewer than the
+five dwells the twist's estimate needs. So the keyframes are extracted twice: the swing
+inset written is the median over the keyframes' own estimates, the twist's from all their
+dwells together (:func:`~calibration.boundary.twist.pooled_insets`). Not the joint's whole
+recording: where the limits depend on the hinge, visits to the union of the keyframes'
+regions stop short of it at most hinge angles, and the estimate would take that for error.
+Test 3 then counts a recorded posture as held when its direction lies within 1° plus the
+swing inset the error made the extraction apply of the swing limits, and its whole
+orientation within that plus the twist inset and its own twist reach at its swing: limits
+moved in by a measured error leave the recorded postures that error carried outside them,
+and that is not evidence against the coupling. Without measured errors (files, sessions
+without neutral checkpoints) nothing moves and the tolerance is 1°.
+
 Unsupported keyframes are left out (the limits between supported ones are interpolated, and
 clamped beyond the end ones, :mod:`models.limb`). Without support a joint's limits are
 extracted from all of its samples, uncoupled, and the report says which test failed
@@ -94,11 +118,14 @@ from typing import Any
 
 import numpy as np
 
+from calibration.boundary.inset import NOISE_REACH
 from calibration.errors import CalibrationError
 from models import quaternion as Q
 from models.errors import ConstraintError
 
 __all__ = ["ChainExtractor"]
+
+_ONE_DEG = float(np.radians(1.0))
 
 
 class ChainExtractor:
@@ -126,6 +153,11 @@ class ChainExtractor:
         ``added``: placed where the interpolation left postures out)
     inside_ : dict, joint → share of the recorded postures valid in that joint (hinges: their
         angle inside the interval); ``limb``: valid in every joint
+    tolerance_deg_ : dict, joint → ``[swing, whole]``: how far outside its swing limits a
+        recorded direction, and outside its limits a recorded orientation, still counted as
+        held in test 3 (1° each, plus the insets its measured slow error made the extraction
+        apply; the twist's reach at each posture's swing comes on top: module doc, "Measured
+        errors")
     reports_ : dict, joint → its extractor's report
     """
 
@@ -184,14 +216,70 @@ class ChainExtractor:
                                  limb_axis=spec.limb_axis, name=name, kind=spec.kind,
                                  by_swing=by_swing)
 
+    def _fit_joint(self, ex, spec, q, t, status, insets=None):
+        """``ex`` fitted on one joint's (or keyframe's) samples with the joint's measured slow
+        error (and a keyframe with its joint's measured ``insets``); the largest swing and
+        twist insets that error made it apply are remembered (``_tolerance``)."""
+        slow = self._slow.get(spec.name)
+        if insets is None:
+            ex.fit(q, t=t, status=status, slow_error_deg=slow)
+        else:
+            ex.fit(q, t=t, status=status, slow_error_deg=slow, insets=insets)
+        if slow:  # a hinge's two ends; a swing joint's region, and its twist's two ends
+            cap = NOISE_REACH * slow
+            sw, tw = self._applied[spec.name]
+            sw = max(sw, min(float(np.max(ex.inset_deg_)), cap))
+            twist = getattr(ex, "twist_inset_deg_", None)
+            if twist is not None:
+                tw = max(tw, min(max(twist), cap))
+            self._applied[spec.name] = (sw, tw)
+        return ex
+
+    def _tolerance(self, spec, q: np.ndarray | None = None):
+        """How far outside a joint's limits a recorded posture still counts as held (tests
+        2-3), radians: ``(swing, whole)`` — its direction within 1° plus the largest swing
+        inset its measured slow error made the extraction apply of the swing limits, and its
+        orientation within that plus the largest twist inset and, for each of the postures
+        ``q`` (N, 4) when given, the reach the error has on its twist at its swing
+        (:func:`calibration.boundary.twist.singular_reach`; module doc, "Measured errors").
+        Without a measured error both are 1°."""
+        from calibration.boundary.twist import singular_reach
+
+        sw, tw = self._applied.get(spec.name, (0.0, 0.0))
+        swing_tol = np.radians(1.0 + sw)
+        whole = swing_tol + np.radians(tw)
+        slow = self._slow.get(spec.name)
+        if q is None or not slow or spec.kind == "hinge":
+            return swing_tol, whole
+        axis = np.asarray(spec.limb_axis, dtype=np.float64)
+        swing = np.arccos(np.clip(Q.rotate(q, axis) @ axis, -1.0, 1.0))
+        return swing_tol, whole + singular_reach(swing, slow)
+
+    def _held(self, limb, j: int, q: np.ndarray, tol) -> np.ndarray:
+        """(N,) bool: the postures ``q`` (N, 3, 4) whose joint ``j`` the limb file holds within
+        ``tol`` (:meth:`_tolerance`): the whole orientation within its tolerance and, with a
+        measured error, the direction within the swing's."""
+        from models.limb_oracle import LimbOracle
+
+        swing_tol, whole = tol
+        held = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
+        if not self._slow.get(limb.joints[j].name):
+            return held
+        wide = _swing_only_limb(limb, j)
+        return held & (LimbOracle(wide).evaluate(q, normalize=True).distance[:, j]
+                       <= swing_tol)
+
     def _keyframe_angles(self, lo: float, hi: float) -> np.ndarray:
         k = int(min(self.max_keyframes, np.floor((hi - lo) / self.keyframe_spacing_deg) + 1))
         return np.linspace(lo, hi, k) if k >= 2 else np.array([0.5 * (lo + hi)])
 
     def fit(self, q, *, t=None, status=None, side: str | None = None,
-            provenance: dict | None = None) -> ChainExtractor:
+            provenance: dict | None = None,
+            slow_error_deg: dict[str, float | None] | None = None) -> ChainExtractor:
         """Extract the limb (module doc) from postures ``q`` (N, 3, 4), sample times ``t``
-        (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors)."""
+        (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors);
+        ``slow_error_deg``: joint name → its measured slow error, degrees (module doc,
+        "Measured errors")."""
         from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
         from models.limb_oracle import LimbOracle
 
@@ -201,11 +289,18 @@ class ChainExtractor:
         chain = LIMB_CHAINS[self.limb]
         specs = [JOINTS[name] for name, _, _ in chain]
         prox, hinge, dist = specs
+        slow = dict(slow_error_deg or {})
+        unknown = sorted(set(slow) - {s.name for s in specs})
+        if unknown:
+            raise ValueError(f"slow_error_deg: no joint {', '.join(unknown)} in the {self.limb}")
+        self._slow = {s.name: (float(slow[s.name]) if slow.get(s.name) else None)
+                      for s in specs}
+        self._applied = {s.name: (0.0, 0.0) for s in specs}
         self.reports_: dict[str, dict] = {}
         constraints: dict[str, Any] = {}
         for spec in (hinge, dist):
-            ex = self._joint_extractor(spec, spec.name).fit(q[:, specs.index(spec)], t=t,
-                                                            status=status)
+            ex = self._fit_joint(self._joint_extractor(spec, spec.name), spec,
+                                 q[:, specs.index(spec)], t, status)
             constraints[spec.name] = ex.constraint_
             self.reports_[spec.name] = ex.report()
         h = constraints[hinge.name].hinge
@@ -226,7 +321,8 @@ class ChainExtractor:
             if found is not None:
                 kept[j] = found
             elif spec.name not in constraints:  # uncoupled (the distal joint's is in hand)
-                ex = self._joint_extractor(spec, spec.name).fit(q[:, j], t=t, status=status)
+                ex = self._fit_joint(self._joint_extractor(spec, spec.name), spec, q[:, j], t,
+                                     status)
                 constraints[spec.name] = ex.constraint_
                 self.reports_[spec.name] = ex.report()
         first = self.couplings_[prox.name]
@@ -241,6 +337,8 @@ class ChainExtractor:
                        else valid[:, i] for i, s in enumerate(specs)], axis=1)
         self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
         self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
+        self.tolerance_deg_ = {s.name: [float(np.degrees(x)) for x in self._tolerance(s)]
+                               for s in specs}
         return self
 
     def _coupling(self, j, chain, specs, constraints, q, ts, st, theta, h, fixed, side,
@@ -249,7 +347,6 @@ class ChainExtractor:
         (module doc, tests 1-3), the couplings already decided (``fixed``: joint index →
         keyframes) in the limb file it is judged in: (keyframes or None, what was found)."""
         from calibration.boundary.compare import boundary_distance
-        from models.limb_oracle import LimbOracle
 
         spec, hinge = specs[j], specs[1]
         at = self._keyframe_angles(h.min_deg, h.max_deg)
@@ -301,12 +398,14 @@ class ChainExtractor:
             except ConstraintError as err:
                 note = f"keyframes could not be interpolated ({err})"
                 continue
-            dist = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j]
-            held = float(np.mean((dist <= np.radians(1.0))
-                                 | _held_by_keyframes(q[:, j], theta, kept)))
+            tol = self._tolerance(spec, q[:, j])
+            held = float(np.mean(self._held(limb, j, q, tol)
+                                 | _held_by_keyframes(q[:, j], theta, kept, tol,
+                                                      bool(self._slow.get(spec.name)))))
             if held < self.min_held:
                 note = (f"the coupled limits and their keyframes would hold {100 * held:.1f} % "
-                        f"of the recorded postures within 1 deg (< {100 * self.min_held:g} %): "
+                        f"of the recorded postures within {np.degrees(tol[0]):.1f} deg (< "
+                        f"{100 * self.min_held:g} %): "
                         "the recording shows where the "
                         f"{spec.name} went at each {hinge.name} angle, not a limit that depends "
                         "on it")
@@ -316,7 +415,8 @@ class ChainExtractor:
                                                    fixed, side, provenance)
             if held < self.min_held:
                 note = (f"the coupled limits would hold {100 * held:.1f} % of the recorded "
-                        f"postures within 1 deg (< {100 * self.min_held:g} %) with "
+                        f"postures within {np.degrees(tol[0]):.1f} deg "
+                        f"(< {100 * self.min_held:g} %) with "
                         f"{len(kept)} keyframes: the interpolation between them, or keyframes "
                         "extracted from too few samples, cut the recorded range")
                 break
@@ -348,13 +448,12 @@ class ChainExtractor:
         recorded postures more than 1° out (module doc), while fewer than ``min_held`` are
         held and the recording supports one there; each addition kept only if the file then
         holds more."""
-        from models.limb_oracle import LimbOracle
 
         spec = specs[j]
-        tol = np.radians(1.0)
+        tol = self._tolerance(spec, q[:, j])
 
         def holds(lb) -> tuple[np.ndarray, float]:
-            out = LimbOracle(lb).evaluate(q, normalize=True).distance[:, j] > tol
+            out = ~self._held(lb, j, q, tol)
             return out, float(np.mean(~out))
 
         out, held = holds(limb)
@@ -390,19 +489,36 @@ class ChainExtractor:
 
     def _keyframes(self, spec, j, q, ts, st, supported, cells, budget) -> list:
         """(angle, constraint) of each supported keyframe of joint ``j`` whose samples
-        (``cells``) extract."""
-        kept = []
+        (``cells``) extract; with a measured slow error, extracted again with the insets
+        pooled over the keyframes (module doc, "Measured errors")."""
+        from calibration.boundary.twist import pooled_insets
+
+        kept, fitted = self._keyframes_once(spec, j, q, ts, st, supported, cells, budget)
+        slow = self._slow.get(spec.name)
+        if slow and len(fitted) >= 2:
+            pooled = (float(np.median([ex.inset_deg_ for ex in fitted])),
+                      pooled_insets([ex.twist_envelope_ for ex in fitted],
+                                    fitted[0].twist_settings(), slow))
+            kept, _ = self._keyframes_once(spec, j, q, ts, st, supported, cells, budget,
+                                           insets=pooled)
+        return kept
+
+    def _keyframes_once(self, spec, j, q, ts, st, supported, cells, budget,
+                        insets=None) -> tuple[list, list]:
+        kept, fitted = [], []
         for info, sel in zip(supported, cells, strict=True):
             ex = self._joint_extractor(spec, f"{spec.name}-at-{info['at_deg']:.0f}",
                                        max_vertices=budget, by_swing=False)
             try:
-                ex.fit(q[sel, j], t=None if ts is None else ts[sel],
-                       status=None if st is None else st[sel])
+                self._fit_joint(ex, spec, q[sel, j], None if ts is None else ts[sel],
+                                None if st is None else st[sel], insets=insets)
             except CalibrationError as err:
                 info["error"] = str(err)
                 continue
+            info.pop("error", None)
             kept.append((float(info["at_deg"]), ex.constraint_))
-        return kept
+            fitted.append(ex)
+        return kept, fitted
 
     def _limb(self, chain, specs, constraints, kept: dict[int, list], side, provenance):
         """The limb file's contents as a validated :class:`models.limb.Limb`; ``kept``: the
@@ -433,6 +549,7 @@ class ChainExtractor:
         the proximal joint's; ``couplings``: every joint's that was tested)."""
         return {"limb": self.limb, "coupled": self.coupled_, "coupling": self.coupling_note_,
                 "keyframes": self.keyframes_, "inside": dict(self.inside_),
+                "tolerance_deg": dict(self.tolerance_deg_),
                 "couplings": {k: dict(v) for k, v in self.couplings_.items()},
                 "joints": self.reports_}
 
@@ -451,9 +568,12 @@ def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> flo
     return float(np.mean(np.bincount(k, minlength=sectors) >= min_samples))
 
 
-def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list) -> np.ndarray:
-    """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within 1° of both keyframes
-    that bracket their hinge angle ``theta`` (beyond the end keyframes: of the end one).
+def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list,
+                       tol=(_ONE_DEG, _ONE_DEG), measured: bool = False) -> np.ndarray:
+    """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within ``tol`` (radians,
+    ``(swing, whole)``: :meth:`ChainExtractor._tolerance`; the swing's checked when the error
+    was ``measured``) of both keyframes that bracket their hinge angle ``theta`` (beyond the
+    end keyframes: of the end one).
 
     Such a posture may still lie outside the limits interpolated between the two keyframes
     (where the limits are not linear in the angle, or the interpolation cuts a corner of a
@@ -462,8 +582,12 @@ def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list) -> np.ndarr
     from models.oracle import ConstraintOracle
 
     a = np.array([angle for angle, _ in kept])
-    near = np.stack([ConstraintOracle(c).signed_distance(q, normalize=True) <= np.radians(1.0)
+    swing_tol, whole = tol
+    near = np.stack([ConstraintOracle(c).signed_distance(q, normalize=True) <= whole
                      for _, c in kept], axis=1)
+    if measured:
+        near &= np.stack([ConstraintOracle(_swing_only(c)).signed_distance(q, normalize=True)
+                          <= swing_tol for _, c in kept], axis=1)
     k = np.clip(np.searchsorted(a, theta, side="right") - 1, 0, len(a) - 2)
     rows = np.arange(len(q))
     both = near[rows, k] & near[rows, k + 1]
@@ -505,3 +629,28 @@ def _cells(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:
     mids = 0.5 * (a[1:] + a[:-1])
     k = np.searchsorted(mids, theta)
     return [k == i for i in range(len(a))]
+
+
+def _swing_only(constraint):
+    """The constraint with its twist left free: its swing limits alone."""
+    from models.constraint import JointConstraint
+
+    d = constraint.to_dict()
+    d["kind"] = "ball"
+    d["twist"] = {"min_deg": -180.0, "max_deg": 180.0}
+    return JointConstraint.from_dict(d)
+
+
+def _swing_only_limb(limb, j: int):
+    """The limb with joint ``j``'s twist left free (its own limits or every keyframe's)."""
+    from models.limb import Limb, inline_constraint
+
+    doc = limb.to_dict()
+    entry = doc["joints"][j]
+    joint = limb.joints[j]
+    if "coupled" in entry:
+        for kf, c in zip(entry["coupled"]["keyframes"], joint.coupling.keyframes, strict=True):
+            kf["constraint"] = inline_constraint(_swing_only(c))
+    else:
+        entry["constraint"] = inline_constraint(_swing_only(joint.constraint))
+    return Limb.from_dict(doc, source="swing limits")

@@ -24,6 +24,7 @@ The fitted attributes are set once, from the steps' results, when every step has
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -128,7 +129,8 @@ class BoundaryExtractor:
     constraint_ : JointConstraint
     centre_ : (3,) unit, projection centre
     vertices_ : (M, 3) polygon vertices; ``interior_`` (3,)
-    twist_deg_ : (float, float), the twist envelope
+    twist_deg_ : (float, float), the twist envelope (``twist_envelope_``: its
+        :class:`~calibration.boundary.twist.TwistEnvelope`, the estimates behind its insets)
     by_swing_ : dict or None, the contract-3 ``by_swing`` mapping
     by_swing_candidate_ : dict or None, the table computed (also when not emitted)
     sparse_arcs_ : list of SparseArc
@@ -274,7 +276,8 @@ class BoundaryExtractor:
 
     # -- fit -------------------------------------------------------------------------------
     def fit(self, q, *, status=None, t=None, provenance: dict | None = None,
-            slow_error_deg: float | None = None) -> BoundaryExtractor:
+            slow_error_deg: float | None = None,
+            insets: tuple[float, tuple[float, float]] | None = None) -> BoundaryExtractor:
         """Extract the boundary from joint orientations.
 
         Parameters
@@ -292,6 +295,11 @@ class BoundaryExtractor:
             heading drift left after the neutral-checkpoint correction, degrees): the evidence
             the visit estimate of the noise inset may use (step 4b). None: no such evidence,
             the inset comes from the measured fast noise only.
+        insets : (swing_deg, (twist_lo_deg, twist_hi_deg)), optional
+            The swing and twist insets already measured on a larger recording of the same
+            sensors, used as they are instead of estimates from these samples (a limb's
+            keyframe, a share of its joint's recording: :class:`ChainExtractor`). The
+            extractor's ``inset_deg_`` and ``twist_inset_deg_`` after a fit are such a pair.
         provenance : dict, optional
             Where the data came from (session, file, ...); extended with the parameters and
             sample counts and stored in the constraint's ``provenance``.
@@ -323,9 +331,15 @@ class BoundaryExtractor:
                 "recorded directions span more than 150 deg from their centre; a swing region "
                 "this large cannot be extracted"
             )
-        swing = alpha_region(p, links, self.region_settings(), self.inset_settings(),
+        inset_settings, twist_settings = self.inset_settings(), self.twist_settings()
+        if insets is not None:
+            inset_settings = dataclasses.replace(inset_settings, measured_deg=float(insets[0]))
+            twist_settings = dataclasses.replace(
+                twist_settings, measured_deg=tuple(float(x) for x in insets[1]))
+        swing = alpha_region(p, links, self.region_settings(), inset_settings,
                              noise_deg=noise, slow_error_deg=slow)
-        twist = twist_envelope(phi, self.twist_settings(), slow)
+        swing_from_axis = np.arccos(np.clip(d @ self.limb_axis, -1.0, 1.0))
+        twist = twist_envelope(phi, twist_settings, slow, swing=swing_from_axis)
         provenance = dict(provenance or {})
         provenance.update({
             "method": "calibration.boundary.BoundaryExtractor",
@@ -381,6 +395,7 @@ class BoundaryExtractor:
         self.twist_noise_deg_ = twist.noise_deg
         self.twist_inset_deg_ = twist.inset_deg
         self.twist_dwells_ = twist.dwells
+        self.twist_envelope_ = twist
         self.by_swing_candidate_ = written.table_candidate
         self.by_swing_ = written.table
         self.sparse_arcs_ = written.arcs

@@ -43,6 +43,7 @@ __all__ = [
     "InsetSettings",
     "difference_std",
     "dwell_depth",
+    "dwell_medians",
     "fast_noise",
     "pileup_offset",
     "swing_inset",
@@ -138,9 +139,16 @@ def dwell_depth(depth: np.ndarray, band: float, min_samples: int,
     envelope, in recording order) within ``band``, at least ``min_samples`` long, whose
     interquartile range is at most ``max_iqr``. Returns their number and the median of their
     median depths (0 when there is none)."""
+    meds = dwell_medians(depth, band, min_samples, max_iqr)
+    return len(meds), (float(np.median(meds)) if meds else 0.0)
+
+
+def dwell_medians(depth: np.ndarray, band: float, min_samples: int,
+                  max_iqr: float) -> list[float]:
+    """Each dwell's median depth (:func:`dwell_depth`), in recording order."""
     idx = np.flatnonzero(depth <= band)
     if idx.size < min_samples:
-        return 0, 0.0
+        return []
     cuts = np.flatnonzero(np.diff(idx) > 1) + 1
     starts = np.concatenate(([0], cuts))
     ends = np.concatenate((cuts, [idx.size]))
@@ -150,8 +158,8 @@ def dwell_depth(depth: np.ndarray, band: float, min_samples: int,
             continue
         q1, q2, q3 = np.percentile(depth[idx[a:b]], [25.0, 50.0, 75.0])
         if q3 - q1 <= max_iqr:
-            meds.append(q2)
-    return len(meds), (float(np.median(meds)) if meds else 0.0)
+            meds.append(float(q2))
+    return meds
 
 
 @dataclass(frozen=True)
@@ -165,6 +173,9 @@ class InsetSettings:
     visit_band_deg, visit_segment_deg : float, samples considered, stretch length
     visit_gap_samples : int, longest gap inside one visit
     visit_min : int, fewest visits a stretch needs to count
+    measured_deg : float or None, an inset already measured on a larger recording of the
+        same sensors (a limb's keyframe: the joint's whole recording), used as it is instead
+        of an estimate from these samples
     """
 
     enabled: bool = True
@@ -173,6 +184,7 @@ class InsetSettings:
     visit_segment_deg: float = 3.0
     visit_gap_samples: int = 20
     visit_min: int = 3
+    measured_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -204,6 +216,9 @@ def swing_inset(poly, p: np.ndarray, noise_deg: float, slow_error_deg: float | N
                                  "slow_error_deg": slow_error_deg}
     if not settings.enabled:
         return InsetEstimate(0.0, estimates)
+    if settings.measured_deg is not None:
+        estimates["measured_deg"] = round(float(settings.measured_deg), 3)
+        return InsetEstimate(float(settings.measured_deg), estimates)
     ring = poly.exterior
     inside = shapely.contains_xy(poly, p[:, 0], p[:, 1])
     dist, arc = ring_distance(ring, p, bound=max(settings.pileup_band_deg,

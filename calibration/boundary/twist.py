@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.boundary.inset import NOISE_REACH, dwell_depth, fast_noise, pileup_offset
+from calibration.boundary.inset import NOISE_REACH, dwell_medians, fast_noise, pileup_offset
 from calibration.boundary.projection import Projection
 from models import quaternion as Q
 
@@ -41,7 +41,10 @@ __all__ = [
     "TwistSettings",
     "choose_table",
     "circular_centre",
+    "end_insets",
     "hold_twists",
+    "pooled_insets",
+    "singular_reach",
     "twist_envelope",
     "twist_table",
 ]
@@ -61,6 +64,9 @@ class TwistSettings:
     enabled : bool, False: the envelope as recorded
     pileup_band_deg : float, depth band of the pile-up histogram (0.25° bins)
     dwell_band_deg, dwell_min_samples, dwell_max_iqr_deg, dwell_min_runs : the dwell test
+    measured_deg : (float, float) or None, each end's inset already measured on a larger
+        recording of the same sensors (a limb's keyframe: the joint's whole recording), used
+        as it is instead of estimates from these samples
     """
 
     enabled: bool = True
@@ -69,6 +75,7 @@ class TwistSettings:
     dwell_min_samples: int = 20
     dwell_max_iqr_deg: float = 3.0
     dwell_min_runs: int = 5
+    measured_deg: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -84,6 +91,8 @@ class TwistEnvelope:
     noise_deg : float, measured white noise of the twist
     inset_deg : (float, float), how far each end was moved in
     dwells : (int, int), dwells found at each end
+    fast_deg : (float, float), each end's fast-noise estimate (capped)
+    dwell_depths : (tuple, tuple), each end's dwells' median depths (degrees)
     """
 
     mid: float
@@ -93,36 +102,86 @@ class TwistEnvelope:
     noise_deg: float
     inset_deg: tuple[float, float]
     dwells: tuple[int, int]
+    fast_deg: tuple[float, float] = (0.0, 0.0)
+    dwell_depths: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
 
 
 def twist_envelope(phi: np.ndarray, settings: TwistSettings,
-                   slow_error_deg: float | None = None) -> TwistEnvelope:
+                   slow_error_deg: float | None = None,
+                   swing: np.ndarray | None = None) -> TwistEnvelope:
     """The envelope of the twists ``phi`` (N,), radians, recording order; each end moved in
-    only as far as the measured errors support (module doc)."""
+    only as far as the measured errors support (module doc). ``swing`` (N,), radians: each
+    sample's swing from the twist axis, for the singularity reach (module doc)."""
     mid = circular_centre(phi)
     rel = Q.wrap_angle_mod(phi - mid)
-    lo, hi = float(rel.min()), float(rel.max())
+    reach = singular_reach(swing, slow_error_deg) if settings.enabled else None
+    # each end from the samples' twists moved in by their own reach
+    at_lo, at_hi = (rel, rel) if reach is None else (rel + reach, rel - reach)
+    lo, hi = float(at_lo.min()), float(at_hi.max())
     noise = fast_noise(np.degrees(np.unwrap(phi))[:, None])
-    inset, dwells = (0.0, 0.0), (0, 0)
-    if settings.enabled:
-        insets, found = [], []
-        for depth in (np.degrees(rel - lo), np.degrees(hi - rel)):
-            fast = min(pileup_offset(depth, settings.pileup_band_deg, 0.25, 2.0),
-                       NOISE_REACH * noise)
-            k, med = dwell_depth(depth, settings.dwell_band_deg, settings.dwell_min_samples,
-                                 settings.dwell_max_iqr_deg)
-            found.append(k)
-            slow = min(med, NOISE_REACH * (slow_error_deg or 0.0)) \
-                if k >= settings.dwell_min_runs else 0.0
-            insets.append(max(fast, slow))
-        a, b = insets
+    inset, dwells, fasts, depths = (0.0, 0.0), (0, 0), (0.0, 0.0), ((), ())
+    if settings.enabled and settings.measured_deg is not None:
+        a, b = (float(x) for x in settings.measured_deg)
         lo, hi = lo + math.radians(a), hi - math.radians(b)
-        inset, dwells = (a, b), (found[0], found[1])
+        inset = (a, b)
+    elif settings.enabled:
+        fast_l, meds_l = [], []
+        width = math.degrees(hi - lo)  # a dwell lies within a quarter of the range of its end
+        for depth in (np.degrees(at_lo - lo), np.degrees(hi - at_hi)):
+            fast_l.append(min(pileup_offset(depth, settings.pileup_band_deg, 0.25, 2.0),
+                              NOISE_REACH * noise))
+            meds_l.append(tuple(dwell_medians(depth, min(settings.dwell_band_deg, width / 4.0),
+                                              settings.dwell_min_samples,
+                                              settings.dwell_max_iqr_deg)))
+        fasts, depths = (fast_l[0], fast_l[1]), (meds_l[0], meds_l[1])
+        a, b = end_insets(fasts, depths, settings, slow_error_deg)
+        lo, hi = lo + math.radians(a), hi - math.radians(b)
+        inset, dwells = (a, b), (len(depths[0]), len(depths[1]))
     tw_lo = math.degrees(float(np.clip(lo + mid, -math.pi, math.pi)))
     tw_hi = math.degrees(float(np.clip(hi + mid, -math.pi, math.pi)))
     if tw_lo > tw_hi:  # the range crosses ±180°: keep the larger side, say so
         tw_lo, tw_hi = (tw_lo, 180.0) if 180.0 - tw_lo >= tw_hi + 180.0 else (-180.0, tw_hi)
-    return TwistEnvelope(mid, rel, tw_lo, tw_hi, noise, inset, dwells)
+    return TwistEnvelope(mid, rel, tw_lo, tw_hi, noise, inset, dwells, fasts, depths)
+
+
+def end_insets(fast: tuple[float, float], dwell_depths, settings: TwistSettings,
+               slow_error_deg: float | None) -> tuple[float, float]:
+    """Each end's inset (degrees) from its fast-noise estimate and its dwells' median depths:
+    the larger of the fast estimate and, with a measured slow error and at least
+    ``dwell_min_runs`` dwells, the median dwell depth capped at ``NOISE_REACH`` × that error
+    (module doc)."""
+    out = []
+    for f, meds in zip(fast, dwell_depths, strict=True):
+        slow = (min(float(np.median(meds)), NOISE_REACH * (slow_error_deg or 0.0))
+                if len(meds) >= settings.dwell_min_runs else 0.0)
+        out.append(max(float(f), slow))
+    return out[0], out[1]
+
+
+def pooled_insets(envelopes: list[TwistEnvelope], settings: TwistSettings,
+                  slow_error_deg: float | None) -> tuple[float, float]:
+    """Each end's inset measured on several recordings' envelopes of the same sensors at
+    once (a limb's keyframes, each a share of its joint's recording): the median of their
+    fast estimates and every dwell of every envelope (:func:`end_insets`) — a keyframe alone
+    holds too few dwells to tell."""
+    fast = tuple(float(np.median([e.fast_deg[k] for e in envelopes])) for k in (0, 1))
+    depths = tuple(tuple(d for e in envelopes for d in e.dwell_depths[k]) for k in (0, 1))
+    return end_insets(fast, depths, settings, slow_error_deg)
+
+
+def singular_reach(swing: np.ndarray | None, slow_error_deg: float | None) -> np.ndarray | None:
+    """How far each sample's twist may be carried by a direction error it shares with its
+    slow error, beyond what a sample at 90° of swing carries (radians, (N,)): a rotation error
+    ``ε`` perpendicular to the limb turns the swing-twist twist by up to ``ε tan(s/2)`` at a
+    swing ``s`` from the twist axis (singular at the axis's antipode, the arm raised
+    overhead), so a sample's twist counts towards an end only beyond
+    ``NOISE_REACH · slow_error · max(0, tan(s/2) − 1)``. None without a measured error or
+    swings."""
+    if swing is None or not slow_error_deg:
+        return None
+    half = np.clip(0.5 * np.asarray(swing, dtype=np.float64), 0.0, math.radians(89.0))
+    return (NOISE_REACH * math.radians(float(slow_error_deg))
+            * np.maximum(0.0, np.tan(half) - 1.0))
 
 
 @dataclass(frozen=True)

@@ -348,7 +348,7 @@ def run_chain(request: ChainRequest) -> ChainResult:
     from rig.readback.files import chain_orientations_from_file
 
     request.check()
-    status = None
+    status, slow = None, None
     if request.file is None:
         from rig.readback.sessions import read_chain
 
@@ -359,6 +359,9 @@ def run_chain(request: ChainRequest) -> ChainResult:
         q, t, status, side = chain.q, chain.t, chain.status, request.side or chain.side
         name = request.name or f"session-{request.session_id}-{request.limb}"
         prov = {k: chain.provenance[k] for k in ("session", "calibration_id", "fusion")}
+        slow = chain.slow_error_deg
+        if any(v is not None for v in slow.values()):
+            prov["slow_error_deg"] = slow
     else:
         cols = request.columns()
         frames = request.frames or "rig"
@@ -369,7 +372,7 @@ def run_chain(request: ChainRequest) -> ChainResult:
         prov = {"file": Path(request.file).name, "segments": cols, "frames": frames}
     side = side if side in ("left", "right") else None
     ex = ChainExtractor(request.limb, name=name).fit(q, t=t, status=status, side=side,
-                                                     provenance=prov)
+                                                     provenance=prov, slow_error_deg=slow)
     path = Path(request.out)
     dump_limb(ex.limb_, path)
     return ChainResult(ex, path)

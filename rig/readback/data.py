@@ -162,9 +162,25 @@ class ChainData:
         facts = self.recording
         if facts is not None:  # coverage is the joint's own, not the recorder's live one
             facts = replace(facts, explored=None, sectors=None, sufficient=None)
+        prov = {**self.provenance, "joint": name}
+        hc = prov.get("heading_correction")
+        if hc and "segments" in hc:  # the joint's own: its distal sensor's, relative
+            prov["heading_correction"] = {**hc, "uncertainty_deg": self.slow_error_deg[name]}
         return JointData(self.q[:, self.joints.index(name)], self.status,
                          parse_axis(None) if axis is None else axis, self.side,
-                         {**self.provenance, "joint": name}, self.patient, name, self.t, facts)
+                         prov, self.patient, name, self.t, facts)
+
+    @property
+    def slow_error_deg(self) -> dict[str, float | None]:
+        """Joint → measured size of the slowly varying error left in its orientations: the
+        limb heading correction's own uncertainty for the joint's distal sensor, which is
+        corrected relative to its proximal neighbour (IMU sessions with neutral checkpoints;
+        None otherwise)."""
+        from calibration.joints import LIMB_CHAINS
+
+        segs = (self.provenance.get("heading_correction") or {}).get("segments") or {}
+        return {name: (segs.get(child) or {}).get("uncertainty_deg")
+                for name, _, child in LIMB_CHAINS[self.limb]}
 
 
 def parse_axis(text: str | None) -> np.ndarray:

@@ -365,7 +365,8 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
         evaluation, _ = evaluate_limb(str(model), limb, eval_n, 12345)
     else:
         limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
-            chain.q, t=chain.t, status=chain.status, side=chain.side).limb_
+            chain.q, t=chain.t, status=chain.status, side=chain.side,
+            slow_error_deg=chain.slow_error_deg).limb_
     cal = latest_calibration(store.calibrations(session_id), "imu-limb")
     sess = store.get_session(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)

@@ -205,3 +205,83 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling():
     assert not ex.coupled_
     assert "smoothed to 16 vertices" in ex.coupling_note_
     assert ex.inside_["shoulder"] == 1.0
+
+
+def _rotated(q, deg: float):
+    """Joint orientations with a constant rotation error of ``deg`` about the parent's +Z (a
+    sensor's slow error that the calibration left)."""
+    import math
+
+    import numpy as np
+
+    from models import quaternion as Q
+
+    return Q.multiply(Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), math.radians(deg)), q)
+
+
+def test_twist_limits_from_well_conditioned_samples_with_a_measured_error(ideal_arm):
+    """The swing-twist twist is singular at the limb axis's antipode: a direction error ε turns
+    it by up to ε tan(s/2) at swing s. A constant 2° error put the shoulder's twist envelope
+    10° beyond its true limit (the arm raised); with the error measured, each sample's twist
+    counts only beyond its own reach (calibration.boundary.twist.singular_reach), and the
+    ends land within 1° of the truth. A narrow twist (the wrist's ±4°) is not collapsed by
+    the dwell inset: a dwell lies within a quarter of the range of its end (with 10° it took
+    the whole range: 4.5° in)."""
+    import math
+
+    import numpy as np
+
+    from calibration.boundary.twist import TwistSettings, singular_reach, twist_envelope
+    from models import quaternion as Q
+    from rig.sim.patients import anatomical_limb
+
+    q, t = ideal_arm
+    truth = anatomical_limb(1, "arm")
+    x = np.array([1.0, 0.0, 0.0])
+    qe = _rotated(q[:, 0], 2.0)
+    phi = Q.twist_angle(qe)
+    swing = np.arccos(np.clip(Q.rotate(qe, x) @ x, -1.0, 1.0))
+    tw = truth.joints[0].coupling.keyframes[0].twist
+    plain = twist_envelope(phi, TwistSettings(), None, swing=swing)
+    assert plain.max_deg - tw.max_deg > 5.0  # what the singularity does unmeasured
+    got = twist_envelope(phi, TwistSettings(), 2.0, swing=swing)
+    assert abs(got.min_deg - tw.min_deg) < 1.0 and abs(got.max_deg - tw.max_deg) < 1.0
+    reach = np.degrees(singular_reach(np.radians([0.0, 90.0, 150.0]), 2.0))
+    assert reach[:2] == pytest.approx([0.0, 0.0], abs=1e-9)
+    assert reach[2] == pytest.approx(6.0 * (math.tan(math.radians(75.0)) - 1.0))
+    assert singular_reach(swing, None) is None
+    wrist = truth.joints[2].constraint.twist
+    slow = np.radians(1.5 * np.sin(2.0 * np.pi * t / 23.0))
+    env = twist_envelope(Q.twist_angle(q[:, 2]) + slow, TwistSettings(), 2.0)
+    assert abs(env.min_deg - wrist.min_deg) < 0.5 and abs(env.max_deg - wrist.max_deg) < 0.5
+
+
+def test_a_measured_slow_error_moves_the_limits_in_and_keeps_the_coupling(ideal_arm):
+    """With each joint's measured slow error (the read path's heading-correction uncertainty),
+    the chain's extractors move the limits in by what it explains, the keyframes with insets
+    pooled over them, and tests 2-3 judge the postures within 1° plus those insets: the
+    shoulder's coupling is still written (the twist 10° too wide without the error measured is
+    within 1° of the truth), the wrist is still not coupled."""
+    from calibration.boundary import ChainExtractor, boundary_distance
+    from rig.sim.patients import anatomical_limb
+
+    q, t = ideal_arm
+    q = q.copy()
+    q[:, 0] = _rotated(q[:, 0], 2.0)
+    ex = ChainExtractor("arm").fit(q, t=t, side="right",
+                                   slow_error_deg={"shoulder": 2.0, "wrist": 1.0})
+    assert ex.coupled_, ex.coupling_note_
+    assert not ex.couplings_["wrist"]["coupled"], ex.couplings_["wrist"]["note"]
+    truth = anatomical_limb(1, "arm").joints[0].coupling
+    got = ex.limb_.joints[0].coupling
+    measured = set()
+    for a, c in zip(got.at_deg, got.keyframes, strict=True):
+        assert boundary_distance(c, truth.at(a))["mean_deg"] < 3.0, a
+        tw = truth.at(a).twist
+        assert abs(c.twist.min_deg - tw.min_deg) < 1.5 and abs(c.twist.max_deg - tw.max_deg) < 1.5
+        measured.add(c.provenance["noise_inset_estimates"]["measured_deg"])
+    assert len(measured) == 1  # one inset, pooled over the keyframes
+    assert ex.tolerance_deg_["shoulder"][1] > 1.0 and ex.tolerance_deg_["elbow"] == [1.0, 1.0]
+    assert ex.report()["tolerance_deg"] == ex.tolerance_deg_
+    with pytest.raises(ValueError, match="no joint knee"):
+        ChainExtractor("arm").fit(q[:10], slow_error_deg={"knee": 1.0})
