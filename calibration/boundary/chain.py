@@ -81,25 +81,29 @@ Measured errors
 ---------------
 ``slow_error_deg`` (per joint: the slow error left in its orientations, as measured — in an
 IMU session the heading correction's own uncertainty for the joint's distal sensor relative
-to its proximal one) is given to each joint's and keyframe's extractor, which then move the
-limits in by what those errors explain (:mod:`calibration.boundary.inset`,
-:mod:`calibration.boundary.twist`: the closest approach of visits to the swing limit, dwells
-at a twist limit, and the twist's singularity at the arm or thigh raised). A keyframe holds
-a share of its joint's samples, too few visits and dwells for estimates of its own:
-estimated per keyframe, they differed from keyframe to keyframe by more than the dependence
-test 2 resolves (a simulated wrist, arm 6: keyframes 4.3° apart along 5 % of their
-boundaries, a coupling where the truth has none), and most keyframes found fewer than the
-five dwells the twist's estimate needs. So the keyframes are extracted twice: the swing
-inset written is the median over the keyframes' own estimates, the twist's from all their
-dwells together (:func:`~calibration.boundary.twist.pooled_insets`). Not the joint's whole
-recording: where the limits depend on the hinge, visits to the union of the keyframes'
-regions stop short of it at most hinge angles, and the estimate would take that for error.
-Test 3 then counts a recorded posture as held when its direction lies within 1° plus the
-swing inset the error made the extraction apply of the swing limits, and its whole
-orientation within that plus the twist inset and its own twist reach at its swing: limits
-moved in by a measured error leave the recorded postures that error carried outside them,
-and that is not evidence against the coupling. Without measured errors (files, sessions
-without neutral checkpoints) nothing moves and the tolerance is 1°.
+to its proximal one) gives each swing joint's and keyframe's twist envelope its singular
+reach (:func:`calibration.boundary.twist.singular_reach`: a direction error ε turns the
+swing-twist twist by up to ε·tan(s/2) at a swing s, so a sample at the arm or thigh raised
+counts towards a twist end only beyond that reach), and test 3 counts each recorded posture
+as held within 1° plus its own reach. That is the default, and all it does.
+
+With ``slow_insets`` the limits are also moved in by what the error explains, as the one-
+joint path does (:mod:`calibration.boundary.inset`: the closest approach of visits to the
+swing limit; dwells at a twist limit). A keyframe holds too few visits and dwells for
+estimates of its own (estimated per keyframe they differed by more than test 2 resolves: a
+false wrist coupling), so keyframes are then extracted twice, the swing inset written the
+median of the keyframes' estimates and the twist's from all their dwells together
+(:func:`~calibration.boundary.twist.pooled_insets`; not from the joint's whole recording,
+whose visits to the union of the keyframes' regions stop short of it), and test 3 counts a
+posture held when its direction lies within 1° plus the swing inset of the swing limits and
+its orientation within that plus the twist inset and its reach. Off by default: on held-out
+simulated limbs (``benchmarks/bench_limb_imu.py``, 2026-11-25) it brought every boundary and
+hinge end closer to the truth (shoulder peaks 2.16°), but the limits then lay inside the
+truth by the calibration's bias (up to 1-1.5° at a twist end), the share of true postures
+within 1° fell to 88.5 % (hip), the demo leg's boundary check failed (94.3 % within 1°, ≥ 97
+% asked), and a wrist coupling was written on 2 of 6 arms where none is true.
+
+Without measured errors (files, sessions without neutral checkpoints) nothing changes.
 
 Unsupported keyframes are left out (the limits between supported ones are interpolated, and
 clamped beyond the end ones, :mod:`models.limb`). Without support a joint's limits are
@@ -141,6 +145,9 @@ class ChainExtractor:
         The test of "the data supports a coupling".
     alpha_deg, max_vertices
         The swing extraction's alpha radius and vertex budget (each joint and keyframe).
+    slow_insets : bool
+        Move the limits in by the measured slow error's insets too, not only take its twist
+        reach (module doc, "Measured errors"; off by default).
     name : str
 
     Attributes
@@ -167,7 +174,8 @@ class ChainExtractor:
                  min_difference_deg: float = 3.0, min_local_difference_deg: float = 4.0,
                  min_held: float = 0.99,
                  alpha_deg: float = 4.0,
-                 max_vertices: int = 64, name: str = "recorded-limb") -> None:
+                 max_vertices: int = 64, name: str = "recorded-limb",
+                 slow_insets: bool = False) -> None:
         from calibration.joints import LIMB_CHAINS
 
         if limb not in LIMB_CHAINS:
@@ -190,6 +198,7 @@ class ChainExtractor:
         self.alpha_deg = float(alpha_deg)
         self.max_vertices = int(max_vertices)
         self.name = name
+        self.slow_insets = bool(slow_insets)
 
     def params(self) -> dict[str, Any]:
         return {"limb": self.limb, "keyframe_spacing_deg": self.keyframe_spacing_deg,
@@ -201,7 +210,7 @@ class ChainExtractor:
                 "min_local_difference_deg": self.min_local_difference_deg,
                 "min_held": self.min_held,
                 "alpha_deg": self.alpha_deg,
-                "max_vertices": self.max_vertices}
+                "max_vertices": self.max_vertices, "slow_insets": self.slow_insets}
 
     # -- the parts --------------------------------------------------------------------------
     def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
@@ -221,6 +230,12 @@ class ChainExtractor:
         error (and a keyframe with its joint's measured ``insets``); the largest swing and
         twist insets that error made it apply are remembered (``_tolerance``)."""
         slow = self._slow.get(spec.name)
+        if not self.slow_insets:  # the error's twist reach alone (module doc)
+            if slow and spec.kind != "hinge":
+                ex.fit(q, t=t, status=status, reach_error_deg=slow)
+            else:
+                ex.fit(q, t=t, status=status)
+            return ex
         if insets is None:
             ex.fit(q, t=t, status=status, slow_error_deg=slow)
         else:
@@ -263,7 +278,7 @@ class ChainExtractor:
 
         swing_tol, whole = tol
         held = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
-        if not self._slow.get(limb.joints[j].name):
+        if not (self.slow_insets and self._slow.get(limb.joints[j].name)):
             return held
         wide = _swing_only_limb(limb, j)
         return held & (LimbOracle(wide).evaluate(q, normalize=True).distance[:, j]
@@ -401,7 +416,8 @@ class ChainExtractor:
             tol = self._tolerance(spec, q[:, j])
             held = float(np.mean(self._held(limb, j, q, tol)
                                  | _held_by_keyframes(q[:, j], theta, kept, tol,
-                                                      bool(self._slow.get(spec.name)))))
+                                                      self.slow_insets
+                                                      and bool(self._slow.get(spec.name)))))
             if held < self.min_held:
                 note = (f"the coupled limits and their keyframes would hold {100 * held:.1f} % "
                         f"of the recorded postures within {np.degrees(tol[0]):.1f} deg (< "
@@ -495,7 +511,7 @@ class ChainExtractor:
 
         kept, fitted = self._keyframes_once(spec, j, q, ts, st, supported, cells, budget)
         slow = self._slow.get(spec.name)
-        if slow and len(fitted) >= 2:
+        if slow and self.slow_insets and len(fitted) >= 2:
             pooled = (float(np.median([ex.inset_deg_ for ex in fitted])),
                       pooled_insets([ex.twist_envelope_ for ex in fitted],
                                     fitted[0].twist_settings(), slow))

@@ -277,7 +277,8 @@ class BoundaryExtractor:
     # -- fit -------------------------------------------------------------------------------
     def fit(self, q, *, status=None, t=None, provenance: dict | None = None,
             slow_error_deg: float | None = None,
-            insets: tuple[float, tuple[float, float]] | None = None) -> BoundaryExtractor:
+            insets: tuple[float, tuple[float, float]] | None = None,
+            reach_error_deg: float | None = None) -> BoundaryExtractor:
         """Extract the boundary from joint orientations.
 
         Parameters
@@ -300,6 +301,9 @@ class BoundaryExtractor:
             sensors, used as they are instead of estimates from these samples (a limb's
             keyframe, a share of its joint's recording: :class:`ChainExtractor`). The
             extractor's ``inset_deg_`` and ``twist_inset_deg_`` after a fit are such a pair.
+        reach_error_deg : float, optional
+            A measured slow error used for the twist's singular reach alone (step 6), not for
+            any inset (a limb's joints: :class:`ChainExtractor`); default ``slow_error_deg``.
         provenance : dict, optional
             Where the data came from (session, file, ...); extended with the parameters and
             sample counts and stored in the constraint's ``provenance``.
@@ -339,7 +343,8 @@ class BoundaryExtractor:
         swing = alpha_region(p, links, self.region_settings(), inset_settings,
                              noise_deg=noise, slow_error_deg=slow)
         swing_from_axis = np.arccos(np.clip(d @ self.limb_axis, -1.0, 1.0))
-        twist = twist_envelope(phi, twist_settings, slow, swing=swing_from_axis)
+        twist = twist_envelope(phi, twist_settings, slow, swing=swing_from_axis,
+                               reach_error_deg=reach_error_deg)
         provenance = dict(provenance or {})
         provenance.update({
             "method": "calibration.boundary.BoundaryExtractor",

@@ -108,13 +108,17 @@ class TwistEnvelope:
 
 def twist_envelope(phi: np.ndarray, settings: TwistSettings,
                    slow_error_deg: float | None = None,
-                   swing: np.ndarray | None = None) -> TwistEnvelope:
+                   swing: np.ndarray | None = None,
+                   reach_error_deg: float | None = None) -> TwistEnvelope:
     """The envelope of the twists ``phi`` (N,), radians, recording order; each end moved in
     only as far as the measured errors support (module doc). ``swing`` (N,), radians: each
-    sample's swing from the twist axis, for the singularity reach (module doc)."""
+    sample's swing from the twist axis, for the singularity reach (module doc) of
+    ``reach_error_deg`` (default ``slow_error_deg``: a measured error given for the reach
+    alone moves no dwell inset)."""
     mid = circular_centre(phi)
     rel = Q.wrap_angle_mod(phi - mid)
-    reach = singular_reach(swing, slow_error_deg) if settings.enabled else None
+    reach = (singular_reach(swing, reach_error_deg if reach_error_deg is not None
+                            else slow_error_deg) if settings.enabled else None)
     # each end from the samples' twists moved in by their own reach
     at_lo, at_hi = (rel, rel) if reach is None else (rel + reach, rel - reach)
     lo, hi = float(at_lo.min()), float(at_hi.max())
