@@ -166,14 +166,35 @@ class LimbOracle:
         """Validity, distance, projection and correction of every joint, hierarchically."""
         q = check_postures(orientations, self.n_joints, normalize=normalize)
         single = q.ndim == 2
-        q3 = q[None] if single else q
+        res = self._evaluate(q[None] if single else q, self.limb.order)
+        if single:
+            res = LimbResult(*(x[0] for x in (res.valid, res.distance, res.projected,
+                                               res.correction, res.coupling_angle)))
+        return res
+
+    def joint_is_valid(self, orientations, joint: int, *, normalize: bool = False) -> np.ndarray:
+        """``is_valid(orientations)[..., joint]``, evaluating only that joint and the joints
+        its limits depend on (a coupled joint's source, hierarchically)."""
+        q = check_postures(orientations, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        needed, j = set(), joint
+        while j is not None:
+            needed.add(j)
+            j = self._source[j]
+        order = [j for j in self.limb.order if j in needed]
+        valid = self._evaluate(q[None] if single else q, order).valid[:, joint]
+        return valid[0] if single else valid
+
+    def _evaluate(self, q3: np.ndarray, order) -> LimbResult:
+        """The joints in ``order`` (the hierarchy's, each after its source) of postures
+        ``(N, J, 4)``; the other joints' entries are left unset."""
         n, jn = q3.shape[:2]
         valid = np.empty((n, jn), dtype=bool)
         dist = np.empty((n, jn))
         proj = np.empty((n, jn, 4))
         corr = np.empty((n, jn, 4))
         angle = np.full((n, jn), np.nan)
-        for j in self.limb.order:
+        for j in order:
             oracle = self._joint[j]
             qj = np.ascontiguousarray(q3[:, j])
             if isinstance(oracle, ConstraintOracle):
@@ -184,10 +205,7 @@ class LimbOracle:
                 r = oracle.evaluate(qj, angle[:, j])
             valid[:, j], dist[:, j] = r.valid, r.distance
             proj[:, j], corr[:, j] = r.projected, r.correction
-        res = LimbResult(valid, dist, proj, corr, angle)
-        if single:
-            res = LimbResult(*(x[0] for x in (valid, dist, proj, corr, angle)))
-        return res
+        return LimbResult(valid, dist, proj, corr, angle)
 
     def correction(self, orientations, *, normalize: bool = False) -> np.ndarray:
         """Corrective quaternions ``(N, J, 4)``: ``corrected_j = correction_j ⊗ q_j``."""

@@ -155,6 +155,14 @@ class ConstraintOracle:
                         _reaches_seam(h.min, h.max)))
 
     # -- public API ------------------------------------------------------------------------
+    def prepare(self) -> ConstraintOracle:
+        """Build now what the single-orientation path needs (a polygon's grid and cell lists,
+        otherwise built by the first query that pays for them), so that no query of a control
+        loop waits for it. Returns self."""
+        if isinstance(self._swing, SphericalPolygon):
+            self._swing.prepare()
+        return self
+
     def evaluate(self, q, *, normalize: bool = False) -> OracleResult:
         """Validity, distance, projection and correction in one pass.
 

@@ -170,6 +170,9 @@ class Supervisor:
         if not (period_s > 0 and math.isfinite(period_s)):
             raise ValueError(f"period_s: expected a positive number, got {period_s!r}")
         self.oracle = oracle
+        prepare = getattr(oracle, "prepare", None)
+        if prepare is not None:  # not inside the first cycle
+            prepare()
         self.config = config or SupervisorConfig()
         c = self.config
         self.period_s = float(period_s)

@@ -95,6 +95,25 @@ def test_grid_search_equals_brute_force(seed):
     np.testing.assert_array_equal(fast_b, ref_b)
 
 
+def test_the_grid_is_built_when_it_pays_and_changes_no_answer():
+    """A polygon answers its first GRID_AFTER_POINTS points by brute force (no grid: a
+    boundary compared once never pays for one), then builds its grid; the answers are the same
+    bits either way."""
+    rng = np.random.default_rng(12)
+    th = np.linspace(0, 2 * np.pi, 120, endpoint=False)
+    verts = star_polygon([0.3, -0.2, 0.9], 50 + 15 * np.sin(4 * th) + rng.uniform(-2, 2, 120))
+    poly = SphericalPolygon(verts, [0.3, -0.2, 0.9])
+    p = Q.random_unit_vectors(SphericalPolygon.GRID_AFTER_POINTS, rng)
+    before = poly.nearest(p)
+    assert "G" not in vars(poly)  # answered without a grid
+    after = poly.nearest(p[:10])  # past the threshold: the grid is built
+    assert "G" in vars(poly) and poly.mean_candidates < 0.2 * len(verts)
+    np.testing.assert_array_equal(after[0], before[0][:10])
+    np.testing.assert_array_equal(after[1], before[1][:10])
+    np.testing.assert_array_equal(poly.nearest(p)[0], before[0])
+    np.testing.assert_array_equal(poly.nearest(p)[1], before[1])
+
+
 def test_single_point_path_equals_batch():
     rng = np.random.default_rng(9)
     verts = star_polygon([0.2, 0.9, 0.1], rng.uniform(15, 70, size=80))

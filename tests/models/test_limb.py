@@ -310,6 +310,10 @@ def test_the_source_joint_is_corrected_first_and_the_dependant_judged_at_its_cor
     assert not res.valid[:, 1].any()  # the knee is outside its range
     np.testing.assert_allclose(res.coupling_angle[:, 0], math.radians(10), atol=1e-9)
     assert np.array_equal(res.valid[:, 0], at10)
+    # one joint's verdict alone (with its source's correction, not the others') is the same
+    for j in range(3):
+        np.testing.assert_array_equal(oracle.joint_is_valid(bent, j), res.valid[:, j])
+    assert oracle.joint_is_valid(bent[0], 1) == res.valid[0, 1]
 
 
 def test_the_corrected_limb_is_valid_and_a_valid_limb_is_left_alone():

@@ -562,7 +562,7 @@ class SimulatedChain:
             d = Q.rotate(q[:, j], axis)
             trial = base.copy()
             trial[:, j] = Q.from_two_vectors(axis, d)
-            rows = np.nonzero(~self.oracle.is_valid(trial)[:, j])[0]
+            rows = np.nonzero(~self.oracle.joint_is_valid(trial, j))[0]
             if not len(rows):
                 continue
             c = np.broadcast_to(m.centre, (len(rows), 3))
@@ -573,7 +573,7 @@ class SimulatedChain:
                 mid = 0.5 * (lo + hi)
                 p = _arc(c, dd, mid)
                 sub[:, j] = Q.from_two_vectors(axis, p)
-                ok = self.oracle.is_valid(sub)[:, j]
+                ok = self.oracle.joint_is_valid(sub, j)
                 lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
             p = _arc(c, dd, lo)
             old = Q.from_two_vectors(axis, dd)
