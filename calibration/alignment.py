@@ -237,7 +237,7 @@ def _triad(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, float]:
     b2 = v2 - (v2 @ b1) * b1
     n = float(np.linalg.norm(b2))
     b2 = b2 / max(n, 1e-12)
-    return np.column_stack((b1, b2, np.cross(b1, b2))), n
+    return np.column_stack((b1, b2, Q.cross(b1, b2))), n
 
 
 def mean_rotation(q: np.ndarray) -> np.ndarray:

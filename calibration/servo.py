@@ -77,9 +77,9 @@ class ServoChainCalibration:
         a = list(self.axes)
         if len(a) == 1:
             b = Q.perpendicular(a[0])
-            a += [b, np.cross(a[0], b)]
+            a += [b, Q.cross(a[0], b)]
         elif len(a) == 2:
-            a.append(np.cross(a[0], a[1]) / np.linalg.norm(np.cross(a[0], a[1])))
+            a.append(Q.cross(a[0], a[1]) / np.linalg.norm(Q.cross(a[0], a[1])))
         return np.array(a)
 
     def joint_angles(self, poses) -> np.ndarray:

@@ -123,7 +123,7 @@ def random_star_polygon(rng: np.random.Generator | int, *, name: str = "star",
     rho = np.radians(np.clip(rho, 8, 110))
     c = quat.random_unit_vectors(1, rng)[0]
     e1 = quat.perpendicular(c)
-    e2 = np.cross(c, e1)
+    e2 = quat.cross(c, e1)
     verts = (np.cos(rho)[:, None] * c
              + np.sin(rho)[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
     tw = None

@@ -60,6 +60,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from models.errors import GeometryError
+from models.quaternion import cross
 
 __all__ = [
     "SphericalPolygon",
@@ -89,7 +90,7 @@ def fibonacci_sphere(n: int) -> np.ndarray:
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+    return np.arctan2(np.linalg.norm(cross(a, b), axis=-1), np.sum(a * b, axis=-1))
 
 
 # -- validation -------------------------------------------------------------------------------
@@ -147,7 +148,7 @@ def first_crossing(vertices) -> tuple[int, int] | None:
     m = len(verts)
     a0 = verts
     a1 = np.roll(verts, -1, axis=0)
-    n = np.cross(a0, a1)
+    n = cross(a0, a1)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     mid, half, edge = _arc_pieces(a0, a1, _angle(a0, a1))
     # two pieces share a point only if their midpoints are within r_a + r_b; the margin covers
@@ -195,13 +196,13 @@ def _arc_pieces(v0: np.ndarray, v1: np.ndarray, theta: np.ndarray):
 
 def _on_arc(p, a0, a1, n, tol=1e-12):
     """Is unit ``p`` (on the great circle with normal ``n``) within the arc a0→a1?"""
-    return (np.sum(np.cross(a0, p) * n, axis=-1) >= -tol) & (
-        np.sum(np.cross(p, a1) * n, axis=-1) >= -tol
+    return (np.sum(cross(a0, p) * n, axis=-1) >= -tol) & (
+        np.sum(cross(p, a1) * n, axis=-1) >= -tol
     )
 
 
 def _arcs_cross(a0, a1, na, b0, b1, nb):
-    line = np.cross(na, nb)
+    line = cross(na, nb)
     ln = np.linalg.norm(line, axis=1)
     same_circle = ln < 1e-12
     safe = np.where(same_circle, 1.0, ln)[:, None]
@@ -230,12 +231,12 @@ def _arcs_cross(a0, a1, na, b0, b1, nb):
 def polygon_area(vertices, interior) -> float:
     """Solid angle (steradians) of the region bounded by the polygon that contains ``interior``."""
     v = np.asarray(vertices, dtype=np.float64)
-    g = np.cross(v, np.roll(v, -1, axis=0))
+    g = cross(v, np.roll(v, -1, axis=0))
     g /= np.linalg.norm(g, axis=1, keepdims=True)
-    t_out = np.cross(g, v)  # leaving vertex k along edge k
-    t_in = np.cross(np.roll(g, 1, axis=0), v)  # arriving at vertex k along edge k-1
+    t_out = cross(g, v)  # leaving vertex k along edge k
+    t_in = cross(np.roll(g, 1, axis=0), v)  # arriving at vertex k along edge k-1
     turn = np.arctan2(
-        np.einsum("ij,ij->i", np.cross(t_in, t_out), v), np.einsum("ij,ij->i", t_in, t_out)
+        np.einsum("ij,ij->i", cross(t_in, t_out), v), np.einsum("ij,ij->i", t_in, t_out)
     )
     left_area = (2.0 * math.pi - float(turn.sum())) % (4.0 * math.pi)  # region left of travel
     solver = SphericalPolygon(v, interior=None)
@@ -267,11 +268,11 @@ def arc_distance(points, a, b) -> np.ndarray:
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     a = np.broadcast_to(np.asarray(a, dtype=np.float64), p.shape)
     b = np.broadcast_to(np.asarray(b, dtype=np.float64), p.shape)
-    g = np.cross(a, b)
+    g = cross(a, b)
     g = g / np.linalg.norm(g, axis=1, keepdims=True)
     s = np.einsum("ij,ij->i", p, g)
-    in_arc = (np.einsum("ij,ij->i", np.cross(g, a), p) >= 0.0) & (
-        np.einsum("ij,ij->i", np.cross(b, g), p) >= 0.0
+    in_arc = (np.einsum("ij,ij->i", cross(g, a), p) >= 0.0) & (
+        np.einsum("ij,ij->i", cross(b, g), p) >= 0.0
     )
     to_circle = np.abs(np.arcsin(np.clip(s, -1.0, 1.0)))
     to_ends = np.minimum(_angle(p, a), _angle(p, b))
@@ -444,9 +445,9 @@ def nearest_on_polygons(vertices: np.ndarray, points: np.ndarray, chunk_pairs: i
         vb, pb = v[a:a + step], p[a:a + step]
         k = len(vb)
         v1 = np.roll(vb, -1, axis=1)
-        g = np.cross(vb, v1)
+        g = cross(vb, v1)
         g /= np.linalg.norm(g, axis=2, keepdims=True)
-        table = np.stack((g, np.cross(g, vb), np.cross(v1, g), vb, v1), axis=2)  # (k, m, 5, 3)
+        table = np.stack((g, cross(g, vb), cross(v1, g), vb, v1), axis=2)  # (k, m, 5, 3)
         key, in_arc, s, end1 = _pair_keys(table.reshape(k * m, 5, 3), np.repeat(pb, m, axis=0))
         best = np.argmin(key.reshape(k, m), axis=1)  # first minimum: lowest edge index
         sel = np.arange(k) * m + best
@@ -522,10 +523,10 @@ class SphericalPolygon:
         self.m = len(v)
         self.v0 = v
         self.v1 = np.roll(v, -1, axis=0)
-        g = np.cross(self.v0, self.v1)
+        g = cross(self.v0, self.v1)
         self.g = g / np.linalg.norm(g, axis=1, keepdims=True)  # geometric edge normals
-        self.t0 = np.cross(self.g, self.v0)  # along the edge at its start
-        self.t1 = np.cross(self.v1, self.g)  # back along the edge at its end
+        self.t0 = cross(self.g, self.v0)  # along the edge at its start
+        self.t1 = cross(self.v1, self.g)  # back along the edge at its end
         self.orient = 1.0
         self._set_pseudo_normals()
         if interior is None:  # only unsigned distances are wanted

@@ -147,7 +147,7 @@ def oriented_vertices(swing: PolygonSwing) -> np.ndarray:
 def _arc_params(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cumulative normalised arc length at each vertex (starting 0) and the edge lengths."""
     nxt = np.roll(v, -1, axis=0)
-    lengths = np.arctan2(np.linalg.norm(np.cross(v, nxt), axis=1), np.einsum("ij,ij->i", v, nxt))
+    lengths = np.arctan2(np.linalg.norm(Q.cross(v, nxt), axis=1), np.einsum("ij,ij->i", v, nxt))
     cum = np.concatenate(([0.0], np.cumsum(lengths)[:-1])) / lengths.sum()
     return cum, lengths
 
@@ -188,7 +188,7 @@ def _match(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     corresponding anchors that minimises the summed geodesic distance of matched points
     (dynamic time warping): the path ``(i, j)`` pairs (K, 2) from (0, 0) to (n−1, n−1), ties
     resolved towards the diagonal."""
-    cost = np.arctan2(np.linalg.norm(np.cross(pa[:, None], pb[None]), axis=2), pa @ pb.T)
+    cost = np.arctan2(np.linalg.norm(Q.cross(pa[:, None], pb[None]), axis=2), pa @ pb.T)
     n, m = cost.shape
     acc = np.full((n + 1, m + 1), np.inf)
     acc[0, 0] = 0.0
@@ -404,7 +404,7 @@ def _inside_point(v: np.ndarray) -> np.ndarray:
     """A point inside an oriented polygon: the midpoint of its longest edge nudged inwards."""
     nxt = np.roll(v, -1, axis=0)
     i = int(np.argmax(np.linalg.norm(nxt - v, axis=1)))
-    g = np.cross(v[i], nxt[i])
+    g = Q.cross(v[i], nxt[i])
     g /= np.linalg.norm(g)
     mid = v[i] + nxt[i]
     mid /= np.linalg.norm(mid)

@@ -73,7 +73,7 @@ _SEGMENTS = {"leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"),
 
 def _star(centre: np.ndarray, phi: np.ndarray, rho_deg: np.ndarray) -> list[list[float]]:
     e1 = Q.perpendicular(centre)
-    e2 = np.cross(centre, e1)
+    e2 = Q.cross(centre, e1)
     rho = np.radians(rho_deg)
     v = (np.cos(rho)[:, None] * centre
          + np.sin(rho)[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
@@ -202,7 +202,7 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
                 cos_t = rng.uniform(math.cos(radius), 1.0, k)
                 az = rng.uniform(0, 2 * np.pi, k)
                 e1 = Q.perpendicular(centre)
-                e2 = np.cross(centre, e1)
+                e2 = Q.cross(centre, e1)
                 sin_t = np.sqrt(1.0 - cos_t**2)
                 d = (cos_t[:, None] * centre + sin_t[:, None] * (
                     np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2))

@@ -578,7 +578,7 @@ def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> flo
         return 0.0
     c = m / np.linalg.norm(m)
     e1 = Q.perpendicular(c)
-    e2 = np.cross(c, e1)
+    e2 = Q.cross(c, e1)
     az = np.arctan2(d @ e2, d @ e1)
     k = np.floor((az + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
     return float(np.mean(np.bincount(k, minlength=sectors) >= min_samples))

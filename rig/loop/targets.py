@@ -288,7 +288,7 @@ class ScriptedTargets(TargetSource):
     def _basis(self):
         c = self.centre
         e1 = Q.perpendicular(c)
-        e2 = np.cross(c, e1)
+        e2 = Q.cross(c, e1)
         return c, e1, e2
 
     def _direction(self, azimuth: float, polar: float) -> np.ndarray:

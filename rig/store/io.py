@@ -156,6 +156,43 @@ def _quat(parts: list[str], where: str) -> tuple[float, float, float, float]:
     return vals[0], vals[1], vals[2], vals[3]
 
 
+def _parse_rows(time_cells: list[str], quat_cells: list[str], n_cols: int):
+    """Every data row at once: times (N,) and quaternions (N, C, 4) — or None when any cell
+    would fail :func:`_check_row` (not a number, not four components, NaN, infinite, zero, not
+    unit), so that the per-row checks name it. Parses as ``float`` does."""
+    if any(cell.count(",") != 3 for cell in quat_cells):
+        return None
+    try:
+        t = np.array(time_cells).astype(np.float64)
+        q = np.array(",".join(quat_cells).split(",")).astype(np.float64)
+    except ValueError:
+        return None
+    q = q.reshape(len(time_cells), n_cols, 4)
+    if not (np.isfinite(t).all() and np.isfinite(q).all()):
+        return None
+    n = np.sqrt(np.sum(q * q, axis=2))
+    if not (np.abs(n - 1.0) <= NORM_TOLERANCE).all():
+        return None
+    return t, q
+
+
+def _rows_one_by_one(data_lines, quat_cols: list[int], labels: list[str], src: str):
+    """:func:`_parse_rows` a row at a time, raising for the first wrong cell with its line."""
+    times, rows = [], []
+    for ln, cells in data_lines:
+        where = f"{src}:{ln}"
+        times.append(_num(cells[0], f"{where}: time"))
+        row = []
+        for c in quat_cols:
+            parts = cells[c].split(",")
+            if len(parts) != 4:
+                raise RigConfigError(f"{where}: column {labels[c]}: {len(parts)} components, "
+                                     f"expected 4 (w,x,y,z)")
+            row.append(_quat(parts, f"{where}: column {labels[c]}"))
+        rows.append(row)
+    return np.array(times), np.array(rows, dtype=np.float64)
+
+
 def _check_time(t: np.ndarray, lines: list[int], src: str, what: str = "time") -> None:
     if t.size > 1:
         d = np.diff(t)
@@ -230,9 +267,9 @@ def read_sto(path: str | os.PathLike) -> OrientationTable:
     ncol = len(labels)
     if len(set(labels)) != ncol:
         raise RigConfigError(f"{src}:{label_line}: duplicate column labels")
-    times: list[float] = []
-    rows: list[list[tuple]] = []
-    line_nos: list[int] = []
+    time_cells: list[str] = []
+    quat_cells: list[str] = []
+    data_lines: list[tuple[int, list[str]]] = []
     quat_cols: list[int] | None = None
     for j in range(i, len(lines)):
         raw = lines[j].rstrip("\r\n")
@@ -253,23 +290,18 @@ def read_sto(path: str | os.PathLike) -> OrientationTable:
                 raise RigConfigError(
                     f"{src}:{ln}: no quaternion columns (cells of four comma-separated numbers)"
                 )
-        times.append(_num(cells[0], f"{src}:{ln}: time"))
-        row = []
-        for c in quat_cols:
-            parts = cells[c].split(",")
-            if len(parts) != 4:
-                raise RigConfigError(
-                    f"{src}:{ln}: column {labels[c]}: {len(parts)} components, expected 4 (w,x,y,z)"
-                )
-            row.append(_quat(parts, f"{src}:{ln}: column {labels[c]}"))
-        rows.append(row)
-        line_nos.append(ln)
-    if not rows:
+        time_cells.append(cells[0])
+        quat_cells.extend(cells[c] for c in quat_cols)
+        data_lines.append((ln, cells))
+    if not data_lines:
         raise RigConfigError(f"{src}: no data rows")
-    t = np.array(times)
-    _check_time(t, line_nos, src)
-    arr = np.array(rows, dtype=np.float64)  # (N, C, 4)
     assert quat_cols is not None
+    line_nos = [ln for ln, _ in data_lines]
+    parsed = _parse_rows(time_cells, quat_cells, len(quat_cols))
+    if parsed is None:  # some cell is wrong: row by row, the first one is named
+        parsed = _rows_one_by_one(data_lines, quat_cols, labels, src)
+    t, arr = parsed
+    _check_time(t, line_nos, src)
     columns = {labels[c]: np.ascontiguousarray(arr[:, k, :]) for k, c in enumerate(quat_cols)}
     return OrientationTable(time=t, columns=columns, rate_hz=rate, meta=meta)
 

@@ -420,7 +420,7 @@ class StarRadial:
     def __init__(self, vertices: np.ndarray, centre: np.ndarray, u: np.ndarray,
                  v: np.ndarray, az: np.ndarray) -> None:
         self.c, self.u, self.v, self.az = centre, u, v, az  # az ascending, one turn
-        self.normal = np.cross(vertices, np.roll(vertices, -1, axis=0))  # edge k: k → k+1
+        self.normal = Q.cross(vertices, np.roll(vertices, -1, axis=0))  # edge k: k → k+1
 
     @classmethod
     def of(cls, constraint: JointConstraint, centre: np.ndarray) -> StarRadial | None:
@@ -447,7 +447,7 @@ class StarRadial:
         a = np.arctan2(d @ self.v, d @ self.u)
         a = self.az[0] + (a - self.az[0]) % (2.0 * math.pi)
         k = np.clip(np.searchsorted(self.az, a, side="right") - 1, 0, len(self.az) - 1)
-        p = np.cross(np.cross(self.c, d), self.normal[k])
+        p = Q.cross(Q.cross(self.c, d), self.normal[k])
         p /= np.linalg.norm(p, axis=1, keepdims=True)
         tangent = d - (d @ self.c)[:, None] * self.c
         return p * np.where(np.sum(p * tangent, axis=1) < 0.0, -1.0, 1.0)[:, None]
