@@ -414,6 +414,24 @@ def _pair_keys(t: np.ndarray, p: np.ndarray):
     return key, in_arc, s, end_is_1
 
 
+def _all_pair_keys(g, t0, t1, v0, v1, p):
+    """:func:`_pair_keys` of every point with every edge of its polygon, without gathering a
+    table per pair (the same arithmetic, the same bits): the edge rows (M, 3) of one polygon,
+    or (N, M, 3) of one polygon per point; points ``p`` (N, 3). Returns (N, M) arrays."""
+    pp = p[:, None, :]
+    s = np.einsum("...j,...j->...", g, pp)
+    in_arc = ((np.einsum("...j,...j->...", t0, pp) >= 0.0)
+              & (np.einsum("...j,...j->...", t1, pp) >= 0.0) & (np.abs(s) < 1.0 - 1e-12))
+    s2 = s * s
+    key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+    e0 = v0 - pp
+    e1 = v1 - pp
+    k0 = np.einsum("...j,...j->...", e0, e0)
+    k1 = np.einsum("...j,...j->...", e1, e1)
+    key = np.where(in_arc, key_in, np.minimum(k0, k1))
+    return key, in_arc, s, k1 < k0
+
+
 def nearest_on_polygons(vertices: np.ndarray, points: np.ndarray, chunk_pairs: int = 400_000):
     """Signed distance and nearest boundary point of each point to **its own** polygon.
 
@@ -447,15 +465,13 @@ def nearest_on_polygons(vertices: np.ndarray, points: np.ndarray, chunk_pairs: i
         v1 = np.roll(vb, -1, axis=1)
         g = cross(vb, v1)
         g /= np.linalg.norm(g, axis=2, keepdims=True)
-        table = np.stack((g, cross(g, vb), cross(v1, g), vb, v1), axis=2)  # (k, m, 5, 3)
-        key, in_arc, s, end1 = _pair_keys(table.reshape(k * m, 5, 3), np.repeat(pb, m, axis=0))
-        best = np.argmin(key.reshape(k, m), axis=1)  # first minimum: lowest edge index
-        sel = np.arange(k) * m + best
-        key, in_arc, s, end1 = key[sel], in_arc[sel], s[sel], end1[sel]
+        key, in_arc, s, end1 = _all_pair_keys(g, cross(g, vb), cross(v1, g), vb, v1, pb)
+        best = np.argmin(key, axis=1)  # first minimum: lowest edge index
         rows = np.arange(k)
-        vidx = np.where(end1, (best + 1) % m, best)
+        vidx = np.where(end1[rows, best], (best + 1) % m, best)
         vnormal = g[rows, vidx] + g[rows, (vidx - 1) % m]  # inward normals of its two edges
-        dist[a:a + k], near[a:a + k] = _finish(pb, key, in_arc, s, 1.0, vnormal,
+        dist[a:a + k], near[a:a + k] = _finish(pb, key[rows, best], in_arc[rows, best],
+                                               s[rows, best], 1.0, vnormal,
                                                (g[rows, best], vb[rows, vidx]))
     return dist, near
 
@@ -603,22 +619,21 @@ class SphericalPolygon:
             dist = np.concatenate([x[0] for x in parts])
             pts = np.concatenate([x[1] for x in parts]) if need_point else None
             return dist, pts
-        pi = np.repeat(np.arange(n), self.m)
-        e = np.tile(np.arange(self.m), n)
-        key, in_arc, s, end1 = self._pair_keys(p[pi], e)
-        best = np.argmin(key.reshape(n, self.m), axis=1)  # first minimum: lowest edge index
-        sel = np.arange(n) * self.m + best
-        return self._finish(p, best, key[sel], in_arc[sel], s[sel], end1[sel], need_point)
+        key, in_arc, s, end1 = _all_pair_keys(self.g, self.t0, self.t1, self.v0, self.v1, p)
+        best = np.argmin(key, axis=1)  # first minimum: lowest edge index
+        r = np.arange(n)
+        return self._finish(p, best, key[r, best], in_arc[r, best], s[r, best], end1[r, best],
+                            need_point)
 
     #: (point, edge) pairs per block of :meth:`brute_nearest`
     BRUTE_PAIRS = 1_000_000
 
     # -- grid ------------------------------------------------------------------------------
     #: points answered by brute force before the grid is built: building it costs about as
-    #: much as answering this many points by brute force, at any vertex count (12 to 2,000
-    #: vertices: 16-770 ms against 5-340 µs a point), so a polygon queried a few times (a
-    #: boundary compared once) never builds it and one queried often pays at most twice
-    GRID_AFTER_POINTS = 2000
+    #: much as answering 3,000-7,000 points by brute force from 40 to 2,000 vertices (22-930
+    #: ms against 6-140 µs a point), so a polygon queried a few times (a boundary compared
+    #: once) never builds it and one queried often pays at most about twice the least
+    GRID_AFTER_POINTS = 4000
     #: finest grid and the candidate count below which refining stops paying
     MAX_GRID = 128
     TARGET_CANDIDATES = 6.0
