@@ -94,8 +94,9 @@ def print_summary(result, console) -> None:
     console.print(summary_table(result))
     console.print(f"database: {result.db}   sessions: "
                   + ", ".join(f"{k} {v}" for k, v in result.sessions.items() if v is not None),
-                  markup=False)
+                  markup=False, soft_wrap=True)  # a path is never broken across lines
     if result.report is not None:
-        console.print(f"report:   {result.report}  (open it in a browser)", markup=False)
+        console.print(f"report:   {result.report}  (open it in a browser)", markup=False,
+                      soft_wrap=True)
     verdict = "every stage ran" if result.ok else "a stage FAILED (see above)"
     console.print(f"[bold]{verdict}[/bold] in {result.total_s:.0f} s")

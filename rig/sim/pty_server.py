@@ -149,6 +149,8 @@ class PtyServer:
     @property
     def line_speed(self) -> int | None:
         """The line speed the host set on the port, bit/s (None if unknown or unplugged)."""
+        if self._master < 0:
+            return None
         try:
             return SPEEDS.get(termios.tcgetattr(self._slave)[5])
         except (termios.error, OSError):
@@ -164,9 +166,19 @@ class PtyServer:
         return self._master >= 0
 
     def disconnect(self) -> None:
-        """Unplug the USB adapter: the pty goes away; the host's port fails with EIO."""
+        """Unplug the USB adapter: the pty's master goes away, so the host's port fails with
+        EIO and opening its path again fails too (a driver trying to reconnect keeps trying).
+
+        The slave end stays open here until :meth:`reconnect` or :meth:`close`: the kernel
+        does not give the pty's number to another pty meanwhile, so a driver reopening the old
+        path never reaches somebody else's simulator (another process's, under a parallel
+        test run).
+        """
         with self.lock:
-            self._close_pty()
+            if self._master >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(self._master)
+                self._master = -1
             self.bytes_dropped += len(self._txq)
             self._txq.clear()
             self._on_disconnect()
@@ -176,7 +188,10 @@ class PtyServer:
         """Plug the adapter back in: a new pty is opened; returns (and stores) its path."""
         with self.lock:
             if self._master < 0 and not self._closed:
-                self._open_pty()
+                old_slave = self._slave
+                self._open_pty()  # first: the old number is not free for it to take
+                with contextlib.suppress(OSError):
+                    os.close(old_slave)
         self._wake()
         return self.port
 
