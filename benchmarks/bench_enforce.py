@@ -78,12 +78,14 @@ def _train(constraint_path: Path, out: Path) -> Path:
 
 
 BUSY_WAIT = False  # --busy-wait: every supervised loop spins between cycles
+WARM_UP = True  # --no-warm-up: the supervised loops without their warm-up (LoopConfig.warm_up)
 REALTIME = False  # --realtime: every supervised loop's thread under SCHED_FIFO when permitted
 
 
 def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None, clock=None):
     cfg = LoopConfig(rate_hz=rate, duration_s=duration,
-                     watchdog_ms=1000 if clock is not None else None, busy_wait=BUSY_WAIT)
+                     watchdog_ms=1000 if clock is not None else None, busy_wait=BUSY_WAIT,
+                     warm_up=WARM_UP)
     kw = {} if clock is None else {"clock": clock, "sleep": clock.sleep}
     with open_port(servos.port, baud=servos.baud) as port:
         chain = prepare_chain(port, servos, oracle)
@@ -112,7 +114,8 @@ def rig_enforce(model_path: Path, out: Path, duration_s: float, *, seed: int,
     cmd = [sys.executable, "-m", "rig", "enforce", "--rig", "sim-shoulder", "--model",
            str(model_path), "--targets", f"script:adversarial?seed={seed}", "--duration",
            str(duration_s), "--summary-json", str(summary), "--quiet", *extra,
-           *(["--busy-wait"] if BUSY_WAIT else []), *(["--realtime"] if REALTIME else [])]
+           *(["--busy-wait"] if BUSY_WAIT else []), *(["--realtime"] if REALTIME else []),
+           *([] if WARM_UP else ["--no-warm-up"])]
     if telemetry:
         cmd += ["--telemetry", str(out.with_suffix(".csv"))]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env())
@@ -177,14 +180,17 @@ def main() -> None:
     ap.add_argument("--model", default=None)
     ap.add_argument("--busy-wait", action="store_true",
                     help="the supervised loops spin between cycles (rig enforce --busy-wait)")
+    ap.add_argument("--no-warm-up", action="store_true",
+                    help="the supervised loops without their warm-up before each deadline "
+                         "(rig enforce --no-warm-up)")
     ap.add_argument("--realtime", action="store_true",
                     help="the supervised loops under SCHED_FIFO when permitted (rig enforce "
                          "--realtime)")
     ap.add_argument("--sections", default=",".join(SECTIONS),
                     help=f"comma-separated, of {', '.join(SECTIONS)}")
     args = ap.parse_args()
-    global BUSY_WAIT, REALTIME
-    BUSY_WAIT, REALTIME = args.busy_wait, args.realtime
+    global BUSY_WAIT, REALTIME, WARM_UP
+    BUSY_WAIT, REALTIME, WARM_UP = args.busy_wait, args.realtime, not args.no_warm_up
     sections = set(args.sections.split(","))
     unknown = sections - set(SECTIONS)
     if unknown:
@@ -205,6 +211,7 @@ def main() -> None:
           f"(preset {model.network_info.get('preset', '?')}); "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; supervised loops "
           f"{'busy-wait' if BUSY_WAIT else 'sleep'} between cycles"
+          f"{', warm-up before each deadline' if WARM_UP else ', no warm-up'}"
           f"{', real-time priority' if REALTIME else ''}")
     compute_us = None
 

@@ -4,7 +4,7 @@ code over :func:`rig.loop.run_enforce`).
 ``rig enforce --rig NAME|FILE --model M.onnx --targets SOURCE [--rate HZ] [--duration S]
 [--telemetry T.csv] [--summary-json S.json] [--db DB [--session ID | --patient P]]
 [--constraint C.yaml] [--force-model] [--safe-state hold|torque-off] [--realtime] [--cpu N]
-[--busy-wait]``
+[--busy-wait] [--no-warm-up]``
 
 Exit status: 2 for a user mistake (one line, before anything moves), 0 when the loop ran to its
 end, 1 when a fault put the limb in the safe state, 130 / 143 after SIGINT / SIGTERM (the limb
@@ -73,11 +73,15 @@ import click
 @click.option("--busy-wait", is_flag=True,
               help="Spin between cycles instead of sleeping: the compute runs on a hot CPU, "
                    "at the cost of a whole core (give it one with --cpu N).")
+@click.option("--no-warm-up", "no_warm_up", is_flag=True,
+              help="Do not run the compute once on the last target shortly before each "
+                   "deadline (the warm-up keeps the real compute's caches warm; it costs that "
+                   "compute again in CPU time per cycle).")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_path,
             summary_path, db, session_id, patient, constraint_path, force_model, safe_state,
             tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms,
-            stale_target_ms, seed, realtime, cpu, busy_wait, quiet) -> None:
+            stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.loop import EnforceHooks, EnforceRequest, run_enforce
     from rig.store.store import pseudonym_warning
@@ -92,7 +96,7 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             force_model=force_model, safe_state=safe_state, tolerance_deg=tolerance_deg,
             max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2,
             stale_servo_ms=stale_servo_ms, stale_target_ms=stale_target_ms, seed=seed,
-            realtime=realtime, cpu=cpu, busy_wait=busy_wait),
+            realtime=realtime, cpu=cpu, busy_wait=busy_wait, warm_up=not no_warm_up),
         echo=(lambda m: None) if quiet else click.echo,
         hooks=EnforceHooks(install_signals=True))
     if quiet:

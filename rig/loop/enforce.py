@@ -67,6 +67,8 @@ class EnforceRequest:
         Pin the loop's thread to this CPU.
     busy_wait : bool
         Spin between cycles instead of sleeping (:class:`~rig.loop.LoopConfig`).
+    warm_up : bool
+        Warm the compute path before each deadline (:class:`~rig.loop.LoopConfig`).
     """
 
     rig: str
@@ -92,6 +94,7 @@ class EnforceRequest:
     realtime: bool = False
     cpu: int | None = None
     busy_wait: bool = False
+    warm_up: bool = True
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
@@ -129,7 +132,7 @@ class EnforceRequest:
         check_cpu(self.cpu)
         return LoopConfig(
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
-            busy_wait=bool(self.busy_wait),
+            busy_wait=bool(self.busy_wait), warm_up=bool(self.warm_up),
             supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
                                         max_velocity_deg_s=float(self.max_velocity_deg_s),
                                         max_accel_deg_s2=float(self.max_accel_deg_s2),

@@ -80,8 +80,18 @@ class Scheduler:
         """Absolute deadline of cycle ``k``."""
         return self.t0 + k * self.period
 
-    def wait(self) -> tuple[int, float, float]:
+    def wait(self, before=None, lead_s: float = 0.0) -> tuple[int, float, float]:
         """Block until the next cycle is due.
+
+        Parameters
+        ----------
+        before : callable, optional
+            Called once while waiting, ``lead_s`` before the deadline (not at all when less
+            than that is left): work that must not delay the cycle (the loop warms its
+            compute path with it).
+        lead_s : float
+            How long before the deadline ``before`` is called, s; 0 calls it at once (a manual
+            clock: one advance per cycle, as without it).
 
         Returns
         -------
@@ -95,6 +105,11 @@ class Scheduler:
         k = self._next
         due = self.t0 + k * self.period
         now = self.clock()
+        if before is not None and due - now > lead_s:
+            if lead_s > 0.0:
+                self._sleep(due - now - lead_s)
+            before()
+            now = self.clock()
         remaining = due - now
         if remaining > self.spin_s:
             self._sleep(remaining - self.spin_s)

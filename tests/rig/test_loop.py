@@ -63,14 +63,14 @@ def models(tmp_path_factory):
 
 
 def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
-         safe_state="hold", before=None, **sup):
+         safe_state="hold", before=None, warm_up=True, **sup):
     """Open the simulated chain, run ``cycles`` cycles on a manual clock, close everything.
 
     Returns (summary, telemetry table, bus, loop).
     """
     oracle = ConstraintOracle(constraint)
     cfg = LoopConfig(rate_hz=200.0, watchdog_ms=watchdog_ms, safe_state=safe_state,
-                     supervisor=SupervisorConfig(**sup))
+                     supervisor=SupervisorConfig(**sup), warm_up=warm_up)
     # the loop and the servos share one simulated clock: the limb moves exactly as far per
     # cycle as the loop's time says, however fast or loaded the test machine is
     with open_port(URL + "&clock=manual&wire_time=off", baud=SERVOS.baud) as port:
@@ -132,6 +132,25 @@ def test_adversarial_targets_never_commanded_beyond_tolerance(models, which):
     assert summary["rate_limited"] == int((bits & Intervention.RATE_LIMITED != 0).sum())
     if which == "wrong-model":
         assert (bits & (Intervention.PROJECTED | Intervention.REPROJECTED)).sum() > 50
+
+
+def test_the_warm_up_changes_nothing_that_is_sent(models):
+    """The warm-up before each deadline runs the compute on copies and throws the result away:
+    with and without it, the same targets give the same corrections, commands and
+    interventions, cycle by cycle. (Not the limb's motion to the last bit: when the simulated
+    servos take a goal relative to the manual clock's next step depends on their thread.)"""
+    constraint, model = models["original+twist"]
+    oracle = ConstraintOracle(constraint)
+    runs = []
+    for warm_up in (True, False):
+        src = ScriptedTargets("adversarial", oracle, seed=3, segment_s=0.5, hold_s=0.25)
+        runs.append(_run(constraint, model, src, cycles=400, warm_up=warm_up))
+    (_, warm, _, loop), (_, cold, _, cold_loop) = runs
+    assert loop.warm_ups > 250 and cold_loop.warm_ups == 0  # each cycle after a usable target
+    for name in ("commanded", "correction", "target"):
+        np.testing.assert_array_equal(_col(warm, name), _col(cold, name), err_msg=name)
+    for name in ("intervention", "faults", "distance_deg", "t_s"):
+        np.testing.assert_array_equal(warm[name], cold[name], err_msg=name)
 
 
 def test_slow_valid_path_is_tracked(models):

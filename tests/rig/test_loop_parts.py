@@ -62,6 +62,21 @@ def test_scheduler_overrun_skips_missed_deadlines_without_a_burst():
     assert cycle == 4 and start == pytest.approx(due)  # back on schedule
 
 
+def test_scheduler_calls_before_its_lead_ahead_of_the_deadline_and_only_with_time_left():
+    clk = ManualClock()
+    s = Scheduler(100.0, clock=clk, sleep=clk.sleep, spin_s=0.0)
+    s.start()
+    calls = []
+    s.wait(lambda: calls.append(clk()), 0.002)  # cycle 0 is due at once: no time left
+    assert calls == [] and not s.finish()
+    cycle, due, start = s.wait(lambda: calls.append(clk()), 0.002)
+    assert cycle == 1 and calls == [pytest.approx(due - 0.002)] and start == pytest.approx(due)
+    clk.advance(0.009)  # cycle 1 works 9 ms: 1 ms left before cycle 2, less than the lead
+    assert not s.finish()
+    cycle, _, _ = s.wait(lambda: calls.append(clk()), 0.002)
+    assert cycle == 2 and len(calls) == 1
+
+
 def test_scheduler_rejects_a_bad_rate():
     with pytest.raises(ValueError, match="rate"):
         Scheduler(0.0)
