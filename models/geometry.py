@@ -398,32 +398,28 @@ class _ArcTree:
 
 
 def _pair_keys(t: np.ndarray, p: np.ndarray):
-    """The per-(point, edge) kernel of :class:`SphericalPolygon`: ``t`` (K, 5, 3) holds each
-    pair's edge as rows g, t0, t1, v0, v1; ``p`` (K, 3) its point. See
-    :meth:`SphericalPolygon._pair_keys` for what is returned."""
-    dots = np.einsum("kij,kj->ki", t[:, :3], p)
-    s = dots[:, 0]
-    in_arc = (dots[:, 1] >= 0.0) & (dots[:, 2] >= 0.0) & (np.abs(s) < 1.0 - 1e-12)
-    s2 = s * s
-    key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
-    # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
-    diff = t[:, 3:] - p[:, None, :]
-    k01 = np.einsum("kij,kij->ki", diff, diff)
-    end_is_1 = k01[:, 1] < k01[:, 0]
-    key = np.where(in_arc, key_in, np.minimum(k01[:, 0], k01[:, 1]))
-    return key, in_arc, s, end_is_1
+    """The per-(point, edge) kernel of :class:`SphericalPolygon` for listed pairs: ``t``
+    (K, 5, 3) holds each pair's edge as rows g, t0, t1, v0, v1; ``p`` (K, 3) its point. See
+    :meth:`SphericalPolygon._pair_keys` for what is returned; the arithmetic is
+    :func:`_all_pair_keys`'s (each pair a polygon of one edge)."""
+    out = _all_pair_keys(*(t[:, None, i] for i in range(5)), p)
+    return tuple(x[:, 0] for x in out)
 
 
 def _all_pair_keys(g, t0, t1, v0, v1, p):
-    """:func:`_pair_keys` of every point with every edge of its polygon, without gathering a
-    table per pair (the same arithmetic, the same bits): the edge rows (M, 3) of one polygon,
-    or (N, M, 3) of one polygon per point; points ``p`` (N, 3). Returns (N, M) arrays."""
+    """Squared chord from each point to each edge's nearest point (the key, monotonic in the
+    angle), whether that nearest point is inside the edge (``in_arc``, not an end), the sine of
+    the angle to the edge's great circle (``s``, signed by its geometric normal) and, when an
+    end is nearest, whether it is the edge's second vertex — for every point with every edge
+    of its polygon: the edge rows (M, 3) of one polygon, or (N, M, 3) of one polygon per
+    point; points ``p`` (N, 3). Returns (N, M) arrays."""
     pp = p[:, None, :]
     s = np.einsum("...j,...j->...", g, pp)
     in_arc = ((np.einsum("...j,...j->...", t0, pp) >= 0.0)
               & (np.einsum("...j,...j->...", t1, pp) >= 0.0) & (np.abs(s) < 1.0 - 1e-12))
     s2 = s * s
     key_in = 2.0 * s2 / (1.0 + np.sqrt(np.maximum(1.0 - s2, 0.0)))
+    # squared chords to the ends by differences (not 2 - 2 p·v: exact near a vertex)
     e0 = v0 - pp
     e1 = v1 - pp
     k0 = np.einsum("...j,...j->...", e0, e0)
