@@ -158,8 +158,8 @@ def _quat(parts: list[str], where: str) -> tuple[float, float, float, float]:
 
 def _parse_rows(time_cells: list[str], quat_cells: list[str], n_cols: int):
     """Every data row at once: times (N,) and quaternions (N, C, 4) — or None when any cell
-    would fail :func:`_check_row` (not a number, not four components, NaN, infinite, zero, not
-    unit), so that the per-row checks name it. Parses as ``float`` does."""
+    would fail :func:`_rows_one_by_one` (not a number, not four components, NaN, infinite,
+    zero, not unit), so that the per-row checks name it. Parses as ``float`` does."""
     if any(cell.count(",") != 3 for cell in quat_cells):
         return None
     try:
