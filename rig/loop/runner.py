@@ -191,6 +191,8 @@ class EnforcementLoop:
         self.intervention_bits: Counter = Counter()
         self.max_violation = 0.0
         self.warm_ups = 0
+        self._warm_input = None  # the last usable target (the warm-up's input), per run
+        self._warm_s = 0.0  # a running estimate of how long a warm-up takes, s
         self.summary: dict = {}
         self._setup_done = False
 
