@@ -22,7 +22,16 @@ Two paths per patient, on the same recording: ``imu`` (steps 1-4: the issue's pa
 device-fused quaternions) and ``truth`` (step 3 on the true joint orientations of the free
 motion: the extraction and coupling test alone, what the IMU path would give with perfect
 sensors and calibration). ``--paths`` may add ``vqf``: the raw samples fused on the host
-(:func:`calibration.fusion.fuse_vqf`) instead of the device quaternions.
+(:func:`calibration.fusion.fuse_vqf`) instead of the device quaternions; and ``pose``: steps 2-4
+on the error-free sensor orientations (``ChainRecording.sensors_true``: no noise, drift or
+fusion), so that ``cal°`` is the calibration's own error — what the patient's posture during
+the static pose puts on every joint (the root's sway leans every segment alike, and gravity is
+taken as each segment's long axis) — and ``truth`` → ``pose`` → ``vqf`` splits the joint
+orientations' error into calibration and sensors. Its other columns are not the IMU path's
+without the sensors' errors: error-free data carry no measured slow error, so the twist's
+singular reach (:func:`calibration.boundary.twist.singular_reach`) is off, and a twist end
+taken from a posture near the arm raised overhead, where a frame error of 2° turns the twist by
+~10°, moves a shoulder's rotation peaks by that much.
 
 Seeds: held out. Tests and one-off checks used seeds 0-13 (``tests/rig/sim``,
 ``tests/calibration``, the NOTES' seed-11 leg); defects were looked for and fixed on seeds 1-20
@@ -273,6 +282,12 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
             if path == "truth":
                 r = analyse(truth, rec.joints[free], rec.t[free], None, limb)
                 r["residual"] = math.nan
+            elif path == "pose":  # error-free sensors: the calibration's own error
+                src = dataclasses.replace(rec, quaternions=rec.sensors_true)
+                cal = calibrate(src, limb, side, status=False)
+                r = analyse(truth, cal.transform(src.quaternions[free]), rec.t[free], None,
+                            limb)
+                r["residual"] = cal.residual_deg_
             else:
                 host = path == "vqf"  # as the read path: no status bytes for a host fusion
                 src = fused(rec) if host else rec
@@ -399,7 +414,8 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate, Hz")
     ap.add_argument("--paths", default="vqf,imu,truth",
                     help="vqf (the read path's default for sessions with raw samples), imu (the "
-                         "devices' quaternions), truth; comma-separated")
+                         "devices' quaternions), truth, pose (the calibration on error-free "
+                         "sensors); comma-separated")
     ap.add_argument("--neutral", type=float, default=20.0,
                     help="neutral checkpoints every this many seconds (0: none, no heading "
                          "correction)")
@@ -410,8 +426,8 @@ def main() -> None:
     limbs = [x.strip() for x in a.limbs.split(",") if x.strip()]
     paths = [x.strip() for x in a.paths.split(",") if x.strip()]
     for p in paths:
-        if p not in ("imu", "truth", "vqf"):
-            raise SystemExit(f"--paths: unknown path {p!r} (imu, truth, vqf)")
+        if p not in ("imu", "truth", "vqf", "pose"):
+            raise SystemExit(f"--paths: unknown path {p!r} (imu, truth, vqf, pose)")
     if a.quick:
         seeds, left, a.duration = seeds[:1], [], 120.0
     runs = [(s, limb, "right") for s in seeds for limb in limbs]
