@@ -18,6 +18,8 @@ third valid) by :func:`~models.limb_evaluation.evaluate_limb_model`. Methods:
 ``network``    the trained limb model: a distance field per coupled polygon swing
                (``models.nn.ndf``, seed 0), everything else exact in the same graph; the same
                figures plus its training time (CPU seconds, one thread).
+``network@F/F/…`` the same trained fields with other projection step fractions (e.g.
+               ``network@0.5/0.5/0.5/1/1``, the shipped ones before 2026-11-28), accuracy only.
 
 ``--single K``: instead, the same network family on K held-out single ball joints (concave
 stars with twist, ``bench_accuracy``'s held-out set) beside today's default, the tabulated
@@ -29,6 +31,7 @@ Prints one row per limb and method and the mean over limbs against the issue's t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import tempfile
@@ -58,23 +61,44 @@ TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
 SPEED: dict[str, list[dict]] = {"geometric": [], "network": []}
 
 
+#: the trained fields of the limb being scored: ``network@…`` reuses ``network``'s
+TRAINED: dict[str, tuple] = {}
+
+
+def _fields(limb) -> tuple[dict, dict, float]:
+    if limb.name not in TRAINED:
+        TRAINED.clear()
+        c0 = time.process_time()
+        fields, facts = fit_limb_fields(limb, seed=0)
+        TRAINED[limb.name] = (fields, facts, time.process_time() - c0)
+    return TRAINED[limb.name]
+
+
 def method(name, limb, oracle, tmp: Path, q):
     if name == "exact":
         return oracle.correction
     if name == "uncoupled":
         return uncoupled_model(limb)
+    if name.startswith("network@"):  # the same fields, other projection step fractions
+        try:
+            steps = tuple(float(x) for x in name.split("@", 1)[1].split("/"))
+        except ValueError:
+            raise SystemExit(f"--methods: {name!r}: expected network@F/F/..., e.g. "
+                             "network@0.5/0.5/0.5/1/1") from None
+        fields, facts, _ = _fields(limb)
+        fields = {k: dataclasses.replace(v, steps=steps) for k, v in fields.items()}
+        path = export_limb_model(limb, tmp / f"{limb.name}-{len(steps)}.onnx", fields, facts)
+        return load_limb_model(path, limb).correction
     if name in ("geometric", "network"):
         fields, facts, cpu = None, None, 0.0
         if name == "network":
-            c0 = time.process_time()
-            fields, facts = fit_limb_fields(limb, seed=0)
-            cpu = time.process_time() - c0
+            fields, facts, cpu = _fields(limb)
         path = export_limb_model(limb, tmp / f"{limb.name}-{name}.onnx", fields, facts)
         model = load_limb_model(path, limb)
         SPEED[name].append({**speed(model, q), "train_cpu_s": cpu})
         return model.correction
     raise SystemExit(f"--methods: unknown method {name!r} (exact, uncoupled, geometric, "
-                     f"network)")
+                     f"network, network@F/F/...)")
 
 
 def speed(model, q) -> dict:
