@@ -87,7 +87,8 @@ def method(name, limb, oracle, tmp: Path, q):
                              "network@0.5/0.5/0.5/1/1") from None
         fields, facts, _ = _fields(limb)
         fields = {k: dataclasses.replace(v, steps=steps) for k, v in fields.items()}
-        path = export_limb_model(limb, tmp / f"{limb.name}-{len(steps)}.onnx", fields, facts)
+        tag = "-".join(f"{x:g}" for x in steps)
+        path = export_limb_model(limb, tmp / f"{limb.name}-network@{tag}.onnx", fields, facts)
         return load_limb_model(path, limb).correction
     if name in ("geometric", "network"):
         fields, facts, cpu = None, None, 0.0
