@@ -60,6 +60,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from models.errors import GeometryError
+from models.jit import njit
 from models.quaternion import cross
 
 __all__ = [
@@ -566,12 +567,11 @@ class SphericalPolygon:
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def prepare(self) -> SphericalPolygon:
-        """Build now what the queries need (the grid and the scalar path's cell lists), so
-        that no query pays for it; the live loop calls it before its first cycle. Returns
+        """Build now what the queries need (the grid, and the scalar path's compiled kernels),
+        so that no query pays for it; the live loop calls it before its first cycle. Returns
         self."""
-        if self.interior is not None and self._lists and self._cell_lists is None:
-            ptr, edges = self.cell_ptr.tolist(), self.cell_edges.tolist()
-            self._cell_lists = [tuple(edges[ptr[c]:ptr[c + 1]]) for c in range(len(ptr) - 1)]
+        if self.interior is not None:
+            self.nearest_one(tuple(self.interior))
         return self
 
     def _set_pseudo_normals(self):
@@ -582,12 +582,6 @@ class SphericalPolygon:
         self._table = np.ascontiguousarray(
             np.stack((self.g, self.t0, self.t1, self.v0, self.v1), 1)
         )
-        # plain-float copies for the scalar (single-orientation) path
-        self._g_list = [tuple(r) for r in self.g.tolist()]
-        self._v_list = [tuple(r) for r in self.v0.tolist()]
-        self._vn_list = [tuple(r) for r in self.vertex_normal.tolist()]
-        self._row_list = [tuple(map(tuple, r)) for r in self._table.tolist()]
-        self._cell_lists: list[tuple[int, ...]] | None = None  # built by nearest_one
 
     # -- per (point, edge) pair ----------------------------------------------------------------
     def _pair_keys(self, p: np.ndarray, e: np.ndarray):
@@ -638,8 +632,6 @@ class SphericalPolygon:
     CELL_CAP = 96
     #: points per block of a tree search (bounds the (point, node) pairs alive at once)
     TREE_CHUNK = 2048
-    #: :meth:`nearest_one` prunes a cell list longer than this by edge caps before ranking
-    PRUNE_ONE = 48
 
     def _cell_index(self, p: np.ndarray, G: int | None = None) -> np.ndarray:
         G = self.G if G is None else G
@@ -818,74 +810,17 @@ class SphericalPolygon:
 
     def nearest_one(self, d: tuple[float, float, float]):
         """Scalar twin of :meth:`nearest` for one direction: the same candidates, ranked by the
-        same keys (so the same edge wins); the winner's distance and point in plain floats."""
-        px, py, pz = d
-        ab = (abs(px), abs(py), abs(pz))
-        ax = 0 if ab[0] >= ab[1] and ab[0] >= ab[2] else (1 if ab[1] >= ab[2] else 2)
-        major = d[ax]
-        u = d[(ax + 1) % 3] / abs(major)
-        v = d[(ax + 2) % 3] / abs(major)
-        G = self.G
-        i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
-        j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
-        cell = ((2 * ax + (major < 0)) * G + i) * G + j
+        same keys (so the same edge wins); the winner's signed distance and point in plain
+        floats. Compiled (:func:`_nearest_in_cell`, :func:`_rank_one`): about a µs."""
+        px, py, pz = float(d[0]), float(d[1]), float(d[2])
         if self._lists:
-            cells = self._cell_lists
-            if cells is None:
-                cells = self.prepare()._cell_lists
-            short = cells[cell]
-            if len(short) <= self.PRUNE_ONE:
-                return self._rank_one(d, short)
-            p = np.array(d, dtype=np.float64)
-            cand = self.cell_edges[self.cell_ptr[cell] : self.cell_ptr[cell + 1]]
-            # drop edges whose cap lies beyond the nearest edge midpoint (a boundary
-            # point): ∠(p, mid) − half > U >= D; the nearest edges all survive
-            diff = self._emid[cand] - p
-            chord = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-            ang = 2.0 * np.arcsin(np.minimum(chord * 0.5, 1.0))
-            cand = cand[ang - self._ehalf[cand] <= ang.min() + _ArcTree.SLACK]
+            r = _nearest_in_cell(px, py, pz, self.G, self.cell_ptr, self.cell_edges,
+                                 self._table, self.v0, self.vertex_normal, self.orient)
         else:
-            p = np.array(d, dtype=np.float64)
-            cand = self._tree.search(p[None, :], 0.0)[1]
-        return self._rank_one(d, cand.tolist())
-
-    def _rank_one(self, d: tuple[float, float, float], cand) -> tuple[float, tuple]:
-        """The nearest of the candidate edges ``cand`` to direction ``d``, in plain floats:
-        :meth:`_pair_keys` and :meth:`_finish` for one point (the same keys, the first minimum
-        winning, so the same edge as the batched path)."""
-        px, py, pz = d
-        best = math.inf
-        win = None
-        for e in cand:
-            g, t0, t1, v0, v1 = self._row_list[e]
-            s = g[0] * px + g[1] * py + g[2] * pz
-            in_arc = (t0[0] * px + t0[1] * py + t0[2] * pz >= 0.0
-                      and t1[0] * px + t1[1] * py + t1[2] * pz >= 0.0 and abs(s) < 1.0 - 1e-12)
-            a0, a1, a2 = v0[0] - px, v0[1] - py, v0[2] - pz
-            b0, b1, b2 = v1[0] - px, v1[1] - py, v1[2] - pz
-            k0 = a0 * a0 + a1 * a1 + a2 * a2
-            k1 = b0 * b0 + b1 * b1 + b2 * b2
-            if in_arc:
-                s2 = s * s
-                key = 2.0 * s2 / (1.0 + math.sqrt(max(1.0 - s2, 0.0)))
-            else:
-                key = k0 if k0 <= k1 else k1
-            if key < best:
-                best, win = key, (e, in_arc, s, k1 < k0)
-        e, in_arc, sk, end1 = win
-        if in_arc:
-            inside = self.orient * sk >= 0.0
-            g = self._g_list[e]
-            f = (px - sk * g[0], py - sk * g[1], pz - sk * g[2])
-            fn = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) or 1.0
-            b = (f[0] / fn, f[1] / fn, f[2] / fn)
-        else:
-            vi = (e + 1) % self.m if end1 else e
-            b = self._v_list[vi]
-            mv = self._vn_list[vi]
-            inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
-        theta = 2.0 * math.asin(min(math.sqrt(best) * 0.5, 1.0))
-        return (-theta if inside else theta), b
+            cand = self._tree.search(np.array([[px, py, pz]]), 0.0)[1]
+            r = _rank_one(px, py, pz, cand, self._table, self.v0, self.vertex_normal,
+                          self.orient)
+        return r[0], (r[1], r[2], r[3])
 
     # -- conveniences ----------------------------------------------------------------------
     def _need_interior(self) -> None:
@@ -914,6 +849,70 @@ class SphericalPolygon:
         """Solid angle (steradians) of the region containing the interior point."""
         self._need_interior()
         return polygon_area(self.vertices, self.interior)
+
+
+@njit
+def _rank_one(px, py, pz, cand, table, v0, vertex_normal, orient):
+    """The nearest of the candidate edges ``cand`` to the unit direction ``p``: the keys of
+    :func:`_pair_keys` and the rule of :func:`_finish` for one point (the first minimum wins,
+    so the same edge as the batched path). Returns (signed distance, nearest point)."""
+    best = math.inf
+    win = -1
+    win_in = False
+    win_s = 0.0
+    win_end1 = False
+    for e in cand:
+        t = table[e]
+        s = t[0, 0] * px + t[0, 1] * py + t[0, 2] * pz
+        in_arc = (t[1, 0] * px + t[1, 1] * py + t[1, 2] * pz >= 0.0
+                  and t[2, 0] * px + t[2, 1] * py + t[2, 2] * pz >= 0.0 and abs(s) < 1.0 - 1e-12)
+        a0, a1, a2 = t[3, 0] - px, t[3, 1] - py, t[3, 2] - pz
+        b0, b1, b2 = t[4, 0] - px, t[4, 1] - py, t[4, 2] - pz
+        k0 = a0 * a0 + a1 * a1 + a2 * a2
+        k1 = b0 * b0 + b1 * b1 + b2 * b2
+        if in_arc:
+            s2 = s * s
+            key = 2.0 * s2 / (1.0 + math.sqrt(max(1.0 - s2, 0.0)))
+        else:
+            key = k0 if k0 <= k1 else k1
+        if key < best:
+            best, win, win_in, win_s, win_end1 = key, e, in_arc, s, k1 < k0
+    if win_in:
+        inside = orient * win_s >= 0.0
+        g = table[win, 0]
+        f0, f1, f2 = px - win_s * g[0], py - win_s * g[1], pz - win_s * g[2]
+        fn = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        if fn == 0.0:
+            fn = 1.0
+        b0, b1, b2 = f0 / fn, f1 / fn, f2 / fn
+    else:
+        vi = (win + 1) % len(table) if win_end1 else win
+        b0, b1, b2 = v0[vi, 0], v0[vi, 1], v0[vi, 2]
+        mv = vertex_normal[vi]
+        inside = px * mv[0] + py * mv[1] + pz * mv[2] >= 0.0
+    theta = 2.0 * math.asin(min(math.sqrt(best) * 0.5, 1.0))
+    return (-theta if inside else theta), b0, b1, b2
+
+
+@njit
+def _nearest_in_cell(px, py, pz, G, cell_ptr, cell_edges, table, v0, vertex_normal, orient):
+    """:func:`_rank_one` on the candidates of the cube-map cell of ``p`` (the cell rule of
+    :meth:`SphericalPolygon._cell_index`)."""
+    ax0, ax1, ax2 = abs(px), abs(py), abs(pz)
+    if ax0 >= ax1 and ax0 >= ax2:
+        ax, major, u, v = 0, px, py, pz
+    elif ax1 >= ax2:
+        ax, major, u, v = 1, py, pz, px
+    else:
+        ax, major, u, v = 2, pz, px, py
+    inv = 1.0 / abs(major)
+    u *= inv
+    v *= inv
+    i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
+    j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
+    cell = ((2 * ax + (1 if major < 0 else 0)) * G + i) * G + j
+    return _rank_one(px, py, pz, cell_edges[cell_ptr[cell]:cell_ptr[cell + 1]], table, v0,
+                     vertex_normal, orient)
 
 
 def _cube_cells(G: int) -> tuple[np.ndarray, np.ndarray]:

@@ -71,10 +71,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from models import qkernels as qk
 from models import qscalar as qs
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
-from models.geometry import SphericalPolygon, boundary_distance, polygon_area
+from models.geometry import (
+    SphericalPolygon,
+    _nearest_in_cell,
+    _rank_one,
+    boundary_distance,
+    polygon_area,
+)
+from models.jit import njit
 
 __all__ = [
     "BOUNDARY_TOLERANCE",
@@ -147,6 +155,7 @@ class ConstraintOracle:
         tw = constraint.twist
         self._twist = (tw.min, tw.max) if tw is not None else None
         self._table = tw.by_swing if tw is not None else None
+        self._kernel_args: tuple | None = None  # built by the first single-orientation query
         # can an interval reach the ±π seam (so the twist test must look across it)?
         self._wraps = tw is not None and _reaches_seam(tw.min, tw.max)
         h = constraint.hinge
@@ -262,62 +271,72 @@ class ConstraintOracle:
         qt = (w / nrm, x / nrm, y / nrm, z / nrm)
         if self._hinge is not None:
             return self._evaluate_hinge_one(qt)
-        ax = self._axis_t
-        d = _rot1(qt, ax)
-        proj = qt
-        swing_out = False
-        if self._swing is not None:
-            sdist, b = self._swing.nearest_one(d)
-            if sdist > BOUNDARY_TOLERANCE:
-                swing_out = True
-                proj = _mul1(_two_vectors1(d, b), qt)
-        else:
-            sdist = -math.inf
-        phi = _twist1(qt, ax)
-        margin = -sdist
-        invalid = swing_out
-        if self._twist is not None:
-            if self._table is not None:
-                lo, hi = self._table.limits_at_one(b if swing_out else d)
-            else:
-                lo, hi = self._twist
-            phi_p = _twist1(proj, ax) if swing_out else phi
-            t = BOUNDARY_TOLERANCE
-            if not lo - t <= phi_p <= hi + t and not (
-                (self._wraps and _across_seam1(phi_p, lo, hi))
-                # twist undefined (TWIST_SINGULARITY), inline: this is the per-cycle path
-                or proj[0] * proj[0] + (proj[1] * ax[0] + proj[2] * ax[1] + proj[3] * ax[2]) ** 2
-                < _SING2
-            ):
-                d_lo = abs(_wrap1(phi_p - lo))
-                d_hi = abs(_wrap1(phi_p - hi))
-                half = 0.5 * _wrap1((lo if d_lo < d_hi else hi) - phi_p)
-                sh = math.sin(half)
-                proj = _mul1(proj, (math.cos(half), ax[0] * sh, ax[1] * sh, ax[2] * sh))
-            if lo - t <= phi <= hi + t:
-                margin = min(margin, phi - lo, hi - phi)
-            elif (self._wraps and _across_seam1(phi, lo, hi)) or (
-                qt[0] * qt[0] + (qt[1] * ax[0] + qt[2] * ax[1] + qt[3] * ax[2]) ** 2 < _SING2
-            ):
-                margin = min(margin, 0.0)  # at a limit across the seam, or twist undefined
-            else:
-                invalid = True
-        if invalid:
-            corr, distance = _correction1(proj, qt)
-            p0, p1, p2, p3 = proj
-            pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
-            proj = (p0 / pn, p1 / pn, p2 / pn, p3 / pn)
-        else:
-            corr = (1.0, 0.0, 0.0, 0.0)
-            distance = -max(margin, 0.0)
+        r = self._ball_one(qt)
         return OracleResult(
-            valid=np.bool_(not invalid),
-            distance=np.float64(distance),
-            projected=np.array(proj),
-            correction=np.array(corr),
-            swing_distance=np.float64(sdist),
-            twist=np.float64(phi),
+            valid=np.bool_(not r[0]),
+            distance=np.float64(r[1]),
+            projected=np.array(r[2:6]),
+            correction=np.array(r[6:10]),
+            swing_distance=np.float64(r[10]),
+            twist=np.float64(r[11]),
         )
+
+    def distance_projected_one(self, w: float, x: float, y: float, z: float):
+        """The control loop's query: ``(D(q), projection of q)`` for one orientation given as
+        four floats (normalised here; non-finite or zero raises as :meth:`evaluate` does), in
+        plain floats — :meth:`evaluate`'s answers without building its arrays."""
+        nrm = math.sqrt(w * w + x * x + y * y + z * z)
+        if not math.isfinite(nrm) or nrm < 1e-12:
+            Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
+        qt = (w / nrm, x / nrm, y / nrm, z / nrm)
+        if self._hinge is not None:
+            r = self._evaluate_hinge_one(qt)
+            p = r.projected
+            return float(r.distance), (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+        r = self._ball_one(qt)
+        return r[1], (r[2], r[3], r[4], r[5])
+
+    def _ball_one(self, qt):
+        """The compiled ball-joint kernel (:func:`_ball_kernel`) on one unit orientation."""
+        k = self._kernel_args
+        if k is None:
+            k = self._kernel_args = self._make_kernel_args()
+        if k[1] == _SWING_CANDIDATES:  # a polygon answered by its cap tree: candidates first
+            d = qs.rotate(qt, self._axis_t)
+            cand = self._swing._tree.search(np.array([d]), 0.0)[1]
+            k = (*k[:5], cand, *k[6:])
+        return _ball_kernel(*qt, *k)
+
+    def _make_kernel_args(self) -> tuple:
+        """The kernel's view of this constraint: the swing's and twist's arrays (placeholders
+        of the same types where a part is absent, so one compiled signature serves all)."""
+        none_i = np.zeros(1, dtype=np.int64)
+        cone = np.zeros(7)
+        G, ptr, edges = 1, none_i, none_i
+        table, v0, vn, orient = np.zeros((1, 5, 3)), np.zeros((1, 3)), np.zeros((1, 3)), 1.0
+        sw = self._swing
+        if sw is None:
+            kind = _SWING_NONE
+        elif isinstance(sw, _ConeSolver):
+            kind = _SWING_CONE
+            cone = np.array([*sw._c_t, sw.r, *sw._perp_t])
+        else:
+            table, v0, vn, orient = sw._table, sw.v0, sw.vertex_normal, float(sw.orient)
+            if sw._lists:
+                kind, G, ptr, edges = _SWING_CELLS, int(sw.G), sw.cell_ptr, sw.cell_edges
+            else:
+                kind = _SWING_CANDIDATES
+        if self._twist is None:
+            tkind, lo, hi = _TWIST_NONE, 0.0, 0.0
+        else:
+            tkind, (lo, hi) = _TWIST_CONSTANT, self._twist
+        dirs_k, sums, kappa = np.zeros((1, 3)), np.zeros((3, 1)), 0.0
+        if self._table is not None:
+            tkind = _TWIST_TABLE
+            dirs_k, sums, kappa = self._table._dirs_k, self._table._sums, self._table.kappa
+        ax = np.array(self._axis_t)
+        return (ax, kind, cone, G, ptr, edges, table, v0, vn, orient, tkind, float(lo),
+                float(hi), bool(self._wraps), dirs_k, sums, float(kappa))
 
     def _prep(self, q, normalize):
         q = Q.check_quaternions(q, normalize=normalize)
@@ -536,6 +555,155 @@ def _first_nonzero_negative(c) -> bool:
         if v != 0.0:
             return v < 0.0
     return False
+
+
+# -- the compiled ball-joint kernel (the control loop's single-orientation path) -------------
+_SWING_NONE, _SWING_CONE, _SWING_CELLS, _SWING_CANDIDATES = 0, 1, 2, 3
+_TWIST_NONE, _TWIST_CONSTANT, _TWIST_TABLE = 0, 1, 2
+_PI = math.pi
+
+
+@njit(inline="always")
+def _twist_k(w, x, y, z, ax):
+    """:func:`models.quaternion.twist_angle1`."""
+    p = x * ax[0] + y * ax[1] + z * ax[2]
+    phi = 2.0 * math.atan2(-p, -w) if w < 0.0 else 2.0 * math.atan2(p, abs(w))
+    return _PI if phi <= -_PI else phi
+
+
+@njit(inline="always")
+def _wrap_k(phi):
+    """:func:`models.quaternion.wrap_angle1`."""
+    if -_PI < phi <= _PI:
+        return phi
+    out = (phi + _PI) % _TWO_PI - _PI
+    return _PI if out == -_PI else out
+
+
+@njit(inline="always")
+def _across_k(phi, lo, hi):
+    t = BOUNDARY_TOLERANCE
+    return phi - _TWO_PI >= lo - t or phi + _TWO_PI <= hi + t
+
+
+@njit(inline="always")
+def _two_vectors_k(a0, a1, a2, b0, b1, b2):
+    """:func:`models.qscalar.from_two_vectors` (antiparallel: :func:`Q.perpendicular`)."""
+    w = 1.0 + a0 * b0 + a1 * b1 + a2 * b2
+    if w < 1e-12:
+        m0, m1, m2 = abs(a0), abs(a1), abs(a2)
+        k = 0 if m0 <= m1 and m0 <= m2 else (1 if m1 <= m2 else 2)
+        e0, e1, e2 = (1.0 if k == 0 else 0.0), (1.0 if k == 1 else 0.0), (1.0 if k == 2 else 0.0)
+        p0, p1, p2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+        n = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        return 0.0, p0 / n, p1 / n, p2 / n
+    q1, q2, q3 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    n = math.sqrt(w * w + q1 * q1 + q2 * q2 + q3 * q3)
+    return w / n, q1 / n, q2 / n, q3 / n
+
+
+@njit
+def _table_limits_k(d0, d1, d2, dirs_k, sums, kappa):
+    """:meth:`models.constraint.SwingTwistTable.limits_at_one`."""
+    n = dirs_k.shape[0]
+    z = np.empty(n)
+    r0 = r1 = r2 = 0.0
+    for i in range(n):
+        z[i] = dirs_k[i, 0] * d0 + dirs_k[i, 1] * d1 + dirs_k[i, 2] * d2
+        e = math.exp(z[i] - kappa)
+        r0 += sums[0, i] * e
+        r1 += sums[1, i] * e
+        r2 += sums[2, i] * e
+    if r2 < 1e-150:  # every weight underflows: shift by the maximum
+        zmax = z.max()
+        r0 = r1 = r2 = 0.0
+        for i in range(n):
+            e = math.exp(z[i] - zmax)
+            r0 += sums[0, i] * e
+            r1 += sums[1, i] * e
+            r2 += sums[2, i] * e
+    return r0 / r2, r1 / r2
+
+
+@njit
+def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, table, v0, vn,
+                 orient, twist_kind, lo, hi, wraps, dirs_k, sums, kappa):
+    """:meth:`ConstraintOracle._evaluate` for one unit orientation of a ball (or two-axis)
+    joint: the same maths and tie rules in compiled plain floats. Returns ``(invalid,
+    distance, projected (4), correction (4), swing distance, twist)``."""
+    d0, d1, d2 = qk.rotate(w, x, y, z, ax[0], ax[1], ax[2])  # the limb direction
+    p0, p1, p2, p3 = w, x, y, z
+    swing_out = False
+    b0, b1, b2 = d0, d1, d2
+    if swing_kind == _SWING_NONE:
+        sdist = -math.inf
+    else:
+        if swing_kind == _SWING_CONE:  # _ConeSolver.nearest_one
+            c0, c1, c2, r = cone[0], cone[1], cone[2], cone[3]
+            cos_t = d0 * c0 + d1 * c1 + d2 * c2
+            g0, g1, g2 = d0 - cos_t * c0, d1 - cos_t * c1, d2 - cos_t * c2
+            sin_t = math.sqrt(g0 ** 2 + g1 ** 2 + g2 ** 2)
+            sdist = math.atan2(sin_t, cos_t) - r
+            if sin_t < 1e-15:
+                u0, u1, u2 = cone[4], cone[5], cone[6]
+            else:
+                u0, u1, u2 = g0 / sin_t, g1 / sin_t, g2 / sin_t
+            cr, sr = math.cos(r), math.sin(r)
+            n0, n1, n2 = cr * c0 + sr * u0, cr * c1 + sr * u1, cr * c2 + sr * u2
+        elif swing_kind == _SWING_CELLS:
+            sdist, n0, n1, n2 = _nearest_in_cell(d0, d1, d2, G, cell_ptr, cell_edges, table,
+                                                 v0, vn, orient)
+        else:
+            sdist, n0, n1, n2 = _rank_one(d0, d1, d2, cell_edges, table, v0, vn, orient)
+        if sdist > BOUNDARY_TOLERANCE:
+            swing_out = True
+            b0, b1, b2 = n0, n1, n2
+            e0, e1, e2, e3 = _two_vectors_k(d0, d1, d2, n0, n1, n2)
+            p0, p1, p2, p3 = qk.mul(e0, e1, e2, e3, w, x, y, z)
+    phi = _twist_k(w, x, y, z, ax)
+    margin = -sdist
+    invalid = swing_out
+    if twist_kind != _TWIST_NONE:
+        if twist_kind == _TWIST_TABLE:
+            lo, hi = _table_limits_k(b0, b1, b2, dirs_k, sums, kappa)
+        phi_p = _twist_k(p0, p1, p2, p3, ax) if swing_out else phi
+        t = BOUNDARY_TOLERANCE
+        if not lo - t <= phi_p <= hi + t and not (
+            (wraps and _across_k(phi_p, lo, hi))
+            or p0 * p0 + (p1 * ax[0] + p2 * ax[1] + p3 * ax[2]) ** 2 < _SING2
+        ):
+            d_lo = abs(_wrap_k(phi_p - lo))
+            d_hi = abs(_wrap_k(phi_p - hi))
+            half = 0.5 * _wrap_k((lo if d_lo < d_hi else hi) - phi_p)
+            sh = math.sin(half)
+            p0, p1, p2, p3 = qk.mul(p0, p1, p2, p3, math.cos(half), ax[0] * sh, ax[1] * sh,
+                                    ax[2] * sh)
+        if lo - t <= phi <= hi + t:
+            margin = min(margin, phi - lo, hi - phi)
+        elif (wraps and _across_k(phi, lo, hi)) or (
+            w * w + (x * ax[0] + y * ax[1] + z * ax[2]) ** 2 < _SING2
+        ):
+            margin = min(margin, 0.0)  # at a limit across the seam, or twist undefined
+        else:
+            invalid = True
+    if invalid:  # _correction1: proj ⊗ q⁻¹, w >= 0 (canonical's rule), and its angle
+        k0, k1, k2, k3 = qk.mul(p0, p1, p2, p3, w, -x, -y, -z)
+        cn = math.sqrt(k0 * k0 + k1 * k1 + k2 * k2 + k3 * k3)
+        neg = k0 < 0.0
+        if k0 == 0.0:
+            for v in (k1, k2, k3):
+                if v != 0.0:
+                    neg = v < 0.0
+                    break
+        sign = -1.0 if neg else 1.0
+        k0, k1, k2, k3 = sign * k0 / cn, sign * k1 / cn, sign * k2 / cn, sign * k3 / cn
+        distance = 2.0 * math.atan2(math.sqrt(k1 * k1 + k2 * k2 + k3 * k3), abs(k0))
+        pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+        p0, p1, p2, p3 = p0 / pn, p1 / pn, p2 / pn, p3 / pn
+    else:
+        k0, k1, k2, k3 = 1.0, 0.0, 0.0, 0.0
+        distance = -max(margin, 0.0)
+    return invalid, distance, p0, p1, p2, p3, k0, k1, k2, k3, sdist, phi
 
 
 # ---------------------------------------------------------------------------------------------

@@ -251,7 +251,7 @@ def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
     cfg = load_rig_config(chain_name)
     if cfg.servos is None:
         raise RigConfigError(f"{url}: chain={chain_name!r} has no servo chain")
-    kin = cfg.servos.kinematics()
+    kin = cfg.servos.kinematics().compile()  # before the bus answers: no stall at a first read
     missing = [i for i in kin.ids if i not in bus.servos]
     if missing:
         raise RigConfigError(f"{url}: chain {chain_name!r} needs servo IDs {list(kin.ids)}, "

@@ -210,6 +210,7 @@ class EnforcementLoop:
             (:class:`~rig.errors.HardwareAlertError`), before any motion.
         """
         chain = self.chain
+        self.kin.compile()  # the compiled kinematics loaded before torque and watchdog
         _patiently(lambda: chain.set_torque(True))
         wd = self.config.watchdog_ms
         if wd is None:
@@ -346,8 +347,7 @@ class EnforcementLoop:
                 goal = sup.step(start, tq, None)
             try:
                 gt = kin.inverse(goal, goal_ticks)
-                cq = kin.forward(gt)
-                cand = (float(cq[0]), float(cq[1]), float(cq[2]), float(cq[3]))
+                cand = kin.forward_one(gt)
                 if sup.accept(cand):
                     goal_ticks = gt
                     commanded = cand
@@ -377,8 +377,7 @@ class EnforcementLoop:
             c1 = perf()
             if fresh:
                 self._present_ticks = ticks
-                pq = kin.forward(ticks)
-                present = (float(pq[0]), float(pq[1]), float(pq[2]), float(pq[3]))
+                present = kin.forward_one(ticks)
                 t_present = start
             else:
                 faults |= Fault.READ_FAILED
@@ -483,7 +482,7 @@ class EnforcementLoop:
         goal = sup.step(now, tq, corr)
         try:
             gt = self.kin.inverse(goal, self._goal_ticks)
-            sup.accept(self.kin.forward(gt))
+            sup.accept(self.kin.forward_one(gt))
         except UnreachableError:
             pass
         self.warm_ups += 1

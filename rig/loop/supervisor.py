@@ -66,8 +66,6 @@ import math
 from dataclasses import dataclass
 from enum import IntFlag
 
-import numpy as np
-
 from models import qscalar as qs
 
 __all__ = ["SAFETY_FLAGS", "Intervention", "Supervisor", "SupervisorConfig"]
@@ -180,7 +178,7 @@ class Supervisor:
         self.tol_eff = math.radians(c.tolerance_deg - c.quantum_deg)
         self.vmax = math.radians(c.max_velocity_deg_s)
         self.amax = math.radians(c.max_accel_deg_s2)
-        self._buf = np.zeros(4)
+        self._query = oracle.distance_projected_one
         self.goal: qs.Quat = qs.IDENTITY
         self.goal_distance = 0.0
         self.ceiling = 0.0
@@ -197,14 +195,13 @@ class Supervisor:
         self._ready = False
 
     # ------------------------------------------------------------------ oracle access
-    def _eval(self, q):
-        b = self._buf
-        b[0], b[1], b[2], b[3] = q[0], q[1], q[2], q[3]
-        return self.oracle.evaluate(b, normalize=True)
+    def _eval(self, q) -> tuple[float, qs.Quat]:
+        """``(D(q), projection of q)`` from the oracle's compiled single-orientation path."""
+        return self._query(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
     def distance(self, q) -> float:
         """``D(q)``: signed angular distance to the boundary, radians (> 0 outside)."""
-        return float(self._eval(q).distance)
+        return self._eval(q)[0]
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, t: float, present) -> None:
@@ -308,9 +305,7 @@ class Supervisor:
         if c == self._cache_c:  # a held target: D is a function of c alone
             c_dist, proj = self._cache_c_result
         else:
-            ev = self._eval(c)
-            c_dist, p = float(ev.distance), ev.projected
-            proj = (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+            c_dist, proj = self._eval(c)
             self._cache_c, self._cache_c_result = c, (c_dist, proj)
         if c_dist > self.tol_eff:
             c = proj
@@ -322,15 +317,14 @@ class Supervisor:
             self.goal, self.goal_distance = c, c_dist
             return c
         self.flags |= Intervention.RATE_LIMITED
-        ev = self._eval(g1)
-        if ev.distance > self.tol_eff:
-            p = ev.projected
-            g1 = (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+        d1, p1 = self._eval(g1)
+        if d1 > self.tol_eff:
+            g1 = p1
             self.flags |= Intervention.REPROJECTED
             self._set_velocity(g0, g1, dt)
             self.goal, self.goal_distance = g1, 0.0
         else:
-            self.goal, self.goal_distance = g1, float(ev.distance)
+            self.goal, self.goal_distance = g1, d1
         return self.goal
 
     def accept(self, commanded) -> bool:
@@ -432,9 +426,7 @@ class Supervisor:
     def _recover(self, g0: qs.Quat, dt: float) -> qs.Quat:
         """Steer the goal towards its own exact projection; ``D`` must fall (monotone rule)."""
         self.flags |= Intervention.RECOVERY
-        ev = self._eval(g0)
-        p = ev.projected
-        target = (float(p[0]), float(p[1]), float(p[2]), float(p[3]))
+        target = self._eval(g0)[1]
         d0 = self.goal_distance
         g1, _ = self._rate_limit(g0, target, dt)
         for _ in range(4):

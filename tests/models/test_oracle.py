@@ -440,6 +440,21 @@ def test_scalar_path_equals_batch_path(constraint, q):
         assert np.shape(single) in ((4,), ())
 
 
+@settings(max_examples=100, deadline=None)
+@given(any_constraint, orientations, st.floats(0.5, 2.0))
+def test_the_control_loops_query_is_evaluate_in_plain_floats(constraint, q, scale):
+    """``distance_projected_one`` (the supervisor's query, compiled) answers what
+    ``evaluate`` does, for unnormalised input too; a NaN is refused as ``evaluate`` refuses it."""
+    o = ConstraintOracle(constraint)
+    d, p = o.distance_projected_one(*(float(v) * scale for v in q))
+    one = o.evaluate(q)
+    assert isinstance(d, float) and len(p) == 4 and all(isinstance(v, float) for v in p)
+    assert d == pytest.approx(float(one.distance), abs=1e-12)
+    np.testing.assert_allclose(p, one.projected, rtol=0, atol=1e-12)
+    with pytest.raises(QuaternionError):
+        o.distance_projected_one(math.nan, 0.0, 0.0, 0.0)
+
+
 @pytest.mark.parametrize("twist", EDGE_TWISTS)
 @pytest.mark.parametrize("q", [(0.0, 1.0, 0.0, 0.0), (-0.0, -1.0, 0.0, 0.0)])
 def test_half_turn_twist_is_inside_ranges_reaching_180(twist, q):

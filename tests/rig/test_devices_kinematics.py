@@ -35,6 +35,20 @@ def test_forward_is_the_product_of_axis_angle_rotations():
     assert np.allclose(batch[0], kin.forward(ticks))
 
 
+def test_the_compiled_forward_equals_the_batched_one():
+    """``forward``/``forward_one`` (compiled, the loop's per-cycle path) and ``forward_batch``
+    (numpy) give the same orientations, for integer and float ticks alike."""
+    rng = np.random.default_rng(3)
+    for axes in ([(0, 0, 1), (0, 1, 0), (1, 0, 0)], [(1, 0, 0), (0, 0.6, 0.8)], [(0, 1, 0)]):
+        kin = ChainKinematics([ServoJoint(i + 1, a, zero_ticks=2000 + 10 * i, direction=(-1) ** i)
+                               for i, a in enumerate(axes)])
+        ticks = rng.integers(0, 4096, size=(200, kin.n))
+        batch = kin.forward_batch(ticks)
+        for t, b in zip(ticks, batch, strict=True):
+            np.testing.assert_allclose(kin.forward(t), b, rtol=0, atol=1e-15)
+            assert kin.forward_one(t.astype(float)) == tuple(kin.forward(t))
+
+
 def test_direction_and_zero_offset():
     kin = ChainKinematics([ServoJoint(7, (0, 0, 1), zero_ticks=1000, direction=-1,
                                       min_ticks=0, max_ticks=4095)])
