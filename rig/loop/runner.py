@@ -172,12 +172,19 @@ class EnforcementLoop:
         spin = 1.0 / self.config.rate_hz if self.config.busy_wait else 0.0003
         self.scheduler = Scheduler(self.config.rate_hz, clock=clock, sleep=sleep,
                                    spin_s=0.0 if manual else spin)
+        self.log = log or (lambda msg: None)
+        # the per-cycle kernels (the oracle's query, IK, FK) compiled or loaded from numba's
+        # cache now, not inside a cycle; a machine's first run compiles them (seconds)
+        t_compile = time.perf_counter()
         self.supervisor = Supervisor(oracle, self.config.supervisor,
                                      period_s=self.scheduler.period)
+        self.kin = chain.kinematics.compile()
+        t_compile = time.perf_counter() - t_compile
+        if t_compile > 1.0:
+            self.log(f"note: compiled the loop's kernels in {t_compile:.1f} s (numba; kept in "
+                     f"its cache for the next runs)")
         self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True)
-        self.kin = chain.kinematics
         self.on_cycle = on_cycle
-        self.log = log or (lambda msg: None)
         self.stop_reason: str | None = None
         self.safe = False
         self.safe_state_entries = 0
@@ -210,7 +217,6 @@ class EnforcementLoop:
             (:class:`~rig.errors.HardwareAlertError`), before any motion.
         """
         chain = self.chain
-        self.kin.compile()  # the compiled kinematics loaded before torque and watchdog
         _patiently(lambda: chain.set_torque(True))
         wd = self.config.watchdog_ms
         if wd is None:
