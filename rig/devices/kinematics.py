@@ -62,7 +62,6 @@ TICKS_PER_REV = 4096
 """Encoder ticks per revolution of an X-series servo (0.088° per tick)."""
 RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_REV
 
-_EPS = 1e-9
 _FREE = 1e-7  # |projection| below which a subproblem-1 angle is free (gimbal lock)
 
 Vec = tuple[float, float, float]
@@ -307,7 +306,6 @@ class ChainKinematics:
         self.n = len(joints)
         self.ids = tuple(ids)
         self.axes = np.array(axes)
-        self._axes = tuple(tuple(float(x) for x in a) for a in axes)
         self.zero_ticks = np.array([j.zero_ticks for j in joints], dtype=np.int64)
         self.min_ticks = np.array([j.min_ticks for j in joints], dtype=np.int64)
         self.max_ticks = np.array([j.max_ticks for j in joints], dtype=np.int64)
