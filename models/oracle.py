@@ -168,11 +168,13 @@ class ConstraintOracle:
 
     # -- public API ------------------------------------------------------------------------
     def prepare(self) -> ConstraintOracle:
-        """Build now what the single-orientation path needs (a polygon's grid and cell lists,
-        otherwise built by the first query that pays for them), so that no query of a control
-        loop waits for it. Returns self."""
+        """Build now what the single-orientation path needs (a polygon's grid, the compiled
+        kernel loaded or compiled: seconds on a machine's first run), otherwise built by the
+        first query that pays for them, so that no query of a control loop waits for it.
+        Returns self."""
         if isinstance(self._swing, SphericalPolygon):
             self._swing.prepare()
+        self.distance_projected_one(1.0, 0.0, 0.0, 0.0)
         return self
 
     def evaluate(self, q, *, normalize: bool = False) -> OracleResult:

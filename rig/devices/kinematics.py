@@ -256,6 +256,16 @@ def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
     return False
 
 
+def _kernel_array(values) -> np.ndarray:
+    """``values`` as the kernels take them: a contiguous int64 array as it is (the drivers'
+    ticks), anything else as contiguous float64 — two compiled signatures in all, both built
+    by :meth:`ChainKinematics.compile`, so no call inside a control loop compiles."""
+    if (isinstance(values, np.ndarray) and values.dtype in (np.int64, np.float64)
+            and values.flags.c_contiguous):
+        return values
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
 class ChainKinematics:
     """Forward and inverse kinematics of a 1-3 joint chain (see the module docstring).
 
@@ -340,7 +350,7 @@ class ChainKinematics:
 
     def forward_one(self, ticks: Sequence[float]) -> Quat:
         """:meth:`forward` as a tuple of floats (the live loop's per-cycle form)."""
-        t = ticks if isinstance(ticks, np.ndarray) else np.asarray(ticks, dtype=np.float64)
+        t = _kernel_array(ticks)
         if t.shape != (self.n,):
             raise ValueError(f"ticks must have {self.n} values, got shape {t.shape}")
         return _forward_kernel(self._axes_c, self._zero_c, self._dir_c, self.n, t)
@@ -353,6 +363,10 @@ class ChainKinematics:
         q = self.forward(self.zero_ticks)
         self.inverse_float(q, self.zero_ticks)
         self.inverse_float(q, self._zero_c)
+        try:  # the kernels behind an unreachable goal's message, called from Python
+            self._unreachable(tuple(q), self._zero_c)
+        except UnreachableError:
+            pass
         return self
 
     def forward_batch(self, ticks: np.ndarray) -> np.ndarray:
@@ -376,8 +390,7 @@ class ChainKinematics:
         if not norm > 0.5 or not math.isfinite(norm):
             raise UnreachableError("IK target is not a unit quaternion", actual=[w, x, y, z])
         w, x, y, z = w / norm, x / norm, y / norm, z / norm
-        near = (near_ticks if isinstance(near_ticks, np.ndarray)
-                else np.asarray(near_ticks, dtype=np.float64))
+        near = _kernel_array(near_ticks)
         if near.shape != (self.n,):
             raise ValueError(f"near_ticks must have {self.n} values, got {near.size}")
         ticks = np.empty(self.n)
