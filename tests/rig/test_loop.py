@@ -333,3 +333,78 @@ def test_bus_watchdog_is_armed_and_backstop_written(models):
             chain.close()
     assert summary["watchdog_ms"] == 100 and summary["cycles"] == 20
     assert summary["backstop_ticks"]["1"] == [int(lo[0]), int(hi[0])]
+
+
+_NO_COMPILE_SCRIPT = """
+import dataclasses, json
+from models import geometry, oracle as O
+from models.oracle import ConstraintOracle
+from models.shapes import load_shape
+from models.constraint import JointConstraint
+from rig.devices import kinematics as K
+from rig.devices.config import load_rig_config
+from rig.devices.ports import open_port
+from rig.loop import EnforcementLoop, LoopConfig
+from rig.loop.runner import prepare_chain
+from rig.loop.targets import CsvTrajectory
+
+KERNELS = [(O, "_ball_kernel"), (geometry, "_nearest_in_cell"), (geometry, "_rank_one"),
+           (K, "_forward_kernel"), (K, "_ik_kernel"), (K, "_solutions_kernel"),
+           (K, "_placed_kernel"), (K, "_residual_kernel")]
+def counts():
+    return {name: len(getattr(mod, name).signatures) for mod, name in KERNELS}
+orig = load_shape("original")
+c = JointConstraint.polygon(orig.swing.vertices, orig.swing.interior, twist=(-45, 70),
+                            name="original+twist")
+oracle = ConstraintOracle(c)
+servos = dataclasses.replace(load_rig_config("sim-shoulder").servos,
+                             port="%s&clock=manual&wire_time=off")
+targets = CsvTrajectory(%r)  # read from a file: nothing queries the oracle before the loop
+with open_port(servos.port, baud=servos.baud) as port:
+    clk = port.simulator.clock
+    chain = prepare_chain(port, servos)  # no backstop: nothing asks the oracle before the loop
+    try:
+        loop = EnforcementLoop(chain, None, oracle, targets,
+                               LoopConfig(rate_hz=200.0, watchdog_ms=1000), clock=clk,
+                               sleep=clk.sleep)
+        before = counts()
+        loop.setup()
+        summary = loop.run(max_cycles=600)
+        after = counts()
+    finally:
+        chain.close()
+print(json.dumps([before, after, dict(summary["interventions_by_kind"])]))
+"""
+
+
+def test_no_kernel_compiles_inside_a_running_loop(tmp_path):
+    """The compiled kernels a cycle calls (the oracle's query, a polygon's nearest edge, IK,
+    FK, an unreachable goal's message) are all built when the loop is, so a machine's first
+    run pays for compiling before its first deadline, never inside a cycle. In a fresh
+    interpreter (no kernel loaded yet), their compiled signatures after 600 adversarial
+    cycles — projections, rate limits, unreachable goals — are those they had before the
+    first. The targets come from a file, so that only the loop itself could have built them."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    orig = load_shape("original")
+    oracle = ConstraintOracle(JointConstraint.polygon(orig.swing.vertices, orig.swing.interior,
+                                                      twist=(-45, 70)))
+    src = ScriptedTargets("adversarial", oracle, seed=3)
+    src.start(0.0)
+    rows = [(k * 0.005, *src.latest(k * 0.005)[1]) for k in range(1, 601)]
+    rows = [r for r in rows if np.isfinite(r).all() and abs(np.linalg.norm(r[1:]) - 1) < 1e-6]
+    path = tmp_path / "targets.csv"
+    path.write_text("t_s,w,x,y,z\n" + "".join(",".join(f"{v!r}" for v in r) + "\n"
+                                            for r in rows))
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", _NO_COMPILE_SCRIPT % (URL, str(path))], cwd=root,
+                         capture_output=True, text=True, timeout=110)
+    assert out.returncode == 0, out.stderr
+    before, after, kinds = json.loads(out.stdout.strip().splitlines()[-1])
+    assert after == before
+    # every kernel the cycle reaches was built (a polygon's ranking inside its cell lookup)
+    assert all(n >= 1 for name, n in before.items() if name != "_rank_one"), before
+    assert kinds.get("projected", 0) + kinds.get("reprojected", 0) > 0, kinds
