@@ -71,6 +71,7 @@ import yaml
 from models.errors import ConstraintError, GeometryError
 from models.fileio import write_owner_only
 from models.geometry import check_polygon, polygon_area
+from models.jit import njit
 from models.quaternion import LIMB_AXIS
 from models.yamlio import safe_dump_yaml, safe_load_yaml
 
@@ -172,6 +173,32 @@ class PolygonSwing:
         )
 
     __hash__ = None  # type: ignore[assignment]
+
+
+@njit
+def _table_limits_one(d0, d1, d2, dirs_k, sums, kappa):
+    """Twist limits (radians) of a swing-twist table at one unit direction: the normalised
+    kernel weights ``exp(κ (d·d_i − 1))`` (``dirs_k = κ d_i``) times each point's limits
+    (``sums``: rows min, max and ones); if every weight underflows, shifted by the largest
+    exponent instead (the normalised weights are the same)."""
+    n = dirs_k.shape[0]
+    z = np.empty(n)
+    r0 = r1 = r2 = 0.0
+    for i in range(n):
+        z[i] = dirs_k[i, 0] * d0 + dirs_k[i, 1] * d1 + dirs_k[i, 2] * d2
+        e = math.exp(z[i] - kappa)
+        r0 += sums[0, i] * e
+        r1 += sums[1, i] * e
+        r2 += sums[2, i] * e
+    if r2 < 1e-150:
+        zmax = z.max()
+        r0 = r1 = r2 = 0.0
+        for i in range(n):
+            e = math.exp(z[i] - zmax)
+            r0 += sums[0, i] * e
+            r1 += sums[1, i] * e
+            r2 += sums[2, i] * e
+    return r0 / r2, r1 / r2
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,15 +305,10 @@ class SwingTwistTable:
         return lo, hi
 
     def limits_at_one(self, d: tuple[float, float, float]) -> tuple[float, float]:
-        """Scalar twin of :meth:`limits_at` for one unit direction (the control loop's path)."""
-        w = np.exp(self._dirs_k @ d - self.kappa)
-        r = self._sums @ w
-        if r[2] < 1e-150:  # see _exponents: shift by the maximum
-            z = self._dirs_k @ d
-            w = np.exp(z - z.max())
-            r = self._sums @ w
-        lo, hi, s = r.tolist()
-        return lo / s, hi / s
+        """Scalar twin of :meth:`limits_at` for one unit direction (the control loop's path,
+        compiled: :func:`_table_limits_one`, which the oracle's kernel calls too)."""
+        return _table_limits_one(float(d[0]), float(d[1]), float(d[2]), self._dirs_k,
+                                 self._sums, self.kappa)
 
     def to_dict(self) -> dict[str, Any]:
         return {

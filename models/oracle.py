@@ -77,7 +77,7 @@ import numpy as np
 from models import qkernels as qk
 from models import qscalar as qs
 from models import quaternion as Q
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import ConeSwing, JointConstraint, PolygonSwing, _table_limits_one
 from models.geometry import (
     SphericalPolygon,
     _nearest_in_cell,
@@ -604,29 +604,6 @@ def _two_vectors_k(a0, a1, a2, b0, b1, b2):
 
 
 @njit
-def _table_limits_k(d0, d1, d2, dirs_k, sums, kappa):
-    """:meth:`models.constraint.SwingTwistTable.limits_at_one`."""
-    n = dirs_k.shape[0]
-    z = np.empty(n)
-    r0 = r1 = r2 = 0.0
-    for i in range(n):
-        z[i] = dirs_k[i, 0] * d0 + dirs_k[i, 1] * d1 + dirs_k[i, 2] * d2
-        e = math.exp(z[i] - kappa)
-        r0 += sums[0, i] * e
-        r1 += sums[1, i] * e
-        r2 += sums[2, i] * e
-    if r2 < 1e-150:  # every weight underflows: shift by the maximum
-        zmax = z.max()
-        r0 = r1 = r2 = 0.0
-        for i in range(n):
-            e = math.exp(z[i] - zmax)
-            r0 += sums[0, i] * e
-            r1 += sums[1, i] * e
-            r2 += sums[2, i] * e
-    return r0 / r2, r1 / r2
-
-
-@njit
 def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, table, v0, vn,
                  orient, twist_kind, lo, hi, wraps, dirs_k, sums, kappa):
     """:meth:`ConstraintOracle._evaluate` for one unit orientation of a ball (or two-axis)
@@ -639,7 +616,7 @@ def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, tabl
     if swing_kind == _SWING_NONE:
         sdist = -math.inf
     else:
-        if swing_kind == _SWING_CONE:  # _ConeSolver.nearest_one
+        if swing_kind == _SWING_CONE:  # _ConeSolver.nearest's closed form, one direction
             c0, c1, c2, r = cone[0], cone[1], cone[2], cone[3]
             cos_t = d0 * c0 + d1 * c1 + d2 * c2
             g0, g1, g2 = d0 - cos_t * c0, d1 - cos_t * c1, d2 - cos_t * c2
@@ -666,7 +643,7 @@ def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, tabl
     invalid = swing_out
     if twist_kind != _TWIST_NONE:
         if twist_kind == _TWIST_TABLE:
-            lo, hi = _table_limits_k(b0, b1, b2, dirs_k, sums, kappa)
+            lo, hi = _table_limits_one(b0, b1, b2, dirs_k, sums, kappa)
         phi_p = _twist_k(p0, p1, p2, p3, ax) if swing_out else phi
         t = BOUNDARY_TOLERANCE
         if not lo - t <= phi_p <= hi + t and not (
@@ -735,17 +712,6 @@ class _ConeSolver:
         u = np.where(tiny[:, None], self._perp, tang / safe)
         b = math.cos(self.r) * c + math.sin(self.r) * u
         return dist, b
-
-    def nearest_one(self, d: tuple[float, float, float]):
-        """Scalar twin of :meth:`nearest` for one direction."""
-        c = self._c_t
-        cos_t = d[0] * c[0] + d[1] * c[1] + d[2] * c[2]
-        tang = (d[0] - cos_t * c[0], d[1] - cos_t * c[1], d[2] - cos_t * c[2])
-        sin_t = math.sqrt(tang[0] ** 2 + tang[1] ** 2 + tang[2] ** 2)
-        dist = math.atan2(sin_t, cos_t) - self.r
-        u = self._perp_t if sin_t < 1e-15 else (tang[0] / sin_t, tang[1] / sin_t, tang[2] / sin_t)
-        cr, sr = math.cos(self.r), math.sin(self.r)
-        return dist, (cr * c[0] + sr * u[0], cr * c[1] + sr * u[1], cr * c[2] + sr * u[2])
 
 
 # ---------------------------------------------------------------------------------------------
