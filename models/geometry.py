@@ -549,10 +549,6 @@ class SphericalPolygon:
             self.orient = -1.0
             self._set_pseudo_normals()
         self._tree = _ArcTree(self.v0, self.v1)
-        # edge caps (the arc's midpoint and half-length) for pruning long lists
-        mid = self.v0 + self.v1
-        self._emid = mid / np.linalg.norm(mid, axis=1, keepdims=True)
-        self._ehalf = 0.5 * _angle(self.v0, self.v1)
         self._brute_points = 0  # points answered by brute force so far (no grid yet)
 
     #: the grid's attributes: built on first use (:meth:`_build_grid`)
