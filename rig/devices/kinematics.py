@@ -326,9 +326,7 @@ class ChainKinematics:
         self._hi = tuple(float(j.max_ticks) for j in joints)
         self.tolerance = math.radians(tolerance_deg)
         # the compiled kernels' view: contiguous float64 arrays
-        self._axes_c = np.ascontiguousarray(self.axes, dtype=np.float64)
         self._zero_c = np.array(self._zero)
-        self._dir_c = np.array(self._dir)
         self._lo_c = np.array(self._lo)
         self._hi_c = np.array(self._hi)
 
@@ -353,12 +351,11 @@ class ChainKinematics:
         t = _kernel_array(ticks)
         if t.shape != (self.n,):
             raise ValueError(f"ticks must have {self.n} values, got shape {t.shape}")
-        return _forward_kernel(self._axes_c, self._zero_c, self._dir_c, self.n, t)
+        return _forward_kernel(self.axes, self._zero_c, self.direction, self.n, t)
 
     def compile(self) -> ChainKinematics:
         """Compile (or load from numba's on-disk cache) the per-sample kernels now, so the
         first :meth:`forward` or :meth:`inverse` of a running loop does not pay for it."""
-        self.forward_one(self.zero_ticks)
         self.forward_one(self._zero_c)
         q = self.forward(self.zero_ticks)
         self.inverse_float(q, self.zero_ticks)
@@ -394,7 +391,7 @@ class ChainKinematics:
         if near.shape != (self.n,):
             raise ValueError(f"near_ticks must have {self.n} values, got {near.size}")
         ticks = np.empty(self.n)
-        if _ik_kernel(self._axes_c, self._zero_c, self._dir_c, self._lo_c, self._hi_c, self.n,
+        if _ik_kernel(self.axes, self._zero_c, self.direction, self._lo_c, self._hi_c, self.n,
                       w, x, y, z, near, self.tolerance, ticks):
             return ticks
         return self._unreachable((w, x, y, z), near)
@@ -403,17 +400,17 @@ class ChainKinematics:
         """Raise the :class:`UnreachableError` that says why no solution serves ``qq``."""
         near = np.asarray(near, dtype=np.float64)
         nt = self.angles(near)
-        count, sols = _solutions_kernel(self._axes_c, self.n, *qq, nt[0],
+        count, sols = _solutions_kernel(self.axes, self.n, *qq, nt[0],
                                         nt[1] if self.n > 1 else 0.0)
         why = "the chain's axes cannot reach it"
         residual_deg = None
         scratch = np.empty(self.n)
         for theta in sols[:count]:
-            res = _residual_kernel(self._axes_c, self.n, theta, *qq)
+            res = _residual_kernel(self.axes, self.n, theta, *qq)
             if res > self.tolerance:
                 residual_deg = math.degrees(res)
                 continue
-            i, _ = _placed_kernel(self._zero_c, self._dir_c, self._lo_c, self._hi_c, self.n,
+            i, _ = _placed_kernel(self._zero_c, self.direction, self._lo_c, self._hi_c, self.n,
                                   theta, near, scratch)
             if i >= 0:
                 base = self._zero[i] + self._dir[i] * theta[i] / RAD_PER_TICK
