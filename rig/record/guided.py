@@ -146,7 +146,7 @@ class GuidedCalibration:
                 f"arm forwards and lower it behind (flexion/extension) for {p.functional_s:g} s")
         else:
             self.display.message(
-                f"calibration of the {self.limb} — 1) neutral pose: {_LIMB_NEUTRAL[self.limb]}; "
+                f"calibration of the {self.limb} — 1) neutral pose: {_NEUTRAL_WORDS[self.limb]}; "
                 f"hold still {p.static_s:g} s. 2) then flex and extend each joint in turn, "
                 f"{', '.join(p.joints)}, {p.movement_s:g} s each")
         if self.rig.simulated:
@@ -304,10 +304,16 @@ class Checkpoint:
     residual_deg: float | None
 
 
-#: The neutral pose a checkpoint asks for, by the rig's ``limb`` (None: the shoulder rigs).
+#: The neutral pose, by the rig's ``limb`` (None: the shoulder rigs): what a limb calibration's
+#: static pose and every neutral checkpoint ask for, in the same words. The calibration makes
+#: the static pose each joint's zero and a checkpoint is read against that zero (a forearm
+#: turned otherwise at a checkpoint than in the static pose is indistinguishable from heading
+#: drift), so the two must be one pose. The arm's palm faces the thigh: the forearm's clinical
+#: zero between pronation and supination (AAOS: thumb up with the elbow bent), which the
+#: normative 80° / 80° are measured from (:data:`calibration.joint_angles.NORMATIVE`).
 _NEUTRAL_WORDS = {
     None: "arm hanging at the side, forearm forward",
-    "arm": "arm hanging at the side, palm facing the thigh, fingers down",
+    "arm": "standing straight, arm hanging at the side, palm facing the thigh, fingers down",
     "leg": "standing straight, foot flat and pointing forward",
 }
 
@@ -550,15 +556,11 @@ def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
 #: What the patient does for each joint's calibration movement, and the limb's neutral pose.
 _LIMB_MOVEMENTS = {
     "shoulder": "raise the straight arm forwards, then back behind",
-    "elbow": "bend and straighten the elbow, palm forwards",
+    "elbow": "bend and straighten the elbow, palm facing the body",
     "wrist": "bend the wrist up and down",
     "hip": "raise the straight leg forwards, then back behind",
     "knee": "bend and straighten the knee",
     "ankle": "point the foot down, then pull the toes up",
-}
-_LIMB_NEUTRAL = {
-    "arm": "standing, arm hanging relaxed at the side, palm forwards, fingers straight",
-    "leg": "standing upright on both feet, knees straight, feet forwards",
 }
 
 

@@ -6,7 +6,10 @@ end. The recordings are made once per module by the limb demo (``--quick`` size,
 from __future__ import annotations
 
 import io
+import os
 import re
+import threading
+import types
 from dataclasses import replace
 from importlib import resources
 
@@ -125,7 +128,8 @@ def test_wrong_requests_of_a_limb_session_are_one_line_errors(leg_demo, rig_cli,
 
 
 def test_limb_rig_configs(tmp_path):
-    for name, limb in (("sim-arm", "arm"), ("sim-leg", "leg"), ("hardware-leg-template", "leg")):
+    for name, limb in (("sim-arm", "arm"), ("sim-leg", "leg"), ("hardware-arm-template", "arm"),
+                       ("hardware-leg-template", "leg")):
         cfg = load_rig_config(name)
         assert cfg.limb == limb
         assert cfg.joint.name == LIMB_CHAINS[limb][0][0]
@@ -183,3 +187,29 @@ def test_rom_of_a_joint_in_a_limb_file(leg_demo, rig_cli):
                            "has no joint 'elbow' (it has hip, knee, ankle)")):
         code, _, err = rig_cli(args)
         assert code == 2 and message in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name", ["hardware-arm-template", "hardware-leg-template"])
+def test_the_static_pose_and_the_checkpoints_ask_for_the_same_neutral_pose(name):
+    # The calibration makes the static pose every joint's zero and each checkpoint is read
+    # against it: an arm told "palm forwards" for one and "palm facing the thigh" for the other
+    # turns the forearm ~85° between them, which the heading correction takes for drift.
+    from rig.record.guided import GuidedCalibration, NeutralCheckpoints
+
+    cfg = load_rig_config(name)
+    rig = types.SimpleNamespace(simulated=False, kind="imu", config=cfg, patients=[])
+    said: list[str] = []
+    display = types.SimpleNamespace(message=said.append)
+    with open(os.devnull) as stdin:  # nobody presses Enter: EOF
+        cal = GuidedCalibration(cfg, rig, display=display, stdin=stdin)
+        cal.begin(threading.Event())
+        cal.close()
+        cps = NeutralCheckpoints(rig, display=display, stdin=stdin)
+        cps.begin()
+        cps.close()
+    [static] = [m for m in said if "1) neutral pose:" in m]
+    [checkpoint] = [m for m in said if m.startswith("neutral checkpoints:")]
+    pose = re.search(r"1\) neutral pose: (.*?); hold still", static).group(1)
+    assert f"({pose})" in checkpoint
+    if cfg.limb == "arm":  # the forearm's clinical zero, from which 80° / 80° are measured
+        assert "palm facing the thigh" in pose
