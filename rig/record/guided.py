@@ -553,14 +553,17 @@ def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
     return model.transform(parent_q, child_q)
 
 
-#: What the patient does for each joint's calibration movement, and the limb's neutral pose.
+#: What the patient does for each joint's calibration movement: flexion first, as the protocol
+#: scripts it (the ankle's flexion is dorsiflexion, toes up). A movement begun the other way is
+#: still calibrated (its axis is flipped by its neighbours' and named in ``flipped_``), but only
+#: through that fallback.
 _LIMB_MOVEMENTS = {
     "shoulder": "raise the straight arm forwards, then back behind",
     "elbow": "bend and straighten the elbow, palm facing the body",
-    "wrist": "bend the wrist up and down",
+    "wrist": "bend the wrist towards the palm, then back the other way",
     "hip": "raise the straight leg forwards, then back behind",
     "knee": "bend and straighten the knee",
-    "ankle": "point the foot down, then pull the toes up",
+    "ankle": "pull the toes up, then point the foot down",
 }
 
 
