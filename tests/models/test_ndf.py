@@ -168,6 +168,36 @@ def test_fields_train_side_by_side_as_they_do_one_after_another():
     assert seen == ["hip", "ankle"]
     for name in ("hip", "ankle"):
         for k in ("b", "w1", "b1", "w2", "b2", "w3", "b3"):
-            np.testing.assert_allclose(getattr(one[name], k), getattr(two[name], k),
-                                       rtol=1e-4, atol=1e-5)
+            np.testing.assert_array_equal(getattr(one[name], k), getattr(two[name], k))
     assert not np.allclose(one["hip"].w1, one["ankle"].w1)
+
+
+def test_a_batch_computed_in_parts_on_helper_threads_gives_the_same_weights():
+    """A field alone on several cores computes each batch's gradient in parts on helper
+    threads; the parts are summed in order, so the weights are those of the same parts on one
+    thread, bit for bit — and the parts' sum is the whole batch's gradient."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from models.nn.ndf import fit_coupled_field
+    from rig.sim.patients import anatomical_limb
+
+    arm = anatomical_limb(0, "arm", "right")
+    limits = arm.joints[arm.index("shoulder")].coupling.limits
+    tiny = FieldSpec(features=16, hidden=16, samples=3000, epochs=2, batch=256)
+    q = training_postures(arm, tiny.samples, np.random.default_rng(7), tiny.uniform)
+    samples = field_samples(arm, "shoulder", q, LimbOracle(arm).evaluate(q))
+    alone = fit_coupled_field(limits, np.random.default_rng(1), tiny, samples, parts=3)
+    with ThreadPoolExecutor(2) as helpers:
+        helped = fit_coupled_field(limits, np.random.default_rng(1), tiny, samples, helpers, 3)
+    for k in ("b", "w1", "b1", "w2", "b2", "w3", "b3"):
+        np.testing.assert_array_equal(getattr(alone, k), getattr(helped, k))
+    # the parts add up to the whole batch's gradient
+    net = DistanceField.initial(tiny, limits.at[0], limits.at[-1], np.random.default_rng(2))
+    d, angle, s_, g = samples
+    z = np.concatenate((d, net.tau(angle)[:, None]), axis=1).astype(np.float32)[:256]
+    lam, w = np.float32(0.05), np.ones(256, np.float32)
+    whole = net.gradients(z, s_[:256].astype(np.float32), g[:256].astype(np.float32), lam, w)
+    parts = net._batch_gradients(z, s_[:256].astype(np.float32), g[:256].astype(np.float32),
+                                 lam, w, 3, None)
+    for a, b in zip(whole, parts, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6)
