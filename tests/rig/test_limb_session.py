@@ -30,10 +30,14 @@ from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 @pytest.fixture(scope="module")
 def leg_demo(tmp_path_factory):
-    """``rig demo --limb leg --quick`` with 60 s of motion instead of 150 s."""
+    """``rig demo --limb leg --quick`` with 60 s of motion instead of 150 s, patient time ×10
+    instead of ×20: a neutral checkpoint's 2 s hold is then 0.2 s of host time, so a pause of
+    the loaded host does not leave it with too few samples to be accepted (at ×20 a fresh
+    clone's CI once accepted only one of the recording's checkpoints for one sensor)."""
     out = tmp_path_factory.mktemp("leg-demo")
     sizes = dict(limb_demo.LIMB_SIZES)
-    limb_demo.LIMB_SIZES["quick"] = replace(sizes["quick"], motion_s=60.0, eval_n=600)
+    limb_demo.LIMB_SIZES["quick"] = replace(sizes["quick"], motion_s=60.0, eval_n=600,
+                                            time_scale=10.0)
     try:
         from rich.console import Console
 
