@@ -53,7 +53,8 @@ CHAINS = tuple(LIMB_CHAINS)
 @click.option("--by-swing", type=click.Choice(BY_SWING_CHOICES), default="auto",
               show_default=True, help="Swing-dependent twist limits.")
 @click.option("--store/--no-store", "store_result", default=True, show_default=True,
-              help="With --db: also store the boundary in the session database.")
+              help="With --db: also store the boundary (with --chain, the limb file) in the "
+                   "session database.")
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
@@ -77,7 +78,8 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, seg
                                      "joints and segments)")
         result = run_chain(ChainRequest(file, chain, segments, out, reference=reference,
                                         frames=frames, name=name, side=side, db=db,
-                                        session_id=session_id, fusion=fusion))
+                                        session_id=session_id, fusion=fusion,
+                                        store=store_result))
         click.echo(result.describe())
         return
 

@@ -265,7 +265,7 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
             if request.session_id is not None:
                 sid = request.session_id
                 session_patient = store.get_session(sid).get("pseudonym")
-                bounds = store.boundaries(sid)
+                bounds = store.boundaries(sid, limb=False)  # a joint's, not a limb file
                 if bounds:
                     session_constraint = loads_constraint(
                         bounds[-1]["constraint_yaml"],

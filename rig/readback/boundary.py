@@ -254,6 +254,10 @@ class ChainRequest:
         chain_orientations_from_store`), instead of ``file``.
     fusion : str
         Sessions: where the IMU orientations come from (:data:`FUSION_CHOICES`).
+    store : bool
+        Sessions: also store the limb file with the session (a boundary whose ``meta.kind`` is
+        :data:`rig.store.LIMB_BOUNDARY`; :func:`stored_limb` reads the last one back), as
+        ``rig boundary`` stores a joint's constraint.
     """
 
     file: str | None
@@ -267,6 +271,7 @@ class ChainRequest:
     db: str | None = None
     session_id: int | None = None
     fusion: str = "auto"
+    store: bool = True
 
     def columns(self) -> list[str]:
         """The four segment columns, proximal to distal."""
@@ -311,16 +316,21 @@ class ChainRequest:
 
 @dataclass
 class ChainResult:
-    """The fitted :class:`~calibration.boundary.ChainExtractor` and the file written."""
+    """The fitted :class:`~calibration.boundary.ChainExtractor`, the file written and the
+    stored boundary's id (None when not stored)."""
 
     extractor: Any
     path: Path
+    boundary_id: int | None = None
+    session_id: int | None = None
 
     def describe(self) -> str:
         """What ``rig boundary --chain`` prints."""
         ex = self.extractor
         r = ex.report()
         lines = [f"wrote {self.path}", f"  limb        {ex.limb}, {len(ex.limb_.joints)} joints"]
+        if self.boundary_id is not None:
+            lines.append(f"  stored      boundary {self.boundary_id} of session {self.session_id}")
         for j in ex.limb_.joints:
             rep = r["joints"].get(j.name, {})
             if j.coupling is not None:
@@ -375,4 +385,26 @@ def run_chain(request: ChainRequest) -> ChainResult:
                                                      provenance=prov, slow_error_deg=slow)
     path = Path(request.out)
     dump_limb(ex.limb_, path)
-    return ChainResult(ex, path)
+    result = ChainResult(ex, path)
+    if request.file is None and request.store:
+        from rig.store import LIMB_BOUNDARY, open_store
+
+        with open_store(request.db, create=False) as st:
+            result.boundary_id = st.add_boundary(
+                request.session_id, ex.limb_.to_yaml(),
+                {"kind": LIMB_BOUNDARY, "limb": request.limb, "path": str(path),
+                 "coupled": {k: bool(v["coupled"]) for k, v in ex.report()["couplings"].items()}})
+            result.session_id = request.session_id
+    return result
+
+
+def stored_limb(store, session_id: int):
+    """The last limb file stored with a session (``rig boundary --chain``), as ``(Limb,
+    boundary id)``, or None."""
+    from models.limb import loads_limb
+
+    rows = store.boundaries(session_id, limb=True)
+    if not rows:
+        return None
+    b = rows[-1]
+    return loads_limb(b["constraint_yaml"], source=f"boundary {b['id']}"), int(b["id"])

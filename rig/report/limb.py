@@ -145,6 +145,7 @@ class LimbReportData:
     joint_order: tuple[str, ...]
     samples: int
     session_label: str | None = None
+    limits_source: str | None = None
     warnings: list[str] = field(default_factory=list)
     simulated: bool = False
     reference_name: str | None = None
@@ -665,7 +666,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      session_label: str | None = None, warnings: Sequence[str] = (),
                      reference=None, calibration: Mapping[str, Mapping[str, float]] | None = None,
                      evaluation: Mapping[str, Any] | None = None, age: float | None = None,
-                     sex: str | None = None) -> LimbReportData:
+                     sex: str | None = None, limits_source: str | None = None
+                     ) -> LimbReportData:
     """Everything the report of one arm or leg shows (module doc).
 
     Parameters
@@ -683,6 +685,9 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         Pseudonym.
     session_label : str, optional
         How the page names the session (e.g. ``"12 (2026-11-23)"``).
+    limits_source : str, optional
+        Where the limits come from (a model's limb file, a limb file stored with the session,
+        or extracted for the report), shown beside the limb.
     warnings : sequence of str
         Reasons to doubt the figures (coverage, an interrupted session), shown at the top.
     reference : models.limb.Limb, optional
@@ -716,7 +721,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     result = LimbOracle(limb).evaluate(q)
     data = LimbReportData(patient=patient, side=side, limb=limb.limb, limb_name=limb.name,
                           joint_order=limb.joint_names, samples=len(q),
-                          session_label=session_label, warnings=[str(w) for w in warnings],
+                          session_label=session_label, limits_source=limits_source,
+                          warnings=[str(w) for w in warnings],
                           reference_name=None if reference is None else reference.name,
                           software=f"rig {__version__}")
     for j, joint in enumerate(limb.joints):
@@ -777,6 +783,7 @@ def render_limb_html(data: LimbReportData) -> str:
     meta = [("Patient (pseudonym)", f"<b>{escape(data.patient)}</b>"),
             ("Session", escape(data.session_label) if data.session_label else None),
             ("Limb", f"{escape(what)} ({escape(data.limb_name)})"),
+            ("Limits", escape(data.limits_source) if data.limits_source else None),
             ("Joints", escape(" → ".join(data.joint_order))),
             ("Recorded postures", fmt(data.samples)),
             ("Reference (dashed)", escape(data.reference_name) if data.reference_name else None)]

@@ -100,7 +100,7 @@ def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
     """(constraint, extraction report, where it came from) — stored, else extracted."""
     from models.constraint import loads_constraint
 
-    stored = store.boundaries(session_id)
+    stored = store.boundaries(session_id, limb=False)
     if stored:
         b = stored[-1]
         c = loads_constraint(b["constraint_yaml"], source=f"boundary {b['id']}")
@@ -345,7 +345,8 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     The joints' orientations come from :func:`rig.readback.sessions.
     chain_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
     the limb file it was made for; it is scored on ``eval_n`` held-out postures of it), else
-    extracted from the session as ``rig boundary --chain`` does. ``reference``: a
+    the last limb file stored with the session (``rig boundary --chain --db``), else extracted
+    from the session as ``rig boundary --chain`` does; the page says which. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
     from calibration.boundary import ChainExtractor
     from rig.readback.sessions import chain_orientations_from_store, latest_calibration
@@ -363,10 +364,19 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                                  f"{', '.join(limb.joint_names)}, the session recorded "
                                  f"{', '.join(chain.joints)}")
         evaluation, _ = evaluate_limb(str(model), limb, eval_n, 12345)
+        source = f"the limb file of the model {Path(model).name}"
     else:
-        limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
-            chain.q, t=chain.t, status=chain.status, side=chain.side,
-            slow_error_deg=chain.slow_error_deg).limb_
+        from rig.readback.boundary import stored_limb
+
+        found = stored_limb(store, session_id)
+        if found is not None and found[0].joint_names == chain.joints:
+            limb, bid = found
+            source = f"boundary {bid} stored with the session (rig boundary --chain)"
+        else:
+            limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
+                chain.q, t=chain.t, status=chain.status, side=chain.side,
+                slow_error_deg=chain.slow_error_deg).limb_
+            source = "extracted from the recorded postures for this report"
     cal = latest_calibration(store.calibrations(session_id), "imu-limb")
     sess = store.get_session(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)
@@ -383,7 +393,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                       f"{sess.get('started_at')}, {used})",
         warnings=chain.recording.warnings(), reference=reference,
         calibration=None if cal is None else cal["data"].get("residuals_deg"),
-        evaluation=evaluation, age=age, sex=sex)
+        evaluation=evaluation, age=age, sex=sex, limits_source=source)
     data.simulated = bool(chain.recording.simulated)
     return write_limb_report(data, out_path)
 

@@ -17,6 +17,7 @@ Import/export of orientation time series (OpenSim ``.sto``, CSV) lives in :mod:`
 
 from rig.store.schema import SCHEMA_VERSION, TELEMETRY_COLUMNS
 from rig.store.store import (
+    LIMB_BOUNDARY,
     RUN_STATUSES,
     SESSION_KINDS,
     SESSION_STATUSES,
@@ -28,6 +29,7 @@ from rig.store.store import (
 from rig.store.writers import SampleWriter, TelemetryWriter
 
 __all__ = [
+    "LIMB_BOUNDARY",
     "RUN_STATUSES",
     "SCHEMA_VERSION",
     "SESSION_KINDS",

@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from calibration.joints import LIMB_CHAINS
-from models.limb import load_limb
+from models.limb import load_limb, loads_limb
 from rig.demo import DemoOptions
 from rig.demo import limb as limb_demo
 from rig.devices.config import load_rig_config
@@ -116,6 +116,34 @@ def test_every_joint_reads_back_from_the_session(leg_demo, rig_cli, tmp_path):
     assert "ankle range of motion" in out and "dorsiflexion" in out
     # the whole leg: the demo's boundary stage ran `rig boundary --chain` on this session
     assert load_limb(leg_demo["out"] / "leg.yaml").joint_names == ("hip", "knee", "ankle")
+
+
+def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_demo, rig_cli,
+                                                                          tmp_path):
+    db, sid = leg_demo["db"], leg_demo["session"]
+    with open_store(db, create=False) as store:
+        limbs = store.boundaries(sid, limb=True)
+        joints = store.boundaries(sid, limb=False)
+    # the demo's boundary stage ran `rig boundary --chain` on the session: its limb file is
+    # stored with it, told apart from a joint's constraint (what `rig enforce --session` reads)
+    assert limbs and limbs[-1]["meta"]["kind"] == "limb" and limbs[-1]["meta"]["limb"] == "leg"
+    assert (loads_limb(limbs[-1]["constraint_yaml"]).to_yaml()
+            == load_limb(leg_demo["out"] / "leg.yaml").to_yaml())
+    assert all((b.get("meta") or {}).get("kind") != "limb" for b in joints)
+    # `rig report` without --model shows that limb file, and says so
+    code, _, err = rig_cli(["report", "--db", db, "--session", sid, "--out",
+                            tmp_path / "r.html"])
+    assert code == 0, err
+    html = (tmp_path / "r.html").read_text()
+    assert f"boundary {limbs[-1]['id']} stored with the session" in html
+    # --no-store writes the file and leaves the store as it was
+    code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--chain", "leg",
+                              "--out", tmp_path / "leg2.yaml", "--no-store"])
+    assert code == 0, err
+    assert (tmp_path / "leg2.yaml").is_file()
+    assert not re.search(r"^\s+stored\s+boundary", out, re.M)
+    with open_store(db, create=False) as store:
+        assert len(store.boundaries(sid, limb=True)) == len(limbs)
 
 
 @pytest.mark.parametrize("args, message", [
