@@ -214,14 +214,12 @@ class DistanceField:
         if parts == 1:
             return self.gradients(zb, sb, gb, lam, wb)
         cut = np.linspace(0, len(zb), parts + 1).astype(np.int64)
-        n = len(zb)
-        args = [(zb[a:b], sb[a:b], gb[a:b], lam, wb[a:b], n) for a, b in itertools.pairwise(cut)]
-        later = ([helpers.submit(self.gradients, *a) for a in args[1:]]
-                 if helpers is not None else None)
+        args = [(zb[a:b], sb[a:b], gb[a:b], lam, wb[a:b], len(zb))
+                for a, b in itertools.pairwise(cut)]
+        later = [helpers.submit(self.gradients, *a) for a in args[1:]] if helpers else []
         total = list(self.gradients(*args[0]))
-        rest = (f.result() for f in later) if later is not None else (
-            self.gradients(*a) for a in args[1:])
-        for part in rest:
+        for k, a in enumerate(args[1:]):
+            part = later[k].result() if later else self.gradients(*a)
             for t, p in zip(total, part, strict=True):
                 t += p
         return tuple(total)
@@ -336,9 +334,9 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
     t0 = time.perf_counter()
     with threadpool_limits(limits=1, user_api="blas"), \
             ThreadPoolExecutor(max_workers=workers) as pool, \
-            ThreadPoolExecutor(max_workers=max(1, spare * workers)) as parts:
+            ThreadPoolExecutor(max_workers=max(1, spare * workers)) as helpers:
         running = [pool.submit(fit_coupled_field, limits, r, spec, samples,
-                               parts if spare else None, 1 + spare)
+                               helpers if spare else None, 1 + spare)
                    for limits, r, samples in jobs]
         for name, job in zip(names, running, strict=True):
             fields[name] = job.result()
