@@ -307,10 +307,10 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True,
     return store
 
 
-
 #: ``meta["kind"]`` of a stored boundary that is a whole limb file (``rig boundary --chain`` on
 #: a session), not one joint's constraint
 LIMB_BOUNDARY = "limb"
+
 
 class Store:
     """Patients, sessions, samples, calibrations, boundaries, models, runs and telemetry.
@@ -901,18 +901,15 @@ class Store:
         """The boundaries stored with a session, oldest first: every one, or (``limb``) only
         the whole-limb files (``meta.kind`` ``"limb"``, :data:`LIMB_BOUNDARY`) or only the
         single joints' constraints."""
-        rows = self._boundaries(session_id)
-        if limb is None:
-            return rows
-        return [r for r in rows if ((r.get("meta") or {}).get("kind") == LIMB_BOUNDARY) == limb]
-
-    def _boundaries(self, session_id: int) -> list[dict]:
         with self._tx(write=False) as conn:
             rows = conn.execute(
                 select(S.boundaries).where(S.boundaries.c.session_id == int(session_id))
                 .order_by(S.boundaries.c.id)
             ).mappings().all()
-        return [dict(r, meta=_loads(r["meta"])) for r in rows]
+        out = [dict(r, meta=_loads(r["meta"])) for r in rows]
+        if limb is None:
+            return out
+        return [r for r in out if ((r["meta"] or {}).get("kind") == LIMB_BOUNDARY) == limb]
 
     def add_model(self, path: str | os.PathLike, *, sha256: str | None = None,
                   metrics: Mapping[str, Any] | None = None, boundary_id: int | None = None,
