@@ -56,6 +56,10 @@ def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
     assert code == 2 and len(lines) == 1 and needle in lines[0], err
 
 
+# the module-scoped fixtures are built once: this module's tests run on one xdist worker
+pytestmark = pytest.mark.xdist_group("test_chain_boundary")
+
+
 @pytest.fixture(scope="module")
 def ideal_arm():
     """Arm 1 (``rig.sim.patients.chain_patient``, ideal sensors) pressed into its limits at

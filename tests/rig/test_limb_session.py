@@ -27,6 +27,9 @@ from rig.readback.sessions import read_chain
 from rig.store import open_store
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
+# the module-scoped demo is run once: its tests run on one xdist worker
+pytestmark = pytest.mark.xdist_group("test_limb_session")
+
 
 @pytest.fixture(scope="module")
 def leg_demo(tmp_path_factory):

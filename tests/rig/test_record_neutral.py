@@ -31,6 +31,10 @@ SEED, RATE, FREE_S, EVERY = 3, 100, 120.0, 20
 X = np.array([1.0, 0.0, 0.0])
 
 
+# the module-scoped recording is made once: its tests run on one xdist worker
+pytestmark = pytest.mark.xdist_group("test_record_neutral")
+
+
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     from models.constraint import dump_constraint

@@ -47,6 +47,10 @@ def _recorded(limb: Limb, seed: int) -> dict[str, np.ndarray]:
     return {name: q[:, i] for i, name in enumerate(limb.joint_names)}
 
 
+# the module-scoped fixtures are built once: this module's tests run on one xdist worker
+pytestmark = pytest.mark.xdist_group("test_report_limb")
+
+
 @pytest.fixture(scope="module")
 def leg():
     limb = anatomical_limb(3, "leg", "right")

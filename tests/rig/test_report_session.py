@@ -19,6 +19,9 @@ from rig.store import open_store
 from rig.training import TrainRequest, run_train
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
+# the module-scoped recording is made once: its tests run on one xdist worker
+pytestmark = pytest.mark.xdist_group("test_report_session")
+
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
