@@ -70,6 +70,7 @@ __all__ = [
     "check_polygon",
     "densify",
     "fibonacci_sphere",
+    "first_contact_along",
     "first_crossing",
     "polygon_area",
 ]
@@ -171,6 +172,108 @@ def first_crossing(vertices) -> tuple[int, int] | None:
             k = int(np.argmax(hits))
             return int(ii[k]), int(jj[k])
     return None
+
+
+def first_contact_along(a, b, chunk: int = 1 << 20) -> float | None:
+    """The first ``t`` in (0, 1) at which the polygon with vertices ``normalise((1 − t) a_i +
+    t b_i)`` has a vertex on an edge it does not end (the moment it stops being simple), or
+    None when it never does.
+
+    Exact, not sampled: a polygon that is simple at ``t = 0`` can only become non-simple
+    through such a contact (two arcs begin to cross where an end of one passes over the
+    other). Vertex ``p`` lies on the great circle of edge ``(q, r)`` where ``p · (q × r) = 0``;
+    normalising does not change that sign, so with ``x(t) = x_a + t (x_b − x_a)`` it is a
+    cubic in ``t``, whose coefficients for every (vertex, edge) pair are four matrix
+    products. Its roots in (0, 1) are bracketed between the roots of its derivative (each
+    piece monotonic) and found by bisection to 1e-12; a root counts when ``p`` is then inside
+    the arc ``q r``. A touch without crossing (a double root) is not reported.
+
+    Parameters
+    ----------
+    a, b : (M, 3) array_like
+        The polygon's vertices at ``t = 0`` and ``t = 1`` (corresponding, in boundary order).
+    chunk : int
+        Pairs handled at once (memory).
+    """
+    A = np.asarray(a, dtype=np.float64)
+    D = np.asarray(b, dtype=np.float64) - A
+    m = len(A)
+    Ar, Dr = np.roll(A, -1, axis=0), np.roll(D, -1, axis=0)
+    # q × r = E0 + t E1 + t² E2 per edge (q = vertex i, r = vertex i + 1)
+    E0 = cross(A, Ar)
+    E1 = cross(A, Dr) + cross(D, Ar)
+    E2 = cross(D, Dr)
+    c0, c1 = A @ E0.T, A @ E1.T + D @ E0.T           # (vertex, edge)
+    c2, c3 = A @ E2.T + D @ E1.T, D @ E2.T
+    p_idx, e_idx = np.nonzero(np.ones((m, m), dtype=bool))
+    keep = (p_idx != e_idx) & (p_idx != (e_idx + 1) % m)
+    p_idx, e_idx = p_idx[keep], e_idx[keep]
+    best = math.inf
+    for s in range(0, len(p_idx), chunk):
+        pi, ei = p_idx[s:s + chunk], e_idx[s:s + chunk]
+        k = np.stack((c0[pi, ei], c1[pi, ei], c2[pi, ei], c3[pi, ei]), axis=1)
+        for t in _cubic_roots_01(k):
+            ok = np.isfinite(t)
+            if not ok.any():
+                continue
+            ii, jj, tt = pi[ok], ei[ok], t[ok]
+            if tt.min() >= best:
+                continue
+            p = A[ii] + tt[:, None] * D[ii]
+            q = A[jj] + tt[:, None] * D[jj]
+            r = Ar[jj] + tt[:, None] * Dr[jj]
+            g = cross(q, r)
+            on = ((np.sum(cross(q, p) * g, axis=1) >= 0.0)
+                  & (np.sum(cross(p, r) * g, axis=1) >= 0.0)
+                  & (np.sum(p * (q + r), axis=1) > 0.0))
+            if on.any():
+                best = min(best, float(tt[on].min()))
+    return None if best == math.inf else best
+
+
+def _cubic_roots_01(k: np.ndarray) -> list[np.ndarray]:
+    """Roots in (0, 1) of ``k0 + k1 t + k2 t² + k3 t³`` (rows of ``k`` (N, 4)) where the cubic
+    changes sign: up to three arrays (N,), NaN where that piece has none."""
+    n = len(k)
+    # pieces between the derivative's roots, where the cubic is monotonic
+    qa, qb, qc = 3.0 * k[:, 3], 2.0 * k[:, 2], k[:, 1]
+    disc = qb * qb - 4.0 * qa * qc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sq = np.sqrt(np.where(disc >= 0.0, disc, np.nan))
+        quad = np.abs(qa) > 1e-300
+        r1 = np.where(quad, (-qb - sq) / (2.0 * qa), np.where(qb != 0, -qc / qb, np.nan))
+        r2 = np.where(quad, (-qb + sq) / (2.0 * qa), np.nan)
+    cuts = np.sort(np.stack((r1, r2), axis=1), axis=1)  # NaN sorts last
+    cuts = np.where((cuts > 0.0) & (cuts < 1.0), cuts, np.nan)
+    edges = np.column_stack((np.zeros(n), cuts, np.ones(n)))
+    # drop the NaN cuts by carrying the previous edge forward: empty pieces then
+    for c in (1, 2):
+        edges[:, c] = np.where(np.isnan(edges[:, c]), edges[:, c - 1], edges[:, c])
+
+    def f(t):
+        return ((k[:, 3] * t + k[:, 2]) * t + k[:, 1]) * t + k[:, 0]
+
+    out = []
+    for lo_c in range(3):
+        lo, hi = edges[:, lo_c].copy(), edges[:, lo_c + 1].copy()
+        flo, fhi = f(lo), f(hi)
+        has = (hi > lo) & (np.sign(flo) * np.sign(fhi) < 0)
+        if not has.any():
+            continue
+        idx = np.flatnonzero(has)
+        lo, hi, flo = lo[idx], hi[idx], flo[idx]
+        kk = k[idx]
+        for _ in range(45):  # 2^-45 of at most 1: below 1e-13
+            mid = 0.5 * (lo + hi)
+            fm = ((kk[:, 3] * mid + kk[:, 2]) * mid + kk[:, 1]) * mid + kk[:, 0]
+            left = np.sign(fm) == np.sign(flo)
+            lo = np.where(left, mid, lo)
+            flo = np.where(left, fm, flo)
+            hi = np.where(left, hi, mid)
+        root = np.full(n, np.nan)
+        root[idx] = 0.5 * (lo + hi)
+        out.append(root)
+    return out
 
 
 def _arc_pieces(v0: np.ndarray, v1: np.ndarray, theta: np.ndarray):

@@ -17,6 +17,7 @@ from models.geometry import (
     boundary_distance,
     check_polygon,
     densify,
+    first_contact_along,
     first_crossing,
     polygon_area,
 )
@@ -247,6 +248,78 @@ def test_simple_polygons_pass_and_have_no_crossing():
         assert first_crossing(verts) is None
         check_polygon(verts, centre)
         check_polygon(verts, -centre)
+
+
+def _lerp_polygon(a, b, t):
+    v = (1.0 - t) * a + t * b
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _simple(v) -> bool:
+    try:
+        check_polygon(v)
+    except GeometryError:
+        return False
+    return True
+
+
+def test_interpolated_star_polygons_never_touch_themselves():
+    """Two star polygons on the same rays: every interpolation between them is star-shaped on
+    those rays, so simple at every t."""
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        centre = Q.random_unit_vectors(1, rng)[0]
+        m = int(rng.integers(5, 60))
+        a = star_polygon(centre, rng.uniform(10, 80, m))
+        b = star_polygon(centre, rng.uniform(10, 80, m))
+        assert first_contact_along(a, b) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_first_contact_is_exact_where_sampling_is_not(seed):
+    """Jittered interpolations, against a dense scan (501 steps): the polygon is simple just
+    before the contact found, touches itself at it (a vertex on an edge, to rounding), and
+    every sampled failure comes after it; a contact between samples that the scan missed
+    is a fold narrower than its step (the 16-step check once let one of 0.8° of elbow angle
+    through: a limb file whose limits there could not be built)."""
+    rng = np.random.default_rng(seed)
+    centre = Q.random_unit_vectors(1, rng)[0]
+    m = 24
+    a = star_polygon(centre, rng.uniform(20, 40, m))
+    b = a + rng.normal(0.0, 0.12, a.shape)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    t = first_contact_along(a, b)
+    steps = np.linspace(0.0, 1.0, 501)
+    bad = [s for s in steps if not _simple(_lerp_polygon(a, b, s))]
+    assert t is not None or not bad
+    if t is None:
+        return
+    assert _simple(_lerp_polygon(a, b, t - 1e-7))
+    if bad:
+        assert t <= bad[0]
+    v = _lerp_polygon(a, b, t)
+    nxt = np.roll(v, -1, axis=0)
+    g = np.cross(v, nxt)
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    # some vertex lies on some other edge's great circle at t
+    off = np.abs(v @ g.T)
+    for i in range(m):
+        off[i, i] = off[i, (i - 1) % m] = np.inf
+    assert off.min() < 1e-9
+
+
+def test_a_fold_between_sampled_steps_is_found():
+    """A 12-vertex star whose jittered interpolation folds over itself for t in about
+    (0.8853, 0.9008) only — between the 16-step samples 14/16 and 15/16, which all pass — is
+    found at its first contact."""
+    rng = np.random.default_rng(27)
+    a = star_polygon(np.array([1.0, 0.0, 0.0]), rng.uniform(20, 40, 12))
+    b = a + rng.normal(0.0, 0.15, a.shape)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    assert all(_simple(_lerp_polygon(a, b, k / 16)) for k in range(17))
+    t = first_contact_along(a, b)
+    assert t == pytest.approx(0.8853, abs=1e-4)
+    assert not _simple(_lerp_polygon(a, b, t + 1e-3))
 
 
 def test_signed_queries_need_an_interior_point():
