@@ -26,7 +26,9 @@ sensors and calibration). ``--paths`` may add ``vqf``: the raw samples fused on 
 on the error-free sensor orientations (``ChainRecording.sensors_true``: no noise, drift or
 fusion), so that ``cal°`` is the calibration's own error — what the patient's posture during
 the static pose puts on every joint (the root's sway leans every segment alike, and gravity is
-taken as each segment's long axis) — and ``truth`` → ``pose`` → ``vqf`` splits the joint
+taken as each segment's long axis; the root's lean is measured against the neutral checkpoints
+and taken off, step 7 of :mod:`calibration.limb_calibration`, on this path and ``vqf`` — the
+read path does so on the host's fusion, whose sensors share one world) — and ``truth`` → ``pose`` → ``vqf`` splits the joint
 orientations' error into calibration and sensors. Its other columns are not the IMU path's
 without the sensors' errors: error-free data carry no measured slow error, so the twist's
 singular reach (:func:`calibration.boundary.twist.singular_reach`) is off, and a twist end
@@ -150,16 +152,22 @@ def limits_at(joint, angle_deg: float):
     return joint.constraint if joint.coupling is None else joint.coupling.at(angle_deg)
 
 
-def calibrate(rec, limb: str, side: str, status: bool = True) -> LimbImuCalibration:
+def calibrate(rec, limb: str, side: str, status: bool = True,
+              upright: np.ndarray | None = None) -> LimbImuCalibration:
     """The limb calibration from the recording's protocol windows (status-checked samples
-    unless ``status`` is False: the devices' status bytes do not describe a host fusion)."""
+    unless ``status`` is False: the devices' status bytes do not describe a host fusion); with
+    ``upright`` (K, 2) windows, the neutral checkpoints as further standings of the root (step
+    7 of :mod:`calibration.limb_calibration`; the read path does so on the host's fusion)."""
     ok = status_ok(rec.status) if status else np.ones(len(rec.t), dtype=bool)
     st = rec.window("static")
     names = [j for j in rec.windows if j != "static"]
     fn = {j: rec.quaternions[rec.window(j)] for j in names}
     fok = {j: ok[rec.window(j)] for j in names}
+    up = None
+    if upright is not None and len(upright):
+        up = [rec.quaternions[(rec.t >= a) & (rec.t <= b) & ok] for a, b in upright]
     return LimbImuCalibration(limb, side).fit(rec.quaternions[st], fn, static_ok=ok[st],
-                                              functional_ok=fok)
+                                              functional_ok=fok, upright=up)
 
 
 def fused(rec):
@@ -284,7 +292,7 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
                 r["residual"] = math.nan
             elif path == "pose":  # error-free sensors: the calibration's own error
                 src = dataclasses.replace(rec, quaternions=rec.sensors_true)
-                cal = calibrate(src, limb, side, status=False)
+                cal = calibrate(src, limb, side, status=False, upright=windows)
                 r = analyse(truth, cal.transform(src.quaternions[free]), rec.t[free], None,
                             limb)
                 r["residual"] = cal.residual_deg_
@@ -292,7 +300,8 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
                 host = path == "vqf"  # as the read path: no status bytes for a host fusion
                 src = fused(rec) if host else rec
                 status = None if host else rec.status.min(axis=1)
-                cal = calibrate(src, limb, side, status=not host)
+                cal = calibrate(src, limb, side, status=not host,
+                                upright=windows if host else None)
                 q, slow = heading_corrected(src, cal, windows, status)
                 r = analyse(truth, cal.transform(q[free]), rec.t[free],
                             None if status is None else status[free], limb, slow)

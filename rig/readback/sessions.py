@@ -122,8 +122,11 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     common = np.asarray(common, dtype=np.float64)
     if use_vqf:
         status = None  # the devices' status bytes do not describe the host's fusion
-        model = _refit_limb(q, {key: common}, cal["data"], session_id)
+        model = _refit_limb(q, {key: common}, cal["data"], session_id,
+                            [c for c in cals if c["kind"] == "neutral-checkpoint"])
         fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
+        fusion_prov["root_lean_deg"] = (None if model.lean_deg_ is None
+                                        else round(float(model.lean_deg_), 3))
     prov = {"session": int(session_id), "started_at": sess.get("started_at"),
             "source": "imu samples", "limb": limb, "calibration_id": int(cal["id"]),
             "calibration_residual_deg": cal.get("residual_deg"),
@@ -407,10 +410,13 @@ def _in_windows(times: dict[str, np.ndarray], cal_data: dict, session_id: int
     return sel
 
 
-def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int):
+def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int,
+                checkpoints=()):
     """:class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the four sensors'
     (fused) orientations ``q`` (N, 4, 4) inside the stored calibration's static and movement
-    windows, with the protocol it stored."""
+    windows, with the protocol it stored; the session's neutral ``checkpoints`` are further
+    upright standings of the root (its lean during the static pose taken off: the host's
+    fusion puts every sensor in one world, which that needs)."""
     from calibration.limb_calibration import LimbImuCalibration
     from calibration.protocol import LimbCalibrationProtocol
 
@@ -424,8 +430,12 @@ def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, ses
             raise CalibrationError(f"stored protocol: {err}") from err
         if "static" not in sel:
             raise CalibrationError("the calibration has no static window")
+        t = next(iter(times.values()))
+        windows = _checkpoint_windows(times, checkpoints, cal_data)[0]
+        upright = [q[(t >= a) & (t <= b)] for a, b in windows]
         model = LimbImuCalibration(cal_data["limb"], cal_data["side"], protocol=protocol)
-        return model.fit(q[sel["static"]], {j: q[sel[j]] for j in protocol.joints if j in sel})
+        return model.fit(q[sel["static"]], {j: q[sel[j]] for j in protocol.joints if j in sel},
+                         upright=upright or None)
 
 
 def _checkpoint_windows(times: dict[str, np.ndarray], checkpoints, cal_data: dict

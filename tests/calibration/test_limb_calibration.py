@@ -169,6 +169,37 @@ def test_exact_without_noise_or_sway_despite_misplaced_sensors_and_headings(limb
     np.testing.assert_allclose(Q.wrap_angle(got[1:] - want[1:]), 0.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("limb", ["arm", "leg"])
+def test_a_root_leaning_in_the_static_pose_is_levelled_by_further_standings(limb):
+    """Step 7: a root (and the whole chain with it) leaning 3° through the protocol
+    conjugates every joint by the lean; with further upright standings (a session's neutral
+    checkpoints, one of them leaning 10°: the median leaves it out) the lean is measured and
+    taken off, and the calibration is exact again. The sensors share one world (the host's
+    fusion), as step 7 needs."""
+    rec = _recording(limb, "right", 5, noise_deg=0.0, sway_deg=0.0)
+    rec.headings = np.zeros(4)
+    upright = rec.root[0]
+    lean = Q.from_axis_angle(np.array([0.6, 0.8, 0.0]), math.radians(3.0))
+    rec.root = np.broadcast_to(Q.multiply(lean, upright), rec.root.shape).copy()
+    rec.sensors, rec.clean = rec.measure(rec.truth, rec.root)
+    neutral = np.broadcast_to(rec.truth[0], (50, 3, 4))
+    standings = []
+    for tilt in (0.0, 0.0, 0.0, 0.0, 10.0):
+        tilted = Q.multiply(Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), math.radians(tilt)),
+                            upright)
+        standings.append(rec.measure(neutral, np.broadcast_to(tilted, (50, 4)))[0])
+    truth, sensors, _ = rec.random_motion(20.0)  # upright, no sway
+    plain = _fit(rec)
+    assert plain.lean_deg_ is None
+    assert _err_deg(plain.transform(sensors), truth).max() > 1.0
+    static, functional = rec.fit_data()
+    cal = LimbImuCalibration(limb, "right").fit(static, functional, upright=standings)
+    assert cal.lean_deg_ == pytest.approx(3.0, abs=1e-6)
+    assert _err_deg(cal.transform(sensors), truth).max() < 1e-6
+    with pytest.raises(CalibrationError, match=r"upright\[0\]: expected shape"):
+        LimbImuCalibration(limb, "right").fit(static, functional, upright=[standings[0][:, :2]])
+
+
 def _accuracy(limb, side, seed):
     """Calibration error (degrees): the fitted calibration applied to noise-free sensors,
     against the truth, in the movement windows and in 60 s of independent random motion; and
