@@ -29,8 +29,8 @@ the static pose puts on every joint (the root's sway leans every segment alike, 
 taken as each segment's long axis; the root's lean is measured against the neutral checkpoints
 and taken off, step 7 of :mod:`calibration.limb_calibration`, on this path and ``vqf`` — the
 read path does so on the host's fusion, whose sensors share one world) — and ``truth`` →
-``pose`` → ``vqf`` splits the joint orientations' error into calibration and sensors. Its other columns are not the IMU path's
-without the sensors' errors: error-free data carry no measured slow error, so the twist's
+``pose`` → ``vqf`` splits the joint orientations' error into calibration and sensors. Its other
+columns are not the IMU path's without the sensors' errors: error-free data carry no measured slow error, so the twist's
 singular reach (:func:`calibration.boundary.twist.singular_reach`) is off, and a twist end
 taken from a posture near the arm raised overhead, where a frame error of 2° turns the twist by
 ~10°, moves a shoulder's rotation peaks by that much.
