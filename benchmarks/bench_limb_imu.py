@@ -24,16 +24,16 @@ motion: the extraction and coupling test alone, what the IMU path would give wit
 sensors and calibration). ``--paths`` may add ``vqf``: the raw samples fused on the host
 (:func:`calibration.fusion.fuse_vqf`) instead of the device quaternions; and ``pose``: steps 2-4
 on the error-free sensor orientations (``ChainRecording.sensors_true``: no noise, drift or
-fusion), so that ``cal°`` is the calibration's own error — what the patient's posture during
-the static pose puts on every joint (the root's sway leans every segment alike, and gravity is
-taken as each segment's long axis; the root's lean is measured against the neutral checkpoints
-and taken off, step 7 of :mod:`calibration.limb_calibration`, on this path and ``vqf`` — the
-read path does so on the host's fusion, whose sensors share one world) — and ``truth`` →
-``pose`` → ``vqf`` splits the joint orientations' error into calibration and sensors. Its other
-columns are not the IMU path's without the sensors' errors: error-free data carry no measured slow error, so the twist's
-singular reach (:func:`calibration.boundary.twist.singular_reach`) is off, and a twist end
-taken from a posture near the arm raised overhead, where a frame error of 2° turns the twist by
-~10°, moves a shoulder's rotation peaks by that much.
+fusion), so that ``cal°`` is the calibration's own error — what the patient's posture during the
+static pose puts on every joint (the root's sway leans every segment alike, and gravity is taken
+as each segment's long axis; the root's lean is measured against the neutral checkpoints and
+taken off, step 7 of :mod:`calibration.limb_calibration`, on this path and ``vqf`` — the read
+path does so on the host's fusion, whose sensors share one world) — and ``truth`` → ``pose`` →
+``vqf`` splits the joint orientations' error into calibration and sensors. Its other columns are
+not the IMU path's without the sensors' errors: error-free data carry no measured slow error, so
+the twist's singular reach (:func:`calibration.boundary.twist.singular_reach`) is off, and a
+twist end taken from a posture near the arm raised overhead, where a frame error of 2° turns the
+twist by ~10°, moves a shoulder's rotation peaks by that much.
 
 Seeds: held out. Tests and one-off checks used seeds 0-13 (``tests/rig/sim``,
 ``tests/calibration``, the NOTES' seed-11 leg); defects were looked for and fixed on seeds 1-20
