@@ -125,6 +125,9 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
         model = _refit_limb(q, {key: common}, cal["data"], session_id,
                             [c for c in cals if c["kind"] == "neutral-checkpoint"])
         fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
+        fusion_prov["refit_residuals_deg"] = {
+            name: {k: round(float(v), 3) for k, v in r.items()}
+            for name, r in model.residuals_.items()}
         fusion_prov["root_lean_deg"] = (None if model.lean_deg_ is None
                                         else round(float(model.lean_deg_), 3))
     prov = {"session": int(session_id), "started_at": sess.get("started_at"),

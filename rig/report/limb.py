@@ -153,6 +153,7 @@ class LimbReportData:
     couplings: list[CouplingSection] = field(default_factory=list)
     coupling_note: str | None = None
     calibration: dict[str, dict[str, float]] = field(default_factory=dict)
+    calibration_note: str | None = None
     evaluation_rows: list[dict[str, Any]] = field(default_factory=list)
     evaluation_facts: dict[str, Any] = field(default_factory=dict)
     evaluation_verdict: str | None = None
@@ -666,8 +667,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      session_label: str | None = None, warnings: Sequence[str] = (),
                      reference=None, calibration: Mapping[str, Mapping[str, float]] | None = None,
                      evaluation: Mapping[str, Any] | None = None, age: float | None = None,
-                     sex: str | None = None, limits_source: str | None = None
-                     ) -> LimbReportData:
+                     sex: str | None = None, limits_source: str | None = None,
+                     calibration_note: str | None = None) -> LimbReportData:
     """Everything the report of one arm or leg shows (module doc).
 
     Parameters
@@ -696,6 +697,9 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     calibration : mapping, optional
         Residuals (degrees) per joint and segment, as
         :attr:`calibration.limb_calibration.LimbImuCalibration.residuals_`.
+    calibration_note : str, optional
+        Which calibration those are (the recorder's, or re-fitted on the host's fusion) and
+        what it measured beyond them (the root's lean), shown beneath them.
     evaluation : mapping, optional
         A limb model's metrics (:func:`models.limb_evaluation.evaluate_limb_model`), judged
         against issue 20's targets (:func:`limb_model_verdict`).
@@ -750,6 +754,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     if calibration:
         data.calibration = {str(k): {str(a): float(b) for a, b in v.items()}
                             for k, v in calibration.items()}
+        data.calibration_note = calibration_note
     if evaluation:
         _, data.evaluation_verdict, data.evaluation_rows = limb_model_verdict(evaluation)
         data.evaluation_facts = _evaluation_facts(evaluation, limb.joint_names)
@@ -831,6 +836,8 @@ def render_limb_html(data: LimbReportData) -> str:
     if data.calibration:
         out.append("<h2>Calibration</h2>")
         out += _calibration_html(data.calibration)
+        if data.calibration_note:
+            out.append(f"<p class='small'>{escape(data.calibration_note)}</p>")
     if data.evaluation_rows or data.evaluation_facts:
         out.append("<h2>Learned limb model</h2>")
         out.append(verdict_html(data.evaluation_verdict))

@@ -349,6 +349,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     from the session as ``rig boundary --chain`` does; the page says which. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
     from calibration.boundary import ChainExtractor
+    from calibration.joints import LIMB_CHAINS
     from rig.readback.sessions import chain_orientations_from_store, latest_calibration
     from rig.report.limb import limb_report_data, write_limb_report
 
@@ -378,6 +379,17 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                 slow_error_deg=chain.slow_error_deg).limb_
             source = "extracted from the recorded postures for this report"
     cal = latest_calibration(store.calibrations(session_id), "imu-limb")
+    residuals = None if cal is None else cal["data"].get("residuals_deg")
+    note = None if cal is None else "The recorder's calibration (the devices' orientations)."
+    fused = chain.provenance.get("fusion") or {}
+    if fused.get("refit_residuals_deg"):  # the joints came through the host's re-fit
+        residuals = fused["refit_residuals_deg"]
+        lean = fused.get("root_lean_deg")
+        note = ("Re-fitted on the raw samples fused on this computer (VQF)"
+                + ("." if lean is None else
+                   f"; the {LIMB_CHAINS[chain.limb][0][1]} leaned {lean:.2f}° during the "
+                   "static pose, measured against the neutral checkpoints, and that lean was "
+                   "taken off every segment."))
     sess = store.get_session(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)
     from calibration.alignment import trusted_samples
@@ -392,7 +404,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
         session_label=f"session {session_id} ({sess.get('rig_name')}, started "
                       f"{sess.get('started_at')}, {used})",
         warnings=chain.recording.warnings(), reference=reference,
-        calibration=None if cal is None else cal["data"].get("residuals_deg"),
+        calibration=residuals, calibration_note=note,
         evaluation=evaluation, age=age, sex=sex, limits_source=source)
     data.simulated = bool(chain.recording.simulated)
     return write_limb_report(data, out_path)

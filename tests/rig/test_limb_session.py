@@ -142,6 +142,11 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     assert code == 0, err
     html = (tmp_path / "r.html").read_text()
     assert f"boundary {limbs[-1]['id']} stored with the session" in html
+    # the calibration shown is the one the joints came through: re-fitted on the host's
+    # fusion, with the pelvis's lean in the static pose taken off
+    lean = read_chain(str(db), sid).provenance["fusion"]["root_lean_deg"]
+    assert (f"Re-fitted on the raw samples fused on this computer (VQF); the pelvis leaned "
+            f"{lean:.2f}° during the static pose") in html
     # --no-store writes the file and leaves the store as it was
     code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--chain", "leg",
                               "--out", tmp_path / "leg2.yaml", "--no-store"])
