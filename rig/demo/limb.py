@@ -163,6 +163,7 @@ class _LimbCtx:
         self.limb_file = out / f"{limb}.yaml"
         self.model_file = out / f"{limb}.onnx"
         self.extracted = None
+        self.limb_boundary: int | None = None  # the limb file's id in the store
         self.calibration: dict | None = None
         self.metrics: dict | None = None
 
@@ -197,6 +198,7 @@ class _LimbCtx:
         res = run_chain(ChainRequest(None, self.limb, None, self.limb_file,
                                      db=str(self.result.db), session_id=self.session))
         self.extracted = res.extractor.limb_
+        self.limb_boundary = res.boundary_id
         rep = res.extractor.report()
         figs = compare_limbs(self.extracted, self.truth)
         figs["inside_within_1deg"] = _inside_within(self.extracted, self.result.db, self.session)
@@ -233,12 +235,18 @@ class _LimbCtx:
                      + "; ".join(couplings))
 
     def train(self, st: StageResult) -> None:
+        from rig.store import open_store
         from rig.training import TrainRequest, run_train
 
         res = run_train(TrainRequest(self.model_file, constraint=str(self.limb_file),
                                      preset=self.size.preset, seed=self.options.seed))
+        # registered with the session and its stored limb file: `rig report` on the session
+        # finds it without --model
+        with open_store(self.result.db, create=False) as store:
+            mid = store.add_model(res.path, boundary_id=self.limb_boundary,
+                                  session_id=self.session)
         st.figures.update({"path": str(res.path), "preset": self.size.preset,
-                           "seconds": res.seconds})
+                           "seconds": res.seconds, "model_id": mid})
         st.verdict = "PASS"
         st.detail = (f"{res.path} ({res.path.stat().st_size / 1e3:.0f} kB), preset "
                      f"{self.size.preset}" + (" (the exact oracle compiled; --quick does not "

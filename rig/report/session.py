@@ -337,6 +337,24 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     return write_report(data, out_path)
 
 
+def _registered_limb_model(store, session_id: int, joints) -> tuple[int, str] | None:
+    """``(id, path)`` of the last model registered with the session that is a limb model of
+    ``joints`` and whose file is still there, else None."""
+    from models.errors import ModelsError
+    from models.limb_model import load_limb_model
+
+    for m in reversed(store.models_for(session_id=session_id)):
+        if not Path(m["path"]).is_file():
+            continue
+        try:
+            limb = load_limb_model(str(m["path"])).limb
+        except (ModelsError, OSError):
+            continue  # a single joint's model, or a file replaced since
+        if limb.joint_names == tuple(joints):
+            return int(m["id"]), str(m["path"])
+    return None
+
+
 def report_for_limb_session(store, session_id: int, out_path, *, model=None, age=None,
                             sex=None, reference=None, eval_n: int = 4000,
                             fusion: str = "auto") -> Path:
@@ -346,7 +364,9 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     chain_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
     the limb file it was made for; it is scored on ``eval_n`` held-out postures of it), else
     the last limb file stored with the session (``rig boundary --chain --db``), else extracted
-    from the session as ``rig boundary --chain`` does; the page says which. ``reference``: a
+    from the session as ``rig boundary --chain`` does; the page says which. Without ``model``
+    the last limb model registered with the session (the limb demo registers its own) is
+    used when its file is still there. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
     from calibration.boundary import ChainExtractor
     from calibration.joints import LIMB_CHAINS
@@ -355,6 +375,11 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
 
     chain = chain_orientations_from_store(store, session_id, fusion=fusion)
     evaluation = None
+    registered = None
+    if model is None:  # the last limb model registered with the session, if its file is there
+        registered = _registered_limb_model(store, session_id, chain.joints)
+        if registered is not None:
+            model = registered[1]
     if model is not None:
         from models.limb_model import load_limb_model
         from rig.training.limb import evaluate_limb
@@ -365,7 +390,9 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                                  f"{', '.join(limb.joint_names)}, the session recorded "
                                  f"{', '.join(chain.joints)}")
         evaluation, _ = evaluate_limb(str(model), limb, eval_n, 12345)
-        source = f"the limb file of the model {Path(model).name}"
+        source = f"the limb file of the model {Path(model).name}" + (
+            "" if registered is None else f" (model {registered[0]}, registered with the "
+                                          "session)")
     else:
         from rig.readback.boundary import stored_limb
 

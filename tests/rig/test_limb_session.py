@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import sqlite3
 import threading
 import types
 from dataclasses import replace
@@ -136,12 +137,29 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     assert (loads_limb(limbs[-1]["constraint_yaml"]).to_yaml()
             == load_limb(leg_demo["out"] / "leg.yaml").to_yaml())
     assert all((b.get("meta") or {}).get("kind") != "limb" for b in joints)
-    # `rig report` without --model shows that limb file, and says so
+    # the demo's train stage registered its limb model with the session and that limb file;
+    # `rig report` without --model finds it and scores it
+    with open_store(db, create=False) as store:
+        models = store.models_for(session_id=sid)
+    assert [(m["path"], m["boundary_id"]) for m in models] == [
+        (str(leg_demo["out"] / "leg.onnx"), limbs[-1]["id"])]
     code, _, err = rig_cli(["report", "--db", db, "--session", sid, "--out",
+                            tmp_path / "m.html"])
+    assert code == 0, err
+    html = (tmp_path / "m.html").read_text()
+    assert (f"the limb file of the model leg.onnx (model {models[0]['id']}, registered with "
+            "the session)") in html and "Learned limb model" in html
+    # without a registered model, `rig report` shows the stored limb file, and says so
+    bare = tmp_path / "bare.db"
+    with sqlite3.connect(db) as src, sqlite3.connect(bare) as dst:
+        src.backup(dst)
+        dst.execute("DELETE FROM models")
+    code, _, err = rig_cli(["report", "--db", bare, "--session", sid, "--out",
                             tmp_path / "r.html"])
     assert code == 0, err
     html = (tmp_path / "r.html").read_text()
     assert f"boundary {limbs[-1]['id']} stored with the session" in html
+    assert "Learned limb model" not in html
     # the calibration shown is the one the joints came through: re-fitted on the host's
     # fusion, with the pelvis's lean in the static pose taken off
     lean = read_chain(str(db), sid).provenance["fusion"]["root_lean_deg"]
