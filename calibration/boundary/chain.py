@@ -70,12 +70,14 @@ a coupling** when
    to twice ``max_keyframes``; listed with ``added``); the limits so written must hold
    ``min_held`` as stated above.
 
-When the interpolation between two keyframes crosses itself (a file that cannot be read), the
-keyframes are extracted again with fewer vertices (32, then 16), smoother — as long as that
-moves none of them ``min_difference_deg`` or more from its boundary at the full vertex budget:
-smoothing that large would be as large as the dependence the coupling is to show (measured on
-simulated arms with 3° of slow sensor error: a shoulder's keyframes at 16 vertices lay 4-13°
-from the recorded ones, and the coupling written from them 8-15° from the truth).
+When the interpolation between two keyframes touches itself (a file that cannot be read), a
+keyframe is added half-way between them where the recording supports one there and they are at
+least twice ``keyframe_band_deg`` apart (listed with ``added`` and ``why``), until the file
+reads; otherwise the keyframes are extracted again with fewer vertices (32, then 16), smoother —
+as long as that moves none of them ``min_difference_deg`` or more from its boundary at the full
+vertex budget: smoothing that large would be as large as the dependence the coupling is to show
+(measured on simulated arms with 3° of slow sensor error: a shoulder's keyframes at 16 vertices
+lay 4-13° from the recorded ones, and the coupling written from them 8-15° from the truth).
 
 Measured errors
 ---------------
@@ -407,12 +409,17 @@ class ChainExtractor:
                            "samples fell short of part of the limit)")
                         + f": no dependence on the {hinge.name}")
                 break
+            sup, unfolded = supported, []
             try:
                 limb = self._limb(chain, specs, constraints, {**fixed, j: kept}, side,
                                   provenance)
             except ConstraintError as err:
-                note = f"keyframes could not be interpolated ({err})"
-                continue
+                found = self._unfold(j, chain, specs, constraints, q, ts, st, theta, supported,
+                                     kept, budget, fixed, side, provenance)
+                if found is None:
+                    note = f"keyframes could not be interpolated ({err})"
+                    continue
+                sup, kept, limb, unfolded = found
             tol = self._tolerance(spec, q[:, j])
             held = float(np.mean(self._held(limb, j, q, tol)
                                  | _held_by_keyframes(q[:, j], theta, kept, tol,
@@ -427,8 +434,9 @@ class ChainExtractor:
                         "on it")
                 break
             kept, limb, held, added = self._refine(j, chain, specs, constraints, q, ts, st,
-                                                   theta, supported, kept, limb, budget,
+                                                   theta, sup, kept, limb, budget,
                                                    fixed, side, provenance)
+            added = [*unfolded, *added]
             if held < self.min_held:
                 note = (f"the coupled limits would hold {100 * held:.1f} % of the recorded "
                         f"postures within {np.degrees(tol[0]):.1f} deg "
@@ -457,6 +465,41 @@ class ChainExtractor:
             info["coverage"] = round(float(share), 3)
             info["supported"] = bool(share >= self.min_keyframe_coverage)
         return info
+
+    def _unfold(self, j, chain, specs, constraints, q, ts, st, theta, supported, kept, budget,
+                fixed, side, provenance):
+        """Keyframes of joint ``j`` added half-way between two whose interpolation touches
+        itself (the limb file would not read), where the recording supports one (test 1) and
+        the two are at least twice ``keyframe_band_deg`` apart: ``(supported, kept, limb,
+        added)`` once the file reads, else None (the keyframes are then smoothed instead)."""
+        spec = specs[j]
+        added: list[dict] = []
+        while len(kept) < 2 * self.max_keyframes:
+            i = _folding_pair(kept)
+            if i is None:
+                return None  # not a fold: something else keeps the file from reading
+            a0, a1 = kept[i][0], kept[i + 1][0]
+            if a1 - a0 < 2 * self.keyframe_band_deg:
+                return None
+            info = self._support(0.5 * (a0 + a1), theta, q[:, j], spec)
+            if not info["supported"]:
+                return None
+            trial = sorted([*supported, info], key=lambda x: x["at_deg"])
+            new = self._keyframes(spec, j, q, ts, st, trial,
+                                  _cells(theta, [float(x["at_deg"]) for x in trial]), budget)
+            if len(new) != len(trial):
+                return None
+            info["added"] = True
+            info["why"] = "the interpolation between its neighbours touched itself"
+            added.append(info)
+            supported, kept = trial, new
+            try:
+                limb = self._limb(chain, specs, constraints, {**fixed, j: kept}, side,
+                                  provenance)
+            except ConstraintError:
+                continue
+            return supported, kept, limb, added
+        return None
 
     def _refine(self, j, chain, specs, constraints, q, ts, st, theta, supported, kept, limb,
                 budget, fixed, side, provenance):
@@ -635,6 +678,22 @@ def _local_difference(pairs: dict[tuple[int, int], dict], n: int, threshold: flo
         if min(mine) >= threshold and max(rest) < slack:
             return 0.0
     return top
+
+
+def _folding_pair(kept: list) -> int | None:
+    """The first ``i`` whose keyframes ``kept[i]``, ``kept[i + 1]`` (angle, constraint) have a
+    polygon swing interpolation that touches itself (:func:`models.geometry.
+    first_contact_along`), else None."""
+    from models.constraint import PolygonSwing
+    from models.geometry import first_contact_along
+    from models.limb import corresponding_polygons
+
+    for i in range(len(kept) - 1):
+        a, b = kept[i][1].swing, kept[i + 1][1].swing
+        if isinstance(a, PolygonSwing) and isinstance(b, PolygonSwing):
+            if first_contact_along(*corresponding_polygons(a, b)) is not None:
+                return i
+    return None
 
 
 def _cells(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:

@@ -135,6 +135,52 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
 
 
+def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(ideal_arm,
+                                                                          monkeypatch):
+    """When the limb file would not read because the interpolation between two keyframes
+    touches itself, a keyframe is added half-way between them (supported by the recording)
+    before the keyframes are smoothed. Held-out arm 103 and development arm 14 fold so (their
+    couplings were refused: smoothing to 32 vertices moved the keyframes 3.3-3.6°; arm 14 is
+    now coupled with a sixth keyframe, each within 1.7° of the truth). Here the fold is
+    simulated on arm 1: the file refuses its first two keyframes together until one lies
+    between them."""
+    import numpy as np
+
+    import calibration.boundary.chain as chain_mod
+    from calibration.boundary import ChainExtractor, boundary_distance
+    from models.errors import ConstraintError
+    from rig.sim.patients import anatomical_limb
+
+    real_limb = ChainExtractor._limb
+    first_two: list = []
+
+    def limb(self, chain, specs, constraints, kept, side, provenance):
+        kf = kept.get(0)
+        if kf is not None:
+            if not first_two:
+                first_two.extend(a for a, _ in kf[:2])
+            if [a for a, _ in kf[:2]] == first_two:  # nothing between them yet
+                raise ConstraintError("keyframes 0 and 1: the boundary interpolated at elbow "
+                                      "10 deg is not a simple polygon", "joints[0]")
+        return real_limb(self, chain, specs, constraints, kept, side, provenance)
+
+    monkeypatch.setattr(ChainExtractor, "_limb", limb)
+    monkeypatch.setattr(chain_mod, "_folding_pair", lambda kept: 0)
+    q, t = ideal_arm
+    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    assert ex.coupled_, ex.coupling_note_
+    got = ex.limb_.joints[0].coupling
+    added = [k for k in ex.keyframes_ if k.get("added")]
+    assert len(added) >= 1 and "touched itself" in added[0]["why"]
+    assert first_two[0] < added[0]["at_deg"] < first_two[1]
+    assert added[0]["at_deg"] in got.at_deg and len(got.at_deg) == 6
+    assert "vertices each" not in ex.coupling_note_  # not smoothed
+    truth = anatomical_limb(1, "arm").joints[0].coupling
+    for a, c in zip(got.at_deg, got.keyframes, strict=True):
+        assert boundary_distance(c, truth.at(a))["mean_deg"] < 3.0, a
+    assert np.isfinite(ex.inside_["shoulder"])
+
+
 def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
     """The gastrocnemius: a simulated ankle with 5-8° more dorsiflexion with the knee bent,
     the rest of its boundary the same (about 1° apart on average, under the 3° the mean test
