@@ -481,14 +481,11 @@ class ChainExtractor:
             a0, a1 = kept[i][0], kept[i + 1][0]
             if a1 - a0 < 2 * self.keyframe_band_deg:
                 return None
-            info = self._support(0.5 * (a0 + a1), theta, q[:, j], spec)
-            if not info["supported"]:
+            found = self._with_keyframe(j, spec, q, ts, st, theta, supported,
+                                        0.5 * (a0 + a1), budget)
+            if found is None:
                 return None
-            trial = sorted([*supported, info], key=lambda x: x["at_deg"])
-            new = self._keyframes(spec, j, q, ts, st, trial,
-                                  _cells(theta, [float(x["at_deg"]) for x in trial]), budget)
-            if len(new) != len(trial):
-                return None
+            info, trial, new = found
             info["added"] = True
             info["why"] = "the interpolation between its neighbours touched itself"
             added.append(info)
@@ -500,6 +497,19 @@ class ChainExtractor:
                 continue
             return supported, kept, limb, added
         return None
+
+    def _with_keyframe(self, j, spec, q, ts, st, theta, supported, at: float, budget):
+        """A candidate keyframe of joint ``j`` at hinge angle ``at`` added to ``supported``:
+        ``(its info, the keyframes' infos, their (angle, constraint))`` with the samples shared
+        out again, or None when the recording does not support one there (test 1) or a
+        keyframe does not extract."""
+        info = self._support(at, theta, q[:, j], spec)
+        if not info["supported"]:
+            return None
+        trial = sorted([*supported, info], key=lambda x: x["at_deg"])
+        new = self._keyframes(spec, j, q, ts, st, trial,
+                              _cells(theta, [float(x["at_deg"]) for x in trial]), budget)
+        return None if len(new) != len(trial) else (info, trial, new)
 
     def _refine(self, j, chain, specs, constraints, q, ts, st, theta, supported, kept, limb,
                 budget, fixed, side, provenance):
@@ -525,14 +535,11 @@ class ChainExtractor:
             i = int(np.argmax(counts))  # the interval leaving most out
             if counts[i] == 0 or a[i + 1] - a[i] < 2 * self.keyframe_band_deg:
                 break
-            info = self._support(0.5 * (a[i] + a[i + 1]), theta, q[:, j], spec)
-            if not info["supported"]:
+            found = self._with_keyframe(j, spec, q, ts, st, theta, supported,
+                                        0.5 * (a[i] + a[i + 1]), budget)
+            if found is None:
                 break
-            trial = sorted([*supported, info], key=lambda x: x["at_deg"])
-            new = self._keyframes(spec, j, q, ts, st, trial,
-                                  _cells(theta, [float(x["at_deg"]) for x in trial]), budget)
-            if len(new) != len(trial):
-                break
+            info, trial, new = found
             try:
                 new_limb = self._limb(chain, specs, constraints, {**fixed, j: new}, side,
                                       provenance)
