@@ -120,10 +120,12 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     status = np.min(np.stack([p["status"][i] for p, i in zip(per, idx, strict=True)]), axis=0)
     del per, by_name
     common = np.asarray(common, dtype=np.float64)
+    checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
+    # the checkpoints' windows in the pairing clock, the unusable ones, the static anchor
+    marks = _checkpoint_windows({key: common}, checkpoints, cal["data"])
     if use_vqf:
         status = None  # the devices' status bytes do not describe the host's fusion
-        model = _refit_limb(q, {key: common}, cal["data"], session_id,
-                            [c for c in cals if c["kind"] == "neutral-checkpoint"])
+        model = _refit_limb(q, {key: common}, cal["data"], session_id, marks[0])
         fusion_prov["refit_residual_deg"] = round(float(model.residual_deg_), 3)
         fusion_prov["refit_residuals_deg"] = {
             name: {k: round(float(v), 3) for k, v in r.items()}
@@ -134,10 +136,9 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
             "source": "imu samples", "limb": limb, "calibration_id": int(cal["id"]),
             "calibration_residual_deg": cal.get("residual_deg"),
             "fusion": fusion_prov}
-    checkpoints = [c for c in cals if c["kind"] == "neutral-checkpoint"]
     if heading and checkpoints:
         q, prov["heading_correction"] = _limb_heading_correction(
-            model, q, common, key, status, checkpoints, cal["data"], session_id)
+            model, q, common, key, status, len(checkpoints), marks, session_id)
     joints = model.transform(q)
     side = sess.get("side")
     facts = _session_facts(store, sess, sensors)
@@ -414,12 +415,13 @@ def _in_windows(times: dict[str, np.ndarray], cal_data: dict, session_id: int
 
 
 def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, session_id: int,
-                checkpoints=()):
+                upright_windows=()):
     """:class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the four sensors'
     (fused) orientations ``q`` (N, 4, 4) inside the stored calibration's static and movement
-    windows, with the protocol it stored; the session's neutral ``checkpoints`` are further
-    upright standings of the root (its lean during the static pose taken off: the host's
-    fusion puts every sensor in one world, which that needs)."""
+    windows, with the protocol it stored; the session's neutral checkpoints' windows
+    (``upright_windows`` (K, 2), in the clock of ``times``) are further upright standings of
+    the root (its lean during the static pose taken off: the host's fusion puts every sensor
+    in one world, which that needs)."""
     from calibration.limb_calibration import LimbImuCalibration
     from calibration.protocol import LimbCalibrationProtocol
 
@@ -434,8 +436,7 @@ def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, ses
         if "static" not in sel:
             raise CalibrationError("the calibration has no static window")
         t = next(iter(times.values()))
-        windows = _checkpoint_windows(times, checkpoints, cal_data)[0]
-        upright = [q[(t >= a) & (t <= b)] for a, b in windows]
+        upright = [q[(t >= a) & (t <= b)] for a, b in upright_windows]
         model = LimbImuCalibration(cal_data["limb"], cal_data["side"], protocol=protocol)
         return model.fit(q[sel["static"]], {j: q[sel[j]] for j in protocol.joints if j in sel},
                          upright=upright or None)
@@ -506,19 +507,20 @@ def _fitted(hc, t: np.ndarray) -> dict:
 
 
 def _limb_heading_correction(model, q: np.ndarray, t: np.ndarray, key: str, status,
-                             checkpoints, cal_data: dict, session_id: int):
+                             n_checkpoints: int, marks, session_id: int):
     """Fit and apply :class:`~calibration.heading.LimbHeadingCorrection` on a limb session's
-    four sensors (N, 4, 4) at times ``t`` (clock ``key``); the corrected sensors and the
-    provenance entry (per segment after the root: accepted checkpoints, rejected ones with
-    their reason, ψ per window, the drift model, the uncertainty left)."""
+    four sensors (N, 4, 4) at times ``t`` (clock ``key``), at the checkpoints' ``marks``
+    (:func:`_checkpoint_windows`); the corrected sensors and the provenance entry (per segment
+    after the root: accepted checkpoints, rejected ones with their reason, ψ per window, the
+    drift model, the uncertainty left)."""
     from calibration.heading import LimbHeadingCorrection
 
-    windows, unusable, anchors = _checkpoint_windows({key: t}, checkpoints, cal_data)
+    windows, unusable, anchors = marks
     hc = LimbHeadingCorrection(model)
     with _about(session_id, "neutral checkpoints"):
         hc.fit(t, q, windows, status=status, anchors=anchors)
     per = {seg: _fitted(c, t) for seg, c in hc.sensors_.items()}
-    prov = {"neutral_checkpoints": len(checkpoints), "accepted": hc.accepted_count_,
+    prov = {"neutral_checkpoints": n_checkpoints, "accepted": hc.accepted_count_,
             "rejected": unusable, "anchored": bool(anchors), "clock": key,
             "relative_to": "each sensor's proximal neighbour", "segments": per}
     return hc.apply(t, q), prov

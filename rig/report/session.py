@@ -291,10 +291,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.calibrations.append({"kind": "imu-alignment re-fitted on the VQF orientations",
                                       "residual_deg": float(refit)})
         if model is None:
-            for m in reversed(store.models_for(session_id=rec_id)):
-                if Path(m["path"]).is_file():
-                    model = m["path"]
-                    break
+            found = _last_registered_model(store, rec_id)
+            model = None if found is None else found[1]
 
     if model is not None:
         from rig.report.figures import error_map_figure
@@ -337,22 +335,26 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     return write_report(data, out_path)
 
 
-def _registered_limb_model(store, session_id: int, joints) -> tuple[int, str] | None:
-    """``(id, path)`` of the last model registered with the session that is a limb model of
-    ``joints`` and whose file is still there, else None."""
+def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, str] | None:
+    """``(id, path)`` of the last model registered with the session whose file is still there
+    (and that ``accept(path)`` takes, when given), else None."""
+    for m in reversed(store.models_for(session_id=session_id)):
+        if Path(m["path"]).is_file() and (accept is None or accept(str(m["path"]))):
+            return int(m["id"]), str(m["path"])
+    return None
+
+
+def _is_limb_model_of(joints):
+    """``accept`` for :func:`_last_registered_model`: a limb model of ``joints``."""
     from models.errors import ModelsError
     from models.limb_model import load_limb_model
 
-    for m in reversed(store.models_for(session_id=session_id)):
-        if not Path(m["path"]).is_file():
-            continue
+    def accept(path: str) -> bool:
         try:
-            limb = load_limb_model(str(m["path"])).limb
+            return load_limb_model(path).limb.joint_names == tuple(joints)
         except (ModelsError, OSError):
-            continue  # a single joint's model, or a file replaced since
-        if limb.joint_names == tuple(joints):
-            return int(m["id"]), str(m["path"])
-    return None
+            return False  # a single joint's model, or a file replaced since
+    return accept
 
 
 def report_for_limb_session(store, session_id: int, out_path, *, model=None, age=None,
@@ -377,7 +379,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     evaluation = None
     registered = None
     if model is None:  # the last limb model registered with the session, if its file is there
-        registered = _registered_limb_model(store, session_id, chain.joints)
+        registered = _last_registered_model(store, session_id, _is_limb_model_of(chain.joints))
         if registered is not None:
             model = registered[1]
     if model is not None:
