@@ -34,7 +34,8 @@ import numpy as np
 
 from models import quaternion as Q
 
-__all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "hinge_angles", "joint_spec", "off_axis_angles"]
+__all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "hinge_angles", "joint_mismatch", "joint_spec",
+           "off_axis_angles"]
 
 
 #: The chains a limb protocol knows: limb → ((joint, parent segment, child segment), ...),
@@ -78,6 +79,28 @@ def joint_spec(name: str) -> JointSpec:
     if name not in JOINTS:
         raise ValueError(f"joint must be one of {', '.join(JOINTS)}, got {name!r}")
     return JOINTS[name]
+
+
+def joint_mismatch(kind: str, joint: str | None = None, side: str | None = None, *,
+                   for_joint: str | None, for_side: str | None = None) -> str | None:
+    """Why limits of ``kind`` said to be for ``joint`` / ``side`` cannot serve ``for_joint`` /
+    ``for_side`` (each None: unknown), as the end of a sentence (``"is for the knee, not the
+    shoulder"``); None when they can.
+
+    The one check every path makes before it reads a file as a joint's (a constraint file, a
+    model's embedded constraint, a rig configuration's constraint, a session's boundary): a
+    named joint or side must be the one asked for, and the kind must fit the joint of
+    :data:`JOINTS` — a hinge's interval is no swing region, so a hinge file cannot stand for a
+    ball or two-axis joint, nor the reverse, even when the file names no joint.
+    """
+    if joint is not None and for_joint is not None and joint != for_joint:
+        return f"is for the {joint}, not the {for_joint}"
+    if side is not None and for_side is not None and side != for_side:
+        return f"is for the {side} side, not the {for_side}"
+    spec = JOINTS.get(for_joint) if for_joint is not None else None
+    if spec is not None and (kind == "hinge") != (spec.kind == "hinge"):
+        return f"holds {kind} limits, but the {for_joint} is a {spec.kind} joint"
+    return None
 
 
 def hinge_angles(q, axis) -> np.ndarray:

@@ -540,6 +540,13 @@ class JointConstraint:
                 f"expected a mapping with 'name' and 'swing', got {type(data).__name__}",
                 source=source,
             )
+        if "joints" in data:  # a limb file (models.limb.is_limb_file) given for one joint
+            joints = data.get("joints")
+            names = ", ".join(str(j.get("name")) for j in joints if isinstance(j, dict)) \
+                if isinstance(joints, list) else ""
+            raise ConstraintError(
+                f"a limb file ({names or 'a list of joints'}), not one joint's constraint file: "
+                "give the constraint of a single joint here", source=source)
         _reject_unknown(data, _TOP_KEYS, None, source)
         name = data.get("name", "unnamed")
         if not isinstance(name, str) or not name.strip():

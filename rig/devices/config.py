@@ -320,12 +320,31 @@ def loads_rig_config(text: str, source: str = "<rig config>",
                 raise ctx.fail("constraint", f"{constraint!r} is neither a shape "
                                              f"({', '.join(SHAPES)}) nor an existing file")
             constraint = str(path)
+        _check_constraint_joint(ctx, constraint, joint)
     sensors = _sensors(ctx, d["sensors"], joint) if d.get("sensors") is not None else None
     servos = _servos(ctx, d["servos"]) if d.get("servos") is not None else None
     if sensors is None and servos is None:
         raise ctx.fail("top level", "needs 'sensors' or 'servos' (or both)")
     desc = ctx.string(d["description"], "description") if d.get("description") else ""
     return RigConfig(name, joint, constraint, sensors, servos, desc, source, limb)
+
+
+def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> None:
+    """``constraint`` must be limits the rig's joint can have (a shoulder rig refuses a knee's
+    file, a hinge's, another side's, a limb file)."""
+    from calibration.joints import joint_mismatch
+    from models.constraint import load_constraint
+    from models.errors import ModelsError
+    from models.shapes import SHAPES, load_shape
+
+    try:
+        c = load_shape(constraint) if constraint in SHAPES else load_constraint(constraint)
+    except ModelsError as err:
+        raise ctx.fail("constraint", str(err)) from None
+    why = joint_mismatch(c.kind, c.joint, c.side, for_joint=joint.name, for_side=joint.side)
+    if why is not None:
+        raise ctx.fail("constraint", f"{constraint} {why}: the rig's joint is the {joint.side} "
+                                     f"{joint.name}")
 
 
 def _limb(ctx: _Ctx, value: Any, joint: JointInfo, sensors: Any) -> str:

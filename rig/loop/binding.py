@@ -10,6 +10,10 @@ the safety supervisor checks every goal against — is, in order of authority:
 3. the rig configuration's ``constraint``;
 4. the model's own embedded constraint.
 
+The enforced constraint is **always refused** when it is for another joint or side than the
+rig's, or its kind cannot be that joint's (:func:`calibration.joints.joint_mismatch`: a knee's
+hinge on a shoulder rig): ``--force-model`` overrides the model, never the joint a rig drives.
+
 The model is **refused** (:class:`ModelBindingError`, one line, exit 2) when its embedded
 constraint differs from the enforced one (limits compared, names ignored), or names a joint or
 side other than the rig configuration's, or a patient other than the session's — unless
@@ -105,6 +109,18 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     else:
         raise ModelBindingError(f"{path}: the model embeds no constraint and none was given "
                                 "(--constraint FILE)")
+    rig_joint = getattr(rig, "joint", None)
+    if rig_joint is not None:
+        # what the rig drives is not the model's to override: --force-model never reaches here
+        from calibration.joints import joint_mismatch
+
+        why = joint_mismatch(enforced.kind, enforced.joint, enforced.side,
+                             for_joint=rig_joint.name, for_side=rig_joint.side)
+        if why is not None:
+            raise ModelBindingError(
+                f"{source}: constraint {_who(enforced)} {why}: rig {rig.name!r} drives the "
+                f"{rig_joint.side} {rig_joint.name} (--force-model overrides the model, never "
+                "the joint the rig drives)")
     problems: list[str] = []
     if embedded is None:
         problems.append(f"{path}: the model embeds no constraint, so it cannot be checked "
@@ -115,8 +131,8 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
                 and embedded.patient != session_patient):
             problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
                             f"{session_id} is patient {session_patient!r}")
-        joint = getattr(getattr(rig, "joint", None), "name", None)
-        side = getattr(getattr(rig, "joint", None), "side", None)
+        joint = getattr(rig_joint, "name", None)
+        side = getattr(rig_joint, "side", None)
         if embedded.joint is not None and joint is not None and embedded.joint != joint:
             problems.append(f"{path}: model is for joint {embedded.joint!r}, rig "
                             f"{rig.name!r} drives joint {joint!r}")

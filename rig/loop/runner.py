@@ -26,8 +26,8 @@ Safe state (``safe_state="hold"``, the default, or ``"torque-off"``)
 Entered at once on: the adapter going away, a hardware alert on any servo of the limb, servo
 data older than ``stale_present_s`` (reads failing beyond the retries), a failed write, a
 stop request (SIGINT / SIGTERM), a target source whose device vanished (after its target went
-stale: the goal already holds). ``hold`` writes Goal Position = Present Position (torque stays
-on: an arm without brakes would fall); ``torque-off`` disables torque. If the bus itself is
+stale: the goal already holds). ``hold`` writes Goal Position = Present Position, within the
+chain's position limits (torque stays on: an arm without brakes would fall); ``torque-off`` disables torque. If the bus itself is
 gone nothing can be written: the servos' Bus Watchdog (armed at start, ``watchdog_ms``) stops
 them. The run then ends; the summary says why. A normal end (duration reached) leaves the limb
 holding its last goal with the watchdog armed.
@@ -255,6 +255,9 @@ class EnforcementLoop:
                     ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
                 except (RigTimeoutError, RigProtocolError):
                     ticks = self._present_ticks
+                # a servo can stand a tick or two past its limits (tracking, a push); holding it
+                # there would be a goal the chain refuses, so hold it at the nearest limit
+                ticks = np.clip(ticks, self.kin.min_ticks, self.kin.max_ticks)
                 chain.write_goal_ticks(ticks)
                 self._goal_ticks = ticks
         except RigError as err:

@@ -94,3 +94,37 @@ def test_unknown_name_lists_the_shipped_configs(tmp_path):
     bad.write_text("name: [unclosed\n")
     with pytest.raises(RigConfigError, match="not valid YAML"):
         load_rig_config(bad)
+
+
+def test_the_constraint_must_be_one_the_rigs_joint_can_have(tmp_path):
+    """Issue 37, case 2: a leg rig took a shoulder file or an arm limb file as ``constraint``."""
+    files = {
+        "knee.yaml": "name: k\nkind: hinge\njoint: knee\nhinge: {axis: [0, 0, -1], min_deg: 0, "
+                     "max_deg: 140}\n",
+        "hinge.yaml": "name: h\nkind: hinge\nhinge: {axis: [0, 0, 1], min_deg: 0, "
+                      "max_deg: 140}\n",
+        "left.yaml": "name: l\nside: left\nswing: {cone: {centre: [1, 0, 0], radius_deg: 40}}\n",
+        "arm.yaml": "name: a\nlimb: arm\njoints:\n- {name: shoulder, parent: thorax, child: "
+                    "upper-arm, constraint: {swing: {cone: {centre: [1, 0, 0], radius_deg: 40}}}}\n",
+        "fine.yaml": "name: s\njoint: shoulder\nside: right\nswing: {cone: {centre: [1, 0, 0], "
+                     "radius_deg: 40}}\n",
+    }
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    for name, match in (("knee.yaml", "is for the knee, not the shoulder"),
+                        ("hinge.yaml", "holds hinge limits, but the shoulder is a ball joint"),
+                        ("left.yaml", "is for the left side, not the right"),
+                        ("arm.yaml", "a limb file .*not one joint's constraint file")):
+        d = base()
+        d["constraint"] = str(tmp_path / name)
+        with pytest.raises(RigConfigError, match=match) as info:
+            parse(d)
+        assert str(info.value).startswith("t.yaml: constraint: ")
+    d = base()
+    d["constraint"] = str(tmp_path / "fine.yaml")
+    assert parse(d).constraint == str(tmp_path / "fine.yaml")
+    d = base()
+    d["joint"]["name"] = "knee"  # a shipped shape is a ball joint's swing region
+    d["constraint"] = "original"
+    with pytest.raises(RigConfigError, match="the knee is a hinge joint"):
+        parse(d)

@@ -408,3 +408,43 @@ def test_no_kernel_compiles_inside_a_running_loop(tmp_path):
     # every kernel the cycle reaches was built (a polygon's ranking inside its cell lookup)
     assert all(n >= 1 for name, n in before.items() if name != "_rank_one"), before
     assert kinds.get("projected", 0) + kinds.get("reprojected", 0) > 0, kinds
+
+
+def test_hold_keeps_a_servo_standing_past_its_limit_at_that_limit(models):
+    """A servo can read a tick or two past its position limit (its noise, a push): the hold
+    written on a fault must be a goal the chain accepts — the present position brought within
+    the same limits the backstop wrote — not a refused write that leaves the limb to the
+    watchdog (issue 37: "goal outside tick limits (got 2259, expected 1024..2258)")."""
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    with open_port(URL + "&clock=manual&wire_time=off", baud=SERVOS.baud) as port:
+        bus = port.simulator
+        clk = bus.clock
+        bus.set_hand(SERVOS.ids[1], 2300.0)  # the limb starts raised (torque off)
+        clk.advance(0.01)
+        chain = prepare_chain(port, SERVOS, oracle)
+        limits = {}
+
+        def on_cycle(loop, k):
+            if k == 3:  # the limits now end 3 ticks short of where servo 2 stands; then a stop
+                present = np.asarray(chain.read_ticks(), dtype=np.int64)
+                lo, hi = chain.kinematics.min_ticks.copy(), chain.kinematics.max_ticks.copy()
+                assert present[1] > 2250
+                hi[1] = present[1] - 3
+                chain.set_position_limits(lo, hi)
+                loop.kin = chain.kinematics
+                limits["hi"] = int(hi[1])
+                loop.request_stop("SIGTERM")
+
+        try:
+            loop = EnforcementLoop(chain, model, oracle, ScriptedTargets("hold", oracle),
+                                   LoopConfig(watchdog_ms=1000), clock=clk, sleep=clk.sleep,
+                                   on_cycle=on_cycle)
+            loop.setup()
+            summary = loop.run(max_cycles=20)
+            goal = bus.servo(SERVOS.ids[1]).get("Goal Position")
+        finally:
+            chain.close()
+    assert summary["safe_state_cycle"] == 3
+    assert loop.safe_state_note is None  # the hold was written, not left to the watchdog
+    assert goal == limits["hi"]

@@ -295,3 +295,24 @@ def test_binding_authority_and_refusals():
     # no rig constraint: the model's own is enforced
     b = bind_model(_FakeModel(cone), rig=_rig(constraint=None))
     assert b.constraint == cone and b.source == "the model's embedded constraint"
+
+
+def test_a_constraint_for_another_joint_is_refused_even_with_force_model():
+    """Issue 37, case 1: a knee file enforced on the shoulder rig with --force-model. The model
+    may be forced; what the rig drives may not: a file named for another joint or side, or a
+    hinge's limits standing for a ball joint, is refused whatever its source."""
+    shoulder = JointConstraint.cone((1, 0, 0), 50.0, name="c50", joint="shoulder",
+                                    side="right")
+    knee = JointConstraint.hinge_joint((0, 0, 1), 0.0, 140.0, name="p42-knee", joint="knee")
+    unnamed_hinge = JointConstraint.hinge_joint((0, 0, 1), 0.0, 140.0, name="h")
+    left = JointConstraint.cone((1, 0, 0), 50.0, name="c50", side="left")
+    for enforced, why in ((knee, "is for the knee, not the shoulder"),
+                          (unnamed_hinge, "holds hinge limits, but the shoulder is a ball joint"),
+                          (left, "is for the left side, not the right")):
+        for kw in ({"constraint": enforced}, {"session_constraint": enforced, "session_id": 4}):
+            with pytest.raises(ModelBindingError, match=why) as err:
+                bind_model(_FakeModel(shoulder), rig=_rig(), force=True, **kw)
+            assert "rig 'sim-shoulder' drives the right shoulder" in str(err.value)
+    # with nothing else given, the model's own constraint is the one enforced: checked alike
+    with pytest.raises(ModelBindingError, match="is for the knee"):
+        bind_model(_FakeModel(knee), rig=_rig(constraint=None), force=True)
