@@ -84,6 +84,22 @@ Where each number was read is recorded beside it (:class:`PopulationValue` ``whe
 selection (:func:`population_band`): the band of the patient's sex containing the age; past the
 oldest adult band, the oldest; age unknown, the band containing an adult of
 :data:`UNKNOWN_AGE` years (the text names the band, so the choice shows).
+
+Movements a joint's kind does not measure (:func:`not_measured`)
+-----------------------------------------------------------------
+A hinge measures its angle alone, a two-axis joint its two swing angles, a ball joint all
+three (:data:`KIND_ANGLES`, the kind from :data:`calibration.joints.JOINTS`). A clinical
+movement outside them — the elbow hinge's pronation and supination — has no peak (None) and
+no comparison: a table shows "not measured by a hinge", never a share of the AAOS value.
+
+Physiological reach (:func:`physiological_max`, :func:`beyond_reach`)
+---------------------------------------------------------------------
+Per joint and movement, the widest value any cited norm gives (:data:`WIDEST_NORMS`: the AAOS
+value, every population mean and 95 % CI upper end above, the shoulder's AAOS and Gill 2020
+values) plus :data:`REACH_MARGIN_DEG` (20°). A peak beyond it is not a person's range — e.g. a
+knee extension of 176° (widest norm 6.9°, Soucie 2011) read from sensor orientations rather
+than segment orientations — and is flagged with what likely caused it. A movement no norm
+gives (the shoulder's adduction) is not judged.
 """
 
 from __future__ import annotations
@@ -99,9 +115,10 @@ from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
 __all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "POPULATION", "UNKNOWN_AGE",
-           "JointAngleSet", "JointRangeOfMotion", "PopulationValue", "allowed_rom",
-           "angle_peaks", "constraint_rom", "from_angles", "joint_angles", "largest_rom",
-           "population_band", "population_reference", "recorded_rom"]
+           "JointAngleSet", "JointRangeOfMotion", "KIND_ANGLES", "PopulationValue",
+           "REACH_MARGIN_DEG", "WIDEST_NORMS", "allowed_rom", "angle_peaks", "beyond_reach",
+           "constraint_rom", "from_angles", "joint_angles", "largest_rom", "not_measured",
+           "physiological_max", "population_band", "population_reference", "recorded_rom"]
 
 @dataclass(frozen=True)
 class JointAngleSet:
@@ -465,6 +482,112 @@ CLINICAL_MOVEMENTS: dict[str, tuple[str, ...]] = {
     "ankle": ("dorsiflexion", "plantarflexion", "inversion", "eversion"),
 }
 
+#: The Cardan angles (0 = α, 1 = β, 2 = γ) each joint kind (:data:`calibration.joints.JOINTS`)
+#: measures: a hinge its angle about its axis alone (its other angles are out-of-axis motion:
+#: an elbow hinge has no forearm rotation, which happens between the radius and the ulna
+#: within the forearm segment), a two-axis joint α and β (its narrow twist is not a range of
+#: motion), a ball joint all three.
+KIND_ANGLES: dict[str, tuple[int, ...]] = {"hinge": (0,), "two-axis": (0, 1),
+                                           "ball": (0, 1, 2)}
+
+
+def not_measured(joint: str) -> dict[str, str]:
+    """The clinical movements (:data:`CLINICAL_MOVEMENTS`) of ``joint`` that its kind cannot
+    measure (:data:`KIND_ANGLES`), each with the words a table shows for it, e.g. the elbow's
+    ``{"pronation": "not measured by a hinge", "supination": ...}``; empty for most joints.
+    The one place that decides it: the peaks, the tables and the report ask here."""
+    from calibration.joints import joint_spec
+
+    kind = joint_spec(joint).kind  # ValueError naming the joints for an unknown one
+    if joint not in JOINT_ANGLES:  # the shoulder (a ball joint): its own angles, all measured
+        return {}
+    js = JOINT_ANGLES[joint]
+    words = f"not measured by a {kind} joint" if kind != "hinge" else "not measured by a hinge"
+    return {m: words for k, pair in enumerate(js.movements) if k not in KIND_ANGLES[kind]
+            for m in pair if m in CLINICAL_MOVEMENTS[joint]}
+
+
+# -- physiological reach ------------------------------------------------------------------------
+#: Degrees beyond the widest published norm at which a reading is flagged as beyond what people
+#: reach (:func:`physiological_max`). The norms are means (Soucie 2011, Boone 1979, Macedo
+#: 2008, Gill 2020) or the round values clinics use as normal (AAOS 1965), not the largest
+#: ranges people have: the margin leaves room for individual variation above them and for a
+#: measurement's alignment error. It is a threshold for readings no person makes, not a norm.
+REACH_MARGIN_DEG = 20.0
+
+
+def _widest_norms() -> dict[str, dict[str, tuple[float, str]]]:
+    """Per joint and movement, the widest value the cited norms give (AAOS 1965; every
+    population mean and 95 % CI upper end of :data:`POPULATION`; the shoulder's AAOS and Gill
+    2020 means and band medians, :data:`calibration.clinical.NORMATIVE`) and its source."""
+    from calibration.clinical import NORMATIVE as SHOULDER
+
+    out: dict[str, dict[str, tuple[float, str]]] = {}
+
+    def keep(joint: str, movement: str, value: float, source: str) -> None:
+        have = out.setdefault(joint, {}).get(movement)
+        if have is None or value > have[0]:
+            out[joint][movement] = (float(value), source)
+
+    for m, v in SHOULDER["aaos"].items():
+        keep("shoulder", m, v, "AAOS 1965")
+    for m, by_sex in SHOULDER["gill2020_mean"].items():
+        for v in by_sex.values():
+            keep("shoulder", m, v, "Gill 2020")
+    for m, by_sex in SHOULDER["gill2020_band_median"].items():
+        for bands in by_sex.values():
+            for *_, v in bands:
+                keep("shoulder", m, v, "Gill 2020")
+    for joint, table in NORMATIVE["aaos"].items():
+        for m, v in table.items():
+            keep(joint, m, v, "AAOS 1965")
+    for joint, src in POPULATION.items():
+        for m, values in src["movements"].items():
+            for p in values:
+                keep(joint, m, p.mean if p.ci95 is None else max(p.mean, p.ci95[1]),
+                     src["short"])
+    return out
+
+
+#: Per joint and movement, the widest published norm (degrees) and its source
+#: (:func:`_widest_norms`); a movement with no published value has none.
+WIDEST_NORMS: dict[str, dict[str, tuple[float, str]]] = _widest_norms()
+
+
+def physiological_max(joint: str, movement: str) -> float | None:
+    """The largest angle (degrees) a person reaches in ``movement`` of ``joint``, as far as the
+    cited norms tell: the widest of them (:data:`WIDEST_NORMS`) plus
+    :data:`REACH_MARGIN_DEG`; None where no norm gives the movement (a shoulder's adduction)."""
+    got = WIDEST_NORMS.get(joint, {}).get(movement)
+    return None if got is None else got[0] + REACH_MARGIN_DEG
+
+
+def beyond_reach(rom, joint: str | None = None) -> dict[str, dict]:
+    """The movements of a range of motion (a :class:`JointRangeOfMotion`, or the shoulder's
+    :class:`calibration.clinical.RangeOfMotion`) beyond what people reach
+    (:func:`physiological_max`): movement → ``{"value", "max", "norm", "source", "text"}``,
+    ``text`` one line saying so and what likely caused it. Empty when every value is within
+    reach."""
+    if isinstance(rom, JointRangeOfMotion):
+        joint, values = rom.joint, dict(rom.peaks)
+    else:
+        joint = joint or "shoulder"
+        values = {m: getattr(rom, m) for m in rom.MOVEMENTS}
+    out: dict[str, dict] = {}
+    for m, v in values.items():
+        top = physiological_max(joint, m)
+        if v is None or top is None or v <= top:
+            continue
+        norm, source = WIDEST_NORMS[joint][m]
+        text = (f"{joint} {m.replace('_', ' ')} {v:.1f}° is beyond what people reach (the widest "
+                f"published norm is {norm:g}°, {source}; flagged beyond {top:g}°): likely "
+                "not the segments' orientations — sensor orientations (as `rig export` writes "
+                "them) rather than segment orientations, the wrong --reference/--limb "
+                "segments, or another joint's or side's data")
+        out[m] = {"value": round(float(v), 2), "max": top, "norm": norm, "source": source,
+                  "text": text}
+    return out
+
 
 @dataclass(frozen=True)
 class JointRangeOfMotion:
@@ -488,7 +611,11 @@ class JointRangeOfMotion:
                                     None if age is None else f"age {age:g}") if x)
         rows = [("movement", "measured", "AAOS", "population" + (f" ({who})" if who else ""))]
         missing = []
+        unmeasured = not_measured(self.joint)
         for m in CLINICAL_MOVEMENTS[self.joint]:
+            if m in unmeasured:  # no deficit to read: the model has no such movement
+                rows.append((m.replace("_", " "), unmeasured[m], "-", "-"))
+                continue
             v = self.peaks.get(m)
             ref = aaos.get(m)
             comparable = (self.joint, m) not in NORMATIVE["not_comparable"]
@@ -506,6 +633,12 @@ class JointRangeOfMotion:
         for (j, m), why in NORMATIVE["not_comparable"].items():
             if j == self.joint:
                 lines.append(f"note: {m} not compared with AAOS: {why}")
+        if unmeasured:
+            from calibration.joints import joint_spec
+
+            lines.append(f"note: {' and '.join(unmeasured)}: the {self.joint} is modelled as a "
+                         f"{joint_spec(self.joint).kind}, which has no such movement: not "
+                         "reported (not a deficit)")
         pop_src = POPULATION.get(self.joint)
         if pop_src is None:
             lines.append(f"note: no published population values found for the {self.joint}")
@@ -526,18 +659,22 @@ class JointRangeOfMotion:
         population reference for ``age`` / ``sex``: ``population`` (movement → text or None, as
         the table), ``population_values`` (movement → the published values applied,
         :meth:`PopulationValue.to_json`), ``population_source`` (the reference, None when the
-        joint has none) and ``population_for`` (the age and sex asked)."""
+        joint has none) and ``population_for`` (the age and sex asked); ``not_measured``
+        (movement → why, :func:`not_measured`: None, no population reference)."""
         _check_who(age, sex)
         out: dict = {"joint": self.joint, "side": self.side}
+        unmeasured = not_measured(self.joint)
+        shown = [m for m in CLINICAL_MOVEMENTS[self.joint] if m not in unmeasured]
         for m in CLINICAL_MOVEMENTS[self.joint]:
-            v = self.peaks.get(m)
+            v = None if m in unmeasured else self.peaks.get(m)
             out[m] = None if v is None else round(float(v), 2)
         out["arc"] = None if self.arc is None else [round(float(v), 2) for v in self.arc]
+        out["not_measured"] = dict(unmeasured)
         out["population"] = {m: population_reference(self.joint, m, age=age, sex=sex)
-                             for m in CLINICAL_MOVEMENTS[self.joint]}
+                             if m in shown else None for m in CLINICAL_MOVEMENTS[self.joint]}
         out["population_values"] = {
             m: [p.to_json() for p in population_band(self.joint, m, age=age, sex=sex)]
-            for m in CLINICAL_MOVEMENTS[self.joint]}
+            if m in shown else [] for m in CLINICAL_MOVEMENTS[self.joint]}
         src = POPULATION.get(self.joint)
         out["population_source"] = None if src is None else src["source"]
         out["population_for"] = {"age": age, "sex": sex}
@@ -580,8 +717,10 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}
     where = None if JOINTS[joint].kind == "hinge" else _in_band(ang, band_deg)
     peaks = angle_peaks(ang, joint, window=1, where=where)
+    unmeasured = not_measured(joint)
     return JointRangeOfMotion(joint, _check_side(side),
-                              {m: peaks.get(m) for m in CLINICAL_MOVEMENTS[joint]},
+                              {m: None if m in unmeasured else peaks.get(m)
+                               for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
 
 
@@ -639,8 +778,10 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
         q = Q.from_axis_angle(np.asarray(h.axis, float), np.radians(theta))
         ang = joint_angles(q, joint, side)
         peaks = angle_peaks(ang, joint, window=1)
-        named = set(js.movements[0])
-        return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named else None)
+        named = set(js.movements[0])  # a hinge constraint bounds its own angle alone
+        unmeasured = not_measured(joint)
+        return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named
+                                                    and m not in unmeasured else None)
                                                 for m in CLINICAL_MOVEMENTS[joint]},
                                   (float(ang["alpha"].min()), float(ang["alpha"].max())))
     ang = joint_angles(allowed_boundary_samples(constraint, step_deg), joint, side)

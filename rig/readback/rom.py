@@ -65,8 +65,19 @@ class RomResult:
 
     @property
     def warnings(self) -> list[str]:
-        """Reasons to doubt the figures (one line each; none for a constraint file)."""
-        return [] if self.facts is None else self.facts.warnings()
+        """Reasons to doubt the figures (one line each): the recording's facts, and every
+        movement beyond what people reach (:attr:`beyond_reach`)."""
+        facts = [] if self.facts is None else self.facts.warnings()
+        return facts + [b["text"] for b in self.beyond_reach.values()]
+
+    @property
+    def beyond_reach(self) -> dict[str, dict]:
+        """Movements beyond physiological reach
+        (:func:`calibration.joint_angles.beyond_reach`): movement → value, the largest
+        plausible, the norm it comes from and the line saying so."""
+        from calibration.joint_angles import beyond_reach
+
+        return beyond_reach(self.rom, self.joint if not self.is_shoulder else "shoulder")
 
     def table(self, *, age: int | None = None, sex: str | None = None) -> str:
         """What ``rig rom`` prints: the source, the warnings, the table against the AAOS
@@ -92,7 +103,9 @@ class RomResult:
         """``rig rom --json``: movement (snake_case, as in the table) → degrees (2 decimals) or
         None, plus ``joint``, ``side``, ``coverage`` (share of the swing sphere's sectors
         explored, 0-1; None for a constraint file), ``interrupted`` (None when unknown: files
-        and constraints), ``neutral_outside_deg``, ``warnings`` and ``source``."""
+        and constraints), ``neutral_outside_deg``, ``beyond_reach`` (movement → ``value``,
+        ``max``, ``norm``, ``source``: beyond what people reach), ``warnings`` and
+        ``source``."""
         r, facts = self.rom, self.facts
         if self.is_shoulder:
             out: dict = {"joint": self.joint or "shoulder", "side": r.side}
@@ -106,6 +119,8 @@ class RomResult:
         out["interrupted"] = None if facts is None else facts.interrupted
         if self.is_shoulder:
             out["neutral_outside_deg"] = round(float(r.neutral_outside_deg), 2)
+        out["beyond_reach"] = {m: {k: v for k, v in b.items() if k != "text"}
+                               for m, b in self.beyond_reach.items()}
         out["warnings"] = self.warnings
         out["source"] = self.source
         return out

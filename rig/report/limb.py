@@ -185,6 +185,14 @@ def _clinical_hinge(name: str, axis) -> bool:
             and bool(np.allclose(np.asarray(axis, float), spec.hinge_axis, atol=1e-6)))
 
 
+def _kind_of(name: str) -> str | None:
+    """The kind :data:`calibration.joints.JOINTS` gives a joint of this name (None: unknown)."""
+    from calibration.joints import JOINTS
+
+    spec = JOINTS.get(name)
+    return None if spec is None else spec.kind
+
+
 def _swing_area(c) -> float:
     from models.geometry import polygon_area
 
@@ -296,7 +304,7 @@ def _primary_angles(q: np.ndarray, name: str, side: str, joint) -> tuple[np.ndar
 # Range-of-motion rows
 # ---------------------------------------------------------------------------------------------
 _KNOWN_JSON = ("joint", "side", "arc", "population", "population_values", "population_source",
-               "population_for")
+               "population_for", "not_measured")
 
 
 def _json_columns(rom_json: Mapping[str, Any], movement: str) -> dict[str, Any]:
@@ -323,7 +331,9 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
         POPULATION,
         UNKNOWN_AGE,
         allowed_rom,
+        beyond_reach,
         largest_rom,
+        not_measured,
         recorded_rom,
     )
 
@@ -348,8 +358,13 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
     rec_json = rec.to_json(age=age, sex=sex)
     pop_src = POPULATION.get(name)
     aaos = NORMATIVE["aaos"].get(name, {})
+    unmeasured = not_measured(name)
+    far = beyond_reach(rec)
     rows = []
     for m in CLINICAL_MOVEMENTS[name]:
+        if m in unmeasured:
+            rows.append(RomRow(_title(m), None, not_measured=unmeasured[m]))
+            continue
         why = NORMATIVE["not_comparable"].get((name, m))
         ref = aaos.get(m)
         pop = (rec_json.get("population") or {}).get(m)
@@ -358,7 +373,8 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
                            f"{pop}, {pop_src['short']}" if pop_src else pop,
                            note=None if why is None else
                            f"not compared with AAOS ({fmt(ref, 0)}°): {why}",
-                           allowed_deg=allowed.peaks.get(m), extra=_json_columns(rec_json, m)))
+                           allowed_deg=allowed.peaks.get(m), extra=_json_columns(rec_json, m),
+                           beyond_reach=far[m]["text"] if m in far else None))
     pos, neg = _movements(name)
     arcs = []
     for label, rom in (("recorded", rec), ("allowed", allowed)):
@@ -368,6 +384,11 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
             "goniometer reads it (calibration.joint_angles.recorded_rom); allowed: the same "
             f"reading of the limits{where} (constraint_rom). Arc of {pos} (negative: {neg}): "
             + "; ".join(arcs) + ".")
+    if unmeasured:
+        which = " and ".join(m.replace("_", " ") for m in unmeasured)
+        note += (f" {which.capitalize()}: the {name} is modelled as a "
+                 f"{_KIND_WORDS.get(_kind_of(name), 'joint')}, which has no such movement "
+                 "(not reported, not a deficit).")
     if pop_src is None:
         note += f" No published population values found for the {name}."
     else:
@@ -742,6 +763,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      + "°; the coupling plot shows how its limits change")
         sec.rom_rows, sec.rom_note = _joint_rom_rows(joint.name, q[:, j], side, limits, where,
                                                      age=age, sex=sex)
+        data.warnings += [r.beyond_reach for r in sec.rom_rows if r.beyond_reach]
         if joint.kind == "hinge":
             _hinge_section(sec, limb, j, q[:, j], side, result, reference)
         else:

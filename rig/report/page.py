@@ -37,6 +37,12 @@ class RomRow:
     note: str | None = None  # why there is no AAOS comparison, e.g. "AAOS: at 90° abduction"
     allowed_deg: float | None = None  # what the joint's limits allow (a limb's report)
     extra: dict[str, Any] = field(default_factory=dict)  # further reference columns, by title
+    #: why the joint's kind does not measure this movement (e.g. "not measured by a hinge",
+    #: :func:`calibration.joint_angles.not_measured`): shown instead of a value, no comparison
+    not_measured: str | None = None
+    #: the line saying the measured value is beyond what people reach
+    #: (:func:`calibration.joint_angles.beyond_reach`), shown among the page's warnings
+    beyond_reach: str | None = None
 
 
 @dataclass
@@ -170,13 +176,22 @@ def rom_table_html(rows: list[RomRow], note: str | None = None, *,
            + "".join(f"<th>{_e(k)}</th>" for k in extra) + "</tr>"]
     notes = []
     for r in rows:
+        if r.not_measured:  # no value, so no share of AAOS to misread as a deficit
+            out.append(f"<tr><td>{_e(r.movement)}</td><td>{_e(r.not_measured)}</td>"
+                       + ("<td>–</td>" if allowed else "") + "<td>–</td><td>–</td>"
+                       + ("<td>–</td>" if pop else "")
+                       + "".join("<td>–</td>" for _ in extra) + "</tr>")
+            continue
         pct = (100.0 * r.measured_deg / r.aaos_deg
                if r.measured_deg is not None and r.aaos_deg else None)
         aaos = fmt(r.aaos_deg, 0)
         if r.note:
             notes.append(f"{r.movement}: {r.note}")
             aaos = f"{aaos}<sup>{len(notes)}</sup>"
-        out.append(f"<tr><td>{_e(r.movement)}</td><td>{fmt(r.measured_deg)}</td>"
+        measured = fmt(r.measured_deg)
+        if r.beyond_reach:
+            measured += " <span class='warn'>(beyond what people reach)</span>"
+        out.append(f"<tr><td>{_e(r.movement)}</td><td>{measured}</td>"
                    + (f"<td>{fmt(r.allowed_deg)}</td>" if allowed else "")
                    + f"<td>{aaos}</td><td>{fmt(pct, 0)}</td>"
                    + (f"<td>{_e(r.population or '–')}</td>" if pop else "")
@@ -302,7 +317,9 @@ def rom_rows(rom, *, age: int | None = None, sex: str | None = None) -> list[Rom
         NORMATIVE,
         population_reference,
     )
+    from calibration.joint_angles import beyond_reach
 
+    far = beyond_reach(rom, "shoulder")
     rows = []
     for m in rom.MOVEMENTS:
         pop = population_reference(m, age=age, sex=sex)
@@ -312,5 +329,6 @@ def rom_rows(rom, *, age: int | None = None, sex: str | None = None) -> list[Rom
                            None if pop is None else f"{pop}, Gill 2020",
                            None if other is None else
                            f"not compared with AAOS ({NORMATIVE['aaos'][m]:.0f}°): {other}; "
-                           "measured here with the arm at the side"))
+                           "measured here with the arm at the side",
+                           beyond_reach=far[m]["text"] if m in far else None))
     return rows

@@ -240,6 +240,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.rom_rows = rom_rows(range_of_motion(
                 constraint, side, directions=None if joint is None else joint.directions),
                 age=age, sex=sex)
+            data.warnings = data.warnings + [r.beyond_reach for r in data.rom_rows
+                                             if r.beyond_reach]
             note = ("Peaks: the farthest reach along each clinical plane (within 5°) of the "
                     f"recorded boundary ({origin}) and of the recorded samples, the smaller of "
                     "the two; rotations with the arm at the side.")

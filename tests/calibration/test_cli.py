@@ -139,3 +139,31 @@ def test_rom_from_a_constraint_file(capsys, tmp_path):
     line = next(ln for ln in stdout.splitlines() if ln.startswith("external rotation"))
     measured = line.split(")")[1].split()[0]
     assert np.isclose(float(measured.rstrip("°")), 60.0)
+
+
+def test_rom_flags_a_knee_angle_beyond_what_people_reach(tmp_path, capsys):
+    """Issue 37: sensor orientations read as segments gave a knee extension of 176.6° without
+    a word; ``rig rom`` now flags it, in the text and the JSON, with its likely cause."""
+    import json
+
+    from calibration.joint_angles import from_angles
+    from models import quaternion as Q
+
+    alpha = np.concatenate([np.linspace(0.0, 110.0, 150), np.full(20, -176.6),
+                            np.linspace(-176.6, 0.0, 150)])
+    zero = np.zeros_like(alpha)
+    knee = from_angles(alpha, zero, zero, "knee", "right")
+    path = tmp_path / "leg.sto"
+    write_sto(path, OrientationTable(time=np.arange(len(alpha)) / 100.0, columns={
+        "thigh_imu": np.tile(Q.IDENTITY, (len(alpha), 1)), "shank_imu": knee}, rate_hz=100.0))
+    args = ["rom", str(path), "--joint", "knee", "--reference", "thigh", "--limb", "shank"]
+    code, stdout, err = run(args, capsys)
+    assert code == 0, err
+    warning = next(ln for ln in stdout.splitlines() if ln.startswith("warning: knee extension"))
+    assert "176.6° is beyond what people reach" in warning and "sensor orientations" in warning
+    assert not any("knee flexion" in ln for ln in stdout.splitlines() if "warning" in ln)
+    code, stdout, err = run([*args, "--json"], capsys)
+    out = json.loads(stdout)
+    assert set(out["beyond_reach"]) == {"extension"}
+    assert out["beyond_reach"]["extension"]["source"] == "Soucie 2011"
+    assert any("beyond what people reach" in w for w in out["warnings"])

@@ -202,8 +202,12 @@ def test_json_keeps_its_keys_adds_the_population_and_round_trips():
     out = rom.to_json(age=40, sex="male")
     assert {k: out[k] for k in old} == {k: plain[k] for k in old}
     assert out["population"]["flexion"] == "143 (men, 1-54)"
-    assert out["population_values"]["supination"] == [
-        {"sex": "male", "age": [1, 54], "mean": 82.0, "sd": None, "ci95": None}]
+    assert out["population_values"]["flexion"] == [
+        {"sex": "male", "age": [1, 54], "mean": 143.0, "sd": None, "ci95": None}]
+    # a hinge has no forearm rotation: no value, no population to compare with (issue 37)
+    assert out["supination"] is None and out["population_values"]["supination"] == []
+    assert out["not_measured"] == {"pronation": "not measured by a hinge",
+                                   "supination": "not measured by a hinge"}
     assert out["population_source"].startswith("men: Boone DC, Azen SP.")
     assert out["population_for"] == {"age": 40, "sex": "male"}
     assert json.loads(json.dumps(out)) == out
@@ -270,3 +274,62 @@ def test_a_coupled_joint_allows_the_largest_over_its_keyframes():
     assert rec.extension is not None and rec.extension < 35.0 and rec.flexion < 35.0
     with pytest.raises(ValueError, match="no ranges"):
         largest_rom([])
+
+
+# -- issue 37: movements a joint's kind cannot measure; angles beyond physiological reach ------
+def test_the_kind_decides_which_movements_are_measured():
+    """One place (:func:`not_measured`, from the joint's kind) says the elbow hinge has no
+    pronation or supination; the recorded peaks, the constraint's and the table agree."""
+    assert ja.not_measured("elbow") == {"pronation": "not measured by a hinge",
+                                        "supination": "not measured by a hinge"}
+    for joint in ("shoulder", "wrist", "hip", "knee", "ankle"):
+        assert ja.not_measured(joint) == {}
+    with pytest.raises(ValueError, match="joint must be one of"):
+        ja.not_measured("neck")
+    # a forearm turned 30° about its long axis while the elbow bends: out-of-axis motion of
+    # the hinge, which before was read as 30° of pronation ("38 % of AAOS")
+    alpha = np.linspace(0.0, 140.0, 300)
+    gamma = 30.0 * np.sin(np.linspace(0.0, 6.0, 300))
+    q = ja.from_angles(alpha, np.zeros_like(alpha), gamma, "elbow", "right")
+    rec = ja.recorded_rom(q, "elbow", "right")
+    assert rec.peaks["pronation"] is None and rec.peaks["supination"] is None
+    assert rec.peaks["flexion"] == pytest.approx(140.0, abs=0.5)
+    text = rec.table()
+    row = next(line for line in text.splitlines() if line.startswith("pronation"))
+    assert "not measured by a hinge" in row and "80°" not in row
+    assert "not a deficit" in text
+
+
+def test_widest_norms_come_from_the_cited_tables():
+    """The physiological maxima are the cited norms' widest values plus the stated margin: no
+    number of their own."""
+    from calibration.clinical import NORMATIVE as SHOULDER
+
+    assert ja.WIDEST_NORMS["knee"]["extension"] == (6.9, "Soucie 2011")  # 5.4, CI to 6.9
+    assert ja.WIDEST_NORMS["knee"]["flexion"][0] == max(
+        NORMATIVE["aaos"]["knee"]["flexion"],
+        *(v.ci95[1] if v.ci95 else v.mean for v in POPULATION["knee"]["movements"]["flexion"]))
+    assert ja.WIDEST_NORMS["shoulder"]["flexion"][0] == SHOULDER["aaos"]["flexion"]
+    assert ja.physiological_max("knee", "extension") == pytest.approx(
+        6.9 + ja.REACH_MARGIN_DEG)
+    assert ja.physiological_max("shoulder", "adduction") is None  # no norm: not judged
+    for joint, moves in CLINICAL_MOVEMENTS.items():
+        for m in moves:
+            assert ja.physiological_max(joint, m) is not None, (joint, m)
+
+
+def test_a_knee_bent_backwards_is_flagged_with_its_likely_cause():
+    """Sensor orientations read as segments (the rig's own ``rig export``) gave a knee
+    extension of 176.6° without a word; now it is flagged, with what likely caused it."""
+    alpha = np.concatenate([np.linspace(0.0, 120.0, 200), np.full(20, -176.6),
+                            np.linspace(-176.6, 0.0, 200)])
+    q = ja.from_angles(alpha, np.zeros_like(alpha), np.zeros_like(alpha), "knee", "right")
+    rec = ja.recorded_rom(q, "knee", "right")
+    far = ja.beyond_reach(rec)
+    assert set(far) == {"extension"}
+    assert far["extension"]["value"] == pytest.approx(176.6, abs=0.1)
+    assert "beyond what people reach" in far["extension"]["text"]
+    assert "sensor orientations" in far["extension"]["text"]
+    assert "--reference/--limb" in far["extension"]["text"]
+    ok = JointRangeOfMotion("knee", "right", {"flexion": 150.0, "extension": 10.0})
+    assert ja.beyond_reach(ok) == {}

@@ -232,3 +232,38 @@ def test_limb_report_renders_in_headless_chromium(leg, tmp_path):
     assert pixels_near(img, "#ee7733", 0.06) > 30  # keyframes: outlines and markers
     assert pixels_near(img, "#b35806", 0.06) > 30  # the warnings, styled
     assert pixels_near(img, "#1b7837", 0.08) > 20  # "met" verdicts, the normal arc
+
+
+def test_the_elbow_hinge_reports_no_forearm_rotation_deficit(arm):
+    """Issue 37: the elbow hinge's table read pronation/supination "3 % of AAOS" from
+    out-of-axis motion; a hinge has no forearm rotation, so the rows say so, with no value
+    and no share of AAOS (decided from the joint's kind)."""
+    _, _, data = arm
+    elbow = {r.movement: r for r in _section(data, "elbow").rom_rows}
+    for m in ("Pronation", "Supination"):
+        assert elbow[m].not_measured == "not measured by a hinge"
+        assert elbow[m].measured_deg is None and elbow[m].aaos_deg is None
+    assert elbow["Flexion"].not_measured is None and elbow["Flexion"].measured_deg > 90.0
+    html = render_limb_html(data)
+    row = re.search(r"<tr><td>Pronation</td>.*?</tr>", html).group(0)
+    assert "not measured by a hinge" in row and ">80<" not in row
+    assert "not a deficit" in _section(data, "elbow").rom_note
+
+
+def test_a_reading_beyond_reach_is_flagged_at_the_top(leg):
+    """Issue 37: a knee bent 170° backwards (sensor orientations read as segments) is flagged
+    among the page's warnings and on its row; the simulated leg's own readings are not."""
+    from calibration.joint_angles import from_angles
+
+    limb, joints, data = leg
+    assert not any(r.beyond_reach for s in data.joints for r in s.rom_rows)
+    n = len(joints["knee"])
+    alpha = np.where(np.arange(n) % 400 < 20, -170.0, 30.0)
+    bent = dict(joints, knee=from_angles(alpha, 0.0, 0.0, "knee", "right"))
+    far = limb_report_data(limb, bent, side="right", patient="P-LEG")
+    knee = {r.movement: r for r in _section(far, "knee").rom_rows}
+    assert "beyond what people reach" in knee["Extension"].beyond_reach
+    assert knee["Flexion"].beyond_reach is None
+    assert knee["Extension"].beyond_reach in far.warnings
+    html = render_limb_html(far)
+    assert html.index("knee extension 170.0° is beyond what people reach") < html.index("<h2>")
