@@ -28,24 +28,18 @@ limit).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from models import quaternion as Q
+from models.limb import LIMB_CHAINS  # limb → ((joint, parent, child), ...), proximal first
 
 __all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "hinge_angles", "joint_mismatch", "joint_spec",
            "off_axis_angles"]
 
 
-#: The chains a limb protocol knows: limb → ((joint, parent segment, child segment), ...),
-#: proximal to distal (the segment names of :data:`calibration.frames.SEGMENT_TO_ISB` and of
-#: limb files).
-LIMB_CHAINS: dict[str, tuple[tuple[str, str, str], ...]] = {
-    "arm": (("shoulder", "thorax", "upper-arm"), ("elbow", "upper-arm", "forearm"),
-            ("wrist", "forearm", "hand")),
-    "leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"), ("ankle", "shank", "foot")),
-}
 
 
 @dataclass(frozen=True)
@@ -81,25 +75,33 @@ def joint_spec(name: str) -> JointSpec:
     return JOINTS[name]
 
 
-def joint_mismatch(kind: str, joint: str | None = None, side: str | None = None, *,
-                   for_joint: str | None, for_side: str | None = None) -> str | None:
-    """Why limits of ``kind`` said to be for ``joint`` / ``side`` cannot serve ``for_joint`` /
-    ``for_side`` (each None: unknown), as the end of a sentence (``"is for the knee, not the
-    shoulder"``); None when they can.
+def joint_mismatch(c, *, for_joint: str | None, for_side: str | None = None) -> str | None:
+    """Why the limits ``c`` (:class:`models.constraint.JointConstraint`) cannot serve as
+    ``for_joint``'s on ``for_side`` (each None: unknown), as the end of a sentence (``"is for
+    the knee, not the shoulder"``); None when they can.
 
     The one check every path makes before it reads a file as a joint's (a constraint file, a
     model's embedded constraint, a rig configuration's constraint, a session's boundary): a
-    named joint or side must be the one asked for, and the kind must fit the joint of
-    :data:`JOINTS` — a hinge's interval is no swing region, so a hinge file cannot stand for a
-    ball or two-axis joint, nor the reverse, even when the file names no joint.
+    joint or side the file names must be the one asked for, and the limits must fit the joint
+    of :data:`JOINTS` even when the file names none — a hinge's interval is no swing region,
+    so a hinge cannot stand for a ball or two-axis joint nor the reverse, and a hinge turns
+    about the joint's own axis (the elbow's +Z, the knee's −Z: read as the other, flexion
+    would change sign).
     """
-    if joint is not None and for_joint is not None and joint != for_joint:
-        return f"is for the {joint}, not the {for_joint}"
-    if side is not None and for_side is not None and side != for_side:
-        return f"is for the {side} side, not the {for_side}"
+    if c.joint is not None and for_joint is not None and c.joint != for_joint:
+        return f"is for the {c.joint}, not the {for_joint}"
+    if c.side is not None and for_side is not None and c.side != for_side:
+        return f"is for the {c.side} side, not the {for_side}"
     spec = JOINTS.get(for_joint) if for_joint is not None else None
-    if spec is not None and (kind == "hinge") != (spec.kind == "hinge"):
-        return f"holds {kind} limits, but the {for_joint} is a {spec.kind} joint"
+    if spec is None:
+        return None
+    if (c.kind == "hinge") != (spec.kind == "hinge"):
+        return f"holds {c.kind} limits, but the {for_joint} is a {spec.kind} joint"
+    if spec.hinge_axis is not None and c.hinge is not None:
+        axis = np.asarray(c.hinge.axis, dtype=np.float64)
+        if float(axis @ np.asarray(spec.hinge_axis)) < math.cos(math.radians(30.0)):
+            return (f"is a hinge about {np.round(axis, 3).tolist()}, but the {for_joint}'s "
+                    f"turns about {list(spec.hinge_axis)} (rig segment frames)")
     return None
 
 

@@ -81,6 +81,7 @@ from models.yamlio import safe_dump_yaml
 __all__ = [
     "CHECK_STEPS",
     "LIMBS",
+    "LIMB_CHAINS",
     "Coupling",
     "InterpolatedLimits",
     "Limb",
@@ -92,8 +93,17 @@ __all__ = [
     "loads_limb",
 ]
 
+#: The chains a limb file's ``limb`` names: limb → ((joint, parent segment, child segment),
+#: ...), proximal to distal, in the rig's segment names (``calibration.joints`` builds its
+#: joint table on it). A file that says ``limb: arm`` holds arm joints, in this order.
+LIMB_CHAINS: dict[str, tuple[tuple[str, str, str], ...]] = {
+    "arm": (("shoulder", "thorax", "upper-arm"), ("elbow", "upper-arm", "forearm"),
+            ("wrist", "forearm", "hand")),
+    "leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"), ("ankle", "shank", "foot")),
+}
+
 #: What the ``limb`` field may say.
-LIMBS = ("arm", "leg")
+LIMBS = tuple(LIMB_CHAINS)
 
 #: Steps between two keyframes at which the interpolated polygon is checked for simplicity.
 CHECK_STEPS = 16
@@ -104,6 +114,21 @@ _COUPLED_KEYS = ("by", "keyframes")
 _KEYFRAME_KEYS = ("at_deg", "constraint")
 # what a joint's inline constraint may not say (the limb says it)
 _BOUND_KEYS = ("joint", "side", "patient")
+
+
+def _check_chain(limb: str, parsed: list[dict], source: str | None) -> None:
+    """A file that says ``limb`` holds that limb's joints on its segments
+    (:data:`LIMB_CHAINS`): a ``hip`` inside an arm is another limb's joint."""
+    chain = LIMB_CHAINS[limb]
+    names = [j for j, _, _ in chain]
+    for p in parsed:  # the order follows: the segments chain (checked before)
+        if p["name"] not in names:
+            raise ConstraintError(f"{p['name']!r} is not a joint of the {limb} (its joints: "
+                                  f"{', '.join(names)})", f"{p['w']}.name", source)
+        _, parent, child = chain[names.index(p["name"])]
+        if (p["parent"], p["child"]) != (parent, child):
+            raise ConstraintError(f"the {limb}'s {p['name']} joins {parent} to {child}, not "
+                                  f"{p['parent']} to {p['child']}", p["w"], source)
 
 
 def _mapping(value: Any, where: str, source: str | None) -> dict:
@@ -569,6 +594,8 @@ class Limb:
                                       "'coupled' (limits at keyframes of another joint's angle)",
                                       w, source)
             parsed.append({"name": jname, "parent": parent, "child": child, "raw": jd, "w": w})
+        if limb is not None:
+            _check_chain(limb, parsed, source)
         # constraints first: a coupling's source must be a hinge
         kinds: dict[str, str] = {}
         built: dict[str, Any] = {}

@@ -50,7 +50,7 @@ from collections.abc import Callable
 import numpy as np
 
 from models import quaternion as Q
-from models.limb import Limb
+from models.limb import LIMB_CHAINS, Limb
 from models.limb_oracle import LimbOracle, end_points
 
 __all__ = [
@@ -65,10 +65,6 @@ __all__ = [
 #: First seed of the held-out limbs (no method is tuned on seeds from here on).
 HELD_OUT_LIMB_SEED = 9_100
 
-_SEGMENTS = {"leg": (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"),
-                     ("ankle", "shank", "foot")),
-             "arm": (("shoulder", "thorax", "upper-arm"), ("elbow", "upper-arm", "forearm"),
-                     ("wrist", "forearm", "hand"))}
 
 
 def _star(centre: np.ndarray, phi: np.ndarray, rho_deg: np.ndarray) -> list[list[float]]:
@@ -107,10 +103,10 @@ def random_limb(seed: int, kind: str = "leg") -> Limb:
     """A seeded held-out leg or arm (see the module docstring)."""
     from models.limb import Limb as _Limb
 
-    if kind not in _SEGMENTS:
+    if kind not in LIMB_CHAINS:
         raise ValueError(f"kind: expected 'leg' or 'arm', got {kind!r}")
     rng = np.random.default_rng(seed)
-    (j0, s0, s1), (j1, _, s2), (j2, _, s3) = _SEGMENTS[kind]
+    (j0, s0, s1), (j1, _, s2), (j2, _, s3) = LIMB_CHAINS[kind]
     hinge_lo = float(rng.uniform(-10, 5))
     hinge_hi = float(rng.uniform(120, 150))
     n_kf = int(rng.integers(3, 5))

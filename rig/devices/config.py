@@ -341,7 +341,7 @@ def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> Non
         c = load_shape(constraint) if constraint in SHAPES else load_constraint(constraint)
     except ModelsError as err:
         raise ctx.fail("constraint", str(err)) from None
-    why = joint_mismatch(c.kind, c.joint, c.side, for_joint=joint.name, for_side=joint.side)
+    why = joint_mismatch(c, for_joint=joint.name, for_side=joint.side)
     if why is not None:
         raise ctx.fail("constraint", f"{constraint} {why}: the rig's joint is the {joint.side} "
                                      f"{joint.name}")

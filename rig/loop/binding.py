@@ -114,8 +114,7 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
         # what the rig drives is not the model's to override: --force-model never reaches here
         from calibration.joints import joint_mismatch
 
-        why = joint_mismatch(enforced.kind, enforced.joint, enforced.side,
-                             for_joint=rig_joint.name, for_side=rig_joint.side)
+        why = joint_mismatch(enforced, for_joint=rig_joint.name, for_side=rig_joint.side)
         if why is not None:
             raise ModelBindingError(
                 f"{source}: constraint {_who(enforced)} {why}: rig {rig.name!r} drives the "

@@ -143,6 +143,9 @@ def _limits_rom(request: RomRequest) -> RomResult:
         if request.joint not in limits.joint_names:
             raise RigConfigError(f"{path}: limb {limits.name!r} has no joint "
                                  f"{request.joint!r} (it has {names})")
+        if limits.side is not None and request.side is not None and limits.side != request.side:
+            raise RigConfigError(f"{path}: limb {limits.name!r} is for the {limits.side} side, "
+                                 f"not the {request.side} (--side {request.side})")
         lj = limits.joints[limits.index(request.joint)]
         constraints = [lj.constraint] if lj.coupling is None else list(lj.coupling.keyframes)
         side = request.side or limits.side or "right"
@@ -153,6 +156,13 @@ def _limits_rom(request: RomRequest) -> RomResult:
                        "(the range depends on that joint's angle)")
         joint = named = request.joint
     else:
+        from calibration.joints import joint_mismatch
+
+        why = joint_mismatch(limits, for_joint=request.joint, for_side=request.side)
+        if why is not None:
+            asked = " ".join(f"--{k} {v}" for k, v in (("joint", request.joint),
+                                                        ("side", request.side)) if v)
+            raise RigConfigError(f"{path}: constraint {limits.name!r} {why} ({asked})")
         constraints = [limits]
         side = request.side or getattr(limits, "side", None) or "right"
         joint = request.joint or getattr(limits, "joint", None) or "shoulder"

@@ -136,6 +136,14 @@ def test_a_leg_file_reads_and_writes_back(tmp_path):
      "joints[1].constraint.side: 'side' is given by the limb"),
     (lambda d: d["joints"][1].update(coupled={}), "give either 'constraint'"),
     (lambda d: d["joints"][2].update(name="hip"), "joint name 'hip' used twice"),
+    # issue 37: the joints a limb file holds are that limb's, in order, on its segments
+    (lambda d: d.update(limb="arm"),
+     "joints[0].name: 'hip' is not a joint of the arm (its joints: shoulder, elbow, wrist)"),
+    (lambda d: d["joints"][2].update(name="wrist"), "'wrist' is not a joint of the leg"),
+    (lambda d: d["joints"][2].update(child="toes"),
+     "joints[2]: the leg's ankle joins shank to foot, not shank to toes"),
+    (lambda d: [j.update(name=n) for j, n in zip(d["joints"], ("knee", "hip", "ankle"))],
+     "joints[0]: the leg's knee joins thigh to shank, not pelvis to thigh"),
 ])
 def test_a_mistake_in_a_limb_file_is_one_line_naming_the_field(mutate, message):
     doc = leg_doc()

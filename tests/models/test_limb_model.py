@@ -22,7 +22,7 @@ from models.limb_evaluation import (
 from models.limb_model import FORMAT, export_limb_model, load_limb_model
 from models.limb_oracle import LimbOracle
 
-ARM = {"name": "cone-arm", "limb": "arm", "joints": [
+ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger joint
     {"name": "shoulder", "parent": "thorax", "child": "upper-arm", "constraint": {
         "swing": {"cone": {"centre": [1, 0, 0], "radius_deg": 70}},
         "twist": {"min_deg": -60, "max_deg": 80}}},

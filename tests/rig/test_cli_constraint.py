@@ -117,3 +117,27 @@ def test_a_rig_config_with_an_alias_is_refused(tmp_path, rig_cli):
     assert code == 2 and "anchors are not accepted" in err and str(path) in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.db").exists()
+
+
+def test_rom_refuses_a_file_read_as_another_joint_or_side(tmp_path, rig_cli):
+    """Issue 37, case 2: ``rig rom --constraint p42.yaml --joint hip`` read a shoulder file as a
+    hip (extension 62.4° against a norm of 30°)."""
+    shoulder = tmp_path / "p42.yaml"
+    shoulder.write_text("name: p42\njoint: shoulder\nside: right\n"
+                        "swing: {cone: {centre: [1, 0, 0], radius_deg: 60}}\n")
+    elbow = tmp_path / "elbow.yaml"  # names no joint: its hinge is the elbow's (+Z)
+    elbow.write_text("name: e\nkind: hinge\nhinge: {axis: [0, 0, 1], min_deg: 0, "
+                     "max_deg: 140}\n")
+    for args, message in (
+            (["--constraint", shoulder, "--joint", "hip"],
+             "constraint 'p42' is for the shoulder, not the hip (--joint hip)"),
+            (["--constraint", shoulder, "--side", "left"],
+             "constraint 'p42' is for the right side, not the left (--side left)"),
+            (["--constraint", elbow, "--joint", "hip"],
+             "holds hinge limits, but the hip is a ball joint"),
+            (["--constraint", elbow, "--joint", "knee"],
+             "is a hinge about [0.0, 0.0, 1.0], but the knee's turns about [0.0, 0.0, -1.0]")):
+        code, out, err = rig_cli(["rom", *args])
+        assert code == 2 and message in err and err.count("\n") == 1, err
+    code, out, _ = rig_cli(["rom", "--constraint", elbow, "--joint", "elbow"])
+    assert code == 0 and "flexion" in out
