@@ -40,6 +40,7 @@ from scipy.spatial import cKDTree
 from calibration.boundary import boundary_distance
 from calibration.clinical import range_of_motion
 from calibration.frames import segment_to_rig
+from calibration.joints import joint_of_columns
 from models.constraint import JointConstraint
 from models.geometry import fibonacci_sphere
 from models.oracle import ConstraintOracle
@@ -72,7 +73,8 @@ def area_far(c: JointConstraint, d: np.ndarray, far_deg: float = 20.0) -> float:
 def measure(path: Path, frames: str) -> list[dict]:
     rows = []
     for joint, ref, limb, side in joints(read_sto(path)):
-        data = load_joint_orientations(str(path), reference=ref, limb=limb, frames=frames)
+        data = load_joint_orientations(str(path), reference=ref, limb=limb, frames=frames,
+                                       joint=joint_of_columns(ref, limb))
         ex = extract(data, side=side)
         d = data.directions
         dist = np.degrees(swing_oracle(ex.constraint_).swing_distance(d))
@@ -100,7 +102,8 @@ def frames_check(path: Path, ref: str, limb: str, side: str) -> tuple[float, flo
                                       table.columns.items()}, rate_hz=table.rate_hz))
         out = []
         for frames, p in (("isb", path), ("rig", rig_file)):
-            data = load_joint_orientations(str(p), reference=ref, limb=limb, frames=frames)
+            data = load_joint_orientations(str(p), reference=ref, limb=limb, frames=frames,
+                                           joint=joint_of_columns(ref, limb))
             c = extract(data, side=side).constraint_
             out.append((c, range_of_motion(c, side, directions=data.directions).to_dict()))
     (a, ra), (b, rb) = out
@@ -119,7 +122,8 @@ def recorded_extreme(d, toward, across, limit_deg, band_deg=5.0):
 
 def neutral_outside_check(path: Path, ref: str, limb: str, side: str):
     table = read_sto(path)
-    data = load_joint_orientations(str(path), reference=ref, limb=limb, frames="isb")
+    data = load_joint_orientations(str(path), reference=ref, limb=limb, frames="isb",
+                                   joint=joint_of_columns(ref, limb))
     d = data.directions
     raised = np.degrees(np.arccos(np.clip(d @ X, -1.0, 1.0))) > 25.0
     with tempfile.TemporaryDirectory() as tmp:
@@ -127,7 +131,8 @@ def neutral_outside_check(path: Path, ref: str, limb: str, side: str):
         write_sto(cut, OrientationTable(time=table.time[raised],
                                         columns={k: v[raised] for k, v in table.columns.items()},
                                         rate_hz=table.rate_hz))
-        part = load_joint_orientations(str(cut), reference=ref, limb=limb, frames="isb")
+        part = load_joint_orientations(str(cut), reference=ref, limb=limb, frames="isb",
+                                       joint=joint_of_columns(ref, limb))
         c = extract(part, side=side).constraint_
         rom = range_of_motion(c, side, directions=part.directions)
     dm = part.directions * (np.array([1.0, 1.0, -1.0]) if side == "left" else 1.0)

@@ -36,8 +36,9 @@ import numpy as np
 from models import quaternion as Q
 from models.limb import LIMB_CHAINS  # limb → ((joint, parent, child), ...), proximal first
 
-__all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "hinge_angles", "joint_mismatch", "joint_spec",
-           "off_axis_angles"]
+__all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "columns_mismatch", "hinge_angles",
+           "joint_mismatch", "joint_of_columns", "joint_spec", "off_axis_angles",
+           "segment_of_column"]
 
 
 
@@ -102,6 +103,80 @@ def joint_mismatch(c, *, for_joint: str | None, for_side: str | None = None) -> 
         if float(axis @ np.asarray(spec.hinge_axis)) < math.cos(math.radians(30.0)):
             return (f"is a hinge about {np.round(axis, 3).tolist()}, but the {for_joint}'s "
                     f"turns about {list(spec.hinge_axis)} (rig segment frames)")
+    return None
+
+
+#: Names of each rig segment in files from other tools: OpenSim's bodies (``femur_r``,
+#: ``calcn_r``, ``ulna_r``: Rajagopal 2016, Gait2392) and OpenSense's IMU columns
+#: (``femur_r_imu``), ISB's segment names, Xsens MVN's (``RightUpperLeg``, ``T8``), and ours.
+_SEGMENT_WORDS: dict[str, tuple[str, ...]] = {
+    "thorax": ("thorax", "torso", "trunk", "chest", "sternum", "t8"),
+    "pelvis": ("pelvis", "sacrum"),
+    "upper-arm": ("upperarm", "humerus"),
+    "forearm": ("forearm", "ulna", "radius", "lowerarm"),
+    "hand": ("hand",),
+    "thigh": ("thigh", "femur", "upperleg"),
+    "shank": ("shank", "tibia", "shin", "fibula", "lowerleg", "calf"),
+    "foot": ("foot", "calcn", "calcaneus", "talus"),
+}
+_WORD_SEGMENT = {w: seg for seg, words in _SEGMENT_WORDS.items() for w in words}
+_SIDE_WORDS = {"r": "right", "right": "right", "l": "left", "left": "left"}
+_NOISE_WORDS = {"imu", "sensor", "segment", "body", "orientation", "quat", "q"}
+
+
+def segment_of_column(name: str) -> tuple[str | None, str | None]:
+    """The rig segment and side a file's column name says, each None when it says none:
+    ``"femur_r_imu"`` → ``("thigh", "right")``, ``"RightForeArm"`` → ``("forearm",
+    "right")``, ``"thorax"`` → ``("thorax", None)``, ``"s1"`` → ``(None, None)``."""
+    import re
+
+    words = re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])|\d+", name.replace("-", "_"))
+    words = [w.lower() for w in words]
+    side = None
+    rest = []
+    for i, w in enumerate(words):
+        if w in _SIDE_WORDS and (len(w) > 1 or i > 0 or len(words) > 1):
+            side = _SIDE_WORDS[w]
+        elif w not in _NOISE_WORDS:
+            rest.append(w)
+    joined = "".join(rest)
+    if joined in _WORD_SEGMENT:
+        return _WORD_SEGMENT[joined], side
+    for w in rest:  # "t8", a body name beside a number
+        if w in _WORD_SEGMENT:
+            return _WORD_SEGMENT[w], side
+    return None, side
+
+
+def columns_mismatch(columns, segments, *, side: str | None = None,
+                     what: str = "columns") -> str | None:
+    """Why file ``columns`` cannot be the rig ``segments`` (same order; None: any) on
+    ``side``, judged by their names (:func:`segment_of_column`; a name that says nothing is
+    not judged); None when nothing contradicts: ``"column 'femur_r' is a thigh, not the
+    upper-arm"``. A hint naming the joint the columns are for follows where one fits."""
+    sides = set()
+    for col, seg in zip(columns, segments, strict=True):
+        found, s = segment_of_column(col)
+        if found is not None and seg is not None and found != seg:
+            return f"column {col!r} is a {found}, not the {seg}"
+        if s is not None:
+            if side is not None and s != side:
+                return f"column {col!r} is a {s} segment, but the {side} side is asked"
+            sides.add(s)
+    if len(sides) > 1:
+        return f"{what} {', '.join(map(repr, columns))} mix the left and right sides"
+    return None
+
+
+def joint_of_columns(reference: str | None, limb: str) -> str | None:
+    """The joint whose parent and child segments a reference and a limb column name, if
+    their names say so (``pelvis``, ``femur_r`` → ``hip``); else None."""
+    if reference is None:
+        return None
+    parent, child = segment_of_column(reference)[0], segment_of_column(limb)[0]
+    for spec in JOINTS.values():
+        if (spec.parent, spec.child) == (parent, child):
+            return spec.name
     return None
 
 

@@ -27,10 +27,10 @@ Entered at once on: the adapter going away, a hardware alert on any servo of the
 data older than ``stale_present_s`` (reads failing beyond the retries), a failed write, a
 stop request (SIGINT / SIGTERM), a target source whose device vanished (after its target went
 stale: the goal already holds). ``hold`` writes Goal Position = Present Position, within the
-chain's position limits (torque stays on: an arm without brakes would fall); ``torque-off`` disables torque. If the bus itself is
-gone nothing can be written: the servos' Bus Watchdog (armed at start, ``watchdog_ms``) stops
-them. The run then ends; the summary says why. A normal end (duration reached) leaves the limb
-holding its last goal with the watchdog armed.
+chain's position limits (torque stays on: an arm without brakes would fall); ``torque-off``
+disables torque. If the bus itself is gone nothing can be written: the servos' Bus Watchdog
+(armed at start, ``watchdog_ms``) stops them. The run then ends; the summary says why. A
+normal end (duration reached) leaves the limb holding its last goal with the watchdog armed.
 """
 
 from __future__ import annotations

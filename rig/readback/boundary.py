@@ -60,7 +60,7 @@ class BoundaryRequest:
 
     def check(self) -> None:
         """Everything that can be checked before reading the recording (one-line errors)."""
-        self.source.check()
+        self.source.check(side=self.side)
         if self.by_swing not in BY_SWING_CHOICES:
             raise RigConfigError(f"--by-swing {self.by_swing!r}: expected one of "
                                  f"{', '.join(BY_SWING_CHOICES)}")
@@ -308,7 +308,14 @@ class ChainRequest:
         else:
             if self.segments is None:
                 raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")
-            self.columns()
+            from calibration.joints import columns_mismatch
+
+            chain = LIMB_CHAINS[self.limb]
+            why = columns_mismatch(self.columns(), [chain[0][1], *(c for _, _, c in chain)],
+                                   side=self.side, what="--segments")
+            if why is not None:
+                raise RigConfigError(f"{self.file}: {why} (reading the {self.limb}: --chain "
+                                     f"{self.limb})")
             if not Path(self.file).is_file():
                 raise RigConfigError(f"{self.file}: no such file")
         _check_side_and_out(self.side, self.out)

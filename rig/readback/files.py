@@ -11,7 +11,32 @@ import numpy as np
 from rig.errors import RigConfigError
 from rig.readback.data import JointData
 
-__all__ = ["chain_orientations_from_file", "joint_orientations_from_file"]
+__all__ = ["chain_orientations_from_file", "check_columns", "joint_orientations_from_file"]
+
+
+def check_columns(file: str, reference: str | None, limb: str, joint: str | None,
+                  side: str | None, *, asked: bool = True) -> None:
+    """A reference and a limb column whose names say other segments than ``joint``'s (None:
+    not judged) or another side than ``side`` are refused in one line
+    (:func:`calibration.joints.columns_mismatch`): ``--joint elbow --reference femur_r --limb
+    tibia_r`` is a knee. ``asked``: the joint was given (--joint), else it is the file's own
+    or the default."""
+    from calibration.joints import JOINTS, columns_mismatch, joint_of_columns
+
+    spec = JOINTS[joint] if joint is not None else None
+    cols = [limb] if reference is None else [reference, limb]
+    segs = [None] * len(cols) if spec is None else \
+        [spec.child] if reference is None else [spec.parent, spec.child]
+    why = columns_mismatch(cols, segs, side=side)
+    if why is None:
+        return
+    implied = joint_of_columns(reference, limb)
+    about = "" if joint is None else \
+        f" (reading the {joint}: --joint {joint})" if asked else \
+        f" (reading the {joint}, the file's joint or the default: give --joint)"
+    hint = f"; these columns are a {implied}: --joint {implied}" if implied and \
+        implied != joint else ""
+    raise RigConfigError(f"{file}: {why}{about}{hint}")
 
 
 def joint_orientations_from_file(file: str, reference: str | None, limb: str, axis: np.ndarray,
@@ -31,9 +56,11 @@ def joint_orientations_from_file(file: str, reference: str | None, limb: str, ax
         raise RigConfigError(f"{file}: no samples")
     child = table.get(limb)
     named = table.meta.get("rig_joint")
+    asked = joint is not None
     if joint is None:
         joint = named if named in JOINTS else None
     spec = JOINTS[joint or "shoulder"]
+    check_columns(file, reference, limb, spec.name, None, asked=asked)
     if reference is not None:
         q = joint_orientation(segment_to_rig(table.get(reference), frames, spec.parent),
                               segment_to_rig(child, frames, spec.child))

@@ -41,7 +41,7 @@ class RomRequest:
         if self.constraint is None:
             if self.source is None:
                 raise RigConfigError("give a recording or --constraint")
-            self.source.check()
+            self.source.check(side=self.side)
             return
         src = self.source
         if src is not None and (src.file is not None or src.db is not None

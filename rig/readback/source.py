@@ -46,8 +46,9 @@ class RecordingSource:
     fusion: str = "auto"
     joint: str | None = None
 
-    def check(self) -> None:
-        """Option combinations and the file's existence, before any work (one-line errors)."""
+    def check(self, side: str | None = None) -> None:
+        """Option combinations, the file's existence and, by their names, its columns against
+        ``--joint`` and ``side``, before any work (one-line errors)."""
         file = self.file
         if file is not None and (self.db is not None or self.session_id is not None):
             raise RigConfigError("give either FILE or --db/--session, not both")
@@ -68,6 +69,10 @@ class RecordingSource:
                                  f"{self.fusion!r}")
         parse_axis(self.limb_axis)
         check_joint(self.joint)
+        if file is not None:
+            from rig.readback.files import check_columns
+
+            check_columns(file, self.reference, self.limb, self.joint, side)
 
     @property
     def label(self) -> str:

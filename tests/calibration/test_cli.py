@@ -167,3 +167,50 @@ def test_rom_flags_a_knee_angle_beyond_what_people_reach(tmp_path, capsys):
     assert set(out["beyond_reach"]) == {"extension"}
     assert out["beyond_reach"]["extension"]["source"] == "Soucie 2011"
     assert any("beyond what people reach" in w for w in out["warnings"])
+
+
+REAL = __import__("pathlib").Path(__file__).parent / "data" / "real" / "cmu_61_07_salsa.sto"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["boundary", "{f}", "--chain", "arm", "--segments", "pelvis,femur_r,tibia_r,calcn_r"],
+     "column 'pelvis' is a pelvis, not the thorax (reading the arm: --chain arm)"),
+    (["boundary", "{f}", "--joint", "elbow", "--reference", "femur_r", "--limb", "tibia_r"],
+     "column 'femur_r' is a thigh, not the upper-arm (reading the elbow: --joint elbow); "
+     "these columns are a knee: --joint knee"),
+    (["boundary", "{f}", "--joint", "knee", "--reference", "femur_r", "--limb", "tibia_r",
+      "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
+    (["boundary", "{f}", "--chain", "leg", "--segments", "pelvis,femur_r,tibia_r,calcn_r",
+      "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
+    (["boundary", "{f}", "--chain", "leg", "--segments", "pelvis,femur_l,tibia_r,calcn_r"],
+     "--segments 'pelvis', 'femur_l', 'tibia_r', 'calcn_r' mix the left and right sides"),
+    (["boundary", "{f}", "--reference", "pelvis", "--limb", "femur_r"],
+     "reading the shoulder, the file's joint or the default: give --joint); these columns "
+     "are a hip: --joint hip"),
+    (["rom", "{f}", "--joint", "knee", "--reference", "femur_l", "--limb", "tibia_l",
+      "--side", "right"], "column 'femur_l' is a left segment, but the right side is asked"),
+])
+def test_columns_that_contradict_the_joint_chain_or_side_are_refused(args, message, tmp_path,
+                                                                     capsys):
+    """Issue 37, case 2: OpenSim/ISB segment names (femur_r, calcn_r, ulna_r, …) are read,
+    and a --chain, --joint or --side they contradict is refused before any work."""
+    out = ["--out", str(tmp_path / "c.yaml")] if args[0] == "boundary" else []
+    code, _, err = run([a.format(f=REAL) for a in args] + out, capsys)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_column_names_of_other_tools_name_a_segment_and_side():
+    from calibration.joints import columns_mismatch, joint_of_columns, segment_of_column
+
+    for name, want in (("femur_r_imu", ("thigh", "right")), ("RightForeArm", ("forearm", "right")),
+                       ("calcn_l", ("foot", "left")), ("T8", ("thorax", None)),
+                       ("humerus_imu", ("upper-arm", None)), ("ulna_r", ("forearm", "right")),
+                       ("LeftLowerLeg", ("shank", "left")), ("upper-arm", ("upper-arm", None)),
+                       ("s1", (None, None)), ("thorax", ("thorax", None))):
+        assert segment_of_column(name) == want, name
+    assert joint_of_columns("pelvis_imu", "femur_r_imu") == "hip"
+    assert joint_of_columns("humerus_r", "ulna_r") == "elbow"
+    assert joint_of_columns(None, "ulna_r") is None
+    assert columns_mismatch(["s1", "s2"], ["thorax", "upper-arm"], side="left") is None
+    assert columns_mismatch(["thorax", "humerus_l"], ["thorax", "upper-arm"], side="left") is None

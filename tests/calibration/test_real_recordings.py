@@ -63,8 +63,9 @@ def _area_far(c: JointConstraint, directions: np.ndarray, far_deg: float = 20.0)
 
 @pytest.mark.parametrize("file, reference, limb, side", JOINTS)
 def test_the_boundary_holds_what_people_did(file, reference, limb, side):
+    joint = "hip" if reference == "pelvis" else "shoulder"  # a hip is no default shoulder
     data = load_joint_orientations(str(DATA / file), reference=reference, limb=limb,
-                                   frames="isb")
+                                   frames="isb", joint=joint)
     ex = extract(data, side=side)
     d = data.directions
     dist = _swing_oracle(ex.constraint_).swing_distance(d)

@@ -142,7 +142,8 @@ def test_a_leg_file_reads_and_writes_back(tmp_path):
     (lambda d: d["joints"][2].update(name="wrist"), "'wrist' is not a joint of the leg"),
     (lambda d: d["joints"][2].update(child="toes"),
      "joints[2]: the leg's ankle joins shank to foot, not shank to toes"),
-    (lambda d: [j.update(name=n) for j, n in zip(d["joints"], ("knee", "hip", "ankle"))],
+    (lambda d: [j.update(name=n) for j, n in zip(d["joints"], ("knee", "hip", "ankle"),
+                                                             strict=True)],
      "joints[0]: the leg's knee joins thigh to shank, not pelvis to thigh"),
 ])
 def test_a_mistake_in_a_limb_file_is_one_line_naming_the_field(mutate, message):

@@ -105,7 +105,8 @@ def test_the_constraint_must_be_one_the_rigs_joint_can_have(tmp_path):
                       "max_deg: 140}\n",
         "left.yaml": "name: l\nside: left\nswing: {cone: {centre: [1, 0, 0], radius_deg: 40}}\n",
         "arm.yaml": "name: a\nlimb: arm\njoints:\n- {name: shoulder, parent: thorax, child: "
-                    "upper-arm, constraint: {swing: {cone: {centre: [1, 0, 0], radius_deg: 40}}}}\n",
+                    "upper-arm, constraint: {swing: {cone: {centre: [1, 0, 0], "
+                    "radius_deg: 40}}}}\n",
         "fine.yaml": "name: s\njoint: shoulder\nside: right\nswing: {cone: {centre: [1, 0, 0], "
                      "radius_deg: 40}}\n",
     }
