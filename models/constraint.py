@@ -829,10 +829,12 @@ def _vector(value: Any, field_name: str, source: str | None) -> np.ndarray:
         raise ConstraintError(f"expected numbers, got {value!r}", field_name, source) from err
     if not np.isfinite(v).all():
         raise ConstraintError(f"has a NaN or infinite component: {value!r}", field_name, source)
-    n = float(np.linalg.norm(v))
-    if n < 1e-12:
+    from models.quaternion import normalize_rows
+
+    unit, n = normalize_rows(v[None, :])  # [0, 0, 1e308] keeps its direction (its square overflows)
+    if n[0] < 1e-12:
         raise ConstraintError("is a zero vector and has no direction", field_name, source)
-    return v / n
+    return unit[0]
 
 
 def _number(value: Any, field_name: str, source: str | None) -> float:

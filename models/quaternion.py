@@ -58,6 +58,7 @@ __all__ = [
     "from_two_vectors",
     "limb_direction",
     "multiply",
+    "normalize_rows",
     "perpendicular",
     "random_quaternions",
     "random_unit_vectors",
@@ -113,7 +114,7 @@ def check_quaternions(q, *, normalize: bool = False, name: str = "orientation") 
     if not finite.all():
         i = int(np.argmin(finite))
         raise QuaternionError(f"{name}[{i}] has a NaN or infinite component: {flat[i].tolist()}")
-    norm = np.sqrt(np.einsum("ij,ij->i", flat, flat))
+    unit, norm = normalize_rows(flat)
     bad = norm < 1e-12
     if bad.any():
         i = int(np.argmax(bad))
@@ -126,8 +127,7 @@ def check_quaternions(q, *, normalize: bool = False, name: str = "orientation") 
                 f"{name}[{i}] is not a unit quaternion (norm {norm[i]:.6g}); "
                 "normalise it or pass normalize=True"
             )
-    out = flat / norm[:, None]
-    return out.reshape(arr.shape)
+    return unit.reshape(arr.shape)
 
 
 def check_vectors(v, *, name: str = "vector", normalize: bool = True) -> np.ndarray:
@@ -142,11 +142,27 @@ def check_vectors(v, *, name: str = "vector", normalize: bool = True) -> np.ndar
     if not np.isfinite(flat).all():
         raise QuaternionError(f"{name} has a NaN or infinite component")
     if normalize:
-        norm = np.linalg.norm(flat, axis=1)
+        flat, norm = normalize_rows(flat)
         if (norm < 1e-12).any():
             raise QuaternionError(f"{name} has zero length")
-        flat = flat / norm[:, None]
     return flat.reshape(arr.shape)
+
+
+def normalize_rows(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of finite ``flat`` (N, k) scaled to unit length, and their lengths (``inf`` where
+    the length itself exceeds the float range). A row whose squares overflow
+    (``[0, 0, 1e308]``) is first divided by its largest component, so it keeps its direction
+    instead of collapsing to zeros."""
+    with np.errstate(over="ignore"):
+        norm = np.sqrt(np.einsum("ij,ij->i", flat, flat))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = flat / norm[:, None]
+    big = ~np.isfinite(norm)
+    if big.any():
+        rows = flat[big]
+        scaled = rows / np.abs(rows).max(axis=1)[:, None]
+        unit[big] = scaled / np.sqrt(np.einsum("ij,ij->i", scaled, scaled))[:, None]
+    return unit, norm
 
 
 def multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -54,6 +54,7 @@ import numpy as np
 
 from models import qkernels as qk
 from models.jit import njit
+from models.quaternion import normalize_rows
 from rig.errors import RigConfigError, UnreachableError
 
 __all__ = ["RAD_PER_TICK", "TICKS_PER_REV", "ChainKinematics", "ServoJoint"]
@@ -295,12 +296,13 @@ class ChainKinematics:
             raise RigConfigError(f"servo chain: duplicate ID {dup}", actual=ids)
         axes = []
         for j in joints:
-            a = np.asarray(j.axis, dtype=np.float64)
-            n = float(np.linalg.norm(a))
-            if a.shape != (3,) or not np.all(np.isfinite(a)) or n < 1e-9:
+            a = np.asarray(j.axis, dtype=np.float64).reshape(1, -1)
+            unit, n = normalize_rows(a) if a.shape == (1, 3) and np.isfinite(a).all() \
+                else (a, [0.0])
+            if n[0] < 1e-9:
                 raise RigConfigError(f"servo chain: ID {j.id}: axis must be a non-zero 3-vector",
                                      actual=list(j.axis))
-            axes.append(a / n)
+            axes.append(unit[0])
             if j.direction not in (1, -1):
                 raise RigConfigError(f"servo chain: ID {j.id}: direction must be 1 or -1",
                                      actual=j.direction)

@@ -60,8 +60,8 @@ class RecordingFacts:
                        "the range")
         if self.unmeasured_drift:
             out.append("no neutral checkpoint was accepted: the IMUs' relative heading drift is "
-                       "neither removed nor measured, so the rotations (and the boundary with "
-                       "the arm raised) may be overstated by it")
+                       "neither removed nor measured, so the rotations (and the boundary away "
+                       "from the neutral pose) may be overstated by it")
         return out
 
     def as_dict(self) -> dict[str, Any]:
@@ -191,7 +191,12 @@ def parse_axis(text: str | None) -> np.ndarray:
         v = np.array([float(c) for c in text.split(",")])
     except ValueError as err:
         raise RigConfigError(f"--limb-axis: expected x,y,z numbers, got {text!r}") from err
-    if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) < 1e-9:
+    from models.quaternion import normalize_rows
+
+    if v.shape != (3,) or not np.isfinite(v).all():
         raise RigConfigError(f"--limb-axis: expected a non-zero x,y,z vector, got {text!r}")
-    return v / np.linalg.norm(v)
+    unit, n = normalize_rows(v[None, :])
+    if n[0] < 1e-9:
+        raise RigConfigError(f"--limb-axis: expected a non-zero x,y,z vector, got {text!r}")
+    return unit[0]
 

@@ -382,3 +382,24 @@ def test_by_swing_shape_errors(by_swing, message):
     text = f"twist: {{min_deg: -10, max_deg: 10, by_swing: {by_swing}}}"
     with pytest.raises(ConstraintError, match=message):
         loads_constraint(text)
+
+
+def test_a_vector_whose_square_overflows_keeps_its_direction():
+    """Issue 37, case 5: ``axis: [0, 0, 1e308]`` squared overflows; it normalised to zeros with
+    a numpy RuntimeWarning, passed the check, and the elbow's range read 0°/0°."""
+    import warnings
+
+    from models import quaternion as Q
+    from models.constraint import loads_constraint
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        c = loads_constraint("kind: hinge\nhinge: {axis: [0, 0, 1e308], min_deg: 0, "
+                             "max_deg: 140}\n")
+        np.testing.assert_array_equal(c.hinge.axis, [0.0, 0.0, 1.0])
+        c = loads_constraint("swing: {cone: {centre: [1e308, 1e308, 0], radius_deg: 30}}\n")
+        np.testing.assert_allclose(c.swing.centre, [math.sqrt(0.5), math.sqrt(0.5), 0.0])
+        np.testing.assert_allclose(Q.check_vectors([[0, -1e308, 0], [3, 4, 0]]),
+                                   [[0, -1, 0], [0.6, 0.8, 0]])
+        np.testing.assert_allclose(Q.check_quaternions([1e308, 0, 0, 1e308], normalize=True),
+                                   [math.sqrt(0.5), 0, 0, math.sqrt(0.5)])
