@@ -471,8 +471,12 @@ class CorrectionModel:
     def __init__(self, path: str | Path, expected_constraint=None):
         self.path = Path(path)
         raw, model = read_onnx(self.path)
-        self._check_io(model)
         self.metadata = {p.key: p.value for p in model.metadata_props}
+        if str(self.metadata.get("jointlimits.format", "")).startswith("jointlimits-limb-"):
+            raise ModelFileError(f"{path}: a limb model (corrections of a whole limb's joints, "
+                                 "[N, J, 4]), not one joint's: give a model trained on a "
+                                 "single joint's constraint file")
+        self._check_io(model)
         if self.metadata.get("jointlimits.format") != FORMAT:
             got = self.metadata.get("jointlimits.format")
             raise ModelFileError(f"{path}: not a jointlimits correction model (metadata "

@@ -230,3 +230,20 @@ def test_field_graph_with_swing_dependent_twist_limits(tmp_path):
     # valid inputs well inside stay put
     deep = o.is_valid(q) & (o.signed_distance(q) < -np.radians(5))
     assert np.degrees(quat.angle(got[deep])).max() < 1e-3
+
+
+def test_a_limb_model_given_for_one_joint_says_so(tmp_path):
+    """Issue 37, case 11: a limb model given to a single-joint command got an ONNX
+    tensor-shape message."""
+    from models.limb import loads_limb
+    from models.limb_model import export_limb_model
+
+    limb = loads_limb("name: arm\nlimb: arm\njoints:\n"
+                      "- {name: shoulder, parent: thorax, child: upper-arm, constraint: "
+                      "{swing: {cone: {centre: [1, 0, 0], radius_deg: 60}}}}\n"
+                      "- {name: elbow, parent: upper-arm, child: forearm, constraint: "
+                      "{kind: hinge, hinge: {axis: [0, 0, 1], min_deg: 0, max_deg: 140}}}\n")
+    path = export_limb_model(limb, tmp_path / "arm.onnx")
+    with pytest.raises(ModelFileError, match=r"a limb model .*not one joint's") as err:
+        load_model(path)
+    assert "tensor" not in str(err.value) and "[N, 4]" not in str(err.value)
