@@ -8,6 +8,7 @@ Hierarchy::
      +-- GeometryError (ValueError)        a spherical polygon is degenerate or self-intersecting
      +-- DatasetError (ValueError)         a dataset file or request is invalid
      +-- ModelFileError (ValueError)       model file missing, not ONNX, or not what was expected
+     +-- OutputPathError (ValueError)      an output file or folder this process cannot write
 
 Every message names what is wrong and, where it helps, what was expected, so that the CLI can
 show it as one line.
@@ -70,3 +71,8 @@ class DatasetError(ModelsError, ValueError):
 
 class ModelFileError(ModelsError, ValueError):
     """A model file is missing, unreadable, or does not match what the caller expects."""
+
+
+class OutputPathError(ModelsError, ValueError):
+    """An output path cannot be written: a folder, a missing or read-only folder, a file that
+    may not be replaced (:func:`models.fileio.check_output`)."""

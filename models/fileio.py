@@ -6,17 +6,86 @@ their body. They are created readable and writable by their owner only (``0600``
 umask), as the session database is. Whole files are written to a temporary name beside the
 target, flushed to disk and renamed over it, so a crash never leaves half a file under the final
 name; a file that grows while it is written (telemetry) is opened owner-only from the start.
+
+:func:`check_output` is the one check every output path passes before the work that fills it
+(and before anything is written to a device): the folder must take a new file, which is tried,
+not inferred from permission bits (root writes through ``0555``, not into ``/proc``, a read-only
+mount or an immutable folder).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
 from typing import IO
 
-__all__ = ["open_owner_only", "write_owner_only"]
+from models.errors import OutputPathError
+
+__all__ = ["check_output", "open_owner_only", "probe_folder", "write_owner_only"]
+
+
+def probe_folder(folder: str | os.PathLike) -> None:
+    """Create and remove an empty file in ``folder``; raises :class:`OSError` when the folder
+    does not take new files (the only test that holds for root, read-only mounts, immutable
+    folders and pseudo file systems alike)."""
+    fd, tmp = tempfile.mkstemp(prefix=".probe.", suffix=".tmp", dir=folder)
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def _reason(err: OSError) -> str:
+    if err.errno == errno.ENOENT:  # the folder is there: /proc and the like refuse new names
+        return "it does not take new files"
+    return (err.strerror or str(err)).lower()
+
+
+def check_output(path: str | os.PathLike, option: str = "--out", *,
+                 folder: bool = False) -> Path:
+    """Check, before any work, that ``path`` can be written; returns it as a :class:`Path`.
+
+    A file (``folder=False``): not a folder, its folder exists and takes a new file (the
+    temporary sibling :func:`write_owner_only` renames), and an existing regular file may be
+    opened for writing (an immutable file may not be replaced). A folder (``folder=True``,
+    created with its parents by the caller): not a file, and its nearest existing folder takes
+    a new file.
+
+    Raises
+    ------
+    OutputPathError
+        One line naming ``option``, the path and the reason, e.g. ``--out /proc/x.yaml: cannot
+        write in /proc (it does not take new files)``.
+    """
+    shown = f"{option} {os.fspath(path)}"
+    if not os.fspath(path):
+        raise OutputPathError(f"{option}: empty path")
+    p = Path(path)
+    if folder:
+        if p.exists() and not p.is_dir():
+            raise OutputPathError(f"{shown}: is a file, expected a folder")
+        where = p
+        while not where.exists() and where != where.parent:
+            where = where.parent
+    else:
+        if p.is_dir():
+            raise OutputPathError(f"{shown}: is a directory (give a file name)")
+        where = p.parent
+        if not where.exists():
+            raise OutputPathError(f"{shown}: directory {where} does not exist")
+    if not where.is_dir():
+        raise OutputPathError(f"{shown}: {where} is not a directory")
+    try:
+        probe_folder(where)
+    except OSError as err:
+        raise OutputPathError(f"{shown}: cannot write in {where} ({_reason(err)})") from None
+    if not folder and p.is_file():
+        try:  # neither created nor truncated: the file is left as it is
+            os.close(os.open(p, os.O_WRONLY | os.O_APPEND))
+        except OSError as err:
+            raise OutputPathError(f"{shown}: cannot replace it ({_reason(err)})") from None
+    return p
 
 
 def write_owner_only(path: str | os.PathLike, data: str | bytes) -> Path:

@@ -66,13 +66,7 @@ class BoundaryRequest:
                                  f"{', '.join(BY_SWING_CHOICES)}")
         _check_side_and_out(self.side, self.out)
         if self.source.db is not None and self.store:
-            from rig.store import open_store
-
-            with open_store(self.source.db, create=False) as st:
-                if st.readonly:
-                    raise RigConfigError(f"--db {self.source.db} is read-only: add --no-store "
-                                         "to extract the boundary without storing it in the "
-                                         "session")
+            _check_can_store(self.source.db)
 
 
 @dataclass
@@ -98,14 +92,24 @@ class BoundaryResult:
 
 
 def _check_side_and_out(side: str | None, out: str | Path) -> None:
-    """``--side`` and ``--out`` (a file in an existing directory), before any work."""
+    """``--side`` and ``--out`` (a file this process can write), before any work."""
+    from models.fileio import check_output
+
     if side not in (None, "left", "right"):
         raise RigConfigError(f"--side {side!r}: expected left or right")
-    path = Path(out)
-    if path.is_dir():
-        raise RigConfigError(f"--out {out}: is a directory")
-    if not path.parent.is_dir():
-        raise RigConfigError(f"--out {out}: directory {path.parent} does not exist")
+    check_output(out, "--out")
+
+
+def _check_can_store(db) -> None:
+    """The result will be stored with the session: a read-only database is refused now, not
+    after the extraction."""
+    from rig.store import open_store
+
+    with open_store(db, create=False) as st:
+        if st.readonly:
+            raise RigConfigError(f"--db {db} is read-only ({st.readonly_reason}): add "
+                                 "--no-store to extract the boundary without storing it in "
+                                 "the session")
 
 
 def run_boundary(request: BoundaryRequest) -> BoundaryResult:
@@ -305,6 +309,8 @@ class ChainRequest:
             if self.fusion not in FUSION_CHOICES:
                 raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
                                      f"{self.fusion!r}")
+            if self.store:
+                _check_can_store(self.db)
         else:
             if self.segments is None:
                 raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")

@@ -260,14 +260,14 @@ def record(
         rig = open_rig(config, calibrate=options.calibrate,
                        **options.source_options)  # wrong port: fails here, no DB yet
         try:
-            store = open_store(options.db)
+            store = open_store(options.db, readonly=False)  # it records: writable
         except BaseException:
             rig.close()
             raise
     else:
         config = rig.config
         try:
-            store = open_store(options.db)
+            store = open_store(options.db, readonly=False)  # it records: writable
         except BaseException:
             rig.close()
             raise

@@ -24,11 +24,16 @@ A new SQLite file is created owner-only (``0600``) before SQLite opens it; SQLit
 ``-wal`` and ``-shm`` files the permissions of the database file.
 
 **Read-only files.** A database file this process may read but not write (an archived copy, a
-colleague's file) is opened read-only (SQLite ``mode=ro``; ``immutable=1`` when even that needs
-a ``-shm`` file the directory will not take): every reading command works, and a command that
-would write says so in one line. It is not migrated: an older schema is refused with the way
-out (copy it somewhere writable once). ``open_store(..., readonly=True)`` asks for the same on
-any file.
+colleague's file), or whose folder does not take the ``-wal`` and ``-shm`` files every writer
+needs (an immutable folder, a read-only mount, a write-protected share), is opened read-only
+(SQLite ``mode=ro``): every reading command works, and a command that would write says so in
+one line. Where a WAL database cannot even be read that way (``mode=ro`` still needs a ``-shm``
+file, which the folder will not take), it is opened ``immutable=1``: SQLite then takes no
+locks and ignores any ``-wal`` file, which is safe only because nothing can write a database
+in that folder; a ``-wal`` file left beside it with changes not yet in the database is refused
+instead, with the way out (copy both files), so nothing it holds is silently left out. A
+read-only file is not migrated: an older schema is refused with the way out (copy it somewhere
+writable once). ``open_store(..., readonly=True)`` asks for the same on any file.
 
 **Another application's database.** A SQLite file that holds tables but not the rig's
 ``schema_version`` (with its columns) is refused untouched, naming a few of its tables; only an
@@ -133,20 +138,47 @@ def _create_owner_only(path: Path) -> None:
         os.close(fd)
 
 
-def _readonly_connect(p: Path):
+def _readonly_reason(p: Path) -> str | None:
+    """Why this process cannot write the existing database file ``p`` (None: it can). Every
+    write needs the file and, for its ``-wal`` / ``-shm`` files, a folder that takes new files:
+    tried, since permission bits do not stop root (an immutable folder or a read-only mount
+    does)."""
+    from models.fileio import probe_folder
+
+    if not os.access(p, os.W_OK):
+        return "no write permission"
+    try:
+        probe_folder(p.parent)
+    except OSError:
+        return "its folder does not take the -wal and -shm files a write needs"
+    return None
+
+
+def _readonly_connect(p: Path, shown: str):
     """A ``connect`` for SQLAlchemy's ``creator``: the file opened read-only (``mode=ro``),
-    else (a WAL database whose ``-shm`` cannot be created) as immutable."""
+    else (a WAL database whose ``-shm`` cannot be created) as immutable — unless a ``-wal``
+    file beside it holds changes, which immutable would leave out."""
     import sqlite3
     from urllib.parse import quote
 
     uri = f"file:{quote(str(p.resolve()))}?mode=ro"
 
     def connect():
+        conn = None
         try:
             conn = sqlite3.connect(uri, uri=True, check_same_thread=False, timeout=10.0)
             conn.execute("SELECT count(*) FROM sqlite_master").fetchall()
             return conn
         except sqlite3.OperationalError:
+            if conn is not None:
+                conn.close()
+            wal = p.with_name(p.name + "-wal")
+            if wal.exists() and wal.stat().st_size > 0:
+                raise RigConfigError(
+                    f"--db {shown}: read-only, and {wal.name} beside it holds changes not yet "
+                    f"in the database that cannot be read without creating {p.name}-shm in a "
+                    f"folder that takes no new files: copy {p.name} and {wal.name} to a "
+                    "writable folder and open the copy") from None
             return sqlite3.connect(uri + "&immutable=1", uri=True, check_same_thread=False)
 
     return connect
@@ -161,7 +193,7 @@ def _refuse_foreign_file(p: Path, shown: str) -> None:
     if p.stat().st_size == 0:
         return  # a new, empty file: it becomes a rig database
     try:
-        conn = sqlite3.connect(f"file:{quote(str(p.resolve()))}?mode=ro", uri=True)
+        conn = _readonly_connect(p, shown)()
         try:
             tables = sorted(r[0] for r in conn.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'"))
@@ -178,9 +210,12 @@ def _refuse_foreign_file(p: Path, shown: str) -> None:
             f"{listed}); left untouched — give a new file or a rig database")
 
 
-def _sqlite_engine(path: str, create: bool, readonly: bool | None) -> tuple[Engine, bool]:
-    """The engine of a SQLite file, and whether it is read-only (``readonly=None``: when the
-    file exists and this process may not write it)."""
+def _sqlite_engine(path: str, create: bool,
+                   readonly: bool | None) -> tuple[Engine, str | None]:
+    """The engine of a SQLite file, and why it is read-only (None: it is not; with
+    ``readonly=None``, when the file exists and this process cannot write it, see
+    :func:`_readonly_reason`; ``readonly=False`` refuses such a file in one line)."""
+    reason = None
     if path == ":memory:":
         engine = create_engine(
             "sqlite://", poolclass=StaticPool, connect_args={"check_same_thread": False}
@@ -195,8 +230,13 @@ def _sqlite_engine(path: str, create: bool, readonly: bool | None) -> tuple[Engi
                 raise RigConfigError(
                     f"no database at {path} (a recording creates it: rig record --db {path})"
                 )
-            if not p.parent.is_dir():
-                raise RigConfigError(f"--db {path}: directory {p.parent} does not exist")
+            from models.errors import OutputPathError
+            from models.fileio import check_output
+
+            try:  # a folder that takes the file, its -wal and -shm
+                check_output(p, "--db")
+            except OutputPathError as err:
+                raise RigConfigError(str(err)) from None
             try:
                 _create_owner_only(p)
             except FileExistsError:
@@ -205,14 +245,20 @@ def _sqlite_engine(path: str, create: bool, readonly: bool | None) -> tuple[Engi
                 raise RigConfigError(f"--db {path}: cannot create: {err.strerror}") from err
         elif not os.access(p, os.R_OK):
             raise RigConfigError(f"--db {path}: permission denied")
+        if readonly:
+            reason = "opened read-only"
+        elif p.exists():
+            reason = _readonly_reason(p)
+            if reason is not None and readonly is False:
+                raise RigConfigError(f"database {path} is read-only ({reason}): this command "
+                                     "writes to it; copy it somewhere writable first")
+            readonly = reason is not None
         if p.exists():
             _refuse_foreign_file(p, path)
-        if readonly is None:
-            readonly = p.exists() and not os.access(p, os.W_OK)
         if readonly:
             if not p.exists():
                 raise RigConfigError(f"no database at {path}")
-            engine = create_engine("sqlite://", creator=_readonly_connect(p))
+            engine = create_engine("sqlite://", creator=_readonly_connect(p, path))
         else:
             engine = create_engine(
                 f"sqlite:///{p}",
@@ -236,7 +282,7 @@ def _sqlite_engine(path: str, create: bool, readonly: bool | None) -> tuple[Engi
         write = conn.get_execution_options().get("rig_write", False)
         conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
 
-    return engine, bool(readonly)
+    return engine, (reason if readonly else None)
 
 
 def _postgres_engine(s: str) -> Engine:
@@ -266,8 +312,10 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True,
         Create a missing SQLite file (owner-only, 0600). ``False`` makes a missing file a
         :class:`~rig.errors.RigConfigError` -- for commands that only read.
     readonly : bool or None
-        Open a SQLite file read-only; None (default): when this process may not write it.
-        A read-only store refuses every write with a one-line error.
+        Open a SQLite file read-only; None (default): when this process cannot write it or
+        its folder (:attr:`Store.readonly_reason` says which). A read-only store refuses
+        every write with a one-line error. False: a command that must write refuses such a
+        file at once, in one line.
 
     Returns
     -------
@@ -287,7 +335,7 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True,
     if not s:
         raise RigConfigError("--db: empty database path")
     path = _sqlite_path(s)
-    ro = False
+    ro = None
     if path is not None:
         engine, ro = _sqlite_engine(path, create, readonly)
     elif s.startswith(("postgresql://", "postgresql+", "postgres://")):
@@ -298,7 +346,7 @@ def open_store(url_or_path: str | os.PathLike, *, create: bool = True,
             f"--db {describe_url(s)}: unsupported scheme {scheme!r}; use a file path, "
             "sqlite:///PATH or postgresql://USER@HOST/DB"
         )
-    store = Store(engine, describe_url(s), readonly=ro)
+    store = Store(engine, describe_url(s), readonly=ro is not None, readonly_reason=ro)
     try:
         store._migrate()
     except BaseException:
@@ -319,11 +367,14 @@ class Store:
     transaction. Use :meth:`sample_writer` / :meth:`telemetry_writer` for high-rate rows.
     """
 
-    def __init__(self, engine: Engine, display: str, *, readonly: bool = False) -> None:
+    def __init__(self, engine: Engine, display: str, *, readonly: bool = False,
+                 readonly_reason: str | None = None) -> None:
         self.engine = engine
         self.url = display
         self.dialect = engine.dialect.name  # "sqlite" | "postgresql"
         self.readonly = bool(readonly)
+        #: why a read-only store is read-only (``"no write permission"``, ...), for messages
+        self.readonly_reason = readonly_reason or ("opened read-only" if readonly else None)
         self._closed = False
 
     # -- plumbing ------------------------------------------------------------------------
@@ -348,7 +399,7 @@ class Store:
         if self._closed:
             raise RigConnectionError(f"store {self.url} is closed")
         if write and self.readonly:
-            raise RigConfigError(f"database {self.url} is read-only (no write permission): "
+            raise RigConfigError(f"database {self.url} is read-only ({self.readonly_reason}): "
                                  "this would change it; copy it somewhere writable first")
         try:
             with self.engine.connect() as conn:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -275,10 +276,104 @@ def _read_only_commands(rig, db, sid, share):
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["flexion"] is not None
     r = rig("boundary", "--db", str(db), "--session", str(sid), "--out", str(share / "b.yaml"))
-    assert r.returncode == 2 and "read-only: add --no-store" in r.stderr
+    assert r.returncode == 2 and "is read-only" in r.stderr and "add --no-store" in r.stderr
     assert r.stderr.count("\n") == 1
     r = rig("session", "close", "--db", str(db), "--session", str(sid + 1), "--force")
     assert r.returncode == 2 and "read-only" in r.stderr and r.stderr.count("\n") == 1
+
+
+@contextlib.contextmanager
+def _write_protected(*paths):
+    """``paths`` (files and folders) as on write-protected media: immutable for root, whom
+    permission bits do not stop (skipped where ``chattr`` does not work), else ``0444`` /
+    ``0555``; undone on the way out."""
+    root = os.geteuid() == 0
+    done = []
+    try:
+        for p in paths:
+            if root:
+                r = subprocess.run(["chattr", "+i", str(p)], capture_output=True, text=True)
+                if r.returncode != 0:
+                    pytest.skip(f"cannot make a file immutable here: {r.stderr.strip()}")
+            else:
+                p.chmod(0o555 if p.is_dir() else 0o444)
+            done.append(p)
+        yield
+    finally:
+        for p in reversed(done):
+            if root:
+                subprocess.run(["chattr", "-i", str(p)], check=True)
+            else:
+                p.chmod(0o755 if p.is_dir() else 0o644)
+
+
+@pytest.mark.parametrize("protected", ["file and folder", "folder"])
+def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
+    # the folder too: SQLite cannot create the WAL database's -shm (mode=ro alone fails)
+    share, out = tmp_path / "share", tmp_path / "out"
+    share.mkdir()
+    out.mkdir()
+    db = share / "archive.db"
+    sid = _servo_db(db)
+    before = db.read_bytes()
+
+    def rig(*args):
+        return subprocess.run([sys.executable, "-m", "rig", *map(str, args)],
+                              capture_output=True, text=True, cwd=out, timeout=300)
+
+    with _write_protected(*([db, share] if protected == "file and folder" else [share])):
+        r = rig("session", "list", "--db", db)
+        assert r.returncode == 0 and "P-RO" in r.stdout, r.stderr
+        r = rig("rom", "--db", db, "--session", sid, "--json")
+        assert r.returncode == 0 and json.loads(r.stdout)["flexion"] is not None, r.stderr
+        r = rig("export", "--db", db, "--session", sid, "--out", out / "s.csv")
+        assert r.returncode == 0 and read_samples_csv(out / "s.csv")["t"].size > 1000, r.stderr
+        r = rig("boundary", "--db", db, "--session", sid, "--no-store", "--out", out / "b.yaml")
+        assert r.returncode == 0 and (out / "b.yaml").is_file(), r.stderr
+        r = rig("report", "--db", db, "--session", sid, "--out", out / "r.html")
+        assert r.returncode == 0 and (out / "r.html").is_file(), r.stderr
+        # what must write says so in one line, before any work
+        reason = ("no write permission" if protected == "file and folder"
+                  else "its folder does not take the -wal and -shm files")
+        for args in (("boundary", "--db", db, "--session", sid, "--out", out / "b2.yaml"),
+                     ("session", "close", "--db", db, "--session", sid + 1, "--force"),
+                     ("record", "--rig", "sim-shoulder", "--db", db, "--patient", "P-2",
+                      "--duration", "1")):
+            r = rig(*args)
+            assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
+            assert "is read-only" in r.stderr and reason in r.stderr, r.stderr
+            assert "Traceback" not in r.stderr and "unable to open" not in r.stderr
+        assert not (out / "b2.yaml").exists()
+        assert sorted(p.name for p in share.iterdir()) == ["archive.db"]  # no -wal, -shm
+    assert db.read_bytes() == before
+    with open_store(db, create=False) as store:  # writable again: nothing was changed
+        assert store.get_session(sid + 1)["status"] == "running"
+
+
+def test_a_wal_left_beside_a_write_protected_archive_is_not_silently_left_out(tmp_path):
+    import shutil
+    import sqlite3
+
+    work, share = tmp_path / "work", tmp_path / "share"
+    work.mkdir()
+    share.mkdir()
+    _servo_db(work / "a.db")
+    # a change still in the -wal when the files were archived (the writer never checkpointed)
+    conn = sqlite3.connect(work / "a.db")
+    conn.execute("PRAGMA wal_autocheckpoint=0")
+    conn.execute("INSERT INTO patients (pseudonym, created_at) VALUES ('P-LATE', 0)")
+    conn.commit()
+    for name in ("a.db", "a.db-wal"):
+        shutil.copy2(work / name, share / name)
+    conn.close()
+    assert (share / "a.db-wal").stat().st_size > 0
+    with _write_protected(share / "a.db", share / "a.db-wal", share):
+        with pytest.raises(Exception, match=r"a.db-wal beside it holds changes not yet in the "
+                                            r"database .* copy a.db and a.db-wal") as err:
+            open_store(share / "a.db", create=False)
+        assert "\n" not in str(err.value)
+    with open_store(share / "a.db", create=False) as store:  # copied somewhere writable: all there
+        assert "P-LATE" in {s["pseudonym"] for s in store.list_patients()}
 
 
 def test_another_applications_database_is_refused_untouched(tmp_path, rig_cli):
