@@ -192,7 +192,15 @@ def _joint(ctx: _Ctx, value: Any) -> JointInfo:
     child = ctx.string(d["child"], "joint.child")
     if parent == child:
         raise ctx.fail("joint", f"parent and child are the same segment {parent!r}")
-    return JointInfo(ctx.string(d["name"], "joint.name"), side, parent, child)
+    name = ctx.string(d["name"], "joint.name")
+    from calibration.joints import JOINTS, columns_mismatch
+
+    spec = JOINTS.get(name)
+    why = columns_mismatch([parent, child], [None, None] if spec is None else
+                           [spec.parent, spec.child], side=side, what="joint.parent/child")
+    if why is not None:  # segments named for another joint or side (femur_l on a right hip)
+        raise ctx.fail("joint", f"{why.replace('column', 'segment')} of the {side} {name}")
+    return JointInfo(name, side, parent, child)
 
 
 def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:

@@ -125,7 +125,22 @@ def test_the_constraint_must_be_one_the_rigs_joint_can_have(tmp_path):
     d["constraint"] = str(tmp_path / "fine.yaml")
     assert parse(d).constraint == str(tmp_path / "fine.yaml")
     d = base()
-    d["joint"]["name"] = "knee"  # a shipped shape is a ball joint's swing region
-    d["constraint"] = "original"
+    d["joint"].update(name="knee", parent="thigh", child="shank")
+    d["sensors"]["segments"] = {"thigh": 0, "shank": 1}
+    d["constraint"] = "original"  # a shipped shape is a ball joint's swing region
     with pytest.raises(RigConfigError, match="the knee is a hinge joint"):
+        parse(d)
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    ({"parent": "pelvis", "child": "femur_r"},
+     "joint: segment 'pelvis' is a pelvis, not the thorax of the right shoulder"),
+    ({"child": "humerus_l"},
+     "joint: segment 'humerus_l' is a left segment, but the right side is asked"),
+])
+def test_joint_segments_named_for_another_joint_or_side_are_refused(edit, match):
+    d = base()
+    d["joint"].update(edit)
+    d["sensors"]["segments"] = {d["joint"]["parent"]: 0, d["joint"]["child"]: 1}
+    with pytest.raises(RigConfigError, match=match):
         parse(d)
