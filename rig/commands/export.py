@@ -22,6 +22,7 @@ from rig.errors import RigConfigError
               help="Output file (written atomically).")
 def export(db: str, session_id: int, fmt: str | None, out: str) -> None:
     """Export a session's recorded orientations."""
+    from models.fileio import check_output
     from rig.store import open_store
     from rig.store.io import export_session
 
@@ -31,8 +32,7 @@ def export(db: str, session_id: int, fmt: str | None, out: str) -> None:
             raise RigConfigError(f"--out {out}: cannot tell the format from the suffix; "
                                  "give --format sto|csv")
         fmt = suffix
-    if not Path(out).parent.is_dir():
-        raise RigConfigError(f"--out {out}: directory {Path(out).parent} does not exist")
+    check_output(out, "--out")
     with open_store(db, create=False) as store:
         summary = export_session(store, session_id, fmt, out)
     extra = ""

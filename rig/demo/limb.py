@@ -124,7 +124,9 @@ def run_limb_demo(options: DemoOptions, limb: str, *, console=None) -> DemoResul
                              "to the shoulder demo")
     console = console if console is not None else Console()
     size = LIMB_SIZES["quick" if options.quick else "full"]
-    out = Path(options.out)
+    from models.fileio import check_output
+
+    out = check_output(options.out, "--out", folder=True)  # before any stage
     t_all = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     stages: list[StageResult] = []

@@ -377,7 +377,9 @@ def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
         from rig.errors import RigConfigError
 
         raise RigConfigError(f"--rate {options.rate_hz}: expected 0 < rate ≤ 5000 Hz")
-    out = Path(options.out)
+    from models.fileio import check_output
+
+    out = check_output(options.out, "--out", folder=True)  # before any stage
     t_all = time.perf_counter()
     stages: list[StageResult] = []
 

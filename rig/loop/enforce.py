@@ -205,15 +205,13 @@ def _causes(s: dict) -> str:
 
 
 def _out_path(option: str, value) -> Path | None:
+    """``--telemetry`` / ``--summary-json`` checked writable (:func:`models.fileio.check_output`):
+    :meth:`EnforceRequest.loop_config` runs it before the servo backstop is written."""
     if value is None:
         return None
-    p = Path(value)
-    if p.exists() and p.is_dir():
-        raise RigConfigError(f"{option} {value}: is a directory")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.exists():
-        raise RigConfigError(f"{option} {value}: directory {parent} does not exist")
-    return p
+    from models.fileio import check_output
+
+    return check_output(value, option)
 
 
 @dataclass

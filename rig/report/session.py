@@ -461,11 +461,9 @@ class ReportRequest:
 
     def check(self) -> None:
         """The files given, before anything is drawn (one-line errors)."""
-        out = Path(self.out)
-        if out.is_dir():
-            raise RigConfigError(f"--out {self.out}: is a directory")
-        if not out.parent.is_dir():
-            raise RigConfigError(f"--out {self.out}: directory {out.parent} does not exist")
+        from models.fileio import check_output
+
+        check_output(self.out, "--out")
         if self.model is not None and not Path(self.model).is_file():
             raise RigConfigError(f"--model {self.model}: no such file")
 

@@ -136,6 +136,9 @@ def _make(
         raise DatasetError(f"--kind: unknown kind {kind!r}; choose one of {', '.join(KINDS)}")
     if out is None:
         raise DatasetError("--out: required (the .npz file to write)")
+    from models.fileio import check_output
+
+    check_output(out, "--out")  # before the dataset is drawn
     count = _int(n, "--n")
     rng = _int(seed, "--seed", default=0)
     if rng < 0:

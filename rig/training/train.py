@@ -70,15 +70,13 @@ class TrainRequest:
     seed: int = 0
 
     def check(self) -> None:
-        """Before any training (a GMLP preset runs for minutes): the output's folder exists (it
-        is never created: a misspelled folder is a mistake), the preset is known."""
+        """Before any training (a GMLP preset runs for minutes): the output can be written in
+        an existing folder (it is never created: a misspelled folder is a mistake), the preset
+        is known."""
         from models.errors import ModelFileError
+        from models.fileio import check_output
 
-        out = Path(self.out)
-        if out.is_dir():
-            raise ModelFileError(f"--out {self.out}: is a directory")
-        if not out.parent.is_dir():
-            raise ModelFileError(f"--out {self.out}: directory {out.parent} does not exist")
+        check_output(self.out, "--out")
         from rig.training.limb import LIMB_PRESETS
 
         if self.preset is not None and self.preset not in PRESET_NAMES + LIMB_PRESETS:

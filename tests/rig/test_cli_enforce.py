@@ -57,6 +57,8 @@ def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="s
     ("targets", "--targets 'dance': expected PATH.csv"),
     ("bad-csv", "bad.csv:3: not a number"),
     ("telemetry-dir", "does not exist"),
+    ("telemetry-proc", "--telemetry /proc/t.csv: cannot write in /proc"),
+    ("summary-proc", "--summary-json /proc/s.json: cannot write in /proc"),
     ("bad-port", "/dev/ttyUSB97"),
     ("unknown-script-key", "unknown key 'speed'"),
     ("db-no-patient", "--db: say whose run this is"),
@@ -78,6 +80,9 @@ def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
         "targets": _argv(files, targets="dance"),
         "bad-csv": _argv(files, targets=str(tmp_path / "bad.csv")),
         "telemetry-dir": _argv(files, "--telemetry", str(tmp_path / "no" / "t.csv")),
+        # a folder that exists but takes no new file (root writes through permission bits)
+        "telemetry-proc": _argv(files, "--telemetry", "/proc/t.csv"),
+        "summary-proc": _argv(files, "--summary-json", "/proc/s.json"),
         "bad-port": _argv(files, rig=str(tmp_path / "rig.yaml")),
         "unknown-script-key": _argv(files, targets="script:slow?speed=3"),
         "db-no-patient": _argv(files, "--db", str(tmp_path / "x.db"), "--duration", "0.2"),
@@ -100,6 +105,9 @@ def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
     assert "Traceback" not in err
     # checked up front: the loop was never started (it announces itself before its first cycle)
     assert "enforcing" not in out and "cycles" not in out, out
+    if case != "db-no-patient":  # still checked once the chain is prepared (issue 37 notes)
+        assert "backstop" not in out, out  # nor the servos' position limits written
+    assert ".tmp" not in err
 
 
 def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, rig_cli):
