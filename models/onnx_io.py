@@ -523,9 +523,15 @@ class CorrectionModel:
             try:
                 from models.constraint import loads_constraint
 
-                same = loads_constraint(self.constraint_yaml) == expected
+                embedded = loads_constraint(self.constraint_yaml)
+                same = embedded == expected
             except Exception:  # unparsable embedded constraint: not the same
-                same = False
+                embedded, same = None, False
+            for what in ("joint", "side", "patient"):  # the same limits, another joint's
+                a, b = getattr(embedded, what, None), getattr(expected, what, None)
+                if a is not None and b is not None and a != b:
+                    raise ModelFileError(f"{self.path}: model was trained for {what} {a!r}, "
+                                         f"the constraint is for {what} {b!r}")
         else:
             same = mine == _as_constraint_dict(expected)
         if not same:

@@ -247,3 +247,20 @@ def test_a_limb_model_given_for_one_joint_says_so(tmp_path):
     with pytest.raises(ModelFileError, match=r"a limb model .*not one joint's") as err:
         load_model(path)
     assert "tensor" not in str(err.value) and "[N, 4]" not in str(err.value)
+
+
+def test_the_same_limits_bound_to_another_joint_are_another_constraint(tmp_path):
+    """Issue 37: a shoulder model evaluated against a hip file with the same limits passed."""
+    from models.constraint import JointConstraint
+
+    sh = JointConstraint.cone((1, 0, 0), 45.0, name="c45", joint="shoulder", side="right",
+                              patient="P-1")
+    net = _net(np.random.default_rng(0), [2], [0])
+    p = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=sh.to_yaml())
+    load_model(p, expected_constraint=JointConstraint.cone((1, 0, 0), 45.0))  # unbound: fine
+    for kw, match in (({"joint": "hip"}, "trained for joint 'shoulder', the constraint is for "
+                                         "joint 'hip'"),
+                      ({"side": "left"}, "side 'right'"),
+                      ({"patient": "P-2"}, "patient 'P-1'")):
+        with pytest.raises(ModelFileError, match=match):
+            load_model(p, expected_constraint=JointConstraint.cone((1, 0, 0), 45.0, **kw))
