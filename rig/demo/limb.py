@@ -22,7 +22,8 @@ Stages (each calls the library function behind the corresponding ``rig`` command
    ``network`` (a trained distance field for the coupled swing), or ``geometric`` (the exact
    oracle compiled, no training) at the quick size.
 5. **evaluate** — ``rig evaluate`` (onnxruntime) on fresh held-out postures; verdict against
-   issue 20's targets (:data:`rig.training.limb.LIMB_TARGETS`).
+   issue 20's targets (:data:`rig.training.limb.LIMB_TARGETS`). The model is registered with
+   the session with this evaluation, which the report shows (one evaluation, one verdict).
 6. **report** — the clinician's report of the limb (:mod:`rig.report.limb`): ``report.html``.
 
 Everything goes into one store, ``<out>/rig.db``.
@@ -237,18 +238,12 @@ class _LimbCtx:
                      + "; ".join(couplings))
 
     def train(self, st: StageResult) -> None:
-        from rig.store import open_store
         from rig.training import TrainRequest, run_train
 
         res = run_train(TrainRequest(self.model_file, constraint=str(self.limb_file),
                                      preset=self.size.preset, seed=self.options.seed))
-        # registered with the session and its stored limb file: `rig report` on the session
-        # finds it without --model
-        with open_store(self.result.db, create=False) as store:
-            mid = store.add_model(res.path, boundary_id=self.limb_boundary,
-                                  session_id=self.session)
         st.figures.update({"path": str(res.path), "preset": self.size.preset,
-                           "seconds": res.seconds, "model_id": mid})
+                           "seconds": res.seconds})
         st.verdict = "PASS"
         st.detail = (f"{res.path} ({res.path.stat().st_size / 1e3:.0f} kB), preset "
                      f"{self.size.preset}" + (" (the exact oracle compiled; --quick does not "
@@ -257,15 +252,26 @@ class _LimbCtx:
 
     def evaluate(self, st: StageResult) -> None:
         from models.limb import load_limb
+        from rig.store import open_store
         from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
+        from rig.training.verdict import evaluation_record, evaluation_verdict
 
         limb = load_limb(self.limb_file)
-        metrics, _ = evaluate_limb(str(self.model_file), limb, self.size.eval_n,
-                                      self.options.seed + 77)
+        seed = self.options.seed + 77
+        metrics, _ = evaluate_limb(str(self.model_file), limb, self.size.eval_n, seed)
         self.metrics = metrics
+        # registered with the session and its stored limb file, with this evaluation: `rig
+        # report` on the session finds the model without --model and shows these figures
+        with open_store(self.result.db, create=False) as store:
+            mid = store.add_model(self.model_file, boundary_id=self.limb_boundary,
+                                  session_id=self.session,
+                                  metrics=evaluation_record(metrics, n=self.size.eval_n,
+                                                            seed=seed, by="rig evaluate"))
         st.figures.update({k: metrics.get(k) for k in LIMB_TARGETS})
+        st.figures["model_id"] = mid
+        ok, _ = evaluation_verdict(metrics, limb=True)
         misses = limb_warnings(metrics)
-        st.verdict = "PASS" if not misses else "WARN"
+        st.verdict = "PASS" if ok else "WARN"
         st.detail = (f"{self.size.eval_n} held-out postures: end-point mean 3-D error "
                      f"{metrics['end_mean_3d_error_pct']:.3f} % (≤ 0.5), invalid left > 1° "
                      f"{100 * metrics['frac_invalid_left_1deg']:.2f} % (≤ 1), valid moved "

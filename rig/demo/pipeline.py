@@ -21,9 +21,11 @@ Stages (each calls the library function behind the corresponding ``rig`` command
    against the patient's truth: mean boundary
    distance ≤ 2°, twist range within 3°, clinical peaks (``rig rom``) within 2°.
 5. **train** — ``rig train`` with its default preset (:func:`rig.training.run_train`),
-   ONNX export, the model registered with the session.
+   ONNX export.
 6. **evaluate** — ``rig evaluate`` (:func:`rig.training.run_evaluate`, onnxruntime) on
-   fresh held-out orientations; verdict against issue 9's targets.
+   fresh held-out orientations; verdict against issue 9's targets
+   (:func:`rig.training.verdict.evaluation_verdict`). The model is registered with the
+   session with this evaluation, which the report shows (one evaluation, one verdict).
 7. **enforce** — ``rig enforce`` (:func:`rig.loop.run_enforce`) on the simulated
    servo limb (torque on, real time) against the ``adversarial`` scripted targets (far outside,
    across the notch, twist excursions, NaN and stale inputs); verdict: no command beyond the
@@ -542,28 +544,34 @@ class _Ctx:
 
     # -- model -------------------------------------------------------------------------------
     def train(self, st: StageResult) -> None:
-        from rig.store import open_store
-        from rig.training import TrainRequest, run_train
+        from rig.training import PRESET_NAMES, TrainRequest, run_train
 
         request = TrainRequest(self.model_file, constraint=str(self.boundary_file),
                                seed=self.options.seed)
+        preset = request.preset or PRESET_NAMES[0]  # the `rig train` default for one joint
         model = run_train(request).model
-        with open_store(self.db, create=False) as store:
-            mid = store.add_model(self.model_file, metrics=model.metrics,
-                                  boundary_id=self.boundary_id, session_id=self.servo_session)
-        st.figures.update({"preset": request.preset, "model_id": mid, "metrics": model.metrics})
+        st.figures.update({"preset": preset, "metrics": model.metrics})
         st.verdict = "INFO"
-        st.detail = f"preset {request.preset!r} (the `rig train` default) → {self.model_file}"
+        st.detail = f"preset {preset!r} (the `rig train` default) → {self.model_file}"
 
     def evaluate(self, st: StageResult) -> None:
-        from rig.report.session import model_verdict
+        from rig.store import open_store
         from rig.training import EvaluateRequest, run_evaluate
+        from rig.training.verdict import evaluation_record, evaluation_verdict
 
+        seed = self.options.seed + 99
         metrics = run_evaluate(EvaluateRequest(str(self.model_file), str(self.boundary_file),
-                                               n=self.size.eval_n,
-                                               seed=self.options.seed + 99)).metrics
-        ok, verdict = model_verdict(metrics)
+                                               n=self.size.eval_n, seed=seed)).metrics
+        ok, verdict = evaluation_verdict(metrics)
+        # the model registered with the session and its boundary, with this evaluation: the
+        # report shows these figures and this verdict, not another held-out set's
+        with open_store(self.db, create=False) as store:
+            mid = store.add_model(self.model_file, boundary_id=self.boundary_id,
+                                  session_id=self.servo_session,
+                                  metrics=evaluation_record(metrics, n=self.size.eval_n,
+                                                            seed=seed, by="rig evaluate"))
         st.figures.update(metrics)
+        st.figures["model_id"] = mid
         st.verdict = "PASS" if ok else "WARN"
         st.detail = (f"{self.size.eval_n:,} held-out orientations: mean 3-D error "
                      f"{metrics['mean_3d_error_pct']:.3f} % (≤ 0.8), invalid left > 1° outside "

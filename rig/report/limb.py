@@ -613,7 +613,8 @@ def limb_model_verdict(metrics: Mapping[str, Any]) -> tuple[bool, str, list[dict
     (:data:`rig.training.limb.LIMB_TARGETS`: end-point mean 3-D error ≤ 0.5 % of the limb's
     length, invalid inputs left > 1° outside ≤ 1 %, valid inputs moved ≤ 0.1° mean, p99
     end-point direction error ≤ 3°). A metric absent from ``metrics`` is shown, not judged."""
-    from rig.training.limb import LIMB_TARGETS, limb_warnings
+    from rig.training.limb import LIMB_TARGETS
+    from rig.training.verdict import evaluation_verdict
 
     rows = []
     for key, limit in LIMB_TARGETS.items():
@@ -623,12 +624,8 @@ def limb_model_verdict(metrics: Mapping[str, Any]) -> tuple[bool, str, list[dict
                      "value": None if v is None else scale * float(v),
                      "target": f"≤ {scale * limit:g}{unit}",
                      "met": None if v is None else bool(float(v) <= limit)})
-    misses = limb_warnings({k: v for k, v in metrics.items() if k in LIMB_TARGETS})
-    if misses:
-        return False, "warning: misses targets: " + "; ".join(misses), rows
-    return True, ("ok: within the limb model's targets (end-point mean 3-D error ≤ 0.5 % of "
-                  "the limb's length, invalid inputs left > 1° outside ≤ 1 %, valid inputs "
-                  "moved ≤ 0.1° mean, p99 end-point direction error ≤ 3°)"), rows
+    ok, verdict = evaluation_verdict(metrics, limb=True)
+    return ok, verdict, rows
 
 
 def _evaluation_facts(metrics: Mapping[str, Any], names: Sequence[str]) -> dict[str, Any]:
@@ -689,7 +686,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      reference=None, calibration: Mapping[str, Mapping[str, float]] | None = None,
                      evaluation: Mapping[str, Any] | None = None, age: float | None = None,
                      sex: str | None = None, limits_source: str | None = None,
-                     calibration_note: str | None = None) -> LimbReportData:
+                     calibration_note: str | None = None,
+                     evaluation_note: str | None = None) -> LimbReportData:
     """Everything the report of one arm or leg shows (module doc).
 
     Parameters
@@ -724,6 +722,9 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     evaluation : mapping, optional
         A limb model's metrics (:func:`models.limb_evaluation.evaluate_limb_model`), judged
         against issue 20's targets (:func:`limb_model_verdict`).
+    evaluation_note : str, optional
+        Which evaluation those metrics are (stored with the model, or drawn for the report),
+        shown beside them.
     age, sex : optional
         The patient's, for the population reference column
         (:func:`calibration.joint_angles.population_reference`; the shoulder's
@@ -780,6 +781,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     if evaluation:
         _, data.evaluation_verdict, data.evaluation_rows = limb_model_verdict(evaluation)
         data.evaluation_facts = _evaluation_facts(evaluation, limb.joint_names)
+        if evaluation_note:
+            data.evaluation_facts = {"evaluation": evaluation_note, **data.evaluation_facts}
     return data
 
 

@@ -40,37 +40,11 @@ import numpy as np
 
 from rig.errors import RigConfigError
 from rig.report.page import ReportData, rom_rows, write_report
+from rig.training.verdict import MODEL_TARGETS, model_verdict  # the one verdict, re-exported
 
 __all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
            "report_data_for_session", "report_for_limb_session", "report_for_session",
            "run_report"]
-
-#: Targets of the learned model (issue 9), metric → (limit, label, unit).
-MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
-    "mean_3d_error_pct": (0.8, "mean 3-D error", "%"),
-    "frac_invalid_violating_1deg": (0.01, "invalid inputs left > 1° outside", ""),
-    "mean_identity_error_deg": (0.2, "mean identity error on valid inputs", "°"),
-    "p99_angular_error_deg": (5.0, "p99 direction error", "°"),
-}
-
-
-
-def model_verdict(metrics: dict[str, float]) -> tuple[bool, str]:
-    """(all targets met, one-line verdict) of held-out metrics against :data:`MODEL_TARGETS`."""
-    missed = []
-    for key, (limit, label, unit) in MODEL_TARGETS.items():
-        v = metrics.get(key)
-        if v is None:
-            continue
-        if key.startswith("frac_"):
-            if v > limit:
-                missed.append(f"{label} {100 * v:.2f} % > {100 * limit:g} %")
-        elif v > limit:
-            missed.append(f"{label} {v:.3g}{unit} > {limit:g}{unit}")
-    if missed:
-        return False, "warning: misses targets: " + "; ".join(missed)
-    return True, ("ok: within targets (mean 3-D error ≤ 0.8 %, invalid inputs left > 1° "
-                  "outside ≤ 1 %, identity error ≤ 0.2°, p99 direction error ≤ 5°)")
 
 
 def _iso(t: float | None) -> str | None:
@@ -298,15 +272,22 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
     if model is not None:
         from rig.report.figures import error_map_figure
+        from rig.training.verdict import evaluation_verdict
 
-        mc, metrics, dirs, err = evaluate_for_report(model, n=eval_n)
-        _, verdict = model_verdict(metrics)
+        stored = None if rec_id is None else stored_model_evaluation(store, rec_id, model)
+        n, seed = (eval_n, REPORT_SEED) if stored is None else (stored[1]["n"],
+                                                                 stored[1]["seed"])
+        mc, metrics, dirs, err = evaluate_for_report(model, n=n, seed=seed)
+        if stored is not None:  # the figures that evaluation gave, wherever it is shown
+            metrics = stored[0]
+        _, verdict = evaluation_verdict(metrics)
         data.model_verdict = verdict
         data.model_metrics = {
             "held-out orientations": int(metrics.get("n", len(err))),
             "mean 3-D error (%)": metrics["mean_3d_error_pct"],
             "p99 direction error (°)": metrics["p99_angular_error_deg"],
             "invalid inputs left > 1° outside (%)":
+            "evaluation": _evaluation_words(stored, n, seed),
                 100.0 * metrics["frac_invalid_violating_1deg"],
             "max violation (°)": metrics["max_violation_deg"],
             "mean identity error, valid inputs (°)": metrics["mean_identity_error_deg"],
@@ -341,6 +322,43 @@ def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, st
     """``(id, path)`` of the last model registered with the session whose file is still there
     (and that ``accept(path)`` takes, when given), else None."""
     for m in reversed(store.models_for(session_id=session_id)):
+#: The seed of the held-out set a report draws for a model with no stored evaluation (``rig
+#: evaluate``'s default).
+REPORT_SEED = 12_345
+
+
+def stored_model_evaluation(store, session_id: int, model) -> tuple[dict, dict] | None:
+    """``(metrics, which)`` of the evaluation stored with ``model`` (the file, unchanged since:
+    the same SHA-256) among the models registered with the session, the newest
+    (:func:`rig.training.verdict.stored_evaluation`: ``which`` has ``n``, ``seed``, ``by``
+    and the model's ``id``); None when none is stored."""
+    from rig.store.store import file_sha256
+    from rig.training.verdict import stored_evaluation
+
+    path = Path(model).resolve()
+    digest = None
+    for row in reversed(store.models_for(session_id=session_id)):
+        if Path(row["path"]).resolve() != path:
+            continue
+        got = stored_evaluation(row)
+        if got is None:
+            continue
+        digest = digest or file_sha256(path)
+        if str(row.get("sha256") or "").lower() == digest:
+            return got[0], {**got[1], "id": int(row["id"])}
+    return None
+
+
+def _evaluation_words(stored, n: int, seed: int) -> str:
+    """Which evaluation the model section shows, for people."""
+    if stored is None:
+        return (f"drawn for this report: {n:,} held-out inputs, seed {seed} (no evaluation "
+                "stored with the model)")
+    which = stored[1]
+    return (f"stored with model {which['id']} by {which.get('by') or 'its evaluation'}: "
+            f"{n:,} held-out inputs, seed {seed}")
+
+
         if Path(m["path"]).is_file() and (accept is None or accept(str(m["path"]))):
             return int(m["id"]), str(m["path"])
     return None
@@ -378,7 +396,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     from rig.report.limb import limb_report_data, write_limb_report
 
     chain = chain_orientations_from_store(store, session_id, fusion=fusion)
-    evaluation = None
+    evaluation = evaluation_note = None
     registered = None
     if model is None:  # the last limb model registered with the session, if its file is there
         registered = _last_registered_model(store, session_id, _is_limb_model_of(chain.joints))
@@ -393,7 +411,13 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
             raise RigConfigError(f"--model {model}: a model of the joints "
                                  f"{', '.join(limb.joint_names)}, the session recorded "
                                  f"{', '.join(chain.joints)}")
-        evaluation, _ = evaluate_limb(str(model), limb, eval_n, 12345)
+        stored = stored_model_evaluation(store, session_id, model)
+        if stored is None:
+            evaluation, _ = evaluate_limb(str(model), limb, eval_n, REPORT_SEED)
+            evaluation_note = _evaluation_words(None, eval_n, REPORT_SEED)
+        else:  # the evaluation the demo (or rig evaluate) registered: its figures, its verdict
+            evaluation = stored[0]
+            evaluation_note = _evaluation_words(stored, stored[1]["n"], stored[1]["seed"])
         source = f"the limb file of the model {Path(model).name}" + (
             "" if registered is None else f" (model {registered[0]}, registered with the "
                                           "session)")
@@ -436,7 +460,8 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                       f"{sess.get('started_at')}, {used})",
         warnings=chain.recording.warnings(), reference=reference,
         calibration=residuals, calibration_note=note,
-        evaluation=evaluation, age=age, sex=sex, limits_source=source)
+        evaluation=evaluation, age=age, sex=sex, limits_source=source,
+        evaluation_note=evaluation_note)
     data.simulated = bool(chain.recording.simulated)
     return write_limb_report(data, out_path)
 

@@ -18,15 +18,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rig.training.verdict import MODEL_TARGETS
+
 __all__ = ["ENFORCEMENT_TARGETS", "PRESET_NAMES", "TrainRequest", "TrainResult",
            "enforcement_warnings", "metric_lines", "run_train"]
 
 #: ``--preset`` values (:mod:`models.nn.config`); ``field`` is the default.
 PRESET_NAMES = ("field", "best", "compact", "thesis", "fixed")
 
-#: What a model must reach on held-out orientations to be used for enforcement as is (the
-#: targets the report's verdict uses, :data:`rig.report.session.MODEL_TARGETS`).
-ENFORCEMENT_TARGETS = {"frac_invalid_violating_1deg": 0.01, "mean_3d_error_pct": 0.8}
+#: What a model must reach on held-out orientations to be used for enforcement as is: two of
+#: the targets every verdict uses (:data:`rig.training.verdict.MODEL_TARGETS`), taken from there.
+ENFORCEMENT_TARGETS = {k: MODEL_TARGETS[k][0]
+                       for k in ("frac_invalid_violating_1deg", "mean_3d_error_pct")}
 
 _LABELS = {
     "mse": "MSE (correction quaternion)",
@@ -170,7 +173,7 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
         for w in result.warnings:
             echo(f"warning: {w}")
         return result
-    preset = request.preset or "field"
+    preset = request.preset or PRESET_NAMES[0]
     if preset not in PRESET_NAMES:
         raise ModelFileError(f"--preset {preset}: for a limb file only; for a single joint use "
                              f"{', '.join(PRESET_NAMES)}")
@@ -237,5 +240,6 @@ def enforcement_warnings(metrics: dict) -> list[str]:
     err = metrics.get("mean_3d_error_pct")
     if err is not None and err > ENFORCEMENT_TARGETS["mean_3d_error_pct"] and not out:
         out.append(f"this model's mean 3-D error is {err:.2f} % (the target for enforcement "
-                   "is 0.8 %); for enforcement use the default preset 'field'")
+                   f"is {ENFORCEMENT_TARGETS['mean_3d_error_pct']:g} %); for enforcement use "
+                   "the default preset 'field'")
     return out

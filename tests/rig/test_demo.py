@@ -67,6 +67,10 @@ def test_quick_demo_runs_every_stage_into_one_database(tmp_path, capsys):
         models = store.models_for(session_id=servo["id"])
         assert len(models) == 1 and models[0]["boundary_id"] == bounds[0]["id"]
         assert models[0]["metrics"]["mean_3d_error_pct"] >= 0
+        # registered with the evaluate stage's evaluation (issue 37: one evaluation, one
+        # verdict — the report below shows it)
+        evaluation = models[0]["metrics"]
+        assert evaluation["evaluation"] == {"n": 2000, "seed": 3 + 99, "by": "rig evaluate"}
         (run,) = store.runs(enf["id"])
         assert enf["meta"]["recording_session"] == servo["id"]
         s = run["summary"]
@@ -81,6 +85,17 @@ def test_quick_demo_runs_every_stage_into_one_database(tmp_path, capsys):
                     "Live enforcement"):
         assert f">{heading}</h2>" in html
     assert "SIM-0003" in html
+    # the report's model section: the evaluate stage's figures and verdict (issue 37)
+    import html as htmltext
+
+    from rig.training.verdict import evaluation_verdict
+
+    assert htmltext.escape(evaluation_verdict(evaluation)[1]) in html
+    assert f"{evaluation['p99_angular_error_deg']:,.3f}" in html
+    assert "stored with model" in html
+    # the train stage names the preset it used, not None (issue 37)
+    flat = " ".join(text.split())
+    assert "preset 'field' (the `rig train` default)" in flat and "preset None" not in flat
 
 
 def _write(path, text):

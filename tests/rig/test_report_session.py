@@ -175,3 +175,47 @@ def test_a_report_says_why_it_has_no_range_and_when_a_session_was_cut_short(tmp_
         assert data.rom_rows and np.isfinite(data.rom_rows[0].measured_deg)
         html = report_for_session(store, cut, tmp_path / "cut.html", eval_n=200).read_text()
         assert "Warning: the session was cut short" in html
+
+
+def test_the_report_shows_the_evaluation_stored_with_the_model(recorded, tmp_path):
+    """Issue 37: one model, two verdicts — the demo's evaluate stage judged one held-out set,
+    the report drew another. The report now shows the evaluation registered with the model:
+    its figures and the same verdict function's verdict."""
+    import shutil
+
+    from rig.training import EvaluateRequest, run_evaluate
+    from rig.training.verdict import evaluation_record, evaluation_verdict
+
+    db = tmp_path / "rig.db"
+    for suffix in ("", "-wal", "-shm"):
+        src = recorded["db"].with_name(recorded["db"].name + suffix)
+        if src.exists():
+            shutil.copy(src, db.with_name(db.name + suffix))
+    model, sid = recorded["tmp"] / "model.onnx", recorded["session"]
+    metrics = run_evaluate(EvaluateRequest(str(model), str(recorded["tmp"] / "boundary.yaml"),
+                                           n=300, seed=7)).metrics
+    with open_store(db) as store:
+        mid = store.add_model(model, session_id=sid, metrics=evaluation_record(
+            metrics, n=300, seed=7, by="rig evaluate"))
+        data = report_data_for_session(store, sid, eval_n=600)
+        assert data.model_metrics["held-out orientations"] == 300  # not a fresh 600
+        assert data.model_metrics["p99 direction error (°)"] == metrics["p99_angular_error_deg"]
+        assert data.model_metrics["mean 3-D error (%)"] == metrics["mean_3d_error_pct"]
+        assert data.model_verdict == evaluation_verdict(metrics)[1]
+        assert data.model_metrics["evaluation"] == (f"stored with model {mid} by rig evaluate: "
+                                                    "300 held-out inputs, seed 7")
+        # the stored verdict stands, whatever another held-out set would give
+        missed = {**metrics, "p99_angular_error_deg": 5.3}
+        store.add_model(model, session_id=sid, metrics=evaluation_record(
+            missed, n=300, seed=7, by="rig evaluate"))
+        data = report_data_for_session(store, sid, eval_n=600)
+        assert data.model_verdict == evaluation_verdict(missed)[1]
+        assert "p99 direction error 5.3° > 5°" in data.model_verdict
+        # --model naming the registered file: its stored evaluation too
+        named = report_data_for_session(store, sid, eval_n=600, model=model)
+        assert named.model_verdict == data.model_verdict
+        # a file with no stored evaluation is evaluated for the report, which says so
+        shutil.copy(model, tmp_path / "other.onnx")
+        other = report_data_for_session(store, sid, eval_n=600, model=tmp_path / "other.onnx")
+    assert other.model_metrics["held-out orientations"] == 600
+    assert other.model_metrics["evaluation"].startswith("drawn for this report: 600")
