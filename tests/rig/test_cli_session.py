@@ -344,6 +344,10 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
             assert "is read-only" in r.stderr and reason in r.stderr, r.stderr
             assert "Traceback" not in r.stderr and "unable to open" not in r.stderr
         assert not (out / "b2.yaml").exists()
+        from rig.readback import ChainRequest  # a limb file from a session: the same, up front
+
+        with pytest.raises(Exception, match=f"is read-only \\({reason}.* add --no-store"):
+            ChainRequest(None, "arm", None, out / "limb.yaml", db=str(db), session_id=sid).check()
         assert sorted(p.name for p in share.iterdir()) == ["archive.db"]  # no -wal, -shm
     assert db.read_bytes() == before
     with open_store(db, create=False) as store:  # writable again: nothing was changed
