@@ -114,9 +114,9 @@ from calibration.clinical import _check_side, mirror_quaternions, text_table
 from calibration.frames import SEGMENT_TO_ISB
 from models import quaternion as Q
 
-__all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "NORMATIVE", "POPULATION", "UNKNOWN_AGE",
-           "JointAngleSet", "JointRangeOfMotion", "KIND_ANGLES", "PopulationValue",
-           "REACH_MARGIN_DEG", "WIDEST_NORMS", "allowed_rom", "angle_peaks", "beyond_reach",
+__all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "KIND_ANGLES", "NORMATIVE", "POPULATION",
+           "REACH_MARGIN_DEG", "UNKNOWN_AGE", "WIDEST_NORMS", "JointAngleSet",
+           "JointRangeOfMotion", "PopulationValue", "allowed_rom", "angle_peaks", "beyond_reach",
            "constraint_rom", "from_angles", "joint_angles", "largest_rom", "not_measured",
            "physiological_max", "population_band", "population_reference", "recorded_rom"]
 

@@ -17,6 +17,8 @@ import sys
 
 import click
 
+from rig.commands._options import finite_seconds
+
 
 @click.command("enforce")
 @click.option("--rig", "rig_name", required=True, metavar="NAME|FILE",
@@ -31,7 +33,7 @@ import click
                    "isb (+Y proximal, +X anterior, +Z right).")
 @click.option("--rate", type=float, default=200.0, show_default=True, metavar="HZ",
               help="Loop rate.")
-@click.option("--duration", type=float, default=None, metavar="S",
+@click.option("--duration", type=float, default=None, metavar="S", callback=finite_seconds,
               help="Seconds to run (default: a CSV's length, else until Ctrl-C).")
 @click.option("--telemetry", "telemetry_path", default=None, metavar="T.csv",
               help="Per-cycle telemetry CSV.")

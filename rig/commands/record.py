@@ -17,6 +17,8 @@ import sys
 
 import click
 
+from rig.commands._options import finite_seconds
+
 
 @click.command("record")
 @click.option("--rig", "rig_name", required=True, metavar="NAME|FILE",
@@ -26,7 +28,7 @@ import click
               help="Session store: a SQLite path, sqlite:///... or postgresql://...")
 @click.option("--patient", required=True, metavar="PSEUDONYM",
               help="The patient's pseudonym (never a real name).")
-@click.option("--duration", type=float, default=None, metavar="S",
+@click.option("--duration", type=float, default=None, metavar="S", callback=finite_seconds,
               help="Seconds to record after calibration (sample time); default: until Ctrl-C.")
 @click.option("--annotate", "annotations", multiple=True, metavar="[T:]TEXT",
               help="A note stored with the session, at T seconds into the recording "

@@ -41,6 +41,8 @@ def _status(r: dict) -> str:
 def format_sessions(rows: list[dict], db: str = "DB") -> str:
     """The table ``rig session list`` prints, and a note under it for every session whose
     writer is gone but that is not closed yet."""
+    from rig.readback.sessions import session_limb
+
     if not rows:
         return "no sessions"
     head = ("id", "patient", "kind", "joint", "started", "recorded", "samples", "last sample",
@@ -54,7 +56,9 @@ def format_sessions(rows: list[dict], db: str = "DB") -> str:
         samples = f"{r['samples']}" + (f" ({by})" if by else "")
         if r["runs"]:
             samples += f", {r['runs']} run{'s' if r['runs'] != 1 else ''}"
-        joint = " ".join(x for x in (r.get("side"), r.get("joint")) if x) or "-"
+        # a whole-limb session is named by its limb ("right leg"), not its first joint
+        joint = " ".join(x for x in (r.get("side"), session_limb(r) or r.get("joint"))
+                         if x) or "-"
         last = _when(r.get("last_sample_at")) if r["samples"] else "-"
         table.append((str(r["id"]), r["pseudonym"], r["kind"], joint, _when(r["started_at"]),
                       dur, samples, last, str(r["dropped"]), _status(r)))

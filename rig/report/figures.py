@@ -35,6 +35,7 @@ __all__ = [
     "hinge_figure",
     "joint_directions",
     "map_side_of",
+    "outline_style",
     "swing_map",
     "to_png",
 ]
@@ -116,13 +117,17 @@ def swing_outline(swing) -> np.ndarray | None:
     return _cone_outline(np.asarray(swing.centre), float(swing.radius))
 
 
-def _grid(ax, max_deg: float) -> None:
+def _grid(ax, max_deg: float, label_azimuth_deg: float = 80.0) -> None:
+    """The rings 30°, 60°, … from the centre, each labelled along ``label_azimuth_deg`` (on a
+    white ground, so no outline hides it)."""
+    ca, sa = math.cos(math.radians(label_azimuth_deg)), math.sin(math.radians(label_azimuth_deg))
     for deg in range(30, int(max_deg) + 1, 30):
         r = EqualAreaMap.ring_radius(deg)
         ax.add_patch(plt.Circle((0, 0), r, fill=False, lw=0.6, color="0.75", zorder=0))
         if deg <= 150:  # the rings crowd towards the antipode
-            ax.text(r * math.cos(math.radians(80)), r * math.sin(math.radians(80)), f"{deg}°",
-                    fontsize=7, color="0.45")
+            ax.text(r * ca, r * sa, f"{deg}°", fontsize=7, color="0.45", ha="center",
+                    va="center", zorder=5,
+                    bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 0.4})
     lim = EqualAreaMap.ring_radius(max_deg) * 1.04
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
@@ -231,6 +236,20 @@ def map_side_of(m: EqualAreaMap, direction) -> str:
     return "up" if y > 0 else "down"
 
 
+def _ring_label_azimuth(m: EqualAreaMap, labels: dict[str, np.ndarray]) -> float:
+    """The page azimuth (degrees) along which the rings are labelled: the one of 15° steps
+    farthest from every anatomical label's direction on the map (a ring label on "anterior"
+    hid it)."""
+    taken = [math.degrees(math.atan2(float(d @ m.v), float(d @ m.u))) for d in labels.values()
+             if 5.0 < math.degrees(math.acos(max(-1.0, min(1.0, float(d @ m.centre))))) < 175.0]
+    taken += [90.0]  # the title and the edge label above the map
+
+    def room(az: float) -> float:
+        return min(abs((az - t + 180.0) % 360.0 - 180.0) for t in taken)
+
+    return max(np.arange(0.0, 360.0, 15.0), key=lambda az: (room(az), -abs(az - 60.0)))
+
+
 def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float,
                        labels: dict[str, np.ndarray]) -> None:
     """Each anatomical direction marked where it falls on the map, or named at the map's edge
@@ -255,8 +274,17 @@ def _anatomical_labels(ax, m: EqualAreaMap, max_deg: float,
                         color="#762a83", ha="center", va="center")
 
 
-#: Colours of further boundaries on a map (a coupled joint's keyframes), in order.
-OUTLINE_COLOURS = ("#222222", "#009988", "#ee7733", "#ee3377", "#0077bb")
+#: Colours of further boundaries on a map (a coupled joint's keyframes), in order: distinct
+#: from one another and from the samples' blue, the sparse arcs' red and the labels' purple
+#: (Paul Tol's vibrant and muted schemes); past the last, the colours repeat dash-dotted.
+OUTLINE_COLOURS = ("#222222", "#009988", "#ee7733", "#ee3377", "#997700", "#33bbee", "#117733",
+                   "#882255", "#999999")
+
+
+def outline_style(k: int) -> tuple[str, str]:
+    """(colour, line style) of the ``k``-th further boundary: no two alike."""
+    return (OUTLINE_COLOURS[k % len(OUTLINE_COLOURS)],
+            "-" if k < len(OUTLINE_COLOURS) else "-.")
 
 
 def boundary_figure(
@@ -322,8 +350,9 @@ def boundary_figure(
     extra_ref = [swing_outline(s) for s in (reference_outlines or [])]
     fig, ax = plt.subplots(figsize=(5.4, 5.4))
     extent = _extent_deg(m, d, outline, ref, *(o for o, _ in extra), *extra_ref)
-    _grid(ax, extent)
-    _anatomical_labels(ax, m, extent, anatomical_directions(side) if labels is None else labels)
+    labels = anatomical_directions(side) if labels is None else labels
+    _grid(ax, extent, _ring_label_azimuth(m, labels))
+    _anatomical_labels(ax, m, extent, labels)
     if len(d):
         p = m.project(d)
         ax.scatter(p[:, 0], p[:, 1], s=2.5, c="#4477aa", alpha=0.4, linewidths=0,
@@ -334,7 +363,7 @@ def boundary_figure(
     for k, r in enumerate(extra_ref):
         if r is not None:
             p = m.project(r)
-            ax.plot(p[:, 0], p[:, 1], "--", color=OUTLINE_COLOURS[k % len(OUTLINE_COLOURS)],
+            ax.plot(p[:, 0], p[:, 1], "--", color=outline_style(k)[0],
                     lw=0.9, alpha=0.8, label="reference range" if k == 0 else None)
     if outline is not None:
         p = m.project(outline)
@@ -342,14 +371,16 @@ def boundary_figure(
     for k, (o, label) in enumerate(extra):
         if o is not None:
             p = m.project(o)
-            ax.plot(p[:, 0], p[:, 1], "-", color=OUTLINE_COLOURS[k % len(OUTLINE_COLOURS)],
-                    lw=1.5, label=label)
+            colour, style = outline_style(k)
+            ax.plot(p[:, 0], p[:, 1], style, color=colour, lw=1.5, label=label)
     for k, (a, b) in enumerate(sparse_arcs or []):
         p = m.project(densify_arc(a, b))
         ax.plot(p[:, 0], p[:, 1], "-", color="#cc3311", lw=3.2, alpha=0.85,
                 label="sparsely sampled" if k == 0 else None)
     ax.plot([0], [0], "+", color="k", ms=8)
-    ax.legend(loc="lower left", fontsize=7, frameon=False)
+    # below the map, outside it: inside, it covered the labels at the map's edge
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=2, fontsize=7,
+              frameon=False)
     ax.set_title(title or "Swing range on an equal-area map (rings: degrees from centre)",
                  fontsize=9)
     return to_png(fig)

@@ -442,7 +442,7 @@ def _swing_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
                 c, ref)["mean_deg"]
     else:
         cp = joint.coupling
-        kw["outlines"] = [(c.swing, f"limits at {cp.by} {a:g}°")
+        kw["outlines"] = [(c.swing, f"limits at {cp.by} {a:.1f}°")
                           for a, c in zip(cp.at_deg, cp.keyframes, strict=True)]
         if ref_joint is not None:
             kw["reference_outlines"] = [_limits_at(ref_joint, a).swing for a in cp.at_deg]
@@ -876,11 +876,24 @@ def render_limb_html(data: LimbReportData) -> str:
         out.append("</table>")
         if data.evaluation_facts:
             out.append(kv_table(data.evaluation_facts, 3))
-    out += page_foot(data.software, "Angles: the joint coordinate systems of the ISB (Wu et "
-                     "al. 2002, 2005) and Grood & Suntay 1983 (the knee), left limbs mirrored; "
-                     "the shoulder's as in its own report (Wu et al. 2005); AAOS 1965 normal "
-                     "values.")
+    out += page_foot(data.software, _angles_sentence(data.joint_order))
     return "\n".join(out)
+
+
+def _angles_sentence(joints: Sequence[str]) -> str:
+    """The footer's angle conventions, naming this limb's joints only (a leg's page does not
+    speak of the shoulder)."""
+    from calibration.joint_angles import JOINT_ANGLES
+
+    parts = []
+    for name in joints:
+        if name == "shoulder":
+            parts.append("shoulder Wu et al. 2005, J Biomech 38:981 (as in the shoulder "
+                         "report)")
+        elif name in JOINT_ANGLES:
+            parts.append(f"{name} {JOINT_ANGLES[name].source}")
+    return ("Angles, the joint coordinate systems of: " + "; ".join(parts)
+            + "; left limbs mirrored. AAOS 1965 normal values.")
 
 
 def write_limb_report(data: LimbReportData, path: str | Path) -> Path:

@@ -55,7 +55,9 @@ class ReportData:
     side: str | None = None
     rig: str | None = None
     started: str | None = None
-    duration_s: float | None = None
+    duration_s: float | None = None  # the samples' span, calibration steps included
+    free_motion_s: float | None = None  # of which the free movement after the calibration
+    calibrated: bool = False  # the session began with the guided calibration steps
     samples: int | None = None
     dropped: int | None = None
     rom_rows: list[RomRow] = field(default_factory=list)
@@ -214,13 +216,26 @@ def page_foot(software: str | None, angles: str) -> list[str]:
             "</body></html>"]
 
 
+def _recorded_words(data: ReportData) -> str | None:
+    """How long the session recorded: the samples' span and, when the free movement was
+    shorter (the guided calibration steps came first), that too — ``--duration 30`` then
+    reads "47 s in all: the calibration steps, then 30 s of free movement"."""
+    total, free = data.duration_s, data.free_motion_s
+    if not total:
+        return None
+    if free is None or total - free < 0.5:
+        return f"{total:.0f} s of motion"
+    before = "the calibration steps, then " if data.calibrated else ""
+    return f"{total:.0f} s in all: {before}{free:.0f} s of free movement"
+
+
 def render_html(data: ReportData) -> str:
     """The whole report as one HTML string."""
     meta = [("Patient (pseudonym)", f"<b>{_e(data.patient)}</b>"),
             ("Session", _e(data.session_id)),
             ("Started", _e(data.started) if data.started else None),
             ("Rig", _e(data.rig) if data.rig else None),
-            ("Recorded", f"{data.duration_s:.0f} s of motion" if data.duration_s else None),
+            ("Recorded", _recorded_words(data)),
             ("Samples", fmt(data.samples) if data.samples is not None else None),
             ("Dropped samples", fmt(data.dropped) if data.dropped is not None else None)]
     out = page_head(f"Range of motion report: {data.patient}, session {data.session_id}",

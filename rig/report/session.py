@@ -191,6 +191,10 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
                       rig=sess.get("rig_name"), started=_iso(sess.get("started_at")),
                       software=f"rig {__version__}")
     data.duration_s = store.recording_span(session_id)  # the samples' span, not wall time
+    meta = sess.get("meta") or {}
+    free = (meta.get("coverage") or {}).get("t_span_s")  # the recording after calibration
+    data.free_motion_s = None if free is None else float(free)
+    data.calibrated = bool(meta.get("calibrated"))
     data.samples = int(store.sample_count(session_id))
     data.dropped = sess.get("dropped")
     rec_id = _recording_session(store, sess)
@@ -283,11 +287,11 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         _, verdict = evaluation_verdict(metrics)
         data.model_verdict = verdict
         data.model_metrics = {
+            "evaluation": _evaluation_words(stored, n, seed),
             "held-out orientations": int(metrics.get("n", len(err))),
             "mean 3-D error (%)": metrics["mean_3d_error_pct"],
             "p99 direction error (°)": metrics["p99_angular_error_deg"],
             "invalid inputs left > 1° outside (%)":
-            "evaluation": _evaluation_words(stored, n, seed),
                 100.0 * metrics["frac_invalid_violating_1deg"],
             "max violation (°)": metrics["max_violation_deg"],
             "mean identity error, valid inputs (°)": metrics["mean_identity_error_deg"],
@@ -318,10 +322,6 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     return write_report(data, out_path)
 
 
-def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, str] | None:
-    """``(id, path)`` of the last model registered with the session whose file is still there
-    (and that ``accept(path)`` takes, when given), else None."""
-    for m in reversed(store.models_for(session_id=session_id)):
 #: The seed of the held-out set a report draws for a model with no stored evaluation (``rig
 #: evaluate``'s default).
 REPORT_SEED = 12_345
@@ -359,6 +359,10 @@ def _evaluation_words(stored, n: int, seed: int) -> str:
             f"{n:,} held-out inputs, seed {seed}")
 
 
+def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, str] | None:
+    """``(id, path)`` of the last model registered with the session whose file is still there
+    (and that ``accept(path)`` takes, when given), else None."""
+    for m in reversed(store.models_for(session_id=session_id)):
         if Path(m["path"]).is_file() and (accept is None or accept(str(m["path"]))):
             return int(m["id"]), str(m["path"])
     return None
@@ -457,7 +461,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
         limb, {j: chain.q[ok, k] for k, j in enumerate(chain.joints)},
         side=chain.side or "right", patient=chain.patient,
         session_label=f"session {session_id} ({sess.get('rig_name')}, started "
-                      f"{sess.get('started_at')}, {used})",
+                      f"{_iso(sess.get('started_at')) or 'at an unknown time'}, {used})",
         warnings=chain.recording.warnings(), reference=reference,
         calibration=residuals, calibration_note=note,
         evaluation=evaluation, age=age, sex=sex, limits_source=source,

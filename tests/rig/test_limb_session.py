@@ -274,3 +274,34 @@ def test_the_static_pose_and_the_checkpoints_ask_for_the_same_neutral_pose(name)
     assert f"({pose})" in checkpoint
     if cfg.limb == "arm":  # the forearm's clinical zero, from which 80° / 80° are measured
         assert "palm facing the thigh" in pose
+
+
+def test_the_report_shows_the_evaluate_stages_evaluation_and_words_fit_the_leg(leg_demo):
+    """Issue 37: the arm demo's evaluate stage said WARN (p99 3.08°) and its report "met"
+    (2.78°, another held-out set); the report now shows the evaluation the stage registered
+    with the model, with the same verdict. And the page speaks of this leg: the session's
+    start as a date, the footer's angle conventions of the hip, knee and ankle only."""
+    import html as htmltext
+
+    from rig.commands.session import format_sessions
+    from rig.training.limb import LIMB_TARGETS
+    from rig.training.verdict import evaluation_verdict
+
+    stage = leg_demo["result"].stage("evaluate")
+    with open_store(leg_demo["db"], create=False) as store:
+        (row,) = store.models_for(session_id=leg_demo["session"])
+        listing = format_sessions(store.list_sessions())
+    metrics = row["metrics"]
+    assert metrics["evaluation"] == {"n": 600, "seed": 5 + 77, "by": "rig evaluate"}
+    assert stage.figures["model_id"] == row["id"]
+    assert {k: metrics[k] for k in LIMB_TARGETS} == {k: stage.figures[k] for k in LIMB_TARGETS}
+    ok, verdict = evaluation_verdict(metrics)
+    assert (stage.verdict == "PASS") == ok
+    page = (leg_demo["out"] / "report.html").read_text()
+    assert htmltext.escape(verdict) in page
+    assert f"{metrics['end_p99_direction_error_deg']:,.3f}" in page
+    assert f"stored with model {row['id']} by rig evaluate: 600 held-out inputs" in page
+    assert re.search(r"started \d{4}-\d\d-\d\d \d\d:\d\d UTC", page)
+    foot = page[page.index("Generated"):]
+    assert "shoulder" not in foot and "knee Grood &amp; Suntay 1983" in foot
+    assert " right leg " in listing.splitlines()[1]

@@ -73,3 +73,67 @@ def test_report_renders_in_headless_chromium(tmp_path):
     assert pixels_near(img, "#4477aa", 0.15) > 50
     # the verdict colour of the "ok" lines shows the page was styled
     assert pixels_near(img, "#1b7837", 0.08) > 20
+
+
+# -- issue 37: what the report says and how its maps are drawn ---------------------------------
+def test_recorded_time_says_what_it_counts():
+    """A ``--duration 30`` session whose samples span 47 s (the calibration steps first) read
+    "Recorded 47 s of motion"; it now says both."""
+    from dataclasses import replace
+
+    base = ReportData(patient="P-1", session_id=1, duration_s=47.2)
+    assert "47 s of motion" in render_html(base)
+    text = render_html(replace(base, free_motion_s=30.04, calibrated=True))
+    assert "47 s in all: the calibration steps, then 30 s of free movement" in text
+    assert "47 s of motion" not in text
+
+
+def _captured_map(monkeypatch, **kw):
+    """The figure :func:`boundary_figure` draws (not its PNG), for its artists' extents."""
+    from rig.report import figures
+
+    got = {}
+    monkeypatch.setattr(figures, "to_png", lambda fig, dpi=110: got.setdefault("fig", fig))
+    c = load_constraint(shape_path("original"))
+    d = Q.limb_direction(ConstraintOracle(c).project(
+        Q.random_quaternions(500, np.random.default_rng(1))))
+    figures.boundary_figure(d, c.swing, **kw)
+    fig = got["fig"]
+    fig.canvas.draw()
+    return fig
+
+
+def test_map_legend_and_ring_labels_cover_no_anatomical_label(monkeypatch):
+    """The legend sat over the label at the map's lower edge ("plantarflexion") and the ring
+    labels on "anterior": the legend is now outside the map and the rings are labelled where
+    no anatomical label is."""
+    import matplotlib.pyplot as plt
+
+    from rig.report.figures import anatomical_directions, joint_directions
+
+    for side, labels in (("right", None), ("left", None), ("right", joint_directions("ankle",
+                                                                                    "right"))):
+        fig = _captured_map(monkeypatch, side=side, labels=labels)
+        ax = fig.axes[0]
+        r = fig.canvas.get_renderer()
+        names = set(anatomical_directions(side) if labels is None else labels)
+        texts = [t for t in ax.texts if t.get_text()]
+        anat = [t for t in texts if any(t.get_text().startswith(n) for n in names)]
+        rings = [t for t in texts if re.fullmatch(r"\d+°", t.get_text())]
+        assert anat and rings
+        legend = ax.get_legend().get_window_extent(r)
+        assert legend.y1 <= ax.get_window_extent(r).y0 + 1  # below the map
+        for a in anat:
+            box = a.get_window_extent(r)
+            assert not box.overlaps(legend), a.get_text()
+            for t in rings:
+                assert not box.overlaps(t.get_window_extent(r)), (a.get_text(), t.get_text())
+        plt.close(fig)
+
+
+def test_keyframe_outlines_never_share_a_style():
+    from rig.report.figures import OUTLINE_COLOURS, outline_style
+
+    styles = [outline_style(k) for k in range(2 * len(OUTLINE_COLOURS))]
+    assert len(set(styles)) == len(styles)
+    assert len(OUTLINE_COLOURS) >= 8 and "#4477aa" not in OUTLINE_COLOURS  # the samples' blue
