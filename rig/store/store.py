@@ -143,10 +143,15 @@ def _readonly_reason(p: Path) -> str | None:
     write needs the file and, for its ``-wal`` / ``-shm`` files, a folder that takes new files:
     tried, since permission bits do not stop root (an immutable folder or a read-only mount
     does)."""
+    import errno
+
     from models.fileio import probe_folder
 
-    if not os.access(p, os.W_OK):
-        return "no write permission"
+    try:
+        os.close(os.open(p, os.O_WRONLY))  # neither created nor truncated: left as it is
+    except OSError as err:
+        return {errno.EROFS: "read-only file system",
+                errno.EPERM: "the file may not be modified"}.get(err.errno, "no write permission")
     try:
         probe_folder(p.parent)
     except OSError:
