@@ -193,7 +193,6 @@ def _refuse_foreign_file(p: Path, shown: str) -> None:
     """Refuse, before anything writes to it (not even the switch to WAL), a SQLite file that
     holds tables but no rig ``schema_version``; a file that is not SQLite at all too."""
     import sqlite3
-    from urllib.parse import quote
 
     if p.stat().st_size == 0:
         return  # a new, empty file: it becomes a rig database
