@@ -259,7 +259,7 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
         if request.db is not None:
             from rig.store import open_store
 
-            store = open_store(request.db)
+            store = open_store(request.db, readonly=False)  # the run is stored: refused now
             if request.session_id is not None:
                 sid = request.session_id
                 session_patient = store.get_session(sid).get("pseudonym")
@@ -281,6 +281,10 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
                              force=request.force_model)
         for m in binding.mismatches:
             echo(f"warning: {m} (--force-model)")
+        if store is not None and (request.patient or session_patient
+                                  or binding.constraint.patient) is None:
+            raise RigConfigError("--db: say whose run this is: --patient PSEUDONYM or "
+                                 "--session ID")
         oracle = ConstraintOracle(binding.constraint)
         src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
                            frames=request.frames)
@@ -323,9 +327,6 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
             store_writer = None
             if store is not None:
                 pseudonym = req.patient or prep.session_patient or binding.constraint.patient
-                if pseudonym is None:
-                    raise RigConfigError("--db: say whose run this is: --patient PSEUDONYM or "
-                                         "--session ID")
                 pid = store.ensure_patient(pseudonym)
                 enforce_session = store.start_session(
                     pid, rig_name=prep.rig_cfg.name, joint=prep.rig_cfg.joint.name,

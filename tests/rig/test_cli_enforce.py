@@ -105,8 +105,7 @@ def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
     assert "Traceback" not in err
     # checked up front: the loop was never started (it announces itself before its first cycle)
     assert "enforcing" not in out and "cycles" not in out, out
-    if case != "db-no-patient":  # still checked once the chain is prepared (issue 37 notes)
-        assert "backstop" not in out, out  # nor the servos' position limits written
+    assert "backstop" not in out, out  # nor the servos' position limits written
     assert ".tmp" not in err
 
 
@@ -265,3 +264,30 @@ def test_quiet_prints_only_the_summary_line(files, rig_cli):
     lines = out.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("cycles ") and "max violation" in lines[0]
     assert "safe-state entries 0" in lines[0] and "end completed" in lines[0]
+
+
+def test_a_read_only_store_is_refused_before_the_backstop(files, tmp_path, rig_cli):
+    """Issue 37: ``rig enforce --db`` on an archive it cannot write wrote the servos' position
+    limits, then failed to store the run."""
+    import os
+    import subprocess
+
+    from rig.store import open_store
+
+    db = tmp_path / "ro.db"
+    with open_store(db) as store:
+        store.add_patient("P-RO")
+    if os.geteuid() == 0:  # permission bits do not stop root: make the file immutable
+        r = subprocess.run(["chattr", "+i", str(db)], capture_output=True, text=True)
+        if r.returncode != 0:
+            pytest.skip(f"cannot make a file immutable here: {r.stderr.strip()}")
+    else:
+        db.chmod(0o444)
+    try:
+        code, out, err = rig_cli(_argv(files, "--db", db, "--patient", "P-RO", "--duration",
+                                       "0.2"))
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "-i", str(db)], check=True)
+    assert code == 2 and "read-only" in err and err.count("\n") == 1, err
+    assert "backstop" not in out and "enforcing" not in out, out
