@@ -1,0 +1,117 @@
+"""The stream board's timing contract on a loaded host (issue 37, item 4): the simulated board
+measures its patient in batches (a running clock measures ahead into a FIFO, so its cost per
+sample is a fraction of one ``measure_many`` call), and answers a command that arrives while it
+catches up on its grid before the rest of the backlog (one batch of work per server iteration).
+
+Counts of work, never clocks: the running clock here is a :class:`StepClock` the test moves,
+and the command is sent from inside the simulator's own measurement, at a known point.
+"""
+
+from __future__ import annotations
+
+import serial
+
+from firmware_protocol.imu import stream as S
+from rig.sim.clock import ManualClock
+from rig.sim.imu import StreamImuSimulator
+from rig.sim.limb import NoiseModel, SimulatedLimb
+
+MAX_READS = 2000
+"""Bound on the reads a receive loop makes (a count, not a clock)."""
+
+
+class StepClock:
+    """A running clock (no ``subscribe``: the simulator treats it as real time) that moves only
+    when the test sets :attr:`t` — the simulator's server wakes at its deadlines meanwhile."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class CountingLimb:
+    """A simulated limb whose ``measure_many`` calls are counted (``on_measure`` runs in the
+    simulator's thread before each)."""
+
+    def __init__(self, limb, on_measure=None) -> None:
+        self.limb = limb
+        self.calls = 0
+        self.on_measure = on_measure
+
+    def __getattr__(self, name):
+        return getattr(self.limb, name)
+
+    def measure_many(self, ts):
+        self.calls += 1
+        if self.on_measure is not None:
+            self.on_measure(self.calls)
+        return self.limb.measure_many(ts)
+
+
+def _frames(ser: serial.Serial, dec: S.StreamDecoder, until) -> list:
+    """Frames read from ``ser`` until ``until(frames)`` holds."""
+    frames: list = []
+    for _ in range(MAX_READS):
+        dec.feed(ser.read(max(1, ser.in_waiting)))
+        frames.extend(dec.drain())
+        if until(frames):
+            return frames
+    raise AssertionError(f"gave up after {len(frames)} frames")
+
+
+def _ack(frames: list, seq: int) -> int | None:
+    """Index of the ACK of command ``seq`` in ``frames`` (None if absent)."""
+    return next((i for i, f in enumerate(frames)
+                 if isinstance(f, S.Ack) and f.command_seq == seq), None)
+
+
+def test_a_running_clock_measures_the_patient_in_batches():
+    """200 samples streamed one slot at a time: before, one ``measure_many`` per sample (a
+    four-segment chain ~0.8 ms each, a fifth of a core at 200 Hz); now one per
+    ``AHEAD_S`` of slots."""
+    clock = StepClock()
+    limb = CountingLimb(SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=4))
+    rate, n = 200, 200
+    with StreamImuSimulator(limb, rate_hz=rate, clock=clock, flow_control=True) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        dec = S.StreamDecoder()
+        ser.write(S.encode_command(0, S.CommandType.START))
+        _frames(ser, dec, lambda fs: _ack(fs, 0) is not None)
+        for k in range(1, n):
+            clock.t = k / rate
+            assert sim.wait_for(lambda k=k: sim.samples_sent >= k + 1, timeout=30.0)
+        ser.write(S.encode_command(1, S.CommandType.STOP))
+        _frames(ser, dec, lambda fs: _ack(fs, 1) is not None)
+        sent = sim.samples_sent
+    assert sent == n
+    assert limb.calls <= n // 10, limb.calls  # was n; now n / (1 + AHEAD_S * rate) + 1
+
+
+def test_a_command_is_answered_before_the_rest_of_the_backlog():
+    """The board 999 slots behind its grid when STOP arrives (sent while it measures its
+    first batch): the ACK comes after at most one batch, not after the backlog (with flow
+    control: 8 kB of it)."""
+    clock = ManualClock()
+    host: dict = {}
+
+    def stop_now(call: int) -> None:  # in the simulator's thread, inside its catch-up
+        if host.pop("armed", False):
+            host["ser"].write(S.encode_command(1, S.CommandType.STOP))
+
+    limb = CountingLimb(SimulatedLimb(sensors=1, noise=NoiseModel.ideal(), seed=4), stop_now)
+    with StreamImuSimulator(limb, rate_hz=200, clock=clock, flow_control=True) as sim, \
+            serial.Serial(sim.port, timeout=0.05) as ser:
+        host["ser"] = ser
+        dec = S.StreamDecoder()
+        ser.write(S.encode_command(0, S.CommandType.START))
+        _frames(ser, dec, lambda fs: _ack(fs, 0) is not None)
+        assert sim.wait_for(lambda: sim.samples_sent == 1)  # the slot at START: sent
+        host["armed"] = True
+        clock.advance(999 / 200)  # 999 more slots due at once
+        frames = _frames(ser, dec, lambda fs: _ack(fs, 1) is not None)
+        before_ack = sum(isinstance(f, S.Sample) and f.timestamp_us > 0  # not the slot at START
+                         for f in frames[:_ack(frames, 1)])
+        assert not sim.streaming
+    assert 0 < before_ack <= StreamImuSimulator._BATCH, before_ack  # was ~270
