@@ -523,6 +523,8 @@ def run_report(request: ReportRequest) -> ReportResult:
                 store, request.session_id, Path(request.out), model=request.model,
                 age=request.age, sex=request.sex, reference=ref, eval_n=request.eval_n,
                 fusion=request.fusion))
+        if request.model is not None:
+            _check_model_for_session(request.model, sess, request.session_id)
         if isinstance(ref, (str, Path)):
             from models.constraint import load_constraint
 
@@ -530,6 +532,28 @@ def run_report(request: ReportRequest) -> ReportResult:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=ref, eval_n=request.eval_n, fusion=request.fusion))
+
+
+def _check_model_for_session(model, sess: dict, session_id: int) -> None:
+    """``--model`` must be made for the session's joint, side and patient (one line, before any
+    work): a knee's model in a shoulder's report would show another joint's figures."""
+    from calibration.joints import joint_mismatch
+    from models.constraint import loads_constraint
+    from models.onnx_io import load_model
+
+    text = load_model(model).constraint_yaml
+    if not text:
+        return
+    mc = loads_constraint(text, source=f"{model} (embedded constraint)")
+    joint = sess.get("joint") or "shoulder"
+    why = joint_mismatch(mc, for_joint=joint, for_side=sess.get("side"))
+    if why is None and mc.patient is not None and sess.get("pseudonym") not in (None,
+                                                                                 mc.patient):
+        why = f"is for patient {mc.patient!r}, not {sess.get('pseudonym')!r}"
+    if why is not None:
+        raise RigConfigError(f"--model {model}: its constraint {mc.name!r} {why} (session "
+                             f"{session_id} recorded the {sess.get('side') or ''} {joint})"
+                             .replace("  ", " "))
 
 
 def _calibration_rows(cals: list[dict]) -> list[dict]:

@@ -219,3 +219,21 @@ def test_the_report_shows_the_evaluation_stored_with_the_model(recorded, tmp_pat
         other = report_data_for_session(store, sid, eval_n=600, model=tmp_path / "other.onnx")
     assert other.model_metrics["held-out orientations"] == 600
     assert other.model_metrics["evaluation"].startswith("drawn for this report: 600")
+
+
+def test_a_model_for_another_joint_side_or_patient_is_refused(recorded, tmp_path, capsys):
+    """Issue 37: a model bound to another joint, side or patient in a session's report."""
+    from models.constraint import JointConstraint
+
+    for kw, match in (({"joint": "hip"}, "is for the hip, not the shoulder"),
+                      ({"side": "left"}, "is for the left side, not the right"),
+                      ({"patient": "P-7"}, "is for patient 'P-7', not 'P-REPORT'")):
+        c = JointConstraint.cone((1, 0, 0), 50.0, name="other", **kw)
+        dump_constraint(c, tmp_path / "c.yaml")
+        run_train(TrainRequest(tmp_path / "m.onnx", constraint=str(tmp_path / "c.yaml")))
+        with pytest.raises(SystemExit) as info:
+            main(["report", "--db", str(recorded["db"]), "--session", str(recorded["session"]),
+                  "--model", str(tmp_path / "m.onnx"), "--out", str(tmp_path / "r.html")])
+        err = capsys.readouterr().err
+        assert info.value.code == 2 and match in err and err.count("\n") == 1, err
+        assert not (tmp_path / "r.html").exists()
