@@ -569,10 +569,18 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
 
 
 def _open_mirror(spec: str, rig) -> MirrorTargets:
+    driven = rig
     if spec.startswith("mirror:"):
         from rig.devices.config import load_rig_config
 
         rig = load_rig_config(spec[len("mirror:"):])
+        mine, theirs = getattr(driven, "joint", None), rig.joint
+        if mine is not None and (mine.name, mine.side) != (theirs.name, theirs.side):
+            # a hip's orientations are no shoulder's targets; another side's would need
+            # reflecting, which the mirror does not do
+            raise RigConfigError(f"--targets {spec}: rig {rig.name!r} wears its sensors on the "
+                                 f"{theirs.side} {theirs.name}, rig {driven.name!r} drives the "
+                                 f"{mine.side} {mine.name}")
     if rig is None or getattr(rig, "sensors", None) is None:
         name = getattr(rig, "name", "?")
         raise RigConfigError(f"--targets {spec}: rig {name!r} has no sensors to mirror; use "

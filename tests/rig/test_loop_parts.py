@@ -161,6 +161,10 @@ def test_open_targets_forms_and_errors(tmp_path):
         from rig.devices.config import load_rig_config
 
         open_targets("mirror", oracle=oracle, rig=load_rig_config("sim-shoulder"))
+    # issue 37: a leg's sensors are no shoulder's targets (refused before any port opens)
+    with pytest.raises(RigConfigError, match="rig 'sim-leg' wears its sensors on the right "
+                                             "hip, rig 'sim-shoulder' drives the right shoulder"):
+        open_targets("mirror:sim-leg", oracle=oracle, rig=load_rig_config("sim-shoulder"))
 
 
 # --------------------------------------------------------------------------- scripts
