@@ -42,6 +42,7 @@ from rig.demo.pipeline import (
     StageResult,
     _RecordingDisplay,
     _shipped_config,
+    recording_failure,
     report_stage,
     run_stages,
 )
@@ -194,6 +195,8 @@ class _LimbCtx:
                                            f"limb calibration residual {cal.residual_deg:.2f}°"))
         st.verdict = ("PASS" if res.status == "completed" and res.dropped == 0 and cal is not None
                       else "WARN" if res.status == "completed" else "FAIL")
+        if res.status != "completed":
+            st.detail = f"{recording_failure(res)}; {st.detail}"
 
     def boundary(self, st: StageResult) -> None:
         from rig.readback import ChainRequest, run_chain

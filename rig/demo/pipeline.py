@@ -303,12 +303,19 @@ class _RecordingDisplay:
         pass
 
 
+def recording_failure(res) -> str:
+    """Why a recording stage failed, first in its detail: the session's status and the
+    device's error (``device_lost: … no answer to STOP (4 attempts)``)."""
+    return f"session {res.session_id} {res.status}" + (f": {res.error}" if res.error else "")
+
+
 # -- the pipeline --------------------------------------------------------------------------------
 def run_stages(ctx, named, stages: list[StageResult], console, log) -> None:
     """Run ``named`` ((name, method(StageResult)), ...) in order under one progress display,
-    appending each stage's result to ``stages``: a stage that raises is FAIL and the rest are
-    SKIP (the summary is still shown). ``ctx.progress`` / ``ctx.task`` are set for the
-    recording display."""
+    appending each stage's result to ``stages``: a stage that raises or ends FAIL (a recording
+    that lost its device) stops the demo there with its own reason, and the rest are SKIP (the
+    summary is still shown) — a later stage would only blame what the failed one left it.
+    ``ctx.progress`` / ``ctx.task`` are set for the recording display."""
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     with Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
@@ -325,6 +332,8 @@ def run_stages(ctx, named, stages: list[StageResult], console, log) -> None:
             else:
                 try:
                     fn(st)
+                    if st.verdict == "FAIL":  # failed without raising: it ends the run too
+                        failed = name
                 except Exception as err:  # a stage that breaks ends the run, summary still shown
                     st.verdict = "FAIL"
                     done = f"{st.detail}; " if st.detail else ""
@@ -467,6 +476,8 @@ class _Ctx:
                      f"dropped {res.dropped}; {cal}")
         st.verdict = ("PASS" if res.status == "completed" and res.dropped == 0 else
                       "WARN" if res.status == "completed" else "FAIL")
+        if res.status != "completed":
+            st.detail = f"{recording_failure(res)}; {st.detail}"
         return res
 
     def record_imu(self, st: StageResult) -> None:
