@@ -31,6 +31,7 @@ step  what                                        module
 8     what a boundary holds; boundary distance    :mod:`~calibration.boundary.compare`
 all   the orchestrator                            :mod:`~calibration.boundary.extractor`
 1-2,6 a hinge's interval (elbow, knee)            :mod:`~calibration.boundary.hinge`
+joint one joint's extraction (--joint, --chain)   :mod:`~calibration.boundary.joint`
 limb  a chain's joints and their coupling         :mod:`~calibration.boundary.chain`
 ====  ==========================================  ============================================
 

@@ -141,22 +141,20 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
     :class:`~calibration.boundary.BoundaryExtractor` (a ``two-axis`` joint for the wrist and
     the ankle when the recorded twist is narrow enough) — its constraint named
     (:func:`default_name`) and bound to the recording's patient, joint and side."""
-    from calibration.boundary import BoundaryExtractor, HingeExtractor
-    from calibration.joints import JOINTS
+    from calibration.boundary.joint import fit_joint, joint_extractor
     from models.constraint import JointConstraint
 
     prov = dict(data.provenance)
     prov["recording"] = data.facts().as_dict()
     label = name or default_name(data)
-    if data.kind == "hinge":
-        ex = HingeExtractor(JOINTS[data.joint].hinge_axis, limb_axis=data.limb_axis,
-                            name=label)
-    else:
-        bs = {"auto": "auto", "on": True, "off": False}[by_swing]
-        ex = BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=bs,
-                               limb_axis=data.limb_axis, name=label, kind=data.kind)
-    ex.fit(data.q, status=data.status, t=data.t, provenance=prov,
-           slow_error_deg=data.slow_error_deg)
+    bs = {"auto": "auto", "on": True, "off": False}[by_swing]
+    ex = joint_extractor(data.joint, limb_axis=data.limb_axis, alpha_deg=alpha_deg,
+                         max_vertices=max_vertices, by_swing=bs, name=label)
+    # one extraction for a joint alone and a limb's joints (calibration.boundary.joint): a
+    # joint of a whole-limb session reads its measured error as --chain reads it, for the
+    # twist's reach alone (the two agree on every joint the chain does not couple)
+    fit_joint(ex, data.q, status=data.status, t=data.t, provenance=prov,
+              slow_error_deg=data.slow_error_deg, slow_insets=not _of_a_limb(data))
     binding = {"side": side or data.side, "joint": data.joint, "patient": data.patient}
     binding = {k: v for k, v in binding.items() if v}
     if binding:
@@ -169,6 +167,11 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
             d.setdefault("provenance", {}).update(binding)
             ex.constraint_ = JointConstraint.from_dict(d)
     return ex
+
+
+def _of_a_limb(data: JointData) -> bool:
+    """Whether ``data`` is one joint of a whole-limb recording (``ChainData.joint``)."""
+    return data.provenance.get("limb") in ("arm", "leg")
 
 
 def default_name(data: JointData) -> str:
@@ -355,10 +358,17 @@ class ChainResult:
             else:
                 what = (f"{j.constraint.kind}, polygon of {rep.get('vertices', '?')} vertices, "
                         f"twist {rep['twist_deg'][0]:.1f} .. {rep['twist_deg'][1]:.1f} deg")
-            lines.append(f"  {j.name:<11} {what}; {100 * r['inside'][j.name]:.2f} % of the "
-                         "recorded postures inside")
+            inside, held = r["inside"][j.name], r["held"][j.name]
+            lines.append(f"  {j.name:<11} {what}; {100 * inside:.2f} % of the recorded postures "
+                         "inside" + ("" if held == inside else
+                                     f", {100 * held:.2f} % within their measured error"))
         for name, c in r["couplings"].items():
             lines.append(f"  coupling    {name}: {'yes' if c['coupled'] else 'no'}: {c['note']}")
+            if c["coupled"]:  # why `--joint` and `rig rom` on this file may read it otherwise
+                lines.append(f"              (`rig rom` on this file reads the {name} as the "
+                             f"largest over its keyframes, each from the postures at its "
+                             f"{ex.limb_.joints[1].name} angle; `--joint {name}` takes every "
+                             "posture at once: the peaks may differ)")
         lines.append(f"  inside      {100 * r['inside']['limb']:.2f} % of the recorded postures "
                      "inside in every joint")
         return "\n".join(lines)
