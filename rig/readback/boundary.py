@@ -314,6 +314,9 @@ class ChainRequest:
                                      f"{self.fusion!r}")
             if self.store:
                 _check_can_store(self.db)
+            from rig.readback.source import check_session_side
+
+            check_session_side(self.db, self.session_id, self.side)
         else:
             if self.segments is None:
                 raise RigConfigError("--chain needs --segments COL,COL,COL (proximal to distal)")

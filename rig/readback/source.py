@@ -24,6 +24,24 @@ def check_joint(joint: str | None) -> None:
             raise RigConfigError(f"--joint {joint!r}: expected one of {', '.join(JOINTS)}")
 
 
+def check_session_side(db, session_id: int | None, side: str | None) -> None:
+    """``--side`` must be the side the session recorded (one line, before reading its samples):
+    a left side would mirror a right limb's clinical angles."""
+    if side is None or db is None or session_id is None:
+        return
+    from rig.store import open_store
+
+    with open_store(db, create=False) as st:
+        sess = st.get_session(session_id)
+    recorded = sess.get("side")
+    if recorded is not None and recorded != side:
+        from rig.readback.sessions import session_limb
+
+        what = session_limb(sess) or sess.get("joint") or "shoulder"
+        raise RigConfigError(f"--side {side}: session {session_id} recorded the {recorded} "
+                             f"{what}")
+
+
 @dataclass(frozen=True)
 class RecordingSource:
     """A session (``db`` + ``session_id``) or an orientation file (``file`` with ``limb`` and
@@ -73,6 +91,8 @@ class RecordingSource:
             from rig.readback.files import check_columns
 
             check_columns(file, self.reference, self.limb, self.joint, side)
+        else:
+            check_session_side(self.db, self.session_id, side)
 
     @property
     def label(self) -> str:

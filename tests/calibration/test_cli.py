@@ -214,3 +214,25 @@ def test_column_names_of_other_tools_name_a_segment_and_side():
     assert joint_of_columns(None, "ulna_r") is None
     assert columns_mismatch(["s1", "s2"], ["thorax", "upper-arm"], side="left") is None
     assert columns_mismatch(["thorax", "humerus_l"], ["thorax", "upper-arm"], side="left") is None
+
+
+def test_a_side_other_than_the_sessions_is_refused_before_reading(servo_patient, tmp_path,
+                                                                   capsys):
+    """Issue 37: ``--side left`` on a right shoulder's session mirrored its clinical angles."""
+    _, rec = servo_patient
+    db = tmp_path / "s.db"
+    with open_store(db) as st:
+        sid = st.start_session(st.add_patient("P-001"), rig_name="sim-shoulder",
+                               joint="shoulder", side="right")
+        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with st.sample_writer(sid) as w:
+            w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
+        st.end_session(sid, status="completed", meta={})
+    for args in (["boundary", "--db", db, "--session", sid, "--side", "left", "--out",
+                  tmp_path / "c.yaml"],
+                 ["rom", "--db", db, "--session", sid, "--side", "left"],
+                 ["boundary", "--db", db, "--session", sid, "--chain", "arm", "--side", "left",
+                  "--out", tmp_path / "c.yaml"]):
+        code, _, err = run([str(a) for a in args], capsys)
+        assert code == 2 and "--side left: session 1 recorded the right shoulder" in err, err
+    assert not (tmp_path / "c.yaml").exists()
