@@ -69,9 +69,12 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
             gc.collect()
             gc.freeze()
             click.echo(port.path)
+            sp = port.simulated_patient
+            if stop_on_stdin_eof and sp is not None:  # the parent's copy of the patient
+                click.echo(f"{sp.t0!r} {sp.scale!r} {sp.device_t0!r}")
             click.get_text_stream("stdout").flush()
             if stop_on_stdin_eof:
-                threading.Thread(target=_stop_at_eof, daemon=True,
+                threading.Thread(target=_stop_at_eof, args=(port,), daemon=True,
                                  name="stdin-eof").start()
             signal.sigwait(stop)
     finally:
@@ -83,11 +86,13 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
 SIM_RT_PRIORITY = 45
 
 
-def _stop_at_eof() -> None:
-    """Read stdin to its end, then stop the process (SIGTERM to itself: ``sigwait`` takes it)."""
+def _stop_at_eof(port) -> None:
+    """Obey the parent's lines on stdin (:func:`rig.devices._sim_backends.serve_control`) to
+    its end, then stop the process (SIGTERM to itself: ``sigwait`` takes it)."""
+    from rig.devices._sim_backends import serve_control
+
     with contextlib.suppress(OSError, ValueError):
-        while sys.stdin.buffer.read1(4096):
-            pass
+        serve_control(port, sys.stdin.buffer)
     os.kill(os.getpid(), signal.SIGTERM)
 
 
@@ -121,7 +126,11 @@ def servos(url: str, stop_on_stdin_eof: bool, realtime: bool) -> None:
 
 @sim.command("imu", short_help="Simulated IMU (sim://imu-stream?... or sim://bno055?...).")
 @click.argument("url", default="sim://imu-stream")
-def imu(url: str) -> None:
+@click.option("--stop-on-stdin-eof", is_flag=True, hidden=True,
+              help="Stop when stdin closes (a parent process's ``process=on`` port).")
+@click.option("--realtime", is_flag=True, hidden=True,
+              help="SCHED_FIFO when permitted (a parent process's ``process=on`` port).")
+def imu(url: str, stop_on_stdin_eof: bool, realtime: bool) -> None:
     """Simulated IMU: 'sim://imu-stream?...' (the rig stream protocol) or 'sim://bno055?...'
     (a BNO055 UART).
 
@@ -130,4 +139,4 @@ def imu(url: str) -> None:
     board at 100 Hz.
     """
     serve(url, ("imu-stream", "stream", "bno055"), "sim://imu-stream?sensors=4&rate=200",
-          "imu-stream or bno055")
+          "imu-stream or bno055", stop_on_stdin_eof=stop_on_stdin_eof, realtime=realtime)

@@ -26,6 +26,14 @@ limb, unseen by this process. Closing the port stops the child, and so does the 
 (the child stops when its stdin closes). The child runs in
 a session of its own: a Ctrl-C at the terminal reaches the driving process, which still has a
 bus to command its safe state on.
+
+A stream board of its own (``sim://imu-stream?...&process=on``): ``rig sim imu`` in a child
+process likewise (the shipped ``sim-arm`` and ``sim-leg`` rigs: a recorder starved on a busy
+host must not starve its board). The recorder needs the patient, so the port's
+:class:`~rig.devices.ports.SimulatedPatient` is this process's copy of it
+(:func:`rig.sim.imu.stream_patient` of the same string moves alike), on the child's clock origin
+and time scale (its second line); a protocol started on it is sent to the child
+(:class:`_ProtocolSender`, :func:`serve_control`).
 """
 
 from __future__ import annotations
@@ -67,6 +75,17 @@ def open_sim_port(url: str, *, baud: int | None = None,
     device = sim_device_of(url)
     if device.name == "dynamixel":
         return _open_dynamixel(url, baud, device.kind, separate_process)
+    if device.name == "imu-stream":
+        from rig.sim.imu import stream_query
+        from rig.sim.urls import without_keys
+
+        try:
+            q = stream_query(url, (PROCESS_KEY,))
+            if q.flag(PROCESS_KEY, separate_process):
+                return _open_stream_process(q, device.kind)
+        except RigConfigError as err:  # every message names the URL
+            raise RigConfigError(str(err) if url in str(err) else f"{url}: {err}") from err
+        return _open_imu(url, device.start(without_keys(url, PROCESS_KEY)), device.kind)
     return _open_imu(url, device.start(url), device.kind)
 
 
@@ -172,48 +191,57 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
     child_url = without_keys(url, PROCESS_KEY)
     if "baud" not in q and baud is not None:
         child_url = with_keys(child_url, baud=int(baud))
-    root = str(Path(__file__).resolve().parents[2])  # the folder holding the rig package
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        p for p in (root, os.environ.get("PYTHONPATH")) if p))
-    err = tempfile.TemporaryFile()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "rig", "sim", "servos", "--stop-on-stdin-eof", "--realtime",
-         child_url],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, env=env,
-        start_new_session=True)
-    closer = _ChildCloser(proc, err)
-    try:
-        path = _first_line(proc, CHILD_START_S)
-        if not path:
-            proc.wait(timeout=CHILD_START_S)
-            err.seek(0)
-            lines = [ln.strip() for ln in err.read().decode(errors="replace").splitlines()
-                     if ln.strip()]
-            last = lines[-1] if lines else f"exit status {proc.returncode}"
-            raise RigConfigError(f"{url}: the simulator process did not start: "
-                                 f"{last.removeprefix('rig: error: ')}")
-    except BaseException:
-        closer()
-        raise
+    _proc, closer, (path,) = _start_child("servos", url, child_url, 1)
     port = Port(url=url, path=path, simulator=None, kind=kind)
     port.add_closer(closer)
     return port
 
 
-def _first_line(proc: subprocess.Popen, timeout: float) -> str:
-    """The child's first stdout line (its pty path), "" if it ended or said nothing in time."""
+def _start_child(command: str, url: str, child_url: str, n_lines: int):
+    """``rig sim <command>`` serving ``child_url`` in a child process (its own session,
+    ``SCHED_FIFO`` where allowed, stopped when its stdin closes): the process, its closer and
+    the first ``n_lines`` lines it printed (its pty path first)."""
+    root = str(Path(__file__).resolve().parents[2])  # the folder holding the rig package
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    err = tempfile.TemporaryFile()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rig", "sim", command, "--stop-on-stdin-eof", "--realtime",
+         child_url],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, env=env,
+        start_new_session=True)
+    closer = _ChildCloser(proc, err)
+    try:
+        lines = _first_lines(proc, n_lines, CHILD_START_S)
+        if len(lines) < n_lines:
+            proc.wait(timeout=CHILD_START_S)
+            err.seek(0)
+            said = [ln.strip() for ln in err.read().decode(errors="replace").splitlines()
+                    if ln.strip()]
+            last = said[-1] if said else f"exit status {proc.returncode}"
+            raise RigConfigError(f"{url}: the simulator process did not start: "
+                                 f"{last.removeprefix('rig: error: ')}")
+    except BaseException:
+        closer()
+        raise
+    return proc, closer, lines
+
+
+def _first_lines(proc: subprocess.Popen, n: int, timeout: float) -> list[str]:
+    """The child's first ``n`` stdout lines (its pty path first); fewer if it ended or said
+    nothing more in time."""
     fd = proc.stdout.fileno()
     buf = b""
     end = time.monotonic() + timeout
-    while b"\n" not in buf:
+    while buf.count(b"\n") < n:
         left = end - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:
-            return ""
+            break
         chunk = os.read(fd, 4096)
         if not chunk:
-            return ""
+            break
         buf += chunk
-    return buf.split(b"\n", 1)[0].decode().strip()
+    return [ln.decode().strip() for ln in buf.split(b"\n")[:n] if ln.strip()][:n]
 
 
 class _ChildCloser:
@@ -263,6 +291,69 @@ def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
     for k, dxl_id in enumerate(kin.ids):
         bus.set_hand(dxl_id, drive.hand(k))
     return _patient(limb, bus.clock, t0, backdrive=drive)
+
+
+def _open_stream_process(q: Any, kind: str) -> Port:
+    """``rig sim imu`` serving ``q``'s stream board in a child process; the port of its pty,
+    with this process's copy of the patient (:func:`rig.sim.imu.stream_patient` of the same
+    query: the same motion) as the port's simulated patient. The child prints its pty path,
+    then when its patient's time was 0 (host monotonic time, shared by the processes) and how
+    fast that time runs; a protocol started here is sent to the child on its stdin
+    (:func:`serve_control`)."""
+    from rig.sim.imu import stream_patient
+    from rig.sim.urls import without_keys
+
+    url = q.url
+    if q.text("clock") == "manual":
+        raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of a "
+                             f"simulator in its own process")
+    limb = stream_patient(q)  # first: a bad patient fails here, before a child starts
+    proc, closer, (path, timing) = _start_child("imu", url, without_keys(url, PROCESS_KEY), 2)
+    port = Port(url=url, path=path, simulator=None, kind=kind)
+    port.add_closer(closer)
+    try:
+        t0, scale, device_t0 = (float(v) for v in timing.split())
+        send = _ProtocolSender(proc)
+        port.simulated_patient = SimulatedPatient(
+            limb, clock=lambda: (time.monotonic() - t0) * scale, clock_t0=0.0, t0=t0,
+            scale=scale, device_t0=device_t0, protocol_pinned="calibrate" in q,
+            on_protocol=send)
+    except BaseException:
+        port.close()
+        raise
+    return port
+
+
+class _ProtocolSender:
+    """Has the patient of a child simulator perform a calibration protocol: one line on the
+    child's stdin, ``protocol <start_s> <pickled protocol, base64>``."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+
+    def __call__(self, protocol: Any, start_s: float) -> None:
+        import base64
+        import pickle
+
+        blob = base64.b64encode(pickle.dumps(protocol)).decode()
+        self.proc.stdin.write(f"protocol {float(start_s)!r} {blob}\n".encode())
+        self.proc.stdin.flush()
+
+
+def serve_control(port: Port, stream: Any) -> None:
+    """In a child simulator: obey the lines its parent writes on ``stream`` (stdin, binary)
+    until it closes — ``protocol <start_s> <pickled protocol, base64>``: the patient performs
+    it from patient time ``start_s`` (:meth:`SimulatedPatient.start_protocol` in the parent).
+    The parent is the rig's own process (it started this one), so its pickles are trusted."""
+    import base64
+    import pickle
+
+    for line in iter(stream.readline, b""):
+        words = line.split()
+        sp = port.simulated_patient
+        if len(words) == 3 and words[0] == b"protocol" and sp is not None:
+            sp.limb.perform_protocol(pickle.loads(base64.b64decode(words[2])),
+                                     start_s=float(words[1]))
 
 
 def _open_imu(url: str, sim: Any, kind: str) -> Port:

@@ -40,6 +40,10 @@ class SimulatedPatient:
     protocol_pinned : bool
         The port string says whether the patient performs the calibration protocol
         (``calibrate=on|off``): a recorder leaves that as it is.
+    on_protocol : callable, optional
+        ``on_protocol(protocol, start_s)`` after :meth:`start_protocol` changed ``limb``: a
+        board served by another process has the same patient perform it there (``limb`` is
+        then this process's copy of that patient, its ground truth).
 
     Attributes
     ----------
@@ -57,8 +61,10 @@ class SimulatedPatient:
 
     def __init__(self, limb: SimulatedLimb, *, clock: Callable[[], float], clock_t0: float,
                  t0: float, scale: float = 1.0, device_t0: float = 0.0,
-                 backdrive: Any = None, protocol_pinned: bool = False) -> None:
+                 backdrive: Any = None, protocol_pinned: bool = False,
+                 on_protocol: Callable[[Any, float], None] | None = None) -> None:
         self.limb = limb
+        self._on_protocol = on_protocol
         self.t0 = float(t0)
         self.scale = float(scale)
         self.device_t0 = float(device_t0)
@@ -98,7 +104,10 @@ class SimulatedPatient:
         """Have the patient perform ``protocol`` from ``lead_s`` seconds of patient time after
         now (the simulators sample the patient lazily: the change applies from their next
         sample on)."""
-        self.limb.perform_protocol(protocol, start_s=max(0.0, self.now()) + float(lead_s))
+        start_s = max(0.0, self.now()) + float(lead_s)
+        self.limb.perform_protocol(protocol, start_s=start_s)
+        if self._on_protocol is not None:
+            self._on_protocol(protocol, start_s)
 
 
 @dataclass

@@ -25,6 +25,8 @@ Port strings
 ``sim://imu-stream?sensors=2&rate=200&patient=original&seed=1&flow=off`` (or ``sim://stream?...``)
     A simulated multi-IMU board speaking the rig stream protocol
     (:func:`rig.sim.imu.stream_from_url`). Sensor 0 is on the thorax, 1.. on the upper arm.
+    ``process=on`` serves the board from a child process, the port's patient view being this
+    process's copy of the same patient (:mod:`rig.devices._sim_backends`).
 
 Unknown query keys are errors naming the key (one parser for every ``sim://`` string:
 :class:`rig.sim.urls.SimUrl`; the simulated devices: :data:`rig.sim.urls.SIM_DEVICES`). A
@@ -61,9 +63,9 @@ def open_port(url: str, *, baud: int | None = None, separate_process: bool = Fal
         The line speed the host will use (a simulated Dynamixel chain without ``baud=`` in its
         URL runs its servos at this rate).
     separate_process : bool
-        Serve a simulated servo chain from a process of its own unless its URL says
-        ``process=off`` (a real-time loop's bus, as hardware is, outside the host process);
-        nothing changes for hardware and the IMU simulators.
+        Serve a simulated servo chain or stream board from a process of its own unless its
+        URL says ``process=off`` (a real-time loop's bus, as hardware is, outside the host
+        process); nothing changes for hardware and the BNO055 simulator.
 
     Returns
     -------

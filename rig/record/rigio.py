@@ -36,7 +36,8 @@ class OpenRig:
         Entered (its context is held by :attr:`stack`).
     sensors : list of SensorInfo
     simulators : list
-        Simulator objects behind ``sim://`` ports (empty on hardware).
+        Simulator objects behind ``sim://`` ports served in this process (empty on hardware
+        and for a simulator in a process of its own).
     kind : str
         ``"imu"`` or ``"servo"``.
     """
@@ -54,8 +55,12 @@ class OpenRig:
 
     @property
     def simulated(self) -> bool:
-        """Every device is a simulator (calibration steps then advance by themselves)."""
-        return bool(self.simulators)
+        """Every device is a simulator (calibration steps then advance by themselves), in
+        this process or served from one of its own (``process=on``)."""
+        if self.simulators:
+            return True
+        return bool(self.ports) and all(p.is_simulated and p.simulated_patient is not None
+                                        for p in self.ports)
 
     @property
     def simulated_patients(self) -> list:
@@ -166,7 +171,7 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
             sims = []  # a mixed rig counts as hardware: the clinician is prompted
         device_t0 = 0.0
         first = port_list[0].simulated_patient
-        if kind == "imu" and sims and first is not None:
+        if kind == "imu" and all(p.simulated_patient is not None for p in port_list):
             device_t0 = first.device_t0
         return OpenRig(config, source, sensors, sims, kind, stack, port_list, device_t0)
     except BaseException:

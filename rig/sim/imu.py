@@ -55,6 +55,8 @@ __all__ = [
     "StreamImuSimulator",
     "bno055_from_url",
     "stream_from_url",
+    "stream_patient",
+    "stream_query",
 ]
 
 # ---------------------------------------------------------------------------------------------
@@ -756,11 +758,7 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
     RigConfigError
         Not ``sim://imu-stream``, unknown key, bad value (the message names the key).
     """
-    q = SimUrl(url, ("imu-stream", "stream"),
-               (*PATIENT_KEYS, *CHAIN_KEYS, "sensors", "rate", "max_lag", "flow", "protocol"),
-               STREAM_EXAMPLE)
-    sensors_given = "sensors" in q
-    sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
+    q = stream_query(url)
     rate = q.integer("rate", 100, 1, 0xFFFF)
     kwargs: dict[str, object] = {
         "rate_hz": rate,
@@ -772,7 +770,24 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
         "clock": q.clock(),
     }
     if "limb" not in overrides:
-        chain = chain_from_url(q, sensors=sensors if sensors_given else None)
-        kwargs["limb"] = chain if chain is not None else patient_from_url(q, sensors=sensors)
+        kwargs["limb"] = stream_patient(q)
     kwargs.update(overrides)
     return StreamImuSimulator(**kwargs)  # type: ignore[arg-type]
+
+
+def stream_query(url: str, extra_keys: tuple[str, ...] = ()) -> SimUrl:
+    """The checked query of a ``sim://imu-stream`` port string (``extra_keys``: a port
+    backend's own, such as ``process``)."""
+    return SimUrl(url, ("imu-stream", "stream"),
+                  (*PATIENT_KEYS, *CHAIN_KEYS, "sensors", "rate", "max_lag", "flow", "protocol",
+                   *extra_keys), STREAM_EXAMPLE)
+
+
+def stream_patient(q: SimUrl):
+    """The patient a ``sim://imu-stream`` query describes — the simulator's :attr:`limb`: a
+    :class:`~rig.sim.limb.SimulatedChain` (``limb=`` or a limb file) or a
+    :class:`~rig.sim.limb.SimulatedLimb`. Deterministic in the query, so a process that does
+    not serve the board builds the same patient (its ground truth) from the same string."""
+    sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
+    chain = chain_from_url(q, sensors=sensors if "sensors" in q else None)
+    return chain if chain is not None else patient_from_url(q, sensors=sensors)

@@ -892,9 +892,10 @@ def _cli_error(capsys, *args: str) -> str:
 @pytest.mark.parametrize(("url", "key"), BAD_IMU_URLS)
 def test_cli_bad_url_is_the_ports_one_line_error(url, key, capsys):
     """The command takes the port's keys through the port's parser: the same message."""
-    build = stream_from_url if "imu-stream" in url else bno055_from_url
+    from rig.devices.ports import open_port
+
     with pytest.raises(RigConfigError) as port_error:
-        build(url)
+        open_port(url)
     err = _cli_error(capsys, url)
     assert err == f"rig: error: {port_error.value}\n" and key in err
 

@@ -5,10 +5,16 @@ catches up on its grid before the rest of the backlog (one batch of work per ser
 
 Counts of work, never clocks: the running clock here is a :class:`StepClock` the test moves,
 and the command is sent from inside the simulator's own measurement, at a known point.
+
+The limb rigs' boards are served from a process of their own (``process=on``, as hardware is
+outside the host): the recorder's process may be starved, the board is not; the patient's copy
+in the recorder's process (its ground truth, and the calibration protocol it starts) moves as
+the child's does.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import serial
 
 from firmware_protocol.imu import stream as S
@@ -115,3 +121,58 @@ def test_a_command_is_answered_before_the_rest_of_the_backlog():
                          for f in frames[:_ack(frames, 1)])
         assert not sim.streaming
     assert 0 < before_ack <= StreamImuSimulator._BATCH, before_ack  # was ~270
+
+
+# -- a board served from a process of its own --------------------------------------------------
+
+
+def test_the_limb_rigs_boards_are_served_from_their_own_process():
+    """``sim-leg`` / ``sim-arm``: the board runs in a child process (as hardware is outside the
+    host: a busy recorder does not starve it), and the recorder still knows a simulated patient
+    performs the calibration steps (before: the board was a thread of the recorder)."""
+    from rig.record.rigio import load_config, open_rig
+
+    for name in ("sim-leg", "sim-arm"):
+        with open_rig(load_config(name), calibrate=True) as rig:
+            (port,) = rig.ports
+            assert port.simulator is None and port.is_simulated, name
+            assert rig.simulators == [] and rig.simulated, name
+            assert rig.protocol is not None and rig.protocol.limb == name[4:]
+
+
+def test_a_board_in_its_own_process_moves_as_the_patient_copy_here():
+    """The child's patient and this process's copy move alike (ground truth within the
+    protocol's quantisation), the calibration protocol started here included — its time scale
+    and clock origin come from the child."""
+    from calibration.protocol import LimbCalibrationProtocol
+    from models import quaternion as Q
+    from rig.devices.ports import open_port
+    from rig.devices.stream_imu import StreamImu
+    from rig.sim.imu import stream_patient, stream_query
+
+    url = ("sim://imu-stream?sensors=4&limb=arm&seed=5&rate=100&noise=off&flow=on"
+           "&time_scale=10&process=on")
+    with open_port(url) as port:
+        sp = port.simulated_patient
+        assert port.simulator is None and sp.scale == 10.0
+        sp.start_protocol(LimbCalibrationProtocol("arm"), lead_s=0.5)
+        start = sp.limb.protocol_start_s
+        got = []
+        with StreamImu(port, rate_hz=100) as imu:
+            for _ in range(MAX_READS):  # into the shoulder's step, 5 s after the neutral pose
+                got += imu.read(0.5)
+                if got and got[-1].device_t - sp.device_t0 > start + 7.0:
+                    break
+    t = np.array([s.device_t for s in got]) - sp.device_t0
+    q = np.array([s.q for s in got])
+    k = np.array([s.sensor for s in got])
+    keep = t > start + 0.5
+    assert keep.sum() > 400
+
+    def off_deg(limb) -> np.ndarray:
+        truth = limb.truth(t[keep]).sensors[np.arange(keep.sum()), k[keep]]
+        return np.degrees(Q.angle(Q.multiply(q[keep], Q.conjugate(truth))))
+
+    assert off_deg(sp.limb).max() < 0.05
+    free = stream_patient(stream_query(url, ("process",)))  # the same patient, no protocol
+    assert off_deg(free).max() > 5.0
