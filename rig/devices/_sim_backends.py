@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from rig.devices.port import Port, SimulatedPatient
-from rig.errors import RigConfigError, UnreachableError
+from rig.errors import RigConfigError, RigConnectionError, UnreachableError
 
 BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
@@ -313,7 +313,7 @@ def _open_stream_process(q: Any, kind: str) -> Port:
     port.add_closer(closer)
     try:
         t0, scale, device_t0 = (float(v) for v in timing.split())
-        send = _ProtocolSender(proc)
+        send = _ProtocolSender(proc, url)
         port.simulated_patient = SimulatedPatient(
             limb, clock=lambda: (time.monotonic() - t0) * scale, clock_t0=0.0, t0=t0,
             scale=scale, device_t0=device_t0, protocol_pinned="calibrate" in q,
@@ -328,16 +328,20 @@ class _ProtocolSender:
     """Has the patient of a child simulator perform a calibration protocol: one line on the
     child's stdin, ``protocol <start_s> <pickled protocol, base64>``."""
 
-    def __init__(self, proc: subprocess.Popen) -> None:
+    def __init__(self, proc: subprocess.Popen, url: str) -> None:
         self.proc = proc
+        self.url = url
 
     def __call__(self, protocol: Any, start_s: float) -> None:
         import base64
         import pickle
 
         blob = base64.b64encode(pickle.dumps(protocol)).decode()
-        self.proc.stdin.write(f"protocol {float(start_s)!r} {blob}\n".encode())
-        self.proc.stdin.flush()
+        try:
+            self.proc.stdin.write(f"protocol {float(start_s)!r} {blob}\n".encode())
+            self.proc.stdin.flush()
+        except (OSError, ValueError) as err:  # the child ended (or the port was closed)
+            raise RigConnectionError("the simulator process is gone", port=self.url) from err
 
 
 def serve_control(port: Port, stream: Any) -> None:
