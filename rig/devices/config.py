@@ -132,14 +132,15 @@ class RigConfig:
 
     def load_constraint(self):
         """The constraint (:class:`models.constraint.JointConstraint`) or None."""
-        if self.constraint is None:
-            return None
-        from models.constraint import load_constraint
-        from models.shapes import SHAPES, load_shape
+        return None if self.constraint is None else _load_constraint(self.constraint)
 
-        if self.constraint in SHAPES:
-            return load_shape(self.constraint)
-        return load_constraint(self.constraint)
+
+def _load_constraint(constraint: str):
+    """A shipped shape by name, else a constraint file."""
+    from models.constraint import load_constraint
+    from models.shapes import SHAPES, load_shape
+
+    return load_shape(constraint) if constraint in SHAPES else load_constraint(constraint)
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -341,12 +342,10 @@ def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> Non
     """``constraint`` must be limits the rig's joint can have (a shoulder rig refuses a knee's
     file, a hinge's, another side's, a limb file)."""
     from calibration.joints import joint_mismatch
-    from models.constraint import load_constraint
     from models.errors import ModelsError
-    from models.shapes import SHAPES, load_shape
 
     try:
-        c = load_shape(constraint) if constraint in SHAPES else load_constraint(constraint)
+        c = _load_constraint(constraint)
     except ModelsError as err:
         raise ctx.fail("constraint", str(err)) from None
     why = joint_mismatch(c, for_joint=joint.name, for_side=joint.side)
