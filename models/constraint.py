@@ -72,7 +72,7 @@ from models.errors import ConstraintError, GeometryError
 from models.fileio import write_owner_only
 from models.geometry import check_polygon, polygon_area
 from models.jit import njit
-from models.quaternion import LIMB_AXIS
+from models.quaternion import LIMB_AXIS, normalize_rows
 from models.yamlio import safe_dump_yaml, safe_load_yaml
 
 __all__ = [
@@ -829,8 +829,6 @@ def _vector(value: Any, field_name: str, source: str | None) -> np.ndarray:
         raise ConstraintError(f"expected numbers, got {value!r}", field_name, source) from err
     if not np.isfinite(v).all():
         raise ConstraintError(f"has a NaN or infinite component: {value!r}", field_name, source)
-    from models.quaternion import normalize_rows
-
     unit, n = normalize_rows(v[None, :])  # [0, 0, 1e308] keeps its direction (its square overflows)
     if n[0] < 1e-12:
         raise ConstraintError("is a zero vector and has no direction", field_name, source)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from models.quaternion import normalize_rows
 from rig.errors import RigConfigError
 
 __all__ = ["CUT_SHORT", "FUSION_CHOICES", "ChainData", "JointData", "RecordingFacts",
@@ -191,8 +192,6 @@ def parse_axis(text: str | None) -> np.ndarray:
         v = np.array([float(c) for c in text.split(",")])
     except ValueError as err:
         raise RigConfigError(f"--limb-axis: expected x,y,z numbers, got {text!r}") from err
-    from models.quaternion import normalize_rows
-
     if v.shape != (3,) or not np.isfinite(v).all():
         raise RigConfigError(f"--limb-axis: expected a non-zero x,y,z vector, got {text!r}")
     unit, n = normalize_rows(v[None, :])
