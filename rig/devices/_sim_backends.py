@@ -324,21 +324,39 @@ def _open_stream_process(q: Any, kind: str) -> Port:
     return port
 
 
+def _protocol_json(protocol: Any) -> str:
+    """A calibration protocol (a frozen dataclass of numbers and names) as one line of JSON."""
+    import dataclasses
+    import json
+
+    return json.dumps({"kind": type(protocol).__name__, **dataclasses.asdict(protocol)})
+
+
+def _protocol_from_json(text: str) -> Any:
+    """The protocol :func:`_protocol_json` wrote (JSON only: no code crosses the pipe)."""
+    import json
+
+    from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+
+    d = json.loads(text)
+    cls = {c.__name__: c for c in (CalibrationProtocol, LimbCalibrationProtocol)}[d.pop("kind")]
+    if d.get("amplitudes") is not None:  # JSON lists back to the dataclass's tuples
+        d["amplitudes"] = tuple(tuple(a) for a in d["amplitudes"])
+    return cls(**d)
+
+
 class _ProtocolSender:
     """Has the patient of a child simulator perform a calibration protocol: one line on the
-    child's stdin, ``protocol <start_s> <pickled protocol, base64>``."""
+    child's stdin, ``protocol <start_s> <the protocol as JSON>``."""
 
     def __init__(self, proc: subprocess.Popen, url: str) -> None:
         self.proc = proc
         self.url = url
 
     def __call__(self, protocol: Any, start_s: float) -> None:
-        import base64
-        import pickle
-
-        blob = base64.b64encode(pickle.dumps(protocol)).decode()
         try:
-            self.proc.stdin.write(f"protocol {float(start_s)!r} {blob}\n".encode())
+            self.proc.stdin.write(
+                f"protocol {float(start_s)!r} {_protocol_json(protocol)}\n".encode())
             self.proc.stdin.flush()
         except (OSError, ValueError) as err:  # the child ended (or the port was closed)
             raise RigConnectionError("the simulator process is gone", port=self.url) from err
@@ -346,17 +364,13 @@ class _ProtocolSender:
 
 def serve_control(port: Port, stream: Any) -> None:
     """In a child simulator: obey the lines its parent writes on ``stream`` (stdin, binary)
-    until it closes — ``protocol <start_s> <pickled protocol, base64>``: the patient performs
-    it from patient time ``start_s`` (:meth:`SimulatedPatient.start_protocol` in the parent).
-    The parent is the rig's own process (it started this one), so its pickles are trusted."""
-    import base64
-    import pickle
-
+    until it closes — ``protocol <start_s> <the protocol as JSON>``: the patient performs it
+    from patient time ``start_s`` (:meth:`SimulatedPatient.start_protocol` in the parent)."""
     for line in iter(stream.readline, b""):
-        words = line.split()
+        words = line.split(None, 2)
         sp = port.simulated_patient
         if len(words) == 3 and words[0] == b"protocol" and sp is not None:
-            sp.limb.perform_protocol(pickle.loads(base64.b64decode(words[2])),
+            sp.limb.perform_protocol(_protocol_from_json(words[2].decode()),
                                      start_s=float(words[1]))
 
 
