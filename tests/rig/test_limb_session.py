@@ -96,8 +96,10 @@ def test_limb_session_in_the_store(leg_demo):
                                                                    "foot"}
     assert 0.0 <= fused["refit_residual_deg"] < 10.0 and chain.status is None
     # the pelvis's lean during the static pose, measured against its neutral checkpoints
-    # (LimbImuCalibration step 7: the host's fusion puts the four sensors in one world)
-    assert 0.0 < fused["root_lean_deg"] < 10.0
+    # (LimbImuCalibration step 7: the host's fusion puts the four sensors in one world); the
+    # median of the standings, component by component, may be the static pose's own (0.0:
+    # seen once on a loaded machine, where fewer checkpoints were accepted), never None
+    assert fused["root_lean_deg"] is not None and 0.0 <= fused["root_lean_deg"] < 10.0
     device = read_chain(str(leg_demo["db"]), leg_demo["session"], fusion="device")
     assert device.provenance["fusion"]["method"] == "device" and device.status is not None
     # each sensor's heading drift removed there, relative to its proximal neighbour
