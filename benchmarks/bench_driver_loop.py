@@ -1,6 +1,6 @@
 """Driver-layer control cycle against the raw ``dynamixel_sdk`` loop, same run, same simulator.
 
-One *driver* cycle = ``DynamixelChain.read_ticks()`` (one fast sync read of Present Position,
+One *driver* cycle = ``DynamixelBus.read_ticks()`` (one fast sync read of Present Position,
 3 servos) → forward kinematics → closed-form inverse kinematics (solution nearest the present
 position) → ``write_goal_ticks()`` (one sync write), on ``sim://dynamixel`` at Return Delay
 Time 0. The *raw* cycle is ``benchmarks/bench_dxl_loop.py``'s ``run_loop`` (GroupSyncRead +
@@ -27,7 +27,7 @@ import numpy as np
 from common import child_servos
 from common import raw_sync_loop as run_loop
 
-from rig.devices import DynamixelChain, load_rig_config
+from rig.devices import DynamixelBus, load_rig_config
 
 URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0&usb_latency_ms=0"
 
@@ -35,22 +35,22 @@ URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0&usb_latency_
 def driver_loop(port: str, cycles: int) -> tuple[list[float], list[float]]:
     """(cycle times, FK+IK times) in seconds."""
     servos = load_rig_config("sim-shoulder").servos
-    with DynamixelChain(port, servos.chain) as chain:
-        chain.set_torque(False)  # EEPROM (limits) only with torque off
-        chain.configure()
-        chain.set_torque(True)
-        kin = chain.kinematics
+    kin = servos.kinematics()
+    with DynamixelBus(port, servos.bus_servos()) as bus:
+        bus.set_torque(False)  # EEPROM (limits) only with torque off
+        bus.configure()
+        bus.set_torque(True)
         times, kin_times = [], []
         for k in range(cycles):
             t0 = time.perf_counter()
-            ticks = chain.read_ticks()
+            ticks = bus.read_ticks()
             t1 = time.perf_counter()
             q = kin.forward(ticks)
             # a slowly moving target: present orientation turned a little about the limb axis
             goal = kin.inverse(q, ticks)
             goal[2] = 2048 + (k % 200) - 100
             t2 = time.perf_counter()
-            chain.write_goal_ticks(goal)
+            bus.write_goal_ticks(goal)
             times.append(time.perf_counter() - t0)
             kin_times.append(t2 - t1)
         return times, kin_times

@@ -61,7 +61,7 @@ from rig.loop import (
     Supervisor,
     SupervisorConfig,
 )
-from rig.loop.runner import prepare_chain
+from rig.loop.runner import prepare_servo_limb
 from rig.sim.clock import ManualClock
 
 SIM_URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
@@ -88,9 +88,9 @@ def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None
                      warm_up=WARM_UP)
     kw = {} if clock is None else {"clock": clock, "sleep": clock.sleep}
     with open_port(servos.port, baud=servos.baud) as port:
-        chain = prepare_chain(port, servos, oracle)
+        limb = prepare_servo_limb(port, servos, oracle)
         try:
-            loop = EnforcementLoop(chain, model, oracle, targets, cfg, **kw)
+            loop = EnforcementLoop(limb, model, oracle, targets, cfg, **kw)
             loop.setup()
             from rig.loop import realtime
 
@@ -102,7 +102,7 @@ def run_loop(servos, oracle, model, targets, *, rate, duration=None, cycles=None
             finally:
                 restore()
         finally:
-            chain.close()
+            limb.close()
     return summary, loop.telemetry.table()
 
 

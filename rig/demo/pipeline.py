@@ -149,7 +149,7 @@ class DemoResult:
 # -- hardware given on the command line ----------------------------------------------------------
 def check_hardware(dxl_port: str | None, dxl_ids, dxl_baud: int, imu_port: str | None,
                    *, seed: int = 0, echo: Callable[[str], None] = print) -> dict[str, Any]:
-    """Open and exercise the servo chain and IMU given as ports: ping, sync reads, quaternions.
+    """Open and exercise the servo bus and IMU given as ports: ping, sync reads, quaternions.
 
     A wrong port, wrong baud, silent bus or missing ID raises (RigError: one line, exit 2) in
     about a second. Only ports that are given are opened.
@@ -160,22 +160,19 @@ def check_hardware(dxl_port: str | None, dxl_ids, dxl_baud: int, imu_port: str |
     ``imu`` (``chip_id``, ``read_hz``, ``last``).
     """
     from rig.devices.bno055 import Bno055
-    from rig.devices.dynamixel import DynamixelChain
-    from rig.devices.kinematics import ServoJoint
+    from rig.devices.dynamixel import DynamixelBus
 
     out: dict[str, Any] = {}
-    chain = imu = None
+    bus = imu = None
     try:
         if dxl_port is not None:
-            axes = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))
-            joints = [ServoJoint(i, axes[k]) for k, i in enumerate(dxl_ids)]
-            chain = DynamixelChain(dxl_port, joints, baud=dxl_baud)
-            for tip in chain.advice:
+            bus = DynamixelBus(dxl_port, list(dxl_ids), baud=dxl_baud)
+            for tip in bus.advice:
                 echo(f"note: {tip}")
         if imu_port is not None:
             imu = Bno055(imu_port)
-        if chain is not None:
-            out["servos"] = _servo_check(chain, echo)
+        if bus is not None:
+            out["servos"] = _servo_check(bus, echo)
         if imu is not None:
             out["imu"] = _imu_check(imu, echo)
     finally:
@@ -183,21 +180,21 @@ def check_hardware(dxl_port: str | None, dxl_ids, dxl_baud: int, imu_port: str |
             if imu is not None:
                 imu.close()
         finally:
-            if chain is not None:
-                chain.close()
+            if bus is not None:
+                bus.close()
     return out
 
 
-def _servo_check(chain, echo) -> dict:
-    found = {i: info.model_number for i, info in chain.servos.items()}
+def _servo_check(bus, echo) -> dict:
+    found = {i: info.model_number for i, info in bus.found.items()}
     echo("ping: " + ", ".join(f"ID {i} -> {info.model} (firmware {info.firmware})"
-                              for i, info in chain.servos.items()))
+                              for i, info in bus.found.items()))
     n, t0 = 50, time.perf_counter()
     for _ in range(n):
-        ticks = chain.read_ticks()  # raises after its retries: a silent bus is not a success
+        ticks = bus.read_ticks()  # raises after its retries: a silent bus is not a success
     rate = n / (time.perf_counter() - t0)
-    pos = dict(zip(chain.ids, ticks.tolist(), strict=True))
-    echo(f"{n} {'fast ' if chain.fast else ''}sync reads of Present Position ({rate:.0f} Hz); "
+    pos = dict(zip(bus.ids, ticks.tolist(), strict=True))
+    echo(f"{n} {'fast ' if bus.fast else ''}sync reads of Present Position ({rate:.0f} Hz); "
          f"positions {pos} ticks")
     return {"found": found, "sync_read_hz": rate, "positions": pos}
 

@@ -9,7 +9,7 @@ back-driven servo chain alike.
 
 Back-driving (``sim://dynamixel?...&patient=...``): each servo's hand position is a function of
 the simulator's clock, ``ticks_i(t) = IK(limb.joint(t - t0))_i`` with the chain's closed-form
-inverse kinematics (:class:`rig.devices.kinematics.ChainKinematics`), evaluated once per
+inverse kinematics (:class:`rig.devices.kinematics.JointKinematics`), evaluated once per
 millisecond of simulated time and shared by the servos; the IK solution nearest the previous one
 keeps the joint angles continuous. While torque is off, Present Position follows it
 (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`), as a clinician moving a back-drivable limb.

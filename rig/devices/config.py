@@ -38,9 +38,14 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       watchdog_ms: 100                     #   0 (off) or 20..2540 (default 100)
       ik_tolerance_deg: 0.1                #   > 0 (default 0.1)
       latency_ms: null                     #   SDK packet-timeout latency; default: detected
-      chain:                               #   parent -> child, 1..3 joints
+      chain:                               #   the joint's servos, parent -> child, 1..3
         - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
            max_ticks: 4095, name: j1}      #   zero/direction/min/max/name optional
+
+The ``servos`` section describes a servo bus (port, baud, model, registers) and the
+kinematics of the rig's joint above it: ``chain`` lists the joint's servos (read as
+:class:`~rig.devices.kinematics.ServoAxis`, kept under that key so existing files read
+unchanged).
 
 At least one of ``sensors`` / ``servos`` is required.
 """
@@ -58,7 +63,8 @@ import yaml
 
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from models.yamlio import safe_load_yaml
-from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.devices.bus import Servo
+from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.errors import RigConfigError
 
 __all__ = [
@@ -101,8 +107,21 @@ class SensorsConfig:
 
 @dataclass(frozen=True)
 class ServosConfig:
+    """A rig config's ``servos`` section: the servo bus and its joint's servos.
+
+    Attributes
+    ----------
+    port : str
+    axes : tuple of ServoAxis
+        The joint's servos, parent → child (YAML key ``chain``).
+    baud, model, return_delay_us, status_return_level, watchdog_ms, latency_ms
+        The bus's settings (see the module docstring).
+    ik_tolerance_deg : float
+        The joint kinematics' IK tolerance.
+    """
+
     port: str
-    chain: tuple[ServoJoint, ...]
+    axes: tuple[ServoAxis, ...]
     baud: int = 1_000_000
     model: str | None = None
     return_delay_us: int = 0
@@ -113,10 +132,20 @@ class ServosConfig:
 
     @property
     def ids(self) -> tuple[int, ...]:
-        return tuple(j.id for j in self.chain)
+        """The servos' IDs, in tick-vector order."""
+        return tuple(j.id for j in self.axes)
 
-    def kinematics(self) -> ChainKinematics:
-        return ChainKinematics(self.chain, tolerance_deg=self.ik_tolerance_deg)
+    def bus_servos(self) -> tuple[Servo, ...]:
+        """The servos as the bus knows them: ID, name, goal range (no kinematics)."""
+        return tuple(Servo(a.id, a.name, a.min_ticks, a.max_ticks) for a in self.axes)
+
+    def kinematics(self) -> JointKinematics:
+        """The joint's kinematics (its servos' ticks ↔ its orientation)."""
+        return JointKinematics(self.axes, tolerance_deg=self.ik_tolerance_deg)
+
+    def limb_kinematics(self, joint: str = "joint") -> LimbKinematics:
+        """The rig as a limb of one joint named ``joint`` (the bus's tick vector ↔ (1, 4))."""
+        return LimbKinematics([self.kinematics()], [joint])
 
 
 @dataclass(frozen=True)
@@ -245,7 +274,7 @@ def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
     return SensorsConfig(ports, protocol, rate, baud, segments, raw)
 
 
-def _chain_joint(ctx: _Ctx, value: Any, where: str) -> ServoJoint:
+def _servo_axis(ctx: _Ctx, value: Any, where: str) -> ServoAxis:
     d = ctx.mapping(value, where, {"id", "axis"},
                     {"zero_ticks", "direction", "min_ticks", "max_ticks", "name"})
     dxl_id = ctx.integer(d["id"], f"{where}.id", 0, 252)
@@ -264,7 +293,7 @@ def _chain_joint(ctx: _Ctx, value: Any, where: str) -> ServoJoint:
     if not lo <= zero <= hi:
         raise ctx.fail(where, f"need min_ticks <= zero_ticks <= max_ticks, got {lo}, {zero}, {hi}")
     name = ctx.string(d["name"], f"{where}.name") if "name" in d else None
-    return ServoJoint(dxl_id, vec, zero, direction, lo, hi, name)  # type: ignore[arg-type]
+    return ServoAxis(dxl_id, vec, zero, direction, lo, hi, name)  # type: ignore[arg-type]
 
 
 def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
@@ -279,8 +308,8 @@ def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
     chain_raw = d["chain"]
     if not isinstance(chain_raw, list) or not 1 <= len(chain_raw) <= 3:
         raise ctx.fail("servos.chain", "expected a list of 1 to 3 joints (parent -> child)")
-    chain = tuple(_chain_joint(ctx, j, f"servos.chain[{i}]") for i, j in enumerate(chain_raw))
-    ids = [j.id for j in chain]
+    axes = tuple(_servo_axis(ctx, j, f"servos.chain[{i}]") for i, j in enumerate(chain_raw))
+    ids = [j.id for j in axes]
     for i in ids:
         if ids.count(i) > 1:
             raise ctx.fail("servos.chain", f"duplicate ID {i}")
@@ -295,11 +324,11 @@ def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
     tol = ctx.number(d.get("ik_tolerance_deg", 0.1), "servos.ik_tolerance_deg", 0.0)
     lat = d.get("latency_ms")
     latency = None if lat is None else ctx.number(lat, "servos.latency_ms", 0.0)
-    cfg = ServosConfig(port, chain, baud, model, rd, srl, wd, tol, latency)
+    cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency)
     try:
         cfg.kinematics()
     except RigConfigError as err:
-        raise ctx.fail("servos.chain", str(err).removeprefix("servo chain: ")) from None
+        raise ctx.fail("servos.chain", str(err).removeprefix("joint kinematics: ")) from None
     return cfg
 
 

@@ -1,30 +1,33 @@
-"""A chain of Dynamixel X-series servos (Protocol 2.0) over the official ``dynamixel_sdk``.
+"""A bus of Dynamixel X-series servos (Protocol 2.0) over the official ``dynamixel_sdk``.
+
+:class:`DynamixelBus` is a :class:`~rig.devices.bus.ServoBus`: servos by ID and register, no
+kinematics (those sit above it, :mod:`rig.devices.kinematics`).
 
 Instruction packets are built and parsed by the SDK's ``PacketHandler`` (protocol 2.0); this
 module keeps what the SDK's group classes throw away — the **error byte of every status
 packet**, whose bit 7 is the *alert* bit (a hardware error is latched; the instruction still
 ran) — and turns SDK result codes into typed errors (:mod:`rig.errors`).
 
-Per cycle (:meth:`DynamixelChain.read_ticks` / :meth:`DynamixelChain.write_goal_ticks`): one
+Per cycle (:meth:`DynamixelBus.read_ticks` / :meth:`DynamixelBus.write_goal_ticks`): one
 SYNC READ of Present Position (132, 4 bytes) — FAST SYNC READ (one status packet for all
 servos) when every servo's firmware supports it (X-series firmware ≥ 45, e-Manual
 "Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply).
 
-Start-up (:meth:`DynamixelChain.configure`): Operating Mode (11) = position, Return Delay
-Time (9, 2 µs units), Min/Max Position Limit (52/48) from the chain's tick limits — EEPROM, so
+Start-up (:meth:`DynamixelBus.configure`): Operating Mode (11) = position, Return Delay
+Time (9, 2 µs units), Min/Max Position Limit (52/48) from the servos' tick limits — EEPROM, so
 written only while torque is off (refused otherwise) and only when they differ (EEPROM has a
-limited write life) — then Status Return Level (68, RAM). :meth:`DynamixelChain.arm_watchdog`
+limited write life) — then Status Return Level (68, RAM). :meth:`DynamixelBus.arm_watchdog`
 writes Bus Watchdog (98, 20 ms units): with torque on, a servo that hears nothing from the host
 for that long stops and flags ``Bus Watchdog = -1`` (255) until 0 is written.
 
 Hardware errors are events: a status packet with the alert bit marks its servo;
-:meth:`DynamixelChain.poll_alerts` reads Torque Enable (64), Hardware Error Status (70) and Bus
+:meth:`DynamixelBus.poll_alerts` reads Torque Enable (64), Hardware Error Status (70) and Bus
 Watchdog (98) and returns :class:`~rig.errors.HardwareAlert` records with the torque state as
 the servo reports it.
 
 Timeouts: the SDK's packet timeout is ``tx_time × bytes + 2 × LATENCY_TIMER + 2 ms`` with a
 module constant ``LATENCY_TIMER = 16`` measured on ``time.time()``; the port class here uses the
-same formula with a per-chain latency (the adapter's detected USB latency timer, see
+same formula with a per-bus latency (the adapter's detected USB latency timer, see
 :mod:`rig.devices.latency`) and the monotonic clock.
 
 Receiving: the SDK's receive loops (``rxPacket``, ``fastSyncRead``, ``broadcastPing``) call
@@ -55,23 +58,21 @@ from firmware_protocol.dynamixel.control_table import (
     ControlTable,
     load_control_table,
 )
-from rig.devices.base import Device, describe_open_error
+from rig.devices.base import describe_open_error
+from rig.devices.bus import Servo, ServoBus
 from rig.devices.config import ServosConfig
-from rig.devices.kinematics import ChainKinematics, ServoJoint
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
 from rig.devices.ports import Port, open_port
 from rig.errors import (
     HardwareAlert,
-    HardwareAlertError,
     RigConfigError,
     RigConnectionError,
     RigError,
     RigProtocolError,
     RigTimeoutError,
-    UnreachableError,
 )
 
-__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelChain", "ServoInfo", "find_servos",
+__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelBus", "ServoInfo", "find_servos",
            "scan"]
 
 ALERT_BIT = 0x80
@@ -177,18 +178,20 @@ def _ping(port: _SdkPort, ph, dxl_id: int) -> tuple[int, int, int] | None:
     return rx[p0] | rx[p0 + 1] << 8, rx[p0 + 2], error
 
 
-class DynamixelChain(Device):
-    """A 1-3 servo chain on one bus: open, check, read, write, kinematics, alerts.
+class DynamixelBus(ServoBus):
+    """X-series servos on one bus: open, check, read, write, registers, alerts, watchdog.
 
     Parameters
     ----------
     port : str, Port or None
         Port string (``/dev/ttyUSB0``, ``sim://dynamixel?...``) or an opened
-        :class:`~rig.devices.ports.Port`; None takes ``chain.port`` (a :class:`ServosConfig`).
-    chain : ServosConfig or sequence of ServoJoint
-        The joints, parent → child.
+        :class:`~rig.devices.ports.Port`; None takes ``servos.port`` (a :class:`ServosConfig`).
+    servos : ServosConfig or sequence of Servo or int
+        The servos in tick-vector order: a rig config's ``servos`` section (its joint's
+        servos, with the bus settings below) or :class:`~rig.devices.bus.Servo` s / IDs
+        (the settings' defaults).
     baud : int, optional
-        Line speed (default ``chain.baud`` or 1 Mbit/s).
+        Line speed (default ``servos.baud`` or 1 Mbit/s).
     timeout : float, optional
         Seconds per attempt of a transaction (on top of the SDK's packet timeout).
     retries : int
@@ -201,53 +204,55 @@ class DynamixelChain(Device):
 
     Attributes
     ----------
-    ids : tuple of int
-    kinematics : ChainKinematics
-    servos : dict of int to ServoInfo
+    config : ServosConfig or None
+        The rig config section it was opened from.
+    found : dict of int to ServoInfo
         What each servo reported at open.
     fast : bool
         FAST SYNC READ in use.
-    alert_pending : bool
-        A status packet carried the alert bit since the last :meth:`poll_alerts`.
-    advice : list of str
-        One-line hints found at open (e.g. the USB latency timer).
+    model : str or None
+        The model every servo must report (``servos.model``).
+    return_delay_us, status_return_level : int
+        What :meth:`configure` writes.
 
     Raises
     ------
     RigConnectionError
         Port missing / not a serial port; nobody answering (wrong baud?); IDs missing.
     RigConfigError
-        Bad chain, unsupported baud, a servo of another model than ``chain.model``.
+        Unsupported baud, a servo of another model than ``model``.
     """
 
-    kind = "Dynamixel chain"
+    kind = "Dynamixel bus"
+    read_what = "sync read of Present Position"
     default_timeout = 0.1
     default_retries = 2
 
-    def __init__(self, port: str | Port | None, chain: ServosConfig | Sequence[ServoJoint], *,
+    def __init__(self, port: str | Port | None, servos: ServosConfig | Sequence[Servo | int], *,
                  baud: int | None = None, timeout: float | None = None,
                  retries: int | None = None, latency_ms: float | None = None,
                  fast: bool | None = None) -> None:
-        if isinstance(chain, ServosConfig):
-            self.config = chain
-        else:
-            joints = tuple(chain)
-            self.config = ServosConfig(port="" if port is None else str(port), chain=joints)
+        config = servos if isinstance(servos, ServosConfig) else None
+        settings = config if config is not None else ServosConfig  # its defaults
+        self.config = config
         if port is None:
-            port = self.config.port
-        self.kinematics: ChainKinematics = self.config.kinematics()
-        self.ids = self.kinematics.ids
-        self._latency = latency_ms if latency_ms is not None else self.config.latency_ms
+            if config is None:
+                raise RigConfigError("a servo bus needs a port")
+            port = config.port
+        self.model = settings.model
+        self.return_delay_us = settings.return_delay_us
+        self.status_return_level = settings.status_return_level
+        self._latency = latency_ms if latency_ms is not None else settings.latency_ms
         self._fast_wanted = fast
-        baud = int(baud if baud is not None else self.config.baud)
-        self.alert_pending = False
+        baud = int(baud if baud is not None else settings.baud)
         self._alert_ids: set[int] = set()
-        self.advice: list[str] = []
-        super().__init__(port, baud=baud, timeout=timeout, retries=retries)
+        super().__init__(port, config.bus_servos() if config is not None else servos,
+                         baud=baud, timeout=timeout, retries=retries,
+                         watchdog_ms=settings.watchdog_ms)
 
     @classmethod
-    def from_config(cls, config: ServosConfig, **kwargs) -> DynamixelChain:
-        """Open the chain a rig config's ``servos`` section describes."""
+    def from_config(cls, config: ServosConfig, **kwargs) -> DynamixelBus:
+        """Open the bus a rig config's ``servos`` section describes."""
         return cls(None, config, **kwargs)
 
     # -- open / close ---------------------------------------------------------------------
@@ -297,7 +302,7 @@ class DynamixelChain(Device):
         if missing:
             raise RigConnectionError(f"servo ID {missing[0]} did not answer at {self.baud} bit/s",
                                      port=url, actual=sorted(found), expected=list(self.ids))
-        want = self.config.model
+        want = self.model
         if want is not None:
             for info in found.values():
                 if info.model.upper() != want.upper():
@@ -310,17 +315,15 @@ class DynamixelChain(Device):
                 if item not in table or (table[item].address, table[item].size) != \
                         (first[item].address, first[item].size):
                     raise RigConfigError(f"control table of {table.display_name} lacks or moves "
-                                         f"{item!r}; the chain needs X-series servos",
+                                         f"{item!r}; the bus needs X-series servos",
                                          port=url, dxl_id=dxl_id)
-        self.servos = found
+        self.found = found
         self.table: ControlTable = first
         t = first
         self._a_present, self._a_goal = t["Present Position"].address, t["Goal Position"].address
         supported = all(s.firmware >= FAST_SYNC_READ_FIRMWARE for s in found.values())
         self.fast = supported if self._fast_wanted is None else bool(self._fast_wanted)
         self._id_param = list(self.ids)
-        self._lo = self.kinematics.min_ticks.tolist()
-        self._hi = self.kinematics.max_ticks.tolist()
         self._id_index = {i: k for k, i in enumerate(self.ids)}
 
     # -- helpers --------------------------------------------------------------------------
@@ -357,19 +360,7 @@ class DynamixelChain(Device):
                                    port=str(self.port), dxl_id=dxl_id, actual=code)
 
     # -- the cycle ------------------------------------------------------------------------
-    def read_ticks(self) -> np.ndarray:
-        """Present Position of every servo, (n,) int64 ticks, by one (fast) sync read.
-
-        Raises
-        ------
-        RigTimeoutError, RigProtocolError
-            After the retries.
-        RigConnectionError
-            The adapter is gone.
-        """
-        return self.transact(self._read_once, "sync read of Present Position")
-
-    def _read_once(self, deadline: float) -> np.ndarray:
+    def _read_ticks(self, deadline: float) -> np.ndarray:
         data = self.sync_read(self._a_present, 4)
         return np.array([int.from_bytes(data[i], "little", signed=True) for i in self.ids],
                         dtype=np.int64)
@@ -413,30 +404,8 @@ class DynamixelChain(Device):
             out[dxl_id] = bytes(data)
         return out
 
-    def check_goal(self, ticks: Sequence[int]) -> None:
-        """Raise :class:`UnreachableError` if a goal is outside its joint's tick limits."""
-        kin = self.kinematics
-        if len(ticks) != kin.n:
-            raise ValueError(f"expected {kin.n} goal ticks, got {len(ticks)}")
-        for k, t in enumerate(ticks):
-            if not self._lo[k] <= t <= self._hi[k]:
-                raise UnreachableError("goal outside the joint's tick limits", port=str(self.port),
-                                       dxl_id=self.ids[k], actual=int(t),
-                                       expected=f"{kin.min_ticks[k]}..{kin.max_ticks[k]}")
-
-    def write_goal_ticks(self, ticks: Sequence[int]) -> None:
-        """Goal Position of every servo by one SYNC WRITE (no reply, no retry).
-
-        Raises
-        ------
-        UnreachableError
-            A goal outside its joint's ``[min_ticks, max_ticks]``: nothing is sent.
-        RigConnectionError
-            The adapter is gone.
-        """
-        self._check_open()
-        ticks = [int(t) for t in ticks]
-        self.check_goal(ticks)
+    def _write_goal_ticks(self, ticks: list[int]) -> None:
+        """Goal Position of every servo by one SYNC WRITE (no reply, no retry)."""
         param: list[int] = []
         for dxl_id, t in zip(self.ids, ticks, strict=True):
             v = int(t) & 0xFFFFFFFF
@@ -515,47 +484,15 @@ class DynamixelChain(Device):
         return ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], self.baud)
 
     # -- torque, configuration, watchdog --------------------------------------------------
-    def torque(self) -> np.ndarray:
+    def _read_torque(self) -> np.ndarray:
         """Torque Enable as each servo reports it, (n,) bool."""
         a = self.table["Torque Enable"].address
         data = self.transact(lambda d: self.sync_read(a, 1), "sync read of Torque Enable")
         return np.array([bool(data[i][0]) for i in self.ids])
 
-    def set_torque(self, on: bool) -> np.ndarray:
-        """Torque on/off on every servo; returns the state the servos then report.
-
-        Raises
-        ------
-        HardwareAlertError
-            Torque on was asked but a servo in hardware-error shutdown stays off.
-        """
+    def _write_torque(self, on: bool) -> None:
         for dxl_id in self.ids:
             self.write_register(dxl_id, "Torque Enable", 1 if on else 0)
-        state = self.torque()
-        if on and not state.all():
-            alerts = {a.dxl_id: a for a in self.poll_alerts()}
-            off = [i for i, s in zip(self.ids, state, strict=True) if not s]
-            if off[0] in alerts:
-                raise HardwareAlertError(alerts[off[0]])
-            raise RigProtocolError("torque did not come on", port=str(self.port),
-                                   dxl_id=off[0])
-        return state
-
-    def set_position_limits(self, min_ticks, max_ticks) -> None:
-        """Replace every joint's min/max ticks (no bus traffic): the kinematics, the goal check
-        of :meth:`write_goal_ticks` and the next :meth:`configure` use them."""
-        import dataclasses
-
-        lo, hi = np.asarray(min_ticks), np.asarray(max_ticks)
-        if lo.shape != (len(self.ids),) or hi.shape != (len(self.ids),):
-            raise ValueError(f"need {len(self.ids)} min and max ticks, got {lo.shape}, {hi.shape}")
-        joints = tuple(dataclasses.replace(j, min_ticks=int(a), max_ticks=int(b))
-                       for j, a, b in zip(self.config.chain, lo, hi, strict=True))
-        config = dataclasses.replace(self.config, chain=joints)
-        self.kinematics = config.kinematics()  # validates the new limits
-        self.config = config
-        self._lo = self.kinematics.min_ticks.tolist()
-        self._hi = self.kinematics.max_ticks.tolist()
 
     def set_latency(self, latency_ms: float) -> None:
         """Adapter latency (ms) the SDK's packet timeout is computed from, from now on."""
@@ -571,14 +508,14 @@ class DynamixelChain(Device):
             An EEPROM value must change while a servo's torque is on (turn torque off first;
             this method never does that by itself: the limb could fall).
         """
-        cfg, kin = self.config, self.kinematics
-        multi_turn = bool((kin.min_ticks < 0).any() or (kin.max_ticks > 4095).any())
+        lo, hi = self.min_ticks, self.max_ticks
+        multi_turn = bool((lo < 0).any() or (hi > 4095).any())
         for k, dxl_id in enumerate(self.ids):
             want = {"Operating Mode": 4 if multi_turn else 3,
-                    "Return Delay Time": cfg.return_delay_us // 2}
+                    "Return Delay Time": self.return_delay_us // 2}
             if not multi_turn:
-                want["Min Position Limit"] = int(kin.min_ticks[k])
-                want["Max Position Limit"] = int(kin.max_ticks[k])
+                want["Min Position Limit"] = int(lo[k])
+                want["Max Position Limit"] = int(hi[k])
             have = {name: self.read_register(dxl_id, name) for name in want}
             change = {n: v for n, v in want.items() if have[n] != v}
             if change and self.read_register(dxl_id, "Torque Enable"):
@@ -589,13 +526,12 @@ class DynamixelChain(Device):
             for name, value in change.items():
                 self.write_register(dxl_id, name, value)
         for dxl_id in self.ids:
-            self.write_register(dxl_id, "Status Return Level", cfg.status_return_level)
-        self._srl = cfg.status_return_level
+            self.write_register(dxl_id, "Status Return Level", self.status_return_level)
+        self._srl = self.status_return_level
 
-    def arm_watchdog(self, ms: int | None = None) -> int:
-        """Arm the Bus Watchdog on every servo (``ms`` rounded up to 20 ms units; default the
-        config's ``watchdog_ms``; 0 disarms and clears a watchdog error). Returns the ms set."""
-        ms = self.config.watchdog_ms if ms is None else int(ms)
+    def _arm_watchdog(self, ms: int) -> int:
+        """Bus Watchdog on every servo, ``ms`` rounded up to 20 ms units (0 disarms and clears
+        a watchdog error); the ms set."""
         if ms < 0 or ms > 2540:
             raise RigConfigError("Bus Watchdog must be 0..2540 ms", port=str(self.port),
                                  actual=ms)
@@ -606,11 +542,11 @@ class DynamixelChain(Device):
             self.write_register(dxl_id, "Bus Watchdog", units)
         return units * 20
 
-    def poll_alerts(self) -> list[HardwareAlert]:
+    def _poll_alerts(self) -> list[HardwareAlert]:
         """Current hardware alerts (one per servo in error), torque as the servo reports it.
 
         Level-triggered: a servo in error is reported at every poll until it is rebooted
-        (hardware error) or its watchdog is cleared. Clears :attr:`alert_pending`.
+        (hardware error) or its watchdog is cleared.
         """
         t = self.table
         a0 = t["Torque Enable"].address
@@ -629,7 +565,6 @@ class DynamixelChain(Device):
                 alerts.append(HardwareAlert(str(self.port), dxl_id, now, hw, names,
                                             bool(b[0])))
         self._alert_ids.clear()
-        self.alert_pending = False
         return alerts
 
     def reboot(self, dxl_id: int) -> None:
@@ -639,23 +574,6 @@ class DynamixelChain(Device):
         result, _ = self._guard(lambda: self._ph.reboot(port, dxl_id))
         self._result(result, "reboot", dxl_id)
         self._alert_ids.discard(dxl_id)
-
-    # -- kinematics conveniences ----------------------------------------------------------
-    def read_orientation(self) -> np.ndarray:
-        """Forward kinematics of :meth:`read_ticks`: (4,) limb relative to parent."""
-        return self.kinematics.forward(self.read_ticks())
-
-    def write_orientation(self, q: Sequence[float], near_ticks: Sequence[int]) -> np.ndarray:
-        """Inverse kinematics then :meth:`write_goal_ticks`; returns the goal ticks.
-
-        Raises
-        ------
-        UnreachableError
-            Nothing sent.
-        """
-        goal = self.kinematics.inverse(q, near_ticks)
-        self.write_goal_ticks(goal)
-        return goal
 
 
 #: Above this many IDs to try at one baud rate, :func:`scan` sends one broadcast PING first and

@@ -1,9 +1,16 @@
-"""Forward and closed-form inverse kinematics of a 1-3 joint servo chain (a spherical joint).
+"""Joint and limb kinematics: servo ticks ↔ joint orientations, above the servo bus.
 
-Model
------
-Joint ``i`` (parent → child order) turns about a fixed unit axis ``a_i`` expressed in the frame
-of the link before it (joint 1: the parent segment, e.g. the thorax). Its angle is
+Vocabulary (``docs/architecture.md``): the *servo bus* (:mod:`rig.devices.bus`) knows servos by
+ID, name and register — ticks, torque, alerts, watchdog — and no kinematics. Above it,
+:class:`JointKinematics` maps the ticks of one joint's 1-3 servos to the joint's orientation and
+back (FK/IK, tick limits), and :class:`LimbKinematics` holds the joints of a limb in order, each
+with its kinematics, mapping the bus's whole tick vector to ``(J, 4)`` joint orientations (a
+one-joint rig is a limb of one joint).
+
+Model of one joint
+------------------
+Servo ``i`` of a joint (parent → child order) turns about a fixed unit axis ``a_i`` expressed in
+the frame of the link before it (servo 1: the parent segment, e.g. the thorax). Its angle is
 
     θ_i = direction_i · (ticks_i − zero_i) · 2π / 4096                (X-series: 4096 ticks/rev)
 
@@ -17,10 +24,10 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
 -------------------------------------------------------------------------------------------------
 * **Subproblem 1** — the angle θ about ``ω`` taking ``p`` to ``q``: project both on the plane
   ⟂ ω (``p' = p − ω(ω·p)``), ``θ = atan2(ω·(p'×q'), p'·q')``; it exists iff ``ω·p = ω·q``.
-* **1 joint** — ``θ_1 = 2 atan2(v·a_1, w)`` for ``q = (w, v)``.
-* **2 joints** — ``R_1 R_2 a_2 = R_1 a_2 = R a_2`` gives θ_1 by subproblem 1, then
+* **1 servo** — ``θ_1 = 2 atan2(v·a_1, w)`` for ``q = (w, v)``.
+* **2 servos** — ``R_1 R_2 a_2 = R_1 a_2 = R a_2`` gives θ_1 by subproblem 1, then
   ``q_2 = q_1* ⊗ q`` must be a rotation about ``a_2``.
-* **3 joints** — ``R_1 R_2 a_3 = R a_3`` is **subproblem 2**: ``c = R_2 a_3 = R_1ᵀ R a_3``
+* **3 servos** — ``R_1 R_2 a_3 = R a_3`` is **subproblem 2**: ``c = R_2 a_3 = R_1ᵀ R a_3``
   satisfies ``a_1·c = a_1·R a_3`` and ``a_2·c = a_2·a_3``, so with ``k = a_1·a_2``
   ``c = α a_1 + β a_2 ± γ (a_1 × a_2)``, ``α = (a_1·Ra_3 − k a_2·a_3)/(1−k²)``,
   ``β = (a_2·a_3 − k a_1·Ra_3)/(1−k²)``, ``γ² = (1 − α² − β² − 2αβk)/|a_1×a_2|²``: two solutions
@@ -32,20 +39,22 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
 Each θ is then moved by whole turns to the tick value nearest the present position inside
 ``[min_ticks, max_ticks]``, and of the (up to two) solutions the one nearest the present position
 (least squared tick distance) is returned. If no solution lies within the tick limits, or the
-target is off the chain's reachable set by more than ``tolerance_deg`` (1-2 joint chains reach
-only a subset of SO(3)), :class:`~rig.errors.UnreachableError` names the joint, the value and the
-limits — goals are never clipped.
+target is off the joint's reachable set by more than ``tolerance_deg`` (joints of 1-2
+servos reach only a subset of SO(3)), :class:`~rig.errors.UnreachableError` names the servo,
+the value and the limits — goals are never clipped.
 
-The per-sample paths (:meth:`ChainKinematics.forward`, :meth:`ChainKinematics.inverse`) run
+The per-sample paths (:meth:`JointKinematics.forward`, :meth:`JointKinematics.inverse`) run
 in kernels compiled by numba (``_forward_kernel``, ``_ik_kernel``: about 1 µs and 2 µs, where
 the same maths in plain Python took 5 µs and 34 µs on this project's 2-core machine); they are
 the live loop's per-cycle kinematics. The kernels compile on first use (about a second, cached
-on disk after that): :meth:`ChainKinematics.compile` does it before a loop starts.
-:meth:`ChainKinematics.forward_batch` is vectorised for recorded tick series.
+on disk after that): :meth:`JointKinematics.compile` does it before a loop starts.
+:meth:`JointKinematics.forward_batch` is vectorised for recorded tick series.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -53,11 +62,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import qkernels as qk
+from models import quaternion as Q
 from models.jit import njit
 from models.quaternion import normalize_rows
 from rig.errors import RigConfigError, UnreachableError
 
-__all__ = ["RAD_PER_TICK", "TICKS_PER_REV", "ChainKinematics", "ServoJoint"]
+__all__ = ["RAD_PER_TICK", "TICKS_PER_REV", "JointKinematics", "LimbKinematics", "ServoAxis"]
 
 TICKS_PER_REV = 4096
 """Encoder ticks per revolution of an X-series servo (0.088° per tick)."""
@@ -70,8 +80,8 @@ Quat = tuple[float, float, float, float]
 
 
 @dataclass(frozen=True)
-class ServoJoint:
-    """One servo of a chain.
+class ServoAxis:
+    """One servo of a joint: its ID, the axis it turns the joint about, zero, direction, limits.
 
     Attributes
     ----------
@@ -260,77 +270,104 @@ def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
 def _kernel_array(values) -> np.ndarray:
     """``values`` as the kernels take them: a contiguous int64 array as it is (the drivers'
     ticks), anything else as contiguous float64 — two compiled signatures in all, both built
-    by :meth:`ChainKinematics.compile`, so no call inside a control loop compiles."""
+    by :meth:`JointKinematics.compile`, so no call inside a control loop compiles."""
     if (isinstance(values, np.ndarray) and values.dtype in (np.int64, np.float64)
             and values.flags.c_contiguous):
         return values
     return np.ascontiguousarray(values, dtype=np.float64)
 
 
-class ChainKinematics:
-    """Forward and inverse kinematics of a 1-3 joint chain (see the module docstring).
+class JointKinematics:
+    """Forward and inverse kinematics of one joint moved by 1-3 servos (see the module
+    docstring).
 
     Parameters
     ----------
-    joints : sequence of ServoJoint
-        Parent → child order, 1 to 3 joints, distinct IDs, no two consecutive axes parallel.
+    servos : sequence of ServoAxis
+        Parent → child order, 1 to 3 servos, distinct IDs, no two consecutive axes parallel.
     tolerance_deg : float
         Largest distance from the reachable set accepted by :meth:`inverse` (the residual of a
-        3-joint chain with independent axes is round-off).
+        3-servo joint with independent axes is round-off).
 
     Attributes
     ----------
+    servos : tuple of ServoAxis
+    n : int
+        Number of servos.
     ids : tuple of int
     axes : (n, 3) float64
     zero_ticks, min_ticks, max_ticks : (n,) int64
     direction : (n,) float64
     """
 
-    def __init__(self, joints: Sequence[ServoJoint], *, tolerance_deg: float = 0.1) -> None:
-        joints = tuple(joints)
-        if not 1 <= len(joints) <= 3:
-            raise RigConfigError(f"a servo chain has 1 to 3 joints, got {len(joints)}")
-        ids = [j.id for j in joints]
+    def __init__(self, servos: Sequence[ServoAxis], *, tolerance_deg: float = 0.1) -> None:
+        servos = tuple(servos)
+        if not 1 <= len(servos) <= 3:
+            raise RigConfigError(f"a joint has 1 to 3 servos, got {len(servos)}")
+        ids = [j.id for j in servos]
         if len(set(ids)) != len(ids):
             dup = next(i for i in ids if ids.count(i) > 1)
-            raise RigConfigError(f"servo chain: duplicate ID {dup}", actual=ids)
+            raise RigConfigError(f"joint kinematics: duplicate ID {dup}", actual=ids)
         axes = []
-        for j in joints:
+        for j in servos:
             a = np.asarray(j.axis, dtype=np.float64).reshape(1, -1)
             unit, n = normalize_rows(a) if a.shape == (1, 3) and np.isfinite(a).all() \
                 else (a, [0.0])
             if n[0] < 1e-9:
-                raise RigConfigError(f"servo chain: ID {j.id}: axis must be a non-zero 3-vector",
-                                     actual=list(j.axis))
+                raise RigConfigError(f"joint kinematics: ID {j.id}: axis must be a non-zero "
+                                     f"3-vector", actual=list(j.axis))
             axes.append(unit[0])
             if j.direction not in (1, -1):
-                raise RigConfigError(f"servo chain: ID {j.id}: direction must be 1 or -1",
+                raise RigConfigError(f"joint kinematics: ID {j.id}: direction must be 1 or -1",
                                      actual=j.direction)
             if not j.min_ticks <= j.zero_ticks <= j.max_ticks:
-                raise RigConfigError(f"servo chain: ID {j.id}: zero_ticks outside "
+                raise RigConfigError(f"joint kinematics: ID {j.id}: zero_ticks outside "
                                      f"[min_ticks, max_ticks]", actual=j.zero_ticks,
                                      expected=f"{j.min_ticks}..{j.max_ticks}")
         for k in range(1, len(axes)):
             if abs(float(axes[k] @ axes[k - 1])) > 1.0 - 1e-6:
-                raise RigConfigError(f"servo chain: axes of IDs {joints[k - 1].id} and "
-                                     f"{joints[k].id} are parallel (no closed-form IK)")
-        self.joints = joints
-        self.n = len(joints)
+                raise RigConfigError(f"joint kinematics: axes of IDs {servos[k - 1].id} and "
+                                     f"{servos[k].id} are parallel (no closed-form IK)")
+        self.servos = servos
+        self.tolerance_deg = tolerance_deg
+        self.n = len(servos)
         self.ids = tuple(ids)
         self.axes = np.array(axes)
-        self.zero_ticks = np.array([j.zero_ticks for j in joints], dtype=np.int64)
-        self.min_ticks = np.array([j.min_ticks for j in joints], dtype=np.int64)
-        self.max_ticks = np.array([j.max_ticks for j in joints], dtype=np.int64)
-        self.direction = np.array([j.direction for j in joints], dtype=np.float64)
-        self._zero = tuple(float(j.zero_ticks) for j in joints)
-        self._dir = tuple(float(j.direction) for j in joints)
-        self._lo = tuple(float(j.min_ticks) for j in joints)
-        self._hi = tuple(float(j.max_ticks) for j in joints)
+        self.zero_ticks = np.array([j.zero_ticks for j in servos], dtype=np.int64)
+        self.min_ticks = np.array([j.min_ticks for j in servos], dtype=np.int64)
+        self.max_ticks = np.array([j.max_ticks for j in servos], dtype=np.int64)
+        self.direction = np.array([j.direction for j in servos], dtype=np.float64)
+        self._zero = tuple(float(j.zero_ticks) for j in servos)
+        self._dir = tuple(float(j.direction) for j in servos)
+        self._lo = tuple(float(j.min_ticks) for j in servos)
+        self._hi = tuple(float(j.max_ticks) for j in servos)
         self.tolerance = math.radians(tolerance_deg)
         # the compiled kernels' view: contiguous float64 arrays
         self._zero_c = np.array(self._zero)
         self._lo_c = np.array(self._lo)
         self._hi_c = np.array(self._hi)
+
+    def with_limits(self, min_ticks: Sequence[int], max_ticks: Sequence[int]) -> JointKinematics:
+        """The same joint with other tick limits (validated as at construction).
+
+        Parameters
+        ----------
+        min_ticks, max_ticks : (n,) array_like of int
+            Per servo, parent → child.
+
+        Raises
+        ------
+        ValueError
+            Not ``n`` values each.
+        RigConfigError
+            A zero outside its new limits.
+        """
+        lo, hi = np.asarray(min_ticks), np.asarray(max_ticks)
+        if lo.shape != (self.n,) or hi.shape != (self.n,):
+            raise ValueError(f"need {self.n} min and max ticks, got {lo.shape}, {hi.shape}")
+        servos = tuple(dataclasses.replace(s, min_ticks=int(a), max_ticks=int(b))
+                       for s, a, b in zip(self.servos, lo, hi, strict=True))
+        return JointKinematics(servos, tolerance_deg=self.tolerance_deg)
 
     # -- forward --------------------------------------------------------------------------
     def angles(self, ticks: Sequence[float]) -> tuple[float, ...]:
@@ -339,7 +376,8 @@ class ChainKinematics:
                      for t, z, d in zip(ticks, self._zero, self._dir, strict=True))
 
     def forward(self, ticks: Sequence[float]) -> np.ndarray:
-        """Limb orientation relative to the parent, (4,) float64 (w, x, y, z), ``w ≥ 0``.
+        """Joint orientation (child segment relative to the parent), (4,) float64 (w, x, y, z),
+        ``w ≥ 0``.
 
         Parameters
         ----------
@@ -355,7 +393,7 @@ class ChainKinematics:
             raise ValueError(f"ticks must have {self.n} values, got shape {t.shape}")
         return _forward_kernel(self.axes, self._zero_c, self.direction, self.n, t)
 
-    def compile(self) -> ChainKinematics:
+    def compile(self) -> JointKinematics:
         """Compile (or load from numba's on-disk cache) the per-sample kernels now, so the
         first :meth:`forward` or :meth:`inverse` of a running loop does not pay for it."""
         self.forward_one(self._zero_c)
@@ -370,8 +408,6 @@ class ChainKinematics:
 
     def forward_batch(self, ticks: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`forward`: ticks (N, n) → orientations (N, 4), ``w ≥ 0``."""
-        from models import quaternion as Q
-
         t = np.asarray(ticks, dtype=np.float64)
         if t.ndim != 2 or t.shape[1] != self.n:
             raise ValueError(f"ticks must have shape (N, {self.n}), got {t.shape}")
@@ -450,3 +486,126 @@ class ChainKinematics:
             prev = self.inverse_float(qi, prev)
             out[i] = np.rint(prev)
         return out
+
+
+class LimbKinematics:
+    """The joints of a limb in order, each with its :class:`JointKinematics`: the servo bus's
+    whole tick vector ↔ ``(J, 4)`` joint orientations.
+
+    The bus's servos are the joints' servos concatenated, parent → child (joint 1's servos
+    first); joint ``j`` owns the slice :attr:`slices` ``[j]`` of the tick vector. Each joint's
+    orientation is its child segment relative to its parent segment, as its own kinematics
+    gives it: the maths of each joint is :class:`JointKinematics`' unchanged. A one-joint rig is
+    a limb of one joint.
+
+    Parameters
+    ----------
+    joints : sequence of JointKinematics
+        Proximal → distal; no servo ID in two joints.
+    names : sequence of str, optional
+        The joints' names (e.g. ``("shoulder", "elbow")``); default ``joint1``, ``joint2``, ...
+
+    Attributes
+    ----------
+    joints : tuple of JointKinematics
+    names : tuple of str
+    ids : tuple of int
+        Every servo, in tick-vector order.
+    n : int
+        Number of servos.
+    slices : tuple of slice
+        Each joint's part of the tick vector.
+    min_ticks, max_ticks, zero_ticks : (n,) int64
+        Concatenated over the joints.
+
+    Raises
+    ------
+    RigConfigError
+        No joint, a servo ID in two joints, names not one per joint or repeated.
+    """
+
+    def __init__(self, joints: Sequence[JointKinematics],
+                 names: Sequence[str] | None = None) -> None:
+        joints = tuple(joints)
+        if not joints:
+            raise RigConfigError("a limb has at least one joint")
+        names = tuple(f"joint{k + 1}" for k in range(len(joints))) if names is None \
+            else tuple(str(n) for n in names)
+        if len(names) != len(joints) or len(set(names)) != len(names):
+            raise RigConfigError("limb kinematics: one distinct name per joint", actual=names)
+        ids = [i for j in joints for i in j.ids]
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            raise RigConfigError(f"limb kinematics: servo ID {dup} in two joints", actual=ids)
+        self.joints = joints
+        self.names = names
+        self.ids = tuple(ids)
+        self.n = len(ids)
+        starts = np.cumsum([0] + [j.n for j in joints]).tolist()
+        self.slices = tuple(slice(a, b) for a, b in itertools.pairwise(starts))
+        self.min_ticks = np.concatenate([j.min_ticks for j in joints])
+        self.max_ticks = np.concatenate([j.max_ticks for j in joints])
+        self.zero_ticks = np.concatenate([j.zero_ticks for j in joints])
+
+    def __len__(self) -> int:
+        return len(self.joints)
+
+    def joint(self, key: int | str) -> JointKinematics:
+        """One joint's kinematics, by position or name."""
+        return self.joints[self.names.index(key) if isinstance(key, str) else key]
+
+    def split(self, ticks: Sequence[float]) -> list[np.ndarray]:
+        """The tick vector (n,) — or a series (N, n) — cut into each joint's part."""
+        t = np.asarray(ticks)
+        if t.shape[-1] != self.n:
+            raise ValueError(f"ticks must have {self.n} values per row, got shape {t.shape}")
+        return [t[..., s] for s in self.slices]
+
+    def with_limits(self, min_ticks: Sequence[int], max_ticks: Sequence[int]) -> LimbKinematics:
+        """The same limb with other tick limits, (n,) each in tick-vector order
+        (:meth:`JointKinematics.with_limits` per joint)."""
+        lo, hi = np.asarray(min_ticks), np.asarray(max_ticks)
+        if lo.shape != (self.n,) or hi.shape != (self.n,):
+            raise ValueError(f"need {self.n} min and max ticks, got {lo.shape}, {hi.shape}")
+        return LimbKinematics([j.with_limits(lo[s], hi[s]) for j, s in
+                               zip(self.joints, self.slices, strict=True)], self.names)
+
+    def compile(self) -> LimbKinematics:
+        """:meth:`JointKinematics.compile` of every joint."""
+        for j in self.joints:
+            j.compile()
+        return self
+
+    def forward(self, ticks: Sequence[float]) -> np.ndarray:
+        """Joint orientations, (J, 4) float64, each joint's child relative to its parent.
+
+        Parameters
+        ----------
+        ticks : (n,) array_like
+            Present Position of every servo, in tick-vector order.
+        """
+        parts = self.split(ticks)
+        return np.stack([j.forward(t) for j, t in zip(self.joints, parts, strict=True)])
+
+    def forward_batch(self, ticks: np.ndarray) -> np.ndarray:
+        """Vectorised :meth:`forward`: ticks (N, n) → orientations (N, J, 4)."""
+        t = np.asarray(ticks, dtype=np.float64)
+        if t.ndim != 2:
+            raise ValueError(f"ticks must have shape (N, {self.n}), got {t.shape}")
+        parts = self.split(t)
+        return np.stack([j.forward_batch(p) for j, p in zip(self.joints, parts, strict=True)],
+                        axis=1)
+
+    def inverse(self, q: np.ndarray, near_ticks: Sequence[float]) -> np.ndarray:
+        """Goal ticks (n,) int64 for joint orientations ``q`` (J, 4), each joint's solution
+        nearest its part of ``near_ticks`` (:meth:`JointKinematics.inverse`).
+
+        Raises
+        ------
+        UnreachableError
+            A joint's target out of its reach or tick limits; never clipped.
+        """
+        q = np.asarray(q, dtype=np.float64).reshape(len(self.joints), 4)
+        near = self.split(np.asarray(near_ticks, dtype=np.float64))
+        return np.concatenate([j.inverse(qj, nj) for j, qj, nj in
+                               zip(self.joints, q, near, strict=True)])

@@ -7,7 +7,7 @@ timer as ``/sys/bus/usb-serial/devices/<ttyUSBn>/latency_timer`` (ms); 1 ms is t
 
 ``dynamixel_sdk`` has its own constant, ``dynamixel_sdk.port_handler.LATENCY_TIMER`` (16 ms):
 it does **not** change the adapter; it only sets the SDK's packet timeout,
-``tx_time × bytes + 2 × LATENCY_TIMER + 2 ms``. :class:`rig.devices.dynamixel.DynamixelChain`
+``tx_time × bytes + 2 × LATENCY_TIMER + 2 ms``. :class:`rig.devices.dynamixel.DynamixelBus`
 uses that formula with the adapter's detected timer instead (at least 1 ms), so a lost packet
 costs ~4 ms at a 1 ms timer, not 34 ms.
 """

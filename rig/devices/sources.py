@@ -8,13 +8,14 @@ A source is a context manager and an iterator of batches of :class:`OrientationS
 * ``iter(source)`` — ``read`` in a loop, yielding non-empty batches until the source is closed.
 
 A device that vanishes makes ``read`` raise :class:`~rig.errors.RigConnectionError` (a servo
-chain that stops answering too: its timeouts are turned into a connection error there).
+bus that stops answering too: its timeouts are turned into a connection error there).
 
 Implementations
 ---------------
-:class:`ServoChainSource`
-    Forward kinematics of one sync read per period: ``kind="joint"``, ``name`` the rig
-    config's joint name; periods on a drift-free monotonic schedule at ``rate_hz``.
+:class:`ServoLimbSource`
+    Limb kinematics of one read of the servo bus per period: one ``kind="joint"`` sample per
+    joint, ``name`` the joint's (a rig config's joint name); periods on a drift-free monotonic
+    schedule at ``rate_hz``.
 :class:`ImuSetSource`
     A stream-protocol board, or one BNO055 per segment: ``kind="sensor"``, ``name`` the
     segment the sensor is strapped to (the rig config's ``segments``), ``q`` the sensor
@@ -35,8 +36,9 @@ import numpy as np
 
 from rig.devices.bno055 import Bno055
 from rig.devices.config import RigConfig
-from rig.devices.dynamixel import DynamixelChain
+from rig.devices.dynamixel import DynamixelBus
 from rig.devices.ports import Port
+from rig.devices.servo_limb import ServoLimb
 from rig.devices.stream_imu import StreamImu
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
 
@@ -44,7 +46,7 @@ __all__ = [
     "ImuSetSource",
     "OrientationSample",
     "OrientationSource",
-    "ServoChainSource",
+    "ServoLimbSource",
     "open_source",
 ]
 
@@ -129,19 +131,18 @@ class _SourceBase:
                 yield batch
 
 
-class ServoChainSource(_SourceBase):
-    """Joint orientation of a servo chain by forward kinematics, at ``rate_hz``.
+class ServoLimbSource(_SourceBase):
+    """Joint orientations of a servo limb by its kinematics, at ``rate_hz``.
 
     Parameters
     ----------
-    chain : DynamixelChain
-        Opened; closed with the source when ``own`` is true.
-    name : str
-        Joint name in the samples.
+    limb : ServoLimb
+        Opened; closed with the source when ``own`` is true. Its joints' names name the
+        samples.
     rate_hz : float
         Reads per second, on a drift-free schedule (a late read is not made up for).
     own : bool
-        Close the chain with the source.
+        Close the limb with the source.
 
     Attributes
     ----------
@@ -149,12 +150,11 @@ class ServoChainSource(_SourceBase):
         The last ticks read.
     """
 
-    def __init__(self, chain: DynamixelChain, name: str = "joint", *, rate_hz: float = 100.0,
-                 own: bool = True) -> None:
+    def __init__(self, limb: ServoLimb, *, rate_hz: float = 100.0, own: bool = True) -> None:
         if not rate_hz > 0:
             raise RigConfigError(f"rate_hz must be > 0, got {rate_hz}")
-        self.chain = chain
-        self.names = (name,)
+        self.limb = limb
+        self.names = tuple(limb.kinematics.names)
         self.period = 1.0 / float(rate_hz)
         self._own = own
         self._next = time.monotonic()
@@ -165,26 +165,31 @@ class ServoChainSource(_SourceBase):
         return 0  # each read is a request: nothing can be lost in between
 
     def read(self, timeout: float) -> list[OrientationSample]:
-        """One reading if the next period starts within ``timeout`` s, else []."""
+        """One reading (a sample per joint) if the next period starts within ``timeout`` s,
+        else []."""
         nxt = _pace(self._next, self.period, timeout)
         if nxt is None:
             return []
         self._next = nxt
+        bus = self.limb.bus
         try:
-            ticks = self.chain.read_ticks()
+            ticks = bus.read_ticks()
         except (RigTimeoutError, RigProtocolError) as err:
+            # the message's wording is kept (CLI output unchanged)
             raise RigConnectionError(f"the servo chain stopped answering ({err})",
-                                     port=str(self.chain.port)) from err
+                                     port=str(bus.port)) from err
         t = time.monotonic()
         self.ticks = ticks
-        q = self.chain.kinematics.forward(ticks)
-        return [OrientationSample(t, None, self.names[0], "joint", q, 0)]
+        kin = self.limb.kinematics
+        return [OrientationSample(t, None, name, "joint", joint.forward(part), 0)
+                for name, joint, part in zip(self.names, kin.joints, kin.split(ticks),
+                                             strict=True)]
 
     def close(self) -> None:
         if not self._closed:
             self._closed = True
             if self._own:
-                self.chain.close()
+                self.limb.close()
 
 
 class ImuSetSource(_SourceBase):
@@ -260,7 +265,7 @@ class ImuSetSource(_SourceBase):
 
 def open_source(config: RigConfig, which: str | None = None, *,
                 rate_hz: float | None = None, ports: Mapping[str, Port] | None = None
-                ) -> ServoChainSource | ImuSetSource:
+                ) -> ServoLimbSource | ImuSetSource:
     """Open the orientation source a rig config describes.
 
     Parameters
@@ -269,7 +274,7 @@ def open_source(config: RigConfig, which: str | None = None, *,
     which : {"servos", "sensors"}, optional
         Needed when the config has both.
     rate_hz : float, optional
-        Default: ``sensors.rate_hz``, or 100 Hz for a servo chain.
+        Default: ``sensors.rate_hz``, or 100 Hz for servos.
     ports : mapping of str to Port, optional
         Already opened ports by port string (a test keeps the simulator for fault injection).
 
@@ -288,8 +293,9 @@ def open_source(config: RigConfig, which: str | None = None, *,
         if config.servos is None:
             raise RigConfigError(f"rig config {config.name!r} has no servos")
         port = ports.get(config.servos.port, config.servos.port)
-        chain = DynamixelChain(port, config.servos)
-        return ServoChainSource(chain, config.joint.name, rate_hz=rate_hz or 100.0)
+        kinematics = config.servos.limb_kinematics(config.joint.name)
+        limb = ServoLimb(DynamixelBus(port, config.servos), kinematics)
+        return ServoLimbSource(limb, rate_hz=rate_hz or 100.0)
     if which != "sensors":
         raise ValueError(f"which must be 'servos' or 'sensors', got {which!r}")
     sensors = config.sensors

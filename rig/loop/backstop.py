@@ -32,7 +32,7 @@ def position_limits_from_boundary(kinematics, oracle, near_ticks, *, n: int = 60
 
     Parameters
     ----------
-    kinematics : rig.devices.kinematics.ChainKinematics
+    kinematics : rig.devices.kinematics.JointKinematics
     oracle : models.oracle.ConstraintOracle
     near_ticks : (n_joints,) array_like
         Start posture (present position), chooses the IK branch and is always inside.

@@ -42,7 +42,7 @@ class EnforceRequest:
     Attributes
     ----------
     rig, model, targets : str
-        Rig configuration with a servo chain (name or file), the ONNX model, the target source
+        Rig configuration with servos (name or file), the ONNX model, the target source
         (:func:`rig.loop.targets.open_targets`).
     frames : {"rig", "isb"}, optional
         Segment frames of a targets file.
@@ -305,7 +305,7 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
 def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                       hooks: EnforceHooks) -> EnforceResult:
     from rig.devices.ports import open_port
-    from rig.loop.runner import EnforcementLoop, prepare_chain
+    from rig.loop.runner import EnforcementLoop, prepare_servo_limb
     from rig.loop.telemetry import Telemetry
 
     req, cfg, store, binding, src = prep.request, prep.cfg, prep.store, prep.binding, prep.targets
@@ -313,15 +313,15 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     ports = dict(hooks.ports or {})
     own_port = servos.port not in ports
     port = ports.get(servos.port)
-    chain = telemetry = None
+    limb = telemetry = None
     run_id = enforce_session = None
     try:
         with src:
-            if own_port:  # a simulated chain in a process of its own, as hardware is
+            if own_port:  # a simulated bus in a process of its own, as hardware is
                 port = open_port(servos.port, baud=servos.baud,
                                  separate_process=hooks.clock is None)
-            chain = prepare_chain(port, servos, prep.oracle, log=echo)
-            for tip in getattr(chain, "advice", []):
+            limb = prepare_servo_limb(port, servos, prep.oracle, log=echo)
+            for tip in limb.bus.advice:
                 echo(f"note: {tip}")
             # -- the store: an 'enforce' session and a run ------------------------------------
             store_writer = None
@@ -345,7 +345,7 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                                   keep=hooks.keep_telemetry)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}
-            loop = EnforcementLoop(chain, prep.model, prep.oracle, src, cfg, telemetry=telemetry,
+            loop = EnforcementLoop(limb, prep.model, prep.oracle, src, cfg, telemetry=telemetry,
                                    on_cycle=hooks.on_cycle, log=echo, **kw)
             echo(f"enforcing {binding.constraint.name!r} ({binding.source}) on rig "
                  f"{prep.rig_cfg.name!r} at {cfg.rate_hz:g} Hz; model {prep.model.path}; "
@@ -402,8 +402,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     finally:
         if telemetry is not None:
             telemetry.close()
-        if chain is not None:
-            chain.close()
+        if limb is not None:
+            limb.close()
         if own_port and port is not None:
             port.close()
 

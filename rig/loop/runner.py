@@ -27,7 +27,7 @@ Entered at once on: the adapter going away, a hardware alert on any servo of the
 data older than ``stale_present_s`` (reads failing beyond the retries), a failed write, a
 stop request (SIGINT / SIGTERM), a target source whose device vanished (after its target went
 stale: the goal already holds). ``hold`` writes Goal Position = Present Position, within the
-chain's position limits (torque stays on: an arm without brakes would fall); ``torque-off``
+servos' position limits (torque stays on: an arm without brakes would fall); ``torque-off``
 disables torque. If the bus itself is gone nothing can be written: the servos' Bus Watchdog
 (armed at start, ``watchdog_ms``) stops them. The run then ends; the summary says why. A
 normal end (duration reached) leaves the limb holding its last goal with the watchdog armed.
@@ -45,6 +45,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rig.devices.bus import ServoBus
+from rig.devices.config import ServosConfig
+from rig.devices.dynamixel import DynamixelBus
+from rig.devices.servo_limb import ServoLimb
 from rig.errors import (
     RigConnectionError,
     RigError,
@@ -52,6 +56,7 @@ from rig.errors import (
     RigTimeoutError,
     UnreachableError,
 )
+from rig.loop.backstop import describe_limits, position_limits_from_boundary
 from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention, Supervisor, SupervisorConfig
 from rig.loop.telemetry import (
@@ -62,7 +67,7 @@ from rig.loop.telemetry import (
     summarise,
 )
 
-__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_chain"]
+__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_servo_limb"]
 
 SAFE_STATES = ("hold", "torque-off")
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
@@ -129,13 +134,15 @@ class LoopConfig:
 
 
 class EnforcementLoop:
-    """Runs the cycle against a servo chain (see the module docstring).
+    """Runs the cycle against a servo limb of one joint (see the module docstring).
 
     Parameters
     ----------
-    chain : rig.devices.dynamixel.DynamixelChain
-        Opened. Used: ``read_ticks``, ``write_goal_ticks``, ``set_torque``, ``kinematics``,
-        ``poll_alerts``, ``arm_watchdog``, ``configure`` / ``set_position_limits``.
+    limb : rig.devices.servo_limb.ServoLimb
+        Opened; one joint (the enforced constraint's). Its bus
+        (:class:`~rig.devices.bus.ServoBus`: ``read_ticks``, ``write_goal_ticks``,
+        ``set_torque``, ``alert_pending`` / ``poll_alerts``, ``arm_watchdog``) and its joint's
+        kinematics; its ``backstop`` is reported.
     model : models.onnx_io.CorrectionModel or None
         The learned correction (None: targets go to the supervisor uncorrected).
     oracle : models.oracle.ConstraintOracle
@@ -158,10 +165,14 @@ class EnforcementLoop:
         After :meth:`run`.
     """
 
-    def __init__(self, chain, model, oracle, targets, config: LoopConfig | None = None, *,
-                 clock=time.monotonic, sleep=time.sleep, telemetry: Telemetry | None = None,
-                 on_cycle=None, log=None):
-        self.chain = chain
+    def __init__(self, limb: ServoLimb, model, oracle, targets,
+                 config: LoopConfig | None = None, *, clock=time.monotonic, sleep=time.sleep,
+                 telemetry: Telemetry | None = None, on_cycle=None, log=None):
+        if len(limb.kinematics) != 1:
+            raise ValueError(f"the loop enforces one joint's constraint; the servo limb has "
+                             f"{len(limb.kinematics)} joints")
+        self.limb = limb
+        self.bus = limb.bus
         self.model = model
         self.oracle = oracle
         self.targets = targets
@@ -178,7 +189,7 @@ class EnforcementLoop:
         t_compile = time.perf_counter()
         self.supervisor = Supervisor(oracle, self.config.supervisor,
                                      period_s=self.scheduler.period)
-        self.kin = chain.kinematics.compile()
+        self.kin = limb.kinematics.joint(0).compile()
         t_compile = time.perf_counter() - t_compile
         if t_compile > 1.0:
             self.log(f"note: compiled the loop's kernels in {t_compile:.1f} s (numba; kept in "
@@ -193,7 +204,7 @@ class EnforcementLoop:
         self.safe_state_cycle: int | None = None
         self.end_reason = ""
         self.watchdog_ms = 0
-        self.limits: tuple[np.ndarray, np.ndarray] | None = getattr(chain, "backstop", None)
+        self.limits: tuple[np.ndarray, np.ndarray] | None = limb.backstop
         self.fault_counts: Counter = Counter()
         self.intervention_bits: Counter = Counter()
         self.max_violation = 0.0
@@ -208,7 +219,7 @@ class EnforcementLoop:
         """Torque on, arm the Bus Watchdog, read the start posture, start the supervisor.
 
         The registers (return delay, status return level, position limits from the boundary)
-        are written before, by :func:`prepare_chain`, with torque off.
+        are written before, by :func:`prepare_servo_limb`, with torque off.
 
         Raises
         ------
@@ -216,13 +227,13 @@ class EnforcementLoop:
             The bus does not answer, or a servo is in hardware-error shutdown
             (:class:`~rig.errors.HardwareAlertError`), before any motion.
         """
-        chain = self.chain
-        _patiently(lambda: chain.set_torque(True))
+        bus = self.bus
+        _patiently(lambda: bus.set_torque(True))
         wd = self.config.watchdog_ms
         if wd is None:
-            wd = getattr(getattr(chain, "config", None), "watchdog_ms", 0)
-        self.watchdog_ms = _patiently(lambda: chain.arm_watchdog(int(wd))) if wd else 0
-        ticks = _read_retrying(chain)
+            wd = bus.watchdog_ms
+        self.watchdog_ms = _patiently(lambda: bus.arm_watchdog(int(wd))) if wd else 0
+        ticks = _read_retrying(bus)
         self._present_ticks = ticks
         self._goal_ticks = ticks.copy()
         present = self.kin.forward(ticks)
@@ -244,21 +255,20 @@ class EnforcementLoop:
         self.safe_state_entries += 1
         self.safe_state_reason = reason
         self.safe_state_cycle = cycle
-        chain = self.chain
-        if hasattr(chain, "retries"):
-            chain.retries = self._driver_retries  # the safe state may take its time
+        bus = self.bus
+        bus.retries = self._driver_retries  # the safe state may take its time
         try:
             if self.config.safe_state == "torque-off":
-                chain.set_torque(False)
+                bus.set_torque(False)
             else:
                 try:
-                    ticks = np.asarray(chain.read_ticks(), dtype=np.int64)
+                    ticks = np.asarray(bus.read_ticks(), dtype=np.int64)
                 except (RigTimeoutError, RigProtocolError):
                     ticks = self._present_ticks
                 # a servo can stand a tick or two past its limits (tracking, a push); holding it
-                # there would be a goal the chain refuses, so hold it at the nearest limit
+                # there would be a goal the bus refuses, so hold it at the nearest limit
                 ticks = np.clip(ticks, self.kin.min_ticks, self.kin.max_ticks)
-                chain.write_goal_ticks(ticks)
+                bus.write_goal_ticks(ticks)
                 self._goal_ticks = ticks
         except RigError as err:
             self.safe_state_note = (f"could not command the safe state ({err}); the servos' "
@@ -278,15 +288,14 @@ class EnforcementLoop:
         if not self._setup_done:
             self.setup()
         cfg = self.config
-        sched, sup, kin, chain = self.scheduler, self.supervisor, self.kin, self.chain
+        sched, sup, kin, bus = self.scheduler, self.supervisor, self.kin, self.bus
         model, tel, targets, clock = self.model, self.telemetry, self.targets, self.clock
         duration = cfg.duration_s
         if duration is None and getattr(targets, "duration_s", None) is not None:
             duration = targets.duration_s + cfg.settle_s
         self.end_reason = "completed"
-        self._driver_retries = getattr(chain, "retries", 0)
-        if hasattr(chain, "retries"):
-            chain.retries = 0  # the loop retries, within the cycle budget
+        self._driver_retries = bus.retries
+        bus.retries = 0  # the loop retries, within the cycle budget
         old_switch = sys.getswitchinterval()
         sys.setswitchinterval(min(old_switch, cfg.switch_interval_s))
         # everything alive now (numpy, onnxruntime, the SDK, ...) leaves the cyclic garbage
@@ -298,17 +307,16 @@ class EnforcementLoop:
         targets.start(t0)
         sup.reset(t0, self._present)
         try:
-            self._cycles(sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0)
+            self._cycles(sched, sup, kin, bus, model, tel, targets, duration, max_cycles, t0)
         finally:
             gc.unfreeze()
             sys.setswitchinterval(old_switch)
-            if hasattr(chain, "retries"):
-                chain.retries = self._driver_retries
+            bus.retries = self._driver_retries
         t_end = clock() - t0
         self.summary = self._summary(t_end if t_end > 0 else tel.rows * sched.period)
         return self.summary
 
-    def _cycles(self, sched, sup, kin, chain, model, tel, targets, duration, max_cycles, t0):
+    def _cycles(self, sched, sup, kin, bus, model, tel, targets, duration, max_cycles, t0):
         cfg = self.config
         perf = time.perf_counter
         clock = self.clock
@@ -319,8 +327,6 @@ class EnforcementLoop:
         commanded = self._commanded
         fc = self.fault_counts
         ib = self.intervention_bits
-        alerts_fn = getattr(chain, "poll_alerts", None)
-        has_flag = hasattr(chain, "alert_pending")
         max_viol = 0.0
         k = -1
         warm = self._warm if cfg.warm_up else None
@@ -368,7 +374,7 @@ class EnforcementLoop:
             lost = False
             for attempt in range(read_attempts):
                 try:
-                    ticks = chain.read_ticks()
+                    ticks = bus.read_ticks()
                     fresh = True
                     break
                 except RigTimeoutError:
@@ -393,9 +399,9 @@ class EnforcementLoop:
             reason = None
             if lost:
                 reason = "the bus adapter went away"
-            elif alerts_fn is not None and (not has_flag or chain.alert_pending):
+            elif bus.alert_pending:
                 try:
-                    alerts = alerts_fn()
+                    alerts = bus.poll_alerts()
                 except RigConnectionError:
                     alerts, reason = (), "the bus adapter went away"
                     faults |= Fault.CONNECTION_LOST
@@ -426,7 +432,7 @@ class EnforcementLoop:
             cw = perf()
             if reason is None:
                 try:
-                    chain.write_goal_ticks(self._goal_ticks)
+                    bus.write_goal_ticks(self._goal_ticks)
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST
                     reason = "the bus adapter went away"
@@ -535,7 +541,7 @@ class EnforcementLoop:
 
 def _patiently(fn, attempts: int = 5):
     """``fn()`` again after a timeout or a garbled answer (idempotent start-up steps: the
-    loop's chain has cycle-sized timeouts that a loaded host can miss)."""
+    loop's bus has cycle-sized timeouts that a loaded host can miss)."""
     for k in range(attempts):
         try:
             return fn()
@@ -545,40 +551,43 @@ def _patiently(fn, attempts: int = 5):
     raise AssertionError("unreachable")
 
 
-def _read_retrying(chain, attempts: int = 5) -> np.ndarray:
-    return np.asarray(_patiently(chain.read_ticks, attempts), dtype=np.int64)
+def _read_retrying(bus: ServoBus, attempts: int = 5) -> np.ndarray:
+    return np.asarray(_patiently(bus.read_ticks, attempts), dtype=np.int64)
 
 
-def _open_chain(cls, port, servos, latency_ms, attempts: int = 3):
-    """Open the chain; a servo that missed its PINGs (a loaded host) is asked again, twice."""
+def _open_bus(port, servos, latency_ms, attempts: int = 3) -> DynamixelBus:
+    """Open the bus; a servo that missed its PINGs (a loaded host) is asked again, twice."""
     for k in range(attempts):
         try:
-            return cls(port, servos, latency_ms=latency_ms)
+            return DynamixelBus(port, servos, latency_ms=latency_ms)
         except RigConnectionError as err:
             if k + 1 == attempts or "did not answer" not in str(err):
                 raise
     raise AssertionError("unreachable")
 
 
-#: SDK latency (ms) of the loop's chain on a simulator: packet timeout 2 × 4 + 2 = 10 ms, so a
+#: SDK latency (ms) of the loop's bus on a simulator: packet timeout 2 × 4 + 2 = 10 ms, so a
 #: lost reply costs two cycles at 200 Hz, not the ~100 ms the driver allows for opening.
 SIM_LOOP_LATENCY_MS = 4.0
 
 
-def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_deg: float = 5.0,
-                  latency_ms: float | None = None, log=None):
-    """Open a servo chain for the loop and write its start-up registers.
+def prepare_servo_limb(port, servos: ServosConfig, oracle=None, *, backstop: bool = True,
+                       margin_deg: float = 5.0, latency_ms: float | None = None,
+                       log=None) -> ServoLimb:
+    """Open a rig's servos for the loop — its bus and its joint's kinematics — and write their
+    start-up registers.
 
-    1. Open :class:`rig.devices.dynamixel.DynamixelChain` on the opened ``port`` with the
+    1. Open :class:`rig.devices.dynamixel.DynamixelBus` on the opened ``port`` with the
        driver's own (generous) timeouts; read torque and the start posture.
     2. With ``backstop`` and torque off: the position limits of
-       :func:`rig.loop.backstop.position_limits_from_boundary` (widened to contain each joint's
-       zero) replace the configured ones; :meth:`~DynamixelChain.configure` writes them to the
-       servos' Min/Max Position Limit registers with the other start-up registers. EEPROM is
+       :func:`rig.loop.backstop.position_limits_from_boundary` (widened to contain each servo's
+       zero) replace the configured ones, in the kinematics and on the bus;
+       :meth:`~rig.devices.dynamixel.DynamixelBus.configure` writes them to the servos'
+       Min/Max Position Limit registers with the other start-up registers. EEPROM is
        written only with torque off: if a servo's torque is already on (a limb holding), the
        registers are left as they are and a line is logged (the supervisor stays the primary
        limit).
-    3. Set the loop's packet timeout on the open chain: ``latency_ms``, else the rig
+    3. Set the loop's packet timeout on the open bus: ``latency_ms``, else the rig
        config's ``latency_ms``, else :data:`SIM_LOOP_LATENCY_MS` on a simulator and the
        driver's default (the adapter's detected latency timer) on hardware. The loop turns the
        driver's retries off while it runs (it retries within its cycle budget).
@@ -593,40 +602,38 @@ def prepare_chain(port, servos, oracle=None, *, backstop: bool = True, margin_de
 
     Returns
     -------
-    chain : DynamixelChain
-        With ``chain.backstop = (min_ticks, max_ticks)`` or None.
+    ServoLimb
+        A limb of one joint, with ``backstop = (min_ticks, max_ticks)`` or None.
     """
-    from rig.devices.dynamixel import DynamixelChain
-
     log = log or (lambda msg: None)
     if latency_ms is None:
         latency_ms = servos.latency_ms
     if latency_ms is None and port.is_simulated:
         latency_ms = SIM_LOOP_LATENCY_MS
-    chain = _open_chain(DynamixelChain, port, servos, servos.latency_ms)
+    kinematics = servos.limb_kinematics()
+    limb = ServoLimb(_open_bus(port, servos, servos.latency_ms), kinematics)
+    bus = limb.bus
     limits = None
     try:
-        torque_on = bool(np.asarray(chain.torque()).any())
+        torque_on = bool(np.asarray(bus.torque()).any())
         if torque_on:
             log("servo torque is already on: position-limit registers left as they are "
                 "(turn torque off to let the loop write the boundary's backstop)")
         elif backstop and oracle is not None:
-            from rig.loop.backstop import describe_limits, position_limits_from_boundary
-
-            ticks = _read_retrying(chain)
-            kin = chain.kinematics
+            ticks = _read_retrying(bus)
+            kin = limb.kinematics.joint(0)
             lo, hi = position_limits_from_boundary(kin, oracle, ticks, margin_deg=margin_deg)
             lo = np.minimum(lo, kin.zero_ticks)
             hi = np.maximum(hi, kin.zero_ticks)
-            chain.set_position_limits(lo, hi)
+            limb.set_position_limits(lo, hi)
             limits = (lo, hi)
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
         if not torque_on:
-            chain.configure()
+            bus.configure()
         if latency_ms is not None:
-            chain.set_latency(latency_ms)
+            bus.set_latency(latency_ms)
     except BaseException:
-        chain.close()
+        limb.close()
         raise
-    chain.backstop = limits
-    return chain
+    limb.backstop = limits
+    return limb

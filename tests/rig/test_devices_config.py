@@ -43,7 +43,7 @@ def parse(d):
 def test_minimal_config_gets_defaults():
     cfg = parse(base())
     assert cfg.servos.baud == 1_000_000 and cfg.servos.watchdog_ms == 100
-    assert cfg.servos.chain[0].zero_ticks == 2048 and cfg.sensors.protocol == "stream"
+    assert cfg.servos.axes[0].zero_ticks == 2048 and cfg.sensors.protocol == "stream"
     assert cfg.sensors.raw is False
 
 

@@ -1,7 +1,7 @@
-"""DynamixelChain through the real dynamixel_sdk: the same bodies on sim:// and on hardware.
+"""DynamixelBus (a servo bus) through the real dynamixel_sdk: the same bodies on sim:// and on hardware.
 
 ``RIG_DXL_PORT=/dev/ttyUSB0`` (with ``RIG_DXL_IDS=1,2,3`` and ``RIG_DXL_BAUD``) runs the
-``bus`` tests on a real chain too; they only read (torque is never enabled on hardware).
+``bus`` tests on real servos too; they only read (torque is never enabled on hardware).
 Fault-injection tests need the simulator and run on it only.
 """
 
@@ -12,7 +12,15 @@ import os
 import numpy as np
 import pytest
 
-from rig.devices import DynamixelChain, ServoJoint, open_port, scan
+from rig.devices import (
+    DynamixelBus,
+    JointKinematics,
+    Servo,
+    ServoAxis,
+    ServoLimb,
+    open_port,
+    scan,
+)
 from rig.errors import (
     HardwareAlertError,
     RigConnectionError,
@@ -24,8 +32,14 @@ from rig.errors import (
 AXES = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]
 
 
-def joints(ids, lo=0, hi=4095):
-    return [ServoJoint(i, AXES[k], min_ticks=lo, max_ticks=hi) for k, i in enumerate(ids)]
+def servos(ids, lo=0, hi=4095):
+    return [Servo(i, min_ticks=lo, max_ticks=hi) for i in ids]
+
+
+def joint(ids, lo=0, hi=4095):
+    """The kinematics of a joint moved by these servos (about Z, Y', X'')."""
+    return JointKinematics([ServoAxis(i, AXES[k], min_ticks=lo, max_ticks=hi)
+                            for k, i in enumerate(ids)])
 
 
 BACKENDS = [pytest.param("sim", id="sim"),
@@ -52,24 +66,24 @@ def sim():
 # -- the same bodies on the simulator and on hardware ------------------------------------------
 def test_open_reports_what_answered(bus):
     port, ids, baud = bus
-    with DynamixelChain(port, joints(ids), baud=baud) as chain:
-        assert sorted(chain.servos) == sorted(ids)
-        for info in chain.servos.values():
+    with DynamixelBus(port, servos(ids), baud=baud) as dxl:
+        assert sorted(dxl.found) == sorted(ids)
+        for info in dxl.found.values():
             assert info.model.startswith(("XM", "XL", "XC", "XH", "XW", "XD"))
             assert info.baud == baud
-        assert chain.ping(ids[0]).model_number == chain.servos[ids[0]].model_number
+        assert dxl.ping(ids[0]).model_number == dxl.found[ids[0]].model_number
 
 
 @pytest.mark.parametrize("fast", [False, True])
 def test_sync_read_matches_single_reads(bus, fast):
     port, ids, baud = bus
-    with DynamixelChain(port, joints(ids), baud=baud, fast=fast) as chain:
-        ticks = chain.read_ticks()
+    with DynamixelBus(port, servos(ids), baud=baud, fast=fast) as dxl:
+        ticks = dxl.read_ticks()
         assert ticks.shape == (len(ids),) and ticks.dtype == np.int64
-        single = [chain.read_register(i, "Present Position") for i in ids]
+        single = [dxl.read_register(i, "Present Position") for i in ids]
         assert np.abs(ticks - single).max() < 50  # the limb may be moving (by hand)
-        q = chain.read_orientation()
-        assert np.linalg.norm(q) == pytest.approx(1.0)
+        q = ServoLimb(dxl, joint(ids)).read_orientations()
+        assert q.shape == (1, 4) and np.linalg.norm(q) == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("fast", [False, True])
@@ -80,24 +94,24 @@ def test_the_receive_waits_for_bytes_instead_of_spinning(bus, fast):
     port, ids, baud = bus
     slow = port if isinstance(port, str) else \
         "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=500"
-    with DynamixelChain(slow, joints(ids), baud=baud, fast=fast) as chain:
-        sdk_port = chain._sdk_port
+    with DynamixelBus(slow, servos(ids), baud=baud, fast=fast) as dxl:
+        sdk_port = dxl._sdk_port
         calls = []
         read = sdk_port.readPort
         sdk_port.readPort = lambda n: calls.append(n) or read(n)
         for _ in range(20):
-            chain.read_ticks()
+            dxl.read_ticks()
     packets = 20 * (1 if fast else len(ids))
     assert len(calls) <= 4 * packets, len(calls) / packets  # busy polling: ~300 per packet
 
 
 def test_bulk_read_and_torque_state(bus):
     port, ids, baud = bus
-    with DynamixelChain(port, joints(ids), baud=baud) as chain:
-        data = chain.bulk_read({i: (chain.table["Firmware Version"].address, 1) for i in ids})
+    with DynamixelBus(port, servos(ids), baud=baud) as dxl:
+        data = dxl.bulk_read({i: (dxl.table["Firmware Version"].address, 1) for i in ids})
         assert {i: d[0] for i, d in data.items()} == {i: s.firmware
-                                                      for i, s in chain.servos.items()}
-        assert chain.torque().dtype == bool
+                                                      for i, s in dxl.found.items()}
+        assert dxl.torque().dtype == bool
 
 
 def test_scan_finds_the_chain(bus):
@@ -110,113 +124,114 @@ def test_scan_finds_the_chain(bus):
 def test_wrong_baud_is_nobody_answering():
     with open_port("sim://dynamixel?ids=1,2&baud=57600") as port:
         with pytest.raises(RigConnectionError, match="no servo answered at 1000000") as info:
-            DynamixelChain(port, joints([1, 2]), baud=1_000_000)
+            DynamixelBus(port, servos([1, 2]), baud=1_000_000)
         assert info.value.expected == [1, 2] and info.value.actual == []
         assert not port.simulator.closed  # a Port passed in is the caller's to close
 
 
 def test_missing_id_is_named(sim):
     with pytest.raises(RigConnectionError, match="servo ID 4 did not answer"):
-        DynamixelChain(sim, joints([1, 4]))
+        DynamixelBus(sim, servos([1, 4]))
 
 
 def test_wrong_model_is_named(sim):
     from rig.devices.config import ServosConfig
 
-    cfg = ServosConfig(port="", chain=tuple(joints([1])), model="XL430-W250")
+    cfg = ServosConfig(port="", axes=tuple(joint([1]).servos), model="XL430-W250")
     with pytest.raises(RigError, match="XL430-W250"):
-        DynamixelChain(sim, cfg)
+        DynamixelBus(sim, cfg)
 
 
 def test_port_string_simulator_is_stopped_with_the_chain():
-    chain = DynamixelChain("sim://dynamixel?ids=1", joints([1]))
-    bus = chain.port.simulator
-    chain.close()
-    chain.close()
+    dxl = DynamixelBus("sim://dynamixel?ids=1", servos([1]))
+    bus = dxl.port.simulator
+    dxl.close()
+    dxl.close()
     assert bus.closed
 
 
 # -- fault injection (simulator) ------------------------------------------------------------
 def test_timeout_is_retried_then_succeeds(sim):
-    with DynamixelChain(sim, joints([1, 2, 3]), fast=False) as chain:
+    with DynamixelBus(sim, servos([1, 2, 3]), fast=False) as dxl:
         sim.simulator.drop_responses(1)
-        assert chain.read_ticks().shape == (3,)
-        assert chain.retried == 1
+        assert dxl.read_ticks().shape == (3,)
+        assert dxl.retried == 1
 
 
 def test_persistent_timeout_is_a_typed_error_after_the_retries(sim):
-    with DynamixelChain(sim, joints([1, 2, 3]), retries=2) as chain:
+    with DynamixelBus(sim, servos([1, 2, 3]), retries=2) as dxl:
         sim.simulator.unplug([2])
         with pytest.raises(RigTimeoutError, match="3 attempts") as info:
-            chain.read_ticks()
+            dxl.read_ticks()
         assert info.value.port == str(sim)
-        assert chain.retried == 2
+        assert dxl.retried == 2
 
 
 def test_garbled_reply_is_retried(sim):
-    with DynamixelChain(sim, joints([1, 2, 3])) as chain:
+    with DynamixelBus(sim, servos([1, 2, 3])) as dxl:
         sim.simulator.corrupt_responses(1)
-        chain.read_ticks()
-        assert chain.retried == 1
+        dxl.read_ticks()
+        assert dxl.retried == 1
 
 
 def test_unplugged_adapter_is_a_connection_error_without_retries(sim):
-    with DynamixelChain(sim, joints([1, 2, 3])) as chain:
-        chain.read_ticks()
+    with DynamixelBus(sim, servos([1, 2, 3])) as dxl:
+        dxl.read_ticks()
         sim.simulator.unplug(adapter=True)
         with pytest.raises(RigConnectionError, match="unplugged"):
-            chain.read_ticks()
-        assert chain.retried == 0
+            dxl.read_ticks()
+        assert dxl.retried == 0
         with pytest.raises(RigConnectionError):
-            chain.write_goal_ticks([2048, 2048, 2048])
+            dxl.write_goal_ticks([2048, 2048, 2048])
 
 
 def test_hardware_error_is_an_event_with_the_reported_torque(sim):
-    with DynamixelChain(sim, joints([1, 2, 3])) as chain:
-        chain.set_torque(True)
-        assert chain.poll_alerts() == []
+    with DynamixelBus(sim, servos([1, 2, 3])) as dxl:
+        dxl.set_torque(True)
+        assert dxl.poll_alerts() == []
         sim.simulator.raise_hardware_error(2, "overload")
-        chain.read_ticks()  # not an exception: the read still ran
-        assert chain.alert_pending
-        alerts = chain.poll_alerts()
+        dxl.read_ticks()  # not an exception: the read still ran
+        assert dxl.alert_pending
+        alerts = dxl.poll_alerts()
         assert [(a.dxl_id, a.names, a.torque) for a in alerts] == [(2, ("overload",), False)]
-        assert not chain.alert_pending
-        assert chain.torque().tolist() == [True, False, True]
-        assert chain.alert_pending  # every status of servo 2 carries the alert bit until reboot
+        assert not dxl.alert_pending
+        assert dxl.torque().tolist() == [True, False, True]
+        assert dxl.alert_pending  # every status of servo 2 carries the alert bit until reboot
         with pytest.raises(HardwareAlertError, match="ID 2: hardware alert overload"):
-            chain.set_torque(True)
-        chain.reboot(2)
-        assert chain.poll_alerts() == []
+            dxl.set_torque(True)
+        dxl.reboot(2)
+        assert dxl.poll_alerts() == []
 
 
 def test_goals_move_the_servos_and_out_of_range_goals_are_not_sent(sim):
-    with DynamixelChain(sim, joints([1, 2, 3], lo=1024, hi=3072)) as chain:
-        chain.configure()
-        chain.set_torque(True)
-        chain.write_goal_ticks([2100, 2000, 2300])
+    with DynamixelBus(sim, servos([1, 2, 3], lo=1024, hi=3072)) as dxl:
+        dxl.configure()
+        dxl.set_torque(True)
+        dxl.write_goal_ticks([2100, 2000, 2300])
         assert sim.simulator.wait_for(lambda: abs(sim.simulator.position(3) - 2300) < 1)
         with pytest.raises(UnreachableError, match="ID 2") as info:
-            chain.write_goal_ticks([2100, 3500, 2300])
+            dxl.write_goal_ticks([2100, 3500, 2300])
         assert info.value.actual == 3500 and info.value.expected == "1024..3072"
         assert abs(sim.simulator.position(2) - 2000) < 1  # nothing was sent
-        goal = chain.write_orientation(chain.kinematics.forward([2200, 1900, 2048]),
-                                       chain.read_ticks())
+        limb = ServoLimb(dxl, joint([1, 2, 3], lo=1024, hi=3072))
+        goal = limb.write_orientations(limb.kinematics.forward([2200, 1900, 2048]),
+                                       dxl.read_ticks())
         assert goal.tolist() == [2200, 1900, 2048]
 
 
 def test_configure_writes_registers_and_refuses_eeprom_with_torque_on(sim):
-    with DynamixelChain(sim, joints([1, 2], lo=1000, hi=3000)) as chain:
-        chain.configure()
-        assert chain.read_register(1, "Min Position Limit") == 1000
-        assert chain.read_register(2, "Max Position Limit") == 3000
-        assert chain.read_register(2, "Return Delay Time") == 0
-        assert chain.arm_watchdog(100) == 100
-        assert chain.read_register(1, "Bus Watchdog") == 5
-        chain.set_torque(True)
-        chain.configure()  # nothing to change: fine with torque on
-    with DynamixelChain(sim, joints([1, 2], lo=500, hi=3000)) as chain:
+    with DynamixelBus(sim, servos([1, 2], lo=1000, hi=3000)) as dxl:
+        dxl.configure()
+        assert dxl.read_register(1, "Min Position Limit") == 1000
+        assert dxl.read_register(2, "Max Position Limit") == 3000
+        assert dxl.read_register(2, "Return Delay Time") == 0
+        assert dxl.arm_watchdog(100) == 100
+        assert dxl.read_register(1, "Bus Watchdog") == 5
+        dxl.set_torque(True)
+        dxl.configure()  # nothing to change: fine with torque on
+    with DynamixelBus(sim, servos([1, 2], lo=500, hi=3000)) as dxl:
         with pytest.raises(RigError, match="torque is on"):
-            chain.configure()
+            dxl.configure()
 
 
 def test_scan_of_every_id_finds_the_servos_through_one_broadcast_ping():
@@ -229,15 +244,15 @@ def test_scan_of_every_id_finds_the_servos_through_one_broadcast_ping():
 
 
 def test_new_position_limits_are_checked_on_goals_and_written_by_configure(sim):
-    with DynamixelChain(sim, joints([1, 2, 3], lo=1024, hi=3072)) as chain:
-        chain.set_position_limits([1500, 1600, 1700], [2500, 2600, 2700])
+    with DynamixelBus(sim, servos([1, 2, 3], lo=1024, hi=3072)) as dxl:
+        dxl.set_position_limits([1500, 1600, 1700], [2500, 2600, 2700])
         with pytest.raises(UnreachableError, match="ID 1") as info:
-            chain.write_goal_ticks([1400, 2000, 2000])
+            dxl.write_goal_ticks([1400, 2000, 2000])
         assert info.value.actual == 1400 and info.value.expected == "1500..2500"
-        chain.configure()
-        assert [chain.read_register(i, "Min Position Limit") for i in (1, 2, 3)] == [
+        dxl.configure()
+        assert [dxl.read_register(i, "Min Position Limit") for i in (1, 2, 3)] == [
             1500, 1600, 1700]
-        assert [chain.read_register(i, "Max Position Limit") for i in (1, 2, 3)] == [
+        assert [dxl.read_register(i, "Max Position Limit") for i in (1, 2, 3)] == [
             2500, 2600, 2700]
         with pytest.raises(ValueError, match="need 3 min and max ticks"):
-            chain.set_position_limits([1500, 1600], [2500, 2600])
+            dxl.set_position_limits([1500, 1600], [2500, 2600])

@@ -1,4 +1,5 @@
-"""Forward / closed-form inverse kinematics of 1-3 joint servo chains."""
+"""Joint kinematics (forward / closed-form inverse of a joint's 1-3 servos) and limb kinematics
+(the joints of a limb in order over one tick vector)."""
 
 from __future__ import annotations
 
@@ -8,14 +9,14 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
-from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.errors import RigConfigError, UnreachableError
 
 ZYX = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]
 
 
-def chain(axes, lo=-8192, hi=8192, **kw):
-    return ChainKinematics([ServoJoint(i + 1, a, min_ticks=lo, max_ticks=hi)
+def joint(axes, lo=-8192, hi=8192, **kw):
+    return JointKinematics([ServoAxis(i + 1, a, min_ticks=lo, max_ticks=hi)
                             for i, a in enumerate(axes)], **kw)
 
 
@@ -24,7 +25,7 @@ def angle_deg(p, q):
 
 
 def test_forward_is_the_product_of_axis_angle_rotations():
-    kin = chain(ZYX)
+    kin = joint(ZYX)
     ticks = np.array([2048 + 512, 2048 - 256, 2048 + 1024])  # +45°, -22.5°, +90°
     expected = Q.multiply(Q.multiply(Q.from_axis_angle(np.array([0.0, 0, 1]), math.pi / 4),
                                      Q.from_axis_angle(np.array([0.0, 1, 0]), -math.pi / 8)),
@@ -40,7 +41,7 @@ def test_the_compiled_forward_equals_the_batched_one():
     (numpy) give the same orientations, for integer and float ticks alike."""
     rng = np.random.default_rng(3)
     for axes in ([(0, 0, 1), (0, 1, 0), (1, 0, 0)], [(1, 0, 0), (0, 0.6, 0.8)], [(0, 1, 0)]):
-        kin = ChainKinematics([ServoJoint(i + 1, a, zero_ticks=2000 + 10 * i, direction=(-1) ** i)
+        kin = JointKinematics([ServoAxis(i + 1, a, zero_ticks=2000 + 10 * i, direction=(-1) ** i)
                                for i, a in enumerate(axes)])
         ticks = rng.integers(0, 4096, size=(200, kin.n))
         batch = kin.forward_batch(ticks)
@@ -50,7 +51,7 @@ def test_the_compiled_forward_equals_the_batched_one():
 
 
 def test_direction_and_zero_offset():
-    kin = ChainKinematics([ServoJoint(7, (0, 0, 1), zero_ticks=1000, direction=-1,
+    kin = JointKinematics([ServoAxis(7, (0, 0, 1), zero_ticks=1000, direction=-1,
                                       min_ticks=0, max_ticks=4095)])
     q = kin.forward([1000 + 1024])  # -90° about Z
     assert angle_deg(q, Q.from_axis_angle(np.array([0.0, 0, 1]), -math.pi / 2)) < 1e-9
@@ -59,7 +60,7 @@ def test_direction_and_zero_offset():
 @pytest.mark.parametrize("axes", [ZYX, [(0, 0, 1), (0.3, 1, 0.2), (1, 0.1, 0)],
                                   [(0, 1, 0), (1, 0, 0), (0, 1, 0)]])
 def test_inverse_inverts_forward_and_picks_the_solution_near_the_present(axes):
-    kin = chain(axes)
+    kin = joint(axes)
     rng = np.random.default_rng(3)
     for _ in range(300):
         ticks = rng.uniform(0, 4095, 3)
@@ -73,13 +74,13 @@ def test_inverse_inverts_forward_and_picks_the_solution_near_the_present(axes):
 
 
 def test_inverse_branch_follows_near_ticks_by_whole_turns():
-    kin = chain(ZYX)
+    kin = joint(ZYX)
     q = kin.forward([2048, 2048, 2048 + 100])
     assert kin.inverse(q, [2048, 2048, 2048 + 4096])[2] == 2048 + 100 + 4096
 
 
 def test_gimbal_lock_keeps_the_first_joint_where_it_is():
-    kin = chain(ZYX)
+    kin = joint(ZYX)
     # elevation -90°: limb along +Z, first and third axes aligned
     q = kin.forward([2048 + 300, 2048 - 1024, 2048 + 100])
     sol = kin.inverse_float(q, [2048 + 250, 2048 - 1000, 2048])
@@ -88,14 +89,14 @@ def test_gimbal_lock_keeps_the_first_joint_where_it_is():
 
 
 def test_out_of_tick_range_is_unreachable_never_clipped():
-    kin = chain(ZYX, lo=1024, hi=3072)
+    kin = joint(ZYX, lo=1024, hi=3072)
     q = kin.forward([2048, 2048, 2048 + 1500])  # axial rotation beyond the +90° stop
     with pytest.raises(UnreachableError, match="ID 3"):
         kin.inverse(q, [2048, 2048, 2048])
 
 
-def test_two_joint_chain_reaches_only_its_surface():
-    kin = chain([(0, 0, 1), (0, 1, 0)])
+def test_a_joint_of_two_servos_reaches_only_its_surface():
+    kin = joint([(0, 0, 1), (0, 1, 0)])
     q = kin.forward([2300, 1900])
     assert kin.inverse(q, [2048, 2048]).tolist() == [2300, 1900]
     twisted = Q.multiply(q, Q.from_axis_angle(np.array([1.0, 0, 0]), math.radians(10)))
@@ -105,18 +106,82 @@ def test_two_joint_chain_reaches_only_its_surface():
 
 def test_non_unit_target_is_refused():
     with pytest.raises(UnreachableError, match="unit quaternion"):
-        chain(ZYX).inverse([0, 0, 0, 0], [2048] * 3)
+        joint(ZYX).inverse([0, 0, 0, 0], [2048] * 3)
     with pytest.raises(UnreachableError):
-        chain(ZYX).inverse([math.nan, 0, 0, 1], [2048] * 3)
+        joint(ZYX).inverse([math.nan, 0, 0, 1], [2048] * 3)
 
 
-@pytest.mark.parametrize(("joints", "match"), [
-    ([ServoJoint(1, (0, 0, 1)), ServoJoint(1, (0, 1, 0))], "duplicate ID 1"),
-    ([ServoJoint(1, (0, 0, 1)), ServoJoint(2, (0, 0, 2))], "parallel"),
-    ([ServoJoint(1, (0, 0, 0))], "non-zero"),
+@pytest.mark.parametrize(("servos", "match"), [
+    ([ServoAxis(1, (0, 0, 1)), ServoAxis(1, (0, 1, 0))], "duplicate ID 1"),
+    ([ServoAxis(1, (0, 0, 1)), ServoAxis(2, (0, 0, 2))], "parallel"),
+    ([ServoAxis(1, (0, 0, 0))], "non-zero"),
     ([], "1 to 3"),
-    ([ServoJoint(i, (0, 0, 1) if i % 2 else (0, 1, 0)) for i in range(4)], "1 to 3"),
+    ([ServoAxis(i, (0, 0, 1) if i % 2 else (0, 1, 0)) for i in range(4)], "1 to 3"),
 ])
-def test_bad_chains(joints, match):
+def test_bad_joints(servos, match):
     with pytest.raises(RigConfigError, match=match):
-        ChainKinematics(joints)
+        JointKinematics(servos)
+
+
+# -- limb kinematics --------------------------------------------------------------------------
+def _arm() -> LimbKinematics:
+    """The servo arm's layout: shoulder 3, elbow 1, forearm 1, wrist 2 servos (IDs 1..7)."""
+    def servos(ids, axes):
+        return [ServoAxis(i, a, min_ticks=-8192, max_ticks=8192) for i, a in zip(ids, axes,
+                                                                                 strict=True)]
+    return LimbKinematics([JointKinematics(servos([1, 2, 3], ZYX)),
+                           JointKinematics(servos([4], [(0, 0, 1)])),
+                           JointKinematics(servos([5], [(1, 0, 0)])),
+                           JointKinematics(servos([6, 7], [(0, 0, 1), (0, 1, 0)]))],
+                          ["shoulder", "elbow", "forearm", "wrist"])
+
+
+def test_limb_kinematics_is_each_joints_kinematics_on_its_slice_of_the_tick_vector():
+    limb = _arm()
+    assert limb.ids == (1, 2, 3, 4, 5, 6, 7) and limb.n == 7 and len(limb) == 4
+    assert [(s.start, s.stop) for s in limb.slices] == [(0, 3), (3, 4), (4, 5), (5, 7)]
+    rng = np.random.default_rng(0)
+    ticks = rng.integers(1024, 3072, size=(50, 7))
+    q = limb.forward_batch(ticks)
+    assert q.shape == (50, 4, 4)
+    for row, qs in zip(ticks, q, strict=True):
+        one = limb.forward(row)
+        np.testing.assert_array_equal(one, np.stack(
+            [j.forward(part) for j, part in zip(limb.joints, limb.split(row), strict=True)]))
+        np.testing.assert_allclose(one, qs, atol=1e-12)
+    # inverse: each joint's solution nearest its part of the present ticks
+    back = limb.inverse(limb.forward(ticks[0]), ticks[0])
+    np.testing.assert_array_equal(back, ticks[0])
+    assert limb.joint("wrist") is limb.joints[3]
+
+
+def test_a_one_joint_limb_is_its_joint_bit_for_bit():
+    kin = joint(ZYX)
+    limb = LimbKinematics([kin], ["shoulder"])
+    ticks = np.array([2100, 1990, 2300])
+    np.testing.assert_array_equal(limb.forward(ticks)[0], kin.forward(ticks))
+    q = kin.forward(ticks)
+    np.testing.assert_array_equal(limb.inverse(q[None], ticks), kin.inverse(q, ticks))
+
+
+def test_limb_limits_are_replaced_per_joint_and_validated():
+    limb = _arm()
+    lo, hi = limb.min_ticks + 100, limb.max_ticks - 100
+    narrower = limb.with_limits(lo, hi)
+    np.testing.assert_array_equal(narrower.min_ticks, lo)
+    np.testing.assert_array_equal(narrower.joint("elbow").max_ticks, hi[3:4])
+    with pytest.raises(ValueError, match="need 7 min and max ticks"):
+        limb.with_limits(lo[:3], hi[:3])
+    with pytest.raises(RigConfigError, match="zero_ticks outside"):
+        limb.with_limits(np.full(7, 2100), np.full(7, 3000))
+
+
+@pytest.mark.parametrize(("names", "match"), [(["a", "a"], "one distinct name"),
+                                               (["a"], "one distinct name")])
+def test_bad_limbs(names, match):
+    with pytest.raises(RigConfigError, match=match):
+        LimbKinematics([joint([(0, 0, 1)]), JointKinematics([ServoAxis(2, (0, 0, 1))])], names)
+    with pytest.raises(RigConfigError, match="servo ID 1 in two joints"):
+        LimbKinematics([joint([(0, 0, 1)]), joint([(0, 1, 0)])])
+    with pytest.raises(RigConfigError, match="at least one joint"):
+        LimbKinematics([])

@@ -59,16 +59,17 @@ def test_missing_and_non_serial_paths_fail_at_once(tmp_path):
 
 def test_back_driven_servos_follow_the_simulated_patient():
     from models import quaternion as Q
-    from rig.devices import DynamixelChain, load_rig_config
+    from rig.devices import DynamixelBus, load_rig_config
 
     cfg = load_rig_config("sim-shoulder")
-    with DynamixelChain(cfg.servos.port, cfg.servos) as chain:
-        port = chain.port
+    kin = cfg.servos.kinematics()
+    with DynamixelBus(cfg.servos.port, cfg.servos) as bus:
+        port = bus.port
         assert port.patient is not None
         seen, ticks_list = [], []
         for _ in range(20):
-            ticks = chain.read_ticks()
-            q = chain.kinematics.forward(ticks)
+            ticks = bus.read_ticks()
+            q = kin.forward(ticks)
             truth = port.patient.joint(port.simulator.clock() - port.patient_t0)[0]
             seen.append(float(np.degrees(Q.angle(Q.multiply(q, Q.conjugate(truth))))))
             ticks_list.append(ticks)

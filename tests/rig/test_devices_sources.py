@@ -9,7 +9,7 @@ from models import quaternion as Q
 from rig.devices import (
     ImuSetSource,
     OrientationSource,
-    ServoChainSource,
+    ServoLimbSource,
     load_rig_config,
     open_port,
     open_source,
@@ -18,11 +18,11 @@ from rig.devices.config import loads_rig_config
 from rig.errors import RigConfigError, RigConnectionError
 
 
-def test_servo_chain_source_reports_the_patient_joint():
+def test_servo_limb_source_reports_the_patient_joint():
     cfg = load_rig_config("sim-shoulder")
     with open_port(cfg.servos.port) as port, \
             open_source(cfg, ports={cfg.servos.port: port}, rate_hz=200) as src:
-        assert isinstance(src, ServoChainSource) and isinstance(src, OrientationSource)
+        assert isinstance(src, ServoLimbSource) and isinstance(src, OrientationSource)
         assert src.names == ("shoulder",)
         batches = []
         for batch in src:
@@ -39,7 +39,7 @@ def test_servo_chain_source_reports_the_patient_joint():
             src.read(1.0)
 
 
-def test_servo_source_turns_a_silent_chain_into_a_connection_error():
+def test_servo_source_turns_a_silent_bus_into_a_connection_error():
     cfg = load_rig_config("sim-shoulder")
     with open_port(cfg.servos.port) as port, \
             open_source(cfg, ports={cfg.servos.port: port}) as src:

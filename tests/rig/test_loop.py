@@ -1,4 +1,4 @@
-"""The live loop on the simulated servo chain (real ``dynamixel_sdk`` on a pty), driven by a
+"""The live loop on the simulated servo bus (real ``dynamixel_sdk`` on a pty), driven by a
 manual clock: correctness by counts and telemetry content, never by wall time.
 
 Faults are injected through the simulator's public fault-injection API. The Bus Watchdog is
@@ -30,7 +30,7 @@ from rig.loop import (
     ScriptedTargets,
     SupervisorConfig,
 )
-from rig.loop.runner import prepare_chain
+from rig.loop.runner import prepare_servo_limb
 from rig.loop.supervisor import SAFETY_FLAGS
 from rig.sim.clock import ManualClock
 
@@ -64,7 +64,7 @@ def models(tmp_path_factory):
 
 def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
          safe_state="hold", before=None, warm_up=True, **sup):
-    """Open the simulated chain, run ``cycles`` cycles on a manual clock, close everything.
+    """Open the simulated servos, run ``cycles`` cycles on a manual clock, close everything.
 
     Returns (summary, telemetry table, bus, loop).
     """
@@ -79,16 +79,16 @@ def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
         if before is not None:
             before(bus)
             clk.advance(0.01)  # let what ``before`` did to the limb take effect
-        chain = prepare_chain(port, SERVOS, oracle)
+        limb = prepare_servo_limb(port, SERVOS, oracle)
         try:
-            loop = EnforcementLoop(chain, model, oracle, targets, cfg, clock=clk,
+            loop = EnforcementLoop(limb, model, oracle, targets, cfg, clock=clk,
                                    sleep=clk.sleep, on_cycle=on_cycle)
             loop.setup()
             summary = loop.run(max_cycles=cycles)
             state = {i: (bus.servo(i).torque, bus.servo(i).get("Goal Position"),
                          bus.position(i)) for i in SERVOS.ids}
         finally:
-            chain.close()
+            limb.close()
     return summary, loop.telemetry.table(), state, loop
 
 
@@ -310,27 +310,27 @@ def test_bus_watchdog_is_armed_and_backstop_written(models):
     clk = ManualClock()
     with open_port(URL, baud=SERVOS.baud) as port:
         bus = port.simulator
-        chain = prepare_chain(port, SERVOS, oracle)
+        limb = prepare_servo_limb(port, SERVOS, oracle)
         try:
-            loop = EnforcementLoop(chain, model, oracle, ScriptedTargets("hold", oracle),
+            loop = EnforcementLoop(limb, model, oracle, ScriptedTargets("hold", oracle),
                                    LoopConfig(), clock=clk, sleep=clk.sleep)
             loop.setup()
-            lo, hi = chain.backstop
+            lo, hi = limb.backstop
             for k, i in enumerate(SERVOS.ids):
                 s = bus.servo(i)
                 assert s.get("Bus Watchdog") == 5  # the rig's 100 ms in 20 ms units
                 assert s.get("Min Position Limit") == lo[k]
                 assert s.get("Max Position Limit") == hi[k]
-                assert SERVOS.chain[k].min_ticks <= lo[k] < hi[k] <= SERVOS.chain[k].max_ticks
+                assert SERVOS.axes[k].min_ticks <= lo[k] < hi[k] <= SERVOS.axes[k].max_ticks
             # the box holds every valid orientation's IK solution (sampled)
             q = Q.random_quaternions(3000, np.random.default_rng(0))
             valid = q[oracle.is_valid(q)]
-            ticks = np.array([chain.kinematics.inverse_float(v, loop._present_ticks)
+            ticks = np.array([limb.kinematics.joint(0).inverse_float(v, loop._present_ticks)
                               for v in valid[:300]])
             assert (ticks >= lo - 1).all() and (ticks <= hi + 1).all()
             summary = loop.run(max_cycles=20)
         finally:
-            chain.close()
+            limb.close()
     assert summary["watchdog_ms"] == 100 and summary["cycles"] == 20
     assert summary["backstop_ticks"]["1"] == [int(lo[0]), int(hi[0])]
 
@@ -345,7 +345,7 @@ from rig.devices import kinematics as K
 from rig.devices.config import load_rig_config
 from rig.devices.ports import open_port
 from rig.loop import EnforcementLoop, LoopConfig
-from rig.loop.runner import prepare_chain
+from rig.loop.runner import prepare_servo_limb
 from rig.loop.targets import CsvTrajectory
 
 KERNELS = [(O, "_ball_kernel"), (geometry, "_nearest_in_cell"), (geometry, "_rank_one"),
@@ -362,9 +362,9 @@ servos = dataclasses.replace(load_rig_config("sim-shoulder").servos,
 targets = CsvTrajectory(%r)  # read from a file: nothing queries the oracle before the loop
 with open_port(servos.port, baud=servos.baud) as port:
     clk = port.simulator.clock
-    chain = prepare_chain(port, servos)  # no backstop: nothing asks the oracle before the loop
+    limb = prepare_servo_limb(port, servos)  # no backstop: nothing asks the oracle before the loop
     try:
-        loop = EnforcementLoop(chain, None, oracle, targets,
+        loop = EnforcementLoop(limb, None, oracle, targets,
                                LoopConfig(rate_hz=200.0, watchdog_ms=1000), clock=clk,
                                sleep=clk.sleep)
         before = counts()
@@ -372,7 +372,7 @@ with open_port(servos.port, baud=servos.baud) as port:
         summary = loop.run(max_cycles=600)
         after = counts()
     finally:
-        chain.close()
+        limb.close()
 print(json.dumps([before, after, dict(summary["interventions_by_kind"])]))
 """
 
@@ -412,7 +412,7 @@ def test_no_kernel_compiles_inside_a_running_loop(tmp_path):
 
 def test_hold_keeps_a_servo_standing_past_its_limit_at_that_limit(models):
     """A servo can read a tick or two past its position limit (its noise, a push): the hold
-    written on a fault must be a goal the chain accepts — the present position brought within
+    written on a fault must be a goal the bus accepts — the present position brought within
     the same limits the backstop wrote — not a refused write that leaves the limb to the
     watchdog (issue 37: "goal outside tick limits (got 2259, expected 1024..2258)")."""
     constraint, model = models["cone50"]
@@ -422,30 +422,30 @@ def test_hold_keeps_a_servo_standing_past_its_limit_at_that_limit(models):
         clk = bus.clock
         bus.set_hand(SERVOS.ids[1], 2300.0)  # the limb starts raised (torque off)
         clk.advance(0.01)
-        chain = prepare_chain(port, SERVOS, oracle)
+        limb = prepare_servo_limb(port, SERVOS, oracle)
         limits = {}
 
         def on_cycle(loop, k):
             if k == 3:  # the limits now end 3 ticks short of where servo 2 stands; then a stop
-                present = np.asarray(chain.read_ticks(), dtype=np.int64)
-                lo, hi = chain.kinematics.min_ticks.copy(), chain.kinematics.max_ticks.copy()
+                present = np.asarray(limb.read_ticks(), dtype=np.int64)
+                lo, hi = limb.kinematics.min_ticks.copy(), limb.kinematics.max_ticks.copy()
                 assert present[1] > 2250
                 hi[1] = present[1] - 3
-                chain.set_position_limits(lo, hi)
-                loop.kin = chain.kinematics
+                limb.set_position_limits(lo, hi)
+                loop.kin = limb.kinematics.joint(0)
                 limits["hi"] = int(hi[1])
                 loop.request_stop("SIGTERM")
 
         try:
-            loop = EnforcementLoop(chain, model, oracle, ScriptedTargets("hold", oracle),
+            loop = EnforcementLoop(limb, model, oracle, ScriptedTargets("hold", oracle),
                                    LoopConfig(watchdog_ms=1000), clock=clk, sleep=clk.sleep,
                                    on_cycle=on_cycle)
             loop.setup()
             summary = loop.run(max_cycles=20)
-            chain.read_ticks()  # a round trip: the simulator has handled the hold's write
+            limb.read_ticks()  # a round trip: the simulator has handled the hold's write
             goal = bus.servo(SERVOS.ids[1]).get("Goal Position")
         finally:
-            chain.close()
+            limb.close()
     assert summary["safe_state_cycle"] == 3
     assert loop.safe_state_note is None  # the hold was written, not left to the watchdog
     assert goal == limits["hi"]

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from models.oracle import ConstraintOracle
-from rig.devices import DynamixelChain, load_rig_config
+from rig.devices import DynamixelBus, load_rig_config
 from rig.devices.ports import open_port
 from rig.errors import RigConfigError
 from rig.loop import EnforcementLoop, LoopConfig, ScriptedTargets, SupervisorConfig, realtime
-from rig.loop.runner import prepare_chain
+from rig.loop.runner import prepare_servo_limb
 from rig.loop.telemetry import CAUSES, count_causes, late_causes
 from rig.sim.dynamixel import bus_from_url
 from rig.sim.dynamixel.bus import latency_timer_tick
@@ -76,9 +76,9 @@ def test_the_sdk_reads_through_a_slow_latency_timer():
     """An adapter left at the FTDI default (16 ms): every read still succeeds, through the
     unchanged SDK, once the driver's packet timeout allows for the timer."""
     servos = dataclasses.replace(RIG.servos, port=URL + "&usb_latency_ms=16", latency_ms=16.0)
-    with open_port(servos.port, baud=servos.baud) as port, DynamixelChain(port, servos) as chain:
+    with open_port(servos.port, baud=servos.baud) as port, DynamixelBus(port, servos) as bus:
         for _ in range(5):
-            np.testing.assert_array_equal(chain.read_ticks(), [2048, 2048, 2048])
+            np.testing.assert_array_equal(bus.read_ticks(), [2048, 2048, 2048])
 
 
 # --------------------------------------------------------------------------- own process
@@ -104,10 +104,10 @@ def test_a_bus_in_its_own_process_speaks_to_the_unchanged_sdk():
     with open_port(url, baud=servos.baud) as port:
         assert port.simulator is None and port.is_simulated and port.kind == "sim-dynamixel"
         assert _simulator_processes(URL + "&seed=4242")  # the child serves it (process= dropped)
-        with DynamixelChain(port, servos) as chain:
-            np.testing.assert_array_equal(chain.read_ticks(), [2048, 2048, 2048])
-            chain.set_torque(True)
-            chain.write_goal_ticks([2100, 2000, 2048])
+        with DynamixelBus(port, servos) as bus:
+            np.testing.assert_array_equal(bus.read_ticks(), [2048, 2048, 2048])
+            bus.set_torque(True)
+            bus.write_goal_ticks([2100, 2000, 2048])
     assert _simulator_processes(URL + "&seed=4242") == []  # closing the port stopped it
 
 
@@ -233,14 +233,14 @@ def test_a_host_stall_shorter_than_the_stale_limit_is_not_a_fault(stall_s):
             if k == 40:
                 clk.advance(stall_s)  # the host stalls before the cycle's read
 
-        chain = prepare_chain(port, servos, oracle)
+        limb = prepare_servo_limb(port, servos, oracle)
         try:
-            loop = EnforcementLoop(chain, None, oracle, ScriptedTargets("sweep", oracle), cfg,
+            loop = EnforcementLoop(limb, None, oracle, ScriptedTargets("sweep", oracle), cfg,
                                    clock=clk, sleep=clk.sleep, on_cycle=on_cycle)
             loop.setup()
             summary = loop.run(max_cycles=120)
         finally:
-            chain.close()
+            limb.close()
     assert summary["safe_state_entries"] == 0 and summary["end_reason"] == "completed"
     # the stall is one overrun, counted under one cause; the deadlines it passed are skipped,
     # never caught up in a burst
@@ -250,7 +250,7 @@ def test_a_host_stall_shorter_than_the_stale_limit_is_not_a_fault(stall_s):
 
 
 # --------------------------------------------------------------------------- rig enforce
-def test_rig_enforce_serves_a_simulated_chain_from_its_own_process(tmp_path, rig_cli):
+def test_rig_enforce_serves_a_simulated_bus_from_its_own_process(tmp_path, rig_cli):
     """``rig enforce --rig sim-shoulder``: the servo simulator runs in a process of its own,
     as hardware is outside the host (no simulator thread shares the loop's interpreter)."""
     from rig.loop import EnforceRequest, run_enforce

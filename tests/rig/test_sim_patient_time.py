@@ -11,7 +11,7 @@ import serial
 
 from firmware_protocol.imu import bno055 as B
 from models import quaternion as Q
-from rig.devices import DynamixelChain, load_rig_config
+from rig.devices import DynamixelBus, load_rig_config
 from rig.devices.ports import open_port
 from rig.sim.clock import ManualClock, ScaledClock
 
@@ -24,14 +24,15 @@ def _angle_deg(a, b) -> float:
 
 def test_back_driven_servos_follow_the_patient_on_a_manual_clock():
     url = SERVOS.port + "&clock=manual&wire_time=off"
-    with open_port(url, baud=SERVOS.baud) as port, DynamixelChain(port, SERVOS) as chain:
+    kin = SERVOS.kinematics()
+    with open_port(url, baud=SERVOS.baud) as port, DynamixelBus(port, SERVOS) as bus:
         clock = port.simulator.clock
         assert isinstance(clock, ManualClock)
         assert clock() - port.patient_t0 == 0.0  # the patient starts with the simulator
         errors = []
         for _ in range(8):
             clock.advance(0.75)
-            q = chain.kinematics.forward(chain.read_ticks())
+            q = kin.forward(bus.read_ticks())
             truth = port.patient.joint(clock() - port.patient_t0)[0]
             errors.append(_angle_deg(q, truth))
         # within a few encoder ticks of the patient's joint (0.088° per tick)
