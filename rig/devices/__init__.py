@@ -32,11 +32,12 @@ Public API
 
 from rig.devices.base import Device
 from rig.devices.bno055 import Bno055
-from rig.devices.bus import Servo, ServoBus
+from rig.devices.bus import ServoBus
 from rig.devices.config import RigConfig, ServosConfig, load_rig_config, rig_config_names
 from rig.devices.dynamixel import DynamixelBus, ServoInfo, scan
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.devices.ports import Port, SimulatedPatient, open_port
+from rig.devices.servo import Servo
 from rig.devices.servo_limb import ServoLimb
 from rig.devices.sources import (
     ImuSetSource,

@@ -32,12 +32,12 @@ Every bus is a context manager with an idempotent :meth:`~rig.devices.base.Devic
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from rig.devices.base import Device
 from rig.devices.ports import Port
+from rig.devices.servo import Servo
 from rig.errors import (
     HardwareAlert,
     HardwareAlertError,
@@ -46,28 +46,7 @@ from rig.errors import (
     UnreachableError,
 )
 
-__all__ = ["Servo", "ServoBus"]
-
-
-@dataclass(frozen=True)
-class Servo:
-    """One servo on a bus.
-
-    Attributes
-    ----------
-    id : int
-        Bus ID (Dynamixel: 0..252).
-    name : str or None
-        Optional label (e.g. ``"elevation"``); :attr:`ServoBus.names` falls back to the ID.
-    min_ticks, max_ticks : int
-        Allowed goal range, ticks (written to the servo's position-limit registers where it
-        has them).
-    """
-
-    id: int
-    name: str | None = None
-    min_ticks: int = 0
-    max_ticks: int = 4095
+__all__ = ["ServoBus"]
 
 
 def _as_servo(item: Servo | int) -> Servo:

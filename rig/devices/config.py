@@ -63,8 +63,8 @@ import yaml
 
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from models.yamlio import safe_load_yaml
-from rig.devices.bus import Servo
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
+from rig.devices.servo import Servo
 from rig.errors import RigConfigError
 
 __all__ = [

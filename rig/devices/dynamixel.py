@@ -59,10 +59,11 @@ from firmware_protocol.dynamixel.control_table import (
     load_control_table,
 )
 from rig.devices.base import describe_open_error
-from rig.devices.bus import Servo, ServoBus
+from rig.devices.bus import ServoBus
 from rig.devices.config import ServosConfig
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
 from rig.devices.ports import Port, open_port
+from rig.devices.servo import Servo
 from rig.errors import (
     HardwareAlert,
     RigConfigError,

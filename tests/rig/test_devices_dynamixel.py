@@ -1,4 +1,4 @@
-"""DynamixelBus (a servo bus) through the real dynamixel_sdk: the same bodies on sim:// and on hardware.
+"""DynamixelBus through the real dynamixel_sdk: the same bodies on sim:// and on hardware.
 
 ``RIG_DXL_PORT=/dev/ttyUSB0`` (with ``RIG_DXL_IDS=1,2,3`` and ``RIG_DXL_BAUD``) runs the
 ``bus`` tests on real servos too; they only read (torque is never enabled on hardware).
