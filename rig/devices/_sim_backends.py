@@ -39,6 +39,8 @@ and time scale (its second line); a protocol started on it is sent to the child
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
 import os
 import select
 import subprocess
@@ -51,8 +53,15 @@ from typing import Any
 
 import numpy as np
 
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from rig.devices.config import load_rig_config
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError, UnreachableError
+from rig.sim.clock import ScaledClock
+from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
+from rig.sim.imu import StreamImuSimulator, stream_patient, stream_query
+from rig.sim.patients import patient_from_url
+from rig.sim.urls import SimUrl, query_keys, sim_device_of, with_keys, without_keys
 
 BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
@@ -70,15 +79,10 @@ def open_sim_port(url: str, *, baud: int | None = None,
     """The port of the simulator ``url`` names (``baud``: the host's line speed, which a
     simulated Dynamixel chain without ``baud=`` runs at; ``separate_process``: a servo chain's
     default for ``process=``)."""
-    from rig.sim.urls import sim_device_of
-
     device = sim_device_of(url)
     if device.name == "dynamixel":
         return _open_dynamixel(url, baud, device.kind, separate_process)
     if device.name == "imu-stream":
-        from rig.sim.imu import stream_query
-        from rig.sim.urls import without_keys
-
         try:
             q = stream_query(url, (PROCESS_KEY,))
             if q.flag(PROCESS_KEY, separate_process):
@@ -94,8 +98,6 @@ def _patient(limb: Any, clock: Any, clock_t0: float, **kwargs: Any) -> Simulated
     ``clock_t0``: :attr:`~rig.devices.ports.SimulatedPatient.t0` is host monotonic time on the
     real clock and on a :class:`~rig.sim.clock.ScaledClock` (its ``host_time``), the clock's own
     reading on a :class:`~rig.sim.clock.ManualClock` (whose time no host time corresponds to)."""
-    from rig.sim.clock import ScaledClock
-
     if isinstance(clock, ScaledClock):
         t0, scale = float(clock.host_time(clock_t0)), clock.scale
     else:
@@ -151,9 +153,6 @@ class _BackDrive:
 
 
 def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: bool) -> Port:
-    from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
-    from rig.sim.urls import SimUrl
-
     overrides: dict[str, Any] = {}
     try:
         q = SimUrl(url, DEVICES, (*KEYS, *BACKDRIVE_KEYS, PROCESS_KEY), EXAMPLE)
@@ -182,8 +181,6 @@ def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: boo
 
 def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
     """``rig sim servos`` serving ``q``'s chain in a child process; the port of its pty."""
-    from rig.sim.urls import with_keys, without_keys
-
     url = q.url
     if q.text("clock") == "manual":
         raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of a "
@@ -271,9 +268,6 @@ class _ChildCloser:
 
 def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
     """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` kinematics."""
-    from rig.devices.config import load_rig_config
-    from rig.sim.patients import patient_from_url
-
     url = q.url
     chain_name = q.text("chain", "sim-shoulder")
     cfg = load_rig_config(chain_name)
@@ -300,9 +294,6 @@ def _open_stream_process(q: Any, kind: str) -> Port:
     then when its patient's time was 0 (host monotonic time, shared by the processes) and how
     fast that time runs; a protocol started here is sent to the child on its stdin
     (:func:`serve_control`)."""
-    from rig.sim.imu import stream_patient
-    from rig.sim.urls import without_keys
-
     url = q.url
     if q.text("clock") == "manual":
         raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of a "
@@ -326,18 +317,11 @@ def _open_stream_process(q: Any, kind: str) -> Port:
 
 def _protocol_json(protocol: Any) -> str:
     """A calibration protocol (a frozen dataclass of numbers and names) as one line of JSON."""
-    import dataclasses
-    import json
-
     return json.dumps({"kind": type(protocol).__name__, **dataclasses.asdict(protocol)})
 
 
 def _protocol_from_json(text: str) -> Any:
     """The protocol :func:`_protocol_json` wrote (JSON only: no code crosses the pipe)."""
-    import json
-
-    from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
-
     d = json.loads(text)
     cls = {c.__name__: c for c in (CalibrationProtocol, LimbCalibrationProtocol)}[d.pop("kind")]
     if d.get("amplitudes") is not None:  # JSON lists back to the dataclass's tuples
@@ -375,9 +359,6 @@ def serve_control(port: Port, stream: Any) -> None:
 
 
 def _open_imu(url: str, sim: Any, kind: str) -> Port:
-    from rig.sim.imu import StreamImuSimulator
-    from rig.sim.urls import query_keys
-
     port = Port(url=url, path=sim.port, simulator=sim, kind=kind)
     port.add_closer(sim.close)
     try:

@@ -19,6 +19,8 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
+import serial
+
 from rig.devices.ports import Port, open_port
 from rig.errors import RigConnectionError, RigError, RigProtocolError, RigTimeoutError
 
@@ -37,8 +39,6 @@ def describe_open_error(err: BaseException) -> str:
 def open_serial(path: str, baud: int, *, what: str, url: str):
     """A non-blocking :class:`serial.Serial` on ``path``, or :class:`RigConnectionError`
     naming ``what`` ("the BNO055 port") and the port string ``url``."""
-    import serial
-
     try:
         return serial.Serial(path, baudrate=baud, timeout=0)
     except (serial.SerialException, OSError) as err:
@@ -49,8 +49,6 @@ def open_serial(path: str, baud: int, *, what: str, url: str):
 def close_serial(ser) -> None:
     """Close ``ser`` (a :class:`serial.Serial` or None), ignoring a port that is already gone
     (an unplugged adapter raises on close)."""
-    import serial
-
     if ser is not None:
         try:
             ser.close()

@@ -61,7 +61,11 @@ from typing import Any
 
 import yaml
 
+from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_mismatch
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
+from models.constraint import load_constraint
+from models.errors import ModelsError
+from models.shapes import SHAPES, load_shape
 from models.yamlio import safe_load_yaml
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.devices.servo import Servo
@@ -166,9 +170,6 @@ class RigConfig:
 
 def _load_constraint(constraint: str):
     """A shipped shape by name, else a constraint file."""
-    from models.constraint import load_constraint
-    from models.shapes import SHAPES, load_shape
-
     return load_shape(constraint) if constraint in SHAPES else load_constraint(constraint)
 
 
@@ -223,7 +224,6 @@ def _joint(ctx: _Ctx, value: Any) -> JointInfo:
     if parent == child:
         raise ctx.fail("joint", f"parent and child are the same segment {parent!r}")
     name = ctx.string(d["name"], "joint.name")
-    from calibration.joints import JOINTS, columns_mismatch
 
     spec = JOINTS.get(name)
     why = columns_mismatch([parent, child], [None, None] if spec is None else
@@ -348,7 +348,6 @@ def loads_rig_config(text: str, source: str = "<rig config>",
     constraint = None
     if d.get("constraint") is not None:
         constraint = ctx.string(d["constraint"], "constraint")
-        from models.shapes import SHAPES
 
         if constraint not in SHAPES:
             path = Path(constraint)
@@ -370,9 +369,6 @@ def loads_rig_config(text: str, source: str = "<rig config>",
 def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> None:
     """``constraint`` must be limits the rig's joint can have (a shoulder rig refuses a knee's
     file, a hinge's, another side's, a limb file)."""
-    from calibration.joints import joint_mismatch
-    from models.errors import ModelsError
-
     try:
         c = _load_constraint(constraint)
     except ModelsError as err:
@@ -385,8 +381,6 @@ def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> Non
 
 def _limb(ctx: _Ctx, value: Any, joint: JointInfo, sensors: Any) -> str:
     """``limb``: arm | leg, its proximal joint the rig's ``joint``, one sensor per segment."""
-    from calibration.joints import LIMB_CHAINS
-
     limb = ctx.string(value, "limb")
     if limb not in LIMB_CHAINS:
         raise ctx.fail("limb", f"expected one of {', '.join(LIMB_CHAINS)}, got {limb!r}")

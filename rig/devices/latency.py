@@ -18,6 +18,8 @@ import glob
 import os
 from pathlib import Path
 
+from dynamixel_sdk import port_handler
+
 __all__ = ["SDK_LATENCY_MS", "latency_advice", "usb_latency_timer_ms", "usb_latency_timers"]
 
 SYSFS = "/sys/bus/usb-serial/devices"
@@ -25,10 +27,8 @@ SYSFS = "/sys/bus/usb-serial/devices"
 
 def _sdk_latency() -> int:
     try:
-        from dynamixel_sdk import port_handler
-
         return int(port_handler.LATENCY_TIMER)
-    except (ImportError, AttributeError, ValueError):  # pragma: no cover
+    except (AttributeError, ValueError):  # pragma: no cover
         return 16
 
 

@@ -48,6 +48,7 @@ import stat
 
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError
+from rig.sim.urls import SIM_DEVICES
 
 __all__ = ["Port", "SimulatedPatient", "check_hardware_path", "open_port"]
 
@@ -83,8 +84,6 @@ def open_port(url: str, *, baud: int | None = None, separate_process: bool = Fal
         raise RigConfigError(f"port {url!r}: expected a device path or a sim:// URL")
     url = url.strip()
     if "://" in url:
-        from rig.sim.urls import SIM_DEVICES
-
         scheme = url.split("://", 1)[0]
         if scheme != "sim":
             hosts = ",".join(sorted(SIM_DEVICES))

@@ -34,6 +34,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from firmware_protocol.imu import bno055 as B
 from rig.devices.bno055 import Bno055
 from rig.devices.config import RigConfig
 from rig.devices.dynamixel import DynamixelBus
@@ -311,7 +312,6 @@ def open_source(config: RigConfig, which: str | None = None, *,
     try:
         for k, p in enumerate(sensors.ports):
             chips.append(Bno055(ports.get(p, p), baud=sensors.baud, sensor=k, raw=sensors.raw))
-        from firmware_protocol.imu import bno055 as B
 
         for chip in chips:
             chip.set_mode(B.OperationMode.NDOF)

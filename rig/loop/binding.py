@@ -26,6 +26,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from calibration.joints import joint_mismatch
+from models.constraint import loads_constraint
+from models.errors import ModelsError
 from rig.errors import RigConfigError
 
 __all__ = ["Binding", "ModelBindingError", "bind_model"]
@@ -87,9 +90,6 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     ModelBindingError
         On the first mismatch, unless ``force``.
     """
-    from models.constraint import loads_constraint
-    from models.errors import ModelsError
-
     path = getattr(model, "path", "model")
     text = getattr(model, "constraint_yaml", "") or ""
     try:
@@ -112,7 +112,6 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     rig_joint = getattr(rig, "joint", None)
     if rig_joint is not None:
         # what the rig drives is not the model's to override: --force-model never reaches here
-        from calibration.joints import joint_mismatch
 
         why = joint_mismatch(enforced, for_joint=rig_joint.name, for_side=rig_joint.side)
         if why is not None:

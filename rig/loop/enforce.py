@@ -22,7 +22,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from models import quaternion as Q
+from models.constraint import load_constraint, loads_constraint
+from models.fileio import check_output, write_owner_only
+from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
+from rig.devices.config import load_rig_config
+from rig.devices.ports import open_port
 from rig.errors import RigConfigError
+from rig.loop import realtime
+from rig.loop.binding import bind_model
+from rig.loop.realtime import check_cpu
+from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig, prepare_servo_limb
+from rig.loop.supervisor import SupervisorConfig
+from rig.loop.targets import open_targets
+from rig.loop.telemetry import Telemetry
+from rig.store import open_store
 
 __all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
            "run_enforce"]
@@ -98,9 +113,6 @@ class EnforceRequest:
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
-        from rig.loop.runner import SAFE_STATES, LoopConfig
-        from rig.loop.supervisor import SupervisorConfig
-
         for name, v in (("--rate", self.rate_hz), ("--duration", self.duration_s),
                         ("--tolerance-deg", self.tolerance_deg),
                         ("--max-velocity-deg-s", self.max_velocity_deg_s),
@@ -127,7 +139,6 @@ class EnforceRequest:
             raise RigConfigError("--patient needs --db")
         _out_path("--telemetry", self.telemetry)
         _out_path("--summary-json", self.summary_json)
-        from rig.loop.realtime import check_cpu
 
         check_cpu(self.cpu)
         return LoopConfig(
@@ -209,7 +220,6 @@ def _out_path(option: str, value) -> Path | None:
     :meth:`EnforceRequest.loop_config` runs it before the servo backstop is written."""
     if value is None:
         return None
-    from models.fileio import check_output
 
     return check_output(value, option)
 
@@ -239,13 +249,6 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
     RigError, ModelsError, FileNotFoundError
         User mistakes, before anything moves.
     """
-    from models.constraint import load_constraint, loads_constraint
-    from models.onnx_io import load_model
-    from models.oracle import ConstraintOracle
-    from rig.devices.config import load_rig_config
-    from rig.loop.binding import bind_model
-    from rig.loop.targets import open_targets
-
     hooks = hooks or EnforceHooks()
     cfg = request.loop_config()
     rig_cfg = load_rig_config(request.rig)
@@ -257,8 +260,6 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
     session_constraint = session_patient = alignment = None
     try:
         if request.db is not None:
-            from rig.store import open_store
-
             store = open_store(request.db, readonly=False)  # the run is stored: refused now
             if request.session_id is not None:
                 sid = request.session_id
@@ -289,8 +290,6 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
         src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
                            frames=request.frames)
         if alignment is not None and hasattr(src, "alignment"):
-            from models import quaternion as Q
-
             src.alignment = {
                 rig_cfg.joint.parent: tuple(Q.conjugate(alignment["thorax_mount"]).tolist()),
                 rig_cfg.joint.child: tuple(Q.conjugate(alignment["limb_mount"]).tolist())}
@@ -304,10 +303,6 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
 
 def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                       hooks: EnforceHooks) -> EnforceResult:
-    from rig.devices.ports import open_port
-    from rig.loop.runner import EnforcementLoop, prepare_servo_limb
-    from rig.loop.telemetry import Telemetry
-
     req, cfg, store, binding, src = prep.request, prep.cfg, prep.store, prep.binding, prep.targets
     servos = prep.rig_cfg.servos
     ports = dict(hooks.ports or {})
@@ -352,7 +347,6 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                  f"targets {src.description}; safe state {cfg.safe_state}")
             loop.setup()
             restore = _install_signals(loop) if hooks.install_signals else None
-            from rig.loop import realtime
 
             unpin, notes = realtime.apply(realtime=req.realtime, cpu=req.cpu)
             for note in notes:
@@ -381,8 +375,6 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 summary["run_id"] = run_id
             sum_path = _out_path("--summary-json", req.summary_json)
             if sum_path is not None:
-                from models.fileio import write_owner_only
-
                 write_owner_only(sum_path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
             if loop.stop_reason is not None:
                 code = 143 if "SIGTERM" in loop.stop_reason else 130

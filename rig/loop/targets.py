@@ -31,7 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.frames import joint_to_rig
+from models import qscalar as qs
 from models import quaternion as Q
+from rig.devices import sources
+from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
 
 __all__ = ["SCRIPTS", "CsvTrajectory", "MirrorTargets", "ScriptedTargets", "TargetSource",
@@ -156,8 +160,6 @@ class CsvTrajectory(TargetSource):
     """
 
     def __init__(self, path: str | Path, frames: str = "rig"):
-        from calibration.frames import joint_to_rig
-
         self.path = Path(path)
         self.t_s, q = load_trajectory(self.path)
         with np.errstate(invalid="ignore"):
@@ -477,8 +479,6 @@ class MirrorTargets(TargetSource):
             self._thread.start()
 
     def _run(self) -> None:
-        from models import qscalar as qs
-
         try:
             while not self._stop.is_set():
                 for s in self.source.read(0.05):
@@ -571,8 +571,6 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
 def _open_mirror(spec: str, rig) -> MirrorTargets:
     driven = rig
     if spec.startswith("mirror:"):
-        from rig.devices.config import load_rig_config
-
         rig = load_rig_config(spec[len("mirror:"):])
         mine, theirs = getattr(driven, "joint", None), rig.joint
         if mine is not None and (mine.name, mine.side) != (theirs.name, theirs.side):
@@ -585,7 +583,6 @@ def _open_mirror(spec: str, rig) -> MirrorTargets:
         name = getattr(rig, "name", "?")
         raise RigConfigError(f"--targets {spec}: rig {name!r} has no sensors to mirror; use "
                              "mirror:<rig with sensors> (e.g. mirror:sim-imu)")
-    from rig.devices import sources
 
     src = sources.open_source(rig, "sensors")
     joint = rig.joint

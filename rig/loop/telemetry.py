@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from models.fileio import open_owner_only
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention
 
 __all__ = ["CAUSES", "COLUMNS", "Fault", "Telemetry", "count_causes", "late_causes",
@@ -126,7 +127,6 @@ class Telemetry:
         self.error: BaseException | None = None
         if self.csv_path is not None:
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-            from models.fileio import open_owner_only
 
             self._fh = open_owner_only(self.csv_path, "w", newline="")  # names the run
             self._fh.write(",".join(COLUMNS) + "\r\n")
