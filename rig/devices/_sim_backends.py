@@ -5,16 +5,16 @@ on a pseudo-terminal and returns a :class:`~rig.devices.ports.Port` whose ``clos
 with the :class:`~rig.devices.ports.SimulatedPatient` view of its patient. The query is parsed
 once, by :class:`rig.sim.urls.SimUrl`; the simulated patient (``patient=`` and the other patient
 keys) is resolved by :func:`rig.sim.patients.patient_from_url`, for the IMU simulators and the
-back-driven servo chain alike.
+back-driven servo bus alike.
 
 Back-driving (``sim://dynamixel?...&patient=...``): each servo's hand position is a function of
-the simulator's clock, ``ticks_i(t) = IK(limb.joint(t - t0))_i`` with the chain's closed-form
+the simulator's clock, ``ticks_i(t) = IK(limb.joint(t - t0))_i`` with the joint's closed-form
 inverse kinematics (:class:`rig.devices.kinematics.JointKinematics`), evaluated once per
 millisecond of simulated time and shared by the servos; the IK solution nearest the previous one
 keeps the joint angles continuous. While torque is off, Present Position follows it
 (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`), as a clinician moving a back-drivable limb.
 
-A bus of its own (``sim://dynamixel?...&process=on``): the chain is served by ``rig sim servos``
+A bus of its own (``sim://dynamixel?...&process=on``): the servos are served by ``rig sim servos``
 in a child process, as hardware is outside the host process — the simulator's thread then takes
 neither the interpreter lock nor the scheduling of the process that drives it; where the system
 allows it the child runs under ``SCHED_FIFO``, since the hardware it stands in for answers on
@@ -68,7 +68,7 @@ BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
 (``seed`` is the bus's, shared)."""
 
 PROCESS_KEY = "process"
-"""``process=on``: serve the chain from a child process (see the module docstring)."""
+"""``process=on``: serve the servos from a child process (see the module docstring)."""
 
 #: How long a child simulator may take to start (import, open its pty) before the port fails.
 CHILD_START_S = 60.0
@@ -77,7 +77,7 @@ CHILD_START_S = 60.0
 def open_sim_port(url: str, *, baud: int | None = None,
                   separate_process: bool = False) -> Port:
     """The port of the simulator ``url`` names (``baud``: the host's line speed, which a
-    simulated Dynamixel chain without ``baud=`` runs at; ``separate_process``: a servo chain's
+    simulated Dynamixel bus without ``baud=`` runs at; ``separate_process``: a servo bus's
     default for ``process=``)."""
     device = sim_device_of(url)
     if device.name == "dynamixel":
@@ -106,7 +106,7 @@ def _patient(limb: Any, clock: Any, clock_t0: float, **kwargs: Any) -> Simulated
 
 
 class _BackDrive:
-    """Joint ticks of a simulated patient through the chain's IK, cached per millisecond."""
+    """Servo ticks of a simulated patient through the joint's IK, cached per millisecond."""
 
     def __init__(self, limb: Any, kinematics: Any, t0: float) -> None:
         self.limb = limb
@@ -128,7 +128,7 @@ class _BackDrive:
             return self._ticks
 
     def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, bool]:
-        """The chain's ticks for limb orientation ``q``: the IK solution nearest ``ticks``, or
+        """The servos' ticks for joint orientation ``q``: the IK solution nearest ``ticks``, or
         ``ticks`` unchanged where ``q`` is out of reach (the servo limb cannot follow: it stays
         put). Also says whether ``q`` was reached."""
         try:
@@ -137,7 +137,7 @@ class _BackDrive:
             return ticks, False
 
     def follow(self, joint_q: np.ndarray) -> tuple[np.ndarray, int]:
-        """The orientations (N, 4) the chain takes, from its zero, while the patient moves
+        """The orientations (N, 4) the servos take, from its zero, while the patient moves
         through ``joint_q`` (N, 4), unquantised, and how many of them were out of reach."""
         ticks = self.kin.zero_ticks.astype(np.float64)
         out = np.empty((len(joint_q), len(ticks)))
@@ -180,7 +180,7 @@ def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: boo
 
 
 def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
-    """``rig sim servos`` serving ``q``'s chain in a child process; the port of its pty."""
+    """``rig sim servos`` serving ``q``'s servos in a child process; the port of its pty."""
     url = q.url
     if q.text("clock") == "manual":
         raise RigConfigError(f"{url}: clock=manual: nothing would advance the clock of a "

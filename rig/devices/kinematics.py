@@ -440,7 +440,7 @@ class JointKinematics:
         nt = self.angles(near)
         count, sols = _solutions_kernel(self.axes, self.n, *qq, nt[0],
                                         nt[1] if self.n > 1 else 0.0)
-        why = "the chain's axes cannot reach it"
+        why = "the chain's axes cannot reach it"  # wording kept: CLI output unchanged
         residual_deg = None
         scratch = np.empty(self.n)
         for theta in sols[:count]:
@@ -472,7 +472,7 @@ class JointKinematics:
         ------
         UnreachableError
             No solution within the tick limits, or ``q`` farther than ``tolerance_deg`` from
-            the chain's reachable set; never clipped.
+            the joint's reachable set; never clipped.
         """
         return np.rint(self.inverse_float(q, near_ticks)).astype(np.int64)
 

@@ -36,7 +36,7 @@ class SimulatedPatient:
         Device time (s) at patient time 0 of a device that timestamps its samples with the
         patient's time (the stream board); 0 otherwise.
     backdrive : object, optional
-        What moves a servo chain with the patient (``follow(joint_q) -> (chain_q, missed)``).
+        What moves servos with the patient (``follow(joint_q) -> (servo_q, missed)``).
     protocol_pinned : bool
         The port string says whether the patient performs the calibration protocol
         (``calibrate=on|off``): a recorder leaves that as it is.
@@ -83,13 +83,13 @@ class SimulatedPatient:
 
     @property
     def back_drives(self) -> bool:
-        """Whether the patient moves a servo chain (torque off) through its kinematics."""
+        """Whether the patient moves servos (torque off) through its kinematics."""
         return self._backdrive is not None
 
     def follow(self, joint_q) -> tuple[np.ndarray, int]:
-        """The orientations (N, 4) the back-driven chain takes, from its zero, while the
+        """The orientations (N, 4) the back-driven servos take, from their zero, while the
         patient moves through ``joint_q`` (N, 4), unquantised, and how many of them were out
-        of the chain's reach.
+        of the joint's reach.
 
         Raises
         ------

@@ -10,7 +10,7 @@ Port strings
     Hardware: the path is used as is. On POSIX it is checked at once (exists, is a character
     device, is a terminal), so a wrong path fails in milliseconds, not after a long job.
 ``sim://dynamixel?ids=1,2,3&model=XM430-W350&baud=57600&return_delay_us=0&noise=0&seed=0``
-    A simulated X-series chain (:mod:`rig.sim.dynamixel`). ``baud`` is the *servos'* rate; when
+    A simulated X-series servo bus (:mod:`rig.sim.dynamixel`). ``baud`` is the *servos'* rate; when
     absent the servos run at the rate the host asks for (``open_port(..., baud=B)``), so a URL
     with ``baud=57600`` opened at 1 Mbit/s is a bus where nobody answers, as on hardware.
     Extra keys handled here: ``patient=<shape name | constraint file>`` back-drives the servos
@@ -18,7 +18,7 @@ Port strings
     ``chain=<rig config name | file>`` (default ``sim-shoulder``), so a recording of the
     servo limb sees a patient's motion; ``speed`` scales that motion's frequencies,
     ``excursion`` its reach. ``usb_latency_ms`` is the USB adapter's latency timer (default 1,
-    a U2D2 set as the SDK recommends); ``process=on`` serves the chain from a child process, as
+    a U2D2 set as the SDK recommends); ``process=on`` serves the servos from a child process, as
     hardware is outside the host (:mod:`rig.devices._sim_backends`).
 ``sim://bno055?patient=original&seed=0&rate=100&sensor=1&noise=on|off``
     A simulated BNO055 on its UART (:func:`rig.sim.imu.bno055_from_url` lists the keys).
@@ -61,10 +61,10 @@ def open_port(url: str, *, baud: int | None = None, separate_process: bool = Fal
     url : str
         See the module docstring.
     baud : int, optional
-        The line speed the host will use (a simulated Dynamixel chain without ``baud=`` in its
+        The line speed the host will use (a simulated Dynamixel bus without ``baud=`` in its
         URL runs its servos at this rate).
     separate_process : bool
-        Serve a simulated servo chain or stream board from a process of its own unless its
+        Serve a simulated servo bus or stream board from a process of its own unless its
         URL says ``process=off`` (a real-time loop's bus, as hardware is, outside the host
         process); nothing changes for hardware and the BNO055 simulator.
 

@@ -16,7 +16,7 @@ urls
     ``sim://`` port strings: the table of simulators (:data:`~rig.sim.urls.SIM_DEVICES`) and
     the one parser of their query, shared by the simulators and the port backends.
 dynamixel
-    A chain of Dynamixel X-series servos (Protocol 2.0) behind a simulated U2D2.
+    A bus of Dynamixel X-series servos (Protocol 2.0) behind a simulated U2D2.
 imu
     Simulated IMUs (BNO055 UART and the rig stream protocol).
 limb

@@ -1,4 +1,4 @@
-"""A simulated chain of Dynamixel X-series servos behind a simulated USB adapter (U2D2).
+"""A simulated bus of Dynamixel X-series servos behind a simulated USB adapter (U2D2).
 
 The bus is served on a pseudo-terminal: :attr:`DynamixelBus.port` (``/dev/pts/N``) is opened by
 ``dynamixel_sdk.PortHandler`` (or plain pyserial) exactly like ``/dev/ttyUSB0``; also reachable

@@ -20,7 +20,7 @@ complete within one period arrive together). A U2D2 on Linux with its latency ti
 1 ms (``/sys/bus/usb-serial/devices/ttyUSBn/latency_timer``, what the Dynamixel SDK
 recommends) is ``usb_latency_s=0.001``, the default of ``sim://dynamixel`` with wire time on.
 Host-to-servo bytes are not delayed (a bulk OUT transfer leaves within the USB frame), and a
-packet is never split by the chip's 64-byte buffer (every status packet of a small chain is
+packet is never split by the chip's 64-byte buffer (every status packet of a few servos is
 shorter).
 """
 
@@ -70,7 +70,7 @@ def latency_timer_tick(t: float, epoch: float, period: float) -> float:
 
 
 class DynamixelBus(FaultInjection, PtyServer):
-    """A chain of simulated servos served on a pseudo-terminal.
+    """A bus of simulated servos served on a pseudo-terminal.
 
     Parameters
     ----------
@@ -405,12 +405,12 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
                     clock: Clock = time.monotonic,
                     model_wire_time: bool = True,
                     usb_latency_ms: float = 0.0) -> DynamixelBus:
-    """Start a simulated servo chain on a new pty.
+    """Start a simulated servo bus on a new pty.
 
     Parameters
     ----------
     ids : iterable of int, or of (id, model)
-        Servo IDs (all of ``model``), or ``(id, model)`` pairs for a mixed chain.
+        Servo IDs (all of ``model``), or ``(id, model)`` pairs for a mixed bus.
     model : str
         e-Manual model name, e.g. ``"XM430-W350"``, ``"XL430-W250"``, ``"XC330-M288"``.
     baud_rate : int

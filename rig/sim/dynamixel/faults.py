@@ -19,7 +19,7 @@ method                                 what the host sees
 ``set_temperature(id, °C)``            Present Temperature; overheating above the limit
 ``unplug(ids)`` / ``replug(ids)``      those servos' cables pulled: they stop answering and
                                        hear nothing (their Bus Watchdog runs out)
-``unplug()`` / ``replug()``            the bus cable between adapter and chain
+``unplug()`` / ``replug()``            the bus cable between adapter and servos
 ``unplug(adapter=True)`` /             the USB adapter itself (:meth:`disconnect` /
 ``replug(adapter=True)``               :meth:`reconnect`): the port fails with EIO; a new pty
 =====================================  =========================================================
@@ -172,7 +172,7 @@ class FaultInjection:
         ----------
         ids : iterable of int, optional
             Servos whose cable is pulled: they stop answering (and hearing). ``None``: the bus
-            cable between adapter and chain, so nobody answers (timeouts, the port stays open).
+            cable between adapter and servos, so nobody answers (timeouts, the port stays open).
         adapter : bool, default False
             Unplug the USB adapter itself instead (:meth:`disconnect`): the pty goes away.
         """

@@ -1,4 +1,4 @@
-"""``sim://dynamixel?...``: the port string that starts a simulated servo chain.
+"""``sim://dynamixel?...``: the port string that starts a simulated servo bus.
 
 ``sim://dynamixel?ids=1,2,3&model=XM430-W350&baud=57600&return_delay_us=0&noise=0.5&seed=1``
 
@@ -41,7 +41,7 @@ KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time",
 
 def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
                  **overrides: object) -> DynamixelBus:
-    """Start a simulated chain described by a port string (every key optional).
+    """Start a simulated servo bus described by a port string (every key optional).
 
     Parameters
     ----------
@@ -69,7 +69,7 @@ def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
 
 
 def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
-    """Start the simulated chain of a parsed ``sim://dynamixel`` URL (its bus keys, above;
+    """Start the simulated servo bus of a parsed ``sim://dynamixel`` URL (its bus keys, above;
     other keys the URL may carry are the caller's). ``overrides`` as :func:`bus_from_url`."""
     kwargs: dict[str, object] = {
         "ids": q.int_list("ids", [1]),
