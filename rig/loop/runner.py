@@ -410,7 +410,7 @@ class EnforcementLoop:
                 if alerts:
                     faults |= Fault.HARDWARE_ALERT
                     a = alerts[0]
-                    reason = getattr(a, "message", None) or f"hardware alert {a!r}"
+                    reason = a.message
             if reason is None and sup.present_stale(start, t_present):
                 faults |= Fault.STALE_PRESENT
                 reason = (f"servo data stale for {1e3 * (start - t_present):.0f} ms (limit "
@@ -529,7 +529,7 @@ class EnforcementLoop:
             "safe_state_cycle": self.safe_state_cycle,
             "safe_state_note": self.safe_state_note,
             "end_reason": self.end_reason,
-            "watchdog_ms": getattr(self, "watchdog_ms", None),
+            "watchdog_ms": self.watchdog_ms,
             "backstop_ticks": (None if self.limits is None else
                                {str(i): [int(a), int(b)] for i, a, b in
                                 zip(self.kin.ids, self.limits[0], self.limits[1],
