@@ -160,3 +160,13 @@ def test_nothing_in_rig_imports_the_cli():
                    if m.startswith("rig.") and not is_cli(m) and m != "rig.__main__"
                    for t in ts if is_cli(t))
     assert not wrong, wrong
+
+
+def test_the_servo_bus_knows_no_kinematics():
+    """Issue 38: a servo bus knows servos by ID, name and register; the joint and limb
+    kinematics sit above it (``rig.devices.servo_limb`` composes the two)."""
+    bus_side = ("rig.devices.servo", "rig.devices.bus", "rig.devices.dynamixel")
+    wrong = sorted(f"{m} imports {t}" for m in bus_side for t in GRAPH[m]
+                   if t in ("rig.devices.kinematics", "rig.devices.servo_limb"))
+    assert not wrong, wrong
+    assert "rig.devices.kinematics" in GRAPH["rig.devices.servo_limb"]
