@@ -37,7 +37,6 @@ from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig, prepare_se
 from rig.loop.supervisor import SupervisorConfig
 from rig.loop.targets import open_targets
 from rig.loop.telemetry import Telemetry
-from rig.store import open_store
 
 __all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
            "run_enforce"]
@@ -260,6 +259,8 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
     session_constraint = session_patient = alignment = None
     try:
         if request.db is not None:
+            from rig.store import open_store  # lazy: --db is optional
+
             store = open_store(request.db, readonly=False)  # the run is stored: refused now
             if request.session_id is not None:
                 sid = request.session_id
