@@ -12,15 +12,21 @@ from models.constraint import dump_constraint
 from models.oracle import ConstraintOracle
 from rig.sim import from_url
 from rig.sim.limb import NoiseModel
-from rig.sim.patients import misplaced_mounts, patient_limb, record_imu, record_servo, star_patient
+from rig.sim.patients import (
+    misplaced_mounts,
+    record_imu,
+    record_servo,
+    simulated_patient,
+    star_constraint,
+)
 
 
 def test_star_patient_is_seeded_and_keeps_the_neutral_pose_inside():
-    a, b = star_patient(5), star_patient(5)
+    a, b = star_constraint(5), star_constraint(5)
     assert a.to_dict() == b.to_dict() and a.name == "star-5"
-    assert star_patient(6).to_dict() != a.to_dict()
+    assert star_constraint(6).to_dict() != a.to_dict()
     for seed in range(20):
-        c = star_patient(seed)
+        c = star_constraint(seed)
         tilt = math.degrees(math.acos(np.clip(c.swing.interior[0], -1.0, 1.0)))
         assert tilt <= 10.0 + 1e-9
         assert c.twist.min_deg < 0.0 < c.twist.max_deg
@@ -28,14 +34,14 @@ def test_star_patient_is_seeded_and_keeps_the_neutral_pose_inside():
 
 
 def test_patient_limb_is_the_patient_of_the_port_string(tmp_path):
-    c = star_patient(3)
+    c = star_constraint(3)
     path = tmp_path / "p.yaml"
     dump_constraint(c, path)
     url = (f"sim://imu-stream?sensors=2&patient={path}&seed=3&misplace_deg=25&calibrate=on"
            "&clock=manual")
     with from_url(url) as sim:  # a manual clock: the device does not run
         port = sim.limb
-    limb = patient_limb(c, 3, misplace_deg=25.0, protocol_start_s=port.protocol_start_s)
+    limb = simulated_patient(3, c, misplace_deg=25.0, protocol_start_s=port.protocol_start_s)
     assert [m.mount for m in limb.mounts] == [m.mount for m in port.mounts]
     t = np.linspace(0.0, 60.0, 300)
     np.testing.assert_allclose(limb.joint(t), port.joint(t), atol=1e-12)
@@ -47,13 +53,13 @@ def test_patient_limb_is_the_patient_of_the_port_string(tmp_path):
 
 
 def test_offline_recordings_follow_the_truth():
-    c = star_patient(4)
-    servo = record_servo(patient_limb(c, 4), 10.0, rate_hz=20.0)
+    c = star_constraint(4)
+    servo = record_servo(simulated_patient(4, c), 10.0, rate_hz=20.0)
     assert len(servo.t) == round((5.0 + servo.protocol.duration_s + 10.0) * 20.0)
     err = np.degrees(Q.angle(Q.multiply(servo.limb, Q.conjugate(servo.truth))))
     assert err.max() < 3 * 360.0 / 4096  # three encoders, each off by at most half a tick
     assert servo.window("static").sum() > 0 and servo.window("free")[-1]
-    limb = patient_limb(c, 4, noise=NoiseModel.ideal(), sway_deg=0.0)
+    limb = simulated_patient(4, c, noise=NoiseModel.ideal(), sway_deg=0.0)
     imu = record_imu(limb, 5.0, rate_hz=20.0, chunk=64)
     np.testing.assert_allclose(imu.truth, limb.joint(imu.t), atol=1e-12)
     # no sensor errors: thorax* ⊗ limb sensor = joint ⊗ (thorax mount* ⊗ limb mount) changes
