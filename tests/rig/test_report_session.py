@@ -11,7 +11,7 @@ import pytest
 
 from models.constraint import dump_constraint
 from rig.cli import main
-from rig.demo.pipeline import SIZES, patient_constraint, write_rig_configs
+from rig.demo.joint import SIZES, patient_constraint, write_rig_configs
 from rig.loop import EnforceRequest, run_enforce
 from rig.record import PlainDisplay, RecordOptions, record_session
 from rig.report.session import report_data_for_session
