@@ -89,6 +89,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.limb import Limb
@@ -417,7 +418,6 @@ class SimulatedWholeLimb(SimulatedLimb):
         if world_from_root is None:
             world_from_root = default_world_from_root()
         self.posture = Posture(world_from_root, sway_deg, series.rows(r, r + 2))
-        from calibration.protocol import LimbCalibrationProtocol
 
         self.neutral = LimbCalibrationProtocol(kind).joint_orientations([-1.0], self.side)[0]
         self._neutral = [
