@@ -50,7 +50,7 @@ from calibration import (
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.shapes import load_shape
-from rig.sim.patients import record_imu, record_servo, simulated_patient, star_constraint
+from rig.sim.patients import record_imu, record_servo, seeded_patient, star_constraint
 
 X = np.array([1.0, 0.0, 0.0])
 SHAPES = ("original", "c-shape", "highly-irregular")
@@ -134,7 +134,7 @@ def show(title, rows):
 def timing(repeats: int) -> None:
     truth = star_constraint(100)
     rate = 100_000 / 600.0
-    rec = record_servo(simulated_patient(100, truth), 600.0 - 20.0, rate)
+    rec = record_servo(seeded_patient(100, truth), 600.0 - 20.0, rate)
     q = rec.limb[:100_000]
     times = []
     for _ in range(repeats):
@@ -159,11 +159,11 @@ def main() -> None:
         a.stars, a.duration, a.no_shapes, a.repeats = 2, 120.0, True, 3
     imu_rows, servo_rows = [], []
     for name, truth, seed in patients(a.stars, not a.no_shapes):
-        limb = simulated_patient(seed, truth)
+        limb = seeded_patient(seed, truth)
         rec = record_servo(limb, a.duration, a.rate)
         free = rec.window("free")
         servo_rows.append(evaluate(name, truth, rec.limb[free], None, rec.truth[free]))
-        limb = simulated_patient(seed, truth)
+        limb = seeded_patient(seed, truth)
         rec = record_imu(limb, a.duration, a.rate)
         q, status, _ = joint_from_imu(rec)
         imu_rows.append(evaluate(name, truth, q, status, rec.truth[rec.window("free")]))

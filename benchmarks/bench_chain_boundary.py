@@ -76,9 +76,9 @@ def read_like_a_session(seed: int, limb: str, side: str, duration: float, rate: 
     """A simulated limb recorded and read back as the read path reads a session: postures
     (N, 3, 4) of the free motion, their times, and each joint's measured slow error."""
     from calibration.fusion import fuse_vqf
-    from rig.sim.patients import record_limb_imu, simulated_patient
+    from rig.sim.patients import record_limb_imu, seeded_patient
 
-    chain = simulated_patient(seed, limb, side, neutral=20.0)
+    chain = seeded_patient(seed, limb, side, neutral=20.0)
     rec = record_limb_imu(chain, duration, rate)
     windows = np.asarray(chain.neutral_windows(float(rec.t[-1])),
                          dtype=np.float64).reshape(-1, 2)

@@ -28,14 +28,14 @@ import numpy as np
 from calibration.alignment import ImuJointCalibration
 from calibration.fusion import fuse_vqf
 from models import quaternion as Q
-from rig.sim.patients import simulated_patient, star_constraint
+from rig.sim.patients import seeded_patient, star_constraint
 
 _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])
 
 
 def _simulate(seed: int, seconds: float, rate: float = 100.0):
-    limb = simulated_patient(seed, star_constraint(seed))
+    limb = seeded_patient(seed, star_constraint(seed))
     t = np.arange(round((limb.protocol_end_s + seconds) * rate)) / rate
     q, raw, truth, joint = [], [], [], []
     for i in range(0, len(t), 2000):

@@ -121,7 +121,7 @@ from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
 from models.constraint import PolygonSwing
 from models.limb_oracle import LimbOracle
-from rig.sim.patients import anatomical_limb, record_limb_imu, simulated_patient
+from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
 #: column → (target, what it says)
@@ -277,7 +277,7 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
              paths: list[str], neutral: float = 20.0) -> dict:
     """One patient: record, then every path."""
     t0 = time.perf_counter()
-    chain = simulated_patient(seed, limb, side, neutral=neutral)
+    chain = seeded_patient(seed, limb, side, neutral=neutral)
     rec = record_limb_imu(chain, duration, rate)
     windows = np.asarray(chain.neutral_windows(float(rec.t[-1])), dtype=np.float64).reshape(-1, 2)
     t_rec = time.perf_counter() - t0

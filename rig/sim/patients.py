@@ -9,7 +9,7 @@ builds it here: the calibration tests (``tests/calibration``), the boundary benc
 and the end-to-end accuracy check of ``rig record`` (``benchmarks/record_accuracy.py``,
 ``benchmarks/bench_record.py accuracy``, through the simulators on real ptys).
 
-- :func:`simulated_patient`: the one factory — the patient of a seed and its limits (a joint's
+- :func:`seeded_patient`: the one factory — the patient of a seed and its limits (a joint's
   constraint, a limb file, or an anatomical ``"arm"`` / ``"leg"``) wearing misplaced sensors
   and performing its calibration protocol, then moving freely.
 - :func:`star_constraint`: a seeded random concave star polygon
@@ -66,7 +66,7 @@ from rig.sim.urls import SimUrl
 
 __all__ = ["LIMB_KEYS", "PATIENT_KEYS", "LimbRecording", "Recording", "anatomical_limb",
            "limb_from_url", "misplaced_mounts", "patient_from_url", "record_imu",
-           "record_limb_imu", "record_servo", "resolve_patient", "simulated_patient",
+           "record_limb_imu", "record_servo", "resolve_patient", "seeded_patient",
            "star_constraint"]
 
 _ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
@@ -540,7 +540,7 @@ def _rounded(d: dict) -> dict:
 # The factory (a joint's patient or an arm's or leg's), port strings, offline recordings
 
 
-def simulated_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | None = None,
+def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | None = None,
                       misplace_deg: float = 25.0, calibrate: bool = True,
                       protocol_start_s: float = 5.0, neutral: float = 0.0,
                       **kwargs) -> SimulatedLimb:
@@ -658,7 +658,7 @@ def limb_from_url(q: SimUrl, *, sensors: int | None = None):
     if truth is None:
         truth = anatomical_limb(seed, kind, side)
     try:
-        return simulated_patient(seed, truth, noise=noise, misplace_deg=misplace,
+        return seeded_patient(seed, truth, noise=noise, misplace_deg=misplace,
                              calibrate=calibrate, protocol_start_s=2.0, neutral=neutral,
                              excursion=excursion, speed=speed, neutral_hold_s=_NEUTRAL_HOLD_S,
                              neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)

@@ -67,9 +67,9 @@ def ideal_arm():
     import numpy as np
 
     from rig.sim.limb import NoiseModel
-    from rig.sim.patients import simulated_patient
+    from rig.sim.patients import seeded_patient
 
-    chain = simulated_patient(1, "arm", noise=NoiseModel.ideal())
+    chain = seeded_patient(1, "arm", noise=NoiseModel.ideal())
     t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
     return chain.joints(t), t
 
@@ -252,9 +252,9 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     from models import quaternion as Q
     from models.limb_oracle import LimbOracle
     from rig.sim.limb import NoiseModel
-    from rig.sim.patients import anatomical_limb, simulated_patient
+    from rig.sim.patients import anatomical_limb, seeded_patient
 
-    chain = simulated_patient(6, "arm", noise=NoiseModel.ideal())
+    chain = seeded_patient(6, "arm", noise=NoiseModel.ideal())
     t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
     q = chain.joints(t)
     rng = np.random.default_rng(2)

@@ -14,7 +14,7 @@ from models import quaternion as Q
 from models.limb_oracle import LimbOracle
 from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SimulatedWholeLimb, limb_mounts
-from rig.sim.patients import anatomical_limb, record_limb_imu, simulated_patient
+from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
 Z = np.array([0.0, 0.0, 1.0])
@@ -187,7 +187,7 @@ def test_sensors_see_a_continuous_limb():
     samples lost the jumps (tilt 30-77° off): now the gyroscope integrates to the truth from
     sample to sample, and the accelerometer's linear acceleration averages out as a limb held
     at the shoulder must (its velocity stays bounded)."""
-    chain = simulated_patient(102, "arm", noise=NoiseModel.ideal(), neutral=20.0)
+    chain = seeded_patient(102, "arm", noise=NoiseModel.ideal(), neutral=20.0)
     rec = record_limb_imu(chain, 100.0, 100.0)
     t = rec.t
     for k in range(1, 4):
@@ -241,7 +241,7 @@ def test_a_jumping_target_is_followed_at_bounded_speed_around_the_range():
 
 
 def test_protocol_is_followed_within_limits():
-    chain = simulated_patient(5, "leg", noise=NoiseModel.ideal(), misplace_deg=0.0)
+    chain = seeded_patient(5, "leg", noise=NoiseModel.ideal(), misplace_deg=0.0)
     p = chain.calibration_protocol
     assert isinstance(p, LimbCalibrationProtocol) and chain.protocol_start_s == 5.0
     w = chain.protocol_windows()
@@ -294,7 +294,7 @@ def test_sensors_are_root_chain_mount_and_reproducible():
 
 
 def test_offline_recording():
-    chain = simulated_patient(3, "arm", side="left")
+    chain = seeded_patient(3, "arm", side="left")
     rec = record_limb_imu(chain, 5.0, rate_hz=50.0)
     n = round((chain.protocol_end_s + 5.0) * 50)
     assert rec.quaternions.shape == (n, 4, 4) and rec.joints.shape == (n, 3, 4)
@@ -305,7 +305,7 @@ def test_offline_recording():
     over = LimbOracle(chain.limb).evaluate(rec.joints).distance
     assert np.nanmax(over) < np.radians(1.5)  # the B-spline's brief overshoot at most
     # the same seed twice: the same recording (noise, drift, disturbances included)
-    again = record_limb_imu(simulated_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
+    again = record_limb_imu(seeded_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
     assert np.array_equal(rec.quaternions, again.quaternions)
     assert np.array_equal(rec.mag, again.mag)
 
