@@ -330,19 +330,29 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     out_path : path
         The HTML file to write.
     model : path, optional
-        A model to show; default the last registered with the session whose file is there.
+        A model to show; default the last registered with the session whose file is there. A
+        joint's model must be made for the session's joint, side and patient
+        (:class:`~rig.errors.RigConfigError`, one line, before any work).
     age, sex : optional
         For the population reference band.
-    reference : JointConstraint or models.limb.Limb, optional
-        The truth drawn dashed (a simulated patient's): a joint's constraint, a limb's limits.
+    reference : JointConstraint, models.limb.Limb or path, optional
+        The truth drawn dashed (a simulated patient's): a joint's constraint, a limb's limits,
+        or the file of either.
     eval_n : int
         Held-out inputs of a model scored for the report (no evaluation stored with it).
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from.
     """
-    if session_limb(store.get_session(session_id)) is not None:
+    sess = store.get_session(session_id)  # no session N: before any work
+    if session_limb(sess) is not None:
+        if isinstance(reference, (str, Path)):
+            reference = load_limb(reference)
         return _write_limb_report(store, session_id, out_path, model=model, age=age, sex=sex,
                                   reference=reference, eval_n=eval_n, fusion=fusion)
+    if model is not None:
+        _check_model_for_session(model, sess, session_id)
+    if isinstance(reference, (str, Path)):
+        reference = load_constraint(reference)
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n, fusion=fusion)
     return write_report(data, out_path)
@@ -515,16 +525,10 @@ def run_report(request: ReportRequest) -> ReportResult:
     report."""
     request.check()
     with open_store(request.db, create=False) as store:
-        sess = store.get_session(request.session_id)
-        whole = session_limb(sess) is not None
-        if request.model is not None and not whole:
-            _check_model_for_session(request.model, sess, request.session_id)
-        ref = request.reference
-        if isinstance(ref, (str, Path)):
-            ref = load_limb(ref) if whole else load_constraint(ref)
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
-            sex=request.sex, reference=ref, eval_n=request.eval_n, fusion=request.fusion))
+            sex=request.sex, reference=request.reference, eval_n=request.eval_n,
+            fusion=request.fusion))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:
