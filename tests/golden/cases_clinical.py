@@ -18,7 +18,7 @@ from calibration.joint_angles import (
 )
 from rig.readback import load_joint_orientations
 from rig.readback.files import chain_orientations_from_file
-from rig.sim.patients import anatomical_limb, chain_patient, star_patient
+from rig.sim.patients import anatomical_limb, seeded_patient, star_constraint
 from tests.golden.cli import REAL
 from tests.golden.harness import case
 from tests.golden.util import jtext
@@ -86,7 +86,7 @@ def case_clinical_limbs_real() -> dict:
 def case_clinical_constraint_rom() -> dict:
     """Range of motion of constraints: a star patient's shoulder (range_of_motion,
     constraint_rom), each joint of the anatomical arm and leg taken alone."""
-    c = star_patient(3)
+    c = star_constraint(3)
     out = {"shoulder_range_of_motion": jtext(range_of_motion(c).to_dict()),
            "shoulder_range_of_motion_left": jtext(range_of_motion(c, "left").to_dict())}
     for limb in (anatomical_limb(7, "arm"), anatomical_limb(11, "leg")):
@@ -115,16 +115,15 @@ def case_extract_joint() -> dict:
     """BoundaryExtractor on a star patient's true motion (ball joint) and HingeExtractor on an
     anatomical knee's: the constraint written and the report."""
     from rig.sim.limb import NoiseModel
-    from rig.sim.patients import patient_limb
 
-    sim = patient_limb(star_patient(9), 9, noise=NoiseModel.ideal(), protocol=None)
+    sim = seeded_patient(9, star_constraint(9), noise=NoiseModel.ideal(), calibrate=False)
     t = np.arange(0.0, 120.0, 0.04)
     q = sim.joint(t)
     ex = BoundaryExtractor().fit(q, t=t)
     out = {"ball_yaml": ex.constraint_.to_yaml(), "ball_report": jtext(ex.report())}
     ex2 = BoundaryExtractor(alpha_deg=8.0, max_vertices=24).fit(q, t=t)
     out["ball_coarse_yaml"] = ex2.constraint_.to_yaml()
-    leg = chain_patient(11, "leg", calibrate=False)
+    leg = seeded_patient(11, "leg", calibrate=False)
     knee = leg.joints(np.arange(0.0, 60.0, 0.04))[:, 1]
     hx = HingeExtractor(axis=(0.0, 0.0, -1.0)).fit(knee)
     out["knee_yaml"] = hx.constraint_.to_yaml()
@@ -138,7 +137,7 @@ def case_extract_chain() -> dict:
     limb file and the report."""
     out = {}
     for name, seed in (("leg", 11), ("arm", 7)):
-        sim = chain_patient(seed, name, calibrate=False)
+        sim = seeded_patient(seed, name, calibrate=False)
         t = np.arange(0.0, 90.0, 0.05)
         q = sim.joints(t)
         ex = ChainExtractor(name).fit(q, t=t, side="right")

@@ -19,7 +19,7 @@ import numpy as np
 from calibration import ImuJointCalibration, LimbImuCalibration
 from rig.readback import joint_orientations_from_store
 from rig.readback.sessions import chain_orientations_from_store
-from rig.sim.patients import chain_patient, patient_limb, record_servo, star_patient
+from rig.sim.patients import record_servo, seeded_patient, star_constraint
 from rig.store import open_store
 from tests.golden.cli import _root, rig
 from tests.golden.harness import case, normalise, tmpdir
@@ -41,7 +41,7 @@ def _measure(sim, t: np.ndarray):
 def _joint_imu():
     """A star patient (seed 5) with two IMUs: protocol, then 45 s of free motion with neutral
     checkpoints every 12 s, at 50 Hz; the device quaternions, raw readings and status bytes."""
-    limb = patient_limb(star_patient(5), 5, neutral_every_s=12.0)
+    limb = seeded_patient(5, star_constraint(5), neutral=12.0)
     t = np.arange(round((limb.protocol_end_s + 45.0) * 50.0)) / 50.0
     q, raw, status = _measure(limb, t)
     return limb, t, q, raw, status
@@ -51,7 +51,7 @@ def _joint_imu():
 def _arm_imu():
     """An anatomical arm (seed 6) with four IMUs: the limb protocol, then 50 s of free motion
     with neutral checkpoints every 12 s, at 25 Hz."""
-    chain = chain_patient(6, "arm", neutral=12.0)
+    chain = seeded_patient(6, "arm", neutral=12.0)
     t = np.arange(round((chain.protocol_end_s + 50.0) * 25.0)) / 25.0
     q, raw, status = _measure(chain, t)
     return chain, t, q, raw, status
@@ -89,7 +89,7 @@ def _joint_db(db: Path, *, raw: bool = True) -> int:
 
 
 def _servo_db(db: Path) -> int:
-    rec = record_servo(patient_limb(star_patient(7), 7), 120.0, 50.0)
+    rec = record_servo(seeded_patient(7, star_constraint(7)), 120.0, 50.0)
     with open_store(db) as s:
         pid = s.add_patient("P-102")
         sid = s.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
