@@ -1,12 +1,12 @@
 """Boundary extraction benchmark: accuracy on held-out simulated patients, and speed.
 
 Accuracy
-    Held-out patients: seeded random concave star polygons (``rig.sim.patients.star_patient``,
+    Held-out patients: seeded random concave star polygons (``rig.sim.patients.star_constraint``,
     seeds 100+; the method and its defaults were set on an earlier star generator's seeds
     0-7, not on these) and the thesis shapes ``original``, ``c-shape`` and
     ``highly-irregular`` with a twist range added, each recorded two ways:
 
-    - **imu**: the simulated patient (``rig.sim.patients.patient_limb``) performs the
+    - **imu**: the simulated patient (``rig.sim.patients.simulated_patient``) performs the
       calibration protocol, then moves freely; two IMUs strapped at misplaced orientations
       (25° off the default straps), with white noise, heading/tilt drift and magnetic
       disturbances (the default ``NoiseModel``); ``ImuJointCalibration`` → joint orientations
@@ -50,7 +50,7 @@ from calibration import (
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.shapes import load_shape
-from rig.sim.patients import patient_limb, record_imu, record_servo, star_patient
+from rig.sim.patients import record_imu, record_servo, seeded_patient, star_constraint
 
 X = np.array([1.0, 0.0, 0.0])
 SHAPES = ("original", "c-shape", "highly-irregular")
@@ -60,7 +60,7 @@ SHAPE_TWIST = {"original": (-45.0, 60.0), "c-shape": (-30.0, 70.0),
 
 def patients(n_star: int, shapes: bool):
     for seed in range(100, 100 + n_star):
-        yield f"star-{seed}", star_patient(seed), seed
+        yield f"star-{seed}", star_constraint(seed), seed
     if shapes:
         for k, name in enumerate(SHAPES):
             c = load_shape(name)
@@ -132,9 +132,9 @@ def show(title, rows):
 
 
 def timing(repeats: int) -> None:
-    truth = star_patient(100)
+    truth = star_constraint(100)
     rate = 100_000 / 600.0
-    rec = record_servo(patient_limb(truth, 100), 600.0 - 20.0, rate)
+    rec = record_servo(seeded_patient(100, truth), 600.0 - 20.0, rate)
     q = rec.limb[:100_000]
     times = []
     for _ in range(repeats):
@@ -159,11 +159,11 @@ def main() -> None:
         a.stars, a.duration, a.no_shapes, a.repeats = 2, 120.0, True, 3
     imu_rows, servo_rows = [], []
     for name, truth, seed in patients(a.stars, not a.no_shapes):
-        limb = patient_limb(truth, seed)
+        limb = seeded_patient(seed, truth)
         rec = record_servo(limb, a.duration, a.rate)
         free = rec.window("free")
         servo_rows.append(evaluate(name, truth, rec.limb[free], None, rec.truth[free]))
-        limb = patient_limb(truth, seed)
+        limb = seeded_patient(seed, truth)
         rec = record_imu(limb, a.duration, a.rate)
         q, status, _ = joint_from_imu(rec)
         imu_rows.append(evaluate(name, truth, q, status, rec.truth[rec.window("free")]))

@@ -29,10 +29,10 @@ Columns, per joint:
 
 Sources:
 
-- simulated limbs from **held-out** seeds (``rig.sim.patients.chain_patient(seed, limb,
+- simulated limbs from **held-out** seeds (``rig.sim.patients.simulated_patient(seed, limb,
   "right", neutral=20)``; seeds 101-105 are the ones ``benchmarks/bench_limb_imu.py`` calls
   held out: tests and development used seeds 0-20), recorded by
-  :func:`~rig.sim.patients.record_chain_imu` (the limb protocol, then ``--duration`` s of free
+  :func:`~rig.sim.patients.record_limb_imu` (the limb protocol, then ``--duration`` s of free
   motion at ``--rate`` Hz) and read as a session is read by default: each sensor's raw samples
   fused on the host (VQF), the limb calibration fitted on the protocol windows with the
   neutral checkpoints as standings of the root, the heading corrected at the checkpoints and
@@ -76,10 +76,10 @@ def read_like_a_session(seed: int, limb: str, side: str, duration: float, rate: 
     """A simulated limb recorded and read back as the read path reads a session: postures
     (N, 3, 4) of the free motion, their times, and each joint's measured slow error."""
     from calibration.fusion import fuse_vqf
-    from rig.sim.patients import chain_patient, record_chain_imu
+    from rig.sim.patients import record_limb_imu, seeded_patient
 
-    chain = chain_patient(seed, limb, side, neutral=20.0)
-    rec = record_chain_imu(chain, duration, rate)
+    chain = seeded_patient(seed, limb, side, neutral=20.0)
+    rec = record_limb_imu(chain, duration, rate)
     windows = np.asarray(chain.neutral_windows(float(rec.t[-1])),
                          dtype=np.float64).reshape(-1, 2)
     qs = [fuse_vqf(rec.t, np.concatenate((rec.accel[:, k], rec.gyro[:, k], rec.mag[:, k]),

@@ -1,9 +1,9 @@
 """Host-side VQF fusion against the devices' fused quaternions, on simulated patients.
 
-For each star patient (``rig.sim.patients.star_patient``; dev seeds 201-205 by default — the
+For each star patient (``rig.sim.patients.star_constraint``; dev seeds 201-205 by default — the
 held-out seeds 101-105 of ``bench_record.py accuracy`` were not used to choose anything) two
 misplaced IMUs are simulated through the calibration protocol and ``--seconds`` of free
-motion at 100 Hz (``SimulatedLimb.measure_many``: device quaternions with the device-fusion
+motion at 100 Hz (``SimulatedJoint.measure_many``: device quaternions with the device-fusion
 error model, and raw accelerometer / gyroscope / magnetometer samples). Per method:
 
 - ``relhead``: the relative heading error of the two sensors' worlds, the heading (about
@@ -28,14 +28,14 @@ import numpy as np
 from calibration.alignment import ImuJointCalibration
 from calibration.fusion import fuse_vqf
 from models import quaternion as Q
-from rig.sim.patients import patient_limb, star_patient
+from rig.sim.patients import seeded_patient, star_constraint
 
 _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])
 
 
 def _simulate(seed: int, seconds: float, rate: float = 100.0):
-    limb = patient_limb(star_patient(seed), seed)
+    limb = seeded_patient(seed, star_constraint(seed))
     t = np.arange(round((limb.protocol_end_s + seconds) * rate)) / rate
     q, raw, truth, joint = [], [], [], []
     for i in range(0, len(t), 2000):

@@ -1,17 +1,17 @@
 """The IMU path on held-out simulated arms and legs (issue 21): limb calibration, chain
 extraction, coupling and clinical peaks against the patient's true limits.
 
-Per patient (``rig.sim.patients.chain_patient(seed, limb, side)``: the anatomical arm or leg of
+Per patient (``rig.sim.patients.simulated_patient(seed, limb, side)``: the anatomical arm or leg of
 :func:`~rig.sim.patients.anatomical_limb` wearing four IMUs strapped 25° off their nominal
 mounts, with the default ``NoiseModel``: white noise, heading drift (an Ornstein-Uhlenbeck
 process, 2° standard deviation per sensor, 30 s), tilt drift and magnetic disturbances; no
 neutral checkpoints):
 
-1. :func:`~rig.sim.patients.record_chain_imu`: the limb calibration protocol
+1. :func:`~rig.sim.patients.record_limb_imu`: the limb calibration protocol
    (:class:`~calibration.protocol.LimbCalibrationProtocol`), then ``--duration`` s of free
    motion at ``--rate`` Hz;
 2. :class:`~calibration.limb_calibration.LimbImuCalibration` fitted on the protocol's windows
-   (:meth:`~rig.sim.limb.SimulatedChain.protocol_windows`; the samples whose four status bytes
+   (:meth:`~rig.sim.limb.SimulatedWholeLimb.protocol_windows`; the samples whose four status bytes
    pass :func:`~calibration.alignment.status_ok`), applied to the free motion: joint
    orientations (N, 3, 4);
 3. :class:`~calibration.boundary.ChainExtractor` on them, with the sample times and, per
@@ -23,7 +23,7 @@ device-fused quaternions) and ``truth`` (step 3 on the true joint orientations o
 motion: the extraction and coupling test alone, what the IMU path would give with perfect
 sensors and calibration). ``--paths`` may add ``vqf``: the raw samples fused on the host
 (:func:`calibration.fusion.fuse_vqf`) instead of the device quaternions; and ``pose``: steps 2-4
-on the error-free sensor orientations (``ChainRecording.sensors_true``: no noise, drift or
+on the error-free sensor orientations (``LimbRecording.sensors_true``: no noise, drift or
 fusion), so that ``cal°`` is the calibration's own error — what the patient's posture during the
 static pose puts on every joint (the root's sway leans every segment alike, and gravity is taken
 as each segment's long axis; the root's lean is measured against the neutral checkpoints and
@@ -121,7 +121,7 @@ from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
 from models.constraint import PolygonSwing
 from models.limb_oracle import LimbOracle
-from rig.sim.patients import anatomical_limb, chain_patient, record_chain_imu
+from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
 #: column → (target, what it says)
@@ -277,8 +277,8 @@ def evaluate(seed: int, limb: str, side: str, duration: float, rate: float,
              paths: list[str], neutral: float = 20.0) -> dict:
     """One patient: record, then every path."""
     t0 = time.perf_counter()
-    chain = chain_patient(seed, limb, side, neutral=neutral)
-    rec = record_chain_imu(chain, duration, rate)
+    chain = seeded_patient(seed, limb, side, neutral=neutral)
+    rec = record_limb_imu(chain, duration, rate)
     windows = np.asarray(chain.neutral_windows(float(rec.t[-1])), dtype=np.float64).reshape(-1, 2)
     t_rec = time.perf_counter() - t0
     free = rec.window("free")

@@ -47,7 +47,7 @@ def make(minutes: list[float], out: Path, rate: int = 400, rom: bool = False) ->
     from rig.record import RecordOptions, record_session
     from rig.record.lockstep import CountingDisplay, LockstepClock
     from rig.record.rigio import load_config, open_rig
-    from rig.sim.patients import star_patient
+    from rig.sim.patients import star_constraint
 
     out.mkdir(parents=True, exist_ok=True)
     for m in minutes:
@@ -56,7 +56,7 @@ def make(minutes: list[float], out: Path, rate: int = 400, rom: bool = False) ->
             print(f"{db} exists, kept")
             continue
         cpath = out / "patient.yaml"
-        dump_constraint(star_patient(11), cpath)
+        dump_constraint(star_constraint(11), cpath)
         port = (f"sim://imu-stream?sensors=2&rate={rate}&patient={cpath}&seed=11"
                 "&misplace_deg=25&neutral=20&clock=manual&flow=on&max_lag=none")
         cfg = out / "rig.yaml"

@@ -17,7 +17,7 @@
     over ``--repeats`` runs.
 ``accuracy``
     Held-out seeded patients (concave star polygons with twist ranges,
-    :func:`rig.sim.patients.star_patient`) recorded through the whole stack on both paths —
+    :func:`rig.sim.patients.star_constraint`) recorded through the whole stack on both paths —
     IMU (stream board on a pty, noise, drift, disturbances, straps 25° off, the guided
     calibration performed by the patient, lockstep manual clock) and the back-driven servo limb
     (scaled clock) — then boundary extraction and clinical peaks from the store, compared with
@@ -112,7 +112,7 @@ def main(argv=None) -> None:
                         "unread bytes (UART)")
     a = sub.add_parser("accuracy")
     a.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103, 104, 105],
-                   help="held-out patients (rig.sim.patients.star_patient seeds; the test "
+                   help="held-out patients (rig.sim.patients.star_constraint seeds; the test "
                         "suite uses seed 7, nothing was tuned on these)")
     a.add_argument("--free", type=float, default=300.0,
                    help="seconds of free motion (patient time) after the calibration")
@@ -142,13 +142,13 @@ def accuracy(seeds, free_s: float, servo_scale: float, servo_rate: float,
              paths: tuple[str, ...], neutral_s: float = 20.0,
              fusions: tuple[str, ...] = ("vqf", "device")) -> None:
     """Held-out seeded patients through the whole stack (see ``benchmarks/record_accuracy.py``)."""
-    from record_accuracy import record_imu_patient, record_servo_patient, star_patient
+    from record_accuracy import record_imu_patient, record_servo_patient, star_constraint
 
     labels = [lab for p in paths for lab in ((f"imu-{f}" for f in fusions) if p == "imu"
                                              else (p,))]
     rows: dict[str, list] = {lab: [] for lab in labels}
     for seed in seeds:
-        truth = star_patient(seed)
+        truth = star_constraint(seed)
         for path in paths:
             t0 = time.perf_counter()
             with tempfile.TemporaryDirectory() as tmp:

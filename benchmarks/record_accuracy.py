@@ -1,6 +1,6 @@
 """End-to-end accuracy of ``rig record`` on a simulated patient whose range of motion is known.
 
-The whole stack, nothing bypassed: a seeded patient (:func:`star_patient`) written to a
+The whole stack, nothing bypassed: a seeded patient (:func:`star_constraint`) written to a
 constraint file → a simulator on a real pty (``sim://imu-stream`` with sensor noise, drift,
 magnetic disturbances and misplaced straps on a lockstep manual clock, or the back-driven servo
 limb ``sim://dynamixel?...&patient=`` on a scaled clock) → the real driver and orientation
@@ -42,9 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from models import quaternion as Q
-from rig.sim.patients import star_patient  # the factory of simulated patients (re-exported)
+from rig.sim.patients import star_constraint  # the factory of simulated patients (re-exported)
 
-__all__ = ["AccuracyResult", "record_imu_patient", "record_servo_patient", "star_patient"]
+__all__ = ["AccuracyResult", "record_imu_patient", "record_servo_patient", "star_constraint"]
 
 _SWING_PEAKS = ("flexion", "extension", "abduction", "adduction", "horizontal_adduction")
 

@@ -37,10 +37,10 @@ def rig_cli(capsys):
 def sim_leg():
     """A simulated leg (``anatomical_limb(11, "leg")``: the hip and ankle coupled to the knee)
     without sensor errors."""
-    from rig.sim.limb import NoiseModel, SimulatedChain
+    from rig.sim.limb import NoiseModel, SimulatedWholeLimb
     from rig.sim.patients import anatomical_limb
 
-    return SimulatedChain(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
+    return SimulatedWholeLimb(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
 
 
 @pytest.fixture(scope="session")

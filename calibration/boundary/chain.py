@@ -59,7 +59,7 @@ a coupling** when
    cuts a corner of a stretch both keyframes share. Boundaries are matched along such
    stretches (dynamic time warping) since e741674; paired by arc length alone they slid
    along them and cut their corners (on simulated range-of-motion tests with a true
-   coupling, ``rig.sim.patients.chain_patient``, 1-5 % of the postures out, up to 6°, and
+   coupling, ``rig.sim.patients.simulated_patient``, 1-5 % of the postures out, up to 6°, and
    most couplings refused). That is the file format's interpolation, not evidence against
    the coupling, so the test is made in two steps. First the evidence: at least
    ``min_held`` of the postures lie within 1° of the limits or of both keyframes that bracket

@@ -4,7 +4,8 @@ A simulated patient with an irregular concave shoulder range → calibration →
 the IMUs and the back-driven servo limb → boundary extraction → training (``rig train``'s
 default preset) → ONNX export → held-out evaluation → live enforcement against targets that try
 to leave the range → the clinician's report; everything in ``<out>/rig.db``; a one-screen
-summary with a verdict per stage. The stages are :mod:`rig.demo.pipeline`.
+summary with a verdict per stage. The stages are :mod:`rig.demo.joint` (``--limb``:
+:mod:`rig.demo.limb`), run by :func:`rig.demo.pipeline.run_demo`.
 
 ``--dxl-port`` / ``--imu-port`` (hardware or ``sim://`` ports) are opened and exercised first
 — ping, sync reads, IMU quaternions — so a wrong port, baud or missing servo is one line,
@@ -45,23 +46,13 @@ def demo(out_dir, seed, quick, limb, rate_hz, dxl_port, dxl_ids, dxl_baud, imu_p
     """Run the whole job on the simulated rig and write a report (no hardware needed)."""
     from rich.console import Console
 
-    from rig.demo import DemoOptions, parse_ids, run_demo
+    from rig.demo import DemoOptions, run_demo
 
     console = Console(highlight=False)
-    if limb is not None:
-        from rig.demo.limb import run_limb_demo
-
-        result = run_limb_demo(DemoOptions(out=Path(out_dir), seed=seed, quick=quick,
-                                           dxl_port=dxl_port, imu_port=imu_port), limb,
-                               console=console)
-        print_summary(result, console)
-        if not result.ok:
-            sys.exit(1)
-        return
-    ids = parse_ids(dxl_ids)
+    # --dxl-ids, --dxl-baud and --rate are the shoulder's: the limb demo does not read them
     result = run_demo(DemoOptions(out=Path(out_dir), seed=seed, quick=quick, dxl_port=dxl_port,
-                                  dxl_ids=tuple(ids), dxl_baud=dxl_baud, imu_port=imu_port,
-                                  rate_hz=rate_hz), console=console)
+                                  dxl_ids=dxl_ids, dxl_baud=dxl_baud, imu_port=imu_port,
+                                  rate_hz=rate_hz, limb=limb), console=console)
     print_summary(result, console)
     if not result.ok:
         sys.exit(1)

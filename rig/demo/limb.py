@@ -1,5 +1,6 @@
 """``rig demo --limb arm|leg``: a whole simulated arm or leg, recorded, extracted, trained,
-evaluated and reported, stage by stage with a verdict per stage.
+evaluated and reported, stage by stage with a verdict per stage (:class:`LimbDemo`, run by
+:func:`rig.demo.pipeline.run_demo`).
 
 Stages (each calls the library function behind the corresponding ``rig`` command):
 
@@ -32,22 +33,40 @@ Everything goes into one store, ``<out>/rig.db``.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rig.demo.pipeline import (
+import numpy as np
+import yaml
+
+from calibration.boundary import boundary_distance
+from calibration.joints import LIMB_CHAINS, hinge_angles
+from models.limb import dump_limb, load_limb
+from models.limb_oracle import LimbOracle
+from rig.demo.stages import (
     DemoOptions,
     DemoResult,
+    RecordingDisplay,
     StageResult,
-    _RecordingDisplay,
-    _shipped_config,
     recording_failure,
     report_stage,
-    run_stages,
+    shipped_config,
 )
+from rig.devices.config import load_rig_config
+from rig.errors import RigConfigError
+from rig.readback import ChainRequest, run_chain
+from rig.readback.sessions import read_chain
+from rig.record import RecordOptions, record_session
+from rig.sim.patients import anatomical_limb
+from rig.sim.urls import with_keys
+from rig.store import open_store
+from rig.training import TrainRequest, run_train
+from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
+from rig.training.verdict import evaluation_record, evaluation_verdict
 
-__all__ = ["LIMB_SIZES", "LimbDemoSize", "run_limb_demo", "write_limb_rig"]
+__all__ = ["LIMB_SIZES", "LimbDemo", "LimbDemoSize", "compare_limbs", "write_limb_rig"]
 
 #: Verdict targets of the boundary stage (issue 21), degrees or shares.
 HINGE_DEG = 2.0
@@ -92,12 +111,7 @@ LIMB_SIZES = {
 def write_limb_rig(out: Path, limb: str, seed: int, size: LimbDemoSize) -> Path:
     """The shipped ``sim-<limb>`` configuration worn by the patient of ``seed``, patient time
     scaled; validated like any ``--rig FILE``."""
-    import yaml
-
-    from rig.devices.config import load_rig_config
-    from rig.sim.urls import with_keys
-
-    cfg = _shipped_config(f"sim-{limb}")
+    cfg = shipped_config(f"sim-{limb}")
     cfg["sensors"]["port"] = with_keys(cfg["sensors"]["port"], seed=seed, rate=size.rate_hz,
                                        time_scale=f"{size.time_scale:g}")
     cfg["sensors"]["rate_hz"] = size.rate_hz
@@ -110,50 +124,55 @@ def write_limb_rig(out: Path, limb: str, seed: int, size: LimbDemoSize) -> Path:
     return path
 
 
-def run_limb_demo(options: DemoOptions, limb: str, *, console=None) -> DemoResult:
-    """Run every stage of the limb demo (module docstring)."""
-    from rich.console import Console
+class LimbDemo:
+    """The limb demo (module docstring) as :func:`rig.demo.pipeline.run_demo` runs it: the
+    options checked at once, then the patient and the stages that follow.
 
-    from calibration.joints import LIMB_CHAINS
-    from models.limb import dump_limb
-    from rig.errors import RigConfigError
-    from rig.sim.patients import anatomical_limb
+    Parameters
+    ----------
+    options : DemoOptions
+        ``limb`` one of :data:`calibration.joints.LIMB_CHAINS` (``"arm"``, ``"leg"``); no
+        hardware ports (the limb demo runs on the simulated limb).
 
-    if limb not in LIMB_CHAINS:
-        raise RigConfigError(f"--limb {limb!r}: expected one of {', '.join(LIMB_CHAINS)}")
-    if options.dxl_port is not None or options.imu_port is not None:
-        raise RigConfigError("--limb runs on the simulated limb: --dxl-port / --imu-port apply "
-                             "to the shoulder demo")
-    console = console if console is not None else Console()
-    size = LIMB_SIZES["quick" if options.quick else "full"]
-    from models.fileio import check_output
+    Raises
+    ------
+    RigConfigError
+        An unknown limb or a hardware port given (one line), before anything is written.
+    """
 
-    out = check_output(options.out, "--out", folder=True)  # before any stage
-    t_all = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    stages: list[StageResult] = []
-    result = DemoResult(out=out, db=out / "rig.db", stages=stages)
+    def __init__(self, options: DemoOptions) -> None:
+        limb = options.limb
+        if limb not in LIMB_CHAINS:
+            raise RigConfigError(f"--limb {limb!r}: expected one of {', '.join(LIMB_CHAINS)}")
+        if options.dxl_port is not None or options.imu_port is not None:
+            raise RigConfigError("--limb runs on the simulated limb: --dxl-port / --imu-port "
+                                 "apply to the shoulder demo")
+        self.options, self.limb = options, limb
+        self.size = LIMB_SIZES["quick" if options.quick else "full"]
 
-    def log(text: str) -> None:
-        console.print(text, highlight=False, markup=False)
+    def check(self, log: Callable[[str], None]) -> list[StageResult]:
+        """No stage before the patient: the limb demo opens no hardware."""
+        return []
 
-    t0 = time.perf_counter()
-    truth = anatomical_limb(options.seed, limb, "right")
-    patient_file = out / f"patient-{limb}.yaml"
-    dump_limb(truth, patient_file)
-    rig = write_limb_rig(out, limb, options.seed, size)
-    coupled = [f"{j.name} by the {j.coupling.by} ({len(j.coupling.at_deg)} keyframes)"
-               for j in truth.joints if j.coupling is not None]
-    stages.append(StageResult(
-        "patient", seconds=time.perf_counter() - t0, verdict="INFO",
-        detail=f"anatomical right {limb}, seed {options.seed}: "
-               f"{', '.join(f'{j.name} {j.kind}' for j in truth.joints)}; coupled: "
-               f"{', '.join(coupled) or 'none'}: {patient_file}"))
-    ctx = _LimbCtx(options, size, limb, out, result, rig, truth, log)
-    run_stages(ctx, (("record", ctx.record), ("boundary", ctx.boundary), ("train", ctx.train),
-                     ("evaluate", ctx.evaluate), ("report", ctx.report)), stages, console, log)
-    result.total_s = time.perf_counter() - t_all
-    return result
+    def patient(self, result: DemoResult, log: Callable[[str], None]):
+        """Stage 1, the seeded anatomical limb and its rig (appended to ``result.stages``);
+        returns the stages' shared state and the named stages that follow."""
+        options, limb, out = self.options, self.limb, result.out
+        t0 = time.perf_counter()
+        truth = anatomical_limb(options.seed, limb, "right")
+        patient_file = out / f"patient-{limb}.yaml"
+        dump_limb(truth, patient_file)
+        rig = write_limb_rig(out, limb, options.seed, self.size)
+        coupled = [f"{j.name} by the {j.coupling.by} ({len(j.coupling.at_deg)} keyframes)"
+                   for j in truth.joints if j.coupling is not None]
+        result.stages.append(StageResult(
+            "patient", seconds=time.perf_counter() - t0, verdict="INFO",
+            detail=f"anatomical right {limb}, seed {options.seed}: "
+                   f"{', '.join(f'{j.name} {j.kind}' for j in truth.joints)}; coupled: "
+                   f"{', '.join(coupled) or 'none'}: {patient_file}"))
+        ctx = _LimbCtx(options, self.size, limb, out, result, rig, truth, log)
+        return ctx, (("record", ctx.record), ("boundary", ctx.boundary), ("train", ctx.train),
+                     ("evaluate", ctx.evaluate), ("report", ctx.report))
 
 
 class _LimbCtx:
@@ -172,9 +191,7 @@ class _LimbCtx:
         self.metrics: dict | None = None
 
     def record(self, st: StageResult) -> None:
-        from rig.record import RecordOptions, record_session
-
-        display = _RecordingDisplay(self.progress, self.task, f"IMUs on the {self.limb}",
+        display = RecordingDisplay(self.progress, self.task, f"IMUs on the {self.limb}",
                                     self.log)
         res = record_session(RecordOptions(rig=str(self.rig), db=str(self.result.db),
                                            patient=f"SIM-{self.limb.upper()}-"
@@ -199,8 +216,6 @@ class _LimbCtx:
             st.detail = f"{recording_failure(res)}; {st.detail}"
 
     def boundary(self, st: StageResult) -> None:
-        from rig.readback import ChainRequest, run_chain
-
         res = run_chain(ChainRequest(None, self.limb, None, self.limb_file,
                                      db=str(self.result.db), session_id=self.session))
         self.extracted = res.extractor.limb_
@@ -241,8 +256,6 @@ class _LimbCtx:
                      + "; ".join(couplings))
 
     def train(self, st: StageResult) -> None:
-        from rig.training import TrainRequest, run_train
-
         res = run_train(TrainRequest(self.model_file, constraint=str(self.limb_file),
                                      preset=self.size.preset, seed=self.options.seed))
         st.figures.update({"path": str(res.path), "preset": self.size.preset,
@@ -254,11 +267,6 @@ class _LimbCtx:
                                               else ""))
 
     def evaluate(self, st: StageResult) -> None:
-        from models.limb import load_limb
-        from rig.store import open_store
-        from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
-        from rig.training.verdict import evaluation_record, evaluation_verdict
-
         limb = load_limb(self.limb_file)
         seed = self.options.seed + 77
         metrics, _ = evaluate_limb(str(self.model_file), limb, self.size.eval_n, seed)
@@ -291,12 +299,6 @@ def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:
     """Share of the session's postures within ``tol_deg`` of ``limb``'s limits in every joint:
     a hinge by its angle (its out-of-axis motion is corrected, not limited), the others by the
     exact limb oracle's distance."""
-    import numpy as np
-
-    from calibration.joints import hinge_angles
-    from models.limb_oracle import LimbOracle
-    from rig.readback.sessions import read_chain
-
     chain = read_chain(str(db), session)
     d = np.degrees(LimbOracle(limb).evaluate(chain.q, normalize=True).distance)
     for j, joint in enumerate(limb.joints):
@@ -319,8 +321,6 @@ def compare_limbs(extracted, truth) -> dict[str, Any]:
       truth is coupled (the recording's union of angles);
     and ``twist_error_deg`` for ball / two-axis joints.
     """
-    from calibration.boundary import boundary_distance
-
     out: dict[str, Any] = {"joints": {}}
     for e, t in zip(extracted.joints, truth.joints, strict=True):
         f: dict[str, Any] = {}

@@ -26,6 +26,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from calibration.joint_angles import from_angles
+from models import quaternion as Q
+
 __all__ = [
     "EqualAreaMap",
     "anatomical_directions",
@@ -197,9 +200,6 @@ def joint_directions(joint: str, side: str | None) -> dict[str, np.ndarray]:
                 "abduction / lateral": a["lateral"], "adduction / medial": a["medial"]}
     if joint not in _JOINT_LABELS:
         return anatomical_directions(side)
-    from calibration.joint_angles import from_angles
-    from models import quaternion as Q
-
     s = "left" if side == "left" else "right"
     x = np.array([1.0, 0.0, 0.0])  # every rig segment's long axis, the foot's too
     out = {"neutral": Q.rotate(from_angles(0.0, 0.0, 0.0, joint, s)[0], x)}

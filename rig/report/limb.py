@@ -62,7 +62,36 @@ from typing import Any
 
 import numpy as np
 
+from calibration.boundary import boundary_distance
+from calibration.clinical import range_of_motion
+from calibration.joint_angles import (
+    CLINICAL_MOVEMENTS,
+    JOINT_ANGLES,
+    NORMATIVE,
+    POPULATION,
+    UNKNOWN_AGE,
+    allowed_rom,
+    beyond_reach,
+    constraint_rom,
+    joint_angles,
+    largest_rom,
+    not_measured,
+    recorded_rom,
+)
+from calibration.joints import JOINTS, hinge_angles, off_axis_angles
 from models import quaternion as Q
+from models.geometry import polygon_area
+from models.limb_oracle import LimbOracle
+from rig import __version__
+from rig.report.figures import (
+    boundary_figure,
+    coupling_figure,
+    hinge_figure,
+    joint_directions,
+    map_side_of,
+    swing_map,
+    swing_outline,
+)
 from rig.report.page import (
     RomRow,
     escape,
@@ -71,11 +100,14 @@ from rig.report.page import (
     kv_table,
     page_foot,
     page_head,
+    rom_rows,
     rom_table_html,
     verdict_html,
     warnings_html,
     write_page,
 )
+from rig.training.limb import LIMB_TARGETS
+from rig.training.verdict import evaluation_verdict
 
 __all__ = ["NO_COUPLING", "CouplingSection", "JointSection", "LimbReportData",
            "limb_model_verdict", "limb_report_data", "render_limb_html", "write_limb_report"]
@@ -169,8 +201,6 @@ def _title(name: str) -> str:
 
 def _movements(name: str) -> tuple[str, str]:
     """(positive, negative) movement of a joint's primary angle."""
-    from calibration.joint_angles import JOINT_ANGLES
-
     if name in JOINT_ANGLES:
         return JOINT_ANGLES[name].movements[0]
     return ("flexion", "extension")
@@ -178,8 +208,6 @@ def _movements(name: str) -> tuple[str, str]:
 
 def _clinical_hinge(name: str, axis) -> bool:
     """Is this hinge's angle the joint's clinical flexion (its axis the rig's, either side)?"""
-    from calibration.joints import JOINTS
-
     spec = JOINTS.get(name)
     return (spec is not None and spec.hinge_axis is not None
             and bool(np.allclose(np.asarray(axis, float), spec.hinge_axis, atol=1e-6)))
@@ -187,15 +215,11 @@ def _clinical_hinge(name: str, axis) -> bool:
 
 def _kind_of(name: str) -> str | None:
     """The kind :data:`calibration.joints.JOINTS` gives a joint of this name (None: unknown)."""
-    from calibration.joints import JOINTS
-
     spec = JOINTS.get(name)
     return None if spec is None else spec.kind
 
 
 def _swing_area(c) -> float:
-    from models.geometry import polygon_area
-
     sw = c.swing
     if sw is None:
         return 4.0 * math.pi
@@ -234,8 +258,6 @@ _ROM_CACHE: dict[str, Any] = {}
 def _constraint_rom(constraint, name: str, side: str):
     """:func:`calibration.joint_angles.constraint_rom`, remembered per limits (a few seconds
     per swing joint; a limb's report asks again for the same limits when it is redrawn)."""
-    from calibration.joint_angles import constraint_rom
-
     key = json.dumps([name, side, _rounded(constraint.to_dict())], sort_keys=True)
     if key not in _ROM_CACHE:
         if len(_ROM_CACHE) > 64:
@@ -260,14 +282,9 @@ def _primary_limits(c, name: str, side: str) -> tuple[float, float]:
     if c.kind == "hinge":
         return float(c.hinge.min_deg), float(c.hinge.max_deg)
     if name == "shoulder":
-        from calibration.clinical import range_of_motion
-
         r = range_of_motion(c, side)
         return (math.nan if r.extension is None else -r.extension,
                 math.nan if r.flexion is None else r.flexion)
-    from calibration.joint_angles import JOINT_ANGLES, joint_angles
-    from rig.report.figures import swing_outline
-
     if name not in JOINT_ANGLES or c.swing is None:
         return math.nan, math.nan
     axis = np.asarray(c.limb_axis, dtype=np.float64)
@@ -285,9 +302,6 @@ def _primary_angles(q: np.ndarray, name: str, side: str, joint) -> tuple[np.ndar
                                                                        np.ndarray]:
     """The primary clinical angle (degrees) of recorded orientations ``q`` (N, 4) and which
     samples it is read at (the shoulder's: within the sagittal band)."""
-    from calibration.joint_angles import JOINT_ANGLES, joint_angles
-    from calibration.joints import hinge_angles
-
     every = np.ones(len(q), dtype=bool)
     if joint.kind == "hinge":
         return hinge_angles(q, joint.loosest().hinge.axis), every
@@ -325,22 +339,8 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
                     age: float | None, sex: str | None) -> tuple[list[RomRow], str | None]:
     """The range-of-motion rows of one joint (module doc) and the note under them; ``limits``
     its constraint, or a coupled joint's keyframes (the largest over them)."""
-    from calibration.joint_angles import (
-        CLINICAL_MOVEMENTS,
-        NORMATIVE,
-        POPULATION,
-        UNKNOWN_AGE,
-        allowed_rom,
-        beyond_reach,
-        largest_rom,
-        not_measured,
-        recorded_rom,
-    )
-
     where = f" ({at})" if at else ""
     if name == "shoulder":
-        from rig.report.page import rom_rows
-
         rows = rom_rows(allowed_rom(limits, name, side, directions=Q.limb_direction(
             q, limits[0].limb_axis)), age=None if age is None else int(age), sex=sex)
         allowed = allowed_rom(limits, name, side)
@@ -414,9 +414,6 @@ def _interval_text(lo: float, hi: float) -> str:
 
 def _swing_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, result,
                    reference) -> None:
-    from calibration.boundary import boundary_distance
-    from rig.report.figures import boundary_figure, joint_directions, map_side_of, swing_map
-
     joint = limb.joints[j]
     axis = np.asarray(joint.limb_axis, dtype=np.float64)
     dirs = Q.limb_direction(q, axis)
@@ -491,10 +488,6 @@ def _swing_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
 
 def _hinge_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, result,
                    reference) -> None:
-    from calibration.joint_angles import NORMATIVE
-    from calibration.joints import hinge_angles, off_axis_angles
-    from rig.report.figures import hinge_figure
-
     joint = limb.joints[j]
     h = joint.loosest().hinge
     angles = hinge_angles(q, h.axis)
@@ -544,9 +537,6 @@ def _hinge_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
 
 def _coupling_section(limb, j: int, q: np.ndarray, side: str,
                       reference) -> CouplingSection:
-    from calibration.joints import hinge_angles
-    from rig.report.figures import coupling_figure
-
     joint = limb.joints[j]
     cp = joint.coupling
     src = limb.joints[limb.index(cp.by)]
@@ -613,9 +603,6 @@ def limb_model_verdict(metrics: Mapping[str, Any]) -> tuple[bool, str, list[dict
     (:data:`rig.training.limb.LIMB_TARGETS`: end-point mean 3-D error ≤ 0.5 % of the limb's
     length, invalid inputs left > 1° outside ≤ 1 %, valid inputs moved ≤ 0.1° mean, p99
     end-point direction error ≤ 3°). A metric absent from ``metrics`` is shown, not judged."""
-    from rig.training.limb import LIMB_TARGETS
-    from rig.training.verdict import evaluation_verdict
-
     rows = []
     for key, limit in LIMB_TARGETS.items():
         label, unit, scale = _TARGET_LABELS.get(key, (key, "", 1.0))
@@ -735,9 +722,6 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     ValueError
         A bad side, a limb bound to the other side, missing or malformed orientations.
     """
-    from models.limb_oracle import LimbOracle
-    from rig import __version__
-
     if side not in ("right", "left"):
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     if limb.side is not None and limb.side != side:
@@ -883,8 +867,6 @@ def render_limb_html(data: LimbReportData) -> str:
 def _angles_sentence(joints: Sequence[str]) -> str:
     """The footer's angle conventions, naming this limb's joints only (a leg's page does not
     speak of the shoulder)."""
-    from calibration.joint_angles import JOINT_ANGLES
-
     parts = []
     for name in joints:
         if name == "shoulder":

@@ -21,6 +21,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from calibration.clinical import AAOS_NOT_COMPARABLE, NORMATIVE, population_reference
+from calibration.joint_angles import beyond_reach
+from models.fileio import write_owner_only
+
 __all__ = ["ReportData", "RomRow", "escape", "fmt", "img_tag", "kv_table", "page_foot", "page_head",
            "render_html", "rom_rows", "rom_table_html", "verdict_html", "warnings_html",
            "write_page", "write_report"]
@@ -298,8 +302,6 @@ def render_html(data: ReportData) -> str:
 def write_page(text: str, path: str | Path) -> Path:
     """Write an HTML page atomically and owner-only (a report names the patient,
     :func:`models.fileio.write_owner_only`); returns the path."""
-    from models.fileio import write_owner_only
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_owner_only(path, text)
@@ -327,13 +329,6 @@ def rom_rows(rom, *, age: int | None = None, sex: str | None = None) -> list[Rom
     measured in another position (the rotations: at 90° abduction) are not compared; the
     population reference is the age band and sex when known, women and men apart
     otherwise."""
-    from calibration.clinical import (
-        AAOS_NOT_COMPARABLE,
-        NORMATIVE,
-        population_reference,
-    )
-    from calibration.joint_angles import beyond_reach
-
     far = beyond_reach(rom, "shoulder")
     rows = []
     for m in rom.MOVEMENTS:

@@ -1,7 +1,9 @@
 """Assemble the clinician's report of one session from the store; ``rig report`` as a library is
-:func:`run_report` (:class:`ReportRequest` → :class:`ReportResult`).
+:func:`run_report` (:class:`ReportRequest` → :class:`ReportResult`), through the one entry
+:func:`report_for_session` for a session of one joint or of a whole arm or leg (a whole limb's
+page is drawn by :mod:`rig.report.limb`).
 
-What each section is made of (a section with no data is left out):
+What each section of a joint's page is made of (a section with no data is left out):
 
 - **patient and session** — the session row (pseudonym, side, rig, start, duration, samples,
   dropped samples);
@@ -38,13 +40,40 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import RigConfigError
+from calibration.alignment import trusted_samples
+from calibration.boundary import ChainExtractor, boundary_distance
+from calibration.clinical import isb_angles, range_of_motion
+from calibration.joints import LIMB_CHAINS, joint_mismatch
+from models import quaternion as Q
+from models.constraint import load_constraint, loads_constraint
+from models.errors import ModelsError
+from models.evaluation import evaluate_model, held_out_orientations
+from models.fileio import check_output
+from models.limb import load_limb
+from models.limb_model import load_limb_model
+from models.metrics import three_d_error_percent
+from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
+from rig import __version__
+from rig.errors import RigConfigError, user_errors
+from rig.readback import extract, joint_orientations_from_store
+from rig.readback.boundary import stored_limb
+from rig.readback.sessions import chain_orientations_from_store, latest_calibration, session_limb
+from rig.report.figures import boundary_figure, error_map_figure
+from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
-from rig.training.verdict import MODEL_TARGETS, model_verdict  # the one verdict, re-exported
+from rig.store import open_store
+from rig.store.store import file_sha256
+from rig.training.limb import evaluate_limb
+from rig.training.verdict import (  # the one verdict, re-exported
+    MODEL_TARGETS,
+    evaluation_verdict,
+    model_verdict,
+    stored_evaluation,
+)
 
 __all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
-           "report_data_for_session", "report_for_limb_session", "report_for_session",
-           "run_report"]
+           "report_data_for_session", "report_for_session", "run_report"]
 
 
 def _iso(t: float | None) -> str | None:
@@ -55,9 +84,6 @@ def _iso(t: float | None) -> str | None:
 
 def _arc_text(arc: dict, side: str) -> str:
     """A sparse boundary arc in clinical words: its length and where its middle points."""
-    from calibration.clinical import isb_angles
-    from models import quaternion as Q
-
     a, b = np.asarray(arc["from"], float), np.asarray(arc["to"], float)
     mid = a + b
     mid = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else a
@@ -72,8 +98,6 @@ def _arc_text(arc: dict, side: str) -> str:
 
 def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
     """(constraint, extraction report, where it came from) — stored, else extracted."""
-    from models.constraint import loads_constraint
-
     stored = store.boundaries(session_id, limb=False)
     if stored:
         b = stored[-1]
@@ -81,7 +105,6 @@ def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
         return c, dict(b.get("meta") or {}), f"boundary {b['id']} stored with the session"
     if joint is None:
         return None, {}, ""
-    from rig.readback import extract
 
     ex = extract(joint)
     return ex.constraint_, ex.report(), "extracted from the recorded samples for this report"
@@ -136,13 +159,6 @@ def enforcement_facts(summary: dict) -> tuple[dict[str, Any], str]:
 def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
     """(constraint, metrics, limb directions (n, 3), 3-D error % (n,)) of a model on held-out
     orientations of the constraint embedded in it."""
-    from models import quaternion as Q
-    from models.constraint import loads_constraint
-    from models.evaluation import evaluate_model, held_out_orientations
-    from models.metrics import three_d_error_percent
-    from models.onnx_io import load_model
-    from models.oracle import ConstraintOracle
-
     model = load_model(model_path)
     constraint = loads_constraint(model.constraint_yaml, source=str(model_path))
     oracle = ConstraintOracle(constraint)
@@ -180,10 +196,6 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         Where an IMU recording's orientations come from when its boundary is extracted
         (:func:`rig.readback.joint_orientations_from_store`).
     """
-    from calibration.clinical import range_of_motion
-    from rig import __version__
-    from rig.errors import user_errors
-
     sess = store.get_session(session_id)
     side = sess.get("side") or "right"
     data = ReportData(patient=sess.get("pseudonym") or "?", session_id=session_id,
@@ -200,8 +212,6 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
     rec_id = _recording_session(store, sess)
 
     if rec_id is not None:
-        from rig.readback import joint_orientations_from_store
-
         joint = None
         try:
             joint = joint_orientations_from_store(store, rec_id, fusion=fusion)
@@ -226,12 +236,9 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.rom_note = note if data.rom_note is None else f"{data.rom_note} {note}"
             directions = np.empty((0, 3))
             if joint is not None:
-                from models import quaternion as Q
-
                 directions = Q.limb_direction(joint.q, joint.limb_axis)
             arcs = rep.get("sparse_arcs") or []
             pairs = [(np.asarray(a["from"], float), np.asarray(a["to"], float)) for a in arcs]
-            from rig.report.figures import boundary_figure
 
             data.boundary_png = boundary_figure(directions, constraint.swing, side=side,
                                                 sparse_arcs=pairs,
@@ -257,8 +264,6 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             if "inside_1deg" in rep:
                 facts["… within 1° of it (%)"] = 100.0 * float(rep["inside_1deg"])
             if reference is not None:
-                from calibration.boundary import boundary_distance
-
                 dist = boundary_distance(constraint, reference)
                 facts["mean distance to reference (°)"] = dist["mean_deg"]
             data.boundary_facts = facts
@@ -275,9 +280,6 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             model = None if found is None else found[1]
 
     if model is not None:
-        from rig.report.figures import error_map_figure
-        from rig.training.verdict import evaluation_verdict
-
         stored = None if rec_id is None else stored_model_evaluation(store, rec_id, model)
         n, seed = (eval_n, REPORT_SEED) if stored is None else (stored[1]["n"],
                                                                  stored[1]["seed"])
@@ -315,8 +317,42 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
-    """Write the HTML report of a session in an opened store (:func:`report_data_for_session`);
-    returns its path."""
+    """Write the HTML report of a session in an opened store — one joint or a whole limb (a
+    session of one joint is a limb of one joint; each has its page); returns its path.
+
+    Parameters
+    ----------
+    store : rig.store.Store
+        Opened store.
+    session_id : int
+        A recording session of one joint (or an ``enforce`` session naming one,
+        :func:`report_data_for_session`), or of a whole arm or leg (:func:`_write_limb_report`).
+    out_path : path
+        The HTML file to write.
+    model : path, optional
+        A model to show; default the last registered with the session whose file is there. A
+        joint's model must be made for the session's joint, side and patient
+        (:class:`~rig.errors.RigConfigError`, one line, before any work).
+    age, sex : optional
+        For the population reference band.
+    reference : JointConstraint, models.limb.Limb or path, optional
+        The truth drawn dashed (a simulated patient's): a joint's constraint, a limb's limits,
+        or the file of either.
+    eval_n : int
+        Held-out inputs of a model scored for the report (no evaluation stored with it).
+    fusion : {"auto", "device", "vqf"}
+        Where an IMU recording's orientations come from.
+    """
+    sess = store.get_session(session_id)  # no session N: before any work
+    if session_limb(sess) is not None:
+        if isinstance(reference, (str, Path)):
+            reference = load_limb(reference)
+        return _write_limb_report(store, session_id, out_path, model=model, age=age, sex=sex,
+                                  reference=reference, eval_n=eval_n, fusion=fusion)
+    if model is not None:
+        _check_model_for_session(model, sess, session_id)
+    if isinstance(reference, (str, Path)):
+        reference = load_constraint(reference)
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n, fusion=fusion)
     return write_report(data, out_path)
@@ -332,9 +368,6 @@ def stored_model_evaluation(store, session_id: int, model) -> tuple[dict, dict] 
     the same SHA-256) among the models registered with the session, the newest
     (:func:`rig.training.verdict.stored_evaluation`: ``which`` has ``n``, ``seed``, ``by``
     and the model's ``id``); None when none is stored."""
-    from rig.store.store import file_sha256
-    from rig.training.verdict import stored_evaluation
-
     path = Path(model).resolve()
     digest = None
     for row in reversed(store.models_for(session_id=session_id)):
@@ -370,9 +403,6 @@ def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, st
 
 def _is_limb_model_of(joints):
     """``accept`` for :func:`_last_registered_model`: a limb model of ``joints``."""
-    from models.errors import ModelsError
-    from models.limb_model import load_limb_model
-
     def accept(path: str) -> bool:
         try:
             return load_limb_model(path).limb.joint_names == tuple(joints)
@@ -381,9 +411,8 @@ def _is_limb_model_of(joints):
     return accept
 
 
-def report_for_limb_session(store, session_id: int, out_path, *, model=None, age=None,
-                            sex=None, reference=None, eval_n: int = 4000,
-                            fusion: str = "auto") -> Path:
+def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
+                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
@@ -394,11 +423,6 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     the last limb model registered with the session (the limb demo registers its own) is
     used when its file is still there. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
-    from calibration.boundary import ChainExtractor
-    from calibration.joints import LIMB_CHAINS
-    from rig.readback.sessions import chain_orientations_from_store, latest_calibration
-    from rig.report.limb import limb_report_data, write_limb_report
-
     chain = chain_orientations_from_store(store, session_id, fusion=fusion)
     evaluation = evaluation_note = None
     registered = None
@@ -407,9 +431,6 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
         if registered is not None:
             model = registered[1]
     if model is not None:
-        from models.limb_model import load_limb_model
-        from rig.training.limb import evaluate_limb
-
         limb = load_limb_model(str(model)).limb
         if limb.joint_names != chain.joints:
             raise RigConfigError(f"--model {model}: a model of the joints "
@@ -426,8 +447,6 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
             "" if registered is None else f" (model {registered[0]}, registered with the "
                                           "session)")
     else:
-        from rig.readback.boundary import stored_limb
-
         found = stored_limb(store, session_id)
         if found is not None and found[0].joint_names == chain.joints:
             limb, bid = found
@@ -451,7 +470,6 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
                    "taken off every segment."))
     sess = store.get_session(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)
-    from calibration.alignment import trusted_samples
 
     ok = trusted_samples(chain.status, len(chain.t))
     used = (f"{len(chain.t):,} postures" if ok.all() else
@@ -490,8 +508,6 @@ class ReportRequest:
 
     def check(self) -> None:
         """The files given, before anything is drawn (one-line errors)."""
-        from models.fileio import check_output
-
         check_output(self.out, "--out")
         if self.model is not None and not Path(self.model).is_file():
             raise RigConfigError(f"--model {self.model}: no such file")
@@ -507,40 +523,17 @@ class ReportResult:
 def run_report(request: ReportRequest) -> ReportResult:
     """Check the request and the session (``no session N`` before any work), then write the
     report."""
-    from rig.readback.sessions import session_limb
-    from rig.store import open_store
-
     request.check()
-    ref = request.reference
     with open_store(request.db, create=False) as store:
-        sess = store.get_session(request.session_id)
-        if session_limb(sess) is not None:
-            if isinstance(ref, (str, Path)):
-                from models.limb import load_limb
-
-                ref = load_limb(ref)
-            return ReportResult(report_for_limb_session(
-                store, request.session_id, Path(request.out), model=request.model,
-                age=request.age, sex=request.sex, reference=ref, eval_n=request.eval_n,
-                fusion=request.fusion))
-        if request.model is not None:
-            _check_model_for_session(request.model, sess, request.session_id)
-        if isinstance(ref, (str, Path)):
-            from models.constraint import load_constraint
-
-            ref = load_constraint(ref)
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
-            sex=request.sex, reference=ref, eval_n=request.eval_n, fusion=request.fusion))
+            sex=request.sex, reference=request.reference, eval_n=request.eval_n,
+            fusion=request.fusion))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:
     """``--model`` must be made for the session's joint, side and patient (one line, before any
     work): a knee's model in a shoulder's report would show another joint's figures."""
-    from calibration.joints import joint_mismatch
-    from models.constraint import loads_constraint
-    from models.onnx_io import load_model
-
     text = load_model(model).constraint_yaml
     if not text:
         return

@@ -20,9 +20,10 @@ dynamixel
 imu
     Simulated IMUs (BNO055 UART and the rig stream protocol).
 limb
-    The simulated patient: shoulder motion inside a constraint (``limb.motion``), what it does
-    when (``limb.schedule``), sensor placement and errors (``limb.sensors``), composed by
-    :class:`~rig.sim.limb.SimulatedLimb`.
+    The simulated patient's limb (:class:`~rig.sim.limb.SimulatedLimb`): one joint inside a
+    constraint (:class:`~rig.sim.limb.SimulatedJoint`) or a whole arm or leg
+    (:class:`~rig.sim.limb.SimulatedWholeLimb`); their motion (``limb.motion``), what they do
+    when (``limb.schedule``), sensor placement and errors (``limb.sensors``).
 patients
     The factory of simulated patients with a known range (seeded star polygons, misplaced
     straps, the calibration protocol), the one resolver of a port string's patient keys, and

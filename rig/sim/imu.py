@@ -45,8 +45,8 @@ from firmware_protocol.imu import bno055 as B
 from firmware_protocol.imu import stream as S
 from models import quaternion as Q
 from rig.sim.clock import real_delay
-from rig.sim.limb import Measurement, SimulatedLimb
-from rig.sim.patients import CHAIN_KEYS, PATIENT_KEYS, chain_from_url, patient_from_url
+from rig.sim.limb import Measurement, SimulatedJoint, SimulatedLimb
+from rig.sim.patients import LIMB_KEYS, PATIENT_KEYS, limb_from_url, patient_from_url
 from rig.sim.pty_server import PtyServer
 from rig.sim.urls import SimUrl
 
@@ -114,7 +114,7 @@ class Bno055Simulator(PtyServer):
     Parameters
     ----------
     limb : SimulatedLimb, optional
-        Motion source; default ``SimulatedLimb(sensors=2, seed=seed)``.
+        Motion source; default ``SimulatedJoint(sensors=2, seed=seed)``.
     sensor : int, optional
         Which of the limb's sensors this chip is (default 1, the upper-arm sensor, or 0 if the
         limb has one sensor).
@@ -150,7 +150,7 @@ class Bno055Simulator(PtyServer):
         clock: Callable[[], float] = time.monotonic,
         seed: int | None = 0,
     ) -> None:
-        self.limb = limb if limb is not None else SimulatedLimb(sensors=2, seed=seed)
+        self.limb = limb if limb is not None else SimulatedJoint(sensors=2, seed=seed)
         self.sensor = sensor if sensor is not None else min(1, self.limb.n_sensors - 1)
         if not 0 <= self.sensor < self.limb.n_sensors:
             raise ValueError(
@@ -345,10 +345,10 @@ class StreamImuSimulator(PtyServer):
 
     Parameters
     ----------
-    limb : SimulatedLimb or SimulatedChain, optional
-        Motion source; default ``SimulatedLimb(sensors=sensors, seed=seed)``. Sensor ``i`` of
+    limb : SimulatedLimb (SimulatedJoint or SimulatedWholeLimb), optional
+        Motion source; default ``SimulatedJoint(sensors=sensors, seed=seed)``. Sensor ``i`` of
         the protocol is ``limb.mounts[i]`` (anything with ``n_sensors``, ``mounts``,
-        ``measure_many`` and ``truth``: a :class:`~rig.sim.limb.SimulatedChain` too).
+        ``measure_many`` and ``truth``: a :class:`~rig.sim.limb.SimulatedWholeLimb` too).
     sensors : int
         Sensors present when ``limb`` is not given (1..16).
     rate_hz : int
@@ -425,7 +425,7 @@ class StreamImuSimulator(PtyServer):
         if limb is None:
             if not 1 <= sensors <= S.MAX_SENSORS:
                 raise ValueError(f"sensors must be 1..{S.MAX_SENSORS}, got {sensors}")
-            limb = SimulatedLimb(sensors=sensors, seed=seed)
+            limb = SimulatedJoint(sensors=sensors, seed=seed)
         if limb.n_sensors > S.MAX_SENSORS:
             raise ValueError(f"the stream protocol carries at most {S.MAX_SENSORS} sensors")
         if not 1 <= min_rate_hz <= rate_hz <= max_rate_hz <= 0xFFFF:
@@ -688,7 +688,7 @@ def bno055_from_url(url: str, **overrides: object) -> Bno055Simulator:
                       pose from 2 s, flexion/extension, then free motion) on / off
     ``neutral``       the patient returns to the neutral pose every this many      0 (never)
                       seconds after the calibration (or from 0 s): 1.5 s into it,
-                      held 2 s, 1.5 s out (``SimulatedLimb(neutral_every_s=)``);
+                      held 2 s, 1.5 s out (``SimulatedJoint(neutral_every_s=)``);
                       0 (never) or >= 6
     ``neutral_sd``    the patient's repeatability of the neutral pose: std of its  2
                       axial rotation, degrees (0..10; swing: half of it)
@@ -742,7 +742,7 @@ def stream_from_url(url: str, **overrides: object) -> StreamImuSimulator:
     ``protocol``  stream protocol version the board speaks: ``1.1`` (raw samples on   1.1
                   request) or ``1.0`` (an older firmware: no SET_FIELDS)
     ``limb``      ``arm`` or ``leg``: the board is worn by a whole arm or leg, one    (none)
-                  sensor per segment (:class:`~rig.sim.limb.SimulatedChain`,
+                  sensor per segment (:class:`~rig.sim.limb.SimulatedWholeLimb`,
                   :func:`rig.sim.patients.anatomical_limb` of ``seed``); ``sensors``
                   must then be 4 (its default); ``calibrate=on`` performs the limb
                   calibration protocol. ``patient=`` a limb file does the same with
@@ -779,15 +779,15 @@ def stream_query(url: str, extra_keys: tuple[str, ...] = ()) -> SimUrl:
     """The checked query of a ``sim://imu-stream`` port string (``extra_keys``: a port
     backend's own, such as ``process``)."""
     return SimUrl(url, ("imu-stream", "stream"),
-                  (*PATIENT_KEYS, *CHAIN_KEYS, "sensors", "rate", "max_lag", "flow", "protocol",
+                  (*PATIENT_KEYS, *LIMB_KEYS, "sensors", "rate", "max_lag", "flow", "protocol",
                    *extra_keys), STREAM_EXAMPLE)
 
 
 def stream_patient(q: SimUrl):
     """The patient a ``sim://imu-stream`` query describes — the simulator's :attr:`limb`: a
-    :class:`~rig.sim.limb.SimulatedChain` (``limb=`` or a limb file) or a
+    :class:`~rig.sim.limb.SimulatedWholeLimb` (``limb=`` or a limb file) or a
     :class:`~rig.sim.limb.SimulatedLimb`. Deterministic in the query, so a process that does
     not serve the board builds the same patient (its ground truth) from the same string."""
     sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
-    chain = chain_from_url(q, sensors=sensors if "sensors" in q else None)
+    chain = limb_from_url(q, sensors=sensors if "sensors" in q else None)
     return chain if chain is not None else patient_from_url(q, sensors=sensors)

@@ -1,34 +1,38 @@
 """Simulated patients: one factory for the tests, the benchmarks and ``rig record``'s accuracy.
 
-A simulated patient is a known range of motion (a :class:`models.constraint.JointConstraint`)
-worn by a :class:`rig.sim.limb.SimulatedLimb`. Everything that needs a patient whose truth is
-known builds it here: the calibration tests (``tests/calibration``), the boundary benchmark
-(``benchmarks/bench_boundary.py``, offline recordings), and the end-to-end accuracy check of
-``rig record`` (``benchmarks/record_accuracy.py``, ``benchmarks/bench_record.py accuracy``, through
-the simulators on real ptys).
+A simulated patient is a known range of motion worn by a :class:`rig.sim.limb.SimulatedLimb`: a
+joint's constraint (:class:`models.constraint.JointConstraint`) by a
+:class:`~rig.sim.limb.SimulatedJoint`, an arm's or leg's limits (:class:`models.limb.Limb`) by a
+:class:`~rig.sim.limb.SimulatedWholeLimb`. Everything that needs a patient whose truth is known
+builds it here: the calibration tests (``tests/calibration``), the boundary benchmarks
+(``benchmarks/bench_boundary.py``, ``benchmarks/bench_chain_boundary.py``, offline recordings),
+and the end-to-end accuracy check of ``rig record`` (``benchmarks/record_accuracy.py``,
+``benchmarks/bench_record.py accuracy``, through the simulators on real ptys).
 
-- :func:`star_patient`: a seeded random concave star polygon
+- :func:`seeded_patient`: the one factory — the patient of a seed and its limits (a joint's
+  constraint, a limb file, or an anatomical ``"arm"`` / ``"leg"``) wearing misplaced sensors
+  and performing its calibration protocol, then moving freely.
+- :func:`star_constraint`: a seeded random concave star polygon
   (:func:`models.evaluation.random_star_polygon`) turned so that its centre lies within
   ``max_tilt_deg`` of the arm at the side (+X), with a twist range ``[-a, b]``, ``a, b`` in
   20-70°. Seeds 101-105 are ``bench_record.py accuracy``'s held-out patients and 100-104
   ``bench_boundary.py``'s; tests use other seeds.
+- :func:`anatomical_limb`: a seeded, physiologically plausible arm or leg with couplings.
 - :func:`misplaced_mounts`: the default straps (:func:`rig.sim.limb.default_mounts`) each turned
   ``misplace_deg`` about a random axis — the draws of the ``misplace_deg`` key of
   ``sim://imu-stream`` / ``sim://bno055`` (:mod:`rig.sim.imu`).
-- :func:`patient_limb`: the patient wearing misplaced sensors and performing the guided
-  calibration protocol (:class:`calibration.protocol.CalibrationProtocol`) through
-  :class:`~rig.sim.limb.SimulatedLimb`'s own ``calibration_protocol`` support, then moving
-  freely.
 - :func:`patient_from_url`: the one resolver of a port string's patient keys (``patient=<shape
   name | constraint file>``, ``seed``, ``noise``, ...; :data:`PATIENT_KEYS`) into a
-  :class:`~rig.sim.limb.SimulatedLimb`, for the IMU simulators and the back-driven servo chain
-  (:mod:`rig.devices._sim_backends`); :func:`resolve_patient` the shape-or-file part. Errors are
-  one-line :class:`~rig.errors.RigConfigError` naming the port and the key.
+  :class:`~rig.sim.limb.SimulatedJoint`, for the IMU simulators and the back-driven servo
+  joint (:mod:`rig.devices._sim_backends`); :func:`resolve_patient` the shape-or-file part;
+  :func:`limb_from_url` an arm's or leg's (:data:`LIMB_KEYS`). Errors are one-line
+  :class:`~rig.errors.RigConfigError` naming the port and the key.
 - :func:`record_imu` / :func:`record_servo`: offline recordings (no pty, no driver) for fast
   tests and benchmarks — the two IMUs through the sensor error model (noise, drift, magnetic
   disturbances, misplaced straps; :meth:`~rig.sim.limb.SimulatedLimb.measure_many`), or the
-  back-driven servo limb (the true joint read through three encoders of 4096 ticks per turn,
-  no drift). A :class:`Recording` holds the samples and the protocol's phase windows.
+  back-driven servo joint (the true joint read through three encoders of 4096 ticks per turn,
+  no drift). A :class:`Recording` holds the samples and the protocol's phase windows;
+  :func:`record_limb_imu` / :class:`LimbRecording` the same for an arm or leg.
 """
 
 from __future__ import annotations
@@ -37,16 +41,33 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from calibration.clinical import mirror_directions
+from calibration.joint_angles import from_angles
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from models import quaternion as Q
+from models.constraint import JointConstraint, load_constraint
+from models.evaluation import random_star_polygon
+from models.limb import Limb, load_limits
+from models.shapes import SHAPES, load_shape
 from rig.errors import RigConfigError
-from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb, default_mounts
+from rig.sim.limb import (
+    NoiseModel,
+    SensorMount,
+    SimulatedJoint,
+    SimulatedLimb,
+    SimulatedWholeLimb,
+    default_mounts,
+    limb_mounts,
+)
+from rig.sim.limb.whole import LIMB_SEGMENTS
 from rig.sim.urls import SimUrl
 
-__all__ = ["CHAIN_KEYS", "PATIENT_KEYS", "ChainRecording", "Recording", "anatomical_limb",
-           "chain_from_url", "chain_patient", "misplaced_mounts", "patient_from_url",
-           "patient_limb", "record_chain_imu", "record_imu", "record_servo", "resolve_patient",
-           "star_patient"]
+__all__ = ["LIMB_KEYS", "PATIENT_KEYS", "LimbRecording", "Recording", "anatomical_limb",
+           "limb_from_url", "misplaced_mounts", "patient_from_url", "record_imu",
+           "record_limb_imu", "record_servo", "resolve_patient", "seeded_patient",
+           "star_constraint"]
 
 _ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
 
@@ -54,13 +75,14 @@ PATIENT_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed"
                 "neutral", "neutral_sd")
 """The port-string keys of a simulated patient (:func:`patient_from_url`); a simulator accepts
 those it lists as known."""
-CHAIN_KEYS = ("limb", "side")
-"""The port-string keys of a chain patient (:func:`chain_from_url`; ``sim://imu-stream`` only)."""
-_NEUTRAL_HOLD_S = 2.0  # SimulatedLimb's defaults: neutral hold and ramp, seconds
+LIMB_KEYS = ("limb", "side")
+"""The port-string keys of an arm or leg patient (:func:`limb_from_url`; ``sim://imu-stream``
+only)."""
+_NEUTRAL_HOLD_S = 2.0  # SimulatedJoint's defaults: neutral hold and ramp, seconds
 _NEUTRAL_RAMP_S = 1.5
 
 
-def star_patient(seed: int, *, max_tilt_deg: float = 10.0):
+def star_constraint(seed: int, *, max_tilt_deg: float = 10.0) -> JointConstraint:
     """A seeded random concave star polygon (:func:`models.evaluation.random_star_polygon`)
     turned so that its centre lies within ``max_tilt_deg`` of the arm at the side (+X) — the
     neutral pose of the calibration protocol must be reachable — with a physiological twist
@@ -70,9 +92,6 @@ def star_patient(seed: int, *, max_tilt_deg: float = 10.0):
     -------
     models.constraint.JointConstraint
     """
-    from models.constraint import JointConstraint
-    from models.evaluation import random_star_polygon
-
     rng = np.random.default_rng([seed, 0xACC])
     star = random_star_polygon(seed, name=f"star-{seed}", twist=False)
     c = Q.check_vectors(star.swing.interior)
@@ -104,41 +123,6 @@ def misplaced_mounts(rng: np.random.Generator, misplace_deg: float = 25.0,
     return out
 
 
-def patient_limb(constraint, seed: int, *, noise: NoiseModel | None = None,
-                 misplace_deg: float = 25.0, protocol="default",
-                 protocol_start_s: float = 5.0, **kwargs) -> SimulatedLimb:
-    """The patient ``constraint`` wearing two misplaced IMUs, performing the calibration
-    protocol, then moving freely.
-
-    Parameters
-    ----------
-    constraint : JointConstraint
-    seed : int
-        Seeds the motion and the sensor errors; the straps are drawn from
-        ``default_rng([seed, 0x5EA7])`` (as ``sim://imu-stream?seed=...`` draws them).
-    noise : NoiseModel, optional
-        Default: :class:`~rig.sim.limb.NoiseModel` (noise, drift, disturbances on).
-    misplace_deg : float
-        How far each strap is turned off its nominal mounting (:func:`misplaced_mounts`).
-    protocol : CalibrationProtocol or None
-        ``"default"``: ``CalibrationProtocol()``; None: free motion from time 0.
-    protocol_start_s : float
-        When the protocol starts: 5 s, by which the sensors' calibration status has reached 3
-        under the default noise model (``calibration_time_s`` 5 s).
-    **kwargs
-        Further :class:`~rig.sim.limb.SimulatedLimb` keywords (``sway_deg``, ``excursion``,
-        ``neutral_every_s`` and the other neutral-checkpoint keywords, ...).
-    """
-    if isinstance(protocol, str) and protocol == "default":
-        from calibration.protocol import CalibrationProtocol
-
-        protocol = CalibrationProtocol()
-    mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace_deg)
-    return SimulatedLimb(constraint, sensors=mounts, noise=noise, seed=seed,
-                         calibration_protocol=protocol, protocol_start_s=protocol_start_s,
-                         **kwargs)
-
-
 def resolve_patient(value: str, *, url: str, key: str = "patient"):
     """The range of motion a port string's ``patient=`` names: a shipped shape or a
     constraint file.
@@ -161,9 +145,6 @@ def resolve_patient(value: str, *, url: str, key: str = "patient"):
         Neither a shape nor a readable, valid constraint file: one line naming the port, the
         key and the value.
     """
-    from models.constraint import load_constraint
-    from models.shapes import SHAPES, load_shape
-
     if value in SHAPES:
         return load_shape(value)
     try:
@@ -197,7 +178,7 @@ def _motion_keys(q: SimUrl) -> tuple[NoiseModel, float, float, float, float]:
 
 
 def patient_from_url(q: SimUrl, *, sensors: int = 2,
-                     misplaced_straps: bool = True) -> SimulatedLimb:
+                     misplaced_straps: bool = True) -> SimulatedJoint:
     """The simulated patient a port string's patient keys describe (the keys the URL's
     simulator accepts among :data:`PATIENT_KEYS`; absent keys take their defaults).
 
@@ -230,14 +211,12 @@ def patient_from_url(q: SimUrl, *, sensors: int = 2,
     misplace = q.number("misplace_deg", 5.0, 0.0, 90.0) if misplaced_straps else None
     protocol = None
     if q.flag("calibrate", False):
-        from calibration.protocol import CalibrationProtocol
-
         protocol = CalibrationProtocol()
     mounts: int | list[SensorMount] = sensors
     if misplace is not None:  # drawn from a stream of their own: the motion is unchanged
         mounts = misplaced_mounts(np.random.default_rng([seed, 0x5EA7]), misplace, sensors)
     try:
-        return SimulatedLimb(constraint, sensors=mounts, noise=noise, excursion=excursion,
+        return SimulatedJoint(constraint, sensors=mounts, noise=noise, excursion=excursion,
                              speed=speed, seed=seed, calibration_protocol=protocol,
                              neutral_every_s=neutral, neutral_hold_s=_NEUTRAL_HOLD_S,
                              neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
@@ -273,18 +252,17 @@ class Recording:
         return (self.t >= self.start_s + a) & (self.t <= self.start_s + b)
 
 
-def _times(limb, duration_s: float, rate_hz: float) -> np.ndarray:
-    """Sample times from 0 to the end of the patient's protocol plus ``duration_s`` (a
-    :class:`SimulatedLimb` or a :class:`~rig.sim.limb.SimulatedChain`)."""
+def _times(limb: SimulatedLimb, duration_s: float, rate_hz: float) -> np.ndarray:
+    """Sample times from 0 to the end of the patient's protocol plus ``duration_s``."""
     n = round((limb.protocol_end_s + duration_s) * rate_hz)
     return np.arange(n) / rate_hz
 
 
-def record_imu(limb: SimulatedLimb, duration_s: float, rate_hz: float = 100.0,
+def record_imu(limb: SimulatedJoint, duration_s: float, rate_hz: float = 100.0,
                chunk: int = 2000) -> Recording:
     """Sample the limb's two sensors (0 thorax, 1 limb) at ``rate_hz`` from time 0 to the end of
     the protocol plus ``duration_s`` seconds, through the sensor error model
-    (:meth:`~rig.sim.limb.SimulatedLimb.measure_many`, ``chunk`` samples per call)."""
+    (:meth:`~rig.sim.limb.SimulatedJoint.measure_many`, ``chunk`` samples per call)."""
     t = _times(limb, duration_s, rate_hz)
     thorax, arm, status, truth = [], [], [], []
     for i in range(0, len(t), chunk):
@@ -299,12 +277,10 @@ def record_imu(limb: SimulatedLimb, duration_s: float, rate_hz: float = 100.0,
                      np.concatenate(truth), limb.calibration_protocol, limb.protocol_start_s)
 
 
-def record_servo(limb: SimulatedLimb, duration_s: float, rate_hz: float = 100.0) -> Recording:
+def record_servo(limb: SimulatedJoint, duration_s: float, rate_hz: float = 100.0) -> Recording:
     """The back-driven servo limb: the true joint read through 3 encoders of 4096 ticks per turn
-    (Z-Y-X chain), i.e. quantised to 0.088° per joint; no drift, no straps. ``thorax`` is the
-    identity, ``limb`` the chain's forward kinematics."""
-    from scipy.spatial.transform import Rotation
-
+    (Z-Y-X axes), i.e. quantised to 0.088° per joint; no drift, no straps. ``thorax`` is the
+    identity, ``limb`` the servos' forward kinematics."""
     t = _times(limb, duration_s, rate_hz)
     n = len(t)
     truth = limb.joint(t)
@@ -335,8 +311,6 @@ def _clinical_basis(joint: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     +Z, :class:`calibration.protocol.CalibrationProtocol`); the others come from
     :func:`calibration.joint_angles.from_angles` (pure α and pure β, or γ for the ankle, whose β
     turns the foot about its own long axis: a twist, not a swing)."""
-    from calibration.joint_angles import from_angles
-
     x = np.array([1.0, 0.0, 0.0])
     if joint == "shoulder":
         return x, np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, -1.0])
@@ -391,8 +365,6 @@ def _mirror_constraint(c: dict) -> dict:
     """A right limb's joint constraint mirrored to the left (:func:`calibration.clinical.
     mirror_directions`: directions ``(x, y, z) → (x, y, −z)``; a rotation's axis
     ``(x, y, z) → (−x, −y, z)`` with the same angle, so a twist about +X changes sign)."""
-    from calibration.clinical import mirror_directions
-
     out = dict(c)
     if "swing" in c:
         p = c["swing"]["polygon"]
@@ -501,7 +473,7 @@ def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
 
 def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
     """A seeded, physiologically plausible arm or leg with couplings: the ground truth of a
-    :class:`~rig.sim.limb.SimulatedChain` patient.
+    :class:`~rig.sim.limb.SimulatedWholeLimb` patient.
 
     Rig segment frames (:mod:`calibration.frames`, :mod:`calibration.joint_angles`): every
     segment +X along it distally, +Y anterior, +Z to the right; the foot +X to the toes, +Y
@@ -544,8 +516,6 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
         Named ``sim-<limb>-<seed>``, its ``provenance`` holding the drawn clinical limits
         (degrees, ``provenance["clinical"]``).
     """
-    from models.limb import Limb
-
     if limb not in _CHAINS:
         raise ValueError(f"limb must be 'arm' or 'leg', got {limb!r}")
     if side not in ("left", "right"):
@@ -567,66 +537,79 @@ def _rounded(d: dict) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
-# Chain patients (arm, leg): factory, port strings, offline recordings
+# The factory (a joint's patient or an arm's or leg's), port strings, offline recordings
 
 
-def chain_patient(seed: int, limb="leg", side: str = "right", *, noise: NoiseModel | None = None,
-                  misplace_deg: float = 25.0, calibrate: bool = True,
-                  protocol_start_s: float = 5.0, neutral: float = 0.0, **kwargs):
-    """A :class:`~rig.sim.limb.SimulatedChain` patient: the arm or leg
-    :func:`anatomical_limb` ``(seed, limb, side)`` (or a given :class:`models.limb.Limb`)
-    wearing four misplaced IMUs, performing the limb calibration protocol, then moving freely.
+def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | None = None,
+                      misplace_deg: float = 25.0, calibrate: bool = True,
+                      protocol_start_s: float = 5.0, neutral: float = 0.0,
+                      **kwargs) -> SimulatedLimb:
+    """The simulated patient of ``seed``: a limb of one joint or a whole arm or leg wearing
+    misplaced IMUs, performing its calibration protocol, then moving freely.
 
     Parameters
     ----------
     seed : int
-        Seeds the limits, the motion and the sensor errors; the straps are drawn from
-        ``default_rng([seed, 0x5EA7])`` (as ``sim://imu-stream?limb=...&seed=...`` draws them).
-    limb : {"arm", "leg"} or models.limb.Limb
+        Seeds the motion and the sensor errors (and an anatomical limb's limits); the straps are
+        drawn from ``default_rng([seed, 0x5EA7])`` (as ``sim://imu-stream?seed=...`` draws
+        them).
+    limb : JointConstraint, models.limb.Limb or {"arm", "leg"}
+        The patient's true limits: a joint's constraint (a :class:`~rig.sim.limb.SimulatedJoint`
+        wearing two IMUs, thorax and limb, :func:`misplaced_mounts`; e.g.
+        :func:`star_constraint` ``(seed)``), a limb file's :class:`~models.limb.Limb`, or the
+        :func:`anatomical_limb` ``(seed, limb, side)`` (a :class:`~rig.sim.limb.SimulatedWholeLimb`
+        wearing one IMU per segment, :func:`rig.sim.limb.limb_mounts`).
     side : {"right", "left"}
-        The side of an anatomical limb (a given Limb's own side is kept).
+        The side of an anatomical limb (a given Limb's own side is kept; unused for a joint).
     noise : NoiseModel, optional
         Default: :class:`~rig.sim.limb.NoiseModel` (noise, drift, disturbances on).
     misplace_deg : float
-        How far each strap is turned off its nominal mounting
-        (:func:`rig.sim.limb.chain_mounts`).
+        How far each strap is turned off its nominal mounting.
     calibrate : bool
-        Perform :class:`calibration.protocol.LimbCalibrationProtocol` from ``protocol_start_s``
-        (5 s: the sensors' calibration status has reached 3 by then).
+        Perform the calibration protocol from ``protocol_start_s`` (a joint's
+        :class:`calibration.protocol.CalibrationProtocol`, a limb's
+        :class:`calibration.protocol.LimbCalibrationProtocol`); False: free motion from time 0.
+    protocol_start_s : float
+        When the protocol starts: 5 s, by which the sensors' calibration status has reached 3
+        under the default noise model (``calibration_time_s`` 5 s).
     neutral : float
         Neutral checkpoints every this many seconds (0: none).
     **kwargs
-        Further :class:`~rig.sim.limb.SimulatedChain` keywords.
+        Further keywords of the limb's class (``sway_deg``, ``excursion``, the other
+        neutral-checkpoint keywords, ...).
+
+    Returns
+    -------
+    SimulatedLimb
+        A :class:`~rig.sim.limb.SimulatedJoint` or a :class:`~rig.sim.limb.SimulatedWholeLimb`.
     """
-    from models.limb import Limb
-    from rig.sim.limb import SimulatedChain, chain_mounts
-
+    rng = np.random.default_rng([seed, 0x5EA7])
+    if isinstance(limb, JointConstraint):
+        return SimulatedJoint(limb, sensors=misplaced_mounts(rng, misplace_deg), noise=noise,
+                              seed=seed, calibration_protocol=(CalibrationProtocol() if calibrate
+                                                               else None),
+                              protocol_start_s=protocol_start_s, neutral_every_s=neutral,
+                              **kwargs)
     truth = limb if isinstance(limb, Limb) else anatomical_limb(seed, limb, side)
-    protocol = None
-    if calibrate:
-        from calibration.protocol import LimbCalibrationProtocol
-
-        protocol = LimbCalibrationProtocol(_chain_kind(truth))
+    protocol = LimbCalibrationProtocol(_limb_kind(truth)) if calibrate else None
     segments = (truth.joints[0].parent, *(j.child for j in truth.joints))
-    mounts = chain_mounts(segments, np.random.default_rng([seed, 0x5EA7]), misplace_deg)
-    return SimulatedChain(truth, sensors=mounts, noise=noise, seed=seed,
-                          calibration_protocol=protocol, protocol_start_s=protocol_start_s,
-                          neutral_every_s=neutral, **kwargs)
+    mounts = limb_mounts(segments, rng, misplace_deg)
+    return SimulatedWholeLimb(truth, sensors=mounts, noise=noise, seed=seed,
+                              calibration_protocol=protocol, protocol_start_s=protocol_start_s,
+                              neutral_every_s=neutral, **kwargs)
 
 
-def _chain_kind(limb) -> str:
-    from rig.sim.limb.chain import CHAIN_SEGMENTS
-
+def _limb_kind(limb) -> str:
     names = tuple(j.name for j in limb.joints)
-    for kind, (joints, _) in CHAIN_SEGMENTS.items():
+    for kind, (joints, _) in LIMB_SEGMENTS.items():
         if names == joints:
             return kind
     raise ValueError(f"limb {limb.name!r}: joints {', '.join(names)} are neither an arm "
                      f"(shoulder, elbow, wrist) nor a leg (hip, knee, ankle)")
 
 
-def chain_from_url(q: SimUrl, *, sensors: int | None = None):
-    """The chain patient a port string describes, or None when it names none: ``limb=arm|leg``
+def limb_from_url(q: SimUrl, *, sensors: int | None = None):
+    """The arm or leg patient a port string describes, or None when it names none: ``limb=arm|leg``
     (an :func:`anatomical_limb` of ``seed`` and ``side``) or ``patient=`` a limb file
     (:func:`models.limb.load_limits`; ``side`` is then the file's). The other patient keys as
     :func:`patient_from_url` reads them (``seed``, ``noise``, ``misplace_deg``, ``excursion``,
@@ -637,7 +620,7 @@ def chain_from_url(q: SimUrl, *, sensors: int | None = None):
     ----------
     q : SimUrl
     sensors : int or None
-        The port's ``sensors`` value: a chain wears 4.
+        The port's ``sensors`` value: an arm or leg wears 4.
 
     Raises
     ------
@@ -675,7 +658,7 @@ def chain_from_url(q: SimUrl, *, sensors: int | None = None):
     if truth is None:
         truth = anatomical_limb(seed, kind, side)
     try:
-        return chain_patient(seed, truth, noise=noise, misplace_deg=misplace,
+        return seeded_patient(seed, truth, noise=noise, misplace_deg=misplace,
                              calibrate=calibrate, protocol_start_s=2.0, neutral=neutral,
                              excursion=excursion, speed=speed, neutral_hold_s=_NEUTRAL_HOLD_S,
                              neutral_ramp_s=_NEUTRAL_RAMP_S, neutral_sd_deg=neutral_sd)
@@ -687,8 +670,6 @@ def chain_from_url(q: SimUrl, *, sensors: int | None = None):
 def _limb_file(path: str, url: str):
     """The :class:`models.limb.Limb` a ``patient=`` limb file holds, or None when the file is a
     constraint file (the shoulder patient's)."""
-    from models.limb import Limb, load_limits
-
     try:
         limits = load_limits(path)
     except FileNotFoundError:
@@ -699,8 +680,8 @@ def _limb_file(path: str, url: str):
 
 
 @dataclass
-class ChainRecording:
-    """Samples of one simulated chain session, offline (arrays over N instants, S = 4 sensors).
+class LimbRecording:
+    """Samples of one simulated arm or leg session, offline (arrays over N instants, S = 4 sensors).
 
     Attributes
     ----------
@@ -741,15 +722,15 @@ class ChainRecording:
         return (self.t >= a) & (self.t <= b)
 
 
-def record_chain_imu(chain, duration_s: float, rate_hz: float = 100.0,
-                     chunk: int = 2000) -> ChainRecording:
-    """Sample a :class:`~rig.sim.limb.SimulatedChain`'s sensors at ``rate_hz`` from time 0 to
-    the end of its protocol plus ``duration_s`` seconds, through the sensor error model
-    (:meth:`~rig.sim.limb.SimulatedChain.measure_many`, ``chunk`` samples per call; no pty)."""
-    t = _times(chain, duration_s, rate_hz)
+def record_limb_imu(limb: SimulatedWholeLimb, duration_s: float, rate_hz: float = 100.0,
+                    chunk: int = 2000) -> LimbRecording:
+    """Sample a :class:`~rig.sim.limb.SimulatedWholeLimb`'s sensors at ``rate_hz`` from time 0
+    to the end of its protocol plus ``duration_s`` seconds, through the sensor error model
+    (:meth:`~rig.sim.limb.SimulatedWholeLimb.measure_many`, ``chunk`` samples per call; no pty)."""
+    t = _times(limb, duration_s, rate_hz)
     parts: dict[str, list] = {k: [] for k in ("q", "g", "a", "m", "c", "j", "r", "s")}
     for i in range(0, len(t), chunk):
-        ms = chain.measure_many(t[i:i + chunk])
+        ms = limb.measure_many(t[i:i + chunk])
         parts["q"].append(np.stack([m.quaternions for m in ms]))
         parts["g"].append(np.stack([m.gyro for m in ms]))
         parts["a"].append(np.stack([m.accel for m in ms]))
@@ -759,7 +740,7 @@ def record_chain_imu(chain, duration_s: float, rate_hz: float = 100.0,
         parts["r"].append(np.concatenate([m.truth.root for m in ms]))
         parts["s"].append(np.concatenate([m.truth.sensors for m in ms]))
     cat = {k: (np.concatenate(v) if v else None) for k, v in parts.items()}
-    return ChainRecording(t, cat["q"], cat["g"], cat["a"], cat["m"], cat["c"], cat["j"],
-                          cat["r"], cat["s"], tuple(m.segment for m in chain.mounts),
-                          chain.protocol_windows(), chain.protocol_start_s,
-                          chain.protocol_end_s)
+    return LimbRecording(t, cat["q"], cat["g"], cat["a"], cat["m"], cat["c"], cat["j"],
+                          cat["r"], cat["s"], tuple(m.segment for m in limb.mounts),
+                          limb.protocol_windows(), limb.protocol_start_s,
+                          limb.protocol_end_s)

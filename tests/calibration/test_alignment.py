@@ -13,7 +13,7 @@ from calibration.alignment import functional_axis, gravity_axis
 from calibration.protocol import CalibrationProtocol
 from models import quaternion as Q
 from rig.sim.limb import NoiseModel
-from rig.sim.patients import patient_limb, record_imu, star_patient
+from rig.sim.patients import record_imu, seeded_patient, star_constraint
 
 
 def _fit(rec):
@@ -29,10 +29,10 @@ def _errors_deg(cal, rec):
 
 
 def test_exact_without_sensor_errors_despite_misplaced_sensors():
-    c = star_patient(4)
+    c = star_constraint(4)
     # no postural sway either: the neutral pose defines the segment frames, so a thorax
     # leaning by s during the static pose conjugates every joint orientation by s
-    limb = patient_limb(c, 4, noise=NoiseModel.ideal(), misplace_deg=35.0, sway_deg=0.0)
+    limb = seeded_patient(4, c, noise=NoiseModel.ideal(), misplace_deg=35.0, sway_deg=0.0)
     # exactness needs the protocol performed as scripted: its flexion lies inside this range
     # (a range that clips it turns the functional axis off the scripted one). The performed
     # motion is the script smoothed (rig.sim.limb: cubic B-spline), a rotation about the same
@@ -54,8 +54,8 @@ def test_exact_without_sensor_errors_despite_misplaced_sensors():
 
 
 def test_with_noise_drift_and_disturbances_errors_stay_small():
-    c = star_patient(2)
-    rec = record_imu(patient_limb(c, 2), 30.0, rate_hz=50.0)
+    c = star_constraint(2)
+    rec = record_imu(seeded_patient(2, c), 30.0, rate_hz=50.0)
     cal = _fit(rec)
     ok = status_ok(rec.status) & rec.window("free")
     err = _errors_deg(cal, rec)[ok]
@@ -65,16 +65,17 @@ def test_with_noise_drift_and_disturbances_errors_stay_small():
 
 
 def test_heading_offset_between_sensor_worlds_is_removed():
-    c = star_patient(3)
+    c = star_constraint(3)
     nz = dataclasses.replace(NoiseModel.ideal(), drift_heading_deg=5.0, drift_time_s=1e9)
-    rec = record_imu(patient_limb(c, 3, noise=nz, sway_deg=0.0), 10.0, rate_hz=50.0)
+    rec = record_imu(seeded_patient(3, c, noise=nz, sway_deg=0.0), 10.0, rate_hz=50.0)
     cal = _fit(rec)
     assert np.median(_errors_deg(cal, rec)) < 0.2
 
 
 def test_calibration_round_trips_through_plain_types():
-    c = star_patient(4)
-    rec = record_imu(patient_limb(c, 4, noise=NoiseModel.ideal(), sway_deg=0.0), 5.0, rate_hz=50.0)
+    c = star_constraint(4)
+    rec = record_imu(seeded_patient(4, c, noise=NoiseModel.ideal(), sway_deg=0.0), 5.0,
+                     rate_hz=50.0)
     cal = _fit(rec)
     again = ImuJointCalibration.from_dict(cal.to_dict())
     q = again.transform(rec.thorax, rec.limb)

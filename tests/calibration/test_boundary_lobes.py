@@ -11,7 +11,7 @@ from calibration import BoundaryExtractor, boundary_distance, outside_fraction
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.oracle import ConstraintOracle
-from rig.sim.patients import patient_limb, record_servo
+from rig.sim.patients import record_servo, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
 Y = np.array([0.0, 1.0, 0.0])
@@ -65,7 +65,7 @@ def lobed_recording():
     visit of the lobe and one burst of 40 glitches (a tight cluster 25° outside the disc, on the
     other side) spliced in."""
     disc = JointConstraint.cone(X, MAIN_DEG, twist=(-40.0, 40.0), name="disc")
-    rec = record_servo(patient_limb(disc, 11, protocol=None), 300.0, 20.0)
+    rec = record_servo(seeded_patient(11, disc, calibrate=False), 300.0, 20.0)
     base = rec.limb
     visit = _swing(_visit())
     rng = np.random.default_rng(5)

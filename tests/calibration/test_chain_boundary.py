@@ -62,14 +62,14 @@ pytestmark = pytest.mark.xdist_group("test_chain_boundary")
 
 @pytest.fixture(scope="module")
 def ideal_arm():
-    """Arm 1 (``rig.sim.patients.chain_patient``, ideal sensors) pressed into its limits at
+    """Arm 1 (``rig.sim.patients.simulated_patient``, ideal sensors) pressed into its limits at
     every elbow angle: 300 s of true joint orientations at 25 Hz and their times."""
     import numpy as np
 
     from rig.sim.limb import NoiseModel
-    from rig.sim.patients import chain_patient
+    from rig.sim.patients import seeded_patient
 
-    chain = chain_patient(1, "arm", noise=NoiseModel.ideal())
+    chain = seeded_patient(1, "arm", noise=NoiseModel.ideal())
     t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
     return chain.joints(t), t
 
@@ -252,9 +252,9 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     from models import quaternion as Q
     from models.limb_oracle import LimbOracle
     from rig.sim.limb import NoiseModel
-    from rig.sim.patients import anatomical_limb, chain_patient
+    from rig.sim.patients import anatomical_limb, seeded_patient
 
-    chain = chain_patient(6, "arm", noise=NoiseModel.ideal())
+    chain = seeded_patient(6, "arm", noise=NoiseModel.ideal())
     t = np.arange(chain.protocol_end_s, chain.protocol_end_s + 300.0, 0.04)
     q = chain.joints(t)
     rng = np.random.default_rng(2)

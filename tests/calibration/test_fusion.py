@@ -18,7 +18,7 @@ from calibration.fusion import VQF_PARAMS, fuse_vqf
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from rig.errors import RigConfigError
-from rig.sim.patients import patient_limb
+from rig.sim.patients import seeded_patient
 
 SEED = 11
 RATE = 100.0
@@ -40,7 +40,7 @@ def _record(limb, t):
 def session():
     """A cone patient wearing two misplaced IMUs: calibration protocol then 60 s free motion."""
     constraint = JointConstraint.cone((1.0, 0.0, 0.0), 60.0, twist=(-40.0, 40.0))
-    limb = patient_limb(constraint, SEED)
+    limb = seeded_patient(SEED, constraint)
     t = np.arange(round((limb.protocol_end_s + FREE_S) * RATE)) / RATE
     q, raw, truth, joint, status = _record(limb, t)
     return limb, t, q, raw, truth, joint, status

@@ -1,5 +1,5 @@
-"""Golden cases: simulated patients (one joint: star patients and SimulatedLimb; a limb:
-anatomical limbs and SimulatedChain), their recordings, and the IMU calibrations and heading
+"""Golden cases: simulated patients (one joint: star patients and SimulatedJoint; a limb:
+anatomical limbs and SimulatedWholeLimb), their recordings, and the IMU calibrations and heading
 corrections fitted on them (joint and limb); host-side sensor fusion."""
 
 from __future__ import annotations
@@ -14,12 +14,11 @@ from calibration.heading import HeadingCorrection, LimbHeadingCorrection
 from calibration.joints import LIMB_CHAINS
 from rig.sim.limb import NoiseModel
 from rig.sim.patients import (
-    chain_patient,
-    patient_limb,
-    record_chain_imu,
     record_imu,
+    record_limb_imu,
     record_servo,
-    star_patient,
+    seeded_patient,
+    star_constraint,
 )
 from tests.golden.harness import case
 from tests.golden.util import jtext
@@ -32,7 +31,7 @@ TIMES = np.linspace(0.0, 60.0, 241)
 def _joint_recording():
     """A star patient (seed 2) with noise, drift and neutral checkpoints every 12 s, recorded at
     50 Hz: 50 s of free motion after the protocol."""
-    limb = patient_limb(star_patient(2), 2, neutral_every_s=12.0)
+    limb = seeded_patient(2, star_constraint(2), neutral=12.0)
     rec = record_imu(limb, 50.0, rate_hz=50.0)
     return limb, rec
 
@@ -41,17 +40,17 @@ def _joint_recording():
 def _chain_recording(limb: str):
     """An anatomical arm (seed 3) or leg (seed 4) with four IMUs and neutral checkpoints every
     12 s, recorded at 25 Hz: 60 s of free motion after the limb protocol."""
-    chain = chain_patient(3 if limb == "arm" else 4, limb, neutral=12.0)
-    rec = record_chain_imu(chain, 60.0, rate_hz=25.0)
+    chain = seeded_patient(3 if limb == "arm" else 4, limb, neutral=12.0)
+    rec = record_limb_imu(chain, 60.0, rate_hz=25.0)
     return chain, rec
 
 
 @case("joint")
 def case_sim_star_patient() -> dict:
-    """Star patients (constraint files) and a SimulatedLimb's truth at fixed times; its sensors
+    """Star patients (constraint files) and a SimulatedJoint's truth at fixed times; its sensors
     measured one instant at a time; the IMU and servo recordings."""
-    out: dict = {f"star_{s}": star_patient(s).to_yaml() for s in (1, 2, 7)}
-    limb = patient_limb(star_patient(4), 4, noise=NoiseModel(), neutral_every_s=10.0)
+    out: dict = {f"star_{s}": star_constraint(s).to_yaml() for s in (1, 2, 7)}
+    limb = seeded_patient(4, star_constraint(4), noise=NoiseModel(), neutral=10.0)
     tr = limb.truth(TIMES)
     out.update(joint=tr.joint, thorax=tr.thorax, sensors=tr.sensors,
                target=limb.target(TIMES), raw_joint=limb.raw_joint(TIMES),
@@ -62,7 +61,8 @@ def case_sim_star_patient() -> dict:
     _, rec = _joint_recording()
     out.update(rec_t=rec.t, rec_thorax=rec.thorax, rec_limb=rec.limb, rec_status=rec.status,
                rec_truth=rec.truth)
-    servo = record_servo(patient_limb(star_patient(4), 4, noise=NoiseModel.ideal()), 5.0, 50.0)
+    servo = record_servo(seeded_patient(4, star_constraint(4), noise=NoiseModel.ideal()), 5.0,
+                         50.0)
     out.update(servo_limb=servo.limb, servo_truth=servo.truth)
     return out
 
@@ -94,11 +94,11 @@ def case_calibration_joint() -> dict:
 
 @case("limb")
 def case_sim_chain_patient() -> dict:
-    """Anatomical arm and leg patients (SimulatedChain): truth at fixed times, protocol and
+    """Anatomical arm and leg patients (SimulatedWholeLimb): truth at fixed times, protocol and
     checkpoint windows, one-instant measurements; the arm's recording (raw readings too)."""
     out: dict = {}
     for name in ("arm", "leg"):
-        chain = chain_patient(3 if name == "arm" else 4, name, neutral=15.0)
+        chain = seeded_patient(3 if name == "arm" else 4, name, neutral=15.0)
         tr = chain.truth(TIMES)
         out.update({f"{name}_joints": tr.joints, f"{name}_root": tr.root,
                     f"{name}_sensors": tr.sensors, f"{name}_target": chain.target(TIMES),

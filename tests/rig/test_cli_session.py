@@ -215,9 +215,9 @@ def test_close_on_postgresql(pg_server, rig_cli):
 
 def _servo_db(path):
     """A small servo-limb recording (joint samples), ended, in a new store."""
-    from rig.sim.patients import patient_limb, record_servo, star_patient
+    from rig.sim.patients import record_servo, seeded_patient, star_constraint
 
-    rec = record_servo(patient_limb(star_patient(7), 7), 40.0, 50.0)
+    rec = record_servo(seeded_patient(7, star_constraint(7)), 40.0, 50.0)
     with open_store(path) as store:
         sid = store.start_session(store.add_patient("P-RO"), rig_name="sim-shoulder",
                                   joint="shoulder", side="right")

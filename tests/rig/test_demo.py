@@ -9,7 +9,7 @@ import pytest
 from models.constraint import load_constraint
 from models.onnx_io import load_model
 from rig.cli import main
-from rig.demo.pipeline import PATIENT_TWIST_DEG, check_hardware
+from rig.demo.joint import PATIENT_TWIST_DEG, check_hardware
 from rig.store import open_store
 
 

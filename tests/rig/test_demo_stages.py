@@ -9,7 +9,7 @@ import types
 
 from rich.console import Console
 
-from rig.demo.pipeline import StageResult, recording_failure, run_stages
+from rig.demo.stages import StageResult, recording_failure, run_stages
 from rig.record.session import RecordResult
 
 LOST = ("sim://imu-stream?sensors=4&limb=arm: the IMU board stopped answering (STOP command: "

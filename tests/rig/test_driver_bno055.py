@@ -10,12 +10,12 @@ from models import quaternion as Q
 from rig.devices.bno055 import Bno055
 from rig.errors import RigConnectionError, RigError
 from rig.sim.imu import Bno055Simulator
-from rig.sim.limb import NoiseModel, SimulatedLimb
+from rig.sim.limb import NoiseModel, SimulatedJoint
 
 
 @pytest.fixture
 def chip():
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=4)
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=4)
     with Bno055Simulator(limb) as sim, Bno055(sim.port) as dev:
         yield sim, dev
 
@@ -32,7 +32,7 @@ def test_reads_chip_id_and_fused_quaternion(chip):
 
 
 def test_raw_sample_in_one_burst_in_si_units():
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=5)
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=5)
     with Bno055Simulator(limb) as sim, Bno055(sim.port, raw=True) as dev:
         dev.set_mode(B.OperationMode.NDOF)
         s = dev.sample()

@@ -20,7 +20,7 @@ import yaml
 
 from calibration.joints import LIMB_CHAINS
 from models.limb import load_limb, loads_limb
-from rig.demo import DemoOptions
+from rig.demo import DemoOptions, run_demo
 from rig.demo import limb as limb_demo
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
@@ -46,8 +46,8 @@ def leg_demo(tmp_path_factory):
         from rich.console import Console
 
         console = Console(file=io.StringIO(), width=200)
-        result = limb_demo.run_limb_demo(DemoOptions(out=out, seed=5, quick=True), "leg",
-                                         console=console)
+        result = run_demo(DemoOptions(out=out, seed=5, quick=True, limb="leg"),
+                          console=console)
         text = console.file.getvalue()
     finally:
         limb_demo.LIMB_SIZES.update(sizes)

@@ -12,12 +12,12 @@ are ``benchmarks/bench_record.py accuracy`` (other seeds; this one is seed 7).
 from __future__ import annotations
 
 from benchmarks.record_accuracy import record_imu_patient
-from rig.sim.patients import star_patient
+from rig.sim.patients import star_constraint
 from rig.store import open_store
 
 
 def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
-    truth = star_patient(7)
+    truth = star_constraint(7)
     r = record_imu_patient(truth, 7, tmp_path, free_s=300.0)
     assert r.status == "completed" and r.dropped == 0
     # the board streamed raw samples too, and the read path fused them on the host (VQF)

@@ -14,14 +14,14 @@ from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.geometry import fibonacci_sphere
 from rig.record.display import PlainDisplay, RecordStatus, make_display, progress_line, render
-from rig.sim.limb import NoiseModel, SimulatedLimb
+from rig.sim.limb import NoiseModel, SimulatedJoint
 
 
 def ConeRange(centre=(1.0, 0.0, 0.0), radius_deg=60.0, twist_deg=(-45.0, 45.0)):
     return JointConstraint.cone(centre, radius_deg, twist=twist_deg)
 
 
-def _feed(cov: CoverageMap, limb: SimulatedLimb, seconds: float, rate: float = 50.0,
+def _feed(cov: CoverageMap, limb: SimulatedJoint, seconds: float, rate: float = 50.0,
           t0: float = 0.0) -> None:
     t = t0 + np.arange(0.0, seconds, 1.0 / rate)
     for k in range(0, len(t), 50):
@@ -42,7 +42,7 @@ def test_fibonacci_sphere_is_nearly_uniform():
 
 
 def test_cone_patient_covered_to_its_radius_and_sufficient():
-    limb = SimulatedLimb(ConeRange(centre=(1, 0, 0), radius_deg=50, twist_deg=(-30, 40)),
+    limb = SimulatedJoint(ConeRange(centre=(1, 0, 0), radius_deg=50, twist_deg=(-30, 40)),
                          seed=3, noise=NoiseModel.ideal())
     cov = CoverageMap(sectors=8, min_boundary_samples=50)
     _feed(cov, limb, 300.0)
@@ -59,7 +59,7 @@ def test_cone_patient_covered_to_its_radius_and_sufficient():
 
 
 def test_one_sided_motion_is_not_sufficient_and_says_where():
-    limb = SimulatedLimb(ConeRange(centre=(1, 0, 0), radius_deg=50), seed=4,
+    limb = SimulatedJoint(ConeRange(centre=(1, 0, 0), radius_deg=50), seed=4,
                          noise=NoiseModel.ideal())
     # the sectors' centre from the rig configuration (the joint's usual centre)
     cov = CoverageMap(sectors=8, min_boundary_samples=50, centre=(1, 0, 0))
@@ -101,7 +101,7 @@ def test_growing_reach_is_not_stable():
 
 
 def test_outlier_cells_do_not_claim_range():
-    limb = SimulatedLimb(ConeRange(radius_deg=30), seed=5, noise=NoiseModel.ideal())
+    limb = SimulatedJoint(ConeRange(radius_deg=30), seed=5, noise=NoiseModel.ideal())
     cov = CoverageMap(sectors=6, min_count=3)
     _feed(cov, limb, 120.0)
     before = [sec.reach_deg for sec in cov.summary().sectors]
@@ -113,7 +113,7 @@ def test_outlier_cells_do_not_claim_range():
 
 
 def test_plain_and_live_display_show_the_verdict():
-    limb = SimulatedLimb(ConeRange(radius_deg=40), seed=6, noise=NoiseModel.ideal())
+    limb = SimulatedJoint(ConeRange(radius_deg=40), seed=6, noise=NoiseModel.ideal())
     cov = CoverageMap(sectors=6, min_boundary_samples=20)
     _feed(cov, limb, 200.0)
     st = RecordStatus(patient="P-017", phase="recording", elapsed_s=200.0, samples=10000,

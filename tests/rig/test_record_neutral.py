@@ -24,7 +24,7 @@ from rig.record.guided import NeutralCheckpoints
 from rig.record.lockstep import CountingDisplay, LockstepClock
 from rig.record.pump import SampleBatch
 from rig.record.rigio import load_config, open_rig
-from rig.sim.patients import star_patient
+from rig.sim.patients import star_constraint
 from rig.store import open_store
 
 SEED, RATE, FREE_S, EVERY = 3, 100, 120.0, 20
@@ -41,7 +41,7 @@ def recorded(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("neutral")
     cpath = tmp / "patient.yaml"
-    dump_constraint(star_patient(SEED), cpath)
+    dump_constraint(star_constraint(SEED), cpath)
     port = (f"sim://imu-stream?sensors=2&rate={RATE}&patient={cpath}&seed={SEED}"
             f"&misplace_deg=25&clock=manual&flow=on&max_lag=none&neutral={EVERY}")
     cfg = tmp / "rig.yaml"

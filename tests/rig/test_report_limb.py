@@ -2,7 +2,7 @@
 the page as headless Chromium draws it.
 
 A seeded anatomical leg (right) and arm (left) with couplings (:func:`rig.sim.patients.
-anatomical_limb`), their true motion (:meth:`rig.sim.limb.SimulatedChain.joints`, 40 s at
+anatomical_limb`), their true motion (:meth:`rig.sim.limb.SimulatedWholeLimb.joints`, 40 s at
 20 Hz) as the recorded joint orientations, the limits themselves as the limb and as the
 reference; each report is assembled once per module.
 """
@@ -27,7 +27,7 @@ from rig.report.limb import (
     render_limb_html,
     write_limb_report,
 )
-from rig.sim.patients import anatomical_limb, chain_patient
+from rig.sim.patients import anatomical_limb, seeded_patient
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
 WARNINGS = ("coverage: 7 of 12 directions explored (not sufficient)",
@@ -43,7 +43,7 @@ CALIBRATION = {"hip": {"static": 0.61, "functional": 0.9, "range": 84.0},
 
 
 def _recorded(limb: Limb, seed: int) -> dict[str, np.ndarray]:
-    q = chain_patient(seed, limb, calibrate=False).joints(np.arange(0.0, 40.0, 0.05))
+    q = seeded_patient(seed, limb, calibrate=False).joints(np.arange(0.0, 40.0, 0.05))
     return {name: q[:, i] for i, name in enumerate(limb.joint_names)}
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from models.constraint import dump_constraint
 from rig.cli import main
-from rig.demo.pipeline import SIZES, patient_constraint, write_rig_configs
+from rig.demo.joint import SIZES, patient_constraint, write_rig_configs
 from rig.loop import EnforceRequest, run_enforce
 from rig.record import PlainDisplay, RecordOptions, record_session
 from rig.report.session import report_data_for_session
@@ -145,9 +145,9 @@ def test_a_report_says_why_it_has_no_range_and_when_a_session_was_cut_short(tmp_
     import numpy as np
 
     from rig.report.session import report_for_session
-    from rig.sim.patients import patient_limb, record_servo, star_patient
+    from rig.sim.patients import record_servo, seeded_patient, star_constraint
 
-    rec = record_servo(patient_limb(star_patient(7), 7), 60.0, 50.0)
+    rec = record_servo(seeded_patient(7, star_constraint(7)), 60.0, 50.0)
     db = tmp_path / "r.db"
     with open_store(db) as store:
         pid = store.add_patient("P-CUT")

@@ -24,7 +24,7 @@ from models.oracle import ConstraintOracle
 from rig.errors import RigConfigError
 from rig.sim.clock import ManualClock
 from rig.sim.imu import Bno055Simulator, StreamImuSimulator, bno055_from_url, stream_from_url
-from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb
+from rig.sim.limb import NoiseModel, SensorMount, SimulatedJoint
 
 QUIET = NoiseModel(disturbance_rate_hz=0.0, calibration_time_s=0.5)
 HANG_GUARD_S = 30.0
@@ -42,17 +42,17 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def test_limb_is_reproducible():
-    a, b = SimulatedLimb(sensors=3, seed=5), SimulatedLimb(sensors=3, seed=5)
+    a, b = SimulatedJoint(sensors=3, seed=5), SimulatedJoint(sensors=3, seed=5)
     t = np.linspace(0.0, 10.0, 50)
     np.testing.assert_array_equal(a.truth(t).sensors, b.truth(t).sensors)
     for ti in t:
         np.testing.assert_array_equal(a.measure(ti).quaternions, b.measure(ti).quaternions)
-    assert not np.allclose(SimulatedLimb(seed=6).joint(t), a.joint(t))
+    assert not np.allclose(SimulatedJoint(seed=6).joint(t), a.joint(t))
 
 
 def test_limb_sweeps_to_and_along_the_cone_limit():
     rom = JointConstraint.cone((1, 0, 0), 50.0, twist=(-30.0, 40.0))
-    limb = SimulatedLimb(rom, seed=2)
+    limb = SimulatedJoint(rom, seed=2)
     t = np.arange(0.0, 120.0, 0.02)
     q = limb.joint(t)
     swing = np.degrees(Q.angle_between(Q.rotate(q, Q.LIMB_AXIS), limb.centre))
@@ -70,7 +70,7 @@ def test_limb_with_constraint_oracle():
     c = JointConstraint.polygon(
         [[0.6, 0.8, 0.0], [0.6, 0.0, 0.8], [0.6, -0.8, 0.0], [0.8, 0.0, -0.6]],
         interior=[1, 0, 0], twist=(-20, 50))
-    limb = SimulatedLimb.from_constraint(c, seed=4)
+    limb = SimulatedJoint.from_constraint(c, seed=4)
     q = limb.joint(np.arange(0.0, 60.0, 0.05))
     oracle = ConstraintOracle(c)
     assert oracle.is_valid(q, normalize=True).all()
@@ -82,7 +82,7 @@ def test_limb_projects_exactly_as_the_oracle_does():
     """One implementation: twist range (0°, 90°) and a -170° twist go to 90° (the nearer end
     round the circle), as the exact oracle says; the limb's motion is the oracle's projection."""
     c = JointConstraint.cone((1, 0, 0), 60.0, twist=(0.0, 90.0))
-    limb = SimulatedLimb(c, seed=1)
+    limb = SimulatedJoint(c, seed=1)
     q = Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), math.radians(-170.0))[None]
     assert np.degrees(Q.twist_angle(limb.oracle.project(q, normalize=True))) == \
         pytest.approx([90.0])
@@ -94,7 +94,7 @@ def test_limb_projects_exactly_as_the_oracle_does():
 
 
 def test_sensor_quaternions_compose_frames():
-    limb = SimulatedLimb(sensors=[SensorMount("thorax", (1.0, 0, 0, 0)),
+    limb = SimulatedJoint(sensors=[SensorMount("thorax", (1.0, 0, 0, 0)),
                                   SensorMount("limb", tuple(Q.from_axis_angle(
                                       np.array([0, 0, 1.0]), 0.3)))], seed=1)
     st = limb.truth(np.linspace(0, 5, 20))
@@ -107,7 +107,7 @@ def test_sensor_quaternions_compose_frames():
 
 
 def test_ideal_sensors_equal_truth_and_gyro_is_the_rate():
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=3)
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=3)
     m0, m1 = limb.measure(1.0), limb.measure(1.001)
     assert _angle_deg(m0.quaternions, m0.truth.sensors[0]).max() < 1e-6
     assert list(m0.calibration) == [0xFF, 0xFF]
@@ -119,7 +119,7 @@ def test_ideal_sensors_equal_truth_and_gyro_is_the_rate():
 def test_measure_many_is_the_same_process_as_measure():
     """Batched measurements: identical to one-by-one without errors; with errors, the same
     statistics (draw order differs)."""
-    a, b = (SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=12) for _ in range(2))
+    a, b = (SimulatedJoint(sensors=3, noise=NoiseModel.ideal(), seed=12) for _ in range(2))
     ts = np.arange(60) / 100.0
     for x, y in zip(a.measure_many(ts), [b.measure(t) for t in ts], strict=True):
         np.testing.assert_allclose(x.quaternions, y.quaternions, atol=1e-12)
@@ -127,7 +127,7 @@ def test_measure_many_is_the_same_process_as_measure():
         assert list(x.calibration) == list(y.calibration)
     white = NoiseModel(white_deg=0.5, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                        disturbance_rate_hz=0.0, calibration_time_s=0.0)
-    limb = SimulatedLimb(sensors=4, noise=white, seed=8)
+    limb = SimulatedJoint(sensors=4, noise=white, seed=8)
     err = np.concatenate([_angle_deg(m.quaternions, m.truth.sensors[0])
                           for m in limb.measure_many(np.arange(150) * 0.01)])
     assert abs(np.sqrt(np.mean(err**2)) - 0.5 * math.sqrt(3)) < 0.1
@@ -138,14 +138,14 @@ def test_measure_many_is_the_same_process_as_measure():
 def test_noise_model_statistics():
     white = NoiseModel(white_deg=0.5, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                        disturbance_rate_hz=0.0, calibration_time_s=0.0)
-    limb = SimulatedLimb(sensors=4, noise=white, seed=8)
+    limb = SimulatedJoint(sensors=4, noise=white, seed=8)
     err = np.concatenate([_angle_deg(m.quaternions, m.truth.sensors[0])
                           for m in (limb.measure(k * 0.01) for k in range(150))])
     # |n| of a 3-D Gaussian with σ per axis has RMS σ√3
     assert abs(np.sqrt(np.mean(err**2)) - 0.5 * math.sqrt(3)) < 0.1
     drift = NoiseModel(white_deg=0.0, drift_heading_deg=3.0, drift_tilt_deg=0.0,
                        drift_time_s=5.0, disturbance_rate_hz=0.0)
-    limb = SimulatedLimb(sensors=4, noise=drift, seed=9)
+    limb = SimulatedJoint(sensors=4, noise=drift, seed=9)
     heading = []
     for k in range(500):
         m = limb.measure(k * 0.5)
@@ -161,7 +161,7 @@ def test_noise_model_statistics():
 def test_magnetic_disturbances_are_transient_and_drop_mag_calibration():
     noise = NoiseModel(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                        disturbance_rate_hz=0.5, disturbance_deg=20.0, calibration_time_s=0.0)
-    limb = SimulatedLimb(sensors=4, noise=noise, seed=10)
+    limb = SimulatedJoint(sensors=4, noise=noise, seed=10)
     errs, mags = [], []
     for k in range(600):
         m = limb.measure(k * 0.05)
@@ -173,7 +173,7 @@ def test_magnetic_disturbances_are_transient_and_drop_mag_calibration():
 
 
 def test_calibration_rises_over_time():
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel(calibration_time_s=4.0,
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel(calibration_time_s=4.0,
                                                      disturbance_rate_hz=0), seed=11)
     stat = [limb.measure(t).calibration for t in np.arange(0.0, 5.0, 0.1)]
     sys_levels = np.array([s >> 6 for s in stat])
@@ -183,12 +183,12 @@ def test_calibration_rises_over_time():
 
 def test_bad_limb_arguments():
     with pytest.raises(TypeError):
-        SimulatedLimb("original")
+        SimulatedJoint("original")
     with pytest.raises(ValueError):
-        SimulatedLimb(sensors=0)
+        SimulatedJoint(sensors=0)
     with pytest.raises(ValueError):
         NoiseModel(white_deg=-1)
-    limb = SimulatedLimb()
+    limb = SimulatedJoint()
     limb.measure(1.0)
     with pytest.raises(ValueError, match="back in time"):
         limb.measure(0.5)
@@ -224,7 +224,7 @@ def _write(ser, reg, data) -> int:
 @pytest.fixture
 def bno():
     clock = ManualClock(1000.0)
-    limb = SimulatedLimb(sensors=2, noise=QUIET, seed=21)
+    limb = SimulatedJoint(sensors=2, noise=QUIET, seed=21)
     with Bno055Simulator(limb, clock=clock, char_timeout_s=0.05) as sim, \
             serial.Serial(sim.port, 115200, timeout=0.5) as ser:
         yield sim, ser, clock
@@ -298,7 +298,7 @@ def test_bno055_modes_gate_data_and_config_writes(bno):
 
 def test_bno055_quaternion_matches_truth_without_noise():
     clock = ManualClock(1000.0)
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=22)
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=22)
     with Bno055Simulator(limb, clock=clock, rate_hz=100) as sim, \
             serial.Serial(sim.port, timeout=0.5) as ser:
         assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
@@ -337,7 +337,7 @@ def test_bno055_raw_data_registers():
     """ACC_DATA and MAG_DATA (and GYR_DATA) hold the limb's raw readings in UNIT_SEL units, in
     the modes that run those sensors, axis-remapped like the rest."""
     clock = ManualClock(1000.0)
-    limb = SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=23)
+    limb = SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=23)
     with Bno055Simulator(limb, clock=clock) as sim, serial.Serial(sim.port, timeout=0.5) as ser:
         assert _read(ser, B.Register.ACC_DATA, 12) == bytes(12)  # CONFIG: nothing measured
         assert _write(ser, B.Register.OPR_MODE, [B.OperationMode.NDOF]) == 1
@@ -412,7 +412,7 @@ def test_simulator_close_is_idempotent_and_reports_thread_errors():
     sim.close()
     assert sim.closed
 
-    class Broken(SimulatedLimb):
+    class Broken(SimulatedJoint):
         def measure(self, t, calibration_elapsed_s=None):
             raise ZeroDivisionError("boom")
 
@@ -479,7 +479,7 @@ def stream():
     """A 4-sensor stream device on a manual clock: time moves only when the test says; with
     flow control, as a clock jump produces a burst larger than the pty's buffer."""
     clock = ManualClock()
-    limb = SimulatedLimb(sensors=4, noise=QUIET, seed=31)
+    limb = SimulatedJoint(sensors=4, noise=QUIET, seed=31)
     with StreamImuSimulator(limb, rate_hz=100, clock=clock, flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         yield sim, StreamHost(ser), clock
@@ -568,7 +568,7 @@ def test_stream_raw_fields_are_the_limb_measurement():
     magnetometer of its instant (the limb's Measurement), at the record's resolution; RAW off
     again gives 1.0 records."""
     clock = ManualClock()
-    limb = SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=8)
+    limb = SimulatedJoint(sensors=3, noise=NoiseModel.ideal(), seed=8)
     with StreamImuSimulator(limb, rate_hz=100, clock=clock, flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         host = StreamHost(ser)
@@ -583,7 +583,7 @@ def test_stream_raw_fields_are_the_limb_measurement():
         host.command(S.CommandType.STOP)
         assert host.dec.errors == 0 and sim.server_error is None
     times = np.array([s.timestamp_us for s in samples[:50]]) / 1e6
-    twin = SimulatedLimb(sensors=3, noise=NoiseModel.ideal(), seed=8)  # the same patient
+    twin = SimulatedJoint(sensors=3, noise=NoiseModel.ideal(), seed=8)  # the same patient
     for s, m in zip(samples[:50], twin.measure_many(times), strict=True):
         got = np.array([r.raw for r in s.readings])
         want = np.hstack([m.accel, m.gyro, m.mag])
@@ -658,7 +658,7 @@ def test_stream_rate_change_while_streaming(stream):
 
 
 def test_stream_timestamps_wrap_and_unwrap():
-    limb = SimulatedLimb(sensors=1, noise=NoiseModel.ideal(), seed=5)
+    limb = SimulatedJoint(sensors=1, noise=NoiseModel.ideal(), seed=5)
     offset = 2**32 - 100_000  # wraps 0.1 s after the start
     clock = ManualClock()
     with StreamImuSimulator(limb, rate_hz=400, timestamp_offset_us=offset, clock=clock,

@@ -7,7 +7,7 @@ import numpy as np
 
 from models import quaternion as Q
 from rig.sim.limb import NoiseModel
-from rig.sim.patients import patient_limb, star_patient
+from rig.sim.patients import seeded_patient, star_constraint
 
 
 def _speed_dps(q, dt):
@@ -15,7 +15,7 @@ def _speed_dps(q, dt):
 
 
 def test_speed_is_bounded_at_1_khz_and_the_limb_stays_in_range():
-    limb = patient_limb(star_patient(204), 204, protocol=None)
+    limb = seeded_patient(204, star_constraint(204), calibrate=False)
     assert limb.motion.radial_stop  # the star patient is star-shaped about its centre
     t = np.arange(0.0, 120.0, 1e-3)
     q = limb.joint(t)
@@ -33,7 +33,7 @@ def test_large_ranges_move_continuously_too():
     # star 232 reaches beyond 90° from its centre (the radial stop must still apply) and its
     # raw push passes near the centre's antipode (it saturates below 170°): before, the arm
     # jumped there at over 100,000 deg/s
-    limb = patient_limb(star_patient(232), 232, protocol=None)
+    limb = seeded_patient(232, star_constraint(232), calibrate=False)
     assert limb.motion.radial_stop
     verts = np.asarray(limb.constraint.swing.vertices, dtype=float)
     assert np.degrees(np.arccos(verts @ limb.centre)).max() > 90.0
@@ -42,7 +42,7 @@ def test_large_ranges_move_continuously_too():
 
 
 def test_radial_stop_is_on_the_boundary_along_the_push():
-    limb = patient_limb(star_patient(204), 204, protocol=None)
+    limb = seeded_patient(204, star_constraint(204), calibrate=False)
     rng = np.random.default_rng(0)
     d = Q.random_unit_vectors(2000, rng)
     d = d[d @ limb.centre > 0.2]
@@ -62,8 +62,8 @@ def test_radial_stop_is_on_the_boundary_along_the_push():
 
 
 def test_values_do_not_depend_on_batching_or_order():
-    c = star_patient(204)
-    a, b = patient_limb(c, 204), patient_limb(c, 204)
+    c = star_constraint(204)
+    a, b = seeded_patient(204, c), seeded_patient(204, c)
     t = np.arange(0.0, 60.0, 0.013)
     whole = a.joint(t)
     rng = np.random.default_rng(1)
@@ -75,7 +75,7 @@ def test_values_do_not_depend_on_batching_or_order():
 
 
 def test_the_gyro_integrates_to_the_truth_and_the_accelerometer_stays_physical():
-    limb = patient_limb(star_patient(204), 204, noise=NoiseModel.ideal())
+    limb = seeded_patient(204, star_constraint(204), noise=NoiseModel.ideal())
     ts = np.arange(0.0, 40.0, 1e-3)
     ms = []
     for i in range(0, len(ts), 4000):
@@ -100,8 +100,8 @@ def test_the_gyro_integrates_to_the_truth_and_the_accelerometer_stays_physical()
 def test_scattered_requests_beyond_the_control_point_cache():
     # more knots than the motion keeps (4096): making room must not drop points a request
     # still needs (it did: a KeyError), and no value changes
-    c = star_patient(204)
-    a, b = patient_limb(c, 204, protocol=None), patient_limb(c, 204, protocol=None)
+    c = star_constraint(204)
+    a, b = seeded_patient(204, c, calibrate=False), seeded_patient(204, c, calibrate=False)
     t = np.arange(0.0, 400.0, 0.05)  # 10,000 knots of 40 ms
     whole = a.joint(t)
     order = np.random.default_rng(2).permutation(len(t))

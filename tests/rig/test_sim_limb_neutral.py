@@ -8,7 +8,7 @@ import pytest
 from calibration.protocol import CalibrationProtocol
 from models import quaternion as Q
 from models.shapes import load_shape
-from rig.sim.limb import SimulatedLimb
+from rig.sim.limb import SimulatedJoint
 
 
 def _angle_deg(a, b):
@@ -35,8 +35,8 @@ def _measures(limb, ts, chunk=500):
 
 @pytest.mark.parametrize("protocol", [None, CalibrationProtocol()])
 def test_off_is_bit_identical_to_a_limb_without_checkpoints(protocol):
-    base = SimulatedLimb(load_shape("original"), seed=7, calibration_protocol=protocol)
-    off = SimulatedLimb(load_shape("original"), seed=7, calibration_protocol=protocol,
+    base = SimulatedJoint(load_shape("original"), seed=7, calibration_protocol=protocol)
+    off = SimulatedJoint(load_shape("original"), seed=7, calibration_protocol=protocol,
                         neutral_every_s=0.0, neutral_hold_s=3.0, neutral_ramp_s=0.5,
                         neutral_sd_deg=5.0)
     assert off.neutral_every_s == 0.0 and off.neutral_sd_deg == 5.0
@@ -52,8 +52,8 @@ def test_off_is_bit_identical_to_a_limb_without_checkpoints(protocol):
 
 def test_on_changes_only_the_checkpoints_and_no_random_draw():
     kw = dict(seed=11, calibration_protocol=CalibrationProtocol())
-    base = SimulatedLimb(load_shape("original"), **kw)
-    on = SimulatedLimb(load_shape("original"), neutral_every_s=20.0, **kw)
+    base = SimulatedJoint(load_shape("original"), **kw)
+    on = SimulatedJoint(load_shape("original"), neutral_every_s=20.0, **kw)
     assert base.mounts == on.mounts
     t = np.arange(0.0, 130.0, 0.01)
     w = on.neutral_windows(t[-1])
@@ -76,7 +76,7 @@ def test_on_changes_only_the_checkpoints_and_no_random_draw():
 
 def test_hold_is_the_checkpoints_neutral_pose():
     sd = 2.0
-    limb = SimulatedLimb(seed=5, calibration_protocol=CalibrationProtocol(),
+    limb = SimulatedJoint(seed=5, calibration_protocol=CalibrationProtocol(),
                          neutral_every_s=20.0, neutral_sd_deg=sd)
     t = np.arange(0.0, 200.0, 0.01)
     windows = limb.neutral_windows(t[-1])
@@ -99,7 +99,7 @@ def test_hold_is_the_checkpoints_neutral_pose():
 
 def test_neutral_poses_spread_matches_neutral_sd_and_is_deterministic():
     sd = 2.0
-    limb = SimulatedLimb(seed=9, neutral_every_s=20.0, neutral_sd_deg=sd)
+    limb = SimulatedJoint(seed=9, neutral_every_s=20.0, neutral_sd_deg=sd)
     k = np.arange(1, 4001)
     r = np.degrees(_rotvec(limb.neutral_poses(k)))
     # limb axis +X: axial rotation sd, the two swing components sd / 2
@@ -107,23 +107,23 @@ def test_neutral_poses_spread_matches_neutral_sd_and_is_deterministic():
     assert np.all(np.abs(r.mean(axis=0)) < 4.0 * np.array([sd, sd / 2, sd / 2]) / np.sqrt(len(k)))
     assert abs(np.corrcoef(r.T)[0, 1]) < 0.06
     # deterministic per seed, independent of the order of evaluation, different per seed
-    again = SimulatedLimb(seed=9, neutral_every_s=20.0, neutral_sd_deg=sd)
+    again = SimulatedJoint(seed=9, neutral_every_s=20.0, neutral_sd_deg=sd)
     assert np.array_equal(again.neutral_poses([7, 3])[::-1], limb.neutral_poses([3, 7]))
-    other = SimulatedLimb(seed=10, neutral_every_s=20.0, neutral_sd_deg=sd)
+    other = SimulatedJoint(seed=10, neutral_every_s=20.0, neutral_sd_deg=sd)
     assert _angle_deg(other.neutral_poses(k[:50]), limb.neutral_poses(k[:50])).min() > 1e-3
     # a Generator seed: its own seed sequence, nothing drawn from it
     g = np.random.default_rng(9)
-    from_gen = SimulatedLimb(seed=g, neutral_every_s=20.0, neutral_sd_deg=sd)
+    from_gen = SimulatedJoint(seed=g, neutral_every_s=20.0, neutral_sd_deg=sd)
     assert np.array_equal(from_gen.neutral_poses(k[:10]), limb.neutral_poses(k[:10]))
     # sd 0: the identity
-    exact = SimulatedLimb(seed=9, neutral_every_s=20.0, neutral_sd_deg=0.0)
+    exact = SimulatedJoint(seed=9, neutral_every_s=20.0, neutral_sd_deg=0.0)
     assert np.array_equal(exact.neutral_poses(k[:10]), np.tile(Q.IDENTITY, (10, 1)))
     with pytest.raises(ValueError, match="from 1"):
         limb.neutral_poses(0)
 
 
 def test_motion_is_c1_at_the_ramp_boundaries():
-    limb = SimulatedLimb(seed=2, excursion=0.25, calibration_protocol=CalibrationProtocol(),
+    limb = SimulatedJoint(seed=2, excursion=0.25, calibration_protocol=CalibrationProtocol(),
                          neutral_every_s=20.0, neutral_sd_deg=3.0)
     end = 130.0
     t = np.arange(0.0, end, 0.01)
@@ -150,8 +150,8 @@ def test_motion_is_c1_at_the_ramp_boundaries():
 def test_checkpoints_start_after_the_protocol_and_its_hand_over():
     protocol = CalibrationProtocol()
     kw = dict(seed=4, calibration_protocol=protocol, protocol_start_s=2.0, blend_s=3.0)
-    base = SimulatedLimb(**kw)
-    limb = SimulatedLimb(neutral_every_s=8.0, **kw)
+    base = SimulatedJoint(**kw)
+    limb = SimulatedJoint(neutral_every_s=8.0, **kw)
     start = 2.0 + protocol.duration_s + 3.0
     assert limb.neutral_start_s == pytest.approx(start)
     first = limb.neutral_windows(100.0)[0]
@@ -160,7 +160,7 @@ def test_checkpoints_start_after_the_protocol_and_its_hand_over():
     t = np.arange(0.0, first[0] - limb.neutral_ramp_s - 2.0 * limb.smooth_s, 0.005)
     assert np.array_equal(base.joint(t), limb.joint(t))
     # a protocol given later (as the back-driven servo patient gets it) moves the schedule
-    late = SimulatedLimb(seed=4, neutral_every_s=8.0)
+    late = SimulatedJoint(seed=4, neutral_every_s=8.0)
     np.testing.assert_allclose(late.neutral_windows(30.0), [[8, 10], [16, 18], [24, 26]])
     late.perform_protocol(protocol, start_s=10.0)
     assert late.neutral_start_s == pytest.approx(10.0 + protocol.duration_s + 3.0)
@@ -168,7 +168,7 @@ def test_checkpoints_start_after_the_protocol_and_its_hand_over():
 
 
 def test_neutral_windows():
-    limb = SimulatedLimb(seed=0, neutral_every_s=20.0)
+    limb = SimulatedJoint(seed=0, neutral_every_s=20.0)
     assert (limb.neutral_every_s, limb.neutral_hold_s, limb.neutral_ramp_s,
             limb.neutral_sd_deg) == (20.0, 2.0, 1.5, 2.0)
     np.testing.assert_array_equal(limb.neutral_windows(100.0),
@@ -177,7 +177,7 @@ def test_neutral_windows():
     np.testing.assert_array_equal(limb.neutral_windows(62.0), [[20, 22], [40, 42], [60, 62]])
     for t_end in (0.0, 19.0, 21.9, -5.0):
         assert limb.neutral_windows(t_end).shape == (0, 2)
-    other = SimulatedLimb(seed=0, neutral_every_s=10.0, neutral_hold_s=3.0, neutral_ramp_s=1.0,
+    other = SimulatedJoint(seed=0, neutral_every_s=10.0, neutral_hold_s=3.0, neutral_ramp_s=1.0,
                           calibration_protocol=CalibrationProtocol(), protocol_start_s=0.0,
                           blend_s=2.0)
     np.testing.assert_allclose(other.neutral_windows(50.0), [[27, 30], [37, 40], [47, 50]])
@@ -199,8 +199,8 @@ def test_neutral_windows():
 ])
 def test_bad_neutral_arguments(kwargs, needle):
     with pytest.raises(ValueError, match=needle):
-        SimulatedLimb(seed=0, **kwargs)
-    assert SimulatedLimb(seed=0, neutral_every_s=6.0).neutral_every_s == 6.0  # the least
+        SimulatedJoint(seed=0, **kwargs)
+    assert SimulatedJoint(seed=0, neutral_every_s=6.0).neutral_every_s == 6.0  # the least
 
 
 def test_sim_imu_config_patient_returns_to_neutral_every_20_s():

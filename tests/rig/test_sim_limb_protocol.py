@@ -10,7 +10,7 @@ from models import quaternion as Q
 from models.shapes import load_shape
 from rig.errors import RigConfigError
 from rig.sim.imu import stream_from_url
-from rig.sim.limb import SimulatedLimb
+from rig.sim.limb import SimulatedJoint
 
 
 def _angle_deg(a, b):
@@ -20,9 +20,9 @@ def _angle_deg(a, b):
 def test_protocol_then_smooth_hand_over_to_free_motion():
     protocol = CalibrationProtocol()
     start = 2.0
-    limb = SimulatedLimb(load_shape("original"), calibration_protocol=protocol,
+    limb = SimulatedJoint(load_shape("original"), calibration_protocol=protocol,
                          protocol_start_s=start, blend_s=3.0, seed=3)
-    free = SimulatedLimb(load_shape("original"), seed=3)
+    free = SimulatedJoint(load_shape("original"), seed=3)
     assert limb.calibration_protocol is protocol and limb.protocol_start_s == start
     assert limb.protocol_end_s == pytest.approx(start + protocol.duration_s)
     # neutral pose before and during the static phase: the identity (up to the motion's
@@ -52,7 +52,7 @@ def test_protocol_pose_outside_the_range_is_projected_onto_it():
     from models.constraint import JointConstraint
 
     cone = JointConstraint.cone((1.0, 0.0, 0.0), 10.0, twist=(-30.0, 30.0))
-    limb = SimulatedLimb(cone, calibration_protocol=CalibrationProtocol(), seed=0)
+    limb = SimulatedJoint(cone, calibration_protocol=CalibrationProtocol(), seed=0)
     t = np.linspace(0.0, limb.protocol_end_s + 10.0, 2000)
     q = limb.joint(t)
     assert limb.oracle.is_valid(q).all()

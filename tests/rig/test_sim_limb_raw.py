@@ -9,7 +9,7 @@ import pytest
 
 from calibration.protocol import CalibrationProtocol
 from models import quaternion as Q
-from rig.sim.limb import GRAVITY, NoiseModel, SimulatedLimb
+from rig.sim.limb import GRAVITY, NoiseModel, SimulatedJoint
 
 _UP = np.array([0.0, 0.0, 1.0])
 
@@ -52,13 +52,13 @@ def test_noise_model_raw_fields():
         with pytest.raises(ValueError, match=next(iter(kw))):
             NoiseModel(**kw)
     with pytest.raises(ValueError, match="limb_lever_m"):
-        SimulatedLimb(seed=0, limb_lever_m=-0.1)
+        SimulatedJoint(seed=0, limb_lever_m=-0.1)
 
 
 @pytest.mark.parametrize("noise", [NoiseModel.ideal(), NoiseModel()])
 def test_at_rest_the_accelerometer_reads_gravity_and_the_magnetometer_the_field(noise):
     protocol = CalibrationProtocol()
-    limb = SimulatedLimb(seed=3, sway_deg=0.0, noise=noise, calibration_protocol=protocol,
+    limb = SimulatedJoint(seed=3, sway_deg=0.0, noise=noise, calibration_protocol=protocol,
                          protocol_start_s=2.0)
     # neutral pose until the protocol's static phase ends: the patient stands still (up to
     # the motion's smoothing, which starts moving two knots, 2 x smooth_s, before the end)
@@ -88,7 +88,7 @@ def test_field_norm_and_dip_hold_during_motion_and_disturbances():
     nz = NoiseModel(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                     gyro_bias_dps=0.0, gyro_noise_dps=0.0, accel_noise=0.0, mag_noise_ut=0.0,
                     disturbance_rate_hz=0.2, field_ut=50.0, dip_deg=-30.0)
-    limb = SimulatedLimb(seed=8, noise=nz)
+    limb = SimulatedJoint(seed=8, noise=nz)
     ms = limb.measure_many(np.arange(0.0, 60.0, 0.02))
     mag = _stack(ms, "mag")
     q = np.stack([m.truth.sensors[0] for m in ms])
@@ -103,7 +103,7 @@ def test_ideal_accel_and_mag_give_the_devices_orientation_by_triad():
     nz = NoiseModel(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                     gyro_bias_dps=0.0, gyro_noise_dps=0.0, accel_noise=0.0, mag_noise_ut=0.0,
                     calibration_time_s=0.0, disturbance_rate_hz=0.2, disturbance_deg=10.0)
-    limb = SimulatedLimb(seed=5, noise=nz, sensors=3, limb_lever_m=0.0, thorax_lever_m=0.0)
+    limb = SimulatedJoint(seed=5, noise=nz, sensors=3, limb_lever_m=0.0, thorax_lever_m=0.0)
     ms = limb.measure_many(np.arange(0.0, 90.0, 0.01))
     acc, mag = _stack(ms, "accel"), _stack(ms, "mag")
     np.testing.assert_allclose(np.linalg.norm(acc, axis=-1), GRAVITY, rtol=1e-9)
@@ -119,7 +119,7 @@ def test_a_disturbance_shows_in_mag_exactly_when_in_the_device_heading():
     nz = NoiseModel(white_deg=0.0, drift_heading_deg=0.0, drift_tilt_deg=0.0,
                     gyro_bias_dps=0.0, gyro_noise_dps=0.0, accel_noise=0.0, mag_noise_ut=0.0,
                     calibration_time_s=0.0, disturbance_rate_hz=0.1)
-    limb = SimulatedLimb(seed=12, noise=nz)
+    limb = SimulatedJoint(seed=12, noise=nz)
     ms = []
     for t in np.arange(0.0, 120.0, 0.05):  # the single-sample path too
         ms.append(limb.measure(t))
@@ -143,7 +143,7 @@ def test_a_disturbance_shows_in_mag_exactly_when_in_the_device_heading():
 
 def test_accelerometer_sees_the_lever_arms_linear_acceleration():
     nz = NoiseModel.ideal()
-    limb = SimulatedLimb(seed=4, noise=nz, excursion=0.25, speed=3.0)
+    limb = SimulatedJoint(seed=4, noise=nz, excursion=0.25, speed=3.0)
     assert limb.limb_lever_m == 0.15 and limb.thorax_lever_m == 0.3
     ts = np.arange(1.0, 30.0, 0.05)
     ms = limb.measure_many(ts)
@@ -165,8 +165,8 @@ def test_accelerometer_sees_the_lever_arms_linear_acceleration():
 
 
 def test_existing_draws_do_not_change_and_batching_does_not_matter():
-    a = SimulatedLimb(seed=21)
-    b = SimulatedLimb(seed=21)
+    a = SimulatedJoint(seed=21)
+    b = SimulatedJoint(seed=21)
     ts = np.arange(0.0, 5.0, 0.01)
     one = a.measure_many(ts)
     parts = []

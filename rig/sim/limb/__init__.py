@@ -1,5 +1,7 @@
-"""The simulated patient: a shoulder moving inside a known range of motion, carrying orientation
-sensors — ground truth plus a sensor error model.
+"""The simulated patient's limb (:class:`SimulatedLimb`): one or more joints moving inside a known
+range of motion, carrying orientation sensors — ground truth plus a sensor error model. A limb
+of one joint (by default a shoulder below the thorax) is a :class:`SimulatedJoint`; a whole arm
+or leg (three joints) a :class:`SimulatedWholeLimb`.
 
 Frames and quaternions (scalar-first, Hamilton, conventions of :mod:`models.quaternion`)
 ---------------------------------------------------------------------------------------
@@ -12,8 +14,8 @@ Frames and quaternions (scalar-first, Hamilton, conventions of :mod:`models.quat
 - **sensor i** — strapped on the thorax or the limb with a fixed mounting rotation ``mount``
   (sensor relative to segment).
 
-Modules (each part a small object or pure functions; :class:`SimulatedLimb` composes them)
-------------------------------------------------------------------------------------------
+Modules (each part a small object or pure functions; the limbs compose them)
+----------------------------------------------------------------------------
 :mod:`~rig.sim.limb.motion`
     How segments move: the root segment's :class:`~rig.sim.limb.motion.Posture`, a joint's
     free motion through its range and its stop at the limits
@@ -28,29 +30,33 @@ Modules (each part a small object or pure functions; :class:`SimulatedLimb` comp
     :class:`~rig.sim.limb.sensors.SensorPlacement`) and what they report
     (:class:`NoiseModel`, :class:`~rig.sim.limb.sensors.SensorErrors`: noise, drift, magnetic
     disturbances, calibration status, raw accelerometer and magnetometer).
-:mod:`~rig.sim.limb.simulated`
-    :class:`SimulatedLimb`, the facade: one joint, its schedule and its sensors; the
-    :class:`LimbState` / :class:`Measurement` it returns.
-:mod:`~rig.sim.limb.chain`
-    :class:`SimulatedChain`: a whole arm or leg (four segments, three joints, a sensor on each
-    segment) moving inside a limb constraint (:class:`models.limb.Limb`) with the same parts;
-    its :class:`ChainState`.
+:mod:`~rig.sim.limb.base`
+    :class:`SimulatedLimb`, what every simulated limb shares: the seeded streams, the root's
+    posture, the schedule's times and the sensors' readings (:class:`Measurement`).
+:mod:`~rig.sim.limb.joint`
+    :class:`SimulatedJoint`: one joint, its schedule and its sensors; its :class:`JointState`.
+:mod:`~rig.sim.limb.whole`
+    :class:`SimulatedWholeLimb`: a whole arm or leg (four segments, three joints, a sensor on
+    each segment) moving inside a limb constraint (:class:`models.limb.Limb`) with the same
+    parts; its :class:`WholeLimbState`.
 """
 
-from rig.sim.limb.chain import ChainState, SimulatedChain, chain_mounts
+from rig.sim.limb.base import Measurement, SimulatedLimb
+from rig.sim.limb.joint import DEFAULT_CONSTRAINT, JointState, SimulatedJoint
 from rig.sim.limb.sensors import GRAVITY, NoiseModel, SensorMount, default_mounts
-from rig.sim.limb.simulated import DEFAULT_CONSTRAINT, LimbState, Measurement, SimulatedLimb
+from rig.sim.limb.whole import SimulatedWholeLimb, WholeLimbState, limb_mounts
 
 __all__ = [
     "DEFAULT_CONSTRAINT",
     "GRAVITY",
-    "ChainState",
-    "LimbState",
+    "JointState",
     "Measurement",
     "NoiseModel",
     "SensorMount",
-    "SimulatedChain",
+    "SimulatedJoint",
     "SimulatedLimb",
-    "chain_mounts",
+    "SimulatedWholeLimb",
+    "WholeLimbState",
     "default_mounts",
+    "limb_mounts",
 ]

@@ -18,7 +18,7 @@ slides **along the limit** — the motion a boundary recording needs
 Continuity
 ----------
 The nearest-point projection of a target outside a concave boundary jumps where the target
-crosses the exterior's medial axis (on ``star_patient(204)``: up to 16,000°/s at 100 Hz; the
+crosses the exterior's medial axis (on ``star_constraint(204)``: up to 16,000°/s at 100 Hz; the
 arm would teleport, and a gyroscope or accelerometer could not follow). Two things keep the
 arm's motion physical:
 

@@ -129,7 +129,7 @@ class NoiseModel:
 @dataclass(frozen=True)
 class SensorMount:
     """Where a sensor sits: ``segment`` names the segment (the shoulder patient's ``"thorax"``
-    or ``"limb"``; a chain's segment names, :class:`rig.sim.limb.chain.SimulatedChain`);
+    or ``"limb"``; a chain's segment names, :class:`rig.sim.limb.whole.SimulatedWholeLimb`);
     ``mount`` (4,) is the sensor frame relative to the segment frame."""
 
     segment: str
@@ -405,7 +405,7 @@ def specific_force_and_field(q_true: np.ndarray, q_next: np.ndarray, q_prev: np.
     earth_field : (3,) float64, µT, world frame
     positions : (3, ..., S, 3) float64, m, optional
         The sensors' world positions at ``t``, ``t + h``, ``t - h`` relative to world-fixed
-        points (a sensor on a chain of segments, :mod:`rig.sim.limb.chain`); default from
+        points (a sensor on a chain of segments, :mod:`rig.sim.limb.whole`); default from
         ``lever``.
     """
     h = RAW_STEP_S

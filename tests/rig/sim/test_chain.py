@@ -13,8 +13,8 @@ from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
 from models.limb_oracle import LimbOracle
 from rig.errors import RigConfigError
-from rig.sim.limb import NoiseModel, SimulatedChain, chain_mounts
-from rig.sim.patients import anatomical_limb, chain_patient, record_chain_imu
+from rig.sim.limb import NoiseModel, SimulatedWholeLimb, limb_mounts
+from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
 Z = np.array([0.0, 0.0, 1.0])
@@ -151,7 +151,7 @@ def test_chain_motion_is_valid_and_reaches_every_limit(sim_leg, sim_leg_motion):
     _, q = sim_leg_motion
     res = leg.oracle.evaluate(q)
     # in range, but for the B-spline's overshoot where it rounds a corner or slides along a
-    # concave limit (module docstring of rig.sim.limb.chain): under 1.5°, rarely over 0.1°
+    # concave limit (module docstring of rig.sim.limb.whole): under 1.5°, rarely over 0.1°
     over = np.degrees(np.nan_to_num(res.distance, nan=-1.0))
     assert over.max() < 1.5 and (over > 0.1).mean() < 0.02 and (over > 0.5).mean() < 0.005
     # the knee's both ends within 2°
@@ -187,8 +187,8 @@ def test_sensors_see_a_continuous_limb():
     samples lost the jumps (tilt 30-77° off): now the gyroscope integrates to the truth from
     sample to sample, and the accelerometer's linear acceleration averages out as a limb held
     at the shoulder must (its velocity stays bounded)."""
-    chain = chain_patient(102, "arm", noise=NoiseModel.ideal(), neutral=20.0)
-    rec = record_chain_imu(chain, 100.0, 100.0)
+    chain = seeded_patient(102, "arm", noise=NoiseModel.ideal(), neutral=20.0)
+    rec = record_limb_imu(chain, 100.0, 100.0)
     t = rec.t
     for k in range(1, 4):
         s = rec.sensors_true[:, k]
@@ -211,7 +211,7 @@ def test_a_jumping_target_is_followed_at_bounded_speed_around_the_range():
     range, and the values do not depend on the order they are asked in."""
     from rig.sim.limb.motion import RateLimit
 
-    chain = SimulatedChain(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
+    chain = SimulatedWholeLimb(anatomical_limb(11, "leg"), seed=11, noise=NoiseModel.ideal())
     neutral = _neutral(chain.limb)
     far = chain.project(np.array([[Q.from_axis_angle(Z, math.radians(150.0)), *neutral[1:]]]))
     step_s, speed = 0.04, math.radians(300.0)
@@ -241,7 +241,7 @@ def test_a_jumping_target_is_followed_at_bounded_speed_around_the_range():
 
 
 def test_protocol_is_followed_within_limits():
-    chain = chain_patient(5, "leg", noise=NoiseModel.ideal(), misplace_deg=0.0)
+    chain = seeded_patient(5, "leg", noise=NoiseModel.ideal(), misplace_deg=0.0)
     p = chain.calibration_protocol
     assert isinstance(p, LimbCalibrationProtocol) and chain.protocol_start_s == 5.0
     w = chain.protocol_windows()
@@ -266,9 +266,9 @@ def test_protocol_is_followed_within_limits():
 
 def test_sensors_are_root_chain_mount_and_reproducible():
     limb = anatomical_limb(2, "arm")
-    mounts = chain_mounts(("thorax", "upper-arm", "forearm", "hand"),
+    mounts = limb_mounts(("thorax", "upper-arm", "forearm", "hand"),
                           np.random.default_rng(1), 20.0)
-    chain = SimulatedChain(limb, sensors=mounts, seed=2, noise=NoiseModel.ideal())
+    chain = SimulatedWholeLimb(limb, sensors=mounts, seed=2, noise=NoiseModel.ideal())
     ts = np.arange(0.0, 3.0, 0.01)
     ms = chain.measure_many(ts)
     s = chain.truth(ts)
@@ -287,15 +287,15 @@ def test_sensors_are_root_chain_mount_and_reproducible():
     assert dev[:, 0].max() < 0.1  # the swaying thorax: g
     assert np.median(dev) < 3.0  # the limb: about g (jolts where a joint meets a limit)
     # the same seed: the same samples; another seed: others
-    twin = SimulatedChain(limb, sensors=mounts, seed=2, noise=NoiseModel.ideal())
+    twin = SimulatedWholeLimb(limb, sensors=mounts, seed=2, noise=NoiseModel.ideal())
     again = twin.measure_many(ts)
     assert all(np.array_equal(a.quaternions, b.quaternions) and np.array_equal(a.accel, b.accel)
                for a, b in zip(ms, again, strict=True))
 
 
 def test_offline_recording():
-    chain = chain_patient(3, "arm", side="left")
-    rec = record_chain_imu(chain, 5.0, rate_hz=50.0)
+    chain = seeded_patient(3, "arm", side="left")
+    rec = record_limb_imu(chain, 5.0, rate_hz=50.0)
     n = round((chain.protocol_end_s + 5.0) * 50)
     assert rec.quaternions.shape == (n, 4, 4) and rec.joints.shape == (n, 3, 4)
     assert rec.accel.shape == rec.gyro.shape == rec.mag.shape == (n, 4, 3)
@@ -305,7 +305,7 @@ def test_offline_recording():
     over = LimbOracle(chain.limb).evaluate(rec.joints).distance
     assert np.nanmax(over) < np.radians(1.5)  # the B-spline's brief overshoot at most
     # the same seed twice: the same recording (noise, drift, disturbances included)
-    again = record_chain_imu(chain_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
+    again = record_limb_imu(seeded_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
     assert np.array_equal(rec.quaternions, again.quaternions)
     assert np.array_equal(rec.mag, again.mag)
 
@@ -319,7 +319,7 @@ def test_stream_board_serves_four_chain_sensors():
     with open_port(url) as port, StreamImu(port, rate_hz=100, raw=True) as imu:
         assert imu.identity.present_mask == 0b1111
         chain = port.patient
-        assert isinstance(chain, SimulatedChain) and chain.limb.name == "sim-leg-3"
+        assert isinstance(chain, SimulatedWholeLimb) and chain.limb.name == "sim-leg-3"
         samples = []
         while len(samples) < 4 * 40:
             samples += imu.read(1.0)
@@ -354,7 +354,7 @@ def test_limb_file_patient(tmp_path):
     path = tmp_path / "leg.yaml"
     path.write_text(anatomical_limb(9, "leg", "left").to_yaml())
     with stream_from_url(f"sim://imu-stream?patient={path}&clock=manual") as sim:
-        assert isinstance(sim.limb, SimulatedChain) and sim.limb.side == "left"
+        assert isinstance(sim.limb, SimulatedWholeLimb) and sim.limb.side == "left"
         assert sim.limb.n_sensors == 4
 
 

@@ -20,7 +20,7 @@ import serial
 from firmware_protocol.imu import stream as S
 from rig.sim.clock import ManualClock
 from rig.sim.imu import StreamImuSimulator
-from rig.sim.limb import NoiseModel, SimulatedLimb
+from rig.sim.limb import NoiseModel, SimulatedJoint
 
 MAX_READS = 2000
 """Bound on the reads a receive loop makes (a count, not a clock)."""
@@ -78,7 +78,7 @@ def test_a_running_clock_measures_the_patient_in_batches():
     four-segment chain ~0.8 ms each, a fifth of a core at 200 Hz); now one per
     ``AHEAD_S`` of slots."""
     clock = StepClock()
-    limb = CountingLimb(SimulatedLimb(sensors=2, noise=NoiseModel.ideal(), seed=4))
+    limb = CountingLimb(SimulatedJoint(sensors=2, noise=NoiseModel.ideal(), seed=4))
     rate, n = 200, 200
     with StreamImuSimulator(limb, rate_hz=rate, clock=clock, flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
@@ -106,7 +106,7 @@ def test_a_command_is_answered_before_the_rest_of_the_backlog():
         if host.pop("armed", False):
             host["ser"].write(S.encode_command(1, S.CommandType.STOP))
 
-    limb = CountingLimb(SimulatedLimb(sensors=1, noise=NoiseModel.ideal(), seed=4), stop_now)
+    limb = CountingLimb(SimulatedJoint(sensors=1, noise=NoiseModel.ideal(), seed=4), stop_now)
     with StreamImuSimulator(limb, rate_hz=200, clock=clock, flow_control=True) as sim, \
             serial.Serial(sim.port, timeout=0.05) as ser:
         host["ser"] = ser

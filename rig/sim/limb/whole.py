@@ -1,5 +1,5 @@
-""":class:`SimulatedChain`: a simulated patient's whole arm or leg — four segments, three joints,
-an IMU on each segment — moving inside a known limb constraint (:class:`models.limb.Limb`).
+""":class:`SimulatedWholeLimb`: a simulated patient's whole arm or leg — four segments, three
+joints, an IMU on each segment — moving inside a known limb constraint (:class:`models.limb.Limb`).
 
 Frames (rig segment frames, :mod:`calibration.frames`, :mod:`calibration.joint_angles`)
 ---------------------------------------------------------------------------------------
@@ -67,7 +67,7 @@ Sensors (:mod:`rig.sim.limb.sensors`)
 -------------------------------------
 The same error processes as the shoulder patient's (:class:`~rig.sim.limb.sensors.SensorErrors`:
 white noise, drift, magnetic disturbances, calibration status, raw gyroscope, accelerometer and
-magnetometer). The accelerometers' linear acceleration comes from the chain's geometry: the
+magnetometer). The accelerometers' linear acceleration comes from the limb's geometry: the
 proximal joint centre (shoulder, hip) is fixed in the world, as the shoulder patient's is;
 segment ``k ≥ 1``'s sensor sits half-way along it, at ``Σ_{m<k} R_m L_m x̂ + R_k L_k x̂ / 2``
 from that centre (``R_m`` segment ``m``'s orientation, ``L_m`` its length,
@@ -78,7 +78,7 @@ foot 0.15); the root's sensor its length above a world-fixed pivot (thorax 0.30 
 Random streams, all from ``seed``: the motion's sinusoids, then the sensor errors draw from the
 seeded generator in that order; the neutral poses and the accelerometer/magnetometer noise have
 seed sequences of their own (nothing drawn from the generator). Misplaced straps are drawn by
-the caller (:func:`chain_mounts`, as :func:`rig.sim.patients.chain_patient` does).
+the caller (:func:`limb_mounts`, as :func:`rig.sim.patients.seeded_patient` does).
 """
 
 from __future__ import annotations
@@ -89,26 +89,33 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
 from models.constraint import ConeSwing, JointConstraint, PolygonSwing
 from models.limb import Limb
 from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
+from rig.sim.limb.base import (
+    SimulatedLimb,
+    SimulatedState,
+    default_world_from_root,
+    seeded,
+)
 from rig.sim.limb.motion import JointMotion, Posture, RateLimit, Sinusoids, SmoothPath
 from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule
-from rig.sim.limb.sensors import RAW_STEP_S, NoiseModel, SensorErrors, SensorMount
-from rig.sim.limb.simulated import Measurement, _forward
+from rig.sim.limb.sensors import NoiseModel, SensorErrors, SensorMount
 
-__all__ = ["CHAIN_SEGMENTS", "SEGMENT_LENGTHS_M", "ChainState", "SimulatedChain", "chain_mounts"]
+__all__ = ["LIMB_SEGMENTS", "SEGMENT_LENGTHS_M", "SimulatedWholeLimb", "WholeLimbState",
+           "limb_mounts"]
 
 _X = np.array([1.0, 0.0, 0.0])
 _Y = np.array([0.0, 1.0, 0.0])
 _Z = np.array([0.0, 0.0, 1.0])
-_CHAIN_KEY = 0x4368  # spawn-key word of each joint's neutral-pose seed sequence
+_LIMB_KEY = 0x4368  # spawn-key word of each joint's neutral-pose seed sequence
 
-#: The chains a :class:`SimulatedChain` wears: limb → joints and segments, proximal to distal
-#: (:data:`calibration.protocol.LIMB_CHAINS`).
-CHAIN_SEGMENTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+#: The limbs a :class:`SimulatedWholeLimb` can be: limb → joints and segments, proximal to
+#: distal (:data:`calibration.protocol.LIMB_CHAINS`).
+LIMB_SEGMENTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "arm": (("shoulder", "elbow", "wrist"), ("thorax", "upper-arm", "forearm", "hand")),
     "leg": (("hip", "knee", "ankle"), ("pelvis", "thigh", "shank", "foot")),
 }
@@ -129,7 +136,7 @@ _NOMINAL = (((_Z, -90.0),), ((_X, 90.0), (_Y, 7.0)), ((_X, 80.0), (_Y, -4.0)),
             ((_X, 100.0), (_Z, 5.0)))
 
 
-def chain_mounts(segments: Sequence[str], rng: np.random.Generator | None = None,
+def limb_mounts(segments: Sequence[str], rng: np.random.Generator | None = None,
                  misplace_deg: float = 0.0) -> list[SensorMount]:
     """One sensor per segment (sensor ``i`` on ``segments[i]``) at nominal straps (none the
     identity, as straps are in practice), each turned by ``misplace_deg`` about a random axis
@@ -153,8 +160,8 @@ def chain_mounts(segments: Sequence[str], rng: np.random.Generator | None = None
 
 
 @dataclass(frozen=True)
-class ChainState:
-    """Ground truth at times ``t`` (N,).
+class WholeLimbState(SimulatedState):
+    """Ground truth of a whole limb at times ``t`` (N,).
 
     Attributes
     ----------
@@ -199,9 +206,9 @@ class _JointScript:
 
 
 @dataclass(frozen=True, eq=False)
-class _ChainSchedule:
+class _LimbSchedule:
     """Each joint's :class:`~rig.sim.limb.schedule.Schedule` (one object: a protocol set
-    meanwhile applies to the whole chain from the next call, and keys the spline's cache)."""
+    meanwhile applies to the whole limb from the next call, and keys the spline's cache)."""
 
     joints: tuple[Schedule, ...]
 
@@ -246,7 +253,7 @@ def _region_centre(c: JointConstraint) -> np.ndarray:
 @dataclass(frozen=True)
 class _Placement:
     """What :class:`~rig.sim.limb.sensors.SensorErrors` asks of a placement: the number of
-    sensors; no fixed lever arms (a chain gives the sensors' positions with each call)."""
+    sensors; no fixed lever arms (a whole limb gives the sensors' positions with each call)."""
 
     n: int
     lever: None = None
@@ -308,13 +315,13 @@ class _HingeMotion:
         return Q.from_axis_angle(self.axis, angle)
 
 
-class SimulatedChain:
+class SimulatedWholeLimb(SimulatedLimb):
     """A patient's arm or leg — its segments' motion within a known limb constraint, four
     sensors and their errors; seeded and reproducible (module docstring).
 
     The interface of :class:`~rig.sim.limb.SimulatedLimb` that the IMU simulators use:
     :attr:`n_sensors`, :attr:`mounts`, :meth:`measure`, :meth:`measure_many` and :meth:`truth`
-    (a :class:`ChainState`: the joint orientations (N, J, 4), the root, segments and sensors).
+    (a :class:`WholeLimbState`: the joint orientations (N, J, 4), the root, segments and sensors).
 
     Parameters
     ----------
@@ -324,7 +331,7 @@ class SimulatedChain:
         (default right) sets the protocol's and the neutral poses' side.
     sensors : sequence of SensorMount, optional
         Where the sensors sit, each ``segment`` one of :attr:`segments`; default one per
-        segment at the nominal straps (:func:`chain_mounts`).
+        segment at the nominal straps (:func:`limb_mounts`).
     noise : NoiseModel, optional
         Default :class:`~rig.sim.limb.NoiseModel` (noise, drift, disturbances on).
     excursion : float
@@ -376,11 +383,11 @@ class SimulatedChain:
     ) -> None:
         if not isinstance(limb, Limb):
             raise TypeError(f"limb must be a models.limb.Limb, got {type(limb).__name__}")
-        kind = limb.limb if limb.limb in CHAIN_SEGMENTS else None
+        kind = limb.limb if limb.limb in LIMB_SEGMENTS else None
         joint_names = tuple(j.name for j in limb.joints)
         if kind is None:  # a limb file without 'limb:': tell it by its joints
-            kind = next((k for k, (js, _) in CHAIN_SEGMENTS.items() if js == joint_names), None)
-        if kind is None or CHAIN_SEGMENTS[kind][0] != joint_names:
+            kind = next((k for k, (js, _) in LIMB_SEGMENTS.items() if js == joint_names), None)
+        if kind is None or LIMB_SEGMENTS[kind][0] != joint_names:
             raise ValueError(f"a simulated chain is an arm (shoulder, elbow, wrist) or a leg "
                              f"(hip, knee, ankle); limb {limb.name!r} has joints "
                              f"{', '.join(joint_names)}")
@@ -393,9 +400,7 @@ class SimulatedChain:
                                           *(j.child for j in limb.joints))
         self.oracle = LimbOracle(limb)
         self.excursion = float(excursion)
-        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-        ss = getattr(rng.bit_generator, "seed_seq", None)
-        seed_seq = ss if isinstance(ss, np.random.SeedSequence) else np.random.SeedSequence(0)
+        rng, seed_seq = seeded(seed)
         # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway
         rows = [1 if j.kind == "hinge" else 3 for j in limb.joints]
         series = Sinusoids.draw(rng, sum(rows) + 2, speed)
@@ -411,18 +416,16 @@ class SimulatedChain:
                                                 excursion=excursion))
             r += n
         if world_from_root is None:
-            world_from_root = Q.multiply(Q.from_axis_angle(_Z, math.radians(35.0)),
-                                         Q.from_axis_angle(_Y, math.radians(90.0)))
+            world_from_root = default_world_from_root()
         self.posture = Posture(world_from_root, sway_deg, series.rows(r, r + 2))
-        from calibration.protocol import LimbCalibrationProtocol
 
         self.neutral = LimbCalibrationProtocol(kind).joint_orientations([-1.0], self.side)[0]
         self._neutral = [
             NeutralPoses(neutral_sd_deg, np.random.SeedSequence(
-                seed_seq.entropy, spawn_key=(*seed_seq.spawn_key, _CHAIN_KEY, i)),
+                seed_seq.entropy, spawn_key=(*seed_seq.spawn_key, _LIMB_KEY, i)),
                 Q.check_vectors(j.limb_axis))
             for i, j in enumerate(limb.joints)]
-        mounts = list(sensors) if sensors is not None else chain_mounts(self.segments)
+        mounts = list(sensors) if sensors is not None else limb_mounts(self.segments)
         for m in mounts:
             if m.segment not in self.segments:
                 raise ValueError(f"sensor on segment {m.segment!r}: not a segment of the "
@@ -439,7 +442,7 @@ class SimulatedChain:
         self.lengths_m = tuple(float(v) for v in lengths)
         self._axes = [Q.check_vectors(j.limb_axis) for j in limb.joints]
         checkpoints = NeutralCheckpoints(neutral_every_s, neutral_hold_s, neutral_ramp_s)
-        self._schedule = _ChainSchedule(tuple(
+        self._schedule = _LimbSchedule(tuple(
             Schedule(blend_s=blend_s, checkpoints=checkpoints) for _ in limb.joints))
         if calibration_protocol is not None:
             self.perform_protocol(calibration_protocol, protocol_start_s)
@@ -448,10 +451,6 @@ class SimulatedChain:
         self._path = SmoothPath(smooth_s)
         self._follow = RateLimit(smooth_s, math.radians(max_speed_dps), self._nearest,
                                  self._near_range)
-
-    @property
-    def n_sensors(self) -> int:
-        return len(self.mounts)
 
     @property
     def schedule(self) -> Schedule:
@@ -463,38 +462,6 @@ class SimulatedChain:
         """The protocol the patient performs, or None."""
         p = self._schedule.first.protocol
         return None if p is None else p.protocol
-
-    @property
-    def protocol_start_s(self) -> float:
-        """Patient time (s) at which the protocol starts; 0 without one."""
-        return self._schedule.first.start_s
-
-    @property
-    def protocol_end_s(self) -> float:
-        """Patient time at which the protocol has ended (free motion, blended, follows); 0
-        without a protocol."""
-        return self._schedule.first.protocol_end_s
-
-    @property
-    def blend_s(self) -> float:
-        return self._schedule.first.blend_s
-
-    @property
-    def neutral_start_s(self) -> float:
-        """Patient time from which neutral checkpoints are counted (as
-        :attr:`rig.sim.limb.SimulatedLimb.neutral_start_s`)."""
-        return self._schedule.first.neutral_start_s
-
-    neutral_every_s = _forward("_schedule.first.checkpoints.every_s",
-                               "Interval between neutral checkpoints, seconds (0: none).")
-    neutral_hold_s = _forward("_schedule.first.checkpoints.hold_s",
-                              "How long each checkpoint's neutral pose is held, seconds.")
-    neutral_ramp_s = _forward("_schedule.first.checkpoints.ramp_s",
-                              "How long the patient takes to reach the neutral pose, seconds.")
-
-    @property
-    def smooth_s(self) -> float:
-        return self._path.step_s
 
     # -- schedule ----------------------------------------------------------------------------
     def perform_protocol(self, protocol, start_s: float = 2.0) -> None:
@@ -510,7 +477,7 @@ class SimulatedChain:
             script = None if protocol is None else _JointScript(protocol, i, self.side,
                                                                 self.neutral[i])
             scheds.append(s.with_protocol(script, start_s))
-        self._schedule = _ChainSchedule(tuple(scheds))  # one assignment: threads see either
+        self._schedule = _LimbSchedule(tuple(scheds))  # one assignment: threads see either
 
     def protocol_windows(self) -> dict[str, tuple[float, float]]:
         """The protocol's phase windows in patient time (``{}`` without a protocol)."""
@@ -519,10 +486,6 @@ class SimulatedChain:
             return {}
         t0 = self.protocol_start_s
         return {k: (t0 + a, t0 + b) for k, (a, b) in p.windows().items()}
-
-    def neutral_windows(self, t_end: float) -> np.ndarray:
-        """Hold windows (K, 2) of the neutral checkpoints that end by patient time ``t_end``."""
-        return self._schedule.first.neutral_windows(t_end)
 
     def neutral_poses(self, k) -> np.ndarray:
         """Every joint's neutral pose at checkpoints ``k`` (K, J, 4), before the projection."""
@@ -589,7 +552,7 @@ class SimulatedChain:
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         return self._target(t, self._schedule)
 
-    def _target(self, t: np.ndarray, schedule: _ChainSchedule) -> np.ndarray:
+    def _target(self, t: np.ndarray, schedule: _LimbSchedule) -> np.ndarray:
         free = self.project(self.raw_joints(t))  # blends run between postures in range
         q = np.stack([s.target(t, free[:, i], self._neutral_pose(i))
                       for i, s in enumerate(schedule.joints)], axis=1)
@@ -633,7 +596,7 @@ class SimulatedChain:
         """The root segment (thorax, pelvis) relative to world (N, 4)."""
         return self.posture(t)
 
-    def truth(self, t) -> ChainState:
+    def truth(self, t) -> WholeLimbState:
         """Error-free state at times ``t`` (scalar or (N,), seconds)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         joints = self.joints(t)
@@ -643,7 +606,7 @@ class SimulatedChain:
             segs.append(Q.multiply(segs[-1], joints[:, i]))
         segments = np.stack(segs, axis=1)
         sensors = Q.multiply(segments[:, self._sensor_segment], self._mount_q[None])
-        return ChainState(t=t, joints=joints, root=root, segments=segments, sensors=sensors)
+        return WholeLimbState(t=t, joints=joints, root=root, segments=segments, sensors=sensors)
 
     def positions(self, segments: np.ndarray) -> np.ndarray:
         """Each sensor's world position (N, S, 3), m, from the segments' orientations
@@ -659,37 +622,5 @@ class SimulatedChain:
             base = base + along
         return mid[:, self._sensor_segment]
 
-    # -- measurements ----------------------------------------------------------------------------
-    def measure(self, t: float, calibration_elapsed_s: float | None = None) -> Measurement:
-        """Sensor outputs at time ``t`` (seconds; calls must not go back in time), as
-        :meth:`rig.sim.limb.SimulatedLimb.measure` (``truth`` a :class:`ChainState`)."""
-        t = float(t)
-        h = RAW_STEP_S
-        truth = self.truth(np.array([t, t + h, t - h]))
-        elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
-        pos = self.positions(truth.segments)
-        r = self.sensor_errors.one(t, truth.sensors, elapsed, positions=pos)
-        return Measurement(t=t, quaternions=r.quaternions[0], gyro=r.gyro[0],
-                           calibration=r.calibration[0], truth=_first(truth, 0, 1),
-                           accel=r.accel[0], mag=r.mag[0])
-
-    def measure_many(self, ts) -> list[Measurement]:
-        """Sensor outputs at increasing times ``ts`` (K,), vectorised (as
-        :meth:`rig.sim.limb.SimulatedLimb.measure_many`)."""
-        ts = np.atleast_1d(np.asarray(ts, dtype=np.float64))
-        k = len(ts)
-        if k == 0:
-            return []
-        h = RAW_STEP_S
-        truth = self.truth(np.concatenate((ts, ts + h, ts - h)))
-        s = truth.sensors
-        pos = self.positions(truth.segments).reshape(3, k, -1, 3)
-        r = self.sensor_errors.many(ts, s[:k], s[k:2 * k], s[2 * k:], positions=pos)
-        return [Measurement(t=float(ts[i]), quaternions=r.quaternions[i], gyro=r.gyro[i],
-                            calibration=r.calibration[i], truth=_first(truth, i, i + 1),
-                            accel=r.accel[i], mag=r.mag[i])
-                for i in range(k)]
-
-
-def _first(s: ChainState, a: int, b: int) -> ChainState:
-    return ChainState(s.t[a:b], s.joints[a:b], s.root[a:b], s.segments[a:b], s.sensors[a:b])
+    def _positions(self, truth: WholeLimbState) -> np.ndarray:
+        return self.positions(truth.segments)

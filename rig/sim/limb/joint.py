@@ -1,4 +1,5 @@
-""":class:`SimulatedLimb`: the simulated patient's shoulder, composed of its parts.
+""":class:`SimulatedJoint`: a simulated patient's limb of one joint (by default a shoulder below
+the thorax), composed of its parts.
 
 - the thorax's posture and the shoulder's free motion and stop at the limits
   (:mod:`rig.sim.limb.motion`: :class:`~rig.sim.limb.motion.Posture`,
@@ -20,46 +21,40 @@ own derived from the generator's (nothing drawn from it).
 
 from __future__ import annotations
 
-import math
-import operator
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from models import quaternion as Q
 from models.constraint import JointConstraint
+from rig.sim.limb.base import (
+    SimulatedLimb,
+    SimulatedState,
+    default_world_from_root,
+    forwarded,
+    seeded,
+)
 from rig.sim.limb.motion import JointMotion, Posture, Sinusoids, SmoothPath
 from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule
 from rig.sim.limb.sensors import (
-    RAW_STEP_S,
     NoiseModel,
-    Readings,
     SensorErrors,
     SensorMount,
     SensorPlacement,
     default_mounts,
 )
 
-__all__ = ["DEFAULT_CONSTRAINT", "LimbState", "Measurement", "SimulatedLimb"]
-
-_Y = np.array([0.0, 1.0, 0.0])
-_Z = np.array([0.0, 0.0, 1.0])
-
-def _forward(path: str, doc: str) -> property:
-    """A read-only attribute of the patient read from one of its parts (``"motion.centre"``)."""
-    get = operator.attrgetter(path)
-    return property(get, doc=doc)
+__all__ = ["DEFAULT_CONSTRAINT", "JointState", "SimulatedJoint"]
 
 
 DEFAULT_CONSTRAINT = JointConstraint.cone((1.0, 0.0, 0.0), 60.0, twist=(-45.0, 45.0),
                                           name="default-cone")
-"""The range of motion of a :class:`SimulatedLimb` given none: 60° cone about +X, twist ±45°."""
+"""The range of motion of a :class:`SimulatedJoint` given none: 60° cone about +X, twist ±45°."""
 
 
 @dataclass(frozen=True)
-class LimbState:
-    """Ground truth at times ``t`` (N,).
+class JointState(SimulatedState):
+    """Ground truth of a one-joint limb at times ``t`` (N,).
 
     Attributes
     ----------
@@ -75,31 +70,9 @@ class LimbState:
     sensors: np.ndarray
 
 
-@dataclass(frozen=True)
-class Measurement:
-    """What the sensors report at one instant ``t`` (seconds).
-
-    Attributes
-    ----------
-    quaternions : (S, 4) float64, unit, sensor relative to world, with errors
-    gyro : (S, 3) float64, rad/s, sensor frame
-    calibration : (S,) int, ``CALIB_STAT`` bytes
-    truth : LimbState with N = 1
-    accel : (S, 3) float64, m/s², sensor frame: specific force (+9.81 along world up at rest)
-    mag : (S, 3) float64, µT, sensor frame
-    """
-
-    t: float
-    quaternions: np.ndarray
-    gyro: np.ndarray
-    calibration: np.ndarray
-    truth: LimbState
-    accel: np.ndarray
-    mag: np.ndarray
-
-
-class SimulatedLimb:
-    """Shoulder motion, sensor placement and sensor errors; seeded and reproducible.
+class SimulatedJoint(SimulatedLimb):
+    """A limb of one joint (a shoulder by default): its motion, sensor placement and sensor
+    errors; seeded and reproducible.
 
     Parameters
     ----------
@@ -193,10 +166,7 @@ class SimulatedLimb:
         thorax_lever_m: float = 0.3,
         smooth_s: float = 0.04,
     ) -> None:
-        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-        # the derived streams' seed sequence: from the seed, without drawing from it
-        ss = getattr(rng.bit_generator, "seed_seq", None)
-        seed_seq = ss if isinstance(ss, np.random.SeedSequence) else np.random.SeedSequence(0)
+        rng, seed_seq = seeded(seed)
         checkpoints = NeutralCheckpoints(neutral_every_s, neutral_hold_s, neutral_ramp_s)
         if constraint is None:
             constraint = DEFAULT_CONSTRAINT
@@ -211,8 +181,7 @@ class SimulatedLimb:
                                   reach_deg=reach_deg, twist_deg=twist_deg, excursion=excursion)
         self._neutral = NeutralPoses(neutral_sd_deg, seed_seq, self.motion.limb_axis)
         if world_from_thorax is None:
-            world_from_thorax = Q.multiply(Q.from_axis_angle(_Z, math.radians(35.0)),
-                                           Q.from_axis_angle(_Y, math.radians(90.0)))
+            world_from_thorax = default_world_from_root()
         self.posture = Posture(world_from_thorax, sway_deg, series.rows(3, 5))
         mounts = default_mounts(sensors, rng) if isinstance(sensors, int) else list(sensors)
         self.placement = SensorPlacement(mounts, self.motion.limb_axis, limb_lever_m,
@@ -225,52 +194,30 @@ class SimulatedLimb:
         self._path = SmoothPath(smooth_s)
 
     @classmethod
-    def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedLimb:
-        """A limb whose range of motion is ``constraint`` (same as ``SimulatedLimb(constraint,
+    def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedJoint:
+        """A limb whose range of motion is ``constraint`` (same as ``SimulatedJoint(constraint,
         **kwargs)``)."""
         return cls(constraint, **kwargs)
 
     # -- the parts' parameters, as attributes of the patient --------------------------------
-    constraint = _forward("motion.constraint", "The range of motion (JointConstraint).")
-    oracle = _forward("motion.oracle", "Its exact oracle (models.oracle.ConstraintOracle).")
-    limb_axis = _forward("motion.limb_axis", "The limb's long axis (3,), limb frame.")
-    centre = _forward("motion.centre", "Centre of the motion (3,), thorax frame.")
-    reach = _forward("motion.reach", "Reach of the motion from its centre, radians.")
-    twist_centre = _forward("motion.twist_centre", "Middle of the twist explored, radians.")
-    twist_half = _forward("motion.twist_half", "Half the twist range explored, radians.")
-    excursion = _forward("motion.excursion", "RMS of the raw motion relative to the reach.")
-    world_from_thorax = _forward("posture.world_from_root",
-                                 "Fixed part of the thorax relative to world (4,).")
-    mounts = _forward("placement.mounts", "Where the sensors sit (list of SensorMount).")
-    limb_lever_m = _forward("placement.limb_lever_m", "Limb sensors' lever arm, metres.")
-    thorax_lever_m = _forward("placement.thorax_lever_m", "Thorax sensor's lever arm, metres.")
-    smooth_s = _forward("_path.step_s", "Knot spacing of the motion's B-spline, seconds.")
-    schedule = _forward("_schedule", "What the patient does when (Schedule).")
-    calibration_protocol = _forward("_schedule.protocol",
-                                    "The protocol the patient performs, or None.")
-    protocol_start_s = _forward("_schedule.start_s",
-                                "Patient time (s) at which the protocol starts; 0 without one.")
-    protocol_end_s = _forward("_schedule.protocol_end_s",
-                              "Patient time at which the protocol has ended (free motion, "
-                              "blended, follows); 0 without a protocol.")
-    blend_s = _forward("_schedule.blend_s", "Length of the protocol's hand-over, seconds.")
-    neutral_every_s = _forward("_schedule.checkpoints.every_s",
-                               "Interval between neutral checkpoints, seconds (0: none).")
-    neutral_hold_s = _forward("_schedule.checkpoints.hold_s",
-                              "How long each neutral pose is held, seconds.")
-    neutral_ramp_s = _forward("_schedule.checkpoints.ramp_s",
-                              "How long the patient takes into and out of it, seconds.")
-    neutral_sd_deg = _forward("_neutral.sd_deg",
-                              "Repeatability of the neutral pose (axial rotation SD), degrees.")
-    neutral_start_s = _forward("_schedule.neutral_start_s",
-                               "Patient time from which neutral checkpoints are counted: the "
-                               "end of the protocol's hand-over to free motion "
-                               "(protocol_end_s + blend_s), or 0 without a protocol. "
-                               "Checkpoint k holds from neutral_start_s + k * neutral_every_s.")
-
-    @property
-    def n_sensors(self) -> int:
-        return len(self.placement)
+    constraint = forwarded("motion.constraint", "The range of motion (JointConstraint).")
+    oracle = forwarded("motion.oracle", "Its exact oracle (models.oracle.ConstraintOracle).")
+    limb_axis = forwarded("motion.limb_axis", "The limb's long axis (3,), limb frame.")
+    centre = forwarded("motion.centre", "Centre of the motion (3,), thorax frame.")
+    reach = forwarded("motion.reach", "Reach of the motion from its centre, radians.")
+    twist_centre = forwarded("motion.twist_centre", "Middle of the twist explored, radians.")
+    twist_half = forwarded("motion.twist_half", "Half the twist range explored, radians.")
+    excursion = forwarded("motion.excursion", "RMS of the raw motion relative to the reach.")
+    world_from_thorax = forwarded("posture.world_from_root",
+                                  "Fixed part of the thorax relative to world (4,).")
+    mounts = forwarded("placement.mounts", "Where the sensors sit (list of SensorMount).")
+    limb_lever_m = forwarded("placement.limb_lever_m", "Limb sensors' lever arm, metres.")
+    thorax_lever_m = forwarded("placement.thorax_lever_m", "Thorax sensor's lever arm, metres.")
+    schedule = forwarded("_schedule", "What the patient does when (Schedule).")
+    calibration_protocol = forwarded("_schedule.protocol",
+                                     "The protocol the patient performs, or None.")
+    neutral_sd_deg = forwarded("_neutral.sd_deg",
+                               "Repeatability of the neutral pose (axial rotation SD), degrees.")
 
     # -- schedule -------------------------------------------------------------------------
     def perform_protocol(self, protocol, start_s: float = 2.0) -> None:
@@ -283,12 +230,6 @@ class SimulatedLimb:
         """
         # one assignment: the simulator threads see either the old or the new schedule
         self._schedule = self._schedule.with_protocol(protocol, start_s)
-
-    def neutral_windows(self, t_end: float) -> np.ndarray:
-        """Hold windows ``[t_k, t_k + neutral_hold_s]`` (K, 2) of the neutral checkpoints
-        ``k = 1, 2, ...`` that end by patient time ``t_end`` (seconds); ``(0, 2)`` when
-        ``neutral_every_s`` is 0."""
-        return self._schedule.neutral_windows(t_end)
 
     def neutral_poses(self, k) -> np.ndarray:
         """Neutral pose (joint orientation, before the oracle's projection) of checkpoints
@@ -337,53 +278,10 @@ class SimulatedLimb:
         """Thorax relative to world (N, 4) at times ``t`` (N,)."""
         return self.posture(t)
 
-    def truth(self, t) -> LimbState:
+    def truth(self, t) -> JointState:
         """Error-free state at times ``t`` (scalar or (N,), seconds)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         joint = self.joint(t)
         thorax = self.thorax(t)
-        return LimbState(t=t, joint=joint, thorax=thorax,
-                         sensors=self.placement.orientations(thorax, joint))
-
-    # -- measurements ---------------------------------------------------------------------
-    def measure(self, t: float, calibration_elapsed_s: float | None = None) -> Measurement:
-        """Sensor outputs at time ``t`` (seconds; calls must not go back in time).
-
-        Parameters
-        ----------
-        t : float
-            Simulation time, seconds.
-        calibration_elapsed_s : float, optional
-            Time the sensors have been fusing (calibration progress); default ``t``.
-        """
-        t = float(t)
-        h = RAW_STEP_S
-        truth = self.truth(np.array([t, t + h, t - h]))
-        elapsed = t if calibration_elapsed_s is None else calibration_elapsed_s
-        r = self.sensor_errors.one(t, truth.sensors, elapsed)
-        return Measurement(t=t, quaternions=r.quaternions[0], gyro=r.gyro[0],
-                           calibration=r.calibration[0],
-                           truth=LimbState(truth.t[:1], truth.joint[:1], truth.thorax[:1],
-                                           truth.sensors[:1]), accel=r.accel[0], mag=r.mag[0])
-
-    def measure_many(self, ts) -> list[Measurement]:
-        """Sensor outputs at increasing times ``ts`` (K,) seconds, vectorised.
-
-        The same error process as ``K`` calls of :meth:`measure` (same models and parameters;
-        the random draws are made in another order, so the numbers differ), at a fraction of
-        the cost: what a stream device producing hundreds of samples per second needs.
-        """
-        ts = np.atleast_1d(np.asarray(ts, dtype=np.float64))
-        k = len(ts)
-        if k == 0:
-            return []
-        h = RAW_STEP_S
-        truth = self.truth(np.concatenate((ts, ts + h, ts - h)))
-        s = truth.sensors
-        r: Readings = self.sensor_errors.many(ts, s[:k], s[k:2 * k], s[2 * k:])
-        return [Measurement(t=float(ts[i]), quaternions=r.quaternions[i], gyro=r.gyro[i],
-                            calibration=r.calibration[i],
-                            truth=LimbState(truth.t[i:i + 1], truth.joint[i:i + 1],
-                                            truth.thorax[i:i + 1], truth.sensors[i:i + 1]),
-                            accel=r.accel[i], mag=r.mag[i])
-                for i in range(k)]
+        return JointState(t=t, joint=joint, thorax=thorax,
+                          sensors=self.placement.orientations(thorax, joint))
