@@ -266,7 +266,7 @@ class _LimbCtx:
         # registered with the session and its stored limb file, with this evaluation: `rig
         # report` on the session finds the model without --model and shows these figures
         with open_store(self.result.db, create=False) as store:
-            mid = store.add_model(self.model_file, boundary_id=self.limb_boundary,
+            mid = store.models.add(self.model_file, boundary_id=self.limb_boundary,
                                   session_id=self.session,
                                   metrics=evaluation_record(metrics, n=self.size.eval_n,
                                                             seed=seed, by="rig evaluate"))
