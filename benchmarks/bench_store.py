@@ -10,7 +10,7 @@ Prints medians over ``--repeats`` runs of:
 * bulk rate -- ``SampleWriter.add_many`` in blocks of 800 rows, committed every 0.5 s by the
   writer's thread (rows/s from first add to close);
 * per-sample rate -- ``SampleWriter.add`` one row at a time (what a reader thread does);
-* read back -- ``Store.samples`` of the bulk session (rows/s);
+* read back -- ``store.samples.read`` of the bulk session (rows/s);
 * commit latency -- one transaction of 400 rows (0.5 s of 2 sensors x 400 Hz) via ``flush``;
 * cost of real time -- CPU seconds the store spends per second of a 2 x 400 Hz recording.
 

@@ -578,9 +578,9 @@ class _Ctx:
         # report shows these figures and this verdict, not another held-out set's
         with open_store(self.db, create=False) as store:
             mid = store.models.add(self.model_file, boundary_id=self.boundary_id,
-                                  session_id=self.servo_session,
-                                  metrics=evaluation_record(metrics, n=self.size.eval_n,
-                                                            seed=seed, by="rig evaluate"))
+                                   session_id=self.servo_session,
+                                   metrics=evaluation_record(metrics, n=self.size.eval_n,
+                                                             seed=seed, by="rig evaluate"))
         st.figures.update(metrics)
         st.figures["model_id"] = mid
         st.verdict = "PASS" if ok else "WARN"

@@ -377,8 +377,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                           "interrupted" if loop.stop_reason else "safe_state")
                 store.runs.end(run_id, summary, status=status)
                 store.sessions.end(enforce_session, status="completed" if status == "completed"
-                                  else "interrupted" if status == "interrupted" else "failed",
-                                  meta={"run_id": run_id})
+                                   else "interrupted" if status == "interrupted" else "failed",
+                                   meta={"run_id": run_id})
                 summary["session_id"] = enforce_session
                 summary["run_id"] = run_id
             sum_path = _out_path("--summary-json", req.summary_json)

@@ -130,7 +130,7 @@ def run_boundary(request: BoundaryRequest) -> BoundaryResult:
 
         with open_store(src.db, create=False) as st:
             result.boundary_id = st.boundaries.add(src.session_id, ex.constraint_.to_yaml(),
-                                                 {"path": str(path), **ex.report()})
+                                                   {"path": str(path), **ex.report()})
     return result
 
 

@@ -11,7 +11,7 @@ Sequence (every step that can fail on a user mistake comes before anything is re
 3. **Guided calibration** (:mod:`rig.record.guided`): a static neutral pose, then functional
    flexion/extension. On simulated rigs the steps advance by themselves (the simulated patient
    performs them); on hardware the clinician is prompted and presses Enter. The calibration and
-   its residual are stored (``store.add_calibration``).
+   its residual are stored (``store.calibrations.add``).
 4. **Recording** until ``duration_s`` of sample time, Ctrl-C / SIGTERM, or a vanished device.
    Joint orientations (calibrated) feed the live :class:`~calibration.coverage.CoverageMap`.
    On a calibrated IMU rig the patient's returns to the neutral pose are marked as
@@ -311,7 +311,7 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
     result.rom_table = "\n".join([*(f"warning: {w}" for w in data.facts().warnings()),
                                   format_rom_table(rom)])
     store.sessions.end(result.session_id, status=result.status,
-                      meta={"rom": result.rom, "rom_source": "extracted boundary"})
+                       meta={"rom": result.rom, "rom_source": "extracted boundary"})
 
 
 def _limb_range_of_motion(store, result: RecordResult, config) -> None:
@@ -344,7 +344,7 @@ def _limb_range_of_motion(store, result: RecordResult, config) -> None:
     result.rom_table = "\n".join([*(f"warning: {w}" for w in chain.recording.warnings()),
                                   *tables])
     store.sessions.end(result.session_id, status=result.status,
-                      meta={"rom": result.rom, "rom_source": "recorded joint angles"})
+                       meta={"rom": result.rom, "rom_source": "recorded joint angles"})
 
 
 def _close(store) -> None:
@@ -361,7 +361,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     if config.limb is not None:  # the whole limb: every joint is read back from the session
         meta["limb"] = config.limb
     session_id = int(store.sessions.start(patient_id, rig_name=config.name, joint=joint.name,
-                                         side=joint.side, kind="record", meta=meta))
+                                          side=joint.side, kind="record", meta=meta))
     for s in rig.sensors:
         store.samples.add_sensor(session_id, s.name, segment=s.segment, kind=s.kind, port=s.port)
     emit("session", {"session_id": session_id, "patient_id": patient_id})
@@ -444,7 +444,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                         if marking:
                             for cp in checkpoints.feed(batch, joint_q, joint_t):
                                 store.calibrations.add(session_id, "neutral-checkpoint",
-                                                      cp.data, cp.residual_deg)
+                                                       cp.data, cp.residual_deg)
                             result.neutral_checkpoints = checkpoints.count
                             status.checkpoints = checkpoints.count
                         status.elapsed_s = float(clock[-1]) - t_start
@@ -528,7 +528,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
         if result.error:
             end_meta["error"] = result.error
         store.sessions.end(session_id, status=result.status, meta=end_meta,
-                          dropped=result.dropped)
+                           dropped=result.dropped)
     return result
 
 

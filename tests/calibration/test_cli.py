@@ -223,7 +223,7 @@ def test_a_side_other_than_the_sessions_is_refused_before_reading(servo_patient,
     db = tmp_path / "s.db"
     with open_store(db) as st:
         sid = st.sessions.start(st.patients.add("P-001"), rig_name="sim-shoulder",
-                               joint="shoulder", side="right")
+                                joint="shoulder", side="right")
         st.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
         with SampleWriter(st, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)

@@ -233,7 +233,7 @@ def _store_session(db, limb, t, q, raw, status):
     with open_store(db) as st:
         pid = st.patients.add("P-002")
         sid = st.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right",
-                               meta={"parent": "thorax_imu", "child": "humerus_imu"})
+                                meta={"parent": "thorax_imu", "child": "humerus_imu"})
         st.samples.add_sensor(sid, "thorax_imu", segment="thorax", kind="sensor")
         st.samples.add_sensor(sid, "humerus_imu", segment="humerus", kind="sensor")
         with SampleWriter(st, sid) as w:

@@ -220,9 +220,9 @@ def _servo_db(path):
     rec = record_servo(patient_limb(star_patient(7), 7), 40.0, 50.0)
     with open_store(path) as store:
         sid = store.sessions.start(store.patients.add("P-RO"), rig_name="sim-shoulder",
-                                  joint="shoulder", side="right")
+                                   joint="shoulder", side="right")
         store.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint",
-                         port="sim://dynamixel")
+                                 port="sim://dynamixel")
         with SampleWriter(store, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
         store.sessions.end(sid, status="completed")

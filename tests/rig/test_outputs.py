@@ -51,7 +51,7 @@ def db(tmp_path):
     rng = np.random.default_rng(3)
     with open_store(path) as store:
         sid = store.sessions.start(store.patients.add("P-OUT"), rig_name="sim-shoulder",
-                                  joint="shoulder", side="right")
+                                   joint="shoulder", side="right")
         q = rng.normal(size=(200, 4))
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         with SampleWriter(store, sid) as w:

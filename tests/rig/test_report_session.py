@@ -162,7 +162,7 @@ def test_a_report_says_why_it_has_no_range_and_when_a_session_was_cut_short(tmp_
         # a servo session stopped by Ctrl-C
         cut = store.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
         store.samples.add_sensor(cut, "shoulder", segment="humerus", kind="joint",
-                         port="sim://dynamixel")
+                                 port="sim://dynamixel")
         with SampleWriter(store, cut) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
         store.sessions.end(cut, status="interrupted", meta={"simulated": True})

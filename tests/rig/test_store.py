@@ -39,7 +39,7 @@ def store(db_url):
 def session(store):
     pid = store.patients.add("P-0001", side="right")
     sid = store.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right",
-                              meta={"rate_hz": 400})
+                               meta={"rate_hz": 400})
     return sid
 
 
@@ -259,7 +259,7 @@ def test_flush_interval_must_commit_every_second(store, session):
 
 def test_calibrations_annotations_boundaries_models(store, session, tmp_path):
     cid = store.calibrations.add(session, "sensor-to-segment",
-                                {"q": np.array([1.0, 0, 0, 0]), "n": np.int64(3)}, 1.25)
+                                 {"q": np.array([1.0, 0, 0, 0]), "n": np.int64(3)}, 1.25)
     [c] = store.calibrations.list(session)
     assert c["id"] == cid and c["data"] == {"q": [1.0, 0.0, 0.0, 0.0], "n": 3}
     assert c["residual_deg"] == 1.25
@@ -277,7 +277,7 @@ def test_calibrations_annotations_boundaries_models(store, session, tmp_path):
     model = tmp_path / "m.onnx"
     model.write_bytes(b"\x08\x01not really onnx")
     mid = store.models.add(model, metrics={"mean_3d_error_pct": 0.5}, boundary_id=bid,
-                          session_id=session)
+                           session_id=session)
     m = store.models.get(mid)
     assert m["sha256"] == hashlib.sha256(model.read_bytes()).hexdigest()
     assert m["metrics"] == {"mean_3d_error_pct": 0.5} and m["path"] == str(model)

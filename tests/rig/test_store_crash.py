@@ -38,7 +38,7 @@ CHILD = textwrap.dedent(
 
     store = open_store(sys.argv[1])
     sid = store.sessions.start(store.patients.add("CRASH-1"), rig_name="sim-imu",
-                              joint="shoulder", side="right")
+                               joint="shoulder", side="right")
     print("session", sid, flush=True)
     w = SampleWriter(store, sid, flush_interval_s=0.5)
     k = 0
