@@ -92,7 +92,7 @@ def bench(db: str, rows: int, repeats: int) -> None:
     print(f"store: {store.url} ({store.dialect}); {repeats} repeats, {total} rows written")
     print(f"  bulk add_many          {statistics.median(bulk):12,.0f} rows/s (median)")
     print(f"  per-sample add         {statistics.median(single):12,.0f} rows/s (median)")
-    print(f"  read back (samples())  {statistics.median(read):12,.0f} rows/s (median)")
+    print(f"  read back samples.read {statistics.median(read):12,.0f} rows/s (median)")
     print(f"  commit of 400 rows     {statistics.median(commit_ms):12.2f} ms   (median)")
     print(f"  CPU per recorded s     {1e3 * statistics.median(cpu_per_s):12.1f} ms   "
           "(2 sensors x 400 Hz, median)")
