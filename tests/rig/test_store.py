@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import stat
 import time
 
@@ -41,6 +42,29 @@ def session(store):
     sid = store.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right",
                                meta={"rate_hz": 400})
     return sid
+
+
+def test_the_store_is_the_database_and_one_repository_per_concern(store, session):
+    """The rooms of the store: ``store.<repository>.<verb>``, nothing of the old flat API left,
+    and every "no such row" the same one line naming the store."""
+    rooms = ("patients", "sessions", "samples", "calibrations", "annotations", "boundaries",
+             "models", "runs")
+    for room in rooms:
+        assert getattr(store, room).db is store
+    flat = ("add_patient", "ensure_patient", "start_session", "end_session", "get_session",
+            "list_sessions", "add_sensor", "sample_writer", "recording_span", "sample_count",
+            "add_calibration", "add_boundary", "get_boundary", "add_model", "models_for",
+            "start_run", "get_run", "telemetry_writer", "telemetry", "raw", "_tx")
+    assert not [name for name in flat if hasattr(store, name)]
+    for call, what in ((lambda: store.samples.read(999), "session"),
+                       (lambda: store.calibrations.add(999, "k", {}), "session"),
+                       (lambda: store.boundaries.get(999), "boundary"),
+                       (lambda: store.models.get(999), "model"),
+                       (lambda: store.runs.get(999), "run"),
+                       (lambda: store.models.add("m.onnx", sha256="0" * 64, boundary_id=999),
+                        "boundary")):
+        with pytest.raises(RigConfigError, match=re.escape(f"no {what} 999 in {store.url}")):
+            call()
 
 
 def test_patients_are_pseudonyms_only(store):
