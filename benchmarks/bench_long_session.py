@@ -106,7 +106,7 @@ def measure(minutes: list[float], out: Path, repeats: int) -> None:
         from rig.store import open_store
 
         with open_store(db, create=False) as st:
-            n = st.sample_count(1)
+            n = st.samples.count(1)
         cmds = {
             "boundary": [*RIG, "boundary", "--db", str(db), "--session", "1", "--out",
                          str(out / "b.yaml"), "--no-store"],
@@ -126,7 +126,7 @@ def measure(minutes: list[float], out: Path, repeats: int) -> None:
 def build_store(path: Path, sessions: int, samples: int) -> None:
     import numpy as np
 
-    from rig.store import open_store
+    from rig.store import SampleWriter, open_store
 
     rng = np.random.default_rng(1)
     q = rng.normal(size=(samples, 4))
@@ -134,12 +134,12 @@ def build_store(path: Path, sessions: int, samples: int) -> None:
     t = np.arange(samples) / 100.0
     with open_store(path) as st:
         for k in range(sessions):
-            pid = st.ensure_patient(f"P-{k % 1000:04d}")
-            sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
-            st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://x")
-            with st.sample_writer(sid) as w:
+            pid = st.patients.ensure(f"P-{k % 1000:04d}")
+            sid = st.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+            st.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://x")
+            with SampleWriter(st, sid) as w:
                 w.add_many(t + k, None, "shoulder", "joint", q, 0)
-            st.end_session(sid, status="completed")
+            st.sessions.end(sid, status="completed")
 
 
 def listing(counts: list[int], samples: int, out: Path, repeats: int) -> None:

@@ -10,7 +10,7 @@ Prints medians over ``--repeats`` runs of:
 * bulk rate -- ``SampleWriter.add_many`` in blocks of 800 rows, committed every 0.5 s by the
   writer's thread (rows/s from first add to close);
 * per-sample rate -- ``SampleWriter.add`` one row at a time (what a reader thread does);
-* read back -- ``Store.samples`` of the bulk session (rows/s);
+* read back -- ``store.samples.read`` of the bulk session (rows/s);
 * commit latency -- one transaction of 400 rows (0.5 s of 2 sensors x 400 Hz) via ``flush``;
 * cost of real time -- CPU seconds the store spends per second of a 2 x 400 Hz recording.
 
@@ -29,7 +29,7 @@ from pathlib import Path
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 
 
 def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -40,14 +40,14 @@ def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
 def bench(db: str, rows: int, repeats: int) -> None:
     rng = np.random.default_rng(0)
     store = open_store(db)
-    pid = store.ensure_patient("BENCH")
+    pid = store.patients.ensure("BENCH")
     bulk, single, commit_ms, cpu_per_s, read = [], [], [], [], []
     block = 800
     q = _unit(rng, block)
     for r in range(repeats):
-        sid = store.start_session(pid, rig_name="bench", meta={"repeat": r})
+        sid = store.sessions.start(pid, rig_name="bench", meta={"repeat": r})
         # bulk
-        w = store.sample_writer(sid)
+        w = SampleWriter(store, sid)
         t0 = time.perf_counter()
         for k in range(0, rows, block):
             t = (k + np.arange(block)) / 800.0
@@ -55,11 +55,11 @@ def bench(db: str, rows: int, repeats: int) -> None:
         w.close()
         bulk.append(rows / (time.perf_counter() - t0))
         t0 = time.perf_counter()
-        got = store.samples(sid)["t"].size
+        got = store.samples.read(sid)["t"].size
         read.append(got / (time.perf_counter() - t0))
         # one row at a time
         n1 = min(rows, 100_000)
-        w = store.sample_writer(sid)
+        w = SampleWriter(store, sid)
         qs = q.tolist()
         t0 = time.perf_counter()
         for k in range(n1):
@@ -67,7 +67,7 @@ def bench(db: str, rows: int, repeats: int) -> None:
         w.close()
         single.append(n1 / (time.perf_counter() - t0))
         # commit latency of 0.5 s of a 2 x 400 Hz recording
-        w = store.sample_writer(sid, flush_interval_s=1.0)
+        w = SampleWriter(store, sid, flush_interval_s=1.0)
         lat = []
         for k in range(20):
             t = (k * 200 + np.arange(200)) / 400.0
@@ -79,7 +79,7 @@ def bench(db: str, rows: int, repeats: int) -> None:
         w.close()
         commit_ms.append(statistics.median(lat))
         # CPU cost of real time: 10 simulated seconds, rows handed over as a reader would
-        w = store.sample_writer(sid)
+        w = SampleWriter(store, sid)
         c0 = time.process_time()
         for s in range(10 * 400):
             t = s / 400.0
@@ -87,12 +87,12 @@ def bench(db: str, rows: int, repeats: int) -> None:
             w.add(t, t, "humerus", "sensor", qs[(s + 1) % block], 3)
         w.close()
         cpu_per_s.append((time.process_time() - c0) / 10.0)
-    total = sum(r["samples"] for r in store.list_sessions())
+    total = sum(r["samples"] for r in store.sessions.list())
     store.close()
     print(f"store: {store.url} ({store.dialect}); {repeats} repeats, {total} rows written")
     print(f"  bulk add_many          {statistics.median(bulk):12,.0f} rows/s (median)")
     print(f"  per-sample add         {statistics.median(single):12,.0f} rows/s (median)")
-    print(f"  read back (samples())  {statistics.median(read):12,.0f} rows/s (median)")
+    print(f"  read back samples.read {statistics.median(read):12,.0f} rows/s (median)")
     print(f"  commit of 400 rows     {statistics.median(commit_ms):12.2f} ms   (median)")
     print(f"  CPU per recorded s     {1e3 * statistics.median(cpu_per_s):12.1f} ms   "
           "(2 sensors x 400 Hz, median)")

@@ -203,7 +203,7 @@ def record_imu_patient(constraint, seed: int, tmp: str | Path, *, free_s: float 
             display=shown, rig=rig,
             on_event=lambda name, info: name == "session" and lock.start())
     with open_store(db, create=False) as store:
-        s = store.samples(res.session_id, name="humerus")
+        s = store.samples.read(res.session_id, name="humerus")
     truth_q = limb.joint(s["device_t"] - rig.device_t0)
     name = constraint.name or f"star-{seed}"
     if isinstance(fusion, str):
@@ -242,7 +242,7 @@ def record_servo_patient(constraint, seed: int, tmp: str | Path, *, free_s: floa
     from rig.store import open_store
 
     with open_store(db, create=False) as store:
-        s = store.samples(res.session_id)
+        s = store.samples.read(res.session_id)
     n = len(s["t"])
     batch = SampleBatch(s["t"], np.full(n, np.nan), s["name"], s["kind"], s["q"], s["status"])
     truth_q = limb.joint(rig.patient_time(batch))

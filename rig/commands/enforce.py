@@ -86,7 +86,7 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.loop import EnforceHooks, EnforceRequest, run_enforce
-    from rig.store.store import pseudonym_warning
+    from rig.store.pseudonyms import pseudonym_warning
 
     if pseudonym_warning(patient):
         click.echo(f"warning: {pseudonym_warning(patient)}", err=True)

@@ -57,7 +57,7 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom,
         annotations=[parse_annotation(a) for a in annotations], calibrate=not no_calibration,
         rom=not no_rom)
     opts.check()
-    from rig.store.store import pseudonym_warning
+    from rig.store.pseudonyms import pseudonym_warning
 
     if pseudonym_warning(patient):
         click.echo(f"warning: {pseudonym_warning(patient)}", err=True)

@@ -119,7 +119,7 @@ def list_(db: str, patient: str | None, since: str | None, limit: int | None, as
     _check_stale(stale_after)
     since_t = _since(since)
     with open_store(db, create=False) as store:
-        rows = store.list_sessions(stale_after_s=stale_after, patient=patient, since=since_t,
+        rows = store.sessions.list(stale_after_s=stale_after, patient=patient, since=since_t,
                                    limit=limit)
     if as_json:
         click.echo(json.dumps(rows, indent=1, sort_keys=True))
@@ -141,7 +141,7 @@ def close(db: str, session_id: int, force: bool, stale_after: float) -> None:
 
     _check_stale(stale_after)
     with open_store(db, create=False) as store:
-        res = store.close_interrupted(session_id, force=force, stale_after_s=stale_after)
+        res = store.sessions.close_interrupted(session_id, force=force, stale_after_s=stale_after)
     what = "last sample" if res["samples"] else "last commit (no samples)"
     click.echo(f"session {res['id']} closed as interrupted: {res['samples']} samples, "
                f"ended at its {what} {_when(res['ended_at'])} ({res['liveness']['reason']})")

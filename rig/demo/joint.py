@@ -434,7 +434,7 @@ class _Ctx:
         # the model registered with the session and its boundary, with this evaluation: the
         # report shows these figures and this verdict, not another held-out set's
         with open_store(self.db, create=False) as store:
-            mid = store.add_model(self.model_file, boundary_id=self.boundary_id,
+            mid = store.models.add(self.model_file, boundary_id=self.boundary_id,
                                   session_id=self.servo_session,
                                   metrics=evaluation_record(metrics, n=self.size.eval_n,
                                                             seed=seed, by="rig evaluate"))

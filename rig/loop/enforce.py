@@ -264,13 +264,13 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
             store = open_store(request.db, readonly=False)  # the run is stored: refused now
             if request.session_id is not None:
                 sid = request.session_id
-                session_patient = store.get_session(sid).get("pseudonym")
-                bounds = store.boundaries(sid, limb=False)  # a joint's, not a limb file
+                session_patient = store.sessions.get(sid).get("pseudonym")
+                bounds = store.boundaries.list(sid, limb=False)  # a joint's, not a limb file
                 if bounds:
                     session_constraint = loads_constraint(
                         bounds[-1]["constraint_yaml"],
                         source=f"boundary {bounds[-1]['id']} of session {sid}")
-                for cal in store.calibrations(sid):
+                for cal in store.calibrations.list(sid):
                     data = cal.get("data") or {}
                     if "thorax_mount" in data and "limb_mount" in data:
                         alignment = data
@@ -323,20 +323,22 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
             store_writer = None
             if store is not None:
                 pseudonym = req.patient or prep.session_patient or binding.constraint.patient
-                pid = store.ensure_patient(pseudonym)
-                enforce_session = store.start_session(
+                pid = store.patients.ensure(pseudonym)
+                enforce_session = store.sessions.start(
                     pid, rig_name=prep.rig_cfg.name, joint=prep.rig_cfg.joint.name,
                     side=prep.rig_cfg.joint.side, kind="enforce",
                     meta={"model": str(prep.model.path), "targets": req.targets,
                           "constraint_source": binding.source,
                           "recording_session": req.session_id})
-                run_id = store.start_run(enforce_session, {
+                run_id = store.runs.start(enforce_session, {
                     "rate_hz": cfg.rate_hz, "safe_state": cfg.safe_state,
                     "tolerance_deg": cfg.supervisor.tolerance_deg,
                     "constraint": binding.constraint.to_yaml()
                     if hasattr(binding.constraint, "to_yaml") else None,
                     "model": str(prep.model.path), "targets": req.targets})
-                store_writer = store.telemetry_writer(run_id)
+                from rig.store import TelemetryWriter  # lazy like open_store: --db is optional
+
+                store_writer = TelemetryWriter(store, run_id)
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
                                   keep=hooks.keep_telemetry)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
@@ -368,10 +370,10 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
             if store is not None:
                 status = ("completed" if loop.safe_state_entries == 0 else
                           "interrupted" if loop.stop_reason else "safe_state")
-                store.end_run(run_id, summary, status=status)
-                store.end_session(enforce_session, status="completed" if status == "completed"
-                                  else "interrupted" if status == "interrupted" else "failed",
-                                  meta={"run_id": run_id})
+                store.runs.end(run_id, summary, status=status)
+                store.sessions.end(enforce_session, status="completed" if status == "completed"
+                                   else "interrupted" if status == "interrupted" else "failed",
+                                   meta={"run_id": run_id})
                 summary["session_id"] = enforce_session
                 summary["run_id"] = run_id
             sum_path = _out_path("--summary-json", req.summary_json)
@@ -387,8 +389,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     except BaseException:
         if store is not None and run_id is not None:
             try:
-                store.end_run(run_id, {"error": "aborted"}, status="failed")
-                store.end_session(enforce_session, status="failed")
+                store.runs.end(run_id, {"error": "aborted"}, status="failed")
+                store.sessions.end(enforce_session, status="failed")
             except Exception:  # the original error matters more
                 pass
         raise

@@ -3,7 +3,7 @@
 The control loop hands one tuple per cycle to :meth:`Telemetry.record` (one numpy row
 assignment into a preallocated chunk, no allocation beyond the tuple). Full chunks go to a
 writer thread that appends them to the ``--telemetry`` CSV and to the store
-(:meth:`rig.store.Store.telemetry_writer`); the loop never waits on a disk or a database.
+(:class:`rig.store.TelemetryWriter`); the loop never waits on a disk or a database.
 Cycle times and lateness are also kept in compact growing arrays for the summary.
 
 Columns (:data:`COLUMNS`; orientations scalar-first joint orientations, parent frame)
@@ -103,7 +103,7 @@ class Telemetry:
     csv_path : str or Path, optional
         Telemetry CSV (header :data:`COLUMNS`).
     store_writer : object with ``add_many(rows)`` and ``close()``, optional
-        :meth:`rig.store.Store.telemetry_writer`.
+        :class:`rig.store.TelemetryWriter`.
     keep : bool
         Keep every row in memory as well (tests and short runs: :meth:`table`).
     """

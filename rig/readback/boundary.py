@@ -129,8 +129,8 @@ def run_boundary(request: BoundaryRequest) -> BoundaryResult:
         from rig.store import open_store
 
         with open_store(src.db, create=False) as st:
-            result.boundary_id = st.add_boundary(src.session_id, ex.constraint_.to_yaml(),
-                                                 {"path": str(path), **ex.report()})
+            result.boundary_id = st.boundaries.add(src.session_id, ex.constraint_.to_yaml(),
+                                                   {"path": str(path), **ex.report()})
     return result
 
 
@@ -416,7 +416,7 @@ def run_chain(request: ChainRequest) -> ChainResult:
         from rig.store import LIMB_BOUNDARY, open_store
 
         with open_store(request.db, create=False) as st:
-            result.boundary_id = st.add_boundary(
+            result.boundary_id = st.boundaries.add(
                 request.session_id, ex.limb_.to_yaml(),
                 {"kind": LIMB_BOUNDARY, "limb": request.limb, "path": str(path),
                  "coupled": {k: bool(v["coupled"]) for k, v in ex.report()["couplings"].items()}})
@@ -429,7 +429,7 @@ def stored_limb(store, session_id: int):
     boundary id)``, or None."""
     from models.limb import loads_limb
 
-    rows = store.boundaries(session_id, limb=True)
+    rows = store.boundaries.list(session_id, limb=True)
     if not rows:
         return None
     b = rows[-1]

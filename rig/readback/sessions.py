@@ -85,12 +85,12 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
 
     if fusion not in FUSION_CHOICES:
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
-    sess = store.get_session(session_id)
+    sess = store.sessions.get(session_id)
     limb = session_limb(sess)
     if limb is None:
         raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
                              ", not a whole arm or leg (no --chain)")
-    cals = store.calibrations(session_id)
+    cals = store.calibrations.list(session_id)
     cal = latest_calibration(cals, "imu-limb")
     if cal is None:
         raise RigConfigError(
@@ -100,13 +100,13 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     with _about(session_id, "limb calibration"):
         model = LimbImuCalibration.from_dict(cal["data"])
     segs = model.segments_
-    sensors = store.sensors(session_id)
+    sensors = store.samples.sensors(session_id)
     by_segment = {r.get("segment"): r.get("name") for r in sensors if r.get("n_samples")}
     missing = [s for s in segs if s not in by_segment]
     if missing:
         raise RigConfigError(f"session {session_id}: no samples from the "
                              f"{', '.join(missing)} sensor(s)")
-    by_name = {by_segment[s]: store.samples(session_id, name=by_segment[s], raw=False)
+    by_name = {by_segment[s]: store.samples.read(session_id, name=by_segment[s], raw=False)
                for s in segs}
     per = list(by_name.values())
     key, use_vqf, fusion_prov = _fuse_if_asked(store, session_id, by_name, fusion, cal["data"])
@@ -200,7 +200,7 @@ def joint_orientations_from_store(store, session_id: int,
     if fusion not in FUSION_CHOICES:
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
     axis = parse_axis(None) if axis is None else axis
-    sess = store.get_session(session_id)
+    sess = store.sessions.get(session_id)
     limb = session_limb(sess)
     if limb is not None:
         chain = chain_orientations_from_store(store, session_id, fusion=fusion,
@@ -209,7 +209,7 @@ def joint_orientations_from_store(store, session_id: int,
     if joint is not None and joint != (sess.get("joint") or "shoulder"):
         raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
                              f", not the {joint}")
-    sensors = store.sensors(session_id)
+    sensors = store.samples.sensors(session_id)
     names = [r["name"] for r in sensors if r.get("n_samples")]
     if not names:
         raise RigConfigError(f"session {session_id} has no samples")
@@ -237,7 +237,7 @@ def _joint_samples(store, session_id: int, fusion: str):
             f"session {session_id} holds joint samples (a servo limb), not IMU ones: "
             f"--fusion {fusion} applies to IMU sessions"
         )
-    s = store.samples(session_id)
+    s = store.samples.read(session_id)
     sel = s["kind"] == "joint"
     return s["q"][sel], s["t"][sel], None
 
@@ -249,7 +249,7 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
     removed at the neutral checkpoints; ``prov`` receives the provenance entries."""
     from calibration.alignment import ImuJointCalibration
 
-    cals = store.calibrations(session_id)
+    cals = store.calibrations.list(session_id)
     cal = latest_calibration(cals, "imu-alignment")
     if cal is None:
         raise RigConfigError(
@@ -261,7 +261,7 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
         model = ImuJointCalibration.from_dict(cal["data"])
     parent, child = _segments(sess, sensors, names, session_id)
     # the orientations first; a sensor's raw readings only while it is fused
-    per = {nm: store.samples(session_id, name=nm, raw=False) for nm in (parent, child)}
+    per = {nm: store.samples.read(session_id, name=nm, raw=False) for nm in (parent, child)}
     key_name, use_vqf, fusion_prov = _fuse_if_asked(store, session_id, per, fusion, cal["data"])
     tp, qp, sp = (per[parent][k] for k in (key_name, "q", "status"))
     tc, qc, sc = (per[child][k] for k in (key_name, "q", "status"))
@@ -302,7 +302,7 @@ def _session_facts(store, sess: dict, sensors: list[dict]) -> RecordingFacts:
     status = sess.get("status")
     cut = status in CUT_SHORT
     if status == "running":  # a recorder that died without closing it counts as cut short
-        cut = store.session_liveness(int(sess["id"])).state != "live"
+        cut = store.sessions.liveness(int(sess["id"])).state != "live"
     cov = (sess.get("meta") or {}).get("coverage") or {}  # the recorder's own, when it ended
     sectors = cov.get("sectors")
     meta = sess.get("meta") or {}
@@ -342,7 +342,7 @@ def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
     host? (yes/no, why not); the raw readings are counted by the store, not fetched."""
     for name, s in per.items():
         n = len(s["t"])
-        have = store.complete_raw_count(session_id, name)
+        have = store.samples.complete_raw_count(session_id, name)
         if have < n:
             return False, (f"sensor {name!r} has no raw samples for {n - have} of {n} samples "
                            "(record with sensors.raw: true)")
@@ -365,7 +365,7 @@ def _fuse_sensors(store, session_id: int, per: dict[str, dict], key_name: str) -
     prov: dict[str, Any] = {"method": "vqf", "library": f"vqf {version('vqf')}"}
     info: dict[str, dict] = {}
     for name, s in per.items():
-        raw = store.raw(session_id, name)
+        raw = store.samples.raw(session_id, name)
         with _about(session_id, f"sensor {name!r}"):
             res = fuse_vqf(s[key_name], raw)
         del raw

@@ -32,7 +32,7 @@ def check_session_side(db, session_id: int | None, side: str | None) -> None:
     from rig.store import open_store
 
     with open_store(db, create=False) as st:
-        sess = st.get_session(session_id)
+        sess = st.sessions.get(session_id)
     recorded = sess.get("side")
     if recorded is not None and recorded != side:
         from rig.readback.sessions import session_limb

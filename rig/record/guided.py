@@ -43,7 +43,7 @@ __all__ = ["CalibrationResult", "GuidedCalibration", "NeutralCheckpoints"]
 
 @dataclass
 class CalibrationResult:
-    """What is stored (``store.add_calibration(session, kind, data, residual_deg)``) and what
+    """What is stored (``store.calibrations.add(session, kind, data, residual_deg)``) and what
     turns raw samples into joint orientations.
 
     Attributes
@@ -290,7 +290,7 @@ class GuidedCalibration:
 
 @dataclass
 class Checkpoint:
-    """One completed neutral checkpoint: what is stored, ``store.add_calibration(session,
+    """One completed neutral checkpoint: what is stored, ``store.calibrations.add(session,
     "neutral-checkpoint", data, residual_deg)``.
 
     ``data`` is ``{"window": [t0, t1], "time": "device_t" | "t"}``: the hold window on the

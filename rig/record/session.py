@@ -11,13 +11,13 @@ Sequence (every step that can fail on a user mistake comes before anything is re
 3. **Guided calibration** (:mod:`rig.record.guided`): a static neutral pose, then functional
    flexion/extension. On simulated rigs the steps advance by themselves (the simulated patient
    performs them); on hardware the clinician is prompted and presses Enter. The calibration and
-   its residual are stored (``store.add_calibration``).
+   its residual are stored (``store.calibrations.add``).
 4. **Recording** until ``duration_s`` of sample time, Ctrl-C / SIGTERM, or a vanished device.
    Joint orientations (calibrated) feed the live :class:`~calibration.coverage.CoverageMap`.
    On a calibrated IMU rig the patient's returns to the neutral pose are marked as
    **neutral checkpoints** (:class:`~rig.record.guided.NeutralCheckpoints`: the simulated
    patient's schedule, or Enter on hardware), each stored as it ends
-   (``store.add_calibration(session, "neutral-checkpoint", {"window": [t0, t1], "time": ...})``)
+   (``store.calibrations.add(session, "neutral-checkpoint", {"window": [t0, t1], "time": ...})``)
    for the read path's heading re-zeroing.
 5. **End**: the reader is stopped, the queue drained, the writer closed (last commit) and the
    session ended with its status (``completed``, ``interrupted``, ``device_lost``, ``failed``)
@@ -50,6 +50,7 @@ from rig.record.guided import (
 )
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
+from rig.store import SampleWriter, open_store
 
 __all__ = ["Annotation", "RecordOptions", "RecordResult", "parse_annotation", "record"]
 
@@ -248,8 +249,6 @@ def record(
     RigConfigError, RigConnectionError, RigTimeoutError, FileNotFoundError
         Before anything is recorded: bad options, config, store path or ports.
     """
-    from rig.store import open_store
-
     options.check()
     stop = stop if stop is not None else threading.Event()
     display = display if display is not None else PlainDisplay()
@@ -311,8 +310,8 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
     result.rom = rom.to_dict()
     result.rom_table = "\n".join([*(f"warning: {w}" for w in data.facts().warnings()),
                                   format_rom_table(rom)])
-    store.end_session(result.session_id, status=result.status,
-                      meta={"rom": result.rom, "rom_source": "extracted boundary"})
+    store.sessions.end(result.session_id, status=result.status,
+                       meta={"rom": result.rom, "rom_source": "extracted boundary"})
 
 
 def _limb_range_of_motion(store, result: RecordResult, config) -> None:
@@ -344,8 +343,8 @@ def _limb_range_of_motion(store, result: RecordResult, config) -> None:
     result.rom = roms
     result.rom_table = "\n".join([*(f"warning: {w}" for w in chain.recording.warnings()),
                                   *tables])
-    store.end_session(result.session_id, status=result.status,
-                      meta={"rom": result.rom, "rom_source": "recorded joint angles"})
+    store.sessions.end(result.session_id, status=result.status,
+                       meta={"rom": result.rom, "rom_source": "recorded joint angles"})
 
 
 def _close(store) -> None:
@@ -356,21 +355,21 @@ def _close(store) -> None:
 
 def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordResult:
     joint = config.joint
-    patient_id = int(store.ensure_patient(options.patient.strip(), side=joint.side))
+    patient_id = int(store.patients.ensure(options.patient.strip(), side=joint.side))
     meta = {"rig": config.name, "simulated": rig.simulated,
             "duration_s": options.duration_s, "sensors": [s.name for s in rig.sensors]}
     if config.limb is not None:  # the whole limb: every joint is read back from the session
         meta["limb"] = config.limb
-    session_id = int(store.start_session(patient_id, rig_name=config.name, joint=joint.name,
-                                         side=joint.side, kind="record", meta=meta))
+    session_id = int(store.sessions.start(patient_id, rig_name=config.name, joint=joint.name,
+                                          side=joint.side, kind="record", meta=meta))
     for s in rig.sensors:
-        store.add_sensor(session_id, s.name, segment=s.segment, kind=s.kind, port=s.port)
+        store.samples.add_sensor(session_id, s.name, segment=s.segment, kind=s.kind, port=s.port)
     emit("session", {"session_id": session_id, "patient_id": patient_id})
     result = RecordResult(session_id, patient_id, status="failed")
     status = RecordStatus(patient=options.patient, phase="starting",
                           duration_s=options.duration_s)
     coverage = CoverageMap(**{"centre": _range_centre(config), **options.coverage})
-    writer = store.sample_writer(session_id)
+    writer = SampleWriter(store, session_id)
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
     calib = GuidedCalibration(config, rig, display=display)
     checkpoints = NeutralCheckpoints(rig, display=display)
@@ -420,7 +419,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                                "the recording)") from err
                             result.calibration = cal
                             result.calibrated = cal.model is not None or rig.kind == "servo"
-                            store.add_calibration(session_id, cal.kind, cal.data, cal.residual_deg)
+                            store.calibrations.add(session_id, cal.kind, cal.data, cal.residual_deg)
                             if cal.model is not None:
                                 display.message(f"calibration stored: {cal.kind}, residual "
                                                 f"{cal.residual_deg:.2f}°")
@@ -444,8 +443,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                             coverage.add(joint_q, joint_t)
                         if marking:
                             for cp in checkpoints.feed(batch, joint_q, joint_t):
-                                store.add_calibration(session_id, "neutral-checkpoint",
-                                                      cp.data, cp.residual_deg)
+                                store.calibrations.add(session_id, "neutral-checkpoint",
+                                                       cp.data, cp.residual_deg)
                             result.neutral_checkpoints = checkpoints.count
                             status.checkpoints = checkpoints.count
                         status.elapsed_s = float(clock[-1]) - t_start
@@ -528,8 +527,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
             end_meta["neutral_checkpoints"] = result.neutral_checkpoints
         if result.error:
             end_meta["error"] = result.error
-        store.end_session(session_id, status=result.status, meta=end_meta,
-                          dropped=result.dropped)
+        store.sessions.end(session_id, status=result.status, meta=end_meta,
+                           dropped=result.dropped)
     return result
 
 
@@ -553,7 +552,7 @@ def _write(writer, batch: SampleBatch) -> None:
 
 
 def _annotate(store, session_id: int, t: float, text: str, status: RecordStatus) -> None:
-    store.add_annotation(session_id, t, text)
+    store.annotations.add(session_id, t, text)
     status.annotations.append((status.elapsed_s, text))
 
 

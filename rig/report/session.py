@@ -62,8 +62,7 @@ from rig.readback.sessions import chain_orientations_from_store, latest_calibrat
 from rig.report.figures import boundary_figure, error_map_figure
 from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
-from rig.store import open_store
-from rig.store.store import file_sha256
+from rig.store import file_sha256, open_store
 from rig.training.limb import evaluate_limb
 from rig.training.verdict import (  # the one verdict, re-exported
     MODEL_TARGETS,
@@ -98,7 +97,7 @@ def _arc_text(arc: dict, side: str) -> str:
 
 def _boundary(store, session_id: int, joint) -> tuple[Any, dict, str]:
     """(constraint, extraction report, where it came from) — stored, else extracted."""
-    stored = store.boundaries(session_id, limb=False)
+    stored = store.boundaries.list(session_id, limb=False)
     if stored:
         b = stored[-1]
         c = loads_constraint(b["constraint_yaml"], source=f"boundary {b['id']}")
@@ -118,12 +117,12 @@ def _recording_session(store, sess: dict) -> int | None:
 
 
 def _runs(store, sess: dict, rec_id: int | None) -> list[dict]:
-    runs = list(store.runs(sess["id"])) if sess.get("kind") == "enforce" else []
+    runs = list(store.runs.list(sess["id"])) if sess.get("kind") == "enforce" else []
     if rec_id is not None:
-        for other in store.list_sessions():
+        for other in store.sessions.list():
             if (other.get("kind") == "enforce" and other["id"] != sess["id"]
                     and (other.get("meta") or {}).get("recording_session") == rec_id):
-                runs.extend(store.runs(other["id"]))
+                runs.extend(store.runs.list(other["id"]))
     return runs
 
 
@@ -196,18 +195,18 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
         Where an IMU recording's orientations come from when its boundary is extracted
         (:func:`rig.readback.joint_orientations_from_store`).
     """
-    sess = store.get_session(session_id)
+    sess = store.sessions.get(session_id)
     side = sess.get("side") or "right"
     data = ReportData(patient=sess.get("pseudonym") or "?", session_id=session_id,
                       joint=sess.get("joint") or "shoulder", side=sess.get("side"),
                       rig=sess.get("rig_name"), started=_iso(sess.get("started_at")),
                       software=f"rig {__version__}")
-    data.duration_s = store.recording_span(session_id)  # the samples' span, not wall time
+    data.duration_s = store.samples.span(session_id)  # the samples' span, not wall time
     meta = sess.get("meta") or {}
     free = (meta.get("coverage") or {}).get("t_span_s")  # the recording after calibration
     data.free_motion_s = None if free is None else float(free)
     data.calibrated = bool(meta.get("calibrated"))
-    data.samples = int(store.sample_count(session_id))
+    data.samples = int(store.samples.count(session_id))
     data.dropped = sess.get("dropped")
     rec_id = _recording_session(store, sess)
 
@@ -217,7 +216,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             joint = joint_orientations_from_store(store, rec_id, fusion=fusion)
         except user_errors() as err:  # a recording that cannot give joint orientations
             data.rom_note = f"Samples not usable for the boundary: {err}."
-        rec_meta = store.get_session(rec_id).get("meta") or {}
+        rec_meta = store.sessions.get(rec_id).get("meta") or {}
         data.simulated = bool(rec_meta.get("simulated"))
         if joint is not None:
             facts = joint.facts()
@@ -269,7 +268,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
             data.boundary_facts = facts
             data.sparse_arcs_deg = []
             data.sparse_arcs_text = [_arc_text(a, side) for a in arcs]
-        data.calibrations = _calibration_rows(store.calibrations(rec_id))
+        data.calibrations = _calibration_rows(store.calibrations.list(rec_id))
         refit = (None if joint is None else
                  (joint.provenance.get("fusion") or {}).get("refit_residual_deg"))
         if refit is not None:
@@ -343,7 +342,7 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from.
     """
-    sess = store.get_session(session_id)  # no session N: before any work
+    sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
         if isinstance(reference, (str, Path)):
             reference = load_limb(reference)
@@ -370,7 +369,7 @@ def stored_model_evaluation(store, session_id: int, model) -> tuple[dict, dict] 
     and the model's ``id``); None when none is stored."""
     path = Path(model).resolve()
     digest = None
-    for row in reversed(store.models_for(session_id=session_id)):
+    for row in reversed(store.models.list(session_id=session_id)):
         if Path(row["path"]).resolve() != path:
             continue
         got = stored_evaluation(row)
@@ -395,7 +394,7 @@ def _evaluation_words(stored, n: int, seed: int) -> str:
 def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, str] | None:
     """``(id, path)`` of the last model registered with the session whose file is still there
     (and that ``accept(path)`` takes, when given), else None."""
-    for m in reversed(store.models_for(session_id=session_id)):
+    for m in reversed(store.models.list(session_id=session_id)):
         if Path(m["path"]).is_file() and (accept is None or accept(str(m["path"]))):
             return int(m["id"]), str(m["path"])
     return None
@@ -456,7 +455,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
                 chain.q, t=chain.t, status=chain.status, side=chain.side,
                 slow_error_deg=chain.slow_error_deg).limb_
             source = "extracted from the recorded postures for this report"
-    cal = latest_calibration(store.calibrations(session_id), "imu-limb")
+    cal = latest_calibration(store.calibrations.list(session_id), "imu-limb")
     residuals = None if cal is None else cal["data"].get("residuals_deg")
     note = None if cal is None else "The recorder's calibration (the devices' orientations)."
     fused = chain.provenance.get("fusion") or {}
@@ -468,7 +467,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
                    f"; the {LIMB_CHAINS[chain.limb][0][1]} leaned {lean:.2f}° during the "
                    "static pose, measured against the neutral checkpoints, and that lean was "
                    "taken off every segment."))
-    sess = store.get_session(session_id)
+    sess = store.sessions.get(session_id)
     # the postures the sensors vouch for (as the extraction and the peaks use them)
 
     ok = trusted_samples(chain.status, len(chain.t))

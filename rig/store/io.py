@@ -49,15 +49,12 @@ import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rig import __version__
 from rig.errors import RigConfigError
-
-if TYPE_CHECKING:
-    from rig.store.store import Store
+from rig.store.store import Store
 
 #: Largest accepted | ||q|| - 1 | of an imported quaternion. Text written with 4 decimals is
 #: within ~2e-4 of unit norm; anything further off is a unit error or a corrupted value.
@@ -418,7 +415,7 @@ def _csv_rows(lines: list[str], header: int, ncols: int, src: str):
 def read_samples_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read a long-form CSV (``t_s,name,w,x,y,z`` and optionally ``device_t_s``, ``kind``,
     ``status``, the nine raw columns ``acc_x..mag_z`` -- all or none; other columns ignored)
-    into arrays shaped like :meth:`Store.samples` (``raw`` NaN where a cell is empty or the
+    into arrays shaped like ``store.samples.read`` (``raw`` NaN where a cell is empty or the
     file has no raw columns)."""
     src = os.fspath(path)
     lines = _read_lines(path)
@@ -560,7 +557,7 @@ def write_csv(path: str | os.PathLike, table: OrientationTable, *, single: bool 
 
 
 def write_samples_csv(path: str | os.PathLike, s: Mapping[str, np.ndarray]) -> None:
-    """Write samples (as returned by :meth:`Store.samples`) in the long form
+    """Write samples (as returned by ``store.samples.read``) in the long form
     ``t_s,device_t_s,name,kind,w,x,y,z,status``, followed by the nine raw columns
     ``acc_x..mag_z`` when any sample has a raw reading (``s["raw"]``, NaN written as an empty
     cell); lossless."""
@@ -704,7 +701,7 @@ def session_table(store: Store, session_id: int) -> tuple[OrientationTable, int]
     (``<name>``), aligned by :func:`align_series`, each on strictly increasing times
     (:func:`_series_times`; the clock used is in ``meta["rig_time"]``). Returns (table,
     reference rows dropped)."""
-    s = store.samples(session_id)
+    s = store.samples.read(session_id)
     if s["t"].size == 0:
         raise RigConfigError(f"session {session_id} has no samples to export")
     series, clocks, anchors = {}, set(), {}
@@ -718,7 +715,7 @@ def session_table(store: Store, session_id: int) -> tuple[OrientationTable, int]
         clocks.add(clock)
         series[label] = (t, q[order])
     table, dropped = align_series(series)
-    sess = store.get_session(session_id)
+    sess = store.sessions.get(session_id)
     table.meta.update({
         "rig_session": str(session_id),
         "rig_patient": str(sess["pseudonym"]),
@@ -750,7 +747,7 @@ def export_session(store: Store, session_id: int, fmt: str, out: str | os.PathLi
         write_sto(out, table)
         return {"path": os.fspath(out), "rows": len(table), "columns": table.labels,
                 "dropped_rows": dropped}
-    s = store.samples(session_id)
+    s = store.samples.read(session_id)
     if s["t"].size == 0:
         raise RigConfigError(f"session {session_id} has no samples to export")
     write_samples_csv(out, s)

@@ -69,6 +69,7 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
     func,
+    inspect,
     select,
     text,
 )
@@ -381,8 +382,6 @@ TELEMETRY_COLUMNS: tuple[str, ...] = tuple(
 
 def current_version(conn: Connection) -> int:
     """Highest applied migration, 0 for an empty database."""
-    from sqlalchemy import inspect
-
     if not inspect(conn).has_table("schema_version"):
         return 0
     v = conn.execute(select(schema_version.c.version).order_by(schema_version.c.version.desc()))

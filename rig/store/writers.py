@@ -9,6 +9,10 @@ when the oldest pending row has waited ``max_latency_s`` (0.8 s), the ``add`` ca
 commits before returning. The :class:`TelemetryWriter` never blocks its caller (the control
 loop); it relies on the thread alone.
 
+A writer is made on an open store (``SampleWriter(store, session_id)``,
+``TelemetryWriter(store, run_id)``) and uses its repositories and transactions; the store knows
+nothing of its writers.
+
 A database error in the background thread is kept and raised by the next ``add``/``flush``/
 ``close``; the rows that failed stay pending.
 
@@ -34,19 +38,16 @@ import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-from sqlalchemy import select
 
 from rig.errors import RigConfigError
 from rig.store import schema as S
 from rig.store.liveness import IDLE_HEARTBEAT_S
+from rig.store.store import Store
 
 _NO_RAW = (None,) * 9
-
-if TYPE_CHECKING:
-    from rig.store.store import Store
 
 
 class _BatchWriter:
@@ -75,7 +76,7 @@ class _BatchWriter:
         self.written = 0  #: rows committed
         self.commits = 0  #: transactions committed
         self.session_id = int(self._session_of(store))
-        store._claim_writer(self.session_id)
+        store.sessions.claim_writer(self.session_id)
         self._beat = time.monotonic()  # when the heartbeat was last written
         self._thread = threading.Thread(
             target=self._run, name=f"rig-store-{self._kind}-writer", daemon=True
@@ -151,8 +152,7 @@ class _BatchWriter:
 
     def _heartbeat(self, conn, **values: Any) -> None:
         """Set the session's heartbeat (and ``values``) inside the caller's transaction."""
-        conn.execute(S.sessions.update().where(S.sessions.c.id == self.session_id)
-                     .values(heartbeat_at=time.time(), **values))
+        self._store.sessions.heartbeat(conn, self.session_id, **values)
         self._beat = time.monotonic()
 
     def _idle_due(self) -> bool:
@@ -161,7 +161,7 @@ class _BatchWriter:
     def _write_extra(self) -> None:
         """State written even without rows: the heartbeat when it is due."""
         if self._idle_due():
-            with self._store._tx() as conn:
+            with self._store.transaction() as conn:
                 self._heartbeat(conn)
 
     def close(self) -> None:
@@ -178,9 +178,10 @@ class _BatchWriter:
 class SampleWriter(_BatchWriter):
     """Batched, crash-safe sample insertion for one session.
 
-    Create with :meth:`rig.store.Store.sample_writer`. ``add`` costs a few microseconds; the
-    rows are committed by a background thread every ``flush_interval_s`` and, as a backstop,
-    by ``add`` itself once the oldest pending row is ``max_latency_s`` old.
+    ``SampleWriter(store, session_id)``; close it (or use ``with``). ``add`` costs a few
+    microseconds; the rows are committed by a background thread every ``flush_interval_s``
+    and, as a backstop, by ``add`` itself once the oldest pending row is ``max_latency_s``
+    old.
 
     Attributes
     ----------
@@ -195,9 +196,10 @@ class SampleWriter(_BatchWriter):
 
     def __init__(self, store: Store, session_id: int, *, flush_interval_s: float = 0.5,
                  max_latency_s: float = 0.8) -> None:
+        store.sessions.get(session_id)  # no such session: one line
         self._sid = int(session_id)
         self._sensor_ids: dict[str, int] = {
-            r["name"]: int(r["id"]) for r in store.sensors(self._sid)
+            r["name"]: int(r["id"]) for r in store.samples.sensors(self._sid)
         }
         self.dropped = 0
         self._dropped_written = 0
@@ -301,24 +303,14 @@ class SampleWriter(_BatchWriter):
         if sid is None:
             sid = new.get(name)
         if sid is None:
-            row = conn.execute(
-                select(S.sensors.c.id).where(
-                    (S.sensors.c.session_id == self.session_id) & (S.sensors.c.name == name)
-                )
-            ).first()
-            if row is not None:
-                sid = int(row[0])
-            else:
-                if kind not in ("sensor", "joint"):
-                    raise RigConfigError(f"sample kind must be 'sensor' or 'joint', got {kind!r}")
-                sid = self._store._insert_sensor(conn, self.session_id, name, name, kind, None)
+            sid = self._store.samples.sensor_id(conn, self.session_id, name, kind)
             new[name] = sid
         return sid
 
     def _write(self, rows: list) -> None:
         sid = self.session_id
         new: dict[str, int] = {}  # sensors created in this transaction: cached after commit
-        with self._store._tx() as conn:
+        with self._store.transaction() as conn:
             params = [
                 {
                     "session_id": sid,
@@ -330,8 +322,7 @@ class SampleWriter(_BatchWriter):
             if any(r[9] is not None for r in rows):  # executemany: the same keys in every row
                 for p, r in zip(params, rows, strict=True):
                     p.update(zip(S.RAW_COLUMNS, _NO_RAW if r[9] is None else r[9], strict=True))
-            conn.execute(S.samples.insert(), params)
-            _count(conn, params)
+            self._store.samples.insert(conn, params)
             t_max = max(self._t_max, max(r[0] for r in rows))
             # the newest sample's t on the Unix clock, never after this commit
             wall, mono = time.time(), time.monotonic()
@@ -347,37 +338,9 @@ class SampleWriter(_BatchWriter):
     def _write_extra(self) -> None:
         dropped = self.dropped
         if dropped != self._dropped_written or self._idle_due():
-            with self._store._tx() as conn:
+            with self._store.transaction() as conn:
                 self._heartbeat(conn, dropped=int(dropped))
             self._dropped_written = dropped
-
-
-def _count(conn, params: list[dict]) -> None:
-    """Add the inserted rows to their sensors' counts and time spans (schema v5), in the
-    inserting transaction: one UPDATE per sensor in the batch."""
-    from sqlalchemy import case, literal
-
-    per: dict[int, list] = {}
-    for p in params:
-        per.setdefault(p["sensor_id"], []).append((p["t"], p["device_t"]))
-    c = S.sensors.c
-    for sensor_id, tt in per.items():
-        t = [x for x, _ in tt]
-        dev = [d for _, d in tt if d is not None and math.isfinite(d)]
-
-        def lower(col, v):
-            return col if v is None else case(((col.is_(None)) | (col > v), literal(v)),
-                                              else_=col)
-
-        def upper(col, v):
-            return col if v is None else case(((col.is_(None)) | (col < v), literal(v)),
-                                              else_=col)
-
-        conn.execute(S.sensors.update().where(c.id == sensor_id).values(
-            n_samples=c.n_samples + len(tt),
-            first_t=lower(c.first_t, min(t)), last_t=upper(c.last_t, max(t)),
-            first_device_t=lower(c.first_device_t, min(dev) if dev else None),
-            last_device_t=upper(c.last_device_t, max(dev) if dev else None)))
 
 
 def _raw_row(raw: Sequence[float] | np.ndarray, name: str, t: float) -> tuple | None:
@@ -438,7 +401,7 @@ class TelemetryWriter(_BatchWriter):
         super().__init__(store, flush_interval_s=flush_interval_s, max_latency_s=None)
 
     def _session_of(self, store: Store) -> int:
-        return int(store.get_run(self.run_id)["session_id"])
+        return int(store.runs.get(self.run_id)["session_id"])
 
     def add(self, row: Mapping[str, Any]) -> None:
         """Queue one cycle's row (cheap: an append under a lock)."""
@@ -476,8 +439,8 @@ class TelemetryWriter(_BatchWriter):
         for p in params:  # executemany needs the same keys in every row
             for k in keys:
                 p.setdefault(k, 0 if k == "intervention" else None)
-        with self._store._tx() as conn:
-            conn.execute(S.telemetry.insert(), params)
+        with self._store.transaction() as conn:
+            self._store.runs.insert_telemetry(conn, params)
             self._heartbeat(conn)
 
 

@@ -31,7 +31,7 @@ MODEL_TARGETS: dict[str, tuple[float, str, str]] = {
     "p99_angular_error_deg": (5.0, "p99 direction error", "°"),
 }
 
-#: The key of a registered model's metrics (:meth:`rig.store.Store.add_model`) that says which
+#: The key of a registered model's metrics (``store.models.add``) that says which
 #: evaluation they are: ``{"n", "seed", "by"}``.
 EVALUATION_KEY = "evaluation"
 
@@ -83,7 +83,7 @@ def evaluation_verdict(metrics: Mapping[str, Any], *,
 
 
 def evaluation_record(metrics: Mapping[str, Any], *, n: int, seed: int, by: str) -> dict:
-    """The metrics to register with a model (:meth:`rig.store.Store.add_model`): the
+    """The metrics to register with a model (``store.models.add``): the
     evaluation's own, and under :data:`EVALUATION_KEY` which one it was (``n`` held-out inputs
     drawn with ``seed``, computed ``by``)."""
     return {**metrics, EVALUATION_KEY: {"n": int(n), "seed": int(seed), "by": str(by)}}
@@ -91,7 +91,7 @@ def evaluation_record(metrics: Mapping[str, Any], *, n: int, seed: int, by: str)
 
 def stored_evaluation(row: Mapping[str, Any] | None) -> tuple[dict, dict] | None:
     """``(metrics, which)`` of the evaluation stored with a registered model (a row of
-    :meth:`rig.store.Store.models_for`), None when it holds none (a model registered with its
+    ``store.models.list``), None when it holds none (a model registered with its
     training's metrics only)."""
     if row is None:
         return None

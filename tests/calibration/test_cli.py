@@ -8,7 +8,7 @@ import pytest
 from calibration.clinical import RangeOfMotion
 from models.constraint import load_constraint
 from rig.cli import main
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 from rig.store.io import OrientationTable, write_csv, write_sto
 
 
@@ -52,12 +52,12 @@ def test_boundary_from_a_session_is_stored(servo_patient, tmp_path, capsys):
     _, rec = servo_patient
     db = tmp_path / "s.db"
     with open_store(db) as st:
-        pid = st.add_patient("P-001")
-        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
-        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
-        with st.sample_writer(sid) as w:
+        pid = st.patients.add("P-001")
+        sid = st.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        st.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with SampleWriter(st, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        st.end_session(sid, status="completed", meta={})
+        st.sessions.end(sid, status="completed", meta={})
     out = tmp_path / "c.yaml"
     code, _, err = run(["boundary", "--db", str(db), "--session", str(sid), "--out", str(out)],
                        capsys)
@@ -80,12 +80,12 @@ def test_rom_json_of_an_interrupted_session(servo_patient, tmp_path, capsys):
     _, rec = servo_patient
     db = tmp_path / "s.db"
     with open_store(db) as st:
-        pid = st.add_patient("P-002")
-        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
-        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
-        with st.sample_writer(sid) as w:
+        pid = st.patients.add("P-002")
+        sid = st.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
+        st.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with SampleWriter(st, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        st.end_session(sid, status="interrupted", meta={})
+        st.sessions.end(sid, status="interrupted", meta={})
     code, stdout, err = run(["rom", "--db", str(db), "--session", str(sid), "--json"], capsys)
     assert code == 0, err
     rom = json.loads(stdout)  # one JSON object, nothing else printed
@@ -222,12 +222,12 @@ def test_a_side_other_than_the_sessions_is_refused_before_reading(servo_patient,
     _, rec = servo_patient
     db = tmp_path / "s.db"
     with open_store(db) as st:
-        sid = st.start_session(st.add_patient("P-001"), rig_name="sim-shoulder",
-                               joint="shoulder", side="right")
-        st.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
-        with st.sample_writer(sid) as w:
+        sid = st.sessions.start(st.patients.add("P-001"), rig_name="sim-shoulder",
+                                joint="shoulder", side="right")
+        st.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with SampleWriter(st, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        st.end_session(sid, status="completed", meta={})
+        st.sessions.end(sid, status="completed", meta={})
     for args in (["boundary", "--db", db, "--session", sid, "--side", "left", "--out",
                   tmp_path / "c.yaml"],
                  ["rom", "--db", db, "--session", sid, "--side", "left"],

@@ -9,6 +9,7 @@ never jumps (a gyroscope cannot follow a jump). Seed 11: not a seed of any bench
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -109,7 +110,8 @@ def test_bad_inputs_are_clear_errors(session):
 # -- the read path ---------------------------------------------------------------------------
 class _Store:
     """A stand-in for :class:`rig.store.Store` holding one IMU session (the read path uses
-    get_session, samples, sensors, calibrations); ``raw`` None: a store before schema v4."""
+    sessions.get, samples.read/raw/complete_raw_count/sensors, calibrations.list); ``raw``
+    None: a store before schema v4."""
 
     def __init__(self, t, q, raw, status, cal_data):
         n = len(t)
@@ -120,12 +122,16 @@ class _Store:
         if raw is not None:
             self._s["raw"] = raw.reshape(-1, 9)
         self._cal = cal_data
+        self.sessions = SimpleNamespace(get=self._session)
+        self.samples = SimpleNamespace(read=self._read, raw=self._raw, sensors=self._sensors,
+                                       complete_raw_count=self._complete_raw_count)
+        self.calibrations = SimpleNamespace(list=self._calibrations)
 
-    def get_session(self, sid):
+    def _session(self, sid):
         return {"id": sid, "side": "right", "pseudonym": "P-1", "joint": "shoulder",
                 "meta": {"parent": "thorax_imu", "child": "humerus_imu"}}
 
-    def samples(self, sid, name=None, raw=True):
+    def _read(self, sid, name=None, raw=True):
         s = dict(self._s)
         if not raw:
             s.pop("raw", None)
@@ -134,22 +140,22 @@ class _Store:
         sel = s["name"] == name
         return {k: v[sel] for k, v in s.items()}
 
-    def raw(self, sid, name):
-        return self.samples(sid, name)["raw"]
+    def _raw(self, sid, name):
+        return self._read(sid, name)["raw"]
 
-    def complete_raw_count(self, sid, name):
+    def _complete_raw_count(self, sid, name):
         if "raw" not in self._s:
             return 0
         sel = self._s["name"] == name
         return int(np.isfinite(self._s["raw"][sel]).all(axis=1).sum())
 
-    def sensors(self, sid):
+    def _sensors(self, sid):
         n = len(self._s["t"]) // 2
         return [{"name": "thorax_imu", "segment": "thorax", "kind": "sensor", "n_samples": n},
                 {"name": "humerus_imu", "segment": "humerus", "kind": "sensor",
                  "n_samples": n}]
 
-    def calibrations(self, sid):
+    def _calibrations(self, sid):
         return [{"id": 1, "kind": "imu-alignment", "data": self._cal, "residual_deg": 1.0}]
 
 
@@ -222,20 +228,20 @@ def test_read_path_without_raw(session):
 # -- the commands ----------------------------------------------------------------------------
 def _store_session(db, limb, t, q, raw, status):
     """A real store holding the simulated IMU session (raw samples where ``raw`` is given)."""
-    from rig.store import open_store
+    from rig.store import SampleWriter, open_store
 
     with open_store(db) as st:
-        pid = st.add_patient("P-002")
-        sid = st.start_session(pid, rig_name="sim-imu", joint="shoulder", side="right",
-                               meta={"parent": "thorax_imu", "child": "humerus_imu"})
-        st.add_sensor(sid, "thorax_imu", segment="thorax", kind="sensor")
-        st.add_sensor(sid, "humerus_imu", segment="humerus", kind="sensor")
-        with st.sample_writer(sid) as w:
+        pid = st.patients.add("P-002")
+        sid = st.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right",
+                                meta={"parent": "thorax_imu", "child": "humerus_imu"})
+        st.samples.add_sensor(sid, "thorax_imu", segment="thorax", kind="sensor")
+        st.samples.add_sensor(sid, "humerus_imu", segment="humerus", kind="sensor")
+        with SampleWriter(st, sid) as w:
             for i, name in enumerate(("thorax_imu", "humerus_imu")):
                 w.add_many(t + 100.0, t, name, "sensor", q[:, i], status[:, i],
                            raw=None if raw is None else raw[:, i])
-        st.add_calibration(sid, "imu-alignment", _stored_calibration(limb, t, q), 1.0)
-        st.end_session(sid, status="completed", meta={})
+        st.calibrations.add(sid, "imu-alignment", _stored_calibration(limb, t, q), 1.0)
+        st.sessions.end(sid, status="completed", meta={})
     return sid
 
 
@@ -291,17 +297,17 @@ def test_boundary_and_rom_fusion_option(session, tmp_path, capsys):
 def test_fusion_option_on_a_servo_session_is_a_user_error(session, tmp_path, capsys):
     # a servo limb's session holds joint samples: asking for a fusion of IMUs there is a
     # mistake (one line, exit 2); the default (auto) reads it as it is
-    from rig.store import open_store
+    from rig.store import SampleWriter, open_store
 
     limb, t, _, _, _, _, _ = session
     db = tmp_path / "servo.db"
     with open_store(db) as st:
-        pid = st.add_patient("P-003")
-        sid = st.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
-        st.add_sensor(sid, "shoulder", kind="joint")
-        with st.sample_writer(sid) as w:
+        pid = st.patients.add("P-003")
+        sid = st.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        st.samples.add_sensor(sid, "shoulder", kind="joint")
+        with SampleWriter(st, sid) as w:
             w.add_many(t, None, "shoulder", "joint", limb.joint(t), np.zeros(len(t), int))
-        st.end_session(sid, status="completed", meta={})
+        st.sessions.end(sid, status="completed", meta={})
     for fusion in ("vqf", "device"):
         code, _, err = _run(["rom", "--db", str(db), "--session", str(sid), "--fusion",
                              fusion], capsys)

@@ -20,7 +20,7 @@ from calibration import ImuJointCalibration, LimbImuCalibration
 from rig.readback import joint_orientations_from_store
 from rig.readback.sessions import chain_orientations_from_store
 from rig.sim.patients import record_servo, seeded_patient, star_constraint
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 from tests.golden.cli import _root, rig
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import html_text, jtext, long_text
@@ -71,32 +71,32 @@ def _joint_db(db: Path, *, raw: bool = True) -> int:
                          "period_s": p.period_s, "settle_s": p.settle_s,
                          "origin": {"time": "device_t", "t0": t0}}}
     with open_store(db) as s:
-        pid = s.add_patient("P-101", side="right")
-        sid = s.start_session(pid, rig_name="sim-imu", joint="shoulder", side="right",
+        pid = s.patients.add("P-101", side="right")
+        sid = s.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right",
                               meta={"parent": "thorax_imu", "child": "humerus_imu"})
-        s.add_sensor(sid, "thorax_imu", segment="thorax", kind="sensor", port="sim://imu")
-        s.add_sensor(sid, "humerus_imu", segment="humerus", kind="sensor", port="sim://imu")
-        with s.sample_writer(sid) as wr:
+        s.samples.add_sensor(sid, "thorax_imu", segment="thorax", kind="sensor", port="sim://imu")
+        s.samples.add_sensor(sid, "humerus_imu", segment="humerus", kind="sensor", port="sim://imu")
+        with SampleWriter(s, sid) as wr:
             for i, name in enumerate(("thorax_imu", "humerus_imu")):
                 wr.add_many(t + HOST_OFFSET_S, t, name, "sensor", q[:, i], status[:, i],
                             raw=rw[:, i] if raw else None)
-        s.add_calibration(sid, "imu-alignment", data, float(cal.residual_deg_))
+        s.calibrations.add(sid, "imu-alignment", data, float(cal.residual_deg_))
         for a, b in limb.neutral_windows(float(t[-1])):
-            s.add_calibration(sid, "neutral-checkpoint",
+            s.calibrations.add(sid, "neutral-checkpoint",
                               {"window": [float(a), float(b)], "time": "device_t"}, 1.0)
-        s.end_session(sid, status="completed", meta={})
+        s.sessions.end(sid, status="completed", meta={})
     return sid
 
 
 def _servo_db(db: Path) -> int:
     rec = record_servo(seeded_patient(7, star_constraint(7)), 120.0, 50.0)
     with open_store(db) as s:
-        pid = s.add_patient("P-102")
-        sid = s.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
-        s.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
-        with s.sample_writer(sid) as wr:
+        pid = s.patients.add("P-102")
+        sid = s.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="left")
+        s.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint", port="sim://dynamixel")
+        with SampleWriter(s, sid) as wr:
             wr.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        s.end_session(sid, status="interrupted", meta={})
+        s.sessions.end(sid, status="interrupted", meta={})
     return sid
 
 
@@ -114,20 +114,20 @@ def _arm_db(db: Path) -> int:
                          "origin": {"time": "device_t", "t0": t0}}}
     names = ("thorax", "upper-arm", "forearm", "hand")
     with open_store(db) as s:
-        pid = s.add_patient("P-103", side="right")
-        sid = s.start_session(pid, rig_name="sim-arm", joint="shoulder", side="right",
+        pid = s.patients.add("P-103", side="right")
+        sid = s.sessions.start(pid, rig_name="sim-arm", joint="shoulder", side="right",
                               meta={"limb": "arm", "parent": "thorax", "child": "upper-arm"})
         for name in names:
-            s.add_sensor(sid, name, segment=name, kind="sensor", port="sim://imu-stream")
-        with s.sample_writer(sid) as wr:
+            s.samples.add_sensor(sid, name, segment=name, kind="sensor", port="sim://imu-stream")
+        with SampleWriter(s, sid) as wr:
             for i, name in enumerate(names):
                 wr.add_many(t + HOST_OFFSET_S, t, name, "sensor", q[:, i], status[:, i],
                             raw=rw[:, i])
-        s.add_calibration(sid, "imu-limb", data, float(cal.residual_deg_))
+        s.calibrations.add(sid, "imu-limb", data, float(cal.residual_deg_))
         for a, b in chain.neutral_windows(float(t[-1])):
-            s.add_calibration(sid, "neutral-checkpoint",
+            s.calibrations.add(sid, "neutral-checkpoint",
                               {"window": [float(a), float(b)], "time": "device_t"}, 1.0)
-        s.end_session(sid, status="completed", meta={})
+        s.sessions.end(sid, status="completed", meta={})
     return sid
 
 
@@ -200,7 +200,7 @@ def case_store_joint_cli() -> dict:
         with open_store(db, create=False) as s:
             out["stored_boundaries"] = normalise(jtext(
                 [{k: b[k] for k in sorted(b) if k not in ("id", "created_at")}
-                 for b in s.boundaries(sid)]), d)
+                 for b in s.boundaries.list(sid)]), d)
         sdb = d / "servo.db"
         ssid = _servo_db(sdb)
         _cli("servo_boundary", ["boundary", "--db", sdb, "--session", ssid, "--out",
@@ -261,7 +261,7 @@ def case_store_limb_cli() -> dict:
         with open_store(db, create=False) as s:
             out["stored_boundaries"] = normalise(jtext(
                 [{k: b[k] for k in sorted(b) if k not in ("id", "created_at")}
-                 for b in s.boundaries(sid)]), d)
+                 for b in s.boundaries.list(sid)]), d)
     return out
 
 

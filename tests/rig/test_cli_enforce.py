@@ -135,13 +135,13 @@ def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, rig_cli):
         assert col in rows[0]
     assert max(float(r["violation_deg"]) for r in rows) <= 1.0
     with open_store(db) as store:
-        run = store.get_run(s["run_id"])
+        run = store.runs.get(s["run_id"])
         assert run["status"] == "completed" and run["summary"]["cycles"] == s["cycles"]
-        t = store.telemetry(s["run_id"])
+        t = store.runs.telemetry(s["run_id"])
         assert len(t["t_s"]) == s["cycles"]
         np.testing.assert_allclose(t["commanded_w"], [float(r["commanded_w"]) for r in rows],
                                    atol=1e-8)
-        sess = store.get_session(s["session_id"])
+        sess = store.sessions.get(s["session_id"])
         assert sess["kind"] == "enforce" and sess["pseudonym"] == "P-0042"
 
 
@@ -228,10 +228,10 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
     orig = load_shape("original")
     db = tmp_path / "rig.db"
     with open_store(db) as store:
-        pid = store.add_patient("P-1")
-        sid = store.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
-        store.add_boundary(sid, orig.to_yaml(), {"source": "test"})
-        store.end_session(sid)
+        pid = store.patients.add("P-1")
+        sid = store.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        store.boundaries.add(sid, orig.to_yaml(), {"source": "test"})
+        store.sessions.end(sid)
     summ = tmp_path / "s.json"
     code, _, err = rig_cli(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
                                 str(sid), "--summary-json", str(summ)))
@@ -239,7 +239,7 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
     s = json.loads(summ.read_text())
     assert s["constraint_source"] == f"session {sid}"
     with open_store(db) as store:
-        run_session = store.get_session(s["session_id"])
+        run_session = store.sessions.get(s["session_id"])
         assert run_session["pseudonym"] == "P-1" and run_session["kind"] == "enforce"
         assert run_session["meta"]["recording_session"] == sid
     # a model trained for another patient's boundary (same limits) is refused
@@ -276,7 +276,7 @@ def test_a_read_only_store_is_refused_before_the_backstop(files, tmp_path, rig_c
 
     db = tmp_path / "ro.db"
     with open_store(db) as store:
-        store.add_patient("P-RO")
+        store.patients.add("P-RO")
     if os.geteuid() == 0:  # permission bits do not stop root: make the file immutable
         r = subprocess.run(["chattr", "+i", str(db)], capture_output=True, text=True)
         if r.returncode != 0:

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 from rig.store import schema as S
 from rig.store.io import read_samples_csv, read_sto
 
@@ -21,19 +21,19 @@ def db(tmp_path):
     path = tmp_path / "clinic.db"
     rng = np.random.default_rng(5)
     with open_store(path) as store:
-        p1 = store.add_patient("P-0001", side="right")
-        s1 = store.start_session(p1, rig_name="sim-imu", joint="shoulder", side="right")
+        p1 = store.patients.add("P-0001", side="right")
+        s1 = store.sessions.start(p1, rig_name="sim-imu", joint="shoulder", side="right")
         t = np.arange(200) / 400.0
         q = rng.normal(size=(200, 4))
         q /= np.linalg.norm(q, axis=1, keepdims=True)
-        with store.sample_writer(s1) as w:
+        with SampleWriter(store, s1) as w:
             w.add_many(t, None, "thorax", "sensor", q)
             w.add_many(t, None, "humerus", "sensor", q[::-1])
             w.set_dropped(2)
-        store.end_session(s1, status="completed")
-        p2 = store.add_patient("P-0002")
-        s2 = store.start_session(p2, rig_name="sim-shoulder", kind="enforce")
-        store.end_run(store.start_run(s2), {"cycles": 0})
+        store.sessions.end(s1, status="completed")
+        p2 = store.patients.add("P-0002")
+        s2 = store.sessions.start(p2, rig_name="sim-shoulder", kind="enforce")
+        store.runs.end(store.runs.start(s2), {"cycles": 0})
     return path
 
 
@@ -78,7 +78,7 @@ def test_export_sto_and_csv(db, tmp_path, rig_cli):
     assert code == 0 and "wrote 200 rows (thorax_imu, humerus_imu)" in out
     table = read_sto(tmp_path / "s1.sto")
     with open_store(db, create=False) as store:
-        np.testing.assert_array_equal(table.get("humerus"), store.samples(1, "humerus")["q"])
+        np.testing.assert_array_equal(table.get("humerus"), store.samples.read(1, "humerus")["q"])
     code, out, _ = rig_cli(["export", "--db", str(db), "--session", "1",
                             "--out", str(tmp_path / "s1.csv")])  # format from the suffix
     assert code == 0 and "wrote 400 rows" in out
@@ -122,8 +122,8 @@ def test_session_list_through_the_console_script(db):
 def test_session_list_on_postgresql(pg_server, rig_cli):
     url = pg_server.new_database()
     with open_store(url) as store:
-        sid = store.start_session(store.add_patient("PG-1"))
-        with store.sample_writer(sid) as w:
+        sid = store.sessions.start(store.patients.add("PG-1"))
+        with SampleWriter(store, sid) as w:
             w.add(0.0, None, "humerus", "sensor", [1.0, 0, 0, 0])
     code, out, _ = rig_cli(["session", "list", "--db", url])
     assert code == 0 and "PG-1" in out and "1 (humerus 1)" in out
@@ -139,7 +139,7 @@ def _dead_pid() -> int:
 def _orphan(url, pid):
     """Session 2 of the fixture as a killed recorder leaves it: running, writer ``pid``."""
     with open_store(url, create=False) as store:
-        with store.sample_writer(2) as w:
+        with SampleWriter(store, 2) as w:
             w.add_many(np.arange(5) / 400.0, None, "humerus", "sensor",
                        np.tile([1.0, 0, 0, 0], (5, 1)))
         with store.engine.begin() as conn:  # then the writer process vanishes
@@ -164,9 +164,9 @@ def test_killed_session_is_listed_interrupted_and_closed(db, rig_cli):
     assert out.startswith("session 2 closed as interrupted: 5 samples, ended at its last "
                           "sample")
     with open_store(db, create=False) as store:
-        s = store.get_session(2)
+        s = store.sessions.get(2)
         assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
-        assert [r["status"] for r in store.runs(2)] == ["completed"]  # it had ended
+        assert [r["status"] for r in store.runs.list(2)] == ["completed"]  # it had ended
     code, out, _ = rig_cli(["session", "list", "--db", str(db)])
     assert out.splitlines()[2].endswith("interrupted") and len(out.splitlines()) == 3
     code, out, _ = rig_cli(["export", "--db", str(db), "--session", "2", "--format", "csv",
@@ -188,7 +188,7 @@ def test_close_mistakes_are_one_line_exit_2(db, args, message, rig_cli):
     assert code == 2 and out == ""
     assert err.startswith("rig: error:") and message in err and err.count("\n") == 1
     with open_store(db, create=False) as store:
-        assert store.get_session(2)["status"] == "running"
+        assert store.sessions.get(2)["status"] == "running"
 
 
 def test_close_live_session_with_force(db, rig_cli):
@@ -200,9 +200,9 @@ def test_close_live_session_with_force(db, rig_cli):
 def test_close_on_postgresql(pg_server, rig_cli):
     url = pg_server.new_database()
     with open_store(url) as store:
-        s1 = store.start_session(store.add_patient("PG-1"))
+        s1 = store.sessions.start(store.patients.add("PG-1"))
         assert s1 == 1
-        sid = store.start_session(store.add_patient("PG-2"))
+        sid = store.sessions.start(store.patients.add("PG-2"))
         assert sid == 2
     _orphan(url, _dead_pid())
     code, out, _ = rig_cli(["session", "list", "--db", url])
@@ -210,7 +210,7 @@ def test_close_on_postgresql(pg_server, rig_cli):
     code, out, _ = rig_cli(["session", "close", "--db", url, "--session", "2"])
     assert code == 0 and "closed as interrupted: 5 samples" in out
     with open_store(url, create=False) as store:
-        assert store.get_session(2)["status"] == "interrupted"
+        assert store.sessions.get(2)["status"] == "interrupted"
 
 
 def _servo_db(path):
@@ -219,24 +219,24 @@ def _servo_db(path):
 
     rec = record_servo(seeded_patient(7, star_constraint(7)), 40.0, 50.0)
     with open_store(path) as store:
-        sid = store.start_session(store.add_patient("P-RO"), rig_name="sim-shoulder",
-                                  joint="shoulder", side="right")
-        store.add_sensor(sid, "shoulder", segment="humerus", kind="joint",
-                         port="sim://dynamixel")
-        with store.sample_writer(sid) as w:
+        sid = store.sessions.start(store.patients.add("P-RO"), rig_name="sim-shoulder",
+                                   joint="shoulder", side="right")
+        store.samples.add_sensor(sid, "shoulder", segment="humerus", kind="joint",
+                                 port="sim://dynamixel")
+        with SampleWriter(store, sid) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        store.end_session(sid, status="completed")
-        store.start_session(store.add_patient("P-RUN"), rig_name="sim-shoulder")  # not ended
+        store.sessions.end(sid, status="completed")
+        store.sessions.start(store.patients.add("P-RUN"), rig_name="sim-shoulder")  # not ended
     return sid
 
 
 def test_a_read_only_store_reads_and_refuses_writes_in_one_line(tmp_path):
     sid = _servo_db(tmp_path / "a.db")
     with open_store(tmp_path / "a.db", create=False, readonly=True) as store:
-        assert store.readonly and store.list_sessions()[0]["samples"] > 1000
-        assert store.samples(sid)["q"].shape[1] == 4
+        assert store.readonly and store.sessions.list()[0]["samples"] > 1000
+        assert store.samples.read(sid)["q"].shape[1] == 4
         with pytest.raises(Exception, match="is read-only") as err:
-            store.add_patient("P-NEW")
+            store.patients.add("P-NEW")
         assert "\n" not in str(err.value)
 
 
@@ -369,7 +369,7 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
         assert sorted(p.name for p in share.iterdir()) == ["archive.db"]  # no -wal, -shm
     assert db.read_bytes() == before
     with open_store(db, create=False) as store:  # writable again: nothing was changed
-        assert store.get_session(sid + 1)["status"] == "running"
+        assert store.sessions.get(sid + 1)["status"] == "running"
 
 
 def test_a_wal_left_beside_a_write_protected_archive_is_not_silently_left_out(tmp_path):
@@ -395,7 +395,7 @@ def test_a_wal_left_beside_a_write_protected_archive_is_not_silently_left_out(tm
             open_store(share / "a.db", create=False)
         assert "\n" not in str(err.value)
     with open_store(share / "a.db", create=False) as store:  # copied somewhere writable: all there
-        assert "P-LATE" in {s["pseudonym"] for s in store.list_patients()}
+        assert "P-LATE" in {s["pseudonym"] for s in store.patients.list()}
 
 
 def test_another_applications_database_is_refused_untouched(tmp_path, rig_cli):
@@ -423,7 +423,7 @@ def test_another_applications_database_is_refused_untouched(tmp_path, rig_cli):
     ("jsmith@clinic.org", "an e-mail address"), ("+44 20 7946 0958", "a phone number"),
 ])
 def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, pseudonym, what, rig_cli):
-    from rig.store.store import pseudonym_concerns
+    from rig.store.pseudonyms import pseudonym_concerns
 
     assert pseudonym_concerns(pseudonym)[0].startswith(what.split(" and ")[0][:6])
     code, _, err = rig_cli(["record", "--rig", "sim-shoulder", "--db", str(tmp_path / "w.db"),
@@ -436,6 +436,6 @@ def test_a_pseudonym_that_looks_like_a_person_is_warned_about(tmp_path, pseudony
 
 @pytest.mark.parametrize("pseudonym", ["P-0042", "SIM-0000", "IMU-7", "patient 12", "BENCH"])
 def test_ordinary_pseudonyms_are_not_warned_about(pseudonym):
-    from rig.store.store import pseudonym_concerns, pseudonym_warning
+    from rig.store.pseudonyms import pseudonym_concerns, pseudonym_warning
 
     assert pseudonym_concerns(pseudonym) == [] and pseudonym_warning(pseudonym) is None

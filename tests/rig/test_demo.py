@@ -46,7 +46,7 @@ def test_quick_demo_runs_every_stage_into_one_database(tmp_path, capsys):
 
     # the database holds the whole job
     with open_store(out / "rig.db", create=False) as store:
-        sessions = {s["id"]: s for s in store.list_sessions()}
+        sessions = {s["id"]: s for s in store.sessions.list()}
         kinds = sorted((s["rig_name"], s["kind"]) for s in sessions.values())
         assert kinds == [("sim-imu", "record"), ("sim-shoulder", "enforce"),
                          ("sim-shoulder", "record")]
@@ -59,23 +59,23 @@ def test_quick_demo_runs_every_stage_into_one_database(tmp_path, capsys):
         assert set(imu["samples_by_sensor"]) == {"thorax", "humerus"}
         assert min(imu["samples_by_sensor"].values()) > 1000 and imu["dropped"] == 0
         assert servo["samples"] > 100
-        assert set(store.samples(servo["id"])["kind"]) == {"joint"}
-        bounds = store.boundaries(servo["id"])
+        assert set(store.samples.read(servo["id"])["kind"]) == {"joint"}
+        bounds = store.boundaries.list(servo["id"])
         assert len(bounds) == 1
         assert load_constraint(out / "boundary.yaml") == load_constraint(
             _write(tmp_path / "b.yaml", bounds[0]["constraint_yaml"]))
-        models = store.models_for(session_id=servo["id"])
+        models = store.models.list(session_id=servo["id"])
         assert len(models) == 1 and models[0]["boundary_id"] == bounds[0]["id"]
         assert models[0]["metrics"]["mean_3d_error_pct"] >= 0
         # registered with the evaluate stage's evaluation (issue 37: one evaluation, one
         # verdict — the report below shows it)
         evaluation = models[0]["metrics"]
         assert evaluation["evaluation"] == {"n": 2000, "seed": 3 + 99, "by": "rig evaluate"}
-        (run,) = store.runs(enf["id"])
+        (run,) = store.runs.list(enf["id"])
         assert enf["meta"]["recording_session"] == servo["id"]
         s = run["summary"]
         assert s["cycles"] > 0 and s["max_violation_deg"] <= s["tolerance_deg"]
-        tel = store.telemetry(run["id"])
+        tel = store.runs.telemetry(run["id"])
         assert len(tel["cycle"]) > 0
         assert float(max(tel["violation_deg"])) <= s["tolerance_deg"]
 

@@ -9,7 +9,7 @@ import pytest
 
 from rig.cli import main
 from rig.errors import RigConfigError
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 from rig.store import schema as S
 from rig.store.io import (
     NORM_TOLERANCE,
@@ -217,16 +217,16 @@ def test_long_csv_is_aligned_without_interpolation(tmp_path):
 
 
 def _recorded(store, rng, n=500, shared=True):
-    pid = store.add_patient("P-77")
-    sid = store.start_session(pid, rig_name="sim-imu", joint="shoulder", side="left")
+    pid = store.patients.add("P-77")
+    sid = store.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="left")
     t = 50.0 + np.arange(n) / 400.0
     q = {"thorax": _unit(rng, n), "humerus": _unit(rng, n)}
-    with store.sample_writer(sid) as w:
+    with SampleWriter(store, sid) as w:
         for k in range(n):  # interleaved, as a reader thread delivers them
             w.add(t[k], k / 400.0, "thorax", "sensor", q["thorax"][k], 3)
             tk = t[k] if shared else t[k] + 0.0004
             w.add(tk, k / 400.0, "humerus", "sensor", q["humerus"][k], 2)
-    store.end_session(sid)
+    store.sessions.end(sid)
     return sid, t, q
 
 
@@ -245,7 +245,7 @@ def test_session_export_import_is_exact(tmp_path):
         assert table.rate_hz == pytest.approx(400.0)
         export_session(store, sid, "csv", tmp_path / "s.csv")
         back = read_samples_csv(tmp_path / "s.csv")
-        s = store.samples(sid)
+        s = store.samples.read(sid)
         for k in ("t", "device_t", "q", "status"):
             np.testing.assert_array_equal(back[k], s[k])
         assert list(back["name"]) == list(s["name"]) and list(back["kind"]) == list(s["kind"])
@@ -261,7 +261,7 @@ def test_session_export_aligns_sensors_with_their_own_clocks(tmp_path):
         assert dropped == 0 and len(table) == 300
         np.testing.assert_array_equal(table.get("thorax"), q["thorax"])
         np.testing.assert_array_equal(table.get("humerus"), q["humerus"])
-        empty = store.start_session(store.ensure_patient("P-77"))
+        empty = store.sessions.start(store.patients.ensure("P-77"))
         with pytest.raises(RigConfigError, match="no samples"):
             export_session(store, empty, "sto", tmp_path / "e.sto")
 
@@ -277,12 +277,12 @@ def test_session_with_batch_timestamps_exports_as_sto(tmp_path, device_clock, ca
     q = {"thorax": _unit(rng, n), "humerus": _unit(rng, n)}
     db = tmp_path / "b.db"
     with open_store(db) as store:
-        sid = store.start_session(store.add_patient("P-78"), rig_name="sim-imu")
-        with store.sample_writer(sid) as w:
+        sid = store.sessions.start(store.patients.add("P-78"), rig_name="sim-imu")
+        with SampleWriter(store, sid) as w:
             for k in range(n):
                 w.add(t[k], dev[k], "thorax", "sensor", q["thorax"][k], 3)
                 w.add(t[k], dev[k], "humerus", "sensor", q["humerus"][k], 3)
-        store.end_session(sid)
+        store.sessions.end(sid)
     with pytest.raises(SystemExit) as info:
         main(["export", "--db", str(db), "--session", str(sid), "--format", "sto", "--out",
               str(tmp_path / "b.sto")])
@@ -351,12 +351,12 @@ def test_session_with_raw_exports_its_raw_readings(tmp_path, capsys):
     rng = np.random.default_rng(22)
     s = _samples_with_raw(rng, 200)
     with open_store(tmp_path / "r.db") as store:
-        sid = store.start_session(store.add_patient("P-R"))
-        with store.sample_writer(sid) as w:
+        sid = store.sessions.start(store.patients.add("P-R"))
+        with SampleWriter(store, sid) as w:
             w.add_many(s["t"], s["device_t"], "humerus", "sensor", s["q"], 3, raw=s["raw"])
             w.add_many(s["t"], None, "thorax", "sensor", _unit(rng, 200))  # no raw
-        store.end_session(sid)
-        stored = store.samples(sid)
+        store.sessions.end(sid)
+        stored = store.samples.read(sid)
     out = tmp_path / "s.csv"
     with pytest.raises(SystemExit) as exc:
         main(["export", "--db", str(tmp_path / "r.db"), "--session", str(sid),

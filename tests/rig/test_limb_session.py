@@ -75,18 +75,18 @@ def test_limb_demo_runs_every_stage(leg_demo):
 
 def test_limb_session_in_the_store(leg_demo):
     with open_store(leg_demo["db"], create=False) as store:
-        sess = store.get_session(leg_demo["session"])
+        sess = store.sessions.get(leg_demo["session"])
         assert sess["meta"]["limb"] == "leg" and sess["status"] == "completed"
-        listed = next(s for s in store.list_sessions() if s["id"] == leg_demo["session"])
+        listed = next(s for s in store.sessions.list() if s["id"] == leg_demo["session"])
         assert set(listed["samples_by_sensor"]) == {"pelvis", "thigh", "shank", "foot"}
-        cal = [c for c in store.calibrations(leg_demo["session"]) if c["kind"] == "imu-limb"]
+        cal = [c for c in store.calibrations.list(leg_demo["session"]) if c["kind"] == "imu-limb"]
         assert len(cal) == 1 and set(cal[0]["data"]["windows_s"]) == {"static", "hip", "knee",
                                                                        "ankle"}
         # the recorder's range of motion: every joint's table
         assert set(sess["meta"]["rom"]) == {"hip", "knee", "ankle"}
         assert sess["meta"]["rom"]["knee"]["flexion"] > 60.0
         # the simulated patient's returns to neutral, marked as they ended
-        ck = [c for c in store.calibrations(leg_demo["session"])
+        ck = [c for c in store.calibrations.list(leg_demo["session"])
               if c["kind"] == "neutral-checkpoint"]
         assert len(ck) >= 2 and all(c["data"]["time"] in ("device_t", "t") for c in ck)
     chain = read_chain(str(leg_demo["db"]), leg_demo["session"])
@@ -131,8 +131,8 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
                                                                           tmp_path):
     db, sid = leg_demo["db"], leg_demo["session"]
     with open_store(db, create=False) as store:
-        limbs = store.boundaries(sid, limb=True)
-        joints = store.boundaries(sid, limb=False)
+        limbs = store.boundaries.list(sid, limb=True)
+        joints = store.boundaries.list(sid, limb=False)
     # the demo's boundary stage ran `rig boundary --chain` on the session: its limb file is
     # stored with it, told apart from a joint's constraint (what `rig enforce --session` reads)
     assert limbs and limbs[-1]["meta"]["kind"] == "limb" and limbs[-1]["meta"]["limb"] == "leg"
@@ -142,7 +142,7 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     # the demo's train stage registered its limb model with the session and that limb file;
     # `rig report` without --model finds it and scores it
     with open_store(db, create=False) as store:
-        models = store.models_for(session_id=sid)
+        models = store.models.list(session_id=sid)
     assert [(m["path"], m["boundary_id"]) for m in models] == [
         (str(leg_demo["out"] / "leg.onnx"), limbs[-1]["id"])]
     code, _, err = rig_cli(["report", "--db", db, "--session", sid, "--out",
@@ -174,7 +174,7 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     assert (tmp_path / "leg2.yaml").is_file()
     assert not re.search(r"^\s+stored\s+boundary", out, re.M)
     with open_store(db, create=False) as store:
-        assert len(store.boundaries(sid, limb=True)) == len(limbs)
+        assert len(store.boundaries.list(sid, limb=True)) == len(limbs)
 
 
 @pytest.mark.parametrize("args, message", [
@@ -291,8 +291,8 @@ def test_the_report_shows_the_evaluate_stages_evaluation_and_words_fit_the_leg(l
 
     stage = leg_demo["result"].stage("evaluate")
     with open_store(leg_demo["db"], create=False) as store:
-        (row,) = store.models_for(session_id=leg_demo["session"])
-        listing = format_sessions(store.list_sessions())
+        (row,) = store.models.list(session_id=leg_demo["session"])
+        listing = format_sessions(store.sessions.list())
     metrics = row["metrics"]
     assert metrics["evaluation"] == {"n": 600, "seed": 5 + 77, "by": "rig evaluate"}
     assert stage.figures["model_id"] == row["id"]

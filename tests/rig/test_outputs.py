@@ -15,7 +15,7 @@ import pytest
 
 from models.errors import OutputPathError
 from models.fileio import check_output
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 
 ROOT = Path(__file__).resolve().parents[2]
 SHAPE = ROOT / "models/shapes/original.yaml"
@@ -50,13 +50,13 @@ def db(tmp_path):
     path = tmp_path / "clinic.db"
     rng = np.random.default_rng(3)
     with open_store(path) as store:
-        sid = store.start_session(store.add_patient("P-OUT"), rig_name="sim-shoulder",
-                                  joint="shoulder", side="right")
+        sid = store.sessions.start(store.patients.add("P-OUT"), rig_name="sim-shoulder",
+                                   joint="shoulder", side="right")
         q = rng.normal(size=(200, 4))
         q /= np.linalg.norm(q, axis=1, keepdims=True)
-        with store.sample_writer(sid) as w:
+        with SampleWriter(store, sid) as w:
             w.add_many(np.arange(200) / 50.0, None, "shoulder", "joint", q)
-        store.end_session(sid, status="completed")
+        store.sessions.end(sid, status="completed")
     return path
 
 

@@ -48,8 +48,8 @@ def test_patient_files_are_owner_only(tmp_path, capsys, open_umask):
     # a session, its export and report
     db = tmp_path / "s.db"
     with open_store(db) as store:
-        sid = store.start_session(store.add_patient("P-0042"), rig_name="x")
-        store.end_session(sid)
+        sid = store.sessions.start(store.patients.add("P-0042"), rig_name="x")
+        store.sessions.end(sid)
     _ok(["report", "--db", str(db), "--session", str(sid), "--out", str(tmp_path / "r.html")],
         capsys)
     # a short enforcement run with telemetry and summary

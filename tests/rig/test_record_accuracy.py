@@ -37,10 +37,10 @@ def test_imu_patient_recorded_through_the_whole_stack(tmp_path):
     assert lo < 0 < hi and tlo < 0 < thi
     # the stored session says what it is
     with open_store(tmp_path / "imu-7.db", create=False) as store:
-        sess = store.list_sessions()[-1]
-        meta = store.get_session(sess["id"])["meta"]
+        sess = store.sessions.list()[-1]
+        meta = store.sessions.get(sess["id"])["meta"]
         assert meta["calibrated"] is True
-        kinds = [c["kind"] for c in store.calibrations(sess["id"])]
+        kinds = [c["kind"] for c in store.calibrations.list(sess["id"])]
         # the guided calibration, then the patient's returns to neutral every 20 s of the 300 s
         assert kinds.count("imu-alignment") == 1
         assert kinds.count("neutral-checkpoint") >= 12 and set(kinds) == {

@@ -68,9 +68,9 @@ def test_kill_9_loses_at_most_one_second(tmp_path, rig_cli):
 
     with open_store(db) as store:
         assert store.check_integrity() == "ok"
-        s = store.get_session(session_id)
+        s = store.sessions.get(session_id)
         assert s["status"] == "running"  # nobody lived to close it
-        data = store.samples(session_id)
+        data = store.samples.read(session_id)
     t = np.asarray(data["t"])
     assert len(t) > 0
     # at most one second of samples (their own host timestamps) missing
@@ -99,10 +99,10 @@ def test_kill_9_loses_at_most_one_second(tmp_path, rig_cli):
     assert code == 0, err
     assert f"closed as interrupted: {len(t)} samples, ended at its last sample" in out
     with open_store(db, create=False) as store:
-        s = store.get_session(session_id)
+        s = store.sessions.get(session_id)
         assert s["status"] == "interrupted" and s["ended_at"] == row["last_sample_at"]
         assert s["meta"]["recovered"]["liveness"] == "interrupted"
-        assert len(store.calibrations(session_id)) == 1
+        assert len(store.calibrations.list(session_id)) == 1
     code, _, err = rig_cli(["session", "close", "--db", db, "--session", session_id])
     assert code == 2 and err.count("\n") == 1
     assert "is not running: it ended as 'interrupted'" in err

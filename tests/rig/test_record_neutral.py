@@ -66,9 +66,9 @@ def test_checkpoints_are_marked_and_stored_in_the_samples_clock(recorded):
     res, limb, rig = recorded.res, recorded.limb, recorded.rig
     assert res.status == "completed" and res.dropped == 0
     with open_store(recorded.db, create=False) as store:
-        cals = store.calibrations(res.session_id)
-        s = store.samples(res.session_id, name="humerus")
-        meta = store.get_session(res.session_id)["meta"]
+        cals = store.calibrations.list(res.session_id)
+        s = store.samples.read(res.session_id, name="humerus")
+        meta = store.sessions.get(res.session_id)["meta"]
     cps = [c for c in cals if c["kind"] == "neutral-checkpoint"]
     [cal] = [c for c in cals if c["kind"] == "imu-alignment"]
     # every window of the patient's schedule that ended during the recording, none other
@@ -99,7 +99,7 @@ def test_read_path_applies_them_and_the_twist_error_drops(recorded):
     with open_store(recorded.db, create=False) as store:
         on = joint_orientations_from_store(store, res.session_id)
         off = joint_orientations_from_store(store, res.session_id, heading=False)
-        s = store.samples(res.session_id, name="humerus")
+        s = store.samples.read(res.session_id, name="humerus")
     hc = on.provenance["heading_correction"]
     assert hc["neutral_checkpoints"] == 5 and hc["accepted"] >= 4
     assert hc["anchored"] is True and hc["clock"] == "device_t"

@@ -87,14 +87,14 @@ def test_sim_imu_records_and_completes(tmp_path):
     assert "recording, uncalibrated" in out.getvalue()
     assert "calibration stored" not in out.getvalue()
     with open_store(db) as store:
-        s = store.get_session(res.session_id)
+        s = store.sessions.get(res.session_id)
         assert s["meta"]["calibrated"] is False and "rom" not in s["meta"]
-        assert store.calibrations(res.session_id) == []
+        assert store.calibrations.list(res.session_id) == []
         assert s["status"] == "completed" and s["meta"]["samples"] == res.samples
-        data = store.samples(res.session_id)
+        data = store.samples.read(res.session_id)
         assert len(data["t"]) == res.samples > 0
         assert set(data["name"]) == {"thorax", "humerus"}
-        assert [a["text"] for a in store.annotations(res.session_id)] == ["half a second"]
+        assert [a["text"] for a in store.annotations.list(res.session_id)] == ["half a second"]
     assert "[completed]" in out.getvalue()
 
 
@@ -117,16 +117,16 @@ def test_sim_imu_records_calibrates_and_completes(tmp_path):
     assert res.calibrated is True and res.calibration.kind == "imu-alignment"
     assert {"session", "calibrated", "recording"} <= set(events)
     with open_store(db) as store:
-        s = store.get_session(res.session_id)
+        s = store.sessions.get(res.session_id)
         assert s["status"] == "completed" and s["dropped"] == 0
         assert s["meta"]["samples"] == res.samples
-        data = store.samples(res.session_id)
+        data = store.samples.read(res.session_id)
         assert len(data["t"]) == res.samples > 0
         assert set(data["name"]) == {"thorax", "humerus"}
-        cals = store.calibrations(res.session_id)
+        cals = store.calibrations.list(res.session_id)
         assert len(cals) == 1 and cals[0]["residual_deg"] == pytest.approx(
             res.calibration.residual_deg)
-        notes = [a["text"] for a in store.annotations(res.session_id)]
+        notes = [a["text"] for a in store.annotations.list(res.session_id)]
         assert notes == ["start note", "one second in"]
         # every frame's two readings are paired (by their shared device timestamp: host times
         # are per batch and repeat), and the calibration status comes along for the extractor
@@ -161,9 +161,9 @@ def test_vanished_device_ends_the_session_cleanly(tmp_path):
     assert res.status == "device_lost" and res.error
     assert res.samples > 0
     with open_store(db) as store:
-        s = store.get_session(res.session_id)
+        s = store.sessions.get(res.session_id)
         assert s["status"] == "device_lost"
-        assert len(store.samples(res.session_id)["t"]) == res.samples
+        assert len(store.samples.read(res.session_id)["t"]) == res.samples
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -195,6 +195,6 @@ def test_a_signal_ends_rig_record_cleanly_and_says_so(tmp_path, sig, code):
     end = json.loads(rest.strip().splitlines()[-1])
     assert end["event"] == "end" and end["status"] == "interrupted"
     with open_store(db) as store:
-        s = store.get_session(end["session_id"])
+        s = store.sessions.get(end["session_id"])
         assert s["status"] == "interrupted"
-        assert len(store.samples(end["session_id"])["t"]) == end["samples"] > 0
+        assert len(store.samples.read(end["session_id"])["t"]) == end["samples"] > 0

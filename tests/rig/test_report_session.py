@@ -15,7 +15,7 @@ from rig.demo.joint import SIZES, patient_constraint, write_rig_configs
 from rig.loop import EnforceRequest, run_enforce
 from rig.record import PlainDisplay, RecordOptions, record_session
 from rig.report.session import report_data_for_session
-from rig.store import open_store
+from rig.store import SampleWriter, open_store
 from rig.training import TrainRequest, run_train
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
@@ -46,9 +46,9 @@ def recorded(tmp_path_factory):
     assert info.value.code == 0
     run_train(TrainRequest(tmp / "model.onnx", constraint=str(tmp / "boundary.yaml")))
     with open_store(db) as store:
-        store.add_model(tmp / "model.onnx", session_id=sid)
-        empty = store.start_session(store.ensure_patient("P-EMPTY"), kind="record")
-        store.end_session(empty)
+        store.models.add(tmp / "model.onnx", session_id=sid)
+        empty = store.sessions.start(store.patients.ensure("P-EMPTY"), kind="record")
+        store.sessions.end(empty)
     code = run_enforce(EnforceRequest(rig=str(rigs["sim-shoulder-live"]),
                                       model=str(tmp / "model.onnx"), targets="script:adversarial",
                                       duration_s=1.0, db=str(db), session_id=sid)).exit_status
@@ -60,7 +60,7 @@ def test_report_data_comes_from_the_store(recorded):
     with open_store(recorded["db"]) as store:
         data = report_data_for_session(store, recorded["session"], reference=recorded["truth"],
                                        age=45, sex="female", eval_n=600)
-        enf = next(s for s in store.list_sessions() if s["kind"] == "enforce")
+        enf = next(s for s in store.sessions.list() if s["kind"] == "enforce")
         enforce_view = report_data_for_session(store, enf["id"], eval_n=600)
     assert data.patient == "P-REPORT" and data.side == "right" and data.samples > 100
     rows = {r.movement: r for r in data.rom_rows}
@@ -150,22 +150,22 @@ def test_a_report_says_why_it_has_no_range_and_when_a_session_was_cut_short(tmp_
     rec = record_servo(seeded_patient(7, star_constraint(7)), 60.0, 50.0)
     db = tmp_path / "r.db"
     with open_store(db) as store:
-        pid = store.add_patient("P-CUT")
+        pid = store.patients.add("P-CUT")
         # an IMU session recorded without the calibration steps
-        raw = store.start_session(pid, rig_name="sim-imu", joint="shoulder", side="right")
+        raw = store.sessions.start(pid, rig_name="sim-imu", joint="shoulder", side="right")
         for name in ("thorax", "humerus"):
-            store.add_sensor(raw, name, segment=name, kind="sensor", port="sim://imu-stream")
-        with store.sample_writer(raw) as w:
+            store.samples.add_sensor(raw, name, segment=name, kind="sensor", port="sim://imu-stream")
+        with SampleWriter(store, raw) as w:
             w.add_many(rec.t, rec.t, "thorax", "sensor", rec.thorax, 0xFF)
             w.add_many(rec.t, rec.t, "humerus", "sensor", rec.limb, 0xFF)
-        store.end_session(raw, status="completed", meta={"simulated": True})
+        store.sessions.end(raw, status="completed", meta={"simulated": True})
         # a servo session stopped by Ctrl-C
-        cut = store.start_session(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
-        store.add_sensor(cut, "shoulder", segment="humerus", kind="joint",
-                         port="sim://dynamixel")
-        with store.sample_writer(cut) as w:
+        cut = store.sessions.start(pid, rig_name="sim-shoulder", joint="shoulder", side="right")
+        store.samples.add_sensor(cut, "shoulder", segment="humerus", kind="joint",
+                                 port="sim://dynamixel")
+        with SampleWriter(store, cut) as w:
             w.add_many(rec.t, None, "shoulder", "joint", rec.limb, 0)
-        store.end_session(cut, status="interrupted", meta={"simulated": True})
+        store.sessions.end(cut, status="interrupted", meta={"simulated": True})
         page = report_for_session(store, raw, tmp_path / "raw.html", eval_n=200)
         html = page.read_text()
         assert ">Range of motion</h2>" in html and "No range of motion" in html
@@ -195,7 +195,7 @@ def test_the_report_shows_the_evaluation_stored_with_the_model(recorded, tmp_pat
     metrics = run_evaluate(EvaluateRequest(str(model), str(recorded["tmp"] / "boundary.yaml"),
                                            n=300, seed=7)).metrics
     with open_store(db) as store:
-        mid = store.add_model(model, session_id=sid, metrics=evaluation_record(
+        mid = store.models.add(model, session_id=sid, metrics=evaluation_record(
             metrics, n=300, seed=7, by="rig evaluate"))
         data = report_data_for_session(store, sid, eval_n=600)
         assert data.model_metrics["held-out orientations"] == 300  # not a fresh 600
@@ -206,7 +206,7 @@ def test_the_report_shows_the_evaluation_stored_with_the_model(recorded, tmp_pat
                                                     "300 held-out inputs, seed 7")
         # the stored verdict stands, whatever another held-out set would give
         missed = {**metrics, "p99_angular_error_deg": 5.3}
-        store.add_model(model, session_id=sid, metrics=evaluation_record(
+        store.models.add(model, session_id=sid, metrics=evaluation_record(
             missed, n=300, seed=7, by="rig evaluate"))
         data = report_data_for_session(store, sid, eval_n=600)
         assert data.model_verdict == evaluation_verdict(missed)[1]

@@ -30,17 +30,17 @@ CHILD = textwrap.dedent(
     f"""
     import sys, time
     import numpy as np
-    from rig.store import open_store
+    from rig.store import SampleWriter, open_store
 
     def q_of(i, phase):
         a = 0.001 * i + phase
         return [np.cos(a), np.sin(a), 0.0, 0.0]
 
     store = open_store(sys.argv[1])
-    sid = store.start_session(store.add_patient("CRASH-1"), rig_name="sim-imu",
-                              joint="shoulder", side="right")
+    sid = store.sessions.start(store.patients.add("CRASH-1"), rig_name="sim-imu",
+                               joint="shoulder", side="right")
     print("session", sid, flush=True)
-    w = store.sample_writer(sid, flush_interval_s=0.5)
+    w = SampleWriter(store, sid, flush_interval_s=0.5)
     k = 0
     start = time.monotonic()
     while True:
@@ -90,13 +90,13 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         con.close()
 
     with open_store(db, create=False) as store:
-        session = store.get_session(sid)
+        session = store.sessions.get(sid)
         assert session["status"] == "running"  # it never ended, and says so
-        live = store.session_liveness(sid)  # ... but its writer is gone
+        live = store.sessions.liveness(sid)  # ... but its writer is gone
         assert live.state == "interrupted" and f"pid {proc.pid} " in live.reason
         counts = {}
         for name, phase in (("thorax", 0.0), ("humerus", 1.0)):
-            s = store.samples(sid, name)
+            s = store.samples.read(sid, name)
             m = s["t"].size
             counts[name] = m
             idx = np.arange(m)
@@ -113,10 +113,10 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         assert abs(counts["thorax"] - counts["humerus"]) <= 1
         # closed as interrupted at its last sample (the samples' clock is the host's monotonic
         # one here, as in a recording), then still readable and exportable
-        closed = store.close_interrupted(sid)
-        session = store.get_session(sid)
+        closed = store.sessions.close_interrupted(sid)
+        session = store.sessions.get(sid)
         assert session["status"] == "interrupted"
-        assert session["ended_at"] == closed["ended_at"] == store.list_sessions()[0][
+        assert session["ended_at"] == closed["ended_at"] == store.sessions.list()[0][
             "last_sample_at"]
         assert session["started_at"] <= session["ended_at"] <= session["heartbeat_at"]
         info = export_session(store, sid, "sto", tmp_path / "crash.sto")
@@ -124,4 +124,4 @@ def test_kill_9_loses_at_most_one_second(tmp_path):
         assert len(table) == info["rows"] == min(counts.values())
         export_session(store, sid, "csv", tmp_path / "crash.csv")
         assert read_samples_csv(tmp_path / "crash.csv")["t"].size == sum(counts.values())
-        assert store.list_sessions()[0]["samples"] == sum(counts.values())
+        assert store.sessions.list()[0]["samples"] == sum(counts.values())

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from rig.errors import RigConfigError
-from rig.store import open_store
+from rig.store import SampleWriter, TelemetryWriter, open_store
 from rig.store import schema as S
 from rig.store.liveness import (
     IDLE_HEARTBEAT_S,
@@ -126,12 +126,12 @@ def _set(store, sid, **values):
 
 
 def test_writers_record_who_writes_and_beat_at_each_commit(store):
-    sid = store.start_session(store.add_patient("P-1"))
-    s = store.get_session(sid)
+    sid = store.sessions.start(store.patients.add("P-1"))
+    s = store.sessions.get(sid)
     me = this_writer()
     assert (s["writer_host"], s["writer_pid"], s["writer_start"]) == (me.host, me.pid, me.start)
     assert s["heartbeat_at"] is None and s["last_sample_at"] is None
-    w = store.sample_writer(sid, flush_interval_s=1.0)
+    w = SampleWriter(store, sid, flush_interval_s=1.0)
     try:
         _set(store, sid, heartbeat_at=None)
         t = time.monotonic()  # the samples' clock, as the sources stamp it
@@ -139,30 +139,30 @@ def test_writers_record_who_writes_and_beat_at_each_commit(store):
                    np.tile([1.0, 0, 0, 0], (4, 1)))
         w.flush()  # (or the writer's thread did)
         assert w.written == 4
-        s = store.get_session(sid)
+        s = store.sessions.get(sid)
         assert s["heartbeat_at"] is not None and s["last_sample_at"] <= s["heartbeat_at"]
         # idle: nothing to commit, the heartbeat is still refreshed once it is due
         _set(store, sid, heartbeat_at=0.0)
         w._beat -= IDLE_HEARTBEAT_S  # as if that long had passed since the last beat
         assert w.flush() == 0
-        assert store.get_session(sid)["heartbeat_at"] > 0.0
+        assert store.sessions.get(sid)["heartbeat_at"] > 0.0
     finally:
         w.close()
     # an enforcement session beats through its telemetry writer
-    rid = store.start_run(sid)
+    rid = store.runs.start(sid)
     _set(store, sid, heartbeat_at=None)
-    with store.telemetry_writer(rid) as tw:
+    with TelemetryWriter(store, rid) as tw:
         tw.add({"t_s": 0.0})
-    assert store.get_session(sid)["heartbeat_at"] is not None
+    assert store.sessions.get(sid)["heartbeat_at"] is not None
 
 
 def _killed_session(store, n=20):
     """A session whose samples were committed by a writer that then vanished."""
-    sid = store.start_session(store.add_patient("P-killed"))
-    with store.sample_writer(sid) as w:
+    sid = store.sessions.start(store.patients.add("P-killed"))
+    with SampleWriter(store, sid) as w:
         w.add_many(100.0 + np.arange(n) * 0.01, None, "humerus", "sensor",
                    np.tile([1.0, 0, 0, 0], (n, 1)))
-    rid = store.start_run(sid)
+    rid = store.runs.start(sid)
     _set(store, sid, writer_host="rig-pc", writer_pid=4242, writer_start=f"{BOOT}/777",
          started_at=1000.0, heartbeat_at=1500.0, last_sample_at=1499.6)
     return sid, rid
@@ -170,52 +170,52 @@ def _killed_session(store, n=20):
 
 def test_list_shows_the_killed_session_interrupted_with_its_last_sample(store):
     sid, _ = _killed_session(store)
-    [row] = store.list_sessions(host="rig-pc", now=1501.0, probe=probe_of({}))
+    [row] = store.sessions.list(host="rig-pc", now=1501.0, probe=probe_of({}))
     assert row["status"] == "running" and row["liveness"]["state"] == "interrupted"
     assert row["samples"] == 20 and row["last_sample_at"] == 1499.6
-    [row] = store.list_sessions(host="rig-pc", probe=probe_of({4242: f"{BOOT}/777"}))
+    [row] = store.sessions.list(host="rig-pc", probe=probe_of({4242: f"{BOOT}/777"}))
     assert row["liveness"]["state"] == "live"
     # a last sample outside the session's life is clamped into it
     _set(store, sid, last_sample_at=3.0)
-    assert store.list_sessions(host="x", now=1501.0)[0]["last_sample_at"] == 1000.0
+    assert store.sessions.list(host="x", now=1501.0)[0]["last_sample_at"] == 1000.0
 
 
 def test_close_refuses_a_live_writer_and_closes_a_dead_one(store):
     sid, rid = _killed_session(store)
     live = probe_of({4242: f"{BOOT}/777"})
     with pytest.raises(RigConfigError, match=r"still being written .*use --force"):
-        store.close_interrupted(sid, host="rig-pc", probe=live)
-    assert store.get_session(sid)["status"] == "running"
-    res = store.close_interrupted(sid, host="rig-pc", now=1501.0, probe=probe_of({}))
+        store.sessions.close_interrupted(sid, host="rig-pc", probe=live)
+    assert store.sessions.get(sid)["status"] == "running"
+    res = store.sessions.close_interrupted(sid, host="rig-pc", now=1501.0, probe=probe_of({}))
     assert res == {"id": sid, "ended_at": 1499.6, "samples": 20,
                    "liveness": {"state": "interrupted",
                                 "reason": "writer pid 4242 on rig-pc is gone"}}
-    s = store.get_session(sid)
+    s = store.sessions.get(sid)
     assert s["status"] == "interrupted" and s["ended_at"] == 1499.6
     assert s["meta"]["recovered"]["forced"] is False
     assert s["meta"]["recovered"]["end"] == "last sample"
-    run = store.get_run(rid)
+    run = store.runs.get(rid)
     assert run["status"] == "interrupted" and run["ended_at"] == 1499.6
-    assert store.samples(sid)["t"].size == 20  # the data stays readable
+    assert store.samples.read(sid)["t"].size == 20  # the data stays readable
     with pytest.raises(RigConfigError, match="is not running: it ended as 'interrupted'"):
-        store.close_interrupted(sid, force=True)
+        store.sessions.close_interrupted(sid, force=True)
 
 
 def test_close_with_force_and_without_samples(store):
-    sid = store.start_session(store.add_patient("P-enf"), kind="enforce")
+    sid = store.sessions.start(store.patients.add("P-enf"), kind="enforce")
     _set(store, sid, started_at=1000.0, heartbeat_at=1200.0)
     with pytest.raises(RigConfigError, match="still being written"):
-        store.close_interrupted(sid)  # this very process: alive
-    res = store.close_interrupted(sid, force=True)
+        store.sessions.close_interrupted(sid)  # this very process: alive
+    res = store.sessions.close_interrupted(sid, force=True)
     assert res["ended_at"] == 1200.0 and res["samples"] == 0  # its writer's last commit
-    assert store.get_session(sid)["meta"]["recovered"]["forced"] is True
+    assert store.sessions.get(sid)["meta"]["recovered"]["forced"] is True
     with pytest.raises(RigConfigError, match="no session 99"):
-        store.close_interrupted(99)
+        store.sessions.close_interrupted(99)
 
 
 def test_stale_heartbeat_from_another_host_can_be_closed(store):
     sid, _ = _killed_session(store)
     with pytest.raises(RigConfigError, match="still being written"):
-        store.close_interrupted(sid, host="laptop", now=1520.0, stale_after_s=30.0)
-    res = store.close_interrupted(sid, host="laptop", now=1531.0, stale_after_s=30.0)
+        store.sessions.close_interrupted(sid, host="laptop", now=1520.0, stale_after_s=30.0)
+    res = store.sessions.close_interrupted(sid, host="laptop", now=1531.0, stale_after_s=30.0)
     assert res["liveness"]["state"] == "interrupted" and res["ended_at"] == 1499.6
