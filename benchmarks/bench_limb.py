@@ -49,9 +49,10 @@ from models.limb_evaluation import (
     held_out_postures,
     uncoupled_model,
 )
-from models.limb_model import export_limb_model, load_limb_model
+from models.limb_model import export_limb_model
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import fit_limb_fields, fit_swing_field
+from models.onnx_io import load_model
 
 TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
            ("frac_invalid_left_1deg", "invalid left > 1° out (fraction)", "<= 0.01"),
@@ -90,13 +91,13 @@ def method(name, limb, oracle, tmp: Path, q):
         fields = {k: dataclasses.replace(v, steps=steps) for k, v in fields.items()}
         tag = "-".join(f"{x:g}" for x in steps)
         path = export_limb_model(limb, tmp / f"{limb.name}-network@{tag}.onnx", fields, facts)
-        return load_limb_model(path, limb).correction
+        return load_model(path, limb).correction
     if name in ("geometric", "network"):
         fields, facts, cpu = None, None, 0.0
         if name == "network":
             fields, facts, cpu = _fields(limb)
         path = export_limb_model(limb, tmp / f"{limb.name}-{name}.onnx", fields, facts)
-        model = load_limb_model(path, limb)
+        model = load_model(path, limb)
         f = facts or {}
         SPEED[name].append({**speed(model, q), "train_cpu_s": cpu,
                             "train_wall_s": f.get("seconds", 0.0),

@@ -25,6 +25,36 @@ import numpy as np
 
 from models import quaternion as quat
 
+#: Metric names renamed, old → today's: one spelling per metric, a one joint's and a limb's
+#: (issue 38). A stored evaluation (an ONNX file's metadata, a registered model's metrics) is
+#: read through :func:`current_metric_names`.
+RENAMED_METRICS = {"frac_invalid_left_1deg": "frac_invalid_violating_1deg"}
+
+
+def current_metric_names(metrics: dict) -> dict:
+    """``metrics`` with every old name of :data:`RENAMED_METRICS` read as today's (a value
+    under both names keeps today's); the same dict when none is old."""
+    if not any(k in metrics for k in RENAMED_METRICS):
+        return metrics
+    out = {}
+    for k, v in metrics.items():
+        new = RENAMED_METRICS.get(k)
+        if new is None:
+            out[k] = v
+        elif new not in metrics:
+            out[new] = v
+    return out
+
+
+def renamed_metrics_note(metrics: dict) -> str | None:
+    """One line naming the renamed metrics ``metrics`` still spells the old way (None when
+    none): what a command shows when it reads an old stored evaluation."""
+    old = [k for k in metrics if k in RENAMED_METRICS]
+    if not old:
+        return None
+    return ("note: metric " + ", ".join(f"{k!r} is now {RENAMED_METRICS[k]!r}" for k in old)
+            + " (renamed: one spelling for a joint and a limb)")
+
 
 def mse(pred: np.ndarray, target: np.ndarray) -> float:
     """Mean squared error over all entries of (N, 4) arrays."""

@@ -143,7 +143,7 @@ def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
     from models.onnx_io import load_model
     from models.oracle import ConstraintOracle
 
-    model = load_model(model_path)
+    model = load_model(model_path, limb=False)
     constraint = loads_constraint(model.constraint_yaml, source=str(model_path))
     oracle = ConstraintOracle(constraint)
     q = held_out_orientations(constraint, n, seed, oracle=oracle)
@@ -371,11 +371,11 @@ def _last_registered_model(store, session_id: int, accept=None) -> tuple[int, st
 def _is_limb_model_of(joints):
     """``accept`` for :func:`_last_registered_model`: a limb model of ``joints``."""
     from models.errors import ModelsError
-    from models.limb_model import load_limb_model
+    from models.onnx_io import load_model
 
     def accept(path: str) -> bool:
         try:
-            return load_limb_model(path).limb.joint_names == tuple(joints)
+            return load_model(path, limb=True).limb.joint_names == tuple(joints)
         except (ModelsError, OSError):
             return False  # a single joint's model, or a file replaced since
     return accept
@@ -407,10 +407,10 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
         if registered is not None:
             model = registered[1]
     if model is not None:
-        from models.limb_model import load_limb_model
+        from models.onnx_io import load_model
         from rig.training.limb import evaluate_limb
 
-        limb = load_limb_model(str(model)).limb
+        limb = load_model(str(model), limb=True).limb
         if limb.joint_names != chain.joints:
             raise RigConfigError(f"--model {model}: a model of the joints "
                                  f"{', '.join(limb.joint_names)}, the session recorded "
@@ -541,7 +541,7 @@ def _check_model_for_session(model, sess: dict, session_id: int) -> None:
     from models.constraint import loads_constraint
     from models.onnx_io import load_model
 
-    text = load_model(model).constraint_yaml
+    text = load_model(model, limb=False).constraint_yaml
     if not text:
         return
     mc = loads_constraint(text, source=f"{model} (embedded constraint)")

@@ -88,8 +88,9 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
     from a limb dataset (``data``: its file and content hash) replace the drawn ones."""
     from models.datasets import field_joints
     from models.errors import ModelFileError
-    from models.limb_model import export_limb_model, load_limb_model
+    from models.limb_model import export_limb_model
     from models.nn.ndf import FieldSpec, fit_limb_fields
+    from models.onnx_io import load_model
 
     preset = preset or LIMB_PRESETS[0]
     if preset not in LIMB_PRESETS:
@@ -113,7 +114,7 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
         why = ("no coupled polygon swing to learn; " if preset == "network" else "")
         echo(f"building {limb.name!r}: {why}the exact limb oracle compiled (geometric)")
     path = export_limb_model(limb, out, fields, facts)
-    model = load_limb_model(path, limb)
+    model = load_model(path, limb)
     metrics = _score(model, limb, HELD_OUT_N, seed + 1_000_003)
     seconds = time.perf_counter() - t0
     echo(f"wrote {path} ({model.metadata['jointlimits.method']}, "
@@ -126,9 +127,9 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
 
 def evaluate_limb(model_path: str, limb, n: int, seed: int) -> tuple[dict, str]:
     """Score an exported limb model on ``n`` fresh held-out postures: ``(metrics, what)``."""
-    from models.limb_model import load_limb_model
+    from models.onnx_io import load_model
 
-    model = load_limb_model(model_path, limb)
+    model = load_model(model_path, limb)
     metrics = _score(model, limb, n, seed)
     return metrics, (f"{model_path}: limb model ({model.metadata['jointlimits.method']}), {n} "
                      f"held-out postures of {limb.name!r} (a third uniform, a third near a "

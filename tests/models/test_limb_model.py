@@ -19,8 +19,9 @@ from models.limb_evaluation import (
     held_out_postures,
     random_limb,
 )
-from models.limb_model import FORMAT, export_limb_model, load_limb_model
+from models.limb_model import FORMAT, export_limb_model
 from models.limb_oracle import LimbOracle
+from models.onnx_io import load_model
 
 ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger joint
     {"name": "shoulder", "parent": "thorax", "child": "upper-arm", "constraint": {
@@ -51,7 +52,7 @@ ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger 
 def leg_model(tmp_path_factory):
     limb = random_limb(HELD_OUT_LIMB_SEED - 1, "leg")  # a tuning seed
     path = export_limb_model(limb, tmp_path_factory.mktemp("m") / "leg.onnx")
-    return limb, LimbOracle(limb), load_limb_model(path, limb)
+    return limb, LimbOracle(limb), load_model(path, limb)
 
 
 def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model):
@@ -73,7 +74,7 @@ def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model)
 def test_coupled_cones_and_hinges_and_four_joints(tmp_path):
     limb = loads_limb(yaml.safe_dump(ARM))
     oracle = LimbOracle(limb)
-    model = load_limb_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
+    model = load_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
     rng = np.random.default_rng(12)
     q = Q.random_quaternions(4 * 4000, rng).reshape(4000, 4, 4)
     # hinges near their axes, bent anywhere from -40° to 180°
@@ -94,7 +95,7 @@ def test_one_posture_metadata_and_file_mode(leg_model, tmp_path):
         np.testing.assert_allclose(model.correction(q[i]), batch[i], atol=1e-6)
     # a batch larger than a chunk runs in chunks on worker threads: the same corrections,
     # in order, as one call on the whole batch
-    big = held_out_postures(limb, 2 * model.CHUNK + 37, 14, oracle=oracle).astype(np.float32)
+    big = held_out_postures(limb, 2 * model.contract.chunk + 37, 14, oracle=oracle).astype(np.float32)
     whole = model.session.run(None, {"orientations": big})[0]
     np.testing.assert_allclose(model.correction(big), whole, atol=1e-6)
     assert model.metadata["jointlimits.format"] == FORMAT
@@ -109,13 +110,13 @@ def test_the_wrong_file_is_refused_in_one_line(leg_model, tmp_path):
     _, _, model = leg_model
     other = random_limb(HELD_OUT_LIMB_SEED - 2, "arm")
     with pytest.raises(ModelFileError, match="the model was made for other limits"):
-        load_limb_model(model.path, other)
+        load_model(model.path, other)
     junk = tmp_path / "junk.onnx"
     junk.write_bytes(b"not a model")
     with pytest.raises(ModelFileError, match="not an ONNX model"):
-        load_limb_model(junk)
+        load_model(junk)
     with pytest.raises(ModelFileError, match="cannot read model file"):
-        load_limb_model(tmp_path / "missing.onnx")
+        load_model(tmp_path / "missing.onnx")
     from models.constraint import JointConstraint
     from models.field import FieldModel
     from models.onnx_io import to_onnx
@@ -125,4 +126,4 @@ def test_the_wrong_file_is_refused_in_one_line(leg_model, tmp_path):
     single.write_bytes(to_onnx(FieldModel.from_constraint(c, grid=20), constraint_yaml=c.to_yaml())
                        .SerializeToString())
     with pytest.raises(ModelFileError, match="not a limb model"):
-        load_limb_model(single)
+        load_model(single, limb=True)
