@@ -40,9 +40,9 @@ import numpy as np
 
 from rig.errors import RigConfigError
 from rig.report.page import ReportData, rom_rows, write_report
-from rig.training.verdict import MODEL_TARGETS, model_verdict  # the one verdict, re-exported
+from rig.training.verdict import MODEL_TARGETS, evaluation_verdict  # the one verdict, re-exported
 
-__all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
+__all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "evaluation_verdict",
            "report_data_for_session", "report_for_limb_session", "report_for_session",
            "run_report"]
 
@@ -276,7 +276,6 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
     if model is not None:
         from rig.report.figures import error_map_figure
-        from rig.training.verdict import evaluation_verdict
 
         stored = None if rec_id is None else stored_model_evaluation(store, rec_id, model)
         n, seed = (eval_n, REPORT_SEED) if stored is None else (stored[1]["n"],

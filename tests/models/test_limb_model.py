@@ -12,10 +12,10 @@ import yaml
 
 from models import quaternion as Q
 from models.errors import ModelFileError
+from models.evaluation import evaluate_model
 from models.limb import loads_limb
 from models.limb_evaluation import (
     HELD_OUT_LIMB_SEED,
-    evaluate_limb_model,
     held_out_postures,
     random_limb,
 )
@@ -58,10 +58,10 @@ def leg_model(tmp_path_factory):
 def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model):
     limb, oracle, model = leg_model
     q = held_out_postures(limb, 3000, 11, oracle=oracle)
-    r = evaluate_limb_model(model.correction, oracle, q)
+    r = evaluate_model(model, limb, q=q, oracle=oracle)
     assert r["end_mean_3d_error_pct"] < 0.005
     assert r["end_p99_direction_error_deg"] < 0.02
-    assert r["frac_invalid_left_1deg"] == 0.0 and r["max_violation_deg"] < 0.05
+    assert r["frac_invalid_violating_1deg"] == 0.0 and r["max_violation_deg"] < 0.05
     assert r["valid_moved_deg"] < 0.01
     exact = oracle.correction(q)
     got = model.correction(q).astype(np.float64)
@@ -81,8 +81,8 @@ def test_coupled_cones_and_hinges_and_four_joints(tmp_path):
     for j in (1, 3):
         q[:, j] = Q.from_axis_angle(np.array([0.0, 0, 1]), np.radians(rng.uniform(-40, 180,
                                                                                    4000)))
-    r = evaluate_limb_model(model.correction, oracle, q)
-    assert r["end_mean_3d_error_pct"] < 0.005 and r["frac_invalid_left_1deg"] == 0.0
+    r = evaluate_model(model, limb, q=q, oracle=oracle)
+    assert r["end_mean_3d_error_pct"] < 0.005 and r["frac_invalid_violating_1deg"] == 0.0
     assert max(r["joint_mean_direction_error_deg"]) < 0.01
 
 
@@ -95,7 +95,8 @@ def test_one_posture_metadata_and_file_mode(leg_model, tmp_path):
         np.testing.assert_allclose(model.correction(q[i]), batch[i], atol=1e-6)
     # a batch larger than a chunk runs in chunks on worker threads: the same corrections,
     # in order, as one call on the whole batch
-    big = held_out_postures(limb, 2 * model.contract.chunk + 37, 14, oracle=oracle).astype(np.float32)
+    big = held_out_postures(limb, 2 * model.contract.chunk + 37, 14,
+                            oracle=oracle).astype(np.float32)
     whole = model.session.run(None, {"orientations": big})[0]
     np.testing.assert_allclose(model.correction(big), whole, atol=1e-6)
     assert model.metadata["jointlimits.format"] == FORMAT

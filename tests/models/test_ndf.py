@@ -7,7 +7,8 @@ import pytest
 
 from models import quaternion as Q
 from models.datasets import field_joints, field_samples, training_postures
-from models.limb_evaluation import evaluate_limb_model, held_out_postures, random_limb
+from models.evaluation import evaluate_model
+from models.limb_evaluation import held_out_postures, random_limb
 from models.limb_model import export_limb_model, limb_to_onnx
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import DistanceField, FieldSpec, fit_limb_fields
@@ -140,7 +141,7 @@ def test_small_network_corrects_a_development_limb(leg, trained):
 
     def predict(x):
         return sess.run(None, {"orientations": x.astype(np.float32)})[0]
-    m = evaluate_limb_model(predict, oracle, q)
+    m = evaluate_model(predict, leg, q=q, oracle=oracle)
     # a 64-wide network trained for 8 epochs: far from the shipped one (bench_limb.py)
     assert m["end_mean_3d_error_pct"] < 3.0
     assert m["valid_moved_deg"] < 0.5
