@@ -64,16 +64,6 @@ def current_metric_names(metrics: dict) -> dict:
     return out
 
 
-def renamed_metrics_note(metrics: dict) -> str | None:
-    """One line naming the renamed metrics ``metrics`` still spells the old way (None when
-    none): what a command shows when it reads an old stored evaluation."""
-    old = [k for k in metrics if k in RENAMED_METRICS]
-    if not old:
-        return None
-    return ("note: metric " + ", ".join(f"{k!r} is now {RENAMED_METRICS[k]!r}" for k in old)
-            + " (renamed: one spelling for a joint and a limb)")
-
-
 def mse(pred: np.ndarray, target: np.ndarray) -> float:
     """Mean squared error over all entries of (N, 4) arrays."""
     d = np.asarray(pred, dtype=np.float64) - np.asarray(target, dtype=np.float64)

@@ -40,6 +40,7 @@ import json
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,7 @@ from onnx import TensorProto, helper, numpy_helper
 
 from models.constraint import loads_constraint
 from models.errors import ModelFileError
+from models.field import encode_bias, encode_matrix, index_weights
 from models.fileio import write_owner_only
 from models.limb import Limb, loads_limb
 from models.metrics import current_metric_names
@@ -67,8 +69,6 @@ OPSET = 17
 def package_version() -> str:
     """Installed version of the ``jointlimits-rig`` distribution."""
     try:
-        from importlib.metadata import version
-
         return version("jointlimits-rig")
     except Exception:  # not installed (source checkout)
         return "0.0.0+unknown"
@@ -258,8 +258,6 @@ def twist_rotation(g: Graph, d: str, e: str, rank: int = 2) -> str:
 
 def _field_graph(g: Graph, model) -> None:
     """The swing-field + twist-clamp graph of :class:`models.field.FieldModel` (its docstring)."""
-    from models.field import encode_bias, encode_matrix, index_weights
-
     axis = model.axis
     prod = product_tensor()
     d = bilinear(g, INPUT, INPUT, rotation_tensor(axis), "limb_direction")
@@ -453,7 +451,7 @@ def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
 
 def latency_session(raw: bytes):
     """An onnxruntime session tuned for latency: one thread, sequential, no spinning."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazily: exporting a model needs no runtime (models/__init__)
 
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
@@ -700,8 +698,8 @@ class CorrectionModel:
 
 
 def _run_options():
-    """The ``RunOptions`` every call passes (onnxruntime imported here: only a model needs it)."""
-    import onnxruntime as ort
+    """The ``RunOptions`` every call passes."""
+    import onnxruntime as ort  # lazily, as in latency_session
 
     return ort.RunOptions()
 
