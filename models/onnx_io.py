@@ -493,7 +493,7 @@ def _contract_of(path: Path, metadata: dict[str, str], limb: bool | None) -> Con
         raise ModelFileError(f"{path}: a limb model (corrections of a whole limb's joints, "
                              "[N, J, 4]), not one joint's: give a model trained on a "
                              "single joint's constraint file")
-    if limb and got != LIMB_CONTRACT.format:
+    if (limb or is_limb) and got != LIMB_CONTRACT.format:
         raise ModelFileError(f"{path}: not a limb model (metadata jointlimits.format is "
                              f"{got!r}, expected {LIMB_CONTRACT.format!r})")
     return LIMB_CONTRACT if is_limb else JOINT_CONTRACT
