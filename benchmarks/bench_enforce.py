@@ -324,7 +324,7 @@ def compute(args, rig, oracle, model, compute_us) -> None:
     for k, q in enumerate(qs_):
         tk = (k + 1) * 0.005
         a = pc()
-        c = model.correct_one(*q)
+        c = model.correct_one(q)
         b = pc()
         tq = sup.admit(tk, q, tk)
         goal = sup.step(tk, tq, c)

@@ -6,7 +6,7 @@ Every held-out limb of :func:`models.limb_evaluation.held_out_limbs` (legs and a
 concave ball joint coupled to a hinge through 3-4 keyframes, a hinge, a two-axis joint; seeds
 from ``HELD_OUT_LIMB_SEED``, none used to tune anything) is scored on
 :func:`~models.limb_evaluation.held_out_postures` (a third uniform, a third near a boundary, a
-third valid) by :func:`~models.limb_evaluation.evaluate_limb_model`. Methods:
+third valid) by :func:`~models.evaluation.evaluate_model`. Methods:
 
 ``exact``      the limb oracle itself (the metrics' sanity check: every figure 0);
 ``uncoupled``  each coupled joint at its loosest limits (what ignoring the coupling costs);
@@ -43,18 +43,19 @@ import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 import onnx
 
+from models.evaluation import evaluate_model
 from models.limb_evaluation import (
-    evaluate_limb_model,
     held_out_limbs,
     held_out_postures,
     uncoupled_model,
 )
-from models.limb_model import export_limb_model, load_limb_model
+from models.limb_model import export_limb_model
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import fit_limb_fields, fit_swing_field
+from models.onnx_io import load_model
 
 TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
-           ("frac_invalid_left_1deg", "invalid left > 1° out (fraction)", "<= 0.01"),
+           ("frac_invalid_violating_1deg", "invalid left > 1° out (fraction)", "<= 0.01"),
            ("valid_moved_deg", "valid inputs moved (mean °)", "<= 0.1"),
            ("end_p99_direction_error_deg", "p99 end-point direction error °", "<= 3"))
 
@@ -90,13 +91,13 @@ def method(name, limb, oracle, tmp: Path, q):
         fields = {k: dataclasses.replace(v, steps=steps) for k, v in fields.items()}
         tag = "-".join(f"{x:g}" for x in steps)
         path = export_limb_model(limb, tmp / f"{limb.name}-network@{tag}.onnx", fields, facts)
-        return load_limb_model(path, limb).correction
+        return load_model(path, limb).correction
     if name in ("geometric", "network"):
         fields, facts, cpu = None, None, 0.0
         if name == "network":
             fields, facts, cpu = _fields(limb)
         path = export_limb_model(limb, tmp / f"{limb.name}-{name}.onnx", fields, facts)
-        model = load_limb_model(path, limb)
+        model = load_model(path, limb)
         f = facts or {}
         SPEED[name].append({**speed(model, q), "train_cpu_s": cpu,
                             "train_wall_s": f.get("seconds", 0.0),
@@ -134,7 +135,7 @@ def single(k: int, n: int) -> None:
     """The distance-field network on single ball joints against today's default (the
     tabulated field, preset ``field``), on the held-out irregular boundaries of
     ``bench_accuracy`` (random stars with twist, seeds from ``HELD_OUT_SEED``)."""
-    from models.evaluation import evaluate_model, held_out_orientations, irregular_boundaries
+    from models.evaluation import held_out_orientations, irregular_boundaries
     from models.field import FieldModel
     from models.oracle import ConstraintOracle, evaluate_ball
 
@@ -193,10 +194,11 @@ def main() -> None:
         oracle = LimbOracle(limb)
         q = held_out_postures(limb, args.n, 1000 + i, oracle=oracle)
         for m in names:
-            r = evaluate_limb_model(method(m, limb, oracle, tmp, q), oracle, q)
+            r = evaluate_model(method(m, limb, oracle, tmp, q), limb, q=q, oracle=oracle)
             rows[m].append(r)
             print(f"{label:<10} {m:<10} {r['end_mean_3d_error_pct']:7.3f} "
-                  f"{r['end_p99_direction_error_deg']:9.2f} {r['frac_invalid_left_1deg']:8.3f} "
+                  f"{r['end_p99_direction_error_deg']:9.2f} "
+                  f"{r['frac_invalid_violating_1deg']:8.3f} "
                   f"{r['valid_moved_deg']:8.3f} {r['max_violation_deg']:10.2f}  "
                   f"{', '.join(f'{x:.2f}' for x in r['joint_mean_direction_error_deg'])}")
     print(f"\nmean over {args.limbs} held-out limbs ({args.n} postures each)")

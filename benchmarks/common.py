@@ -63,11 +63,11 @@ def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
     """Per-call latency (ns) of ``model.correct_one`` over the orientations ``qs`` (N, 4)."""
     rows = [tuple(map(float, r)) for r in qs]
     for r in rows[:warmup]:
-        model.correct_one(*r)
+        model.correct_one(r)
     lat = []
     for r in rows:
         t0 = time.perf_counter_ns()
-        model.correct_one(*r)
+        model.correct_one(r)
         lat.append(time.perf_counter_ns() - t0)
     return lat
 

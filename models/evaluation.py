@@ -1,9 +1,12 @@
 """Held-out evaluation of corrective constraints: test orientations, boundary sets, metrics.
 
-One function for every caller (``rig evaluate``, ``benchmarks/``, the demo):
-:func:`evaluate_model` scores a model — an ONNX file, a :class:`models.onnx_io.CorrectionModel`
-or any ``(N, 4) → (N, 4)`` callable — on :func:`held_out_orientations` with the metrics of
-:func:`models.metrics.evaluate` (3-D error, violations, identity error, p99 direction error).
+One function for every caller (``rig evaluate``, ``benchmarks/``, the demo), a joint's model
+or a limb's (a one-joint constraint is a limb of one joint): :func:`evaluate_model` scores a
+model — a :class:`models.onnx_io.CorrectionModel` or any ``(N, 4) → (N, 4)`` callable (a
+limb's: ``(N, J, 4) → (N, J, 4)``) — on :func:`held_out_orientations` (a limb's:
+:func:`models.limb_evaluation.held_out_postures`) with the metrics of
+:func:`models.metrics.evaluate` (3-D error, violations, identity error, p99 direction error; a
+limb's at its end point).
 
 Held-out orientations (issue 9's protocol)
 ------------------------------------------
@@ -31,6 +34,9 @@ import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
+from models.limb import Limb
+from models.limb_evaluation import held_out_postures
+from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
 
 __all__ = [
@@ -163,7 +169,7 @@ def regular_boundaries(radii=RADII_DEG) -> dict[str, Any]:
             for r in radii}
 
 
-def _predictor(model, constraint) -> Callable[[np.ndarray], np.ndarray]:
+def _predictor(model) -> Callable[[np.ndarray], np.ndarray]:
     if hasattr(model, "correction"):
         return model.correction
     if hasattr(model, "predict"):
@@ -176,28 +182,35 @@ def _predictor(model, constraint) -> Callable[[np.ndarray], np.ndarray]:
 
 def evaluate_model(model, constraint, *, n: int = 10_000, seed: int = 12_345,
                    q: np.ndarray | None = None, band_deg: float = 20.0,
-                   oracle=None) -> dict[str, float]:
-    """Metrics of a model on held-out orientations of ``constraint``.
+                   oracle=None) -> dict[str, Any]:
+    """Metrics of a model on held-out orientations of ``constraint`` (a limb's postures).
 
     Parameters
     ----------
     model : CorrectionModel, object with ``predict`` or callable
         An ONNX model opened with :func:`models.onnx_io.load_model` runs through onnxruntime.
-    constraint : JointConstraint
+    constraint : JointConstraint or Limb
     n, seed, band_deg
-        :func:`held_out_orientations` parameters (ignored when ``q`` is given).
+        :func:`held_out_orientations` parameters (a limb's:
+        :func:`models.limb_evaluation.held_out_postures`; ignored when ``q`` is given).
     q : (N, 4) array, optional
-        Orientations to use instead (e.g. the same set for several models).
-    oracle : ConstraintOracle, optional
+        Orientations to use instead (e.g. the same set for several models); a limb's postures
+        (N, J, 4).
+    oracle : ConstraintOracle or LimbOracle, optional
 
     Returns
     -------
-    dict of float: :func:`models.metrics.evaluate`'s metrics plus ``valid_fraction``.
+    dict: :func:`models.metrics.evaluate`'s metrics, a joint's plus ``valid_fraction``.
     """
+    if isinstance(constraint, Limb):
+        oracle = oracle or LimbOracle(constraint)
+        if q is None:
+            q = held_out_postures(constraint, n, seed, band_deg=band_deg, oracle=oracle)
+        return M.evaluate(_predictor(model), oracle, q)
     oracle = oracle or ConstraintOracle(constraint)
     if q is None:
         q = held_out_orientations(constraint, n, seed, band_deg=band_deg, oracle=oracle)
-    out = M.evaluate(_predictor(model, constraint), oracle, q)
+    out = M.evaluate(_predictor(model), oracle, q)
     out["valid_fraction"] = float(np.mean(oracle.is_valid(q)))
     return out
 

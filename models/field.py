@@ -79,19 +79,22 @@ def node_index(d: np.ndarray, grid: int) -> np.ndarray:
     """
     d = np.asarray(d, dtype=np.float64)
     p = d / np.abs(d).sum(axis=1, keepdims=True)
-    x = np.floor(p @ _encode_matrix(grid) + _encode_bias(grid))
-    return (x @ _index_weights(grid)).astype(np.int64)
+    x = np.floor(p @ encode_matrix(grid) + encode_bias(grid))
+    return (x @ index_weights(grid)).astype(np.int64)
 
 
-def _encode_matrix(grid: int) -> np.ndarray:
+def encode_matrix(grid: int) -> np.ndarray:
+    """(3, 3) ``M`` of :func:`node_index`'s ``⌊p M + c⌋`` (rows ``i``, ``j``, ``h``)."""
     return np.array([[grid / 2, 0.0, 0.0], [0.0, grid / 2, 0.0], [0.0, 0.0, -0.5]])
 
 
-def _encode_bias(grid: int) -> np.ndarray:
+def encode_bias(grid: int) -> np.ndarray:
+    """(3,) ``c`` of :func:`node_index`'s ``⌊p M + c⌋``."""
     return np.array([grid / 2 + 0.5, grid / 2 + 0.5, 1.0])
 
 
-def _index_weights(grid: int) -> np.ndarray:
+def index_weights(grid: int) -> np.ndarray:
+    """(3,) weights of ``(i, j, h)`` in the flat node index ``h (G+1)² + i (G+1) + j``."""
     return np.array([grid + 1.0, 1.0, float((grid + 1) ** 2)])
 
 

@@ -2,8 +2,9 @@
 
 A *limb model* maps postures ``(N, J, 4)`` (joint orientations, child relative to parent,
 scalar-first, in the limb file's joint order) to corrections ``(N, J, 4)``
-(``corrected_j = correction_j ⊗ q_j``). :func:`evaluate_limb_model` scores one against the exact
-limb oracle (:class:`models.limb_oracle.LimbOracle`).
+(``corrected_j = correction_j ⊗ q_j``). :func:`models.evaluation.evaluate_model` scores one
+against the exact limb oracle (:class:`models.limb_oracle.LimbOracle`) on the postures drawn
+here, with the limb metrics of :func:`models.metrics.evaluate`.
 
 Held-out limbs (:func:`random_limb`)
 -------------------------------------
@@ -24,22 +25,6 @@ its time: what a model must leave alone). Hinges: in the first two thirds, the a
 over the interval widened by 40° on each side, half of them exactly on the axis (a servo
 limb's hinge), half with up to 5° of out-of-axis rotation (a human joint, an IMU); in the last
 third on the axis inside the interval.
-
-Metrics (:func:`evaluate_limb_model`)
--------------------------------------
-With the exact corrected posture ``p*`` (the oracle's projection) and the model's ``p̂``
-(``ĉ_j ⊗ q_j``), unit segment lengths, the end point ``E(p) = Σ_j (p_0 ⊗ … ⊗ p_j) · a_j``:
-
-- ``end_mean_3d_error_pct``: mean ``|E(p̂) − E(p*)|`` in % of the limb's length ``J``;
-- ``end_p99_direction_error_deg``: 99th percentile of the angle between ``E(p̂)`` and ``E(p*)``;
-- ``joint_mean_direction_error_deg`` (per joint): mean angle between each segment's direction
-  in its parent's frame after the model's and the exact correction;
-- ``frac_invalid_left_1deg``: postures invalid in some joint whose model-corrected posture is
-  more than 1° outside in any joint (the limb oracle's distance, the thesis's proposed
-  distance-to-boundary metric);
-- ``mean_violation_deg`` / ``max_violation_deg``: that distance over all postures and joints;
-- ``valid_moved_deg``: mean, over valid postures, of the largest rotation the model applies to
-  any joint (0 for an exact model).
 """
 
 from __future__ import annotations
@@ -51,11 +36,10 @@ import numpy as np
 
 from models import quaternion as Q
 from models.limb import LIMB_CHAINS, Limb
-from models.limb_oracle import LimbOracle, end_points
+from models.limb_oracle import LimbOracle
 
 __all__ = [
     "HELD_OUT_LIMB_SEED",
-    "evaluate_limb_model",
     "held_out_limbs",
     "held_out_postures",
     "random_limb",
@@ -263,43 +247,6 @@ def _proposal(joint) -> tuple[np.ndarray, float, float, float]:
         return centre, radius, -math.pi, math.pi
     return (centre, radius, min(c.twist.min for c in members),
             max(c.twist.max for c in members))
-
-
-def evaluate_limb_model(predict: Callable[[np.ndarray], np.ndarray], oracle: LimbOracle,
-                        q: np.ndarray) -> dict[str, float | list[float]]:
-    """The metrics of the module docstring for a limb model on postures ``q`` (N, J, 4)."""
-    q = np.asarray(q, dtype=np.float64)
-    n, jn = q.shape[:2]
-    exact = oracle.evaluate(q)
-    learned = np.asarray(predict(q), dtype=np.float64).reshape(n, jn, 4)
-    learned = learned / np.linalg.norm(learned, axis=2, keepdims=True)
-    fixed = Q.multiply(learned.reshape(-1, 4), q.reshape(-1, 4)).reshape(n, jn, 4)
-    axes = oracle.axes
-    e_model = end_points(fixed, axes)
-    e_exact = end_points(exact.projected, axes)
-    err = np.linalg.norm(e_model - e_exact, axis=1)
-    dir_err = np.degrees(Q.angle_between(e_model, e_exact))
-    seg_err = np.stack([np.degrees(Q.angle_between(Q.rotate(fixed[:, j], axes[j]),
-                                                   Q.rotate(exact.projected[:, j], axes[j])))
-                        for j in range(jn)], axis=1)
-    after = oracle.evaluate(fixed)
-    viol = np.degrees(np.maximum(after.distance, 0.0))
-    invalid = ~exact.limb_valid
-    moved = np.degrees(Q.angle(learned.reshape(-1, 4))).reshape(n, jn).max(axis=1)
-    return {
-        "n": float(n),
-        "valid_fraction": float(exact.limb_valid.mean()),
-        "end_mean_3d_error_pct": float(100.0 * err.mean() / jn),
-        "end_max_3d_error_pct": float(100.0 * err.max() / jn),
-        "end_p99_direction_error_deg": float(np.percentile(dir_err, 99)),
-        "joint_mean_direction_error_deg": [float(x) for x in seg_err.mean(axis=0)],
-        "frac_invalid_left_1deg": (float((viol[invalid] > 1.0).any(axis=1).mean())
-                                   if invalid.any() else 0.0),
-        "mean_violation_deg": float(viol.mean()),
-        "max_violation_deg": float(viol.max()),
-        "valid_moved_deg": (float(moved[exact.limb_valid].mean())
-                            if exact.limb_valid.any() else 0.0),
-    }
 
 
 def uncoupled_model(limb: Limb, step_deg: float = 5.0) -> Callable[[np.ndarray], np.ndarray]:

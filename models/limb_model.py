@@ -53,8 +53,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -62,30 +60,27 @@ import onnx
 from onnx import TensorProto, helper
 
 from models.constraint import ConeSwing, PolygonSwing
-from models.errors import ModelFileError
 from models.fileio import write_owner_only
-from models.limb import Limb, loads_limb, oriented_vertices
+from models.limb import Limb, oriented_vertices
 from models.onnx_io import (
+    LIMB_CONTRACT,
     OPSET,
-    _bilinear,
-    _Graph,
-    _product_tensor,
-    _rotation_tensor,
+    Graph,
+    bilinear,
     interval_clamp,
-    latency_session,
     package_version,
-    read_onnx,
+    product_tensor,
+    rotation_tensor,
     twist_rotation,
 )
 
-__all__ = ["FORMAT", "INPUT", "OUTPUT", "LimbModel", "export_limb_model", "limb_to_onnx",
-           "load_limb_model"]
+__all__ = ["FORMAT", "INPUT", "OUTPUT", "export_limb_model", "limb_to_onnx"]
 
-FORMAT = "jointlimits-limb-correction/1"
-INPUT = "orientations"
-OUTPUT = "corrections"
+#: The limb contract's format, input and output names (:data:`models.onnx_io.LIMB_CONTRACT`;
+#: the file is opened by :func:`models.onnx_io.load_model`).
+FORMAT, INPUT, OUTPUT = LIMB_CONTRACT.format, LIMB_CONTRACT.input, LIMB_CONTRACT.output
 
-_PROD = _product_tensor()
+_PROD = product_tensor()
 _I64 = np.int64
 
 
@@ -99,42 +94,42 @@ for _a, _b, _c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _CROSS[_a, _b, _c], _CROSS[_b, _a, _c] = 1.0, -1.0
 
 
-def _i(g: _Graph, v) -> str:
+def _i(g: Graph, v) -> str:
     return g.const(np.asarray(v), dtype=_I64)
 
 
-def _dot(g: _Graph, a: str, b: str) -> str:
+def _dot(g: Graph, a: str, b: str) -> str:
     return g.op("ReduceSum", [g.op("Mul", [a, b]), _i(g, [-1])], keepdims=1)
 
 
-def _normalize(g: _Graph, a: str) -> str:
+def _normalize(g: Graph, a: str) -> str:
     """Unit rows over the last axis (a zero row stays zero)."""
     return g.op("LpNormalization", [a], axis=-1, p=2)
 
 
-def _cross(g: _Graph, a: str, b: str) -> str:
+def _cross(g: Graph, a: str, b: str) -> str:
     """a × b over the last axis (length 3)."""
-    return _bilinear(g, a, b, _CROSS, "cross")
+    return bilinear(g, a, b, _CROSS, "cross")
 
 
-def _first(g: _Graph, a: str) -> str:
+def _first(g: Graph, a: str) -> str:
     """The first component over the last axis (…, 1)."""
     return g.op("Slice", [a, _i(g, [0]), _i(g, [1]), _i(g, [-1])])
 
 
-def _canonical(g: _Graph, q: str) -> str:
+def _canonical(g: Graph, q: str) -> str:
     """``q`` with ``w >= 0``."""
     return g.op("Mul", [q, g.op("Where", [g.op("Less", [_first(g, q), g.const(0.0)]),
                                          g.const(-1.0), g.const(1.0)])])
 
 
-def _rows(g: _Graph, group: str, k: int, size: int) -> str:
+def _rows(g: Graph, group: str, k: int, size: int) -> str:
     """Row ``k`` (N, ·) of a group tensor (K, N, ·)."""
     one = group if size == 1 else g.op("Gather", [group, _i(g, [k])], axis=0)
     return g.op("Squeeze", [one, _i(g, [0])])
 
 
-def _stack(g: _Graph, parts: list[str]) -> str:
+def _stack(g: Graph, parts: list[str]) -> str:
     """Rows (N, ·) stacked into a group tensor (K, N, ·)."""
     ups = [g.op("Unsqueeze", [p, _i(g, [0])]) for p in parts]
     return ups[0] if len(ups) == 1 else g.op("Concat", ups, axis=0)
@@ -148,7 +143,7 @@ class _Limits:
         self.limited = any(x is not None for x in items)  #: any joint with a limit
         self.items = [(-math.pi, math.pi) if x is None else x for x in items]
 
-    def clamp(self, g: _Graph, t: str, target: bool) -> tuple[str, str | None]:
+    def clamp(self, g: Graph, t: str, target: bool) -> tuple[str, str | None]:
         """:func:`models.onnx_io.interval_clamp` of half-angle pairs ``t`` (K, N, 2), each row
         to its joint's interval (constants folded; per-sample ones stacked to (K, N, 2))."""
         if all(isinstance(x, tuple) for x in self.items):
@@ -159,7 +154,7 @@ class _Limits:
             g.const(np.array(x)[None]), shape]) for x in self.items]), target)
 
 
-def _keyframe_lerp(g: _Graph, kt, values: np.ndarray) -> str:
+def _keyframe_lerp(g: Graph, kt, values: np.ndarray) -> str:
     """(N, C) per-sample rows linear between keyframes' rows ``values`` (K, C) (intervals
     (lo, hi), cone centres, radii) at the located interval and fraction ``kt``."""
     k, t = kt
@@ -168,7 +163,7 @@ def _keyframe_lerp(g: _Graph, kt, values: np.ndarray) -> str:
     return g.op("Add", [lo, g.op("Mul", [g.op("Sub", [hi, lo]), t])])
 
 
-def _locate(g: _Graph, angle: str, at: np.ndarray) -> tuple[str, str]:
+def _locate(g: Graph, angle: str, at: np.ndarray) -> tuple[str, str]:
     """Keyframe interval (N, 1) int64 and fraction (N, 1) of coupling angles (N, 1)."""
     n = len(at)
     if n > 2:
@@ -184,7 +179,7 @@ def _locate(g: _Graph, angle: str, at: np.ndarray) -> tuple[str, str]:
     return k, t
 
 
-def _hinge_group(g: _Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[str, str]:
+def _hinge_group(g: Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[str, str]:
     """Corrections (K, N, 4) and corrected angles (K, N, 1) of hinges ``q`` (K, N, 4) about
     ``axes`` (K, 3): the half-angle pair ``(w, a·v)`` clamped, the pure rotation about the axis
     with the clamped angle (the geodesic correction: out-of-axis motion is removed too)."""
@@ -201,18 +196,18 @@ def _hinge_group(g: _Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[st
     hmap[:, 1, 1:] = axes
     h = g.op("MatMul", [target, g.const(hmap)])  # (c, s a); correction = h ⊗ q⁻¹
     qinv = g.op("Mul", [q, g.const([1.0, -1.0, -1.0, -1.0])])
-    corr = _bilinear(g, h, qinv, _PROD, "hinge_correction")
+    corr = bilinear(g, h, qinv, _PROD, "hinge_correction")
     return _canonical(g, _normalize(g, corr)), angle
 
 
-def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list, lims: _Limits) -> str:
+def _swing_group(g: Graph, q: str, axes: np.ndarray, nearests: list, lims: _Limits) -> str:
     """Corrections (K, N, 4) of ball / two-axis joints ``q`` (K, N, 4) with limb axes ``axes``
     (K, 3): limb direction ``d``; per joint ``nearest(d (N, 3)) -> (outside (N, 1), b (N, 3))``
     or None; swing correction ``Δ`` = the minimal rotation ``d → b`` where outside; the twist of
     ``Δ ⊗ q`` about ``d`` clamped (``τ``; none when no joint of the group has a twist limit);
     correction ``Δ ⊗ τ``."""
     k = len(axes)
-    d = _normalize(g, _bilinear(g, q, q, np.stack([_rotation_tensor(a) for a in axes]),
+    d = _normalize(g, bilinear(g, q, q, np.stack([rotation_tensor(a) for a in axes]),
                                 "limb_direction"))
     delta = None
     if any(n is not None for n in nearests):
@@ -245,12 +240,12 @@ def _swing_group(g: _Graph, q: str, axes: np.ndarray, nearests: list, lims: _Lim
     if delta is None:
         t = g.op("MatMul", [q, g.const(tmap[:, 0])])
     else:
-        t = _bilinear(g, delta, q, tmap, "twist_pair")
+        t = bilinear(g, delta, q, tmap, "twist_pair")
     e, _ = lims.clamp(g, t, False)
     tau = twist_rotation(g, d, e, rank=3)
     if delta is None:
         return _canonical(g, tau)
-    return _canonical(g, _normalize(g, _bilinear(g, delta, tau, _PROD, "swing_twist")))
+    return _canonical(g, _normalize(g, bilinear(g, delta, tau, _PROD, "swing_twist")))
 
 
 def _polygon_tables(v: np.ndarray) -> dict[str, np.ndarray]:
@@ -280,7 +275,7 @@ _DOTS = ("g", "t0", "t1", "v0", "v1")  # the columns of a polygon's dot table, i
 _ROWS = ("g", "v0", "v1", "vn", "vn1")  # the columns of its row table
 
 
-def _nearest_polygon(g: _Graph, d: str, dots: str, rows: str, m: int) -> tuple[str, str]:
+def _nearest_polygon(g: Graph, d: str, dots: str, rows: str, m: int) -> tuple[str, str]:
     """Kernel of :class:`models.geometry.SphericalPolygon` over all ``m`` edges. ``d`` (N, 3);
     ``dots`` (1|N, 3, 5m) the tables :data:`_DOTS` side by side (one product gives every
     edge's plane side, arc coordinates and end cosines); ``rows`` (1|N, m, 15) the tables
@@ -313,7 +308,7 @@ def _nearest_polygon(g: _Graph, d: str, dots: str, rows: str, m: int) -> tuple[s
         end1, v1, v0])])
 
 
-def _nearest_cone(g: _Graph, d: str, c: str, r: str) -> tuple[str, str]:
+def _nearest_cone(g: Graph, d: str, c: str, r: str) -> tuple[str, str]:
     """Cone(s) of centre ``c`` and radius ``r`` (constants or (N, 3) / (N, 1))."""
     cos_t = _dot(g, d, c)
     tang = g.op("Sub", [d, g.op("Mul", [cos_t, c])])
@@ -326,7 +321,7 @@ def _nearest_cone(g: _Graph, d: str, c: str, r: str) -> tuple[str, str]:
     return g.op("Greater", [theta, r]), b
 
 
-def _constant_polygon(g: _Graph, swing: PolygonSwing):
+def _constant_polygon(g: Graph, swing: PolygonSwing):
     tab = _polygon_tables(oriented_vertices(swing))
     tab["vn1"] = np.roll(tab["vn"], -1, axis=0)
     m = len(tab["v0"])
@@ -335,7 +330,7 @@ def _constant_polygon(g: _Graph, swing: PolygonSwing):
     return lambda d: _nearest_polygon(g, d, dots, rows, m)
 
 
-def _coupled_polygon(g: _Graph, pairs, kt):
+def _coupled_polygon(g: Graph, pairs, kt):
     m = max(len(a) for a, _ in pairs)
     padded = [_pad(a, b, m) for a, b in pairs]
     a_st = np.stack([a for a, _ in padded])
@@ -360,7 +355,7 @@ def _coupled_polygon(g: _Graph, pairs, kt):
     return lambda d: _nearest_polygon(g, d, dots, rows, m)
 
 
-def _field_nearest(g: _Graph, tau: str, net):
+def _field_nearest(g: Graph, tau: str, net):
     """``nearest(d) -> (outside, b)`` of a coupled swing by its trained distance field
     (:class:`models.nn.ndf.DistanceField`): ``outside`` where ``f(d, τ) > 0``, ``b`` after the
     field's projection steps (the same computation as :meth:`DistanceField.project`)."""
@@ -431,7 +426,7 @@ def _is_hinge(joint) -> bool:
             else joint.constraint.kind) == "hinge"
 
 
-def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
+def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:
     """Every joint's correction into ``OUTPUT``: the groups of :func:`_levels` × kind in the
     hierarchy's order; a coupled joint reads its source's corrected angle."""
     level = _levels(limb)
@@ -485,7 +480,7 @@ def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:
     g.op("Transpose", [out], perm=[1, 0, 2], out=OUTPUT)
 
 
-def _swing_nearest(g: _Graph, joint, kt, src: str | None, field):
+def _swing_nearest(g: Graph, joint, kt, src: str | None, field):
     """``nearest(d)`` of a ball / two-axis joint's swing (None: no swing limit); a coupled one
     at keyframe interval and fraction ``kt`` of its source's corrected angle ``src``."""
     cp = joint.coupling
@@ -524,7 +519,7 @@ def limb_to_onnx(limb: Limb, fields: dict | None = None,
     if fields and set(fields) != need:
         raise ValueError(f"fields: expected one per coupled polygon swing {sorted(need)}, "
                          f"got {sorted(fields)}")
-    g = _Graph()
+    g = Graph()
     jn = len(limb.joints)
     _limb_graph(g, limb, fields)
     used = {name for node in g.nodes for name in node.input}
@@ -561,83 +556,3 @@ def export_limb_model(limb: Limb, path: str | Path, fields: dict | None = None,
     path = Path(path)
     write_owner_only(path, limb_to_onnx(limb, fields, training).SerializeToString())
     return path
-
-
-class LimbModel:
-    """An exported limb model run by onnxruntime: one posture on the calling thread (one
-    onnxruntime thread, no spinning); a batch of more than :attr:`CHUNK` postures in chunks of
-    :attr:`CHUNK` on one worker thread per core for the call (the session is shared;
-    onnxruntime releases the GIL while it runs, and chunks of this size stay in the cache).
-
-    Parameters
-    ----------
-    path : str or Path
-    expected_limb : Limb, optional
-        The model's embedded limb must have the same limits (content hash).
-
-    Raises
-    ------
-    ModelFileError
-        Missing or unreadable file, not ONNX, not a limb model, wrong inputs/outputs, or
-        another limb's limits.
-    """
-
-    def __init__(self, path: str | Path, expected_limb: Limb | None = None):
-        self.path = Path(path)
-        raw, model = read_onnx(self.path)
-        self.metadata = {p.key: p.value for p in model.metadata_props}
-        if self.metadata.get("jointlimits.format") != FORMAT:
-            got = self.metadata.get("jointlimits.format")
-            raise ModelFileError(f"{path}: not a limb model (metadata jointlimits.format is "
-                                 f"{got!r}, expected {FORMAT!r})")
-        self.limb = loads_limb(self.metadata.get("jointlimits.limb", ""), source=f"{path} "
-                                                                                  f"(embedded)")
-        self.joints = tuple(json.loads(self.metadata.get("jointlimits.joints", "[]")))
-        ins = [v for v in model.graph.input
-               if v.name not in {i.name for i in model.graph.initializer}]
-        if len(ins) != 1 or ins[0].name != INPUT or [o.name for o in model.graph.output] != [
-                OUTPUT]:
-            raise ModelFileError(f"{path}: expected input '{INPUT}' and output '{OUTPUT}'")
-        if expected_limb is not None and expected_limb.content_hash() != self.limb.content_hash():
-            raise ModelFileError(f"{path}: the model was made for other limits (limb "
-                                 f"{self.limb.name!r}); export one for this limb file")
-        self.session = latency_session(raw)
-        self._run = self.session._sess.run
-        self.n_joints = len(self.joints)
-        self._one = np.zeros((1, self.n_joints, 4), dtype=np.float32)
-        self._feed = {INPUT: self._one}
-
-    CHUNK = 1024  #: postures per onnxruntime call in a batch
-
-    @property
-    def size_bytes(self) -> int:
-        return self.path.stat().st_size
-
-    def correction(self, postures: np.ndarray) -> np.ndarray:
-        """Corrections (N, J, 4) float32 of postures (N, J, 4) (or (J, 4) → (J, 4))."""
-        q = np.ascontiguousarray(postures, dtype=np.float32)
-        single = q.ndim == 2
-        q = q.reshape(-1, self.n_joints, 4)
-        workers = min(os.cpu_count() or 1, 8)
-        if len(q) <= self.CHUNK or workers == 1:
-            out = self._run([OUTPUT], {INPUT: q}, None)[0]
-            return out[0] if single else out
-        out = np.empty(q.shape, dtype=np.float32)
-
-        def chunk(k: int) -> None:
-            out[k:k + self.CHUNK] = self._run([OUTPUT], {INPUT: q[k:k + self.CHUNK]}, None)[0]
-        starts = range(0, len(q), self.CHUNK)
-        with ThreadPoolExecutor(min(workers, len(starts)), thread_name_prefix="limb-model") as pool:
-            list(pool.map(chunk, starts))
-        return out
-
-    def correct_one(self, posture) -> np.ndarray:
-        """One posture (J, 4) through a preallocated input buffer: (J, 4) float32."""
-        self._one[0] = posture
-        return self._run([OUTPUT], self._feed, None)[0][0]
-
-
-def load_limb_model(path: str | Path, expected_limb: Limb | None = None) -> LimbModel:
-    """Open an exported limb model (:class:`LimbModel`)."""
-    return LimbModel(path, expected_limb)
-

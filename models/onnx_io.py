@@ -27,15 +27,20 @@ Metadata (``metadata_props``): ``jointlimits.format``, ``jointlimits.constraint`
 YAML), ``jointlimits.constraint_sha256``, ``jointlimits.training_data_sha256``,
 ``jointlimits.metrics`` (JSON), ``jointlimits.network`` (JSON summary), ``jointlimits.version``.
 
-:class:`CorrectionModel` refuses a file that is not ONNX, has other input/output names or
-shapes, or whose constraint differs from the one the caller expects
-(:class:`models.errors.ModelFileError`). No pickle anywhere.
+:class:`CorrectionModel` runs a one-joint model and a limb model (:mod:`models.limb_model`)
+alike, what differs between their files in one :class:`Contract`. It refuses a file that is
+not ONNX, has other input/output names or shapes, or whose constraint differs from the one the
+caller expects (:class:`models.errors.ModelFileError`). No pickle anywhere.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -44,10 +49,15 @@ import onnx
 import yaml
 from onnx import TensorProto, helper, numpy_helper
 
+from models.constraint import loads_constraint
 from models.errors import ModelFileError
+from models.field import encode_bias, encode_matrix, index_weights
 from models.fileio import write_owner_only
+from models.limb import Limb, loads_limb
+from models.metrics import current_metric_names
 from models.nn import activations as act
 from models.nn.gmlp import GMLP, frame_matrices
+from models.quaternion import multiply
 from models.yamlio import safe_load_yaml
 
 FORMAT = "jointlimits-correction/1"
@@ -59,8 +69,6 @@ OPSET = 17
 def package_version() -> str:
     """Installed version of the ``jointlimits-rig`` distribution."""
     try:
-        from importlib.metadata import version
-
         return version("jointlimits-rig")
     except Exception:  # not installed (source checkout)
         return "0.0.0+unknown"
@@ -74,22 +82,29 @@ def data_sha256(*arrays: np.ndarray) -> str:
     return h.hexdigest()
 
 
-class _Graph:
+class Graph:
+    """An ONNX graph under construction: nodes and initialisers (constants) in the order they
+    are added, each value named ``stem_k`` by a running counter (:meth:`name`). The one-joint
+    graphs here and the limb graph (:mod:`models.limb_model`) are built with it."""
+
     def __init__(self):
         self.nodes: list = []
         self.inits: list = []
         self._n = 0
 
     def name(self, stem: str) -> str:
+        """A fresh value name ``stem_k``."""
         self._n += 1
         return f"{stem}_{self._n}"
 
     def const(self, value, stem="c", dtype=np.float32) -> str:
+        """An initialiser holding ``value`` as ``dtype``; returns its name."""
         n = self.name(stem)
         self.inits.append(numpy_helper.from_array(np.asarray(value, dtype=dtype), n))
         return n
 
     def op(self, op_type: str, inputs: list[str], stem: str | None = None, out=None, **attrs):
+        """A node of one output (named ``out``, else fresh from ``stem``); returns its name."""
         out = out or self.name(stem or op_type.lower())
         self.nodes.append(helper.make_node(op_type, inputs, [out], **attrs))
         return out
@@ -101,7 +116,7 @@ class _Graph:
         return outs
 
 
-def _activation(g: _Graph, kind: int, z: str, templates: np.ndarray | None = None,
+def _activation(g: Graph, kind: int, z: str, templates: np.ndarray | None = None,
                 coef: np.ndarray | None = None) -> str:
     if kind == 0:
         return z
@@ -136,15 +151,13 @@ def _activation(g: _Graph, kind: int, z: str, templates: np.ndarray | None = Non
     return g.op("Add", [g.op("Mul", [y, t]), d])
 
 
-def _product_tensor() -> np.ndarray:
+def product_tensor() -> np.ndarray:
     """(4, 4, 4): ``(e_i ⊗ e_j)_k`` — the Hamilton product as a bilinear form."""
-    from models.quaternion import multiply
-
     eye = np.eye(4)
     return np.stack([np.stack([multiply(eye[i], eye[j]) for j in range(4)]) for i in range(4)])
 
 
-def _rotation_tensor(axis: np.ndarray) -> np.ndarray:
+def rotation_tensor(axis: np.ndarray) -> np.ndarray:
     """(4, 4, 3): ``R(q) a`` as a quadratic form of (not necessarily unit) ``q``."""
     def f(q):
         w, u = q[0], q[1:]
@@ -159,7 +172,7 @@ def _rotation_tensor(axis: np.ndarray) -> np.ndarray:
     return t
 
 
-def _bilinear(g: _Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") -> str:
+def bilinear(g: Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") -> str:
     """``out_k = Σ_ij p_i q_j t[i, j, k]`` over the last axis: 4 nodes, zero pairs pruned.
 
     ``t`` (I, J, O) for inputs (..., I), (..., J); or (K, I, J, O), one form per row of a
@@ -180,7 +193,7 @@ def _bilinear(g: _Graph, p: str, q: str, t: np.ndarray, stem: str = "bilinear") 
     return g.op("MatMul", [prod, g.const(s[0] if t.ndim == 3 else s)], stem=stem)
 
 
-def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
+def twist_clamp(g: Graph, u: str, cr: str, sr: str) -> str:
     """The twist clamp on half-angle pairs: ``u`` (N, 2) unit, taken relative to the middle of
     the interval; ``cr``, ``sr`` the cosine and sine of its half-width / 2 (scalars or (N, 1)).
     Returns ``e`` (N, 2), the half-angle pair of the clamping rotation: ``(1, 0)`` inside,
@@ -200,7 +213,7 @@ def twist_clamp(g: _Graph, u: str, cr: str, sr: str) -> str:
 _ROT90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # (w, x) @ _ROT90 = (x, -w)
 
 
-def interval_clamp(g: _Graph, t: str, lims, target: bool = False) -> tuple[str, str | None]:
+def interval_clamp(g: Graph, t: str, lims, target: bool = False) -> tuple[str, str | None]:
     """Clamp half-angle pairs ``t`` (..., 2) (the angle ``φ/2`` of a rotation about an axis) to
     intervals on the circle: relative to each interval's middle, nearer end, a tie to ``max``
     (:func:`twist_clamp`, the oracle's rule).
@@ -233,7 +246,7 @@ def interval_clamp(g: _Graph, t: str, lims, target: bool = False) -> tuple[str, 
                            g.op("Mul", [g.op("MatMul", [tn, g.const(_ROT90.T)]), e_x])])
 
 
-def twist_rotation(g: _Graph, d: str, e: str, rank: int = 2) -> str:
+def twist_rotation(g: Graph, d: str, e: str, rank: int = 2) -> str:
     """The rotation of half-angle pair ``e`` (..., 2) about the unit direction ``d`` (..., 3):
     ``(1, d) ⊙ (e_w, e_x, e_x, e_x)`` (..., 4); ``rank`` of the inputs."""
     pads = [0] * (2 * rank)
@@ -243,19 +256,17 @@ def twist_rotation(g: _Graph, d: str, e: str, rank: int = 2) -> str:
                 stem="twist_rotation")
 
 
-def _field_graph(g: _Graph, model) -> None:
+def _field_graph(g: Graph, model) -> None:
     """The swing-field + twist-clamp graph of :class:`models.field.FieldModel` (its docstring)."""
-    from models.field import _encode_bias, _encode_matrix, _index_weights
-
     axis = model.axis
-    prod = _product_tensor()
-    d = _bilinear(g, INPUT, INPUT, _rotation_tensor(axis), "limb_direction")
+    prod = product_tensor()
+    d = bilinear(g, INPUT, INPUT, rotation_tensor(axis), "limb_direction")
     delta = None
     if model.table is not None:  # nearest table node in the two octahedral diamonds
         p = g.op("Div", [d, g.op("ReduceL1", [d], axes=[1], keepdims=1)])
-        x = g.op("Floor", [g.op("Gemm", [p, g.const(_encode_matrix(model.grid)),
-                                           g.const(_encode_bias(model.grid))])])
-        flat = g.op("ReduceSum", [g.op("Mul", [x, g.const(_index_weights(model.grid))]),
+        x = g.op("Floor", [g.op("Gemm", [p, g.const(encode_matrix(model.grid)),
+                                           g.const(encode_bias(model.grid))])])
+        flat = g.op("ReduceSum", [g.op("Mul", [x, g.const(index_weights(model.grid))]),
                                   g.const([1], dtype=np.int64)], keepdims=0)
         idx = g.op("Cast", [flat], to=TensorProto.INT64)
         delta = g.op("Gather", [g.const(model.table), idx], stem="swing_correction")
@@ -271,11 +282,11 @@ def _field_graph(g: _Graph, model) -> None:
     by_swing = getattr(tw, "by_swing", None)
     if by_swing is None:
         t = (g.op("MatMul", [INPUT, g.const(tmap[0])]) if delta is None
-             else _bilinear(g, delta, INPUT, tmap, "twist"))
+             else bilinear(g, delta, INPUT, tmap, "twist"))
         e, _ = interval_clamp(g, t, (tw.min, tw.max))
     else:  # limits interpolated at the corrected direction b = R(q') a (contract 3)
-        qp = INPUT if delta is None else _bilinear(g, delta, INPUT, prod, "corrected")
-        b = _bilinear(g, qp, qp, _rotation_tensor(axis), "corrected_direction")
+        qp = INPUT if delta is None else bilinear(g, delta, INPUT, prod, "corrected")
+        b = bilinear(g, qp, qp, rotation_tensor(axis), "corrected_direction")
         kappa = float(by_swing.kappa)
         z = g.op("MatMul", [b, g.const(kappa * np.asarray(by_swing.directions).T)])
         w = g.op("Exp", [g.op("Sub", [z, g.op("ReduceMax", [z], axes=[1], keepdims=1)])])
@@ -288,10 +299,10 @@ def _field_graph(g: _Graph, model) -> None:
     if delta is None:
         g.op("Identity", [tau], out=OUTPUT)
         return
-    g.op("Identity", [_bilinear(g, delta, tau, prod)], out=OUTPUT)  # Δ ⊗ τ
+    g.op("Identity", [bilinear(g, delta, tau, prod)], out=OUTPUT)  # Δ ⊗ τ
 
 
-def _finish(g: _Graph, meta: dict[str, str]) -> onnx.ModelProto:
+def _finish(g: Graph, meta: dict[str, str]) -> onnx.ModelProto:
     graph = helper.make_graph(
         g.nodes, "jointlimits_correction",
         [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", 4])],
@@ -332,7 +343,7 @@ def to_onnx(
 
     ``network`` is a :class:`~models.nn.gmlp.GMLP` or a :class:`models.field.FieldModel`.
     """
-    g = _Graph()
+    g = Graph()
     if not isinstance(network, GMLP):  # a FieldModel
         _field_graph(g, network)
         info = {**network.info, **(extra or {})}
@@ -440,7 +451,7 @@ def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
 
 def latency_session(raw: bytes):
     """An onnxruntime session tuned for latency: one thread, sequential, no spinning."""
-    import onnxruntime as ort
+    import onnxruntime as ort  # lazily: exporting a model needs no runtime (models/__init__)
 
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
@@ -451,45 +462,117 @@ def latency_session(raw: bytes):
     return ort.InferenceSession(raw, sess_options=opts, providers=["CPUExecutionProvider"])
 
 
+@dataclass(frozen=True)
+class Contract:
+    """What a model file's contract fixes, the one place a one-joint model and a limb model
+    differ: ``format`` (metadata ``jointlimits.format``), the input and output names, and
+    whether a sample is a posture ``[J, 4]`` (a limb's joints) or one orientation ``[4]``.
+    A batch over ``chunk`` samples runs in chunks of ``chunk`` on worker threads (None: in one
+    call)."""
+
+    format: str
+    input: str
+    output: str
+    per_joint: bool
+    chunk: int | None = None
+
+
+#: A one-joint model: ``orientation [N, 4] → correction [N, 4]`` (module docstring).
+JOINT_CONTRACT = Contract(FORMAT, INPUT, OUTPUT, per_joint=False)
+#: A limb model: ``orientations [N, J, 4] → corrections [N, J, 4]`` (:mod:`models.limb_model`).
+LIMB_CONTRACT = Contract("jointlimits-limb-correction/1", "orientations", "corrections",
+                         per_joint=True, chunk=1024)
+
+
+def _contract_of(path: Path, metadata: dict[str, str], limb: bool | None) -> Contract:
+    """The contract a file claims (a ``jointlimits-limb-`` format is a limb's, anything else is
+    judged as a one joint's), refused in one line when it is not the one ``limb`` asks for."""
+    got = metadata.get("jointlimits.format")
+    is_limb = str(got or "").startswith("jointlimits-limb-")
+    if limb is False and is_limb:
+        raise ModelFileError(f"{path}: a limb model (corrections of a whole limb's joints, "
+                             "[N, J, 4]), not one joint's: give a model trained on a "
+                             "single joint's constraint file")
+    if (limb or is_limb) and got != LIMB_CONTRACT.format:
+        raise ModelFileError(f"{path}: not a limb model (metadata jointlimits.format is "
+                             f"{got!r}, expected {LIMB_CONTRACT.format!r})")
+    return LIMB_CONTRACT if is_limb else JOINT_CONTRACT
+
+
 class CorrectionModel:
-    """An exported correction model run by onnxruntime, tuned for latency.
+    """An exported correction model run by onnxruntime, tuned for latency: one joint's
+    (``[N, 4] → [N, 4]``, :func:`export_onnx`) or a whole limb's (``[N, J, 4] → [N, J, 4]``,
+    :func:`models.limb_model.export_limb_model`) — a one-joint model is the limb of one joint
+    whose file keeps its ``[N, 4]`` contract (:class:`Contract`).
+
+    One sample (:meth:`correct_one`) runs on the calling thread (one onnxruntime thread, no
+    spinning) through a preallocated input buffer; a limb's batch of more than
+    :attr:`Contract.chunk` postures in chunks on one worker thread per core for the call (the
+    session is shared; onnxruntime releases the GIL while it runs, and chunks of this size stay
+    in the cache).
 
     Parameters
     ----------
     path : str or Path
-        ``.onnx`` file written by :func:`export_onnx`.
-    expected_constraint : JointConstraint, YAML str, dict or None
-        If given, the model's embedded constraint must equal it.
+        ``.onnx`` file written by :func:`export_onnx` or
+        :func:`models.limb_model.export_limb_model`.
+    expected_constraint : JointConstraint, YAML str, dict, Limb or None
+        If given, the model's embedded constraint must equal it (a :class:`models.limb.Limb`:
+        a limb model with the same limits, content hash; anything else: a one-joint model).
+    limb : bool or None
+        True: refuse a one-joint model; False: refuse a limb model; None (the default) takes
+        either, unless ``expected_constraint`` tells which.
+
+    Attributes
+    ----------
+    contract : Contract
+    metadata : dict of str
+    constraint_yaml : str
+        The embedded constraint file (a limb model: its limb file).
+    limb : Limb or None
+        A limb model's limb (None for a one-joint model).
+    joints : tuple of str
+        A limb model's joint names, in order (empty for a one-joint model).
 
     Raises
     ------
     ModelFileError
-        Missing file, not ONNX, wrong input/output names or shapes, not one of ours, or a
-        different constraint.
+        Missing file, not ONNX, wrong input/output names or shapes, not one of ours, the other
+        contract than asked for, or a different constraint.
     """
 
-    def __init__(self, path: str | Path, expected_constraint=None):
+    def __init__(self, path: str | Path, expected_constraint=None, *, limb: bool | None = None):
         self.path = Path(path)
         raw, model = read_onnx(self.path)
         self.metadata = {p.key: p.value for p in model.metadata_props}
-        if str(self.metadata.get("jointlimits.format", "")).startswith("jointlimits-limb-"):
-            raise ModelFileError(f"{path}: a limb model (corrections of a whole limb's joints, "
-                                 "[N, J, 4]), not one joint's: give a model trained on a "
-                                 "single joint's constraint file")
-        self._check_io(model)
-        if self.metadata.get("jointlimits.format") != FORMAT:
-            got = self.metadata.get("jointlimits.format")
-            raise ModelFileError(f"{path}: not a jointlimits correction model (metadata "
-                                 f"jointlimits.format is {got!r}, expected {FORMAT!r})")
-        self.constraint_yaml = self.metadata.get("jointlimits.constraint", "")
+        if expected_constraint is not None and limb is None:
+            limb = isinstance(expected_constraint, Limb)
+        self.contract = _contract_of(path, self.metadata, limb)
+        self.limb: Limb | None = None
+        self.joints: tuple[str, ...] = ()
+        if self.contract.per_joint:
+            self.constraint_yaml = self.metadata.get("jointlimits.limb", "")
+            self.limb = loads_limb(self.constraint_yaml, source=f"{path} (embedded)")
+            self.joints = tuple(json.loads(self.metadata.get("jointlimits.joints", "[]")))
+            self._check_limb_io(model)
+            sample: tuple[int, ...] = (len(self.joints), 4)
+        else:
+            self._check_io(model)
+            if self.metadata.get("jointlimits.format") != FORMAT:
+                got = self.metadata.get("jointlimits.format")
+                raise ModelFileError(f"{path}: not a jointlimits correction model (metadata "
+                                     f"jointlimits.format is {got!r}, expected {FORMAT!r})")
+            self.constraint_yaml = self.metadata.get("jointlimits.constraint", "")
+            sample = (4,)
         if expected_constraint is not None:
             self.check_constraint(expected_constraint)
         self.session = latency_session(raw)
-        self._one = np.zeros((1, 4), dtype=np.float32)
-        self._run = self.session._sess.run  # skips the Python-side checks of session.run
-        self._outs = [OUTPUT]
-        self._feed = {INPUT: self._one}
-        self._ro = None
+        self._sample = sample
+        self._one = np.zeros((1, *sample), dtype=np.float32)
+        self._outs = [self.contract.output]
+        self._feed = {self.contract.input: self._one}
+        # session.run, the public path: its Python-side checks cost ~0.1 µs a call
+        self._ro = _run_options()
 
     def _check_io(self, model: onnx.ModelProto) -> None:
         def describe(vs):
@@ -513,16 +596,29 @@ class CorrectionModel:
                 f"float32 [N, 4], got inputs {[(n, d) for n, _, d in got_in]} and outputs "
                 f"{[(n, d) for n, _, d in got_out]}")
 
+    def _check_limb_io(self, model: onnx.ModelProto) -> None:
+        c = self.contract
+        ins = [v for v in model.graph.input
+               if v.name not in {i.name for i in model.graph.initializer}]
+        if len(ins) != 1 or ins[0].name != c.input or [o.name for o in model.graph.output] != [
+                c.output]:
+            raise ModelFileError(f"{self.path}: expected input '{c.input}' and output "
+                                 f"'{c.output}'")
+
     def check_constraint(self, expected) -> None:
-        """Raise :class:`ModelFileError` unless the embedded constraint equals ``expected``."""
+        """Raise :class:`ModelFileError` unless the embedded constraint equals ``expected``
+        (a :class:`models.limb.Limb`: the same limits, by content hash)."""
+        if self.contract.per_joint:
+            if expected.content_hash() != self.limb.content_hash():
+                raise ModelFileError(f"{self.path}: the model was made for other limits (limb "
+                                     f"{self.limb.name!r}); export one for this limb file")
+            return
         try:
             mine = safe_load_yaml(self.constraint_yaml)
         except yaml.YAMLError:
             mine = None
         if hasattr(expected, "to_yaml"):  # a JointConstraint: compare limits, ignore the name
             try:
-                from models.constraint import loads_constraint
-
                 embedded = loads_constraint(self.constraint_yaml)
                 same = embedded == expected
             except Exception:  # unparsable embedded constraint: not the same
@@ -542,49 +638,73 @@ class CorrectionModel:
                 "`rig train` for this constraint file")
 
     @property
-    def metrics(self) -> dict[str, float]:
-        return json.loads(self.metadata.get("jointlimits.metrics", "{}"))
+    def metrics(self) -> dict[str, Any]:
+        """The held-out metrics stored at export (a one-joint model's; a limb model stores
+        none), an old metric name read as today's (:func:`current_metric_names`)."""
+        return current_metric_names(json.loads(self.metadata.get("jointlimits.metrics", "{}")))
 
     @property
     def network_info(self) -> dict[str, Any]:
+        """The network's summary stored at export (``jointlimits.network``)."""
         return json.loads(self.metadata.get("jointlimits.network", "{}"))
+
+    @property
+    def size_bytes(self) -> int:
+        """The model file's size."""
+        return self.path.stat().st_size
 
     def correction(self, orientation: np.ndarray) -> np.ndarray:
         """Batched corrections.
 
         Parameters
         ----------
-        orientation : (N, 4) or (4,) float, raw scalar-first quaternions (either sign)
+        orientation : (N, 4) or (4,) float for a one-joint model, (N, J, 4) or (J, 4) for a
+            limb model: raw scalar-first quaternions (either sign), a limb's joints in its
+            file's order
 
         Returns
         -------
-        (N, 4) or (4,) float32, unit corrective quaternions.
+        float32 array of the input's shape: unit corrective quaternions.
         """
         q = np.ascontiguousarray(orientation, dtype=np.float32)
-        single = q.ndim == 1
-        out = self._run(self._outs, {INPUT: q.reshape(-1, 4)}, self._ro)[0]
-        return out[0] if single else out
+        single = q.ndim == len(self._sample)
+        q = q.reshape(-1, *self._sample)
+        c = self.contract
+        workers = min(os.cpu_count() or 1, 8)
+        if c.chunk is None or len(q) <= c.chunk or workers == 1:
+            out = self.session.run(self._outs, {c.input: q}, self._ro)[0]
+            return out[0] if single else out
+        out = np.empty(q.shape, dtype=np.float32)
 
-    def correct_one(self, w: float, x: float, y: float, z: float) -> np.ndarray:
-        """The cheap single-orientation path: (4,) float32 correction of one quaternion.
+        def chunk(k: int) -> None:
+            out[k:k + c.chunk] = self.session.run(self._outs, {c.input: q[k:k + c.chunk]},
+                                                  self._ro)[0]
+        starts = range(0, len(q), c.chunk)
+        with ThreadPoolExecutor(min(workers, len(starts)), thread_name_prefix="limb-model") as pool:
+            list(pool.map(chunk, starts))
+        return out
 
-        Reuses one preallocated input buffer; the returned array is fresh.
-        """
-        one = self._one[0]
-        one[0] = w
-        one[1] = x
-        one[2] = y
-        one[3] = z
-        return self._run(self._outs, self._feed, self._ro)[0][0]
+    def correct_one(self, orientation) -> np.ndarray:
+        """The cheap single-sample path: the correction of one orientation (4,) (a limb model:
+        one posture (J, 4)), float32, through one preallocated input buffer; the returned
+        array is fresh."""
+        self._one[0] = orientation
+        return self.session.run(self._outs, self._feed, self._ro)[0][0]
 
     def corrected(self, orientation: np.ndarray) -> np.ndarray:
-        """``correction ⊗ orientation`` (N, 4) float64, keeping the input's sign."""
-        from models.quaternion import multiply
-
+        """``correction ⊗ orientation`` float64 of the input's shape, keeping its sign."""
         q = np.asarray(orientation, dtype=np.float64)
         return multiply(self.correction(q).astype(np.float64), q)
 
 
-def load_model(path: str | Path, expected_constraint=None) -> CorrectionModel:
-    """Open an exported model (see :class:`CorrectionModel`)."""
-    return CorrectionModel(path, expected_constraint)
+def _run_options():
+    """The ``RunOptions`` every call passes."""
+    import onnxruntime as ort  # lazily, as in latency_session
+
+    return ort.RunOptions()
+
+
+def load_model(path: str | Path, expected_constraint=None, *,
+               limb: bool | None = None) -> CorrectionModel:
+    """Open an exported model, one joint's or a limb's (see :class:`CorrectionModel`)."""
+    return CorrectionModel(path, expected_constraint, limb=limb)

@@ -51,7 +51,7 @@ from models.datasets._common import (
     label_regions,
     make_rng,
 )
-from models.datasets._dataset import REGION_NAMES, Dataset, created_by
+from models.datasets._dataset import Dataset, dataset_meta
 from models.errors import ConstraintError, DatasetError
 from models.oracle import ConstraintOracle
 
@@ -62,17 +62,6 @@ __all__ = [
     "sphere_quaternion_dataset",
     "sphere_vector_dataset",
 ]
-
-
-def _meta(kind: str, generator: dict[str, Any], rng_meta: dict[str, Any], **extra: Any) -> dict:
-    return {
-        "kind": kind,
-        "generator": generator,
-        **rng_meta,
-        "created_by": created_by(),
-        "region_names": list(REGION_NAMES),
-        **extra,
-    }
 
 
 def interval_dataset(
@@ -138,7 +127,7 @@ def interval_dataset(
         "band": band,
         "convention": convention,
     }
-    return Dataset(p[:, None], c[:, None], _meta("interval", gen, rng_meta), regions)
+    return Dataset(p[:, None], c[:, None], dataset_meta("interval", gen, rng_meta), regions)
 
 
 def ball_dataset(
@@ -181,7 +170,7 @@ def ball_dataset(
     c[invalid] = -v[invalid] * (1.0 - radius / norm[invalid])[:, None]  # eq. 49
     regions = label_regions(~invalid, norm - radius, band)
     gen = {"n": n, "dim": dim, "radius": radius, "band": band}
-    return Dataset(v, c, _meta(f"ball{dim}", gen, rng_meta), regions)
+    return Dataset(v, c, dataset_meta(f"ball{dim}", gen, rng_meta), regions)
 
 
 def cone_constraint(centre: Any = (1.0, 0.0, 0.0), radius_deg: float = 45.0) -> JointConstraint:
@@ -229,7 +218,7 @@ def _sphere(
         "radius_deg": float(radius_deg),
         "band_deg": math.degrees(band),
     }
-    meta = _meta(
+    meta = dataset_meta(
         kind, gen, rng_meta, constraint=constraint.to_yaml(), constraint_name=constraint.name
     )
     return v, b, dist, regions, meta

@@ -76,6 +76,21 @@ def created_by() -> str:
     return f"jointlimits-rig {v}"
 
 
+def dataset_meta(kind: str, generator: dict[str, Any], rng_meta: dict[str, Any],
+                 **extra: Any) -> dict:
+    """A generated dataset's metadata: its ``kind``, the ``generator``'s parameters, the seed
+    facts of :func:`models.datasets._common.make_rng`, ``created_by``, the region names, then
+    ``extra`` (in that key order: the file's JSON keeps it)."""
+    return {
+        "kind": kind,
+        "generator": generator,
+        **rng_meta,
+        "created_by": created_by(),
+        "region_names": list(REGION_NAMES),
+        **extra,
+    }
+
+
 def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return obj.tolist()

@@ -19,9 +19,8 @@ from typing import Any
 import numpy as np
 
 from models import quaternion as quat
-from models.datasets._chapter3 import _meta
 from models.datasets._common import check_n, label_regions, make_rng
-from models.datasets._dataset import Dataset
+from models.datasets._dataset import Dataset, dataset_meta
 from models.geometry import nearest_on_polygons
 
 __all__ = ["UNIFORM", "coupled_directions", "coupled_targets", "field_joints", "field_samples",
@@ -50,7 +49,7 @@ def limb_dataset(limb, n: int, rng: np.random.Generator | int | None = 0,
     learned = [limb.index(name) for name in field_joints(limb)] or list(range(len(limb.joints)))
     regions = label_regions(res.valid[:, learned].all(axis=1),
                             res.distance[:, learned].max(axis=1), np.radians(BAND_DEG))
-    meta: dict[str, Any] = _meta("limb", {"n": n, "uniform": uniform, "joints": jn},
+    meta: dict[str, Any] = dataset_meta("limb", {"n": n, "uniform": uniform, "joints": jn},
                                  rng_meta, limb=limb.to_yaml(), limb_name=limb.name,
                                  joints=list(limb.joint_names))
     return Dataset(q.reshape(n, 4 * jn), res.correction.reshape(n, 4 * jn), meta, regions)

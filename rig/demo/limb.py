@@ -23,7 +23,7 @@ Stages (each calls the library function behind the corresponding ``rig`` command
    ``network`` (a trained distance field for the coupled swing), or ``geometric`` (the exact
    oracle compiled, no training) at the quick size.
 5. **evaluate** — ``rig evaluate`` (onnxruntime) on fresh held-out postures; verdict against
-   issue 20's targets (:data:`rig.training.limb.LIMB_TARGETS`). The model is registered with
+   issue 20's targets (:func:`rig.training.verdict.targets_for`). The model is registered with
    the session with this evaluation, which the report shows (one evaluation, one verdict).
 6. **report** — the clinician's report of the limb (:mod:`rig.report.limb`): ``report.html``.
 
@@ -63,8 +63,13 @@ from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
 from rig.store import open_store
 from rig.training import TrainRequest, run_train
-from rig.training.limb import LIMB_TARGETS, evaluate_limb, limb_warnings
-from rig.training.verdict import evaluation_record, evaluation_verdict
+from rig.training.limb import evaluate_limb
+from rig.training.verdict import (
+    evaluation_record,
+    evaluation_verdict,
+    missed_targets,
+    targets_for,
+)
 
 __all__ = ["LIMB_SIZES", "LimbDemo", "LimbDemoSize", "compare_limbs", "write_limb_rig"]
 
@@ -278,14 +283,14 @@ class _LimbCtx:
                                    session_id=self.session,
                                    metrics=evaluation_record(metrics, n=self.size.eval_n,
                                                              seed=seed, by="rig evaluate"))
-        st.figures.update({k: metrics.get(k) for k in LIMB_TARGETS})
+        st.figures.update({k: metrics.get(k) for k in targets_for(limb=True)})
         st.figures["model_id"] = mid
         ok, _ = evaluation_verdict(metrics, limb=True)
-        misses = limb_warnings(metrics)
+        misses = missed_targets(metrics, limb=True)
         st.verdict = "PASS" if ok else "WARN"
         st.detail = (f"{self.size.eval_n} held-out postures: end-point mean 3-D error "
                      f"{metrics['end_mean_3d_error_pct']:.3f} % (≤ 0.5), invalid left > 1° "
-                     f"{100 * metrics['frac_invalid_left_1deg']:.2f} % (≤ 1), valid moved "
+                     f"{100 * metrics['frac_invalid_violating_1deg']:.2f} % (≤ 1), valid moved "
                      f"{metrics['valid_moved_deg']:.3f}° (≤ 0.1), p99 end-point direction "
                      f"{metrics['end_p99_direction_error_deg']:.2f}° (≤ 3)"
                      + ("" if not misses else "; " + "; ".join(misses)))

@@ -254,7 +254,7 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
     if rig_cfg.servos is None:
         raise RigConfigError(f"--rig {request.rig}: rig {rig_cfg.name!r} has no servo chain to "
                              "drive")
-    mdl = load_model(request.model)
+    mdl = load_model(request.model, limb=False)
     store = None
     session_constraint = session_patient = alignment = None
     try:

@@ -355,7 +355,7 @@ class EnforcementLoop:
             goal_ticks = self._goal_ticks
             corr = _NAN4
             if tq is not None and model is not None:
-                cv = model.correct_one(tq[0], tq[1], tq[2], tq[3])
+                cv = model.correct_one(tq)
                 corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
                 goal = sup.step(start, tq, corr)
             else:
@@ -492,7 +492,7 @@ class EnforcementLoop:
             return
         corr = None
         if self.model is not None:
-            cv = self.model.correct_one(tq[0], tq[1], tq[2], tq[3])
+            cv = self.model.correct_one(tq)
             corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
         goal = sup.step(now, tq, corr)
         try:

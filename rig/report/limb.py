@@ -37,8 +37,8 @@ Sections, per joint in the limb's order:
   coupling says so in one line.
 
 Then the calibration residuals (:attr:`calibration.limb_calibration.LimbImuCalibration.
-residuals_`), the limb model's evaluation (:func:`models.limb_evaluation.evaluate_limb_model`)
-against issue 20's targets (:data:`rig.training.limb.LIMB_TARGETS`), and the warnings
+residuals_`), the limb model's evaluation (:func:`models.evaluation.evaluate_model`)
+against issue 20's targets (:func:`rig.training.verdict.targets_for`), and the warnings
 (coverage, an interrupted session) at the top, as the shoulder report shows them.
 
 How a limit on the primary angle α is read from a swing region: α of a ball joint's child
@@ -82,6 +82,7 @@ from calibration.joints import JOINTS, hinge_angles, off_axis_angles
 from models import quaternion as Q
 from models.geometry import polygon_area
 from models.limb_oracle import LimbOracle
+from models.metrics import current_metric_names
 from rig import __version__
 from rig.report.figures import (
     boundary_figure,
@@ -106,8 +107,7 @@ from rig.report.page import (
     warnings_html,
     write_page,
 )
-from rig.training.limb import LIMB_TARGETS
-from rig.training.verdict import evaluation_verdict
+from rig.training.verdict import evaluation_verdict, targets_for
 
 __all__ = ["NO_COUPLING", "CouplingSection", "JointSection", "LimbReportData",
            "limb_model_verdict", "limb_report_data", "render_limb_html", "write_limb_report"]
@@ -123,7 +123,7 @@ _NEAR_KEYFRAME_DEG = 10.0  # recorded postures "at" a keyframe: hinge within thi
 #: Issue 20's targets as the report words them: metric → (label, unit, scale shown).
 _TARGET_LABELS: dict[str, tuple[str, str, float]] = {
     "end_mean_3d_error_pct": ("end-point mean 3-D error (% of limb length)", " %", 1.0),
-    "frac_invalid_left_1deg": ("invalid inputs left > 1° outside (%)", " %", 100.0),
+    "frac_invalid_violating_1deg": ("invalid inputs left > 1° outside (%)", " %", 100.0),
     "valid_moved_deg": ("valid inputs moved, mean (°)", "°", 1.0),
     "end_p99_direction_error_deg": ("p99 end-point direction error (°)", "°", 1.0),
 }
@@ -599,12 +599,13 @@ def _reference_joint(reference, name: str, kind: str):
 # ---------------------------------------------------------------------------------------------
 def limb_model_verdict(metrics: Mapping[str, Any]) -> tuple[bool, str, list[dict[str, Any]]]:
     """(all targets met, one-line verdict, one row per target) of a limb model's held-out
-    metrics (:func:`models.limb_evaluation.evaluate_limb_model`) against issue 20's targets
-    (:data:`rig.training.limb.LIMB_TARGETS`: end-point mean 3-D error ≤ 0.5 % of the limb's
+    metrics (:func:`models.evaluation.evaluate_model`) against issue 20's targets
+    (:func:`rig.training.verdict.targets_for` a limb: end-point mean 3-D error ≤ 0.5 % of the limb's
     length, invalid inputs left > 1° outside ≤ 1 %, valid inputs moved ≤ 0.1° mean, p99
     end-point direction error ≤ 3°). A metric absent from ``metrics`` is shown, not judged."""
+    metrics = current_metric_names(dict(metrics))
     rows = []
-    for key, limit in LIMB_TARGETS.items():
+    for key, (limit, *_) in targets_for(limb=True).items():
         label, unit, scale = _TARGET_LABELS.get(key, (key, "", 1.0))
         v = metrics.get(key)
         rows.append({"metric": label, "key": key,
@@ -707,7 +708,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         Which calibration those are (the recorder's, or re-fitted on the host's fusion) and
         what it measured beyond them (the root's lean), shown beneath them.
     evaluation : mapping, optional
-        A limb model's metrics (:func:`models.limb_evaluation.evaluate_limb_model`), judged
+        A limb model's metrics (:func:`models.evaluation.evaluate_model`), judged
         against issue 20's targets (:func:`limb_model_verdict`).
     evaluation_note : str, optional
         Which evaluation those metrics are (stored with the model, or drawn for the report),

@@ -50,7 +50,6 @@ from models.errors import ModelsError
 from models.evaluation import evaluate_model, held_out_orientations
 from models.fileio import check_output
 from models.limb import load_limb
-from models.limb_model import load_limb_model
 from models.metrics import three_d_error_percent
 from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
@@ -67,11 +66,10 @@ from rig.training.limb import evaluate_limb
 from rig.training.verdict import (  # the one verdict, re-exported
     MODEL_TARGETS,
     evaluation_verdict,
-    model_verdict,
     stored_evaluation,
 )
 
-__all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "model_verdict",
+__all__ = ["MODEL_TARGETS", "ReportRequest", "ReportResult", "evaluation_verdict",
            "report_data_for_session", "report_for_session", "run_report"]
 
 
@@ -158,7 +156,7 @@ def enforcement_facts(summary: dict) -> tuple[dict[str, Any], str]:
 def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
     """(constraint, metrics, limb directions (n, 3), 3-D error % (n,)) of a model on held-out
     orientations of the constraint embedded in it."""
-    model = load_model(model_path)
+    model = load_model(model_path, limb=False)
     constraint = loads_constraint(model.constraint_yaml, source=str(model_path))
     oracle = ConstraintOracle(constraint)
     q = held_out_orientations(constraint, n, seed, oracle=oracle)
@@ -404,7 +402,7 @@ def _is_limb_model_of(joints):
     """``accept`` for :func:`_last_registered_model`: a limb model of ``joints``."""
     def accept(path: str) -> bool:
         try:
-            return load_limb_model(path).limb.joint_names == tuple(joints)
+            return load_model(path, limb=True).limb.joint_names == tuple(joints)
         except (ModelsError, OSError):
             return False  # a single joint's model, or a file replaced since
     return accept
@@ -430,7 +428,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
         if registered is not None:
             model = registered[1]
     if model is not None:
-        limb = load_limb_model(str(model)).limb
+        limb = load_model(str(model), limb=True).limb
         if limb.joint_names != chain.joints:
             raise RigConfigError(f"--model {model}: a model of the joints "
                                  f"{', '.join(limb.joint_names)}, the session recorded "
@@ -533,7 +531,7 @@ def run_report(request: ReportRequest) -> ReportResult:
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:
     """``--model`` must be made for the session's joint, side and patient (one line, before any
     work): a knee's model in a shoulder's report would show another joint's figures."""
-    text = load_model(model).constraint_yaml
+    text = load_model(model, limb=False).constraint_yaml
     if not text:
         return
     mc = loads_constraint(text, source=f"{model} (embedded constraint)")

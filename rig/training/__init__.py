@@ -20,7 +20,6 @@ Modules
 
 from rig.training.evaluate import EvaluateRequest, EvaluateResult, run_evaluate
 from rig.training.train import (
-    ENFORCEMENT_TARGETS,
     PRESET_NAMES,
     TrainRequest,
     TrainResult,
@@ -29,6 +28,6 @@ from rig.training.train import (
     run_train,
 )
 
-__all__ = ["ENFORCEMENT_TARGETS", "PRESET_NAMES", "EvaluateRequest", "EvaluateResult",
+__all__ = ["PRESET_NAMES", "EvaluateRequest", "EvaluateResult",
            "TrainRequest", "TrainResult", "enforcement_warnings", "metric_lines",
            "run_evaluate", "run_train"]

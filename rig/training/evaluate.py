@@ -31,9 +31,8 @@ class EvaluateRequest:
 
 @dataclass
 class EvaluateResult:
-    """The metrics (:func:`models.evaluation.evaluate_model`, or
-    :func:`models.limb_evaluation.evaluate_limb_model` for a limb) and what they were measured
-    on, for people (``description``, then ``lines``)."""
+    """The metrics (:func:`models.evaluation.evaluate_model`, a joint's or a limb's) and what
+    they were measured on, for people (``description``, then ``lines``)."""
 
     metrics: dict
     description: str

@@ -18,18 +18,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rig.training.verdict import MODEL_TARGETS
+from rig.training.verdict import MODEL_TARGETS, missed_targets
 
-__all__ = ["ENFORCEMENT_TARGETS", "PRESET_NAMES", "TrainRequest", "TrainResult",
+__all__ = ["PRESET_NAMES", "TrainRequest", "TrainResult",
            "enforcement_warnings", "metric_lines", "run_train"]
 
 #: ``--preset`` values (:mod:`models.nn.config`); ``field`` is the default.
 PRESET_NAMES = ("field", "best", "compact", "thesis", "fixed")
-
-#: What a model must reach on held-out orientations to be used for enforcement as is: two of
-#: the targets every verdict uses (:data:`rig.training.verdict.MODEL_TARGETS`), taken from there.
-ENFORCEMENT_TARGETS = {k: MODEL_TARGETS[k][0]
-                       for k in ("frac_invalid_violating_1deg", "mean_3d_error_pct")}
 
 _LABELS = {
     "mse": "MSE (correction quaternion)",
@@ -90,8 +85,9 @@ class TrainRequest:
 @dataclass
 class TrainResult:
     """The trained model (:class:`models.nn.train.TrainedModel`), the ONNX file written, how
-    long it took and why it should not be trusted to enforce limits (empty when it meets
-    :data:`ENFORCEMENT_TARGETS`)."""
+    long it took and why it should not be trusted to enforce limits (empty when it meets the
+    targets: :func:`enforcement_warnings`; a limb's,
+    :func:`rig.training.verdict.missed_targets`)."""
 
     model: Any
     path: Path
@@ -163,13 +159,13 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     request.check()
     limb, source, data = _limb_source(request)  # a joint's: (None, constraint, dataset)
     if limb is not None:
-        from rig.training.limb import limb_warnings, train_limb
+        from rig.training.limb import train_limb
 
         t0 = time.perf_counter()
         trained, path = train_limb(limb, request.out, preset=request.preset,
                                    seed=request.seed, postures=source, data=data, echo=echo)
         result = TrainResult(trained, path, time.perf_counter() - t0,
-                             limb_warnings(trained.metrics))
+                             missed_targets(trained.metrics, limb=True))
         for w in result.warnings:
             echo(f"warning: {w}")
         return result
@@ -227,19 +223,21 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
 
 def enforcement_warnings(metrics: dict) -> list[str]:
     """Why a freshly trained model should not be trusted to enforce limits (empty when it
-    meets :data:`ENFORCEMENT_TARGETS`): the live supervisor still projects every goal, but the
-    model's corrections would be overridden on every such input."""
+    meets two of the targets every verdict uses, :data:`rig.training.verdict.MODEL_TARGETS`:
+    invalid inputs left > 1° outside, mean 3-D error): the live supervisor still projects
+    every goal, but the model's corrections would be overridden on every such input."""
     out = []
     frac = metrics.get("frac_invalid_violating_1deg")
-    if frac is not None and frac > ENFORCEMENT_TARGETS["frac_invalid_violating_1deg"]:
+    if frac is not None and frac > MODEL_TARGETS["frac_invalid_violating_1deg"].limit:
         worst = metrics.get("max_violation_deg")
         out.append(f"this model leaves {100 * frac:.1f} % of the held-out invalid "
                    "orientations more than 1° outside the constraint"
                    + (f" (worst {worst:.0f}°)" if worst is not None else "")
                    + "; for enforcement use the default preset 'field', which does not")
     err = metrics.get("mean_3d_error_pct")
-    if err is not None and err > ENFORCEMENT_TARGETS["mean_3d_error_pct"] and not out:
+    limit = MODEL_TARGETS["mean_3d_error_pct"].limit
+    if err is not None and err > limit and not out:
         out.append(f"this model's mean 3-D error is {err:.2f} % (the target for enforcement "
-                   f"is {ENFORCEMENT_TARGETS['mean_3d_error_pct']:g} %); for enforcement use "
+                   f"is {limit:g} %); for enforcement use "
                    "the default preset 'field'")
     return out

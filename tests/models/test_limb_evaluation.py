@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
+from models.evaluation import evaluate_model
 from models.limb_evaluation import (
     HELD_OUT_LIMB_SEED,
-    evaluate_limb_model,
     held_out_limbs,
     held_out_postures,
     random_limb,
@@ -50,21 +50,22 @@ def test_postures_are_a_third_valid_and_reproducible(leg):
 def test_the_exact_model_scores_zero_and_ignoring_the_coupling_costs(leg):
     limb, oracle = leg
     q = held_out_postures(limb, 1500, 4, oracle=oracle)
-    exact = evaluate_limb_model(oracle.correction, oracle, q)
-    assert exact["end_mean_3d_error_pct"] < 1e-9 and exact["frac_invalid_left_1deg"] == 0.0
+    exact = evaluate_model(oracle.correction, limb, q=q, oracle=oracle)
+    assert exact["end_mean_3d_error_pct"] < 1e-9 and exact["frac_invalid_violating_1deg"] == 0.0
     assert exact["valid_moved_deg"] < 1e-9 and exact["max_violation_deg"] < 1e-6
-    loose = evaluate_limb_model(uncoupled_model(limb), oracle, q)
+    loose = evaluate_model(uncoupled_model(limb), limb, q=q, oracle=oracle)
     # the loosest limits contain every valid posture: nothing valid moves …
     assert loose["valid_moved_deg"] < 1e-9
     # … but many invalid postures are left outside the limits at their knee angle
-    assert loose["frac_invalid_left_1deg"] > 0.2 and loose["end_mean_3d_error_pct"] > 0.5
+    assert loose["frac_invalid_violating_1deg"] > 0.2 and loose["end_mean_3d_error_pct"] > 0.5
     assert loose["joint_mean_direction_error_deg"][1:] == pytest.approx([0.0, 0.0], abs=1e-9)
 
 
 def test_a_model_that_corrects_nothing_is_scored_as_such(leg):
     limb, oracle = leg
     q = held_out_postures(limb, 600, 5, oracle=oracle)
-    ident = evaluate_limb_model(lambda x: np.tile(Q.IDENTITY, (*x.shape[:2], 1)), oracle, q)
+    ident = evaluate_model(lambda x: np.tile(Q.IDENTITY, (*x.shape[:2], 1)), limb, q=q,
+                           oracle=oracle)
     invalid = ~oracle.evaluate(q).limb_valid
-    assert ident["frac_invalid_left_1deg"] > 0.9 and invalid.any()
+    assert ident["frac_invalid_violating_1deg"] > 0.9 and invalid.any()
     assert ident["valid_moved_deg"] == 0.0

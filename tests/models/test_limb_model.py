@@ -12,15 +12,16 @@ import yaml
 
 from models import quaternion as Q
 from models.errors import ModelFileError
+from models.evaluation import evaluate_model
 from models.limb import loads_limb
 from models.limb_evaluation import (
     HELD_OUT_LIMB_SEED,
-    evaluate_limb_model,
     held_out_postures,
     random_limb,
 )
-from models.limb_model import FORMAT, export_limb_model, load_limb_model
+from models.limb_model import FORMAT, export_limb_model
 from models.limb_oracle import LimbOracle
+from models.onnx_io import load_model
 
 ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger joint
     {"name": "shoulder", "parent": "thorax", "child": "upper-arm", "constraint": {
@@ -51,16 +52,16 @@ ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger 
 def leg_model(tmp_path_factory):
     limb = random_limb(HELD_OUT_LIMB_SEED - 1, "leg")  # a tuning seed
     path = export_limb_model(limb, tmp_path_factory.mktemp("m") / "leg.onnx")
-    return limb, LimbOracle(limb), load_limb_model(path, limb)
+    return limb, LimbOracle(limb), load_model(path, limb)
 
 
 def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model):
     limb, oracle, model = leg_model
     q = held_out_postures(limb, 3000, 11, oracle=oracle)
-    r = evaluate_limb_model(model.correction, oracle, q)
+    r = evaluate_model(model, limb, q=q, oracle=oracle)
     assert r["end_mean_3d_error_pct"] < 0.005
     assert r["end_p99_direction_error_deg"] < 0.02
-    assert r["frac_invalid_left_1deg"] == 0.0 and r["max_violation_deg"] < 0.05
+    assert r["frac_invalid_violating_1deg"] == 0.0 and r["max_violation_deg"] < 0.05
     assert r["valid_moved_deg"] < 0.01
     exact = oracle.correction(q)
     got = model.correction(q).astype(np.float64)
@@ -73,15 +74,15 @@ def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model)
 def test_coupled_cones_and_hinges_and_four_joints(tmp_path):
     limb = loads_limb(yaml.safe_dump(ARM))
     oracle = LimbOracle(limb)
-    model = load_limb_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
+    model = load_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
     rng = np.random.default_rng(12)
     q = Q.random_quaternions(4 * 4000, rng).reshape(4000, 4, 4)
     # hinges near their axes, bent anywhere from -40° to 180°
     for j in (1, 3):
         q[:, j] = Q.from_axis_angle(np.array([0.0, 0, 1]), np.radians(rng.uniform(-40, 180,
                                                                                    4000)))
-    r = evaluate_limb_model(model.correction, oracle, q)
-    assert r["end_mean_3d_error_pct"] < 0.005 and r["frac_invalid_left_1deg"] == 0.0
+    r = evaluate_model(model, limb, q=q, oracle=oracle)
+    assert r["end_mean_3d_error_pct"] < 0.005 and r["frac_invalid_violating_1deg"] == 0.0
     assert max(r["joint_mean_direction_error_deg"]) < 0.01
 
 
@@ -94,7 +95,8 @@ def test_one_posture_metadata_and_file_mode(leg_model, tmp_path):
         np.testing.assert_allclose(model.correction(q[i]), batch[i], atol=1e-6)
     # a batch larger than a chunk runs in chunks on worker threads: the same corrections,
     # in order, as one call on the whole batch
-    big = held_out_postures(limb, 2 * model.CHUNK + 37, 14, oracle=oracle).astype(np.float32)
+    big = held_out_postures(limb, 2 * model.contract.chunk + 37, 14,
+                            oracle=oracle).astype(np.float32)
     whole = model.session.run(None, {"orientations": big})[0]
     np.testing.assert_allclose(model.correction(big), whole, atol=1e-6)
     assert model.metadata["jointlimits.format"] == FORMAT
@@ -109,13 +111,13 @@ def test_the_wrong_file_is_refused_in_one_line(leg_model, tmp_path):
     _, _, model = leg_model
     other = random_limb(HELD_OUT_LIMB_SEED - 2, "arm")
     with pytest.raises(ModelFileError, match="the model was made for other limits"):
-        load_limb_model(model.path, other)
+        load_model(model.path, other)
     junk = tmp_path / "junk.onnx"
     junk.write_bytes(b"not a model")
     with pytest.raises(ModelFileError, match="not an ONNX model"):
-        load_limb_model(junk)
+        load_model(junk)
     with pytest.raises(ModelFileError, match="cannot read model file"):
-        load_limb_model(tmp_path / "missing.onnx")
+        load_model(tmp_path / "missing.onnx")
     from models.constraint import JointConstraint
     from models.field import FieldModel
     from models.onnx_io import to_onnx
@@ -125,4 +127,4 @@ def test_the_wrong_file_is_refused_in_one_line(leg_model, tmp_path):
     single.write_bytes(to_onnx(FieldModel.from_constraint(c, grid=20), constraint_yaml=c.to_yaml())
                        .SerializeToString())
     with pytest.raises(ModelFileError, match="not a limb model"):
-        load_limb_model(single)
+        load_model(single, limb=True)

@@ -7,10 +7,12 @@ import pytest
 
 from models import quaternion as Q
 from models.datasets import field_joints, field_samples, training_postures
-from models.limb_evaluation import evaluate_limb_model, held_out_postures, random_limb
-from models.limb_model import export_limb_model, limb_to_onnx, load_limb_model
+from models.evaluation import evaluate_model
+from models.limb_evaluation import held_out_postures, random_limb
+from models.limb_model import export_limb_model, limb_to_onnx
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import DistanceField, FieldSpec, fit_limb_fields
+from models.onnx_io import load_model
 from models.oracle import evaluate_ball
 
 SMALL = FieldSpec(features=64, hidden=64, samples=20000, epochs=8, batch=512)
@@ -98,7 +100,7 @@ def test_field_samples_are_the_limb_oracles_distances(leg):
 
 def test_onnx_graph_computes_the_fields_projection(leg, trained, tmp_path):
     fields, facts = trained
-    model = load_limb_model(export_limb_model(leg, tmp_path / "leg.onnx", fields, facts), leg)
+    model = load_model(export_limb_model(leg, tmp_path / "leg.onnx", fields, facts), leg)
     assert model.metadata["jointlimits.method"] == "network"
     assert '"joints": ["hip"]' in model.metadata["jointlimits.training"]
     q = held_out_postures(leg, 900, 7)
@@ -139,7 +141,7 @@ def test_small_network_corrects_a_development_limb(leg, trained):
 
     def predict(x):
         return sess.run(None, {"orientations": x.astype(np.float32)})[0]
-    m = evaluate_limb_model(predict, oracle, q)
+    m = evaluate_model(predict, leg, q=q, oracle=oracle)
     # a 64-wide network trained for 8 epochs: far from the shipped one (bench_limb.py)
     assert m["end_mean_3d_error_pct"] < 3.0
     assert m["valid_moved_deg"] < 0.5

@@ -286,8 +286,7 @@ def test_the_report_shows_the_evaluate_stages_evaluation_and_words_fit_the_leg(l
     import html as htmltext
 
     from rig.commands.session import format_sessions
-    from rig.training.limb import LIMB_TARGETS
-    from rig.training.verdict import evaluation_verdict
+    from rig.training.verdict import evaluation_verdict, targets_for
 
     stage = leg_demo["result"].stage("evaluate")
     with open_store(leg_demo["db"], create=False) as store:
@@ -296,7 +295,8 @@ def test_the_report_shows_the_evaluate_stages_evaluation_and_words_fit_the_leg(l
     metrics = row["metrics"]
     assert metrics["evaluation"] == {"n": 600, "seed": 5 + 77, "by": "rig evaluate"}
     assert stage.figures["model_id"] == row["id"]
-    assert {k: metrics[k] for k in LIMB_TARGETS} == {k: stage.figures[k] for k in LIMB_TARGETS}
+    targets = targets_for(limb=True)
+    assert {k: metrics[k] for k in targets} == {k: stage.figures[k] for k in targets}
     ok, verdict = evaluation_verdict(metrics)
     assert (stage.verdict == "PASS") == ok
     page = (leg_demo["out"] / "report.html").read_text()
