@@ -15,11 +15,11 @@ from models.onnx_io import export_onnx, load_model
 from models.oracle import ConstraintOracle
 from models.shapes import load_shape
 from rig.devices.config import load_rig_config
-from rig.devices.kinematics import ChainKinematics, ServoJoint
+from rig.devices.kinematics import JointKinematics, ServoAxis
 from rig.devices.ports import open_port
 from rig.errors import UnreachableError
 from rig.loop import EnforcementLoop, LoopConfig, ScriptedTargets, SupervisorConfig
-from rig.loop.runner import prepare_chain
+from rig.loop.runner import prepare_servo_limb
 from rig.loop.supervisor import Supervisor
 from tests.golden.harness import case, tmpdir
 from tests.golden.util import jtext, quats
@@ -45,7 +45,7 @@ def _notch() -> JointConstraint:
 
 @case("joint")
 def case_kinematics() -> dict:
-    """ChainKinematics of 1-3 servo chains: forward (batched, compiled, one), inverse (closed
+    """JointKinematics of 1-3 servo chains: forward (batched, compiled, one), inverse (closed
     form, float, batched) near seeded ticks, and the unreachable targets' messages."""
     out: dict = {}
     rng = np.random.default_rng(21)
@@ -57,7 +57,7 @@ def case_kinematics() -> dict:
         "one": [(0, 1, 0)],
     }
     for name, axes in chains.items():
-        kin = ChainKinematics([ServoJoint(i + 1, a, zero_ticks=2000 + 10 * i,
+        kin = JointKinematics([ServoAxis(i + 1, a, zero_ticks=2000 + 10 * i,
                                           direction=(-1) ** i, min_ticks=-8192, max_ticks=8192)
                                for i, a in enumerate(axes)])
         ticks = rng.integers(0, 4096, size=(300, kin.n))
@@ -158,7 +158,7 @@ def case_enforcement_loop() -> dict:
         src = ScriptedTargets("adversarial", oracle, seed=7, segment_s=0.25, hold_s=0.1)
         with open_port(URL + "&clock=manual&wire_time=off", baud=servos.baud) as port:
             clk = port.simulator.clock
-            chain = prepare_chain(port, servos, oracle)
+            chain = prepare_servo_limb(port, servos, oracle)
             try:
                 loop = EnforcementLoop(chain, model, oracle, src, cfg, clock=clk,
                                        sleep=clk.sleep)
