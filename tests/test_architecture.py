@@ -1,6 +1,6 @@
 """The rooms and arrows of the code (docs/architecture in README.md's map): computed from the
-source's import statements, every one of them — at module level and inside functions, since a
-lazy import is still a dependency — except those under ``if TYPE_CHECKING:``.
+source's import statements, every one of them — at module level, inside functions and under
+``if TYPE_CHECKING:``, since a lazy or a type-only import is still a dependency.
 
 - no import cycle between modules anywhere (importing ``a.b.c`` from outside ``a.b`` runs
   ``a.b``'s ``__init__``: that edge counts too);
@@ -34,24 +34,12 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _type_checking_lines(tree: ast.AST) -> set[int]:
-    lines: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            for sub in node.body:
-                lines.update(range(sub.lineno, (sub.end_lineno or sub.lineno) + 1))
-    return lines
-
-
 def _imports(name: str, path: Path) -> set[str]:
     """The modules of ours that ``name`` imports (each resolved to the longest module name)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    skip = _type_checking_lines(tree)
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     found: set[str] = set()
     for node in ast.walk(tree):
-        if getattr(node, "lineno", None) in skip:
-            continue
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -170,3 +158,75 @@ def test_the_servo_bus_knows_no_kinematics():
                    if t in ("rig.devices.kinematics", "rig.devices.servo_limb"))
     assert not wrong, wrong
     assert "rig.devices.kinematics" in GRAPH["rig.devices.servo_limb"]
+
+
+# --- issue 38: what the graph above does not say -------------------------------------------
+
+def _function_imports(path: Path) -> list[tuple[int, str, bool]]:
+    """(line, imported module, justified) for each import inside a function body."""
+    text = path.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    tree = ast.parse(text)
+    out = []
+    for node in ast.walk(tree):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.Import):
+                mods = [a.name for a in sub.names]
+            elif isinstance(sub, ast.ImportFrom):
+                mods = ["." * sub.level + (sub.module or "")]
+            else:
+                continue
+            near = " ".join(lines[max(0, sub.lineno - 3): sub.end_lineno or sub.lineno])
+            for m in mods:
+                out.append((sub.lineno, m, "lazy" in near))
+    return sorted(set(out))
+
+
+def _ours(module: str) -> bool:
+    return module.startswith(".") or module.split(".")[0] in PACKAGES
+
+
+LAZY_ROOMS = ("rig.cli", "rig.__main__", "rig.commands")
+
+
+def test_our_modules_are_imported_at_the_top():
+    """An import of our own code inside a function hides a dependency from the top of the file.
+    Allowed where laziness is the point: the CLI's command table and commands (start-up time),
+    and a line that says why (a comment with "lazy" on it or just above it). Third-party
+    imports inside functions are optional or heavy dependencies and stay allowed."""
+    wrong = []
+    for name, path in MODULES.items():
+        if name in LAZY_ROOMS or name.startswith("rig.commands."):
+            continue
+        for line, mod, justified in _function_imports(path):
+            if _ours(mod) and not justified:
+                wrong.append(f"{path.relative_to(ROOT)}:{line} imports {mod} inside a function")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_private_name_is_imported_from_another_module():
+    wrong = []
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.level or _ours(node.module or "")):
+                for a in node.names:
+                    if a.name.startswith("_") and not a.name.startswith("__"):
+                        wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} imports "
+                                     f"{node.module}.{a.name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_private_attribute_of_a_library_object_is_used():
+    """onnxruntime's ``session._sess`` and its like: private APIs of other projects break on
+    their next release."""
+    wrong = []
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and node.attr in ("_sess", "_session")
+                    and isinstance(node.value, ast.Attribute)):
+                wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} uses .{node.attr}")
+    assert not wrong, "\n".join(wrong)
