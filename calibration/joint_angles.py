@@ -110,7 +110,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.clinical import _check_side, mirror_quaternions, text_table
+from calibration.clinical import check_side, mirror_quaternions, text_table
 from calibration.frames import SEGMENT_TO_ISB
 from calibration.kinds import calibration_kind, registered
 from models import quaternion as Q
@@ -394,7 +394,7 @@ def _joint(name: str) -> JointAngleSet:
 
 
 def _side(q: np.ndarray, side: str) -> np.ndarray:
-    return mirror_quaternions(q) if _check_side(side) == "left" else q
+    return mirror_quaternions(q) if check_side(side) == "left" else q
 
 
 def joint_angles(q, joint: str, side: str = "right") -> dict[str, np.ndarray]:
@@ -719,7 +719,7 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
         else None
     peaks = angle_peaks(ang, joint, window=1, where=where)
     unmeasured = not_measured(joint)
-    return JointRangeOfMotion(joint, _check_side(side),
+    return JointRangeOfMotion(joint, check_side(side),
                               {m: None if m in unmeasured else peaks.get(m)
                                for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
@@ -735,7 +735,7 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
     crossed it: a simulated ankle's inversion 4.5-6° short). A hinge reads its interval (its
     other angles are zero); movements a constraint does not model are None."""
     js = _joint(joint)
-    side = _check_side(side)
+    side = check_side(side)
     kind = calibration_kind(constraint.kind)
     ang = joint_angles(kind.allowed_samples(constraint, step_deg), joint, side)
     where = _in_band(ang, band_deg) if kind.reads_in_band else None

@@ -11,7 +11,7 @@ segment's long axis) unless the kind computes its own (:meth:`CalibrationKind.cl
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -37,6 +37,13 @@ class CalibrationKind:
     bounds : tuple of int
         The Cardan angles a constraint of this kind bounds (what
         :func:`calibration.joint_angles.constraint_rom` reads from it).
+    movements : tuple of (str, str)
+        The movement pairs (positive, negative) of the kind's own clinical angles
+        (:meth:`clinical_angles`); empty when the kind has none of its own (a joint of it is
+        read by its joint's Cardan angles, :mod:`calibration.joint_angles`).
+    norms : dict
+        Normative values (degrees) of the kind's own movements, ``{movement: degrees}``;
+        ``norms_source`` cites them.
     """
 
     name: str = ""
@@ -44,6 +51,9 @@ class CalibrationKind:
     unmeasured_words: str = ""
     reads_in_band: bool = True
     bounds: tuple[int, ...] = (0, 1, 2)
+    movements: tuple[tuple[str, str], ...] = ()
+    norms: ClassVar[dict[str, float]] = {}
+    norms_source: str = ""
 
     def extractor(self, spec: Any, *, limb_axis, alpha_deg: float, max_vertices: int,
                   by_swing: bool | str, name: str) -> Any:
@@ -51,6 +61,24 @@ class CalibrationKind:
         :class:`calibration.joints.JointSpec` or None), fitted with
         :func:`calibration.boundary.joint.fit_joint`."""
         raise NotImplementedError
+
+    def clinical_angles(self, q: np.ndarray, side: str = "right") -> dict[str, np.ndarray]:
+        """The kind's own clinical angles (degrees, (N,) each, keyed by the positive movement
+        of each pair of :attr:`movements`) of joint orientations ``q`` (N, 4) (child relative
+        to parent, rig frames; a left joint mirrored first). Kinds without angles of their
+        own raise NotImplementedError: their joints are read by Cardan angles."""
+        raise NotImplementedError(f"a {self.name} joint is read by its joint's Cardan angles")
+
+    def clinical_peaks(self, q: np.ndarray, side: str = "right") -> dict[str, float]:
+        """The farthest value (degrees, >= 0; 0 when never reached) of each movement of
+        :attr:`movements` over joint orientations ``q`` (N, 4)."""
+        ang = self.clinical_angles(q, side)
+        out: dict[str, float] = {}
+        for pos, neg in self.movements:
+            v = np.asarray(ang[pos], dtype=float)
+            out[pos] = float(max(0.0, v.max()))
+            out[neg] = float(max(0.0, -v.min()))
+        return out
 
     def allowed_samples(self, constraint: Any, step_deg: float) -> np.ndarray:
         """Orientations (N, 4) where the set ``constraint`` allows takes its extreme angles
