@@ -11,6 +11,7 @@ name           module                                  extraction
 ``ball``       :mod:`calibration.kinds.ball`           swing polygon + twist (+ by-swing)
 ``hinge``      :mod:`calibration.kinds.hinge`          the angle interval about its axis
 ``two-axis``   :mod:`calibration.kinds.two_axis`       as a ball joint, narrow twist
+``forearm``    :mod:`calibration.kinds.forearm`        flexion and pronation intervals
 =============  ======================================  ====================================
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 from calibration.kinds.ball import BallCalibration
 from calibration.kinds.base import CalibrationKind
+from calibration.kinds.forearm import ForearmCalibration
 from calibration.kinds.hinge import HingeCalibration
 from calibration.kinds.two_axis import TwoAxisCalibration
 from models.errors import ConstraintError
@@ -29,6 +31,7 @@ _REGISTRY: dict[str, CalibrationKind] = {k.name: k for k in (
     BallCalibration(),
     HingeCalibration(),
     TwoAxisCalibration(),
+    ForearmCalibration(),
 )}
 
 def calibration_kind(name: str) -> CalibrationKind:

@@ -16,6 +16,7 @@ name           module                              limits
 ``ball``       :mod:`models.kinds.ball`            swing region + twist interval
 ``hinge``      :mod:`models.kinds.hinge`           one axis + an angle interval
 ``two-axis``   :mod:`models.kinds.two_axis`        swing region + narrow twist
+``forearm``    :mod:`models.kinds.forearm`         flexion + axial rotation intervals
 =============  ==================================  ==================================
 """
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 from models.errors import ConstraintError
 from models.kinds.ball import BallKind
 from models.kinds.base import JointKind
+from models.kinds.forearm import ForearmKind
 from models.kinds.hinge import HingeKind
 from models.kinds.two_axis import TwoAxisKind
 
@@ -35,6 +37,7 @@ _REGISTRY: dict[str, JointKind] = {k.name: k for k in (
     BallKind(),
     HingeKind(),
     TwoAxisKind(),
+    ForearmKind(),
 )}
 
 #: The kind of a constraint file that names none (a ball joint: files written before kinds
