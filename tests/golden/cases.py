@@ -14,6 +14,7 @@ from tests.golden import (  # noqa: F401  (they register their cases)
     cases_models,
     cases_sim,
     cases_store,
+    cases_train,
 )
 from tests.golden.harness import REGISTRY
 
