@@ -12,6 +12,7 @@ from tests.golden import (  # noqa: F401  (they register their cases)
     cases_clinical,
     cases_loop,
     cases_models,
+    cases_services,
     cases_sim,
     cases_store,
     cases_train,
