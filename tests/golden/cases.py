@@ -10,6 +10,7 @@ from __future__ import annotations
 from tests.golden import (  # noqa: F401  (they register their cases)
     cases_cli,
     cases_clinical,
+    cases_demo,
     cases_loop,
     cases_models,
     cases_services,
