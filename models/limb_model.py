@@ -59,9 +59,9 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper
 
-from models.constraint import ConeSwing, PolygonSwing
 from models.fileio import write_owner_only
 from models.limb import Limb, oriented_vertices
+from models.limits import ConeSwing, PolygonSwing
 from models.onnx_io import (
     LIMB_CONTRACT,
     OPSET,
@@ -422,8 +422,9 @@ def _levels(limb: Limb) -> list[int]:
 
 
 def _is_hinge(joint) -> bool:
-    return (joint.coupling.limits.kind if joint.coupling is not None
-            else joint.constraint.kind) == "hinge"
+    """The joint's limits are an axis and an interval (the hinge graph), not a swing region
+    and a twist (the swing-twist graph)."""
+    return joint.joint_kind.single_axis
 
 
 def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:

@@ -208,7 +208,7 @@ def test_our_modules_are_imported_at_the_top():
 
 def test_no_private_name_is_imported_from_another_module():
     wrong = []
-    for name, path in MODULES.items():
+    for path in MODULES.values():
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and (node.level or _ours(node.module or "")):
@@ -223,7 +223,7 @@ def test_no_private_attribute_of_a_library_object_is_used():
     """onnxruntime's ``session._sess`` and its like: private APIs of other projects break on
     their next release."""
     wrong = []
-    for name, path in MODULES.items():
+    for path in MODULES.values():
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and node.attr in ("_sess", "_session")

@@ -141,6 +141,7 @@ from calibration.boundary.inset import NOISE_REACH
 from calibration.errors import CalibrationError
 from models import quaternion as Q
 from models.errors import ConstraintError
+from models.kinds import DEFAULT_KIND, get_kind
 
 __all__ = ["ChainExtractor"]
 
@@ -279,7 +280,7 @@ class ChainExtractor:
         swing_tol = np.radians(slack_deg + sw)
         whole = swing_tol + np.radians(tw)
         slow = self._slow.get(spec.name)
-        if q is None or not slow or spec.kind == "hinge":
+        if q is None or not slow or not get_kind(spec.kind).swing_twist:
             return swing_tol, whole
         axis = np.asarray(spec.limb_axis, dtype=np.float64)
         swing = np.arccos(np.clip(Q.rotate(q, axis) @ axis, -1.0, 1.0))
@@ -343,7 +344,7 @@ class ChainExtractor:
         self.couplings_: dict[str, dict[str, Any]] = {}
         for j in (0, 2):
             spec = specs[j]
-            if spec.kind == "hinge":
+            if not get_kind(spec.kind).swing_twist:  # the hinge: the couplings' source
                 continue
             found, info = self._coupling(j, chain, specs, constraints, q, ts, st, theta, h,
                                          kept, side, provenance)
@@ -363,12 +364,13 @@ class ChainExtractor:
         self.limb_ = self._limb(chain, specs, constraints, kept, side, provenance)
         # what the file holds, measured on it
         valid = LimbOracle(self.limb_).evaluate(q, normalize=True).valid
-        ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg) if s.kind == "hinge"
+        ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg)
+                       if not get_kind(s.kind).swing_twist
                        else valid[:, i] for i, s in enumerate(specs)], axis=1)
         self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
         self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
         # ... and within what the measured error explains at each posture (no slack)
-        held = np.stack([ok[:, i] if s.kind == "hinge" else ok[:, i] | self._held(
+        held = np.stack([ok[:, i] if not get_kind(s.kind).swing_twist else ok[:, i] | self._held(
             self.limb_, i, q, self._tolerance(s, q[:, i], slack_deg=0.0))
             for i, s in enumerate(specs)], axis=1)
         self.held_ = {s.name: float(np.mean(held[:, i])) for i, s in enumerate(specs)}
@@ -760,9 +762,9 @@ def _folding_pair(kept: list) -> int | None:
     """The first ``i`` whose keyframes ``kept[i]``, ``kept[i + 1]`` (angle, constraint) have a
     polygon swing interpolation that touches itself (:func:`models.geometry.
     first_contact_along`), else None."""
-    from models.constraint import PolygonSwing
     from models.geometry import first_contact_along
     from models.limb import corresponding_polygons
+    from models.limits import PolygonSwing
 
     for i in range(len(kept) - 1):
         a, b = kept[i][1].swing, kept[i + 1][1].swing
@@ -797,7 +799,7 @@ def _swing_only(constraint):
     from models.constraint import JointConstraint
 
     d = constraint.to_dict()
-    d["kind"] = "ball"
+    d["kind"] = DEFAULT_KIND
     d["twist"] = {"min_deg": -180.0, "max_deg": 180.0}
     return JointConstraint.from_dict(d)
 

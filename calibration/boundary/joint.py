@@ -3,9 +3,9 @@
 (:class:`~calibration.boundary.ChainExtractor`), so that the two cannot disagree about a joint
 the chain does not couple.
 
-- a hinge (elbow, knee): :class:`~calibration.boundary.HingeExtractor` about the joint's hinge
-  axis;
-- otherwise :class:`~calibration.boundary.BoundaryExtractor` (the wrist and the ankle as
+- the extractor of the joint's kind (:meth:`calibration.kinds.base.CalibrationKind.extractor`):
+  a hinge (elbow, knee) :class:`~calibration.boundary.HingeExtractor` about the joint's hinge
+  axis; otherwise :class:`~calibration.boundary.BoundaryExtractor` (the wrist and the ankle as
   ``two-axis`` joints when their recorded twist allows).
 
 A measured slow error (``slow_error_deg``: the heading correction's own uncertainty) is used
@@ -25,6 +25,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from calibration.joints import JOINTS
+from calibration.kinds import calibration_kind
+from models.kinds import DEFAULT_KIND
+
 __all__ = ["fit_joint", "joint_extractor"]
 
 
@@ -33,18 +37,13 @@ def joint_extractor(joint: str | None, *, limb_axis=None, alpha_deg: float = 4.0
                     name: str = "recorded") -> Any:
     """The unfitted extractor of ``joint`` (:data:`calibration.joints.JOINTS`; a name it does
     not list, or None, is a ball joint); ``limb_axis`` defaults to the joint's."""
-    from calibration.boundary.extractor import BoundaryExtractor
-    from calibration.boundary.hinge import HingeExtractor
-    from calibration.joints import JOINTS
-
     spec = JOINTS.get(joint or "shoulder")
-    kind = "ball" if spec is None else spec.kind
+    kind = DEFAULT_KIND if spec is None else spec.kind
     axis = limb_axis if limb_axis is not None else (
         (1.0, 0.0, 0.0) if spec is None else spec.limb_axis)
-    if kind == "hinge":
-        return HingeExtractor(spec.hinge_axis, limb_axis=axis, name=name)
-    return BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=by_swing,
-                             limb_axis=axis, name=name, kind=kind)
+    return calibration_kind(kind).extractor(spec, limb_axis=axis, alpha_deg=alpha_deg,
+                                            max_vertices=max_vertices, by_swing=by_swing,
+                                            name=name)
 
 
 def fit_joint(ex, q, *, t=None, status=None, slow_error_deg: float | None = None,

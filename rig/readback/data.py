@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from models.kinds import DEFAULT_KIND, get_kind
 from models.quaternion import normalize_rows
 from rig.errors import RigConfigError
 
@@ -93,7 +94,7 @@ class JointData:
         computed from the joint orientations when the recorder stored none)."""
         if self.recording is None:
             self.recording = RecordingFacts()
-        if self.recording.sectors is None and self.kind == "hinge":
+        if self.recording.sectors is None and get_kind(self.kind).single_axis:
             # one angle: no swing sphere to cover (the interval's ends are the evidence)
             self.recording = replace(self.recording, explored=0, sectors=0)
         if self.recording.sectors is None:
@@ -111,7 +112,7 @@ class JointData:
         from calibration.joints import JOINTS
 
         spec = JOINTS.get(self.joint or "shoulder")
-        return "ball" if spec is None else spec.kind
+        return DEFAULT_KIND if spec is None else spec.kind
 
     @property
     def directions(self) -> np.ndarray:

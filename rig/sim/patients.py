@@ -49,6 +49,7 @@ from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from models import quaternion as Q
 from models.constraint import JointConstraint, load_constraint
 from models.evaluation import random_star_polygon
+from models.kinds import DEFAULT_KIND, get_kind
 from models.limb import Limb, load_limits
 from models.shapes import SHAPES, load_shape
 from rig.errors import RigConfigError
@@ -149,7 +150,7 @@ def resolve_patient(value: str, *, url: str, key: str = "patient"):
         return load_shape(value)
     try:
         c = load_constraint(value)
-        c.require_kind("a simulated patient")
+        c.require_swing_twist("a simulated patient")
         return c
     except FileNotFoundError:
         raise RigConfigError(f"{url}: {key}={value!r}: not a shape name ({', '.join(SHAPES)}) "
@@ -372,7 +373,7 @@ def _mirror_constraint(c: dict) -> dict:
                                     "interior": mirror_directions(p["interior"]).tolist()}}
     if "twist" in c:
         out["twist"] = {"min_deg": -c["twist"]["max_deg"], "max_deg": -c["twist"]["min_deg"]}
-    if "hinge" in c:
+    if get_kind(c.get("kind", DEFAULT_KIND)).single_axis:  # the hinge's axis block
         ax = c["hinge"]["axis"]
         out["hinge"] = {**c["hinge"], "axis": [-ax[0], -ax[1], ax[2]]}
     return out

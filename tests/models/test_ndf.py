@@ -8,12 +8,12 @@ import pytest
 from models import quaternion as Q
 from models.datasets import field_joints, field_samples, training_postures
 from models.evaluation import evaluate_model
+from models.kinds.ball import evaluate_ball
 from models.limb_evaluation import held_out_postures, random_limb
 from models.limb_model import export_limb_model, limb_to_onnx
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import DistanceField, FieldSpec, fit_limb_fields
 from models.onnx_io import load_model
-from models.oracle import evaluate_ball
 
 SMALL = FieldSpec(features=64, hidden=64, samples=20000, epochs=8, batch=512)
 DEV_SEED = 321  # a development limb, below the held-out seeds

@@ -91,9 +91,10 @@ import numpy as np
 
 from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import JointConstraint
 from models.limb import Limb
 from models.limb_oracle import LimbOracle
+from models.limits import ConeSwing, PolygonSwing
 from models.oracle import ConstraintOracle
 from rig.sim.limb.base import (
     SimulatedLimb,
@@ -402,12 +403,12 @@ class SimulatedWholeLimb(SimulatedLimb):
         self.excursion = float(excursion)
         rng, seed_seq = seeded(seed)
         # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway
-        rows = [1 if j.kind == "hinge" else 3 for j in limb.joints]
+        rows = [1 if j.joint_kind.single_axis else 3 for j in limb.joints]
         series = Sinusoids.draw(rng, sum(rows) + 2, speed)
         self.motions: list[JointMotion | _HingeMotion] = []
         r = 0
         for j, n in zip(limb.joints, rows, strict=True):
-            if j.kind == "hinge":
+            if j.joint_kind.single_axis:
                 self.motions.append(_HingeMotion(j.loosest(), series.rows(r, r + 1), excursion))
             else:
                 c = _loosest(j)
