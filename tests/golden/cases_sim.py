@@ -100,7 +100,7 @@ def case_sim_chain_patient() -> dict:
     for name in ("arm", "leg"):
         chain = chain_patient(3 if name == "arm" else 4, name, neutral=15.0)
         tr = chain.truth(TIMES)
-        out.update({f"{name}_joints": tr.joints, f"{name}root_relative": tr.root,
+        out.update({f"{name}_joints": tr.joints, f"{name}_root": tr.root,
                     f"{name}_sensors": tr.sensors, f"{name}_target": chain.target(TIMES),
                     f"{name}_raw_joints": chain.raw_joints(TIMES),
                     f"{name}_project": chain.project(tr.joints),
