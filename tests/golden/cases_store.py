@@ -21,7 +21,7 @@ from rig.readback import joint_orientations_from_store
 from rig.readback.sessions import chain_orientations_from_store
 from rig.sim.patients import record_servo, seeded_patient, star_constraint
 from rig.store import SampleWriter, open_store
-from tests.golden.cli import _root, rig
+from tests.golden.cli import rig, root_relative
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import html_text, jtext, long_text
 
@@ -152,7 +152,7 @@ def _cli(prefix: str, args: list, tmp, out: dict) -> None:
 
 
 def _file(path: Path, tmp) -> str:
-    return _root(normalise(path.read_text(), [tmp])) if path.exists() else "<missing>"
+    return root_relative(normalise(path.read_text(), [tmp])) if path.exists() else "<missing>"
 
 
 @case("joint")
