@@ -31,15 +31,15 @@ step  what                                        module
 8     what a boundary holds; boundary distance    :mod:`~calibration.boundary.compare`
 all   the orchestrator                            :mod:`~calibration.boundary.extractor`
 1-2,6 a hinge's interval (elbow, knee)            :mod:`~calibration.boundary.hinge`
-joint one joint's extraction (--joint, --chain)   :mod:`~calibration.boundary.joint`
-limb  a chain's joints and their coupling         :mod:`~calibration.boundary.chain`
+joint one joint's extraction (--joint, --limb)    :mod:`~calibration.boundary.joint`
+limb  a limb's joints and their coupling          :mod:`~calibration.boundary.limb`
 ====  ==========================================  ============================================
 
 Imports point one way: ``planar`` → ``inset``, ``region`` → ``alpha``; ``projection`` →
 ``simplify``, ``twist``; ``inset`` → ``twist``; ``compare`` → ``sparse``; all → ``extractor``.
 
 Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`HingeExtractor`,
-:class:`ChainExtractor` (a limb file),
+:class:`LimbExtractor` (a limb file),
 :class:`SparseArc`, and the accuracy measures
 :func:`boundary_distance` (symmetric mean boundary distance), :func:`boundary_points`,
 :func:`outside_fraction`.
@@ -47,7 +47,7 @@ Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`Hinge
 
 from __future__ import annotations
 
-from calibration.boundary.chain import ChainExtractor
+from calibration.boundary.limb import LimbExtractor
 from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
 from calibration.boundary.extractor import BoundaryExtractor
 from calibration.boundary.hinge import HingeExtractor
@@ -55,7 +55,7 @@ from calibration.boundary.sparse import SparseArc
 
 __all__ = [
     "BoundaryExtractor",
-    "ChainExtractor",
+    "LimbExtractor",
     "HingeExtractor",
     "SparseArc",
     "boundary_distance",

@@ -387,19 +387,19 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
-    chain_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
+    joint_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
     the limb file it was made for; it is scored on ``eval_n`` held-out postures of it), else
-    the last limb file stored with the session (``rig boundary --chain --db``), else extracted
-    from the session as ``rig boundary --chain`` does; the page says which. Without ``model``
+    the last limb file stored with the session (``rig boundary --limb --db``), else extracted
+    from the session as ``rig boundary --limb`` does; the page says which. Without ``model``
     the last limb model registered with the session (the limb demo registers its own) is
     used when its file is still there. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
-    from calibration.boundary import ChainExtractor
+    from calibration.boundary import LimbExtractor
     from calibration.joints import LIMB_CHAINS
-    from rig.readback.sessions import chain_orientations_from_store, latest_calibration
+    from rig.readback.sessions import joint_orientations_from_store, latest_calibration
     from rig.report.limb import limb_report_data, write_limb_report
 
-    chain = chain_orientations_from_store(store, session_id, fusion=fusion)
+    chain = joint_orientations_from_store(store, session_id, fusion=fusion)
     evaluation = evaluation_note = None
     registered = None
     if model is None:  # the last limb model registered with the session, if its file is there
@@ -433,9 +433,9 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
             limb, bid = found
             source = f"boundary {bid} stored with the session (rig boundary --chain)"
         else:
-            limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
-                chain.q, t=chain.t, status=chain.status, side=chain.side,
-                slow_error_deg=chain.slow_error_deg).limb_
+            limb = LimbExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
+                chain.joint_q, t=chain.t, status=chain.status, side=chain.side,
+                slow_error_deg=chain.slow_errors_deg).limb_
             source = "extracted from the recorded postures for this report"
     cal = latest_calibration(store.calibrations(session_id), "imu-limb")
     residuals = None if cal is None else cal["data"].get("residuals_deg")
@@ -458,7 +458,7 @@ def report_for_limb_session(store, session_id: int, out_path, *, model=None, age
             f"{int(ok.sum()):,} of {len(chain.t):,} postures: those the sensors flagged "
             "(magnetic disturbance, uncalibrated) left out")
     data = limb_report_data(
-        limb, {j: chain.q[ok, k] for k, j in enumerate(chain.joints)},
+        limb, {j: chain.joint_q[ok, k] for k, j in enumerate(chain.joints)},
         side=chain.side or "right", patient=chain.patient,
         session_label=f"session {session_id} ({sess.get('rig_name')}, started "
                       f"{_iso(sess.get('started_at')) or 'at an unknown time'}, {used})",

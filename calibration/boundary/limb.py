@@ -1,4 +1,4 @@
-"""A whole limb's limits from a recording of its chain: :class:`ChainExtractor` → a limb file
+"""A whole limb's limits from a recording of its joints: :class:`LimbExtractor` → a limb file
 (:mod:`models.limb`), with a coupling where the recording supports one.
 
 Input: joint orientations ``q`` (N, 3, 4) of an arm (shoulder, elbow, wrist) or a leg (hip,
@@ -142,14 +142,19 @@ from calibration.errors import CalibrationError
 from models import quaternion as Q
 from models.errors import ConstraintError
 
-__all__ = ["ChainExtractor"]
+__all__ = ["METHOD", "LimbExtractor"]
+
+#: The method a limb file's provenance names: the name limb files have always recorded (the
+#: class was ``ChainExtractor`` before the word "chain" was retired for a limb), kept so that
+#: every limb file is written byte for byte as before.
+METHOD = "calibration.boundary.ChainExtractor"
 
 _ONE_DEG = float(np.radians(1.0))
 #: Rounds of keyframes grown by the postures their interpolation leaves out (``_grow``).
 _GROW_ROUNDS = 3
 
 
-class ChainExtractor:
+class LimbExtractor:
     """Recorded limb postures → a limb file with its coupling (module doc).
 
     Parameters
@@ -305,7 +310,7 @@ class ChainExtractor:
 
     def fit(self, q, *, t=None, status=None, side: str | None = None,
             provenance: dict | None = None,
-            slow_error_deg: dict[str, float | None] | None = None) -> ChainExtractor:
+            slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
         """Extract the limb (module doc) from postures ``q`` (N, 3, 4), sample times ``t``
         (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors);
         ``slow_error_deg``: joint name → its measured slow error, degrees (module doc,
@@ -670,7 +675,7 @@ class ChainExtractor:
                 entry["constraint"] = inline_constraint(constraints[name])
             joints.append(entry)
         prov = dict(provenance or {})
-        prov.update({"method": "calibration.boundary.ChainExtractor", "parameters": self.params(),
+        prov.update({"method": METHOD, "parameters": self.params(),
                      "couplings": {k: {"coupled": v["coupled"], "keyframes": v["keyframes"]}
                                    for k, v in self.couplings_.items()}})
         doc = {"name": self.name, "limb": self.limb, "joints": joints, "provenance": prov}
@@ -706,7 +711,7 @@ def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> flo
 def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list,
                        tol=(_ONE_DEG, _ONE_DEG), measured: bool = False) -> np.ndarray:
     """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within ``tol`` (radians,
-    ``(swing, whole)``: :meth:`ChainExtractor._tolerance`; the swing's checked when the error
+    ``(swing, whole)``: :meth:`LimbExtractor._tolerance`; the swing's checked when the error
     was ``measured``) of both keyframes that bracket their hinge angle ``theta`` (beyond the
     end keyframes: of the end one).
 
