@@ -1,0 +1,14 @@
+"""Every golden case, by name: :data:`CASES` (filled by importing the ``cases_*`` modules).
+
+Each case is a function ``case_<name>() -> dict`` in a ``cases_*.py`` module, registered with
+``@case("joint")`` or ``@case("limb")`` (:func:`tests.golden.harness.case`). A renamed API is
+followed by editing the case code, never the stored data (``tests/golden/data``).
+"""
+
+from __future__ import annotations
+
+from tests.golden import cases_cli, cases_models, cases_sim  # noqa: F401  (they register cases)
+from tests.golden.harness import REGISTRY
+
+#: name -> :class:`tests.golden.harness.Case`
+CASES = REGISTRY
