@@ -1,4 +1,4 @@
-"""A limb file from a recording of a whole arm or leg (rig boundary --chain): each joint's
+"""A limb file from a recording of a whole arm or leg (rig boundary --limb): each joint's
 limits, and a coupling only where the data supports one."""
 
 from __future__ import annotations
@@ -54,6 +54,23 @@ def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
                         "--out", str(tmp_path / "x.yaml"), *args], capsys)
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and needle in lines[0], err
+
+
+def test_the_old_spelling_chain_still_reads_a_whole_limb(tmp_path, capsys):
+    """``--chain arm`` (the old spelling of ``--limb arm``) writes the same limb file and
+    summary, with one line on stderr naming the new spelling."""
+    segs = ["--segments", "thorax,humerus_r,ulna_r,hand_r", "--frames", "isb"]
+    new, old = tmp_path / "new.yaml", tmp_path / "old.yaml"
+    code, out_new, err_new = run(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--limb", "arm",
+                                  *segs, "--out", str(new)], capsys)
+    assert code == 0 and err_new == "", err_new
+    code, out_old, err_old = run(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--chain", "arm",
+                                  *segs, "--out", str(old)], capsys)
+    assert code == 0, err_old
+    assert err_old.strip().splitlines() == ["rig: note: --chain is now --limb: rig boundary "
+                                            "--limb arm ..."]
+    assert old.read_bytes() == new.read_bytes()
+    assert out_old.replace(str(old), "F") == out_new.replace(str(new), "F")
 
 
 # the module-scoped fixtures are built once: this module's tests run on one xdist worker
