@@ -136,7 +136,8 @@ def single(k: int, n: int) -> None:
     ``bench_accuracy`` (random stars with twist, seeds from ``HELD_OUT_SEED``)."""
     from models.evaluation import evaluate_model, held_out_orientations, irregular_boundaries
     from models.field import FieldModel
-    from models.oracle import ConstraintOracle, evaluate_ball
+    from models.kinds.ball import evaluate_ball
+    from models.oracle import ConstraintOracle
 
     stars = [(name, c) for name, c in irregular_boundaries(k).items()
              if name.startswith("star")][:k]

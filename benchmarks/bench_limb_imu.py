@@ -119,8 +119,8 @@ from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom, recorded_rom
 from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
-from models.constraint import PolygonSwing
 from models.limb_oracle import LimbOracle
+from models.limits import PolygonSwing
 from rig.sim.patients import anatomical_limb, chain_patient, record_chain_imu
 
 X = np.array([1.0, 0.0, 0.0])

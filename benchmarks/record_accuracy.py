@@ -126,7 +126,8 @@ def _peak_sensitivity(truth, peaks_true: dict) -> float:
     along the plane moves by several degrees per degree; no measurement whose planes are
     aligned only to within a degree can be held to 2° there."""
     from calibration.clinical import range_of_motion
-    from models.constraint import JointConstraint, PolygonSwing
+    from models.constraint import JointConstraint
+    from models.limits import PolygonSwing
 
     if not isinstance(truth.swing, PolygonSwing):
         return 0.0

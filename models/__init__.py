@@ -30,10 +30,10 @@ from typing import TYPE_CHECKING, Any
 _EXPORTS: dict[str, tuple[str, str | None]] = {
     # constraint files
     "JointConstraint": ("models.constraint", "JointConstraint"),
-    "ConeSwing": ("models.constraint", "ConeSwing"),
-    "PolygonSwing": ("models.constraint", "PolygonSwing"),
-    "TwistLimits": ("models.constraint", "TwistLimits"),
-    "SwingTwistTable": ("models.constraint", "SwingTwistTable"),
+    "ConeSwing": ("models.limits", "ConeSwing"),
+    "PolygonSwing": ("models.limits", "PolygonSwing"),
+    "TwistLimits": ("models.limits", "TwistLimits"),
+    "SwingTwistTable": ("models.limits", "SwingTwistTable"),
     "load_constraint": ("models.constraint", "load_constraint"),
     "loads_constraint": ("models.constraint", "loads_constraint"),
     "dump_constraint": ("models.constraint", "dump_constraint"),
@@ -44,8 +44,8 @@ _EXPORTS: dict[str, tuple[str, str | None]] = {
     "dump_limb": ("models.limb", "dump_limb"),
     # exact answers
     "ConstraintOracle": ("models.oracle", "ConstraintOracle"),
-    "OracleResult": ("models.oracle", "OracleResult"),
-    "BOUNDARY_TOLERANCE": ("models.oracle", "BOUNDARY_TOLERANCE"),
+    "OracleResult": ("models.kinds.base", "OracleResult"),
+    "BOUNDARY_TOLERANCE": ("models.kinds.base", "BOUNDARY_TOLERANCE"),
     "SphericalPolygon": ("models.geometry", "SphericalPolygon"),
     "LimbOracle": ("models.limb_oracle", "LimbOracle"),
     "LimbResult": ("models.limb_oracle", "LimbResult"),
@@ -129,11 +129,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from models import evaluation, geometry, quaternion
     from models.constraint import (
-        ConeSwing,
         JointConstraint,
-        PolygonSwing,
-        SwingTwistTable,
-        TwistLimits,
         dump_constraint,
         load_constraint,
         loads_constraint,
@@ -149,8 +145,10 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from models.evaluation import evaluate_model, held_out_orientations
     from models.field import FieldModel
     from models.geometry import SphericalPolygon
+    from models.kinds.base import BOUNDARY_TOLERANCE, OracleResult
     from models.limb import Limb, dump_limb, load_limb, loads_limb
     from models.limb_oracle import LimbOracle, LimbResult
+    from models.limits import ConeSwing, PolygonSwing, SwingTwistTable, TwistLimits
     from models.onnx_io import CorrectionModel, export_onnx, load_model
-    from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle, OracleResult
+    from models.oracle import ConstraintOracle
     from models.shapes import SHAPES, load_shape

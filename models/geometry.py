@@ -72,7 +72,9 @@ __all__ = [
     "fibonacci_sphere",
     "first_contact_along",
     "first_crossing",
+    "nearest_in_cell",
     "polygon_area",
+    "rank_one",
 ]
 
 #: Two directions closer than this (radians) are "the same point" for validation purposes.
@@ -910,14 +912,14 @@ class SphericalPolygon:
     def nearest_one(self, d: tuple[float, float, float]):
         """Scalar twin of :meth:`nearest` for one direction: the same candidates, ranked by the
         same keys (so the same edge wins); the winner's signed distance and point in plain
-        floats. Compiled (:func:`_nearest_in_cell`, :func:`_rank_one`): about a µs."""
+        floats. Compiled (:func:`nearest_in_cell`, :func:`rank_one`): about a µs."""
         px, py, pz = float(d[0]), float(d[1]), float(d[2])
         if self._lists:
-            r = _nearest_in_cell(px, py, pz, self.G, self.cell_ptr, self.cell_edges,
+            r = nearest_in_cell(px, py, pz, self.G, self.cell_ptr, self.cell_edges,
                                  self._table, self.v0, self.vertex_normal, self.orient)
         else:
             cand = self._tree.search(np.array([[px, py, pz]]), 0.0)[1]
-            r = _rank_one(px, py, pz, cand, self._table, self.v0, self.vertex_normal,
+            r = rank_one(px, py, pz, cand, self._table, self.v0, self.vertex_normal,
                           self.orient)
         return r[0], (r[1], r[2], r[3])
 
@@ -951,7 +953,7 @@ class SphericalPolygon:
 
 
 @njit
-def _rank_one(px, py, pz, cand, table, v0, vertex_normal, orient):
+def rank_one(px, py, pz, cand, table, v0, vertex_normal, orient):
     """The nearest of the candidate edges ``cand`` to the unit direction ``p``: the keys of
     :func:`_pair_keys` and the rule of :func:`_finish` for one point (the first minimum wins,
     so the same edge as the batched path). Returns (signed distance, nearest point)."""
@@ -994,9 +996,11 @@ def _rank_one(px, py, pz, cand, table, v0, vertex_normal, orient):
 
 
 @njit
-def _nearest_in_cell(px, py, pz, G, cell_ptr, cell_edges, table, v0, vertex_normal, orient):
-    """:func:`_rank_one` on the candidates of the cube-map cell of ``p`` (the cell rule of
-    :meth:`SphericalPolygon._cell_index`)."""
+def nearest_in_cell(px, py, pz, G, cell_ptr, cell_edges, table, v0, vertex_normal, orient):
+    """:func:`rank_one` on the candidates of the cube-map cell of ``p`` (the cell rule of
+    :meth:`SphericalPolygon._cell_index`): a polygon's nearest boundary point to one unit
+    direction, compiled for the control loop (the ball joint's kernel calls it). Returns
+    (signed distance, nearest point)."""
     ax0, ax1, ax2 = abs(px), abs(py), abs(pz)
     if ax0 >= ax1 and ax0 >= ax2:
         ax, major, u, v = 0, px, py, pz
@@ -1010,7 +1014,7 @@ def _nearest_in_cell(px, py, pz, G, cell_ptr, cell_edges, table, v0, vertex_norm
     i = min(max(int((u + 1.0) * (0.5 * G)), 0), G - 1)
     j = min(max(int((v + 1.0) * (0.5 * G)), 0), G - 1)
     cell = ((2 * ax + (1 if major < 0 else 0)) * G + i) * G + j
-    return _rank_one(px, py, pz, cell_edges[cell_ptr[cell]:cell_ptr[cell + 1]], table, v0,
+    return rank_one(px, py, pz, cell_edges[cell_ptr[cell]:cell_ptr[cell + 1]], table, v0,
                      vertex_normal, orient)
 
 

@@ -62,20 +62,12 @@ from typing import Any
 import numpy as np
 
 from models import quaternion as Q
-from models.constraint import (
-    SIDES,
-    ConeSwing,
-    JointConstraint,
-    PolygonSwing,
-    _label,
-    _plain,
-    _reject_unknown,
-    parse_yaml,
-    read_text,
-)
+from models.constraint import SIDES, JointConstraint, parse_yaml, read_text
 from models.errors import ConstraintError, GeometryError
 from models.fileio import write_owner_only
 from models.geometry import SphericalPolygon, check_polygon, first_contact_along
+from models.kinds import JointKind, get_kind
+from models.limits import ConeSwing, PolygonSwing, label, plain, reject_unknown
 from models.yamlio import safe_dump_yaml
 
 __all__ = [
@@ -138,8 +130,8 @@ def _mapping(value: Any, where: str, source: str | None) -> dict:
 
 
 def _text(value: Any, where: str, source: str | None) -> str:
-    """A required short text (:func:`models.constraint._label`'s rules)."""
-    text = _label(value, where, source)
+    """A required short text (:func:`models.limits.label`'s rules)."""
+    text = label(value, where, source)
     if text is None:
         raise ConstraintError("expected a non-empty single-line text, got nothing", where,
                               source)
@@ -296,11 +288,9 @@ class InterpolatedLimits:
 
     def interval(self, k, t) -> tuple[np.ndarray, np.ndarray]:
         """Twist (ball, two-axis) or hinge interval (radians) at the located angles."""
-        if self.kind == "hinge":
-            return (self._lerp(k, t, lambda c: c.hinge.min),
-                    self._lerp(k, t, lambda c: c.hinge.max))
-        return (self._lerp(k, t, lambda c: c.twist.min),
-                self._lerp(k, t, lambda c: c.twist.max))
+        interval = get_kind(self.kind).coupled_interval
+        return (self._lerp(k, t, lambda c: interval(c)[0]),
+                self._lerp(k, t, lambda c: interval(c)[1]))
 
     def cones(self, k, t) -> tuple[np.ndarray, np.ndarray]:
         """Cone centres (N, 3) and radii (N,) at the located angles."""
@@ -331,23 +321,7 @@ def _interpolation(kf: list[tuple[float, JointConstraint]], where: str, by: str,
         if not np.allclose(c.limb_axis, first.limb_axis, atol=1e-9):
             raise ConstraintError("every keyframe of a coupling has the same limb_axis",
                                   f"{w}.limb_axis", source)
-        if kind == "hinge":
-            if not np.allclose(c.hinge.axis, first.hinge.axis, atol=1e-9):
-                raise ConstraintError("every keyframe of a coupled hinge has the same axis "
-                                      "(only its interval changes)", f"{w}.hinge.axis", source)
-            continue
-        if type(c.swing) is not type(first.swing):
-            shape = {ConeSwing: "a cone", PolygonSwing: "a polygon", type(None): "no swing"}
-            raise ConstraintError(f"every keyframe of a coupling has the same swing shape: "
-                                  f"keyframe 0 has {shape[type(first.swing)]}, this one "
-                                  f"{shape[type(c.swing)]}", f"{w}.swing", source)
-        if (c.twist is None) != (first.twist is None):
-            raise ConstraintError("every keyframe of a coupling limits the twist, or none does",
-                                  f"{w}.twist", source)
-        if c.twist is not None and c.twist.by_swing is not None:
-            raise ConstraintError("a keyframe's twist is an interval (min_deg, max_deg); "
-                                  "by_swing tables are not interpolated", f"{w}.twist.by_swing",
-                                  source)
+        get_kind(kind).check_keyframe(c, first, w, source)
     at = np.radians([a for a, _ in kf])
     polygons: list[tuple[np.ndarray, np.ndarray]] = []
     if isinstance(first.swing, PolygonSwing):
@@ -421,9 +395,10 @@ class Coupling:
         if ti in (0.0, 1.0):
             return self.keyframes[ki + int(ti)]
         d = self.keyframes[ki].to_dict()
-        if lim.kind == "hinge" or "twist" in d:
+        key = get_kind(lim.kind).coupled_interval_key
+        if key in d:
             lo, hi = (math.degrees(float(x[0])) for x in lim.interval(k, t))
-            d["hinge" if lim.kind == "hinge" else "twist"].update(min_deg=lo, max_deg=hi)
+            d[key].update(min_deg=lo, max_deg=hi)
         sw = self.keyframes[ki].swing
         if isinstance(sw, ConeSwing):
             c, r = lim.cones(k, t)
@@ -466,8 +441,14 @@ class LimbJoint:
 
     @property
     def kind(self) -> str:
+        """The joint's kind name (its constraint's, or its keyframes')."""
         return (self.constraint.kind if self.constraint is not None
                 else self.coupling.limits.kind)
+
+    @property
+    def joint_kind(self) -> JointKind:
+        """The joint's registered kind (:func:`models.kinds.get_kind`)."""
+        return get_kind(self.kind)
 
     @property
     def limb_axis(self) -> np.ndarray:
@@ -479,12 +460,7 @@ class LimbJoint:
         two-axis joint (the union of its keyframe regions is not one polygon in general)."""
         if self.constraint is not None:
             return self.constraint
-        if self.kind != "hinge":
-            return None
-        kf = self.coupling.keyframes
-        h = kf[0].hinge
-        return JointConstraint.hinge_joint(h.axis, min(c.hinge.min_deg for c in kf),
-                                           max(c.hinge.max_deg for c in kf), name=self.name)
+        return get_kind(self.kind).loosest(self.coupling.keyframes, self.name)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "parent": self.parent, "child": self.child}
@@ -547,7 +523,7 @@ class Limb:
         if body is None:
             raise ConstraintError(f"expected a mapping with 'joints', got "
                                   f"{type(data).__name__}", source=source)
-        _reject_unknown(body, _TOP_KEYS, "", source)
+        reject_unknown(body, _TOP_KEYS, "", source)
         name = _text(body.get("name", "unnamed"), "name", source)
         limb = body.get("limb")
         if limb is not None and limb not in LIMBS:
@@ -574,7 +550,7 @@ class Limb:
         for i, jd in enumerate(raw):
             w = f"joints[{i}]"
             jd = _mapping(jd, w, source)
-            _reject_unknown(jd, _JOINT_KEYS, w, source)
+            reject_unknown(jd, _JOINT_KEYS, w, source)
             for key in ("name", "parent", "child"):
                 if key not in jd:
                     raise ConstraintError(f"missing '{key}'", w, source)
@@ -607,7 +583,7 @@ class Limb:
                 kinds[p["name"]] = c.kind
             else:
                 cd = _mapping(jd["coupled"], f"{w}.coupled", source)
-                _reject_unknown(cd, _COUPLED_KEYS, f"{w}.coupled", source)
+                reject_unknown(cd, _COUPLED_KEYS, f"{w}.coupled", source)
                 for key in _COUPLED_KEYS:
                     if key not in cd:
                         raise ConstraintError(f"missing '{key}'", f"{w}.coupled", source)
@@ -619,7 +595,7 @@ class Limb:
                 for k, kd in enumerate(kfl):
                     kw = f"{w}.coupled.keyframes[{k}]"
                     kd = _mapping(kd, kw, source)
-                    _reject_unknown(kd, _KEYFRAME_KEYS, kw, source)
+                    reject_unknown(kd, _KEYFRAME_KEYS, kw, source)
                     for key in _KEYFRAME_KEYS:
                         if key not in kd:
                             raise ConstraintError(f"missing '{key}'", kw, source)
@@ -652,7 +628,7 @@ class Limb:
             if by == p["name"]:
                 raise ConstraintError("a joint's limits cannot depend on its own angle",
                                       f"{w}.coupled.by", source)
-            if kinds[by] != "hinge":
+            if not get_kind(kinds[by]).drives_couplings:
                 raise ConstraintError(f"a coupling follows a hinge's angle; {by!r} is a "
                                       f"{kinds[by]} joint", f"{w}.coupled.by", source)
             limits = _interpolation(kf, f"{w}.coupled", by, source)
@@ -670,7 +646,7 @@ class Limb:
                 out[key] = getattr(self, key)
         out["joints"] = [j.to_dict() for j in self.joints]
         if self.provenance:
-            out["provenance"] = _plain(self.provenance, "provenance")
+            out["provenance"] = plain(self.provenance, "provenance")
         return out
 
     def to_yaml(self) -> str:

@@ -166,8 +166,8 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
     rng = np.random.default_rng(rng)
     oracle = oracle or LimbOracle(limb)
     jn = len(limb.joints)
-    swing = [j for j, jt in enumerate(limb.joints) if jt.kind != "hinge"]
-    hinges = [j for j, jt in enumerate(limb.joints) if jt.kind == "hinge"]
+    swing = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.swing_twist]
+    hinges = [j for j, jt in enumerate(limb.joints) if not jt.joint_kind.swing_twist]
     band = math.radians(band_deg)
 
     def draw(m: int) -> np.ndarray:
@@ -240,7 +240,7 @@ def _proposal(joint) -> tuple[np.ndarray, float, float, float]:
     """A cap (centre, radius) holding a swing joint's region at every coupling angle, and the
     hull (radians) of its twist intervals: where :func:`held_out_postures` draws valid
     orientations from."""
-    from models.constraint import ConeSwing
+    from models.limits import ConeSwing
 
     members = [joint.constraint] if joint.coupling is None else list(joint.coupling.keyframes)
     centre = np.zeros(3)
@@ -315,7 +315,7 @@ def uncoupled_model(limb: Limb, step_deg: float = 5.0) -> Callable[[np.ndarray],
     for joint in limb.joints:
         if joint.coupling is None:
             per_joint.append([ConstraintOracle(joint.constraint)])
-        elif joint.kind == "hinge":
+        elif joint.loosest() is not None:  # a coupled hinge: the hull of its intervals
             per_joint.append([ConstraintOracle(joint.loosest())])
         else:
             cp = joint.coupling

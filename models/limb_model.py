@@ -61,10 +61,10 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper
 
-from models.constraint import ConeSwing, PolygonSwing
 from models.errors import ModelFileError
 from models.fileio import write_owner_only
 from models.limb import Limb, loads_limb, oriented_vertices
+from models.limits import ConeSwing, PolygonSwing
 from models.onnx_io import (
     OPSET,
     _bilinear,
@@ -427,8 +427,9 @@ def _levels(limb: Limb) -> list[int]:
 
 
 def _is_hinge(joint) -> bool:
-    return (joint.coupling.limits.kind if joint.coupling is not None
-            else joint.constraint.kind) == "hinge"
+    """The joint's limits are an axis and an interval (the hinge graph), not a swing region
+    and a twist (the swing-twist graph)."""
+    return not joint.joint_kind.swing_twist
 
 
 def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:

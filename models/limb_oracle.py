@@ -6,11 +6,11 @@ parent, scalar-first, in the limb file's joint order — or ``(J, 4)`` for one p
 
 Hierarchical correction (``models.limb``): joints are evaluated in :attr:`Limb.order`; a joint
 without a coupling is answered by :class:`models.oracle.ConstraintOracle` (the single-joint
-oracle, unchanged); a coupled joint by the same maths (:func:`models.oracle.evaluate_ball`,
-:func:`models.oracle.evaluate_hinge`) with its limits interpolated at the coupling angle of
-**the corrected** source joint — the hinge angle of the source's projected orientation. So the
-corrected limb is valid in every joint (the source's correction does not move again; the
-dependant is valid at that angle), and a valid limb is left as it is.
+oracle, unchanged); a coupled joint by the same maths (its kind's
+:meth:`~models.kinds.base.JointKind.evaluate_coupled`) with its limits interpolated at the
+coupling angle of **the corrected** source joint — the hinge angle of the source's projected
+orientation. So the corrected limb is valid in every joint (the source's correction does not
+move again; the dependant is valid at that angle), and a valid limb is left as it is.
 
 One implementation serves a batch and a single posture (a posture is a batch of one).
 """
@@ -22,11 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
-from models.constraint import ConeSwing, PolygonSwing
 from models.errors import QuaternionError
-from models.geometry import nearest_on_polygons
+from models.kinds.base import OracleResult
 from models.limb import InterpolatedLimits, Limb
-from models.oracle import ConstraintOracle, OracleResult, evaluate_ball, evaluate_hinge
+from models.oracle import ConstraintOracle
 
 __all__ = ["LimbOracle", "LimbResult", "check_postures", "end_points", "segment_directions"]
 
@@ -87,56 +86,17 @@ def end_points(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
 
 
 class _CoupledJoint:
-    """A coupled joint's oracle: limits interpolated at a coupling angle per sample."""
+    """A coupled joint's oracle: limits interpolated at a coupling angle per sample (the
+    maths of its kind: :meth:`models.kinds.base.JointKind.evaluate_coupled`)."""
 
     def __init__(self, limits: InterpolatedLimits, axis: np.ndarray):
         self.lim = limits
         self.axis = axis
-        first = limits.keyframes[0]
-        self.hinge_axis = None if first.hinge is None else np.asarray(first.hinge.axis)
-        self.swing = type(first.swing)
-        self.twist = first.twist is not None
+        self.kind = limits.keyframes[0].joint_kind
 
     def evaluate(self, q: np.ndarray, angle: np.ndarray) -> OracleResult:
-        lim = self.lim
-        k, t = lim.locate(angle)
-        if self.hinge_axis is not None:
-            lo, hi = lim.interval(k, t)
-            return evaluate_hinge(q, self.hinge_axis, lo, hi, True)
-        nearest = None
-        if self.swing is ConeSwing:
-            def nearest(d):
-                return _cones_nearest(d, *lim.cones(k, t))
-        elif self.swing is PolygonSwing:
-            def nearest(d):
-                dist = np.empty(len(d))
-                pts = np.empty((len(d), 3))
-                for seg in np.unique(k):
-                    rows = np.nonzero(k == seg)[0]
-                    dist[rows], pts[rows] = nearest_on_polygons(lim.polygon_at(seg, t[rows]),
-                                                                d[rows])
-                return dist, pts
-        limits = None
-        if self.twist:
-            lo, hi = lim.interval(k, t)
-
-            def limits(e):
-                return lo, hi
-        return evaluate_ball(q, self.axis, nearest, limits, True)
-
-
-def _cones_nearest(d: np.ndarray, c: np.ndarray, r: np.ndarray):
-    """:class:`models.oracle._ConeSolver`'s closed form with one cone (centre, radius) per row."""
-    cos_t = np.einsum("ij,ij->i", d, c)
-    tang = d - cos_t[:, None] * c
-    sin_t = np.linalg.norm(tang, axis=1)
-    dist = np.arctan2(sin_t, cos_t) - r
-    tiny = sin_t < 1e-15
-    u = tang / np.where(tiny, 1.0, sin_t)[:, None]
-    if tiny.any():
-        u[tiny] = Q.perpendicular(c[tiny])
-    b = np.cos(r)[:, None] * c + np.sin(r)[:, None] * u
-    return dist, b
+        k, t = self.lim.locate(angle)
+        return self.kind.evaluate_coupled(q, self.axis, self.lim, k, t)
 
 
 class LimbOracle:
@@ -159,8 +119,8 @@ class LimbOracle:
                 self._joint.append(_CoupledJoint(j.coupling.limits, np.asarray(j.limb_axis)))
         self._source = [None if j.coupling is None else limb.index(j.coupling.by)
                         for j in limb.joints]
-        self._hinge_axis = [None if j.kind != "hinge" else np.asarray(
-            (j.constraint or j.coupling.keyframes[0]).hinge.axis) for j in limb.joints]
+        self._coupling_axis = [(j.constraint or j.coupling.keyframes[0]).joint_kind.coupling_axis(
+            j.constraint or j.coupling.keyframes[0]) for j in limb.joints]
 
     def evaluate(self, orientations, *, normalize: bool = False) -> LimbResult:
         """Validity, distance, projection and correction of every joint, hierarchically."""
@@ -201,7 +161,7 @@ class LimbOracle:
                 r = oracle.evaluate(qj)
             else:
                 src = self._source[j]
-                angle[:, j] = Q.twist_angle(proj[:, src], self._hinge_axis[src])
+                angle[:, j] = Q.twist_angle(proj[:, src], self._coupling_axis[src])
                 r = oracle.evaluate(qj, angle[:, j])
             valid[:, j], dist[:, j] = r.valid, r.distance
             proj[:, j], corr[:, j] = r.projected, r.correction

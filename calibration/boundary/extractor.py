@@ -414,7 +414,8 @@ class BoundaryExtractor:
         """The written constraint as a ``two-axis`` joint when asked and the recorded twist is
         narrow enough for one (:data:`models.constraint.TWO_AXIS_MAX_TWIST_DEG`); otherwise
         the ball joint, with the reason in its provenance (``kind_note``)."""
-        from models.constraint import TWO_AXIS_MAX_TWIST_DEG, JointConstraint
+        from models.constraint import JointConstraint
+        from models.kinds.two_axis import TWO_AXIS_MAX_TWIST_DEG
 
         if self.kind == "ball":
             return constraint

@@ -765,9 +765,9 @@ def _folding_pair(kept: list) -> int | None:
     """The first ``i`` whose keyframes ``kept[i]``, ``kept[i + 1]`` (angle, constraint) have a
     polygon swing interpolation that touches itself (:func:`models.geometry.
     first_contact_along`), else None."""
-    from models.constraint import PolygonSwing
     from models.geometry import first_contact_along
     from models.limb import corresponding_polygons
+    from models.limits import PolygonSwing
 
     for i in range(len(kept) - 1):
         a, b = kept[i][1].swing, kept[i + 1][1].swing

@@ -285,7 +285,7 @@ def hold_twists(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, bandwidt
     """
     from scipy.optimize import linprog
 
-    from models.constraint import SwingTwistTable
+    from models.limits import SwingTwistTable
 
     lo, hi = lo.copy(), hi.copy()
     r = SwingTwistTable(bandwidth_deg, directions, lo, hi).weights(d)  # (N, K)

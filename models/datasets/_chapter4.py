@@ -70,7 +70,7 @@ from typing import Any
 import numpy as np
 
 from models import quaternion as Q
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import JointConstraint
 from models.datasets._common import (
     check_choice,
     check_n,
@@ -83,6 +83,7 @@ from models.datasets._common import (
 from models.datasets._dataset import REGION_NAMES, Dataset, created_by
 from models.errors import DatasetError
 from models.geometry import fibonacci_sphere
+from models.limits import ConeSwing, PolygonSwing
 from models.oracle import ConstraintOracle
 
 __all__ = [

@@ -76,7 +76,7 @@ def limb_postures(ds: Dataset):
 def field_joints(limb) -> list[str]:
     """The joints of a limb that get a trained field: coupled polygon swings (a coupled cone
     or interval is interpolated exactly in closed form)."""
-    from models.constraint import PolygonSwing
+    from models.limits import PolygonSwing
 
     return [j.name for j in limb.joints if j.coupling is not None
             and isinstance(j.coupling.keyframes[0].swing, PolygonSwing)]

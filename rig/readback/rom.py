@@ -173,7 +173,7 @@ def _limits_rom(request: RomRequest) -> RomResult:
                                  f"--joint (one of shoulder, {', '.join(JOINT_ANGLES)})")
     else:
         for c in constraints:
-            c.require_kind("rig rom")
+            c.require_swing_twist("rig rom")
     return RomResult(allowed_rom(constraints, joint, side), named, source)
 
 

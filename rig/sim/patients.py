@@ -168,7 +168,7 @@ def resolve_patient(value: str, *, url: str, key: str = "patient"):
         return load_shape(value)
     try:
         c = load_constraint(value)
-        c.require_kind("a simulated patient")
+        c.require_swing_twist("a simulated patient")
         return c
     except FileNotFoundError:
         raise RigConfigError(f"{url}: {key}={value!r}: not a shape name ({', '.join(SHAPES)}) "

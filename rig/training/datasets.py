@@ -66,7 +66,7 @@ def _constraint(constraint: str | None, loaded, shape: str | None, radius: str |
     if len(given) > 1:
         raise DatasetError(f"{' and '.join(given)}: give only one constraint source")
     if constraint is not None:
-        loaded.require_kind("rig dataset make")
+        loaded.require_swing_twist("rig dataset make")
         return loaded
     if shape is not None:
         return load_shape(shape)

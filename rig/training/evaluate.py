@@ -65,7 +65,7 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
                                "postures only")
         metrics, what = evaluate_limb(request.model, constraint, request.n, request.seed)
         return EvaluateResult(metrics, what, limb_metric_lines(metrics, constraint.joint_names))
-    constraint.require_kind("rig evaluate")
+    constraint.require_swing_twist("rig evaluate")
     model = load_model(request.model, expected_constraint=constraint)
     oracle = ConstraintOracle(constraint)
     n, seed, distribution = request.n, request.seed, request.distribution

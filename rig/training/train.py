@@ -185,7 +185,7 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
         raise ConstraintError("--constraint: required (or --data with a dataset file)")
     else:
         constraint = source
-    constraint.require_kind("rig train")
+    constraint.require_swing_twist("rig train")
     is_field = cfg["model"]["method"] == "field"
     gens = cfg["evolution"]["generations"]
     src = f" on {len(patterns[0])} patterns of {request.data}" if patterns is not None else ""

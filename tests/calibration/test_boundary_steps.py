@@ -18,7 +18,8 @@ from calibration.boundary.simplify import simplify_around, spherical_polygon
 from calibration.boundary.sparse import sparse_arcs
 from calibration.boundary.twist import TwistSettings, hold_twists, twist_envelope
 from models import quaternion as Q
-from models.constraint import JointConstraint, SwingTwistTable
+from models.constraint import JointConstraint
+from models.limits import SwingTwistTable
 
 X = np.array([1.0, 0.0, 0.0])
 

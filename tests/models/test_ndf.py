@@ -7,11 +7,11 @@ import pytest
 
 from models import quaternion as Q
 from models.datasets import field_joints, field_samples, training_postures
+from models.kinds.ball import evaluate_ball
 from models.limb_evaluation import evaluate_limb_model, held_out_postures, random_limb
 from models.limb_model import export_limb_model, limb_to_onnx, load_limb_model
 from models.limb_oracle import LimbOracle
 from models.nn.ndf import DistanceField, FieldSpec, fit_limb_fields
-from models.oracle import evaluate_ball
 
 SMALL = FieldSpec(features=64, hidden=64, samples=20000, epochs=8, batch=512)
 DEV_SEED = 321  # a development limb, below the held-out seeds

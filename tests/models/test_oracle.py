@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.errors import QuaternionError
-from models.oracle import BOUNDARY_TOLERANCE, ConstraintOracle
+from models.kinds.base import BOUNDARY_TOLERANCE
+from models.oracle import ConstraintOracle
 
 SETTINGS = settings(max_examples=60, deadline=None)
 

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
-from models.constraint import PolygonSwing, load_constraint
+from models.constraint import load_constraint
 from models.errors import DatasetError
+from models.limits import PolygonSwing
 from models.oracle import ConstraintOracle, polygon_area_sr
 from models.shapes import SHAPES, load_shape, shape_path
 

@@ -90,9 +90,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import JointConstraint
 from models.limb import Limb
 from models.limb_oracle import LimbOracle
+from models.limits import ConeSwing, PolygonSwing
 from models.oracle import ConstraintOracle
 from rig.sim.limb.motion import JointMotion, Posture, RateLimit, Sinusoids, SmoothPath
 from rig.sim.limb.schedule import NeutralCheckpoints, NeutralPoses, Schedule

@@ -58,7 +58,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
-from models.constraint import ConeSwing, JointConstraint, PolygonSwing
+from models.constraint import JointConstraint
+from models.limits import ConeSwing, PolygonSwing
 from models.oracle import ConstraintOracle
 from rig.sim.limb._rotations import exp_map, slerp
 
