@@ -47,16 +47,16 @@ Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`Hinge
 
 from __future__ import annotations
 
-from calibration.boundary.limb import LimbExtractor
 from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
 from calibration.boundary.extractor import BoundaryExtractor
 from calibration.boundary.hinge import HingeExtractor
+from calibration.boundary.limb import LimbExtractor
 from calibration.boundary.sparse import SparseArc
 
 __all__ = [
     "BoundaryExtractor",
-    "LimbExtractor",
     "HingeExtractor",
+    "LimbExtractor",
     "SparseArc",
     "boundary_distance",
     "boundary_points",

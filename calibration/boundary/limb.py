@@ -155,11 +155,20 @@ _GROW_ROUNDS = 3
 
 
 class LimbExtractor:
-    """Recorded limb postures → a limb file with its coupling (module doc).
+    """Recorded limb postures → a limb file with its coupling (module doc); the one entry of
+    boundary extraction, for a whole limb or a limb of one joint.
+
+    A limb of one joint (``limb`` a tuple of one joint name, ``rig boundary --joint``,
+    :func:`rig.readback.boundary.extract`) has nothing to couple: its joint's limits are the
+    one extraction of :mod:`calibration.boundary.joint` (a hinge's interval, else a swing
+    region and twist), available as ``constraint_`` and ``extractors_[joint]``; no limb file
+    is written for it (``limb_`` is None) — its constraint is the file.
 
     Parameters
     ----------
-    limb : {"arm", "leg"}
+    limb : {"arm", "leg"} or tuple of one joint name
+        A whole limb, or a limb of one joint (:data:`calibration.joints.JOINTS`; None, or a
+        name it does not list, is a ball joint).
     keyframe_spacing_deg, max_keyframes, keyframe_band_deg
         Where keyframes go and which samples each is extracted from.
     min_keyframe_samples, min_keyframe_coverage, min_difference_deg,
@@ -169,12 +178,20 @@ class LimbExtractor:
         The swing extraction's alpha radius and vertex budget (each joint and keyframe).
     slow_insets : bool
         Move the limits in by the measured slow error's insets too, not only take its twist
-        reach (module doc, "Measured errors"; off by default).
+        reach (module doc, "Measured errors"; off by default; one-joint IMU sessions read
+        so, :mod:`calibration.boundary.joint`).
     name : str
+    by_swing, limb_axis
+        A limb of one joint: the swing-dependent twist choice (``"auto"``, True, False) and
+        the limb axis (default the joint's); a whole limb's joints use their own.
 
     Attributes
     ----------
-    limb_ : models.limb.Limb
+    extractors_ : dict, joint → its fitted extractor (a limb of one joint; a whole limb's
+        joints are in ``reports_``)
+    constraint_ : models.constraint.JointConstraint, the one joint's limits (a limb of one
+        joint)
+    limb_ : models.limb.Limb (None for a limb of one joint)
     couplings_ : dict, tested joint → ``coupled``, ``note`` (why or why not), ``keyframes``,
         ``difference_deg``, ``local_difference_deg``
     coupled_, coupling_note_, keyframes_ : the proximal joint's: whether coupled, why, every
@@ -201,11 +218,16 @@ class LimbExtractor:
                  min_held: float = 0.99, min_inside: float = 0.995,
                  alpha_deg: float = 4.0,
                  max_vertices: int = 64, name: str = "recorded-limb",
-                 slow_insets: bool = False) -> None:
+                 slow_insets: bool = False, by_swing: bool | str = "auto",
+                 limb_axis=None) -> None:
         from calibration.joints import LIMB_CHAINS
 
-        if limb not in LIMB_CHAINS:
-            raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)}, got {limb!r}")
+        one = isinstance(limb, tuple) and len(limb) == 1
+        if not one and limb not in LIMB_CHAINS:
+            raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
+                             f"joint, got {limb!r}")
+        self.by_swing = by_swing
+        self.limb_axis = limb_axis
         if max_keyframes < 2:
             raise ValueError(f"max_keyframes must be >= 2, got {max_keyframes}")
         for label, v in (("keyframe_spacing_deg", keyframe_spacing_deg),
@@ -314,10 +336,13 @@ class LimbExtractor:
         """Extract the limb (module doc) from postures ``q`` (N, 3, 4), sample times ``t``
         (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors);
         ``slow_error_deg``: joint name → its measured slow error, degrees (module doc,
-        "Measured errors")."""
+        "Measured errors"); a limb of one joint: postures (N, 1, 4) or (N, 4)."""
         from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
         from models.limb_oracle import LimbOracle
 
+        if isinstance(self.limb, tuple):
+            return self._fit_one(q, t=t, status=status, provenance=provenance,
+                                 slow_error_deg=slow_error_deg)
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 3 or q.shape[1:] != (3, 4):
             raise CalibrationError(f"expected postures of shape (N, 3, 4), got {q.shape}")
@@ -380,6 +405,31 @@ class LimbExtractor:
         self.held_["limb"] = float(np.mean(held.all(axis=1)))
         self.tolerance_deg_ = {s.name: [float(np.degrees(x)) for x in self._tolerance(s)]
                                for s in specs}
+        return self
+
+    def _fit_one(self, q, *, t=None, status=None, provenance: dict | None = None,
+                 slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
+        """A limb of one joint: its one extraction (:mod:`calibration.boundary.joint`)."""
+        from calibration.boundary.joint import fit_joint, joint_extractor
+
+        (joint,) = self.limb
+        if getattr(q, "ndim", 2) == 3:
+            if q.shape[1] != 1:
+                raise CalibrationError(f"expected postures of one joint, got {q.shape}")
+            q = q[:, 0]
+        slow = dict(slow_error_deg or {})
+        unknown = sorted(set(slow) - {joint}, key=str)
+        if unknown:
+            raise ValueError(f"slow_error_deg: no joint {', '.join(map(str, unknown))} in a "
+                             f"limb of the {joint}")
+        ex = joint_extractor(joint, limb_axis=self.limb_axis, alpha_deg=self.alpha_deg,
+                             max_vertices=self.max_vertices, by_swing=self.by_swing,
+                             name=self.name)
+        fit_joint(ex, q, status=status, t=t, provenance=provenance,
+                  slow_error_deg=slow.get(joint), slow_insets=self.slow_insets)
+        self.extractors_ = {joint: ex}
+        self.constraint_ = ex.constraint_
+        self.limb_ = None
         return self
 
     def _coupling(self, j, chain, specs, constraints, q, ts, st, theta, h, fixed, side,
@@ -685,7 +735,10 @@ class LimbExtractor:
 
     def report(self) -> dict[str, Any]:
         """What the extraction did, as plain types (``coupled``/``coupling``/``keyframes``:
-        the proximal joint's; ``couplings``: every joint's that was tested)."""
+        the proximal joint's; ``couplings``: every joint's that was tested; a limb of one
+        joint: its extractor's report)."""
+        if isinstance(self.limb, tuple):
+            return self.extractors_[self.limb[0]].report()
         return {"limb": self.limb, "coupled": self.coupled_, "coupling": self.coupling_note_,
                 "keyframes": self.keyframes_, "inside": dict(self.inside_),
                 "held": dict(self.held_),

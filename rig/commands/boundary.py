@@ -7,8 +7,8 @@ reference⁻¹ ⊗ limb; with ``--limb`` alone the column already holds joint or
 
 A whole arm or leg is ``--limb arm|leg``, as in ``rig demo --limb``: a whole-limb session
 (``--db --session``) or a file's ``--segments``; ``--limb`` names a file's column otherwise,
-and a column named ``arm`` or ``leg`` with ``--reference``. ``--chain arm|leg``, its old spelling, is still accepted, with a one-line
-note on stderr naming the new one.
+and a column named ``arm`` or ``leg`` with ``--reference``. ``--chain arm|leg``, its old
+spelling, is still accepted, with a one-line note on stderr naming the new one.
 """
 
 from __future__ import annotations

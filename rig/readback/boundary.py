@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 from calibration.boundary import LimbExtractor
-from calibration.boundary.joint import fit_joint, joint_extractor
 from calibration.joints import LIMB_CHAINS, columns_mismatch
 from models.constraint import JointConstraint, dump_constraint
 from models.fileio import check_output
@@ -239,7 +238,8 @@ def _load_limb(request: BoundaryRequest) -> JointData:
 
 def extract(data: JointData, *, name: str | None = None, side: str | None = None,
             alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto"):
-    """The fitted extractor of loaded joint orientations — a
+    """The fitted extractor of one joint's loaded orientations (J = 1), from the one
+    extraction entry :class:`~calibration.boundary.LimbExtractor` on a limb of that joint — a
     :class:`~calibration.boundary.HingeExtractor` for a hinge (elbow, knee), else a
     :class:`~calibration.boundary.BoundaryExtractor` (a ``two-axis`` joint for the wrist and
     the ankle when the recorded twist is narrow enough) — its constraint named
@@ -248,13 +248,14 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
     prov["recording"] = data.facts().as_dict()
     label = name or default_name(data)
     bs = {"auto": "auto", "on": True, "off": False}[by_swing]
-    ex = joint_extractor(data.joint, limb_axis=data.limb_axis, alpha_deg=alpha_deg,
-                         max_vertices=max_vertices, by_swing=bs, name=label)
-    # one extraction for a joint alone and a limb's joints (calibration.boundary.joint): a
-    # joint of a whole-limb session reads its measured error as --limb reads it, for the
+    # the one extraction entry, for a limb of one joint (calibration.boundary.LimbExtractor):
+    # a joint of a whole-limb session reads its measured error as --limb reads it, for the
     # twist's reach alone (the two agree on every joint the limb does not couple)
-    fit_joint(ex, data.q, status=data.status, t=data.t, provenance=prov,
-              slow_error_deg=data.slow_error_deg, slow_insets=not _of_a_limb(data))
+    ex = LimbExtractor((data.joint,), alpha_deg=alpha_deg, max_vertices=max_vertices,
+                       by_swing=bs, limb_axis=data.limb_axis, name=label,
+                       slow_insets=not _of_a_limb(data)).fit(
+        data.joint_q, status=data.status, t=data.t, provenance=prov,
+        slow_error_deg={data.joint: data.slow_error_deg}).extractors_[data.joint]
     binding = {"side": side or data.side, "joint": data.joint, "patient": data.patient}
     binding = {k: v for k, v in binding.items() if v}
     if binding:

@@ -1,6 +1,6 @@
 """What a recording read back is: joint orientations with their provenance
-(:class:`JointData`: N samples of J joints, a one-joint recording J = 1), and the facts a reader must know before trusting figures from them
-(:class:`RecordingFacts`)."""
+(:class:`JointData`: N samples of J joints, a one-joint recording J = 1), and the facts a
+reader must know before trusting figures from them (:class:`RecordingFacts`)."""
 
 from __future__ import annotations
 
