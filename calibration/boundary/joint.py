@@ -25,6 +25,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from calibration.boundary.extractor import BoundaryExtractor
+from calibration.boundary.hinge import HingeExtractor
+from calibration.joints import JOINTS
+
 __all__ = ["fit_joint", "joint_extractor"]
 
 
@@ -33,10 +37,6 @@ def joint_extractor(joint: str | None, *, limb_axis=None, alpha_deg: float = 4.0
                     name: str = "recorded") -> Any:
     """The unfitted extractor of ``joint`` (:data:`calibration.joints.JOINTS`; a name it does
     not list, or None, is a ball joint); ``limb_axis`` defaults to the joint's."""
-    from calibration.boundary.extractor import BoundaryExtractor
-    from calibration.boundary.hinge import HingeExtractor
-    from calibration.joints import JOINTS
-
     spec = JOINTS.get(joint or "shoulder")
     kind = "ball" if spec is None else spec.kind
     axis = limb_axis if limb_axis is not None else (
@@ -53,8 +53,6 @@ def fit_joint(ex, q, *, t=None, status=None, slow_error_deg: float | None = None
     times ``t`` and IMU ``status`` when known, with its measured slow error used as
     ``slow_insets`` says (module doc); ``insets``: a keyframe's, measured on its joint's
     whole recording (``slow_insets`` only)."""
-    from calibration.boundary.hinge import HingeExtractor
-
     slow = float(slow_error_deg) if slow_error_deg else None
     kw: dict[str, Any] = {"t": t, "status": status, "provenance": provenance}
     if not slow_insets:

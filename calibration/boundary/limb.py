@@ -137,10 +137,20 @@ from typing import Any
 
 import numpy as np
 
+from calibration.boundary.compare import boundary_distance
 from calibration.boundary.inset import NOISE_REACH
+from calibration.boundary.joint import fit_joint, joint_extractor
+from calibration.boundary.twist import pooled_insets, singular_reach
 from calibration.errors import CalibrationError
+from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
 from models import quaternion as Q
+from models.constraint import JointConstraint
 from models.errors import ConstraintError
+from models.geometry import first_contact_along
+from models.limb import Limb, corresponding_polygons, inline_constraint
+from models.limb_oracle import LimbOracle
+from models.limits import PolygonSwing
+from models.oracle import ConstraintOracle
 
 __all__ = ["METHOD", "LimbExtractor"]
 
@@ -220,8 +230,6 @@ class LimbExtractor:
                  max_vertices: int = 64, name: str = "recorded-limb",
                  slow_insets: bool = False, by_swing: bool | str = "auto",
                  limb_axis=None) -> None:
-        from calibration.joints import LIMB_CHAINS
-
         one = isinstance(limb, tuple) and len(limb) == 1
         if not one and limb not in LIMB_CHAINS:
             raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
@@ -264,8 +272,6 @@ class LimbExtractor:
     # -- the parts --------------------------------------------------------------------------
     def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
                          by_swing: bool | str = "auto"):
-        from calibration.boundary.joint import joint_extractor
-
         return joint_extractor(spec.name, limb_axis=spec.limb_axis, alpha_deg=self.alpha_deg,
                                max_vertices=max_vertices or self.max_vertices,
                                by_swing=by_swing, name=name)
@@ -274,8 +280,6 @@ class LimbExtractor:
         """``ex`` fitted on one joint's (or keyframe's) samples with the joint's measured slow
         error (and a keyframe with its joint's measured ``insets``); the largest swing and
         twist insets that error made it apply are remembered (``_tolerance``)."""
-        from calibration.boundary.joint import fit_joint
-
         slow = self._slow.get(spec.name)
         fit_joint(ex, q, t=t, status=status, slow_error_deg=slow, slow_insets=self.slow_insets,
                   insets=insets)  # without slow_insets: the error's twist reach alone
@@ -300,8 +304,6 @@ class LimbExtractor:
         (:func:`calibration.boundary.twist.singular_reach`; module doc, "Measured errors").
         Without a measured error both are 1° (``slack_deg``; 0: what the limb file holds
         within the measured error alone, ``held_``)."""
-        from calibration.boundary.twist import singular_reach
-
         sw, tw = self._applied.get(spec.name, (0.0, 0.0))
         swing_tol = np.radians(slack_deg + sw)
         whole = swing_tol + np.radians(tw)
@@ -316,8 +318,6 @@ class LimbExtractor:
         """(N,) bool: the postures ``q`` (N, 3, 4) whose joint ``j`` the limb file holds within
         ``tol`` (:meth:`_tolerance`): the whole orientation within its tolerance and, with a
         measured error, the direction within the swing's."""
-        from models.limb_oracle import LimbOracle
-
         swing_tol, whole = tol
         held = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
         if not (self.slow_insets and self._slow.get(limb.joints[j].name)):
@@ -337,9 +337,6 @@ class LimbExtractor:
         (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors);
         ``slow_error_deg``: joint name → its measured slow error, degrees (module doc,
         "Measured errors"); a limb of one joint: postures (N, 1, 4) or (N, 4)."""
-        from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
-        from models.limb_oracle import LimbOracle
-
         if isinstance(self.limb, tuple):
             return self._fit_one(q, t=t, status=status, provenance=provenance,
                                  slow_error_deg=slow_error_deg)
@@ -410,8 +407,6 @@ class LimbExtractor:
     def _fit_one(self, q, *, t=None, status=None, provenance: dict | None = None,
                  slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
         """A limb of one joint: its one extraction (:mod:`calibration.boundary.joint`)."""
-        from calibration.boundary.joint import fit_joint, joint_extractor
-
         (joint,) = self.limb
         if getattr(q, "ndim", 2) == 3:
             if q.shape[1] != 1:
@@ -437,8 +432,6 @@ class LimbExtractor:
         """Joint ``j``'s limits against the hinge's angle, when the recording supports them
         (module doc, tests 1-3), the couplings already decided (``fixed``: joint index →
         keyframes) in the limb file it is judged in: (keyframes or None, what was found)."""
-        from calibration.boundary.compare import boundary_distance
-
         spec, hinge = specs[j], specs[1]
         at = self._keyframe_angles(h.min_deg, h.max_deg)
         keyframes = [self._support(a, theta, q[:, j], spec) for a in at]
@@ -680,8 +673,6 @@ class LimbExtractor:
         """(angle, constraint) of each supported keyframe of joint ``j`` whose samples
         (``cells``) extract; with a measured slow error, extracted again with the insets
         pooled over the keyframes (module doc, "Measured errors")."""
-        from calibration.boundary.twist import pooled_insets
-
         kept, fitted = self._keyframes_once(spec, j, q, ts, st, supported, cells, budget)
         slow = self._slow.get(spec.name)
         if slow and self.slow_insets and len(fitted) >= 2:
@@ -712,8 +703,6 @@ class LimbExtractor:
     def _limb(self, chain, specs, constraints, kept: dict[int, list], side, provenance):
         """The limb file's contents as a validated :class:`models.limb.Limb`; ``kept``: the
         coupled joints' keyframes by joint index."""
-        from models.limb import Limb, inline_constraint
-
         hinge = specs[1]
         joints = []
         for j, (name, parent, child) in enumerate(chain):
@@ -772,8 +761,6 @@ def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list,
     (where the limits are not linear in the angle, or the interpolation cuts a corner of a
     shared stretch): the file format's interpolation, not evidence against the coupling
     (module doc, test 3)."""
-    from models.oracle import ConstraintOracle
-
     a = np.array([angle for angle, _ in kept])
     swing_tol, whole = tol
     near = np.stack([ConstraintOracle(c).signed_distance(q, normalize=True) <= whole
@@ -818,10 +805,6 @@ def _folding_pair(kept: list) -> int | None:
     """The first ``i`` whose keyframes ``kept[i]``, ``kept[i + 1]`` (angle, constraint) have a
     polygon swing interpolation that touches itself (:func:`models.geometry.
     first_contact_along`), else None."""
-    from models.geometry import first_contact_along
-    from models.limb import corresponding_polygons
-    from models.limits import PolygonSwing
-
     for i in range(len(kept) - 1):
         a, b = kept[i][1].swing, kept[i + 1][1].swing
         if isinstance(a, PolygonSwing) and isinstance(b, PolygonSwing):
@@ -852,8 +835,6 @@ def _spans(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:
 
 def _swing_only(constraint):
     """The constraint with its twist left free: its swing limits alone."""
-    from models.constraint import JointConstraint
-
     d = constraint.to_dict()
     d["kind"] = "ball"
     d["twist"] = {"min_deg": -180.0, "max_deg": 180.0}
@@ -862,8 +843,6 @@ def _swing_only(constraint):
 
 def _swing_only_limb(limb, j: int):
     """The limb with joint ``j``'s twist left free (its own limits or every keyframe's)."""
-    from models.limb import Limb, inline_constraint
-
     doc = limb.to_dict()
     entry = doc["joints"][j]
     joint = limb.joints[j]
