@@ -1,11 +1,11 @@
-"""``rig boundary --chain`` against ``--joint`` on the same recording (issue 37, item 3): does a
+"""``rig boundary --limb`` against ``--joint`` on the same recording (issue 37, item 3): does a
 limb file keep what each joint reached, and does each of its joints say what the one-joint
 extraction says?
 
 Per limb, the recorded postures ``q`` (N, 3, 4) go through both paths as the CLI runs them:
 
-- ``--chain``: :class:`calibration.boundary.LimbExtractor` with the sample times, the status
-  and each joint's measured slow error (:func:`rig.readback.boundary.run_chain`'s call);
+- ``--limb``: :class:`calibration.boundary.LimbExtractor` with the sample times, the status
+  and each joint's measured slow error (:func:`rig.readback.boundary.extract_limb`'s call);
 - ``--joint``: :func:`rig.readback.boundary.extract` on each joint's orientations alone
   (``rig boundary --joint NAME``'s call), with that joint's measured slow error.
 

@@ -11,7 +11,7 @@ orientations in ISB frames) and every joint their columns allow, the constraint
   extremes (negative: outside them), and the out-of-axis motion (RMS, p99) reported;
 - others: the kind written (``two-axis`` when the recorded twist allows) and the twist width.
 
-Then ``rig boundary --chain`` on each recording's limbs: coupled or not (and why), and the share
+Then ``rig boundary --limb`` on each recording's limbs: coupled or not (and why), and the share
 of recorded postures inside the limb file in every joint.
 
 Usage::

@@ -451,7 +451,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
 
 
 def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg_chain):
-    """``--joint`` and ``--chain`` on the same recording run one per-joint extraction
+    """``--joint`` and ``--limb`` on the same recording run one per-joint extraction
     (calibration.boundary.joint): a joint the chain leaves uncoupled is written with the same
     limits, the measured slow error read the same way (the twist's reach alone). Before, the
     one-joint path moved a limb session's knee ends in by the error (0.4-1.1° on a simulated
@@ -481,3 +481,26 @@ def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg
             assert np.allclose(alone.swing.vertices, joint.constraint.swing.vertices)
             assert alone.twist.min_deg == joint.constraint.twist.min_deg
     assert ex.limb_.joints[1].coupling is None  # the knee is always written alone
+
+
+def test_a_limb_of_one_joint_is_its_joints_one_extraction():
+    """The one extraction entry takes a limb of one joint: ``LimbExtractor(("knee",))`` gives
+    the constraint (and report) of the knee's own extraction (:mod:`calibration.boundary.joint`),
+    byte for byte, and writes no limb file."""
+    import numpy as np
+
+    from calibration.boundary import LimbExtractor
+    from calibration.boundary.joint import fit_joint, joint_extractor
+    from rig.readback import load_joint_orientations
+
+    data = load_joint_orientations(str(DATA / "xio_ximu3_lower_body.sto"), reference="femur_r",
+                                   limb="tibia_r", frames="isb", joint="knee")
+    alone = fit_joint(joint_extractor("knee", name="k"), data.q, t=data.t, slow_insets=True)
+    lx = LimbExtractor(("knee",), name="k", slow_insets=True).fit(data.joint_q, t=data.t)
+    assert lx.limb_ is None and set(lx.extractors_) == {"knee"}
+    assert lx.constraint_.to_yaml() == alone.constraint_.to_yaml()
+    assert lx.report() == alone.report()
+    again = LimbExtractor(("knee",), name="k", slow_insets=True).fit(np.asarray(data.q), t=data.t)
+    assert again.constraint_.to_yaml() == alone.constraint_.to_yaml()
+    with pytest.raises(ValueError, match="a tuple of one joint"):
+        LimbExtractor("knee")

@@ -141,7 +141,7 @@ def case_cli_errors() -> dict:
 
 @case("limb")
 def case_cli_boundary_chain_arm() -> dict:
-    """``rig boundary --chain arm`` on CMU optical capture (right and left arms): the limb file
+    """``rig boundary --limb arm`` on CMU optical capture (right and left arms): the limb file
     written and the summary; ``rig rom`` of the limb file refused without --joint."""
     out: dict = {}
     with tmpdir() as d:
@@ -159,7 +159,7 @@ def case_cli_boundary_chain_arm() -> dict:
 
 @case("limb")
 def case_cli_boundary_chain_leg() -> dict:
-    """``rig boundary --chain leg`` on the two inertial lower-body recordings and CMU's legs."""
+    """``rig boundary --limb leg`` on the two inertial lower-body recordings and CMU's legs."""
     out: dict = {}
     with tmpdir() as d:
         for name, file, side in (("xio", "xio_ximu3_lower_body.sto", "r"),
