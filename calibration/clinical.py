@@ -105,6 +105,7 @@ __all__ = [
     "NORMATIVE",
     "RIG_TO_ISB",
     "RangeOfMotion",
+    "check_side",
     "format_rom_table",
     "isb_angles",
     "mirror_directions",
@@ -121,7 +122,8 @@ _ANTERIOR = np.array([0.0, 1.0, 0.0])
 _LATERAL = np.array([0.0, 0.0, 1.0])  # after mirroring a left arm
 
 
-def _check_side(side: str) -> str:
+def check_side(side: str) -> str:
+    """``side`` itself when it is ``"right"`` or ``"left"``; ValueError naming both otherwise."""
     if side not in ("right", "left"):
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     return side
@@ -146,7 +148,7 @@ def to_isb(q, side: str = "right"):
     from scipy.spatial.transform import Rotation
 
     q = Q.check_quaternions(q, normalize=True, name="joint orientation")
-    if _check_side(side) == "left":
+    if check_side(side) == "left":
         q = mirror_quaternions(q)
     m = RIG_TO_ISB
     return Rotation.from_matrix(m @ Q.to_rotation(q).as_matrix() @ m.T)
@@ -302,7 +304,7 @@ def range_of_motion(constraint: JointConstraint, side: str = "right", *,
     """
     if not 0.0 <= band_deg <= 30.0:
         raise ValueError(f"band_deg must be in [0, 30], got {band_deg!r}")
-    _check_side(side)
+    check_side(side)
     dist0 = _swing_distance_fn(constraint)
     if side == "left":
         def dist(p):

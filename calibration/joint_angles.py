@@ -110,8 +110,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.clinical import _check_side, mirror_quaternions, text_table
+from calibration.clinical import check_side, mirror_quaternions, text_table
 from calibration.frames import SEGMENT_TO_ISB
+from calibration.kinds import calibration_kind, registered
 from models import quaternion as Q
 
 __all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "KIND_ANGLES", "NORMATIVE", "POPULATION",
@@ -393,7 +394,7 @@ def _joint(name: str) -> JointAngleSet:
 
 
 def _side(q: np.ndarray, side: str) -> np.ndarray:
-    return mirror_quaternions(q) if _check_side(side) == "left" else q
+    return mirror_quaternions(q) if check_side(side) == "left" else q
 
 
 def joint_angles(q, joint: str, side: str = "right") -> dict[str, np.ndarray]:
@@ -487,8 +488,7 @@ CLINICAL_MOVEMENTS: dict[str, tuple[str, ...]] = {
 #: an elbow hinge has no forearm rotation, which happens between the radius and the ulna
 #: within the forearm segment), a two-axis joint α and β (its narrow twist is not a range of
 #: motion), a ball joint all three.
-KIND_ANGLES: dict[str, tuple[int, ...]] = {"hinge": (0,), "two-axis": (0, 1),
-                                           "ball": (0, 1, 2)}
+KIND_ANGLES: dict[str, tuple[int, ...]] = {k.name: k.angles for k in registered()}
 
 
 def not_measured(joint: str) -> dict[str, str]:
@@ -502,7 +502,7 @@ def not_measured(joint: str) -> dict[str, str]:
     if joint not in JOINT_ANGLES:  # the shoulder (a ball joint): its own angles, all measured
         return {}
     js = JOINT_ANGLES[joint]
-    words = f"not measured by a {kind} joint" if kind != "hinge" else "not measured by a hinge"
+    words = calibration_kind(kind).unmeasured_words
     return {m: words for k, pair in enumerate(js.movements) if k not in KIND_ANGLES[kind]
             for m in pair if m in CLINICAL_MOVEMENTS[joint]}
 
@@ -715,50 +715,14 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])
     ang = {k: median_filter(v, size=min(window, n), mode="nearest") for k, v in raw.items()}
-    where = None if JOINTS[joint].kind == "hinge" else _in_band(ang, band_deg)
+    where = _in_band(ang, band_deg) if calibration_kind(JOINTS[joint].kind).reads_in_band \
+        else None
     peaks = angle_peaks(ang, joint, window=1, where=where)
     unmeasured = not_measured(joint)
-    return JointRangeOfMotion(joint, _check_side(side),
+    return JointRangeOfMotion(joint, check_side(side),
                               {m: None if m in unmeasured else peaks.get(m)
                                for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
-
-
-def allowed_boundary_samples(constraint, step_deg: float = 0.25,
-                             interior: int = 80_000) -> np.ndarray:
-    """Orientations (N, 4) on the boundary of the set a ball or two-axis constraint allows —
-    where every joint angle takes its extremes (a Cardan angle has no extreme inside the
-    set): each limb direction along the swing boundary (``step_deg`` apart) at twists across
-    its interval (``step_deg`` apart), and each direction inside the swing region (a
-    Fibonacci grid of ``interior`` points on the sphere, ~0.8°) at its two twist limits
-    (an unconstrained twist: at twists 2° apart along the boundary, 10° inside).
-    Orientations are ``swing ⊗ twist``, the oracle's decomposition about the limb axis, so
-    every one is allowed."""
-    from calibration.boundary.compare import swing_boundary_points
-    from models.geometry import fibonacci_sphere
-    from models.oracle import ConstraintOracle
-
-    oracle = ConstraintOracle(constraint)
-    axis = np.asarray(constraint.limb_axis, dtype=np.float64)
-    step = math.radians(step_deg)
-    grid = fibonacci_sphere(interior)
-    inside = grid if constraint.swing is None else grid[oracle.swing_distance(grid) <= 0.0]
-    edge = (np.zeros((0, 3)) if constraint.swing is None
-            else swing_boundary_points(constraint.swing, step_deg)[0])
-    # an unconstrained twist has no ends: every direction at twists 2° (edge) / 10° apart
-    free = constraint.twist is None
-    parts = []
-    for d, tw_step in ((edge, math.radians(2.0) if free else step),
-                       (inside, math.radians(10.0) if free else None)):
-        if not len(d):
-            continue
-        lo, hi = (np.broadcast_to(x, (len(d),)) for x in oracle.twist_limits_at(d))
-        m = 2 if tw_step is None else math.ceil(float((hi - lo).max()) / tw_step) + 1
-        tw = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, m)[None, :]
-        sw = Q.from_two_vectors(np.broadcast_to(axis, d.shape), d)
-        parts.append(Q.multiply(np.repeat(sw, m, axis=0),
-                                Q.from_axis_angle(axis, tw.ravel())))
-    return np.concatenate(parts)
 
 
 def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: float = 5.0,
@@ -766,30 +730,23 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
     """The range of motion a constraint allows (:class:`models.constraint.JointConstraint`,
     rig frames), read as a goniometer reads a position: each angle's farthest value among the
     allowed orientations at which a goniometer reads it (:func:`_in_band`). Swing joints: the
-    angles of :func:`allowed_boundary_samples` (``step_deg`` apart along the boundary; a
-    Cardan grid read a narrow twist interval only where a grid line crossed it: a simulated
-    ankle's inversion 4.5-6° short). A hinge reads its interval (its other angles are zero);
-    movements a constraint does not model are None."""
+    angles of :func:`calibration.kinds.ball.allowed_boundary_samples` (``step_deg`` apart
+    along the boundary; a Cardan grid read a narrow twist interval only where a grid line
+    crossed it: a simulated ankle's inversion 4.5-6° short). A hinge reads its interval (its
+    other angles are zero); movements a constraint does not model are None."""
     js = _joint(joint)
-    side = _check_side(side)
-    if constraint.kind == "hinge":
-        h = constraint.hinge
-        theta = np.arange(h.min_deg, h.max_deg + 1e-9, min(step_deg, 0.1))
-        q = Q.from_axis_angle(np.asarray(h.axis, float), np.radians(theta))
-        ang = joint_angles(q, joint, side)
-        peaks = angle_peaks(ang, joint, window=1)
-        named = set(js.movements[0])  # a hinge constraint bounds its own angle alone
-        unmeasured = not_measured(joint)
-        return JointRangeOfMotion(joint, side, {m: (peaks[m] if m in named
-                                                    and m not in unmeasured else None)
-                                                for m in CLINICAL_MOVEMENTS[joint]},
-                                  (float(ang["alpha"].min()), float(ang["alpha"].max())))
-    ang = joint_angles(allowed_boundary_samples(constraint, step_deg), joint, side)
-    where = _in_band(ang, band_deg)
+    side = check_side(side)
+    kind = calibration_kind(constraint.kind)
+    ang = joint_angles(kind.allowed_samples(constraint, step_deg), joint, side)
+    where = _in_band(ang, band_deg) if kind.reads_in_band else None
+    unmeasured = not_measured(joint)
     out: dict[str, float | None] = {}
     for k, key in enumerate(("alpha", "beta", "gamma")):
-        out.update(_pair(ang[key][where[key]], *js.movements[k]))
-    return JointRangeOfMotion(joint, side, {m: out.get(m) for m in CLINICAL_MOVEMENTS[joint]},
+        if k in kind.bounds:  # the angles a constraint of its kind bounds
+            out.update(_pair(ang[key] if where is None else ang[key][where[key]],
+                             *js.movements[k]))
+    return JointRangeOfMotion(joint, side, {m: None if m in unmeasured else out.get(m)
+                                            for m in CLINICAL_MOVEMENTS[joint]},
                               (float(ang["alpha"].min()), float(ang["alpha"].max())))
 
 

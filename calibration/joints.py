@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
+from models.kinds import get_kind
 from models.limb import LIMB_CHAINS  # limb → ((joint, parent, child), ...), proximal first
 
 __all__ = ["JOINTS", "LIMB_CHAINS", "JointSpec", "columns_mismatch", "hinge_angles",
@@ -96,10 +97,11 @@ def joint_mismatch(c, *, for_joint: str | None, for_side: str | None = None) -> 
     spec = JOINTS.get(for_joint) if for_joint is not None else None
     if spec is None:
         return None
-    if (c.kind == "hinge") != (spec.kind == "hinge"):
+    if c.joint_kind.swing_twist != get_kind(spec.kind).swing_twist:
         return f"holds {c.kind} limits, but the {for_joint} is a {spec.kind} joint"
-    if spec.hinge_axis is not None and c.hinge is not None:
-        axis = np.asarray(c.hinge.axis, dtype=np.float64)
+    own = c.joint_kind.coupling_axis(c)  # a hinge's axis (None for a swing-twist joint)
+    if spec.hinge_axis is not None and own is not None:
+        axis = np.asarray(own, dtype=np.float64)
         if float(axis @ np.asarray(spec.hinge_axis)) < math.cos(math.radians(30.0)):
             return (f"is a hinge about {np.round(axis, 3).tolist()}, but the {for_joint}'s "
                     f"turns about {list(spec.hinge_axis)} (rig segment frames)")

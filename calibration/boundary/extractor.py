@@ -56,6 +56,11 @@ from calibration.errors import CalibrationError
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.errors import ConstraintError
+from models.kinds import DEFAULT_KIND, swing_twist_kinds
+from models.kinds.two_axis import TWO_AXIS_MAX_TWIST_DEG, TwoAxisKind
+
+#: The two-axis kind's name: a ball joint's extraction written as one when its twist allows.
+TWO_AXIS = TwoAxisKind.name
 
 __all__ = ["BoundaryExtractor"]
 
@@ -178,10 +183,11 @@ class BoundaryExtractor:
         twist_dwell_min_runs: int = 5,
         limb_axis=(1.0, 0.0, 0.0),
         name: str = "recorded",
-        kind: str = "ball",
+        kind: str = DEFAULT_KIND,
     ) -> None:
-        if kind not in ("ball", "two-axis"):
-            raise ValueError(f"kind must be 'ball' or 'two-axis', got {kind!r}")
+        if kind not in swing_twist_kinds():
+            raise ValueError(f"kind must be {' or '.join(map(repr, swing_twist_kinds()))}, "
+                             f"got {kind!r}")
         if by_swing not in (True, False, "auto"):
             raise ValueError(f"by_swing must be True, False or 'auto', got {by_swing!r}")
         for label, val in (("alpha_deg", alpha_deg), ("cell_deg", cell_deg),
@@ -412,17 +418,14 @@ class BoundaryExtractor:
 
     def _with_kind(self, constraint):
         """The written constraint as a ``two-axis`` joint when asked and the recorded twist is
-        narrow enough for one (:data:`models.constraint.TWO_AXIS_MAX_TWIST_DEG`); otherwise
+        narrow enough for one (:data:`models.kinds.two_axis.TWO_AXIS_MAX_TWIST_DEG`); otherwise
         the ball joint, with the reason in its provenance (``kind_note``)."""
-        from models.constraint import JointConstraint
-        from models.kinds.two_axis import TWO_AXIS_MAX_TWIST_DEG
-
-        if self.kind == "ball":
+        if self.kind != TWO_AXIS:
             return constraint
         d = constraint.to_dict()
         width = self.twist_deg_[1] - self.twist_deg_[0]
         if width <= TWO_AXIS_MAX_TWIST_DEG:
-            d["kind"] = "two-axis"
+            d["kind"] = TWO_AXIS
         else:
             d.setdefault("provenance", {})["kind_note"] = (
                 f"recorded twist {width:.1f} deg wide (a two-axis joint allows "

@@ -3,9 +3,9 @@
 (:class:`~calibration.boundary.LimbExtractor`), so that the two cannot disagree about a joint
 the limb does not couple.
 
-- a hinge (elbow, knee): :class:`~calibration.boundary.HingeExtractor` about the joint's hinge
-  axis;
-- otherwise :class:`~calibration.boundary.BoundaryExtractor` (the wrist and the ankle as
+- the extractor of the joint's kind (:meth:`calibration.kinds.base.CalibrationKind.extractor`):
+  a hinge (elbow, knee) :class:`~calibration.boundary.HingeExtractor` about the joint's hinge
+  axis; otherwise :class:`~calibration.boundary.BoundaryExtractor` (the wrist and the ankle as
   ``two-axis`` joints when their recorded twist allows).
 
 A measured slow error (``slow_error_deg``: the heading correction's own uncertainty) is used
@@ -25,9 +25,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from calibration.boundary.extractor import BoundaryExtractor
-from calibration.boundary.hinge import HingeExtractor
 from calibration.joints import JOINTS
+from calibration.kinds import calibration_kind
+from models.kinds import DEFAULT_KIND
 
 __all__ = ["fit_joint", "joint_extractor"]
 
@@ -38,13 +38,12 @@ def joint_extractor(joint: str | None, *, limb_axis=None, alpha_deg: float = 4.0
     """The unfitted extractor of ``joint`` (:data:`calibration.joints.JOINTS`; a name it does
     not list, or None, is a ball joint); ``limb_axis`` defaults to the joint's."""
     spec = JOINTS.get(joint or "shoulder")
-    kind = "ball" if spec is None else spec.kind
+    kind = DEFAULT_KIND if spec is None else spec.kind
     axis = limb_axis if limb_axis is not None else (
         (1.0, 0.0, 0.0) if spec is None else spec.limb_axis)
-    if kind == "hinge":
-        return HingeExtractor(spec.hinge_axis, limb_axis=axis, name=name)
-    return BoundaryExtractor(alpha_deg=alpha_deg, max_vertices=max_vertices, by_swing=by_swing,
-                             limb_axis=axis, name=name, kind=kind)
+    return calibration_kind(kind).extractor(spec, limb_axis=axis, alpha_deg=alpha_deg,
+                                            max_vertices=max_vertices, by_swing=by_swing,
+                                            name=name)
 
 
 def fit_joint(ex, q, *, t=None, status=None, slow_error_deg: float | None = None,
@@ -53,6 +52,8 @@ def fit_joint(ex, q, *, t=None, status=None, slow_error_deg: float | None = None
     times ``t`` and IMU ``status`` when known, with its measured slow error used as
     ``slow_insets`` says (module doc); ``insets``: a keyframe's, measured on its joint's
     whole recording (``slow_insets`` only)."""
+    from calibration.boundary.hinge import HingeExtractor
+
     slow = float(slow_error_deg) if slow_error_deg else None
     kw: dict[str, Any] = {"t": t, "status": status, "provenance": provenance}
     if not slow_insets:

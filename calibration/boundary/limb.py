@@ -147,6 +147,7 @@ from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.errors import ConstraintError
 from models.geometry import first_contact_along
+from models.kinds import DEFAULT_KIND, get_kind
 from models.limb import Limb, corresponding_polygons, inline_constraint
 from models.limb_oracle import LimbOracle
 from models.limits import PolygonSwing
@@ -308,7 +309,7 @@ class LimbExtractor:
         swing_tol = np.radians(slack_deg + sw)
         whole = swing_tol + np.radians(tw)
         slow = self._slow.get(spec.name)
-        if q is None or not slow or spec.kind == "hinge":
+        if q is None or not slow or not get_kind(spec.kind).swing_twist:
             return swing_tol, whole
         axis = np.asarray(spec.limb_axis, dtype=np.float64)
         swing = np.arccos(np.clip(Q.rotate(q, axis) @ axis, -1.0, 1.0))
@@ -370,7 +371,7 @@ class LimbExtractor:
         self.couplings_: dict[str, dict[str, Any]] = {}
         for j in (0, 2):
             spec = specs[j]
-            if spec.kind == "hinge":
+            if not get_kind(spec.kind).swing_twist:  # the hinge: the couplings' source
                 continue
             found, info = self._coupling(j, chain, specs, constraints, q, ts, st, theta, h,
                                          kept, side, provenance)
@@ -390,12 +391,13 @@ class LimbExtractor:
         self.limb_ = self._limb(chain, specs, constraints, kept, side, provenance)
         # what the file holds, measured on it
         valid = LimbOracle(self.limb_).evaluate(q, normalize=True).valid
-        ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg) if s.kind == "hinge"
+        ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg)
+                       if not get_kind(s.kind).swing_twist
                        else valid[:, i] for i, s in enumerate(specs)], axis=1)
         self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
         self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
         # ... and within what the measured error explains at each posture (no slack)
-        held = np.stack([ok[:, i] if s.kind == "hinge" else ok[:, i] | self._held(
+        held = np.stack([ok[:, i] if not get_kind(s.kind).swing_twist else ok[:, i] | self._held(
             self.limb_, i, q, self._tolerance(s, q[:, i], slack_deg=0.0))
             for i, s in enumerate(specs)], axis=1)
         self.held_ = {s.name: float(np.mean(held[:, i])) for i, s in enumerate(specs)}
@@ -836,7 +838,7 @@ def _spans(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:
 def _swing_only(constraint):
     """The constraint with its twist left free: its swing limits alone."""
     d = constraint.to_dict()
-    d["kind"] = "ball"
+    d["kind"] = DEFAULT_KIND
     d["twist"] = {"min_deg": -180.0, "max_deg": 180.0}
     return JointConstraint.from_dict(d)
 

@@ -16,6 +16,7 @@ name           module                              limits
 ``ball``       :mod:`models.kinds.ball`            swing region + twist interval
 ``hinge``      :mod:`models.kinds.hinge`           one axis + an angle interval
 ``two-axis``   :mod:`models.kinds.two_axis`        swing region + narrow twist
+``forearm``    :mod:`models.kinds.forearm`         flexion + axial rotation intervals
 =============  ==================================  ==================================
 """
 
@@ -24,16 +25,19 @@ from __future__ import annotations
 from models.errors import ConstraintError
 from models.kinds.ball import BallKind
 from models.kinds.base import JointKind
+from models.kinds.forearm import ForearmKind
 from models.kinds.hinge import HingeKind
 from models.kinds.two_axis import TwoAxisKind
 
-__all__ = ["DEFAULT_KIND", "KINDS", "JointKind", "file_keys", "get_kind", "registered"]
+__all__ = ["DEFAULT_KIND", "KINDS", "JointKind", "file_keys", "get_kind", "registered",
+           "swing_twist_kinds"]
 
 #: The registered kinds by name, in registration order (a file without ``kind:`` is a ball).
 _REGISTRY: dict[str, JointKind] = {k.name: k for k in (
     BallKind(),
     HingeKind(),
     TwoAxisKind(),
+    ForearmKind(),
 )}
 
 #: The kind of a constraint file that names none (a ball joint: files written before kinds
@@ -69,3 +73,8 @@ def file_keys() -> tuple[str, ...]:
     """The top-level keys of a constraint file that hold some kind's limits (each once, in
     registration order)."""
     return tuple(dict.fromkeys(key for k in _REGISTRY.values() for key in k.file_keys))
+
+
+def swing_twist_kinds() -> tuple[str, ...]:
+    """The names of the kinds whose limits are a swing region and a twist (ball, two-axis)."""
+    return tuple(k.name for k in _REGISTRY.values() if k.swing_twist)

@@ -123,7 +123,8 @@ def test_rom_of_a_narrow_twist_ankle_reaches_what_its_constraint_allows():
     from are all allowed, and no allowed orientation near them (2° of random rotation, kept
     where the oracle allows it) reads farther; each peak is within 1° of the farthest of those
     (a Cardan grid at 10° of rotation read the inversion 4.5° short)."""
-    from calibration.joint_angles import _in_band, allowed_boundary_samples, joint_angles
+    from calibration.joint_angles import _in_band, joint_angles
+    from calibration.kinds.ball import allowed_boundary_samples
     from models.oracle import ConstraintOracle
     from rig.sim.patients import anatomical_limb
 
