@@ -7,7 +7,14 @@ followed by editing the case code, never the stored data (``tests/golden/data``)
 
 from __future__ import annotations
 
-from tests.golden import cases_cli, cases_models, cases_sim  # noqa: F401  (they register cases)
+from tests.golden import (  # noqa: F401  (they register their cases)
+    cases_cli,
+    cases_clinical,
+    cases_loop,
+    cases_models,
+    cases_sim,
+    cases_store,
+)
 from tests.golden.harness import REGISTRY
 
 #: name -> :class:`tests.golden.harness.Case`

@@ -83,12 +83,15 @@ _PATTERNS: tuple[tuple[re.Pattern[str], str], ...] = (
     # ISO 8601 date-times (with T or a space, optional seconds, fraction and zone)
     (re.compile(r"\d{4}-\d\d-\d\d[T ]\d\d:\d\d(?::\d\d(?:\.\d+)?)?(?:Z|[+-]\d\d:?\d\d)?"),
      "<TIME>"),
+    # the same in ISO 8601's basic format (a name made from a session's start: 20261128T164924Z)
+    (re.compile(r"(?<!\d)\d{8}T\d{6}Z?(?!\d)"), "<TIME>"),
     (re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}", re.I), "<UUID>"),
     (re.compile(r"\bpid[ =:]+\d+", re.I), "pid <PID>"),
-    (re.compile(r"(\"(?:created_at|updated_at|started_at|ended_at|closed_at)\"\s*:\s*)"
-                r"(?:\"[^\"]*\"|[-0-9.e+]+)"), r"\1<TIME>"),
-    (re.compile(r"((?:jointlimits-rig|onnxruntime|numpy|onnx)[ =:/]+v?)\d+(?:\.\d+)+"
-                r"(?:(?:a|b|rc|\.dev|\.post|\+)[\w.]*)?"), r"\1<VERSION>"),
+    # a time stamp's value after its key, in JSON, escaped JSON or YAML
+    (re.compile(r"(\\?\"?\b(?:created_at|updated_at|started_at|ended_at|closed_at)\b\\?\"?"
+                r"\s*:\s*)(?:\\?\"[^\"\\]*\\?\"|'[^']*'|[-0-9.e+]+)"), r"\1<TIME>"),
+    (re.compile(r"(\b(?:jointlimits-rig|rig|rig_version|onnxruntime|numpy|onnx)[ =:/]+v?)"
+                r"\d+(?:\.\d+)+(?:(?:a|b|rc|\.dev|\.post|\+)[\w.]*)?"), r"\1<VERSION>"),
     # wall-clock durations measured by the code (a JSON key, possibly inside escaped JSON)
     (re.compile(r"(\\?\"(?:build_s|seconds|elapsed_s|train_s)\\?\"\s*:\s*)[-0-9.e+]+"),
      r"\1<SECONDS>"),
@@ -98,13 +101,19 @@ _PATTERNS: tuple[tuple[re.Pattern[str], str], ...] = (
 def normalise(text: str, tmp: str | Path | list[str | Path] | None = None) -> str:
     """``text`` with what differs between two runs of the same code replaced by placeholders.
 
-    Strips, in this order: the temporary directories ``tmp`` (and their resolved forms) →
-    ``<TMP>``; ISO 8601 date-times → ``<TIME>``; UUIDs → ``<UUID>``; ``pid N`` → ``pid <PID>``;
-    the value of a JSON ``created_at``/``updated_at``/``started_at``/``ended_at``/``closed_at``
-    → ``<TIME>``; the version after ``jointlimits-rig``, ``onnxruntime``, ``numpy`` or ``onnx``
-    → ``<VERSION>``; a measured duration, the value of a JSON ``build_s``/``seconds``/
-    ``elapsed_s``/``train_s`` (also inside JSON escaped in a string) → ``<SECONDS>``. Nothing
-    else is touched.
+    Strips, in this order:
+
+    - the temporary directories ``tmp`` (and their resolved forms) → ``<TMP>``;
+    - ISO 8601 date-times, extended or basic (``20261128T164924Z``) → ``<TIME>``;
+    - UUIDs → ``<UUID>``; ``pid N`` → ``pid <PID>``;
+    - the value of a key ``created_at``, ``updated_at``, ``started_at``, ``ended_at`` or
+      ``closed_at`` (JSON, JSON escaped in a string, YAML) → ``<TIME>``;
+    - the version after ``jointlimits-rig``, ``rig``, ``rig_version``, ``onnxruntime``,
+      ``numpy`` or ``onnx`` → ``<VERSION>``;
+    - a measured duration, the value of a JSON ``build_s``, ``seconds``, ``elapsed_s`` or
+      ``train_s`` (also inside JSON escaped in a string) → ``<SECONDS>``.
+
+    Nothing else is touched.
     """
     dirs = [] if tmp is None else [tmp] if isinstance(tmp, (str, Path)) else list(tmp)
     forms = set()

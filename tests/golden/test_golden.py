@@ -45,16 +45,20 @@ def test_normalise_strips_exactly_the_run_dependent_parts(tmp_path):
     text = (f"wrote {tmp_path}/out.yaml at 2026-11-28T16:37:54.123456+00:00\n"
             "session 3 started 2026-11-28 16:37:54 by pid 4242\n"
             "model 123e4567-e89b-12d3-a456-426614174000\n"
+            "name: P-101-session-1-20261128T164924Z\nrig_version=0.1.0\nversion=3\n"
             '{"created_at": "Sat Nov 28", "closed_at": 1764347874.5, "n": 12}\n'
-            "jointlimits-rig 0.1.0, onnxruntime 1.20.1\n"
+            '"{\\"started_at\\": 1764347874.5}"\n  started_at: 1795884768.5679164\n'
+            "jointlimits-rig 0.1.0, onnxruntime 1.20.1, by rig 0.1.0.\n"
             '{"network": "{\\"build_s\\": 0.028, \\"grid\\": 60}", "seconds": 1.5}\n'
             "angles 12.5 -0.0 nan 2026 3.14159 seed=12345 pid-free text\n")
     assert normalise(text, tmp_path) == (
         "wrote <TMP>/out.yaml at <TIME>\n"
         "session 3 started <TIME> by pid <PID>\n"
         "model <UUID>\n"
+        "name: P-101-session-1-<TIME>\nrig_version=<VERSION>\nversion=3\n"
         '{"created_at": <TIME>, "closed_at": <TIME>, "n": 12}\n'
-        "jointlimits-rig <VERSION>, onnxruntime <VERSION>\n"
+        '"{\\"started_at\\": <TIME>}"\n  started_at: <TIME>\n'
+        "jointlimits-rig <VERSION>, onnxruntime <VERSION>, by rig <VERSION>.\n"
         '{"network": "{\\"build_s\\": <SECONDS>, \\"grid\\": 60}", "seconds": <SECONDS>}\n'
         "angles 12.5 -0.0 nan 2026 3.14159 seed=12345 pid-free text\n")
 

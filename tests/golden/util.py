@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
 from typing import Any
 
 import numpy as np
@@ -55,3 +57,23 @@ def onnx_bytes(path, tmp=None) -> bytes:
     for p in model.metadata_props:
         p.value = normalise(p.value, tmp)
     return model.SerializeToString()
+
+
+def long_text(prefix: str, text: str, head: int = 40) -> dict[str, Any]:
+    """A long text as its first ``head`` lines, its line count and its SHA-256 (a difference
+    past the head still fails, by the digest)."""
+    lines = text.splitlines()
+    return {f"{prefix}_head": "\n".join(lines[:head]), f"{prefix}_lines": len(lines),
+            f"{prefix}_sha256": hashlib.sha256(text.encode()).hexdigest()}
+
+
+_IMAGE = re.compile(r"data:image/(png|jpeg|svg\+xml);base64,([A-Za-z0-9+/=]+)")
+
+
+def html_text(prefix: str, html: str) -> dict[str, Any]:
+    """An HTML page as its text with every embedded image replaced by the SHA-256 of its
+    base64 data (a difference names its line), plus the SHA-256 of the whole page."""
+    text = _IMAGE.sub(lambda m: f"data:image/{m.group(1)};sha256,"
+                      f"{hashlib.sha256(m.group(2).encode()).hexdigest()}", html)
+    return {f"{prefix}_html": text,
+            f"{prefix}_html_sha256": hashlib.sha256(html.encode()).hexdigest()}
