@@ -10,10 +10,13 @@ from __future__ import annotations
 from tests.golden import (  # noqa: F401  (they register their cases)
     cases_cli,
     cases_clinical,
+    cases_demo,
     cases_loop,
     cases_models,
+    cases_services,
     cases_sim,
     cases_store,
+    cases_train,
 )
 from tests.golden.harness import REGISTRY
 

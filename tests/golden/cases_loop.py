@@ -179,3 +179,34 @@ def case_enforcement_loop() -> dict:
     out["max_violation_deg"] = float(summary["max_violation_deg"])
     assert math.isfinite(out["max_violation_deg"])
     return out
+
+
+@case("joint")
+def case_servo_bus() -> dict:
+    """The servo chain on the simulated bus (a manual clock, nothing advancing it): start
+    posture, torque, the goal ticks ``write_orientation`` sends for seeded valid orientations
+    (inverse kinematics near the previous goal) as the servos' Goal Position registers read
+    back (a read is answered after the sync write before it: ordered on the port), ping
+    answers, alerts."""
+    servos = dataclasses.replace(load_rig_config("sim-shoulder").servos, port=URL)
+    oracle = ConstraintOracle(_notch())
+    with open_port(URL + "&clock=manual&wire_time=off", baud=servos.baud) as port:
+        chain = prepare_chain(port, servos, oracle)
+        try:
+            start = chain.read_ticks()
+            out: dict = {"start_ticks": np.asarray(start, dtype=np.int64),
+                         "start_orientation": chain.read_orientation(),
+                         "torque": np.asarray(chain.set_torque(True))}
+            valid = [q for q in quats(400, 5) if oracle.is_valid(q)][:20]
+            sent, goal, near = [], [], start
+            for q in valid:
+                near = chain.write_orientation(q, near)
+                sent.append(near)
+                goal.append([chain.read_register(i, "Goal Position") for i in servos.ids])
+            out["sent_ticks"] = np.asarray(sent, dtype=np.int64)
+            out["goal_registers"] = np.asarray(goal, dtype=np.int64)
+            out["ping"] = repr([chain.ping(i) for i in servos.ids])
+            out["alerts"] = repr(chain.poll_alerts())
+        finally:
+            chain.close()
+    return out

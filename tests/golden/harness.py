@@ -95,6 +95,8 @@ _PATTERNS: tuple[tuple[re.Pattern[str], str], ...] = (
     # wall-clock durations measured by the code (a JSON key, possibly inside escaped JSON)
     (re.compile(r"(\\?\"(?:build_s|seconds|elapsed_s|train_s)\\?\"\s*:\s*)[-0-9.e+]+"),
      r"\1<SECONDS>"),
+    # ... and as ``rig train`` prints them: "wrote m.onnx (swing field) in 0.7 s", "trained in"
+    (re.compile(r"(\) in |\btrained in )\d+(?:\.\d+)? s\b"), r"\1<SECONDS> s"),
 )
 
 
@@ -111,7 +113,8 @@ def normalise(text: str, tmp: str | Path | list[str | Path] | None = None) -> st
     - the version after ``jointlimits-rig``, ``rig``, ``rig_version``, ``onnxruntime``,
       ``numpy`` or ``onnx`` → ``<VERSION>``;
     - a measured duration, the value of a JSON ``build_s``, ``seconds``, ``elapsed_s`` or
-      ``train_s`` (also inside JSON escaped in a string) → ``<SECONDS>``.
+      ``train_s`` (also inside JSON escaped in a string), or ``in N s`` after a closing
+      parenthesis or ``trained`` (``rig train``'s lines) → ``<SECONDS>``.
 
     Nothing else is touched.
     """

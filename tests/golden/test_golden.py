@@ -50,6 +50,7 @@ def test_normalise_strips_exactly_the_run_dependent_parts(tmp_path):
             '"{\\"started_at\\": 1764347874.5}"\n  started_at: 1795884768.5679164\n'
             "jointlimits-rig 0.1.0, onnxruntime 1.20.1, by rig 0.1.0.\n"
             '{"network": "{\\"build_s\\": 0.028, \\"grid\\": 60}", "seconds": 1.5}\n'
+            "wrote m.onnx (swing field) in 0.7 s; hip: trained in 291.6 s; in 5 s\n"
             "angles 12.5 -0.0 nan 2026 3.14159 seed=12345 pid-free text\n")
     assert normalise(text, tmp_path) == (
         "wrote <TMP>/out.yaml at <TIME>\n"
@@ -60,6 +61,7 @@ def test_normalise_strips_exactly_the_run_dependent_parts(tmp_path):
         '"{\\"started_at\\": <TIME>}"\n  started_at: <TIME>\n'
         "jointlimits-rig <VERSION>, onnxruntime <VERSION>, by rig <VERSION>.\n"
         '{"network": "{\\"build_s\\": <SECONDS>, \\"grid\\": 60}", "seconds": <SECONDS>}\n'
+        "wrote m.onnx (swing field) in <SECONDS> s; hip: trained in <SECONDS> s; in 5 s\n"
         "angles 12.5 -0.0 nan 2026 3.14159 seed=12345 pid-free text\n")
 
 
