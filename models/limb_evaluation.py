@@ -167,7 +167,7 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
     oracle = oracle or LimbOracle(limb)
     jn = len(limb.joints)
     swing = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.swing_twist]
-    hinges = [j for j, jt in enumerate(limb.joints) if not jt.joint_kind.swing_twist]
+    hinges = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.single_axis]
     band = math.radians(band_deg)
 
     def draw(m: int) -> np.ndarray:

@@ -429,7 +429,7 @@ def _levels(limb: Limb) -> list[int]:
 def _is_hinge(joint) -> bool:
     """The joint's limits are an axis and an interval (the hinge graph), not a swing region
     and a twist (the swing-twist graph)."""
-    return not joint.joint_kind.swing_twist
+    return joint.joint_kind.single_axis
 
 
 def _limb_graph(g: _Graph, limb: Limb, fields: dict) -> None:

@@ -24,7 +24,7 @@ through ``d`` and ``C``, ``r`` from ``C``).
 
 *Twist.* The limits ``[lo(e), hi(e)]`` are taken at the *corrected* limb direction ``e`` (``b``
 when the swing was corrected, else ``d``): constant, or the kernel-weighted table of
-:class:`models.constraint.SwingTwistTable` (``by_swing``). After the swing correction the twist
+:class:`models.limits.SwingTwistTable` (``by_swing``). After the swing correction the twist
 ``φ'`` of ``Δ ⊗ q`` is clamped to them by a right-multiplied rotation about ``a`` (the limb
 direction is unchanged), towards the nearer limit on the circle.
 

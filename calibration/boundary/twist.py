@@ -266,7 +266,7 @@ def hold_twists(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, bandwidt
                 d: np.ndarray, tw: np.ndarray, env_lo: float,
                 env_hi: float) -> tuple[np.ndarray, np.ndarray]:
     """A table's intervals widened as little as possible so that its interpolated limits
-    (:class:`models.constraint.SwingTwistTable`: kernel-weighted means of the points' limits)
+    (:class:`models.limits.SwingTwistTable`: kernel-weighted means of the points' limits)
     hold every recorded twist ``tw`` (N,), degrees, at its direction ``d`` (N, 3).
 
     A linear programme per side — minimise the total widening ``Σ Δ_j ≥ 0`` subject to

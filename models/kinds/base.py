@@ -129,6 +129,12 @@ class JointKind:
     coupled_interval_key : str
         The file key of the interval a coupling interpolates between keyframes
         (:meth:`coupled_interval`).
+    single_axis : bool
+        Its limits are one angle interval about one axis (a hinge): reports, simulators and
+        read-back treat it by that angle.
+    narrow_twist : bool
+        Its twist about the limb axis is fixed or narrow (a two-axis joint): a report names its
+        swing region and its narrow twist.
     """
 
     name: str = ""
@@ -137,6 +143,8 @@ class JointKind:
     swing_twist: bool = False
     drives_couplings: bool = False
     coupled_interval_key: str = "twist"
+    single_axis: bool = False
+    narrow_twist: bool = False
 
     def refuse(self, data: dict, source: str | None) -> None:
         """Raise for keys of a constraint file this kind refuses with its own message (checked

@@ -92,6 +92,7 @@ class HingeKind(JointKind):
     file_keys = ("hinge",)
     drives_couplings = True
     coupled_interval_key = "hinge"
+    single_axis = True
 
     def refuse(self, data: dict, source: str | None) -> None:
         for key in ("swing", "twist"):

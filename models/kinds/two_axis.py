@@ -24,6 +24,7 @@ class TwoAxisKind(BallKind):
 
     name = "two-axis"
     words = "two-axis joint"
+    narrow_twist = True
 
     def parse(self, data: dict, source: str | None) -> dict[str, Any]:
         out = super().parse(data, source)

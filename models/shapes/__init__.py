@@ -4,7 +4,7 @@ Thesis ch. 4.2.2 tests the learned corrective constraint on irregular boundaries
 an interactive virtual arm: *original* (one concave region), *small*, *large*, *C-shape*
 (pronounced concavity) and *highly irregular*. The recorded outlines are not published, so
 these are synthetic stand-ins with the same character. Each is a spherical polygon (great-circle
-edges, :class:`models.constraint.PolygonSwing`) around the limb axis +X, written as a radius
+edges, :class:`models.limits.PolygonSwing`) around the limb axis +X, written as a radius
 ``ρ(φ)`` (angle from +X) against azimuth ``φ`` about +X; a polygon that is star-shaped about +X
 in this sense is simple, because consecutive vertices less than π apart in azimuth span a convex
 lune. Extents (angle from +X):

@@ -301,7 +301,7 @@ def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:
     chain = read_session(str(db), session)
     d = np.degrees(LimbOracle(limb).evaluate(chain.joint_q, normalize=True).distance)
     for j, joint in enumerate(limb.joints):
-        if joint.kind == "hinge" and joint.constraint is not None:
+        if joint.joint_kind.single_axis and joint.constraint is not None:
             h = joint.constraint.hinge
             a = hinge_angles(chain.joint_q[:, j], h.axis)
             d[:, j] = np.maximum(h.min_deg - a, a - h.max_deg)
@@ -325,7 +325,7 @@ def compare_limbs(extracted, truth) -> dict[str, Any]:
     out: dict[str, Any] = {"joints": {}}
     for e, t in zip(extracted.joints, truth.joints, strict=True):
         f: dict[str, Any] = {}
-        if e.kind == "hinge":
+        if e.joint_kind.single_axis:
             ec, tc = e.loosest(), t.loosest()
             f["hinge_deg"] = [ec.hinge.min_deg, ec.hinge.max_deg]
             f["hinge_error_deg"] = max(abs(ec.hinge.min_deg - tc.hinge.min_deg),

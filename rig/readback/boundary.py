@@ -22,6 +22,7 @@ from calibration.boundary import LimbExtractor
 from calibration.joints import LIMB_CHAINS, columns_mismatch
 from models.constraint import JointConstraint, dump_constraint
 from models.fileio import check_output
+from models.kinds import DEFAULT_KIND, get_kind
 from models.limb import dump_limb, loads_limb
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData
@@ -296,7 +297,7 @@ def describe(ex, out_path: Path | None = None) -> str:
     lines = []
     if out_path is not None:
         lines.append(f"wrote {out_path}")
-    if r.get("kind") == "hinge":
+    if get_kind(r.get("kind", DEFAULT_KIND)).single_axis:
         lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
                      f"{r['dropped_status']} dropped for IMU status, "
                      f"{r['spikes']} isolated spikes)")
@@ -325,7 +326,7 @@ def describe(ex, out_path: Path | None = None) -> str:
     extra = f", {r['by_swing_points']} swing regions" if r["by_swing_points"] else ""
     lines.append(f"  twist       {tw[0]:.1f} .. {tw[1]:.1f} deg{extra}")
     note = ex.constraint_.provenance.get("kind_note")
-    if r.get("kind", "ball") != "ball" or note:
+    if r.get("kind", DEFAULT_KIND) != DEFAULT_KIND or note:
         lines.append(f"  kind        {r['kind']}" + (f" ({note})" if note else ""))
     if r["sparse_arcs"]:
         lines.append(f"  sparse      {len(r['sparse_arcs'])} boundary arcs "
@@ -376,7 +377,7 @@ def describe_limb(ex: LimbExtractor, path: Path, boundary_id: int | None = None,
         if j.coupling is not None:
             what = (f"coupled to the {j.coupling.by}: keyframes at "
                     f"{', '.join(f'{a:.0f}' for a in j.coupling.at_deg)} deg")
-        elif j.kind == "hinge":
+        elif j.joint_kind.single_axis:
             lo, hi = rep["hinge_deg"]
             what = f"hinge {lo:.1f} .. {hi:.1f} deg"
         else:

@@ -12,6 +12,7 @@ import numpy as np
 from calibration.coverage import coverage_of
 from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
+from models.kinds import DEFAULT_KIND, get_kind
 from models.quaternion import normalize_rows
 from rig.errors import RigConfigError
 
@@ -172,7 +173,7 @@ class JointData:
             self.recording = RecordingFacts()
         if len(self.joints) != 1:
             return self.recording
-        if self.recording.sectors is None and self.kind == "hinge":
+        if self.recording.sectors is None and get_kind(self.kind).single_axis:
             # one angle: no swing sphere to cover (the interval's ends are the evidence)
             self.recording = replace(self.recording, explored=0, sectors=0)
         if self.recording.sectors is None:
@@ -186,7 +187,7 @@ class JointData:
         """The one joint's kind (:data:`calibration.joints.JOINTS`; a joint it does not list,
         such as an older recording's name, is read as a ball joint)."""
         spec = JOINTS.get(self.joint or "shoulder")
-        return "ball" if spec is None else spec.kind
+        return DEFAULT_KIND if spec is None else spec.kind
 
     @property
     def directions(self) -> np.ndarray:

@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 
 from models import quaternion as Q
+from models.kinds import get_kind
 from rig.report.page import (
     RomRow,
     escape,
@@ -83,7 +84,6 @@ __all__ = ["NO_COUPLING", "CouplingSection", "JointSection", "LimbReportData",
 #: The line a limb without a coupling gets.
 NO_COUPLING = "No coupling supported by this recording."
 
-_KIND_WORDS = {"ball": "ball joint", "hinge": "hinge", "two-axis": "two-axis joint"}
 _SHOULDER_BAND_DEG = 5.0  # calibration.clinical.range_of_motion's default band
 _CURVE_POINTS = 19  # coupling angles a coupling's limits are evaluated at (and its keyframes)
 _NEAR_KEYFRAME_DEG = 10.0  # recorded postures "at" a keyframe: hinge within this of its angle
@@ -185,6 +185,12 @@ def _clinical_hinge(name: str, axis) -> bool:
             and bool(np.allclose(np.asarray(axis, float), spec.hinge_axis, atol=1e-6)))
 
 
+def _kind_words(name: str) -> str:
+    """How a sentence names the kind of the joint called ``name`` ("joint" when unknown)."""
+    kind = _kind_of(name)
+    return "joint" if kind is None else get_kind(kind).words
+
+
 def _kind_of(name: str) -> str | None:
     """The kind :data:`calibration.joints.JOINTS` gives a joint of this name (None: unknown)."""
     from calibration.joints import JOINTS
@@ -209,7 +215,7 @@ def _widest(joint) -> tuple[Any, float | None]:
     coupled swing joint's widest keyframe (and that keyframe's angle)."""
     if joint.coupling is None:
         return joint.constraint, None
-    if joint.kind == "hinge":
+    if get_kind(joint.kind).single_axis:
         return joint.loosest(), None
     kf = joint.coupling.keyframes
     k = int(np.argmax([_swing_area(c) for c in kf]))
@@ -257,7 +263,7 @@ def _rounded(value: Any) -> Any:
 def _primary_limits(c, name: str, side: str) -> tuple[float, float]:
     """(lower, upper) of a joint's primary clinical angle (degrees) under limits ``c`` (module
     doc); NaN where the limits do not bound it."""
-    if c.kind == "hinge":
+    if c.joint_kind.single_axis:
         return float(c.hinge.min_deg), float(c.hinge.max_deg)
     if name == "shoulder":
         from calibration.clinical import range_of_motion
@@ -289,7 +295,7 @@ def _primary_angles(q: np.ndarray, name: str, side: str, joint) -> tuple[np.ndar
     from calibration.joints import hinge_angles
 
     every = np.ones(len(q), dtype=bool)
-    if joint.kind == "hinge":
+    if get_kind(joint.kind).single_axis:
         return hinge_angles(q, joint.loosest().hinge.axis), every
     d = Q.limb_direction(q, np.asarray(joint.limb_axis, dtype=np.float64))
     if name == "shoulder":
@@ -387,7 +393,7 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
     if unmeasured:
         which = " and ".join(m.replace("_", " ") for m in unmeasured)
         note += (f" {which.capitalize()}: the {name} is modelled as a "
-                 f"{_KIND_WORDS.get(_kind_of(name), 'joint')}, which has no such movement "
+                 f"{_kind_words(name)}, which has no such movement "
                  "(not reported, not a deficit).")
     if pop_src is None:
         note += f" No published population values found for the {name}."
@@ -402,7 +408,7 @@ def _joint_rom_rows(name: str, q: np.ndarray, side: str, limits: list, at: str |
 # Sections
 # ---------------------------------------------------------------------------------------------
 def _heading(limb, joint) -> str:
-    text = f"{_title(joint.name)} — {_KIND_WORDS.get(joint.kind, joint.kind)}"
+    text = f"{_title(joint.name)} — {get_kind(joint.kind).words}"
     if joint.coupling is not None:
         text += f", limits coupled to the {joint.coupling.by}"
     return text
@@ -465,14 +471,15 @@ def _swing_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
     if intervals:  # a coupled joint's: the hull of its keyframes' intervals
         lo, hi = min(t.min_deg for t in intervals), max(t.max_deg for t in intervals)
         sec.facts["twist allowed (°)"] = _interval_text(lo, hi)
-        if joint.kind == "two-axis":
+        if get_kind(joint.kind).narrow_twist:
             twist_note = f"; narrow twist {_interval_text(lo, hi)}°"
     else:
         sec.facts["twist allowed"] = ("depends on the direction (by_swing table)" if twists
                                       else "free")
     sec.facts["twist recorded (°)"] = _interval_text(float(rec_tw.min()), float(rec_tw.max()))
     child = limb.joints[j].child
-    kind = "two-axis joint: swing region" if joint.kind == "two-axis" else "swing region"
+    kind = (f"{get_kind(joint.kind).words}: swing region" if get_kind(joint.kind).narrow_twist
+            else "swing region")
     kw["title"] = (f"{_title(joint.name)} ({side}): the {child}'s direction, {kind}"
                    f"{twist_note}")
     sec.figure_png = boundary_figure(dirs, None, **kw)
@@ -486,7 +493,7 @@ def _swing_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
                    + (f" The {joint.name} is a two-axis joint: its twist about the "
                       f"{child}'s long axis is narrow (twist allowed "
                       f"{sec.facts.get('twist allowed (°)', '?')}°)."
-                      if joint.kind == "two-axis" else ""))
+                      if get_kind(joint.kind).narrow_twist else ""))
 
 
 def _hinge_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, result,
@@ -509,7 +516,7 @@ def _hinge_section(sec: JointSection, limb, j: int, q: np.ndarray, side: str, re
         norm = (0.0 - aaos[neg], aaos[pos])  # 0.0 -: no negative zero
     ref_joint = _reference_joint(reference, joint.name, joint.kind)
     ref = None
-    if ref_joint is not None and ref_joint.kind == "hinge":
+    if ref_joint is not None and get_kind(ref_joint.kind).single_axis:
         rh = ref_joint.loosest().hinge
         ref = (rh.min_deg, rh.max_deg)
     sec.facts = {
@@ -566,7 +573,7 @@ def _coupling_section(limb, j: int, q: np.ndarray, side: str,
     clinical_src = _clinical_hinge(cp.by, sh.axis)
     src_pos, _ = _movements(cp.by)
     xlabel = f"{cp.by} {src_pos} (°)" if clinical_src else f"{cp.by} hinge angle (°)"
-    if joint.kind == "hinge":
+    if get_kind(joint.kind).single_axis:
         ylabel = f"{joint.name} hinge angle (°)"
     else:
         ylabel = f"{joint.name} {pos} (+) / {neg} (−) (°)"
@@ -601,7 +608,7 @@ def _reference_joint(reference, name: str, kind: str):
     if reference is None or name not in reference.joint_names:
         return None
     ref = reference.joints[reference.index(name)]
-    return ref if (ref.kind == "hinge") == (kind == "hinge") else None
+    return ref if get_kind(ref.kind).single_axis == get_kind(kind).single_axis else None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -754,7 +761,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
     for j, joint in enumerate(limb.joints):
         sec = JointSection(joint.name, joint.kind, _heading(limb, joint))
         limits, where = [joint.constraint], None
-        if joint.coupling is not None and joint.kind == "hinge":
+        if joint.coupling is not None and get_kind(joint.kind).single_axis:
             limits, where = [joint.loosest()], "the hull of its keyframes"
         elif joint.coupling is not None:
             cp = joint.coupling
@@ -765,7 +772,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         sec.rom_rows, sec.rom_note = _joint_rom_rows(joint.name, q[:, j], side, limits, where,
                                                      age=age, sex=sex)
         data.warnings += [r.beyond_reach for r in sec.rom_rows if r.beyond_reach]
-        if joint.kind == "hinge":
+        if get_kind(joint.kind).single_axis:
             _hinge_section(sec, limb, j, q[:, j], side, result, reference)
         else:
             _swing_section(sec, limb, j, q[:, j], side, result, reference)

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models import quaternion as Q
+from models.kinds import DEFAULT_KIND, get_kind
 from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SensorMount, SimulatedLimb, default_mounts
 from rig.sim.urls import SimUrl
@@ -400,7 +401,7 @@ def _mirror_constraint(c: dict) -> dict:
                                     "interior": mirror_directions(p["interior"]).tolist()}}
     if "twist" in c:
         out["twist"] = {"min_deg": -c["twist"]["max_deg"], "max_deg": -c["twist"]["min_deg"]}
-    if "hinge" in c:
+    if get_kind(c.get("kind", DEFAULT_KIND)).single_axis:  # the hinge's axis block
         ax = c["hinge"]["axis"]
         out["hinge"] = {**c["hinge"], "axis": [-ax[0], -ax[1], ax[2]]}
     return out

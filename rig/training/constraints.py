@@ -51,7 +51,7 @@ def _summarise_limb(path: str, limb, samples: int, seed: int) -> str:
     valid = oracle.is_valid(q)
     parts = []
     for j, joint in enumerate(limb.joints):
-        if joint.kind == "hinge":
+        if joint.joint_kind.single_axis:
             lo = joint.loosest().hinge
             parts.append(f"{joint.name} hinge {lo.min_deg:g}..{lo.max_deg:g} deg")
         else:

@@ -398,12 +398,12 @@ class SimulatedChain:
         ss = getattr(rng.bit_generator, "seed_seq", None)
         seed_seq = ss if isinstance(ss, np.random.SeedSequence) else np.random.SeedSequence(0)
         # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway
-        rows = [1 if j.kind == "hinge" else 3 for j in limb.joints]
+        rows = [1 if j.joint_kind.single_axis else 3 for j in limb.joints]
         series = Sinusoids.draw(rng, sum(rows) + 2, speed)
         self.motions: list[JointMotion | _HingeMotion] = []
         r = 0
         for j, n in zip(limb.joints, rows, strict=True):
-            if j.kind == "hinge":
+            if j.joint_kind.single_axis:
                 self.motions.append(_HingeMotion(j.loosest(), series.rows(r, r + 1), excursion))
             else:
                 c = _loosest(j)
