@@ -132,8 +132,8 @@ class BoundaryRequest:
             if self.segments is None:
                 raise RigConfigError(f"--limb {self.limb} needs --segments COL,COL,COL "
                                      "(proximal to distal)")
-            chain = LIMB_CHAINS[self.limb]
-            why = columns_mismatch(self.columns(), [chain[0][1], *(c for _, _, c in chain)],
+            order = LIMB_CHAINS[self.limb]
+            why = columns_mismatch(self.columns(), [order[0][1], *(c for _, _, c in order)],
                                    side=self.side, what="--segments")
             if why is not None:
                 raise RigConfigError(f"{src.file}: {why} (reading the {self.limb}: --limb "

@@ -81,12 +81,12 @@ def limb_orientations_from_file(file: str, columns: list[str], limb: str,
     table = read_orientations(file)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
-    chain = LIMB_CHAINS[limb]
-    names = [chain[0][1], *(c for _, _, c in chain)]
+    order = LIMB_CHAINS[limb]
+    names = [order[0][1], *(c for _, _, c in order)]
     seg = [segment_to_rig(table.get(c), frames, n) for c, n in zip(columns, names, strict=True)]
     q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
     side = table.meta.get("rig_side")
-    return JointData(q, tuple(name for name, _, _ in chain),
+    return JointData(q, tuple(name for name, _, _ in order),
                      np.asarray(table.time, dtype=np.float64), None, parse_axis(None),
                      side if side in ("left", "right") else None,
                      {"file": Path(file).name, "segments": list(columns), "frames": frames},
