@@ -4,7 +4,7 @@ status, stdout, stderr and the files written (joint and limb)."""
 from __future__ import annotations
 
 from models.shapes import SHAPES, shape_path
-from tests.golden.cli import REAL, RIG_DATA, _root, rig
+from tests.golden.cli import REAL, RIG_DATA, rig, root_relative
 from tests.golden.harness import case, normalise, tmpdir
 
 
@@ -17,7 +17,7 @@ def _run(prefix: str, args: list, tmp, out: dict) -> dict:
 
 
 def _file(path, tmp) -> str:
-    return _root(normalise(path.read_text(), [tmp]))
+    return root_relative(normalise(path.read_text(), [tmp]))
 
 
 @case("joint")

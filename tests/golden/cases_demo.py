@@ -7,7 +7,7 @@ from __future__ import annotations
 from rig.demo.limb import LIMB_SIZES, compare_limbs, write_limb_rig
 from rig.demo.pipeline import SIZES, patient_constraint, write_rig_configs
 from rig.sim.patients import anatomical_limb
-from tests.golden.cli import _root
+from tests.golden.cli import root_relative
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import jtext
 
@@ -24,7 +24,7 @@ def case_demo_joint_pieces() -> dict:
             paths = write_rig_configs(d / size, pf, 3, SIZES[size])
             for name, p in paths.items():
                 key = f"{size}_{name}".replace("-", "_")
-                out[key] = _root(normalise(p.read_text(), [d]))
+                out[key] = root_relative(normalise(p.read_text(), [d]))
     return out
 
 
@@ -37,7 +37,7 @@ def case_demo_limb_pieces() -> dict:
         for limb in ("arm", "leg"):
             for size, s in LIMB_SIZES.items():
                 p = write_limb_rig(d / size, limb, 5, s)
-                out[f"{limb}_{size}_rig"] = _root(normalise(p.read_text(), [d]))
+                out[f"{limb}_{size}_rig"] = root_relative(normalise(p.read_text(), [d]))
     for limb, a, b in (("leg", 11, 12), ("arm", 7, 8)):
         out[f"compare_{limb}"] = jtext(compare_limbs(anatomical_limb(a, limb),
                                                      anatomical_limb(b, limb)))

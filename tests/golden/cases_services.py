@@ -7,13 +7,13 @@ from __future__ import annotations
 from rig.readback.boundary import BoundaryRequest, run_boundary
 from rig.readback.rom import RomRequest, run_rom
 from rig.readback.source import RecordingSource
-from tests.golden.cli import REAL, _root
+from tests.golden.cli import REAL, root_relative
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import jtext
 
 
 def _text(s: str, tmp) -> str:
-    return _root(normalise(s, [tmp]))
+    return root_relative(normalise(s, [tmp]))
 
 
 @case("joint")

@@ -20,7 +20,7 @@ from calibration import ImuJointCalibration, LimbImuCalibration
 from rig.readback import joint_orientations_from_store
 from rig.sim.patients import chain_patient, patient_limb, record_servo, star_patient
 from rig.store import open_store
-from tests.golden.cli import _root, rig
+from tests.golden.cli import rig, root_relative
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import html_text, jtext, long_text
 
@@ -151,7 +151,7 @@ def _cli(prefix: str, args: list, tmp, out: dict) -> None:
 
 
 def _file(path: Path, tmp) -> str:
-    return _root(normalise(path.read_text(), [tmp])) if path.exists() else "<missing>"
+    return root_relative(normalise(path.read_text(), [tmp])) if path.exists() else "<missing>"
 
 
 @case("joint")

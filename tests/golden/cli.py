@@ -33,9 +33,11 @@ def rig(args: list, tmp: Path | None = None) -> dict:
         sys.stderr.flush()
         stdout, stderr = out.getvalue().decode(), err.getvalue().decode()
     dirs = [tmp] if tmp is not None else []
-    return {"exit": code, "stdout": _root(normalise(stdout, dirs)),
-            "stderr": _root(normalise(stderr, dirs))}
+    return {"exit": code, "stdout": root_relative(normalise(stdout, dirs)),
+            "stderr": root_relative(normalise(stderr, dirs))}
 
 
-def _root(text: str) -> str:
+def root_relative(text: str) -> str:
+    """``text`` with the repository's root directory written ``<ROOT>`` (the shipped files'
+    paths do not depend on where the checkout is)."""
     return text.replace(str(ROOT), "<ROOT>")

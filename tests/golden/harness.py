@@ -9,8 +9,9 @@ Storage (``tests/golden/data``), written only by ``python -m tests.golden.regen`
 
 - ``<name>.npz``: every array (and number) the case returned, under its key; an array larger
   than :data:`DIGEST_BYTES` is stored as its SHA-256 (in the JSON) plus :data:`N_SAMPLES`
-  values at evenly spaced flat indices (``<key>.__samples__``) and ``nanmin``/``nanmax``/
-  ``nansum`` (``<key>.__stats__``), so a mismatch still says where and by how much.
+  values at evenly spaced flat indices (``<key>.__samples__``), ``nanmin``/``nanmax``/
+  ``nansum`` (``<key>.__stats__``) and the sums of :data:`N_CHUNKS` consecutive chunks
+  (``<key>.__chunks__``), so a mismatch still says where and by how much.
 - ``<name>.json``: the kind, the strings (exactly), the bytes (base64 up to
   :data:`DIGEST_BYTES`, else SHA-256 and length), and the digests of the large arrays.
 
@@ -45,6 +46,9 @@ DATA = Path(__file__).resolve().parent / "data"
 DIGEST_BYTES = 8 * 1024
 #: Values kept of a digested array, at evenly spaced flat indices.
 N_SAMPLES = 32
+#: A digested array is also kept as the sums of this many consecutive chunks of its flat
+#: elements (a difference anywhere shows in its chunk's sum, which locates it).
+N_CHUNKS = 64
 
 KINDS = ("joint", "limb")
 
@@ -169,6 +173,15 @@ def _stats(arr: np.ndarray) -> np.ndarray:
                         dtype=np.float64)
 
 
+def _chunk_sums(arr: np.ndarray) -> np.ndarray:
+    flat = arr.reshape(-1)
+    if flat.dtype.kind == "c":
+        flat = np.abs(flat)
+    flat = flat.astype(np.float64)
+    with np.errstate(all="ignore"):
+        return np.array([np.nansum(c) for c in np.array_split(flat, N_CHUNKS)])
+
+
 def _sha(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
@@ -196,6 +209,7 @@ def encode(outputs: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, An
                                        "shape": list(arr.shape)}
                 arrays[f"{key}.__samples__"] = arr.reshape(-1)[_sample_index(arr.size)]
                 arrays[f"{key}.__stats__"] = _stats(arr)
+                arrays[f"{key}.__chunks__"] = _chunk_sums(arr)
     return arrays, doc
 
 
@@ -313,6 +327,17 @@ def compare(name: str, outputs: dict[str, Any], data: Path = DATA) -> list[str]:
             s = _compare_array("samples", exp_arrays[f"{key}.__samples__"],
                                got_arrays[f"{key}.__samples__"])
             msg += "; " + (s if s else f"the {N_SAMPLES} sampled values are equal")
+            ce, cg = exp_arrays[f"{key}.__chunks__"], got_arrays[f"{key}.__chunks__"]
+            bad = np.flatnonzero(ce.view(np.uint64) != cg.view(np.uint64))
+            if len(bad):
+                bounds = np.cumsum([0] + [len(c) for c in np.array_split(np.empty(size),
+                                                                          N_CHUNKS)])
+                k = int(bad[0])
+                first = np.unravel_index(int(bounds[k]), tuple(want["shape"]))
+                msg += (f"; {len(bad)} of {N_CHUNKS} chunks differ, the first from element "
+                        f"{tuple(int(i) for i in first)} (flat {int(bounds[k])}..."
+                        f"{int(bounds[k + 1]) - 1}): its sum {float(cg[k])!r}, expected "
+                        f"{float(ce[k])!r}")
             st = _compare_array("stats", exp_arrays[f"{key}.__stats__"],
                                 got_arrays[f"{key}.__stats__"])
             if st:

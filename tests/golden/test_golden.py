@@ -96,3 +96,7 @@ def test_a_large_array_is_stored_as_a_digest_that_still_locates_a_difference(tmp
     moved[0] += 1.0  # sample index 0 is always kept
     (p,) = _check(tmp_path, {"big": big}, {"big": moved})
     assert "SHA-256 differs" in p and "largest difference" in p
+    moved = big.copy()
+    moved[5001] += 1e-9  # not a sample: found by its chunk's sum
+    (p,) = _check(tmp_path, {"big": big}, {"big": moved})
+    assert "sampled values are equal" in p and "the first from element (4852,)" in p, p
