@@ -14,7 +14,7 @@ neutral checkpoints):
    (:meth:`~rig.sim.limb.SimulatedWholeLimb.protocol_windows`; the samples whose four status bytes
    pass :func:`~calibration.alignment.status_ok`), applied to the free motion: joint
    orientations (N, 3, 4);
-3. :class:`~calibration.boundary.ChainExtractor` on them, with the sample times and, per
+3. :class:`~calibration.boundary.LimbExtractor` on them, with the sample times and, per
    sample, the lowest of the four status bytes (the system level is the top bits);
 4. compared with the truth, the patient's :class:`~models.limb.Limb`.
 
@@ -63,7 +63,7 @@ Comparison conventions (columns)
     ``a``; the largest over the keyframes (each is listed below the table).
 ``found`` (extracted / true)
     Whether the joint's limits were written coupled, and whether the truth's are
-    (``ChainExtractor`` tests the shoulder, hip, wrist and ankle; the truth couples the
+    (``LimbExtractor`` tests the shoulder, hip, wrist and ankle; the truth couples the
     shoulder and hip, and the ankle: the gastrocnemius, 5-8° more dorsiflexion with the knee
     bent).
 ``rec°`` / ``con°`` (clinical peaks; target ≤ 2°)
@@ -114,7 +114,7 @@ from calibration import (
     boundary_distance,
     status_ok,
 )
-from calibration.boundary import ChainExtractor
+from calibration.boundary import LimbExtractor
 from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom, recorded_rom
 from calibration.joints import JOINTS, LIMB_CHAINS
@@ -211,7 +211,7 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str,
     (``slow``: each joint's measured slow error, as the read path passes it)."""
     side = truth.side
     t0 = time.perf_counter()
-    ex = ChainExtractor(limb).fit(q, t=t, status=status, side=side, slow_error_deg=slow)
+    ex = LimbExtractor(limb).fit(q, t=t, status=status, side=side, slow_error_deg=slow)
     t_ext = time.perf_counter() - t0
     got = ex.limb_
     res = LimbOracle(got).evaluate(truth.q, normalize=True)
@@ -260,7 +260,7 @@ def heading_corrected(rec, cal: LimbImuCalibration, windows: np.ndarray,
     """The recording's sensors with their heading drift removed at the neutral checkpoints
     (:class:`calibration.heading.LimbHeadingCorrection`, anchored at the static window's
     centre, as the read path does; unchanged without checkpoints), and each joint's slow error
-    as the read path measures it (:attr:`rig.readback.data.ChainData.slow_error_deg`: the
+    as the read path measures it (:attr:`rig.readback.data.JointData.slow_errors_deg`: the
     correction's uncertainty for the joint's distal sensor over the recording)."""
     if not len(windows):
         return rec.quaternions, {}

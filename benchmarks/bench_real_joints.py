@@ -11,7 +11,7 @@ orientations in ISB frames) and every joint their columns allow, the constraint
   extremes (negative: outside them), and the out-of-axis motion (RMS, p99) reported;
 - others: the kind written (``two-axis`` when the recorded twist allows) and the twist width.
 
-Then ``rig boundary --chain`` on each recording's limbs: coupled or not (and why), and the share
+Then ``rig boundary --limb`` on each recording's limbs: coupled or not (and why), and the share
 of recorded postures inside the limb file in every joint.
 
 Usage::
@@ -26,7 +26,7 @@ from pathlib import Path
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
-from calibration.boundary import ChainExtractor
+from calibration.boundary import LimbExtractor
 from calibration.joints import JOINTS, hinge_angles
 from models.oracle import ConstraintOracle
 from rig.readback import RecordingSource, extract
@@ -70,7 +70,7 @@ def main() -> None:
                 print(f"{path.name:<28} {joint:<6} {s:>4} {100 * inside:8.2f}  {detail}")
     print()
     print(f"{'recording':<28} {'chain':<6} side {'inside%':>8}  coupling")
-    from rig.readback.files import chain_orientations_from_file
+    from rig.readback.files import limb_orientations_from_file
 
     for path in sorted(DATA.glob("*.sto")):
         have = set(read_orientations(str(path)).columns)
@@ -79,8 +79,8 @@ def main() -> None:
                 cols = [n.format(s) for n in names]
                 if not set(cols) <= have:
                     continue
-                q, table = chain_orientations_from_file(str(path), cols, limb, "isb")
-                ex = ChainExtractor(limb).fit(q, t=np.asarray(table.time), side=side)
+                rec = limb_orientations_from_file(str(path), cols, limb, "isb")
+                ex = LimbExtractor(limb).fit(rec.joint_q, t=rec.t, side=side)
                 for k, (joint, c) in enumerate(ex.couplings_.items()):
                     head = (f"{path.name:<28} {limb:<6} {s:>4} {100 * ex.inside_['limb']:8.2f}"
                             if k == 0 else " " * 48)

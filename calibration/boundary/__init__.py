@@ -31,20 +31,20 @@ step  what                                        module
 8     what a boundary holds; boundary distance    :mod:`~calibration.boundary.compare`
 all   the orchestrator                            :mod:`~calibration.boundary.extractor`
 1-2,6 a hinge's interval (elbow, knee)            :mod:`~calibration.boundary.hinge`
-joint one joint's extraction (--joint, --chain)   :mod:`~calibration.boundary.joint`
-limb  a chain's joints and their coupling         :mod:`~calibration.boundary.chain`
+joint one joint's extraction (--joint, --limb)    :mod:`~calibration.boundary.joint`
+limb  a limb's joints and their coupling          :mod:`~calibration.boundary.limb`
 ====  ==========================================  ============================================
 
 Imports point one way: ``planar`` → ``inset``, ``region`` → ``alpha``; ``projection`` →
 ``simplify``, ``twist``; ``inset`` → ``twist``; ``compare`` → ``sparse``; all → ``extractor``.
 
 Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`HingeExtractor`,
-:class:`ChainExtractor` (a limb file),
+:class:`LimbExtractor` (the one extraction entry: a whole limb, or a limb of one joint),
 :class:`SparseArc`, and the accuracy measures
 :func:`boundary_distance` (symmetric mean boundary distance), :func:`boundary_points`,
 :func:`outside_fraction` — each imported on first use (PEP 562 ``__getattr__``, as
 :mod:`models`), so that importing one step's module (a joint kind's extractor,
-:mod:`calibration.kinds`) does not import the chain extraction built on the kinds.
+:mod:`calibration.kinds`) does not import the limb extraction built on the kinds.
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ from typing import TYPE_CHECKING, Any
 #: public name -> the module defining it
 _EXPORTS: dict[str, str] = {
     "BoundaryExtractor": "calibration.boundary.extractor",
-    "ChainExtractor": "calibration.boundary.chain",
     "HingeExtractor": "calibration.boundary.hinge",
+    "LimbExtractor": "calibration.boundary.limb",
     "SparseArc": "calibration.boundary.sparse",
     "boundary_distance": "calibration.boundary.compare",
     "boundary_points": "calibration.boundary.compare",
@@ -65,8 +65,8 @@ _EXPORTS: dict[str, str] = {
 
 __all__ = [
     "BoundaryExtractor",
-    "ChainExtractor",
     "HingeExtractor",
+    "LimbExtractor",
     "SparseArc",
     "boundary_distance",
     "boundary_points",
@@ -89,8 +89,8 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
-    from calibration.boundary.chain import ChainExtractor
     from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
     from calibration.boundary.extractor import BoundaryExtractor
     from calibration.boundary.hinge import HingeExtractor
+    from calibration.boundary.limb import LimbExtractor
     from calibration.boundary.sparse import SparseArc

@@ -305,11 +305,11 @@ class BoundaryExtractor:
         insets : (swing_deg, (twist_lo_deg, twist_hi_deg)), optional
             The swing and twist insets already measured on a larger recording of the same
             sensors, used as they are instead of estimates from these samples (a limb's
-            keyframe, a share of its joint's recording: :class:`ChainExtractor`). The
+            keyframe, a share of its joint's recording: :class:`LimbExtractor`). The
             extractor's ``inset_deg_`` and ``twist_inset_deg_`` after a fit are such a pair.
         reach_error_deg : float, optional
             A measured slow error used for the twist's singular reach alone (step 6), not for
-            any inset (a limb's joints: :class:`ChainExtractor`); default ``slow_error_deg``.
+            any inset (a limb's joints: :class:`LimbExtractor`); default ``slow_error_deg``.
         provenance : dict, optional
             Where the data came from (session, file, ...); extended with the parameters and
             sample counts and stored in the constraint's ``provenance``.

@@ -1,7 +1,7 @@
 """One joint's limits from its own orientations: the one extraction behind ``rig boundary
---joint`` (:func:`rig.readback.boundary.extract`) and each joint of ``rig boundary --chain``
-(:class:`~calibration.boundary.ChainExtractor`), so that the two cannot disagree about a joint
-the chain does not couple.
+--joint`` (:func:`rig.readback.boundary.extract`) and each joint of ``rig boundary --limb``
+(:class:`~calibration.boundary.LimbExtractor`), so that the two cannot disagree about a joint
+the limb does not couple.
 
 - the extractor of the joint's kind (:meth:`calibration.kinds.base.CalibrationKind.extractor`):
   a hinge (elbow, knee) :class:`~calibration.boundary.HingeExtractor` about the joint's hinge

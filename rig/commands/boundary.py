@@ -4,6 +4,11 @@
 Input is a recorded session (``--db DB --session ID``) or an imported orientation file
 (``FILE.sto`` / ``FILE.csv`` with ``--reference COLUMN --limb COLUMN``: joint orientation =
 reference⁻¹ ⊗ limb; with ``--limb`` alone the column already holds joint orientations).
+
+A whole arm or leg is ``--limb arm|leg``, as in ``rig demo --limb``: a whole-limb session
+(``--db --session``) or a file's ``--segments``; ``--limb`` names a file's column otherwise,
+and a column named ``arm`` or ``leg`` with ``--reference``. ``--chain arm|leg``, its old
+spelling, is still accepted, with a one-line note on stderr naming the new one.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from rig.readback.boundary import BY_SWING_CHOICES
 from rig.readback.data import FUSION_CHOICES
 
 JOINT_NAMES = tuple(JOINTS)
-CHAINS = tuple(LIMB_CHAINS)
+LIMBS = tuple(LIMB_CHAINS)
 
 
 @click.command()
@@ -26,18 +31,18 @@ CHAINS = tuple(LIMB_CHAINS)
               help="Session id (see rig session list).")
 @click.option("--reference", default=None, help="FILE column of the reference segment (thorax).")
 @click.option("--limb", default=None, help="FILE column of the limb segment (joint orientations "
-              "when --reference is not given).")
+              "when --reference is not given); or a whole arm or leg (--limb arm|leg) from a "
+              "session recorded on an arm or leg rig or from FILE's --segments: writes a limb "
+              "file, with a coupling where the recording supports one.")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
               "(default: the long axis of --frames, 1,0,0 in rig frames).")
 @click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
               "segments are --reference and --limb (a session: the joint it recorded).")
-@click.option("--chain", "chain", type=click.Choice(CHAINS), default=None,
-              help="A whole arm or leg from FILE's segment columns (--segments) or from a session "
-              "recorded on an arm or leg rig: writes a limb file, with a coupling where the "
-              "recording supports one.")
-@click.option("--segments", default=None, help="With --chain: the segment columns proximal to "
-              "distal, COL,COL,COL (after --reference) or all four.")
+@click.option("--chain", "chain", type=click.Choice(LIMBS), default=None, hidden=True,
+              help="Old spelling of --limb arm|leg.")
+@click.option("--segments", default=None, help="With --limb arm|leg: the segment columns "
+              "proximal to distal, COL,COL,COL (after --reference) or all four.")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -53,7 +58,7 @@ CHAINS = tuple(LIMB_CHAINS)
 @click.option("--by-swing", type=click.Choice(BY_SWING_CHOICES), default="auto",
               show_default=True, help="Swing-dependent twist limits.")
 @click.option("--store/--no-store", "store_result", default=True, show_default=True,
-              help="With --db: also store the boundary (with --chain, the limb file) in the "
+              help="With --db: also store the boundary (with --limb arm|leg, the limb file) in the "
                    "session database.")
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
@@ -67,27 +72,28 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, seg
     from rig.errors import RigConfigError
     from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 
-    if chain is not None or segments is not None:
-        from rig.readback import ChainRequest, run_chain
-
-        if chain is None:
-            raise RigConfigError("--segments applies with --chain arm|leg")
-        for flag, value in (("--joint", joint), ("--limb", limb), ("--limb-axis", limb_axis)):
+    whole = None  # a whole arm or leg: --limb arm|leg (a session's, or with --segments)
+    if chain is not None:
+        click.echo(f"rig: note: --chain is now --limb: rig boundary --limb {chain} ...",
+                   err=True)
+        if limb is not None:
+            raise RigConfigError("--limb does not apply with --chain (the limb names its "
+                                 "joints and segments)")
+        whole = chain
+    elif limb in LIMBS and (segments is not None or file is None or reference is None):
+        whole, limb = limb, None  # a column named arm or leg: with --reference
+    if whole is not None or segments is not None:
+        if whole is None:
+            raise RigConfigError("--segments applies with --limb arm|leg")
+        for flag, value in (("--joint", joint), ("--limb-axis", limb_axis)):
             if value is not None:
-                raise RigConfigError(f"{flag} does not apply with --chain (the chain names its "
-                                     "joints and segments)")
-        result = run_chain(ChainRequest(file, chain, segments, out, reference=reference,
-                                        frames=frames, name=name, side=side, db=db,
-                                        session_id=session_id, fusion=fusion,
-                                        store=store_result))
-        click.echo(result.describe())
-        return
-
+                raise RigConfigError(f"{flag} does not apply with --limb {whole} (the limb "
+                                     "names its joints and segments)")
     result = run_boundary(BoundaryRequest(
         RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
                         joint),
         out, name=name, side=side, alpha_deg=alpha_deg, max_vertices=max_vertices,
-        by_swing=by_swing, store=store_result))
+        by_swing=by_swing, store=store_result, limb=whole, segments=segments))
     click.echo(result.describe())
     for w in result.warnings:
         click.echo(f"warning: {w}")

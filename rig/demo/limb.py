@@ -13,7 +13,7 @@ Stages (each calls the library function behind the corresponding ``rig`` command
    misplaced straps) through the stream protocol; the limb calibration protocol (static pose,
    then each joint's flexion/extension), then free motion for ``motion_s`` of patient time.
    PASS: completed, nothing dropped, calibration residual reported.
-3. **boundary** — ``rig boundary --chain`` on the session (:func:`rig.readback.run_chain`):
+3. **boundary** — ``rig boundary --limb`` on the session (:func:`rig.readback.run_boundary`):
    the limb file ``<limb>.yaml``. Verdicts against the truth: hinge interval ends within 2°,
    ball / two-axis boundaries within 2° mean distance (an extracted coupling's keyframes
    within 3° of the truth at the same angle; an uncoupled boundary against the truth at the
@@ -56,8 +56,8 @@ from rig.demo.stages import (
 )
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
-from rig.readback import ChainRequest, run_chain
-from rig.readback.sessions import read_chain
+from rig.readback import BoundaryRequest, RecordingSource, run_boundary
+from rig.readback.sessions import read_session
 from rig.record import RecordOptions, record_session
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
@@ -221,8 +221,9 @@ class _LimbCtx:
             st.detail = f"{recording_failure(res)}; {st.detail}"
 
     def boundary(self, st: StageResult) -> None:
-        res = run_chain(ChainRequest(None, self.limb, None, self.limb_file,
-                                     db=str(self.result.db), session_id=self.session))
+        res = run_boundary(BoundaryRequest(
+            RecordingSource(db=str(self.result.db), session_id=self.session), self.limb_file,
+            limb=self.limb))
         self.extracted = res.extractor.limb_
         self.limb_boundary = res.boundary_id
         rep = res.extractor.report()
@@ -304,12 +305,12 @@ def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:
     """Share of the session's postures within ``tol_deg`` of ``limb``'s limits in every joint:
     a hinge by its angle (its out-of-axis motion is corrected, not limited), the others by the
     exact limb oracle's distance."""
-    chain = read_chain(str(db), session)
-    d = np.degrees(LimbOracle(limb).evaluate(chain.q, normalize=True).distance)
+    chain = read_session(str(db), session)
+    d = np.degrees(LimbOracle(limb).evaluate(chain.joint_q, normalize=True).distance)
     for j, joint in enumerate(limb.joints):
         if joint.joint_kind.single_axis and joint.constraint is not None:
             h = joint.constraint.hinge
-            a = hinge_angles(chain.q[:, j], h.axis)
+            a = hinge_angles(chain.joint_q[:, j], h.axis)
             d[:, j] = np.maximum(h.min_deg - a, a - h.max_deg)
     return float(np.mean((d <= tol_deg).all(axis=1)))
 

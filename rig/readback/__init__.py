@@ -8,16 +8,19 @@ Modules
     :class:`RecordingSource`: which recording (a session in a store or an orientation file),
     checked before any work and loaded.
 :mod:`~rig.readback.sessions`
-    A session's joint orientations: servo joint samples, or IMU orientations through the
-    calibration, VQF fusion of the raw samples and the heading-drift correction.
+    A session's joint orientations, one joint or a whole limb: servo joint samples, or IMU
+    orientations through the calibration, VQF fusion of the raw samples and the heading-drift
+    correction.
 :mod:`~rig.readback.files`
-    An orientation file's (.sto / CSV) joint orientations, rig or ISB frames.
+    An orientation file's (.sto / CSV) joint orientations, rig or ISB frames: one joint's
+    columns, or a whole limb's segment columns.
 :mod:`~rig.readback.data`
-    :class:`JointData` (orientations + provenance) and :class:`RecordingFacts`.
+    :class:`JointData` (N samples of J joints + provenance; one joint is J = 1) and
+    :class:`RecordingFacts`.
 :mod:`~rig.readback.boundary`
-    :func:`run_boundary` (:class:`BoundaryRequest` → :class:`BoundaryResult`), :func:`extract`;
-    a limb file from a file's segment columns: :func:`run_chain` (:class:`ChainRequest` →
-    :class:`ChainResult`).
+    :func:`run_boundary` (:class:`BoundaryRequest` → :class:`BoundaryResult`): a constraint
+    file of one joint, or a limb file of a whole limb (``limb``); :func:`extract` (one joint)
+    and :func:`extract_limb` (a whole limb) on orientations already loaded.
 :mod:`~rig.readback.rom`
     :func:`run_rom` (:class:`RomRequest` → :class:`RomResult`).
 """
@@ -25,12 +28,10 @@ Modules
 from rig.readback.boundary import (
     BoundaryRequest,
     BoundaryResult,
-    ChainRequest,
-    ChainResult,
     describe,
     extract,
+    extract_limb,
     run_boundary,
-    run_chain,
 )
 from rig.readback.data import JointData, RecordingFacts
 from rig.readback.rom import RomRequest, RomResult, run_rom
@@ -41,8 +42,6 @@ __all__ = [
     "FUSION_CHOICES",
     "BoundaryRequest",
     "BoundaryResult",
-    "ChainRequest",
-    "ChainResult",
     "JointData",
     "RecordingFacts",
     "RecordingSource",
@@ -50,10 +49,10 @@ __all__ = [
     "RomResult",
     "describe",
     "extract",
+    "extract_limb",
     "joint_orientations_from_store",
     "load_joint_orientations",
     "read_session",
     "run_boundary",
-    "run_chain",
     "run_rom",
 ]

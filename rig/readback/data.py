@@ -1,6 +1,6 @@
 """What a recording read back is: joint orientations with their provenance
-(:class:`JointData`), and the facts a reader must know before trusting figures from them
-(:class:`RecordingFacts`)."""
+(:class:`JointData`: N samples of J joints, a one-joint recording J = 1), and the facts a
+reader must know before trusting figures from them (:class:`RecordingFacts`)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,14 @@ from typing import Any
 
 import numpy as np
 
+from calibration.coverage import coverage_of
+from calibration.joints import JOINTS, LIMB_CHAINS
+from models import quaternion as Q
 from models.kinds import DEFAULT_KIND, get_kind
 from models.quaternion import normalize_rows
 from rig.errors import RigConfigError
 
-__all__ = ["CUT_SHORT", "FUSION_CHOICES", "ChainData", "JointData", "RecordingFacts",
-           "parse_axis"]
+__all__ = ["CUT_SHORT", "FUSION_CHOICES", "JointData", "RecordingFacts", "parse_axis"]
 
 #: Session statuses that mean the recording stopped before its planned end.
 CUT_SHORT = ("interrupted", "device_lost", "failed")
@@ -76,30 +78,105 @@ class RecordingFacts:
 
 @dataclass
 class JointData:
-    """Joint orientations from a session or file, and where they came from."""
+    """Joint orientations read back from a session or a file, and where they came from: N
+    samples of J joints at the same instants — a whole limb (``limb``: arm or leg, J = 3) or
+    one joint (a limb of one joint, J = 1).
 
-    q: np.ndarray  # (N, 4) limb relative to reference
-    status: np.ndarray | None  # (N,) IMU calibration bytes, or None
-    limb_axis: np.ndarray  # (3,)
-    side: str | None
+    Attributes
+    ----------
+    joint_q : (N, J, 4) float64
+        Every joint's orientation, scalar-first, child relative to parent (rig segment frames),
+        in the order of ``joints`` (proximal to distal).
+    joints : tuple of (str or None)
+        The joints' names (:data:`calibration.joints.JOINTS`; None: a file's unnamed joint).
+    t : (N,) float64 or None
+        Sample times, seconds (any origin).
+    status : (N,) or None
+        IMU calibration bytes (a limb: the lowest of its sensors'), or None.
+    limb_axis : (3,) float64
+        The distal segment's long axis in its frame (a one joint's ``--limb-axis``; +X).
+    side : {"left", "right"} or None
+    provenance : dict
+    patient : str or None
+    limb : {"arm", "leg"} or None
+        The whole limb recorded, or None for one joint (a joint selected from a limb keeps
+        ``provenance["limb"]``).
+    recording : RecordingFacts or None
+
+    The one joint's views (``q``, ``joint``, ``kind``, ``directions``, ``slow_error_deg``,
+    :meth:`facts` with coverage) need J = 1: :meth:`select` takes one joint of a limb.
+    """
+
+    joint_q: np.ndarray
+    joints: tuple[str | None, ...]
+    t: np.ndarray | None = None
+    status: np.ndarray | None = None
+    limb_axis: np.ndarray = field(default_factory=lambda: parse_axis(None))
+    side: str | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
     patient: str | None = None
-    joint: str | None = None
-    t: np.ndarray | None = None  # (N,) sample times, seconds (any origin), or None
-
+    limb: str | None = None
     recording: RecordingFacts | None = None
 
+    @classmethod
+    def of_joint(cls, q: np.ndarray, joint: str | None, *, t: np.ndarray | None = None,
+                 status: np.ndarray | None = None, limb_axis: np.ndarray | None = None,
+                 side: str | None = None, provenance: dict[str, Any] | None = None,
+                 patient: str | None = None, recording: RecordingFacts | None = None
+                 ) -> JointData:
+        """One joint's orientations ``q`` (N, 4) as a limb of one joint (J = 1)."""
+        return cls(np.asarray(q)[:, None, :], (joint,), t, status,
+                   parse_axis(None) if limb_axis is None else limb_axis, side,
+                   {} if provenance is None else provenance, patient, None, recording)
+
+    def _one(self, what: str) -> None:
+        if len(self.joints) != 1:
+            raise RigConfigError(f"{what} of one joint: the {self.limb or 'recording'} has "
+                                 f"{len(self.joints)} ({', '.join(map(str, self.joints))}); "
+                                 "select one")
+
+    @property
+    def q(self) -> np.ndarray:
+        """(N, 4) the one joint's orientations (J = 1)."""
+        self._one("orientations")
+        return self.joint_q[:, 0]
+
+    @property
+    def joint(self) -> str | None:
+        """The one joint's name (J = 1; None: a file's unnamed joint)."""
+        self._one("the name")
+        return self.joints[0]
+
+    def select(self, name: str, axis: np.ndarray | None = None) -> JointData:
+        """One joint of the recording (J = 1), ``axis`` its limb axis (default +X); its facts
+        the recording's, with coverage from its own orientations."""
+        if name not in self.joints:
+            raise RigConfigError(f"the {self.limb or 'recording'} has no {name} (its joints: "
+                                 f"{', '.join(map(str, self.joints))})")
+        facts = self.recording
+        if facts is not None:  # coverage is the joint's own, not the recorder's live one
+            facts = replace(facts, explored=None, sectors=None, sufficient=None)
+        prov = {**self.provenance, "joint": name}
+        hc = prov.get("heading_correction")
+        if hc and "segments" in hc:  # the joint's own: its distal sensor's, relative
+            prov["heading_correction"] = {**hc, "uncertainty_deg": self.slow_errors_deg[name]}
+        return JointData.of_joint(self.joint_q[:, self.joints.index(name)], name, t=self.t,
+                                  status=self.status,
+                                  limb_axis=parse_axis(None) if axis is None else axis,
+                                  side=self.side, provenance=prov, patient=self.patient,
+                                  recording=facts)
+
     def facts(self) -> RecordingFacts:
-        """What a reader must know before trusting figures from this recording (coverage
-        computed from the joint orientations when the recorder stored none)."""
+        """What a reader must know before trusting figures from this recording (one joint:
+        coverage computed from its orientations when the recorder stored none)."""
         if self.recording is None:
             self.recording = RecordingFacts()
+        if len(self.joints) != 1:
+            return self.recording
         if self.recording.sectors is None and get_kind(self.kind).single_axis:
             # one angle: no swing sphere to cover (the interval's ends are the evidence)
             self.recording = replace(self.recording, explored=0, sectors=0)
         if self.recording.sectors is None:
-            from calibration.coverage import coverage_of
-
             cov = coverage_of(self.q, self.t, limb_axis=self.limb_axis)
             self.recording = replace(self.recording, explored=cov.explored,
                                      sectors=len(cov.sectors), sufficient=cov.sufficient)
@@ -107,25 +184,35 @@ class JointData:
 
     @property
     def kind(self) -> str:
-        """The joint's kind (:data:`calibration.joints.JOINTS`; a joint it does not list, such
-        as an older recording's name, is read as a ball joint)."""
-        from calibration.joints import JOINTS
-
+        """The one joint's kind (:data:`calibration.joints.JOINTS`; a joint it does not list,
+        such as an older recording's name, is read as a ball joint)."""
         spec = JOINTS.get(self.joint or "shoulder")
         return DEFAULT_KIND if spec is None else spec.kind
 
     @property
     def directions(self) -> np.ndarray:
-        """(N, 3) the recorded limb directions, parent frame (rig axes)."""
-        from models import quaternion as Q
-
+        """(N, 3) the one joint's recorded limb directions, parent frame (rig axes)."""
         return Q.rotate(self.q, self.limb_axis)
 
     @property
     def slow_error_deg(self) -> float | None:
-        """Measured size of the slowly varying errors left in the orientations (the heading
-        correction's own uncertainty, IMU sessions with neutral checkpoints), else None."""
+        """Measured size of the slowly varying errors left in the one joint's orientations
+        (the heading correction's own uncertainty, IMU sessions with neutral checkpoints),
+        else None."""
+        self._one("the slow error")
         return (self.provenance.get("heading_correction") or {}).get("uncertainty_deg")
+
+    @property
+    def slow_errors_deg(self) -> dict[str | None, float | None]:
+        """Joint → measured size of the slowly varying error left in its orientations. A
+        whole limb: the limb heading correction's own uncertainty for the joint's distal
+        sensor, which is corrected relative to its proximal neighbour (IMU sessions with
+        neutral checkpoints; None otherwise); one joint: :attr:`slow_error_deg`."""
+        if self.limb is None:
+            return {self.joint: self.slow_error_deg}
+        segs = (self.provenance.get("heading_correction") or {}).get("segments") or {}
+        return {name: (segs.get(child) or {}).get("uncertainty_deg")
+                for name, _, child in LIMB_CHAINS[self.limb]}
 
     @property
     def orientations(self) -> str | None:
@@ -134,55 +221,6 @@ class JointData:
         method = (self.provenance.get("fusion") or {}).get("method")
         return {"vqf": "fused on the host by VQF from the raw samples",
                 "device": "as fused by the devices"}.get(method)
-
-
-@dataclass
-class ChainData:
-    """A whole limb's postures from a session: every joint's orientation at the same instants
-    (child relative to parent, rig frames), and where they came from.
-
-    ``q`` is (N, J, 4) in the order of ``joints`` (:data:`calibration.joints.LIMB_CHAINS`
-    ``[limb]``, proximal to distal); ``t`` (N,) seconds; ``status`` (N,) the lowest of the
-    sensors' calibration bytes or None."""
-
-    q: np.ndarray
-    t: np.ndarray
-    limb: str
-    joints: tuple[str, ...]
-    side: str | None
-    status: np.ndarray | None = None
-    provenance: dict[str, Any] = field(default_factory=dict)
-    patient: str | None = None
-    recording: RecordingFacts | None = None
-
-    def joint(self, name: str, axis: np.ndarray | None = None) -> JointData:
-        """One joint's :class:`JointData` (its facts: the session's, coverage from its own
-        orientations)."""
-        if name not in self.joints:
-            raise RigConfigError(f"the {self.limb} has no {name} (its joints: "
-                                 f"{', '.join(self.joints)})")
-        facts = self.recording
-        if facts is not None:  # coverage is the joint's own, not the recorder's live one
-            facts = replace(facts, explored=None, sectors=None, sufficient=None)
-        prov = {**self.provenance, "joint": name}
-        hc = prov.get("heading_correction")
-        if hc and "segments" in hc:  # the joint's own: its distal sensor's, relative
-            prov["heading_correction"] = {**hc, "uncertainty_deg": self.slow_error_deg[name]}
-        return JointData(self.q[:, self.joints.index(name)], self.status,
-                         parse_axis(None) if axis is None else axis, self.side,
-                         prov, self.patient, name, self.t, facts)
-
-    @property
-    def slow_error_deg(self) -> dict[str, float | None]:
-        """Joint → measured size of the slowly varying error left in its orientations: the
-        limb heading correction's own uncertainty for the joint's distal sensor, which is
-        corrected relative to its proximal neighbour (IMU sessions with neutral checkpoints;
-        None otherwise)."""
-        from calibration.joints import LIMB_CHAINS
-
-        segs = (self.provenance.get("heading_correction") or {}).get("segments") or {}
-        return {name: (segs.get(child) or {}).get("uncertainty_deg")
-                for name, _, child in LIMB_CHAINS[self.limb]}
 
 
 def parse_axis(text: str | None) -> np.ndarray:

@@ -8,10 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.alignment import joint_orientation
+from calibration.frames import joint_to_rig, segment_to_rig
+from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_of_columns
 from rig.errors import RigConfigError
-from rig.readback.data import JointData
+from rig.readback.data import JointData, parse_axis
+from rig.store.io import read_orientations
 
-__all__ = ["chain_orientations_from_file", "check_columns", "joint_orientations_from_file"]
+__all__ = ["check_columns", "joint_orientations_from_file", "limb_orientations_from_file"]
 
 
 def check_columns(file: str, reference: str | None, limb: str, joint: str | None,
@@ -21,8 +25,6 @@ def check_columns(file: str, reference: str | None, limb: str, joint: str | None
     (:func:`calibration.joints.columns_mismatch`): ``--joint elbow --reference femur_r --limb
     tibia_r`` is a knee. ``asked``: the joint was given (--joint), else it is the file's own
     or the default."""
-    from calibration.joints import JOINTS, columns_mismatch, joint_of_columns
-
     spec = JOINTS[joint] if joint is not None else None
     cols = [limb] if reference is None else [reference, limb]
     segs = [None] * len(cols) if spec is None else \
@@ -46,11 +48,6 @@ def joint_orientations_from_file(file: str, reference: str | None, limb: str, ax
     ``frames`` is the file's segment-frame convention, ``axis`` the limb axis in rig frames,
     ``joint`` the joint (:data:`calibration.joints.JOINTS`; None: the file's, else the
     shoulder) whose segments the columns are."""
-    from calibration.alignment import joint_orientation
-    from calibration.frames import joint_to_rig, segment_to_rig
-    from calibration.joints import JOINTS
-    from rig.store.io import read_orientations
-
     table = read_orientations(file)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
@@ -70,27 +67,27 @@ def joint_orientations_from_file(file: str, reference: str | None, limb: str, ax
     if reference is not None:
         prov["reference"] = reference
     side = table.meta.get("rig_side")
-    return JointData(q, None, axis, side if side in ("left", "right") else None, prov,
-                     table.meta.get("rig_patient"), joint or named,
-                     np.asarray(table.time, dtype=np.float64))
+    return JointData.of_joint(q, joint or named, t=np.asarray(table.time, dtype=np.float64),
+                              limb_axis=axis, side=side if side in ("left", "right") else None,
+                              provenance=prov, patient=table.meta.get("rig_patient"))
 
 
-def chain_orientations_from_file(file: str, columns: list[str], limb: str,
-                                 frames: str = "rig"):
+def limb_orientations_from_file(file: str, columns: list[str], limb: str,
+                                frames: str = "rig") -> JointData:
     """A whole limb's postures from ``file``'s four segment ``columns`` (proximal to distal, the
     segments of :data:`calibration.joints.LIMB_CHAINS` ``[limb]``): the joint orientations
-    (N, 3, 4), rig frames, each child relative to its parent, and the file's table (times,
-    metadata)."""
-    from calibration.alignment import joint_orientation
-    from calibration.frames import segment_to_rig
-    from calibration.joints import LIMB_CHAINS
-    from rig.store.io import read_orientations
-
+    (N, 3, 4), rig frames, each child relative to its parent, with the file's times, side
+    and patient."""
     table = read_orientations(file)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
-    chain = LIMB_CHAINS[limb]
-    names = [chain[0][1], *(c for _, _, c in chain)]
+    order = LIMB_CHAINS[limb]
+    names = [order[0][1], *(c for _, _, c in order)]
     seg = [segment_to_rig(table.get(c), frames, n) for c, n in zip(columns, names, strict=True)]
     q = np.stack([joint_orientation(seg[i], seg[i + 1]) for i in range(3)], axis=1)
-    return q, table
+    side = table.meta.get("rig_side")
+    return JointData(q, tuple(name for name, _, _ in order),
+                     np.asarray(table.time, dtype=np.float64), None, parse_axis(None),
+                     side if side in ("left", "right") else None,
+                     {"file": Path(file).name, "segments": list(columns), "frames": frames},
+                     table.meta.get("rig_patient"), limb)

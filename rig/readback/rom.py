@@ -17,7 +17,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from calibration.clinical import format_rom_table, range_of_motion
+from calibration.joint_angles import (
+    JOINT_ANGLES,
+    JointRangeOfMotion,
+    allowed_rom,
+    beyond_reach,
+    recorded_rom,
+)
+from calibration.joints import joint_mismatch
+from models.limb import Limb, load_limits
 from rig.errors import RigConfigError
+from rig.readback.boundary import extract
 from rig.readback.data import RecordingFacts
 from rig.readback.source import RecordingSource, check_joint
 
@@ -75,15 +86,11 @@ class RomResult:
         """Movements beyond physiological reach
         (:func:`calibration.joint_angles.beyond_reach`): movement → value, the largest
         plausible, the norm it comes from and the line saying so."""
-        from calibration.joint_angles import beyond_reach
-
         return beyond_reach(self.rom, self.joint if not self.is_shoulder else "shoulder")
 
     def table(self, *, age: int | None = None, sex: str | None = None) -> str:
         """What ``rig rom`` prints: the source, the warnings, the table against the AAOS
         values and (the shoulder) the population reference for ``age`` / ``sex``."""
-        from calibration.clinical import format_rom_table
-
         lines = [self.source, *(f"warning: {w}" for w in self.warnings)]
         if self.is_shoulder:
             lines.append(format_rom_table(self.rom, age=age, sex=sex))
@@ -95,8 +102,6 @@ class RomResult:
     def is_shoulder(self) -> bool:
         """The shoulder's table (:class:`calibration.clinical.RangeOfMotion`), not another
         joint's (:class:`calibration.joint_angles.JointRangeOfMotion`)."""
-        from calibration.joint_angles import JointRangeOfMotion
-
         return not isinstance(self.rom, JointRangeOfMotion)
 
     def to_json(self, *, age: int | None = None, sex: str | None = None) -> dict:
@@ -130,9 +135,6 @@ def _limits_rom(request: RomRequest) -> RomResult:
     """The range of motion a constraint file allows, or one joint's in a limb file (a
     coupled joint: the largest over its keyframes, movement by movement — what it allows at
     some angle of the joint it depends on)."""
-    from calibration.joint_angles import JOINT_ANGLES, allowed_rom
-    from models.limb import Limb, load_limits
-
     path = request.constraint
     limits = load_limits(path)
     source = path
@@ -156,8 +158,6 @@ def _limits_rom(request: RomRequest) -> RomResult:
                        "(the range depends on that joint's angle)")
         joint = named = request.joint
     else:
-        from calibration.joints import joint_mismatch
-
         why = joint_mismatch(limits, for_joint=request.joint, for_side=request.side)
         if why is not None:
             asked = " ".join(f"--{k} {v}" for k, v in (("joint", request.joint),
@@ -180,21 +180,15 @@ def _limits_rom(request: RomRequest) -> RomResult:
 def run_rom(request: RomRequest) -> RomResult:
     """Check the request, then read the constraint or extract the recording's boundary, and
     compute the clinical peaks."""
-    from calibration.clinical import range_of_motion
-
     request.check()
     if request.constraint is not None:
         return _limits_rom(request)
-    from rig.readback.boundary import extract
-
     src = request.source
     data = src.load()
     side = request.side or data.side or "right"
     source = src.label
     if data.orientations is not None:
         source += f" (IMU orientations {data.orientations})"
-    from calibration.joint_angles import JOINT_ANGLES, recorded_rom
-
     if data.joint in JOINT_ANGLES:
         return RomResult(recorded_rom(data.q, data.joint, side, status=data.status), data.joint,
                          source, data.facts())

@@ -12,43 +12,39 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 from dataclasses import replace
+from importlib.metadata import version
 from typing import Any
 
 import numpy as np
 
+from calibration.alignment import ImuJointCalibration
 from calibration.errors import CalibrationError
+from calibration.fusion import fuse_vqf
+from calibration.heading import HeadingCorrection, LimbHeadingCorrection
+from calibration.limb_calibration import LimbImuCalibration
+from calibration.protocol import LimbCalibrationProtocol
 from rig.errors import RigConfigError
 from rig.readback.data import (
     CUT_SHORT,
     FUSION_CHOICES,
-    ChainData,
     JointData,
     RecordingFacts,
     parse_axis,
 )
+from rig.store import open_store
+from rig.store.io import align_series, shared_instants
 
-__all__ = ["chain_orientations_from_store", "joint_orientations_from_store", "read_chain",
-           "read_session", "session_limb"]
+__all__ = ["joint_orientations_from_store", "read_session", "session_limb"]
 
 
 def read_session(db: str, session_id: int, axis: np.ndarray | None = None,
-                 fusion: str = "auto", joint: str | None = None) -> JointData:
+                 fusion: str = "auto", joint: str | None = None, *,
+                 heading: bool = True) -> JointData:
     """:func:`joint_orientations_from_store` on the store at ``db`` (opened as it is: never
     created, read-only when the file is)."""
-    from rig.store import open_store
-
     with open_store(db, create=False) as store:
         return joint_orientations_from_store(store, session_id, axis, fusion=fusion,
-                                             joint=joint)
-
-
-def read_chain(db: str, session_id: int, fusion: str = "auto", *,
-               heading: bool = True) -> ChainData:
-    """:func:`chain_orientations_from_store` on the store at ``db`` (never created)."""
-    from rig.store import open_store
-
-    with open_store(db, create=False) as store:
-        return chain_orientations_from_store(store, session_id, fusion=fusion, heading=heading)
+                                             joint=joint, heading=heading)
 
 
 def latest_calibration(cals: list[dict], kind: str) -> dict | None:
@@ -63,14 +59,14 @@ def session_limb(sess: dict) -> str | None:
     return limb if limb in ("arm", "leg") else None
 
 
-def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto",
-                                  heading: bool = True) -> ChainData:
+def _limb_orientations(store, session_id: int, sess: dict, limb: str, axis: np.ndarray, *,
+                       fusion: str, heading: bool) -> JointData:
     """Every joint of a whole-limb session (one IMU per segment, ``limb`` in the rig
     configuration): the four sensors' orientations at the instants all of them have a sample
     (paired by the device timestamp where there is one), through the session's ``imu-limb``
     calibration (:class:`calibration.limb_calibration.LimbImuCalibration`).
 
-    ``fusion`` as for one joint (:func:`joint_orientations_from_store`): ``vqf`` fuses each
+    ``fusion`` as for one joint: ``vqf`` fuses each
     sensor's raw samples on the host and re-fits the limb calibration on the fused
     orientations inside its stored windows; ``auto`` does so when every sensor has raw samples
     and the calibration says where its windows are, else uses the devices' orientations
@@ -81,15 +77,6 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     window; provenance ``heading_correction``); with none accepted the facts say the drift
     was neither removed nor measured.
     """
-    from calibration.limb_calibration import LimbImuCalibration
-
-    if fusion not in FUSION_CHOICES:
-        raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
-    sess = store.sessions.get(session_id)
-    limb = session_limb(sess)
-    if limb is None:
-        raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
-                             ", not a whole arm or leg (no --chain)")
     cals = store.calibrations.list(session_id)
     cal = latest_calibration(cals, "imu-limb")
     if cal is None:
@@ -110,8 +97,6 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
                for s in segs}
     per = list(by_name.values())
     key, use_vqf, fusion_prov = _fuse_if_asked(store, session_id, by_name, fusion, cal["data"])
-    from rig.store.io import shared_instants
-
     common, idx = shared_instants([p[key] for p in per])
     if not len(common):
         raise RigConfigError(f"session {session_id}: the {limb}'s sensors have no sample time in "
@@ -144,9 +129,9 @@ def chain_orientations_from_store(store, session_id: int, *, fusion: str = "auto
     facts = _session_facts(store, sess, sensors)
     if not (prov.get("heading_correction") or {}).get("accepted"):
         facts = replace(facts, unmeasured_drift=True)
-    return ChainData(joints, common, limb, tuple(model.joints_),
-                     side if side in ("left", "right") else None, status, prov,
-                     sess.get("pseudonym"), facts)
+    return JointData(joints, tuple(model.joints_), common, status, axis,
+                     side if side in ("left", "right") else None, prov, sess.get("pseudonym"),
+                     limb, facts)
 
 
 @contextlib.contextmanager
@@ -182,9 +167,11 @@ def joint_orientations_from_store(store, session_id: int,
       of both sensors and a calibration with ``protocol.origin``; otherwise a one-line error;
     - ``"auto"`` (default): ``"vqf"`` when those needs are met, else ``"device"``.
 
-    A whole-limb session (:func:`session_limb`) gives the orientations of ``joint`` (default
-    its proximal joint) from :func:`chain_orientations_from_store`; a one-joint session must
-    be asked for its own joint (``joint`` None or its name).
+    A whole-limb session (:func:`session_limb`: one IMU per segment, ``limb`` in the rig
+    configuration) gives every joint of the limb (J = 3, :func:`_limb_orientations`), or the
+    one named by ``joint`` (:meth:`JointData.select <rig.readback.data.JointData.select>`,
+    ``axis`` its limb axis); a one-joint session gives its joint (J = 1) and must be asked
+    for its own joint (``joint`` None or its name).
 
     The provenance's ``fusion`` entry records the method (and for VQF the library version, the
     parameters that differ from VQF's defaults, the resampling rate, each sensor's share of
@@ -199,13 +186,13 @@ def joint_orientations_from_store(store, session_id: int,
     """
     if fusion not in FUSION_CHOICES:
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
-    axis = parse_axis(None) if axis is None else axis
     sess = store.sessions.get(session_id)
     limb = session_limb(sess)
     if limb is not None:
-        chain = chain_orientations_from_store(store, session_id, fusion=fusion,
-                                              heading=heading)
-        return chain.joint(chain.joints[0] if joint is None else joint, axis)
+        data = _limb_orientations(store, session_id, sess, limb, parse_axis(None),
+                                  fusion=fusion, heading=heading)
+        return data if joint is None else data.select(joint, axis)
+    axis = parse_axis(None) if axis is None else axis
     if joint is not None and joint != (sess.get("joint") or "shoulder"):
         raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
                              f", not the {joint}")
@@ -225,9 +212,10 @@ def joint_orientations_from_store(store, session_id: int,
     facts = _session_facts(store, sess, sensors)
     if not is_joint and not (prov.get("heading_correction") or {}).get("accepted"):
         facts = replace(facts, unmeasured_drift=True)
-    return JointData(q, status, axis, side if side in ("left", "right") else None, prov,
-                     sess.get("pseudonym"), sess.get("joint"), np.asarray(t, dtype=np.float64),
-                     facts)
+    return JointData.of_joint(q, sess.get("joint"), t=np.asarray(t, dtype=np.float64),
+                              status=status, limb_axis=axis,
+                              side=side if side in ("left", "right") else None, provenance=prov,
+                              patient=sess.get("pseudonym"), recording=facts)
 
 
 def _joint_samples(store, session_id: int, fusion: str):
@@ -247,8 +235,6 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
     """(q, t, status) of an IMU session: the thorax and limb sensors paired in time, through
     the calibration (re-fitted on VQF orientations when fused on the host), the heading drift
     removed at the neutral checkpoints; ``prov`` receives the provenance entries."""
-    from calibration.alignment import ImuJointCalibration
-
     cals = store.calibrations.list(session_id)
     cal = latest_calibration(cals, "imu-alignment")
     if cal is None:
@@ -268,8 +254,6 @@ def _imu_orientations(store, session_id: int, sess: dict, sensors: list[dict],
     _, ip, ic = np.intersect1d(tp, tc, return_indices=True)
     if len(ip) < 0.5 * min(len(tp), len(tc)):
         # different clocks: nearest-in-time pairing through the store's aligner
-        from rig.store.io import align_series
-
         table, _ = align_series({parent: (tp, qp), child: (tc, qc)})
         qpar, qchi, status = table.columns[parent], table.columns[child], None
         times = {key_name: np.asarray(table.time)}
@@ -358,10 +342,6 @@ def _vqf_usable(store, session_id: int, per: dict[str, dict], key_name: str,
 def _fuse_sensors(store, session_id: int, per: dict[str, dict], key_name: str) -> dict:
     """Each sensor's ``q`` (in ``per``: name → samples) replaced by its VQF orientation, one
     sensor at a time (its raw readings read for it and released); returns the provenance."""
-    from importlib.metadata import version
-
-    from calibration.fusion import fuse_vqf
-
     prov: dict[str, Any] = {"method": "vqf", "library": f"vqf {version('vqf')}"}
     info: dict[str, dict] = {}
     for name, s in per.items():
@@ -383,8 +363,6 @@ def _refit(qpar: np.ndarray, qchi: np.ndarray, times: dict[str, np.ndarray], cal
            session_id: int):
     """:class:`~calibration.alignment.ImuJointCalibration` fitted on the paired (fused)
     orientations inside the stored calibration's static and functional windows."""
-    from calibration.alignment import ImuJointCalibration
-
     sel = _in_windows(times, cal_data, session_id)
     for name in ("static", "functional"):
         if name not in sel:
@@ -422,9 +400,6 @@ def _refit_limb(q: np.ndarray, times: dict[str, np.ndarray], cal_data: dict, ses
     (``upright_windows`` (K, 2), in the clock of ``times``) are further upright standings of
     the root (its lean during the static pose taken off: the host's fusion puts every sensor
     in one world, which that needs)."""
-    from calibration.limb_calibration import LimbImuCalibration
-    from calibration.protocol import LimbCalibrationProtocol
-
     stored = cal_data["protocol"]
     sel = _in_windows(times, cal_data, session_id)
     with _about(session_id, "re-fitting the limb calibration on the VQF orientations"):
@@ -481,8 +456,6 @@ def _heading_correction(q: np.ndarray, times: dict[str, np.ndarray], status, che
     ``--limb-axis`` says: the IMU calibration's segment frames have +X along gravity in the
     neutral pose, the thorax vertical the drift turns about. Returns the corrected
     orientations and the provenance entry."""
-    from calibration.heading import HeadingCorrection
-
     t = times[next(iter(times))]
     windows, unusable, anchors = _checkpoint_windows(times, checkpoints, cal_data)
     hc = HeadingCorrection((1.0, 0.0, 0.0))
@@ -513,8 +486,6 @@ def _limb_heading_correction(model, q: np.ndarray, t: np.ndarray, key: str, stat
     (:func:`_checkpoint_windows`); the corrected sensors and the provenance entry (per segment
     after the root: accepted checkpoints, rejected ones with their reason, ψ per window, the
     drift model, the uncertainty left)."""
-    from calibration.heading import LimbHeadingCorrection
-
     windows, unusable, anchors = marks
     hc = LimbHeadingCorrection(model)
     with _about(session_id, "neutral checkpoints"):

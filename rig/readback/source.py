@@ -7,10 +7,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from calibration.frames import direction_to_rig
+from calibration.joints import JOINTS
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData, parse_axis
-from rig.readback.files import joint_orientations_from_file
-from rig.readback.sessions import read_session
+from rig.readback.files import check_columns, joint_orientations_from_file
+from rig.readback.sessions import read_session, session_limb
+from rig.store import open_store
 
 __all__ = ["FUSION_CHOICES", "RecordingSource", "check_joint", "load_joint_orientations"]
 
@@ -18,8 +21,6 @@ __all__ = ["FUSION_CHOICES", "RecordingSource", "check_joint", "load_joint_orien
 def check_joint(joint: str | None) -> None:
     """``--joint``: None or a joint of :data:`calibration.joints.JOINTS` (one-line error)."""
     if joint is not None:
-        from calibration.joints import JOINTS
-
         if joint not in JOINTS:
             raise RigConfigError(f"--joint {joint!r}: expected one of {', '.join(JOINTS)}")
 
@@ -29,14 +30,10 @@ def check_session_side(db, session_id: int | None, side: str | None) -> None:
     a left side would mirror a right limb's clinical angles."""
     if side is None or db is None or session_id is None:
         return
-    from rig.store import open_store
-
     with open_store(db, create=False) as st:
         sess = st.sessions.get(session_id)
     recorded = sess.get("side")
     if recorded is not None and recorded != side:
-        from rig.readback.sessions import session_limb
-
         what = session_limb(sess) or sess.get("joint") or "shoulder"
         raise RigConfigError(f"--side {side}: session {session_id} recorded the {recorded} "
                              f"{what}")
@@ -88,8 +85,6 @@ class RecordingSource:
         parse_axis(self.limb_axis)
         check_joint(self.joint)
         if file is not None:
-            from rig.readback.files import check_columns
-
             check_columns(file, self.reference, self.limb, self.joint, side)
         else:
             check_session_side(self.db, self.session_id, side)
@@ -100,24 +95,21 @@ class RecordingSource:
         return self.file if self.file is not None else f"session {self.session_id}"
 
     def load(self) -> JointData:
-        """The joint orientations, in rig frames (sessions:
-        :func:`~rig.readback.sessions.read_session`; files:
-        :func:`~rig.readback.files.joint_orientations_from_file`)."""
+        """The one joint's orientations (J = 1), in rig frames (sessions:
+        :func:`~rig.readback.sessions.read_session`, a whole limb's ``joint``, by default its
+        proximal one; files: :func:`~rig.readback.files.joint_orientations_from_file`)."""
         self.check()
         if self.file is not None:
-            from calibration.joints import JOINTS
-
             frames = self.frames or "rig"
             spec = JOINTS[self.joint or "shoulder"]
             axis = parse_axis(self.limb_axis)
             if self.limb_axis is not None:
-                from calibration.frames import direction_to_rig
-
                 axis = direction_to_rig(axis, frames, spec.child)
             return joint_orientations_from_file(self.file, self.reference, self.limb, axis,
                                                 frames, self.joint)
-        return read_session(self.db, self.session_id, parse_axis(self.limb_axis), self.fusion,
-                            self.joint)
+        axis = parse_axis(self.limb_axis)
+        data = read_session(self.db, self.session_id, axis, self.fusion, self.joint)
+        return data if len(data.joints) == 1 else data.select(data.joints[0], axis)
 
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,

@@ -322,17 +322,17 @@ def _limb_range_of_motion(store, result: RecordResult, config) -> None:
         from calibration.clinical import format_rom_table, range_of_motion
         from calibration.joint_angles import JOINT_ANGLES, recorded_rom
         from rig.readback import extract
-        from rig.readback.sessions import chain_orientations_from_store
+        from rig.readback.sessions import joint_orientations_from_store
 
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
-        chain = chain_orientations_from_store(store, result.session_id)
+        chain = joint_orientations_from_store(store, result.session_id)
         roms, tables = {}, []
         for k, j in enumerate(chain.joints):
             if j in JOINT_ANGLES:
-                r = recorded_rom(chain.q[:, k], j, side, status=chain.status)
+                r = recorded_rom(chain.joint_q[:, k], j, side, status=chain.status)
                 roms[j], table = r.to_json(), r.table()
             else:  # the shoulder: peaks of its boundary, as for a shoulder session
-                data = chain.joint(j)
+                data = chain.select(j)
                 r = range_of_motion(extract(data, side=side).constraint_, side,
                                     directions=data.directions)
                 roms[j], table = r.to_dict(), f"{j} ({side})\n{format_rom_table(r)}"

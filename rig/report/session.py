@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from calibration.alignment import trusted_samples
-from calibration.boundary import ChainExtractor, boundary_distance
+from calibration.boundary import LimbExtractor, boundary_distance
 from calibration.clinical import isb_angles, range_of_motion
 from calibration.joints import LIMB_CHAINS, joint_mismatch
 from models import quaternion as Q
@@ -57,7 +57,7 @@ from rig import __version__
 from rig.errors import RigConfigError, user_errors
 from rig.readback import extract, joint_orientations_from_store
 from rig.readback.boundary import stored_limb
-from rig.readback.sessions import chain_orientations_from_store, latest_calibration, session_limb
+from rig.readback.sessions import latest_calibration, session_limb
 from rig.report.figures import boundary_figure, error_map_figure
 from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
@@ -413,14 +413,14 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
-    chain_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
+    joint_orientations_from_store`. The limits shown are the ``model``'s (a limb model embeds
     the limb file it was made for; it is scored on ``eval_n`` held-out postures of it), else
-    the last limb file stored with the session (``rig boundary --chain --db``), else extracted
-    from the session as ``rig boundary --chain`` does; the page says which. Without ``model``
+    the last limb file stored with the session (``rig boundary --limb --db``), else extracted
+    from the session as ``rig boundary --limb`` does; the page says which. Without ``model``
     the last limb model registered with the session (the limb demo registers its own) is
     used when its file is still there. ``reference``: a
     :class:`models.limb.Limb` drawn dashed (a simulated patient's truth)."""
-    chain = chain_orientations_from_store(store, session_id, fusion=fusion)
+    chain = joint_orientations_from_store(store, session_id, fusion=fusion)
     evaluation = evaluation_note = None
     registered = None
     if model is None:  # the last limb model registered with the session, if its file is there
@@ -449,9 +449,9 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
             limb, bid = found
             source = f"boundary {bid} stored with the session (rig boundary --chain)"
         else:
-            limb = ChainExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
-                chain.q, t=chain.t, status=chain.status, side=chain.side,
-                slow_error_deg=chain.slow_error_deg).limb_
+            limb = LimbExtractor(chain.limb, name=f"session-{session_id}-{chain.limb}").fit(
+                chain.joint_q, t=chain.t, status=chain.status, side=chain.side,
+                slow_error_deg=chain.slow_errors_deg).limb_
             source = "extracted from the recorded postures for this report"
     cal = latest_calibration(store.calibrations.list(session_id), "imu-limb")
     residuals = None if cal is None else cal["data"].get("residuals_deg")
@@ -473,7 +473,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
             f"{int(ok.sum()):,} of {len(chain.t):,} postures: those the sensors flagged "
             "(magnetic disturbance, uncalibrated) left out")
     data = limb_report_data(
-        limb, {j: chain.q[ok, k] for k, j in enumerate(chain.joints)},
+        limb, {j: chain.joint_q[ok, k] for k, j in enumerate(chain.joints)},
         side=chain.side or "right", patient=chain.patient,
         session_label=f"session {session_id} ({sess.get('rig_name')}, started "
                       f"{_iso(sess.get('started_at')) or 'at an unknown time'}, {used})",

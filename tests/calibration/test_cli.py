@@ -173,16 +173,16 @@ REAL = __import__("pathlib").Path(__file__).parent / "data" / "real" / "cmu_61_0
 
 
 @pytest.mark.parametrize("args, message", [
-    (["boundary", "{f}", "--chain", "arm", "--segments", "pelvis,femur_r,tibia_r,calcn_r"],
-     "column 'pelvis' is a pelvis, not the thorax (reading the arm: --chain arm)"),
+    (["boundary", "{f}", "--limb", "arm", "--segments", "pelvis,femur_r,tibia_r,calcn_r"],
+     "column 'pelvis' is a pelvis, not the thorax (reading the arm: --limb arm)"),
     (["boundary", "{f}", "--joint", "elbow", "--reference", "femur_r", "--limb", "tibia_r"],
      "column 'femur_r' is a thigh, not the upper-arm (reading the elbow: --joint elbow); "
      "these columns are a knee: --joint knee"),
     (["boundary", "{f}", "--joint", "knee", "--reference", "femur_r", "--limb", "tibia_r",
       "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
-    (["boundary", "{f}", "--chain", "leg", "--segments", "pelvis,femur_r,tibia_r,calcn_r",
+    (["boundary", "{f}", "--limb", "leg", "--segments", "pelvis,femur_r,tibia_r,calcn_r",
       "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
-    (["boundary", "{f}", "--chain", "leg", "--segments", "pelvis,femur_l,tibia_r,calcn_r"],
+    (["boundary", "{f}", "--limb", "leg", "--segments", "pelvis,femur_l,tibia_r,calcn_r"],
      "--segments 'pelvis', 'femur_l', 'tibia_r', 'calcn_r' mix the left and right sides"),
     (["boundary", "{f}", "--reference", "pelvis", "--limb", "femur_r"],
      "reading the shoulder, the file's joint or the default: give --joint); these columns "
@@ -193,7 +193,7 @@ REAL = __import__("pathlib").Path(__file__).parent / "data" / "real" / "cmu_61_0
 def test_columns_that_contradict_the_joint_chain_or_side_are_refused(args, message, tmp_path,
                                                                      capsys):
     """Issue 37, case 2: OpenSim/ISB segment names (femur_r, calcn_r, ulna_r, …) are read,
-    and a --chain, --joint or --side they contradict is refused before any work."""
+    and a --limb arm|leg, --joint or --side they contradict is refused before any work."""
     out = ["--out", str(tmp_path / "c.yaml")] if args[0] == "boundary" else []
     code, _, err = run([a.format(f=REAL) for a in args] + out, capsys)
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
@@ -231,7 +231,7 @@ def test_a_side_other_than_the_sessions_is_refused_before_reading(servo_patient,
     for args in (["boundary", "--db", db, "--session", sid, "--side", "left", "--out",
                   tmp_path / "c.yaml"],
                  ["rom", "--db", db, "--session", sid, "--side", "left"],
-                 ["boundary", "--db", db, "--session", sid, "--chain", "arm", "--side", "left",
+                 ["boundary", "--db", db, "--session", sid, "--limb", "arm", "--side", "left",
                   "--out", tmp_path / "c.yaml"]):
         code, _, err = run([str(a) for a in args], capsys)
         assert code == 2 and "--side left: session 1 recorded the right shoulder" in err, err

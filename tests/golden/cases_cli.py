@@ -125,9 +125,9 @@ def case_cli_errors() -> dict:
                             "--limb", "tibia_r", "--frames", "isb", "--out", c],
             "hip_as_shoulder": ["boundary", xio, "--reference", "pelvis", "--limb", "femur_r",
                                 "--frames", "isb", "--out", c],
-            "mixed_sides": ["boundary", xio, "--chain", "leg", "--segments",
+            "mixed_sides": ["boundary", xio, "--limb", "leg", "--segments",
                             "pelvis,femur_l,tibia_r,calcn_r", "--frames", "isb", "--out", c],
-            "arm_from_leg": ["boundary", xio, "--chain", "arm", "--segments",
+            "arm_from_leg": ["boundary", xio, "--limb", "arm", "--segments",
                              "pelvis,femur_r,tibia_r,calcn_r", "--frames", "isb", "--out", c],
             "rom_bad_joint": ["rom", xio, "--frames", "isb", "--joint", "toe"],
             "rom_no_constraint": ["rom", "--constraint", d / "nope.yaml"],
@@ -141,13 +141,13 @@ def case_cli_errors() -> dict:
 
 @case("limb")
 def case_cli_boundary_chain_arm() -> dict:
-    """``rig boundary --chain arm`` on CMU optical capture (right and left arms): the limb file
+    """``rig boundary --limb arm`` on CMU optical capture (right and left arms): the limb file
     written and the summary; ``rig rom`` of the limb file refused without --joint."""
     out: dict = {}
     with tmpdir() as d:
         for side in ("r", "l"):
             f = d / f"arm_{side}.yaml"
-            _run(f"arm_{side}", ["boundary", REAL / "cmu_61_07_salsa.sto", "--chain", "arm",
+            _run(f"arm_{side}", ["boundary", REAL / "cmu_61_07_salsa.sto", "--limb", "arm",
                                  "--segments", f"thorax,humerus_{side},ulna_{side},hand_{side}",
                                  "--frames", "isb", "--out", f], d, out)
             out[f"arm_{side}_yaml"] = _file(f, d)
@@ -159,14 +159,14 @@ def case_cli_boundary_chain_arm() -> dict:
 
 @case("limb")
 def case_cli_boundary_chain_leg() -> dict:
-    """``rig boundary --chain leg`` on the two inertial lower-body recordings and CMU's legs."""
+    """``rig boundary --limb leg`` on the two inertial lower-body recordings and CMU's legs."""
     out: dict = {}
     with tmpdir() as d:
         for name, file, side in (("xio", "xio_ximu3_lower_body.sto", "r"),
                                  ("xsens", "opensense_xsens_walking.sto", "l"),
                                  ("cmu", "cmu_61_07_salsa.sto", "r")):
             f = d / f"{name}.yaml"
-            _run(name, ["boundary", REAL / file, "--chain", "leg", "--segments",
+            _run(name, ["boundary", REAL / file, "--limb", "leg", "--segments",
                         f"pelvis,femur_{side},tibia_{side},calcn_{side}", "--frames", "isb",
                         "--out", f], d, out)
             out[f"{name}_yaml"] = _file(f, d) if f.exists() else ""

@@ -1,12 +1,12 @@
 """Golden cases: clinical angles and ranges of motion on the real recordings, and boundary
-extraction through its classes (BoundaryExtractor, HingeExtractor, ChainExtractor) on seeded
+extraction through its classes (BoundaryExtractor, HingeExtractor, LimbExtractor) on seeded
 simulated motion (joint and limb)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from calibration.boundary import BoundaryExtractor, ChainExtractor
+from calibration.boundary import BoundaryExtractor, LimbExtractor
 from calibration.boundary.hinge import HingeExtractor
 from calibration.clinical import isb_angles, range_of_motion
 from calibration.joint_angles import (
@@ -17,7 +17,7 @@ from calibration.joint_angles import (
     recorded_rom,
 )
 from rig.readback import load_joint_orientations
-from rig.readback.files import chain_orientations_from_file
+from rig.readback.files import limb_orientations_from_file
 from rig.sim.patients import anatomical_limb, seeded_patient, star_constraint
 from tests.golden.cli import REAL
 from tests.golden.harness import case
@@ -65,16 +65,17 @@ def case_clinical_angles_real() -> dict:
 
 @case("limb")
 def case_clinical_limbs_real() -> dict:
-    """Whole limbs read from the real recordings (chain_orientations_from_file): postures and
+    """Whole limbs read from the real recordings (limb_orientations_from_file): postures and
     every joint's recorded range of motion."""
     out: dict = {}
     for name, file, limb, cols in (
             ("arm_cmu61_r", "cmu_61_07_salsa.sto", "arm", "thorax,humerus_r,ulna_r,hand_r"),
             ("leg_xio_l", "xio_ximu3_lower_body.sto", "leg", "pelvis,femur_l,tibia_l,calcn_l")):
-        q, table = chain_orientations_from_file(str(REAL / file), cols.split(","), limb,
-                                                frames="isb")
+        rec = limb_orientations_from_file(str(REAL / file), cols.split(","), limb,
+                                          frames="isb")
+        q = rec.joint_q
         out[f"{name}_q"] = q
-        out[f"{name}_t"] = np.asarray(table.time, dtype=np.float64)
+        out[f"{name}_t"] = rec.t
         joints = ("shoulder", "elbow", "wrist") if limb == "arm" else ("hip", "knee", "ankle")
         side = "right" if cols.endswith("_r") else "left"
         out[f"{name}_rom"] = jtext({j: _rom(recorded_rom(q[:, i], j, side))
@@ -133,14 +134,14 @@ def case_extract_joint() -> dict:
 
 @case("limb")
 def case_extract_chain() -> dict:
-    """ChainExtractor on the true motion of an anatomical leg and arm (couplings tested): the
+    """LimbExtractor on the true motion of an anatomical leg and arm (couplings tested): the
     limb file and the report."""
     out = {}
     for name, seed in (("leg", 11), ("arm", 7)):
         sim = seeded_patient(seed, name, calibrate=False)
         t = np.arange(0.0, 90.0, 0.05)
         q = sim.joints(t)
-        ex = ChainExtractor(name).fit(q, t=t, side="right")
+        ex = LimbExtractor(name).fit(q, t=t, side="right")
         out[f"{name}_yaml"] = ex.limb_.to_yaml()
         out[f"{name}_report"] = jtext(ex.report())
         out[f"{name}_couplings"] = jtext(ex.couplings_)

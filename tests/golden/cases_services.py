@@ -1,10 +1,10 @@
-"""Golden cases: the read-back services called as the CLI calls them (``run_boundary``,
-``run_chain``, ``run_rom`` with their request dataclasses) on the real recordings: results,
-warnings, the files written (joint and limb)."""
+"""Golden cases: the read-back services called as the CLI calls them (``run_boundary`` of one
+joint and of a whole limb, ``run_rom`` with their request dataclasses) on the real recordings:
+results, warnings, the files written (joint and limb)."""
 
 from __future__ import annotations
 
-from rig.readback.boundary import BoundaryRequest, ChainRequest, run_boundary, run_chain
+from rig.readback.boundary import BoundaryRequest, run_boundary
 from rig.readback.rom import RomRequest, run_rom
 from rig.readback.source import RecordingSource
 from tests.golden.cli import REAL, root_relative
@@ -44,7 +44,8 @@ def case_services_joint() -> dict:
 
 @case("limb")
 def case_services_limb() -> dict:
-    """run_chain on the Xsens legs and CMU's left arm: the limb file, the summary."""
+    """run_boundary of a whole limb on the Xsens legs and CMU's left arm: the limb file, the
+    summary."""
     out: dict = {}
     with tmpdir() as d:
         for name, file, limb, cols in (
@@ -52,8 +53,8 @@ def case_services_limb() -> dict:
                  "pelvis,femur_r,tibia_r,calcn_r"),
                 ("arm_cmu60_l", "cmu_60_02_salsa.sto", "arm",
                  "thorax,humerus_l,ulna_l,hand_l")):
-            r = run_chain(ChainRequest(file=str(REAL / file), limb=limb, segments=cols,
-                                       out=d / f"{name}.yaml", frames="isb"))
+            r = run_boundary(BoundaryRequest(RecordingSource(str(REAL / file), frames="isb"),
+                                             d / f"{name}.yaml", limb=limb, segments=cols))
             out[f"{name}_describe"] = _text(r.describe(), d)
             out[f"{name}_file"] = _text((d / f"{name}.yaml").read_text(), d)
             out[f"{name}_report"] = _text(jtext(r.extractor.report()), d)

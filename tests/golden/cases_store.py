@@ -1,6 +1,6 @@
-"""Golden cases: sessions in a store, read back (``joint_orientations_from_store``,
-``chain_orientations_from_store``) and through the services and the CLI (``rig boundary``,
-``rig boundary --chain``, ``rig rom``, ``rig export``, ``rig report``): one joint's IMU and
+"""Golden cases: sessions in a store, read back (``joint_orientations_from_store``, of one
+joint and of a whole limb) and through the services and the CLI (``rig boundary``,
+``rig boundary --limb``, ``rig rom``, ``rig export``, ``rig report``): one joint's IMU and
 servo sessions, a whole arm's IMU session (with raw samples and neutral checkpoints).
 
 The sessions are written into a fresh SQLite store per case exactly as the recorder writes
@@ -18,7 +18,6 @@ import numpy as np
 
 from calibration import ImuJointCalibration, LimbImuCalibration
 from rig.readback import joint_orientations_from_store
-from rig.readback.sessions import chain_orientations_from_store
 from rig.sim.patients import record_servo, seeded_patient, star_constraint
 from rig.store import SampleWriter, open_store
 from tests.golden.cli import rig, root_relative
@@ -223,8 +222,8 @@ def case_store_limb_readback() -> dict:
         with open_store(db, create=False) as s:
             for name, kw in (("device", {"fusion": "device"}), ("vqf", {"fusion": "vqf"}),
                              ("noheading", {"heading": False})):
-                c = chain_orientations_from_store(s, sid, **kw)
-                out[f"{name}_q"] = c.q
+                c = joint_orientations_from_store(s, sid, **kw)
+                out[f"{name}_q"] = c.joint_q
                 out[f"{name}_t"] = np.asarray(c.t, dtype=np.float64)
                 if c.status is not None:
                     out[f"{name}_status"] = np.asarray(c.status)
@@ -237,17 +236,17 @@ def case_store_limb_readback() -> dict:
 
 @case("limb")
 def case_store_limb_cli() -> dict:
-    """``rig boundary --chain``, ``rig boundary --joint`` and ``rig rom --joint`` on the arm
+    """``rig boundary --limb``, ``rig boundary --joint`` and ``rig rom --joint`` on the arm
     session; the limb file written and stored."""
     out: dict = {}
     with tmpdir() as d:
         db = d / "arm.db"
         sid = _arm_db(db)
         f = d / "arm.yaml"
-        _cli("chain", ["boundary", "--db", db, "--session", sid, "--chain", "arm", "--out", f],
+        _cli("chain", ["boundary", "--db", db, "--session", sid, "--limb", "arm", "--out", f],
              d, out)
         out["chain_yaml"] = _file(f, d)
-        _cli("chain_device", ["boundary", "--db", db, "--session", sid, "--chain", "arm",
+        _cli("chain_device", ["boundary", "--db", db, "--session", sid, "--limb", "arm",
                               "--fusion", "device", "--no-store", "--out", d / "dev.yaml"],
              d, out)
         out["chain_device_yaml"] = _file(d / "dev.yaml", d)

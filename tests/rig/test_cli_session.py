@@ -354,7 +354,7 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
         assert r.returncode == 0 and (out / "r.html").is_file(), r.stderr
         # what must write says so in one line, before any work
         for args in (("boundary", "--db", db, "--session", sid, "--out", out / "b2.yaml"),
-                     ("boundary", "--db", db, "--session", sid, "--chain", "arm",
+                     ("boundary", "--db", db, "--session", sid, "--limb", "arm",
                       "--out", out / "limb.yaml"),
                      ("session", "close", "--db", db, "--session", sid + 1, "--force"),
                      ("record", "--rig", "sim-shoulder", "--db", db, "--patient", "P-2",

@@ -1,6 +1,6 @@
 """Whole-limb sessions (issue 21): a rig with ``limb: arm|leg`` records four IMUs through the
 limb calibration protocol into the store; every joint reads back from the session
-(``rig boundary|rom --joint``, ``rig boundary --chain``); ``rig demo --limb`` runs it end to
+(``rig boundary|rom --joint``, ``rig boundary --limb``); ``rig demo --limb`` runs it end to
 end. The recordings are made once per module by the limb demo (``--quick`` size, shortened)."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from rig.demo import DemoOptions, run_demo
 from rig.demo import limb as limb_demo
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
-from rig.readback.sessions import read_chain
+from rig.readback.sessions import read_session
 from rig.store import open_store
 from tests.rig.browser import dark_fraction, pixels_near, screenshot
 
@@ -89,7 +89,7 @@ def test_limb_session_in_the_store(leg_demo):
         ck = [c for c in store.calibrations.list(leg_demo["session"])
               if c["kind"] == "neutral-checkpoint"]
         assert len(ck) >= 2 and all(c["data"]["time"] in ("device_t", "t") for c in ck)
-    chain = read_chain(str(leg_demo["db"]), leg_demo["session"])
+    chain = read_session(str(leg_demo["db"]), leg_demo["session"])
     # the raw samples fused on the host (auto), the calibration re-fitted on them
     fused = chain.provenance["fusion"]
     assert fused["method"] == "vqf" and set(fused["sensors"]) == {"pelvis", "thigh", "shank",
@@ -100,18 +100,18 @@ def test_limb_session_in_the_store(leg_demo):
     # median of the standings, component by component, may be the static pose's own (0.0:
     # seen once on a loaded machine, where fewer checkpoints were accepted), never None
     assert fused["root_lean_deg"] is not None and 0.0 <= fused["root_lean_deg"] < 10.0
-    device = read_chain(str(leg_demo["db"]), leg_demo["session"], fusion="device")
+    device = read_session(str(leg_demo["db"]), leg_demo["session"], fusion="device")
     assert device.provenance["fusion"]["method"] == "device" and device.status is not None
     # each sensor's heading drift removed there, relative to its proximal neighbour
     hc = chain.provenance["heading_correction"]
     assert hc["neutral_checkpoints"] == len(ck) and hc["anchored"]
     assert set(hc["segments"]) == {"thigh", "shank", "foot"} and hc["accepted"] >= 2
     assert not chain.recording.unmeasured_drift
-    assert "heading_correction" not in read_chain(str(leg_demo["db"]), leg_demo["session"],
-                                                  heading=False).provenance
+    assert "heading_correction" not in read_session(str(leg_demo["db"]), leg_demo["session"],
+                                                    heading=False).provenance
     assert chain.limb == "leg" and chain.joints == ("hip", "knee", "ankle")
-    assert chain.q.shape[1:] == (3, 4) and len(chain.q) == len(chain.t) > 1000
-    np.testing.assert_allclose(np.linalg.norm(chain.q, axis=-1), 1.0, atol=1e-9)
+    assert chain.joint_q.shape[1:] == (3, 4) and len(chain.joint_q) == len(chain.t) > 1000
+    np.testing.assert_allclose(np.linalg.norm(chain.joint_q, axis=-1), 1.0, atol=1e-9)
 
 
 def test_every_joint_reads_back_from_the_session(leg_demo, rig_cli, tmp_path):
@@ -123,7 +123,7 @@ def test_every_joint_reads_back_from_the_session(leg_demo, rig_cli, tmp_path):
     code, out, err = rig_cli(["rom", "--db", db, "--session", sid, "--joint", "ankle"])
     assert code == 0, err
     assert "ankle range of motion" in out and "dorsiflexion" in out
-    # the whole leg: the demo's boundary stage ran `rig boundary --chain` on this session
+    # the whole leg: the demo's boundary stage ran `rig boundary --limb` on this session
     assert load_limb(leg_demo["out"] / "leg.yaml").joint_names == ("hip", "knee", "ankle")
 
 
@@ -133,7 +133,7 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     with open_store(db, create=False) as store:
         limbs = store.boundaries.list(sid, limb=True)
         joints = store.boundaries.list(sid, limb=False)
-    # the demo's boundary stage ran `rig boundary --chain` on the session: its limb file is
+    # the demo's boundary stage ran `rig boundary --limb` on the session: its limb file is
     # stored with it, told apart from a joint's constraint (what `rig enforce --session` reads)
     assert limbs and limbs[-1]["meta"]["kind"] == "limb" and limbs[-1]["meta"]["limb"] == "leg"
     assert (loads_limb(limbs[-1]["constraint_yaml"]).to_yaml()
@@ -164,11 +164,11 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
     assert "Learned limb model" not in html
     # the calibration shown is the one the joints came through: re-fitted on the host's
     # fusion, with the pelvis's lean in the static pose taken off
-    lean = read_chain(str(db), sid).provenance["fusion"]["root_lean_deg"]
+    lean = read_session(str(db), sid).provenance["fusion"]["root_lean_deg"]
     assert (f"Re-fitted on the raw samples fused on this computer (VQF); the pelvis leaned "
             f"{lean:.2f}° during the static pose") in html
     # --no-store writes the file and leaves the store as it was
-    code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--chain", "leg",
+    code, out, err = rig_cli(["boundary", "--db", db, "--session", sid, "--limb", "leg",
                               "--out", tmp_path / "leg2.yaml", "--no-store"])
     assert code == 0, err
     assert (tmp_path / "leg2.yaml").is_file()
@@ -179,8 +179,8 @@ def test_the_limb_file_is_stored_with_the_session_and_the_report_reads_it(leg_de
 
 @pytest.mark.parametrize("args, message", [
     (["boundary", "--joint", "elbow"], "the leg has no elbow (its joints: hip, knee, ankle)"),
-    (["boundary", "--chain", "arm"], "recorded the leg, not the arm"),
-    (["boundary", "--chain", "leg", "--segments", "a,b,c"], "--segments applies to files"),
+    (["boundary", "--limb", "arm"], "recorded the leg, not the arm"),
+    (["boundary", "--limb", "leg", "--segments", "a,b,c"], "--segments applies to files"),
 ])
 def test_wrong_requests_of_a_limb_session_are_one_line_errors(leg_demo, rig_cli, tmp_path,
                                                               args, message):

@@ -66,7 +66,7 @@ def _commands(out: Path, folder: Path, db: Path) -> dict[str, list]:
                      "--out", out / "b.yaml"],
         "boundary-session": ["boundary", "--db", db, "--session", 1, "--no-store",
                              "--out", out / "b.yaml"],
-        "boundary-chain": ["boundary", ARM, "--chain", "arm", "--segments",
+        "boundary-limb": ["boundary", ARM, "--limb", "arm", "--segments",
                            "thorax,humerus_r,ulna_r,hand_r", "--frames", "isb",
                            "--out", out / "limb.yaml"],
         "train": ["train", "--constraint", SHAPE, "--out", out / "m.onnx"],
@@ -81,7 +81,7 @@ def _commands(out: Path, folder: Path, db: Path) -> dict[str, list]:
     }
 
 
-COMMANDS = ["boundary", "boundary-session", "boundary-chain", "train", "report", "export",
+COMMANDS = ["boundary", "boundary-session", "boundary-limb", "train", "report", "export",
             "dataset", "demo", "demo-limb", "record"]
 
 

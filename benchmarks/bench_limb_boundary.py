@@ -1,11 +1,11 @@
-"""``rig boundary --chain`` against ``--joint`` on the same recording (issue 37, item 3): does a
+"""``rig boundary --limb`` against ``--joint`` on the same recording (issue 37, item 3): does a
 limb file keep what each joint reached, and does each of its joints say what the one-joint
 extraction says?
 
 Per limb, the recorded postures ``q`` (N, 3, 4) go through both paths as the CLI runs them:
 
-- ``--chain``: :class:`calibration.boundary.ChainExtractor` with the sample times, the status
-  and each joint's measured slow error (:func:`rig.readback.boundary.run_chain`'s call);
+- ``--limb``: :class:`calibration.boundary.LimbExtractor` with the sample times, the status
+  and each joint's measured slow error (:func:`rig.readback.boundary.extract_limb`'s call);
 - ``--joint``: :func:`rig.readback.boundary.extract` on each joint's orientations alone
   (``rig boundary --joint NAME``'s call), with that joint's measured slow error.
 
@@ -43,8 +43,8 @@ Sources:
 
 Run::
 
-    .venv/bin/python benchmarks/bench_chain_boundary.py                 # 10 limbs + real
-    .venv/bin/python benchmarks/bench_chain_boundary.py --seeds 101 --limbs leg --no-real
+    .venv/bin/python benchmarks/bench_limb_boundary.py                 # 10 limbs + real
+    .venv/bin/python benchmarks/bench_limb_boundary.py --seeds 101 --limbs leg --no-real
 """
 
 from __future__ import annotations
@@ -119,14 +119,14 @@ def _cached(folder: str | None, seed: int, limb: str, duration: float, rate: flo
 def compare(q: np.ndarray, t: np.ndarray, limb: str, side: str,
             slow: dict | None) -> list[dict]:
     """Both paths on one recording: per joint the shares held and the peaks' differences."""
-    from calibration.boundary import ChainExtractor
+    from calibration.boundary import LimbExtractor
     from calibration.boundary.twist import singular_reach
     from models import quaternion as Q
     from rig.readback.boundary import extract
     from rig.readback.data import JointData
 
     slow = slow or {}
-    ex = ChainExtractor(limb).fit(q, t=t, side=side, slow_error_deg=slow or None)
+    ex = LimbExtractor(limb).fit(q, t=t, side=side, slow_error_deg=slow or None)
     lb = ex.limb_
     res = LimbOracle(lb).evaluate(q, normalize=True)
     rows = []
@@ -136,11 +136,12 @@ def compare(q: np.ndarray, t: np.ndarray, limb: str, side: str,
         reach = singular_reach(np.arccos(np.clip(Q.rotate(q[:, j], axis) @ axis, -1.0, 1.0)),
                                slow.get(joint.name))
         reach = 0.0 if reach is None else reach
-        prov = {"limb": limb}  # as a whole-limb session's joint (ChainData.joint) says
+        prov = {"limb": limb}  # as a whole-limb session's joint (JointData.select) says
         if slow.get(joint.name) is not None:
             prov["heading_correction"] = {"uncertainty_deg": slow[joint.name]}
-        data = JointData(q[:, j], None, np.asarray(spec.limb_axis, dtype=np.float64), side,
-                         prov, None, joint.name, t)
+        data = JointData.of_joint(q[:, j], joint.name, t=t,
+                                  limb_axis=np.asarray(spec.limb_axis, dtype=np.float64),
+                                  side=side, provenance=prov)
         one = extract(data, side=side).constraint_
         row = {"joint": joint.name, "coupled": joint.coupling is not None}
         if spec.kind == "hinge":
@@ -229,7 +230,7 @@ def main() -> None:
             show(label, sim[label], time.perf_counter() - t0)
     real: dict[str, list[dict]] = {}
     if not a.no_real:
-        from rig.readback.files import chain_orientations_from_file
+        from rig.readback.files import limb_orientations_from_file
         from rig.store.io import read_orientations
 
         for path in sorted(Path(DATA).glob("*.sto")):
@@ -240,10 +241,9 @@ def main() -> None:
                     if not set(cols) <= have:
                         continue
                     t0 = time.perf_counter()
-                    q, table = chain_orientations_from_file(str(path), cols, limb, "isb")
+                    rec = limb_orientations_from_file(str(path), cols, limb, "isb")
                     label = f"{path.stem[:22]} {limb} {s}"
-                    real[label] = compare(q, np.asarray(table.time, dtype=np.float64), limb,
-                                          side, None)
+                    real[label] = compare(rec.joint_q, rec.t, limb, side, None)
                     show(label, real[label], time.perf_counter() - t0)
     if sim:
         summary(sim, f"simulated, held-out seeds {a.seeds} ({len(sim)} limbs, "

@@ -1,4 +1,4 @@
-"""A limb file from a recording of a whole arm or leg (rig boundary --chain): each joint's
+"""A limb file from a recording of a whole arm or leg (rig boundary --limb): each joint's
 limits, and a coupling only where the data supports one."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def run(args, capsys):
 ])
 def test_a_real_limb_holds_what_was_recorded(file, chain, segments, side, tmp_path, capsys):
     out = tmp_path / "limb.yaml"
-    code, stdout, err = run(["boundary", str(DATA / file), "--chain", chain, "--segments",
+    code, stdout, err = run(["boundary", str(DATA / file), "--limb", chain, "--segments",
                              segments, "--frames", "isb", "--side", side, "--out", str(out)],
                             capsys)
     assert code == 0, err
@@ -43,11 +43,11 @@ def test_a_real_limb_holds_what_was_recorded(file, chain, segments, side, tmp_pa
 
 
 @pytest.mark.parametrize("args, needle", [
-    (["--segments", "a,b,c"], "--segments applies with --chain"),
-    (["--chain", "leg", "--segments", "pelvis,femur_l,tibia_l"], "four segment columns"),
-    (["--chain", "leg", "--segments", "pelvis,femur_l,tibia_l,calcn_l", "--joint", "knee"],
+    (["--segments", "a,b,c"], "--segments applies with --limb arm|leg"),
+    (["--limb", "leg", "--segments", "pelvis,femur_l,tibia_l"], "four segment columns"),
+    (["--limb", "leg", "--segments", "pelvis,femur_l,tibia_l,calcn_l", "--joint", "knee"],
      "--joint does not apply"),
-    (["--chain", "leg"], "--chain needs --segments"),
+    (["--limb", "leg"], "--limb leg needs --segments"),
 ])
 def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
     code, _, err = run(["boundary", str(DATA / "xio_ximu3_lower_body.sto"), "--frames", "isb",
@@ -56,8 +56,25 @@ def test_bad_chain_options_are_one_line_errors(args, needle, tmp_path, capsys):
     assert code == 2 and len(lines) == 1 and needle in lines[0], err
 
 
+def test_the_old_spelling_chain_still_reads_a_whole_limb(tmp_path, capsys):
+    """``--chain arm`` (the old spelling of ``--limb arm``) writes the same limb file and
+    summary, with one line on stderr naming the new spelling."""
+    segs = ["--segments", "thorax,humerus_r,ulna_r,hand_r", "--frames", "isb"]
+    new, old = tmp_path / "new.yaml", tmp_path / "old.yaml"
+    code, out_new, err_new = run(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--limb", "arm",
+                                  *segs, "--out", str(new)], capsys)
+    assert code == 0 and err_new == "", err_new
+    code, out_old, err_old = run(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--chain", "arm",
+                                  *segs, "--out", str(old)], capsys)
+    assert code == 0, err_old
+    assert err_old.strip().splitlines() == ["rig: note: --chain is now --limb: rig boundary "
+                                            "--limb arm ..."]
+    assert old.read_bytes() == new.read_bytes()
+    assert out_old.replace(str(old), "F") == out_new.replace(str(new), "F")
+
+
 # the module-scoped fixtures are built once: this module's tests run on one xdist worker
-pytestmark = pytest.mark.xdist_group("test_chain_boundary")
+pytestmark = pytest.mark.xdist_group("test_limb_boundary")
 
 
 @pytest.fixture(scope="module")
@@ -84,12 +101,12 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     corners: 98.8 % held, and a keyframe had to be added)."""
     import numpy as np
 
-    from calibration.boundary import ChainExtractor, boundary_distance
+    from calibration.boundary import LimbExtractor, boundary_distance
     from models.limb_oracle import LimbOracle
     from rig.sim.patients import anatomical_limb
 
     q, t = ideal_arm
-    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    ex = LimbExtractor("arm").fit(q, t=t, side="right")
     assert ex.coupled_, ex.coupling_note_
     truth = anatomical_limb(1, "arm").joints[0].coupling
     got = ex.limb_.joints[0].coupling
@@ -116,7 +133,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
     import numpy as np
 
     import models.limb as limb_format
-    from calibration.boundary import ChainExtractor
+    from calibration.boundary import LimbExtractor
     from models.limb_oracle import LimbOracle
 
     def by_arc_length(a, b):
@@ -130,7 +147,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
 
     monkeypatch.setattr(limb_format, "corresponding_polygons", by_arc_length)
     q, t = ideal_arm
-    ex = ChainExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
+    ex = LimbExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
     assert ex.coupled_, ex.coupling_note_
     added = [k for k in ex.keyframes_ if k.get("added")]
     assert added and all(k["supported"] for k in added)
@@ -149,12 +166,12 @@ def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(idea
     between them."""
     import numpy as np
 
-    import calibration.boundary.chain as chain_mod
-    from calibration.boundary import ChainExtractor, boundary_distance
+    import calibration.boundary.limb as chain_mod
+    from calibration.boundary import LimbExtractor, boundary_distance
     from models.errors import ConstraintError
     from rig.sim.patients import anatomical_limb
 
-    real_limb = ChainExtractor._limb
+    real_limb = LimbExtractor._limb
     first_two: list = []
 
     def limb(self, chain, specs, constraints, kept, side, provenance):
@@ -167,10 +184,10 @@ def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(idea
                                       "10 deg is not a simple polygon", "joints[0]")
         return real_limb(self, chain, specs, constraints, kept, side, provenance)
 
-    monkeypatch.setattr(ChainExtractor, "_limb", limb)
+    monkeypatch.setattr(LimbExtractor, "_limb", limb)
     monkeypatch.setattr(chain_mod, "_folding_pair", lambda kept: 0)
     q, t = ideal_arm
-    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    ex = LimbExtractor("arm").fit(q, t=t, side="right")
     assert ex.coupled_, ex.coupling_note_
     got = ex.limb_.joints[0].coupling
     added = [k for k in ex.keyframes_ if k.get("added")]
@@ -189,10 +206,10 @@ def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
     the rest of its boundary the same (about 1° apart on average, under the 3° the mean test
     resolves): found by the local test (test 2: the difference along 5 % of the boundaries),
     each keyframe within 1.5° of the true limits at its knee angle; the hip's coupling too."""
-    from calibration.boundary import ChainExtractor, boundary_distance
+    from calibration.boundary import LimbExtractor, boundary_distance
 
     t, q = sim_leg_motion
-    ex = ChainExtractor("leg").fit(q, t=t, side="right")
+    ex = LimbExtractor("leg").fit(q, t=t, side="right")
     ankle = ex.couplings_["ankle"]
     assert ankle["coupled"], ankle["note"]
     assert ankle["difference_deg"] < 3.0 <= 4.0 <= ankle["local_difference_deg"]
@@ -210,7 +227,7 @@ def test_one_keyframe_short_of_the_limit_is_not_a_dependence():
     simulated wrist at one elbow angle whose samples fell short of part of its limit), is not
     a dependence; graded differences (an ankle's: 2.3° between neighbours, 5.5° end to end)
     are."""
-    from calibration.boundary.chain import _local_difference
+    from calibration.boundary.limb import _local_difference
 
     def pairs(m):
         return {(i, k): {"p95_deg": m[i][k]} for i in range(len(m))
@@ -248,7 +265,7 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     shoulder holds them all; the unfolding and smoothing are tested with that test off."""
     import numpy as np
 
-    from calibration.boundary import ChainExtractor, boundary_distance
+    from calibration.boundary import LimbExtractor, boundary_distance
     from models import quaternion as Q
     from models.limb_oracle import LimbOracle
     from rig.sim.limb import NoiseModel
@@ -264,10 +281,10 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
                    for _ in range(9)], axis=1).reshape(-1, 3, 3)
     angle = np.linalg.norm(rv, axis=-1)
     q = Q.multiply(q, Q.from_axis_angle(rv / np.maximum(angle, 1e-12)[..., None], angle))
-    ex = ChainExtractor("arm").fit(q, t=t, side="right")
+    ex = LimbExtractor("arm").fit(q, t=t, side="right")
     assert not ex.coupled_ and "would hold 98." in ex.coupling_note_, ex.coupling_note_
     assert ex.held_["shoulder"] == 1.0
-    ex = ChainExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
+    ex = LimbExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
     assert ex.coupled_ and "vertices each" not in ex.coupling_note_, ex.coupling_note_
     added = [kf for kf in ex.keyframes_ if kf.get("added")]
     assert added and all("touched itself" in kf["why"] for kf in added)
@@ -278,8 +295,8 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
     # no keyframe can be added: smoothing, refused as far as the coupling
-    monkeypatch.setattr(ChainExtractor, "_unfold", lambda self, *a, **kw: None)
-    ex = ChainExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
+    monkeypatch.setattr(LimbExtractor, "_unfold", lambda self, *a, **kw: None)
+    ex = LimbExtractor("arm", min_inside=0.0).fit(q, t=t, side="right")
     assert not ex.coupled_
     assert "smoothed to 16 vertices" in ex.coupling_note_
     assert ex.inside_["shoulder"] == 1.0
@@ -343,13 +360,13 @@ def test_a_measured_slow_error_in_a_limb(ideal_arm, slow_insets):
     inset. Either way the shoulder's coupling is still written, its twist 8-10° too wide
     without the error measured comes within 2.5° of the truth (1.5° with the insets, which also
     take the constant error's own 1.9° off the end), and the wrist is still not coupled."""
-    from calibration.boundary import ChainExtractor, boundary_distance
+    from calibration.boundary import LimbExtractor, boundary_distance
     from rig.sim.patients import anatomical_limb
 
     q, t = ideal_arm
     q = q.copy()
     q[:, 0] = _rotated(q[:, 0], 2.0)
-    ex = ChainExtractor("arm", slow_insets=slow_insets).fit(
+    ex = LimbExtractor("arm", slow_insets=slow_insets).fit(
         q, t=t, side="right", slow_error_deg={"shoulder": 2.0, "wrist": 1.0})
     assert ex.coupled_, ex.coupling_note_
     assert not ex.couplings_["wrist"]["coupled"], ex.couplings_["wrist"]["note"]
@@ -370,7 +387,7 @@ def test_a_measured_slow_error_in_a_limb(ideal_arm, slow_insets):
     assert ex.tolerance_deg_["elbow"] == [1.0, 1.0]
     assert ex.report()["tolerance_deg"] == ex.tolerance_deg_
     with pytest.raises(ValueError, match="no joint knee"):
-        ChainExtractor("arm").fit(q[:10], slow_error_deg={"knee": 1.0})
+        LimbExtractor("arm").fit(q[:10], slow_error_deg={"knee": 1.0})
 
 
 @pytest.fixture(scope="module")
@@ -396,10 +413,10 @@ def drifting_leg(sim_leg_motion):
 
 @pytest.fixture(scope="module")
 def drifting_leg_chain(drifting_leg):
-    from calibration.boundary import ChainExtractor
+    from calibration.boundary import LimbExtractor
 
     t, q, slow = drifting_leg
-    return ChainExtractor("leg").fit(q, t=t, side="right", slow_error_deg=slow)
+    return LimbExtractor("leg").fit(q, t=t, side="right", slow_error_deg=slow)
 
 
 def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain):
@@ -410,7 +427,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
     among the postures it is interpolated into."""
     import numpy as np
 
-    from calibration.boundary.chain import _spans, _swing_only
+    from calibration.boundary.limb import _spans, _swing_only
     from calibration.joints import JOINTS, hinge_angles
     from models import quaternion as Q
     from models.oracle import ConstraintOracle
@@ -434,7 +451,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
 
 
 def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg_chain):
-    """``--joint`` and ``--chain`` on the same recording run one per-joint extraction
+    """``--joint`` and ``--limb`` on the same recording run one per-joint extraction
     (calibration.boundary.joint): a joint the chain leaves uncoupled is written with the same
     limits, the measured slow error read the same way (the twist's reach alone). Before, the
     one-joint path moved a limb session's knee ends in by the error (0.4-1.1° on a simulated
@@ -449,10 +466,10 @@ def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg
     ex = drifting_leg_chain
     for j, joint in enumerate(ex.limb_.joints):
         spec = JOINTS[joint.name]
-        data = JointData(q[:, j], None, np.asarray(spec.limb_axis, dtype=np.float64), "right",
-                         {"limb": "leg", "heading_correction": {"uncertainty_deg":
-                                                                slow[joint.name]}},
-                         None, joint.name, t)
+        data = JointData.of_joint(
+            q[:, j], joint.name, t=t, limb_axis=np.asarray(spec.limb_axis, dtype=np.float64),
+            side="right", provenance={"limb": "leg", "heading_correction": {
+                "uncertainty_deg": slow[joint.name]}})
         alone = extract(data, side="right").constraint_
         if joint.coupling is not None:
             continue
@@ -464,3 +481,26 @@ def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg
             assert np.allclose(alone.swing.vertices, joint.constraint.swing.vertices)
             assert alone.twist.min_deg == joint.constraint.twist.min_deg
     assert ex.limb_.joints[1].coupling is None  # the knee is always written alone
+
+
+def test_a_limb_of_one_joint_is_its_joints_one_extraction():
+    """The one extraction entry takes a limb of one joint: ``LimbExtractor(("knee",))`` gives
+    the constraint (and report) of the knee's own extraction (:mod:`calibration.boundary.joint`),
+    byte for byte, and writes no limb file."""
+    import numpy as np
+
+    from calibration.boundary import LimbExtractor
+    from calibration.boundary.joint import fit_joint, joint_extractor
+    from rig.readback import load_joint_orientations
+
+    data = load_joint_orientations(str(DATA / "xio_ximu3_lower_body.sto"), reference="femur_r",
+                                   limb="tibia_r", frames="isb", joint="knee")
+    alone = fit_joint(joint_extractor("knee", name="k"), data.q, t=data.t, slow_insets=True)
+    lx = LimbExtractor(("knee",), name="k", slow_insets=True).fit(data.joint_q, t=data.t)
+    assert lx.limb_ is None and set(lx.extractors_) == {"knee"}
+    assert lx.constraint_.to_yaml() == alone.constraint_.to_yaml()
+    assert lx.report() == alone.report()
+    again = LimbExtractor(("knee",), name="k", slow_insets=True).fit(np.asarray(data.q), t=data.t)
+    assert again.constraint_.to_yaml() == alone.constraint_.to_yaml()
+    with pytest.raises(ValueError, match="a tuple of one joint"):
+        LimbExtractor("knee")

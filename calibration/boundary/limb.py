@@ -1,4 +1,4 @@
-"""A whole limb's limits from a recording of its chain: :class:`ChainExtractor` → a limb file
+"""A whole limb's limits from a recording of its joints: :class:`LimbExtractor` → a limb file
 (:mod:`models.limb`), with a coupling where the recording supports one.
 
 Input: joint orientations ``q`` (N, 3, 4) of an arm (shoulder, elbow, wrist) or a leg (hip,
@@ -137,25 +137,49 @@ from typing import Any
 
 import numpy as np
 
+from calibration.boundary.compare import boundary_distance
 from calibration.boundary.inset import NOISE_REACH
+from calibration.boundary.joint import fit_joint, joint_extractor
+from calibration.boundary.twist import pooled_insets, singular_reach
 from calibration.errors import CalibrationError
+from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
 from models import quaternion as Q
+from models.constraint import JointConstraint
 from models.errors import ConstraintError
+from models.geometry import first_contact_along
 from models.kinds import DEFAULT_KIND, get_kind
+from models.limb import Limb, corresponding_polygons, inline_constraint
+from models.limb_oracle import LimbOracle
+from models.limits import PolygonSwing
+from models.oracle import ConstraintOracle
 
-__all__ = ["ChainExtractor"]
+__all__ = ["METHOD", "LimbExtractor"]
+
+#: The method a limb file's provenance names: the name limb files have always recorded (the
+#: class was ``ChainExtractor`` before the word "chain" was retired for a limb), kept so that
+#: every limb file is written byte for byte as before.
+METHOD = "calibration.boundary.ChainExtractor"
 
 _ONE_DEG = float(np.radians(1.0))
 #: Rounds of keyframes grown by the postures their interpolation leaves out (``_grow``).
 _GROW_ROUNDS = 3
 
 
-class ChainExtractor:
-    """Recorded limb postures → a limb file with its coupling (module doc).
+class LimbExtractor:
+    """Recorded limb postures → a limb file with its coupling (module doc); the one entry of
+    boundary extraction, for a whole limb or a limb of one joint.
+
+    A limb of one joint (``limb`` a tuple of one joint name, ``rig boundary --joint``,
+    :func:`rig.readback.boundary.extract`) has nothing to couple: its joint's limits are the
+    one extraction of :mod:`calibration.boundary.joint` (a hinge's interval, else a swing
+    region and twist), available as ``constraint_`` and ``extractors_[joint]``; no limb file
+    is written for it (``limb_`` is None) — its constraint is the file.
 
     Parameters
     ----------
-    limb : {"arm", "leg"}
+    limb : {"arm", "leg"} or tuple of one joint name
+        A whole limb, or a limb of one joint (:data:`calibration.joints.JOINTS`; None, or a
+        name it does not list, is a ball joint).
     keyframe_spacing_deg, max_keyframes, keyframe_band_deg
         Where keyframes go and which samples each is extracted from.
     min_keyframe_samples, min_keyframe_coverage, min_difference_deg,
@@ -165,12 +189,20 @@ class ChainExtractor:
         The swing extraction's alpha radius and vertex budget (each joint and keyframe).
     slow_insets : bool
         Move the limits in by the measured slow error's insets too, not only take its twist
-        reach (module doc, "Measured errors"; off by default).
+        reach (module doc, "Measured errors"; off by default; one-joint IMU sessions read
+        so, :mod:`calibration.boundary.joint`).
     name : str
+    by_swing, limb_axis
+        A limb of one joint: the swing-dependent twist choice (``"auto"``, True, False) and
+        the limb axis (default the joint's); a whole limb's joints use their own.
 
     Attributes
     ----------
-    limb_ : models.limb.Limb
+    extractors_ : dict, joint → its fitted extractor (a limb of one joint; a whole limb's
+        joints are in ``reports_``)
+    constraint_ : models.constraint.JointConstraint, the one joint's limits (a limb of one
+        joint)
+    limb_ : models.limb.Limb (None for a limb of one joint)
     couplings_ : dict, tested joint → ``coupled``, ``note`` (why or why not), ``keyframes``,
         ``difference_deg``, ``local_difference_deg``
     coupled_, coupling_note_, keyframes_ : the proximal joint's: whether coupled, why, every
@@ -197,11 +229,14 @@ class ChainExtractor:
                  min_held: float = 0.99, min_inside: float = 0.995,
                  alpha_deg: float = 4.0,
                  max_vertices: int = 64, name: str = "recorded-limb",
-                 slow_insets: bool = False) -> None:
-        from calibration.joints import LIMB_CHAINS
-
-        if limb not in LIMB_CHAINS:
-            raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)}, got {limb!r}")
+                 slow_insets: bool = False, by_swing: bool | str = "auto",
+                 limb_axis=None) -> None:
+        one = isinstance(limb, tuple) and len(limb) == 1
+        if not one and limb not in LIMB_CHAINS:
+            raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
+                             f"joint, got {limb!r}")
+        self.by_swing = by_swing
+        self.limb_axis = limb_axis
         if max_keyframes < 2:
             raise ValueError(f"max_keyframes must be >= 2, got {max_keyframes}")
         for label, v in (("keyframe_spacing_deg", keyframe_spacing_deg),
@@ -238,8 +273,6 @@ class ChainExtractor:
     # -- the parts --------------------------------------------------------------------------
     def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
                          by_swing: bool | str = "auto"):
-        from calibration.boundary.joint import joint_extractor
-
         return joint_extractor(spec.name, limb_axis=spec.limb_axis, alpha_deg=self.alpha_deg,
                                max_vertices=max_vertices or self.max_vertices,
                                by_swing=by_swing, name=name)
@@ -248,8 +281,6 @@ class ChainExtractor:
         """``ex`` fitted on one joint's (or keyframe's) samples with the joint's measured slow
         error (and a keyframe with its joint's measured ``insets``); the largest swing and
         twist insets that error made it apply are remembered (``_tolerance``)."""
-        from calibration.boundary.joint import fit_joint
-
         slow = self._slow.get(spec.name)
         fit_joint(ex, q, t=t, status=status, slow_error_deg=slow, slow_insets=self.slow_insets,
                   insets=insets)  # without slow_insets: the error's twist reach alone
@@ -274,8 +305,6 @@ class ChainExtractor:
         (:func:`calibration.boundary.twist.singular_reach`; module doc, "Measured errors").
         Without a measured error both are 1° (``slack_deg``; 0: what the limb file holds
         within the measured error alone, ``held_``)."""
-        from calibration.boundary.twist import singular_reach
-
         sw, tw = self._applied.get(spec.name, (0.0, 0.0))
         swing_tol = np.radians(slack_deg + sw)
         whole = swing_tol + np.radians(tw)
@@ -290,8 +319,6 @@ class ChainExtractor:
         """(N,) bool: the postures ``q`` (N, 3, 4) whose joint ``j`` the limb file holds within
         ``tol`` (:meth:`_tolerance`): the whole orientation within its tolerance and, with a
         measured error, the direction within the swing's."""
-        from models.limb_oracle import LimbOracle
-
         swing_tol, whole = tol
         held = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
         if not (self.slow_insets and self._slow.get(limb.joints[j].name)):
@@ -306,14 +333,14 @@ class ChainExtractor:
 
     def fit(self, q, *, t=None, status=None, side: str | None = None,
             provenance: dict | None = None,
-            slow_error_deg: dict[str, float | None] | None = None) -> ChainExtractor:
+            slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
         """Extract the limb (module doc) from postures ``q`` (N, 3, 4), sample times ``t``
         (N,) and IMU ``status`` bytes (N,) when known (a sample's lowest over its sensors);
         ``slow_error_deg``: joint name → its measured slow error, degrees (module doc,
-        "Measured errors")."""
-        from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
-        from models.limb_oracle import LimbOracle
-
+        "Measured errors"); a limb of one joint: postures (N, 1, 4) or (N, 4)."""
+        if isinstance(self.limb, tuple):
+            return self._fit_one(q, t=t, status=status, provenance=provenance,
+                                 slow_error_deg=slow_error_deg)
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 3 or q.shape[1:] != (3, 4):
             raise CalibrationError(f"expected postures of shape (N, 3, 4), got {q.shape}")
@@ -379,13 +406,34 @@ class ChainExtractor:
                                for s in specs}
         return self
 
+    def _fit_one(self, q, *, t=None, status=None, provenance: dict | None = None,
+                 slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
+        """A limb of one joint: its one extraction (:mod:`calibration.boundary.joint`)."""
+        (joint,) = self.limb
+        if getattr(q, "ndim", 2) == 3:
+            if q.shape[1] != 1:
+                raise CalibrationError(f"expected postures of one joint, got {q.shape}")
+            q = q[:, 0]
+        slow = dict(slow_error_deg or {})
+        unknown = sorted(set(slow) - {joint}, key=str)
+        if unknown:
+            raise ValueError(f"slow_error_deg: no joint {', '.join(map(str, unknown))} in a "
+                             f"limb of the {joint}")
+        ex = joint_extractor(joint, limb_axis=self.limb_axis, alpha_deg=self.alpha_deg,
+                             max_vertices=self.max_vertices, by_swing=self.by_swing,
+                             name=self.name)
+        fit_joint(ex, q, status=status, t=t, provenance=provenance,
+                  slow_error_deg=slow.get(joint), slow_insets=self.slow_insets)
+        self.extractors_ = {joint: ex}
+        self.constraint_ = ex.constraint_
+        self.limb_ = None
+        return self
+
     def _coupling(self, j, chain, specs, constraints, q, ts, st, theta, h, fixed, side,
                   provenance) -> tuple[list | None, dict[str, Any]]:
         """Joint ``j``'s limits against the hinge's angle, when the recording supports them
         (module doc, tests 1-3), the couplings already decided (``fixed``: joint index →
         keyframes) in the limb file it is judged in: (keyframes or None, what was found)."""
-        from calibration.boundary.compare import boundary_distance
-
         spec, hinge = specs[j], specs[1]
         at = self._keyframe_angles(h.min_deg, h.max_deg)
         keyframes = [self._support(a, theta, q[:, j], spec) for a in at]
@@ -627,8 +675,6 @@ class ChainExtractor:
         """(angle, constraint) of each supported keyframe of joint ``j`` whose samples
         (``cells``) extract; with a measured slow error, extracted again with the insets
         pooled over the keyframes (module doc, "Measured errors")."""
-        from calibration.boundary.twist import pooled_insets
-
         kept, fitted = self._keyframes_once(spec, j, q, ts, st, supported, cells, budget)
         slow = self._slow.get(spec.name)
         if slow and self.slow_insets and len(fitted) >= 2:
@@ -659,8 +705,6 @@ class ChainExtractor:
     def _limb(self, chain, specs, constraints, kept: dict[int, list], side, provenance):
         """The limb file's contents as a validated :class:`models.limb.Limb`; ``kept``: the
         coupled joints' keyframes by joint index."""
-        from models.limb import Limb, inline_constraint
-
         hinge = specs[1]
         joints = []
         for j, (name, parent, child) in enumerate(chain):
@@ -672,7 +716,7 @@ class ChainExtractor:
                 entry["constraint"] = inline_constraint(constraints[name])
             joints.append(entry)
         prov = dict(provenance or {})
-        prov.update({"method": "calibration.boundary.ChainExtractor", "parameters": self.params(),
+        prov.update({"method": METHOD, "parameters": self.params(),
                      "couplings": {k: {"coupled": v["coupled"], "keyframes": v["keyframes"]}
                                    for k, v in self.couplings_.items()}})
         doc = {"name": self.name, "limb": self.limb, "joints": joints, "provenance": prov}
@@ -682,7 +726,10 @@ class ChainExtractor:
 
     def report(self) -> dict[str, Any]:
         """What the extraction did, as plain types (``coupled``/``coupling``/``keyframes``:
-        the proximal joint's; ``couplings``: every joint's that was tested)."""
+        the proximal joint's; ``couplings``: every joint's that was tested; a limb of one
+        joint: its extractor's report)."""
+        if isinstance(self.limb, tuple):
+            return self.extractors_[self.limb[0]].report()
         return {"limb": self.limb, "coupled": self.coupled_, "coupling": self.coupling_note_,
                 "keyframes": self.keyframes_, "inside": dict(self.inside_),
                 "held": dict(self.held_),
@@ -708,7 +755,7 @@ def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> flo
 def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list,
                        tol=(_ONE_DEG, _ONE_DEG), measured: bool = False) -> np.ndarray:
     """(N,) bool: the postures ``q`` (N, 4) of the proximal joint within ``tol`` (radians,
-    ``(swing, whole)``: :meth:`ChainExtractor._tolerance`; the swing's checked when the error
+    ``(swing, whole)``: :meth:`LimbExtractor._tolerance`; the swing's checked when the error
     was ``measured``) of both keyframes that bracket their hinge angle ``theta`` (beyond the
     end keyframes: of the end one).
 
@@ -716,8 +763,6 @@ def _held_by_keyframes(q: np.ndarray, theta: np.ndarray, kept: list,
     (where the limits are not linear in the angle, or the interpolation cuts a corner of a
     shared stretch): the file format's interpolation, not evidence against the coupling
     (module doc, test 3)."""
-    from models.oracle import ConstraintOracle
-
     a = np.array([angle for angle, _ in kept])
     swing_tol, whole = tol
     near = np.stack([ConstraintOracle(c).signed_distance(q, normalize=True) <= whole
@@ -762,10 +807,6 @@ def _folding_pair(kept: list) -> int | None:
     """The first ``i`` whose keyframes ``kept[i]``, ``kept[i + 1]`` (angle, constraint) have a
     polygon swing interpolation that touches itself (:func:`models.geometry.
     first_contact_along`), else None."""
-    from models.geometry import first_contact_along
-    from models.limb import corresponding_polygons
-    from models.limits import PolygonSwing
-
     for i in range(len(kept) - 1):
         a, b = kept[i][1].swing, kept[i + 1][1].swing
         if isinstance(a, PolygonSwing) and isinstance(b, PolygonSwing):
@@ -796,8 +837,6 @@ def _spans(theta: np.ndarray, at: list[float]) -> list[np.ndarray]:
 
 def _swing_only(constraint):
     """The constraint with its twist left free: its swing limits alone."""
-    from models.constraint import JointConstraint
-
     d = constraint.to_dict()
     d["kind"] = DEFAULT_KIND
     d["twist"] = {"min_deg": -180.0, "max_deg": 180.0}
@@ -806,8 +845,6 @@ def _swing_only(constraint):
 
 def _swing_only_limb(limb, j: int):
     """The limb with joint ``j``'s twist left free (its own limits or every keyframe's)."""
-    from models.limb import Limb, inline_constraint
-
     doc = limb.to_dict()
     entry = doc["joints"][j]
     joint = limb.joints[j]
