@@ -119,8 +119,8 @@ def _cached(folder: str | None, seed: int, limb: str, duration: float, rate: flo
 def compare(q: np.ndarray, t: np.ndarray, limb: str, side: str,
             slow: dict | None) -> list[dict]:
     """Both paths on one recording: per joint the shares held and the peaks' differences."""
-    from calibration.boundary import LimbExtractor
     from calibration.boundary.twist import singular_reach
+    from calibration.extraction import LimbExtractor
     from models import quaternion as Q
     from rig.readback.boundary import extract
     from rig.readback.data import JointData

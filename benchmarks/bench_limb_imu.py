@@ -114,7 +114,7 @@ from calibration import (
     boundary_distance,
     status_ok,
 )
-from calibration.boundary import LimbExtractor
+from calibration.extraction import LimbExtractor
 from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom, recorded_rom
 from calibration.joints import JOINTS, LIMB_CHAINS

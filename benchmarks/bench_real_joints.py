@@ -26,7 +26,7 @@ from pathlib import Path
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 
-from calibration.boundary import LimbExtractor
+from calibration.extraction import LimbExtractor
 from calibration.joints import JOINTS, hinge_angles
 from models.oracle import ConstraintOracle
 from rig.readback import RecordingSource, extract

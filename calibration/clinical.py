@@ -99,6 +99,7 @@ import numpy as np
 from calibration.frames import RIG_TO_ISB
 from models import quaternion as Q
 from models.constraint import JointConstraint
+from models.oracle import ConstraintOracle
 
 __all__ = [
     "AAOS_NOT_COMPARABLE",
@@ -205,7 +206,6 @@ def isb_angles(q, side: str = "right", *, switch_deg: float = 30.0) -> dict[str,
 
 # -- peaks from a constraint --------------------------------------------------------------------
 def _swing_distance_fn(constraint: JointConstraint):
-    from models.oracle import ConstraintOracle
 
     if constraint.swing is None:
         return lambda d: np.full(len(d), -1.0)

@@ -71,6 +71,7 @@ import math
 
 import numpy as np
 
+from calibration.alignment import status_ok
 from calibration.errors import CalibrationError
 from models import quaternion as Q
 
@@ -201,7 +202,6 @@ class HeadingCorrection:
                                    "t0 <= t1")
         usable = np.ones(len(t), bool)
         if status is not None:
-            from calibration.alignment import status_ok
 
             usable = status_ok(np.asarray(status).reshape(-1), self.min_system)
         anchors = [float(a) for a in anchors if math.isfinite(float(a))]

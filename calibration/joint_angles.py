@@ -110,10 +110,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.clinical import check_side, mirror_quaternions, text_table
+from calibration.alignment import trusted_samples
+from calibration.clinical import NORMATIVE as SHOULDER
+from calibration.clinical import check_side, mirror_quaternions, range_of_motion, text_table
 from calibration.frames import SEGMENT_TO_ISB
+from calibration.joints import JOINTS, joint_spec
 from calibration.kinds import calibration_kind, registered
 from models import quaternion as Q
+from models.constraint import JointConstraint
 
 __all__ = ["CLINICAL_MOVEMENTS", "JOINT_ANGLES", "KIND_ANGLES", "NORMATIVE", "POPULATION",
            "REACH_MARGIN_DEG", "UNKNOWN_AGE", "WIDEST_NORMS", "JointAngleSet",
@@ -496,7 +500,6 @@ def not_measured(joint: str) -> dict[str, str]:
     measure (:data:`KIND_ANGLES`), each with the words a table shows for it, e.g. the elbow's
     ``{"pronation": "not measured by a hinge", "supination": ...}``; empty for most joints.
     The one place that decides it: the peaks, the tables and the report ask here."""
-    from calibration.joints import joint_spec
 
     kind = joint_spec(joint).kind  # ValueError naming the joints for an unknown one
     if joint not in JOINT_ANGLES:  # the shoulder (a ball joint): its own angles, all measured
@@ -520,7 +523,6 @@ def _widest_norms() -> dict[str, dict[str, tuple[float, str]]]:
     """Per joint and movement, the widest value the cited norms give (AAOS 1965; every
     population mean and 95 % CI upper end of :data:`POPULATION`; the shoulder's AAOS and Gill
     2020 means and band medians, :data:`calibration.clinical.NORMATIVE`) and its source."""
-    from calibration.clinical import NORMATIVE as SHOULDER
 
     out: dict[str, dict[str, tuple[float, str]]] = {}
 
@@ -634,7 +636,6 @@ class JointRangeOfMotion:
             if j == self.joint:
                 lines.append(f"note: {m} not compared with AAOS: {why}")
         if unmeasured:
-            from calibration.joints import joint_spec
 
             lines.append(f"note: {' and '.join(unmeasured)}: the {self.joint} is modelled as a "
                          f"{joint_spec(self.joint).kind}, which has no such movement: not "
@@ -706,10 +707,8 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     so one disturbed stretch would otherwise be the peak. All are used when none passes."""
     from scipy.ndimage import median_filter
 
-    from calibration.joints import JOINTS
 
     if status is not None:
-        from calibration.alignment import trusted_samples
 
         q = np.asarray(q)[trusted_samples(np.asarray(status).reshape(-1), len(q))]
     raw = joint_angles(q, joint, side)
@@ -788,8 +787,6 @@ def allowed_rom(constraints, joint: str, side: str = "right", *, directions=None
     same recording for every keyframe, so the largest of the smaller is the smaller of the
     largest); the other joints: :func:`constraint_rom`. ``rig rom --constraint``, the limb
     report and the IMU-path benchmark read coupled joints here."""
-    from calibration.clinical import range_of_motion
-    from models.constraint import JointConstraint
 
     if isinstance(constraints, JointConstraint):
         constraints = [constraints]

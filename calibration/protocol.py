@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.clinical import mirror_quaternions
+from calibration.joint_angles import from_angles
 from calibration.joints import LIMB_CHAINS
 from models import quaternion as Q
 
@@ -186,7 +188,6 @@ class LimbCalibrationProtocol:
     def joint_orientations(self, t, side: str = "right") -> np.ndarray:
         """Scripted joint orientations (N, 3, 4), rig frames (child relative to parent,
         :mod:`calibration.frames`), at times ``t`` (N,)."""
-        from calibration.joint_angles import from_angles
 
         a = self.angles(t)
         out = np.empty((len(a), len(self.joints), 4))
@@ -195,7 +196,6 @@ class LimbCalibrationProtocol:
                 theta = np.radians(a[:, i])
                 q = Q.from_axis_angle(_Z, theta)
                 if side == "left":
-                    from calibration.clinical import mirror_quaternions
 
                     q = mirror_quaternions(q)
                 out[:, i] = q

@@ -34,10 +34,12 @@ import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
+from models.constraint import JointConstraint
 from models.limb import Limb
 from models.limb_evaluation import held_out_postures
 from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
+from models.shapes import SHAPES, load_shape
 
 __all__ = [
     "RADII_DEG",
@@ -112,7 +114,6 @@ def random_star_polygon(rng: np.random.Generator | int, *, name: str = "star",
     -------
     JointConstraint
     """
-    from models.constraint import JointConstraint
 
     rng = np.random.default_rng(rng)
     k = int(rng.integers(10, 29))
@@ -146,8 +147,6 @@ def irregular_boundaries(n_random: int = 20, seed: int = HELD_OUT_SEED) -> dict[
     -------
     dict name → JointConstraint (insertion-ordered: shapes first).
     """
-    from models.constraint import JointConstraint
-    from models.shapes import SHAPES, load_shape
 
     out: dict[str, Any] = {}
     for s in SHAPES:
@@ -162,7 +161,6 @@ def irregular_boundaries(n_random: int = 20, seed: int = HELD_OUT_SEED) -> dict[
 
 def regular_boundaries(radii=RADII_DEG) -> dict[str, Any]:
     """Cones about +X, +Y, +Z of the given radii (degrees), no twist: dict name → constraint."""
-    from models.constraint import JointConstraint
 
     return {f"cone {ax} {r}°": JointConstraint.cone(v, r, name=f"cone-{ax}-{r}")
             for ax, v in (("X", [1, 0, 0]), ("Y", [0, 1, 0]), ("Z", [0, 0, 1]))

@@ -35,8 +35,12 @@ from collections.abc import Callable
 import numpy as np
 
 from models import quaternion as Q
+from models.constraint import JointConstraint
 from models.limb import LIMB_CHAINS, Limb
+from models.limb import Limb as _Limb
 from models.limb_oracle import LimbOracle
+from models.limits import ConeSwing
+from models.oracle import ConstraintOracle
 
 __all__ = [
     "HELD_OUT_LIMB_SEED",
@@ -85,7 +89,6 @@ def _azimuths(rng: np.random.Generator, k: int) -> np.ndarray:
 
 def random_limb(seed: int, kind: str = "leg") -> Limb:
     """A seeded held-out leg or arm (see the module docstring)."""
-    from models.limb import Limb as _Limb
 
     if kind not in LIMB_CHAINS:
         raise ValueError(f"kind: expected 'leg' or 'arm', got {kind!r}")
@@ -224,7 +227,6 @@ def _proposal(joint) -> tuple[np.ndarray, float, float, float]:
     """A cap (centre, radius) holding a swing joint's region at every coupling angle, and the
     hull (radians) of its twist intervals: where :func:`held_out_postures` draws valid
     orientations from."""
-    from models.limits import ConeSwing
 
     members = [joint.constraint] if joint.coupling is None else list(joint.coupling.keyframes)
     centre = np.zeros(3)
@@ -255,8 +257,6 @@ def uncoupled_model(limb: Limb, step_deg: float = 5.0) -> Callable[[np.ndarray],
     every ``step_deg`` of the source's range, the twist at the hull of its intervals), every
     other joint exact. What ignoring the coupling costs is its score beside the exact model's.
     """
-    from models.constraint import JointConstraint
-    from models.oracle import ConstraintOracle
 
     per_joint: list[list[ConstraintOracle]] = []
     for joint in limb.joints:

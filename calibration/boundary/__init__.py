@@ -31,66 +31,30 @@ step  what                                        module
 8     what a boundary holds; boundary distance    :mod:`~calibration.boundary.compare`
 all   the orchestrator                            :mod:`~calibration.boundary.extractor`
 1-2,6 a hinge's interval (elbow, knee)            :mod:`~calibration.boundary.hinge`
-joint one joint's extraction (--joint, --limb)    :mod:`~calibration.boundary.joint`
-limb  a limb's joints and their coupling          :mod:`~calibration.boundary.limb`
 ====  ==========================================  ============================================
 
 Imports point one way: ``planar`` → ``inset``, ``region`` → ``alpha``; ``projection`` →
 ``simplify``, ``twist``; ``inset`` → ``twist``; ``compare`` → ``sparse``; all → ``extractor``.
 
 Public API: :class:`BoundaryExtractor` (ball and two-axis joints), :class:`HingeExtractor`,
-:class:`LimbExtractor` (the one extraction entry: a whole limb, or a limb of one joint),
-:class:`SparseArc`, and the accuracy measures
-:func:`boundary_distance` (symmetric mean boundary distance), :func:`boundary_points`,
-:func:`outside_fraction` — each imported on first use (PEP 562 ``__getattr__``, as
-:mod:`models`), so that importing one step's module (a joint kind's extractor,
-:mod:`calibration.kinds`) does not import the limb extraction built on the kinds.
+:class:`SparseArc`, and the accuracy measures :func:`boundary_distance` (symmetric mean
+boundary distance), :func:`boundary_points`, :func:`outside_fraction`.
+
+These are the steps. What each joint kind extracts with them is in :mod:`calibration.kinds`;
+the one extraction entry, a limb of one or more joints (:class:`LimbExtractor`), is
+:mod:`calibration.extraction`, above both: nothing here imports either.
 """
 
-from __future__ import annotations
-
-import importlib
-from typing import TYPE_CHECKING, Any
-
-#: public name -> the module defining it
-_EXPORTS: dict[str, str] = {
-    "BoundaryExtractor": "calibration.boundary.extractor",
-    "HingeExtractor": "calibration.boundary.hinge",
-    "LimbExtractor": "calibration.boundary.limb",
-    "SparseArc": "calibration.boundary.sparse",
-    "boundary_distance": "calibration.boundary.compare",
-    "boundary_points": "calibration.boundary.compare",
-    "outside_fraction": "calibration.boundary.compare",
-}
+from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
+from calibration.boundary.extractor import BoundaryExtractor
+from calibration.boundary.hinge import HingeExtractor
+from calibration.boundary.sparse import SparseArc
 
 __all__ = [
     "BoundaryExtractor",
     "HingeExtractor",
-    "LimbExtractor",
     "SparseArc",
     "boundary_distance",
     "boundary_points",
     "outside_fraction",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    try:
-        module = _EXPORTS[name]
-    except KeyError:
-        raise AttributeError(f"module 'calibration.boundary' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # later look-ups skip __getattr__
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
-
-
-if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
-    from calibration.boundary.compare import boundary_distance, boundary_points, outside_fraction
-    from calibration.boundary.extractor import BoundaryExtractor
-    from calibration.boundary.hinge import HingeExtractor
-    from calibration.boundary.limb import LimbExtractor
-    from calibration.boundary.sparse import SparseArc

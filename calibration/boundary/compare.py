@@ -23,6 +23,7 @@ import numpy as np
 
 from models import quaternion as Q
 from models.constraint import JointConstraint
+from models.oracle import ConstraintOracle
 
 __all__ = [
     "Inside",
@@ -71,7 +72,6 @@ def swing_oracle(constraint: JointConstraint):
     TypeError
         ``constraint`` is not a :class:`~models.constraint.JointConstraint`.
     """
-    from models.oracle import ConstraintOracle
 
     if isinstance(constraint, JointConstraint):
         c = constraint

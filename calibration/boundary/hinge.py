@@ -28,7 +28,9 @@ import numpy as np
 from calibration.boundary.outliers import find_spikes, usable_samples
 from calibration.boundary.twist import TwistSettings, twist_envelope
 from calibration.errors import CalibrationError
+from calibration.joints import hinge_angles, off_axis_angles
 from models import quaternion as Q
+from models.constraint import JointConstraint
 
 __all__ = ["HingeExtractor"]
 
@@ -84,8 +86,6 @@ class HingeExtractor:
         """Extract the interval from joint orientations ``q`` (N, 4) (child relative to parent),
         with their IMU ``status`` bytes and sample times ``t`` when known (as
         :meth:`~calibration.boundary.BoundaryExtractor.fit`)."""
-        from calibration.joints import hinge_angles, off_axis_angles
-        from models.constraint import JointConstraint
 
         usable = usable_samples(q, status, t, min_system_status=self.min_system_status)
         recorded = Q.rotate(usable.q, self.limb_axis)

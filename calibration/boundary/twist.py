@@ -34,6 +34,7 @@ import numpy as np
 from calibration.boundary.inset import NOISE_REACH, dwell_medians, fast_noise, pileup_offset
 from calibration.boundary.projection import Projection
 from models import quaternion as Q
+from models.limits import SwingTwistTable
 
 __all__ = [
     "TableSettings",
@@ -285,7 +286,6 @@ def hold_twists(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, bandwidt
     """
     from scipy.optimize import linprog
 
-    from models.limits import SwingTwistTable
 
     lo, hi = lo.copy(), hi.copy()
     r = SwingTwistTable(bandwidth_deg, directions, lo, hi).weights(d)  # (N, K)

@@ -59,7 +59,7 @@ class CalibrationKind:
                   by_swing: bool | str, name: str) -> Any:
         """The unfitted extractor of a joint of this kind (``spec`` a
         :class:`calibration.joints.JointSpec` or None), fitted with
-        :func:`calibration.boundary.joint.fit_joint`."""
+        :func:`calibration.extraction.joint.fit_joint`."""
         raise NotImplementedError
 
     def clinical_angles(self, q: np.ndarray, side: str = "right") -> dict[str, np.ndarray]:

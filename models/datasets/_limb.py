@@ -21,7 +21,11 @@ import numpy as np
 from models import quaternion as quat
 from models.datasets._common import check_n, label_regions, make_rng
 from models.datasets._dataset import Dataset, dataset_meta
+from models.errors import DatasetError
 from models.geometry import nearest_on_polygons
+from models.limb import loads_limb
+from models.limb_oracle import LimbOracle
+from models.limits import PolygonSwing
 
 __all__ = ["UNIFORM", "coupled_directions", "coupled_targets", "field_joints", "field_samples",
            "limb_dataset", "limb_postures", "training_postures"]
@@ -39,7 +43,6 @@ UNIFORM = 0.7
 def limb_dataset(limb, n: int, rng: np.random.Generator | int | None = 0,
                  uniform: float = UNIFORM) -> Dataset:
     """``n`` postures of ``limb`` with their exact corrections (module docstring)."""
-    from models.limb_oracle import LimbOracle
 
     n = check_n(n)
     gen, rng_meta = make_rng(rng)
@@ -57,8 +60,6 @@ def limb_dataset(limb, n: int, rng: np.random.Generator | int | None = 0,
 
 def limb_postures(ds: Dataset):
     """``(limb, postures (N, J, 4))`` of a limb dataset; :class:`DatasetError` otherwise."""
-    from models.errors import DatasetError
-    from models.limb import loads_limb
 
     text = ds.meta.get("limb")
     if ds.meta.get("kind") != "limb" or not text:
@@ -75,7 +76,6 @@ def limb_postures(ds: Dataset):
 def field_joints(limb) -> list[str]:
     """The joints of a limb that get a trained field: coupled polygon swings (a coupled cone
     or interval is interpolated exactly in closed form)."""
-    from models.limits import PolygonSwing
 
     return [j.name for j in limb.joints if j.coupling is not None
             and isinstance(j.coupling.keyframes[0].swing, PolygonSwing)]
@@ -160,7 +160,6 @@ def field_samples(limb, name: str, postures: np.ndarray, result=None):
     """A field joint's training samples from postures: ``(d, angle, s, g)`` — its limb
     direction, its source's corrected angle (``result``: the limb oracle's answers for
     ``postures``, computed when not given), the exact targets."""
-    from models.limb_oracle import LimbOracle
 
     result = result or LimbOracle(limb).evaluate(postures)
     j = limb.index(name)

@@ -50,6 +50,8 @@ from models.datasets._limb import (
     field_samples,
     training_postures,
 )
+from models.limb import InterpolatedLimits, oriented_vertices
+from models.limb_oracle import LimbOracle
 
 __all__ = ["DistanceField", "FieldSpec", "fit_coupled_field", "fit_limb_fields", "fit_swing_field"]
 
@@ -315,7 +317,6 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
 
     from threadpoolctl import threadpool_limits
 
-    from models.limb_oracle import LimbOracle
 
     rng = np.random.default_rng(seed)
     if postures is None:
@@ -353,7 +354,6 @@ def fit_swing_field(constraint, rng: np.random.Generator,
                     spec: FieldSpec = FieldSpec()) -> DistanceField:
     """The same network on one joint's polygon swing (no coupling: τ is constant), for the
     measurement against the tabulated field (``benchmarks/bench_limb.py --single``)."""
-    from models.limb import InterpolatedLimits, oriented_vertices
 
     v = oriented_vertices(constraint.swing)
     limits = InterpolatedLimits(constraint.kind, np.array([0.0, 1.0]), (constraint, constraint),

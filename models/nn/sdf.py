@@ -29,6 +29,7 @@ import numpy as np
 
 from models import quaternion as quat
 from models.field import FieldModel
+from models.oracle import ConstraintOracle
 
 
 @dataclass
@@ -101,7 +102,6 @@ class DistanceNetModel(FieldModel):
     def fit_constraint(cls, constraint, rng, *, n: int = 20_000, hidden: int = 64,
                        epochs: int = 3000, steps: int = 3, oracle=None) -> DistanceNetModel:
         """Fit the distance network on ``n`` directions (half uniform, half within 20°)."""
-        from models.oracle import ConstraintOracle
 
         oracle = oracle or ConstraintOracle(constraint)
         t0 = time.perf_counter()

@@ -31,6 +31,9 @@ import numpy as np
 
 from models import metrics as M
 from models import quaternion as quat
+from models.datasets import quaternion_dataset
+from models.evaluation import evaluate_model
+from models.field import FieldModel
 from models.geometry import fibonacci_sphere
 from models.nn.evolution import EvolutionResult, GenerationStats, evolve
 from models.nn.gmlp import GMLP, swing_of
@@ -138,7 +141,6 @@ def training_patterns(constraint, n: int, rng: np.random.Generator, *,
 
 
 def _patterns(constraint, n, rng, **kw) -> tuple[np.ndarray, np.ndarray, str]:
-    from models.datasets import quaternion_dataset
 
     ds = quaternion_dataset(constraint, n, rng, **kw)
     return (np.asarray(ds.inputs, np.float64), quat.canonical(np.asarray(ds.targets)),
@@ -186,8 +188,6 @@ def split(q, t, sizes, rng):
 def _train_field(constraint, config: dict, rng, oracle, patterns) -> TrainedModel:
     import time
 
-    from models.evaluation import evaluate_model
-    from models.field import FieldModel
 
     t0 = time.perf_counter()
     f = FieldModel.from_constraint(constraint, grid=config["model"]["grid"], oracle=oracle)

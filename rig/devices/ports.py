@@ -89,7 +89,9 @@ def open_port(url: str, *, baud: int | None = None, separate_process: bool = Fal
             hosts = ",".join(sorted(SIM_DEVICES))
             raise RigConfigError(f"port {url!r}: unknown scheme {scheme!r}; use a device path "
                                  f"(/dev/ttyUSB0, COM3) or sim://{{{hosts}}}")
-        from rig.devices._sim_backends import open_sim_port  # only when a simulator is asked for
+        from rig.devices._sim_backends import (
+            open_sim_port,  # lazy: only when a simulator is asked for
+        )
 
         return open_sim_port(url, baud=baud, separate_process=separate_process)
     check_hardware_path(url)

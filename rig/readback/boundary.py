@@ -4,7 +4,7 @@ service for both).
 
 :func:`run_boundary` takes a :class:`BoundaryRequest` (which recording, one joint or a whole
 ``limb``, the extractor's parameters, where to write) and returns a :class:`BoundaryResult`;
-:func:`extract` runs one joint's extraction (:mod:`calibration.boundary.joint`) on joint
+:func:`extract` runs one joint's extraction (:mod:`calibration.extraction.joint`) on joint
 orientations already loaded (the recorder's range of motion, the report, the demo), and
 :func:`extract_limb` a whole limb's (:class:`calibration.boundary.LimbExtractor`). The
 constraint or limb file records its provenance (session or file, parameters, sample counts,
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from calibration.boundary import LimbExtractor
+from calibration.extraction import LimbExtractor
 from calibration.joints import LIMB_CHAINS, columns_mismatch
 from models.constraint import JointConstraint, dump_constraint
 from models.fileio import check_output

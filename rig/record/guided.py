@@ -35,8 +35,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.alignment import ImuJointCalibration, functional_axis, status_ok
+from calibration.errors import CalibrationError
+from calibration.limb_calibration import LimbImuCalibration
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from models import quaternion as Q
 from rig.record.pump import SampleBatch
+from rig.store.io import shared_instants
 
 __all__ = ["CalibrationResult", "GuidedCalibration", "NeutralCheckpoints"]
 
@@ -78,7 +83,6 @@ class GuidedCalibration:
     """
 
     def __init__(self, config, rig, *, display, protocol=None, stdin=None) -> None:
-        from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 
         self.config = config
         self.rig = rig
@@ -91,7 +95,6 @@ class GuidedCalibration:
                         else LimbCalibrationProtocol(self.limb))
         if (self.limb is not None) != isinstance(protocol, LimbCalibrationProtocol) or (
                 self.limb is not None and protocol.limb != self.limb):
-            from calibration.errors import CalibrationError
 
             what = "a whole-limb" if isinstance(protocol, LimbCalibrationProtocol) else "a joint"
             raise CalibrationError(f"the {self.limb or config.joint.name} rig was given {what} "
@@ -522,7 +525,6 @@ def _pairs(b: SampleBatch, parent: str, child: str
     """Parent and child orientations at the same instants (equal sample times), and whether
     both sensors' calibration status is trustworthy there (:func:`calibration.alignment.
     status_ok`: a magnetic disturbance drops it)."""
-    from calibration.alignment import status_ok
 
     clock = b.time()
     sp = b.name == parent
@@ -540,7 +542,6 @@ def _usable(ok: np.ndarray):
 
 
 def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child: str):
-    from calibration.alignment import ImuJointCalibration
 
     st, sl, sok = _pairs(static, parent, child)
     ft, fl, fok = _pairs(functional, parent, child)
@@ -570,8 +571,6 @@ _LIMB_MOVEMENTS = {
 def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The sensors ``names`` (proximal to distal) at the instants all of them have a sample
     (M, S, 4), and whether every sensor's status is trustworthy there (M,)."""
-    from calibration.alignment import status_ok
-    from rig.store.io import shared_instants
 
     clock = b.time()
     sel = [b.name == n for n in names]
@@ -583,7 +582,6 @@ def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, 
 
 def _solve_limb(static: SampleBatch, movements: dict[str, SampleBatch], limb: str, side: str,
                 protocol) -> CalibrationResult:
-    from calibration.limb_calibration import LimbImuCalibration
 
     segs = protocol.segments
     st, sok = _chain_samples(static, segs)
@@ -607,8 +605,6 @@ def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationRes
     """Servo chain: the neutral pose must read as the identity through the forward kinematics
     (a wrong zero offset or direction shows here), the functional movement as a rotation about
     one axis. No correction is applied: the chain's zeros are the rig configuration's."""
-    from calibration.alignment import functional_axis
-    from calibration.errors import CalibrationError
 
     qs = static.q[static.kind == "joint"]
     qf = functional.q[functional.kind == "joint"]

@@ -12,6 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from rig.devices.config import load_rig_config
+from rig.devices.ports import open_port
+from rig.devices.sources import open_source
+
 __all__ = ["OpenRig", "SensorInfo", "load_config", "open_rig"]
 
 
@@ -112,7 +117,6 @@ class OpenRig:
 
 def load_config(name_or_path: str):
     """The rig configuration (``rig.devices.config.load_rig_config``)."""
-    from rig.devices.config import load_rig_config
 
     return load_rig_config(name_or_path)
 
@@ -135,8 +139,6 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
     (:class:`rig.errors.RigConnectionError`, :class:`rig.errors.RigTimeoutError`), before any
     sample is recorded.
     """
-    from rig.devices.ports import open_port
-    from rig.devices.sources import open_source
 
     if which is None:
         which = "sensors" if getattr(config, "sensors", None) is not None else "servos"
@@ -187,7 +189,6 @@ def _patient_performs_protocol(port, limb: str | None = None) -> None:
     sp = port.simulated_patient
     if sp is None or sp.protocol_pinned or sp.limb.calibration_protocol is not None:
         return
-    from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 
     sp.start_protocol(CalibrationProtocol() if limb is None else LimbCalibrationProtocol(limb),
                       lead_s=2.0)

@@ -39,8 +39,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.clinical import format_rom_table, range_of_motion
 from calibration.coverage import CoverageMap
+from calibration.joint_angles import JOINT_ANGLES, recorded_rom
 from rig.errors import RigConfigError, RigConnectionError, RigError
+from rig.readback import extract, joint_orientations_from_store
 from rig.record.display import PlainDisplay, RecordStatus
 from rig.record.guided import (
     CalibrationResult,
@@ -297,8 +300,6 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         _limb_range_of_motion(store, result, config)
         return
     try:
-        from calibration.clinical import format_rom_table, range_of_motion
-        from rig.readback import extract, joint_orientations_from_store
 
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
         data = joint_orientations_from_store(store, result.session_id)
@@ -319,11 +320,6 @@ def _limb_range_of_motion(store, result: RecordResult, config) -> None:
     shoulder's from its extracted boundary as for a shoulder session), stored in the session's
     metadata as ``rom`` = ``{joint: table}``."""
     try:
-        from calibration.clinical import format_rom_table, range_of_motion
-        from calibration.joint_angles import JOINT_ANGLES, recorded_rom
-        from rig.readback import extract
-        from rig.readback.sessions import joint_orientations_from_store
-
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
         chain = joint_orientations_from_store(store, result.session_id)
         roms, tables = {}, []

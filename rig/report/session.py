@@ -41,8 +41,9 @@ from typing import Any
 import numpy as np
 
 from calibration.alignment import trusted_samples
-from calibration.boundary import LimbExtractor, boundary_distance
+from calibration.boundary import boundary_distance
 from calibration.clinical import isb_angles, range_of_motion
+from calibration.extraction import LimbExtractor
 from calibration.joints import LIMB_CHAINS, joint_mismatch
 from models import quaternion as Q
 from models.constraint import load_constraint, loads_constraint

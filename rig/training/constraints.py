@@ -6,14 +6,16 @@ import math
 
 import numpy as np
 
+from models import quaternion as Q
+from models.limb import Limb, load_limits
+from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
+
 __all__ = ["summarise"]
 
 
 def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
     """Validate ``path`` and describe it: limits, and the fraction of orientations it allows."""
-    from models import quaternion as Q
-    from models.limb import Limb, load_limits
-    from models.oracle import ConstraintOracle
 
     c = load_limits(path)  # read and parsed once, either kind
     if isinstance(c, Limb):
@@ -41,8 +43,6 @@ def summarise(path: str, samples: int = 200_000, seed: int = 0) -> str:
 def _summarise_limb(path: str, limb, samples: int, seed: int) -> str:
     """A limb file: its joints, couplings, and the fraction of random postures each swing
     joint allows (a coupled joint judged at its source's corrected angle)."""
-    from models import quaternion as Q
-    from models.limb_oracle import LimbOracle
 
     oracle = LimbOracle(limb)
     n = len(limb.joints)

@@ -15,7 +15,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from models import datasets as D
+from models.datasets import cone_constraint, limb_postures, load_dataset
 from models.errors import DatasetError
+from models.fileio import check_output
+from models.limb import Limb, load_limits
+from models.pca import quaternion_pca
+from models.shapes import load_shape
 
 __all__ = ["KINDS", "dataset_info", "make_dataset"]
 
@@ -55,8 +61,6 @@ def _floats(value: str, option: str, count: int | None = None) -> tuple[float, .
 def _constraint(constraint: str | None, loaded, shape: str | None, radius: str | None,
                 centre: str):
     """The quaternion dataset's constraint; ``loaded``: the ``--constraint`` file's content."""
-    from models.datasets import cone_constraint
-    from models.shapes import load_shape
 
     given = [
         o
@@ -130,13 +134,11 @@ def _make(
     seed: str | None = None,
     split: str | None = None,
 ) -> list[tuple[Path, Any]]:
-    from models import datasets as D
 
     if kind not in KINDS:
         raise DatasetError(f"--kind: unknown kind {kind!r}; choose one of {', '.join(KINDS)}")
     if out is None:
         raise DatasetError("--out: required (the .npz file to write)")
-    from models.fileio import check_output
 
     check_output(out, "--out")  # before the dataset is drawn
     count = _int(n, "--n")
@@ -156,7 +158,6 @@ def _make(
                 raise DatasetError(f"{option}: only for --kind quaternion, not {kind!r}")
     limits = None
     if kind in ("quaternion", "limb") and constraint is not None:
-        from models.limb import Limb, load_limits
 
         limits = load_limits(constraint)  # read once, either kind
         if isinstance(limits, Limb):
@@ -206,7 +207,6 @@ def _make(
 def _limb(limb, *, target_path: str, n: int, seed: int, split: str | None,
           others) -> list[tuple[Path, Any]]:
     """A limb dataset (:func:`models.datasets.limb_dataset`)."""
-    from models import datasets as D
 
     for option, value in others:
         if value is not None:
@@ -216,7 +216,6 @@ def _limb(limb, *, target_path: str, n: int, seed: int, split: str | None,
 
 
 def _save(ds, out: str, split: str | None, rng: int) -> list[tuple[Path, Any]]:
-    from models import datasets as D
 
     target = Path(out)
     if split is None:
@@ -231,13 +230,10 @@ def _save(ds, out: str, split: str | None, rng: int) -> list[tuple[Path, Any]]:
 
 def dataset_info(path: str) -> str:
     """The summary ``rig dataset info`` prints."""
-    from models.datasets import load_dataset
-    from models.pca import quaternion_pca
 
     ds = load_dataset(path)
     lines = [f"{path}", ds.summary()]
     if ds.meta.get("kind") == "limb":
-        from models.datasets import limb_postures
 
         lines.append(limb_postures(ds)[0].summary())
         return "\n".join(lines)

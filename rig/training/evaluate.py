@@ -10,6 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from models.errors import DatasetError
+from models.evaluation import evaluate_model, held_out_orientations
+from models.limb import Limb, load_limits
+from models.nn.train import training_patterns
+from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
+from rig.training.limb import evaluate_limb, limb_metric_lines
+from rig.training.train import metric_lines
+
 __all__ = ["DISTRIBUTIONS", "EvaluateRequest", "EvaluateResult", "run_evaluate"]
 
 #: ``--distribution`` values.
@@ -44,20 +53,12 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
     the model through onnxruntime and compare with the exact oracle."""
     import numpy as np
 
-    from models.errors import DatasetError
-    from models.evaluation import evaluate_model, held_out_orientations
-    from models.limb import Limb, load_limits
-    from models.nn.train import training_patterns
-    from models.onnx_io import load_model
-    from models.oracle import ConstraintOracle
-    from rig.training.train import metric_lines
 
     if request.distribution not in DISTRIBUTIONS:
         raise DatasetError(f"--distribution {request.distribution!r}: expected one of "
                            f"{', '.join(DISTRIBUTIONS)}")
     constraint = load_limits(request.constraint)
     if isinstance(constraint, Limb):
-        from rig.training.limb import evaluate_limb, limb_metric_lines
 
         if request.distribution != "held-out" or request.twist:
             raise DatasetError("--distribution/--twist: a limb model is evaluated on held-out "

@@ -17,6 +17,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from models.datasets import field_joints
+from models.errors import ModelFileError
+from models.evaluation import evaluate_model
+from models.limb_model import export_limb_model
+from models.nn.ndf import FieldSpec, fit_limb_fields
+from models.onnx_io import load_model
+from rig.training.metrics import labelled_lines
+
 __all__ = ["LIMB_METRIC_LABELS", "LIMB_PRESETS", "LimbTrained", "evaluate_limb",
            "limb_metric_lines", "train_limb"]
 
@@ -49,7 +57,6 @@ class LimbTrained:
 def limb_metric_lines(metrics: dict, joints) -> list[str]:
     """The limb metrics for people, one labelled line each (fractions in %), then each
     joint's mean direction error."""
-    from rig.training.metrics import labelled_lines
 
     out = labelled_lines(metrics, LIMB_METRIC_LABELS, 44)
     for name, err in zip(joints, metrics.get("joint_mean_direction_error_deg", ()),
@@ -59,7 +66,6 @@ def limb_metric_lines(metrics: dict, joints) -> list[str]:
 
 
 def _score(model, limb, n: int, seed: int) -> dict:
-    from models.evaluation import evaluate_model
 
     return evaluate_model(model, limb, n=n, seed=seed)
 
@@ -69,11 +75,6 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
                echo: Callable[[str], None]) -> tuple[LimbTrained, Path]:
     """Train (``network``) or compile (``geometric``) and export a limb model; ``postures``
     from a limb dataset (``data``: its file and content hash) replace the drawn ones."""
-    from models.datasets import field_joints
-    from models.errors import ModelFileError
-    from models.limb_model import export_limb_model
-    from models.nn.ndf import FieldSpec, fit_limb_fields
-    from models.onnx_io import load_model
 
     preset = preset or LIMB_PRESETS[0]
     if preset not in LIMB_PRESETS:
@@ -110,7 +111,6 @@ def train_limb(limb, out: str | Path, *, preset: str | None, seed: int,
 
 def evaluate_limb(model_path: str, limb, n: int, seed: int) -> tuple[dict, str]:
     """Score an exported limb model on ``n`` fresh held-out postures: ``(metrics, what)``."""
-    from models.onnx_io import load_model
 
     model = load_model(model_path, limb)
     metrics = _score(model, limb, n, seed)

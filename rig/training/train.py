@@ -18,6 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from models.datasets import limb_postures, load_dataset
+from models.errors import ConstraintError, DatasetError, ModelFileError
+from models.fileio import check_output
+from models.limb import Limb, load_limits
+from models.nn.config import get_config, load_config
+from models.nn.train import train_correction
+from models.onnx_io import export_onnx
+from rig.training.limb import LIMB_PRESETS, train_limb
+from rig.training.metrics import labelled_lines
 from rig.training.verdict import MODEL_TARGETS, missed_targets
 
 __all__ = ["PRESET_NAMES", "TrainRequest", "TrainResult",
@@ -48,7 +57,6 @@ def _silent(_: str) -> None:
 
 def metric_lines(metrics: dict) -> list[str]:
     """Held-out metrics for people, one labelled line each (fractions in %)."""
-    from rig.training.metrics import labelled_lines
 
     return labelled_lines(metrics, _LABELS, 42)
 
@@ -71,11 +79,8 @@ class TrainRequest:
         """Before any training (a GMLP preset runs for minutes): the output can be written in
         an existing folder (it is never created: a misspelled folder is a mistake), the preset
         is known."""
-        from models.errors import ModelFileError
-        from models.fileio import check_output
 
         check_output(self.out, "--out")
-        from rig.training.limb import LIMB_PRESETS
 
         if self.preset is not None and self.preset not in PRESET_NAMES + LIMB_PRESETS:
             raise ModelFileError(f"--preset {self.preset!r}: expected one of "
@@ -102,7 +107,6 @@ class TrainResult:
 def _load_data(ds, data_path, given, constraint_path):
     """(constraint, (inputs, targets, content hash)) of a loaded quaternion dataset ``ds``;
     checks it against ``given``, the constraint file's content (None without one)."""
-    from models.errors import DatasetError
 
     c = ds.constraint()
     if c is None or ds.inputs.shape[1:] != (4,) or ds.targets.shape[1:] != (4,):
@@ -118,12 +122,9 @@ def _limb_source(request: TrainRequest):
     """``(limb, postures, data)`` when the request is about a limb (a limb file, or a limb
     dataset — postures and ``{"file", "sha256"}``); else ``(None, constraint or None, dataset
     or None)``: each file read once."""
-    from models.errors import DatasetError, ModelFileError
-    from models.limb import Limb, load_limits
 
     limits = load_limits(request.constraint) if request.constraint is not None else None
     if request.data is not None:
-        from models.datasets import limb_postures, load_dataset
 
         ds = load_dataset(request.data)
         if ds.meta.get("kind") != "limb":
@@ -151,15 +152,10 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     summary (what ``rig train`` prints)."""
     import numpy as np
 
-    from models.errors import ConstraintError, ModelFileError
-    from models.nn.config import get_config, load_config
-    from models.nn.train import train_correction
-    from models.onnx_io import export_onnx
 
     request.check()
     limb, source, data = _limb_source(request)  # a joint's: (None, constraint, dataset)
     if limb is not None:
-        from rig.training.limb import train_limb
 
         t0 = time.perf_counter()
         trained, path = train_limb(limb, request.out, preset=request.preset,

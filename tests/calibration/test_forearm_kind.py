@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.boundary.joint import fit_joint
+from calibration.extraction.joint import fit_joint
 from calibration.joint_angles import NORMATIVE, joint_angles
 from calibration.joints import JOINTS
 from calibration.kinds import calibration_kind

@@ -101,7 +101,8 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     corners: 98.8 % held, and a keyframe had to be added)."""
     import numpy as np
 
-    from calibration.boundary import LimbExtractor, boundary_distance
+    from calibration.boundary import boundary_distance
+    from calibration.extraction import LimbExtractor
     from models.limb_oracle import LimbOracle
     from rig.sim.patients import anatomical_limb
 
@@ -133,7 +134,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
     import numpy as np
 
     import models.limb as limb_format
-    from calibration.boundary import LimbExtractor
+    from calibration.extraction import LimbExtractor
     from models.limb_oracle import LimbOracle
 
     def by_arc_length(a, b):
@@ -166,8 +167,9 @@ def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(idea
     between them."""
     import numpy as np
 
-    import calibration.boundary.limb as chain_mod
-    from calibration.boundary import LimbExtractor, boundary_distance
+    import calibration.extraction.limb as chain_mod
+    from calibration.boundary import boundary_distance
+    from calibration.extraction import LimbExtractor
     from models.errors import ConstraintError
     from rig.sim.patients import anatomical_limb
 
@@ -206,7 +208,8 @@ def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
     the rest of its boundary the same (about 1° apart on average, under the 3° the mean test
     resolves): found by the local test (test 2: the difference along 5 % of the boundaries),
     each keyframe within 1.5° of the true limits at its knee angle; the hip's coupling too."""
-    from calibration.boundary import LimbExtractor, boundary_distance
+    from calibration.boundary import boundary_distance
+    from calibration.extraction import LimbExtractor
 
     t, q = sim_leg_motion
     ex = LimbExtractor("leg").fit(q, t=t, side="right")
@@ -227,7 +230,7 @@ def test_one_keyframe_short_of_the_limit_is_not_a_dependence():
     simulated wrist at one elbow angle whose samples fell short of part of its limit), is not
     a dependence; graded differences (an ankle's: 2.3° between neighbours, 5.5° end to end)
     are."""
-    from calibration.boundary.limb import _local_difference
+    from calibration.extraction.limb import _local_difference
 
     def pairs(m):
         return {(i, k): {"p95_deg": m[i][k]} for i in range(len(m))
@@ -265,7 +268,8 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     shoulder holds them all; the unfolding and smoothing are tested with that test off."""
     import numpy as np
 
-    from calibration.boundary import LimbExtractor, boundary_distance
+    from calibration.boundary import boundary_distance
+    from calibration.extraction import LimbExtractor
     from models import quaternion as Q
     from models.limb_oracle import LimbOracle
     from rig.sim.limb import NoiseModel
@@ -360,7 +364,8 @@ def test_a_measured_slow_error_in_a_limb(ideal_arm, slow_insets):
     inset. Either way the shoulder's coupling is still written, its twist 8-10° too wide
     without the error measured comes within 2.5° of the truth (1.5° with the insets, which also
     take the constant error's own 1.9° off the end), and the wrist is still not coupled."""
-    from calibration.boundary import LimbExtractor, boundary_distance
+    from calibration.boundary import boundary_distance
+    from calibration.extraction import LimbExtractor
     from rig.sim.patients import anatomical_limb
 
     q, t = ideal_arm
@@ -413,7 +418,7 @@ def drifting_leg(sim_leg_motion):
 
 @pytest.fixture(scope="module")
 def drifting_leg_chain(drifting_leg):
-    from calibration.boundary import LimbExtractor
+    from calibration.extraction import LimbExtractor
 
     t, q, slow = drifting_leg
     return LimbExtractor("leg").fit(q, t=t, side="right", slow_error_deg=slow)
@@ -427,7 +432,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
     among the postures it is interpolated into."""
     import numpy as np
 
-    from calibration.boundary.limb import _spans, _swing_only
+    from calibration.extraction.limb import _spans, _swing_only
     from calibration.joints import JOINTS, hinge_angles
     from models import quaternion as Q
     from models.oracle import ConstraintOracle
@@ -452,7 +457,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
 
 def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg_chain):
     """``--joint`` and ``--limb`` on the same recording run one per-joint extraction
-    (calibration.boundary.joint): a joint the chain leaves uncoupled is written with the same
+    (calibration.extraction.joint): a joint the chain leaves uncoupled is written with the same
     limits, the measured slow error read the same way (the twist's reach alone). Before, the
     one-joint path moved a limb session's knee ends in by the error (0.4-1.1° on a simulated
     leg session, 82-84 % of the recorded angles left inside) while the chain did not."""
@@ -485,12 +490,12 @@ def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg
 
 def test_a_limb_of_one_joint_is_its_joints_one_extraction():
     """The one extraction entry takes a limb of one joint: ``LimbExtractor(("knee",))`` gives
-    the constraint (and report) of the knee's own extraction (:mod:`calibration.boundary.joint`),
+    the constraint (and report) of the knee's own extraction (:mod:`calibration.extraction.joint`),
     byte for byte, and writes no limb file."""
     import numpy as np
 
-    from calibration.boundary import LimbExtractor
-    from calibration.boundary.joint import fit_joint, joint_extractor
+    from calibration.extraction import LimbExtractor
+    from calibration.extraction.joint import fit_joint, joint_extractor
     from rig.readback import load_joint_orientations
 
     data = load_joint_orientations(str(DATA / "xio_ximu3_lower_body.sto"), reference="femur_r",

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibration.boundary import BoundaryExtractor, LimbExtractor
+from calibration.boundary import BoundaryExtractor
 from calibration.boundary.hinge import HingeExtractor
 from calibration.clinical import isb_angles, range_of_motion
+from calibration.extraction import LimbExtractor
 from calibration.joint_angles import (
     allowed_rom,
     angle_peaks,

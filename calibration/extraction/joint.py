@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from calibration.boundary.hinge import HingeExtractor
 from calibration.joints import JOINTS
 from calibration.kinds import calibration_kind
 from models.kinds import DEFAULT_KIND
@@ -52,7 +53,6 @@ def fit_joint(ex, q, *, t=None, status=None, slow_error_deg: float | None = None
     times ``t`` and IMU ``status`` when known, with its measured slow error used as
     ``slow_insets`` says (module doc); ``insets``: a keyframe's, measured on its joint's
     whole recording (``slow_insets`` only)."""
-    from calibration.boundary.hinge import HingeExtractor
 
     slow = float(slow_error_deg) if slow_error_deg else None
     kw: dict[str, Any] = {"t": t, "status": status, "provenance": provenance}

@@ -8,7 +8,7 @@ knee, ankle), each child relative to its parent in rig segment frames
 Each joint alone
 ----------------
 Each joint's limits are extracted from its own orientations by the one extraction
-``rig boundary --joint`` runs too (:mod:`calibration.boundary.joint`): the hinge (elbow, knee)
+``rig boundary --joint`` runs too (:mod:`calibration.extraction.joint`): the hinge (elbow, knee)
 by :class:`~calibration.boundary.HingeExtractor`, the others by
 :class:`~calibration.boundary.BoundaryExtractor` (the distal joint as a ``two-axis`` joint when
 its recorded twist allows). A joint left uncoupled is written as that extraction gives it, the
@@ -139,9 +139,9 @@ import numpy as np
 
 from calibration.boundary.compare import boundary_distance
 from calibration.boundary.inset import NOISE_REACH
-from calibration.boundary.joint import fit_joint, joint_extractor
 from calibration.boundary.twist import pooled_insets, singular_reach
 from calibration.errors import CalibrationError
+from calibration.extraction.joint import fit_joint, joint_extractor
 from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
 from models import quaternion as Q
 from models.constraint import JointConstraint
@@ -171,7 +171,7 @@ class LimbExtractor:
 
     A limb of one joint (``limb`` a tuple of one joint name, ``rig boundary --joint``,
     :func:`rig.readback.boundary.extract`) has nothing to couple: its joint's limits are the
-    one extraction of :mod:`calibration.boundary.joint` (a hinge's interval, else a swing
+    one extraction of :mod:`calibration.extraction.joint` (a hinge's interval, else a swing
     region and twist), available as ``constraint_`` and ``extractors_[joint]``; no limb file
     is written for it (``limb_`` is None) — its constraint is the file.
 
@@ -190,7 +190,7 @@ class LimbExtractor:
     slow_insets : bool
         Move the limits in by the measured slow error's insets too, not only take its twist
         reach (module doc, "Measured errors"; off by default; one-joint IMU sessions read
-        so, :mod:`calibration.boundary.joint`).
+        so, :mod:`calibration.extraction.joint`).
     name : str
     by_swing, limb_axis
         A limb of one joint: the swing-dependent twist choice (``"auto"``, True, False) and
@@ -408,7 +408,7 @@ class LimbExtractor:
 
     def _fit_one(self, q, *, t=None, status=None, provenance: dict | None = None,
                  slow_error_deg: dict[str, float | None] | None = None) -> LimbExtractor:
-        """A limb of one joint: its one extraction (:mod:`calibration.boundary.joint`)."""
+        """A limb of one joint: its one extraction (:mod:`calibration.extraction.joint`)."""
         (joint,) = self.limb
         if getattr(q, "ndim", 2) == 3:
             if q.shape[1] != 1:
