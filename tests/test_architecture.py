@@ -6,7 +6,11 @@ source's import statements, every one of them — at module level, inside functi
   ``a.b``'s ``__init__``: that edge counts too);
 - ``firmware_protocol`` and ``models`` import nothing of ours, ``calibration`` only ``models``;
 - nothing in ``rig/`` imports the CLI (``rig.commands``, ``rig.cli``) but the CLI itself and
-  ``python -m rig`` (``rig/__main__.py``).
+  ``python -m rig`` (``rig/__main__.py``);
+- our own modules are imported at the top of a file, except in the CLI and where a comment
+  says why the import is lazy; no private name is imported from another module;
+- no kind name is compared outside the kinds' own modules, and no module of ``rig/`` starts
+  to ask "one joint or a whole limb?" (the ones that still do are listed with the reason).
 """
 
 from __future__ import annotations
@@ -15,6 +19,8 @@ import ast
 from pathlib import Path
 
 import pytest
+
+from models.kinds import KINDS
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("firmware_protocol", "models", "calibration", "rig")
@@ -230,3 +236,125 @@ def test_no_private_attribute_of_a_library_object_is_used():
                     and isinstance(node.value, ast.Attribute)):
                 wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} uses .{node.attr}")
     assert not wrong, "\n".join(wrong)
+
+
+# --- one contract for a joint and a limb: where "is this a limb?" is still asked -----------
+
+#: The modules of ``rig/`` that still ask "one joint or a whole limb?", and why. A module not
+#: listed here must not start to; a listed one that stops is taken off (the test says so).
+#: The aim (issue 38) is an empty table: each entry is a place where a one-joint path and a
+#: limb path still differ in what they compute, not only in size.
+LIMB_OR_JOINT: dict[str, str] = {
+    "rig/demo/pipeline.py": "the shoulder demo or a limb demo, chosen from --limb",
+    "rig/loop/enforce.py": "the loop drives one joint; a limb model is refused",
+    "rig/readback/boundary.py": "--limb chooses a limb file or one joint's constraint",
+    "rig/readback/data.py": "one joint's properties of a recording read back",
+    "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
+    "rig/readback/sessions.py": "one joint's or a limb's IMU calibration and heading",
+    "rig/readback/source.py": "a session of one joint or a limb",
+    "rig/record/guided.py": "the joint's or the limb's calibration protocol",
+    "rig/record/rigio.py": "the joint's or the limb's calibration protocol",
+    "rig/record/session.py": "range of motion of one joint or of every joint",
+    "rig/report/session.py": "the one joint's page or the limb's",
+    "rig/sim/imu.py": "one simulated joint or a whole limb behind a port",
+    "rig/sim/limb/joint.py": "a simulated joint's constraint",
+    "rig/sim/limb/whole.py": "a simulated limb's limits",
+    "rig/sim/patients.py": "a patient's joint or limb",
+    "rig/store/boundaries.py": "boundaries of a session: limb files or joint constraints",
+    "rig/training/constraints.py": "a constraint file or a limb file",
+    "rig/training/datasets.py": "a joint's or a limb's dataset",
+    "rig/training/evaluate.py": "a joint's or a limb's evaluation",
+    "rig/training/train.py": "a joint's or a limb's training",
+    "rig/training/verdict.py": "a joint's or a limb's targets",
+}
+
+
+def _limb_or_joint_sites(path: Path) -> list[str]:
+    """Tests of "limb or joint" in a module: ``isinstance(x, Limb | JointConstraint)``, ``limb
+    is None`` / ``is not None`` (a name or attribute called ``limb``), ``is_limb``, and
+    ``session_limb(...)`` used as a condition."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = []
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id == "isinstance" and len(node.args) == 2):
+            names = {n.id if isinstance(n, ast.Name) else getattr(n, "attr", "")
+                     for n in ast.walk(node.args[1])}
+            if names & {"Limb", "JointConstraint"}:
+                out.append(f"{node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, ast.Compare) and any(isinstance(op, (ast.Is, ast.IsNot))
+                                                   for op in node.ops):
+            left = node.left
+            name = left.id if isinstance(left, ast.Name) else getattr(left, "attr", "")
+            if name == "limb":
+                out.append(f"{node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, (ast.Name, ast.Attribute)):
+            name = node.id if isinstance(node, ast.Name) else node.attr
+            if name in ("is_limb", "_is_limb"):
+                out.append(f"{node.lineno}: {name}")
+        elif isinstance(node, (ast.If, ast.IfExp, ast.While)):
+            for sub in ast.walk(node.test):
+                if (isinstance(sub, ast.Call) and isinstance(sub.func, ast.Name)
+                        and sub.func.id == "session_limb"):
+                    out.append(f"{node.lineno}: {ast.unparse(node.test)}")
+    return out
+
+
+def _limb_or_joint_modules() -> dict[str, list[str]]:
+    found = {}
+    for name, path in MODULES.items():
+        if not name.startswith("rig.") or name.startswith("rig.commands"):
+            continue
+        sites = _limb_or_joint_sites(path)
+        if sites:
+            found[path.relative_to(ROOT).as_posix()] = sites
+    return found
+
+
+def test_no_new_module_asks_whether_it_has_a_limb_or_a_joint():
+    found = _limb_or_joint_modules()
+    new = {k: v for k, v in found.items() if k not in LIMB_OR_JOINT}
+    assert not new, "modules that now branch on limb or joint:\n" + "\n".join(
+        f"{k}: {'; '.join(v)}" for k, v in new.items())
+    gone = sorted(set(LIMB_OR_JOINT) - set(found))
+    assert not gone, f"no longer branch on limb or joint, take them off LIMB_OR_JOINT: {gone}"
+
+
+def test_the_limb_or_joint_check_sees_what_it_should(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text("def f(c, limb=None, sess=None):\n"
+                 "    if isinstance(c, Limb):\n        pass\n"
+                 "    if limb is not None:\n        pass\n"
+                 "    if session_limb(sess):\n        pass\n"
+                 "    return is_limb\n", encoding="utf-8")
+    assert len(_limb_or_joint_sites(p)) == 4
+
+
+# --- joint kinds: what is special about a kind lives in its own modules ---------------------
+# Outside ``models/kinds/`` and ``calibration/kinds/`` no code compares anything with a kind's
+# name (``joint.kind == "hinge"``, ``kind in ("ball", "two-axis")``): it asks the registries
+# (:func:`models.kinds.get_kind`, :func:`calibration.kinds.calibration_kind`).
+
+KINDS_MODULES = ("models/kinds/", "calibration/kinds/")
+
+
+def _strings(node: ast.AST) -> list[str]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return [node.value]
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return [s for e in node.elts for s in _strings(e)]
+    return []
+
+
+def test_no_kind_name_comparisons_outside_the_kinds_modules():
+    names = set(KINDS)
+    found = []
+    for path in MODULES.values():
+        rel = path.relative_to(ROOT).as_posix()
+        if rel.startswith(KINDS_MODULES):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Compare) and any(
+                    s in names for o in (node.left, *node.comparators) for s in _strings(o)):
+                found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "compare with a kind's name outside its module:\n" + "\n".join(found)
