@@ -18,9 +18,11 @@ and the end-to-end accuracy check of ``rig record`` (``benchmarks/record_accurac
   20-70°. Seeds 101-105 are ``bench_record.py accuracy``'s held-out patients and 100-104
   ``bench_boundary.py``'s; tests use other seeds.
 - :func:`anatomical_limb`: a seeded, physiologically plausible arm or leg with couplings.
-- :func:`misplaced_mounts`: the default straps (:func:`rig.sim.limb.default_mounts`) each turned
-  ``misplace_deg`` about a random axis — the draws of the ``misplace_deg`` key of
-  ``sim://imu-stream`` / ``sim://bno055`` (:mod:`rig.sim.imu`).
+- :func:`patient_class`: which simulated limb wears given limits (each limb's
+  :attr:`~rig.sim.limb.SimulatedLimb.limits_type`); the limb itself says what differs — its
+  calibration protocol and its straps (``misplace_deg``: :func:`rig.sim.limb.misplaced_mounts`
+  for a joint, the draws of the ``misplace_deg`` key of ``sim://imu-stream`` / ``sim://bno055``,
+  :mod:`rig.sim.imu`; :func:`rig.sim.limb.limb_mounts` for an arm or leg).
 - :func:`patient_from_url`: the one resolver of a port string's patient keys (``patient=<shape
   name | constraint file>``, ``seed``, ``noise``, ...; :data:`PATIENT_KEYS`) into a
   :class:`~rig.sim.limb.SimulatedJoint`, for the IMU simulators and the back-driven servo
@@ -45,7 +47,7 @@ from scipy.spatial.transform import Rotation
 
 from calibration.clinical import mirror_directions
 from calibration.joint_angles import from_angles
-from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from calibration.protocol import CalibrationProtocol
 from models import quaternion as Q
 from models.constraint import JointConstraint, load_constraint
 from models.evaluation import random_star_polygon
@@ -59,14 +61,12 @@ from rig.sim.limb import (
     SimulatedJoint,
     SimulatedLimb,
     SimulatedWholeLimb,
-    default_mounts,
-    limb_mounts,
+    misplaced_mounts,
 )
-from rig.sim.limb.whole import LIMB_SEGMENTS
 from rig.sim.urls import SimUrl
 
 __all__ = ["LIMB_KEYS", "PATIENT_KEYS", "LimbRecording", "Recording", "anatomical_limb",
-           "limb_from_url", "misplaced_mounts", "patient_from_url", "record_imu",
+           "limb_from_url", "patient_class", "patient_from_url", "record_imu",
            "record_limb_imu", "record_servo", "resolve_patient", "seeded_patient",
            "star_constraint"]
 
@@ -105,23 +105,6 @@ def star_constraint(seed: int, *, max_tilt_deg: float = 10.0) -> JointConstraint
                      Q.check_vectors(star.swing.vertices))
     twist = (-float(rng.uniform(20.0, 70.0)), float(rng.uniform(20.0, 70.0)))
     return JointConstraint.polygon(verts, target, twist=twist, name=f"star-{seed}")
-
-
-def misplaced_mounts(rng: np.random.Generator, misplace_deg: float = 25.0,
-                     sensors: int = 2) -> list[SensorMount]:
-    """Sensor 0 on the thorax, the others on the limb (:func:`rig.sim.limb.default_mounts`),
-    each strap turned by ``misplace_deg`` about a random axis (sensor frame):
-    ``mount ⊗ exp(misplace_deg · axis)``. ``misplace_deg = 0``: the default straps."""
-    mounts = default_mounts(sensors, rng)
-    if not misplace_deg:
-        return mounts
-    out = []
-    for m in mounts:
-        axis = rng.standard_normal(3)
-        axis /= np.linalg.norm(axis)
-        err = Q.from_axis_angle(axis, math.radians(misplace_deg))
-        out.append(SensorMount(m.segment, tuple(Q.canonical(Q.multiply(m.mount, err)))))
-    return out
 
 
 def resolve_patient(value: str, *, url: str, key: str = "patient"):
@@ -186,9 +169,10 @@ def patient_from_url(q: SimUrl, *, sensors: int = 2,
     ``patient`` (a shape or a constraint file, :func:`resolve_patient`; default the 60° cone
     :data:`rig.sim.limb.DEFAULT_CONSTRAINT`), ``seed`` (0), ``noise`` (on: ``NoiseModel()``;
     off: ``NoiseModel.ideal()``), ``misplace_deg`` (5: each strap turned this far,
-    :func:`misplaced_mounts` of ``default_rng([seed, 0x5EA7])``), ``excursion`` (1, in
-    (0, 3]), ``speed`` (1, in (0, 20]), ``calibrate`` (off: the guided calibration protocol
-    from 2 s), ``neutral`` (0 or a checkpoint interval >= 6 s), ``neutral_sd`` (2°, 0..10).
+    :func:`rig.sim.limb.misplaced_mounts` of ``default_rng([seed, 0x5EA7])``), ``excursion``
+    (1, in (0, 3]), ``speed`` (1, in (0, 20]), ``calibrate`` (off: the guided calibration
+    protocol from 2 s), ``neutral`` (0 or a checkpoint interval >= 6 s), ``neutral_sd`` (2°,
+    0..10).
 
     Parameters
     ----------
@@ -540,6 +524,28 @@ def _rounded(d: dict) -> dict:
 # ---------------------------------------------------------------------------------------------
 # The factory (a joint's patient or an arm's or leg's), port strings, offline recordings
 
+#: The simulated limbs, each under the limits it wears (:attr:`SimulatedLimb.limits_type`).
+_WEARERS: dict[type, type[SimulatedLimb]] = {
+    cls.limits_type: cls for cls in (SimulatedJoint, SimulatedWholeLimb)}
+
+
+def patient_class(limits) -> type[SimulatedLimb] | None:
+    """The simulated limb that wears ``limits``: a :class:`~rig.sim.limb.SimulatedJoint` a
+    joint's constraint, a :class:`~rig.sim.limb.SimulatedWholeLimb` a limb file's limits; None
+    for anything else.
+
+    Parameters
+    ----------
+    limits : object
+
+    Returns
+    -------
+    type or None
+        A subclass of :class:`~rig.sim.limb.SimulatedLimb`.
+    """
+    return next((_WEARERS[t] for t in type(limits).__mro__ if t in _WEARERS), None)
+
+
 
 def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | None = None,
                       misplace_deg: float = 25.0, calibrate: bool = True,
@@ -556,7 +562,7 @@ def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | 
         them).
     limb : JointConstraint, models.limb.Limb or {"arm", "leg"}
         The patient's true limits: a joint's constraint (a :class:`~rig.sim.limb.SimulatedJoint`
-        wearing two IMUs, thorax and limb, :func:`misplaced_mounts`; e.g.
+        wearing two IMUs, thorax and limb, :func:`rig.sim.limb.misplaced_mounts`; e.g.
         :func:`star_constraint` ``(seed)``), a limb file's :class:`~models.limb.Limb`, or the
         :func:`anatomical_limb` ``(seed, limb, side)`` (a :class:`~rig.sim.limb.SimulatedWholeLimb`
         wearing one IMU per segment, :func:`rig.sim.limb.limb_mounts`).
@@ -585,28 +591,14 @@ def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | 
         A :class:`~rig.sim.limb.SimulatedJoint` or a :class:`~rig.sim.limb.SimulatedWholeLimb`.
     """
     rng = np.random.default_rng([seed, 0x5EA7])
-    if isinstance(limb, JointConstraint):
-        return SimulatedJoint(limb, sensors=misplaced_mounts(rng, misplace_deg), noise=noise,
-                              seed=seed, calibration_protocol=(CalibrationProtocol() if calibrate
-                                                               else None),
-                              protocol_start_s=protocol_start_s, neutral_every_s=neutral,
-                              **kwargs)
-    truth = limb if isinstance(limb, Limb) else anatomical_limb(seed, limb, side)
-    protocol = LimbCalibrationProtocol(_limb_kind(truth)) if calibrate else None
-    segments = (truth.joints[0].parent, *(j.child for j in truth.joints))
-    mounts = limb_mounts(segments, rng, misplace_deg)
-    return SimulatedWholeLimb(truth, sensors=mounts, noise=noise, seed=seed,
-                              calibration_protocol=protocol, protocol_start_s=protocol_start_s,
-                              neutral_every_s=neutral, **kwargs)
-
-
-def _limb_kind(limb) -> str:
-    names = tuple(j.name for j in limb.joints)
-    for kind, (joints, _) in LIMB_SEGMENTS.items():
-        if names == joints:
-            return kind
-    raise ValueError(f"limb {limb.name!r}: joints {', '.join(names)} are neither an arm "
-                     f"(shoulder, elbow, wrist) nor a leg (hip, knee, ankle)")
+    wearer = patient_class(limb)
+    if wearer is None:  # not limits but a name: the anatomical arm or leg of the seed
+        limb = anatomical_limb(seed, limb, side)
+        wearer = patient_class(limb)
+    protocol = wearer.calibration_protocol_for(limb) if calibrate else None
+    return wearer(limb, sensors=wearer.misplaced_straps(limb, rng, misplace_deg), noise=noise,
+                  seed=seed, calibration_protocol=protocol, protocol_start_s=protocol_start_s,
+                  neutral_every_s=neutral, **kwargs)
 
 
 def limb_from_url(q: SimUrl, *, sensors: int | None = None):

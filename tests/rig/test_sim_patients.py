@@ -11,10 +11,15 @@ from models import quaternion as Q
 from models.constraint import dump_constraint
 from models.oracle import ConstraintOracle
 from rig.sim import from_url
-from rig.sim.limb import NoiseModel, SimulatedJoint, SimulatedLimb, SimulatedWholeLimb
+from rig.sim.limb import (
+    NoiseModel,
+    SimulatedJoint,
+    SimulatedLimb,
+    SimulatedWholeLimb,
+    misplaced_mounts,
+)
 from rig.sim.patients import (
     anatomical_limb,
-    misplaced_mounts,
     record_imu,
     record_servo,
     seeded_patient,

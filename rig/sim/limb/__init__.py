@@ -43,7 +43,13 @@ Modules (each part a small object or pure functions; the limbs compose them)
 
 from rig.sim.limb.base import Measurement, SimulatedLimb
 from rig.sim.limb.joint import DEFAULT_CONSTRAINT, JointState, SimulatedJoint
-from rig.sim.limb.sensors import GRAVITY, NoiseModel, SensorMount, default_mounts
+from rig.sim.limb.sensors import (
+    GRAVITY,
+    NoiseModel,
+    SensorMount,
+    default_mounts,
+    misplaced_mounts,
+)
 from rig.sim.limb.whole import SimulatedWholeLimb, WholeLimbState, limb_mounts
 
 __all__ = [
@@ -59,4 +65,5 @@ __all__ = [
     "WholeLimbState",
     "default_mounts",
     "limb_mounts",
+    "misplaced_mounts",
 ]

@@ -21,7 +21,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from models import quaternion as Q
-from rig.sim.limb.sensors import RAW_STEP_S, Readings
+from rig.sim.limb.sensors import RAW_STEP_S, Readings, SensorMount
 
 __all__ = ["Measurement", "SimulatedLimb", "SimulatedState", "default_world_from_root",
            "forwarded", "seeded"]
@@ -124,8 +124,48 @@ class SimulatedLimb:
     (:class:`~rig.sim.limb.motion.SmoothPath`) and ``mounts``, and implements
     :attr:`schedule`, :attr:`calibration_protocol`, :meth:`perform_protocol`, :meth:`truth`
     (a :class:`SimulatedState` with a ``sensors`` field (N, S, 4)) and, when its sensors' lever
-    arms move with the joints, :meth:`_positions`.
+    arms move with the joints, :meth:`_positions`; and says what it wears: its
+    :attr:`limits_type`, what a seeded patient wearing such limits performs
+    (:meth:`calibration_protocol_for`) and where its straps sit (:meth:`misplaced_straps`) —
+    :func:`rig.sim.patients.seeded_patient` chooses the limb by them, no one asks "a joint or
+    a whole limb?".
     """
+
+    limits_type: type
+    """The limits the limb moves inside (a joint's constraint, a limb file's limits)."""
+
+    @classmethod
+    def check_limits(cls, limits, name: str):
+        """``limits`` as given, if they are what the limb wears (:attr:`limits_type`).
+
+        Parameters
+        ----------
+        limits : object
+        name : str
+            The argument's name, for the error.
+
+        Raises
+        ------
+        TypeError
+            Anything else: names the argument and the type expected.
+        """
+        expected = cls.limits_type
+        if not isinstance(limits, expected):
+            raise TypeError(f"{name} must be a {expected.__module__}.{expected.__qualname__}, "
+                            f"got {type(limits).__name__}")
+        return limits
+
+    @classmethod
+    def calibration_protocol_for(cls, limits):
+        """The guided calibration protocol a patient wearing ``limits`` performs."""
+        raise NotImplementedError
+
+    @classmethod
+    def misplaced_straps(cls, limits, rng: np.random.Generator,
+                         misplace_deg: float) -> list[SensorMount]:
+        """The sensors a patient wearing ``limits`` is given, each strap turned
+        ``misplace_deg`` about an axis drawn from ``rng``."""
+        raise NotImplementedError
 
     # -- the schedule's times, as attributes of the patient ------------------------------------
     protocol_start_s = forwarded("schedule.start_s",

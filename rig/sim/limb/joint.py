@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.protocol import CalibrationProtocol
 from models.constraint import JointConstraint
 from rig.sim.limb.base import (
     SimulatedLimb,
@@ -42,6 +43,7 @@ from rig.sim.limb.sensors import (
     SensorMount,
     SensorPlacement,
     default_mounts,
+    misplaced_mounts,
 )
 
 __all__ = ["DEFAULT_CONSTRAINT", "JointState", "SimulatedJoint"]
@@ -170,9 +172,7 @@ class SimulatedJoint(SimulatedLimb):
         checkpoints = NeutralCheckpoints(neutral_every_s, neutral_hold_s, neutral_ramp_s)
         if constraint is None:
             constraint = DEFAULT_CONSTRAINT
-        if not isinstance(constraint, JointConstraint):
-            raise TypeError(f"constraint must be a models.constraint.JointConstraint, got "
-                            f"{type(constraint).__name__}")
+        self.check_limits(constraint, "constraint")
         if not excursion > 0 or not speed > 0:
             raise ValueError("excursion and speed must be > 0")
         # (row, component) sinusoids: swing u, swing v, twist, sway x, sway y
@@ -192,6 +192,19 @@ class SimulatedJoint(SimulatedLimb):
         self.noise = noise if noise is not None else NoiseModel()
         self.sensor_errors = SensorErrors(self.noise, self.placement, rng, seed_seq)
         self._path = SmoothPath(smooth_s)
+
+    limits_type = JointConstraint
+
+    @classmethod
+    def calibration_protocol_for(cls, limits: JointConstraint) -> CalibrationProtocol:
+        """A joint's guided calibration (:class:`calibration.protocol.CalibrationProtocol`)."""
+        return CalibrationProtocol()
+
+    @classmethod
+    def misplaced_straps(cls, limits: JointConstraint, rng: np.random.Generator,
+                         misplace_deg: float) -> list[SensorMount]:
+        """Two sensors, thorax and limb (:func:`~rig.sim.limb.sensors.misplaced_mounts`)."""
+        return misplaced_mounts(rng, misplace_deg)
 
     @classmethod
     def from_constraint(cls, constraint: JointConstraint, **kwargs) -> SimulatedJoint:

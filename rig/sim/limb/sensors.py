@@ -3,7 +3,8 @@
 Placement (:class:`SensorPlacement`)
 ------------------------------------
 Sensor ``i`` is strapped on a segment (``"thorax"``, the parent, or ``"limb"``) with a fixed
-mounting rotation ``mount`` (sensor relative to segment, :class:`SensorMount`). Its true
+mounting rotation ``mount`` (sensor relative to segment, :class:`SensorMount`; the default
+straps :func:`default_mounts`, each turned off them by :func:`misplaced_mounts`). Its true
 orientation relative to world is::
 
     q_world_sensor = thorax(t) ⊗ [joint(t) ⊗] mount
@@ -64,6 +65,7 @@ __all__ = [
     "SensorMount",
     "SensorPlacement",
     "default_mounts",
+    "misplaced_mounts",
 ]
 
 _X = np.array([1.0, 0.0, 0.0])
@@ -152,6 +154,23 @@ def default_mounts(n: int, rng: np.random.Generator) -> list[SensorMount]:
     for q in Q.random_quaternions(max(0, n - 2), rng):
         mounts.append(SensorMount("limb", tuple(Q.canonical(q))))
     return mounts[:n]
+
+
+def misplaced_mounts(rng: np.random.Generator, misplace_deg: float = 25.0,
+                     sensors: int = 2) -> list[SensorMount]:
+    """Sensor 0 on the thorax, the others on the limb (:func:`default_mounts`),
+    each strap turned by ``misplace_deg`` about a random axis (sensor frame):
+    ``mount ⊗ exp(misplace_deg · axis)``. ``misplace_deg = 0``: the default straps."""
+    mounts = default_mounts(sensors, rng)
+    if not misplace_deg:
+        return mounts
+    out = []
+    for m in mounts:
+        axis = rng.standard_normal(3)
+        axis /= np.linalg.norm(axis)
+        err = Q.from_axis_angle(axis, math.radians(misplace_deg))
+        out.append(SensorMount(m.segment, tuple(Q.canonical(Q.multiply(m.mount, err)))))
+    return out
 
 
 class SensorPlacement:

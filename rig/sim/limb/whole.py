@@ -142,7 +142,7 @@ def limb_mounts(segments: Sequence[str], rng: np.random.Generator | None = None,
     """One sensor per segment (sensor ``i`` on ``segments[i]``) at nominal straps (none the
     identity, as straps are in practice), each turned by ``misplace_deg`` about a random axis
     (``mount ⊗ exp(misplace_deg · axis)``, sensor frame, axes drawn from ``rng``) — the draws
-    of :func:`rig.sim.patients.misplaced_mounts`."""
+    of :func:`rig.sim.limb.sensors.misplaced_mounts`."""
     if len(segments) != len(_NOMINAL):
         raise ValueError(f"a chain wears {len(_NOMINAL)} sensors, got {len(segments)} segments")
     out = []
@@ -382,8 +382,7 @@ class SimulatedWholeLimb(SimulatedLimb):
         smooth_s: float = 0.04,
         max_speed_dps: float = 400.0,
     ) -> None:
-        if not isinstance(limb, Limb):
-            raise TypeError(f"limb must be a models.limb.Limb, got {type(limb).__name__}")
+        self.check_limits(limb, "limb")
         kind = limb.limb if limb.limb in LIMB_SEGMENTS else None
         joint_names = tuple(j.name for j in limb.joints)
         if kind is None:  # a limb file without 'limb:': tell it by its joints
@@ -452,6 +451,32 @@ class SimulatedWholeLimb(SimulatedLimb):
         self._path = SmoothPath(smooth_s)
         self._follow = RateLimit(smooth_s, math.radians(max_speed_dps), self._nearest,
                                  self._near_range)
+
+    limits_type = Limb
+
+    @classmethod
+    def calibration_protocol_for(cls, limits: Limb) -> LimbCalibrationProtocol:
+        """The limb's guided calibration (:class:`calibration.protocol.LimbCalibrationProtocol`
+        of an arm or a leg, told by the limb's joints).
+
+        Raises
+        ------
+        ValueError
+            The joints are neither an arm's nor a leg's.
+        """
+        names = tuple(j.name for j in limits.joints)
+        kind = next((k for k, (joints, _) in LIMB_SEGMENTS.items() if names == joints), None)
+        if kind is None:
+            raise ValueError(f"limb {limits.name!r}: joints {', '.join(names)} are neither an "
+                             f"arm (shoulder, elbow, wrist) nor a leg (hip, knee, ankle)")
+        return LimbCalibrationProtocol(kind)
+
+    @classmethod
+    def misplaced_straps(cls, limits: Limb, rng: np.random.Generator,
+                         misplace_deg: float) -> list[SensorMount]:
+        """One sensor per segment (:func:`limb_mounts`)."""
+        return limb_mounts((limits.joints[0].parent, *(j.child for j in limits.joints)), rng,
+                           misplace_deg)
 
     @property
     def schedule(self) -> Schedule:
