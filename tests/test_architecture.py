@@ -246,7 +246,6 @@ def test_no_private_attribute_of_a_library_object_is_used():
 #: limb path still differ in what they compute, not only in size.
 LIMB_OR_JOINT: dict[str, str] = {
     "rig/demo/pipeline.py": "the shoulder demo or a limb demo, chosen from --limb",
-    "rig/loop/enforce.py": "the loop drives one joint; a limb model is refused",
     "rig/readback/boundary.py": "--limb chooses a limb file or one joint's constraint",
     "rig/readback/data.py": "one joint's properties of a recording read back",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",

@@ -18,6 +18,7 @@ import json
 import math
 import signal
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -309,14 +310,16 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     ports = dict(hooks.ports or {})
     own_port = servos.port not in ports
     port = ports.get(servos.port)
-    limb = telemetry = None
+    opened = ExitStack()  # closed in reverse when the run ends: telemetry, servo limb, own port
     run_id = enforce_session = None
     try:
         with src:
             if own_port:  # a simulated bus in a process of its own, as hardware is
                 port = open_port(servos.port, baud=servos.baud,
                                  separate_process=hooks.clock is None)
+                opened.callback(port.close)
             limb = prepare_servo_limb(port, servos, prep.oracle, log=echo)
+            opened.callback(limb.close)
             for tip in limb.bus.advice:
                 echo(f"note: {tip}")
             # -- the store: an 'enforce' session and a run ------------------------------------
@@ -341,6 +344,7 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 store_writer = TelemetryWriter(store, run_id)
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
                                   keep=hooks.keep_telemetry)
+            opened.callback(telemetry.close)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}
             loop = EnforcementLoop(limb, prep.model, prep.oracle, src, cfg, telemetry=telemetry,
@@ -395,12 +399,7 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 pass
         raise
     finally:
-        if telemetry is not None:
-            telemetry.close()
-        if limb is not None:
-            limb.close()
-        if own_port and port is not None:
-            port.close()
+        opened.close()
 
 
 def _install_signals(loop):
