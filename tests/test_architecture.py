@@ -245,7 +245,7 @@ def test_no_private_attribute_of_a_library_object_is_used():
 #: The aim (issue 38) is an empty table: each entry is a place where a one-joint path and a
 #: limb path still differ in what they compute, not only in size.
 LIMB_OR_JOINT: dict[str, str] = {
-    "rig/demo/pipeline.py": "the shoulder demo or a limb demo, chosen from --limb",
+    "rig/demo/pipeline.py": "--limb chooses JointDemo or LimbDemo, the one place that does",
     "rig/readback/boundary.py": "--limb chooses a limb file or one joint's constraint",
     "rig/readback/data.py": "one joint's properties of a recording read back",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
@@ -255,9 +255,9 @@ LIMB_OR_JOINT: dict[str, str] = {
     "rig/record/rigio.py": "the joint's or the limb's calibration protocol",
     "rig/record/session.py": "range of motion of one joint or of every joint",
     "rig/report/session.py": "the one joint's page or the limb's",
-    "rig/sim/imu.py": "one simulated joint or a whole limb behind a port",
+    "rig/sim/imu.py": "the default patient when no motion source is given (limb=None)",
     "rig/sim/patients.py": "a port string's patient= file: a limb file makes an arm or leg",
-    "rig/store/boundaries.py": "boundaries of a session: limb files or joint constraints",
+    "rig/store/boundaries.py": "the caller's filter list(limb=None|True|False) on the stored tag",
     "rig/training/constraints.py": "a constraint file or a limb file",
     "rig/training/datasets.py": "a joint's or a limb's dataset",
     "rig/training/evaluate.py": "a joint's or a limb's evaluation",

@@ -39,6 +39,7 @@ def run_demo(options: DemoOptions, *, console=None) -> DemoResult:
     RigError
         A bad option or an unreachable device given by port, before anything is written.
     """
+    # --limb chooses the demo, here only: what differs lives in JointDemo / LimbDemo
     demo = LimbDemo(options) if options.limb is not None else JointDemo(options)
     console = console if console is not None else Console()
     out = check_output(options.out, "--out", folder=True)  # before any stage

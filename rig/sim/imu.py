@@ -150,6 +150,7 @@ class Bno055Simulator(PtyServer):
         clock: Callable[[], float] = time.monotonic,
         seed: int | None = 0,
     ) -> None:
+        # no motion source given: the default patient of the seed (not a joint-or-limb question)
         self.limb = limb if limb is not None else SimulatedJoint(sensors=2, seed=seed)
         self.sensor = sensor if sensor is not None else min(1, self.limb.n_sensors - 1)
         if not 0 <= self.sensor < self.limb.n_sensors:
@@ -422,7 +423,7 @@ class StreamImuSimulator(PtyServer):
             raise ValueError(f"max_lag_s must be > 0 or None, got {max_lag_s!r}")
         if not 0 <= initial_seq <= 0xFFFF:
             raise ValueError(f"initial_seq must be 0..65535, got {initial_seq}")
-        if limb is None:
+        if limb is None:  # no motion source given: the default patient of sensors and seed
             if not 1 <= sensors <= S.MAX_SENSORS:
                 raise ValueError(f"sensors must be 1..{S.MAX_SENSORS}, got {sensors}")
             limb = SimulatedJoint(sensors=sensors, seed=seed)
@@ -789,5 +790,6 @@ def stream_patient(q: SimUrl):
     :class:`~rig.sim.limb.SimulatedLimb`. Deterministic in the query, so a process that does
     not serve the board builds the same patient (its ground truth) from the same string."""
     sensors = q.integer("sensors", 2, 1, S.MAX_SENSORS)
+    # limb_from_url is the one place that reads the user's limb= / patient= limb file
     chain = limb_from_url(q, sensors=sensors if "sensors" in q else None)
     return chain if chain is not None else patient_from_url(q, sensors=sensors)

@@ -669,6 +669,9 @@ def _limb_file(path: str, url: str):
         return None  # resolve_patient names it
     except (OSError, ValueError) as err:
         raise RigConfigError(f"{url}: patient={path!r}: {_one_line(err)}") from err
+    # The user's patient= names a file of either format: what it holds decides which patient
+    # the port string describes. This is the one place that reads it (limb_from_url's caller
+    # builds the joint's patient from the same file when this says None).
     return limits if isinstance(limits, Limb) else None
 
 

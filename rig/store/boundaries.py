@@ -44,6 +44,8 @@ class BoundaryRepository(Repository):
         the whole-limb files (``meta.kind`` ``"limb"``, :data:`LIMB_BOUNDARY`) or only the
         single joints' constraints."""
         out = self._of_session(session_id)
+        # the caller's filter, not a branch: which stored rows are limb files is decided here
+        # only, by the tag rig boundary --limb writes (LIMB_BOUNDARY)
         if limb is None:
             return out
         return [r for r in out if ((r["meta"] or {}).get("kind") == LIMB_BOUNDARY) == limb]
