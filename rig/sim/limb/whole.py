@@ -78,7 +78,8 @@ foot 0.15); the root's sensor its length above a world-fixed pivot (thorax 0.30 
 Random streams, all from ``seed``: the motion's sinusoids, then the sensor errors draw from the
 seeded generator in that order; the neutral poses and the accelerometer/magnetometer noise have
 seed sequences of their own (nothing drawn from the generator). Misplaced straps are drawn by
-the caller (:func:`limb_mounts`, as :func:`rig.sim.patients.seeded_patient` does).
+the caller (:func:`limb_mounts`; :meth:`SimulatedWholeLimb.misplaced_straps`, which
+:func:`rig.sim.patients.seeded_patient` calls).
 """
 
 from __future__ import annotations
