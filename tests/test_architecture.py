@@ -261,11 +261,8 @@ LIMB_OR_JOINT: dict[str, str] = {
     "rig/sim/limb/whole.py": "a simulated limb's limits",
     "rig/sim/patients.py": "a patient's joint or limb",
     "rig/store/boundaries.py": "boundaries of a session: limb files or joint constraints",
-    "rig/training/constraints.py": "a constraint file or a limb file",
-    "rig/training/datasets.py": "a joint's or a limb's dataset",
-    "rig/training/evaluate.py": "a joint's or a limb's evaluation",
-    "rig/training/train.py": "a joint's or a limb's training",
-    "rig/training/verdict.py": "a joint's or a limb's targets",
+    "rig/training/verdict.py": ("the one place (`judging`) that turns a caller's `limb=` "
+                                "word, or its absence, into whose targets judge an evaluation"),
 }
 
 

@@ -17,8 +17,8 @@ from models.onnx_io import export_onnx, load_model
 from models.oracle import ConstraintOracle
 from models.shapes import SHAPES, load_shape
 from rig.sim.patients import anatomical_limb
+from rig.training.joint import enforcement_warnings
 from rig.training.limb import limb_metric_lines
-from rig.training.train import enforcement_warnings
 from rig.training.verdict import evaluation_verdict, missed_targets, targets_for
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import jtext, onnx_bytes, prefixed, quats
