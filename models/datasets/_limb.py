@@ -2,7 +2,7 @@
 
 ``inputs`` (N, 4·J) are postures (joint orientations, child relative to parent, scalar-first,
 in the limb file's joint order, flattened joint by joint); ``targets`` (N, 4·J) the exact
-corrections (:class:`models.limb_oracle.LimbOracle`, ``corrected_j = correction_j ⊗ q_j``);
+corrections (:class:`models.oracle.ConstraintOracle`, ``corrected_j = correction_j ⊗ q_j``);
 ``regions`` as for one joint, judged on the joints the network learns (the coupled polygon
 swings; every joint when there are none): valid when each of them is, the distance the
 largest. The postures are the ones the trained limb model learns from
@@ -39,12 +39,12 @@ UNIFORM = 0.7
 def limb_dataset(limb, n: int, rng: np.random.Generator | int | None = 0,
                  uniform: float = UNIFORM) -> Dataset:
     """``n`` postures of ``limb`` with their exact corrections (module docstring)."""
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
 
     n = check_n(n)
     gen, rng_meta = make_rng(rng)
     q = training_postures(limb, n, gen, uniform)
-    res = LimbOracle(limb).evaluate(q)
+    res = ConstraintOracle(limb).evaluate(q)
     jn = len(limb.joints)
     learned = [limb.index(name) for name in field_joints(limb)] or list(range(len(limb.joints)))
     regions = label_regions(res.valid[:, learned].all(axis=1),
@@ -160,9 +160,9 @@ def field_samples(limb, name: str, postures: np.ndarray, result=None):
     """A field joint's training samples from postures: ``(d, angle, s, g)`` — its limb
     direction, its source's corrected angle (``result``: the limb oracle's answers for
     ``postures``, computed when not given), the exact targets."""
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
 
-    result = result or LimbOracle(limb).evaluate(postures)
+    result = result or ConstraintOracle(limb).evaluate(postures)
     j = limb.index(name)
     joint = limb.joints[j]
     angle = result.coupling_angle[:, j]

@@ -315,12 +315,12 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
 
     from threadpoolctl import threadpool_limits
 
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
 
     rng = np.random.default_rng(seed)
     if postures is None:
         postures = training_postures(limb, spec.samples, rng, spec.uniform)
-    result = LimbOracle(limb).evaluate(postures)  # once, for every field's source angles
+    result = ConstraintOracle(limb).evaluate(postures)  # once, for every field's source angles
     names = field_joints(limb)
     jobs = [(limb.joints[limb.index(name)].coupling.limits,
              rng if k == 0 else np.random.default_rng([seed, k]),
