@@ -439,7 +439,9 @@ class ConstraintOracle:
             oracle = self._joints[j]
             qj = np.ascontiguousarray(q3[:, j])
             if isinstance(oracle, KindOracle):
-                r = oracle.evaluate(Q.check_quaternions(qj))  # as one joint's evaluate does
+                # checked again as one joint's orientations are (this second rounding to unit
+                # is the limb's answers' since the limb oracle began: kept, bit for bit)
+                r = oracle.evaluate(Q.check_quaternions(qj))
             else:
                 src = self._source[j]
                 angle[:, j] = Q.twist_angle(proj[:, src], self._coupling_axis[src])
