@@ -8,7 +8,6 @@ import numpy as np
 
 from models import quaternion as Q
 from models.limb import Limb, load_limits
-from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
 
 __all__ = ["summarise"]
@@ -44,7 +43,7 @@ def _summarise_limb(path: str, limb, samples: int, seed: int) -> str:
     """A limb file: its joints, couplings, and the fraction of random postures each swing
     joint allows (a coupled joint judged at its source's corrected angle)."""
 
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     n = len(limb.joints)
     rng = np.random.default_rng(seed)
     q = Q.random_quaternions(samples * n, rng).reshape(samples, n, 4)
