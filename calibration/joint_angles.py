@@ -636,7 +636,6 @@ class JointRangeOfMotion:
             if j == self.joint:
                 lines.append(f"note: {m} not compared with AAOS: {why}")
         if unmeasured:
-
             lines.append(f"note: {' and '.join(unmeasured)}: the {self.joint} is modelled as a "
                          f"{joint_spec(self.joint).kind}, which has no such movement: not "
                          "reported (not a deficit)")
@@ -707,9 +706,7 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     so one disturbed stretch would otherwise be the peak. All are used when none passes."""
     from scipy.ndimage import median_filter
 
-
     if status is not None:
-
         q = np.asarray(q)[trusted_samples(np.asarray(status).reshape(-1), len(q))]
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])

@@ -317,7 +317,6 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
 
     from threadpoolctl import threadpool_limits
 
-
     rng = np.random.default_rng(seed)
     if postures is None:
         postures = training_postures(limb, spec.samples, rng, spec.uniform)

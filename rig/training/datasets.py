@@ -158,7 +158,6 @@ def _make(
                 raise DatasetError(f"{option}: only for --kind quaternion, not {kind!r}")
     limits = None
     if kind in ("quaternion", "limb") and constraint is not None:
-
         limits = load_limits(constraint)  # read once, either kind
         if isinstance(limits, Limb):
             return _limb(limits, target_path=out, n=count, seed=rng, split=split, others=(
@@ -234,7 +233,6 @@ def dataset_info(path: str) -> str:
     ds = load_dataset(path)
     lines = [f"{path}", ds.summary()]
     if ds.meta.get("kind") == "limb":
-
         lines.append(limb_postures(ds)[0].summary())
         return "\n".join(lines)
     c = ds.constraint()

@@ -53,13 +53,11 @@ def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
     the model through onnxruntime and compare with the exact oracle."""
     import numpy as np
 
-
     if request.distribution not in DISTRIBUTIONS:
         raise DatasetError(f"--distribution {request.distribution!r}: expected one of "
                            f"{', '.join(DISTRIBUTIONS)}")
     constraint = load_limits(request.constraint)
     if isinstance(constraint, Limb):
-
         if request.distribution != "held-out" or request.twist:
             raise DatasetError("--distribution/--twist: a limb model is evaluated on held-out "
                                "postures only")

@@ -125,7 +125,6 @@ def _limb_source(request: TrainRequest):
 
     limits = load_limits(request.constraint) if request.constraint is not None else None
     if request.data is not None:
-
         ds = load_dataset(request.data)
         if ds.meta.get("kind") != "limb":
             if isinstance(limits, Limb):
@@ -152,11 +151,9 @@ def run_train(request: TrainRequest, *, echo: Callable[[str], None] = _silent) -
     summary (what ``rig train`` prints)."""
     import numpy as np
 
-
     request.check()
     limb, source, data = _limb_source(request)  # a joint's: (None, constraint, dataset)
     if limb is not None:
-
         t0 = time.perf_counter()
         trained, path = train_limb(limb, request.out, preset=request.preset,
                                    seed=request.seed, postures=source, data=data, echo=echo)
