@@ -233,7 +233,6 @@ def dataset_info(path: str) -> str:
     ds = load_dataset(path)
     lines = [f"{path}", ds.summary()]
     if ds.meta.get("kind") == "limb":
-
         lines.append(limb_postures(ds)[0].summary())
         return "\n".join(lines)
     c = ds.constraint()

@@ -26,9 +26,9 @@ from models.datasets import field_joints
 from models.errors import ModelFileError
 from models.evaluation import evaluate_model
 from models.limb_model import export_limb_model
-from models.limb_oracle import LimbOracle
 from models.nn.ndf import FieldSpec, fit_limb_fields
 from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
 from rig.training.metrics import labelled_lines
 
 __all__ = ["LIMB_METRIC_LABELS", "LIMB_PRESETS", "LimbTrained", "describe_limb",
@@ -76,7 +76,7 @@ def describe_limb(path: str, limb, samples: int, seed: int) -> str:
     random postures each swing joint allows (a coupled joint judged at its source's corrected
     angle; ``samples`` uniform postures drawn with ``seed``)."""
 
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     n = len(limb.joints)
     rng = np.random.default_rng(seed)
     q = Q.random_quaternions(samples * n, rng).reshape(samples, n, 4)
