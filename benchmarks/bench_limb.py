@@ -50,9 +50,9 @@ from models.limb_evaluation import (
     uncoupled_model,
 )
 from models.limb_model import export_limb_model
-from models.limb_oracle import LimbOracle
 from models.nn.ndf import fit_limb_fields, fit_swing_field
 from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
 
 TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
            ("frac_invalid_violating_1deg", "invalid left > 1° out (fraction)", "<= 0.01"),
@@ -192,7 +192,7 @@ def main() -> None:
           f"{'moved °':>8} {'max viol °':>10}  joint dir err ° (mean)")
     tmp = Path(tempfile.mkdtemp(prefix="bench-limb-"))
     for i, (label, limb) in enumerate(held_out_limbs(args.limbs).items()):
-        oracle = LimbOracle(limb)
+        oracle = ConstraintOracle(limb)
         q = held_out_postures(limb, args.n, 1000 + i, oracle=oracle)
         for m in names:
             r = evaluate_model(method(m, limb, oracle, tmp, q), limb, q=q, oracle=oracle)

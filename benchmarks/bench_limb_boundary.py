@@ -63,7 +63,6 @@ from calibration.errors import CalibrationError
 from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom
 from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
-from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
 
 DATA = common.ROOT / "tests" / "calibration" / "data" / "real"
@@ -128,7 +127,7 @@ def compare(q: np.ndarray, t: np.ndarray, limb: str, side: str,
     slow = slow or {}
     ex = LimbExtractor(limb).fit(q, t=t, side=side, slow_error_deg=slow or None)
     lb = ex.limb_
-    res = LimbOracle(lb).evaluate(q, normalize=True)
+    res = ConstraintOracle(lb).evaluate(q, normalize=True)
     rows = []
     for j, joint in enumerate(lb.joints):
         spec = JOINTS[joint.name]

@@ -81,7 +81,7 @@ Comparison conventions (columns)
     up to 15° on the truth path.)
 ``in%`` / ``in1%`` ("no recorded region left out")
     Share of the **true** joint orientations of the free motion that the extracted limb file
-    accepts (:class:`models.limb_oracle.LimbOracle`, exact: swing and twist; a coupled joint at
+    accepts (:class:`models.oracle.ConstraintOracle`, exact: swing and twist; a coupled joint at
     its corrected hinge angle), and within 1° of it; ``limb``: every joint. A hinge's true
     orientations dwell exactly at its ends, so 0.0001° of calibration error there shows in
     ``in%``, not in ``in1%``.
@@ -119,8 +119,8 @@ from calibration.heading import LimbHeadingCorrection
 from calibration.joint_angles import allowed_rom, recorded_rom
 from calibration.joints import JOINTS, LIMB_CHAINS
 from models import quaternion as Q
-from models.limb_oracle import LimbOracle
 from models.limits import PolygonSwing
+from models.oracle import ConstraintOracle
 from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
 
 X = np.array([1.0, 0.0, 0.0])
@@ -214,7 +214,7 @@ def analyse(truth: Truth, q: np.ndarray, t: np.ndarray, status, limb: str,
     ex = LimbExtractor(limb).fit(q, t=t, status=status, side=side, slow_error_deg=slow)
     t_ext = time.perf_counter() - t0
     got = ex.limb_
-    res = LimbOracle(got).evaluate(truth.q, normalize=True)
+    res = ConstraintOracle(got).evaluate(truth.q, normalize=True)
     cal_err = np.degrees(Q.angle(Q.multiply(Q.conjugate(truth.q), q)))
     joints = []
     for j, (tj, gj) in enumerate(zip(truth.limb.joints, got.joints, strict=True)):

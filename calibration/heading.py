@@ -202,7 +202,6 @@ class HeadingCorrection:
                                    "t0 <= t1")
         usable = np.ones(len(t), bool)
         if status is not None:
-
             usable = status_ok(np.asarray(status).reshape(-1), self.min_system)
         anchors = [float(a) for a in anchors if math.isfinite(float(a))]
 

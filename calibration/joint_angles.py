@@ -495,13 +495,15 @@ CLINICAL_MOVEMENTS: dict[str, tuple[str, ...]] = {
 KIND_ANGLES: dict[str, tuple[int, ...]] = {k.name: k.angles for k in registered()}
 
 
-def not_measured(joint: str) -> dict[str, str]:
+def not_measured(joint: str, kind: str | None = None) -> dict[str, str]:
     """The clinical movements (:data:`CLINICAL_MOVEMENTS`) of ``joint`` that its kind cannot
     measure (:data:`KIND_ANGLES`), each with the words a table shows for it, e.g. the elbow's
     ``{"pronation": "not measured by a hinge", "supination": ...}``; empty for most joints.
+    ``kind``: the kind of the constraint the peaks come from, when it is not the joint's own
+    (an elbow held by a ``forearm`` constraint measures pronation and supination).
     The one place that decides it: the peaks, the tables and the report ask here."""
-
-    kind = joint_spec(joint).kind  # ValueError naming the joints for an unknown one
+    spec_kind = joint_spec(joint).kind  # ValueError naming the joints for an unknown one
+    kind = spec_kind if kind is None else kind
     if joint not in JOINT_ANGLES:  # the shoulder (a ball joint): its own angles, all measured
         return {}
     js = JOINT_ANGLES[joint]
@@ -602,6 +604,9 @@ class JointRangeOfMotion:
     side: str
     peaks: dict[str, float | None]
     arc: tuple[float, float] | None = None
+    #: the kind of the constraint the peaks come from, when not the joint's own
+    #: (:func:`not_measured`)
+    kind: str | None = None
 
     def table(self, *, age: float | None = None, sex: str | None = None) -> str:
         """The clinical table as text: movement, measured peak, AAOS (:data:`NORMATIVE`) and the
@@ -613,7 +618,7 @@ class JointRangeOfMotion:
                                     None if age is None else f"age {age:g}") if x)
         rows = [("movement", "measured", "AAOS", "population" + (f" ({who})" if who else ""))]
         missing = []
-        unmeasured = not_measured(self.joint)
+        unmeasured = not_measured(self.joint, self.kind)
         for m in CLINICAL_MOVEMENTS[self.joint]:
             if m in unmeasured:  # no deficit to read: the model has no such movement
                 rows.append((m.replace("_", " "), unmeasured[m], "-", "-"))
@@ -636,9 +641,9 @@ class JointRangeOfMotion:
             if j == self.joint:
                 lines.append(f"note: {m} not compared with AAOS: {why}")
         if unmeasured:
-
             lines.append(f"note: {' and '.join(unmeasured)}: the {self.joint} is modelled as a "
-                         f"{joint_spec(self.joint).kind}, which has no such movement: not "
+                         f"{self.kind or joint_spec(self.joint).kind}, which has no such "
+                         "movement: not "
                          "reported (not a deficit)")
         pop_src = POPULATION.get(self.joint)
         if pop_src is None:
@@ -664,7 +669,7 @@ class JointRangeOfMotion:
         (movement → why, :func:`not_measured`: None, no population reference)."""
         _check_who(age, sex)
         out: dict = {"joint": self.joint, "side": self.side}
-        unmeasured = not_measured(self.joint)
+        unmeasured = not_measured(self.joint, self.kind)
         shown = [m for m in CLINICAL_MOVEMENTS[self.joint] if m not in unmeasured]
         for m in CLINICAL_MOVEMENTS[self.joint]:
             v = None if m in unmeasured else self.peaks.get(m)
@@ -707,9 +712,7 @@ def recorded_rom(q, joint: str, side: str = "right", *, window: int = 5,
     so one disturbed stretch would otherwise be the peak. All are used when none passes."""
     from scipy.ndimage import median_filter
 
-
     if status is not None:
-
         q = np.asarray(q)[trusted_samples(np.asarray(status).reshape(-1), len(q))]
     raw = joint_angles(q, joint, side)
     n = len(raw["alpha"])
@@ -738,7 +741,8 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
     kind = calibration_kind(constraint.kind)
     ang = joint_angles(kind.allowed_samples(constraint, step_deg), joint, side)
     where = _in_band(ang, band_deg) if kind.reads_in_band else None
-    unmeasured = not_measured(joint)
+    own = constraint.kind if constraint.kind != joint_spec(joint).kind else None
+    unmeasured = not_measured(joint, own)
     out: dict[str, float | None] = {}
     for k, key in enumerate(("alpha", "beta", "gamma")):
         if k in kind.bounds:  # the angles a constraint of its kind bounds
@@ -746,7 +750,7 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
                              *js.movements[k]))
     return JointRangeOfMotion(joint, side, {m: None if m in unmeasured else out.get(m)
                                             for m in CLINICAL_MOVEMENTS[joint]},
-                              (float(ang["alpha"].min()), float(ang["alpha"].max())))
+                              (float(ang["alpha"].min()), float(ang["alpha"].max())), own)
 
 
 def largest_rom(roms: list):

@@ -98,7 +98,6 @@ class LimbCalibrationProtocol:
     """The calibration of a limb with one sensor per segment (4 segments, 3 joints).
 
     Phases, one after the other (seconds from the protocol start; :meth:`windows`):
-
     1. ``"static"`` (``static_s``): the neutral standing pose — arm hanging at the side, palm
        facing the thigh, fingers down (arm); standing straight, foot flat and pointing forward
        (leg). Every joint at its clinical zero (:func:`calibration.joint_angles.from_angles`
@@ -196,7 +195,6 @@ class LimbCalibrationProtocol:
                 theta = np.radians(a[:, i])
                 q = Q.from_axis_angle(_Z, theta)
                 if side == "left":
-
                     q = mirror_quaternions(q)
                 out[:, i] = q
             else:

@@ -7,7 +7,7 @@ corrective model exported to ONNX::
     import models
 
     c = models.load_constraint("right-shoulder.yaml")     # JointConstraint
-    oracle = models.ConstraintOracle(c)
+    oracle = models.ConstraintOracle(c)   # or of a models.Limb: postures (N, J, 4)
     corrected = models.quaternion.multiply(oracle.correction(q), q)   # q: (N, 4) w, x, y, z
     model = models.load_model("model.onnx", expected_constraint=c)   # onnxruntime, lazily
     corrected = models.quaternion.multiply(model.correction(q), q)
@@ -47,8 +47,7 @@ _EXPORTS: dict[str, tuple[str, str | None]] = {
     "OracleResult": ("models.kinds.base", "OracleResult"),
     "BOUNDARY_TOLERANCE": ("models.kinds.base", "BOUNDARY_TOLERANCE"),
     "SphericalPolygon": ("models.geometry", "SphericalPolygon"),
-    "LimbOracle": ("models.limb_oracle", "LimbOracle"),
-    "LimbResult": ("models.limb_oracle", "LimbResult"),
+    "LimbResult": ("models.oracle", "LimbResult"),
     # shipped example boundaries
     "SHAPES": ("models.shapes", "SHAPES"),
     "load_shape": ("models.shapes", "load_shape"),
@@ -84,7 +83,6 @@ __all__ = [
     "GeometryError",
     "JointConstraint",
     "Limb",
-    "LimbOracle",
     "LimbResult",
     "ModelFileError",
     "ModelsError",
@@ -147,8 +145,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from models.geometry import SphericalPolygon
     from models.kinds.base import BOUNDARY_TOLERANCE, OracleResult
     from models.limb import Limb, dump_limb, load_limb, loads_limb
-    from models.limb_oracle import LimbOracle, LimbResult
     from models.limits import ConeSwing, PolygonSwing, SwingTwistTable, TwistLimits
     from models.onnx_io import CorrectionModel, export_onnx, load_model
-    from models.oracle import ConstraintOracle
+    from models.oracle import ConstraintOracle, LimbResult
     from models.shapes import SHAPES, load_shape

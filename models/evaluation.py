@@ -37,7 +37,6 @@ from models import quaternion as quat
 from models.constraint import JointConstraint
 from models.limb import Limb
 from models.limb_evaluation import held_out_postures
-from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
 from models.shapes import SHAPES, load_shape
 
@@ -194,18 +193,18 @@ def evaluate_model(model, constraint, *, n: int = 10_000, seed: int = 12_345,
     q : (N, 4) array, optional
         Orientations to use instead (e.g. the same set for several models); a limb's postures
         (N, J, 4).
-    oracle : ConstraintOracle or LimbOracle, optional
+    oracle : ConstraintOracle, optional
+        The exact oracle of ``constraint`` (built when not given).
 
     Returns
     -------
     dict: :func:`models.metrics.evaluate`'s metrics, a joint's plus ``valid_fraction``.
     """
+    oracle = oracle or ConstraintOracle(constraint)
     if isinstance(constraint, Limb):
-        oracle = oracle or LimbOracle(constraint)
         if q is None:
             q = held_out_postures(constraint, n, seed, band_deg=band_deg, oracle=oracle)
         return M.evaluate(_predictor(model), oracle, q)
-    oracle = oracle or ConstraintOracle(constraint)
     if q is None:
         q = held_out_orientations(constraint, n, seed, band_deg=band_deg, oracle=oracle)
     out = M.evaluate(_predictor(model), oracle, q)

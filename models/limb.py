@@ -44,7 +44,7 @@ Coupling semantics
   in ``t``; sampling at 16 steps let a fold that lasted 0.8° of the elbow's angle through, and
   the limits there could not be built), and for its other defects at :data:`CHECK_STEPS`
   steps.
-- Correction is **hierarchical** (``models.limb_oracle``): a joint on which another depends is
+- Correction is **hierarchical** (``models.oracle``): a joint on which another depends is
   corrected by its own limits first; the dependent joint is then corrected against its limits
   interpolated at the **corrected** angle. Joints are evaluated in an order where every
   coupling's source comes before its dependant; a cycle of couplings is refused.

@@ -3,7 +3,7 @@
 A *limb model* maps postures ``(N, J, 4)`` (joint orientations, child relative to parent,
 scalar-first, in the limb file's joint order) to corrections ``(N, J, 4)``
 (``corrected_j = correction_j ⊗ q_j``). :func:`models.evaluation.evaluate_model` scores one
-against the exact limb oracle (:class:`models.limb_oracle.LimbOracle`) on the postures drawn
+against the exact limb oracle (:class:`models.oracle.ConstraintOracle`) on the postures drawn
 here, with the limb metrics of :func:`models.metrics.evaluate`.
 
 Held-out limbs (:func:`random_limb`)
@@ -38,7 +38,6 @@ from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.limb import LIMB_CHAINS, Limb
 from models.limb import Limb as _Limb
-from models.limb_oracle import LimbOracle
 from models.limits import ConeSwing
 from models.oracle import ConstraintOracle
 
@@ -148,10 +147,10 @@ def held_out_limbs(n: int = 10, seed: int = HELD_OUT_LIMB_SEED) -> dict[str, Lim
 
 
 def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
-                      band_deg: float = 20.0, oracle: LimbOracle | None = None) -> np.ndarray:
+                      band_deg: float = 20.0, oracle: ConstraintOracle | None = None) -> np.ndarray:
     """Test postures ``(n, J, 4)`` (see the module docstring)."""
     rng = np.random.default_rng(rng)
-    oracle = oracle or LimbOracle(limb)
+    oracle = oracle or ConstraintOracle(limb)
     jn = len(limb.joints)
     swing = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.swing_twist]
     hinges = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.single_axis]

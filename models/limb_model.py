@@ -20,7 +20,7 @@ the hinges, the twist clamps (intervals interpolated at ``τ``'s angle) and ever
 exactly as below. Metadata ``jointlimits.training`` (JSON) holds the seed, the postures' count
 (and the dataset's hash when trained from one), the network's size and the training time.
 
-Method ``geometric``: the exact limb oracle (:mod:`models.limb_oracle`) compiled into the
+Method ``geometric``: the exact limb oracle (:mod:`models.oracle`) compiled into the
 graph, in float32 — no table, no training; its size grows with the vertex count only.
 
 The graph runs the joints in stages of the hierarchy (a joint after the joints its limits

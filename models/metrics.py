@@ -17,7 +17,7 @@ For orientations ``q`` (N, 4), the exact correction ``c*`` (oracle) and a learne
   correction is the identity.
 
 A limb's postures ``q`` (N, J, 4) (joint orientations, child relative to parent, in the limb
-file's order; a limb oracle, :class:`models.limb_oracle.LimbOracle`): with the exact corrected
+file's order; a limb oracle, :class:`models.oracle.ConstraintOracle`): with the exact corrected
 posture ``p*`` (the oracle's projection) and the model's ``p̂`` (``ĉ_j ⊗ q_j``), unit segment
 lengths, the end point ``E(p) = Σ_j (p_0 ⊗ … ⊗ p_j) · a_j``:
 
@@ -41,7 +41,7 @@ from collections.abc import Callable
 import numpy as np
 
 from models import quaternion as quat
-from models.limb_oracle import end_points
+from models.oracle import end_points
 
 #: Metric names renamed, old → today's: one spelling per metric, a one joint's and a limb's
 #: (issue 38). A stored evaluation (an ONNX file's metadata, a registered model's metrics) is
@@ -112,8 +112,8 @@ def evaluate(
         limb's: ``(N, J, 4) → (N, J, 4)``.
     oracle : object
         Exact constraint with ``correction``, ``project``, ``signed_distance``, ``is_valid``
-        (:class:`models.oracle.ConstraintOracle`); a limb's: with ``evaluate`` and ``axes``
-        (:class:`models.limb_oracle.LimbOracle`).
+        (:class:`models.oracle.ConstraintOracle`); a limb's (the same class, built from the
+        limb): with ``evaluate`` and ``axes``.
     q : (N, 4) or (N, J, 4) float
         Held-out orientations (unit, either sign), or a limb's postures.
 

@@ -1,11 +1,31 @@
-"""The exact joint-constraint oracle: validity, nearest valid orientation, correction, distance.
+"""The exact oracle of a joint or a limb: validity, nearest valid orientation, correction, distance.
 
-:class:`ConstraintOracle` validates its input and hands it to the exact oracle of the
-constraint's kind (:meth:`models.kinds.base.JointKind.oracle`: the maths of each kind is in its
-module, :mod:`models.kinds.ball`, :mod:`models.kinds.hinge`, ...; the ball joint's below). One
-vectorised implementation, used for dataset generation, model evaluation and the live
-supervisor, plus a scalar path for one orientation per control cycle that gives the same
-answers.
+One class, :class:`ConstraintOracle`, for a joint's constraint and for a whole limb (a
+:class:`models.limb.Limb`: joints in order, with couplings). A one-joint constraint file is a limb
+of one joint: its oracle keeps the one joint's contract — orientations ``(N, 4)`` or ``(4,)`` in,
+answers of the same leading shape out, and a single-orientation path in plain floats for the
+control loop (:meth:`ConstraintOracle.distance_projected_one`) — while a limb's takes postures
+``(N, J, 4)`` or ``(J, 4)``: joint ``j``'s child segment relative to its parent, scalar-first, in
+the limb file's joint order.
+
+What differs between kinds of joint is in the kinds' modules (:mod:`models.kinds`): each joint is
+answered by the exact oracle of its kind (:meth:`models.kinds.base.JointKind.oracle`; the maths
+of each kind is in its module, :mod:`models.kinds.ball`, :mod:`models.kinds.hinge`, ...; the ball
+joint's below), a coupled joint by its kind's :meth:`~models.kinds.base.JointKind.evaluate_coupled`.
+What is the limb's — the couplings and their hierarchy — is here (below). One vectorised
+implementation, used for dataset generation, model evaluation and the live supervisor, plus a
+scalar path for one orientation per control cycle that gives the same answers.
+
+Hierarchical correction of a limb
+---------------------------------
+Joints are evaluated in :attr:`models.limb.Limb.order` (every coupling's source before its
+dependant). A joint without a coupling is answered by its kind's oracle, as one joint's
+constraint is; a coupled joint by the same maths with its limits interpolated at the coupling
+angle of **the corrected** source joint — the source's angle (its kind's
+:meth:`~models.kinds.base.JointKind.coupling_axis`) in its projected orientation. So the corrected
+limb is valid in every joint (the source's correction does not move again; the dependant is valid
+at that angle), and a valid limb is left as it is. One implementation serves a batch and a single
+posture (a posture is a batch of one).
 
 Maths
 -----
@@ -67,64 +87,195 @@ same edge wins. For a ball or two-axis joint that path is one kernel compiled by
 (:func:`models.kinds.ball._ball_kernel`: the swing, the twist, a ``by_swing`` table's weights
 and the projection, about 2-3 µs a query on the project's 2-core machine, where plain Python
 took 9-14 µs); a hinge's is plain Python. :meth:`ConstraintOracle.distance_projected_one` is the
-control loop's query (plain floats in and out).
+control loop's query (plain floats in and out), a joint's only.
 """
+
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from models import quaternion as Q
 from models.constraint import JointConstraint
+from models.errors import QuaternionError
 from models.geometry import boundary_distance, polygon_area
-from models.kinds.base import BOUNDARY_TOLERANCE, OracleResult
+from models.kinds.base import BOUNDARY_TOLERANCE, KindOracle, OracleResult
+from models.limb import InterpolatedLimits, Limb
 from models.limits import PolygonSwing
 
 __all__ = [
     "ConstraintOracle",
+    "LimbResult",
+    "check_postures",
+    "end_points",
     "polygon_area_sr",
     "polygon_boundary_distance",
+    "segment_directions",
 ]
 
 
+@dataclass(frozen=True)
+class LimbResult:
+    """A limb oracle's answers for a batch of postures (leading shape N; one posture: none).
+
+    One joint's constraint answers with :class:`models.kinds.base.OracleResult` (arrays of
+    length N).
+
+    Attributes
+    ----------
+    valid : (N, J) bool
+    distance : (N, J) radians; > 0 outside (the joint's correction angle), <= 0 inside
+    projected : (N, J, 4) the corrected orientations (same sign as the input)
+    correction : (N, J, 4) ``projected ⊗ q⁻¹``, ``w >= 0``; identity where valid
+    coupling_angle : (N, J) radians: the corrected source's angle a coupled joint was judged
+        at; NaN for joints without a coupling
+    """
+
+    valid: np.ndarray
+    distance: np.ndarray
+    projected: np.ndarray
+    correction: np.ndarray
+    coupling_angle: np.ndarray
+
+    @property
+    def limb_valid(self) -> np.ndarray:
+        """(N,) bool: every joint valid."""
+        return self.valid.all(axis=-1)
+
+
+def check_postures(q, n_joints: int, *, normalize: bool = False) -> np.ndarray:
+    """Validate postures ``(N, J, 4)`` or ``(J, 4)``; float64, unit (see
+    :func:`models.quaternion.check_quaternions`)."""
+    arr = np.asarray(q, dtype=np.float64) if not isinstance(q, np.ndarray) else q
+    if arr.ndim not in (2, 3) or arr.shape[-2:] != (n_joints, 4):
+        raise QuaternionError(f"postures: expected shape (N, {n_joints}, 4) or ({n_joints}, 4) "
+                              f"(one scalar-first quaternion per joint), got {arr.shape}")
+    flat = Q.check_quaternions(arr.reshape(-1, 4), normalize=normalize, name="postures")
+    return flat.reshape(arr.shape)
+
+
+def segment_directions(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """Each segment's long axis in the root segment's frame, ``(N, J, 3)``: segment ``j``
+    (joint ``j``'s child) points along ``(q_0 ⊗ … ⊗ q_j) · axes[j]``."""
+    n, j = q.shape[:2]
+    out = np.empty((n, j, 3))
+    acc = q[:, 0]
+    out[:, 0] = Q.rotate(acc, axes[0])
+    for k in range(1, j):
+        acc = Q.multiply(acc, q[:, k])
+        out[:, k] = Q.rotate(acc, axes[k])
+    return out
+
+
+def end_points(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The limb's end point (hand, foot) ``(N, 3)`` with unit segment lengths, root frame."""
+    return segment_directions(q, axes).sum(axis=1)
+
+
+class _CoupledJoint:
+    """A coupled joint's oracle: limits interpolated at a coupling angle per sample (the
+    maths of its kind: :meth:`models.kinds.base.JointKind.evaluate_coupled`)."""
+
+    def __init__(self, limits: InterpolatedLimits, axis: np.ndarray):
+        self.lim = limits
+        self.axis = axis
+        self.kind = limits.keyframes[0].joint_kind
+
+    def evaluate(self, q: np.ndarray, angle: np.ndarray) -> OracleResult:
+        k, t = self.lim.locate(angle)
+        return self.kind.evaluate_coupled(q, self.axis, self.lim, k, t)
+
+
 class ConstraintOracle:
-    """Exact answers for one :class:`~models.constraint.JointConstraint`.
+    """Exact answers for one joint's :class:`~models.constraint.JointConstraint` or for a whole
+    :class:`~models.limb.Limb` (hierarchically over its couplings: the module docstring).
 
     Parameters
     ----------
-    constraint : JointConstraint
+    limits : JointConstraint or Limb
+        One joint's constraint: every method takes orientations ``q`` of shape ``(4,)`` or
+        ``(N, 4)`` and answers with the matching leading shape. A limb: every method takes
+        postures ``(N, J, 4)`` or ``(J, 4)`` (a limb of one joint read from a limb file too:
+        ``(N, 1, 4)``) and answers per joint ``(N, J, ...)``; the methods marked "one joint's"
+        are refused with :class:`TypeError`.
 
-    All methods accept ``q`` of shape ``(4,)`` or ``(N, 4)`` (scalar-first, unit norm, either
-    sign; validated by :func:`models.quaternion.check_quaternions`) and return arrays with the
-    matching leading shape. The answers are those of the constraint's kind's oracle
+    Inputs are scalar-first, unit norm, either sign (validated by
+    :func:`models.quaternion.check_quaternions`; ``normalize=True`` scales any finite non-zero
+    quaternion). A joint's answers are those of its kind's oracle
     (:meth:`models.kinds.base.JointKind.oracle`).
+
+    Attributes
+    ----------
+    constraint : JointConstraint or None
+        One joint's constraint (None for a limb).
+    limb : Limb or None
+        The limb (None for one joint's constraint).
+    n_joints : int
+        The joints answered (1 for one joint's constraint).
+    axes : (n_joints, 3) float64
+        Each joint's limb axis (its child segment's long axis, child frame).
+    axis : (3,) float64 or None
+        One joint's limb axis (None for a limb).
     """
 
-    def __init__(self, constraint: JointConstraint):
-        self.constraint = constraint
-        self.axis = np.asarray(constraint.limb_axis, dtype=np.float64)
-        self._kind = constraint.joint_kind.oracle(constraint)
-        self._swing = self._kind.swing
+    def __init__(self, limits: JointConstraint | Limb):
+        self._joints: list[KindOracle | _CoupledJoint] = []
+        if isinstance(limits, Limb):
+            self.limb: Limb | None = limits
+            self.constraint: JointConstraint | None = None
+            self.axis: np.ndarray | None = None
+            self.axes = np.array([j.limb_axis for j in limits.joints])
+            for j in limits.joints:
+                if j.coupling is None:
+                    self._joints.append(j.constraint.joint_kind.oracle(j.constraint))
+                else:
+                    self._joints.append(_CoupledJoint(j.coupling.limits,
+                                                      np.asarray(j.limb_axis)))
+            self._source = [None if j.coupling is None else limits.index(j.coupling.by)
+                            for j in limits.joints]
+            self._coupling_axis = [
+                (j.constraint or j.coupling.keyframes[0]).joint_kind.coupling_axis(
+                    j.constraint or j.coupling.keyframes[0]) for j in limits.joints]
+            self._kind: KindOracle | None = None
+            self._swing = None
+        else:
+            self.limb = None
+            self.constraint = limits
+            self.axis = np.asarray(limits.limb_axis, dtype=np.float64)
+            self.axes = self.axis[None]
+            self._kind = limits.joint_kind.oracle(limits)
+            self._swing = self._kind.swing
+            self._joints.append(self._kind)
+        self.n_joints = len(self._joints)
 
-    # -- public API ------------------------------------------------------------------------
+    # -- both: one joint's orientations (N, 4), a limb's postures (N, J, 4) ------------------
     def prepare(self) -> ConstraintOracle:
         """Build now what the single-orientation path needs (a polygon's grid, the compiled
         kernel loaded or compiled: seconds on a machine's first run), otherwise built by the
-        first query that pays for them, so that no query of a control loop waits for it.
-        Returns self."""
+        first query that pays for them, so that no query of a control loop waits for it; for a
+        limb, its joints' kinds prepare theirs. Returns self."""
+        if self._kind is None:
+            for oracle in self._joints:
+                if isinstance(oracle, KindOracle):
+                    oracle.prepare()
+            return self
         self._kind.prepare()
         self.distance_projected_one(1.0, 0.0, 0.0, 0.0)
         return self
 
-    def evaluate(self, q, *, normalize: bool = False) -> OracleResult:
+    def evaluate(self, q, *, normalize: bool = False) -> OracleResult | LimbResult:
         """Validity, distance, projection and correction in one pass.
 
-        A single orientation (shape ``(4,)``) takes a scalar path (plain floats, one small
-        numpy gather for a polygon) built for the control loop; it gives the same answers as
-        the batched path.
+        One joint's: an :class:`~models.kinds.base.OracleResult`; a single orientation (shape
+        ``(4,)``) takes a scalar path (plain floats, one small numpy gather for a polygon)
+        built for the control loop, giving the same answers as the batched path. A limb's: a
+        :class:`LimbResult`, every joint hierarchically.
         """
+        if self._kind is None:
+            return self._evaluate_postures(q, normalize)
         if isinstance(q, np.ndarray) and q.shape == (4,) and q.dtype.kind in "fiu":
             return self._evaluate_one(q, normalize)
         q = Q.check_quaternions(q, normalize=normalize)
@@ -136,7 +287,11 @@ class ConstraintOracle:
         return res
 
     def is_valid(self, q, *, normalize: bool = False) -> np.ndarray:
-        """True where the orientation satisfies the constraint (within tolerance)."""
+        """True where the orientation satisfies the constraint (within tolerance); a limb's:
+        ``(N, J)``, each joint within its limits (a coupled joint at the corrected source's
+        angle — for a valid source, its own angle)."""
+        if self._kind is None:
+            return self._evaluate_postures(q, normalize).valid
         if isinstance(q, np.ndarray) and q.shape == (4,) and q.dtype.kind in "fiu":
             return self._evaluate_one(q, normalize).valid
         q2, single = self._prep(q, normalize)
@@ -144,26 +299,64 @@ class ConstraintOracle:
         return valid[0] if single else valid
 
     def project(self, q, *, normalize: bool = False) -> np.ndarray:
-        """Nearest valid orientation (same quaternion sign as the input)."""
+        """Nearest valid orientation (same quaternion sign as the input); a limb's: the nearest
+        valid posture, joint by joint in the hierarchy's order."""
         return self.evaluate(q, normalize=normalize).projected
 
     def correction(self, q, *, normalize: bool = False) -> np.ndarray:
-        """Corrective quaternion ``project(q) ⊗ q⁻¹`` (``w >= 0``, identity when valid)."""
+        """Corrective quaternion ``project(q) ⊗ q⁻¹`` (``w >= 0``, identity when valid); a
+        limb's ``(N, J, 4)``: ``corrected_j = correction_j ⊗ q_j``."""
         return self.evaluate(q, normalize=normalize).correction
 
     def signed_distance(self, q, *, normalize: bool = False) -> np.ndarray:
-        """Signed angular distance to the boundary, radians (> 0 outside, <= 0 inside)."""
+        """Signed angular distance to the boundary, radians (> 0 outside, <= 0 inside); a
+        limb's per joint ``(N, J)``."""
         return self.evaluate(q, normalize=normalize).distance
 
+    def joint_is_valid(self, q, joint: int, *, normalize: bool = False) -> np.ndarray:
+        """``is_valid(q)[..., joint]``, evaluating only that joint and the joints its limits
+        depend on (a coupled joint's source, hierarchically); one joint's constraint: joint 0,
+        :meth:`is_valid`."""
+        if self._kind is not None:
+            if joint != 0:
+                raise IndexError(f"joint {joint}: one joint's constraint has joint 0 only")
+            return self.is_valid(q, normalize=normalize)
+        q = check_postures(q, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        needed, j = set(), joint
+        while j is not None:
+            needed.add(j)
+            j = self._source[j]
+        order = [j for j in self.limb.order if j in needed]
+        valid = self._evaluate(q[None] if single else q, order).valid[:, joint]
+        return valid[0] if single else valid
+
+    def end_points(self, q, *, normalize: bool = False) -> np.ndarray:
+        """The limb's end point with unit segment lengths, ``(N, 3)`` (root segment's frame);
+        one joint's: its child segment's direction (parent frame)."""
+        if self._kind is not None:
+            q = Q.check_quaternions(q, normalize=normalize)
+            p = end_points(q.reshape(-1, 1, 4), self.axes)
+            return p[0] if q.ndim == 1 else p
+        q = check_postures(q, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        p = end_points(q[None] if single else q, self.axes)
+        return p[0] if single else p
+
+    # -- one joint's -------------------------------------------------------------------------
     def swing_distance(self, directions) -> np.ndarray:
-        """Signed angular distance (radians) of limb directions (N, 3) to the swing boundary."""
+        """Signed angular distance (radians) of limb directions (N, 3) to the swing boundary
+        (one joint's)."""
+        self._one_joint("swing_distance")
         d = Q.check_vectors(directions, name="direction")
         single = d.ndim == 1
         out = self._swing_dist(d.reshape(-1, 3))
         return out[0] if single else out
 
     def nearest_swing_point(self, directions) -> np.ndarray:
-        """Nearest point of the swing region (N, 3): the direction itself when inside."""
+        """Nearest point of the swing region (N, 3): the direction itself when inside (one
+        joint's)."""
+        self._one_joint("nearest_swing_point")
         d = Q.check_vectors(directions, name="direction")
         single = d.ndim == 1
         d2 = d.reshape(-1, 3)
@@ -174,16 +367,34 @@ class ConstraintOracle:
         return out[0] if single else out
 
     def twist_limits_at(self, directions) -> tuple[np.ndarray, np.ndarray]:
-        """Twist limits (radians) at limb directions (N, 3) or (3,), unit, parent frame.
+        """Twist limits (radians) at limb directions (N, 3) or (3,), unit, parent frame (one
+        joint's).
 
         ``(lo, hi)`` arrays (N,) — floats for one direction — from the constraint's ``by_swing``
         table, else its constant interval; ``(−π, π)`` when twist is unconstrained. The oracle
         clamps the twist to these limits at the corrected limb direction.
         """
+        self._one_joint("twist_limits_at")
         d = Q.check_vectors(directions, name="direction")
         return self.constraint.twist_limits_at(d)
 
+    def distance_projected_one(self, w: float, x: float, y: float, z: float):
+        """The control loop's query: ``(D(q), projection of q)`` for one orientation given as
+        four floats (normalised here; non-finite or zero raises as :meth:`evaluate` does), in
+        plain floats — :meth:`evaluate`'s answers without building its arrays (one joint's)."""
+        if self._kind is None:
+            self._one_joint("distance_projected_one")
+        nrm = math.sqrt(w * w + x * x + y * y + z * z)
+        if not math.isfinite(nrm) or nrm < 1e-12:
+            Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
+        return self._kind.distance_projected_one((w / nrm, x / nrm, y / nrm, z / nrm))
+
     # -- internals -------------------------------------------------------------------------
+    def _one_joint(self, what: str) -> None:
+        if self._kind is None:
+            raise TypeError(f"{what}: one joint's query; a limb's oracle answers postures "
+                            f"(N, {self.n_joints}, 4) — ask the oracle of the joint's constraint")
+
     def _evaluate_one(self, q: np.ndarray, normalize: bool) -> OracleResult:
         """Scalar twin of the batched path for one orientation (same maths, same tie rules)."""
         w, x, y, z = q.tolist()
@@ -196,15 +407,6 @@ class ConstraintOracle:
             Q.check_quaternions(q, normalize=normalize)  # raises with the precise message
         return self._kind.evaluate_one((w / nrm, x / nrm, y / nrm, z / nrm))
 
-    def distance_projected_one(self, w: float, x: float, y: float, z: float):
-        """The control loop's query: ``(D(q), projection of q)`` for one orientation given as
-        four floats (normalised here; non-finite or zero raises as :meth:`evaluate` does), in
-        plain floats — :meth:`evaluate`'s answers without building its arrays."""
-        nrm = math.sqrt(w * w + x * x + y * y + z * z)
-        if not math.isfinite(nrm) or nrm < 1e-12:
-            Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
-        return self._kind.distance_projected_one((w / nrm, x / nrm, y / nrm, z / nrm))
-
     def _prep(self, q, normalize):
         q = Q.check_quaternions(q, normalize=normalize)
         return q.reshape(-1, 4), q.ndim == 1
@@ -213,6 +415,40 @@ class ConstraintOracle:
         if self._swing is None:
             return np.full(len(d), -np.inf)
         return self._swing.nearest(d, need_point=False)[0]
+
+    def _evaluate_postures(self, q, normalize: bool) -> LimbResult:
+        """A limb's :meth:`evaluate`: every joint, hierarchically."""
+        q = check_postures(q, self.n_joints, normalize=normalize)
+        single = q.ndim == 2
+        res = self._evaluate(q[None] if single else q, self.limb.order)
+        if single:
+            res = LimbResult(*(x[0] for x in (res.valid, res.distance, res.projected,
+                                               res.correction, res.coupling_angle)))
+        return res
+
+    def _evaluate(self, q3: np.ndarray, order) -> LimbResult:
+        """The joints in ``order`` (the hierarchy's, each after its source) of postures
+        ``(N, J, 4)``; the other joints' entries are left unset."""
+        n, jn = q3.shape[:2]
+        valid = np.empty((n, jn), dtype=bool)
+        dist = np.empty((n, jn))
+        proj = np.empty((n, jn, 4))
+        corr = np.empty((n, jn, 4))
+        angle = np.full((n, jn), np.nan)
+        for j in order:
+            oracle = self._joints[j]
+            qj = np.ascontiguousarray(q3[:, j])
+            if isinstance(oracle, KindOracle):
+                # checked again as one joint's orientations are (this second rounding to unit
+                # is the limb's answers' since the limb oracle began: kept, bit for bit)
+                r = oracle.evaluate(Q.check_quaternions(qj))
+            else:
+                src = self._source[j]
+                angle[:, j] = Q.twist_angle(proj[:, src], self._coupling_axis[src])
+                r = oracle.evaluate(qj, angle[:, j])
+            valid[:, j], dist[:, j] = r.valid, r.distance
+            proj[:, j], corr[:, j] = r.projected, r.correction
+        return LimbResult(valid, dist, proj, corr, angle)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -226,4 +462,3 @@ def polygon_boundary_distance(vertices: np.ndarray, point: np.ndarray) -> float:
 def polygon_area_sr(swing: PolygonSwing) -> float:
     """Solid angle (steradians) of a polygon swing's valid region."""
     return polygon_area(swing.vertices, swing.interior)
-

@@ -83,7 +83,6 @@ def from_two_vectors(a, b) -> Quat:
     :func:`models.quaternion.from_two_vectors`)."""
     w = 1.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
     if w < 1e-12:
-
         p = perpendicular(a)
         return (0.0, float(p[0]), float(p[1]), float(p[2]))
     q = (w, a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])

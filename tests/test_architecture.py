@@ -258,11 +258,8 @@ LIMB_OR_JOINT: dict[str, str] = {
     "rig/sim/imu.py": "the default patient when no motion source is given (limb=None)",
     "rig/sim/patients.py": "a port string's patient= file: a limb file makes an arm or leg",
     "rig/store/boundaries.py": "the caller's filter list(limb=None|True|False) on the stored tag",
-    "rig/training/constraints.py": "a constraint file or a limb file",
-    "rig/training/datasets.py": "a joint's or a limb's dataset",
-    "rig/training/evaluate.py": "a joint's or a limb's evaluation",
-    "rig/training/train.py": "a joint's or a limb's training",
-    "rig/training/verdict.py": "a joint's or a limb's targets",
+    "rig/training/verdict.py": ("the one place (`judging`) that turns a caller's `limb=` "
+                                "word, or its absence, into whose targets judge an evaluation"),
 }
 
 

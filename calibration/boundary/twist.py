@@ -286,7 +286,6 @@ def hold_twists(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, bandwidt
     """
     from scipy.optimize import linprog
 
-
     lo, hi = lo.copy(), hi.copy()
     r = SwingTwistTable(bandwidth_deg, directions, lo, hi).weights(d)  # (N, K)
     slack = 2e-3  # the file's 3 decimals, rounded outwards, keep a margin of 1e-3

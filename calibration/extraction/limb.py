@@ -125,7 +125,7 @@ clamped beyond the end ones, :mod:`models.limb`). Without support a joint's limi
 extracted from all of its samples, uncoupled, and the report says which test failed
 (``couplings``: per tested joint).
 
-What the limb file holds is measured on it (:class:`models.limb_oracle.LimbOracle`): the share
+What the limb file holds is measured on it (:class:`models.oracle.ConstraintOracle`): the share
 of recorded postures valid in every joint, per joint (a coupled joint at its recorded hinge
 angle), and for hinges the share of recorded hinge angles inside the interval (out-of-axis
 motion of a hinge is corrected, not a limit: :mod:`calibration.boundary.hinge`).
@@ -149,7 +149,6 @@ from models.errors import ConstraintError
 from models.geometry import first_contact_along
 from models.kinds import DEFAULT_KIND, get_kind
 from models.limb import Limb, corresponding_polygons, inline_constraint
-from models.limb_oracle import LimbOracle
 from models.limits import PolygonSwing
 from models.oracle import ConstraintOracle
 
@@ -320,11 +319,11 @@ class LimbExtractor:
         ``tol`` (:meth:`_tolerance`): the whole orientation within its tolerance and, with a
         measured error, the direction within the swing's."""
         swing_tol, whole = tol
-        held = LimbOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
+        held = ConstraintOracle(limb).evaluate(q, normalize=True).distance[:, j] <= whole
         if not (self.slow_insets and self._slow.get(limb.joints[j].name)):
             return held
         wide = _swing_only_limb(limb, j)
-        return held & (LimbOracle(wide).evaluate(q, normalize=True).distance[:, j]
+        return held & (ConstraintOracle(wide).evaluate(q, normalize=True).distance[:, j]
                        <= swing_tol)
 
     def _keyframe_angles(self, lo: float, hi: float) -> np.ndarray:
@@ -390,7 +389,7 @@ class LimbExtractor:
         self.difference_deg_ = first["difference_deg"]
         self.limb_ = self._limb(chain, specs, constraints, kept, side, provenance)
         # what the file holds, measured on it
-        valid = LimbOracle(self.limb_).evaluate(q, normalize=True).valid
+        valid = ConstraintOracle(self.limb_).evaluate(q, normalize=True).valid
         ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg)
                        if not get_kind(s.kind).swing_twist
                        else valid[:, i] for i, s in enumerate(specs)], axis=1)

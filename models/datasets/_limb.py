@@ -2,7 +2,7 @@
 
 ``inputs`` (N, 4·J) are postures (joint orientations, child relative to parent, scalar-first,
 in the limb file's joint order, flattened joint by joint); ``targets`` (N, 4·J) the exact
-corrections (:class:`models.limb_oracle.LimbOracle`, ``corrected_j = correction_j ⊗ q_j``);
+corrections (:class:`models.oracle.ConstraintOracle`, ``corrected_j = correction_j ⊗ q_j``);
 ``regions`` as for one joint, judged on the joints the network learns (the coupled polygon
 swings; every joint when there are none): valid when each of them is, the distance the
 largest. The postures are the ones the trained limb model learns from
@@ -24,8 +24,8 @@ from models.datasets._dataset import Dataset, dataset_meta
 from models.errors import DatasetError
 from models.geometry import nearest_on_polygons
 from models.limb import loads_limb
-from models.limb_oracle import LimbOracle
 from models.limits import PolygonSwing
+from models.oracle import ConstraintOracle
 
 __all__ = ["UNIFORM", "coupled_directions", "coupled_targets", "field_joints", "field_samples",
            "limb_dataset", "limb_postures", "training_postures"]
@@ -47,7 +47,7 @@ def limb_dataset(limb, n: int, rng: np.random.Generator | int | None = 0,
     n = check_n(n)
     gen, rng_meta = make_rng(rng)
     q = training_postures(limb, n, gen, uniform)
-    res = LimbOracle(limb).evaluate(q)
+    res = ConstraintOracle(limb).evaluate(q)
     jn = len(limb.joints)
     learned = [limb.index(name) for name in field_joints(limb)] or list(range(len(limb.joints)))
     regions = label_regions(res.valid[:, learned].all(axis=1),
@@ -161,7 +161,7 @@ def field_samples(limb, name: str, postures: np.ndarray, result=None):
     direction, its source's corrected angle (``result``: the limb oracle's answers for
     ``postures``, computed when not given), the exact targets."""
 
-    result = result or LimbOracle(limb).evaluate(postures)
+    result = result or ConstraintOracle(limb).evaluate(postures)
     j = limb.index(name)
     joint = limb.joints[j]
     angle = result.coupling_angle[:, j]

@@ -14,7 +14,7 @@ iRprop−/+), :mod:`~models.nn.evolution` (NetGEN-style GA), :mod:`~models.nn.co
 YAML), :mod:`~models.nn.train` (patterns from :mod:`models.datasets` → evolution →
 metrics), :mod:`~models.nn.ndf` (the distance field of a coupled swing: the trained limb
 model), :mod:`~models.nn.sdf` (the earlier single-joint distance MLP). Exact oracles:
-:mod:`models.oracle`, :mod:`models.limb_oracle`.
+:mod:`models.oracle` (a joint's and a limb's).
 """
 
 from models.nn.config import PRESETS, ConfigError, get_config, load_config

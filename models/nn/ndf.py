@@ -51,7 +51,7 @@ from models.datasets._limb import (
     training_postures,
 )
 from models.limb import InterpolatedLimits, oriented_vertices
-from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
 
 __all__ = ["DistanceField", "FieldSpec", "fit_coupled_field", "fit_limb_fields", "fit_swing_field"]
 
@@ -317,11 +317,10 @@ def fit_limb_fields(limb, seed: int = 0, spec: FieldSpec = FieldSpec(), progress
 
     from threadpoolctl import threadpool_limits
 
-
     rng = np.random.default_rng(seed)
     if postures is None:
         postures = training_postures(limb, spec.samples, rng, spec.uniform)
-    result = LimbOracle(limb).evaluate(postures)  # once, for every field's source angles
+    result = ConstraintOracle(limb).evaluate(postures)  # once, for every field's source angles
     names = field_joints(limb)
     jobs = [(limb.joints[limb.index(name)].coupling.limits,
              rng if k == 0 else np.random.default_rng([seed, k]),

@@ -188,7 +188,6 @@ def split(q, t, sizes, rng):
 def _train_field(constraint, config: dict, rng, oracle, patterns) -> TrainedModel:
     import time
 
-
     t0 = time.perf_counter()
     f = FieldModel.from_constraint(constraint, grid=config["model"]["grid"], oracle=oracle)
     build_s = time.perf_counter() - t0

@@ -14,8 +14,8 @@ from __future__ import annotations
 import click
 
 from rig.training.evaluate import DISTRIBUTIONS
+from rig.training.joint import PRESET_NAMES
 from rig.training.limb import LIMB_PRESETS
-from rig.training.train import PRESET_NAMES
 
 
 @click.command()

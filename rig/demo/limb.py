@@ -44,7 +44,7 @@ import yaml
 from calibration.boundary import boundary_distance
 from calibration.joints import LIMB_CHAINS, hinge_angles
 from models.limb import dump_limb, load_limb
-from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
 from rig.demo.stages import (
     DemoOptions,
     DemoResult,
@@ -306,7 +306,7 @@ def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:
     a hinge by its angle (its out-of-axis motion is corrected, not limited), the others by the
     exact limb oracle's distance."""
     chain = read_session(str(db), session)
-    d = np.degrees(LimbOracle(limb).evaluate(chain.joint_q, normalize=True).distance)
+    d = np.degrees(ConstraintOracle(limb).evaluate(chain.joint_q, normalize=True).distance)
     for j, joint in enumerate(limb.joints):
         if joint.joint_kind.single_axis and joint.constraint is not None:
             h = joint.constraint.hinge

@@ -83,7 +83,6 @@ class GuidedCalibration:
     """
 
     def __init__(self, config, rig, *, display, protocol=None, stdin=None) -> None:
-
         self.config = config
         self.rig = rig
         self.display = display
@@ -95,7 +94,6 @@ class GuidedCalibration:
                         else LimbCalibrationProtocol(self.limb))
         if (self.limb is not None) != isinstance(protocol, LimbCalibrationProtocol) or (
                 self.limb is not None and protocol.limb != self.limb):
-
             what = "a whole-limb" if isinstance(protocol, LimbCalibrationProtocol) else "a joint"
             raise CalibrationError(f"the {self.limb or config.joint.name} rig was given {what} "
                                    "calibration protocol")
@@ -582,7 +580,6 @@ def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, 
 
 def _solve_limb(static: SampleBatch, movements: dict[str, SampleBatch], limb: str, side: str,
                 protocol) -> CalibrationResult:
-
     segs = protocol.segments
     st, sok = _chain_samples(static, segs)
     moves = {j: _chain_samples(b, segs) for j, b in movements.items()}

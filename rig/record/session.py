@@ -300,7 +300,6 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         _limb_range_of_motion(store, result, config)
         return
     try:
-
         side = config.joint.side if config.joint.side in ("left", "right") else "right"
         data = joint_orientations_from_store(store, result.session_id)
         constraint = extract(data, side=side).constraint_

@@ -82,8 +82,8 @@ from calibration.joints import JOINTS, hinge_angles, off_axis_angles
 from models import quaternion as Q
 from models.geometry import polygon_area
 from models.kinds import get_kind
-from models.limb_oracle import LimbOracle
 from models.metrics import current_metric_names
+from models.oracle import ConstraintOracle
 from rig import __version__
 from rig.report.figures import (
     boundary_figure,
@@ -736,7 +736,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         raise ValueError(f"side {side!r}: the limb {limb.name!r} is a {limb.side} "
                          f"{limb.limb or 'limb'}")
     q = _postures(limb, joints)
-    result = LimbOracle(limb).evaluate(q)
+    result = ConstraintOracle(limb).evaluate(q)
     data = LimbReportData(patient=patient, side=side, limb=limb.limb, limb_name=limb.name,
                           joint_order=limb.joint_names, samples=len(q),
                           session_label=session_label, limits_source=limits_source,

@@ -8,8 +8,14 @@ Modules
     :func:`run_train` (:class:`TrainRequest` → :class:`TrainResult`), ``rig train``.
 :mod:`~rig.training.evaluate`
     :func:`run_evaluate` (:class:`EvaluateRequest` → :class:`EvaluateResult`), ``rig evaluate``.
+:mod:`~rig.training.kinds`
+    the training kinds: what the commands below do differently for one joint's constraint
+    file and a limb file, chosen in one place (:func:`~rig.training.kinds.training_kind`).
+:mod:`~rig.training.joint`
+    one joint's steps: the model (``--preset field|best|compact|thesis|fixed``), its scores and
+    enforcement warnings.
 :mod:`~rig.training.limb`
-    both on limb files: the limb model (``--preset network|geometric``) and its scores.
+    a limb file's steps: the limb model (``--preset network|geometric``) and its scores.
 :mod:`~rig.training.metrics`
     the metrics as labelled lines.
 :mod:`~rig.training.datasets`
@@ -19,14 +25,8 @@ Modules
 """
 
 from rig.training.evaluate import EvaluateRequest, EvaluateResult, run_evaluate
-from rig.training.train import (
-    PRESET_NAMES,
-    TrainRequest,
-    TrainResult,
-    enforcement_warnings,
-    metric_lines,
-    run_train,
-)
+from rig.training.joint import PRESET_NAMES, enforcement_warnings, metric_lines
+from rig.training.train import TrainRequest, TrainResult, run_train
 
 __all__ = ["PRESET_NAMES", "EvaluateRequest", "EvaluateResult",
            "TrainRequest", "TrainResult", "enforcement_warnings", "metric_lines",

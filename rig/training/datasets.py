@@ -19,9 +19,10 @@ from models import datasets as D
 from models.datasets import cone_constraint, limb_postures, load_dataset
 from models.errors import DatasetError
 from models.fileio import check_output
-from models.limb import Limb, load_limits
+from models.limb import load_limits
 from models.pca import quaternion_pca
 from models.shapes import load_shape
+from rig.training.kinds import training_kind
 
 __all__ = ["KINDS", "dataset_info", "make_dataset"]
 
@@ -158,19 +159,17 @@ def _make(
                 raise DatasetError(f"{option}: only for --kind quaternion, not {kind!r}")
     limits = None
     if kind in ("quaternion", "limb") and constraint is not None:
-
         limits = load_limits(constraint)  # read once, either kind
-        if isinstance(limits, Limb):
-            return _limb(limits, target_path=out, n=count, seed=rng, split=split, others=(
-                ("--shape", shape), ("--cone-radius", cone_radius),
-                ("--distribution", distribution), ("--order", order),
-                ("--hemisphere", hemisphere), ("--twist", twist or None),
-                ("--band-deg", band_deg)))
-        if kind == "limb":
-            raise DatasetError(f"--kind limb: {constraint} is a single-joint constraint file, "
-                               "not a limb file")
+        # what the file makes: a limb file a limb dataset, one joint's a quaternion dataset
+        kind = training_kind(limits).dataset_kind(kind, constraint)
     if kind == "limb":
-        raise DatasetError("--kind limb: needs --constraint LIMB.yaml (a limb file)")
+        if limits is None:
+            raise DatasetError("--kind limb: needs --constraint LIMB.yaml (a limb file)")
+        return _limb(limits, target_path=out, n=count, seed=rng, split=split, others=(
+            ("--shape", shape), ("--cone-radius", cone_radius),
+            ("--distribution", distribution), ("--order", order),
+            ("--hemisphere", hemisphere), ("--twist", twist or None),
+            ("--band-deg", band_deg)))
     if kind == "quaternion":
         c = _constraint(constraint, limits, shape, cone_radius, cone_centre)
         ds = D.quaternion_dataset(
@@ -234,7 +233,6 @@ def dataset_info(path: str) -> str:
     ds = load_dataset(path)
     lines = [f"{path}", ds.summary()]
     if ds.meta.get("kind") == "limb":
-
         lines.append(limb_postures(ds)[0].summary())
         return "\n".join(lines)
     c = ds.constraint()

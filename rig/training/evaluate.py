@@ -11,13 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from models.errors import DatasetError
-from models.evaluation import evaluate_model, held_out_orientations
-from models.limb import Limb, load_limits
-from models.nn.train import training_patterns
-from models.onnx_io import load_model
-from models.oracle import ConstraintOracle
-from rig.training.limb import evaluate_limb, limb_metric_lines
-from rig.training.train import metric_lines
+from models.limb import load_limits
+from rig.training.kinds import training_kind
 
 __all__ = ["DISTRIBUTIONS", "EvaluateRequest", "EvaluateResult", "run_evaluate"]
 
@@ -50,37 +45,13 @@ class EvaluateResult:
 
 def run_evaluate(request: EvaluateRequest) -> EvaluateResult:
     """Load the model (refused when made for another constraint), draw the orientations, run
-    the model through onnxruntime and compare with the exact oracle."""
-    import numpy as np
-
+    the model through onnxruntime and compare with the exact oracle — one joint's
+    (:func:`rig.training.joint.evaluate_joint`) or a limb's held-out postures
+    (:func:`rig.training.limb.evaluate_limb`), as the file's training kind says
+    (:func:`rig.training.kinds.training_kind`)."""
 
     if request.distribution not in DISTRIBUTIONS:
         raise DatasetError(f"--distribution {request.distribution!r}: expected one of "
                            f"{', '.join(DISTRIBUTIONS)}")
     constraint = load_limits(request.constraint)
-    if isinstance(constraint, Limb):
-
-        if request.distribution != "held-out" or request.twist:
-            raise DatasetError("--distribution/--twist: a limb model is evaluated on held-out "
-                               "postures only")
-        metrics, what = evaluate_limb(request.model, constraint, request.n, request.seed)
-        return EvaluateResult(metrics, what, limb_metric_lines(metrics, constraint.joint_names))
-    constraint.require_swing_twist("rig evaluate")
-    model = load_model(request.model, expected_constraint=constraint)
-    oracle = ConstraintOracle(constraint)
-    n, seed, distribution = request.n, request.seed, request.distribution
-    if distribution == "held-out":
-        q = held_out_orientations(constraint, n, seed, oracle=oracle)
-    else:
-        q, _ = training_patterns(constraint, n, np.random.default_rng(seed),
-                                 distribution=distribution, order="random",
-                                 hemisphere="ambiguous", twist=request.twist, oracle=oracle)
-    metrics = evaluate_model(model, constraint, q=q, oracle=oracle)
-    info = model.network_info
-    what = (f"swing field, grid {info.get('grid')}" if info.get("method") == "field" else
-            f"{info.get('hidden', '?')} hidden nodes, {info.get('links', '?')} links")
-    kind = ("orientations (half uniform, half within 20° of the boundary)"
-            if distribution == "held-out" else f"{distribution} orientations")
-    twist = " with twist" if request.twist and distribution != "held-out" else ""
-    return EvaluateResult(metrics, f"{request.model}: {what}, {len(q)} held-out {kind}{twist} "
-                                   f"of {constraint.name!r}", metric_lines(metrics))
+    return EvaluateResult(*training_kind(constraint).evaluate(request, constraint))

@@ -1,4 +1,6 @@
-"""``rig train`` and ``rig evaluate`` on limb files (issue 20): the limb model.
+"""``rig constraint check``, ``rig train`` and ``rig evaluate`` on limb files (issue 20): the
+limb model (one joint's steps are :mod:`rig.training.joint`; :mod:`rig.training.kinds` chooses
+between them).
 
 ``rig train --constraint LIMB.yaml`` (or ``--data`` with a limb dataset from ``rig dataset
 make --constraint LIMB.yaml``) trains a distance field per coupled polygon swing
@@ -17,16 +19,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from models import quaternion as Q
 from models.datasets import field_joints
 from models.errors import ModelFileError
 from models.evaluation import evaluate_model
 from models.limb_model import export_limb_model
 from models.nn.ndf import FieldSpec, fit_limb_fields
 from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
 from rig.training.metrics import labelled_lines
 
-__all__ = ["LIMB_METRIC_LABELS", "LIMB_PRESETS", "LimbTrained", "evaluate_limb",
-           "limb_metric_lines", "train_limb"]
+__all__ = ["LIMB_METRIC_LABELS", "LIMB_PRESETS", "LimbTrained", "describe_limb",
+           "evaluate_limb", "limb_metric_lines", "train_limb"]
 
 #: ``--preset`` values for limb files; the first is the default.
 LIMB_PRESETS = ("network", "geometric")
@@ -63,6 +69,28 @@ def limb_metric_lines(metrics: dict, joints) -> list[str]:
                          strict=False):
         out.append(f"  {'mean direction error, ' + name + ' (deg)':<44} {err:.6g}")
     return out
+
+
+def describe_limb(path: str, limb, samples: int, seed: int) -> str:
+    """``rig constraint check`` of a limb file: its joints, couplings, and the fraction of
+    random postures each swing joint allows (a coupled joint judged at its source's corrected
+    angle; ``samples`` uniform postures drawn with ``seed``)."""
+
+    oracle = ConstraintOracle(limb)
+    n = len(limb.joints)
+    rng = np.random.default_rng(seed)
+    q = Q.random_quaternions(samples * n, rng).reshape(samples, n, 4)
+    valid = oracle.is_valid(q)
+    parts = []
+    for j, joint in enumerate(limb.joints):
+        if joint.joint_kind.single_axis:
+            lo = joint.loosest().hinge
+            parts.append(f"{joint.name} hinge {lo.min_deg:g}..{lo.max_deg:g} deg")
+        else:
+            parts.append(f"{joint.name} {100 * float(valid[:, j].mean()):.2f} %")
+    return "\n".join([f"{path}: OK", limb.summary(),
+                      f"  valid       {'; '.join(parts)} of all orientations "
+                      f"({samples} uniform postures)"])
 
 
 def _score(model, limb, n: int, seed: int) -> dict:

@@ -97,3 +97,29 @@ def test_extraction_holds_the_recorded_extremes(file, s, flexion, pronation):
 def test_every_models_kind_has_its_calibration_kind():
     for name in KINDS:
         assert calibration_kind(name).name == name
+
+
+FOREARM_FILE = """\
+name: p42-forearm
+kind: forearm
+joint: elbow
+side: right
+forearm:
+  flexion: {axis: [0, 0, 1], min_deg: 0, max_deg: 140}
+  rotation: {min_deg: -70, max_deg: 80}
+"""
+
+
+def test_rom_of_a_forearm_constraint_reads_pronation_and_supination():
+    """`rig rom --constraint` on a forearm file: the elbow's table shows the file's pronation
+    (−φ) and supination (+φ), not "not measured by a hinge" as for the elbow's own kind."""
+    from calibration.joint_angles import constraint_rom
+    from models.constraint import loads_constraint
+
+    rom = constraint_rom(loads_constraint(FOREARM_FILE), "elbow", "right")
+    assert rom.peaks["pronation"] == pytest.approx(70.0, abs=1e-6)
+    assert rom.peaks["supination"] == pytest.approx(80.0, abs=1e-6)
+    assert rom.peaks["flexion"] == pytest.approx(140.0, abs=1e-6)
+    table = rom.table()
+    assert "not measured" not in table and "pronation      70.0°" in table
+    assert rom.to_json()["not_measured"] == {}

@@ -103,7 +103,7 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
 
     from calibration.boundary import boundary_distance
     from calibration.extraction import LimbExtractor
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
     from rig.sim.patients import anatomical_limb
 
     q, t = ideal_arm
@@ -114,7 +114,7 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     for a, c in zip(got.at_deg, got.keyframes, strict=True):
         assert boundary_distance(c, truth.at(a))["mean_deg"] < 3.0, a
     assert not any(k.get("added") for k in ex.keyframes_)
-    dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
+    dist = ConstraintOracle(ex.limb_).evaluate(q, normalize=True).distance
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
     assert ex.inside_["elbow"] == ex.inside_["wrist"] == 1.0
     # the wrist's limits do not depend on the elbow: tested, and not coupled
@@ -135,7 +135,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
 
     import models.limb as limb_format
     from calibration.extraction import LimbExtractor
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
 
     def by_arc_length(a, b):
         centre = a.interior + b.interior
@@ -152,7 +152,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
     assert ex.coupled_, ex.coupling_note_
     added = [k for k in ex.keyframes_ if k.get("added")]
     assert added and all(k["supported"] for k in added)
-    dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
+    dist = ConstraintOracle(ex.limb_).evaluate(q, normalize=True).distance
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
 
 
@@ -271,7 +271,7 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     from calibration.boundary import boundary_distance
     from calibration.extraction import LimbExtractor
     from models import quaternion as Q
-    from models.limb_oracle import LimbOracle
+    from models.oracle import ConstraintOracle
     from rig.sim.limb import NoiseModel
     from rig.sim.patients import anatomical_limb, seeded_patient
 
@@ -296,7 +296,7 @@ def test_keyframes_are_not_smoothed_as_far_as_the_coupling(monkeypatch):
     got = ex.limb_.joints[0].coupling
     for a, c in zip(got.at_deg, got.keyframes, strict=True):
         assert boundary_distance(c, truth.at(a))["mean_deg"] < 2 * 3.0, a
-    dist = LimbOracle(ex.limb_).evaluate(q, normalize=True).distance
+    dist = ConstraintOracle(ex.limb_).evaluate(q, normalize=True).distance
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
     # no keyframe can be added: smoothing, refused as far as the coupling
     monkeypatch.setattr(LimbExtractor, "_unfold", lambda self, *a, **kw: None)

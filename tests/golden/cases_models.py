@@ -11,14 +11,13 @@ from models.field import FieldModel
 from models.limb import loads_limb
 from models.limb_evaluation import held_out_postures, random_limb
 from models.limb_model import export_limb_model
-from models.limb_oracle import LimbOracle
 from models.metrics import RENAMED_METRICS, current_metric_names
 from models.onnx_io import export_onnx, load_model
 from models.oracle import ConstraintOracle
 from models.shapes import SHAPES, load_shape
 from rig.sim.patients import anatomical_limb
+from rig.training.joint import enforcement_warnings
 from rig.training.limb import limb_metric_lines
-from rig.training.train import enforcement_warnings
 from rig.training.verdict import evaluation_verdict, missed_targets, targets_for
 from tests.golden.harness import case, normalise, tmpdir
 from tests.golden.util import jtext, onnx_bytes, prefixed, quats
@@ -125,12 +124,12 @@ def _limbs() -> dict:
 
 @case("limb")
 def case_oracle_limbs() -> dict:
-    """LimbOracle on seeded postures [N, J, 4] of the anatomical arm and leg (couplings), a
+    """ConstraintOracle on seeded postures [N, J, 4] of the anatomical arm and leg (couplings), a
     left arm and the four-joint coupled test arm: every field, per-joint validity, end points;
     the limb files' text."""
     out: dict = {}
     for i, (name, limb) in enumerate(_limbs().items()):
-        oracle = LimbOracle(limb)
+        oracle = ConstraintOracle(limb)
         jn = len(limb.joints)
         q = quats(1000 * jn, 300 + i).reshape(1000, jn, 4)
         r = oracle.evaluate(q)
@@ -186,7 +185,7 @@ def case_model_field_polygon() -> dict:
 
 
 def _limb_model(limb) -> dict:
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     with tmpdir() as d:
         p = export_limb_model(limb, d / "limb.onnx")
         raw = onnx_bytes(p, d)

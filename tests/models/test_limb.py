@@ -17,7 +17,6 @@ from models.constraint import JointConstraint
 from models.errors import ConstraintError, QuaternionError
 from models.geometry import SphericalPolygon, nearest_on_polygons
 from models.limb import dump_limb, load_limb, loads_limb
-from models.limb_oracle import LimbOracle
 from models.oracle import ConstraintOracle
 
 Z = np.array([0.0, 0.0, 1.0])
@@ -196,7 +195,7 @@ def test_keyframes_whose_interpolation_crosses_itself_are_refused():
 def test_uncoupled_joints_get_the_single_joint_oracles_answers():
     limb = _load(leg_doc())
     q = _postures(3000, seed=1)
-    res = LimbOracle(limb).evaluate(q)
+    res = ConstraintOracle(limb).evaluate(q)
     for j in (1, 2):
         ref = ConstraintOracle(limb.joints[j].constraint).evaluate(q[:, j])
         assert np.array_equal(res.valid[:, j], ref.valid)
@@ -211,7 +210,7 @@ def test_at_a_keyframe_the_coupled_joint_is_exactly_that_keyframe(index):
     limb = _load(leg_doc())
     hip = limb.joints[0].coupling
     q = _with_knee(_postures(4000, seed=2), hip.at_deg[index])
-    res = LimbOracle(limb).evaluate(q)
+    res = ConstraintOracle(limb).evaluate(q)
     ref = ConstraintOracle(hip.keyframes[index]).evaluate(q[:, 0])
     assert 0.01 < ref.valid.mean() < 0.99
     assert np.array_equal(res.valid[:, 0], ref.valid)
@@ -237,7 +236,7 @@ def test_coupled_cones_and_hinges_match_their_keyframes_and_interpolate_linearly
                 {"at_deg": 0, "constraint": _knee(0, 60)},
                 {"at_deg": 100, "constraint": _knee(20, 100)}]}}]}
     limb = _load(doc)
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     q = _postures(3000, seed=3)
     for at in (0, 100):
         qa = q.copy()
@@ -290,7 +289,7 @@ def test_the_limits_change_continuously_with_the_coupling_angle():
     """The signed distance of a fixed posture moves by no more than the boundary does (a
     vertex's displacement) as the knee turns in steps of 0.05°, across the keyframes."""
     limb = _load(leg_doc(twist=False))
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     lim = limb.joints[0].coupling.limits
     q0 = _postures(200, seed=5)
     angles = np.arange(-10.0, 130.0, 0.05)
@@ -308,7 +307,7 @@ def test_the_source_joint_is_corrected_first_and_the_dependant_judged_at_its_cor
     """The knee's range starts at 10°; a knee at −60° is corrected to 10° and the hip judged
     at 10° (part of the way from keyframe 0° to 60°), not at the clamped 0°."""
     limb = _load(leg_doc(knee=(10, 135), twist=False))
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     q = _postures(20000, seed=6)
     at10 = oracle.evaluate(_with_knee(q, 10)).valid[:, 0]
     at0 = ConstraintOracle(limb.joints[0].coupling.keyframes[0]).is_valid(q[:, 0])
@@ -327,7 +326,7 @@ def test_the_source_joint_is_corrected_first_and_the_dependant_judged_at_its_cor
 
 def test_the_corrected_limb_is_valid_and_a_valid_limb_is_left_alone():
     limb = _load(leg_doc())
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     q = _postures(20000, seed=7)
     res = oracle.evaluate(q)
     fixed = Q.multiply(res.correction.reshape(-1, 4), q.reshape(-1, 4)).reshape(q.shape)
@@ -341,7 +340,7 @@ def test_the_corrected_limb_is_valid_and_a_valid_limb_is_left_alone():
 
 def test_one_posture_is_a_batch_of_one_and_bad_shapes_are_refused():
     limb = _load(leg_doc())
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     q = _postures(5, seed=8)
     batch = oracle.evaluate(q)
     for i in range(5):
@@ -358,7 +357,7 @@ def test_one_posture_is_a_batch_of_one_and_bad_shapes_are_refused():
 
 def test_end_points_with_unit_segments():
     limb = _load(leg_doc())
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     straight = np.tile(Q.IDENTITY, (3, 1))
     np.testing.assert_allclose(oracle.end_points(straight), [3, 0, 0], atol=1e-12)
     bent = straight.copy()

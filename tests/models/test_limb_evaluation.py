@@ -14,13 +14,13 @@ from models.limb_evaluation import (
     random_limb,
     uncoupled_model,
 )
-from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
 
 
 @pytest.fixture(scope="module")
 def leg():
     limb = random_limb(HELD_OUT_LIMB_SEED - 1, "leg")  # a tuning seed, not a held-out one
-    return limb, LimbOracle(limb)
+    return limb, ConstraintOracle(limb)
 
 
 def test_held_out_limbs_are_legs_and_arms_with_a_coupling_of_3_or_more_keyframes():

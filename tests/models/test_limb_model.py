@@ -20,8 +20,8 @@ from models.limb_evaluation import (
     random_limb,
 )
 from models.limb_model import FORMAT, export_limb_model
-from models.limb_oracle import LimbOracle
 from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
 
 ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger joint
     {"name": "shoulder", "parent": "thorax", "child": "upper-arm", "constraint": {
@@ -52,7 +52,7 @@ ARM = {"name": "cone-arm", "joints": [  # no "limb: arm": the arm has no finger 
 def leg_model(tmp_path_factory):
     limb = random_limb(HELD_OUT_LIMB_SEED - 1, "leg")  # a tuning seed
     path = export_limb_model(limb, tmp_path_factory.mktemp("m") / "leg.onnx")
-    return limb, LimbOracle(limb), load_model(path, limb)
+    return limb, ConstraintOracle(limb), load_model(path, limb)
 
 
 def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model):
@@ -73,7 +73,7 @@ def test_the_graph_gives_the_oracles_corrections_to_float32_precision(leg_model)
 
 def test_coupled_cones_and_hinges_and_four_joints(tmp_path):
     limb = loads_limb(yaml.safe_dump(ARM))
-    oracle = LimbOracle(limb)
+    oracle = ConstraintOracle(limb)
     model = load_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
     rng = np.random.default_rng(12)
     q = Q.random_quaternions(4 * 4000, rng).reshape(4000, 4, 4)

@@ -11,9 +11,9 @@ from models.evaluation import evaluate_model
 from models.kinds.ball import evaluate_ball
 from models.limb_evaluation import held_out_postures, random_limb
 from models.limb_model import export_limb_model, limb_to_onnx
-from models.limb_oracle import LimbOracle
 from models.nn.ndf import DistanceField, FieldSpec, fit_limb_fields
 from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
 
 SMALL = FieldSpec(features=64, hidden=64, samples=20000, epochs=8, batch=512)
 DEV_SEED = 321  # a development limb, below the held-out seeds
@@ -80,7 +80,7 @@ def test_field_samples_are_the_limb_oracles_distances(leg):
     q = training_postures(leg, 500, rng)
     (name,) = field_joints(leg)
     d, angle, s, g = field_samples(leg, name, q)  # the oracle's answers computed inside
-    res = LimbOracle(leg).evaluate(q)
+    res = ConstraintOracle(leg).evaluate(q)
     assert [np.array_equal(a, b) for a, b in zip(
         field_samples(leg, name, q, res), (d, angle, s, g), strict=True)] == [True] * 4
     j = leg.index(name)
@@ -106,19 +106,20 @@ def test_onnx_graph_computes_the_fields_projection(leg, trained, tmp_path):
     q = held_out_postures(leg, 900, 7)
     got = model.correction(q).astype(np.float64)
     # the numpy computation: the limb oracle with the coupled joint's nearest point replaced
-    oracle = LimbOracle(leg)
+    oracle = ConstraintOracle(leg)
     (name,) = fields
     j = leg.index(name)
     net = fields[name]
     res = oracle.evaluate(q)
-    cj = oracle._joint[j]
-    k, t = cj.lim.locate(res.coupling_angle[:, j])
-    lo, hi = cj.lim.interval(k, t)
+    lim = leg.joints[j].coupling.limits
+    k, t = lim.locate(res.coupling_angle[:, j])
+    lo, hi = lim.interval(k, t)
 
     def nearest(d):
         out, b = net.project(d, res.coupling_angle[:, j])
         return np.where(out, 1.0, -1.0), b
-    want = evaluate_ball(np.ascontiguousarray(q[:, j]), cj.axis, nearest,
+    axis = np.asarray(leg.joints[j].limb_axis)
+    want = evaluate_ball(np.ascontiguousarray(q[:, j]), axis, nearest,
                          lambda e: (lo, hi)).correction
     err = np.degrees(Q.angle(Q.multiply(got[:, j], Q.conjugate(want))))
     assert np.percentile(err, 99) < 0.05  # float32 graph against float64 numpy
@@ -136,7 +137,7 @@ def test_small_network_corrects_a_development_limb(leg, trained):
     import onnxruntime as ort
 
     sess = ort.InferenceSession(model_bytes, providers=["CPUExecutionProvider"])
-    oracle = LimbOracle(leg)
+    oracle = ConstraintOracle(leg)
     q = held_out_postures(leg, 1500, 11, oracle=oracle)
 
     def predict(x):
@@ -187,7 +188,7 @@ def test_a_batch_computed_in_parts_on_helper_threads_gives_the_same_weights():
     limits = arm.joints[arm.index("shoulder")].coupling.limits
     tiny = FieldSpec(features=16, hidden=16, samples=3000, epochs=2, batch=256)
     q = training_postures(arm, tiny.samples, np.random.default_rng(7), tiny.uniform)
-    samples = field_samples(arm, "shoulder", q, LimbOracle(arm).evaluate(q))
+    samples = field_samples(arm, "shoulder", q, ConstraintOracle(arm).evaluate(q))
     alone = fit_coupled_field(limits, np.random.default_rng(1), tiny, samples, parts=3)
     with ThreadPoolExecutor(2) as helpers:
         helped = fit_coupled_field(limits, np.random.default_rng(1), tiny, samples, helpers, 3)

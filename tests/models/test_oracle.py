@@ -530,3 +530,63 @@ def test_twist_is_not_limited_where_it_is_undefined(twist):
     assert math.degrees(Q.angle_between(limb, [1, 0, 0])) == pytest.approx(120, abs=1e-9)
     tw = math.degrees(Q.twist_angle(one))
     assert twist[0] - 1e-9 <= tw <= twist[1] + 1e-9 or (twist[0] == -180 and tw == 180)
+
+
+# -- one oracle for a joint and a limb (issue 38) -----------------------------------------------
+ONE_JOINT_LIMITS = {
+    "ball": {"swing": {"cone": {"centre": [0.6, 0.8, 0.0], "radius_deg": 50}},
+             "twist": {"min_deg": -40, "max_deg": 70}},
+    "hinge": {"kind": "hinge", "hinge": {"axis": [0, 0, 1], "min_deg": 5, "max_deg": 140}},
+    "two-axis": {"kind": "two-axis", "swing": {"cone": {"centre": [0, -1, 0.2],
+                                                          "radius_deg": 30}},
+                 "twist": {"min_deg": -5, "max_deg": 5}},
+    "forearm": {"kind": "forearm", "forearm": {
+        "flexion": {"axis": [0, 0, 1], "min_deg": 0, "max_deg": 145},
+        "rotation": {"min_deg": -80, "max_deg": 70}}},
+}
+
+
+@pytest.mark.parametrize("kind", sorted(ONE_JOINT_LIMITS))
+def test_a_limb_of_one_joint_answers_as_its_joint_bit_for_bit(kind):
+    """A one-joint constraint is a limb of one joint: the oracle built from a limb file of that
+    joint gives the joint's answers on postures (N, 1, 4), bit for bit (on the same unit
+    orientations)."""
+    from models.limb import Limb
+
+    body = ONE_JOINT_LIMITS[kind]
+    joint = ConstraintOracle(JointConstraint.from_dict(body))
+    limb = ConstraintOracle(Limb.from_dict({"name": "one", "joints": [
+        {"name": "elbow", "parent": "upper-arm", "child": "forearm", "constraint": body}]}))
+    assert (joint.n_joints, limb.n_joints) == (1, 1) and limb.constraint is None
+    np.testing.assert_array_equal(joint.axes, limb.axes)
+    q = Q.random_quaternions(2000, np.random.default_rng(38))
+    # a limb's postures are checked (made unit) once as postures, then once per joint as one
+    # joint's orientations are: the joint compared on the postures' check (the same rounding)
+    a, b = joint.evaluate(Q.check_quaternions(q)), limb.evaluate(q[:, None])
+    for name in ("valid", "distance", "projected", "correction"):
+        assert getattr(a, name).tobytes() == getattr(b, name)[:, 0].tobytes(), name
+    assert np.isnan(b.coupling_angle).all()
+    one = limb.evaluate(q[7][None])  # one posture (J, 4)
+    assert one.projected.shape == (1, 4) and one.projected.tobytes() == a.projected[7].tobytes()
+    assert joint.joint_is_valid(q, 0).tobytes() == limb.joint_is_valid(q[:, None], 0).tobytes()
+    np.testing.assert_array_equal(joint.end_points(q), limb.end_points(q[:, None]))
+    assert limb.prepare() is limb and joint.prepare() is joint
+
+
+def test_a_limbs_oracle_refuses_one_joints_queries_and_shapes():
+    from models.limb import Limb
+
+    limb = ConstraintOracle(Limb.from_dict({"name": "one", "joints": [
+        {"name": "elbow", "parent": "upper-arm", "child": "forearm",
+         "constraint": ONE_JOINT_LIMITS["hinge"]}]}))
+    for call in (lambda: limb.distance_projected_one(1.0, 0.0, 0.0, 0.0),
+                 lambda: limb.swing_distance([1.0, 0.0, 0.0]),
+                 lambda: limb.nearest_swing_point([1.0, 0.0, 0.0]),
+                 lambda: limb.twist_limits_at([1.0, 0.0, 0.0])):
+        with pytest.raises(TypeError, match="a limb's oracle answers postures"):
+            call()
+    with pytest.raises(QuaternionError, match=r"expected shape \(N, 1, 4\)"):
+        limb.evaluate(np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0]]))
+    joint = ConstraintOracle(JointConstraint.from_dict(ONE_JOINT_LIMITS["hinge"]))
+    with pytest.raises(IndexError, match="joint 0 only"):
+        joint.joint_is_valid(np.array([1.0, 0, 0, 0]), 1)

@@ -11,7 +11,7 @@ import pytest
 from models.datasets import limb_postures, load_dataset
 from models.limb import dump_limb
 from models.limb_evaluation import random_limb
-from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
 
 CONE = "name: cone60y\nswing:\n  cone: {centre: [0, 1, 0], radius_deg: 60}\n"
 
@@ -35,7 +35,7 @@ def test_dataset_train_evaluate_a_limb(tmp_path, leg, rig_cli):
     got_limb, q = limb_postures(ds)
     assert got_limb.content_hash() == limb.content_hash()
     # the targets are the exact limb oracle's corrections
-    np.testing.assert_allclose(ds.targets.reshape(-1, 3, 4), LimbOracle(limb).correction(q))
+    np.testing.assert_allclose(ds.targets.reshape(-1, 3, 4), ConstraintOracle(limb).correction(q))
     code, out, _ = rig_cli(["dataset", "info", str(data)])
     assert code == 0 and "coupled to knee" in out
 

@@ -28,7 +28,7 @@ Motion (the shoulder patient's recipe, :mod:`rig.sim.limb.motion`, on every join
   circle towards the motion centre onto the boundary (bisection on the limb oracle's verdict,
   the other joints as the oracle corrects them: a coupled region at its hinge's corrected
   angle), then the exact hierarchical projection of the limb oracle
-  (:meth:`models.limb_oracle.LimbOracle.project`: the hinge first, the joints coupled to it
+  (:meth:`models.oracle.ConstraintOracle.project`: the hinge first, the joints coupled to it
   against their limits at the corrected hinge angle; the twist clamp). The oracle's nearest
   point alone jumps where a target crosses the medial axis of a concave notch or of a region's
   excluded cap (a shoulder's): measured on seeds 3, 5, 8 at 50 Hz over 240 s, the leg's joints
@@ -94,7 +94,6 @@ from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.limb import Limb
-from models.limb_oracle import LimbOracle
 from models.limits import ConeSwing, PolygonSwing
 from models.oracle import ConstraintOracle
 from rig.sim.limb.base import (
@@ -399,7 +398,7 @@ class SimulatedWholeLimb(SimulatedLimb):
         self.side = limb.side or "right"
         self.segments: tuple[str, ...] = (limb.joints[0].parent,
                                           *(j.child for j in limb.joints))
-        self.oracle = LimbOracle(limb)
+        self.oracle = ConstraintOracle(limb)
         self.excursion = float(excursion)
         rng, seed_seq = seeded(seed)
         # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway

@@ -11,7 +11,7 @@ import pytest
 from calibration.joint_angles import from_angles, joint_angles
 from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
-from models.limb_oracle import LimbOracle
+from models.oracle import ConstraintOracle
 from rig.errors import RigConfigError
 from rig.sim.limb import NoiseModel, SimulatedWholeLimb, limb_mounts
 from rig.sim.patients import anatomical_limb, record_limb_imu, seeded_patient
@@ -49,7 +49,7 @@ def test_anatomical_limbs_load_and_neutral_is_valid(kind, side):
     for seed in range(6):
         limb = anatomical_limb(seed, kind, side)
         assert (limb.name, limb.limb, limb.side) == (f"sim-{kind}-{seed}", kind, side)
-        assert LimbOracle(limb).is_valid(_neutral(limb)).all()
+        assert ConstraintOracle(limb).is_valid(_neutral(limb)).all()
         swing = limb.joints[0].coupling.keyframes[0].swing
         assert _concave(swing.vertices)
         assert len(limb.joints[0].coupling.keyframes) >= 3
@@ -62,7 +62,7 @@ def test_anatomical_limbs_load_and_neutral_is_valid(kind, side):
 @pytest.mark.parametrize("side", ["right", "left"])
 def test_leg_clinical_ranges(side):
     limb = anatomical_limb(7, "leg", side)
-    o = LimbOracle(limb)
+    o = ConstraintOracle(limb)
     c = limb.provenance["clinical"]
     base = _neutral(limb)
 
@@ -112,7 +112,7 @@ def test_leg_clinical_ranges(side):
 @pytest.mark.parametrize("side", ["right", "left"])
 def test_arm_clinical_ranges(side):
     limb = anatomical_limb(7, "arm", side)
-    o = LimbOracle(limb)
+    o = ConstraintOracle(limb)
     base = _neutral(limb)
     flip = -1.0 if side == "left" else 1.0
 
@@ -302,7 +302,7 @@ def test_offline_recording():
     assert rec.segments == ("thorax", "upper-arm", "forearm", "hand")
     assert set(rec.windows) == {"static", "shoulder", "elbow", "wrist"}
     assert rec.window("elbow").sum() > 0 and rec.window("free").sum() == 5 * 50
-    over = LimbOracle(chain.limb).evaluate(rec.joints).distance
+    over = ConstraintOracle(chain.limb).evaluate(rec.joints).distance
     assert np.nanmax(over) < np.radians(1.5)  # the B-spline's brief overshoot at most
     # the same seed twice: the same recording (noise, drift, disturbances included)
     again = record_limb_imu(seeded_patient(3, "arm", side="left"), 5.0, rate_hz=50.0)
