@@ -123,7 +123,8 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_the_graph_sees_the_imports_it_should():
     # a known arrow of each kind: module level, inside a function, relative, a package's init
     assert "rig.errors" in GRAPH["rig.cli"]
-    assert "rig.readback" in GRAPH["rig.record.session"]  # imported inside a function
+    assert "rig.readback" in GRAPH["rig.record.procedures"]
+    assert "rig.errors" in GRAPH["rig.commands.boundary"]  # imported inside a function
     assert "rig.readback.boundary" in GRAPH["rig.commands.boundary"]
     assert "rig.readback" in GRAPH["rig.commands.boundary"]  # the package's __init__ runs too
     assert "models.quaternion" in GRAPH["calibration.coverage"]
@@ -252,9 +253,9 @@ LIMB_OR_JOINT: dict[str, str] = {
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
     "rig/readback/sessions.py": "one joint's or a limb's IMU calibration and heading",
     "rig/readback/source.py": "a session of one joint or a limb",
-    "rig/record/guided.py": "the joint's or the limb's calibration protocol",
-    "rig/record/rigio.py": "the joint's or the limb's calibration protocol",
-    "rig/record/session.py": "range of motion of one joint or of every joint",
+    "rig/record/procedures.py": "procedure_for: the one place choosing a rig's calibration "
+                                "procedure (ImuJointCalibration or LimbImuCalibration, "
+                                "different algorithms) from the configuration's limb",
     "rig/report/session.py": "the one joint's page or the limb's",
     "rig/sim/imu.py": "one simulated joint or a whole limb behind a port",
     "rig/sim/limb/joint.py": "a simulated joint's constraint",
