@@ -248,11 +248,10 @@ def test_no_private_attribute_of_a_library_object_is_used():
 LIMB_OR_JOINT: dict[str, str] = {
     "rig/demo/pipeline.py": "the shoulder demo or a limb demo, chosen from --limb",
     "rig/loop/enforce.py": "the loop drives one joint; a limb model is refused",
-    "rig/readback/boundary.py": "--limb chooses a limb file or one joint's constraint",
-    "rig/readback/data.py": "one joint's properties of a recording read back",
+    "rig/readback/boundary.py": "BoundaryRequest.work: the user's --limb arm|leg, the one "
+                                "place choosing a limb file or one joint's constraint",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
-    "rig/readback/sessions.py": "one joint's or a limb's IMU calibration and heading",
-    "rig/readback/source.py": "a session of one joint or a limb",
+    "rig/readback/source.py": "not limb-or-joint: --limb COLUMN (a file's column) given or not",
     "rig/record/procedures.py": "procedure_for: the one place choosing a rig's calibration "
                                 "procedure (ImuJointCalibration or LimbImuCalibration, "
                                 "different algorithms) from the configuration's limb",
