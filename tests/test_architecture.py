@@ -123,7 +123,8 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_the_graph_sees_the_imports_it_should():
     # a known arrow of each kind: module level, inside a function, relative, a package's init
     assert "rig.errors" in GRAPH["rig.cli"]
-    assert "rig.readback" in GRAPH["rig.record.session"]  # imported inside a function
+    assert "rig.readback" in GRAPH["rig.record.procedures"]
+    assert "rig.errors" in GRAPH["rig.commands.boundary"]  # imported inside a function
     assert "rig.readback.boundary" in GRAPH["rig.commands.boundary"]
     assert "rig.readback" in GRAPH["rig.commands.boundary"]  # the package's __init__ runs too
     assert "models.quaternion" in GRAPH["calibration.coverage"]
@@ -246,14 +247,13 @@ def test_no_private_attribute_of_a_library_object_is_used():
 #: limb path still differ in what they compute, not only in size.
 LIMB_OR_JOINT: dict[str, str] = {
     "rig/demo/pipeline.py": "--limb chooses JointDemo or LimbDemo, the one place that does",
-    "rig/readback/boundary.py": "--limb chooses a limb file or one joint's constraint",
-    "rig/readback/data.py": "one joint's properties of a recording read back",
+    "rig/readback/boundary.py": "BoundaryRequest.work: the user's --limb arm|leg, the one "
+                                "place choosing a limb file or one joint's constraint",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
-    "rig/readback/sessions.py": "one joint's or a limb's IMU calibration and heading",
-    "rig/readback/source.py": "a session of one joint or a limb",
-    "rig/record/guided.py": "the joint's or the limb's calibration protocol",
-    "rig/record/rigio.py": "the joint's or the limb's calibration protocol",
-    "rig/record/session.py": "range of motion of one joint or of every joint",
+    "rig/readback/source.py": "not limb-or-joint: --limb COLUMN (a file's column) given or not",
+    "rig/record/procedures.py": "procedure_for: the one place choosing a rig's calibration "
+                                "procedure (ImuJointCalibration or LimbImuCalibration, "
+                                "different algorithms) from the configuration's limb",
     "rig/report/session.py": "the one joint's page or the limb's",
     "rig/sim/imu.py": "the default patient when no motion source is given (limb=None)",
     "rig/sim/patients.py": "a port string's patient= file: a limb file makes an arm or leg",

@@ -27,12 +27,13 @@ from models.limb import dump_limb, loads_limb
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData
 from rig.readback.files import limb_orientations_from_file
-from rig.readback.sessions import joint_orientations_from_store, session_limb
+from rig.readback.sessions import joint_orientations_from_store, session_shape
 from rig.readback.source import RecordingSource, check_session_side
 from rig.store import LIMB_BOUNDARY, open_store
 
-__all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "default_name", "describe",
-           "extract", "extract_limb", "run_boundary", "stored_limb"]
+__all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "OneJointBoundary",
+           "WholeLimbBoundary", "default_name", "describe", "extract", "extract_limb",
+           "run_boundary", "stored_limb"]
 
 #: ``--by-swing``: swing-dependent twist limits when the data supports them, always, never.
 BY_SWING_CHOICES = ("auto", "on", "off")
@@ -92,55 +93,93 @@ class BoundaryRequest:
                                  "--reference), all different")
         return cols
 
+    @property
+    def work(self) -> OneJointBoundary | WholeLimbBoundary:
+        """What the request asks for: one joint's constraint file, or a whole limb's limb file.
+        The user's ``--limb arm|leg`` option decides, here and nowhere else in this module
+        (the request's check, reading and extraction ask the object it gives)."""
+        return WholeLimbBoundary() if self.limb is not None else OneJointBoundary()
+
     def check(self) -> None:
         """Everything that can be checked before reading the recording (one-line errors)."""
-        if self.limb is not None:
-            self._check_limb()
-            return
-        self.source.check(side=self.side)
-        if self.by_swing not in BY_SWING_CHOICES:
-            raise RigConfigError(f"--by-swing {self.by_swing!r}: expected one of "
-                                 f"{', '.join(BY_SWING_CHOICES)}")
-        _check_side_and_out(self.side, self.out)
-        if self.source.db is not None and self.store:
-            _check_can_store(self.source.db)
+        self.work.check(self)
 
-    def _check_limb(self) -> None:
-        """A whole limb's request (``--limb arm|leg``)."""
-        src = self.source
-        if self.limb not in LIMB_CHAINS:
-            raise RigConfigError(f"--limb {self.limb!r}: expected one of "
+
+class OneJointBoundary:
+    """``rig boundary`` of one joint: a constraint file (:func:`extract`)."""
+
+    def check(self, request: BoundaryRequest) -> None:
+        """One joint's request, before reading the recording (one-line errors)."""
+        request.source.check(side=request.side)
+        if request.by_swing not in BY_SWING_CHOICES:
+            raise RigConfigError(f"--by-swing {request.by_swing!r}: expected one of "
+                                 f"{', '.join(BY_SWING_CHOICES)}")
+        _check_side_and_out(request.side, request.out)
+        if request.source.db is not None and request.store:
+            _check_can_store(request.source.db)
+
+    def run(self, request: BoundaryRequest, path: Path) -> tuple[BoundaryResult, str, dict]:
+        """Read, extract and write the constraint file: the result, the YAML text and the
+        metadata to store with the session."""
+        data = request.source.load()
+        ex = extract(data, name=request.name, side=request.side, alpha_deg=request.alpha_deg,
+                     max_vertices=request.max_vertices, by_swing=request.by_swing)
+        dump_constraint(ex.constraint_, path)
+        result = BoundaryResult(ex, data, path, warnings=data.facts().warnings())
+        return result, ex.constraint_.to_yaml(), {"path": str(path), **ex.report()}
+
+
+class WholeLimbBoundary:
+    """``rig boundary --limb arm|leg``: a whole limb's limb file (:func:`extract_limb`)."""
+
+    def check(self, request: BoundaryRequest) -> None:
+        """A whole limb's request (``--limb arm|leg``), before reading the recording."""
+        src = request.source
+        if request.limb not in LIMB_CHAINS:
+            raise RigConfigError(f"--limb {request.limb!r}: expected one of "
                                  f"{', '.join(LIMB_CHAINS)}")
         if src.file is not None and (src.db is not None or src.session_id is not None):
             raise RigConfigError("give either FILE or --db/--session, not both")
         if src.file is None:
             if src.db is None or src.session_id is None:
-                raise RigConfigError(f"--limb {self.limb} needs a recording: FILE --segments "
-                                     "COL,COL,COL, or --db DB --session ID")
-            for flag, value in (("--segments", self.segments), ("--reference", src.reference),
-                                ("--frames", src.frames)):
+                raise RigConfigError(f"--limb {request.limb} needs a recording: FILE "
+                                     "--segments COL,COL,COL, or --db DB --session ID")
+            for flag, value in (("--segments", request.segments),
+                                ("--reference", src.reference), ("--frames", src.frames)):
                 if value is not None:
                     raise RigConfigError(f"{flag} applies to files; a session knows its "
                                          "segments")
             if src.fusion not in FUSION_CHOICES:
                 raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got "
                                      f"{src.fusion!r}")
-            if self.store:
+            if request.store:
                 _check_can_store(src.db)
-            check_session_side(src.db, src.session_id, self.side)
+            check_session_side(src.db, src.session_id, request.side)
         else:
-            if self.segments is None:
-                raise RigConfigError(f"--limb {self.limb} needs --segments COL,COL,COL "
+            if request.segments is None:
+                raise RigConfigError(f"--limb {request.limb} needs --segments COL,COL,COL "
                                      "(proximal to distal)")
-            order = LIMB_CHAINS[self.limb]
-            why = columns_mismatch(self.columns(), [order[0][1], *(c for _, _, c in order)],
-                                   side=self.side, what="--segments")
+            order = LIMB_CHAINS[request.limb]
+            why = columns_mismatch(request.columns(),
+                                   [order[0][1], *(c for _, _, c in order)],
+                                   side=request.side, what="--segments")
             if why is not None:
-                raise RigConfigError(f"{src.file}: {why} (reading the {self.limb}: --limb "
-                                     f"{self.limb})")
+                raise RigConfigError(f"{src.file}: {why} (reading the {request.limb}: --limb "
+                                     f"{request.limb})")
             if not Path(src.file).is_file():
                 raise RigConfigError(f"{src.file}: no such file")
-        _check_side_and_out(self.side, self.out)
+        _check_side_and_out(request.side, request.out)
+
+    def run(self, request: BoundaryRequest, path: Path) -> tuple[BoundaryResult, str, dict]:
+        """Read, extract and write the limb file: the result, the YAML text and the metadata
+        to store with the session (a boundary of kind :data:`rig.store.LIMB_BOUNDARY`)."""
+        data = _load_limb(request)
+        ex = extract_limb(data, name=request.name, side=request.side,
+                          alpha_deg=request.alpha_deg, max_vertices=request.max_vertices)
+        dump_limb(ex.limb_, path)
+        meta = {"kind": LIMB_BOUNDARY, "limb": request.limb, "path": str(path),
+                "coupled": {k: bool(v["coupled"]) for k, v in ex.report()["couplings"].items()}}
+        return BoundaryResult(ex, data, path), ex.limb_.to_yaml(), meta
 
 
 @dataclass
@@ -191,25 +230,11 @@ def _check_can_store(db) -> None:
 def run_boundary(request: BoundaryRequest) -> BoundaryResult:
     """Check the request, read the recording (one joint, or every joint of a whole ``limb``),
     extract, write the constraint or limb file (and store it with the session when asked)."""
-    request.check()
+    work = request.work
+    work.check(request)
     src = request.source
     path = Path(request.out)
-    if request.limb is None:
-        data = src.load()
-        ex = extract(data, name=request.name, side=request.side, alpha_deg=request.alpha_deg,
-                     max_vertices=request.max_vertices, by_swing=request.by_swing)
-        dump_constraint(ex.constraint_, path)
-        result = BoundaryResult(ex, data, path, warnings=data.facts().warnings())
-        text, meta = ex.constraint_.to_yaml(), {"path": str(path), **ex.report()}
-    else:
-        data = _load_limb(request)
-        ex = extract_limb(data, name=request.name, side=request.side,
-                          alpha_deg=request.alpha_deg, max_vertices=request.max_vertices)
-        dump_limb(ex.limb_, path)
-        result = BoundaryResult(ex, data, path)
-        text = ex.limb_.to_yaml()
-        meta = {"kind": LIMB_BOUNDARY, "limb": request.limb, "path": str(path),
-                "coupled": {k: bool(v["coupled"]) for k, v in ex.report()["couplings"].items()}}
+    result, text, meta = work.run(request, path)
     if src.db is not None and request.store:
         with open_store(src.db, create=False) as st:
             result.boundary_id = st.boundaries.add(src.session_id, text, meta)
@@ -226,10 +251,7 @@ def _load_limb(request: BoundaryRequest) -> JointData:
                                            src.frames or "rig")
     with open_store(src.db, create=False) as store:
         sess = store.sessions.get(src.session_id)
-        if session_limb(sess) is None:
-            raise RigConfigError(f"session {src.session_id} recorded the "
-                                 f"{sess.get('joint') or 'shoulder'}, not a whole arm or leg "
-                                 "(no --limb)")
+        session_shape(sess).require_whole_limb(src.session_id, sess)
         data = joint_orientations_from_store(store, src.session_id, fusion=src.fusion)
     if data.limb != request.limb:
         raise RigConfigError(f"session {src.session_id} recorded the {data.limb}, not "

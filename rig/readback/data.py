@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from calibration.coverage import coverage_of
-from calibration.joints import JOINTS, LIMB_CHAINS
+from calibration.joints import JOINTS
 from models import quaternion as Q
 from models.kinds import DEFAULT_KIND, get_kind
 from models.quaternion import normalize_rows
@@ -102,6 +102,9 @@ class JointData:
         The whole limb recorded, or None for one joint (a joint selected from a limb keeps
         ``provenance["limb"]``).
     recording : RecordingFacts or None
+    slow_errors : dict
+        Joint → measured size of the slowly varying error left in its orientations, as the
+        reader that made them measured it (:attr:`slow_errors_deg`; a joint not in it: None).
 
     The one joint's views (``q``, ``joint``, ``kind``, ``directions``, ``slow_error_deg``,
     :meth:`facts` with coverage) need J = 1: :meth:`select` takes one joint of a limb.
@@ -117,6 +120,7 @@ class JointData:
     patient: str | None = None
     limb: str | None = None
     recording: RecordingFacts | None = None
+    slow_errors: dict[str | None, float | None] = field(default_factory=dict)
 
     @classmethod
     def of_joint(cls, q: np.ndarray, joint: str | None, *, t: np.ndarray | None = None,
@@ -124,10 +128,14 @@ class JointData:
                  side: str | None = None, provenance: dict[str, Any] | None = None,
                  patient: str | None = None, recording: RecordingFacts | None = None
                  ) -> JointData:
-        """One joint's orientations ``q`` (N, 4) as a limb of one joint (J = 1)."""
+        """One joint's orientations ``q`` (N, 4) as a limb of one joint (J = 1); its measured
+        slow error the heading correction's own uncertainty in ``provenance`` (IMU sessions
+        with neutral checkpoints)."""
+        prov = {} if provenance is None else provenance
+        slow = (prov.get("heading_correction") or {}).get("uncertainty_deg")
         return cls(np.asarray(q)[:, None, :], (joint,), t, status,
                    parse_axis(None) if limb_axis is None else limb_axis, side,
-                   {} if provenance is None else provenance, patient, None, recording)
+                   prov, patient, None, recording, {joint: slow})
 
     def _one(self, what: str) -> None:
         if len(self.joints) != 1:
@@ -158,7 +166,7 @@ class JointData:
             facts = replace(facts, explored=None, sectors=None, sufficient=None)
         prov = {**self.provenance, "joint": name}
         hc = prov.get("heading_correction")
-        if hc and "segments" in hc:  # the joint's own: its distal sensor's, relative
+        if hc:  # the joint's own (a limb's: its distal sensor's, relative to its neighbour)
             prov["heading_correction"] = {**hc, "uncertainty_deg": self.slow_errors_deg[name]}
         return JointData.of_joint(self.joint_q[:, self.joints.index(name)], name, t=self.t,
                                   status=self.status,
@@ -200,19 +208,16 @@ class JointData:
         (the heading correction's own uncertainty, IMU sessions with neutral checkpoints),
         else None."""
         self._one("the slow error")
-        return (self.provenance.get("heading_correction") or {}).get("uncertainty_deg")
+        return self.slow_errors_deg[self.joints[0]]
 
     @property
     def slow_errors_deg(self) -> dict[str | None, float | None]:
-        """Joint → measured size of the slowly varying error left in its orientations. A
-        whole limb: the limb heading correction's own uncertainty for the joint's distal
-        sensor, which is corrected relative to its proximal neighbour (IMU sessions with
-        neutral checkpoints; None otherwise); one joint: :attr:`slow_error_deg`."""
-        if self.limb is None:
-            return {self.joint: self.slow_error_deg}
-        segs = (self.provenance.get("heading_correction") or {}).get("segments") or {}
-        return {name: (segs.get(child) or {}).get("uncertainty_deg")
-                for name, _, child in LIMB_CHAINS[self.limb]}
+        """Joint → measured size of the slowly varying error left in its orientations, in the
+        order of ``joints`` (:attr:`slow_errors`; None where none was measured). One joint:
+        the heading correction's own uncertainty; a whole limb: the limb heading
+        correction's for the joint's distal sensor, which is corrected relative to its
+        proximal neighbour (IMU sessions with neutral checkpoints)."""
+        return {name: self.slow_errors.get(name) for name in self.joints}
 
     @property
     def orientations(self) -> str | None:

@@ -21,6 +21,7 @@ from calibration.alignment import ImuJointCalibration
 from calibration.errors import CalibrationError
 from calibration.fusion import fuse_vqf
 from calibration.heading import HeadingCorrection, LimbHeadingCorrection
+from calibration.joints import LIMB_CHAINS
 from calibration.limb_calibration import LimbImuCalibration
 from calibration.protocol import LimbCalibrationProtocol
 from rig.errors import RigConfigError
@@ -34,7 +35,8 @@ from rig.readback.data import (
 from rig.store import open_store
 from rig.store.io import align_series, shared_instants
 
-__all__ = ["joint_orientations_from_store", "read_session", "session_limb"]
+__all__ = ["OneJointSession", "WholeLimbSession", "joint_orientations_from_store",
+           "read_session", "session_limb", "session_shape"]
 
 
 def read_session(db: str, session_id: int, axis: np.ndarray | None = None,
@@ -54,9 +56,9 @@ def latest_calibration(cals: list[dict], kind: str) -> dict | None:
 
 
 def session_limb(sess: dict) -> str | None:
-    """The limb (``arm``/``leg``) a session recorded whole, or None (one joint)."""
-    limb = (sess.get("meta") or {}).get("limb")
-    return limb if limb in ("arm", "leg") else None
+    """The limb (``arm``/``leg``) a session recorded whole, or None (one joint):
+    :func:`session_shape`'s."""
+    return session_shape(sess).limb
 
 
 def _limb_orientations(store, session_id: int, sess: dict, limb: str, axis: np.ndarray, *,
@@ -129,9 +131,13 @@ def _limb_orientations(store, session_id: int, sess: dict, limb: str, axis: np.n
     facts = _session_facts(store, sess, sensors)
     if not (prov.get("heading_correction") or {}).get("accepted"):
         facts = replace(facts, unmeasured_drift=True)
+    # each joint's measured slow error: its distal sensor's, relative to its proximal one
+    segs = (prov.get("heading_correction") or {}).get("segments") or {}
+    slow = {name: (segs.get(child) or {}).get("uncertainty_deg")
+            for name, _, child in LIMB_CHAINS[limb]}
     return JointData(joints, tuple(model.joints_), common, status, axis,
                      side if side in ("left", "right") else None, prov, sess.get("pseudonym"),
-                     limb, facts)
+                     limb, facts, slow)
 
 
 @contextlib.contextmanager
@@ -187,35 +193,90 @@ def joint_orientations_from_store(store, session_id: int,
     if fusion not in FUSION_CHOICES:
         raise RigConfigError(f"fusion must be one of {', '.join(FUSION_CHOICES)}, got {fusion!r}")
     sess = store.sessions.get(session_id)
-    limb = session_limb(sess)
-    if limb is not None:
-        data = _limb_orientations(store, session_id, sess, limb, parse_axis(None),
+    return session_shape(sess).read(store, session_id, sess, axis, fusion=fusion,
+                                    heading=heading, joint=joint)
+
+
+class OneJointSession:
+    """A session of one joint (a thorax and a limb IMU through an ``imu-alignment``
+    calibration, or a servo joint's samples): what :func:`session_shape` gives for it."""
+
+    #: The whole limb recorded: none.
+    limb = None
+
+    def recorded(self, sess: dict) -> str:
+        """What the session recorded, for people: its joint."""
+        return sess.get("joint") or "shoulder"
+
+    def require_whole_limb(self, session_id: int, sess: dict) -> None:
+        """Refuse a whole limb's request (``--limb``) on this session (one line)."""
+        raise RigConfigError(f"session {session_id} recorded the {self.recorded(sess)}, not a "
+                             "whole arm or leg (no --limb)")
+
+    def read(self, store, session_id: int, sess: dict, axis: np.ndarray | None, *,
+             fusion: str, heading: bool, joint: str | None) -> JointData:
+        """The joint's orientations (J = 1; :func:`joint_orientations_from_store`); ``joint``
+        must be None or the session's own."""
+        axis = parse_axis(None) if axis is None else axis
+        if joint is not None and joint != self.recorded(sess):
+            raise RigConfigError(f"session {session_id} recorded the {self.recorded(sess)}, "
+                                 f"not the {joint}")
+        sensors = store.samples.sensors(session_id)
+        names = [r["name"] for r in sensors if r.get("n_samples")]
+        if not names:
+            raise RigConfigError(f"session {session_id} has no samples")
+        prov: dict[str, Any] = {"session": int(session_id),
+                                "started_at": sess.get("started_at")}
+        is_joint = any(r["kind"] == "joint" for r in sensors if r.get("n_samples"))
+        if is_joint:
+            q, t, status = _joint_samples(store, session_id, fusion)
+            prov["source"] = "joint samples"
+        else:
+            q, t, status = _imu_orientations(store, session_id, sess, sensors, names,
+                                             fusion=fusion, heading=heading, prov=prov)
+        side = sess.get("side")
+        facts = _session_facts(store, sess, sensors)
+        if not is_joint and not (prov.get("heading_correction") or {}).get("accepted"):
+            facts = replace(facts, unmeasured_drift=True)
+        return JointData.of_joint(q, sess.get("joint"), t=np.asarray(t, dtype=np.float64),
+                                  status=status, limb_axis=axis,
+                                  side=side if side in ("left", "right") else None,
+                                  provenance=prov, patient=sess.get("pseudonym"),
+                                  recording=facts)
+
+
+class WholeLimbSession:
+    """A session of a whole limb (one IMU per segment through an ``imu-limb`` calibration:
+    :class:`~calibration.limb_calibration.LimbImuCalibration`, a different algorithm from one
+    joint's): what :func:`session_shape` gives for it."""
+
+    def __init__(self, limb: str) -> None:
+        self.limb = limb
+
+    def recorded(self, sess: dict) -> str:
+        """What the session recorded, for people: its limb."""
+        return self.limb
+
+    def require_whole_limb(self, session_id: int, sess: dict) -> None:
+        """A whole limb's request (``--limb``) is this session's kind of request."""
+
+    def read(self, store, session_id: int, sess: dict, axis: np.ndarray | None, *,
+             fusion: str, heading: bool, joint: str | None) -> JointData:
+        """Every joint of the limb (J = 3, :func:`_limb_orientations`), or the one named by
+        ``joint`` (:meth:`JointData.select <rig.readback.data.JointData.select>`, ``axis`` its
+        limb axis)."""
+        data = _limb_orientations(store, session_id, sess, self.limb, parse_axis(None),
                                   fusion=fusion, heading=heading)
         return data if joint is None else data.select(joint, axis)
-    axis = parse_axis(None) if axis is None else axis
-    if joint is not None and joint != (sess.get("joint") or "shoulder"):
-        raise RigConfigError(f"session {session_id} recorded the {sess.get('joint') or 'shoulder'}"
-                             f", not the {joint}")
-    sensors = store.samples.sensors(session_id)
-    names = [r["name"] for r in sensors if r.get("n_samples")]
-    if not names:
-        raise RigConfigError(f"session {session_id} has no samples")
-    prov: dict[str, Any] = {"session": int(session_id), "started_at": sess.get("started_at")}
-    is_joint = any(r["kind"] == "joint" for r in sensors if r.get("n_samples"))
-    if is_joint:
-        q, t, status = _joint_samples(store, session_id, fusion)
-        prov["source"] = "joint samples"
-    else:
-        q, t, status = _imu_orientations(store, session_id, sess, sensors, names,
-                                         fusion=fusion, heading=heading, prov=prov)
-    side = sess.get("side")
-    facts = _session_facts(store, sess, sensors)
-    if not is_joint and not (prov.get("heading_correction") or {}).get("accepted"):
-        facts = replace(facts, unmeasured_drift=True)
-    return JointData.of_joint(q, sess.get("joint"), t=np.asarray(t, dtype=np.float64),
-                              status=status, limb_axis=axis,
-                              side=side if side in ("left", "right") else None, provenance=prov,
-                              patient=sess.get("pseudonym"), recording=facts)
+
+
+def session_shape(sess: dict) -> OneJointSession | WholeLimbSession:
+    """How a session is read back, chosen from what it recorded: a whole limb (``limb`` in
+    its metadata: ``arm``/``leg``, :class:`WholeLimbSession`) or one joint
+    (:class:`OneJointSession`). The one place that asks which; the read path, ``rig
+    boundary`` and the side check ask the object it gives."""
+    limb = (sess.get("meta") or {}).get("limb")
+    return WholeLimbSession(limb) if limb in ("arm", "leg") else OneJointSession()
 
 
 def _joint_samples(store, session_id: int, fusion: str):

@@ -12,7 +12,7 @@ from calibration.joints import JOINTS
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData, parse_axis
 from rig.readback.files import check_columns, joint_orientations_from_file
-from rig.readback.sessions import read_session, session_limb
+from rig.readback.sessions import read_session, session_shape
 from rig.store import open_store
 
 __all__ = ["FUSION_CHOICES", "RecordingSource", "check_joint", "load_joint_orientations"]
@@ -34,7 +34,7 @@ def check_session_side(db, session_id: int | None, side: str | None) -> None:
         sess = st.sessions.get(session_id)
     recorded = sess.get("side")
     if recorded is not None and recorded != side:
-        what = session_limb(sess) or sess.get("joint") or "shoulder"
+        what = session_shape(sess).recorded(sess)
         raise RigConfigError(f"--side {side}: session {session_id} recorded the {recorded} "
                              f"{what}")
 
@@ -69,6 +69,9 @@ class RecordingSource:
             raise RigConfigError("give either FILE or --db/--session, not both")
         if file is None and (self.db is None or self.session_id is None):
             raise RigConfigError("give a recording: FILE.sto|FILE.csv, or --db DB --session ID")
+        # ``limb`` here is the user's ``--limb COLUMN`` (the file's column of the distal
+        # segment), not a whole limb: these two checks ask whether the option was given, in
+        # the one place that decides what a file needs; no limb-or-joint branch
         if file is not None:
             if self.limb is None:
                 raise RigConfigError(f"{file}: --limb COLUMN is required with a file")

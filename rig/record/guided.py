@@ -35,38 +35,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.alignment import ImuJointCalibration, functional_axis, status_ok
 from calibration.errors import CalibrationError
-from calibration.limb_calibration import LimbImuCalibration
-from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
+from rig.record.procedures import NEUTRAL_WORDS, CalibrationResult, procedure_for
 from rig.record.pump import SampleBatch
-from rig.store.io import shared_instants
 
-__all__ = ["CalibrationResult", "GuidedCalibration", "NeutralCheckpoints"]
-
-
-@dataclass
-class CalibrationResult:
-    """What is stored (``store.calibrations.add(session, kind, data, residual_deg)``) and what
-    turns raw samples into joint orientations.
-
-    Attributes
-    ----------
-    kind : str
-        ``"imu-alignment"`` or ``"servo-zero"``.
-    data : dict
-        JSON-able calibration parameters plus the protocol windows.
-    residual_deg : float
-        The calibration's own residual, degrees.
-    model : object or None
-        The fitted :class:`~calibration.alignment.ImuJointCalibration` (IMU rigs).
-    """
-
-    kind: str
-    data: dict
-    residual_deg: float
-    model: object = None
+__all__ = ["GuidedCalibration", "NeutralCheckpoints"]
 
 
 class GuidedCalibration:
@@ -77,25 +52,30 @@ class GuidedCalibration:
     config : RigConfig
     rig : OpenRig
     display : display object (``message``)
-    protocol : CalibrationProtocol, optional
+    protocol : CalibrationProtocol or LimbCalibrationProtocol, optional
     stdin : text stream, optional
         Where Enter is read on hardware (default ``sys.stdin``).
+    procedure : JointProcedure or LimbProcedure, optional
+        The rig's calibration procedure (default :func:`~rig.record.procedures.procedure_for`
+        the configuration's ``limb``).
     """
 
-    def __init__(self, config, rig, *, display, protocol=None, stdin=None) -> None:
+    def __init__(self, config, rig, *, display, protocol=None, stdin=None,
+                 procedure=None) -> None:
+
         self.config = config
         self.rig = rig
         self.display = display
-        self.limb = getattr(config, "limb", None)
+        self.procedure = (procedure if procedure is not None
+                          else procedure_for(getattr(config, "limb", None)))
         if protocol is None and rig.simulated:
             protocol = rig.protocol  # the one the simulated patient performs
         if protocol is None:
-            protocol = (CalibrationProtocol() if self.limb is None
-                        else LimbCalibrationProtocol(self.limb))
-        if (self.limb is not None) != isinstance(protocol, LimbCalibrationProtocol) or (
-                self.limb is not None and protocol.limb != self.limb):
+            protocol = self.procedure.default_protocol()
+        if not self.procedure.accepts(protocol):
+
             what = "a whole-limb" if isinstance(protocol, LimbCalibrationProtocol) else "a joint"
-            raise CalibrationError(f"the {self.limb or config.joint.name} rig was given {what} "
+            raise CalibrationError(f"the {self.procedure.name(config)} rig was given {what} "
                                    "calibration protocol")
         self.protocol = protocol
         self.stdin = stdin if stdin is not None else sys.stdin
@@ -125,31 +105,11 @@ class GuidedCalibration:
 
     def _phases(self) -> list[tuple[float, str, str]]:
         """The movement phases after the static pose: (start, what to say, short prompt)."""
-        p = self.protocol
-        if self.limb is None:
-            return [(p.static_s, "now flexion/extension: raise the straight arm forwards, then "
-                     f"behind, slowly ({p.functional_s:g} s)", "flexion/extension")]
-        out = []
-        for i, joint in enumerate(p.joints):
-            what = _LIMB_MOVEMENTS[joint]
-            out.append((p.static_s + i * p.movement_s,
-                        f"now the {joint}: {what}, slowly, the rest still ({p.movement_s:g} s)",
-                        f"{joint} flexion/extension"))
-        return out
+        return self.procedure.phases(self.protocol)
 
     def begin(self, stop: threading.Event) -> None:
         """Announce the protocol; on hardware wait (in the background) for Enter."""
-        p = self.protocol
-        if self.limb is None:
-            self.display.message(
-                f"calibration — 1) neutral pose: patient upright, arm hanging relaxed at the "
-                f"side, forearm forward; hold still {p.static_s:g} s. 2) then raise the straight "
-                f"arm forwards and lower it behind (flexion/extension) for {p.functional_s:g} s")
-        else:
-            self.display.message(
-                f"calibration of the {self.limb} — 1) neutral pose: {_NEUTRAL_WORDS[self.limb]}; "
-                f"hold still {p.static_s:g} s. 2) then flex and extend each joint in turn, "
-                f"{', '.join(p.joints)}, {p.movement_s:g} s each")
+        self.display.message(self.procedure.announcement(self.protocol))
         if self.rig.simulated:
             self._armed = True
             self.display.message("simulated patient: the steps advance by themselves")
@@ -209,19 +169,8 @@ class GuidedCalibration:
 
     def finish(self) -> CalibrationResult:
         """Compute the calibration from the recorded protocol."""
-        static = self.window("static")
-        if self.limb is not None:
-            result = _solve_limb(static, {j: self.window(j) for j in self.protocol.joints},
-                                 self.limb, self.config.joint.side, self.protocol)
-            fields = ("limb", "static_s", "movement_s", "period_s", "settle_s")
-        else:
-            functional = self.window("functional")
-            if self.rig.kind == "servo":
-                result = _servo_check(static, functional)
-            else:
-                result = _solve_imu(static, functional, self.parent, self.child)
-            fields = ("static_s", "functional_s", "flexion_deg", "extension_deg", "period_s",
-                      "settle_s")
+        result = self.procedure.solve(self.window, self.protocol, self.config, self.rig.kind)
+        fields = self.procedure.protocol_fields
         result.data = {**result.data,
                        "protocol": {k: getattr(self.protocol, k) for k in fields},
                        "windows_s": {k: list(v) for k, v in self.protocol.windows().items()}}
@@ -282,8 +231,7 @@ class GuidedCalibration:
             self._last_parent = batch.q[np.flatnonzero(is_parent)[-1]]
         child_q = batch.q[child_rows]
         if self._result is not None and self._result.model is not None:
-            apply = _apply_imu if self.limb is None else _apply_limb
-            q = apply(self._result.model, parent_q, child_q)
+            q = self.procedure.live(self._result.model, parent_q, child_q)
         else:
             q = Q.multiply(Q.conjugate(parent_q), child_q)
         return q, batch.time()[child_rows]
@@ -303,20 +251,6 @@ class Checkpoint:
 
     data: dict
     residual_deg: float | None
-
-
-#: The neutral pose, by the rig's ``limb`` (None: the shoulder rigs): what a limb calibration's
-#: static pose and every neutral checkpoint ask for, in the same words. The calibration makes
-#: the static pose each joint's zero and a checkpoint is read against that zero (a forearm
-#: turned otherwise at a checkpoint than in the static pose is indistinguishable from heading
-#: drift), so the two must be one pose. The arm's palm faces the thigh: the forearm's clinical
-#: zero between pronation and supination (AAOS: thumb up with the elbow bent), which the
-#: normative 80° / 80° are measured from (:data:`calibration.joint_angles.NORMATIVE`).
-_NEUTRAL_WORDS = {
-    None: "arm hanging at the side, forearm forward",
-    "arm": "standing straight, arm hanging at the side, palm facing the thigh, fingers down",
-    "leg": "standing straight, foot flat and pointing forward",
-}
 
 
 class NeutralCheckpoints:
@@ -356,16 +290,16 @@ class NeutralCheckpoints:
         self.hold_s = float(hold_s)
         self.lead_s = float(lead_s)
         self.count = 0
-        self._pose = _NEUTRAL_WORDS.get(getattr(getattr(rig, "config", None), "limb", None),
-                                        _NEUTRAL_WORDS[None])
-        self._limb = None
+        self._pose = NEUTRAL_WORDS.get(getattr(getattr(rig, "config", None), "limb", None),
+                                       NEUTRAL_WORDS[None])
+        self._patient = None
         if rig.simulated:
             pats = rig.patients
-            limb = pats[0] if pats else None
-            if (limb is not None and callable(getattr(limb, "neutral_windows", None))
-                    and float(getattr(limb, "neutral_every_s", 0.0) or 0.0) > 0.0):
-                self._limb = limb
-        self.active = rig.kind == "imu" and (self._limb is not None or not rig.simulated)
+            patient = pats[0] if pats else None
+            if (patient is not None and callable(getattr(patient, "neutral_windows", None))
+                    and float(getattr(patient, "neutral_every_s", 0.0) or 0.0) > 0.0):
+                self._patient = patient
+        self.active = rig.kind == "imu" and (self._patient is not None or not rig.simulated)
         self._schedule = np.empty((0, 2))  # simulated: patient-time windows known so far
         self._horizon = -math.inf
         self._next = 0  # index of the next scheduled window not yet completed
@@ -388,12 +322,12 @@ class NeutralCheckpoints:
         """Say what to do; on hardware start reading Enter in the background."""
         if not self.active:
             return
-        if self._limb is not None:
-            every = float(self._limb.neutral_every_s)
+        if self._patient is not None:
+            every = float(self._patient.neutral_every_s)
             self.display.message(
                 f"neutral checkpoints: the simulated patient returns to the neutral pose every "
                 f"{every:g} s ({self._pose}) and holds it "
-                f"{float(getattr(self._limb, 'neutral_hold_s', 2.0)):g} s")
+                f"{float(getattr(self._patient, 'neutral_hold_s', 2.0)):g} s")
             return
         try:
             self.stdin.fileno()
@@ -431,7 +365,7 @@ class NeutralCheckpoints:
         clock = batch.time()
         now = float(clock[-1])
         base = "device_t" if np.isfinite(batch.device_t).all() else "t"
-        if self._limb is not None:
+        if self._patient is not None:
             self._schedule_from_patient(batch)
         else:
             with self._lock:
@@ -463,11 +397,11 @@ class NeutralCheckpoints:
         clock = batch.time()
         offset = float(np.median(clock - pt))  # samples' clock minus patient time
         now = float(pt[-1])
-        limb = self._limb
-        ramp = float(getattr(limb, "neutral_ramp_s", 0.0) or 0.0)
+        patient = self._patient
+        ramp = float(getattr(patient, "neutral_ramp_s", 0.0) or 0.0)
         if now + 60.0 > self._horizon:  # the schedule a minute ahead
             self._horizon = now + 120.0
-            self._schedule = np.asarray(limb.neutral_windows(self._horizon),
+            self._schedule = np.asarray(patient.neutral_windows(self._horizon),
                                         dtype=np.float64).reshape(-1, 2)
         sched = self._schedule
         while self._announced < len(sched) and now >= sched[self._announced, 0] - ramp - \
@@ -516,109 +450,6 @@ def patient_performs_protocol(rig) -> bool:
     """
     patients = rig.patients
     return bool(patients) and all(p.calibration_protocol is not None for p in patients)
-
-
-def _pairs(b: SampleBatch, parent: str, child: str
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Parent and child orientations at the same instants (equal sample times), and whether
-    both sensors' calibration status is trustworthy there (:func:`calibration.alignment.
-    status_ok`: a magnetic disturbance drops it)."""
-
-    clock = b.time()
-    sp = b.name == parent
-    sc = b.name == child
-    _, ip, ic = np.intersect1d(clock[sp], clock[sc], assume_unique=False, return_indices=True)
-    ok = status_ok(np.stack((b.status[sp][ip], b.status[sc][ic]), axis=1)) if len(ip) else \
-        np.zeros(0, bool)
-    return b.q[sp][ip], b.q[sc][ic], ok
-
-
-def _usable(ok: np.ndarray):
-    """The status mask, unless it leaves too little (then every sample, as on hardware whose
-    status byte is not meaningful)."""
-    return ok if ok.sum() >= max(20, len(ok) // 4) else None
-
-
-def _solve_imu(static: SampleBatch, functional: SampleBatch, parent: str, child: str):
-
-    st, sl, sok = _pairs(static, parent, child)
-    ft, fl, fok = _pairs(functional, parent, child)
-    cal = ImuJointCalibration().fit(st, sl, ft, fl, static_ok=_usable(sok),
-                                    functional_ok=_usable(fok))
-    return CalibrationResult("imu-alignment", cal.to_dict(), float(cal.residual_deg_), cal)
-
-
-def _apply_imu(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
-    return model.transform(parent_q, child_q)
-
-
-#: What the patient does for each joint's calibration movement: flexion first, as the protocol
-#: scripts it (the ankle's flexion is dorsiflexion, toes up). A movement begun the other way is
-#: still calibrated (its axis is flipped by its neighbours' and named in ``flipped_``), but only
-#: through that fallback.
-_LIMB_MOVEMENTS = {
-    "shoulder": "raise the straight arm forwards, then back behind",
-    "elbow": "bend and straighten the elbow, palm facing the body",
-    "wrist": "bend the wrist towards the palm, then back the other way",
-    "hip": "raise the straight leg forwards, then back behind",
-    "knee": "bend and straighten the knee",
-    "ankle": "pull the toes up, then point the foot down",
-}
-
-
-def _chain_samples(b: SampleBatch, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """The sensors ``names`` (proximal to distal) at the instants all of them have a sample
-    (M, S, 4), and whether every sensor's status is trustworthy there (M,)."""
-
-    clock = b.time()
-    sel = [b.name == n for n in names]
-    common, idx = shared_instants([clock[m] for m in sel])
-    q = np.stack([b.q[m][i] for m, i in zip(sel, idx, strict=True)], axis=1)
-    st = np.stack([b.status[m][i] for m, i in zip(sel, idx, strict=True)], axis=1)
-    return q, status_ok(st) if len(common) else np.zeros(0, bool)
-
-
-def _solve_limb(static: SampleBatch, movements: dict[str, SampleBatch], limb: str, side: str,
-                protocol) -> CalibrationResult:
-    segs = protocol.segments
-    st, sok = _chain_samples(static, segs)
-    moves = {j: _chain_samples(b, segs) for j, b in movements.items()}
-    cal = LimbImuCalibration(limb, side if side in ("left", "right") else "right",
-                             protocol=protocol).fit(
-        st, {j: q for j, (q, _) in moves.items()}, static_ok=_usable(sok),
-        functional_ok={j: ok for j, (_, ok) in moves.items() if _usable(ok) is not None})
-    return CalibrationResult("imu-limb", cal.to_dict(), float(cal.residual_deg_), cal)
-
-
-def _apply_limb(model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
-    """The limb's proximal joint from its first two sensors (each segment is its sensor's
-    orientation turned by its heading and mount alone: :meth:`LimbImuCalibration.
-    segment_orientations`)."""
-    seg = model.segment_orientations(np.stack([parent_q, child_q, parent_q, parent_q], axis=1))
-    return Q.multiply(Q.conjugate(seg[:, 0]), seg[:, 1])
-
-
-def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationResult:
-    """Servo chain: the neutral pose must read as the identity through the forward kinematics
-    (a wrong zero offset or direction shows here), the functional movement as a rotation about
-    one axis. No correction is applied: the chain's zeros are the rig configuration's."""
-
-    qs = static.q[static.kind == "joint"]
-    qf = functional.q[functional.kind == "joint"]
-    if not len(qs):
-        raise CalibrationError("no joint samples arrived during the static pose: the chain's "
-                               "zeros cannot be checked")
-    zero = np.degrees(Q.angle(qs))
-    static_rms = float(np.sqrt(np.mean(zero**2)))
-    data = {"kind": "servo-chain-check", "static_rms_deg": static_rms,
-            "static_max_deg": float(np.max(zero))}
-    residual = static_rms
-    if len(qf) >= 2:
-        axis, off_axis, flex_range = functional_axis(qf)
-        data.update({"functional_axis": [float(v) for v in axis],
-                     "functional_deg": float(off_axis), "functional_range_deg": float(flex_range)})
-        residual = max(residual, float(off_axis))
-    return CalibrationResult("servo-zero", data, residual, None)
 
 
 def _watch_enter(stdin, stop: threading.Event, on_enter) -> None:

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from rig.devices.config import load_rig_config
 from rig.devices.ports import open_port
 from rig.devices.sources import open_source
+from rig.record.procedures import procedure_for
 
 __all__ = ["OpenRig", "SensorInfo", "load_config", "open_rig"]
 
@@ -190,5 +190,4 @@ def _patient_performs_protocol(port, limb: str | None = None) -> None:
     if sp is None or sp.protocol_pinned or sp.limb.calibration_protocol is not None:
         return
 
-    sp.start_protocol(CalibrationProtocol() if limb is None else LimbCalibrationProtocol(limb),
-                      lead_s=2.0)
+    sp.start_protocol(procedure_for(limb).default_protocol(), lead_s=2.0)

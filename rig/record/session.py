@@ -39,18 +39,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.clinical import format_rom_table, range_of_motion
 from calibration.coverage import CoverageMap
-from calibration.joint_angles import JOINT_ANGLES, recorded_rom
 from rig.errors import RigConfigError, RigConnectionError, RigError
-from rig.readback import extract, joint_orientations_from_store
 from rig.record.display import PlainDisplay, RecordStatus
-from rig.record.guided import (
-    CalibrationResult,
-    GuidedCalibration,
-    NeutralCheckpoints,
-    patient_performs_protocol,
-)
+from rig.record.guided import GuidedCalibration, NeutralCheckpoints, patient_performs_protocol
+from rig.record.procedures import CalibrationResult, procedure_for
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
 from rig.store import SampleWriter, open_store
@@ -284,7 +277,11 @@ def record(
 
 
 def _range_of_motion(store, result: RecordResult, config) -> None:
-    """Boundary → clinical peaks, stored in the session's metadata (never fails the session).
+    """Clinical peaks, stored in the session's metadata (never fails the session): the rig's
+    calibration procedure's (:meth:`JointProcedure.range_of_motion
+    <rig.record.procedures.JointProcedure.range_of_motion>`: the joint's boundary;
+    :meth:`LimbProcedure.range_of_motion
+    <rig.record.procedures.LimbProcedure.range_of_motion>`: every joint's).
 
     Only for calibrated joint orientations: an uncalibrated IMU recording has no anatomical
     frames, and angles from it would be numbers without meaning.
@@ -296,50 +293,7 @@ def _range_of_motion(store, result: RecordResult, config) -> None:
         result.rom_note = ("no range of motion: the recording is not calibrated (sensor frames, "
                            "not anatomical ones)")
         return
-    if config.limb is not None:
-        _limb_range_of_motion(store, result, config)
-        return
-    try:
-        side = config.joint.side if config.joint.side in ("left", "right") else "right"
-        data = joint_orientations_from_store(store, result.session_id)
-        constraint = extract(data, side=side).constraint_
-        rom = range_of_motion(constraint, side, directions=data.directions)
-    except Exception as err:  # too few samples, degenerate region: say so, keep the session
-        result.rom_note = f"no range of motion: {err}"
-        return
-    result.rom = rom.to_dict()
-    result.rom_table = "\n".join([*(f"warning: {w}" for w in data.facts().warnings()),
-                                  format_rom_table(rom)])
-    store.sessions.end(result.session_id, status=result.status,
-                       meta={"rom": result.rom, "rom_source": "extracted boundary"})
-
-
-def _limb_range_of_motion(store, result: RecordResult, config) -> None:
-    """Every joint's clinical peaks (:func:`calibration.joint_angles.recorded_rom`; the
-    shoulder's from its extracted boundary as for a shoulder session), stored in the session's
-    metadata as ``rom`` = ``{joint: table}``."""
-    try:
-        side = config.joint.side if config.joint.side in ("left", "right") else "right"
-        chain = joint_orientations_from_store(store, result.session_id)
-        roms, tables = {}, []
-        for k, j in enumerate(chain.joints):
-            if j in JOINT_ANGLES:
-                r = recorded_rom(chain.joint_q[:, k], j, side, status=chain.status)
-                roms[j], table = r.to_json(), r.table()
-            else:  # the shoulder: peaks of its boundary, as for a shoulder session
-                data = chain.select(j)
-                r = range_of_motion(extract(data, side=side).constraint_, side,
-                                    directions=data.directions)
-                roms[j], table = r.to_dict(), f"{j} ({side})\n{format_rom_table(r)}"
-            tables.append(table)
-    except Exception as err:  # too few samples: say so, keep the session
-        result.rom_note = f"no range of motion: {err}"
-        return
-    result.rom = roms
-    result.rom_table = "\n".join([*(f"warning: {w}" for w in chain.recording.warnings()),
-                                  *tables])
-    store.sessions.end(result.session_id, status=result.status,
-                       meta={"rom": result.rom, "rom_source": "recorded joint angles"})
+    procedure_for(config.limb).range_of_motion(store, result, config)
 
 
 def _close(store) -> None:
@@ -353,8 +307,8 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     patient_id = int(store.patients.ensure(options.patient.strip(), side=joint.side))
     meta = {"rig": config.name, "simulated": rig.simulated,
             "duration_s": options.duration_s, "sensors": [s.name for s in rig.sensors]}
-    if config.limb is not None:  # the whole limb: every joint is read back from the session
-        meta["limb"] = config.limb
+    procedure = procedure_for(config.limb)
+    meta.update(procedure.session_meta())  # a whole limb: every joint is read back from it
     session_id = int(store.sessions.start(patient_id, rig_name=config.name, joint=joint.name,
                                           side=joint.side, kind="record", meta=meta))
     for s in rig.sensors:
@@ -366,7 +320,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     coverage = CoverageMap(**{"centre": _range_centre(config), **options.coverage})
     writer = SampleWriter(store, session_id)
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
-    calib = GuidedCalibration(config, rig, display=display)
+    calib = GuidedCalibration(config, rig, display=display, procedure=procedure)
     checkpoints = NeutralCheckpoints(rig, display=display)
     marking = False  # neutral checkpoints are being marked (calibrated IMU rig)
     pending = sorted(options.annotations, key=lambda a: -1.0 if a.at_s is None else a.at_s)
