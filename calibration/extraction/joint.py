@@ -35,11 +35,14 @@ __all__ = ["fit_joint", "joint_extractor"]
 
 def joint_extractor(joint: str | None, *, limb_axis=None, alpha_deg: float = 4.0,
                     max_vertices: int = 64, by_swing: bool | str = "auto",
-                    name: str = "recorded") -> Any:
+                    name: str = "recorded", kind: str | None = None) -> Any:
     """The unfitted extractor of ``joint`` (:data:`calibration.joints.JOINTS`; a name it does
-    not list, or None, is a ball joint); ``limb_axis`` defaults to the joint's."""
+    not list, or None, is a ball joint); ``limb_axis`` defaults to the joint's; ``kind`` (a
+    registered joint kind, e.g. ``forearm`` for an elbow that also turns about its long axis)
+    replaces the joint's own kind."""
     spec = JOINTS.get(joint or "shoulder")
-    kind = DEFAULT_KIND if spec is None else spec.kind
+    if kind is None:
+        kind = DEFAULT_KIND if spec is None else spec.kind
     axis = limb_axis if limb_axis is not None else (
         (1.0, 0.0, 0.0) if spec is None else spec.limb_axis)
     return calibration_kind(kind).extractor(spec, limb_axis=axis, alpha_deg=alpha_deg,

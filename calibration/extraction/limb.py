@@ -194,6 +194,9 @@ class LimbExtractor:
     by_swing, limb_axis
         A limb of one joint: the swing-dependent twist choice (``"auto"``, True, False) and
         the limb axis (default the joint's); a whole limb's joints use their own.
+    kind : str or None
+        A limb of one joint: the joint kind to extract (:mod:`calibration.kinds`; e.g.
+        ``forearm`` for an elbow recorded turning about its long axis); default the joint's.
 
     Attributes
     ----------
@@ -229,11 +232,15 @@ class LimbExtractor:
                  alpha_deg: float = 4.0,
                  max_vertices: int = 64, name: str = "recorded-limb",
                  slow_insets: bool = False, by_swing: bool | str = "auto",
-                 limb_axis=None) -> None:
+                 limb_axis=None, kind: str | None = None) -> None:
         one = isinstance(limb, tuple) and len(limb) == 1
         if not one and limb not in LIMB_CHAINS:
             raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
                              f"joint, got {limb!r}")
+        if kind is not None and not one:
+            raise ValueError("kind applies to a limb of one joint (a whole limb's joints have "
+                             "their own kinds)")
+        self.kind = kind
         self.by_swing = by_swing
         self.limb_axis = limb_axis
         if max_keyframes < 2:
@@ -420,7 +427,7 @@ class LimbExtractor:
                              f"limb of the {joint}")
         ex = joint_extractor(joint, limb_axis=self.limb_axis, alpha_deg=self.alpha_deg,
                              max_vertices=self.max_vertices, by_swing=self.by_swing,
-                             name=self.name)
+                             name=self.name, kind=self.kind)
         fit_joint(ex, q, status=status, t=t, provenance=provenance,
                   slow_error_deg=slow.get(joint), slow_insets=self.slow_insets)
         self.extractors_ = {joint: ex}

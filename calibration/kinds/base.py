@@ -84,3 +84,9 @@ class CalibrationKind:
         """Orientations (N, 4) where the set ``constraint`` allows takes its extreme angles
         (its boundary; every one allowed), ``step_deg`` apart."""
         raise NotImplementedError
+
+    def describe_extraction(self, ex: Any, report: dict[str, Any]) -> list[str] | None:
+        """What ``rig boundary`` prints of a fitted extractor of this kind (``report`` its
+        :meth:`report`), one line a step; None: the swing or hinge lines
+        (:func:`rig.readback.boundary.describe`) say it."""
+        return None

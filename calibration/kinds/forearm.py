@@ -173,6 +173,20 @@ class ForearmCalibration(CalibrationKind):
         theta, phi, _ = decompose(q, np.array(ELBOW_AXIS), np.array([1.0, 0.0, 0.0]))
         return {"flexion": np.degrees(theta), "pronation": -np.degrees(phi)}
 
+    def describe_extraction(self, ex, report) -> list[str]:
+        r = report
+        f_lo, f_hi = r["flexion_deg"]
+        r_lo, r_hi = r["rotation_deg"]
+        return [f"  samples     {r['samples']} ({r['samples_used']} used, "
+                f"{r['dropped_status']} dropped for IMU status, {r['spikes']} isolated spikes)",
+                f"  flexion     {f_lo:.1f} .. {f_hi:.1f} deg about "
+                f"{', '.join(f'{v:g}' for v in ex.axis)}",
+                f"  rotation    {r_lo:.1f} .. {r_hi:.1f} deg about the limb's long axis "
+                f"(pronation {max(0.0, -r_lo):.1f}, supination {max(0.0, r_hi):.1f} deg)",
+                f"  off-axis    {r['off_axis_rms_deg']:.1f} deg RMS, "
+                f"{r['off_axis_p99_deg']:.1f} deg p99 (carrying angle and other motion: "
+                "corrected onto the joint, not a limit)"]
+
     def allowed_samples(self, constraint, step_deg: float) -> np.ndarray:
         f = constraint.limits
         step = min(step_deg, 0.5)

@@ -17,6 +17,7 @@ import click
 
 from calibration.frames import FRAMES
 from calibration.joints import JOINTS, LIMB_CHAINS
+from models.kinds import KINDS
 from rig.readback.boundary import BY_SWING_CHOICES
 from rig.readback.data import FUSION_CHOICES
 
@@ -39,6 +40,10 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
               "segments are --reference and --limb (a session: the joint it recorded).")
+@click.option("--kind", type=click.Choice(KINDS), default=None,
+              help="The joint kind to extract (default: the joint's own — the elbow and knee "
+              "hinges, a ball otherwise, two-axis for the wrist and ankle when their twist is "
+              "narrow); forearm: an elbow's flexion and its pronation-supination.")
 @click.option("--chain", "chain", type=click.Choice(LIMBS), default=None, hidden=True,
               help="Old spelling of --limb arm|leg.")
 @click.option("--segments", default=None, help="With --limb arm|leg: the segment columns "
@@ -63,8 +68,9 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
-def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, segments, frames,
-             out, name, side, alpha_deg, max_vertices, by_swing, store_result, fusion) -> None:
+def boundary(file, db, session_id, reference, limb, limb_axis, joint, kind, chain, segments,
+             frames, out, name, side, alpha_deg, max_vertices, by_swing, store_result,
+             fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
@@ -93,7 +99,7 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, chain, seg
         RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
                         joint),
         out, name=name, side=side, alpha_deg=alpha_deg, max_vertices=max_vertices,
-        by_swing=by_swing, store=store_result, limb=whole, segments=segments))
+        by_swing=by_swing, store=store_result, limb=whole, segments=segments, kind=kind))
     click.echo(result.describe())
     for w in result.warnings:
         click.echo(f"warning: {w}")

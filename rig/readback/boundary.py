@@ -20,9 +20,10 @@ from typing import Any
 
 from calibration.extraction import LimbExtractor
 from calibration.joints import LIMB_CHAINS, columns_mismatch
+from calibration.kinds import calibration_kind
 from models.constraint import JointConstraint, dump_constraint
 from models.fileio import check_output
-from models.kinds import DEFAULT_KIND, get_kind
+from models.kinds import DEFAULT_KIND, KINDS, get_kind
 from models.limb import dump_limb, loads_limb
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData
@@ -81,6 +82,7 @@ class BoundaryRequest:
     store: bool = True
     limb: str | None = None
     segments: str | None = None
+    kind: str | None = None
 
     def columns(self) -> list[str]:
         """A whole limb's four segment columns of the file, proximal to distal."""
@@ -111,6 +113,8 @@ class OneJointBoundary:
     def check(self, request: BoundaryRequest) -> None:
         """One joint's request, before reading the recording (one-line errors)."""
         request.source.check(side=request.side)
+        if request.kind is not None and request.kind not in KINDS:
+            raise RigConfigError(f"--kind {request.kind!r}: expected one of {', '.join(KINDS)}")
         if request.by_swing not in BY_SWING_CHOICES:
             raise RigConfigError(f"--by-swing {request.by_swing!r}: expected one of "
                                  f"{', '.join(BY_SWING_CHOICES)}")
@@ -123,7 +127,8 @@ class OneJointBoundary:
         metadata to store with the session."""
         data = request.source.load()
         ex = extract(data, name=request.name, side=request.side, alpha_deg=request.alpha_deg,
-                     max_vertices=request.max_vertices, by_swing=request.by_swing)
+                     max_vertices=request.max_vertices, by_swing=request.by_swing,
+                     kind=request.kind)
         dump_constraint(ex.constraint_, path)
         result = BoundaryResult(ex, data, path, warnings=data.facts().warnings())
         return result, ex.constraint_.to_yaml(), {"path": str(path), **ex.report()}
@@ -138,6 +143,9 @@ class WholeLimbBoundary:
         if request.limb not in LIMB_CHAINS:
             raise RigConfigError(f"--limb {request.limb!r}: expected one of "
                                  f"{', '.join(LIMB_CHAINS)}")
+        if request.kind is not None:
+            raise RigConfigError(f"--kind applies to one joint; the {request.limb}'s joints "
+                                 "have their own kinds")
         if src.file is not None and (src.db is not None or src.session_id is not None):
             raise RigConfigError("give either FILE or --db/--session, not both")
         if src.file is None:
@@ -260,13 +268,16 @@ def _load_limb(request: BoundaryRequest) -> JointData:
 
 
 def extract(data: JointData, *, name: str | None = None, side: str | None = None,
-            alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto"):
+            alpha_deg: float = 4.0, max_vertices: int = 64, by_swing: str = "auto",
+            kind: str | None = None):
     """The fitted extractor of one joint's loaded orientations (J = 1), from the one
     extraction entry :class:`~calibration.boundary.LimbExtractor` on a limb of that joint — a
     :class:`~calibration.boundary.HingeExtractor` for a hinge (elbow, knee), else a
     :class:`~calibration.boundary.BoundaryExtractor` (a ``two-axis`` joint for the wrist and
     the ankle when the recorded twist is narrow enough) — its constraint named
-    (:func:`default_name`) and bound to the recording's patient, joint and side."""
+    (:func:`default_name`) and bound to the recording's patient, joint and side. ``kind``
+    replaces the joint's own kind (``forearm``: an elbow's flexion and pronation–supination,
+    :mod:`calibration.kinds.forearm`)."""
     prov = dict(data.provenance)
     prov["recording"] = data.facts().as_dict()
     label = name or default_name(data)
@@ -276,7 +287,7 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
     # twist's reach alone (the two agree on every joint the limb does not couple)
     ex = LimbExtractor((data.joint,), alpha_deg=alpha_deg, max_vertices=max_vertices,
                        by_swing=bs, limb_axis=data.limb_axis, name=label,
-                       slow_insets=not _of_a_limb(data)).fit(
+                       slow_insets=not _of_a_limb(data), kind=kind).fit(
         data.joint_q, status=data.status, t=data.t, provenance=prov,
         slow_error_deg={data.joint: data.slow_error_deg}).extractors_[data.joint]
     binding = {"side": side or data.side, "joint": data.joint, "patient": data.patient}
@@ -319,6 +330,9 @@ def describe(ex, out_path: Path | None = None) -> str:
     lines = []
     if out_path is not None:
         lines.append(f"wrote {out_path}")
+    own = calibration_kind(r.get("kind", DEFAULT_KIND)).describe_extraction(ex, r)
+    if own is not None:  # a kind that says it itself (the forearm's two intervals)
+        return "\n".join(lines + own)
     if get_kind(r.get("kind", DEFAULT_KIND)).single_axis:
         lines.append(f"  samples     {r['samples']} ({r['samples_used']} used, "
                      f"{r['dropped_status']} dropped for IMU status, "

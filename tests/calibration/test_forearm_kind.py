@@ -123,3 +123,27 @@ def test_rom_of_a_forearm_constraint_reads_pronation_and_supination():
     table = rom.table()
     assert "not measured" not in table and "pronation      70.0°" in table
     assert rom.to_json()["not_measured"] == {}
+
+
+def test_rig_boundary_extracts_a_forearm_constraint_from_a_real_arm(rig_cli, tmp_path):
+    """`rig boundary --joint elbow --kind forearm` on the CMU arm: a forearm file holding the
+    recorded flexion and pronation extremes, said in its own lines; `rig rom` reads it back;
+    `--kind` with a whole limb is a one-line error."""
+    out = tmp_path / "fa.yaml"
+    code, text, err = rig_cli(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--reference",
+                               "humerus_r", "--limb", "ulna_r", "--joint", "elbow", "--frames",
+                               "isb", "--kind", "forearm", "--out", str(out)])
+    assert code == 0, err
+    assert "flexion     31.8 .. 149.1 deg" in text and "pronation 55.0" in text
+    from models.constraint import load_constraint
+
+    c = load_constraint(out)
+    assert c.kind == "forearm" and c.joint == "elbow"
+    assert c.limits.flexion_max_deg == pytest.approx(149.112, abs=1e-3)
+    assert c.limits.rotation_min_deg == pytest.approx(-54.998, abs=1e-3)
+    code, text, err = rig_cli(["rom", "--constraint", str(out)])
+    assert code == 0 and "pronation" in text and "not measured" not in text
+    code, text, err = rig_cli(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--limb", "arm",
+                          "--segments", "thorax,humerus_r,ulna_r,hand_r", "--kind", "forearm",
+                          "--out", str(tmp_path / "x.yaml")])
+    assert code == 2 and err.count("\n") == 1 and "--kind applies to one joint" in err
