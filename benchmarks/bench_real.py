@@ -73,7 +73,7 @@ def area_far(c: JointConstraint, d: np.ndarray, far_deg: float = 20.0) -> float:
 def measure(path: Path, frames: str) -> list[dict]:
     rows = []
     for joint, ref, limb, side in joints(read_sto(path)):
-        data = load_joint_orientations(str(path), reference=ref, limb=limb, frames=frames,
+        data = load_joint_orientations(str(path), parent=ref, child=limb, frames=frames,
                                        joint=joint_of_columns(ref, limb))
         ex = extract(data, side=side)
         d = data.directions
@@ -102,7 +102,7 @@ def frames_check(path: Path, ref: str, limb: str, side: str) -> tuple[float, flo
                                       table.columns.items()}, rate_hz=table.rate_hz))
         out = []
         for frames, p in (("isb", path), ("rig", rig_file)):
-            data = load_joint_orientations(str(p), reference=ref, limb=limb, frames=frames,
+            data = load_joint_orientations(str(p), parent=ref, child=limb, frames=frames,
                                            joint=joint_of_columns(ref, limb))
             c = extract(data, side=side).constraint_
             out.append((c, range_of_motion(c, side, directions=data.directions).to_dict()))
@@ -122,7 +122,7 @@ def recorded_extreme(d, toward, across, limit_deg, band_deg=5.0):
 
 def neutral_outside_check(path: Path, ref: str, limb: str, side: str):
     table = read_sto(path)
-    data = load_joint_orientations(str(path), reference=ref, limb=limb, frames="isb",
+    data = load_joint_orientations(str(path), parent=ref, child=limb, frames="isb",
                                    joint=joint_of_columns(ref, limb))
     d = data.directions
     raised = np.degrees(np.arccos(np.clip(d @ X, -1.0, 1.0))) > 25.0
@@ -131,7 +131,7 @@ def neutral_outside_check(path: Path, ref: str, limb: str, side: str):
         write_sto(cut, OrientationTable(time=table.time[raised],
                                         columns={k: v[raised] for k, v in table.columns.items()},
                                         rate_hz=table.rate_hz))
-        part = load_joint_orientations(str(cut), reference=ref, limb=limb, frames="isb",
+        part = load_joint_orientations(str(cut), parent=ref, child=limb, frames="isb",
                                        joint=joint_of_columns(ref, limb))
         c = extract(part, side=side).constraint_
         rom = range_of_motion(c, side, directions=part.directions)

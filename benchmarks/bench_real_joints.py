@@ -50,7 +50,7 @@ def main() -> None:
                 ref, lim = p.format(s), c.format(s)
                 if ref not in cols or lim not in cols:
                     continue
-                data = RecordingSource(str(path), reference=ref, limb=lim, frames="isb",
+                data = RecordingSource(str(path), parent=ref, child=lim, frames="isb",
                                        joint=joint).load()
                 ex = extract(data, side=side)
                 con = ex.constraint_

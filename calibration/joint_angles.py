@@ -586,7 +586,7 @@ def beyond_reach(rom, joint: str | None = None) -> dict[str, dict]:
         text = (f"{joint} {m.replace('_', ' ')} {v:.1f}° is beyond what people reach (the widest "
                 f"published norm is {norm:g}°, {source}; flagged beyond {top:g}°): likely "
                 "not the segments' orientations — sensor orientations (as `rig export` writes "
-                "them) rather than segment orientations, the wrong --reference/--limb "
+                "them) rather than segment orientations, the wrong --parent/--child "
                 "segments, or another joint's or side's data")
         out[m] = {"value": round(float(v), 2), "max": top, "norm": norm, "source": source,
                   "text": text}

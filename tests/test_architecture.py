@@ -250,7 +250,6 @@ LIMB_OR_JOINT: dict[str, str] = {
     "rig/readback/boundary.py": "BoundaryRequest.work: the user's --limb arm|leg, the one "
                                 "place choosing a limb file or one joint's constraint",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",
-    "rig/readback/source.py": "not limb-or-joint: --limb COLUMN (a file's column) given or not",
     "rig/record/procedures.py": "procedure_for: the one place choosing a rig's calibration "
                                 "procedure (ImuJointCalibration or LimbImuCalibration, "
                                 "different algorithms) from the configuration's limb",

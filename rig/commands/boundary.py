@@ -2,13 +2,14 @@
 :func:`rig.readback.run_boundary`).
 
 Input is a recorded session (``--db DB --session ID``) or an imported orientation file
-(``FILE.sto`` / ``FILE.csv`` with ``--reference COLUMN --limb COLUMN``: joint orientation =
-reference⁻¹ ⊗ limb; with ``--limb`` alone the column already holds joint orientations).
+(``FILE.sto`` / ``FILE.csv`` with ``--parent COLUMN --child COLUMN``: joint orientation =
+parent⁻¹ ⊗ child; with ``--child`` alone the column already holds joint orientations).
 
 A whole arm or leg is ``--limb arm|leg``, as in ``rig demo --limb``: a whole-limb session
-(``--db --session``) or a file's ``--segments``; ``--limb`` names a file's column otherwise,
-and a column named ``arm`` or ``leg`` with ``--reference``. ``--chain arm|leg``, its old
-spelling, is still accepted, with a one-line note on stderr naming the new one.
+(``--db --session``) or a file's ``--segments``; ``--limb`` means nothing else (a column named
+``arm`` is ``--child arm``). The old spellings are still accepted, each with a one-line note on
+stderr naming the new one (:func:`rig.commands._options.file_columns`): ``--chain arm|leg``,
+``--reference COLUMN`` and ``--limb COLUMN`` (a value that is not a limb).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import click
 from calibration.frames import FRAMES
 from calibration.joints import JOINTS, LIMB_CHAINS
 from models.kinds import KINDS
+from rig.commands._options import file_columns
 from rig.readback.boundary import BY_SWING_CHOICES
 from rig.readback.data import FUSION_CHOICES
 
@@ -30,16 +32,19 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--db", default=None, help="Store: a file path, sqlite:///PATH or postgresql://...")
 @click.option("--session", "session_id", default=None, type=click.IntRange(min=1),
               help="Session id (see rig session list).")
-@click.option("--reference", default=None, help="FILE column of the reference segment (thorax).")
-@click.option("--limb", default=None, help="FILE column of the limb segment (joint orientations "
-              "when --reference is not given); or a whole arm or leg (--limb arm|leg) from a "
-              "session recorded on an arm or leg rig or from FILE's --segments: writes a limb "
-              "file, with a coupling where the recording supports one.")
+@click.option("--parent", default=None, help="FILE column of the joint's parent segment "
+              "(the shoulder's: thorax).")
+@click.option("--child", default=None, help="FILE column of the joint's child segment (joint "
+              "orientations when --parent is not given).")
+@click.option("--reference", default=None, hidden=True, help="Old spelling of --parent.")
+@click.option("--limb", default=None, metavar="arm|leg", help="A whole arm or leg (--limb "
+              "arm|leg) from a session recorded on an arm or leg rig or from FILE's --segments: "
+              "writes a limb file, with a coupling where the recording supports one.")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
               "(default: the long axis of --frames, 1,0,0 in rig frames).")
 @click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
-              "segments are --reference and --limb (a session: the joint it recorded).")
+              "segments are --parent and --child (a session: the joint it recorded).")
 @click.option("--kind", type=click.Choice(KINDS), default=None,
               help="The joint kind to extract (default: the joint's own — the elbow and knee "
               "hinges, a ball otherwise, two-axis for the wrist and ankle when their twist is "
@@ -47,7 +52,7 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--chain", "chain", type=click.Choice(LIMBS), default=None, hidden=True,
               help="Old spelling of --limb arm|leg.")
 @click.option("--segments", default=None, help="With --limb arm|leg: the segment columns "
-              "proximal to distal, COL,COL,COL (after --reference) or all four.")
+              "proximal to distal, COL,COL,COL (after --parent) or all four.")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -68,9 +73,9 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto", show_default=True,
               help="IMU sessions: orientations fused by the devices, or by VQF on the host "
               "from the raw samples (auto: VQF when every sample has raw data).")
-def boundary(file, db, session_id, reference, limb, limb_axis, joint, kind, chain, segments,
-             frames, out, name, side, alpha_deg, max_vertices, by_swing, store_result,
-             fusion) -> None:
+def boundary(file, db, session_id, parent, child, reference, limb, limb_axis, joint, kind,
+             chain, segments, frames, out, name, side, alpha_deg, max_vertices, by_swing,
+             store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
     FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
@@ -78,16 +83,14 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, kind, chai
     from rig.errors import RigConfigError
     from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 
-    whole = None  # a whole arm or leg: --limb arm|leg (a session's, or with --segments)
+    parent, child, whole = file_columns(parent, child, reference, limb)
     if chain is not None:
         click.echo(f"rig: note: --chain is now --limb: rig boundary --limb {chain} ...",
                    err=True)
-        if limb is not None:
+        if whole is not None:
             raise RigConfigError("--limb does not apply with --chain (the limb names its "
                                  "joints and segments)")
         whole = chain
-    elif limb in LIMBS and (segments is not None or file is None or reference is None):
-        whole, limb = limb, None  # a column named arm or leg: with --reference
     if whole is not None or segments is not None:
         if whole is None:
             raise RigConfigError("--segments applies with --limb arm|leg")
@@ -96,7 +99,7 @@ def boundary(file, db, session_id, reference, limb, limb_axis, joint, kind, chai
                 raise RigConfigError(f"{flag} does not apply with --limb {whole} (the limb "
                                      "names its joints and segments)")
     result = run_boundary(BoundaryRequest(
-        RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
+        RecordingSource(file, db, session_id, parent, child, limb_axis, frames, fusion,
                         joint),
         out, name=name, side=side, alpha_deg=alpha_deg, max_vertices=max_vertices,
         by_swing=by_swing, store=store_result, limb=whole, segments=segments, kind=kind))

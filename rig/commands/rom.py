@@ -11,6 +11,7 @@ import click
 
 from calibration.frames import FRAMES
 from calibration.joints import JOINTS
+from rig.commands._options import file_columns
 from rig.readback.data import FUSION_CHOICES
 
 JOINT_NAMES = tuple(JOINTS)
@@ -21,14 +22,17 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--db", default=None, help="Store: a file path, sqlite:///PATH or postgresql://...")
 @click.option("--session", "session_id", default=None, type=click.IntRange(min=1),
               help="Session id (see rig session list).")
-@click.option("--reference", default=None, help="FILE column of the thorax.")
-@click.option("--limb", default=None, help="FILE column of the upper arm (joint orientations "
-              "when --reference is not given).")
+@click.option("--parent", default=None, help="FILE column of the joint's parent segment "
+              "(the shoulder's: thorax).")
+@click.option("--child", default=None, help="FILE column of the joint's child segment (the "
+              "shoulder's: upper arm; joint orientations when --parent is not given).")
+@click.option("--reference", default=None, hidden=True, help="Old spelling of --parent.")
+@click.option("--limb", default=None, hidden=True, help="Old spelling of --child COLUMN.")
 @click.option("--limb-axis", default=None, help="Limb long axis in the limb frame, x,y,z "
               "(default: the long axis of --frames).")
 @click.option("--joint", type=click.Choice(JOINT_NAMES), default=None,
               help="The joint: shoulder (default), elbow, wrist, hip, knee or ankle; its "
-              "segments are --reference and --limb (a session: the joint it recorded).")
+              "segments are --parent and --child (a session: the joint it recorded).")
 @click.option("--frames", type=click.Choice(FRAMES), default=None,
               help="Segment frames of FILE: rig (+X distal, +Y anterior, +Z right; default) or "
               "isb (+Y proximal, +X anterior, +Z right: ISB / OpenSim).")
@@ -47,12 +51,17 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object: movement -> degrees or null, plus joint, side, "
               "coverage, interrupted.")
-def rom(file, db, session_id, reference, limb, limb_axis, joint, frames, constraint_path, side,
-        age, sex, fusion, as_json) -> None:
+def rom(file, db, session_id, parent, child, reference, limb, limb_axis, joint, frames,
+        constraint_path, side, age, sex, fusion, as_json) -> None:
     """Print the clinical range of motion (ISB angles, peaks, normative values)."""
+    from rig.errors import RigConfigError
     from rig.readback import RecordingSource, RomRequest, run_rom
 
-    source = RecordingSource(file, db, session_id, reference, limb, limb_axis, frames, fusion,
+    parent, child, whole = file_columns(parent, child, reference, limb)
+    if whole is not None:
+        raise RigConfigError(f"--limb {whole} (a whole limb) does not apply to rig rom; a "
+                             f"file's column named {whole} is --child {whole}")
+    source = RecordingSource(file, db, session_id, parent, child, limb_axis, frames, fusion,
                              joint)
     result = run_rom(RomRequest(source, constraint=constraint_path, side=side, joint=joint))
     click.echo(json.dumps(result.to_json(age=age, sex=sex)) if as_json

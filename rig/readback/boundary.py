@@ -48,7 +48,7 @@ class BoundaryRequest:
     Attributes
     ----------
     source : RecordingSource
-        The recording. A whole limb from a file names no ``source.limb`` column, ``limb_axis``
+        The recording. A whole limb from a file names no ``source.child`` column, ``limb_axis``
         or ``joint`` (its segments are ``segments``); a session knows its segments.
     out : str or Path
         Constraint (or limb) file to write (YAML, owner-only).
@@ -69,7 +69,7 @@ class BoundaryRequest:
         supports one, from a whole-limb session or from a file's ``segments``.
     segments : str, optional
         A file's segment columns of the whole ``limb``, proximal to distal, comma-separated:
-        four (thorax or pelvis first), or three when ``source.reference`` names the first.
+        four (thorax or pelvis first), or three when ``source.parent`` names the first.
     """
 
     source: RecordingSource
@@ -87,12 +87,12 @@ class BoundaryRequest:
     def columns(self) -> list[str]:
         """A whole limb's four segment columns of the file, proximal to distal."""
         cols = [c.strip() for c in (self.segments or "").split(",") if c.strip()]
-        if self.source.reference is not None:
-            cols = [self.source.reference, *cols]
+        if self.source.parent is not None:
+            cols = [self.source.parent, *cols]
         if len(cols) != 4 or len(set(cols)) != 4:
             raise RigConfigError(f"--segments {self.segments!r}: expected the {self.limb}'s four "
                                  "segment columns proximal to distal (or three with "
-                                 "--reference), all different")
+                                 "--parent), all different")
         return cols
 
     @property
@@ -153,7 +153,7 @@ class WholeLimbBoundary:
                 raise RigConfigError(f"--limb {request.limb} needs a recording: FILE "
                                      "--segments COL,COL,COL, or --db DB --session ID")
             for flag, value in (("--segments", request.segments),
-                                ("--reference", src.reference), ("--frames", src.frames)):
+                                ("--parent", src.parent), ("--frames", src.frames)):
                 if value is not None:
                     raise RigConfigError(f"{flag} applies to files; a session knows its "
                                          "segments")

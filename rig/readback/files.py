@@ -22,7 +22,7 @@ def check_columns(file: str, reference: str | None, limb: str, joint: str | None
                   side: str | None, *, asked: bool = True) -> None:
     """A reference and a limb column whose names say other segments than ``joint``'s (None:
     not judged) or another side than ``side`` are refused in one line
-    (:func:`calibration.joints.columns_mismatch`): ``--joint elbow --reference femur_r --limb
+    (:func:`calibration.joints.columns_mismatch`): ``--joint elbow --parent femur_r --child
     tibia_r`` is a knee. ``asked``: the joint was given (--joint), else it is the file's own
     or the default."""
     spec = JOINTS[joint] if joint is not None else None

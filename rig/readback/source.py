@@ -41,8 +41,10 @@ def check_session_side(db, session_id: int | None, side: str | None) -> None:
 
 @dataclass(frozen=True)
 class RecordingSource:
-    """A session (``db`` + ``session_id``) or an orientation file (``file`` with ``limb`` and
-    optionally ``reference``, in ``frames`` conventions: ``"rig"`` by default or ``"isb"``).
+    """A session (``db`` + ``session_id``) or an orientation file (``file`` with its ``child``
+    segment's column and optionally its ``parent``'s, ``--child COLUMN`` / ``--parent COLUMN``,
+    in ``frames`` conventions: ``"rig"`` by default or ``"isb"``; ``child`` alone: the column
+    holds joint orientations already).
 
     ``limb_axis`` is ``x,y,z`` text in the file's frame convention (default: the long axis,
     +X in rig frames, −Y in ISB frames; the foot's +X in either); ``fusion`` applies to IMU
@@ -54,8 +56,8 @@ class RecordingSource:
     file: str | None = None
     db: str | None = None
     session_id: int | None = None
-    reference: str | None = None
-    limb: str | None = None
+    parent: str | None = None
+    child: str | None = None
     limb_axis: str | None = None
     frames: str | None = None
     fusion: str = "auto"
@@ -69,16 +71,13 @@ class RecordingSource:
             raise RigConfigError("give either FILE or --db/--session, not both")
         if file is None and (self.db is None or self.session_id is None):
             raise RigConfigError("give a recording: FILE.sto|FILE.csv, or --db DB --session ID")
-        # ``limb`` here is the user's ``--limb COLUMN`` (the file's column of the distal
-        # segment), not a whole limb: these two checks ask whether the option was given, in
-        # the one place that decides what a file needs; no limb-or-joint branch
         if file is not None:
-            if self.limb is None:
-                raise RigConfigError(f"{file}: --limb COLUMN is required with a file")
+            if self.child is None:
+                raise RigConfigError(f"{file}: --child COLUMN is required with a file")
             if not Path(file).is_file():
                 raise RigConfigError(f"{file}: no such file")
-        elif self.reference is not None or self.limb is not None:
-            raise RigConfigError("--reference/--limb apply to files; a session knows its "
+        elif self.parent is not None or self.child is not None:
+            raise RigConfigError("--parent/--child apply to files; a session knows its "
                                  "segments")
         elif self.frames is not None:
             raise RigConfigError("--frames applies to files; a session is in the rig's frames")
@@ -88,7 +87,7 @@ class RecordingSource:
         parse_axis(self.limb_axis)
         check_joint(self.joint)
         if file is not None:
-            check_columns(file, self.reference, self.limb, self.joint, side)
+            check_columns(file, self.parent, self.child, self.joint, side)
         else:
             check_session_side(self.db, self.session_id, side)
 
@@ -108,7 +107,7 @@ class RecordingSource:
             axis = parse_axis(self.limb_axis)
             if self.limb_axis is not None:
                 axis = direction_to_rig(axis, frames, spec.child)
-            return joint_orientations_from_file(self.file, self.reference, self.limb, axis,
+            return joint_orientations_from_file(self.file, self.parent, self.child, axis,
                                                 frames, self.joint)
         axis = parse_axis(self.limb_axis)
         data = read_session(self.db, self.session_id, axis, self.fusion, self.joint)
@@ -116,10 +115,10 @@ class RecordingSource:
 
 
 def load_joint_orientations(file: str | None = None, *, db: str | None = None,
-                            session_id: int | None = None, reference: str | None = None,
-                            limb: str | None = None, limb_axis: str | None = None,
+                            session_id: int | None = None, parent: str | None = None,
+                            child: str | None = None, limb_axis: str | None = None,
                             fusion: str = "auto", frames: str | None = None,
                             joint: str | None = None) -> JointData:
     """``RecordingSource(...).load()`` with the options as keywords."""
-    return RecordingSource(file, db, session_id, reference, limb, limb_axis, frames,
+    return RecordingSource(file, db, session_id, parent, child, limb_axis, frames,
                            fusion, joint).load()

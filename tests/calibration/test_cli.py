@@ -30,8 +30,8 @@ def sto_file(servo_patient, tmp_path_factory):
 
 def test_boundary_from_sto_writes_a_loadable_constraint(sto_file, tmp_path, capsys):
     out = tmp_path / "c.yaml"
-    code, stdout, err = run(["boundary", str(sto_file), "--reference", "thorax",
-                             "--limb", "humerus", "--out", str(out), "--side", "left"], capsys)
+    code, stdout, err = run(["boundary", str(sto_file), "--parent", "thorax",
+                             "--child", "humerus", "--out", str(out), "--side", "left"], capsys)
     assert code == 0, err
     assert "wrote" in stdout and "twist" in stdout
     c = load_constraint(out)
@@ -43,7 +43,7 @@ def test_boundary_from_csv_with_joint_column(servo_patient, tmp_path, capsys):
     _, rec = servo_patient
     csv = tmp_path / "joint.csv"
     write_csv(csv, OrientationTable(time=rec.t, columns={"shoulder": rec.limb}))
-    code, _, err = run(["boundary", str(csv), "--limb", "shoulder", "--out",
+    code, _, err = run(["boundary", str(csv), "--child", "shoulder", "--out",
                         str(tmp_path / "c.yaml")], capsys)
     assert code == 0, err
 
@@ -105,19 +105,19 @@ def test_rom_json_of_an_interrupted_session(servo_patient, tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["boundary", "--out", "c.yaml"], "give a recording"),
-    (["boundary", "missing.sto", "--limb", "h", "--out", "c.yaml"], "no such file"),
-    (["boundary", "{sto}", "--out", "c.yaml"], "--limb"),
-    (["boundary", "{sto}", "--reference", "thx", "--limb", "humerus", "--out", "c.yaml"],
+    (["boundary", "missing.sto", "--child", "h", "--out", "c.yaml"], "no such file"),
+    (["boundary", "{sto}", "--out", "c.yaml"], "--child"),
+    (["boundary", "{sto}", "--parent", "thx", "--child", "humerus", "--out", "c.yaml"],
      "no column 'thx'"),
-    (["boundary", "{sto}", "--limb", "humerus", "--limb-axis", "1,0", "--out", "c.yaml"],
+    (["boundary", "{sto}", "--child", "humerus", "--limb-axis", "1,0", "--out", "c.yaml"],
      "--limb-axis"),
-    (["boundary", "{sto}", "--db", "x.db", "--session", "1", "--limb", "h", "--out", "c.yaml"],
+    (["boundary", "{sto}", "--db", "x.db", "--session", "1", "--child", "h", "--out", "c.yaml"],
      "not both"),
     (["rom", "--constraint", "nope.yaml"], "no such file"),
     (["rom", "--constraint", "nope.yaml", "--frames", "isb"], "--frames applies"),
     (["boundary", "--db", "x.db", "--session", "1", "--frames", "isb", "--out", "c.yaml"],
      "--frames applies to files"),
-    (["boundary", "{sto}", "--limb", "humerus", "--frames", "opensim", "--out", "c.yaml"],
+    (["boundary", "{sto}", "--child", "humerus", "--frames", "opensim", "--out", "c.yaml"],
      "--frames"),
 ])
 def test_bad_input_is_one_line_exit_2(args, message, sto_file, tmp_path, capsys, monkeypatch):
@@ -156,7 +156,7 @@ def test_rom_flags_a_knee_angle_beyond_what_people_reach(tmp_path, capsys):
     path = tmp_path / "leg.sto"
     write_sto(path, OrientationTable(time=np.arange(len(alpha)) / 100.0, columns={
         "thigh_imu": np.tile(Q.IDENTITY, (len(alpha), 1)), "shank_imu": knee}, rate_hz=100.0))
-    args = ["rom", str(path), "--joint", "knee", "--reference", "thigh", "--limb", "shank"]
+    args = ["rom", str(path), "--joint", "knee", "--parent", "thigh", "--child", "shank"]
     code, stdout, err = run(args, capsys)
     assert code == 0, err
     warning = next(ln for ln in stdout.splitlines() if ln.startswith("warning: knee extension"))
@@ -175,19 +175,19 @@ REAL = __import__("pathlib").Path(__file__).parent / "data" / "real" / "cmu_61_0
 @pytest.mark.parametrize("args, message", [
     (["boundary", "{f}", "--limb", "arm", "--segments", "pelvis,femur_r,tibia_r,calcn_r"],
      "column 'pelvis' is a pelvis, not the thorax (reading the arm: --limb arm)"),
-    (["boundary", "{f}", "--joint", "elbow", "--reference", "femur_r", "--limb", "tibia_r"],
+    (["boundary", "{f}", "--joint", "elbow", "--parent", "femur_r", "--child", "tibia_r"],
      "column 'femur_r' is a thigh, not the upper-arm (reading the elbow: --joint elbow); "
      "these columns are a knee: --joint knee"),
-    (["boundary", "{f}", "--joint", "knee", "--reference", "femur_r", "--limb", "tibia_r",
+    (["boundary", "{f}", "--joint", "knee", "--parent", "femur_r", "--child", "tibia_r",
       "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
     (["boundary", "{f}", "--limb", "leg", "--segments", "pelvis,femur_r,tibia_r,calcn_r",
       "--side", "left"], "column 'femur_r' is a right segment, but the left side is asked"),
     (["boundary", "{f}", "--limb", "leg", "--segments", "pelvis,femur_l,tibia_r,calcn_r"],
      "--segments 'pelvis', 'femur_l', 'tibia_r', 'calcn_r' mix the left and right sides"),
-    (["boundary", "{f}", "--reference", "pelvis", "--limb", "femur_r"],
+    (["boundary", "{f}", "--parent", "pelvis", "--child", "femur_r"],
      "reading the shoulder, the file's joint or the default: give --joint); these columns "
      "are a hip: --joint hip"),
-    (["rom", "{f}", "--joint", "knee", "--reference", "femur_l", "--limb", "tibia_l",
+    (["rom", "{f}", "--joint", "knee", "--parent", "femur_l", "--child", "tibia_l",
       "--side", "right"], "column 'femur_l' is a left segment, but the right side is asked"),
 ])
 def test_columns_that_contradict_the_joint_chain_or_side_are_refused(args, message, tmp_path,
@@ -236,3 +236,55 @@ def test_a_side_other_than_the_sessions_is_refused_before_reading(servo_patient,
         code, _, err = run([str(a) for a in args], capsys)
         assert code == 2 and "--side left: session 1 recorded the right shoulder" in err, err
     assert not (tmp_path / "c.yaml").exists()
+
+
+# --- a file's segment columns are --parent/--child; --limb is only a whole limb ---------------
+
+NOTE_PARENT = "rig: note: --reference is now --parent"
+NOTE_CHILD = "rig: note: --limb COLUMN is now --child COLUMN"
+
+
+@pytest.mark.parametrize("command", ["boundary", "rom"])
+def test_the_old_column_spellings_work_with_one_note_each(command, sto_file, tmp_path, capsys):
+    def call(*columns):
+        extra = ["--out", str(tmp_path / "c.yaml")] if command == "boundary" else ["--json"]
+        return run([command, str(sto_file), *columns, *extra], capsys)
+
+    new = call("--parent", "thorax", "--child", "humerus")
+    old = call("--reference", "thorax", "--limb", "humerus")
+    assert new[0] == old[0] == 0, old[2]
+    assert new[2] == ""
+    assert old[2].splitlines() == [NOTE_PARENT, NOTE_CHILD]
+    assert old[1] == new[1]
+    code, _, err = call("--parent", "thorax", "--limb", "humerus")
+    assert code == 0 and err.splitlines() == [NOTE_CHILD]
+    code, _, err = call("--reference", "thorax", "--child", "humerus")
+    assert code == 0 and err.splitlines() == [NOTE_PARENT]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--parent", "thorax", "--reference", "thorax", "--child", "humerus"], "give --parent once"),
+    (["--parent", "thorax", "--child", "humerus", "--limb", "humerus"], "give --child once"),
+])
+def test_an_old_and_a_new_spelling_together_are_refused(args, message, sto_file, tmp_path,
+                                                        capsys):
+    code, _, err = run(["boundary", str(sto_file), *args, "--out", str(tmp_path / "c.yaml")],
+                       capsys)
+    assert code == 2 and err.splitlines()[-1].startswith("rig: error:") and message in err
+
+
+def test_child_arm_is_a_column_and_limb_arm_is_the_whole_arm(servo_patient, tmp_path, capsys):
+    """A column named ``arm`` is read with ``--child arm``; ``--limb arm`` is the whole arm
+    (it wants the arm's four segment columns), not that column, and no note is printed."""
+    _, rec = servo_patient
+    csv = tmp_path / "joint.csv"
+    write_csv(csv, OrientationTable(time=rec.t, columns={"arm": rec.limb}))
+    out = tmp_path / "c.yaml"
+    code, _, err = run(["boundary", str(csv), "--child", "arm", "--out", str(out)], capsys)
+    assert code == 0 and err == "", err
+    assert load_constraint(out).provenance["limb"] == "arm"
+    code, _, err = run(["boundary", str(csv), "--limb", "arm", "--out", str(out)], capsys)
+    assert code == 2 and "note" not in err
+    assert err.strip() == "rig: error: --limb arm needs --segments COL,COL,COL (proximal to distal)"
+    code, _, err = run(["rom", str(csv), "--limb", "arm"], capsys)
+    assert code == 2 and "is --child arm" in err and len(err.strip().splitlines()) == 1

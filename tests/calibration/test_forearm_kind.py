@@ -33,7 +33,7 @@ RECORDED = [
 
 
 def _elbow(file: str, s: str):
-    return RecordingSource(str(DATA / file), reference=f"humerus_{s}", limb=f"ulna_{s}",
+    return RecordingSource(str(DATA / file), parent=f"humerus_{s}", child=f"ulna_{s}",
                            frames="isb", joint="elbow").load()
 
 
@@ -130,8 +130,8 @@ def test_rig_boundary_extracts_a_forearm_constraint_from_a_real_arm(rig_cli, tmp
     recorded flexion and pronation extremes, said in its own lines; `rig rom` reads it back;
     `--kind` with a whole limb is a one-line error."""
     out = tmp_path / "fa.yaml"
-    code, text, err = rig_cli(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--reference",
-                               "humerus_r", "--limb", "ulna_r", "--joint", "elbow", "--frames",
+    code, text, err = rig_cli(["boundary", str(DATA / "cmu_60_02_salsa.sto"), "--parent",
+                               "humerus_r", "--child", "ulna_r", "--joint", "elbow", "--frames",
                                "isb", "--kind", "forearm", "--out", str(out)])
     assert code == 0, err
     assert "flexion     31.8 .. 149.1 deg" in text and "pronation 55.0" in text

@@ -330,6 +330,6 @@ def test_a_knee_bent_backwards_is_flagged_with_its_likely_cause():
     assert far["extension"]["value"] == pytest.approx(176.6, abs=0.1)
     assert "beyond what people reach" in far["extension"]["text"]
     assert "sensor orientations" in far["extension"]["text"]
-    assert "--reference/--limb" in far["extension"]["text"]
+    assert "--parent/--child" in far["extension"]["text"]
     ok = JointRangeOfMotion("knee", "right", {"flexion": 150.0, "extension": 10.0})
     assert ja.beyond_reach(ok) == {}

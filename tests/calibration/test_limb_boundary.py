@@ -498,8 +498,8 @@ def test_a_limb_of_one_joint_is_its_joints_one_extraction():
     from calibration.extraction.joint import fit_joint, joint_extractor
     from rig.readback import load_joint_orientations
 
-    data = load_joint_orientations(str(DATA / "xio_ximu3_lower_body.sto"), reference="femur_r",
-                                   limb="tibia_r", frames="isb", joint="knee")
+    data = load_joint_orientations(str(DATA / "xio_ximu3_lower_body.sto"), parent="femur_r",
+                                   child="tibia_r", frames="isb", joint="knee")
     alone = fit_joint(joint_extractor("knee", name="k"), data.q, t=data.t, slow_insets=True)
     lx = LimbExtractor(("knee",), name="k", slow_insets=True).fit(data.joint_q, t=data.t)
     assert lx.limb_ is None and set(lx.extractors_) == {"knee"}

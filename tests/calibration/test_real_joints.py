@@ -50,7 +50,7 @@ def run(args, capsys):
 
 @pytest.mark.parametrize("file, joint, reference, limb, s", CASES)
 def test_every_joint_holds_what_people_did(file, joint, reference, limb, s):
-    data = RecordingSource(str(DATA / file), reference=reference, limb=limb, frames="isb",
+    data = RecordingSource(str(DATA / file), parent=reference, child=limb, frames="isb",
                            joint=joint).load()
     assert data.joint == joint
     ex = extract(data, side=_side(s))
@@ -84,9 +84,9 @@ def test_isb_and_rig_frames_give_the_same_ankle(tmp_path):
     np.testing.assert_array_equal(rig.columns["calcn_r"], table.columns["calcn_r"])
     assert np.array_equal(SEGMENT_TO_ISB["foot"], np.eye(3))
     write_sto(tmp_path / "rig.sto", rig)
-    a = RecordingSource(str(DATA / "xio_ximu3_lower_body.sto"), reference="tibia_r",
-                        limb="calcn_r", frames="isb", joint="ankle").load()
-    b = RecordingSource(str(tmp_path / "rig.sto"), reference="tibia_r", limb="calcn_r",
+    a = RecordingSource(str(DATA / "xio_ximu3_lower_body.sto"), parent="tibia_r",
+                        child="calcn_r", frames="isb", joint="ankle").load()
+    b = RecordingSource(str(tmp_path / "rig.sto"), parent="tibia_r", child="calcn_r",
                         frames="rig", joint="ankle").load()
     np.testing.assert_allclose(np.abs(np.sum(a.q * b.q, axis=1)), 1.0, atol=1e-9)
     # standing at the start: the foot's long axis points along the shank's +Y (anterior)
@@ -96,14 +96,14 @@ def test_isb_and_rig_frames_give_the_same_ankle(tmp_path):
 def test_boundary_and_rom_for_a_knee_at_the_cli(tmp_path, capsys):
     out = tmp_path / "knee.yaml"
     src = str(DATA / "xio_ximu3_lower_body.sto")
-    code, stdout, err = run(["boundary", src, "--joint", "knee", "--reference", "femur_l",
-                             "--limb", "tibia_l", "--frames", "isb", "--side", "left",
+    code, stdout, err = run(["boundary", src, "--joint", "knee", "--parent", "femur_l",
+                             "--child", "tibia_l", "--frames", "isb", "--side", "left",
                              "--out", str(out)], capsys)
     assert code == 0, err
     assert "hinge" in stdout and "off-axis" in stdout
     c = load_constraint(out)
     assert c.kind == "hinge" and c.joint == "knee" and c.side == "left"
-    code, stdout, err = run(["rom", src, "--joint", "knee", "--reference", "femur_l", "--limb",
+    code, stdout, err = run(["rom", src, "--joint", "knee", "--parent", "femur_l", "--child",
                              "tibia_l", "--frames", "isb", "--side", "left", "--json"], capsys)
     assert code == 0, err
     rec = json.loads(stdout)
@@ -120,7 +120,7 @@ def test_boundary_and_rom_for_a_knee_at_the_cli(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, needle", [
     (["--joint", "toe"], "'--joint'"),
-    (["--joint", "knee", "--limb", "nope", "--reference", "femur_l"], "nope"),
+    (["--joint", "knee", "--child", "nope", "--parent", "femur_l"], "nope"),
 ])
 def test_bad_joint_options_are_one_line_errors(args, needle, capsys):
     code, _, err = run(["rom", str(DATA / "xio_ximu3_lower_body.sto"), "--frames", "isb",

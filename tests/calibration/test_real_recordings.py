@@ -64,7 +64,7 @@ def _area_far(c: JointConstraint, directions: np.ndarray, far_deg: float = 20.0)
 @pytest.mark.parametrize("file, reference, limb, side", JOINTS)
 def test_the_boundary_holds_what_people_did(file, reference, limb, side):
     joint = "hip" if reference == "pelvis" else "shoulder"  # a hip is no default shoulder
-    data = load_joint_orientations(str(DATA / file), reference=reference, limb=limb,
+    data = load_joint_orientations(str(DATA / file), parent=reference, child=limb,
                                    frames="isb", joint=joint)
     ex = extract(data, side=side)
     d = data.directions
@@ -83,13 +83,13 @@ def test_the_boundary_holds_what_people_did(file, reference, limb, side):
 
 def test_rig_boundary_prints_the_share_measured_on_the_file_it_writes(tmp_path, capsys):
     out = tmp_path / "shoulder.yaml"
-    code, stdout, err = run(["boundary", str(DATA / "cmu_61_07_salsa.sto"), "--reference",
-                             "thorax", "--limb", "humerus_r", "--frames", "isb", "--out",
+    code, stdout, err = run(["boundary", str(DATA / "cmu_61_07_salsa.sto"), "--parent",
+                             "thorax", "--child", "humerus_r", "--frames", "isb", "--out",
                              str(out)], capsys)
     assert code == 0, err
     c = load_constraint(out)
-    data = load_joint_orientations(str(DATA / "cmu_61_07_salsa.sto"), reference="thorax",
-                                   limb="humerus_r", frames="isb")
+    data = load_joint_orientations(str(DATA / "cmu_61_07_salsa.sto"), parent="thorax",
+                                   child="humerus_r", frames="isb")
     measured = float(np.mean(_swing_oracle(c).swing_distance(data.directions) <= 0.0))
     line = next(ln for ln in stdout.splitlines() if ln.strip().startswith("inside"))
     assert f"{100 * measured:.2f} % of the {len(data.q)} recorded directions" in line
@@ -114,11 +114,11 @@ def test_the_same_recording_in_rig_and_isb_frames_gives_the_same_results(tmp_pat
     results = {}
     for frames, path in (("isb", src), ("rig", rig_file)):
         out = tmp_path / f"{frames}.yaml"
-        code, _, err = run(["boundary", str(path), "--reference", "thorax", "--limb",
+        code, _, err = run(["boundary", str(path), "--parent", "thorax", "--child",
                             "humerus_l", "--frames", frames, "--side", "left", "--out",
                             str(out)], capsys)
         assert code == 0, err
-        code, stdout, err = run(["rom", str(path), "--reference", "thorax", "--limb",
+        code, stdout, err = run(["rom", str(path), "--parent", "thorax", "--child",
                                  "humerus_l", "--frames", frames, "--side", "left", "--json"],
                                 capsys)
         assert code == 0, err
@@ -133,7 +133,7 @@ def test_the_same_recording_in_rig_and_isb_frames_gives_the_same_results(tmp_pat
         if rom_a[m] is not None:
             assert rom_a[m] == pytest.approx(rom_b[m], abs=0.5), m
     # read as if in rig frames, an ISB file gives a different (meaningless) answer
-    code, stdout, _ = run(["rom", str(src), "--reference", "thorax", "--limb", "humerus_l",
+    code, stdout, _ = run(["rom", str(src), "--parent", "thorax", "--child", "humerus_l",
                            "--side", "left", "--json"], capsys)
     assert code == 0 and json.loads(stdout)["flexion"] != rom_a["flexion"]
 
@@ -161,7 +161,7 @@ def test_a_recording_that_never_rests_at_neutral_gets_its_peaks(tmp_path, capsys
     write_sto(path, OrientationTable(time=table.time[raised],
                                      columns={k: v[raised] for k, v in table.columns.items()},
                                      rate_hz=table.rate_hz))
-    code, stdout, err = run(["rom", str(path), "--reference", "thorax", "--limb", "humerus_r",
+    code, stdout, err = run(["rom", str(path), "--parent", "thorax", "--child", "humerus_r",
                              "--frames", "isb", "--side", "right", "--json"], capsys)
     assert code == 0, err
     rom = json.loads(stdout)

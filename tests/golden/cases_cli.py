@@ -40,14 +40,14 @@ def case_cli_boundary_and_rom_shoulder() -> dict:
     out: dict = {}
     with tmpdir() as d:
         c = d / "shoulder.yaml"
-        _run("boundary", ["boundary", REAL / "cmu_61_07_salsa.sto", "--reference", "thorax",
-                          "--limb", "humerus_r", "--frames", "isb", "--out", c], d, out)
+        _run("boundary", ["boundary", REAL / "cmu_61_07_salsa.sto", "--parent", "thorax",
+                          "--child", "humerus_r", "--frames", "isb", "--out", c], d, out)
         out["constraint_yaml"] = _file(c, d)
-        _run("rom", ["rom", REAL / "cmu_60_02_salsa.sto", "--reference", "thorax", "--limb",
+        _run("rom", ["rom", REAL / "cmu_60_02_salsa.sto", "--parent", "thorax", "--child",
                      "humerus_l", "--frames", "isb", "--side", "left", "--age", "50", "--sex",
                      "female"], d, out)
-        _run("rom_json", ["rom", REAL / "cmu_61_07_salsa.sto", "--reference", "thorax",
-                          "--limb", "humerus_r", "--frames", "isb", "--json"], d, out)
+        _run("rom_json", ["rom", REAL / "cmu_61_07_salsa.sto", "--parent", "thorax",
+                          "--child", "humerus_r", "--frames", "isb", "--json"], d, out)
         _run("rom_constraint", ["rom", "--constraint", c, "--age", "40", "--sex", "male"], d,
              out)
         _run("rom_constraint_json", ["rom", "--constraint", c, "--json"], d, out)
@@ -63,30 +63,30 @@ def case_cli_boundary_and_rom_knee_hip_ankle() -> dict:
     with tmpdir() as d:
         xio, xsens = REAL / "xio_ximu3_lower_body.sto", REAL / "opensense_xsens_walking.sto"
         k = d / "knee.yaml"
-        _run("knee", ["boundary", xio, "--joint", "knee", "--reference", "femur_l", "--limb",
+        _run("knee", ["boundary", xio, "--joint", "knee", "--parent", "femur_l", "--child",
                       "tibia_l", "--frames", "isb", "--side", "left", "--out", k], d, out)
         out["knee_yaml"] = _file(k, d)
-        _run("knee_rom", ["rom", xio, "--joint", "knee", "--reference", "femur_l", "--limb",
+        _run("knee_rom", ["rom", xio, "--joint", "knee", "--parent", "femur_l", "--child",
                           "tibia_l", "--frames", "isb", "--side", "left", "--json"], d, out)
         _run("knee_rom_constraint", ["rom", "--constraint", k], d, out)
         h = d / "hip.yaml"
-        _run("hip", ["boundary", xsens, "--joint", "hip", "--reference", "pelvis", "--limb",
+        _run("hip", ["boundary", xsens, "--joint", "hip", "--parent", "pelvis", "--child",
                      "femur_r", "--frames", "isb", "--out", h, "--max-vertices", "40"], d, out)
         out["hip_yaml"] = _file(h, d)
-        _run("hip_rom", ["rom", xsens, "--joint", "hip", "--reference", "pelvis", "--limb",
+        _run("hip_rom", ["rom", xsens, "--joint", "hip", "--parent", "pelvis", "--child",
                          "femur_r", "--frames", "isb"], d, out)
         a = d / "ankle.yaml"
-        _run("ankle", ["boundary", xio, "--joint", "ankle", "--reference", "tibia_r",
-                       "--limb", "calcn_r", "--frames", "isb", "--by-swing", "on", "--out", a],
+        _run("ankle", ["boundary", xio, "--joint", "ankle", "--parent", "tibia_r",
+                       "--child", "calcn_r", "--frames", "isb", "--by-swing", "on", "--out", a],
              d, out)
         out["ankle_yaml"] = _file(a, d)
-        _run("ankle_rom", ["rom", xio, "--joint", "ankle", "--reference", "tibia_r", "--limb",
+        _run("ankle_rom", ["rom", xio, "--joint", "ankle", "--parent", "tibia_r", "--child",
                            "calcn_r", "--frames", "isb", "--json"], d, out)
         _run("elbow_rom", ["rom", REAL / "cmu_60_02_salsa.sto", "--joint", "elbow",
-                           "--reference", "humerus_r", "--limb", "ulna_r", "--frames", "isb"],
+                           "--parent", "humerus_r", "--child", "ulna_r", "--frames", "isb"],
              d, out)
         _run("wrist_rom", ["rom", REAL / "cmu_60_02_salsa.sto", "--joint", "wrist",
-                           "--reference", "ulna_r", "--limb", "hand_r", "--frames", "isb",
+                           "--parent", "ulna_r", "--child", "hand_r", "--frames", "isb",
                            "--json"], d, out)
     return out
 
@@ -99,10 +99,10 @@ def case_cli_boundary_opensense_imus() -> dict:
     with tmpdir() as d:
         c = d / "c.yaml"
         sto = RIG_DATA / "opensense_orientations.sto"
-        _run("boundary", ["boundary", sto, "--reference", "torso_imu", "--limb",
+        _run("boundary", ["boundary", sto, "--parent", "torso_imu", "--child",
                           "humerus_r_imu", "--out", c, "--name", "os"], d, out)
         out["constraint_yaml"] = _file(c, d) if c.exists() else ""
-        _run("rom", ["rom", sto, "--reference", "torso_imu", "--limb", "humerus_r_imu",
+        _run("rom", ["rom", sto, "--parent", "torso_imu", "--child", "humerus_r_imu",
                      "--json"], d, out)
     return out
 
@@ -116,14 +116,14 @@ def case_cli_errors() -> dict:
         c = str(d / "c.yaml")
         cases = {
             "no_recording": ["boundary", "--out", c],
-            "missing_file": ["boundary", d / "missing.sto", "--limb", "h", "--out", c],
+            "missing_file": ["boundary", d / "missing.sto", "--child", "h", "--out", c],
             "no_limb": ["boundary", xio, "--out", c],
-            "bad_column": ["boundary", xio, "--reference", "thx", "--limb", "femur_r", "--out",
+            "bad_column": ["boundary", xio, "--parent", "thx", "--child", "femur_r", "--out",
                            c],
-            "bad_axis": ["boundary", xio, "--limb", "femur_r", "--limb-axis", "1,0", "--out", c],
-            "wrong_joint": ["boundary", xio, "--joint", "elbow", "--reference", "femur_r",
-                            "--limb", "tibia_r", "--frames", "isb", "--out", c],
-            "hip_as_shoulder": ["boundary", xio, "--reference", "pelvis", "--limb", "femur_r",
+            "bad_axis": ["boundary", xio, "--child", "femur_r", "--limb-axis", "1,0", "--out", c],
+            "wrong_joint": ["boundary", xio, "--joint", "elbow", "--parent", "femur_r",
+                            "--child", "tibia_r", "--frames", "isb", "--out", c],
+            "hip_as_shoulder": ["boundary", xio, "--parent", "pelvis", "--child", "femur_r",
                                 "--frames", "isb", "--out", c],
             "mixed_sides": ["boundary", xio, "--limb", "leg", "--segments",
                             "pelvis,femur_l,tibia_r,calcn_r", "--frames", "isb", "--out", c],

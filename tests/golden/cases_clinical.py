@@ -47,7 +47,7 @@ def case_clinical_angles_real() -> dict:
     (joint_angles, the shoulder's isb_angles), peaks and recorded range of motion."""
     out: dict = {}
     for name, file, joint, ref, limb, side in REAL_JOINTS:
-        d = load_joint_orientations(str(REAL / file), reference=ref, limb=limb, frames="isb",
+        d = load_joint_orientations(str(REAL / file), parent=ref, child=limb, frames="isb",
                                     joint=joint)
         out[f"{name}_q"] = d.q
         if joint == "shoulder":  # ISB's shoulder angles (calibration.clinical)

@@ -25,7 +25,7 @@ def case_services_joint() -> dict:
     with tmpdir() as d:
         for name, joint, ref, limb in (("knee", "knee", "femur_r", "tibia_r"),
                                        ("hip", "hip", "pelvis", "femur_l")):
-            src = RecordingSource(xio, reference=ref, limb=limb, frames="isb", joint=joint)
+            src = RecordingSource(xio, parent=ref, child=limb, frames="isb", joint=joint)
             r = run_boundary(BoundaryRequest(src, d / f"{name}.yaml", max_vertices=32))
             out[f"{name}_describe"] = _text(r.describe(), d)
             out[f"{name}_warnings"] = jtext(r.warnings)

@@ -62,7 +62,7 @@ def db(tmp_path):
 
 def _commands(out: Path, folder: Path, db: Path) -> dict[str, list]:
     return {
-        "boundary": ["boundary", STO, "--limb", "humerus_r_imu", "--reference", "torso_imu",
+        "boundary": ["boundary", STO, "--child", "humerus_r_imu", "--parent", "torso_imu",
                      "--out", out / "b.yaml"],
         "boundary-session": ["boundary", "--db", db, "--session", 1, "--no-store",
                              "--out", out / "b.yaml"],
@@ -153,7 +153,7 @@ def test_an_existing_file_that_may_not_be_replaced_is_refused(tmp_path):
 def test_the_boundary_request_checks_its_output_before_reading(tmp_path):
     from rig.readback import BoundaryRequest, RecordingSource
 
-    req = BoundaryRequest(RecordingSource(file=str(STO), limb="humerus_r_imu"),
+    req = BoundaryRequest(RecordingSource(file=str(STO), child="humerus_r_imu"),
                           out="/proc/x.yaml")
     with pytest.raises(OutputPathError, match="cannot write in /proc"):
         req.check()

@@ -42,8 +42,8 @@ def test_patient_files_are_owner_only(tmp_path, capsys, open_umask):
     _ok(["train", "--constraint", str(tmp_path / "p.yaml"), "--out", str(tmp_path / "p.onnx")],
         capsys)
     # a boundary from a recording
-    _ok(["boundary", str(REAL / "xio_ximu3_lower_body.sto"), "--joint", "hip", "--reference",
-         "pelvis", "--limb", "femur_r", "--frames", "isb", "--out", str(tmp_path / "b.yaml")],
+    _ok(["boundary", str(REAL / "xio_ximu3_lower_body.sto"), "--joint", "hip", "--parent",
+         "pelvis", "--child", "femur_r", "--frames", "isb", "--out", str(tmp_path / "b.yaml")],
         capsys)
     # a session, its export and report
     db = tmp_path / "s.db"
