@@ -1,6 +1,6 @@
 """Joint orientations from an orientation file (OpenSim ``.sto`` or CSV, :mod:`rig.store.io`):
-one column, or a reference and a limb column (joint orientation = reference⁻¹ ⊗ limb), in rig or
-ISB segment frames (:mod:`calibration.frames`)."""
+one column, or a parent and a child segment's columns (joint orientation = parent⁻¹ ⊗ child), in
+rig or ISB segment frames (:mod:`calibration.frames`)."""
 
 from __future__ import annotations
 
@@ -18,21 +18,21 @@ from rig.store.io import read_orientations
 __all__ = ["check_columns", "joint_orientations_from_file", "limb_orientations_from_file"]
 
 
-def check_columns(file: str, reference: str | None, limb: str, joint: str | None,
+def check_columns(file: str, parent: str | None, child: str, joint: str | None,
                   side: str | None, *, asked: bool = True) -> None:
-    """A reference and a limb column whose names say other segments than ``joint``'s (None:
+    """A parent and a child column whose names say other segments than ``joint``'s (None:
     not judged) or another side than ``side`` are refused in one line
     (:func:`calibration.joints.columns_mismatch`): ``--joint elbow --parent femur_r --child
     tibia_r`` is a knee. ``asked``: the joint was given (--joint), else it is the file's own
     or the default."""
     spec = JOINTS[joint] if joint is not None else None
-    cols = [limb] if reference is None else [reference, limb]
+    cols = [child] if parent is None else [parent, child]
     segs = [None] * len(cols) if spec is None else \
-        [spec.child] if reference is None else [spec.parent, spec.child]
+        [spec.child] if parent is None else [spec.parent, spec.child]
     why = columns_mismatch(cols, segs, side=side)
     if why is None:
         return
-    implied = joint_of_columns(reference, limb)
+    implied = joint_of_columns(parent, child)
     about = "" if joint is None else \
         f" (reading the {joint}: --joint {joint})" if asked else \
         f" (reading the {joint}, the file's joint or the default: give --joint)"
@@ -41,31 +41,32 @@ def check_columns(file: str, reference: str | None, limb: str, joint: str | None
     raise RigConfigError(f"{file}: {why}{about}{hint}")
 
 
-def joint_orientations_from_file(file: str, reference: str | None, limb: str, axis: np.ndarray,
+def joint_orientations_from_file(file: str, parent: str | None, child: str, axis: np.ndarray,
                                  frames: str = "rig", joint: str | None = None) -> JointData:
-    """Joint orientations (rig frames) of ``file``'s ``limb`` column relative to its
-    ``reference`` column (``limb`` alone: the column holds joint orientations already);
+    """Joint orientations (rig frames) of ``file``'s ``child`` column relative to its
+    ``parent`` column (``child`` alone: the column holds joint orientations already);
     ``frames`` is the file's segment-frame convention, ``axis`` the limb axis in rig frames,
     ``joint`` the joint (:data:`calibration.joints.JOINTS`; None: the file's, else the
     shoulder) whose segments the columns are."""
     table = read_orientations(file)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
-    child = table.get(limb)
+    child_q = table.get(child)
     named = table.meta.get("rig_joint")
     asked = joint is not None
     if joint is None:
         joint = named if named in JOINTS else None
     spec = JOINTS[joint or "shoulder"]
-    check_columns(file, reference, limb, spec.name, None, asked=asked)
-    if reference is not None:
-        q = joint_orientation(segment_to_rig(table.get(reference), frames, spec.parent),
-                              segment_to_rig(child, frames, spec.child))
+    check_columns(file, parent, child, spec.name, None, asked=asked)
+    if parent is not None:
+        q = joint_orientation(segment_to_rig(table.get(parent), frames, spec.parent),
+                              segment_to_rig(child_q, frames, spec.child))
     else:
-        q = joint_to_rig(child, frames, spec.parent, spec.child)
-    prov = {"file": str(Path(file).name), "limb": limb, "frames": frames}
-    if reference is not None:
-        prov["reference"] = reference
+        q = joint_to_rig(child_q, frames, spec.parent, spec.child)
+    # the provenance keys stay "limb" and "reference": constraint files already carry them
+    prov = {"file": str(Path(file).name), "limb": child, "frames": frames}
+    if parent is not None:
+        prov["reference"] = parent
     side = table.meta.get("rig_side")
     return JointData.of_joint(q, joint or named, t=np.asarray(table.time, dtype=np.float64),
                               limb_axis=axis, side=side if side in ("left", "right") else None,
