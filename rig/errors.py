@@ -36,10 +36,6 @@ import functools
 from dataclasses import dataclass
 from typing import Any
 
-from calibration.errors import CalibrationError
-from firmware_protocol.errors import ProtocolError
-from models.errors import ModelsError
-
 __all__ = [
     "HardwareAlert",
     "HardwareAlertError",
@@ -192,6 +188,12 @@ def user_errors() -> tuple[type[BaseException], ...]:
     """Exceptions that mean "the user gave something wrong" — a file, an option, a port, a
     recording that cannot give the answer asked of it: shown as one line, never a traceback.
     (The packages' roots are imported on the first call: ``rig --help`` stays fast.)"""
+    # lazy: importing these runs the packages' __init__ (numpy, scipy and their native BLAS
+    # threads); `rig sim` imports this module and must block its stop signals before any
+    # thread exists (rig.commands.sim.serve), or a SIGINT can land on a BLAS thread
+    from calibration.errors import CalibrationError
+    from firmware_protocol.errors import ProtocolError
+    from models.errors import ModelsError
 
     return (RigError, ModelsError, CalibrationError, ProtocolError,
             FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError)

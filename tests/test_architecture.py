@@ -169,25 +169,45 @@ def test_the_servo_bus_knows_no_kinematics():
 
 # --- issue 38: what the graph above does not say -------------------------------------------
 
+def _says_lazy(lines: list[str], first: int, last: int) -> bool:
+    """Whether a run of imports (lines ``first``..``last``, 1-based) or the comments just
+    above it say why it is lazy (a comment with "lazy")."""
+    if "lazy" in " ".join(lines[first - 1: last]):
+        return True
+    k = first - 2
+    while k >= 0 and lines[k].strip().startswith("#"):
+        if "lazy" in lines[k]:
+            return True
+        k -= 1
+    return False
+
+
 def _function_imports(path: Path) -> list[tuple[int, str, bool]]:
-    """(line, imported module, justified) for each import inside a function body."""
+    """(line, imported module, justified) for each import inside a function body; a run of
+    consecutive imports shares the comment above its first one."""
     text = path.read_text(encoding="utf-8")
     lines = text.splitlines()
     tree = ast.parse(text)
     out = []
-    for node in ast.walk(tree):
-        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
             continue
-        for sub in ast.walk(node):
-            if isinstance(sub, ast.Import):
-                mods = [a.name for a in sub.names]
-            elif isinstance(sub, ast.ImportFrom):
-                mods = ["." * sub.level + (sub.module or "")]
-            else:
-                continue
-            near = " ".join(lines[max(0, sub.lineno - 3): sub.end_lineno or sub.lineno])
-            for m in mods:
-                out.append((sub.lineno, m, "lazy" in near))
+        for block in ast.walk(fn):
+            for body in (getattr(block, f, None) for f in ("body", "orelse", "finalbody")):
+                if not isinstance(body, list):
+                    continue
+                run_start = None
+                for stmt in body:
+                    if not isinstance(stmt, (ast.Import, ast.ImportFrom)):
+                        run_start = None
+                        continue
+                    run_start = run_start or stmt.lineno
+                    if isinstance(stmt, ast.Import):
+                        mods = [a.name for a in stmt.names]
+                    else:
+                        mods = ["." * stmt.level + (stmt.module or "")]
+                    ok = _says_lazy(lines, run_start, stmt.end_lineno or stmt.lineno)
+                    out.extend((stmt.lineno, m, ok) for m in mods)
     return sorted(set(out))
 
 

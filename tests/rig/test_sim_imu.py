@@ -878,6 +878,19 @@ def test_cli_default_is_a_stream_board_and_sigint_also_exits_zero():
     assert proc.returncode == 0, err
 
 
+def test_the_sim_command_starts_no_thread_before_it_blocks_its_stop_signals():
+    """`rig sim` blocks SIGINT/SIGTERM before any thread exists, so that only its main thread
+    takes them (sigwait). Importing the command must therefore not import numpy or scipy,
+    whose native BLAS threads would start unblocked and could take a SIGINT (`rig: aborted`,
+    exit 130): issue 38 had moved `rig.errors`' imports of the packages' error roots to the top
+    of the file, which did."""
+    code = ("import sys, rig.commands.sim; "
+            "print(sorted(m for m in ('numpy', 'scipy', 'onnxruntime') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=60).stdout
+    assert out.strip() == "[]"
+
+
 def _cli_error(capsys, *args: str) -> str:
     from rig.cli import main
 
