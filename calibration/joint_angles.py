@@ -741,8 +741,7 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
     kind = calibration_kind(constraint.kind)
     ang = joint_angles(kind.allowed_samples(constraint, step_deg), joint, side)
     where = _in_band(ang, band_deg) if kind.reads_in_band else None
-    own = constraint.kind if constraint.kind != joint_spec(joint).kind else None
-    unmeasured = not_measured(joint, own)
+    unmeasured = not_measured(joint, constraint.kind)
     out: dict[str, float | None] = {}
     for k, key in enumerate(("alpha", "beta", "gamma")):
         if k in kind.bounds:  # the angles a constraint of its kind bounds
@@ -750,7 +749,8 @@ def constraint_rom(constraint, joint: str, side: str = "right", *, band_deg: flo
                              *js.movements[k]))
     return JointRangeOfMotion(joint, side, {m: None if m in unmeasured else out.get(m)
                                             for m in CLINICAL_MOVEMENTS[joint]},
-                              (float(ang["alpha"].min()), float(ang["alpha"].max())), own)
+                              (float(ang["alpha"].min()), float(ang["alpha"].max())),
+                              constraint.kind)
 
 
 def largest_rom(roms: list):

@@ -35,7 +35,32 @@ from models.constraint import JointConstraint
 __all__ = ["HingeExtractor"]
 
 
-class HingeExtractor:
+class AxisSettings:
+    """What the extractors of a joint turning about a given axis share (a hinge,
+    :class:`HingeExtractor`; a forearm, :class:`calibration.kinds.forearm.ForearmExtractor`):
+    the axis (parent frame), the child's long axis (spikes are found on its direction), the
+    spike test's speed and length, the lowest IMU system status used, the constraint's name."""
+
+    def __init__(self, axis, axis_name: str, *, limb_axis=(1.0, 0.0, 0.0),
+                 max_speed_dps: float = 3000.0, spike_max_samples: int = 2,
+                 min_system_status: int = 2, name: str = "recorded") -> None:
+        self.axis = Q.check_vectors(axis, name=axis_name)
+        self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
+        if not max_speed_dps > 0:
+            raise ValueError(f"max_speed_dps must be > 0, got {max_speed_dps!r}")
+        self.max_speed_dps = float(max_speed_dps)
+        self.spike_max_samples = int(spike_max_samples)
+        self.min_system_status = int(min_system_status)
+        self.name = name
+
+    def params(self) -> dict[str, Any]:
+        """The settings, as plain types (the written constraint's provenance)."""
+        return {"axis": [float(v) for v in self.axis], "max_speed_dps": self.max_speed_dps,
+                "spike_max_samples": self.spike_max_samples,
+                "min_system_status": self.min_system_status}
+
+
+class HingeExtractor(AxisSettings):
     """Recorded joint orientations → a ``hinge`` constraint (module doc).
 
     Parameters
@@ -65,21 +90,13 @@ class HingeExtractor:
                  max_speed_dps: float = 3000.0, spike_max_samples: int = 2,
                  min_system_status: int = 2, noise_correction: bool = True,
                  name: str = "recorded") -> None:
-        self.axis = Q.check_vectors(axis, name="hinge axis")
-        self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
-        if not max_speed_dps > 0:
-            raise ValueError(f"max_speed_dps must be > 0, got {max_speed_dps!r}")
-        self.max_speed_dps = float(max_speed_dps)
-        self.spike_max_samples = int(spike_max_samples)
-        self.min_system_status = int(min_system_status)
+        AxisSettings.__init__(self, axis, "hinge axis", limb_axis=limb_axis,
+                              max_speed_dps=max_speed_dps, spike_max_samples=spike_max_samples,
+                              min_system_status=min_system_status, name=name)
         self.noise_correction = bool(noise_correction)
-        self.name = name
 
     def params(self) -> dict[str, Any]:
-        return {"axis": [float(v) for v in self.axis], "max_speed_dps": self.max_speed_dps,
-                "spike_max_samples": self.spike_max_samples,
-                "min_system_status": self.min_system_status,
-                "noise_correction": self.noise_correction}
+        return {**AxisSettings.params(self), "noise_correction": self.noise_correction}
 
     def fit(self, q, *, status=None, t=None, provenance: dict | None = None,
             slow_error_deg: float | None = None) -> HingeExtractor:

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.boundary.hinge import AxisSettings
 from calibration.boundary.outliers import find_spikes, usable_samples
 from calibration.clinical import check_side, mirror_quaternions
 from calibration.errors import CalibrationError
@@ -59,7 +60,7 @@ AAOS_FOREARM: dict[str, float] = {"flexion": 150.0, "extension": 0.0, "pronation
                                   "supination": 80.0}
 
 
-class ForearmExtractor:
+class ForearmExtractor(AxisSettings):
     """A forearm joint's flexion and rotation intervals from its recorded orientations.
 
     Parameters
@@ -75,19 +76,9 @@ class ForearmExtractor:
     def __init__(self, axis=ELBOW_AXIS, *, limb_axis=(1.0, 0.0, 0.0),
                  max_speed_dps: float = 3000.0, spike_max_samples: int = 2,
                  min_system_status: int = 2, name: str = "recorded") -> None:
-        self.axis = Q.check_vectors(axis, name="flexion axis")
-        self.limb_axis = Q.check_vectors(limb_axis, name="limb_axis")
-        if not max_speed_dps > 0:
-            raise ValueError(f"max_speed_dps must be > 0, got {max_speed_dps!r}")
-        self.max_speed_dps = float(max_speed_dps)
-        self.spike_max_samples = int(spike_max_samples)
-        self.min_system_status = int(min_system_status)
-        self.name = name
-
-    def params(self) -> dict[str, Any]:
-        return {"axis": [float(v) for v in self.axis], "max_speed_dps": self.max_speed_dps,
-                "spike_max_samples": self.spike_max_samples,
-                "min_system_status": self.min_system_status}
+        super().__init__(axis, "flexion axis", limb_axis=limb_axis,
+                         max_speed_dps=max_speed_dps, spike_max_samples=spike_max_samples,
+                         min_system_status=min_system_status, name=name)
 
     def fit(self, q, *, status=None, t=None, provenance: dict | None = None,
             **_error: Any) -> ForearmExtractor:
