@@ -99,11 +99,11 @@ def joint_mismatch(c, *, for_joint: str | None, for_side: str | None = None) -> 
         return None
     if c.joint_kind.swing_twist != get_kind(spec.kind).swing_twist:
         return f"holds {c.kind} limits, but the {for_joint} is a {spec.kind} joint"
-    own = c.joint_kind.coupling_axis(c)  # a hinge's axis (None for a swing-twist joint)
+    own = c.joint_kind.flexion_axis(c)  # a hinge's or forearm's (None: a swing-twist joint)
     if spec.hinge_axis is not None and own is not None:
         axis = np.asarray(own, dtype=np.float64)
         if float(axis @ np.asarray(spec.hinge_axis)) < math.cos(math.radians(30.0)):
-            return (f"is a hinge about {np.round(axis, 3).tolist()}, but the {for_joint}'s "
+            return (f"is a {c.kind} about {np.round(axis, 3).tolist()}, but the {for_joint}'s "
                     f"turns about {list(spec.hinge_axis)} (rig segment frames)")
     return None
 

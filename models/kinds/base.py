@@ -202,6 +202,11 @@ class JointKind:
         axis, a flexion axis), None when this kind cannot be a coupling's source."""
         return None
 
+    def flexion_axis(self, constraint: Any) -> np.ndarray | None:
+        """The axis (3,, parent frame) a joint of this kind flexes about — what tells an
+        elbow's (+Z) from a knee's (−Z) — None for a swing-twist joint."""
+        return self.coupling_axis(constraint)
+
 
 # -- angle intervals on the circle (both paths) -------------------------------------------------
 def reaches_seam(lo, hi) -> bool:

@@ -190,6 +190,9 @@ class ForearmKind(JointKind):
     def oracle(self, constraint: Any) -> ForearmOracle:
         return ForearmOracle(constraint.limits, constraint.limb_axis)
 
+    def flexion_axis(self, constraint: Any) -> np.ndarray:
+        return np.asarray(constraint.limits.axis, dtype=np.float64)
+
     def check_keyframe(self, c: Any, first: Any, where: str, source: str | None) -> None:
         raise ConstraintError("a forearm joint's limits are not coupled to another joint's "
                               "angle (keyframes are ball, two-axis or hinge joints)",

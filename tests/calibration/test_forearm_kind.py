@@ -147,3 +147,17 @@ def test_rig_boundary_extracts_a_forearm_constraint_from_a_real_arm(rig_cli, tmp
                           "--segments", "thorax,humerus_r,ulna_r,hand_r", "--kind", "forearm",
                           "--out", str(tmp_path / "x.yaml")])
     assert code == 2 and err.count("\n") == 1 and "--kind applies to one joint" in err
+
+
+def test_an_elbows_forearm_file_is_refused_for_the_knee():
+    """The flexion axis tells an elbow (+Z) from a knee (−Z) for a forearm joint as for a
+    hinge: an unbound forearm file about +Z is no knee's, and no shoulder's (a ball joint)."""
+    from calibration.joints import joint_mismatch
+    from models.constraint import loads_constraint
+
+    c = loads_constraint(FOREARM_FILE.replace("joint: elbow\n", ""))
+    assert joint_mismatch(c, for_joint="elbow", for_side="right") is None
+    assert "is a forearm about [0.0, 0.0, 1.0], but the knee's turns about" in joint_mismatch(
+        c, for_joint="knee", for_side="right")
+    assert "but the shoulder is a ball joint" in joint_mismatch(c, for_joint="shoulder",
+                                                                for_side="right")
