@@ -267,6 +267,10 @@ def test_no_private_attribute_of_a_library_object_is_used():
 #: limb path still differ in what they compute, not only in size.
 LIMB_OR_JOINT: dict[str, str] = {
     "rig/demo/pipeline.py": "--limb chooses JointDemo or LimbDemo, the one place that does",
+    "rig/loop/targets.py": "the scripted targets of one joint from its swing and twist geometry "
+                           "(kept bit for bit) or of a limb from its oracle alone; a posture "
+                           "is one joint's (N, 4) or a limb's (N, J, 4) for the oracle; a limb's "
+                           "joints name a targets file's columns and the segments mirrored",
     "rig/readback/boundary.py": "BoundaryRequest.work: the user's --limb arm|leg, the one "
                                 "place choosing a limb file or one joint's constraint",
     "rig/readback/rom.py": "clinical peaks of a constraint file or a limb file",

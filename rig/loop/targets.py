@@ -1,23 +1,28 @@
-"""Target sources for the live loop: where each cycle's joint-orientation target comes from.
+"""Target sources for the live loop: where each cycle's posture target comes from.
 
 Every source answers one non-blocking question per cycle, :meth:`TargetSource.latest`:
-``(target_t, q)`` — the target joint orientation (scalar-first, limb relative to parent, a
-tuple of 4 floats which may be NaN, zero or anything else a real source can produce) and the
-loop-clock time it was produced (None: no target yet). The supervisor decides what to do with
-bad or stale targets; sources never filter.
+``(target_t, posture)`` — the target posture, a float64 array ``(J, 4)``: one scalar-first
+orientation per joint of the driven limb, child relative to parent, in the limb file's joint
+order (one joint: ``(1, 4)``), whose rows may be NaN, zero or anything else a real source can
+produce — and the loop-clock time it was produced (None: no target yet). The supervisor decides
+what to do with bad or stale targets; sources never filter. Every source has ``n_joints`` and
+``joint_names``.
 
-- :class:`CsvTrajectory` — a file ``t_s,w,x,y,z`` played against the loop's clock (zero-order
-  hold: a row is the target from its ``t_s`` until the next row; after the last row the target
-  ages and goes stale, so the limb holds).
-- :class:`ScriptedTargets` — motions computed from the enforced constraint: ``slow`` (a slow
-  closed path well inside the region), ``sweep`` (radial sweeps out past the boundary and back)
-  and ``adversarial`` (far outside, jumps across the correctional discontinuity and concave
-  notches, twist excursions, NaN / zero / infinite / non-unit and stale inputs).
+- :class:`CsvTrajectory` — a file ``t_s,w,x,y,z`` (one joint) or ``t_s`` then
+  ``<joint>_w,<joint>_x,<joint>_y,<joint>_z`` for each joint in the limb file's order, played
+  against the loop's clock (zero-order hold: a row is the target from its ``t_s`` until the
+  next row; after the last row the target ages and goes stale, so the limb holds).
+- :class:`ScriptedTargets` — motions computed from the enforced constraint or limb file:
+  ``slow`` (a slow closed path well inside the region), ``sweep`` (sweeps out past the boundary
+  and back) and ``adversarial`` (far outside, jumps across the correctional discontinuity,
+  twist excursions, reaches that become invalid only because another joint moved, NaN / zero /
+  infinite / non-unit and stale inputs).
 - :class:`MirrorTargets` — mirror an IMU-worn limb through the orientation-source interface
-  (:mod:`rig.devices.sources`): joint orientation ``q_parent⁻¹ ⊗ q_child`` from two segment
-  sensors, or a ``kind="joint"`` sample as it is; a reader thread keeps the latest.
+  (:mod:`rig.devices.sources`): each joint's orientation ``q_parent⁻¹ ⊗ q_child`` from its two
+  segments' sensors, or a ``kind="joint"`` sample as it is; a reader thread keeps the latest.
 
-:func:`open_targets` turns a ``--targets`` string into a source.
+:func:`open_targets` turns a ``--targets`` string into a source; :func:`valid_targets` says
+which postures are valid targets (finite, unit, inside the limits in every joint).
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
 
 __all__ = ["SCRIPTS", "CsvTrajectory", "MirrorTargets", "ScriptedTargets", "TargetSource",
-           "load_trajectory", "open_targets"]
+           "expected_header", "load_trajectory", "open_targets", "valid_targets"]
 
 SCRIPTS = ("slow", "sweep", "adversarial", "hold")
 
@@ -55,17 +60,24 @@ class TargetSource:
         Natural length of the motion (None: endless).
     description : str
         One line for logs and run metadata.
+    n_joints : int
+        Joints of every posture :meth:`latest` returns.
+    joint_names : tuple of str or None
+        Their names, in the limb file's order (None: one joint, unnamed).
     """
 
     duration_s: float | None = None
     description = "targets"
+    n_joints: int = 1
+    joint_names: tuple[str, ...] | None = None
 
     def start(self, t0: float) -> None:
         """The loop starts: loop-clock time ``t0`` is the motion's time 0."""
         self.t0 = float(t0)
 
-    def latest(self, t: float) -> tuple[float | None, tuple[float, float, float, float] | None]:
-        """``(target_t, q)`` at loop time ``t``; ``(None, None)`` when there is no target yet."""
+    def latest(self, t: float) -> tuple[float | None, np.ndarray | None]:
+        """``(target_t, posture (n_joints, 4))`` at loop time ``t``; ``(None, None)`` when there
+        is no target yet."""
         raise NotImplementedError
 
     def close(self) -> None:
@@ -78,49 +90,134 @@ class TargetSource:
         self.close()
 
 
+def valid_targets(oracle, postures) -> np.ndarray:
+    """Which postures are valid targets: finite, unit (within 1e-3) and inside the limits in
+    every joint (hierarchically, as the supervisor judges them).
+
+    Parameters
+    ----------
+    oracle : models.oracle.ConstraintOracle
+        The enforced constraint's or limb file's oracle.
+    postures : (N, J, 4) or (N, 4) array_like
+        Targets as the sources return them (``(N, 4)``: one joint).
+
+    Returns
+    -------
+    (N,) bool
+    """
+    q = np.asarray(postures, dtype=np.float64).reshape(len(postures), -1, 4)
+    ok = np.isfinite(q).all(axis=(1, 2)) & (np.abs(np.linalg.norm(q, axis=2) - 1.0)
+                                            < 1e-3).all(axis=1)
+    out = np.zeros(len(q), dtype=bool)
+    if ok.any():
+        good = q[ok] / np.linalg.norm(q[ok], axis=2, keepdims=True)
+        if oracle.limb is None:
+            out[ok] = oracle.is_valid(good[:, 0])
+        else:
+            out[ok] = oracle.is_valid(good).all(axis=1)
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # CSV trajectories
 # ---------------------------------------------------------------------------------------------
-def load_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a ``t_s,w,x,y,z`` CSV.
+def expected_header(joint_names=None) -> list[str]:
+    """The header of a targets file for these joints: ``t_s,w,x,y,z`` (one joint, None) or
+    ``t_s`` then ``<joint>_w,<joint>_x,<joint>_y,<joint>_z`` for each joint."""
+    if not joint_names:
+        return ["t_s", "w", "x", "y", "z"]
+    return ["t_s"] + [f"{j}_{c}" for j in joint_names for c in "wxyz"]
+
+
+def _header_columns(path: Path, header: list[str], joint_names) -> list[int]:
+    """Indices of the quaternion columns, joint by joint (one joint: ``w,x,y,z`` anywhere, or
+    ``<joint>_w..z``; a limb: exactly ``t_s`` then each joint's in order)."""
+    plain = expected_header()
+    if len(joint_names or ()) <= 1:
+        named = expected_header(joint_names) if joint_names else None
+        if named is not None and all(c in header for c in named):
+            return [header.index(c) for c in named[1:]]
+        missing = [c for c in plain if c not in header]
+        if missing:
+            want = ",".join(plain) + (f" (or {','.join(named)})" if named else "")
+            raise RigConfigError(f"{path}:1: missing column(s) {', '.join(missing)}; expected "
+                                 f"a header {want} (got {','.join(header)})")
+        return [header.index(c) for c in plain[1:]]
+    want = expected_header(joint_names)
+    say = (f"expected a header {','.join(want)} (t_s, then each joint of the limb in its "
+           f"file's order: {', '.join(joint_names)})")
+    if header == want:
+        return list(range(1, len(want)))
+    dup = sorted({c for c in header if header.count(c) > 1})
+    if dup:
+        raise RigConfigError(f"{path}:1: repeated column(s) {', '.join(dup)}; {say}")
+    if header[1:] == plain[1:] or header == plain:
+        raise RigConfigError(f"{path}:1: a one-joint targets file (t_s,w,x,y,z) for a limb of "
+                             f"{len(joint_names)} joints; {say}")
+    missing = [c for c in want if c not in header]
+    if missing:
+        raise RigConfigError(f"{path}:1: missing column(s) {', '.join(missing)}; {say}")
+    extra = [c for c in header if c not in want]
+    if extra:
+        raise RigConfigError(f"{path}:1: unknown column(s) {', '.join(extra)}; {say}")
+    got = [c.rsplit("_", 1)[0] for c in header[1:] if c != "t_s"]
+    order = list(dict.fromkeys(got))
+    raise RigConfigError(f"{path}:1: columns out of order (joints {', '.join(order)}, "
+                         f"t_s at column {header.index('t_s') + 1}); {say}")
+
+
+def load_trajectory(path: str | Path, joint_names=None) -> tuple[np.ndarray, np.ndarray]:
+    """Read a targets CSV: ``t_s,w,x,y,z`` (one joint) or, for a limb (``joint_names``),
+    ``t_s`` then ``<joint>_w,<joint>_x,<joint>_y,<joint>_z`` for each joint in that order.
+
+    Parameters
+    ----------
+    path : str or Path
+    joint_names : sequence of str, optional
+        The driven limb's joints in its file's order (one name or None: one joint, which may
+        also be written ``<joint>_w..z``).
 
     Returns
     -------
     t_s : (N,) float64, seconds, non-decreasing, finite
-    q : (N, 4) float64, scalar-first targets, kept as written (NaN, zero or non-unit rows are
-        allowed: the supervisor refuses them at run time, and adversarial files use them)
+    q : (N, J, 4) float64, scalar-first targets, kept as written (NaN, zero or non-unit rows
+        are allowed: the supervisor refuses them at run time, and adversarial files use them)
 
     Raises
     ------
     RigConfigError
-        Missing header columns, a non-numeric cell, a non-finite or decreasing time (naming the
-        file and line), or no rows.
+        Missing, unknown, repeated or misordered columns (naming the expected header), a
+        non-numeric cell, a non-finite or decreasing time (naming the file and line), or no
+        rows.
     FileNotFoundError
     """
     path = Path(path)
+    want = ",".join(expected_header(joint_names if joint_names and len(joint_names) > 1
+                                    else None))
     if path.is_dir():
-        raise RigConfigError(f"{path}: is a directory, not a t_s,w,x,y,z CSV file")
+        raise RigConfigError(f"{path}: is a directory, not a {want} CSV file")
     try:
         with path.open(newline="", encoding="utf-8-sig") as fh:
-            return _read_trajectory(path, fh)
+            return _read_trajectory(path, fh, joint_names)
     except UnicodeDecodeError as err:
         raise RigConfigError(f"{path}: not a text CSV file ({err.reason} at byte "
-                             f"{err.start}); expected a header t_s,w,x,y,z") from None
+                             f"{err.start}); expected a header {want}") from None
 
 
-def _read_trajectory(path: Path, fh) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of an opened ``t_s,w,x,y,z`` CSV (see :func:`load_trajectory`)."""
+def _read_trajectory(path: Path, fh, joint_names) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of an opened targets CSV (see :func:`load_trajectory`)."""
     reader = csv.reader(fh)
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
-        raise RigConfigError(f"{path}: empty file; expected a header t_s,w,x,y,z") from None
-    need = ["t_s", "w", "x", "y", "z"]
-    missing = [c for c in need if c not in header]
-    if missing:
-        raise RigConfigError(f"{path}:1: missing column(s) {', '.join(missing)}; expected "
-                             f"a header t_s,w,x,y,z (got {','.join(header)})")
-    idx = [header.index(c) for c in need]
+        want = ",".join(expected_header(joint_names if joint_names and len(joint_names) > 1
+                                        else None))
+        raise RigConfigError(f"{path}: empty file; expected a header {want}") from None
+    if "t_s" not in header:
+        want = expected_header(joint_names if joint_names and len(joint_names) > 1 else None)
+        raise RigConfigError(f"{path}:1: missing column(s) t_s; expected a header "
+                             f"{','.join(want)} (got {','.join(header)})")
+    idx = [header.index("t_s")] + _header_columns(path, header, joint_names)
     rows = []
     last_t = -math.inf
     for line_no, row in enumerate(reader, start=2):
@@ -143,7 +240,7 @@ def _read_trajectory(path: Path, fh) -> tuple[np.ndarray, np.ndarray]:
     if not rows:
         raise RigConfigError(f"{path}: no rows after the header")
     arr = np.array(rows, dtype=np.float64)
-    return arr[:, 0].copy(), arr[:, 1:].copy()
+    return arr[:, 0].copy(), arr[:, 1:].reshape(len(arr), -1, 4).copy()
 
 
 class CsvTrajectory(TargetSource):
@@ -152,19 +249,27 @@ class CsvTrajectory(TargetSource):
     Parameters
     ----------
     path : str or Path
-        ``t_s,w,x,y,z`` CSV (see :func:`load_trajectory`); ``t_s`` is relative to the loop's
-        start.
+        Targets CSV (see :func:`load_trajectory`); ``t_s`` is relative to the loop's start.
     frames : "rig" or "isb"
         Segment-frame convention of the file's joint orientations (:mod:`calibration.frames`);
         converted to the rig's on loading.
+    joint_names : sequence of str, optional
+        The driven limb's joints in its file's order (None: one joint).
+    segments : sequence of (str, str), optional
+        Each joint's (parent, child) segment names, for ``frames="isb"`` (None: the limb axis
+        convention of one joint, as :func:`calibration.frames.joint_to_rig` without names).
     """
 
-    def __init__(self, path: str | Path, frames: str = "rig"):
+    def __init__(self, path: str | Path, frames: str = "rig", joint_names=None, segments=None):
         self.path = Path(path)
-        self.t_s, q = load_trajectory(self.path)
-        with np.errstate(invalid="ignore"):
-            q = joint_to_rig(q, frames)  # NaN / zero rows stay invalid for the supervisor
-        self._q = [tuple(float(v) for v in row) for row in q]
+        self.t_s, q = load_trajectory(self.path, joint_names)
+        self.n_joints = q.shape[1]
+        self.joint_names = tuple(joint_names) if joint_names else None
+        with np.errstate(invalid="ignore"):  # NaN / zero rows stay invalid for the supervisor
+            for j in range(self.n_joints):
+                pc = segments[j] if segments is not None else (None, None)
+                q[:, j] = joint_to_rig(q[:, j], frames, *pc)
+        self._q = np.ascontiguousarray(q)
         self.duration_s = float(self.t_s[-1])
         self.description = f"csv {self.path} ({len(self._q)} rows, {self.duration_s:.3g} s)"
         self._ts = self.t_s.tolist()
@@ -225,7 +330,20 @@ class ScriptedTargets(TargetSource):
         20-120° beyond its limits, NaN / zero / infinite / non-unit targets (a new one every
         tick), stale targets (timestamped 1 s in the past), and large valid jumps.
         ``hold``: the deepest point, still.
+
+        For a limb (an oracle of a limb file) the same scripts are built from the limb's exact
+        oracle alone, whatever its joints' kinds (:class:`_LimbMotions`): ``slow`` goes from
+        the deepest posture found out to valid postures (checked valid, with a 1° margin, all
+        along the way) and back, one per ``period_s``; ``sweep`` goes from it past projected
+        boundary postures, the joint moving most 30° beyond; ``adversarial`` adds, to far
+        outside postures (every joint, or one), discontinuity pairs, invalid, stale and large
+        valid jumps, the **coupled** segments: ``coupled_source`` holds a valid posture while
+        the joint a coupled joint depends on (the elbow) moves to an angle (valid for it) at
+        which the coupled joint's (the shoulder's) held orientation is outside its limits, and
+        ``coupled_dependent`` holds the source at such an angle while the coupled joint moves
+        to an orientation valid only at another angle of its source.
     oracle : models.oracle.ConstraintOracle
+        A joint's constraint's or a limb file's.
     seed : int
     period_s, segment_s, hold_s : float
     alternate_hz : float
@@ -239,6 +357,21 @@ class ScriptedTargets(TargetSource):
         self.name = name
         self.oracle = oracle
         self.rng = np.random.default_rng(seed)
+        self.n_joints = oracle.n_joints
+        limb = oracle.limb
+        self.joint_names = None if limb is None else tuple(limb.joint_names)
+        if limb is not None:
+            self.period_s = float(period_s)
+            self.segment_s = float(segment_s)
+            self.hold_s = float(hold_s)
+            self.alternate_hz = float(alternate_hz)
+            self.description = f"script:{name} (seed {seed}, limb {limb.name})"
+            self.t0 = 0.0
+            self.duration_s = None
+            self._limb = _LimbMotions(oracle, self.rng, self)
+            self.kinds = list(self._limb.segments) if name == "adversarial" else []
+            return
+        self._limb = None
         self.axis = np.asarray(oracle.constraint.limb_axis, dtype=np.float64)
         self.period_s = float(period_s)
         self.segment_s = float(segment_s)
@@ -372,9 +505,30 @@ class ScriptedTargets(TargetSource):
         if self.name != "adversarial":
             return ""
         e = max(0.0, t - self.t0)
+        if self._limb is not None:
+            return self._limb.segments[int(e / self.segment_s) % len(self._limb.segments)]
         return self._segments[int(e / self.segment_s) % len(self._segments)][0]
 
+    def steady(self, t: float, settle_s: float = 0.3) -> bool:
+        """Whether the target at loop time ``t`` is one a limb can be tracking: a continuous
+        motion's (``slow``, ``sweep``, ``hold``), or an adversarial target that has been the
+        same posture since ``t - settle_s``, fresh (with :func:`valid_targets`: the cycles
+        whose tracking the valid-target figures measure)."""
+        if self.name != "adversarial":
+            return True
+        e = t - self.t0
+        if e < settle_s or self.segment(t) in ("stale", "invalid", "discontinuity"):
+            return False
+        a, b = self.latest(t)[1], self.latest(t - settle_s)[1]
+        return bool(np.array_equal(a, b)) and self.segment(t) == self.segment(t - settle_s)
+
     def latest(self, t):
+        if self._limb is not None:
+            return self._limb.latest(t)
+        tt, q = self._latest_one(t)
+        return tt, np.array(q, dtype=np.float64).reshape(1, 4)
+
+    def _latest_one(self, t):
         e = t - self.t0
         if self.name == "hold":
             return t, self._q(self.centre, self.twist_mid)
@@ -426,6 +580,257 @@ class ScriptedTargets(TargetSource):
         return r
 
 
+def _slerp(c: np.ndarray, b: np.ndarray, s) -> np.ndarray:
+    """Per joint, the rotation from ``c`` towards ``b`` by the fraction ``s`` of the way (beyond
+    ``b`` for ``s > 1``): ``exp(s log(b ⊗ c⁻¹)) ⊗ c``, the shorter way. ``c``, ``b`` (..., 4)
+    broadcasting, ``s`` broadcasting against their leading shape."""
+    c = np.asarray(c, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    rel = Q.multiply(b, Q.conjugate(c))
+    rel = np.where((rel[..., :1] < 0), -rel, rel)
+    ang = Q.angle(rel)
+    vn = np.linalg.norm(rel[..., 1:], axis=-1, keepdims=True)
+    axis = np.where(vn > 1e-15, rel[..., 1:] / np.where(vn > 1e-15, vn, 1.0),
+                    np.array([1.0, 0.0, 0.0]))
+    return Q.multiply(Q.from_axis_angle(axis, np.asarray(s, dtype=np.float64) * ang), c)
+
+
+class _Excursion:
+    """A path ``s ↦ exp(s·log(b ⊗ c⁻¹)) ⊗ c`` per joint, in plain floats (the hot path: a few
+    µs per call for an arm, no numpy arrays built but the one returned)."""
+
+    __slots__ = ("axes", "angles", "centre")
+
+    def __init__(self, c: np.ndarray, b: np.ndarray):
+        rel = Q.multiply(b, Q.conjugate(c))
+        rel = np.where(rel[:, :1] < 0, -rel, rel)
+        self.angles = Q.angle(rel).tolist()
+        vn = np.linalg.norm(rel[:, 1:], axis=1, keepdims=True)
+        ax = np.where(vn > 1e-15, rel[:, 1:] / np.where(vn > 1e-15, vn, 1.0), 0.0)
+        self.axes = [tuple(a) for a in ax.tolist()]
+        self.centre = [tuple(q) for q in np.asarray(c, dtype=np.float64).tolist()]
+
+    def at(self, s: float) -> np.ndarray:
+        out = np.empty((len(self.angles), 4))
+        for j, (ang, (ax, ay, az), cq) in enumerate(zip(self.angles, self.axes, self.centre,
+                                                         strict=True)):
+            h = 0.5 * s * ang
+            sn = math.sin(h)
+            out[j] = qs.mul((math.cos(h), ax * sn, ay * sn, az * sn), cq)
+        return out
+
+
+class _LimbMotions:
+    """The scripts of :class:`ScriptedTargets` for a limb, built from its exact oracle alone
+    (any joints' kinds: every posture is judged by the oracle, never by a kind's geometry).
+
+    Valid postures are drawn as fractions of the way from a deep valid posture (the
+    **centre**) to projections of random postures (valid, on or inside the boundary: the way
+    stays on a hinge's axis, in a two-axis joint's region), kept when the oracle says every
+    joint is at least a margin inside its limits. The centre starts at the projection of the
+    neutral posture (identity in every joint) and moves to the deepest such posture found.
+    """
+
+    #: How far inside every joint a posture of the valid pools is (rad).
+    MARGIN = math.radians(2.0)
+
+    def __init__(self, oracle, rng: np.random.Generator, script: ScriptedTargets):
+        self.o = oracle
+        self.rng = rng
+        self.s = script
+        self.J = oracle.n_joints
+        self.centre = self._find_centre()
+        self.segments: tuple[str, ...] = ()
+        if script.name == "slow":
+            self._build_slow()
+        elif script.name == "sweep":
+            self._build_sweep()
+        elif script.name == "adversarial":
+            self._build_adversarial()
+
+    # -- sampling ----------------------------------------------------------------------------
+    def _depth(self, p: np.ndarray) -> np.ndarray:
+        """(N,) how far inside its limits the least inside joint is (rad; < 0: outside)."""
+        return -self.o.signed_distance(p).max(axis=1)
+
+    def _random(self, n: int) -> np.ndarray:
+        return Q.random_quaternions(n * self.J, self.rng).reshape(n, self.J, 4)
+
+    def _boundary(self, n: int) -> np.ndarray:
+        """Projections of ``n`` random postures: valid, most of them on the boundary."""
+        return self.o.project(self._random(n))
+
+    def _find_centre(self) -> np.ndarray:
+        ident = np.zeros((1, self.J, 4))
+        ident[..., 0] = 1.0
+        c = self.o.project(ident)[0]
+        best = float(self._depth(c[None])[0])
+        for _ in range(3):
+            b = self._boundary(1000)
+            for f in (0.3, 0.5):
+                m = _slerp(c[None], b, f)
+                d = self._depth(m)
+                k = int(np.argmax(d))
+                if d[k] > best:
+                    c, best = m[k], float(d[k])
+        self.depth = best
+        return c
+
+    def _valid_pool(self, n: int, lo: float, hi: float, margin: float) -> np.ndarray:
+        """Up to ``n`` valid postures ``margin`` inside every joint, a fraction ``lo``..``hi``
+        of the way from the centre to the boundary."""
+        out: list[np.ndarray] = []
+        for _ in range(8):
+            b = self._boundary(2 * n)
+            p = _slerp(self.centre[None], b, self.rng.uniform(lo, hi, (len(b), 1)))
+            out.extend(p[self._depth(p) >= margin])
+            if len(out) >= n:
+                break
+        return np.array(out[:n]).reshape(-1, self.J, 4)
+
+    def _path_valid(self, ends: np.ndarray, margin: float, steps: int = 33) -> np.ndarray:
+        """(N,) whether the whole way from the centre to each of ``ends`` is ``margin``
+        inside."""
+        s = np.linspace(0.0, 1.0, steps)
+        p = _slerp(self.centre[None, None], ends[:, None], s[None, :, None])
+        return (self._depth(p.reshape(-1, self.J, 4)).reshape(len(ends), steps)
+                >= margin).all(axis=1)
+
+    # -- slow and sweep ----------------------------------------------------------------------
+    def _build_slow(self) -> None:
+        cand = self._valid_pool(64, 0.4, 0.7, self.MARGIN)
+        ok = cand[self._path_valid(cand, math.radians(1.0))] if len(cand) else cand
+        ends = ok[:8] if len(ok) else self.centre[None]
+        self._excursions = [_Excursion(self.centre, e) for e in ends]
+
+    def _build_sweep(self) -> None:
+        b = self._boundary(12)
+        self._excursions = [_Excursion(self.centre, e) for e in b]
+        reach = []
+        for ex in self._excursions:
+            far = max(ex.angles)
+            reach.append(1.0 if far < 1e-9 else
+                         min(1.0 + math.radians(30.0) / far, math.radians(170.0) / far))
+        self._reach = reach
+
+    # -- adversarial -------------------------------------------------------------------------
+    def _build_adversarial(self) -> None:
+        o, J, rng = self.o, self.J, self.rng
+        valid = self._valid_pool(256, 0.1, 0.9, self.MARGIN)
+        if not len(valid):
+            valid = self.centre[None]
+        self._valid = valid
+        # far outside: every joint random, or one joint of a valid posture turned away
+        r = self._random(3000)
+        far_all = r[o.signed_distance(r).max(axis=1) > math.radians(30)][:64]
+        one = valid[rng.integers(0, len(valid), 3000)].copy()
+        jj = rng.integers(0, J, 3000)
+        one[np.arange(3000), jj] = Q.random_quaternions(3000, rng)
+        far_one = one[o.signed_distance(one).max(axis=1) > math.radians(30)][:64]
+        far = [p for pair in zip(far_all, far_one, strict=False) for p in pair]
+        self._far = np.array(far or [-self.centre]).reshape(-1, J, 4)
+        # discontinuity: outside postures 1° apart in one joint whose projections are ≥ 10°
+        # apart in some joint
+        r = self._random(3000)
+        jj = rng.integers(0, J, 3000)
+        step = Q.from_axis_angle(Q.random_unit_vectors(3000, rng), np.full(3000, math.radians(1.0)))
+        r2 = r.copy()
+        r2[np.arange(3000), jj] = Q.multiply(step, r[np.arange(3000), jj])
+        p1, p2 = o.project(r), o.project(r2)
+        jump = Q.angle(Q.multiply(p1, Q.conjugate(p2))).max(axis=1) > math.radians(10)
+        self._pairs = list(zip(r[jump][:32], r2[jump][:32], strict=True))
+        # coupled: pairs of valid postures near the boundary, one joint taken from the other
+        near = self._valid_pool(1500, 0.7, 1.0, math.radians(0.5))
+        self._coupled_source, self._coupled_dependent = self._coupled(near)
+        bad = np.array([(math.nan,) * 4, (0.0,) * 4, (math.inf, 0.0, 0.0, 0.0),
+                        (2.0, 0.0, 0.0, 0.0), (math.nan, 1.0, 0.0, 0.0), (0.5, 0.5, 0.5, 0.3)])
+        invalid = np.repeat(valid[:1], len(bad) * J, axis=0)
+        for k in range(len(bad) * J):
+            invalid[k, k % J] = bad[k // J]
+        self._invalid = invalid
+        segs = ["far", "coupled_source", "discontinuity", "coupled_dependent", "invalid",
+                "stale", "valid_jump", "far"]
+        have = {"coupled_source": len(self._coupled_source),
+                "coupled_dependent": len(self._coupled_dependent),
+                "discontinuity": len(self._pairs)}
+        self.segments = tuple(k for k in segs if have.get(k, 1))
+
+    def _coupled(self, near: np.ndarray) -> tuple[list, list]:
+        """``(start, moving joint, end)`` triples: a valid posture, then the joint a coupled
+        joint depends on (``coupled_source``) or the coupled joint itself
+        (``coupled_dependent``) moved to another valid posture's, after which the coupled
+        joint alone is outside its limits (by 3° or more)."""
+        o, J, limb = self.o, self.J, self.o.limb
+        src_list: list = []
+        dep_list: list = []
+        if len(near) < 2:
+            return src_list, dep_list
+        n = 4000
+        ia = self.rng.integers(0, len(near), n)
+        ib = self.rng.integers(0, len(near), n)
+        a, b = near[ia], near[ib]
+        for j, joint in enumerate(limb.joints):
+            if joint.coupling is None:
+                continue
+            s = limb.index(joint.coupling.by)
+            others = [k for k in range(J) if k != j]
+            for moving, start, end_from, out in ((s, a, b, src_list), (j, b, a, dep_list)):
+                end = start.copy()
+                end[:, moving] = end_from[:, moving]
+                d = o.signed_distance(end)
+                hit = (d[:, j] > math.radians(3.0)) & (d[:, others] <= 0).all(axis=1)
+                for k in np.flatnonzero(hit)[:16]:
+                    out.append((start[k], moving, end[k]))
+        return src_list, dep_list
+
+    # -- the motion --------------------------------------------------------------------------
+    def latest(self, t: float):
+        sc = self.s
+        e = t - sc.t0
+        name = sc.name
+        if name == "hold":
+            return t, self.centre.copy()
+        if name == "slow":
+            k = int(e // sc.period_s)
+            frac = (e / sc.period_s) % 1.0
+            ex = self._excursions[k % len(self._excursions)]
+            return t, ex.at(0.5 * (1.0 - math.cos(2.0 * math.pi * frac)))
+        if name == "sweep":
+            k = int(e // sc.period_s)
+            frac = (e / sc.period_s) % 1.0
+            i = k % len(self._excursions)
+            return t, self._excursions[i].at(self._reach[i] * 0.5
+                                             * (1.0 - math.cos(2.0 * math.pi * frac)))
+        e = max(0.0, e)
+        seg_i = int(e / sc.segment_s)
+        kind = self.segments[seg_i % len(self.segments)]
+        in_seg = e - seg_i * sc.segment_s
+        held = seg_i * 7 + int(in_seg / sc.hold_s)
+        tick = int(e * sc.alternate_hz)
+        if kind == "far":
+            return t, self._far[held % len(self._far)]
+        if kind in ("coupled_source", "coupled_dependent"):
+            table = self._coupled_source if kind == "coupled_source" else \
+                self._coupled_dependent
+            start, moving, end = table[seg_i % len(table)]
+            u = in_seg / sc.segment_s
+            if u < 0.3:
+                return t, start
+            if u >= 0.8:
+                return t, end
+            p = start.copy()
+            p[moving] = _slerp(start[moving], end[moving], (u - 0.3) / 0.5)
+            return t, p
+        if kind == "discontinuity":
+            a, b = self._pairs[held % len(self._pairs)]
+            return t, (a if tick % 2 == 0 else b)
+        if kind == "invalid":
+            return t, self._invalid[tick % len(self._invalid)]
+        if kind == "stale":
+            return t - 1.0, self._valid[held % len(self._valid)]
+        return t, self._valid[(held * 11) % len(self._valid)]
+
+
 # ---------------------------------------------------------------------------------------------
 # Mirroring an IMU-worn limb
 # ---------------------------------------------------------------------------------------------
@@ -437,8 +842,13 @@ class MirrorTargets(TargetSource):
     source : rig.devices.sources.OrientationSource
         Opened source (context manager entered by this object, closed by :meth:`close`).
     parent, child : str or None
-        Segment names giving ``q_joint = q_parent⁻¹ ⊗ q_child`` from ``kind="sensor"``
-        samples; ``kind="joint"`` samples are used as they are.
+        One joint's segment names: ``q_joint = q_parent⁻¹ ⊗ q_child`` from ``kind="sensor"``
+        samples (``joints`` instead, for a limb).
+    joints : sequence of (str, str), optional
+        Each joint's (parent, child) segment names, in the limb file's order.
+    joint_names : sequence of str, optional
+        The joints' names (a ``kind="joint"`` sample is that joint's orientation as it is; one
+        joint: any joint sample).
     alignment : dict of str to (4,) array, optional
         Sensor-to-segment alignments ``q_segment = q_sensor ⊗ a`` (from calibration).
     clock : callable
@@ -446,23 +856,33 @@ class MirrorTargets(TargetSource):
 
     Notes
     -----
-    A reader thread calls ``source.read(timeout=0.05)`` and keeps the newest joint
-    orientation; :meth:`latest` only reads it (no locking on the hot path: one tuple
-    assignment is atomic). A vanished device stops the thread and leaves the last target to
-    go stale (the supervisor then holds); :attr:`error` says why.
+    A reader thread calls ``source.read(timeout=0.05)`` and, once every joint has been seen,
+    keeps the newest posture ``(n_joints, 4)`` with the oldest of its joints' times;
+    :meth:`latest` only reads it (no locking on the hot path: one tuple assignment is atomic).
+    A vanished device stops the thread and leaves the last target to go stale (the supervisor
+    then holds); :attr:`error` says why.
     """
 
     def __init__(self, source, *, parent: str | None = None, child: str | None = None,
-                 alignment: dict | None = None, clock=time.monotonic, description="mirror"):
+                 joints=None, joint_names=None, alignment: dict | None = None,
+                 clock=time.monotonic, description="mirror"):
         self.source = source
-        self.parent, self.child = parent, child
+        self.joints = [tuple(pc) for pc in joints] if joints is not None else [(parent, child)]
+        self.parent, self.child = self.joints[0]
+        self.n_joints = len(self.joints)
+        self.joint_names = tuple(joint_names) if joint_names else None
         self.alignment = {k: tuple(float(v) for v in a) for k, a in (alignment or {}).items()}
         self.clock = clock
         self.description = description
         self.error: BaseException | None = None
         self.dropped = 0
-        self._latest: tuple[float, tuple] | None = None
+        self._latest: tuple[float, np.ndarray] | None = None
         self._seg: dict[str, tuple] = {}
+        self._joint: list[tuple | None] = [None] * self.n_joints
+        self._uses = {}  # segment name → the joints it is a segment of
+        for j, (p, c) in enumerate(self.joints):
+            for name in (p, c):
+                self._uses.setdefault(name, []).append(j)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.t0 = 0.0
@@ -478,23 +898,38 @@ class MirrorTargets(TargetSource):
                                             daemon=True)
             self._thread.start()
 
+    def _joint_index(self, name: str) -> int | None:
+        if self.n_joints == 1:
+            return 0
+        names = self.joint_names or ()
+        return names.index(name) if name in names else None
+
     def _run(self) -> None:
+        joint = self._joint
         try:
             while not self._stop.is_set():
+                changed = False
                 for s in self.source.read(0.05):
                     q = tuple(float(v) for v in s.q)
                     if s.kind == "joint":
-                        self._latest = (s.t, q)
+                        j = self._joint_index(s.name)
+                        if j is not None:
+                            joint[j] = (s.t, q)
+                            changed = True
                         continue
                     a = self.alignment.get(s.name)
                     if a is not None:
                         q = qs.mul(q, a)
                     self._seg[s.name] = (s.t, q)
-                    if s.name in (self.parent, self.child):
-                        p = self._seg.get(self.parent)
-                        c = self._seg.get(self.child)
+                    for j in self._uses.get(s.name, ()):
+                        p = self._seg.get(self.joints[j][0])
+                        c = self._seg.get(self.joints[j][1])
                         if p is not None and c is not None:
-                            self._latest = (min(p[0], c[0]), qs.mul(qs.conj(p[1]), c[1]))
+                            joint[j] = (min(p[0], c[0]), qs.mul(qs.conj(p[1]), c[1]))
+                            changed = True
+                if changed and all(x is not None for x in joint):
+                    self._latest = (min(x[0] for x in joint),
+                                    np.array([x[1] for x in joint], dtype=np.float64))
                 self.dropped = int(getattr(self.source, "dropped", 0) or 0)
         except BaseException as err:  # a vanished device: the target goes stale
             self.error = err
@@ -521,9 +956,21 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
     """A target source from a ``--targets`` string.
 
     ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory` (its joint orientations in
-    ``frames``, default the rig's);
+    ``frames``, default the rig's; for a limb's oracle, a column group per joint of the limb);
     ``script:NAME[?seed=N&period_s=S&segment_s=S&hold_s=S]`` → :class:`ScriptedTargets`;
-    ``mirror`` (the rig configuration's sensors) → :class:`MirrorTargets`.
+    ``mirror`` (the rig configuration's sensors) or ``mirror:RIG`` → :class:`MirrorTargets`
+    (for a limb's oracle, every joint of the limb, from a rig wearing a sensor on each of its
+    segments: ``mirror:sim-arm``).
+
+    Parameters
+    ----------
+    spec : str
+    oracle : models.oracle.ConstraintOracle
+        The enforced constraint's or limb file's: the joints every posture holds.
+    rig : rig.devices.config.RigConfig, optional
+        The driven rig.
+    seed : int
+    frames : {"rig", "isb"}, optional
 
     Raises
     ------
@@ -558,12 +1005,18 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
         kw.setdefault("seed", seed)
         return ScriptedTargets(name, oracle, **kw)
     if spec == "mirror" or spec.startswith("mirror:"):
+        if oracle.limb is not None:
+            return _open_limb_mirror(spec, rig, oracle.limb)
         return _open_mirror(spec, rig)
     path = Path(spec)
     if path.suffix.lower() == ".csv" or path.exists():
         if not path.exists():
             raise FileNotFoundError(2, "no such targets file", str(path))
-        return CsvTrajectory(path, frames or "rig")
+        limb = oracle.limb
+        if limb is None:
+            return CsvTrajectory(path, frames or "rig")
+        return CsvTrajectory(path, frames or "rig", joint_names=limb.joint_names,
+                             segments=[(j.parent, j.child) for j in limb.joints])
     raise RigConfigError(f"--targets {spec!r}: expected PATH.csv, script:NAME "
                          f"({'|'.join(SCRIPTS)}) or mirror")
 
@@ -588,3 +1041,33 @@ def _open_mirror(spec: str, rig) -> MirrorTargets:
     joint = rig.joint
     return MirrorTargets(src, parent=joint.parent, child=joint.child,
                          description=f"mirror of {rig.name} sensors")
+
+
+def _open_limb_mirror(spec: str, rig, limb) -> MirrorTargets:
+    """``mirror`` / ``mirror:RIG`` for a limb: every joint of ``limb`` from the sensors of a rig
+    worn on that limb (same limb, same side, a sensor on each of its segments)."""
+    driven = rig
+    if spec.startswith("mirror:"):
+        rig = load_rig_config(spec[len("mirror:"):])
+    sensors = getattr(rig, "sensors", None)
+    name = getattr(rig, "name", "?")
+    if sensors is None:
+        raise RigConfigError(f"--targets {spec}: rig {name!r} has no sensors to mirror; use "
+                             "mirror:<rig with sensors on the limb> (e.g. mirror:sim-arm)")
+    worn = getattr(rig, "limb", None)
+    side = rig.joint.side
+    what = f"{limb.side + ' ' if limb.side else ''}{limb.limb or 'limb'} {limb.name!r}"
+    if (limb.limb and worn != limb.limb) or (limb.side and side != limb.side):
+        raise RigConfigError(f"--targets {spec}: rig {name!r} wears its sensors on the {side} "
+                             f"{worn or rig.joint.name}, the enforced limb is the {what}"
+                             + (f" of rig {driven.name!r}" if driven is not None else ""))
+    missing = [seg for j in limb.joints for seg in (j.parent, j.child)
+               if seg not in sensors.segments]
+    if missing:
+        raise RigConfigError(f"--targets {spec}: rig {name!r} has no sensor on segment(s) "
+                             f"{', '.join(dict.fromkeys(missing))} of the {what} (its sensors: "
+                             f"{', '.join(sensors.segments)})")
+    src = sources.open_source(rig, "sensors")
+    return MirrorTargets(src, joints=[(j.parent, j.child) for j in limb.joints],
+                         joint_names=limb.joint_names,
+                         description=f"mirror of {rig.name} sensors ({limb.limb or 'limb'})")

@@ -95,11 +95,12 @@ def test_csv_trajectory_zero_order_hold_against_the_loop_clock(tmp_path):
     src.start(100.0)
     assert src.latest(99.9) == (None, None)
     t, q = src.latest(100.2)
-    assert q == (1.0, 0.0, 0.0, 0.0) and t == 100.2  # fresh while the trajectory runs
+    assert q.shape == (1, 4) and q.dtype == np.float64  # one joint's posture: (1, 4)
+    assert q.tolist() == [[1.0, 0.0, 0.0, 0.0]] and t == 100.2  # fresh while it runs
     t, q = src.latest(100.7)
-    assert q == (0.0, 1.0, 0.0, 0.0)
+    assert q.tolist() == [[0.0, 1.0, 0.0, 0.0]]
     t, q = src.latest(101.5)  # after the last row the target ages from its time
-    assert math.isnan(q[0]) and t == 101.0
+    assert math.isnan(q[0, 0]) and t == 101.0
 
 
 def test_csv_trajectory_in_isb_frames_is_the_same_motion_in_rig_frames(tmp_path):
@@ -114,6 +115,7 @@ def test_csv_trajectory_in_isb_frames_is_the_same_motion_in_rig_frames(tmp_path)
     src = CsvTrajectory(p, frames="isb")
     src.start(0.0)
     _, q = src.latest(0.15)
+    q = q[0]
     np.testing.assert_allclose(q, joint_to_rig(q_isb[1], "isb"), atol=1e-12)
     # the same joint orientation: the limb's long axis (-Y in ISB) lands on the rig's +X
     np.testing.assert_allclose(Q.rotate(np.array(q), np.array([1.0, 0.0, 0.0])),
@@ -121,7 +123,7 @@ def test_csv_trajectory_in_isb_frames_is_the_same_motion_in_rig_frames(tmp_path)
                                    [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
                                atol=1e-12)
     _, q = src.latest(0.35)
-    assert math.isnan(q[0])  # an invalid row stays invalid for the supervisor
+    assert math.isnan(q[0, 0])  # an invalid row stays invalid for the supervisor
     with pytest.raises(RigConfigError, match="--frames applies to a targets file"):
         open_targets("script:sweep", oracle=ConstraintOracle(load_shape("original")),
                      frames="isb")
@@ -173,7 +175,7 @@ def test_slow_script_stays_well_inside(shape):
     oracle = ConstraintOracle(load_shape(shape))
     src = ScriptedTargets("slow", oracle, period_s=4.0)
     src.start(0.0)
-    q = np.array([src.latest(t)[1] for t in np.linspace(0, 4, 400)])
+    q = np.array([src.latest(t)[1][0] for t in np.linspace(0, 4, 400)])
     d = oracle.signed_distance(q)
     assert (d < -math.radians(1.0)).all()
     step = np.degrees(Q.angle(Q.multiply(q[1:], Q.conjugate(q[:-1]))))
@@ -184,7 +186,7 @@ def test_sweep_script_leaves_the_region_and_comes_back():
     oracle = ConstraintOracle(JointConstraint.cone((1, 0, 0), 40.0, name="c40"))
     src = ScriptedTargets("sweep", oracle, period_s=1.0)
     src.start(0.0)
-    d = np.degrees(oracle.signed_distance(np.array([src.latest(t)[1]
+    d = np.degrees(oracle.signed_distance(np.array([src.latest(t)[1][0]
                                                     for t in np.linspace(0, 12, 1200)])))
     assert d.max() > 25.0 and d.min() < -30.0
 
@@ -197,7 +199,8 @@ def test_adversarial_script_has_every_kind():
     src.start(0.0)
     seen: dict[str, list] = {}
     for t in np.arange(0, 2.0, 0.005):
-        seen.setdefault(src.segment(t), []).append((t, *src.latest(t)))
+        tt, q = src.latest(t)
+        seen.setdefault(src.segment(t), []).append((t, tt, q[0]))
     assert set(seen) == {"far", "discontinuity", "twist", "invalid", "stale", "valid_jump"}
     far = np.array([q for _, _, q in seen["far"]])
     assert (oracle.signed_distance(far) > math.radians(30)).all()
