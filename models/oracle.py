@@ -389,6 +389,67 @@ class ConstraintOracle:
             Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
         return self._kind.distance_projected_one((w / nrm, x / nrm, y / nrm, z / nrm))
 
+    # -- a limb's joints, one at a time (the control loop's per-joint queries) --------------
+    def joint_source(self, joint: int) -> int | None:
+        """The index of the joint whose angle ``joint``'s limits depend on (its coupling's
+        source), None for a joint with limits of its own (and for one joint's constraint)."""
+        if self._kind is not None:
+            return None
+        return self._source[joint]
+
+    def coupling_angle_one(self, joint: int, w: float, x: float, y: float, z: float) -> float:
+        """The coupling angle (radians) of orientation ``(w, x, y, z)`` of source joint
+        ``joint``: its twist about its kind's coupling axis — what a joint coupled to it is
+        judged at (:meth:`evaluate` takes it from the corrected source orientation)."""
+        if self._kind is not None:
+            raise TypeError("coupling_angle_one: a limb's query")
+        axis = self._coupling_axis[joint]
+        if axis is None:
+            raise ValueError(f"joint {joint} cannot drive a coupling")
+        return float(Q.twist_angle(np.array([[w, x, y, z]]), axis)[0])
+
+    def joint_query(self, joint: int):
+        """A fast single-orientation query of one joint of a limb: a callable
+        ``query(w, x, y, z, angle) -> (D, projection)`` in plain floats, ``D`` the joint's
+        signed distance (radians) and ``projection`` its corrected orientation (4-tuple) — the
+        answers of :meth:`evaluate` for that joint when its coupling's source is at ``angle``
+        (radians; the corrected source's :meth:`coupling_angle_one`). ``angle`` is ignored for a
+        joint with limits of its own, answered by its kind's compiled single-orientation path
+        (:meth:`distance_projected_one`'s); a coupled joint is answered by its kind's coupled
+        evaluation on a batch of one (the last answer is cached: a held goal costs nothing).
+        One joint's constraint: joint 0, :meth:`distance_projected_one`."""
+        if self._kind is not None:
+            if joint != 0:
+                raise IndexError(f"joint {joint}: one joint's constraint has joint 0 only")
+            dpo = self.distance_projected_one
+
+            def query_own(w, x, y, z, angle=math.nan):
+                return dpo(w, x, y, z)
+            return query_own
+        oracle = self._joints[joint]
+        if isinstance(oracle, KindOracle):
+            kind_one = oracle.distance_projected_one
+
+            def query_kind(w, x, y, z, angle=math.nan):
+                nrm = math.sqrt(w * w + x * x + y * y + z * z)
+                if not math.isfinite(nrm) or nrm < 1e-12:
+                    Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
+                return kind_one((w / nrm, x / nrm, y / nrm, z / nrm))
+            return query_kind
+        last: list = [None, None]
+
+        def query_coupled(w, x, y, z, angle):
+            key = (w, x, y, z, angle)
+            if key == last[0]:
+                return last[1]
+            q = Q.check_quaternions(np.array([[w, x, y, z]]), normalize=True)
+            r = oracle.evaluate(q, np.array([float(angle)]))
+            p = r.projected[0]
+            out = (float(r.distance[0]), (float(p[0]), float(p[1]), float(p[2]), float(p[3])))
+            last[0], last[1] = key, out
+            return out
+        return query_coupled
+
     # -- internals -------------------------------------------------------------------------
     def _one_joint(self, what: str) -> None:
         if self._kind is None:

@@ -56,15 +56,18 @@ from rig.errors import (
     RigTimeoutError,
     UnreachableError,
 )
+from rig.devices.kinematics import RAD_PER_TICK
 from rig.loop.backstop import describe_limits, position_limits_from_boundary
+from rig.loop.limb_supervisor import LimbSupervisor
 from rig.loop.scheduler import Scheduler
-from rig.loop.supervisor import SAFETY_FLAGS, Intervention, Supervisor, SupervisorConfig
+from rig.loop.supervisor import SAFETY_FLAGS, Intervention, SupervisorConfig
 from rig.loop.telemetry import (
     Fault,
     Telemetry,
     intervention_counts,
     rate_limited_count,
     summarise,
+    telemetry_columns,
 )
 
 __all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_servo_limb"]
@@ -100,6 +103,12 @@ class LoopConfig:
         no context switch precedes the cycle's compute, which runs as fast as it does alone
         (after a sleep the CPU's caches, TLB and branch predictors are cold: the same work takes
         2-3 times as long). For a core of its own (``--cpu N``).
+    joint_supervisors : mapping of joint name → SupervisorConfig, optional
+        Per-joint tolerance and rate limits of a limb (the others: ``supervisor``).
+    servo_max_velocity_deg_s : float or None
+        Per-servo velocity limit: a goal's step of any servo beyond ``limit × period`` is cut to
+        it (every servo of the limb, in ticks), and the cut ticks' posture goes through the
+        final check as any goal does (flag ``RATE_LIMITED`` on the joint). None: off.
     warm_up : bool
         Shortly before each deadline, run the cycle's compute once on the last cycle's
         target with throw-away copies (the supervisor's, nothing sent, nothing recorded), so
@@ -117,6 +126,8 @@ class LoopConfig:
     switch_interval_s: float = 0.0005
     busy_wait: bool = False
     warm_up: bool = True
+    joint_supervisors: dict | None = None
+    servo_max_velocity_deg_s: float | None = None
 
     def __post_init__(self):
         if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
@@ -131,22 +142,29 @@ class LoopConfig:
                              f"{self.safe_state!r}")
         if self.read_attempts < 1:
             raise ValueError("read_attempts must be >= 1")
+        v = self.servo_max_velocity_deg_s
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ValueError(f"servo_max_velocity_deg_s: expected a positive number, got {v!r}")
 
 
 class EnforcementLoop:
-    """Runs the cycle against a servo limb of one joint (see the module docstring).
+    """Runs the cycle against a servo limb of J joints (see the module docstring); a single
+    joint is the same loop with one joint.
 
     Parameters
     ----------
     limb : rig.devices.servo_limb.ServoLimb
-        Opened; one joint (the enforced constraint's). Its bus
+        Opened; its joints those of the enforced limb, in the limb file's order (one joint:
+        the enforced constraint's). Its bus
         (:class:`~rig.devices.bus.ServoBus`: ``read_ticks``, ``write_goal_ticks``,
         ``set_torque``, ``alert_pending`` / ``poll_alerts``, ``arm_watchdog``) and its joint's
         kinematics; its ``backstop`` is reported.
     model : models.onnx_io.CorrectionModel or None
-        The learned correction (None: targets go to the supervisor uncorrected).
+        The learned correction (None: targets go to the supervisor uncorrected); a limb's
+        (``correct_one`` of a posture ``(J, 4)``) for J > 1.
     oracle : models.oracle.ConstraintOracle
-        The enforced constraint.
+        The enforced constraint (one joint) or limb (J joints, hierarchical:
+        :class:`rig.loop.limb_supervisor.LimbSupervisor`).
     targets : rig.loop.targets.TargetSource
     config : LoopConfig
     clock, sleep : callables
@@ -168,10 +186,13 @@ class EnforcementLoop:
     def __init__(self, limb: ServoLimb, model, oracle, targets,
                  config: LoopConfig | None = None, *, clock=time.monotonic, sleep=time.sleep,
                  telemetry: Telemetry | None = None, on_cycle=None, log=None):
-        if len(limb.kinematics) != 1:
-            raise ValueError(f"the loop enforces one joint's constraint; the servo limb has "
-                             f"{len(limb.kinematics)} joints")
+        n_oracle = getattr(oracle, "n_joints", 1)
+        if n_oracle != len(limb.kinematics):
+            raise ValueError(f"the enforced limits have {n_oracle} joint(s); the servo limb has "
+                             f"{len(limb.kinematics)}")
         self.limb = limb
+        self.n_joints = len(limb.kinematics)
+        self.joint_names = tuple(limb.kinematics.names)
         self.bus = limb.bus
         self.model = model
         self.oracle = oracle
@@ -187,14 +208,26 @@ class EnforcementLoop:
         # the per-cycle kernels (the oracle's query, IK, FK) compiled or loaded from numba's
         # cache now, not inside a cycle; a machine's first run compiles them (seconds)
         t_compile = time.perf_counter()
-        self.supervisor = Supervisor(oracle, self.config.supervisor,
-                                     period_s=self.scheduler.period)
-        self.kin = limb.kinematics.joint(0).compile()
+        self.supervisor = LimbSupervisor(oracle, self.config.supervisor,
+                                         period_s=self.scheduler.period,
+                                         joint_configs=self.config.joint_supervisors,
+                                         names=self.joint_names)
+        self.kin = limb.kinematics.compile()
+        self.kins = self.kin.joints
+        self.slices = self.kin.slices
+        v = self.config.servo_max_velocity_deg_s
+        self._max_step = None if v is None else max(
+            1, int(math.radians(v) * self.scheduler.period / RAD_PER_TICK))
         t_compile = time.perf_counter() - t_compile
         if t_compile > 1.0:
             self.log(f"note: compiled the loop's kernels in {t_compile:.1f} s (numba; kept in "
                      f"its cache for the next runs)")
-        self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True)
+        columns = telemetry_columns(self.joint_names)
+        self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True,
+                                                                           columns=columns)
+        if self.telemetry.columns != columns:
+            raise ValueError("the telemetry's columns are not this limb's (Telemetry(..., "
+                             "columns=telemetry_columns(joint names)))")
         self.on_cycle = on_cycle
         self.stop_reason: str | None = None
         self.safe = False
@@ -208,6 +241,8 @@ class EnforcementLoop:
         self.fault_counts: Counter = Counter()
         self.intervention_bits: Counter = Counter()
         self.max_violation = 0.0
+        self.joint_max_violation = [0.0] * self.n_joints
+        self.joint_intervention_bits: list[Counter] = [Counter() for _ in range(self.n_joints)]
         self.warm_ups = 0
         self._warm_input = None  # the last usable target (the warm-up's input), per run
         self._warm_s = 0.0  # a running estimate of how long a warm-up takes, s
@@ -236,9 +271,9 @@ class EnforcementLoop:
         ticks = _read_retrying(bus)
         self._present_ticks = ticks
         self._goal_ticks = ticks.copy()
-        present = self.kin.forward(ticks)
-        self._present = tuple(float(v) for v in present)
-        self._commanded = self._present
+        self._present = [kj.forward_one(ticks[sl]) for kj, sl in zip(self.kins, self.slices,
+                                                                       strict=True)]
+        self._commanded = list(self._present)
         self._setup_done = True
 
     def request_stop(self, reason: str) -> None:
@@ -327,6 +362,14 @@ class EnforcementLoop:
         commanded = self._commanded
         fc = self.fault_counts
         ib = self.intervention_bits
+        jib = self.joint_intervention_bits
+        jmax = self.joint_max_violation
+        subs = sup.joints
+        kins, slices = self.kins, self.slices
+        nj = self.n_joints
+        joints = range(nj)
+        one = nj == 1
+        nan_posture = [_NAN4] * nj
         max_viol = 0.0
         k = -1
         warm = self._warm if cfg.warm_up else None
@@ -351,21 +394,23 @@ class EnforcementLoop:
             c2 = perf()
             target_t, target = targets.latest(start)
             tq = sup.admit(start, target, target_t)
-            prev_commanded, prev_d = commanded, sup.last_commanded_distance
+            prev_commanded = commanded
+            prev_d = [s.last_commanded_distance for s in subs]
             goal_ticks = self._goal_ticks
-            corr = _NAN4
+            corr = nan_posture
             if tq is not None and model is not None:
-                cv = model.correct_one(tq)
-                corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
+                corr = self._correct(model, tq)
                 goal = sup.step(start, tq, corr)
             else:
                 goal = sup.step(start, tq, None)
             try:
-                gt = kin.inverse(goal, goal_ticks)
-                cand = kin.forward_one(gt)
+                gt = self._inverse(goal, goal_ticks)
+                cand = [kj.forward_one(gt[sl]) for kj, sl in zip(kins, slices, strict=True)]
                 if sup.accept(cand):
                     goal_ticks = gt
                     commanded = cand
+                elif not one:
+                    sup.revert(commanded)
             except UnreachableError:
                 sup.revert(commanded, Intervention.UNREACHABLE)
             c3 = perf()
@@ -392,7 +437,7 @@ class EnforcementLoop:
             c1 = perf()
             if fresh:
                 self._present_ticks = ticks
-                present = kin.forward_one(ticks)
+                present = [kj.forward_one(ticks[sl]) for kj, sl in zip(kins, slices, strict=True)]
                 t_present = start
             else:
                 faults |= Fault.READ_FAILED
@@ -427,7 +472,8 @@ class EnforcementLoop:
                 self._warm_input = tq  # the last usable target (None after a hold)
             else:  # nothing of this cycle's goal is sent: the telemetry says what was
                 commanded = prev_commanded
-                sup.last_commanded_distance = prev_d
+                for s_, d_ in zip(subs, prev_d, strict=True):
+                    s_.last_commanded_distance = d_
             # -- 3. one sync write ---------------------------------------------------------
             cw = perf()
             if reason is None:
@@ -443,30 +489,71 @@ class EnforcementLoop:
                 self.enter_safe_state(reason, k)
             c4 = perf()
             # -- 4. telemetry ---------------------------------------------------------------
-            d = sup.last_commanded_distance
-            viol = d if d > 0.0 else 0.0
-            if viol > max_viol:
-                max_viol = viol
-            bits = sup.flags if reason is None else 0
-            if bits:
-                ib[bits] += 1
             over = sched.finish()
             if over:
                 faults |= Fault.OVERRUN
             if faults:
                 fc[faults] += 1
-            tgt = target if target is not None else _NAN4
-            tel.record((
-                k, t,
-                tgt[0], tgt[1], tgt[2], tgt[3],
-                corr[0], corr[1], corr[2], corr[3],
-                commanded[0], commanded[1], commanded[2], commanded[3],
-                present[0], present[1], present[2], present[3],
-                math.degrees(sup.last_correction_angle), math.degrees(viol), math.degrees(d),
-                1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw), 1e3 * (perf() - c0),
-                1e3 * (start - due),
-                bits, int(faults), 1 if self.safe else 0,
-            ))
+            tgt = target
+            if one:
+                s0 = subs[0]
+                d = s0.last_commanded_distance
+                viol = d if d > 0.0 else 0.0
+                if viol > max_viol:
+                    max_viol = viol
+                bits = s0.flags if reason is None else 0
+                if bits:
+                    ib[bits] += 1
+                tg = tgt if tgt is not None else _NAN4
+                if tgt is not None and not isinstance(tgt, tuple):
+                    tg = np.asarray(tgt, dtype=np.float64).reshape(-1)
+                cr, cm, pr = corr[0], commanded[0], present[0]
+                tel.record((
+                    k, t,
+                    tg[0], tg[1], tg[2], tg[3],
+                    cr[0], cr[1], cr[2], cr[3],
+                    cm[0], cm[1], cm[2], cm[3],
+                    pr[0], pr[1], pr[2], pr[3],
+                    math.degrees(s0.last_correction_angle), math.degrees(viol),
+                    math.degrees(d),
+                    1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw), 1e3 * (perf() - c0),
+                    1e3 * (start - due),
+                    bits, int(faults), 1 if self.safe else 0,
+                ))
+            else:
+                tg = nan_posture if tgt is None else _posture_rows(tgt, nj)
+                row = [k, t]
+                limb_viol = 0.0
+                limb_bits = 0
+                for j in joints:
+                    s_ = subs[j]
+                    d = s_.last_commanded_distance
+                    viol = d if d > 0.0 else 0.0
+                    if viol > jmax[j]:
+                        jmax[j] = viol
+                    if viol > limb_viol:
+                        limb_viol = viol
+                    bits = s_.flags if reason is None else 0
+                    if bits:
+                        jib[j][bits] += 1
+                        limb_bits |= bits
+                    row.extend(tg[j])
+                    row.extend(corr[j])
+                    row.extend(commanded[j])
+                    row.extend(present[j])
+                    row.append(math.degrees(s_.last_correction_angle))
+                    row.append(math.degrees(viol))
+                    row.append(math.degrees(d))
+                    row.append(bits)
+                if limb_viol > max_viol:
+                    max_viol = limb_viol
+                if limb_bits:
+                    ib[limb_bits] += 1
+                row.extend((math.degrees(limb_viol),
+                            1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw),
+                            1e3 * (perf() - c0), 1e3 * (start - due),
+                            limb_bits, int(faults), 1 if self.safe else 0))
+                tel.record(row)
             if self.safe:
                 self.end_reason = "safe state: " + (self.safe_state_reason or "?")
                 break
@@ -475,35 +562,78 @@ class EnforcementLoop:
             if max_cycles is not None and k + 1 >= max_cycles:
                 break
         self.max_violation = max_viol
+        if one:
+            jmax[0] = max_viol
         self._commanded = commanded
+
+    def _correct(self, model, tq) -> list:
+        """The model's corrections of the admitted target (J tuples of 4 floats)."""
+        if self.n_joints == 1:
+            cv = model.correct_one(tq[0])
+            return [(float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))]
+        cv = np.asarray(model.correct_one(np.array(tq)), dtype=np.float64).reshape(-1, 4)
+        return [tuple(r) for r in cv.tolist()]
+
+    def _inverse(self, goal, near, sup=None) -> np.ndarray:
+        """Goal ticks of every joint (nearest the previous goal ticks), each servo's step cut to
+        the per-servo velocity limit when one is set."""
+        if self.n_joints == 1:
+            gt = self.kins[0].inverse(goal[0], near)
+        else:
+            gt = np.concatenate([kj.inverse(g, near[sl]) for kj, g, sl in
+                                 zip(self.kins, goal, self.slices, strict=True)])
+        m = self._max_step
+        if m is not None:
+            step = gt - near
+            if np.abs(step).max() > m:
+                gt = near + np.clip(step, -m, m)
+                for j, sl in enumerate(self.slices):
+                    if np.abs(step[sl]).max() > m:
+                        (sup or self.supervisor).joints[j].flags |= Intervention.RATE_LIMITED
+        return gt
 
     def _warm(self) -> None:
         """The cycle's compute on the last usable target, on a copy of the supervisor (its
-        state is plain values: a shallow copy changes nothing of the original), its goal
-        through IK and FK, its result thrown away. The loop calls it shortly before a
-        deadline, so that the real compute, straight after, runs on warm caches and branch
-        predictors — on this project's virtual machine the compute after a wait took 1.3-1.6
-        times as long as the same work run again at once (``docs/loop.md``)."""
+        state is plain values: a shallow copy of each joint's supervisor changes nothing of the
+        original), its goal through IK and FK, its result thrown away. The loop calls it
+        shortly before a deadline, so that the real compute, straight after, runs on warm
+        caches and branch predictors — on this project's virtual machine the compute after a
+        wait took 1.3-1.6 times as long as the same work run again at once
+        (``docs/loop.md``)."""
         t0 = time.perf_counter()
         now = self.clock()
-        sup = copy.copy(self.supervisor)
-        tq = sup.admit(now, self._warm_input, now)
-        if tq is None:
-            return
-        corr = None
-        if self.model is not None:
-            cv = self.model.correct_one(tq)
-            corr = (float(cv[0]), float(cv[1]), float(cv[2]), float(cv[3]))
-        goal = sup.step(now, tq, corr)
+        real = self.supervisor
+        sup = copy.copy(real)
+        sup.joints = tuple(copy.copy(s) for s in real.joints)
+        angles = [None if v is None else v.angle for v in real.views]
         try:
-            gt = self.kin.inverse(goal, self._goal_ticks)
-            sup.accept(self.kin.forward_one(gt))
-        except UnreachableError:
-            pass
+            done = self._warm_compute(sup, now)
+        finally:  # the views are shared: the real supervisors' coupling angles as they were
+            for v, a in zip(real.views, angles, strict=True):
+                if v is not None:
+                    v.angle = a
+        if not done:
+            return
         self.warm_ups += 1
         took = time.perf_counter() - t0
         # a slow estimate of how long it takes: a single slow warm-up moves it little
         self._warm_s = took if self._warm_s == 0.0 else 0.9 * self._warm_s + 0.1 * took
+
+    def _warm_compute(self, sup, now) -> bool:
+        tq = sup.admit(now, self._warm_input, now)
+        if tq is None:
+            return False
+        corr = None
+        if self.model is not None:
+            corr = self._correct(self.model, tq)
+        goal = sup.step(now, tq, corr)
+        try:
+            gt = self._inverse(goal, self._goal_ticks, sup)
+            sup.accept([kj.forward_one(gt[sl]) for kj, sl in zip(self.kins, self.slices,
+                                                                 strict=True)])
+        except UnreachableError:
+            pass
+        return True
 
     # ------------------------------------------------------------------ summary
     def _summary(self, duration_s: float) -> dict:
@@ -535,8 +665,56 @@ class EnforcementLoop:
                                 zip(self.kin.ids, self.limits[0], self.limits[1],
                                     strict=True)}),
         }
+        if self.n_joints > 1:
+            counters["joints"] = self._joint_summary()
         return summarise(rate_hz=self.config.rate_hz, telemetry=self.telemetry,
                          counters=counters, duration_s=duration_s)
+
+    def _joint_summary(self) -> dict:
+        """Per-joint figures of a limb's run: tolerance, largest violation, interventions by
+        kind; with the rows kept (``Telemetry(keep=True)``), the tracking error of valid
+        targets (median / p95 of the angle between target and present, degrees, over the
+        cycles whose target posture the exact limb oracle finds valid in that joint)."""
+        out: dict = {}
+        table = self.telemetry.table() if self.telemetry.keep else None
+        valid = None
+        if table is not None and self.telemetry.rows and getattr(self.oracle, "limb", None):
+            tq = np.stack([np.stack([table[f"{n}_target_{c}"] for c in "wxyz"], axis=-1)
+                           for n in self.joint_names], axis=1)
+            ok = np.isfinite(tq).all(axis=(1, 2))
+            ok &= (np.abs(np.linalg.norm(tq, axis=-1) - 1.0) < 1e-6).all(axis=1)
+            valid = np.zeros(tq.shape[:2], dtype=bool)
+            if ok.any():
+                valid[ok] = self.oracle.is_valid(tq[ok])
+        for j, name in enumerate(self.joint_names):
+            cfg = self.supervisor.joints[j].config
+            bits = dict(self.joint_intervention_bits[j])
+            fig = {
+                "tolerance_deg": cfg.tolerance_deg,
+                "max_violation_deg": math.degrees(self.joint_max_violation[j]),
+                "interventions": int(sum(n for b, n in bits.items() if b & SAFETY_FLAGS)),
+                "interventions_by_kind": intervention_counts(bits),
+                "rate_limited": rate_limited_count(bits),
+            }
+            if valid is not None:
+                t = np.stack([table[f"{name}_target_{c}"] for c in "wxyz"], axis=-1)
+                p = np.stack([table[f"{name}_present_{c}"] for c in "wxyz"], axis=-1)
+                dot = np.abs(np.einsum("ij,ij->i", t, p))
+                err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
+                e = err[valid[:, j] & np.isfinite(err)]
+                fig["tracked_cycles"] = int(len(e))
+                fig["tracking_p50_deg"] = None if not len(e) else float(np.median(e))
+                fig["tracking_p95_deg"] = None if not len(e) else float(np.percentile(e, 95))
+            out[name] = fig
+        return out
+
+
+def _posture_rows(target, n: int) -> list:
+    """A target posture as ``n`` rows of 4 floats (NaN rows when it is not ``(n, 4)``)."""
+    arr = np.asarray(target, dtype=np.float64).reshape(-1)
+    if arr.size != 4 * n:
+        return [_NAN4] * n
+    return arr.reshape(n, 4).tolist()
 
 
 def _patiently(fn, attempts: int = 5):

@@ -84,13 +84,14 @@ class Intervention(IntFlag):
     MODEL_INVALID = 64   #: the model's correction was non-finite or non-unit → ignored
     UNREACHABLE = 128    #: IK found no solution within the tick limits → previous goal ticks
     GUARD_HOLD = 256     #: the ticks' orientation failed the final check → previous goal ticks
+    HELD_FOR_COUPLED = 512  #: a limb's source joint held still while a joint coupled to it recovers
 
 
 #: Flags that mean "the supervisor changed what would have been sent" (counted as interventions).
 SAFETY_FLAGS = int(Intervention.PROJECTED | Intervention.HOLD_INVALID | Intervention.HOLD_STALE
                    | Intervention.REPROJECTED | Intervention.RECOVERY
                    | Intervention.MODEL_INVALID | Intervention.UNREACHABLE
-                   | Intervention.GUARD_HOLD)
+                   | Intervention.GUARD_HOLD | Intervention.HELD_FOR_COUPLED)
 
 
 @dataclass(frozen=True)
@@ -338,20 +339,40 @@ class Supervisor:
         commanded : (4,) array-like
             Forward kinematics of the goal ticks, unit.
         """
-        cmd = (float(commanded[0]), float(commanded[1]), float(commanded[2]),
-               float(commanded[3]))
-        if cmd == self._cache_cmd:  # the same ticks as last cycle (a holding goal)
-            d = self._cache_cmd_d
-        else:
-            d = self.distance(cmd)
-            self._cache_cmd, self._cache_cmd_d = cmd, d
-        if d <= self.tol or d <= self.ceiling:
-            if d < self.ceiling:
-                self.ceiling = max(0.0, d)
-            self.last_commanded_distance = d
+        d = self.commanded_distance(commanded)
+        if self.allows(d):
+            self.commit(d)
             return True
         self.flags |= Intervention.GUARD_HOLD
         return False
+
+    def commanded_distance(self, commanded) -> float:
+        """``D(commanded)`` (radians), remembered for the same orientation next cycle (the
+        ticks of a holding goal); :meth:`accept`'s first half."""
+        cmd = (float(commanded[0]), float(commanded[1]), float(commanded[2]),
+               float(commanded[3]))
+        if cmd == self._cache_cmd:  # the same ticks as last cycle (a holding goal)
+            return self._cache_cmd_d
+        d = self.distance(cmd)
+        self._cache_cmd, self._cache_cmd_d = cmd, d
+        return d
+
+    def allows(self, d: float) -> bool:
+        """The final check on a command at distance ``d``: ``d ≤ max(τ, C)``."""
+        return d <= self.tol or d <= self.ceiling
+
+    def commit(self, d: float) -> None:
+        """A command at distance ``d`` is sent: lower the ceiling (:meth:`accept`'s second
+        half)."""
+        if d < self.ceiling:
+            self.ceiling = max(0.0, d)
+        self.last_commanded_distance = d
+
+    def forget(self) -> None:
+        """Drop the remembered answers of the oracle (its limits changed: a coupled joint's
+        source moved)."""
+        self._cache_c = None
+        self._cache_cmd = None
 
     def revert(self, goal, flag: int = 0) -> None:
         """The caller could not send this cycle's goal (e.g. IK unreachable) and kept the

@@ -44,8 +44,8 @@ import numpy as np
 from models.fileio import open_owner_only
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention
 
-__all__ = ["CAUSES", "COLUMNS", "Fault", "Telemetry", "count_causes", "late_causes",
-           "summarise"]
+__all__ = ["CAUSES", "COLUMNS", "JOINT_COLUMNS", "LIMB_COLUMNS", "Fault", "Telemetry",
+           "count_causes", "late_causes", "summarise", "telemetry_columns"]
 
 
 class Fault(IntFlag):
@@ -79,6 +79,41 @@ COLUMNS: tuple[str, ...] = (
     "read_ms", "compute_ms", "write_ms", "cycle_ms", "late_ms",
     "intervention", "faults", "safe_state",
 )
+#: One joint's columns in a run of several joints, each prefixed ``<joint>_``
+#: (:func:`telemetry_columns`).
+JOINT_COLUMNS: tuple[str, ...] = (
+    "target_w", "target_x", "target_y", "target_z",
+    "correction_w", "correction_x", "correction_y", "correction_z",
+    "commanded_w", "commanded_x", "commanded_y", "commanded_z",
+    "present_w", "present_x", "present_y", "present_z",
+    "correction_deg", "violation_deg", "distance_deg", "intervention",
+)
+#: The whole limb's columns after the joints' in a run of several joints.
+LIMB_COLUMNS: tuple[str, ...] = (
+    "violation_deg", "read_ms", "compute_ms", "write_ms", "cycle_ms", "late_ms",
+    "intervention", "faults", "safe_state",
+)
+
+
+def telemetry_columns(joint_names=None) -> tuple[str, ...]:
+    """The telemetry's column names of a run over the joints ``joint_names``.
+
+    One joint (or None): :data:`COLUMNS`, today's names exactly. Several: ``cycle``, ``t_s``,
+    then for each joint in the limb file's order :data:`JOINT_COLUMNS` prefixed ``<joint>_``
+    (e.g. ``elbow_target_w``, ``elbow_violation_deg``, ``elbow_intervention``), then the whole
+    limb's :data:`LIMB_COLUMNS` (``violation_deg``: the largest joint's; ``intervention``: the
+    joints' bits OR-ed).
+    """
+    names = tuple(joint_names or ())
+    if len(names) <= 1:
+        return COLUMNS
+    return ("cycle", "t_s", *(f"{j}_{c}" for j in names for c in JOINT_COLUMNS), *LIMB_COLUMNS)
+
+
+def _is_int_column(name: str) -> bool:
+    return name in _INT_COLUMNS or name.endswith("_intervention")
+
+
 _INT_COLUMNS = frozenset({"cycle", "intervention", "faults", "safe_state"})
 _STORE_DROP = ("faults", "safe_state")
 
@@ -86,7 +121,7 @@ CHUNK = 2048
 _SLICE = 64  # rows the writer formats before it pauses
 _PAUSE_S = 0.0005
 #: one CSV row (as ``csv.writer`` writes it: integers, floats to 9 significant digits, CRLF)
-_ROW_FORMAT = ",".join("%d" if c in _INT_COLUMNS else "%.9g" for c in COLUMNS) + "\r\n"
+COLUMNS_ROW_FORMAT = ",".join("%d" if c in _INT_COLUMNS else "%.9g" for c in COLUMNS) + "\r\n"
 
 
 def _fault_names(bits: int) -> str | None:
@@ -108,8 +143,17 @@ class Telemetry:
         Keep every row in memory as well (tests and short runs: :meth:`table`).
     """
 
-    def __init__(self, csv_path=None, store_writer=None, *, keep: bool = False):
-        self.n_col = len(COLUMNS)
+    def __init__(self, csv_path=None, store_writer=None, *, keep: bool = False,
+                 columns: tuple[str, ...] | None = None):
+        self.columns = COLUMNS if columns is None else tuple(columns)
+        cols = self.columns
+        self.n_col = len(cols)
+        self._int = tuple(_is_int_column(c) for c in cols)
+        self._row_format = (COLUMNS_ROW_FORMAT if cols == COLUMNS else
+                            ",".join("%d" if i else "%.9g" for i in self._int) + "\r\n")
+        self._ix = tuple(cols.index(c) for c in ("cycle_ms", "late_ms", "compute_ms",
+                                                  "read_ms", "write_ms", "faults",
+                                                  "intervention", "safe_state"))
         self.csv_path = None if csv_path is None else Path(csv_path)
         self.store_writer = store_writer
         self.keep = keep
@@ -129,7 +173,7 @@ class Telemetry:
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
 
             self._fh = open_owner_only(self.csv_path, "w", newline="")  # names the run
-            self._fh.write(",".join(COLUMNS) + "\r\n")
+            self._fh.write(",".join(self.columns) + "\r\n")
         self._thread = None
         if self._fh is not None or store_writer is not None:
             self._thread = threading.Thread(target=self._run, name="rig-loop-telemetry",
@@ -144,11 +188,12 @@ class Telemetry:
         n = self.rows
         if n >= len(self._cycle_ms):
             self._grow()
-        self._cycle_ms[n] = row[24]
-        self._late_ms[n] = row[25]
-        self._compute_ms[n] = row[22]
-        self._bus_ms[n] = row[21] + row[23]
-        self._faults[n] = row[27]
+        ix = self._ix
+        self._cycle_ms[n] = row[ix[0]]
+        self._late_ms[n] = row[ix[1]]
+        self._compute_ms[n] = row[ix[2]]
+        self._bus_ms[n] = row[ix[3]] + row[ix[4]]
+        self._faults[n] = row[ix[5]]
         self.rows = n + 1
         i += 1
         if i == CHUNK:
@@ -187,15 +232,18 @@ class Telemetry:
         for lo in range(0, len(block), _SLICE):
             part = block[lo:lo + _SLICE]
             if self._fh is not None:
-                self._fh.write("".join(_ROW_FORMAT % tuple(r) for r in part.tolist()))
+                fmt = self._row_format
+                self._fh.write("".join(fmt % tuple(r) for r in part.tolist()))
             if self.store_writer is not None:
                 rows = []
+                ints, cols, ix = self._int, self.columns, self._ix
                 for r in part.tolist():
-                    d = {c: (int(v) if c in _INT_COLUMNS else float(v))
-                         for c, v in zip(COLUMNS, r, strict=True) if c not in _STORE_DROP}
-                    d["fault"] = _fault_names(int(r[27]))
-                    d["intervention_flags"] = int(r[26])
-                    d["safe_state"] = int(r[28])
+                    d = {c: (int(v) if i else float(v))
+                         for c, v, i in zip(cols, r, ints, strict=True)
+                         if c not in _STORE_DROP}
+                    d["fault"] = _fault_names(int(r[ix[5]]))
+                    d["intervention_flags"] = int(r[ix[6]])
+                    d["safe_state"] = int(r[ix[7]])
                     rows.append(d)
                 self.store_writer.add_many(rows)
             time.sleep(_PAUSE_S)
@@ -231,8 +279,8 @@ class Telemetry:
         if self._i:
             blocks.append(self._chunk[: self._i])
         arr = np.concatenate(blocks) if blocks else np.empty((0, self.n_col))
-        return {c: (arr[:, k].astype(np.int64) if c in _INT_COLUMNS else arr[:, k])
-                for k, c in enumerate(COLUMNS)}
+        return {c: (arr[:, k].astype(np.int64) if i else arr[:, k])
+                for k, (c, i) in enumerate(zip(self.columns, self._int, strict=True))}
 
     def cycle_ms(self) -> np.ndarray:
         return self._cycle_ms[: self.rows].copy()
@@ -368,6 +416,7 @@ def _jsonable(o):
 INTERVENTION_PRIORITY = (Intervention.GUARD_HOLD, Intervention.UNREACHABLE,
                          Intervention.HOLD_STALE, Intervention.HOLD_INVALID,
                          Intervention.MODEL_INVALID, Intervention.RECOVERY,
+                         Intervention.HELD_FOR_COUPLED,
                          Intervention.REPROJECTED, Intervention.PROJECTED)
 
 
