@@ -135,6 +135,9 @@ class JointKind:
     narrow_twist : bool
         Its twist about the limb axis is fixed or narrow (a two-axis joint): a report names its
         swing region and its narrow twist.
+    servo_axes : int
+        How many servos drive a joint of this kind on a servo limb (a ball joint 3, a hinge 1,
+        a forearm 2: flexion then pronation-supination, a two-axis joint 2).
     """
 
     name: str = ""
@@ -145,6 +148,7 @@ class JointKind:
     coupled_interval_key: str = "twist"
     single_axis: bool = False
     narrow_twist: bool = False
+    servo_axes: int = 3
 
     def refuse(self, data: dict, source: str | None) -> None:
         """Raise for keys of a constraint file this kind refuses with its own message (checked

@@ -162,6 +162,7 @@ class ForearmKind(JointKind):
     max_deg}}`` (no swing, no twist)."""
 
     name = "forearm"
+    servo_axes = 2
     words = "forearm joint"
     file_keys = ("forearm",)
 

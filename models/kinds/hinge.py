@@ -93,6 +93,7 @@ class HingeKind(JointKind):
     drives_couplings = True
     coupled_interval_key = "hinge"
     single_axis = True
+    servo_axes = 1
 
     def refuse(self, data: dict, source: str | None) -> None:
         for key in ("swing", "twist"):

@@ -25,6 +25,7 @@ class TwoAxisKind(BallKind):
     name = "two-axis"
     words = "two-axis joint"
     narrow_twist = True
+    servo_axes = 2
 
     def parse(self, data: dict, source: str | None) -> dict[str, Any]:
         out = super().parse(data, source)

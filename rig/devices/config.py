@@ -15,7 +15,8 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       child: humerus
     limb: arm                              # optional: arm | leg — the sensors are worn on the
                                            #   whole limb (sensors.segments maps its four
-                                           #   segments; joint is its proximal joint)
+                                           #   segments; joint is its proximal joint), or the
+                                           #   servos drive it (servos.joints: its joints)
     constraint: original                   # optional: shipped shape name or constraint file
                                            #   (relative to this file); the patient / default
     sensors:                               # optional (IMU rigs)
@@ -41,11 +42,20 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       chain:                               #   the joint's servos, parent -> child, 1..3
         - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
            max_ticks: 4095, name: j1}      #   zero/direction/min/max/name optional
+      joints:                              #   instead of chain, with limb: a servo limb —
+        - name: shoulder                   #   every joint of the limb, in its order
+          kind: ball                       #   optional: default the joint's (calibration.
+          chain: [...]                     #   joints); e.g. forearm for an elbow with
+        - {name: elbow, kind: forearm, chain: [...]}  # pronation; servos as many as the
+        - {name: wrist, chain: [...]}      #   kind's servo_axes (ball 3, forearm 2, ...)
 
 The ``servos`` section describes a servo bus (port, baud, model, registers) and the
-kinematics of the rig's joint above it: ``chain`` lists the joint's servos (read as
+kinematics of the rig's joints above it: ``chain`` lists the one joint's servos (read as
 :class:`~rig.devices.kinematics.ServoAxis`, kept under that key so existing files read
-unchanged).
+unchanged); ``joints`` (a rig with ``limb:``) lists each joint of the limb with its servos,
+the bus's tick vector being the joints' servos concatenated in that order
+(:class:`~rig.devices.kinematics.LimbKinematics`). A servo limb needs no sensors: ``limb``
+then checks ``servos.joints`` against the limb's joints instead of ``sensors.segments``.
 
 At least one of ``sensors`` / ``servos`` is required.
 """
@@ -65,6 +75,7 @@ from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_mism
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from models.constraint import load_constraint
 from models.errors import ModelsError
+from models.kinds import KINDS, get_kind
 from models.shapes import SHAPES, load_shape
 from models.yamlio import safe_load_yaml
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
@@ -73,6 +84,7 @@ from rig.errors import RigConfigError
 
 __all__ = [
     "JointInfo",
+    "ServoJoint",
     "RigConfig",
     "SensorsConfig",
     "ServosConfig",
@@ -110,18 +122,40 @@ class SensorsConfig:
 
 
 @dataclass(frozen=True)
+class ServoJoint:
+    """One joint of a servo limb (an entry of ``servos.joints``).
+
+    Attributes
+    ----------
+    name : str
+        The joint's name in the limb (``shoulder``, ``elbow``, ...).
+    kind : str
+        Its kind (:mod:`models.kinds`), e.g. ``forearm`` for an elbow with pronation.
+    axes : tuple of ServoAxis
+        Its servos, parent → child (YAML key ``chain``).
+    """
+
+    name: str
+    kind: str
+    axes: tuple[ServoAxis, ...]
+
+
+@dataclass(frozen=True)
 class ServosConfig:
-    """A rig config's ``servos`` section: the servo bus and its joint's servos.
+    """A rig config's ``servos`` section: the servo bus and its joints' servos.
 
     Attributes
     ----------
     port : str
     axes : tuple of ServoAxis
-        The joint's servos, parent → child (YAML key ``chain``).
+        Every servo in tick-vector order: the one joint's, parent → child (YAML key
+        ``chain``), or the limb's joints' concatenated in the limb's order.
     baud, model, return_delay_us, status_return_level, watchdog_ms, latency_ms
         The bus's settings (see the module docstring).
     ik_tolerance_deg : float
         The joint kinematics' IK tolerance.
+    joints : tuple of ServoJoint
+        A servo limb's joints (YAML key ``joints``); empty for a rig of one joint (``chain``).
     """
 
     port: str
@@ -133,6 +167,12 @@ class ServosConfig:
     watchdog_ms: int = 100
     ik_tolerance_deg: float = 0.1
     latency_ms: float | None = None
+    joints: tuple[ServoJoint, ...] = ()
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The joints' names, proximal → distal (``("joint",)`` for a rig of one joint)."""
+        return tuple(j.name for j in self.joints) or ("joint",)
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -144,12 +184,32 @@ class ServosConfig:
         return tuple(Servo(a.id, a.name, a.min_ticks, a.max_ticks) for a in self.axes)
 
     def kinematics(self) -> JointKinematics:
-        """The joint's kinematics (its servos' ticks ↔ its orientation)."""
+        """The one joint's kinematics (its servos' ticks ↔ its orientation).
+
+        Raises
+        ------
+        RigConfigError
+            A servo limb of more than one joint (use :meth:`limb_kinematics`).
+        """
+        if len(self.joints) > 1:
+            raise RigConfigError(f"a servo limb of {len(self.joints)} joints "
+                                 f"({', '.join(self.joint_names)}) has no single joint's "
+                                 f"kinematics: use its limb kinematics")
         return JointKinematics(self.axes, tolerance_deg=self.ik_tolerance_deg)
 
-    def limb_kinematics(self, joint: str = "joint") -> LimbKinematics:
-        """The rig as a limb of one joint named ``joint`` (the bus's tick vector ↔ (1, 4))."""
-        return LimbKinematics([self.kinematics()], [joint])
+    def limb_kinematics(self, joint: str | None = None) -> LimbKinematics:
+        """Every joint's kinematics: the bus's tick vector ↔ (J, 4) joint orientations.
+
+        Parameters
+        ----------
+        joint : str, optional
+            The name of a rig of one joint (``chain``; default ``"joint"``); a servo limb's
+            joints are named by ``servos.joints``.
+        """
+        if not self.joints:
+            return LimbKinematics([self.kinematics()], [joint or "joint"])
+        return LimbKinematics([JointKinematics(j.axes, tolerance_deg=self.ik_tolerance_deg)
+                               for j in self.joints], self.joint_names)
 
 
 @dataclass(frozen=True)
@@ -161,7 +221,7 @@ class RigConfig:
     servos: ServosConfig | None = None
     description: str = ""
     source: str | None = field(default=None, compare=False)
-    limb: str | None = None  # "arm" | "leg": IMUs on the whole limb (calibration.joints)
+    limb: str | None = None  # "arm" | "leg": IMUs or servos on the whole limb
 
     def load_constraint(self):
         """The constraint (:class:`models.constraint.JointConstraint`) or None."""
@@ -296,23 +356,79 @@ def _servo_axis(ctx: _Ctx, value: Any, where: str) -> ServoAxis:
     return ServoAxis(dxl_id, vec, zero, direction, lo, hi, name)  # type: ignore[arg-type]
 
 
-def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
-    d = ctx.mapping(value, "servos", {"port", "chain"},
-                    {"baud", "model", "return_delay_us", "status_return_level", "watchdog_ms",
-                     "ik_tolerance_deg", "latency_ms"})
+def _chain(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ...]:
+    if not isinstance(value, list) or not 1 <= len(value) <= 3:
+        raise ctx.fail(where, "expected a list of 1 to 3 servos (parent -> child)")
+    return tuple(_servo_axis(ctx, j, f"{where}[{i}]") for i, j in enumerate(value))
+
+
+def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
+                  ) -> tuple[ServoJoint, ...]:
+    """``servos.joints``: the ``limb``'s joints ``names`` in its order, each its kind's number
+    of servos (none named: the file has no ``limb:`` to check them against)."""
+    if not names:
+        raise ctx.fail("servos.joints", "a servo limb needs 'limb: arm' or 'limb: leg' "
+                                        "(one joint: servos.chain)")
+    if not isinstance(value, list) or not value:
+        raise ctx.fail("servos.joints", f"expected a list of the {limb}'s joints "
+                                        f"({', '.join(names)})")
+    joints = []
+    for i, raw in enumerate(value):
+        where = f"servos.joints[{i}]"
+        d = ctx.mapping(raw, where, {"name", "chain"}, {"kind"})
+        name = ctx.string(d["name"], f"{where}.name")
+        if i >= len(names) or name != names[i]:
+            raise ctx.fail(f"{where}.name", f"the {limb}'s joints are {', '.join(names)}, in "
+                                            f"that order; got {name!r} at position {i + 1}")
+        own = get_kind(JOINTS[name].kind)
+        kind_name = ctx.string(d.get("kind", own.name), f"{where}.kind")
+        if kind_name not in KINDS:
+            raise ctx.fail(f"{where}.kind", f"expected one of {', '.join(KINDS)}, "
+                                            f"got {kind_name!r}")
+        kind = get_kind(kind_name)
+        if kind.swing_twist != own.swing_twist:
+            raise ctx.fail(f"{where}.kind", f"the {name} cannot be a {kind.words} (it is a "
+                                            f"{own.words})")
+        axes = _chain(ctx, d["chain"], f"{where}.chain")
+        if len(axes) != kind.servo_axes:
+            raise ctx.fail(f"{where}.chain", f"a {kind.words} has {kind.servo_axes} servo"
+                                             f"{'s' if kind.servo_axes > 1 else ''}, "
+                                             f"got {len(axes)}")
+        joints.append(ServoJoint(name, kind.name, axes))
+    if len(joints) != len(names):
+        raise ctx.fail("servos.joints", f"the {limb} has {len(names)} joints "
+                                        f"({', '.join(names)}), got {len(joints)}")
+    return tuple(joints)
+
+
+def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
+    """``servos``; ``limb`` the file's ``limb:`` (empty: none), whose joints ``joints`` lists."""
+    names = tuple(name for name, _, _ in LIMB_CHAINS.get(limb, ()))
+    d = ctx.mapping(value, "servos", {"port"},
+                    {"chain", "joints", "baud", "model", "return_delay_us",
+                     "status_return_level", "watchdog_ms", "ik_tolerance_deg", "latency_ms"})
     port = ctx.string(d["port"], "servos.port")
     baud = ctx.integer(d.get("baud", 1_000_000), "servos.baud")
     if baud not in _X_BAUDS:
         raise ctx.fail("servos.baud", f"{baud} is not an X-series rate "
                                       f"({', '.join(map(str, _X_BAUDS))})")
-    chain_raw = d["chain"]
-    if not isinstance(chain_raw, list) or not 1 <= len(chain_raw) <= 3:
-        raise ctx.fail("servos.chain", "expected a list of 1 to 3 joints (parent -> child)")
-    axes = tuple(_servo_axis(ctx, j, f"servos.chain[{i}]") for i, j in enumerate(chain_raw))
+    if ("chain" in d) == ("joints" in d):
+        raise ctx.fail("servos", "needs either 'chain' (one joint) or 'joints' (a limb)")
+    joints: tuple[ServoJoint, ...] = ()
+    if "joints" in d:
+        joints = _servo_joints(ctx, d["joints"], limb, names)
+        axes = tuple(a for j in joints for a in j.axes)
+        where = "servos.joints"
+    else:
+        if names:
+            raise ctx.fail("servos.chain", f"the {limb} rig's servos are listed per joint "
+                                           f"(servos.joints)")
+        axes = _chain(ctx, d["chain"], "servos.chain")
+        where = "servos.chain"
     ids = [j.id for j in axes]
     for i in ids:
         if ids.count(i) > 1:
-            raise ctx.fail("servos.chain", f"duplicate ID {i}")
+            raise ctx.fail(where, f"duplicate ID {i}")
     model = ctx.string(d["model"], "servos.model") if d.get("model") is not None else None
     rd = ctx.integer(d.get("return_delay_us", 0), "servos.return_delay_us", 0, 508)
     if rd % 2:
@@ -324,11 +440,16 @@ def _servos(ctx: _Ctx, value: Any) -> ServosConfig:
     tol = ctx.number(d.get("ik_tolerance_deg", 0.1), "servos.ik_tolerance_deg", 0.0)
     lat = d.get("latency_ms")
     latency = None if lat is None else ctx.number(lat, "servos.latency_ms", 0.0)
-    cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency)
-    try:
-        cfg.kinematics()
-    except RigConfigError as err:
-        raise ctx.fail("servos.chain", str(err).removeprefix("joint kinematics: ")) from None
+    cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints)
+    for j in joints or (None,):
+        try:
+            if j is None:
+                cfg.kinematics()
+            else:
+                JointKinematics(j.axes, tolerance_deg=tol)
+        except RigConfigError as err:
+            at = where if j is None else f"{where}[{cfg.joint_names.index(j.name)}].chain"
+            raise ctx.fail(at, str(err).removeprefix("joint kinematics: ")) from None
     return cfg
 
 
@@ -359,7 +480,7 @@ def loads_rig_config(text: str, source: str = "<rig config>",
             constraint = str(path)
         _check_constraint_joint(ctx, constraint, joint)
     sensors = _sensors(ctx, d["sensors"], joint) if d.get("sensors") is not None else None
-    servos = _servos(ctx, d["servos"]) if d.get("servos") is not None else None
+    servos = _servos(ctx, d["servos"], limb or "") if d.get("servos") is not None else None
     if sensors is None and servos is None:
         raise ctx.fail("top level", "needs 'sensors' or 'servos' (or both)")
     desc = ctx.string(d["description"], "description") if d.get("description") else ""
@@ -380,7 +501,8 @@ def _check_constraint_joint(ctx: _Ctx, constraint: str, joint: JointInfo) -> Non
 
 
 def _limb(ctx: _Ctx, value: Any, joint: JointInfo, sensors: Any) -> str:
-    """``limb``: arm | leg, its proximal joint the rig's ``joint``, one sensor per segment."""
+    """``limb``: arm | leg, its proximal joint the rig's ``joint``, one sensor per segment
+    (sensors given; a servo limb's joints are checked by :func:`_servo_joints`)."""
     limb = ctx.string(value, "limb")
     if limb not in LIMB_CHAINS:
         raise ctx.fail("limb", f"expected one of {', '.join(LIMB_CHAINS)}, got {limb!r}")
@@ -388,6 +510,8 @@ def _limb(ctx: _Ctx, value: Any, joint: JointInfo, sensors: Any) -> str:
     if joint.name != chain[0][0] or (joint.parent, joint.child) != chain[0][1:]:
         raise ctx.fail("joint", f"the {limb} rig's joint must be its proximal one: name "
                                 f"{chain[0][0]}, parent {chain[0][1]}, child {chain[0][2]}")
+    if sensors is None:
+        return limb
     segs = sensors.get("segments") if isinstance(sensors, Mapping) else None
     need = [chain[0][1], *(c for _, _, c in chain)]
     missing = [s for s in need if not isinstance(segs, Mapping) or s not in segs]

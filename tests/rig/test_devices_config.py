@@ -144,3 +144,86 @@ def test_joint_segments_named_for_another_joint_or_side_are_refused(edit, match)
     d["sensors"]["segments"] = {d["joint"]["parent"]: 0, d["joint"]["child"]: 1}
     with pytest.raises(RigConfigError, match=match):
         parse(d)
+
+
+# ------------------------------------------------------------------ a servo limb (issue 39)
+def arm() -> dict:
+    return yaml.safe_load("""
+name: a
+limb: arm
+joint: {name: shoulder, side: right, parent: thorax, child: upper-arm}
+servos:
+  port: "sim://dynamixel?ids=1,2,3,4,5,6,7"
+  joints:
+    - name: shoulder
+      chain: [{id: 1, axis: [0, 0, 1]}, {id: 2, axis: [0, 1, 0]}, {id: 3, axis: [1, 0, 0]}]
+    - name: elbow
+      kind: forearm
+      chain: [{id: 4, axis: [0, 0, 1]}, {id: 5, axis: [1, 0, 0]}]
+    - name: wrist
+      chain: [{id: 6, axis: [0, 0, 1]}, {id: 7, axis: [0, 1, 0]}]
+""")
+
+
+def test_servo_limb_lists_its_joints_in_the_limbs_order():
+    cfg = parse(arm())
+    assert cfg.limb == "arm" and cfg.sensors is None
+    s = cfg.servos
+    assert s.joint_names == ("shoulder", "elbow", "wrist")
+    assert [j.kind for j in s.joints] == ["ball", "forearm", "two-axis"]
+    assert s.ids == tuple(range(1, 8)) and len(s.bus_servos()) == 7
+    kin = s.limb_kinematics()
+    assert kin.names == s.joint_names and kin.n == 7
+    assert [kin.joint(k).n for k in range(3)] == [3, 2, 2]
+    with pytest.raises(RigConfigError, match="limb kinematics"):
+        s.kinematics()
+
+
+def test_one_joint_rig_is_a_limb_of_one_joint_unchanged():
+    s = load_rig_config("sim-shoulder").servos
+    assert s.joints == () and s.joint_names == ("joint",)
+    assert s.limb_kinematics().names == ("joint",)
+    assert s.limb_kinematics("shoulder").names == ("shoulder",)
+
+
+def test_shipped_servo_arms_load():
+    for name in ("sim-servo-arm", "hardware-servo-arm-template"):
+        cfg = load_rig_config(name)
+        assert cfg.limb == "arm" and cfg.servos.ids == tuple(range(1, 8))
+        assert [j.kind for j in cfg.servos.joints] == ["ball", "forearm", "two-axis"]
+
+
+def _joints(d):
+    return d["servos"]["joints"]
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda d: _joints(d)[1].update(knd="forearm"), r"joints\[1\]: unknown key 'knd'"),
+    (lambda d: _joints(d)[2]["chain"][0].update(id=1), "servos.joints: duplicate ID 1"),
+    (lambda d: _joints(d).reverse(), r"joints\[0\].name: the arm's joints are shoulder, "
+                                     r"elbow, wrist, in that order; got 'wrist'"),
+    (lambda d: _joints(d)[1].update(name="knee"), r"got 'knee' at position 2"),
+    (lambda d: _joints(d).pop(), "the arm has 3 joints .* got 2"),
+    (lambda d: _joints(d)[1].pop("kind"), r"joints\[1\].chain: a hinge has 1 servo, got 2"),
+    (lambda d: _joints(d)[0]["chain"].pop(), r"joints\[0\].chain: a ball joint has 3 servos, "
+                                             r"got 2"),
+    (lambda d: _joints(d)[0].update(kind="hinge"), r"joints\[0\].kind: the shoulder cannot "
+                                                   r"be a hinge"),
+    (lambda d: _joints(d)[1].update(kind="elbowish"), r"joints\[1\].kind: expected one of"),
+    (lambda d: d.pop("limb"), "a servo limb needs 'limb: arm'"),
+    (lambda d: d["servos"].update(chain=[{"id": 1, "axis": [0, 0, 1]}]),
+     "needs either 'chain' .* or 'joints'"),
+])
+def test_servo_limb_errors_name_what_is_wrong(edit, match):
+    d = arm()
+    edit(d)
+    with pytest.raises(RigConfigError, match=match):
+        parse(d)
+
+
+def test_a_limb_rig_with_one_joints_chain_is_refused():
+    d = arm()
+    d["servos"].pop("joints")
+    d["servos"]["chain"] = [{"id": 1, "axis": [0, 0, 1]}]
+    with pytest.raises(RigConfigError, match="servos are listed per joint"):
+        parse(d)
