@@ -267,6 +267,9 @@ def test_no_private_attribute_of_a_library_object_is_used():
 #: limb path still differ in what they compute, not only in size.
 LIMB_OR_JOINT: dict[str, str] = {
     "rig/demo/pipeline.py": "--limb chooses JointDemo or LimbDemo, the one place that does",
+    "rig/loop/binding.py": "the enforced limits of a rig of one joint are a constraint, of a "
+                           "servo limb a limb file (_limb_of: the one question), each checked "
+                           "against what the rig drives",
     "rig/loop/targets.py": "the scripted targets of one joint from its swing and twist geometry "
                            "(kept bit for bit) or of a limb from its oracle alone; a posture "
                            "is one joint's (N, 4) or a limb's (N, J, 4) for the oracle; a limb's "

@@ -20,6 +20,15 @@ side other than the rig configuration's, or a patient other than the session's â
 ``force`` (``--force-model``) is given, in which case the mismatch is reported as a warning and
 the supervisor still enforces the enforced constraint (the model only shapes the goals inside
 it; it never widens what is allowed).
+
+**A servo limb** (a rig whose ``servos.joints`` drive a whole limb): the enforced limits are a
+limb file (:class:`models.limb.Limb`; the session's stored limb boundary, a ``--constraint``
+limb file, the model's embedded limb) and the model a limb model. Always refused, whatever
+``force``: a one-joint constraint or model on a limb rig or a limb file or model on a one-joint
+rig; a limb file or model of another limb (a leg's on an arm rig), another side, or whose
+joints are not the rig's servo joints in the same order; a limb joint whose kind is not the one
+the rig's servos drive (a hinge elbow's limits on a forearm elbow's two servos). The limits
+(content hash: names, side, patient left out), side and patient as above (forceable).
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ from dataclasses import dataclass, field
 from calibration.joints import joint_mismatch
 from models.constraint import loads_constraint
 from models.errors import ModelsError
+from models.limb import Limb, loads_limb
 from rig.errors import RigConfigError
 
 __all__ = ["Binding", "ModelBindingError", "bind_model"]
@@ -44,13 +54,13 @@ class Binding:
 
     Attributes
     ----------
-    constraint : models.constraint.JointConstraint
-        The constraint enforced by the supervisor.
+    constraint : models.constraint.JointConstraint or models.limb.Limb
+        The constraint (a servo limb's: limb file) enforced by the supervisor.
     source : str
         Where it came from (``"--constraint FILE"``, ``"session N"``, ``"rig NAME"``,
         ``"model"``).
-    model_constraint : JointConstraint or None
-        The model's embedded constraint.
+    model_constraint : JointConstraint, Limb or None
+        The model's embedded constraint (a limb model's: its limb file).
     mismatches : list of str
         What did not match (empty when bound cleanly; non-empty only with ``force``).
     """
@@ -76,10 +86,10 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     ----------
     model : models.onnx_io.CorrectionModel
     rig : rig.devices.config.RigConfig, optional
-    constraint : JointConstraint, optional
-        Explicit constraint (``--constraint``).
-    session_constraint : JointConstraint, optional
-        The session's stored boundary.
+    constraint : JointConstraint or Limb, optional
+        Explicit constraint or limb file (``--constraint``).
+    session_constraint : JointConstraint or Limb, optional
+        The session's stored boundary (a limb rig's: its stored limb file).
     session_patient : str, optional
         Pseudonym of the session's patient.
     force : bool
@@ -92,9 +102,14 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     """
     path = getattr(model, "path", "model")
     text = getattr(model, "constraint_yaml", "") or ""
+    model_is_limb = bool(getattr(model, "joints", ()))
     try:
-        embedded = loads_constraint(text, source=f"{path} (embedded constraint)") if text \
-            else None
+        embedded = None
+        if model_is_limb:
+            embedded = getattr(model, "limb", None) or loads_limb(
+                text, source=f"{path} (embedded limb)")
+        elif text:
+            embedded = loads_constraint(text, source=f"{path} (embedded constraint)")
     except ModelsError as err:
         raise ModelBindingError(f"{path}: its embedded constraint does not load ({err})") \
             from None
@@ -109,39 +124,145 @@ def bind_model(model, *, rig=None, constraint=None, constraint_source: str = "--
     else:
         raise ModelBindingError(f"{path}: the model embeds no constraint and none was given "
                                 "(--constraint FILE)")
-    rig_joint = getattr(rig, "joint", None)
-    if rig_joint is not None:
-        # what the rig drives is not the model's to override: --force-model never reaches here
-
-        why = joint_mismatch(enforced, for_joint=rig_joint.name, for_side=rig_joint.side)
-        if why is not None:
-            raise ModelBindingError(
-                f"{source}: constraint {_who(enforced)} {why}: rig {rig.name!r} drives the "
-                f"{rig_joint.side} {rig_joint.name} (--force-model overrides the model, never "
-                "the joint the rig drives)")
-    problems: list[str] = []
-    if embedded is None:
-        problems.append(f"{path}: the model embeds no constraint, so it cannot be checked "
-                        f"against {source}")
+    # what the rig drives is not the model's to override: --force-model never reaches here
+    why = _rig_mismatch(enforced, rig)
+    if why is not None:
+        what = "joints" if _servo_joints(rig) else "joint"
+        raise ModelBindingError(f"{source}: {why} (--force-model overrides the model, never "
+                                f"the {what} the rig drives)")
+    if embedded is not None and (_limb_of(embedded) is None) != (_limb_of(enforced) is None):
+        raise ModelBindingError(_model_shape_mismatch(path, embedded, rig))
+    if _limb_of(enforced) is not None:
+        problems = _limb_model_problems(path, embedded, enforced, source, rig, session_id,
+                                        session_patient)
     else:
-        # the person first: a model made for someone else is the mistake that matters most
-        if (embedded.patient is not None and session_patient is not None
-                and embedded.patient != session_patient):
-            problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
-                            f"{session_id} is patient {session_patient!r}")
-        joint = getattr(rig_joint, "name", None)
-        side = getattr(rig_joint, "side", None)
-        if embedded.joint is not None and joint is not None and embedded.joint != joint:
-            problems.append(f"{path}: model is for joint {embedded.joint!r}, rig "
-                            f"{rig.name!r} drives joint {joint!r}")
-        if embedded.side is not None and side is not None and embedded.side != side:
-            problems.append(f"{path}: model is for the {embedded.side} side, rig "
-                            f"{rig.name!r} is the {side} side")
-        if enforced is not embedded and embedded != enforced:
-            problems.append(f"{path}: model trained for constraint {_who(embedded)}, which "
-                            f"differs from {source} ({_who(enforced, session_patient)})")
+        problems = _joint_model_problems(path, embedded, enforced, source, rig, session_id,
+                                         session_patient)
     if problems and not force:
         raise ModelBindingError(f"{problems[0]}; use --force-model to run it anyway (the "
                                 "supervisor still enforces the constraint)")
     return Binding(constraint=enforced, source=source, model_constraint=embedded,
                    mismatches=problems)
+
+
+def _limb_of(c) -> Limb | None:
+    """The limb file ``c`` is, None for one joint's constraint: the one place binding asks."""
+    return c if isinstance(c, Limb) else None
+
+
+def _servo_joints(rig) -> tuple:
+    """A servo limb rig's joints (``servos.joints``); empty for a rig of one joint."""
+    servos = getattr(rig, "servos", None)
+    return tuple(getattr(servos, "joints", ()) or ())
+
+
+def _drives(rig) -> str:
+    """What the rig drives, as a sentence's end."""
+    joints = _servo_joints(rig)
+    j = rig.joint
+    if joints:
+        return (f"rig {rig.name!r} drives the {j.side} {rig.limb or 'limb'}'s "
+                f"{len(joints)} joints ({', '.join(sj.name for sj in joints)})")
+    return f"rig {rig.name!r} drives the {j.side} {j.name}"
+
+
+def _limits_words(c) -> str:
+    if _limb_of(c) is not None:
+        return (f"limb file {_who(c)} ({c.side + ' ' if c.side else ''}"
+                f"{c.limb or 'limb'}: {', '.join(c.joint_names)})")
+    return f"constraint {_who(c)}"
+
+
+def _rig_mismatch(enforced, rig) -> str | None:
+    """Why the enforced limits cannot be those of what the rig drives (None: they can)."""
+    if rig is None:
+        return None
+    joints = _servo_joints(rig)
+    rig_joint = getattr(rig, "joint", None)
+    if not joints:
+        if _limb_of(enforced) is not None:
+            return f"a {_limits_words(enforced)}, but {_drives(rig)}: give its constraint file"
+        if rig_joint is None:
+            return None
+        why = joint_mismatch(enforced, for_joint=rig_joint.name, for_side=rig_joint.side)
+        return None if why is None else f"constraint {_who(enforced)} {why}: {_drives(rig)}"
+    if _limb_of(enforced) is None:
+        return (f"a one joint's constraint {_who(enforced)}, but {_drives(rig)}: give a limb "
+                "file of that limb")
+    names = tuple(sj.name for sj in joints)
+    if enforced.limb and rig.limb and enforced.limb != rig.limb:
+        return f"a {_limits_words(enforced)}, but {_drives(rig)}"
+    if enforced.side and rig_joint is not None and enforced.side != rig_joint.side:
+        return f"the {_limits_words(enforced)} is for the {enforced.side} side: {_drives(rig)}"
+    if tuple(enforced.joint_names) != names:
+        return (f"the joints of {_limits_words(enforced)} are not the rig's: {_drives(rig)}, "
+                "in that order")
+    for lj, sj in zip(enforced.joints, joints, strict=True):
+        if lj.kind != sj.kind:
+            return (f"joint {lj.name!r} of {_limits_words(enforced)} holds {lj.kind} limits, "
+                    f"but rig {rig.name!r} drives its {sj.name} as a {sj.kind} joint "
+                    f"({len(sj.axes)} servos)")
+    return None
+
+
+def _model_shape_mismatch(path, embedded, rig) -> str:
+    if _limb_of(embedded) is not None:
+        return (f"{path}: a limb model ({_limits_words(embedded)}), but "
+                f"{_drives(rig) if rig is not None else 'the enforced limits are one joint'}"
+                "'s: give a model trained on that joint's constraint file")
+    return (f"{path}: a one-joint model, but "
+            f"{_drives(rig) if rig is not None else 'the enforced limits are a limb'}: give a "
+            "limb model (rig train on the limb's file)")
+
+
+def _joint_model_problems(path, embedded, enforced, source, rig, session_id,
+                          session_patient) -> list[str]:
+    """A one-joint model against the enforced constraint, the rig and the session."""
+    rig_joint = getattr(rig, "joint", None)
+    problems: list[str] = []
+    if embedded is None:
+        problems.append(f"{path}: the model embeds no constraint, so it cannot be checked "
+                        f"against {source}")
+        return problems
+    # the person first: a model made for someone else is the mistake that matters most
+    if (embedded.patient is not None and session_patient is not None
+            and embedded.patient != session_patient):
+        problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
+                        f"{session_id} is patient {session_patient!r}")
+    joint = getattr(rig_joint, "name", None)
+    side = getattr(rig_joint, "side", None)
+    if embedded.joint is not None and joint is not None and embedded.joint != joint:
+        problems.append(f"{path}: model is for joint {embedded.joint!r}, rig "
+                        f"{rig.name!r} drives joint {joint!r}")
+    if embedded.side is not None and side is not None and embedded.side != side:
+        problems.append(f"{path}: model is for the {embedded.side} side, rig "
+                        f"{rig.name!r} is the {side} side")
+    if enforced is not embedded and embedded != enforced:
+        problems.append(f"{path}: model trained for constraint {_who(embedded)}, which "
+                        f"differs from {source} ({_who(enforced, session_patient)})")
+    return problems
+
+
+def _limb_model_problems(path, embedded, enforced, source, rig, session_id,
+                         session_patient) -> list[str]:
+    """A limb model against the enforced limb file, the rig and the session (its joints
+    refused outright: the network's input is those joints)."""
+    if embedded is None:
+        return [f"{path}: the model embeds no limb file, so it cannot be checked against "
+                f"{source}"]
+    if tuple(embedded.joint_names) != tuple(enforced.joint_names) or (
+            embedded.limb and enforced.limb and embedded.limb != enforced.limb):
+        raise ModelBindingError(f"{path}: a model of the {_limits_words(embedded)}, but "
+                                f"{source} is the {_limits_words(enforced)}")
+    problems: list[str] = []
+    if embedded.patient and session_patient and embedded.patient != session_patient:
+        problems.append(f"{path}: model is for patient {embedded.patient!r}, session "
+                        f"{session_id} is patient {session_patient!r}")
+    side = getattr(getattr(rig, "joint", None), "side", None)
+    if embedded.side and side and embedded.side != side:
+        problems.append(f"{path}: model is for the {embedded.side} side, rig "
+                        f"{rig.name!r} is the {side} side")
+    if enforced is not embedded and embedded.content_hash() != enforced.content_hash():
+        problems.append(f"{path}: model trained for limb {_who(embedded)}, which differs "
+                        f"from {source} ({_who(enforced, session_patient)})")
+    return problems

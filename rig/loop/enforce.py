@@ -25,6 +25,7 @@ from typing import Any
 
 from models import quaternion as Q
 from models.constraint import load_constraint, loads_constraint
+from models.limb import load_limits, loads_limb
 from models.fileio import check_output, write_owner_only
 from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
@@ -37,7 +38,7 @@ from rig.loop.realtime import check_cpu
 from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig, prepare_servo_limb
 from rig.loop.supervisor import SupervisorConfig
 from rig.loop.targets import open_targets
-from rig.loop.telemetry import Telemetry
+from rig.loop.telemetry import Telemetry, telemetry_columns
 
 __all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
            "run_enforce"]
@@ -255,7 +256,9 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
     if rig_cfg.servos is None:
         raise RigConfigError(f"--rig {request.rig}: rig {rig_cfg.name!r} has no servo chain to "
                              "drive")
-    mdl = load_model(request.model, limb=False)
+    # a servo limb (servos.joints) runs a limb model over a limb file; one joint, one joint's
+    servo_joints = tuple(rig_cfg.servos.joints)
+    mdl = load_model(request.model, limb=bool(servo_joints))
     store = None
     session_constraint = session_patient = alignment = None
     try:
@@ -266,16 +269,21 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
             if request.session_id is not None:
                 sid = request.session_id
                 session_patient = store.sessions.get(sid).get("pseudonym")
-                bounds = store.boundaries.list(sid, limb=False)  # a joint's, not a limb file
+                # a joint's constraint for a rig of one joint, a limb file for a servo limb
+                bounds = store.boundaries.list(sid, limb=bool(servo_joints))
                 if bounds:
-                    session_constraint = loads_constraint(
+                    read = loads_limb if servo_joints else loads_constraint
+                    session_constraint = read(
                         bounds[-1]["constraint_yaml"],
                         source=f"boundary {bounds[-1]['id']} of session {sid}")
                 for cal in store.calibrations.list(sid):
                     data = cal.get("data") or {}
                     if "thorax_mount" in data and "limb_mount" in data:
                         alignment = data
-        explicit = (load_constraint(request.constraint) if request.constraint is not None
+        # a servo limb's --constraint may be a limb file (refused by the binding when it is
+        # not this limb's); a rig of one joint's reads as it always has
+        read_limits = load_limits if servo_joints else load_constraint
+        explicit = (read_limits(request.constraint) if request.constraint is not None
                     else None)
         binding = bind_model(mdl, rig=rig_cfg, constraint=explicit,
                              constraint_source=f"--constraint {request.constraint}",
@@ -291,7 +299,7 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
         oracle = ConstraintOracle(binding.constraint)
         src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
                            frames=request.frames)
-        if alignment is not None and hasattr(src, "alignment"):
+        if alignment is not None and hasattr(src, "alignment") and src.n_joints == 1:
             src.alignment = {
                 rig_cfg.joint.parent: tuple(Q.conjugate(alignment["thorax_mount"]).tolist()),
                 rig_cfg.joint.child: tuple(Q.conjugate(alignment["limb_mount"]).tolist())}
@@ -342,8 +350,9 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 from rig.store import TelemetryWriter  # lazy like open_store: --db is optional
 
                 store_writer = TelemetryWriter(store, run_id)
+            columns = telemetry_columns(tuple(limb.kinematics.names))
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
-                                  keep=hooks.keep_telemetry)
+                                  keep=hooks.keep_telemetry, columns=columns)
             opened.callback(telemetry.close)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}
