@@ -390,6 +390,12 @@ class ConstraintOracle:
         return self._kind.distance_projected_one((w / nrm, x / nrm, y / nrm, z / nrm))
 
     # -- a limb's joints, one at a time (the control loop's per-joint queries) --------------
+    @property
+    def order(self) -> tuple[int, ...]:
+        """The joints' evaluation order (:attr:`models.limb.Limb.order`: every coupling's
+        source before its dependant); ``(0,)`` for one joint's constraint."""
+        return (0,) if self._kind is not None else tuple(self.limb.order)
+
     def joint_source(self, joint: int) -> int | None:
         """The index of the joint whose angle ``joint``'s limits depend on (its coupling's
         source), None for a joint with limits of its own (and for one joint's constraint)."""

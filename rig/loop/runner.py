@@ -605,13 +605,12 @@ class EnforcementLoop:
         real = self.supervisor
         sup = copy.copy(real)
         sup.joints = tuple(copy.copy(s) for s in real.joints)
-        angles = [None if v is None else v.angle for v in real.views]
+        angles = [v.angle for v in real.views]
         try:
             done = self._warm_compute(sup, now)
         finally:  # the views are shared: the real supervisors' coupling angles as they were
             for v, a in zip(real.views, angles, strict=True):
-                if v is not None:
-                    v.angle = a
+                v.angle = a
         if not done:
             return
         self.warm_ups += 1
@@ -678,7 +677,7 @@ class EnforcementLoop:
         out: dict = {}
         table = self.telemetry.table() if self.telemetry.keep else None
         valid = None
-        if table is not None and self.telemetry.rows and getattr(self.oracle, "limb", None):
+        if table is not None and self.telemetry.rows:
             tq = np.stack([np.stack([table[f"{n}_target_{c}"] for c in "wxyz"], axis=-1)
                            for n in self.joint_names], axis=1)
             ok = np.isfinite(tq).all(axis=(1, 2))
