@@ -18,6 +18,7 @@ from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.devices.ports import open_port
 from rig.devices.servo_limb import ServoLimb
 from rig.loop import EnforcementLoop, Intervention, LoopConfig, SupervisorConfig
+from rig.loop.backstop import position_limits_from_limb
 from rig.loop.limb_supervisor import LimbSupervisor
 from rig.loop.targets import TargetSource
 from rig.loop.telemetry import telemetry_columns
@@ -275,3 +276,39 @@ def test_one_joint_limb_supervisor_is_the_one_joint_supervisor():
         tb = b.admit(t, q[None], t)
         gb = b.step(t, tb)
         assert ga == gb[0] and a.flags == b.flags
+
+
+def test_the_backstop_of_a_limb_contains_every_valid_posture(arm):
+    limb, oracle = arm
+    kin = _kinematics()
+    lo, hi = position_limits_from_limb(kin, oracle, kin.zero_ticks, n=1500)
+    assert lo.shape == hi.shape == (7,) and (lo <= kin.zero_ticks).all() \
+        and (kin.zero_ticks <= hi).all()
+    assert (hi - lo < 4095).any()  # the elbow's hinge at least is a real limit
+    pool = held_out_postures(limb, 200, np.random.default_rng(4), oracle=oracle)
+    ok = oracle.is_valid(pool).all(axis=1)
+    for p in pool[ok]:
+        t = kin.inverse(p, kin.zero_ticks)
+        assert ((lo <= t) & (t <= hi)).all()
+
+
+def test_per_servo_velocity_limit_and_per_joint_tolerance(arm):
+    limb, oracle = arm
+    pool = held_out_postures(limb, 40, np.random.default_rng(9), oracle=oracle)
+    start = _valid(oracle, pool)
+    far = pool[np.flatnonzero(oracle.is_valid(pool).all(axis=1))[-1]]
+    wide = SupervisorConfig(tolerance_deg=2.0, quantum_deg=0.25)
+    summary, table, _ = _run(oracle, PostureTargets(lambda k: far), 120, before=_place(start),
+                             servo_max_velocity_deg_s=30.0,
+                             joint_supervisors={"wrist": wide})
+    kin = _kinematics()
+    cmd = _posture(table, "commanded")
+    ticks = np.array([kin.inverse(c, kin.zero_ticks) for c in cmd])
+    step = np.abs(np.diff(ticks, axis=0)).max()
+    assert step <= int(math.radians(30.0) * 0.005 / (2 * math.pi / 4096))
+    assert (table["intervention"] & Intervention.RATE_LIMITED).any()
+    assert summary["joints"]["wrist"]["tolerance_deg"] == 2.0
+    assert summary["joints"]["elbow"]["tolerance_deg"] == 1.0
+    assert _commanded_distance_deg(oracle, table).max() <= 2.0
+    with pytest.raises(ValueError, match="unknown joint"):
+        LimbSupervisor(oracle, joint_configs={"knee": wide}, names=NAMES)
