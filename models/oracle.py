@@ -390,6 +390,12 @@ class ConstraintOracle:
         return self._kind.distance_projected_one((w / nrm, x / nrm, y / nrm, z / nrm))
 
     # -- a limb's joints, one at a time (the control loop's per-joint queries) --------------
+    @property
+    def order(self) -> tuple[int, ...]:
+        """The joints' evaluation order (:attr:`models.limb.Limb.order`: every coupling's
+        source before its dependant); ``(0,)`` for one joint's constraint."""
+        return (0,) if self._kind is not None else tuple(self.limb.order)
+
     def joint_source(self, joint: int) -> int | None:
         """The index of the joint whose angle ``joint``'s limits depend on (its coupling's
         source), None for a joint with limits of its own (and for one joint's constraint)."""
@@ -407,6 +413,33 @@ class ConstraintOracle:
         if axis is None:
             raise ValueError(f"joint {joint} cannot drive a coupling")
         return float(Q.twist_angle(np.array([[w, x, y, z]]), axis)[0])
+
+    def coupling_range(self, joint: int) -> tuple[float, float] | None:
+        """The coupling angles (radians) over which joint ``joint``'s limits change — its first
+        and last keyframe's (beyond them the limits are those keyframes') — None for a joint
+        with limits of its own."""
+        if self._kind is not None or self._source[joint] is None:
+            return None
+        at = self._joints[joint].lim.at
+        return float(at[0]), float(at[-1])
+
+    def evaluate_joint(self, joint: int, q, angle=None) -> OracleResult:
+        """One joint of a limb on its own orientations ``q`` (N, 4): its kind's oracle, a
+        coupled joint's limits at the coupling angles ``angle`` (N,) (radians; required for a
+        coupled joint, ignored otherwise) — :meth:`evaluate`'s answers for that joint when its
+        source is at those angles. One joint's constraint: joint 0, :meth:`evaluate`."""
+        if self._kind is not None:
+            if joint != 0:
+                raise IndexError(f"joint {joint}: one joint's constraint has joint 0 only")
+            return self.evaluate(np.asarray(q, dtype=np.float64).reshape(-1, 4))
+        q2 = Q.check_quaternions(np.asarray(q, dtype=np.float64).reshape(-1, 4))
+        oracle = self._joints[joint]
+        if isinstance(oracle, KindOracle):
+            return oracle.evaluate(q2)
+        if angle is None:
+            raise ValueError(f"joint {joint} is coupled: its limits need the coupling angle")
+        a = np.broadcast_to(np.asarray(angle, dtype=np.float64), (len(q2),))
+        return oracle.evaluate(q2, a)
 
     def joint_query(self, joint: int):
         """A fast single-orientation query of one joint of a limb: a callable

@@ -22,7 +22,7 @@ from models import quaternion as Q
 from rig.devices.kinematics import TICKS_PER_REV
 from rig.errors import UnreachableError
 
-__all__ = ["position_limits_from_boundary"]
+__all__ = ["position_limits_from_boundary", "position_limits_from_limb"]
 
 
 def position_limits_from_boundary(kinematics, oracle, near_ticks, *, n: int = 6000,
@@ -68,6 +68,51 @@ def position_limits_from_boundary(kinematics, oracle, near_ticks, *, n: int = 60
     lo = np.where(whole, lo_cfg, np.maximum(lo, lo_cfg))
     hi = np.where(whole, hi_cfg, np.minimum(hi, hi_cfg))
     return lo, hi
+
+
+class _JointEnvelope:
+    """One joint of a limb oracle answering ``evaluate(q)`` over its whole envelope: a coupled
+    joint's limits at a coupling angle drawn uniformly over its keyframes' range per sample
+    (beyond that range its limits do not change), so the valid samples and projections cover
+    every region the joint can be allowed."""
+
+    def __init__(self, oracle, joint: int, seed: int):
+        self.oracle, self.joint = oracle, joint
+        self.range = oracle.coupling_range(joint)
+        self.rng = np.random.default_rng(seed)
+
+    def evaluate(self, q):
+        angle = None if self.range is None else self.rng.uniform(*self.range, len(q))
+        return self.oracle.evaluate_joint(self.joint, q, angle)
+
+
+def position_limits_from_limb(kinematics, oracle, near_ticks, *, n: int = 6000,
+                              margin_deg: float = 5.0, seed: int = 0
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`position_limits_from_boundary` for every joint of a limb, each from the joint's
+    envelope (a coupled joint's limits over all its coupling angles).
+
+    Parameters
+    ----------
+    kinematics : rig.devices.kinematics.LimbKinematics
+    oracle : models.oracle.ConstraintOracle
+        A limb's (or one joint's: a limb of one joint).
+    near_ticks : (n_servos,) array_like
+        Start posture, tick-vector order.
+
+    Returns
+    -------
+    min_ticks, max_ticks : (n_servos,) int64, tick-vector order
+    """
+    near = np.asarray(near_ticks, dtype=np.float64)
+    los, his = [], []
+    for j, (kin, sl) in enumerate(zip(kinematics.joints, kinematics.slices, strict=True)):
+        env = _JointEnvelope(oracle, j, seed + 1 + j)
+        lo, hi = position_limits_from_boundary(kin, env, near[sl], n=n, margin_deg=margin_deg,
+                                               seed=seed + j)
+        los.append(np.minimum(lo, kin.zero_ticks))
+        his.append(np.maximum(hi, kin.zero_ticks))
+    return np.concatenate(los), np.concatenate(his)
 
 
 def describe_limits(kinematics, lo, hi) -> str:

@@ -78,7 +78,7 @@ class LimbSupervisor:
     joint_configs : mapping of joint name → SupervisorConfig, or sequence (one per joint)
         Per-joint tolerance and rate limits.
     names : sequence of str, optional
-        The joints' names (default: the limb's).
+        The joints' names (default ``joint1``, ``joint2``, ...).
 
     Attributes
     ----------
@@ -95,26 +95,18 @@ class LimbSupervisor:
                  names: Sequence[str] | None = None):
         self.oracle = oracle
         self.config = config or SupervisorConfig()
-        limb = getattr(oracle, "limb", None)
-        if limb is None:  # one joint's constraint: its own oracle, as before
-            self.names = tuple(names or ("joint1",))
-            configs = self._configs(joint_configs, self.names)
-            self.joints = (Supervisor(oracle, configs[0], period_s=period_s),)
-            self.views: tuple[JointView | None, ...] = (None,)
-            self.sources: tuple[int | None, ...] = (None,)
-            self.order: tuple[int, ...] = (0,)
-        else:
-            oracle.prepare()
-            n = oracle.n_joints
-            self.names = tuple(names or limb.joint_names)
-            if len(self.names) != n:
-                raise ValueError(f"{len(self.names)} joint names for a limb of {n} joints")
-            configs = self._configs(joint_configs, self.names)
-            self.views = tuple(JointView(oracle.joint_query(j)) for j in range(n))
-            self.joints = tuple(Supervisor(v, c, period_s=period_s)
-                                for v, c in zip(self.views, configs, strict=True))
-            self.sources = tuple(oracle.joint_source(j) for j in range(n))
-            self.order = tuple(limb.order)
+        oracle.prepare()  # not inside the first cycle
+        n = oracle.n_joints
+        self.names = tuple(names) if names is not None else tuple(
+            f"joint{j + 1}" for j in range(n))
+        if len(self.names) != n:
+            raise ValueError(f"{len(self.names)} joint names for limits of {n} joint(s)")
+        configs = self._configs(joint_configs, self.names)
+        self.views = tuple(JointView(oracle.joint_query(j)) for j in range(n))
+        self.joints = tuple(Supervisor(v, c, period_s=period_s)
+                            for v, c in zip(self.views, configs, strict=True))
+        self.sources = tuple(oracle.joint_source(j) for j in range(n))
+        self.order = tuple(oracle.order)
         self.n_joints = len(self.joints)
         self.dependants = tuple(tuple(d for d, s in enumerate(self.sources) if s == j)
                                 for j in range(self.n_joints))
@@ -161,7 +153,7 @@ class LimbSupervisor:
         a = self.oracle.coupling_angle_one(src, float(q[0]), float(q[1]), float(q[2]),
                                            float(q[3]))
         view = self.views[j]
-        if a != view.angle:
+        if a != view.angle:  # NaN never equals: the first angle is always taken
             view.angle = a
             self.joints[j].forget()
 

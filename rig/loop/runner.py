@@ -57,7 +57,11 @@ from rig.errors import (
     UnreachableError,
 )
 from rig.devices.kinematics import RAD_PER_TICK
-from rig.loop.backstop import describe_limits, position_limits_from_boundary
+from rig.loop.backstop import (
+    describe_limits,
+    position_limits_from_boundary,
+    position_limits_from_limb,
+)
 from rig.loop.limb_supervisor import LimbSupervisor
 from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention, SupervisorConfig
@@ -605,13 +609,12 @@ class EnforcementLoop:
         real = self.supervisor
         sup = copy.copy(real)
         sup.joints = tuple(copy.copy(s) for s in real.joints)
-        angles = [None if v is None else v.angle for v in real.views]
+        angles = [v.angle for v in real.views]
         try:
             done = self._warm_compute(sup, now)
         finally:  # the views are shared: the real supervisors' coupling angles as they were
             for v, a in zip(real.views, angles, strict=True):
-                if v is not None:
-                    v.angle = a
+                v.angle = a
         if not done:
             return
         self.warm_ups += 1
@@ -678,7 +681,7 @@ class EnforcementLoop:
         out: dict = {}
         table = self.telemetry.table() if self.telemetry.keep else None
         valid = None
-        if table is not None and self.telemetry.rows and getattr(self.oracle, "limb", None):
+        if table is not None and self.telemetry.rows:
             tq = np.stack([np.stack([table[f"{n}_target_{c}"] for c in "wxyz"], axis=-1)
                            for n in self.joint_names], axis=1)
             ok = np.isfinite(tq).all(axis=(1, 2))
@@ -752,14 +755,16 @@ SIM_LOOP_LATENCY_MS = 4.0
 def prepare_servo_limb(port, servos: ServosConfig, oracle=None, *, backstop: bool = True,
                        margin_deg: float = 5.0, latency_ms: float | None = None,
                        log=None) -> ServoLimb:
-    """Open a rig's servos for the loop — its bus and its joint's kinematics — and write their
+    """Open a rig's servos for the loop — its bus and its joints' kinematics — and write their
     start-up registers.
 
     1. Open :class:`rig.devices.dynamixel.DynamixelBus` on the opened ``port`` with the
        driver's own (generous) timeouts; read torque and the start posture.
     2. With ``backstop`` and torque off: the position limits of
        :func:`rig.loop.backstop.position_limits_from_boundary` (widened to contain each servo's
-       zero) replace the configured ones, in the kinematics and on the bus;
+       zero; a limb's: :func:`~rig.loop.backstop.position_limits_from_limb`, each joint from its
+       envelope — a coupled joint's limits over all its coupling angles) replace the
+       configured ones, in the kinematics and on the bus;
        :meth:`~rig.devices.dynamixel.DynamixelBus.configure` writes them to the servos'
        Min/Max Position Limit registers with the other start-up registers. EEPROM is
        written only with torque off: if a servo's torque is already on (a limb holding), the
@@ -776,12 +781,12 @@ def prepare_servo_limb(port, servos: ServosConfig, oracle=None, *, backstop: boo
         Opened port (the caller closes it).
     servos : rig.devices.config.ServosConfig
     oracle : models.oracle.ConstraintOracle, optional
-        Needed for the backstop.
+        Needed for the backstop (one joint's, or a limb's with the servos' joints).
 
     Returns
     -------
     ServoLimb
-        A limb of one joint, with ``backstop = (min_ticks, max_ticks)`` or None.
+        The rig's joints, with ``backstop = (min_ticks, max_ticks)`` or None.
     """
     log = log or (lambda msg: None)
     if latency_ms is None:
@@ -799,10 +804,14 @@ def prepare_servo_limb(port, servos: ServosConfig, oracle=None, *, backstop: boo
                 "(turn torque off to let the loop write the boundary's backstop)")
         elif backstop and oracle is not None:
             ticks = _read_retrying(bus)
-            kin = limb.kinematics.joint(0)
-            lo, hi = position_limits_from_boundary(kin, oracle, ticks, margin_deg=margin_deg)
-            lo = np.minimum(lo, kin.zero_ticks)
-            hi = np.maximum(hi, kin.zero_ticks)
+            kin = limb.kinematics
+            if len(kin) == 1:  # one joint: as before, bit for bit
+                kj = kin.joint(0)
+                lo, hi = position_limits_from_boundary(kj, oracle, ticks, margin_deg=margin_deg)
+                lo = np.minimum(lo, kj.zero_ticks)
+                hi = np.maximum(hi, kj.zero_ticks)
+            else:
+                lo, hi = position_limits_from_limb(kin, oracle, ticks, margin_deg=margin_deg)
             limb.set_position_limits(lo, hi)
             limits = (lo, hi)
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")

@@ -57,7 +57,8 @@ class RunRepository(Repository):
     def telemetry(self, run_id: int) -> dict[str, np.ndarray]:
         """Telemetry of a run in cycle order: one array per column of
         :data:`~rig.store.schema.TELEMETRY_COLUMNS` (float64, NaN for missing; ``fault`` and
-        ``extra`` as object arrays, ``extra`` decoded)."""
+        ``extra`` as object arrays, ``extra`` decoded), then the numeric keys of ``extra`` as
+        columns of their own (a limb run's per-joint columns, named as in its CSV)."""
         cols = [S.telemetry.c[n] for n in S.TELEMETRY_COLUMNS] + [S.telemetry.c.extra]
         q = select(*cols).where(S.telemetry.c.run_id == int(run_id)).order_by(S.telemetry.c.id)
         with self.db.transaction(write=False) as conn:
@@ -74,11 +75,34 @@ class RunRepository(Repository):
                 out[name] = np.array([-1 if v is None else v for v in col], dtype=np.int64)
             else:
                 out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
+        out.update(_extra_columns(out["extra"], out))
         return out
 
     def list(self, session_id: int) -> list[dict]:
         """The runs of a session, oldest first."""
         return self._of_session(session_id)
+
+
+def _extra_columns(extra: np.ndarray, have: dict) -> dict[str, np.ndarray]:
+    """The numeric keys of the ``extra`` JSON as columns of their own (a limb's per-joint
+    telemetry, ``<joint>_commanded_w`` ...: the CSV's names), NaN where a row lacks one;
+    ``*_intervention`` as int64 (-1 where missing). Keys of a column, and keys with any
+    non-numeric value, are left in ``extra``."""
+    keys: dict[str, bool] = {}
+    for d in extra:
+        for k, v in (d or {}).items():
+            numeric = v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+            keys[k] = keys.get(k, True) and numeric
+    out: dict[str, np.ndarray] = {}
+    for k, numeric in keys.items():
+        if not numeric or k in have:
+            continue
+        vals = [(d or {}).get(k) for d in extra]
+        if k.endswith("_intervention"):
+            out[k] = np.array([-1 if v is None else v for v in vals], dtype=np.int64)
+        else:
+            out[k] = np.array([np.nan if v is None else v for v in vals], dtype=np.float64)
+    return out
 
 
 def run_counts(conn: Connection, session_ids: list[int]) -> dict[int, int]:

@@ -681,3 +681,22 @@ def test_raw_readings_alone_and_their_complete_count(tmp_path):
         assert store.samples.raw(sid, "none").shape == (0, 9)
         lean = store.samples.read(sid, name="humerus", raw=False)
         assert np.isnan(lean["raw"]).all() and not lean["raw"].flags.writeable
+
+
+def test_a_limbs_per_joint_telemetry_reads_back_by_the_csvs_names(store, session):
+    from rig.loop.telemetry import Telemetry, telemetry_columns
+    from rig.store import TelemetryWriter
+    rid = store.runs.start(session, {"limb": "arm"})
+    cols = telemetry_columns(["shoulder", "elbow"])
+    tel = Telemetry(store_writer=TelemetryWriter(store, rid), columns=cols)
+    for k in range(5):
+        row = [float(k)] * len(cols)
+        row[cols.index("elbow_intervention")] = 8
+        row[cols.index("faults")] = 0
+        tel.record(tuple(row))
+    tel.close()
+    back = store.runs.telemetry(rid)
+    assert back["elbow_commanded_w"].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert back["shoulder_violation_deg"][4] == 4.0
+    assert back["elbow_intervention"].dtype == np.int64 and (back["elbow_intervention"] == 8).all()
+    assert back["cycle_ms"].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
