@@ -55,17 +55,21 @@ import numpy as np
 
 from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from rig.devices.config import load_rig_config
+from rig.devices.kinematics import JointKinematics, LimbKinematics
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError, UnreachableError
 from rig.sim.clock import ScaledClock
 from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
 from rig.sim.imu import StreamImuSimulator, stream_patient, stream_query
-from rig.sim.patients import patient_from_url
+from rig.sim.patients import limb_from_url, patient_from_url
 from rig.sim.urls import SimUrl, query_keys, sim_device_of, with_keys, without_keys
 
-BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion")
+BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
 (``seed`` is the bus's, shared)."""
+
+PUSHED_TOLERANCE_DEG = 180.0
+"""The IK tolerance of a back-driven joint: any orientation, to the nearest its axes reach."""
 
 PROCESS_KEY = "process"
 """``process=on``: serve the servos from a child process (see the module docstring)."""
@@ -106,7 +110,13 @@ def _patient(limb: Any, clock: Any, clock_t0: float, **kwargs: Any) -> Simulated
 
 
 class _BackDrive:
-    """Servo ticks of a simulated patient through the joint's IK, cached per millisecond."""
+    """Servo ticks of a simulated patient through its limb's IK, cached per millisecond.
+
+    ``limb`` is the patient (:meth:`~rig.sim.limb.SimulatedLimb.joints`: its posture, (N, J, 4))
+    and ``kinematics`` the servo limb's :class:`~rig.devices.kinematics.LimbKinematics` of the
+    same J joints: each joint's servos take the IK solution of its orientation nearest their
+    previous ticks; a joint whose orientation is out of its reach stays put (the others move).
+    """
 
     def __init__(self, limb: Any, kinematics: Any, t0: float) -> None:
         self.limb = limb
@@ -122,29 +132,35 @@ class _BackDrive:
         with self._lock:
             if key != self._key:
                 self._key = key
-                q = self.limb.joint(max(0.0, key / 1000.0 - self.t0))[0]
-                self._ticks, reached = self._step(q, self._ticks)
-                self.unreachable += not reached
+                q = self.limb.joints(max(0.0, key / 1000.0 - self.t0))[0]
+                self._ticks, missed = self._step(q, self._ticks)
+                self.unreachable += missed > 0
             return self._ticks
 
-    def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, bool]:
-        """The servos' ticks for joint orientation ``q``: the IK solution nearest ``ticks``, or
-        ``ticks`` unchanged where ``q`` is out of reach (the servo limb cannot follow: it stays
-        put). Also says whether ``q`` was reached."""
-        try:
-            return self.kin.inverse_float(q, ticks), True
-        except UnreachableError:
-            return ticks, False
+    def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, int]:
+        """The servos' ticks for the posture ``q`` (J, 4): each joint's IK solution nearest its
+        part of ``ticks``, or that part unchanged where the joint's orientation is out of reach
+        (the servo limb cannot follow: it stays put). Also says how many joints were not
+        reached."""
+        out = ticks.copy()
+        missed = 0
+        for joint, s, qj in zip(self.kin.joints, self.kin.slices, q, strict=True):
+            try:
+                out[s] = joint.inverse_float(qj, ticks[s])
+            except UnreachableError:
+                missed += 1
+        return out, missed
 
     def follow(self, joint_q: np.ndarray) -> tuple[np.ndarray, int]:
-        """The orientations (N, 4) the servos take, from its zero, while the patient moves
-        through ``joint_q`` (N, 4), unquantised, and how many of them were out of reach."""
+        """The postures (N, J, 4) the servos take, from their zero, while the patient moves
+        through ``joint_q`` (N, J, 4), unquantised, and at how many instants some joint was
+        out of reach."""
         ticks = self.kin.zero_ticks.astype(np.float64)
         out = np.empty((len(joint_q), len(ticks)))
         missed = 0
         for i, q in enumerate(joint_q):
-            ticks, reached = self._step(q, ticks)
-            missed += not reached
+            ticks, m = self._step(q, ticks)
+            missed += m > 0
             out[i] = ticks
         return self.kin.forward_batch(out), missed
 
@@ -166,10 +182,10 @@ def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: boo
     port = Port(url=url, path=bus.port, simulator=bus, kind=kind)
     port.add_closer(bus.close)
     own = [k for k in BACKDRIVE_KEYS if k in q]
-    if "patient" not in q:
+    if "patient" not in q and "limb" not in q:
         if own:
             port.close()
-            raise RigConfigError(f"{url}: {', '.join(sorted(own))} need patient=")
+            raise RigConfigError(f"{url}: {', '.join(sorted(own))} need patient= or limb=")
         return port
     try:
         port.simulated_patient = _back_driving_patient(q, bus)
@@ -267,19 +283,34 @@ class _ChildCloser:
 
 
 def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
-    """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` kinematics."""
+    """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` rig's kinematics:
+    a servo limb's (``chain=sim-servo-arm``) by an arm or leg patient (``limb=``, or
+    ``patient=`` a limb file: :func:`~rig.sim.patients.limb_from_url`, its joints' kinds the
+    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient."""
     url = q.url
     chain_name = q.text("chain", "sim-shoulder")
     cfg = load_rig_config(chain_name)
     if cfg.servos is None:
         raise RigConfigError(f"{url}: chain={chain_name!r} has no servo chain")
-    kin = cfg.servos.kinematics().compile()  # before the bus answers: no stall at a first read
+    # pushed by the patient, a joint of fewer than three servos takes the nearest orientation
+    # its axes reach (the closed-form decomposition; a two-servo wrist cannot twist): the IK's
+    # tolerance is no limit here, the tick limits still are
+    kin = LimbKinematics([JointKinematics(j.servos, tolerance_deg=PUSHED_TOLERANCE_DEG)
+                          for j in cfg.servos.limb_kinematics().joints], cfg.servos.joint_names)
+    kin.compile()  # before the bus answers: no stall at a first read
     missing = [i for i in kin.ids if i not in bus.servos]
     if missing:
         raise RigConfigError(f"{url}: chain {chain_name!r} needs servo IDs {list(kin.ids)}, "
                              f"the simulated bus has no ID {missing[0]}")
     # a servo limb wears no IMU: the default straps (the motion does not depend on them)
-    limb = patient_from_url(q, sensors=2, misplaced_straps=False)
+    kinds = {j.name: j.kind for j in cfg.servos.joints}
+    limb = limb_from_url(q, kinds=kinds, misplaced_straps=False) or patient_from_url(
+        q, sensors=2, misplaced_straps=False)
+    n = len(limb.joints(0.0)[0])
+    if n != len(kin):
+        raise RigConfigError(f"{url}: chain {chain_name!r} has {len(kin)} joint"
+                             f"{'s' if len(kin) > 1 else ''} ({', '.join(kin.names)}), the "
+                             f"patient {n}")
     t0 = bus.clock()
     drive = _BackDrive(limb, kin, t0)
     for k, dxl_id in enumerate(kin.ids):

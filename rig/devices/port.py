@@ -87,9 +87,10 @@ class SimulatedPatient:
         return self._backdrive is not None
 
     def follow(self, joint_q) -> tuple[np.ndarray, int]:
-        """The orientations (N, 4) the back-driven servos take, from their zero, while the
-        patient moves through ``joint_q`` (N, 4), unquantised, and how many of them were out
-        of the joint's reach.
+        """The orientations the back-driven servos take, from their zero, while the patient
+        moves through ``joint_q`` — (N, 4) for a joint, (N, J, 4) postures for a limb; the
+        result the same shape — unquantised, and at how many instants a joint was out of
+        reach.
 
         Raises
         ------
@@ -98,7 +99,9 @@ class SimulatedPatient:
         """
         if self._backdrive is None:
             raise ValueError("this port's simulated patient back-drives no servo chain")
-        return self._backdrive.follow(np.asarray(joint_q, dtype=np.float64).reshape(-1, 4))
+        q = np.asarray(joint_q, dtype=np.float64)
+        out, missed = self._backdrive.follow(q.reshape(len(q), -1, 4))
+        return out.reshape(q.shape), missed
 
     def start_protocol(self, protocol, lead_s: float = 2.0) -> None:
         """Have the patient perform ``protocol`` from ``lead_s`` seconds of patient time after

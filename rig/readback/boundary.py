@@ -385,7 +385,8 @@ def extract_limb(data: JointData, *, name: str | None = None, side: str | None =
     slow = None
     if "session" in data.provenance:
         label = f"session-{data.provenance['session']}-{data.limb}"
-        prov = {k: data.provenance[k] for k in ("session", "calibration_id", "fusion")}
+        prov = {k: data.provenance[k] for k in ("session", "calibration_id", "fusion")
+                if k in data.provenance}  # a servo limb's: no calibration, no fusion
         slow = data.slow_errors_deg
         if any(v is not None for v in slow.values()):
             prov["slow_error_deg"] = slow

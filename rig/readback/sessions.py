@@ -262,12 +262,43 @@ class WholeLimbSession:
 
     def read(self, store, session_id: int, sess: dict, axis: np.ndarray | None, *,
              fusion: str, heading: bool, joint: str | None) -> JointData:
-        """Every joint of the limb (J = 3, :func:`_limb_orientations`), or the one named by
-        ``joint`` (:meth:`JointData.select <rig.readback.data.JointData.select>`, ``axis`` its
-        limb axis)."""
-        data = _limb_orientations(store, session_id, sess, self.limb, parse_axis(None),
-                                  fusion=fusion, heading=heading)
+        """Every joint of the limb (J = 3: a servo limb's joint samples as recorded,
+        :func:`_limb_joint_samples`, else the IMUs through the limb calibration,
+        :func:`_limb_orientations`), or the one named by ``joint`` (:meth:`JointData.select
+        <rig.readback.data.JointData.select>`, ``axis`` its limb axis)."""
+        sensors = store.samples.sensors(session_id)
+        if any(r["kind"] == "joint" for r in sensors if r.get("n_samples")):
+            data = _limb_joint_samples(store, session_id, sess, self.limb, sensors, fusion)
+        else:
+            data = _limb_orientations(store, session_id, sess, self.limb, parse_axis(None),
+                                      fusion=fusion, heading=heading)
         return data if joint is None else data.select(joint, axis)
+
+
+def _limb_joint_samples(store, session_id: int, sess: dict, limb: str, sensors: list[dict],
+                        fusion: str) -> JointData:
+    """Every joint of a servo limb's session: each joint's samples (named by the joint: the
+    servos' ticks through the limb's forward kinematics, as recorded) at the instants all of
+    them have one (one bus read gives every joint's)."""
+    _joint_samples(store, session_id, fusion)  # the same refusal of --fusion as one joint's
+    names = tuple(name for name, _, _ in LIMB_CHAINS[limb])
+    have = {r["name"] for r in sensors if r.get("n_samples") and r["kind"] == "joint"}
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise RigConfigError(f"session {session_id}: no samples of the {limb}'s "
+                             f"{', '.join(missing)}")
+    per = [store.samples.read(session_id, name=n, raw=False) for n in names]
+    common, idx = shared_instants([p["t"] for p in per])
+    if not len(common):
+        raise RigConfigError(f"session {session_id}: the {limb}'s joints have no sample time "
+                             "in common")
+    q = np.stack([p["q"][i] for p, i in zip(per, idx, strict=True)], axis=1)
+    side = sess.get("side")
+    prov = {"session": int(session_id), "started_at": sess.get("started_at"),
+            "source": "joint samples", "limb": limb}
+    return JointData(q, names, np.asarray(common, dtype=np.float64), None, parse_axis(None),
+                     side if side in ("left", "right") else None, prov, sess.get("pseudonym"),
+                     limb, _session_facts(store, sess, sensors), {})
 
 
 def session_shape(sess: dict) -> OneJointSession | WholeLimbSession:

@@ -205,8 +205,8 @@ class GuidedCalibration:
         IMU rigs: each child-segment sample is paired with the latest parent-segment sample
         (the stream device sends both in one frame with one timestamp).
         """
-        if self.rig.kind == "servo":
-            sel = batch.kind == "joint"
+        if self.rig.kind == "servo":  # the proximal joint's (a servo limb reads them all)
+            sel = (batch.kind == "joint") & (batch.name == self.rig.sensors[0].name)
             return batch.q[sel], batch.time()[sel]
         is_parent = batch.name == self.parent
         is_child = batch.name == self.child

@@ -184,10 +184,13 @@ class LimbProcedure:
 
     def solve(self, window, protocol, config, rig_kind: str) -> CalibrationResult:
         """The :class:`~calibration.limb_calibration.LimbImuCalibration` from the static
-        window and each joint's movement window (``window(name)``: the samples in it)."""
+        window and each joint's movement window (``window(name)``: the samples in it); a servo
+        limb's zero check (:func:`_servo_limb_check`)."""
         static = window("static")
-        return _solve_limb(static, {j: window(j) for j in protocol.joints}, self.limb,
-                           config.joint.side, protocol)
+        movements = {j: window(j) for j in protocol.joints}
+        if rig_kind == "servo":
+            return _servo_limb_check(static, movements)
+        return _solve_limb(static, movements, self.limb, config.joint.side, protocol)
 
     def live(self, model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
         """The live orientations of the limb's proximal joint (coverage, checkpoints)."""
@@ -337,3 +340,18 @@ def _servo_check(static: SampleBatch, functional: SampleBatch) -> CalibrationRes
     return CalibrationResult("servo-zero", data, residual, None)
 
 
+
+
+def _servo_limb_check(static: SampleBatch, movements: dict[str, SampleBatch]
+                      ) -> CalibrationResult:
+    """Servo limb: :func:`_servo_check` of every joint — its samples in the static pose and in
+    its own movement window (joint samples are named by their joint). No correction is
+    applied: the limb's zeros are the rig configuration's."""
+    data: dict = {"kind": "servo-limb-check", "joints": {}}
+    residual = 0.0
+    for joint, moving in movements.items():
+        one = _servo_check(static.select(static.name == joint),
+                           moving.select(moving.name == joint))
+        data["joints"][joint] = one.data
+        residual = max(residual, one.residual_deg)
+    return CalibrationResult("servo-zero", data, residual, None)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.joints import LIMB_CHAINS
 from rig.devices.config import load_rig_config
 from rig.devices.ports import open_port
 from rig.devices.sources import open_source
@@ -163,9 +164,10 @@ def open_rig(config, *, which: str | None = None, rate_hz: float | None = None,
                        for name in source.names]
             kind = "imu"
         else:
-            sensors = [SensorInfo(name, segment=config.joint.child, kind="joint",
-                                  port=ports[urls[0]].url)
-                       for name in source.names]
+            child = {name: c for name, _, c in LIMB_CHAINS.get(config.limb, ())}
+            sensors = [SensorInfo(name, segment=child.get(name, config.joint.child),
+                                  kind="joint", port=ports[urls[0]].url)
+                       for name in source.names]  # a servo limb's joints: each its segment
             kind = "servo"
         port_list = list(ports.values())
         sims = [p.simulator for p in port_list if p.simulator is not None]

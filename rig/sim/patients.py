@@ -47,6 +47,7 @@ from scipy.spatial.transform import Rotation
 
 from calibration.clinical import mirror_directions
 from calibration.joint_angles import from_angles
+from calibration.joints import JOINTS
 from calibration.protocol import CalibrationProtocol
 from models import quaternion as Q
 from models.constraint import JointConstraint, load_constraint
@@ -378,7 +379,7 @@ def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(rng.uniform(lo, hi))
 
 
-def _leg(rng: np.random.Generator) -> tuple[list[dict], dict]:
+def _leg(rng: np.random.Generator, kinds: dict) -> tuple[list[dict], dict]:
     # hip (AAOS 1965: flexion 120, extension 30, abduction 45, adduction 30, rotation 45 each)
     flex, slr = _u(rng, 100.0, 125.0), _u(rng, 60.0, 80.0)
     ext, add, abd = _u(rng, 10.0, 30.0), _u(rng, 15.0, 30.0), _u(rng, 30.0, 50.0)
@@ -419,7 +420,7 @@ def _leg(rng: np.random.Generator) -> tuple[list[dict], dict]:
     return joints, clinical
 
 
-def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
+def _arm(rng: np.random.Generator, kinds: dict) -> tuple[list[dict], dict]:
     # shoulder (AAOS 1965: flexion 180, extension 60, abduction 180, adduction 30-ish); below 165°
     # so that no vertex nears the neutral direction's antipode (swing-twist is singular there)
     flex, abd = _u(rng, 150.0, 162.0), _u(rng, 150.0, 162.0)
@@ -431,6 +432,7 @@ def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
     wflex, wext = _u(rng, 60.0, 80.0), _u(rng, 50.0, 70.0)
     radial, ulnar, wrist_tw = _u(rng, 15.0, 25.0), _u(rng, 25.0, 35.0), _u(rng, 3.0, 6.0)
     wr_notches, wr_jitter = _notches(rng, 1), _jitter(rng)
+    elbow, elbow_clinical = _ELBOWS[kinds.get("elbow", "hinge")](rng, elbow_lo, elbow_hi)
     sh_twist = {"min_deg": -internal, "max_deg": external}
     sh_kf = []
     for at, e in ((0.0, ext - ext_straight), (45.0, ext - 0.5 * ext_straight), (90.0, ext)):
@@ -439,8 +441,7 @@ def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
             "twist": dict(sh_twist)}})
     joints = [
         {"coupled": {"by": "elbow", "keyframes": sh_kf}},
-        {"constraint": {"kind": "hinge", "hinge": {"axis": [0.0, 0.0, 1.0],
-                                                   "min_deg": elbow_lo, "max_deg": elbow_hi}}},
+        {"constraint": elbow},
         {"constraint": {"kind": "two-axis",
                         "swing": _swing_polygon("wrist", (wflex, ulnar, wext, radial),
                                                 wr_notches, wr_jitter),
@@ -450,13 +451,40 @@ def _arm(rng: np.random.Generator) -> tuple[list[dict], dict]:
                              "extension_elbow_straight": ext - ext_straight, "abduction": abd,
                              "adduction": add, "internal_rotation": internal,
                              "external_rotation": external},
-                "elbow": {"flexion": elbow_hi, "extension": -elbow_lo},
+                "elbow": {"flexion": elbow_hi, "extension": -elbow_lo, **elbow_clinical},
                 "wrist": {"flexion": wflex, "extension": wext, "radial_deviation": radial,
                           "ulnar_deviation": ulnar, "twist": wrist_tw}}
     return joints, clinical
 
 
-def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
+def _hinge_elbow(rng: np.random.Generator, lo: float, hi: float) -> tuple[dict, dict]:
+    """The elbow a hinge about +Z over ``[lo, hi]`` degrees (draws nothing more); its
+    constraint and its clinical limits beyond flexion and extension (none)."""
+    return {"kind": "hinge", "hinge": {"axis": [0.0, 0.0, 1.0], "min_deg": lo,
+                                       "max_deg": hi}}, {}
+
+
+def _forearm_elbow(rng: np.random.Generator, lo: float, hi: float) -> tuple[dict, dict]:
+    """The elbow a forearm joint: flexion about +Z over ``[lo, hi]``, then pronation 70-85° and
+    supination 75-90° about the forearm's long axis (AAOS 1965: 80 and 80; pronation is the
+    rotation's negative direction, :mod:`models.kinds.forearm`). Drawn after every other draw
+    of the arm (:func:`anatomical_limb` calls it last): the rest of the arm is the hinge arm's
+    of the same seed."""
+    pron, sup = _u(rng, 70.0, 85.0), _u(rng, 75.0, 90.0)
+    return {"kind": "forearm", "forearm": {"flexion": {"axis": [0.0, 0.0, 1.0], "min_deg": lo,
+                                                       "max_deg": hi},
+                                           "rotation": {"min_deg": -pron, "max_deg": sup}}}, \
+        {"pronation": pron, "supination": sup}
+
+
+#: How an anatomical arm's elbow is drawn, by its kind (:func:`anatomical_limb`'s ``kinds``).
+_ELBOWS = {"hinge": _hinge_elbow, "forearm": _forearm_elbow}
+#: The kinds an anatomical limb's joints may take: their own (calibration.joints) or these.
+_KIND_OPTIONS = {"elbow": tuple(_ELBOWS)}
+
+
+def anatomical_limb(seed: int, limb: str = "leg", side: str = "right", *,
+                    kinds: dict[str, str] | None = None):
     """A seeded, physiologically plausible arm or leg with couplings: the ground truth of a
     :class:`~rig.sim.limb.SimulatedWholeLimb` patient.
 
@@ -483,6 +511,10 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
       elbow 0, 45, 90°, extension 10-20° less with the elbow straight. Elbow: a hinge about
       ``(0, 0, 1)`` (its angle is elbow flexion), ``[−(0..5), 135..150]``. Wrist: two-axis,
       flexion 60-80, extension 50-70, radial 15-25, ulnar deviation 25-35, twist ±3-6°.
+      With ``kinds={"elbow": "forearm"}`` the elbow is a forearm joint (:mod:`models.kinds.
+      forearm`): the same flexion interval, then pronation 70-85 and supination 75-90 about
+      the forearm's long axis — drawn last, so the rest of the arm is the hinge arm's of the
+      seed (a servo arm's elbow turns about both, ``rig/configs/sim-servo-arm.yaml``).
 
     Each pure movement's limit is a polygon vertex on that movement's great circle, so
     :func:`calibration.joint_angles.joint_angles` of the boundary reads it back; the neutral
@@ -494,6 +526,10 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
     seed : int
     limb : {"arm", "leg"}
     side : {"right", "left"}
+    kinds : dict, optional
+        Joint → kind (:mod:`models.kinds`) where it differs from the joint's own
+        (:data:`calibration.joints.JOINTS`): the arm's elbow may be a ``forearm``; a joint's
+        own kind may be given too.
 
     Returns
     -------
@@ -505,8 +541,17 @@ def anatomical_limb(seed: int, limb: str = "leg", side: str = "right"):
         raise ValueError(f"limb must be 'arm' or 'leg', got {limb!r}")
     if side not in ("left", "right"):
         raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    kinds = dict(kinds or {})
+    for joint, kind in kinds.items():
+        spec = JOINTS.get(joint)
+        if spec is None or spec.limb != limb:
+            raise ValueError(f"kinds: the {limb} has no joint {joint!r}")
+        allowed = (spec.kind, *_KIND_OPTIONS.get(joint, ()))
+        if kind not in allowed:
+            raise ValueError(f"kinds: the simulated {joint} is a {' or a '.join(allowed)}, "
+                             f"not a {kind}")
     rng = np.random.default_rng([seed, 0x11B, 0 if limb == "arm" else 1])
-    joints, clinical = (_arm if limb == "arm" else _leg)(rng)
+    joints, clinical = (_arm if limb == "arm" else _leg)(rng, kinds)
     doc_joints = []
     for (name, parent, child), body in zip(_CHAINS[limb], joints, strict=True):
         j = {"name": name, "parent": parent, "child": child, **body}
@@ -601,7 +646,8 @@ def seeded_patient(seed: int, limb, side: str = "right", *, noise: NoiseModel | 
                   neutral_every_s=neutral, **kwargs)
 
 
-def limb_from_url(q: SimUrl, *, sensors: int | None = None):
+def limb_from_url(q: SimUrl, *, sensors: int | None = None, kinds: dict[str, str] | None = None,
+                  misplaced_straps: bool = True):
     """The arm or leg patient a port string describes, or None when it names none: ``limb=arm|leg``
     (an :func:`anatomical_limb` of ``seed`` and ``side``) or ``patient=`` a limb file
     (:func:`models.limb.load_limits`; ``side`` is then the file's). The other patient keys as
@@ -614,6 +660,12 @@ def limb_from_url(q: SimUrl, *, sensors: int | None = None):
     q : SimUrl
     sensors : int or None
         The port's ``sensors`` value: an arm or leg wears 4.
+    kinds : dict, optional
+        The anatomical limb's joint kinds (:func:`anatomical_limb`; a servo arm's forearm
+        elbow).
+    misplaced_straps : bool
+        Straps drawn by ``misplace_deg`` (IMU simulators); False: the nominal straps (a servo
+        limb wears no IMU).
 
     Raises
     ------
@@ -646,10 +698,13 @@ def limb_from_url(q: SimUrl, *, sensors: int | None = None):
                              f"patient wears 4 sensors (one per segment)")
     seed = q.integer("seed", 0)
     noise, excursion, speed, neutral, neutral_sd = _motion_keys(q)
-    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0)
+    misplace = q.number("misplace_deg", 5.0, 0.0, 90.0) if misplaced_straps else 0.0
     calibrate = q.flag("calibrate", False)
     if truth is None:
-        truth = anatomical_limb(seed, kind, side)
+        try:
+            truth = anatomical_limb(seed, kind, side, kinds=kinds)
+        except ValueError as err:
+            raise RigConfigError(f"{q.url}: limb={kind}: {_one_line(err)}") from err
     try:
         return seeded_patient(seed, truth, noise=noise, misplace_deg=misplace,
                              calibrate=calibrate, protocol_start_s=2.0, neutral=neutral,

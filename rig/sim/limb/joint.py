@@ -287,6 +287,11 @@ class SimulatedJoint(SimulatedLimb):
         q = self._path(t, lambda ts: self._target(ts, schedule), schedule)
         return self.motion.project(q)
 
+    def joints(self, t) -> np.ndarray:
+        """The posture (N, 1, 4) at times ``t`` (N,): :meth:`joint` as a limb of one joint
+        (:meth:`SimulatedWholeLimb.joints <rig.sim.limb.SimulatedWholeLimb.joints>`' shape)."""
+        return self.joint(t)[:, None]
+
     def thorax(self, t) -> np.ndarray:
         """Thorax relative to world (N, 4) at times ``t`` (N,)."""
         return self.posture(t)

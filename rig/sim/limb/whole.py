@@ -292,7 +292,7 @@ def _free(m, t: np.ndarray) -> np.ndarray:
     hundred °/s) and the push saturates smoothly from ``min(reach, 110°)`` towards 30° more
     (not 120° → 170°): the radial stop aims from the centre, and a direction near the
     centre's antipode has no steady azimuth about it."""
-    if isinstance(m, _HingeMotion):
+    if isinstance(m, (_HingeMotion, _ForearmMotion)):
         return m.free(t)
     return m.free(t, reach_cap=_REACH_CAP, knee=min(m.reach, _PUSH_KNEE), room=_PUSH_ROOM,
                   twist_room=_TWIST_ROOM)
@@ -314,6 +314,29 @@ class _HingeMotion:
         room = _HINGE_ROOM
         angle = self.mid + room * np.tanh(self.excursion * self.half * self.series(0, t) / room)
         return Q.from_axis_angle(self.axis, angle)
+
+
+class _ForearmMotion:
+    """A forearm joint's free motion: flexion about its axis then rotation about the limb axis
+    (:mod:`models.kinds.forearm`), each as a hinge's (:class:`_HingeMotion`) over its own
+    interval, from its own sinusoid: ``F(θ(t)) ⊗ R(φ(t))``."""
+
+    def __init__(self, c: JointConstraint, series: Sinusoids, excursion: float) -> None:
+        lim = c.limits
+        self.axis = Q.check_vectors(lim.axis)
+        self.limb_axis = Q.check_vectors(c.limb_axis)
+        self.intervals = [np.radians([lim.flexion_min_deg, lim.flexion_max_deg]),
+                          np.radians([lim.rotation_min_deg, lim.rotation_max_deg])]
+        self.series = series
+        self.excursion = float(excursion)
+
+    def free(self, t: np.ndarray) -> np.ndarray:
+        room = _HINGE_ROOM
+        angles = [0.5 * (lo + hi) + room * np.tanh(
+            self.excursion * 0.5 * (hi - lo) * self.series(k, t) / room)
+            for k, (lo, hi) in enumerate(self.intervals)]
+        return Q.multiply(Q.from_axis_angle(self.axis, angles[0]),
+                          Q.from_axis_angle(self.limb_axis, angles[1]))
 
 
 class SimulatedWholeLimb(SimulatedLimb):
@@ -401,14 +424,21 @@ class SimulatedWholeLimb(SimulatedLimb):
         self.oracle = ConstraintOracle(limb)
         self.excursion = float(excursion)
         rng, seed_seq = seeded(seed)
-        # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; sway
-        rows = [1 if j.joint_kind.single_axis else 3 for j in limb.joints]
+        # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; per
+        # forearm joint (a flexion axis, not single-axis) its flexion and rotation; sway
+        flexes = [j.constraint is not None and not j.joint_kind.single_axis
+                  and j.joint_kind.flexion_axis(j.constraint) is not None for j in limb.joints]
+        rows = [1 if j.joint_kind.single_axis else 2 if f else 3
+                for j, f in zip(limb.joints, flexes, strict=True)]
         series = Sinusoids.draw(rng, sum(rows) + 2, speed)
-        self.motions: list[JointMotion | _HingeMotion] = []
+        self.motions: list[JointMotion | _HingeMotion | _ForearmMotion] = []
         r = 0
-        for j, n in zip(limb.joints, rows, strict=True):
+        for j, n, f in zip(limb.joints, rows, flexes, strict=True):
             if j.joint_kind.single_axis:
                 self.motions.append(_HingeMotion(j.loosest(), series.rows(r, r + 1), excursion))
+            elif f:
+                self.motions.append(_ForearmMotion(j.loosest(), series.rows(r, r + 2),
+                                                   excursion))
             else:
                 c = _loosest(j)
                 self.motions.append(JointMotion(c, series.rows(r, r + 3),
