@@ -595,26 +595,46 @@ def _slerp(c: np.ndarray, b: np.ndarray, s) -> np.ndarray:
     return Q.multiply(Q.from_axis_angle(axis, np.asarray(s, dtype=np.float64) * ang), c)
 
 
-class _Excursion:
-    """A path ``s ↦ exp(s·log(b ⊗ c⁻¹)) ⊗ c`` per joint, in plain floats (the hot path: a few
-    µs per call for an arm, no numpy arrays built but the one returned)."""
+class _Path:
+    """A path of postures precomputed at ``K`` points (``table`` (K, J, 4), consecutive rows a
+    small rotation apart), played by :meth:`at`: the nearest row — every posture of the path
+    the oracle's own (a posture between two rows of a hinge or forearm joint would be off its
+    axes by a rounding error, which the oracle counts as outside) — and past its end the last
+    step continued, in plain floats."""
 
-    __slots__ = ("axes", "angles", "centre")
+    __slots__ = ("table", "last", "step_angles", "step_axes", "end")
 
-    def __init__(self, c: np.ndarray, b: np.ndarray):
-        rel = Q.multiply(b, Q.conjugate(c))
-        rel = np.where(rel[:, :1] < 0, -rel, rel)
-        self.angles = Q.angle(rel).tolist()
-        vn = np.linalg.norm(rel[:, 1:], axis=1, keepdims=True)
-        ax = np.where(vn > 1e-15, rel[:, 1:] / np.where(vn > 1e-15, vn, 1.0), 0.0)
-        self.axes = [tuple(a) for a in ax.tolist()]
-        self.centre = [tuple(q) for q in np.asarray(c, dtype=np.float64).tolist()]
+    def __init__(self, table: np.ndarray):
+        self.table = np.ascontiguousarray(table, dtype=np.float64)
+        self.last = len(self.table) - 1
+        rel = Q.multiply(self.table[1:], Q.conjugate(self.table[:-1]))
+        rel = np.where(rel[..., :1] < 0, -rel, rel)
+        self.step_angles = Q.angle(rel)  # (K-1, J)
+        vn = np.linalg.norm(rel[..., 1:], axis=-1, keepdims=True)
+        self.step_axes = np.where(vn > 1e-15, rel[..., 1:] / np.where(vn > 1e-15, vn, 1.0),
+                                  0.0)
+        self.end = list(zip(self.step_angles[-1].tolist(), self.step_axes[-1].tolist(),
+                            self.table[-1].tolist(), strict=True))
 
-    def at(self, s: float) -> np.ndarray:
-        out = np.empty((len(self.angles), 4))
-        for j, (ang, (ax, ay, az), cq) in enumerate(zip(self.angles, self.axes, self.centre,
-                                                         strict=True)):
-            h = 0.5 * s * ang
+    def step_deg(self) -> float:
+        """The largest rotation of any joint between consecutive rows, degrees."""
+        return float(np.degrees(self.step_angles.max(initial=0.0)))
+
+    def beyond(self, extra_rad: float) -> float:
+        """The ``u`` past 1 at which the last step, continued, has turned the joint it turns
+        most by ``extra_rad`` (1.0 when the path ends still)."""
+        step = float(self.step_angles[-1].max())
+        return 1.0 if step < 1e-9 else 1.0 + extra_rad / step / self.last
+
+    def at(self, u: float) -> np.ndarray:
+        """The posture at ``u`` ∈ [0, 1] along the path (beyond 1: its last step continued)."""
+        x = max(0.0, u) * self.last
+        if x <= self.last:
+            return self.table[int(x + 0.5)]
+        f = x - self.last
+        out = np.empty((len(self.end), 4))
+        for j, (ang, (ax, ay, az), cq) in enumerate(self.end):
+            h = 0.5 * f * ang
             sn = math.sin(h)
             out[j] = qs.mul((math.cos(h), ax * sn, ay * sn, az * sn), cq)
         return out
@@ -622,17 +642,22 @@ class _Excursion:
 
 class _LimbMotions:
     """The scripts of :class:`ScriptedTargets` for a limb, built from its exact oracle alone
-    (any joints' kinds: every posture is judged by the oracle, never by a kind's geometry).
+    (any joints' kinds: every posture is the oracle's or judged by it, never by a kind's
+    geometry).
 
-    Valid postures are drawn as fractions of the way from a deep valid posture (the
-    **centre**) to projections of random postures (valid, on or inside the boundary: the way
-    stays on a hinge's axis, in a two-axis joint's region), kept when the oracle says every
-    joint is at least a margin inside its limits. The centre starts at the projection of the
-    neutral posture (identity in every joint) and moves to the deepest such posture found.
+    Valid postures are projections of postures a fraction of the way from a deep valid posture
+    (the **centre**) to projections of random postures (the projection keeps a hinge on its
+    axis, a forearm joint on its two axes, which a straight way between two of their postures
+    leaves), kept when the oracle says every joint is at least a margin inside its limits. The
+    centre starts at the projection of the neutral posture (identity in every joint) and moves
+    to the deepest such posture found. Paths are such projections at :data:`STEPS` points,
+    played by :class:`_Path` (nearest point).
     """
 
     #: How far inside every joint a posture of the valid pools is (rad).
     MARGIN = math.radians(2.0)
+    #: Points of a precomputed slow or sweep path (a row every ~4 ms at the default period).
+    STEPS = 2049
 
     def __init__(self, oracle, rng: np.random.Generator, script: ScriptedTargets):
         self.o = oracle
@@ -660,21 +685,25 @@ class _LimbMotions:
         """Projections of ``n`` random postures: valid, most of them on the boundary."""
         return self.o.project(self._random(n))
 
+    def _towards(self, b: np.ndarray, f) -> np.ndarray:
+        """The projections of postures a fraction ``f`` of the way from the centre to ``b``."""
+        return self.o.project(_slerp(self.centre[None], b, f))
+
     def _find_centre(self) -> np.ndarray:
         ident = np.zeros((1, self.J, 4))
         ident[..., 0] = 1.0
-        c = self.o.project(ident)[0]
-        best = float(self._depth(c[None])[0])
-        for _ in range(3):
+        self.centre = self.o.project(ident)[0]
+        best = float(self._depth(self.centre[None])[0])
+        for _ in range(4):
             b = self._boundary(1000)
-            for f in (0.3, 0.5):
-                m = _slerp(c[None], b, f)
+            for f in (0.2, 0.4):
+                m = self._towards(b, f)
                 d = self._depth(m)
                 k = int(np.argmax(d))
                 if d[k] > best:
-                    c, best = m[k], float(d[k])
+                    self.centre, best = m[k], float(d[k])
         self.depth = best
-        return c
+        return self.centre
 
     def _valid_pool(self, n: int, lo: float, hi: float, margin: float) -> np.ndarray:
         """Up to ``n`` valid postures ``margin`` inside every joint, a fraction ``lo``..``hi``
@@ -682,36 +711,41 @@ class _LimbMotions:
         out: list[np.ndarray] = []
         for _ in range(8):
             b = self._boundary(2 * n)
-            p = _slerp(self.centre[None], b, self.rng.uniform(lo, hi, (len(b), 1)))
+            p = self._towards(b, self.rng.uniform(lo, hi, (len(b), 1)))
             out.extend(p[self._depth(p) >= margin])
             if len(out) >= n:
                 break
         return np.array(out[:n]).reshape(-1, self.J, 4)
 
-    def _path_valid(self, ends: np.ndarray, margin: float, steps: int = 33) -> np.ndarray:
-        """(N,) whether the whole way from the centre to each of ``ends`` is ``margin``
-        inside."""
-        s = np.linspace(0.0, 1.0, steps)
-        p = _slerp(self.centre[None, None], ends[:, None], s[None, :, None])
-        return (self._depth(p.reshape(-1, self.J, 4)).reshape(len(ends), steps)
-                >= margin).all(axis=1)
+    def _path(self, end: np.ndarray, steps: int) -> np.ndarray:
+        """(steps, J, 4): the projected way from the centre to ``end``."""
+        s = np.linspace(0.0, 1.0, steps)[:, None]
+        return self._towards(np.broadcast_to(end, (steps, self.J, 4)), s)
 
     # -- slow and sweep ----------------------------------------------------------------------
     def _build_slow(self) -> None:
-        cand = self._valid_pool(64, 0.4, 0.7, self.MARGIN)
-        ok = cand[self._path_valid(cand, math.radians(1.0))] if len(cand) else cand
-        ends = ok[:8] if len(ok) else self.centre[None]
-        self._excursions = [_Excursion(self.centre, e) for e in ends]
+        paths = []
+        for end in self._valid_pool(48, 0.4, 0.8, self.MARGIN):
+            table = self._path(end, 257)
+            if (self._depth(table) >= math.radians(1.0)).all() and \
+                    _Path(table).step_deg() < 2.0:
+                # dense: a row per cycle or so at 200 Hz (steps < 0.25°)
+                paths.append(_Path(self._path(end, self.STEPS)))
+            if len(paths) == 8:
+                break
+        self._paths = paths or [_Path(np.stack([self.centre, self.centre]))]
 
     def _build_sweep(self) -> None:
+        """12 sweeps, each of one joint in turn (the others at the centre) to a projected
+        boundary posture and 30° beyond along the way's last step."""
         b = self._boundary(12)
-        self._excursions = [_Excursion(self.centre, e) for e in b]
-        reach = []
-        for ex in self._excursions:
-            far = max(ex.angles)
-            reach.append(1.0 if far < 1e-9 else
-                         min(1.0 + math.radians(30.0) / far, math.radians(170.0) / far))
-        self._reach = reach
+        self._paths, self._reach = [], []
+        for i, end in enumerate(b):
+            one = self.centre.copy()
+            one[i % self.J] = end[i % self.J]
+            path = _Path(self._path(one, self.STEPS))
+            self._paths.append(path)
+            self._reach.append(path.beyond(math.radians(30.0)))
 
     # -- adversarial -------------------------------------------------------------------------
     def _build_adversarial(self) -> None:
@@ -733,14 +767,15 @@ class _LimbMotions:
         # apart in some joint
         r = self._random(3000)
         jj = rng.integers(0, J, 3000)
-        step = Q.from_axis_angle(Q.random_unit_vectors(3000, rng), np.full(3000, math.radians(1.0)))
+        step = Q.from_axis_angle(Q.random_unit_vectors(3000, rng),
+                                 np.full(3000, math.radians(1.0)))
         r2 = r.copy()
         r2[np.arange(3000), jj] = Q.multiply(step, r[np.arange(3000), jj])
         p1, p2 = o.project(r), o.project(r2)
         jump = Q.angle(Q.multiply(p1, Q.conjugate(p2))).max(axis=1) > math.radians(10)
         self._pairs = list(zip(r[jump][:32], r2[jump][:32], strict=True))
-        # coupled: pairs of valid postures near the boundary, one joint taken from the other
-        near = self._valid_pool(1500, 0.7, 1.0, math.radians(0.5))
+        # coupled: pairs of valid postures, one joint taken from the other
+        near = self._valid_pool(1500, 0.5, 1.0, math.radians(0.5))
         self._coupled_source, self._coupled_dependent = self._coupled(near)
         bad = np.array([(math.nan,) * 4, (0.0,) * 4, (math.inf, 0.0, 0.0, 0.0),
                         (2.0, 0.0, 0.0, 0.0), (math.nan, 1.0, 0.0, 0.0), (0.5, 0.5, 0.5, 0.3)])
@@ -756,31 +791,35 @@ class _LimbMotions:
         self.segments = tuple(k for k in segs if have.get(k, 1))
 
     def _coupled(self, near: np.ndarray) -> tuple[list, list]:
-        """``(start, moving joint, end)`` triples: a valid posture, then the joint a coupled
-        joint depends on (``coupled_source``) or the coupled joint itself
-        (``coupled_dependent``) moved to another valid posture's, after which the coupled
-        joint alone is outside its limits (by 3° or more)."""
+        """Ramps ``(K, J, 4)``: a valid posture, then the joint a coupled joint depends on
+        (``coupled_source``: its way projected, so that it stays a posture of its joint) or
+        the coupled joint itself (``coupled_dependent``) moved to another valid posture's,
+        after which the coupled joint alone is outside its limits (by 3° or more)."""
         o, J, limb = self.o, self.J, self.o.limb
         src_list: list = []
         dep_list: list = []
         if len(near) < 2:
             return src_list, dep_list
-        n = 4000
-        ia = self.rng.integers(0, len(near), n)
-        ib = self.rng.integers(0, len(near), n)
-        a, b = near[ia], near[ib]
+        n = 6000
+        a = near[self.rng.integers(0, len(near), n)]
+        b = near[self.rng.integers(0, len(near), n)]
+        s = np.linspace(0.0, 1.0, 129)[:, None]
         for j, joint in enumerate(limb.joints):
             if joint.coupling is None:
                 continue
-            s = limb.index(joint.coupling.by)
+            src = limb.index(joint.coupling.by)
             others = [k for k in range(J) if k != j]
-            for moving, start, end_from, out in ((s, a, b, src_list), (j, b, a, dep_list)):
+            for moving, start, end_from, out in ((src, a, b, src_list), (j, b, a, dep_list)):
                 end = start.copy()
                 end[:, moving] = end_from[:, moving]
                 d = o.signed_distance(end)
                 hit = (d[:, j] > math.radians(3.0)) & (d[:, others] <= 0).all(axis=1)
                 for k in np.flatnonzero(hit)[:16]:
-                    out.append((start[k], moving, end[k]))
+                    ramp = np.repeat(start[k][None], len(s), axis=0)
+                    ramp[:, moving] = _slerp(start[k][moving], end[k][moving], s[:, 0])
+                    if moving == src:  # the source's own way: its projection
+                        ramp[:, moving] = o.project(ramp)[:, moving]
+                    out.append(_Path(ramp))
         return src_list, dep_list
 
     # -- the motion --------------------------------------------------------------------------
@@ -790,17 +829,12 @@ class _LimbMotions:
         name = sc.name
         if name == "hold":
             return t, self.centre.copy()
-        if name == "slow":
+        if name in ("slow", "sweep"):
             k = int(e // sc.period_s)
             frac = (e / sc.period_s) % 1.0
-            ex = self._excursions[k % len(self._excursions)]
-            return t, ex.at(0.5 * (1.0 - math.cos(2.0 * math.pi * frac)))
-        if name == "sweep":
-            k = int(e // sc.period_s)
-            frac = (e / sc.period_s) % 1.0
-            i = k % len(self._excursions)
-            return t, self._excursions[i].at(self._reach[i] * 0.5
-                                             * (1.0 - math.cos(2.0 * math.pi * frac)))
+            i = k % len(self._paths)
+            reach = self._reach[i] if name == "sweep" else 1.0
+            return t, self._paths[i].at(reach * 0.5 * (1.0 - math.cos(2.0 * math.pi * frac)))
         e = max(0.0, e)
         seg_i = int(e / sc.segment_s)
         kind = self.segments[seg_i % len(self.segments)]
@@ -812,15 +846,8 @@ class _LimbMotions:
         if kind in ("coupled_source", "coupled_dependent"):
             table = self._coupled_source if kind == "coupled_source" else \
                 self._coupled_dependent
-            start, moving, end = table[seg_i % len(table)]
-            u = in_seg / sc.segment_s
-            if u < 0.3:
-                return t, start
-            if u >= 0.8:
-                return t, end
-            p = start.copy()
-            p[moving] = _slerp(start[moving], end[moving], (u - 0.3) / 0.5)
-            return t, p
+            u = in_seg / sc.segment_s  # held, moved over the middle half, held
+            return t, table[seg_i % len(table)].at(min(1.0, max(0.0, (u - 0.3) / 0.5)))
         if kind == "discontinuity":
             a, b = self._pairs[held % len(self._pairs)]
             return t, (a if tick % 2 == 0 else b)
