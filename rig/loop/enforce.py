@@ -37,7 +37,7 @@ from rig.loop.realtime import check_cpu
 from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig, prepare_servo_limb
 from rig.loop.supervisor import SupervisorConfig
 from rig.loop.targets import open_targets
-from rig.loop.telemetry import Telemetry
+from rig.loop.telemetry import Telemetry, telemetry_columns
 
 __all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
            "run_enforce"]
@@ -343,7 +343,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
 
                 store_writer = TelemetryWriter(store, run_id)
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
-                                  keep=hooks.keep_telemetry)
+                                  keep=hooks.keep_telemetry,
+                                  columns=telemetry_columns(limb.kinematics.names))
             opened.callback(telemetry.close)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}
