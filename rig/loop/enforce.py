@@ -350,9 +350,9 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 from rig.store import TelemetryWriter  # lazy like open_store: --db is optional
 
                 store_writer = TelemetryWriter(store, run_id)
-            columns = telemetry_columns(tuple(limb.kinematics.names))
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
-                                  keep=hooks.keep_telemetry, columns=columns)
+                                  keep=hooks.keep_telemetry,
+                                  columns=telemetry_columns(limb.kinematics.names))
             opened.callback(telemetry.close)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}

@@ -1,0 +1,131 @@
+"""The limb loop's compute per cycle (supervisor + IK + FK, optionally a limb model), 7 servos:
+inside the loop against the same work alone, same run.
+
+A 7-servo arm (shoulder Z-Y'-X'', elbow hinge Z, wrist Z-Y'-X'') on ``sim://dynamixel`` driven by
+a manual clock (the simulator advances exactly one period per cycle, so the figures are the
+compute's, not the scheduler's), enforcing a held-out arm limb file whose shoulder is coupled to
+the elbow (:func:`models.limb_evaluation.random_limb`), targets from the held-out postures held
+30 cycles each (valid and invalid). *Inside*: the telemetry's ``compute_ms`` (target → supervisor
+→ IK → FK → final check). *Alone*: the same targets through a fresh
+:class:`~rig.loop.limb_supervisor.LimbSupervisor` and the same kinematics in a tight loop.
+Prints the machine's 10⁷-additions loop time beside the figures.
+
+Run: ``python benchmarks/bench_loop_limb.py [--cycles 4000] [--model LIMB.onnx]``. Figures,
+never assertions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+import numpy as np
+
+from models.limb_evaluation import held_out_postures, random_limb
+from models.onnx_io import load_model
+from models.oracle import ConstraintOracle
+from rig.devices.dynamixel import DynamixelBus
+from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
+from rig.devices.ports import open_port
+from rig.devices.servo_limb import ServoLimb
+from rig.errors import UnreachableError
+from rig.loop import EnforcementLoop, LoopConfig
+from rig.loop.limb_supervisor import LimbSupervisor
+from rig.loop.targets import TargetSource
+
+URL = "sim://dynamixel?ids=1-7&model=XM430-W350&return_delay_us=0&clock=manual&wire_time=off"
+
+
+def kinematics() -> LimbKinematics:
+    z, y, x = (0, 0, 1), (0, 1, 0), (1, 0, 0)
+
+    def ax(i, a):
+        return ServoAxis(id=i, axis=a, zero_ticks=2048, direction=1, min_ticks=0,
+                         max_ticks=4095)
+    return LimbKinematics([JointKinematics([ax(1, z), ax(2, y), ax(3, x)]),
+                           JointKinematics([ax(4, z)]),
+                           JointKinematics([ax(5, z), ax(6, y), ax(7, x)])],
+                          names=("shoulder", "elbow", "wrist"))
+
+
+class Postures(TargetSource):
+    def __init__(self, pool, hold=30, period=0.005):
+        self.pool, self.hold, self.period = pool, hold, period
+
+    def latest(self, t):
+        k = int(round((t - self.t0) / self.period))
+        return t, self.pool[(k // self.hold) % len(self.pool)]
+
+
+def additions() -> float:
+    t = time.perf_counter()
+    s = 0
+    for i in range(10 ** 7):
+        s += i
+    return time.perf_counter() - t
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cycles", type=int, default=4000)
+    ap.add_argument("--model", default=None, help="a limb model (.onnx) for the arm limb")
+    args = ap.parse_args()
+    limb = random_limb(20261128, "arm")
+    oracle = ConstraintOracle(limb).prepare()
+    pool = held_out_postures(limb, 60, np.random.default_rng(7), oracle=oracle)
+    start = pool[int(np.flatnonzero(oracle.is_valid(pool).all(axis=1))[0])]
+    model = None if args.model is None else load_model(args.model, limb=True)
+    kin = kinematics()
+    t10 = additions()
+    with open_port(URL, baud=1_000_000) as port:
+        sim = port.simulator
+        for i, t in zip(kin.ids, kin.inverse(start, kin.zero_ticks), strict=True):
+            sim.set_hand(i, float(t))
+        sim.clock.advance(0.01)
+        sl = ServoLimb(DynamixelBus(port, list(kin.ids)), kin)
+        try:
+            sl.bus.configure()
+            loop = EnforcementLoop(sl, model, oracle, Postures(pool), LoopConfig(
+                watchdog_ms=1000), clock=sim.clock, sleep=sim.clock.sleep)
+            loop.setup()
+            summary = loop.run(max_cycles=args.cycles)
+        finally:
+            sl.close()
+    inside = loop.telemetry.compute_ms() * 1e3
+    # the same work alone: the same targets, a fresh supervisor, the same kinematics
+    sup = LimbSupervisor(oracle, period_s=0.005, names=kin.names)
+    sup.reset(0.0, start)
+    ticks = kin.inverse(start, kin.zero_ticks)
+    commanded = list(map(tuple, start))
+    alone = np.empty(args.cycles)
+    for k in range(args.cycles):
+        t0 = time.perf_counter()
+        t = 0.005 * (k + 1)
+        tq = sup.admit(t, pool[(k // 30) % len(pool)], t)
+        corr = None
+        if tq is not None and model is not None:
+            corr = np.asarray(model.correct_one(np.array(tq)), dtype=np.float64)
+        goal = sup.step(t, tq, corr)
+        try:
+            gt = np.concatenate([j.inverse(g, ticks[s]) for j, g, s in
+                                 zip(kin.joints, goal, kin.slices, strict=True)])
+            cand = [j.forward_one(gt[s]) for j, s in zip(kin.joints, kin.slices, strict=True)]
+            if sup.accept(cand):
+                ticks, commanded = gt, cand
+            else:
+                sup.revert(commanded)
+        except UnreachableError:
+            sup.revert(commanded)
+        alone[k] = (time.perf_counter() - t0) * 1e6
+    p_in, p_al = float(np.median(inside)), float(np.median(alone))
+    print(f"10^7 additions: {t10:.2f} s")
+    print(f"cycles {summary['cycles']}, warm-ups {loop.warm_ups}, max violation "
+          f"{summary['max_violation_deg']:.3f} deg, model {'yes' if model else 'no'}")
+    print(f"compute inside the loop: p50 {p_in:.0f} us, p99 {np.percentile(inside, 99):.0f} us")
+    print(f"the same work alone:     p50 {p_al:.0f} us, p99 {np.percentile(alone, 99):.0f} us")
+    print(f"ratio inside / alone (medians): {p_in / p_al:.2f}")
+
+
+if __name__ == "__main__":
+    main()
