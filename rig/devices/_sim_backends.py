@@ -68,6 +68,9 @@ BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
 (``seed`` is the bus's, shared)."""
 
+_BLOCK_MS = 100  # the back-drive's ticks are computed this many milliseconds at a time
+_AHEAD_BLOCKS = 3  # ... and this many blocks ahead of the last one asked for
+
 PUSHED_TOLERANCE_DEG = 180.0
 """The IK tolerance of a back-driven joint: any orientation, to the nearest its axes reach."""
 
@@ -110,32 +113,88 @@ def _patient(limb: Any, clock: Any, clock_t0: float, **kwargs: Any) -> Simulated
 
 
 class _BackDrive:
-    """Servo ticks of a simulated patient through its limb's IK, cached per millisecond.
+    """Servo ticks of a simulated patient through its limb's IK, one value per millisecond.
 
     ``limb`` is the patient (:meth:`~rig.sim.limb.SimulatedLimb.joints`: its posture, (N, J, 4))
     and ``kinematics`` the servo limb's :class:`~rig.devices.kinematics.LimbKinematics` of the
     same J joints: each joint's servos take the IK solution of its orientation nearest their
-    previous ticks; a joint whose orientation is out of its reach stays put (the others move).
+    ticks of the millisecond before; a joint whose orientation is out of its reach stays put
+    (the others move).
+
+    The ticks are computed in blocks of :data:`_BLOCK_MS` milliseconds (the patient's posture
+    vectorised over the block), in order from time 0, by a worker thread that keeps
+    :data:`_AHEAD_BLOCKS` blocks ahead of the last one asked for: a whole limb's patient
+    computes its motion's knots in bursts of up to a hundred milliseconds, which the servos'
+    answers must not wait for. A block not ready when asked is computed there and then.
+    A protocol the patient is told to perform starts seconds later
+    (:meth:`~rig.devices.port.SimulatedPatient.start_protocol`), after the blocks computed
+    ahead.
     """
 
     def __init__(self, limb: Any, kinematics: Any, t0: float) -> None:
         self.limb = limb
         self.kin = kinematics
         self.t0 = t0
-        self._lock = threading.Lock()
-        self._key: int | None = None
-        self._ticks = kinematics.zero_ticks.astype(np.float64)
+        self._lock = threading.Lock()  # computing blocks, in order
+        self._blocks: dict[int, np.ndarray] = {}
+        self._next = 0  # the first block not computed
+        self._last = kinematics.zero_ticks.astype(np.float64)
         self.unreachable = 0
+        self._wanted = 0
+        self._wake = threading.Condition()
+        self._closed = False
+        self._worker = threading.Thread(target=self._work, name="back-drive", daemon=True)
+        self._worker.start()
 
     def ticks(self, now: float) -> np.ndarray:
-        key = int(now * 1000.0)
-        with self._lock:
-            if key != self._key:
-                self._key = key
-                q = self.limb.joints(max(0.0, key / 1000.0 - self.t0))[0]
-                self._ticks, missed = self._step(q, self._ticks)
+        key = max(0, int(now * 1000.0) - int(round(self.t0 * 1000.0)))
+        b = key // _BLOCK_MS
+        block = self._blocks.get(b)
+        if block is None:
+            with self._lock:
+                self._compute(b)
+                block = self._blocks[b]
+        if b + _AHEAD_BLOCKS >= self._next:
+            with self._wake:
+                self._wanted = max(self._wanted, b + _AHEAD_BLOCKS)
+                self._wake.notify()
+        return block[key - b * _BLOCK_MS]
+
+    def _compute(self, upto: int) -> None:
+        """Blocks ``self._next`` .. ``upto`` (lock held), dropping those long past."""
+        while self._next <= upto:
+            b = self._next
+            t = (b * _BLOCK_MS + np.arange(_BLOCK_MS)) / 1000.0
+            q = self.limb.joints(t)
+            out = np.empty((_BLOCK_MS, len(self._last)))
+            ticks = self._last
+            for i in range(_BLOCK_MS):
+                ticks, missed = self._step(q[i], ticks)
                 self.unreachable += missed > 0
-            return self._ticks
+                out[i] = ticks
+            self._last = ticks
+            self._blocks[b] = out
+            self._blocks.pop(b - 4, None)
+            self._next = b + 1
+
+    def _work(self) -> None:
+        while True:
+            with self._wake:
+                while not self._closed and self._wanted < self._next:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                wanted = self._wanted
+            with self._lock:
+                self._compute(min(wanted, self._next))  # a block at a time: asks come first
+
+    def close(self) -> None:
+        """Stop the worker (idempotent)."""
+        with self._wake:
+            self._closed = True
+            self._wake.notify()
+        if self._worker is not threading.current_thread():
+            self._worker.join()
 
     def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, int]:
         """The servos' ticks for the posture ``q`` (J, 4): each joint's IK solution nearest its
@@ -188,7 +247,8 @@ def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: boo
             raise RigConfigError(f"{url}: {', '.join(sorted(own))} need patient= or limb=")
         return port
     try:
-        port.simulated_patient = _back_driving_patient(q, bus)
+        port.simulated_patient, drive = _back_driving_patient(q, bus)
+        port.add_closer(drive.close)
     except BaseException:
         port.close()
         raise
@@ -282,11 +342,12 @@ class _ChildCloser:
             self.err.close()
 
 
-def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
+def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDrive]:
     """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` rig's kinematics:
     a servo limb's (``chain=sim-servo-arm``) by an arm or leg patient (``limb=``, or
     ``patient=`` a limb file: :func:`~rig.sim.patients.limb_from_url`, its joints' kinds the
-    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient."""
+    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient;
+    and what moves the servos (closed with the port)."""
     url = q.url
     chain_name = q.text("chain", "sim-shoulder")
     cfg = load_rig_config(chain_name)
@@ -315,7 +376,7 @@ def _back_driving_patient(q: Any, bus: Any) -> SimulatedPatient:
     drive = _BackDrive(limb, kin, t0)
     for k, dxl_id in enumerate(kin.ids):
         bus.set_hand(dxl_id, drive.hand(k))
-    return _patient(limb, bus.clock, t0, backdrive=drive)
+    return _patient(limb, bus.clock, t0, backdrive=drive), drive
 
 
 def _open_stream_process(q: Any, kind: str) -> Port:

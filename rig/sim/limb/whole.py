@@ -425,9 +425,8 @@ class SimulatedWholeLimb(SimulatedLimb):
         self.excursion = float(excursion)
         rng, seed_seq = seeded(seed)
         # (row, component): per swing joint swing u, swing v, twist; per hinge its angle; per
-        # forearm joint (a flexion axis, not single-axis) its flexion and rotation; sway
-        flexes = [j.constraint is not None and not j.joint_kind.single_axis
-                  and j.joint_kind.flexion_axis(j.constraint) is not None for j in limb.joints]
+        # forearm joint its flexion and rotation; sway
+        flexes = [j.joint_kind.flexion_rotation for j in limb.joints]
         rows = [1 if j.joint_kind.single_axis else 2 if f else 3
                 for j, f in zip(limb.joints, flexes, strict=True)]
         series = Sinusoids.draw(rng, sum(rows) + 2, speed)
