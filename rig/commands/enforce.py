@@ -22,12 +22,16 @@ from rig.commands._options import finite_seconds
 
 @click.command("enforce")
 @click.option("--rig", "rig_name", required=True, metavar="NAME|FILE",
-              help="Rig configuration with a servo chain (e.g. sim-shoulder) or a YAML file.")
+              help="Rig configuration with a servo chain (e.g. sim-shoulder), a servo limb "
+                   "(sim-servo-arm) or a YAML file.")
 @click.option("--model", "model_path", required=True, metavar="M.onnx",
-              help="Correction model from `rig train` (its metadata names its constraint).")
+              help="Correction model from `rig train` (its metadata names its constraint; a "
+                   "servo limb's: a limb model).")
 @click.option("--targets", required=True, metavar="SOURCE",
-              help="PATH.csv (t_s,w,x,y,z), script:slow|sweep|adversarial|hold[?seed=N], or "
-                   "mirror / mirror:RIG (an IMU-worn limb through the orientation sources).")
+              help="PATH.csv (t_s,w,x,y,z; a servo limb: t_s then <joint>_w,<joint>_x,"
+                   "<joint>_y,<joint>_z per joint in the limb file's order), "
+                   "script:slow|sweep|adversarial|hold[?seed=N], or mirror / mirror:RIG (an "
+                   "IMU-worn limb through the orientation sources).")
 @click.option("--frames", type=click.Choice(["rig", "isb"]), default=None,
               help="Segment frames of a targets file's joint orientations: rig (default) or "
                    "isb (+Y proximal, +X anterior, +Z right).")
@@ -48,8 +52,8 @@ from rig.commands._options import finite_seconds
 @click.option("--patient", default=None, metavar="PSEUDONYM",
               help="Patient pseudonym for the stored run (default: the session's).")
 @click.option("--constraint", "constraint_path", default=None, metavar="C.yaml",
-              help="Constraint to enforce (default: the session's boundary, else the rig "
-                   "config's, else the model's own).")
+              help="Constraint to enforce, a limb file for a servo limb (default: the "
+                   "session's boundary, else the rig config's, else the model's own).")
 @click.option("--force-model", is_flag=True,
               help="Run a model made for another constraint / joint / side / patient (the "
                    "supervisor still enforces the constraint).")

@@ -511,12 +511,13 @@ class ScriptedTargets(TargetSource):
 
     def steady(self, t: float, settle_s: float = 0.3) -> bool:
         """Whether the target at loop time ``t`` is one a limb can be tracking: a continuous
-        motion's (``slow``, ``sweep``, ``hold``), or an adversarial target that has been the
-        same posture since ``t - settle_s``, fresh (with :func:`valid_targets`: the cycles
-        whose tracking the valid-target figures measure)."""
-        if self.name != "adversarial":
-            return True
+        motion's (``slow``, ``sweep``) after its first ``period_s`` (the limb coming to the path
+        from wherever it was), ``hold``'s, or an adversarial target that has been the same
+        posture since ``t - settle_s``, fresh (with :func:`valid_targets`: the cycles whose
+        tracking the valid-target figures measure)."""
         e = t - self.t0
+        if self.name != "adversarial":  # once the limb has had a lap to reach the path
+            return e >= self.period_s or self.name == "hold"
         if e < settle_s or self.segment(t) in ("stale", "invalid", "discontinuity"):
             return False
         a, b = self.latest(t)[1], self.latest(t - settle_s)[1]
@@ -725,7 +726,10 @@ class _LimbMotions:
     # -- slow and sweep ----------------------------------------------------------------------
     def _build_slow(self) -> None:
         paths = []
-        for end in self._valid_pool(48, 0.4, 0.8, self.MARGIN):
+        ends = self._valid_pool(96, 0.3, 0.7, self.MARGIN)
+        # within 40° of the centre in every joint: slow enough for any chain of servos
+        reach = Q.angle(Q.multiply(ends, Q.conjugate(self.centre[None]))).max(axis=1)
+        for end in ends[reach <= math.radians(40.0)]:
             table = self._path(end, 257)
             if (self._depth(table) >= math.radians(1.0)).all() and \
                     _Path(table).step_deg() < 2.0:
