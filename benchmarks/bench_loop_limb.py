@@ -4,13 +4,15 @@ inside the loop against the same work alone, same run.
 A 7-servo arm (shoulder Z-Y'-X'', elbow hinge Z, wrist Z-Y'-X'') on ``sim://dynamixel`` driven by
 a manual clock (the simulator advances exactly one period per cycle, so the figures are the
 compute's, not the scheduler's), enforcing a held-out arm limb file whose shoulder is coupled to
-the elbow (:func:`models.limb_evaluation.random_limb`), targets from the held-out postures held
-30 cycles each (valid and invalid). *Inside*: the telemetry's ``compute_ms`` (target → supervisor
+the elbow (:func:`models.limb_evaluation.random_limb`), targets from its held-out postures:
+``jumps`` (default) holds each (valid and invalid) 30 cycles; ``smooth`` joins the valid ones
+joint by joint, 2 s apart (tracking). *Inside*: the telemetry's ``compute_ms`` (target → supervisor
 → IK → FK → final check). *Alone*: the same targets through a fresh
 :class:`~rig.loop.limb_supervisor.LimbSupervisor` and the same kinematics in a tight loop.
 Prints the machine's 10⁷-additions loop time beside the figures.
 
-Run: ``python benchmarks/bench_loop_limb.py [--cycles 4000] [--model LIMB.onnx]``. Figures,
+Run: ``python benchmarks/bench_loop_limb.py [--cycles 4000] [--targets jumps|smooth]
+[--model LIMB.onnx]``. Figures,
 never assertions.
 """
 
@@ -50,12 +52,36 @@ def kinematics() -> LimbKinematics:
 
 
 class Postures(TargetSource):
-    def __init__(self, pool, hold=30, period=0.005):
-        self.pool, self.hold, self.period = pool, hold, period
+    """``jumps``: the pool's postures (valid and invalid) held ``hold`` cycles each. ``smooth``:
+    the pool's valid postures joined joint by joint along the shortest rotation, ``hold``
+    cycles from one to the next (the rate limits can follow: tracking)."""
+
+    def __init__(self, pool, hold=30, period=0.005, smooth=False):
+        self.pool, self.hold, self.period, self.smooth = pool, hold, period, smooth
+
+    def at(self, k):
+        i, r = divmod(k, self.hold)
+        a = self.pool[i % len(self.pool)]
+        if not self.smooth:
+            return a
+        b = self.pool[(i + 1) % len(self.pool)]
+        return slerp(a, b, r / self.hold)
 
     def latest(self, t):
-        k = int(round((t - self.t0) / self.period))
-        return t, self.pool[(k // self.hold) % len(self.pool)]
+        return t, self.at(int(round((t - self.t0) / self.period)))
+
+
+def slerp(a: np.ndarray, b: np.ndarray, f: float) -> np.ndarray:
+    """Row-wise shortest-path interpolation of unit quaternions (J, 4)."""
+    dot = np.einsum("ij,ij->i", a, b)
+    b = np.where(dot[:, None] < 0, -b, b)
+    th = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))[:, None]
+    s = np.sin(th)
+    small = s[:, 0] < 1e-9
+    w0 = np.where(small[:, None], 1.0 - f, np.sin((1.0 - f) * th) / np.where(small[:, None], 1, s))
+    w1 = np.where(small[:, None], f, np.sin(f * th) / np.where(small[:, None], 1, s))
+    q = w0 * a + w1 * b
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def additions() -> float:
@@ -70,11 +96,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=4000)
     ap.add_argument("--model", default=None, help="a limb model (.onnx) for the arm limb")
+    ap.add_argument("--targets", choices=("jumps", "smooth"), default="jumps")
+    ap.add_argument("--hold", type=int, default=None,
+                    help="cycles per posture (default 30 for jumps, 400 for smooth)")
     args = ap.parse_args()
     limb = random_limb(20261128, "arm")
     oracle = ConstraintOracle(limb).prepare()
     pool = held_out_postures(limb, 60, np.random.default_rng(7), oracle=oracle)
-    start = pool[int(np.flatnonzero(oracle.is_valid(pool).all(axis=1))[0])]
+    valid = pool[oracle.is_valid(pool).all(axis=1)]
+    start = valid[0]
+    smooth = args.targets == "smooth"
+    src = Postures(valid if smooth else pool, args.hold or (400 if smooth else 30),
+                   smooth=smooth)
     model = None if args.model is None else load_model(args.model, limb=True)
     kin = kinematics()
     t10 = additions()
@@ -86,7 +119,7 @@ def main() -> None:
         sl = ServoLimb(DynamixelBus(port, list(kin.ids)), kin)
         try:
             sl.bus.configure()
-            loop = EnforcementLoop(sl, model, oracle, Postures(pool), LoopConfig(
+            loop = EnforcementLoop(sl, model, oracle, src, LoopConfig(
                 watchdog_ms=1000), clock=sim.clock, sleep=sim.clock.sleep)
             loop.setup()
             summary = loop.run(max_cycles=args.cycles)
@@ -102,7 +135,7 @@ def main() -> None:
     for k in range(args.cycles):
         t0 = time.perf_counter()
         t = 0.005 * (k + 1)
-        tq = sup.admit(t, pool[(k // 30) % len(pool)], t)
+        tq = sup.admit(t, src.at(k), t)
         corr = None
         if tq is not None and model is not None:
             corr = np.asarray(model.correct_one(np.array(tq)), dtype=np.float64)
@@ -118,10 +151,20 @@ def main() -> None:
         except UnreachableError:
             sup.revert(commanded)
         alone[k] = (time.perf_counter() - t0) * 1e6
+    table = loop.telemetry.table()
+    cmd = np.stack([np.stack([table[f"{n}_commanded_{c}"] for c in "wxyz"], axis=-1)
+                    for n in kin.names], axis=1)
+    d = np.degrees(oracle.signed_distance(cmd))
     p_in, p_al = float(np.median(inside)), float(np.median(alone))
     print(f"10^7 additions: {t10:.2f} s")
     print(f"cycles {summary['cycles']}, warm-ups {loop.warm_ups}, max violation "
           f"{summary['max_violation_deg']:.3f} deg, model {'yes' if model else 'no'}")
+    for j, n in enumerate(kin.names):
+        f = summary["joints"][n]
+        print(f"  {n}: commanded beyond 1 deg (exact limb oracle) {int((d[:, j] > 1.0).sum())}"
+              f", max {d[:, j].max():.3f} deg; interventions {f['interventions']}; tracking "
+              f"of valid targets p50 {f['tracking_p50_deg']:.2f} p95 "
+              f"{f['tracking_p95_deg']:.2f} deg over {f['tracked_cycles']} cycles")
     print(f"compute inside the loop: p50 {p_in:.0f} us, p99 {np.percentile(inside, 99):.0f} us")
     print(f"the same work alone:     p50 {p_al:.0f} us, p99 {np.percentile(alone, 99):.0f} us")
     print(f"ratio inside / alone (medians): {p_in / p_al:.2f}")

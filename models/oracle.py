@@ -177,6 +177,10 @@ def end_points(q: np.ndarray, axes: np.ndarray) -> np.ndarray:
     return segment_directions(q, axes).sum(axis=1)
 
 
+#: Answers a coupled joint's :meth:`ConstraintOracle.joint_query` remembers (oldest dropped).
+_QUERY_CACHE = 8
+
+
 class _CoupledJoint:
     """A coupled joint's oracle: limits interpolated at a coupling angle per sample (the
     maths of its kind: :meth:`models.kinds.base.JointKind.evaluate_coupled`)."""
@@ -451,7 +455,8 @@ class ConstraintOracle:
         (radians; the corrected source's :meth:`coupling_angle_one`). ``angle`` is ignored for a
         joint with limits of its own, answered by its kind's compiled single-orientation path
         (:meth:`distance_projected_one`'s); a coupled joint is answered by its kind's coupled
-        evaluation on a batch of one (the last answer is cached: a held goal costs nothing).
+        evaluation on a batch of one (the last :data:`_QUERY_CACHE` answers are remembered: a
+        held goal, judged at its source's goal angle and at its commanded angle, costs nothing).
         One joint's constraint: joint 0, :meth:`distance_projected_one`."""
         if self._kind is not None:
             if joint != 0:
@@ -471,17 +476,20 @@ class ConstraintOracle:
                     Q.check_quaternions(np.array([w, x, y, z]), normalize=True)  # raises
                 return kind_one((w / nrm, x / nrm, y / nrm, z / nrm))
             return query_kind
-        last: list = [None, None]
+        cache: dict = {}
 
         def query_coupled(w, x, y, z, angle):
             key = (w, x, y, z, angle)
-            if key == last[0]:
-                return last[1]
+            out = cache.get(key)
+            if out is not None:
+                return out
             q = Q.check_quaternions(np.array([[w, x, y, z]]), normalize=True)
             r = oracle.evaluate(q, np.array([float(angle)]))
             p = r.projected[0]
             out = (float(r.distance[0]), (float(p[0]), float(p[1]), float(p[2]), float(p[3])))
-            last[0], last[1] = key, out
+            if len(cache) >= _QUERY_CACHE:
+                del cache[next(iter(cache))]  # the oldest
+            cache[key] = out
             return out
         return query_coupled
 

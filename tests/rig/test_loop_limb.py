@@ -12,6 +12,8 @@ import pytest
 
 from models import quaternion as Q
 from models.limb_evaluation import held_out_postures, random_limb
+from models.limb_model import export_limb_model
+from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
 from rig.devices.dynamixel import DynamixelBus
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
@@ -77,7 +79,7 @@ def _valid(oracle, pool):
     return pool[int(np.flatnonzero(oracle.is_valid(pool).all(axis=1))[0])]
 
 
-def _run(oracle, targets, cycles, *, before=None, **cfg):
+def _run(oracle, targets, cycles, *, before=None, model=None, **cfg):
     loop_cfg = LoopConfig(rate_hz=200.0, watchdog_ms=1000, **cfg)
     with open_port(URL, baud=1_000_000) as port:
         sim = port.simulator
@@ -90,7 +92,7 @@ def _run(oracle, targets, cycles, *, before=None, **cfg):
         try:
             limb.set_position_limits(kin.min_ticks, kin.max_ticks)
             limb.bus.configure()
-            loop = EnforcementLoop(limb, None, oracle, targets, loop_cfg, clock=clk,
+            loop = EnforcementLoop(limb, model, oracle, targets, loop_cfg, clock=clk,
                                    sleep=clk.sleep)
             loop.setup()
             summary = loop.run(max_cycles=cycles)
@@ -312,3 +314,22 @@ def test_per_servo_velocity_limit_and_per_joint_tolerance(arm):
     assert _commanded_distance_deg(oracle, table).max() <= 2.0
     with pytest.raises(ValueError, match="unknown joint"):
         LimbSupervisor(oracle, joint_configs={"knee": wide}, names=NAMES)
+
+
+def test_the_limb_model_in_the_loop(arm, tmp_path):
+    limb, oracle = arm
+    model = load_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
+    pool = held_out_postures(limb, 30, np.random.default_rng(21), oracle=oracle)
+    summary, table, loop = _run(oracle, PostureTargets(lambda k: pool[(k // 20) % len(pool)]),
+                                200, before=_place(_valid(oracle, pool)), model=model)
+    assert summary["safe_state_entries"] == 0
+    assert _commanded_distance_deg(oracle, table).max() <= 1.0 + 1e-9
+    corr = _posture(table, "correction")
+    assert np.isfinite(corr).all()
+    # the exact graph's corrections: the corrected targets are valid (to float32 rounding)
+    fixed = Q.multiply(corr.reshape(-1, 4), _posture(table, "target").reshape(-1, 4))
+    fixed /= np.linalg.norm(fixed, axis=1, keepdims=True)
+    d = oracle.signed_distance(fixed.reshape(-1, 3, 4))
+    assert np.degrees(d).max() < 0.05
+    assert not (table["intervention"] & Intervention.MODEL_INVALID).any()
+    assert table["shoulder_correction_deg"].max() > 1.0
