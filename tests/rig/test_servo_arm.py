@@ -91,3 +91,32 @@ def test_recording_the_servo_arm_gives_a_limb_session(rig_cli, tmp_path):
     flexion = np.degrees(elbow.coupling_angle(limb.joints[1].constraint, data.joint_q[:, 1]))
     assert flexion.min() > -2.0 and flexion.max() < limb.provenance["clinical"]["elbow"][
         "flexion"] + 0.5
+
+
+def test_the_servo_arms_postures_extract_into_a_coupled_limb_with_a_forearm_elbow():
+    """300 s of patient 1's free motion at 25 Hz (offline: no pty for the motion) as the servo
+    arm holds it (:meth:`SimulatedPatient.follow`, the back-drive's IK: what a recording of it
+    reads), extracted as the session's kinds say: three joints, the elbow a forearm joint
+    whose flexion and pronation-supination are the patient's, the shoulder coupled to the
+    elbow's flexion."""
+    from calibration.extraction import LimbExtractor
+    from rig.sim.limb import NoiseModel
+    from rig.sim.patients import seeded_patient
+
+    truth = anatomical_limb(1, "arm", kinds={"elbow": "forearm"})
+    patient = seeded_patient(1, truth, noise=NoiseModel.ideal(), calibrate=False)
+    t = np.arange(0.0, 300.0, 0.04)
+    url = (ARM.servos.port.replace("process=on", "process=off").replace("seed=3", "seed=1")
+           + "&clock=manual&wire_time=off")
+    with open_port(url, baud=ARM.servos.baud) as port:
+        q, missed = port.simulated_patient.follow(patient.joints(t))
+    assert missed < len(t) // 100
+    ex = LimbExtractor("arm", kinds={"elbow": "forearm"}).fit(q, t=t, side="right")
+    limb = ex.limb_
+    assert [j.kind for j in limb.joints] == ["ball", "forearm", "two-axis"]
+    assert ex.coupled_, ex.coupling_note_
+    assert limb.joints[0].coupling is not None and limb.joints[0].coupling.by == "elbow"
+    got, want = limb.joints[1].constraint.limits, truth.joints[1].constraint.limits
+    for attr in ("flexion_min_deg", "flexion_max_deg", "rotation_min_deg", "rotation_max_deg"):
+        assert getattr(got, attr) == pytest.approx(getattr(want, attr), abs=2.0), attr
+    assert ex.params()["kinds"] == {"elbow": "forearm"}
