@@ -133,6 +133,7 @@ motion of a hinge is corrected, not a limit: :mod:`calibration.boundary.hinge`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -142,7 +143,7 @@ from calibration.boundary.inset import NOISE_REACH
 from calibration.boundary.twist import pooled_insets, singular_reach
 from calibration.errors import CalibrationError
 from calibration.extraction.joint import fit_joint, joint_extractor
-from calibration.joints import JOINTS, LIMB_CHAINS, hinge_angles
+from calibration.joints import JOINTS, LIMB_CHAINS, JointSpec, hinge_angles
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.errors import ConstraintError
@@ -197,6 +198,11 @@ class LimbExtractor:
     kind : str or None
         A limb of one joint: the joint kind to extract (:mod:`calibration.kinds`; e.g.
         ``forearm`` for an elbow recorded turning about its long axis); default the joint's.
+    kinds : dict, optional
+        A whole limb: joint → the kind to extract where it is not the joint's own (e.g.
+        ``{"elbow": "forearm"}``: a servo arm's elbow turns about its long axis too; the
+        couplings then follow the forearm's flexion, :meth:`models.kinds.JointKind.
+        coupling_angle`).
 
     Attributes
     ----------
@@ -232,7 +238,8 @@ class LimbExtractor:
                  alpha_deg: float = 4.0,
                  max_vertices: int = 64, name: str = "recorded-limb",
                  slow_insets: bool = False, by_swing: bool | str = "auto",
-                 limb_axis=None, kind: str | None = None) -> None:
+                 limb_axis=None, kind: str | None = None,
+                 kinds: dict[str, str] | None = None) -> None:
         one = isinstance(limb, tuple) and len(limb) == 1
         if not one and limb not in LIMB_CHAINS:
             raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
@@ -241,6 +248,19 @@ class LimbExtractor:
             raise ValueError("kind applies to a limb of one joint (a whole limb's joints have "
                              "their own kinds)")
         self.kind = kind
+        self.kinds = dict(kinds or {})
+        if self.kinds:
+            if one:
+                raise ValueError("kinds applies to a whole limb (a limb of one joint: kind)")
+            names = [name for name, _, _ in LIMB_CHAINS[limb]]
+            for joint, k in self.kinds.items():
+                if joint not in names:
+                    raise ValueError(f"kinds: the {limb} has no joint {joint!r}")
+                get_kind(k)  # registered, or ConstraintError naming the kinds
+            source = names[1]
+            if not get_kind(self.kinds.get(source, JOINTS[source].kind)).drives_couplings:
+                raise ValueError(f"kinds: the {source} drives the couplings; a "
+                                 f"{self.kinds[source]} joint does not")
         self.by_swing = by_swing
         self.limb_axis = limb_axis
         if max_keyframes < 2:
@@ -274,14 +294,15 @@ class LimbExtractor:
                 "min_local_difference_deg": self.min_local_difference_deg,
                 "min_held": self.min_held, "min_inside": self.min_inside,
                 "alpha_deg": self.alpha_deg,
-                "max_vertices": self.max_vertices, "slow_insets": self.slow_insets}
+                "max_vertices": self.max_vertices, "slow_insets": self.slow_insets,
+                **({"kinds": dict(self.kinds)} if self.kinds else {})}
 
     # -- the parts --------------------------------------------------------------------------
     def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
                          by_swing: bool | str = "auto"):
         return joint_extractor(spec.name, limb_axis=spec.limb_axis, alpha_deg=self.alpha_deg,
                                max_vertices=max_vertices or self.max_vertices,
-                               by_swing=by_swing, name=name)
+                               by_swing=by_swing, name=name, kind=spec.kind)
 
     def _fit_joint(self, ex, spec, q, t, status, insets=None):
         """``ex`` fitted on one joint's (or keyframe's) samples with the joint's measured slow
@@ -351,7 +372,7 @@ class LimbExtractor:
         if q.ndim != 3 or q.shape[1:] != (3, 4):
             raise CalibrationError(f"expected postures of shape (N, 3, 4), got {q.shape}")
         chain = LIMB_CHAINS[self.limb]
-        specs = [JOINTS[name] for name, _, _ in chain]
+        specs = [_with_kind(JOINTS[name], self.kinds.get(name)) for name, _, _ in chain]
         prox, hinge, dist = specs
         slow = dict(slow_error_deg or {})
         unknown = sorted(set(slow) - {s.name for s in specs})
@@ -367,8 +388,7 @@ class LimbExtractor:
                                  q[:, specs.index(spec)], t, status)
             constraints[spec.name] = ex.constraint_
             self.reports_[spec.name] = ex.report()
-        h = constraints[hinge.name].hinge
-        theta = hinge_angles(q[:, 1], hinge.hinge_axis)
+        h, theta = _coupling_angles(hinge, constraints[hinge.name], q[:, 1])
         ts = None if t is None else np.asarray(t)
         st = None if status is None else np.asarray(status)
         # the proximal joint's coupling first, then the distal one's with the proximal's
@@ -398,7 +418,7 @@ class LimbExtractor:
         # what the file holds, measured on it
         valid = ConstraintOracle(self.limb_).evaluate(q, normalize=True).valid
         ok = np.stack([(theta >= h.min_deg) & (theta <= h.max_deg)
-                       if not get_kind(s.kind).swing_twist
+                       if s.hinge_axis is not None
                        else valid[:, i] for i, s in enumerate(specs)], axis=1)
         self.inside_ = {s.name: float(np.mean(ok[:, i])) for i, s in enumerate(specs)}
         self.inside_["limb"] = float(np.mean(ok.all(axis=1)))
@@ -742,6 +762,35 @@ class LimbExtractor:
                 "tolerance_deg": dict(self.tolerance_deg_),
                 "couplings": {k: dict(v) for k, v in self.couplings_.items()},
                 "joints": self.reports_}
+
+
+@dataclass(frozen=True)
+class _Interval:
+    """The coupling angle's interval, degrees."""
+
+    min_deg: float
+    max_deg: float
+
+
+def _with_kind(spec: JointSpec, kind: str | None) -> JointSpec:
+    """``spec`` extracted as ``kind`` (None: its own); a hinge axis only for its own hinge."""
+    if kind is None or kind == spec.kind:
+        return spec
+    return replace(spec, kind=kind, hinge_axis=None)
+
+
+def _coupling_angles(source: JointSpec, constraint, q: np.ndarray
+                     ) -> tuple[_Interval, np.ndarray]:
+    """The couplings' source joint's interval and angle at each posture (degrees, (N,)): a
+    hinge's about its own axis (:func:`calibration.joints.hinge_angles`), another kind's as
+    the kind reads it (a forearm's flexion, :meth:`models.kinds.JointKind.coupling_angle`)."""
+    if source.hinge_axis is not None:
+        h = constraint.hinge
+        return _Interval(h.min_deg, h.max_deg), hinge_angles(q, source.hinge_axis)
+    kind = get_kind(source.kind)
+    lo, hi = np.degrees(kind.coupling_range(constraint))
+    qn = Q.check_quaternions(np.atleast_2d(q), normalize=True, name="joint orientation")
+    return _Interval(float(lo), float(hi)), np.degrees(kind.coupling_angle(constraint, qn))
 
 
 def _sector_share(d: np.ndarray, sectors: int = 12, min_samples: int = 5) -> float:

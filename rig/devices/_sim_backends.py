@@ -20,9 +20,13 @@ neither the interpreter lock nor the scheduling of the process that drives it; w
 allows it the child runs under ``SCHED_FIFO``, since the hardware it stands in for answers on
 time whatever the host does. ``open_port(...,
 separate_process=True)`` asks for it unless the URL says ``process=off`` (the live loop does).
-The port has no ``simulator`` object (nothing to inject faults into) and no patient view: a
-``patient=`` moves the limb in the child while torque is off, as a real patient moves a real
-limb, unseen by this process. Closing the port stops the child, and so does the parent's end
+The port has no ``simulator`` object (nothing to inject faults into). A ``patient=`` (or
+``limb=``) moves the limb in the child while torque is off, as a real patient moves a real
+limb; the port's :class:`~rig.devices.ports.SimulatedPatient` is this process's copy of it
+(the same keys: the same motion), on the child's clock origin and time scale (its second
+line), and a protocol started on it is sent to the child, as for a stream board (below) — a
+recorder has the patient of ``sim-servo-arm`` perform the limb's calibration protocol so.
+Closing the port stops the child, and so does the parent's end
 (the child stops when its stdin closes). The child runs in
 a session of its own: a Ctrl-C at the terminal reaches the driving process, which still has a
 bus to command its safe state on.
@@ -143,8 +147,7 @@ class _BackDrive:
         self._wanted = 0
         self._wake = threading.Condition()
         self._closed = False
-        self._worker = threading.Thread(target=self._work, name="back-drive", daemon=True)
-        self._worker.start()
+        self._worker: threading.Thread | None = None  # started by the first ask (ticks)
 
     def ticks(self, now: float) -> np.ndarray:
         key = max(0, int(now * 1000.0) - int(round(self.t0 * 1000.0)))
@@ -156,6 +159,10 @@ class _BackDrive:
                 block = self._blocks[b]
         if b + _AHEAD_BLOCKS >= self._next:
             with self._wake:
+                if self._worker is None and not self._closed:
+                    self._worker = threading.Thread(target=self._work, name="back-drive",
+                                                    daemon=True)
+                    self._worker.start()
                 self._wanted = max(self._wanted, b + _AHEAD_BLOCKS)
                 self._wake.notify()
         return block[key - b * _BLOCK_MS]
@@ -193,8 +200,9 @@ class _BackDrive:
         with self._wake:
             self._closed = True
             self._wake.notify()
-        if self._worker is not threading.current_thread():
-            self._worker.join()
+            worker = self._worker
+        if worker is not None and worker is not threading.current_thread():
+            worker.join()
 
     def _step(self, q: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, int]:
         """The servos' ticks for the posture ``q`` (J, 4): each joint's IK solution nearest its
@@ -264,9 +272,23 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
     child_url = without_keys(url, PROCESS_KEY)
     if "baud" not in q and baud is not None:
         child_url = with_keys(child_url, baud=int(baud))
-    _proc, closer, (path,) = _start_child("servos", url, child_url, 1)
-    port = Port(url=url, path=path, simulator=None, kind=kind)
+    backdriven = "patient" in q or "limb" in q
+    # first: a bad patient fails here, before a child starts; this process's copy of it
+    limb, kin = _back_driven_limb(q) if backdriven else (None, None)
+    proc, closer, lines = _start_child("servos", url, child_url, 2 if backdriven else 1)
+    port = Port(url=url, path=lines[0], simulator=None, kind=kind)
     port.add_closer(closer)
+    if limb is None:
+        return port
+    try:
+        t0, scale, _ = (float(v) for v in lines[1].split())
+        port.simulated_patient = SimulatedPatient(
+            limb, clock=lambda: (time.monotonic() - t0) * scale, clock_t0=0.0, t0=t0,
+            scale=scale, backdrive=_BackDrive(limb, kin, 0.0),
+            protocol_pinned="calibrate" in q, on_protocol=_ProtocolSender(proc, url))
+    except BaseException:
+        port.close()
+        raise
     return port
 
 
@@ -342,12 +364,11 @@ class _ChildCloser:
             self.err.close()
 
 
-def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDrive]:
-    """The patient of ``q`` moving ``bus``'s servos through the ``chain=`` rig's kinematics:
-    a servo limb's (``chain=sim-servo-arm``) by an arm or leg patient (``limb=``, or
+def _back_driven_limb(q: Any) -> tuple[Any, Any]:
+    """The patient of ``q`` and the kinematics it moves the servos through (the ``chain=``
+    rig's): a servo limb's (``chain=sim-servo-arm``) by an arm or leg patient (``limb=``, or
     ``patient=`` a limb file: :func:`~rig.sim.patients.limb_from_url`, its joints' kinds the
-    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient;
-    and what moves the servos (closed with the port)."""
+    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient."""
     url = q.url
     chain_name = q.text("chain", "sim-shoulder")
     cfg = load_rig_config(chain_name)
@@ -358,11 +379,6 @@ def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDriv
     # tolerance is no limit here, the tick limits still are
     kin = LimbKinematics([JointKinematics(j.servos, tolerance_deg=PUSHED_TOLERANCE_DEG)
                           for j in cfg.servos.limb_kinematics().joints], cfg.servos.joint_names)
-    kin.compile()  # before the bus answers: no stall at a first read
-    missing = [i for i in kin.ids if i not in bus.servos]
-    if missing:
-        raise RigConfigError(f"{url}: chain {chain_name!r} needs servo IDs {list(kin.ids)}, "
-                             f"the simulated bus has no ID {missing[0]}")
     # a servo limb wears no IMU: the default straps (the motion does not depend on them)
     kinds = {j.name: j.kind for j in cfg.servos.joints}
     limb = limb_from_url(q, kinds=kinds, misplaced_straps=False) or patient_from_url(
@@ -372,6 +388,18 @@ def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDriv
         raise RigConfigError(f"{url}: chain {chain_name!r} has {len(kin)} joint"
                              f"{'s' if len(kin) > 1 else ''} ({', '.join(kin.names)}), the "
                              f"patient {n}")
+    return limb, kin
+
+
+def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDrive]:
+    """The patient of ``q`` (:func:`_back_driven_limb`) moving ``bus``'s servos; and what
+    moves them (closed with the port)."""
+    limb, kin = _back_driven_limb(q)
+    kin.compile()  # before the bus answers: no stall at a first read
+    missing = [i for i in kin.ids if i not in bus.servos]
+    if missing:
+        raise RigConfigError(f"{q.url}: chain {q.text('chain', 'sim-shoulder')!r} needs servo "
+                             f"IDs {list(kin.ids)}, the simulated bus has no ID {missing[0]}")
     t0 = bus.clock()
     drive = _BackDrive(limb, kin, t0)
     for k, dxl_id in enumerate(kin.ids):

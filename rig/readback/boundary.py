@@ -395,8 +395,10 @@ def extract_limb(data: JointData, *, name: str | None = None, side: str | None =
         prov = dict(data.provenance)
     side = side or data.side
     side = side if side in ("left", "right") else None
+    # a servo limb's session says its joints' kinds (a forearm elbow), an IMU one none
     return LimbExtractor(data.limb, name=name or label, alpha_deg=alpha_deg,
-                         max_vertices=max_vertices).fit(
+                         max_vertices=max_vertices,
+                         kinds=data.provenance.get("kinds")).fit(
         data.joint_q, t=data.t, status=data.status, side=side, provenance=prov,
         slow_error_deg=slow)
 
@@ -417,6 +419,10 @@ def describe_limb(ex: LimbExtractor, path: Path, boundary_id: int | None = None,
         elif j.joint_kind.single_axis:
             lo, hi = rep["hinge_deg"]
             what = f"hinge {lo:.1f} .. {hi:.1f} deg"
+        elif j.joint_kind.flexion_rotation:
+            (flo, fhi), (rlo, rhi) = rep["flexion_deg"], rep["rotation_deg"]
+            what = (f"forearm, flexion {flo:.1f} .. {fhi:.1f} deg, rotation {rlo:.1f} .. "
+                    f"{rhi:.1f} deg")
         else:
             what = (f"{j.constraint.kind}, polygon of {rep.get('vertices', '?')} vertices, "
                     f"twist {rep['twist_deg'][0]:.1f} .. {rep['twist_deg'][1]:.1f} deg")

@@ -296,6 +296,9 @@ def _limb_joint_samples(store, session_id: int, sess: dict, limb: str, sensors: 
     side = sess.get("side")
     prov = {"session": int(session_id), "started_at": sess.get("started_at"),
             "source": "joint samples", "limb": limb}
+    kinds = (sess.get("meta") or {}).get("kinds")
+    if kinds:  # the servo limb's joint kinds where not the joints' own (a forearm elbow)
+        prov["kinds"] = dict(kinds)
     return JointData(q, names, np.asarray(common, dtype=np.float64), None, parse_axis(None),
                      side if side in ("left", "right") else None, prov, sess.get("pseudonym"),
                      limb, _session_facts(store, sess, sensors), {})

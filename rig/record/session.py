@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.coverage import CoverageMap
+from calibration.joints import JOINTS
 from rig.errors import RigConfigError, RigConnectionError, RigError
 from rig.record.display import PlainDisplay, RecordStatus
 from rig.record.guided import GuidedCalibration, NeutralCheckpoints, patient_performs_protocol
@@ -309,6 +310,10 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
             "duration_s": options.duration_s, "sensors": [s.name for s in rig.sensors]}
     procedure = procedure_for(config.limb)
     meta.update(procedure.session_meta())  # a whole limb: every joint is read back from it
+    kinds = {j.name: j.kind for j in getattr(config.servos, "joints", ())
+             if j.kind != JOINTS[j.name].kind}
+    if kinds:  # a servo limb's joints of another kind than their own (a forearm elbow)
+        meta["kinds"] = kinds
     session_id = int(store.sessions.start(patient_id, rig_name=config.name, joint=joint.name,
                                           side=joint.side, kind="record", meta=meta))
     for s in rig.sensors:
