@@ -481,31 +481,45 @@ def _field_nearest(g: Graph, tau: str, net):
     a1_t = g.op("Add", [g.op("Mul", [tau, g.const(net.w1[nf + 3:nf + 4].astype(f32))]),
                         g.const(net.b1[None].astype(f32))])
 
-    def evaluate(x: str) -> tuple[str, str]:
+    def forward(g: Graph, x: str) -> tuple[str, tuple[str, str, str]]:
         u = g.op("Add", [g.op("MatMul", [x, bd]), u_t])
         h1 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [
             g.op("Concat", [g.op("Sin", [u]), x], axis=1), w1_fd]), a1_t])])
         h2 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [h1, w2]), b2])])
-        f = g.op("Add", [g.op("MatMul", [h2, w3]), b3])
+        return g.op("Add", [g.op("MatMul", [h2, w3]), b3]), (u, h1, h2)
+
+    def gradient(g: Graph, u: str, h1: str, h2: str) -> str:
         g2 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h2, h2])]), w3r])
         g1 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h1, h1])]), g.op("MatMul", [g2, w2t])])
-        grad = g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
+        return g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
                                                          g.op("Cos", [u])]), bdt]),
                             g.op("MatMul", [g1, w1_dt])])
-        return f, grad
 
     def nearest(d: str) -> tuple[str, str]:
+        f, inner = forward(g, d)
+        outside = g.op("Greater", [f, g.const(0.0)])
+        # the steps only where some direction is outside: a valid posture's single call
+        # skips them (a direction inside takes no step: Relu(f) = 0)
+        anyone = g.op("Greater", [g.op("ReduceMax", [g.op("Cast", [outside], to=TensorProto.FLOAT)],
+                                       keepdims=0), g.const(0.0)])
+        br = g.branch()
         x = d
-        outside = None
-        for frac in net.steps:
-            f, grad = evaluate(x)
-            if outside is None:
-                outside = g.op("Greater", [f, g.const(0.0)])
-            tang = _normalize(g, g.op("Sub", [grad, g.op("Mul", [_dot(g, grad, x), x])]))
-            step = g.op("Mul", [g.op("Relu", [f]), g.const(float(frac))])
-            x = _normalize(g, g.op("Sub", [g.op("Mul", [g.op("Cos", [step]), x]),
-                                           g.op("Mul", [g.op("Sin", [step]), tang])]))
-        return outside, x
+        for k, frac in enumerate(net.steps):
+            if k:
+                f, inner = forward(br, x)
+            grad = gradient(br, *inner)
+            tang = _normalize(br, br.op("Sub", [grad, br.op("Mul", [_dot(br, grad, x), x])]))
+            step = br.op("Mul", [br.op("Relu", [f]), br.const(float(frac))])
+            x = _normalize(br, br.op("Sub", [br.op("Mul", [br.op("Cos", [step]), x]),
+                                             br.op("Mul", [br.op("Sin", [step]), tang])]))
+        same = g.branch()
+        kept = same.op("Identity", [d])
+        b = g.op("If", [anyone], then_branch=helper.make_graph(
+            br.nodes, g.name("steps"), [], [helper.make_tensor_value_info(
+                x, TensorProto.FLOAT, None)], br.inits), else_branch=helper.make_graph(
+            same.nodes, g.name("inside"), [], [helper.make_tensor_value_info(
+                kept, TensorProto.FLOAT, None)], same.inits))
+        return outside, b
     return nearest
 
 
@@ -625,6 +639,17 @@ def _swing_nearest(g: Graph, joint, kt, src: str | None, field):
     return None
 
 
+def _inputs(nodes) -> set[str]:
+    """The value names ``nodes`` read, their branches' (``If``) included."""
+    out = set()
+    for node in nodes:
+        out.update(node.input)
+        for attr in node.attribute:
+            if attr.type == onnx.AttributeProto.GRAPH:
+                out |= _inputs(attr.g.node)
+    return out
+
+
 def limb_to_onnx(limb: Limb, fields: dict | None = None,
                  training: dict | None = None) -> onnx.ModelProto:
     """The limb model of ``limb`` (module docstring): method ``geometric`` without ``fields``;
@@ -640,7 +665,7 @@ def limb_to_onnx(limb: Limb, fields: dict | None = None,
     g = Graph()
     jn = len(limb.joints)
     _limb_graph(g, limb, fields)
-    used = {name for node in g.nodes for name in node.input}
+    used = _inputs(g.nodes)
     g.inits = [t for t in g.inits if t.name in used]
     graph = helper.make_graph(
         g.nodes, "jointlimits_limb_correction",
