@@ -395,7 +395,7 @@ def test_no_kernel_compiles_inside_a_running_loop(tmp_path):
                                                       twist=(-45, 70)))
     src = ScriptedTargets("adversarial", oracle, seed=3)
     src.start(0.0)
-    rows = [(k * 0.005, *src.latest(k * 0.005)[1]) for k in range(1, 601)]
+    rows = [(k * 0.005, *src.latest(k * 0.005)[1][0].tolist()) for k in range(1, 601)]
     rows = [r for r in rows if np.isfinite(r).all() and abs(np.linalg.norm(r[1:]) - 1) < 1e-6]
     path = tmp_path / "targets.csv"
     path.write_text("t_s,w,x,y,z\n" + "".join(",".join(f"{v!r}" for v in r) + "\n"

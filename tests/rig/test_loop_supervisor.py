@@ -39,7 +39,7 @@ def _start(oracle, q0=None, **cfg):
     sup = Supervisor(oracle, SupervisorConfig(**cfg), period_s=DT)
     if q0 is None:
         src = ScriptedTargets("hold", oracle)
-        q0 = src.latest(0.0)[1]
+        q0 = src.latest(0.0)[1][0]  # one joint's posture (1, 4): its orientation
     sup.reset(0.0, q0)
     return sup
 
@@ -255,7 +255,8 @@ def test_adversarial_script_never_commands_beyond_tolerance():
         kinds = set()
         for k in range(1, 1200):
             t = k * DT
-            tt, target = src.latest(t)
+            tt, posture = src.latest(t)
+            target = posture[0]
             kinds.add(src.segment(t))
             goal = _cycle(sup, t, target, target_t=tt)
             assert oracle.signed_distance(np.array(goal)) <= tol, (name, k, src.segment(t))
