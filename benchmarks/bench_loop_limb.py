@@ -68,7 +68,7 @@ class Postures(TargetSource):
         return slerp(a, b, r / self.hold)
 
     def latest(self, t):
-        return t, self.at(int(round((t - self.t0) / self.period)))
+        return t, self.at(round((t - self.t0) / self.period))
 
 
 def slerp(a: np.ndarray, b: np.ndarray, f: float) -> np.ndarray:

@@ -174,6 +174,9 @@ class LimbSupervisor:
             for s in self.joints:
                 s.admit(t, None, None)
             return None
+        if self.n_joints == 1 and np.ndim(target) == 1:  # one joint's (4,): as it came
+            out1 = self.joints[0].admit(t, target, target_t)
+            return None if out1 is None else [out1]
         arr = np.asarray(target, dtype=np.float64).reshape(-1, 4)
         if arr.shape[0] != self.n_joints:
             for s in self.joints:

@@ -48,6 +48,7 @@ import numpy as np
 from rig.devices.bus import ServoBus
 from rig.devices.config import ServosConfig
 from rig.devices.dynamixel import DynamixelBus
+from rig.devices.kinematics import RAD_PER_TICK
 from rig.devices.servo_limb import ServoLimb
 from rig.errors import (
     RigConnectionError,
@@ -56,7 +57,6 @@ from rig.errors import (
     RigTimeoutError,
     UnreachableError,
 )
-from rig.devices.kinematics import RAD_PER_TICK
 from rig.loop.backstop import (
     describe_limits,
     position_limits_from_boundary,
@@ -705,7 +705,7 @@ class EnforcementLoop:
                 dot = np.abs(np.einsum("ij,ij->i", t, p))
                 err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
                 e = err[valid[:, j] & np.isfinite(err)]
-                fig["tracked_cycles"] = int(len(e))
+                fig["tracked_cycles"] = len(e)
                 fig["tracking_p50_deg"] = None if not len(e) else float(np.median(e))
                 fig["tracking_p95_deg"] = None if not len(e) else float(np.percentile(e, 95))
             out[name] = fig

@@ -56,7 +56,7 @@ class PostureTargets(TargetSource):
         self.fn, self.n_joints, self.period = fn, n_joints, period
 
     def latest(self, t):
-        k = int(round((t - self.t0) / self.period))
+        k = round((t - self.t0) / self.period)
         out = self.fn(k)
         age = 0.0
         if isinstance(out, tuple):
@@ -172,7 +172,7 @@ def test_adversarial_limb_targets_never_commanded_beyond_tolerance(arm):
             return (0.5, pool[seg % len(pool)])  # stale
         return pool[seg % len(pool)]
 
-    summary, table, loop = _run(oracle, PostureTargets(fn), 700,
+    summary, table, _loop = _run(oracle, PostureTargets(fn), 700,
                                 before=_place(_valid(oracle, pool)))
     assert summary["cycles"] == 700 and summary["safe_state_entries"] == 0
     d = _commanded_distance_deg(oracle, table)
@@ -216,7 +216,7 @@ def test_elbow_moves_and_the_shoulder_follows(arm):
         f = min(1.0, (k - 200) / 200)
         return np.array([reach, _hinge((1 - f) * hi + f * lo), wrist])
 
-    summary, table, _ = _run(oracle, PostureTargets(fn), 600,
+    _summary, table, _ = _run(oracle, PostureTargets(fn), 600,
                              before=_place(np.array([reach, bent, wrist])))
     d = _commanded_distance_deg(oracle, table)
     assert d.max() <= 1.0 + 1e-9
@@ -250,7 +250,7 @@ def test_a_shoulder_outside_is_brought_back_while_the_elbow_holds(arm):
     def fn(k):
         return np.array([target[0], other_elbow, target[2]])
 
-    summary, table, _ = _run(oracle, PostureTargets(fn), 500, before=place)
+    _summary, table, _ = _run(oracle, PostureTargets(fn), 500, before=place)
     d = np.degrees(oracle.signed_distance(_posture(table, "commanded"))[:, 0])
     assert d[0] > 10.0
     back = np.flatnonzero(d <= 1.0)
@@ -320,7 +320,7 @@ def test_the_limb_model_in_the_loop(arm, tmp_path):
     limb, oracle = arm
     model = load_model(export_limb_model(limb, tmp_path / "arm.onnx"), limb)
     pool = held_out_postures(limb, 30, np.random.default_rng(21), oracle=oracle)
-    summary, table, loop = _run(oracle, PostureTargets(lambda k: pool[(k // 20) % len(pool)]),
+    summary, table, _loop = _run(oracle, PostureTargets(lambda k: pool[(k // 20) % len(pool)]),
                                 200, before=_place(_valid(oracle, pool)), model=model)
     assert summary["safe_state_entries"] == 0
     assert _commanded_distance_deg(oracle, table).max() <= 1.0 + 1e-9
