@@ -1,6 +1,7 @@
 """Limb models on held-out limbs (issue 20): end-point and per-joint errors, violations.
 
     python benchmarks/bench_limb.py [--limbs 10] [--n 6000] [--methods exact,uncoupled,geometric]
+                                    [--forearm K]
 
 Every held-out limb of :func:`models.limb_evaluation.held_out_limbs` (legs and arms with a
 concave ball joint coupled to a hinge through 3-4 keyframes, a hinge, a two-axis joint; seeds
@@ -21,6 +22,18 @@ third valid) by :func:`~models.evaluation.evaluate_model`. Methods:
                cores trains on two threads, ``models.nn.ndf.fit_limb_fields``).
 ``network@F/F/…`` the same trained fields with other projection step fractions (e.g.
                ``network@0.5/0.5/0.5/1/1``, the shipped ones before 2026-11-28), accuracy only.
+
+``--forearm K``: after them, K held-out arms whose elbow is a forearm joint
+(:func:`~models.limb_evaluation.held_out_forearm_arms`: flexion and pronation–supination, the
+shoulder coupled to the flexion; the 7-servo arm's chain), scored and summed up apart.
+
+Single call: the median of 3000 ``correct_one`` calls cycling through the held-out postures,
+and apart over the postures valid in every joint (where a live limb spends its time) and the
+others; the network's projection steps run only when its field finds a direction outside, so
+its valid postures' calls are the cheaper. The two models' single calls are measured in the
+same run, interleaved, and their ratio printed (issue 39: network ≤ 50 µs and ≤ 1.2 ×
+geometric), with the time a Python loop of 10⁷ additions took (how fast the machine was).
+Node counts include the ``If`` branch's nodes (the top level's in brackets).
 
 ``--single K``: instead, the same network family on K held-out single ball joints (concave
 stars with twist, ``bench_accuracy``'s held-out set) beside today's default, the tabulated
@@ -45,6 +58,7 @@ import onnx
 
 from models.evaluation import evaluate_model
 from models.limb_evaluation import (
+    held_out_forearm_arms,
     held_out_limbs,
     held_out_postures,
     uncoupled_model,
@@ -61,6 +75,10 @@ TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
 
 
 SPEED: dict[str, list[dict]] = {"geometric": [], "network": []}
+
+#: the current limb's loaded models (geometric, network): their single calls are timed
+#: together, interleaved (:func:`single_calls`)
+LOADED: dict[str, object] = {}
 
 
 #: the trained fields of the limb being scored: ``network@…`` reuses ``network``'s
@@ -98,6 +116,7 @@ def method(name, limb, oracle, tmp: Path, q):
             fields, facts, cpu = _fields(limb)
         path = export_limb_model(limb, tmp / f"{limb.name}-{name}.onnx", fields, facts)
         model = load_model(path, limb)
+        LOADED[name] = model
         f = facts or {}
         SPEED[name].append({**speed(model, q), "train_cpu_s": cpu,
                             "train_wall_s": f.get("seconds", 0.0),
@@ -107,15 +126,40 @@ def method(name, limb, oracle, tmp: Path, q):
                      f"network, network@F/F/...)")
 
 
+def _count_nodes(graph) -> int:
+    """Nodes of a graph and of its ``If`` branches."""
+    return sum(1 + sum(_count_nodes(a.g) for a in node.attribute
+                       if a.type == onnx.AttributeProto.GRAPH) for node in graph.node)
+
+
+def single_calls(models: dict, q, valid) -> dict[str, dict[str, float]]:
+    """Median single-call times (µs) of each model on the postures ``q``, all of them, the
+    ``valid`` ones and the others: 3000 calls each, the models interleaved in rounds of 150
+    calls (the same load for both)."""
+    q32 = np.ascontiguousarray(q, dtype=np.float32)
+    for m in models.values():
+        for i in range(300):
+            m.correct_one(q32[i % len(q32)])
+    lat: dict[str, list[tuple[int, bool]]] = {k: [] for k in models}
+    for r in range(20):
+        for k, m in models.items():
+            for i in range(r * 150, (r + 1) * 150):
+                p = q32[i % len(q32)]
+                t0 = time.perf_counter_ns()
+                m.correct_one(p)
+                lat[k].append((time.perf_counter_ns() - t0, bool(valid[i % len(q32)])))
+    out = {}
+    for k, v in lat.items():
+        ok = [t for t, good in v if good]
+        bad = [t for t, good in v if not good]
+        out[k] = {"single_us": statistics.median(t for t, _ in v) / 1e3,
+                  "single_valid_us": statistics.median(ok) / 1e3 if ok else float("nan"),
+                  "single_invalid_us": statistics.median(bad) / 1e3 if bad else float("nan")}
+    return out
+
+
 def speed(model, q) -> dict:
     q32 = np.ascontiguousarray(q, dtype=np.float32)
-    for i in range(300):
-        model.correct_one(q32[i % len(q32)])
-    lat = []
-    for i in range(3000):
-        t0 = time.perf_counter_ns()
-        model.correct_one(q32[i % len(q32)])
-        lat.append(time.perf_counter_ns() - t0)
     big = np.resize(q32, (10_000, *q32.shape[1:]))
     runs, one = [], []
     for _ in range(5):
@@ -125,8 +169,8 @@ def speed(model, q) -> dict:
         t0 = time.perf_counter()
         model.session.run(None, {"orientations": big})
         one.append(time.perf_counter() - t0)
-    return {"bytes": model.size_bytes, "nodes": len(onnx.load(str(model.path)).graph.node),
-            "single_us": statistics.median(lat) / 1e3,
+    graph = onnx.load(str(model.path)).graph
+    return {"bytes": model.size_bytes, "nodes": _count_nodes(graph), "top_nodes": len(graph.node),
             "per_s": len(big) / statistics.median(runs),
             "per_s_one_thread": len(big) / statistics.median(one)}
 
@@ -179,6 +223,8 @@ def main() -> None:
     ap.add_argument("--limbs", type=int, default=10)
     ap.add_argument("--n", type=int, default=6000, help="postures per limb")
     ap.add_argument("--methods", default="exact,uncoupled,geometric,network")
+    ap.add_argument("--forearm", type=int, default=0, metavar="K",
+                    help="also K held-out arms whose elbow is a forearm joint")
     ap.add_argument("--single", type=int, default=0, metavar="K",
                     help="instead: the network family on K held-out single ball joints "
                          "(concave stars with twist) beside the tabulated field")
@@ -187,22 +233,57 @@ def main() -> None:
         single(args.single, args.n)
         return
     names = args.methods.split(",")
-    rows: dict[str, list[dict]] = {m: [] for m in names}
-    print(f"{'limb':<10} {'method':<10} {'end %':>7} {'p99 end °':>9} {'left>1°':>8} "
-          f"{'moved °':>8} {'max viol °':>10}  joint dir err ° (mean)")
+    print(f"a Python loop of 10^7 additions: {loop_seconds():.2f} s (how fast this machine "
+          f"ran)")
     tmp = Path(tempfile.mkdtemp(prefix="bench-limb-"))
-    for i, (label, limb) in enumerate(held_out_limbs(args.limbs).items()):
+    families = [(f"{args.limbs} held-out limbs", held_out_limbs(args.limbs), 1000)]
+    if args.forearm:
+        families.append((f"{args.forearm} held-out arms with a forearm elbow",
+                         held_out_forearm_arms(args.forearm), 2000))
+    for title, limbs, seed in families:
+        score(title, limbs, seed, names, args.n, tmp)
+
+
+def loop_seconds() -> float:
+    """How long a Python loop of 10⁷ additions takes (the machine's speed that day)."""
+    t0 = time.perf_counter()
+    s = 0
+    for i in range(10**7):
+        s += i
+    return time.perf_counter() - t0
+
+
+def score(title: str, limbs: dict, seed: int, names: list[str], n: int, tmp: Path) -> None:
+    """One family of limbs: a row per limb and method, the means, the models' figures."""
+    for runs in SPEED.values():
+        runs.clear()
+    rows: dict[str, list[dict]] = {m: [] for m in names}
+    print(f"\n{'limb':<18} {'method':<10} {'end %':>7} {'p99 end °':>9} {'left>1°':>8} "
+          f"{'moved °':>8} {'max viol °':>10}  joint dir err ° (mean)")
+    for i, (label, limb) in enumerate(limbs.items()):
         oracle = ConstraintOracle(limb)
-        q = held_out_postures(limb, args.n, 1000 + i, oracle=oracle)
+        q = held_out_postures(limb, n, seed + i, oracle=oracle)
+        LOADED.clear()
         for m in names:
             r = evaluate_model(method(m, limb, oracle, tmp, q), limb, q=q, oracle=oracle)
             rows[m].append(r)
-            print(f"{label:<10} {m:<10} {r['end_mean_3d_error_pct']:7.3f} "
+            print(f"{label:<18} {m:<10} {r['end_mean_3d_error_pct']:7.3f} "
                   f"{r['end_p99_direction_error_deg']:9.2f} "
                   f"{r['frac_invalid_violating_1deg']:8.3f} "
                   f"{r['valid_moved_deg']:8.3f} {r['max_violation_deg']:10.2f}  "
                   f"{', '.join(f'{x:.2f}' for x in r['joint_mean_direction_error_deg'])}")
-    print(f"\nmean over {args.limbs} held-out limbs ({args.n} postures each)")
+        if LOADED:
+            calls = single_calls(LOADED, q, oracle.evaluate(q).valid.all(axis=1))
+            for name, c in calls.items():
+                SPEED[name][-1].update(c)
+            if len(calls) == 2:
+                g, nw = calls["geometric"], calls["network"]
+                print(f"{label:<18} single call: network {nw['single_us']:.1f} µs, geometric "
+                      f"{g['single_us']:.1f} µs, ratio {nw['single_us'] / g['single_us']:.2f}; "
+                      f"valid postures {nw['single_valid_us']:.1f} / "
+                      f"{g['single_valid_us']:.1f} µs, the others "
+                      f"{nw['single_invalid_us']:.1f} / {g['single_invalid_us']:.1f} µs")
+    print(f"\nmean over {title} ({n} postures each)")
     print(f"{'target':<36} {'goal':>8} " + " ".join(f"{m:>10}" for m in names))
     for key, label, goal in TARGETS:
         vals = " ".join(f"{np.mean([r[key] for r in rows[m]]):10.3f}" for m in names)
@@ -216,10 +297,19 @@ def main() -> None:
                  f"{med['train_cpu_s']:.0f} s CPU on {med['threads']:.0f} thread(s)) "
                  f"(target <= 300)" if name == "network" else "no training")
         print(f"\n{name} limb model, median over {len(runs)} limbs: file "
-              f"{med['bytes'] / 1e3:.0f} kB (target <= 2 MB), {med['nodes']:.0f} graph nodes; "
-              f"onnxruntime single call {med['single_us']:.0f} µs (target <= 50); batched "
-              f"{med['per_s']:,.0f} limbs/s on {os.cpu_count()} cores (target >= 500,000), "
-              f"{med['per_s_one_thread']:,.0f} in one call on one thread; {train}")
+              f"{med['bytes'] / 1e3:.0f} kB (target <= 2 MB), {med['nodes']:.0f} graph nodes "
+              f"({med['top_nodes']:.0f} at the top level); onnxruntime single call "
+              f"{med['single_us']:.0f} µs (target <= 50; valid postures "
+              f"{med['single_valid_us']:.0f} µs, the others {med['single_invalid_us']:.0f}); "
+              f"batched {med['per_s']:,.0f} limbs/s on {os.cpu_count()} cores (target >= "
+              f"500,000), {med['per_s_one_thread']:,.0f} in one call on one thread; {train}")
+    both = [(nw["single_us"], g["single_us"]) for nw, g in zip(SPEED["network"],
+                                                              SPEED["geometric"], strict=False)]
+    if both:
+        ratios = [a / b for a, b in both]
+        print(f"\nnetwork / geometric single call, same run: median ratio "
+              f"{statistics.median(ratios):.2f} (target <= 1.2), per limb "
+              f"{', '.join(f'{r:.2f}' for r in ratios)}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 A *limb file* describes one patient's limb as a chain of joints from the trunk outwards —
 shoulder → elbow → wrist, hip → knee → ankle — each joint with its kind (``ball``, ``hinge``,
-``two-axis``: :mod:`models.constraint`), the segments it joins, and its limits. A joint's limits
+``two-axis``, ``forearm``: :mod:`models.constraint`), the segments it joins, and its limits. A joint's limits
 may depend on another joint's angle (**a coupling**: muscles that cross two joints — the
 hamstrings limit hip flexion when the knee is straight): they are then given at two or more
 values of that angle (**keyframes**) and interpolated between them. Reference:
@@ -15,8 +15,10 @@ child); a segment's long axis is the joint constraint's ``limb_axis`` (+X by def
 Coupling semantics
 ------------------
 - The coupling angle is the angle of a **hinge** joint of the same limb (the rotation about its
-  hinge axis, degrees, as in its ``hinge`` interval); other kinds have no single angle and are
-  refused.
+  hinge axis, degrees, as in its ``hinge`` interval) or the flexion of a **forearm** joint (the
+  ``θ`` of ``F(θ) ⊗ R(φ)``, as in its ``forearm.flexion`` interval: an elbow that also
+  pronates; :meth:`models.kinds.base.JointKind.coupling_angle`); other kinds have no single
+  angle and are refused.
 - Between keyframes ``k`` and ``k+1`` (at angles ``a_k < a_{k+1}``) the limits at angle ``a``
   are those of the interpolation at ``t = (a − a_k) / (a_{k+1} − a_k)``; outside the keyframes'
   range the nearer end keyframe's limits hold (clamped, never extrapolated).
@@ -361,12 +363,13 @@ def _interpolation(kf: list[tuple[float, JointConstraint]], where: str, by: str,
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class Coupling:
-    """A joint's limits at keyframes of another joint's (a hinge's) angle.
+    """A joint's limits at keyframes of another joint's angle (a hinge's, a forearm's
+    flexion).
 
     Attributes
     ----------
     by : str
-        The hinge joint whose angle the limits depend on.
+        The joint (a hinge, a forearm) whose angle the limits depend on.
     at_deg : tuple of float, increasing (at least 2)
     limits : InterpolatedLimits
         The keyframes' constraints and their interpolation (:attr:`keyframes`).
@@ -572,7 +575,7 @@ class Limb:
             parsed.append({"name": jname, "parent": parent, "child": child, "raw": jd, "w": w})
         if limb is not None:
             _check_chain(limb, parsed, source)
-        # constraints first: a coupling's source must be a hinge
+        # constraints first: a coupling's source must drive couplings (a hinge, a forearm)
         kinds: dict[str, str] = {}
         built: dict[str, Any] = {}
         for p in parsed:
@@ -629,8 +632,9 @@ class Limb:
                 raise ConstraintError("a joint's limits cannot depend on its own angle",
                                       f"{w}.coupled.by", source)
             if not get_kind(kinds[by]).drives_couplings:
-                raise ConstraintError(f"a coupling follows a hinge's angle; {by!r} is a "
-                                      f"{kinds[by]} joint", f"{w}.coupled.by", source)
+                raise ConstraintError(f"a coupling follows a hinge's angle or a forearm's "
+                                      f"flexion; {by!r} is a {kinds[by]} joint",
+                                      f"{w}.coupled.by", source)
             limits = _interpolation(kf, f"{w}.coupled", by, source)
             joints.append(LimbJoint(p["name"], p["parent"], p["child"], coupling=Coupling(
                 by=by, at_deg=tuple(a for a, _ in kf), limits=limits)))

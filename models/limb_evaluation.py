@@ -14,7 +14,10 @@ draws them) with a twist interval, **coupled** to the hinge (knee or elbow) thro
 keyframes whose boundaries differ in vertex count and grow towards one side as the hinge bends
 (the hamstrings' straight-leg limit, the biceps' long head); the hinge has a random interval;
 the distal two-axis joint a smaller concave polygon and a narrow twist. No method is tuned on
-seeds ≥ :data:`HELD_OUT_LIMB_SEED`.
+seeds ≥ :data:`HELD_OUT_LIMB_SEED`. A family of its own (:func:`held_out_forearm_arms`, seeds
+from :data:`HELD_OUT_FOREARM_SEED`): arms drawn the same way whose elbow is a **forearm**
+joint (the hinge's flexion interval plus pronation–supination, 60-90° each way), the shoulder
+coupled to its flexion — the 7-servo arm's chain.
 
 Test postures (:func:`held_out_postures`)
 -----------------------------------------
@@ -24,7 +27,9 @@ joint at its source's corrected angle); a third valid in every joint (where a li
 its time: what a model must leave alone). Hinges: in the first two thirds, the angle uniform
 over the interval widened by 40° on each side, half of them exactly on the axis (a servo
 limb's hinge), half with up to 5° of out-of-axis rotation (a human joint, an IMU); in the last
-third on the axis inside the interval.
+third on the axis inside the interval. Forearm joints alike: flexion and rotation each uniform
+over its interval widened by 40° (half on the joint's set ``F(θ) ⊗ R(φ)``, half up to 5° off
+it), in the last third on the set inside both intervals.
 """
 
 from __future__ import annotations
@@ -42,7 +47,9 @@ from models.limits import ConeSwing
 from models.oracle import ConstraintOracle
 
 __all__ = [
+    "HELD_OUT_FOREARM_SEED",
     "HELD_OUT_LIMB_SEED",
+    "held_out_forearm_arms",
     "held_out_limbs",
     "held_out_postures",
     "random_limb",
@@ -51,6 +58,9 @@ __all__ = [
 
 #: First seed of the held-out limbs (no method is tuned on seeds from here on).
 HELD_OUT_LIMB_SEED = 9_100
+
+#: First seed of the held-out arms with a forearm elbow (:func:`held_out_forearm_arms`).
+HELD_OUT_FOREARM_SEED = 9_200
 
 
 
@@ -86,8 +96,10 @@ def _azimuths(rng: np.random.Generator, k: int) -> np.ndarray:
     return np.sort((np.arange(k) + rng.uniform(-0.3, 0.3, k)) * 2 * np.pi / k)
 
 
-def random_limb(seed: int, kind: str = "leg") -> Limb:
-    """A seeded held-out leg or arm (see the module docstring)."""
+def random_limb(seed: int, kind: str = "leg", *, forearm: bool = False) -> Limb:
+    """A seeded held-out leg or arm (see the module docstring); ``forearm``: an arm whose elbow
+    is a forearm joint — the same draws, then its pronation–supination interval (the elbow's
+    flexion interval is the hinge's; the shoulder is coupled to the flexion)."""
 
     if kind not in LIMB_CHAINS:
         raise ValueError(f"kind: expected 'leg' or 'arm', got {kind!r}")
@@ -133,6 +145,14 @@ def random_limb(seed: int, kind: str = "leg") -> Limb:
                                                     np.clip(dist_rho(phi), 6, 60)),
                                   "interior": dist_centre.tolist()}},
             "twist": {"min_deg": float(-tw), "max_deg": float(tw)}}}]}
+    if forearm:
+        if kind != "arm":
+            raise ValueError(f"forearm: an arm's elbow, not a {kind}'s joint")
+        pro, sup = rng.uniform(60, 90), rng.uniform(60, 90)  # pronation −φ, supination +φ
+        doc["name"] = f"forearm-arm-{seed}"
+        doc["joints"][1]["constraint"] = {"kind": "forearm", "forearm": {
+            "flexion": {"axis": hinge_axis, "min_deg": hinge_lo, "max_deg": hinge_hi},
+            "rotation": {"min_deg": float(-pro), "max_deg": float(sup)}}}
     return _Limb.from_dict(doc, source=f"held-out {kind} {seed}")
 
 
@@ -146,6 +166,17 @@ def held_out_limbs(n: int = 10, seed: int = HELD_OUT_LIMB_SEED) -> dict[str, Lim
     return out
 
 
+def held_out_forearm_arms(n: int = 3, seed: int = HELD_OUT_FOREARM_SEED) -> dict[str, Limb]:
+    """``n`` held-out arms whose elbow is a forearm joint (flexion and pronation–supination,
+    the shoulder coupled to the flexion): name → Limb. A family of its own beside
+    :func:`held_out_limbs` (whose limbs and seeds are unchanged)."""
+    out = {}
+    for i in range(n):
+        limb = random_limb(seed + i, "arm", forearm=True)
+        out[limb.name] = limb
+    return out
+
+
 def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
                       band_deg: float = 20.0, oracle: ConstraintOracle | None = None) -> np.ndarray:
     """Test postures ``(n, J, 4)`` (see the module docstring)."""
@@ -154,7 +185,20 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
     jn = len(limb.joints)
     swing = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.swing_twist]
     hinges = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.single_axis]
+    forearms = [j for j, jt in enumerate(limb.joints) if jt.joint_kind.flexion_rotation]
     band = math.radians(band_deg)
+
+    def forearm(j: int, m: int, widen: float) -> np.ndarray:
+        """Forearm ``j``'s ``F(θ) ⊗ R(φ)``, each angle uniform over its interval widened by
+        ``widen`` degrees a side."""
+        c = limb.joints[j].constraint
+        f = c.limits
+        th = rng.uniform(math.radians(f.flexion_min_deg - widen),
+                         math.radians(f.flexion_max_deg + widen), m)
+        ph = rng.uniform(math.radians(f.rotation_min_deg - widen),
+                         math.radians(f.rotation_max_deg + widen), m)
+        return Q.multiply(Q.from_axis_angle(np.asarray(f.axis), th),
+                          Q.from_axis_angle(np.asarray(c.limb_axis), ph))
 
     def draw(m: int) -> np.ndarray:
         q = Q.random_quaternions(m * jn, rng).reshape(m, jn, 4)
@@ -167,6 +211,12 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
                                     np.radians(rng.uniform(0, 5, m)))
             bent = np.where((rng.random(m) < 0.5)[:, None], on, Q.multiply(off, on))
             q[:, j] = bent * np.where(rng.random(m) < 0.5, -1.0, 1.0)[:, None]
+        for j in forearms:  # as hinges: half on the joint's set, half up to 5° off it
+            on = forearm(j, m, 40.0)
+            off = Q.from_axis_angle(Q.random_unit_vectors(m, rng),
+                                    np.radians(rng.uniform(0, 5, m)))
+            bent = np.where((rng.random(m) < 0.5)[:, None], on, Q.multiply(off, on))
+            q[:, j] = bent * np.where(rng.random(m) < 0.5, -1.0, 1.0)[:, None]
         return q
 
     def valid(m: int) -> np.ndarray:
@@ -175,6 +225,8 @@ def held_out_postures(limb: Limb, n: int, rng: np.random.Generator | int, *,
             h = limb.joints[j].loosest().hinge
             q[:, j] = Q.from_axis_angle(np.asarray(h.axis), np.radians(
                 rng.uniform(h.min_deg, h.max_deg, m)))
+        for j in forearms:
+            q[:, j] = forearm(j, m, 0.0)
         for j in (j for j in limb.order if j in swing):  # sources first
             centre, radius, lo, hi = _proposal(limb.joints[j])
             axis = np.asarray(limb.joints[j].limb_axis)

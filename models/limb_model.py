@@ -35,6 +35,13 @@ joints (a leg: 261 nodes). Per joint:
   with the clamped angle (the geodesic correction: out-of-axis motion is removed too). Its
   corrected angle ``θ = 4 atan(s / (1 + c))`` (``(c, s)`` the clamped pair with ``c >= 0``)
   drives the joints coupled to it;
+- **forearm**: the exact closed form of :mod:`models.kinds.forearm` on half-angle pairs
+  (``u = (cos θ/2, sin θ/2)`` of the flexion, ``v`` of the axial rotation; no angle is taken
+  but the output's): ``A_ij = <q, e_ij>`` by one ``MatMul`` with the four edges' free pairs;
+  the free optimum as square roots of two complex products; the edges' free pairs clamped as
+  a hinge's, the first largest ``|h|`` where the optimum is outside (:func:`_forearm_group`).
+  Its corrected flexion ``θ = 4 atan(s / (1 + c))`` drives the joints coupled to it, as a
+  hinge's angle does;
 - **swing** (ball, two-axis): limb direction ``d = R(q) a``; nearest boundary point ``b`` of a
   cone (closed form) or a polygon by the kernel of :class:`models.geometry.SphericalPolygon`
   over every edge (key = squared chord, lowest index on ties — ``ArgMin`` returns the first —,
@@ -60,6 +67,7 @@ import onnx
 from onnx import TensorProto, helper
 
 from models.fileio import write_owner_only
+from models.kinds.forearm import basis as forearm_basis
 from models.limb import Limb, oriented_vertices
 from models.limits import ConeSwing, PolygonSwing
 from models.onnx_io import (
@@ -71,6 +79,7 @@ from models.onnx_io import (
     package_version,
     product_tensor,
     rotation_tensor,
+    twist_clamp,
     twist_rotation,
 )
 
@@ -197,6 +206,102 @@ def _hinge_group(g: Graph, q: str, axes: np.ndarray, lims: _Limits) -> tuple[str
     h = g.op("MatMul", [target, g.const(hmap)])  # (c, s a); correction = h ⊗ q⁻¹
     qinv = g.op("Mul", [q, g.const([1.0, -1.0, -1.0, -1.0])])
     corr = bilinear(g, h, qinv, _PROD, "hinge_correction")
+    return _canonical(g, _normalize(g, corr)), angle
+
+
+def _half_pairs(angles: np.ndarray) -> np.ndarray:
+    """Half-angle pairs ``(cos θ/2, sin θ/2)`` (..., 2) of angles (radians)."""
+    return np.stack([np.cos(0.5 * angles), np.sin(0.5 * angles)], axis=-1)
+
+
+def _clamp_pairs(g: Graph, t: str, lo: np.ndarray, hi: np.ndarray) -> str:
+    """Half-angle pairs ``t`` (..., 2) clamped to intervals ``[lo, hi]`` (radians, constants
+    broadcast to ``t``'s leading shape, one per pair): the hinge's rule on the circle
+    (:func:`models.onnx_io.twist_clamp`: relative to the middle, nearer end, a tie to ``max``).
+    Returns the clamped pairs, unit (the input's own where inside)."""
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    cm, sm = np.cos(0.5 * mid)[..., None], np.sin(0.5 * mid)[..., None]
+    tn = _normalize(g, t)
+    swap = g.op("MatMul", [tn, g.const([[0.0, 1.0], [1.0, 0.0]])])  # (x, w)
+    u = g.op("Add", [g.op("Mul", [tn, g.const(np.concatenate([cm, cm], -1))]),
+                     g.op("Mul", [swap, g.const(np.concatenate([sm, -sm], -1))])])  # t e^{-i mid/2}
+    e = twist_clamp(g, u, g.const(np.cos(0.5 * half)[..., None]),
+                    g.const(np.sin(0.5 * half)[..., None]))
+    e_w, e_x = g.ops("Split", [e], 2, axis=-1)  # e ⊗ t̂ (complex product)
+    return g.op("Add", [g.op("Mul", [tn, e_w]), g.op("Mul", [
+        g.op("MatMul", [tn, g.const([[0.0, 1.0], [-1.0, 0.0]])]), e_x])])
+
+
+def _forearm_group(g: Graph, q: str, ns: np.ndarray, xs: np.ndarray, flex: np.ndarray,
+                   rot: np.ndarray) -> tuple[str, str]:
+    """Corrections (K, N, 4) and corrected flexion angles (K, N, 1) of forearm joints ``q``
+    (K, N, 4) with flexion axes ``ns`` and limb axes ``xs`` (K, 3), intervals ``flex`` and
+    ``rot`` (K, 2) radians: the exact closed form of :mod:`models.kinds.forearm` on half-angle
+    pairs ``u = (cos θ/2, sin θ/2)``, ``v = (cos φ/2, sin φ/2)`` (no angle is taken but the
+    output's flexion). ``A_ij = <q, e_ij>``; ``z1 = ½(A00 + A11) + ½i(A10 − A01)`` and
+    ``z2 = ½(A00 − A11) + ½i(A01 + A10)``; the free optimum ``u0 = √(z1 z2)``,
+    ``v0 = √(z2 z̄1)`` (either square root: a pair and its negative are one rotation); on an
+    edge (one angle fixed at an end, pair ``c``) the free pair is ``w = Aᵀc`` or ``A c``,
+    clamped to its interval, with ``h = w · clamped``; the first largest ``|h|`` of the four
+    edges where ``(u0, v0)`` is outside either interval. Projection ``Σ u_i v_j e_ij``."""
+    k = len(ns)
+    bases = np.stack([forearm_basis(n, x) for n, x in zip(ns, xs, strict=True)])  # (K, 4, 4)
+    zmap = np.array([[0.5, 0.0, 0.5, 0.0], [0.0, -0.5, 0.0, 0.5],
+                     [0.0, 0.5, 0.0, 0.5], [0.5, 0.0, -0.5, 0.0]])  # A → (x1, y1, x2, y2)
+    ends = np.concatenate([_half_pairs(flex), _half_pairs(rot)], axis=1)  # (K, 4, 2)
+    emap = np.zeros((k, 4, 8))  # A → the four edges' free pairs
+    for e in range(4):
+        c0, c1 = ends[:, e, 0], ends[:, e, 1]
+        if e < 2:  # θ fixed: w = Aᵀu = (A00 cu + A10 su, A01 cu + A11 su)
+            emap[:, 0, 2 * e], emap[:, 2, 2 * e] = c0, c1
+            emap[:, 1, 2 * e + 1], emap[:, 3, 2 * e + 1] = c0, c1
+        else:  # φ fixed: w = A v = (A00 cv + A01 sv, A10 cv + A11 sv)
+            emap[:, 0, 2 * e], emap[:, 1, 2 * e] = c0, c1
+            emap[:, 2, 2 * e + 1], emap[:, 3, 2 * e + 1] = c0, c1
+    amap = np.swapaxes(bases, 1, 2)  # q → A
+    lin = g.op("MatMul", [q, g.const(np.concatenate([amap @ zmap, amap @ emap], axis=2))])
+    z, free = g.ops("Split", [lin, _i(g, [4, 8])], 2, axis=-1)
+    # free optimum: (z1 z2, z2 z̄1) as one quadratic form, then a square root of each
+    sq = np.zeros((4, 4, 4))
+    sq[0, 2, 0], sq[1, 3, 0], sq[0, 3, 1], sq[1, 2, 1] = 1.0, -1.0, 1.0, 1.0
+    sq[0, 2, 2], sq[1, 3, 2], sq[0, 3, 3], sq[1, 2, 3] = 1.0, 1.0, 1.0, -1.0
+    w = g.op("Reshape", [bilinear(g, z, z, sq, "forearm_optimum"), _i(g, [0, 0, 2, 2])])
+    r = g.op("ReduceL2", [w], axes=[-1], keepdims=1)
+    right = g.op("Add", [w, g.op("Mul", [r, g.const([1.0, 0.0])])])  # (r + x, y)
+    right = g.op("Add", [right, g.const([1e-18, 0.0])])  # r = 0 (no unique optimum): (1, 0)
+    left = g.op("Add", [g.op("MatMul", [w, g.const([[0.0, -1.0], [1.0, 0.0]])]),
+                        g.op("Mul", [r, g.const([0.0, 1.0])])])  # (y, r − x)
+    opt = _normalize(g, g.op("Where", [g.op("Less", [_first(g, w), g.const(0.0)]), left,
+                                       right]))  # (K, N, 2, 2): u0, v0
+    lims = np.stack([flex, rot], axis=1)  # (K, 2, 2): per pair (lo, hi)
+    mid, half = lims.mean(axis=2), 0.5 * (lims[..., 1] - lims[..., 0])
+    rel_x = g.op("ReduceSum", [g.op("Mul", [opt, g.const(np.stack([
+        -np.sin(0.5 * mid), np.cos(0.5 * mid)], -1)[:, None])]), _i(g, [-1])], keepdims=0)
+    worst = g.op("ReduceMax", [g.op("Sub", [g.op("Abs", [rel_x]), g.const(
+        np.sin(0.5 * half)[:, None])])], axes=[-1], keepdims=1)
+    inside = g.op("LessOrEqual", [worst, g.const(0.0)])  # (K, N, 1)
+    # the edges: θ = lo, hi (φ free), φ = lo, hi (θ free)
+    free = g.op("Reshape", [free, _i(g, [0, 0, 4, 2])])
+    e_lo = np.stack([rot[:, 0], rot[:, 0], flex[:, 0], flex[:, 0]], 1)
+    e_hi = np.stack([rot[:, 1], rot[:, 1], flex[:, 1], flex[:, 1]], 1)
+    clamped = _clamp_pairs(g, free, e_lo[:, None], e_hi[:, None])  # (K, N, 4, 2)
+    h = g.op("Abs", [g.op("ReduceSum", [g.op("Mul", [free, clamped]), _i(g, [-1])],
+                          keepdims=0)])
+    best = g.op("ArgMax", [h], axis=-1, keepdims=1)  # the first largest (K, N, 1)
+    fixed = g.const(ends[:, None])  # (K, 1, 4, 2)
+    theta_edge = g.const(np.array([True, True, False, False])[:, None], dtype=np.bool_)
+    cand = g.op("Concat", [g.op("Where", [theta_edge, fixed, clamped]),
+                           g.op("Where", [theta_edge, clamped, fixed])], axis=-1)
+    at = g.op("Tile", [g.op("Unsqueeze", [best, _i(g, [-1])]), _i(g, [1, 1, 1, 4])])
+    edge = g.op("Squeeze", [g.op("GatherElements", [cand, at], axis=2), _i(g, [2])])
+    uv = g.op("Where", [inside, g.op("Reshape", [opt, _i(g, [0, 0, 4])]), edge])
+    u, v = g.ops("Split", [uv], 2, axis=-1)
+    proj = bilinear(g, u, v, bases.reshape(k, 2, 2, 4), "forearm_projection")
+    qinv = g.op("Mul", [q, g.const([1.0, -1.0, -1.0, -1.0])])
+    corr = bilinear(g, proj, qinv, _PROD, "forearm_correction")
+    c, s_ = g.ops("Split", [_canonical(g, u)], 2, axis=-1)
+    angle = g.op("Mul", [g.op("Atan", [g.op("Div", [s_, g.op("Add", [c, g.const(1.0)])])]),
+                         g.const(4.0)])
     return _canonical(g, _normalize(g, corr)), angle
 
 
@@ -376,31 +481,45 @@ def _field_nearest(g: Graph, tau: str, net):
     a1_t = g.op("Add", [g.op("Mul", [tau, g.const(net.w1[nf + 3:nf + 4].astype(f32))]),
                         g.const(net.b1[None].astype(f32))])
 
-    def evaluate(x: str) -> tuple[str, str]:
+    def forward(g: Graph, x: str) -> tuple[str, tuple[str, str, str]]:
         u = g.op("Add", [g.op("MatMul", [x, bd]), u_t])
         h1 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [
             g.op("Concat", [g.op("Sin", [u]), x], axis=1), w1_fd]), a1_t])])
         h2 = g.op("Tanh", [g.op("Add", [g.op("MatMul", [h1, w2]), b2])])
-        f = g.op("Add", [g.op("MatMul", [h2, w3]), b3])
+        return g.op("Add", [g.op("MatMul", [h2, w3]), b3]), (u, h1, h2)
+
+    def gradient(g: Graph, u: str, h1: str, h2: str) -> str:
         g2 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h2, h2])]), w3r])
         g1 = g.op("Mul", [g.op("Sub", [one, g.op("Mul", [h1, h1])]), g.op("MatMul", [g2, w2t])])
-        grad = g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
+        return g.op("Add", [g.op("MatMul", [g.op("Mul", [g.op("MatMul", [g1, w1_ft]),
                                                          g.op("Cos", [u])]), bdt]),
                             g.op("MatMul", [g1, w1_dt])])
-        return f, grad
 
     def nearest(d: str) -> tuple[str, str]:
+        f, inner = forward(g, d)
+        outside = g.op("Greater", [f, g.const(0.0)])
+        # the steps only where some direction is outside: a valid posture's single call
+        # skips them (a direction inside takes no step: Relu(f) = 0)
+        anyone = g.op("Greater", [g.op("ReduceMax", [g.op("Cast", [outside], to=TensorProto.FLOAT)],
+                                       keepdims=0), g.const(0.0)])
+        br = g.branch()
         x = d
-        outside = None
-        for frac in net.steps:
-            f, grad = evaluate(x)
-            if outside is None:
-                outside = g.op("Greater", [f, g.const(0.0)])
-            tang = _normalize(g, g.op("Sub", [grad, g.op("Mul", [_dot(g, grad, x), x])]))
-            step = g.op("Mul", [g.op("Relu", [f]), g.const(float(frac))])
-            x = _normalize(g, g.op("Sub", [g.op("Mul", [g.op("Cos", [step]), x]),
-                                           g.op("Mul", [g.op("Sin", [step]), tang])]))
-        return outside, x
+        for k, frac in enumerate(net.steps):
+            if k:
+                f, inner = forward(br, x)
+            grad = gradient(br, *inner)
+            tang = _normalize(br, br.op("Sub", [grad, br.op("Mul", [_dot(br, grad, x), x])]))
+            step = br.op("Mul", [br.op("Relu", [f]), br.const(float(frac))])
+            x = _normalize(br, br.op("Sub", [br.op("Mul", [br.op("Cos", [step]), x]),
+                                             br.op("Mul", [br.op("Sin", [step]), tang])]))
+        same = g.branch()
+        kept = same.op("Identity", [d])
+        b = g.op("If", [anyone], then_branch=helper.make_graph(
+            br.nodes, g.name("steps"), [], [helper.make_tensor_value_info(
+                x, TensorProto.FLOAT, None)], br.inits), else_branch=helper.make_graph(
+            same.nodes, g.name("inside"), [], [helper.make_tensor_value_info(
+                kept, TensorProto.FLOAT, None)], same.inits))
+        return outside, b
     return nearest
 
 
@@ -421,10 +540,12 @@ def _levels(limb: Limb) -> list[int]:
     return late
 
 
-def _is_hinge(joint) -> bool:
-    """The joint's limits are an axis and an interval (the hinge graph), not a swing region
-    and a twist (the swing-twist graph)."""
-    return joint.joint_kind.single_axis
+def _graph_class(joint) -> int:
+    """Which group graph answers the joint: 0 an axis and an interval (the hinge graph), 1 a
+    swing region and a twist (the swing-twist graph), 2 a flexion and an axial rotation (the
+    forearm graph)."""
+    kind = joint.joint_kind
+    return 0 if kind.single_axis else 2 if kind.flexion_rotation else 1
 
 
 def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:
@@ -433,9 +554,9 @@ def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:
     level = _levels(limb)
     groups: dict[tuple[int, int], list[int]] = {}
     for j in sorted(range(len(limb.joints)), key=lambda j: level[j]):
-        groups.setdefault((level[j], 0 if _is_hinge(limb.joints[j]) else 1), []).append(j)
+        groups.setdefault((level[j], _graph_class(limb.joints[j])), []).append(j)
     qt = g.op("Transpose", [INPUT], perm=[1, 0, 2])  # (J, N, 4)
-    angles: dict[int, tuple[str, int, int]] = {}  # hinge → (its group's angles, row, size)
+    angles: dict[int, tuple[str, int, int]] = {}  # source → (its group's angles, row, size)
     cache: dict[int, str] = {}
 
     def angle_of(j: int) -> str:
@@ -456,6 +577,11 @@ def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:
                 src = angle_of(limb.index(cp.by))
                 kt = _locate(g, src, np.radians(np.asarray(cp.at_deg)))
                 c = cp.keyframes[0]
+            if cls == 2:  # a forearm (never coupled: its keyframes are refused)
+                f = c.limits
+                axes.append((f.axis, c.limb_axis))
+                items.append((f.flexion, f.rotation))
+                continue
             if cls == 0:
                 axes.append(c.hinge.axis)
                 items.append((c.hinge.min, c.hinge.max) if cp is None else _keyframe_lerp(
@@ -467,7 +593,12 @@ def _limb_graph(g: Graph, limb: Limb, fields: dict) -> None:
                          else _keyframe_lerp(g, kt, np.array([[k.twist.min, k.twist.max]
                                                                for k in cp.keyframes])))
         axes = np.asarray(axes, dtype=float)
-        if cls == 0:
+        if cls == 2:
+            lims = np.asarray(items, dtype=float)  # (K, 2, 2): flexion, rotation
+            corr, ang = _forearm_group(g, q, axes[:, 0], axes[:, 1], lims[:, 0], lims[:, 1])
+            for r, j in enumerate(js):
+                angles[j] = (ang, r, len(js))
+        elif cls == 0:
             corr, ang = _hinge_group(g, q, axes, _Limits(items))
             for r, j in enumerate(js):
                 angles[j] = (ang, r, len(js))
@@ -508,6 +639,17 @@ def _swing_nearest(g: Graph, joint, kt, src: str | None, field):
     return None
 
 
+def _inputs(nodes) -> set[str]:
+    """The value names ``nodes`` read, their branches' (``If``) included."""
+    out = set()
+    for node in nodes:
+        out.update(node.input)
+        for attr in node.attribute:
+            if attr.type == onnx.AttributeProto.GRAPH:
+                out |= _inputs(attr.g.node)
+    return out
+
+
 def limb_to_onnx(limb: Limb, fields: dict | None = None,
                  training: dict | None = None) -> onnx.ModelProto:
     """The limb model of ``limb`` (module docstring): method ``geometric`` without ``fields``;
@@ -523,7 +665,7 @@ def limb_to_onnx(limb: Limb, fields: dict | None = None,
     g = Graph()
     jn = len(limb.joints)
     _limb_graph(g, limb, fields)
-    used = {name for node in g.nodes for name in node.input}
+    used = _inputs(g.nodes)
     g.inits = [t for t in g.inits if t.name in used]
     graph = helper.make_graph(
         g.nodes, "jointlimits_limb_correction",

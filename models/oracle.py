@@ -22,7 +22,8 @@ Joints are evaluated in :attr:`models.limb.Limb.order` (every coupling's source 
 dependant). A joint without a coupling is answered by its kind's oracle, as one joint's
 constraint is; a coupled joint by the same maths with its limits interpolated at the coupling
 angle of **the corrected** source joint — the source's angle (its kind's
-:meth:`~models.kinds.base.JointKind.coupling_axis`) in its projected orientation. So the corrected
+:meth:`~models.kinds.base.JointKind.coupling_angle`: a hinge's angle about its axis, a forearm's
+flexion) in its projected orientation. So the corrected
 limb is valid in every joint (the source's correction does not move again; the dependant is valid
 at that angle), and a valid limb is left as it is. One implementation serves a batch and a single
 posture (a posture is a batch of one).
@@ -95,6 +96,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -240,9 +242,11 @@ class ConstraintOracle:
                                                       np.asarray(j.limb_axis)))
             self._source = [None if j.coupling is None else limits.index(j.coupling.by)
                             for j in limits.joints]
-            self._coupling_axis = [
-                (j.constraint or j.coupling.keyframes[0]).joint_kind.coupling_axis(
-                    j.constraint or j.coupling.keyframes[0]) for j in limits.joints]
+            # each joint's coupling angle of (N, 4) orientations: its kind's (a hinge's angle,
+            # a forearm's flexion)
+            self._coupling_angle = [
+                partial((j.constraint or j.coupling.keyframes[0]).joint_kind.coupling_angle,
+                        j.constraint or j.coupling.keyframes[0]) for j in limits.joints]
             self._kind: KindOracle | None = None
             self._swing = None
         else:
@@ -546,7 +550,7 @@ class ConstraintOracle:
                 r = oracle.evaluate(Q.check_quaternions(qj))
             else:
                 src = self._source[j]
-                angle[:, j] = Q.twist_angle(proj[:, src], self._coupling_axis[src])
+                angle[:, j] = self._coupling_angle[src](proj[:, src])
                 r = oracle.evaluate(qj, angle[:, j])
             valid[:, j], dist[:, j] = r.valid, r.distance
             proj[:, j], corr[:, j] = r.projected, r.correction

@@ -133,6 +133,8 @@ motion of a hinge is corrected, not a limit: :mod:`calibration.boundary.hinge`).
 
 from __future__ import annotations
 
+import math
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -197,6 +199,11 @@ class LimbExtractor:
     kind : str or None
         A limb of one joint: the joint kind to extract (:mod:`calibration.kinds`; e.g.
         ``forearm`` for an elbow recorded turning about its long axis); default the joint's.
+    kinds : dict or None
+        A whole limb: joint name → the kind to extract it as instead of its own — the arm's
+        ``{"elbow": "forearm"}`` for an elbow that also pronates and supinates (a 7-servo
+        arm): its flexion and rotation intervals, and the couplings follow its flexion
+        (:meth:`models.kinds.base.JointKind.coupling_angle`) as they follow a hinge's angle.
 
     Attributes
     ----------
@@ -232,14 +239,27 @@ class LimbExtractor:
                  alpha_deg: float = 4.0,
                  max_vertices: int = 64, name: str = "recorded-limb",
                  slow_insets: bool = False, by_swing: bool | str = "auto",
-                 limb_axis=None, kind: str | None = None) -> None:
+                 limb_axis=None, kind: str | None = None,
+                 kinds: dict[str, str] | None = None) -> None:
         one = isinstance(limb, tuple) and len(limb) == 1
         if not one and limb not in LIMB_CHAINS:
             raise ValueError(f"limb must be one of {', '.join(LIMB_CHAINS)} or a tuple of one "
                              f"joint, got {limb!r}")
         if kind is not None and not one:
-            raise ValueError("kind applies to a limb of one joint (a whole limb's joints have "
-                             "their own kinds)")
+            raise ValueError("kind applies to a limb of one joint (a whole limb's joints: "
+                             "kinds={joint: kind})")
+        self.kinds = dict(kinds or {})
+        if self.kinds:
+            if one:
+                raise ValueError("kinds applies to a whole limb (a limb of one joint: kind)")
+            source = LIMB_CHAINS[limb][1][0]
+            for joint, k in self.kinds.items():
+                if joint != source:
+                    raise ValueError(f"kinds: only the {limb}'s {source} (the couplings' "
+                                     f"source) takes another kind, not {joint!r}")
+                if not get_kind(k).drives_couplings:
+                    raise ValueError(f"kinds: the {joint} drives the couplings: a {k} joint "
+                                     f"does not")
         self.kind = kind
         self.by_swing = by_swing
         self.limb_axis = limb_axis
@@ -274,14 +294,15 @@ class LimbExtractor:
                 "min_local_difference_deg": self.min_local_difference_deg,
                 "min_held": self.min_held, "min_inside": self.min_inside,
                 "alpha_deg": self.alpha_deg,
-                "max_vertices": self.max_vertices, "slow_insets": self.slow_insets}
+                "max_vertices": self.max_vertices, "slow_insets": self.slow_insets,
+                **({"kinds": dict(self.kinds)} if self.kinds else {})}
 
     # -- the parts --------------------------------------------------------------------------
     def _joint_extractor(self, spec, name: str, *, max_vertices: int | None = None,
                          by_swing: bool | str = "auto"):
         return joint_extractor(spec.name, limb_axis=spec.limb_axis, alpha_deg=self.alpha_deg,
                                max_vertices=max_vertices or self.max_vertices,
-                               by_swing=by_swing, name=name)
+                               by_swing=by_swing, name=name, kind=self.kinds.get(spec.name))
 
     def _fit_joint(self, ex, spec, q, t, status, insets=None):
         """``ex`` fitted on one joint's (or keyframe's) samples with the joint's measured slow
@@ -367,8 +388,14 @@ class LimbExtractor:
                                  q[:, specs.index(spec)], t, status)
             constraints[spec.name] = ex.constraint_
             self.reports_[spec.name] = ex.report()
-        h = constraints[hinge.name].hinge
-        theta = hinge_angles(q[:, 1], hinge.hinge_axis)
+        if hinge.name in self.kinds:  # another source kind (a forearm: its flexion)
+            src = constraints[hinge.name]
+            lo, hi = (math.degrees(x) for x in src.joint_kind.coupling_range(src))
+            h = SimpleNamespace(min_deg=lo, max_deg=hi)
+            theta = np.degrees(src.joint_kind.coupling_angle(src, q[:, 1]))
+        else:
+            h = constraints[hinge.name].hinge
+            theta = hinge_angles(q[:, 1], hinge.hinge_axis)
         ts = None if t is None else np.asarray(t)
         st = None if status is None else np.asarray(status)
         # the proximal joint's coupling first, then the distal one's with the proximal's

@@ -131,7 +131,8 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = U
     """Postures ``(n, J, 4)`` a limb's fields train on (``rig dataset make`` on a limb file).
 
     Each hinge that drives a coupling on its axis at an angle uniform over its loosest
-    interval (so its corrected angle is its own); each :func:`field_joints` joint's direction
+    interval (so its corrected angle is its own; a forearm likewise on its own set, the flexion
+    uniform, then its rotation uniform over its interval); each :func:`field_joints` joint's direction
     from :func:`coupled_directions` at that angle, its twist uniform within its interval there (so
     its validity is its swing's); every other joint uniform on SO(3).
     """
@@ -141,10 +142,11 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = U
     for name in field_joints(limb):
         joint = limb.joints[limb.index(name)]
         src = limb.index(joint.coupling.by)
-        if src not in angle:
-            h = limb.joints[src].loosest().hinge
-            angle[src] = rng.uniform(h.min, h.max, n)
-            q[:, src] = quat.from_axis_angle(np.asarray(h.axis), angle[src])
+        if src not in angle:  # on its own set (a hinge's axis, a forearm's F(θ) ⊗ R(φ))
+            c = limb.joints[src].loosest()
+            lo, hi = c.joint_kind.coupling_range(c)
+            angle[src] = rng.uniform(lo, hi, n)
+            q[:, src] = c.joint_kind.at_coupling_angle(c, angle[src], rng)
         d = coupled_directions(joint.coupling.limits, angle[src], rng, uniform)
         axis = np.asarray(joint.limb_axis)
         lim = joint.coupling.limits

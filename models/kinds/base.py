@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from models import qscalar as qs
+from models import quaternion as Q
 
 __all__ = [
     "BOUNDARY_TOLERANCE",
@@ -135,6 +136,9 @@ class JointKind:
     narrow_twist : bool
         Its twist about the limb axis is fixed or narrow (a two-axis joint): a report names its
         swing region and its narrow twist.
+    flexion_rotation : bool
+        Its limits are a flexion interval about one axis and an axial-rotation interval about
+        the limb axis (a forearm): the limb model compiles it as such a group.
     """
 
     name: str = ""
@@ -145,6 +149,7 @@ class JointKind:
     coupled_interval_key: str = "twist"
     single_axis: bool = False
     narrow_twist: bool = False
+    flexion_rotation: bool = False
 
     def refuse(self, data: dict, source: str | None) -> None:
         """Raise for keys of a constraint file this kind refuses with its own message (checked
@@ -201,6 +206,25 @@ class JointKind:
         """The axis (3,) whose angle can drive another joint's limits in a limb (a hinge's
         axis, a flexion axis), None when this kind cannot be a coupling's source."""
         return None
+
+    def coupling_angle(self, constraint: Any, q: np.ndarray) -> np.ndarray:
+        """The angle (radians, (N,), in (−π, π]) of orientations ``q`` (N, 4) that drives the
+        joints coupled to this one — what a coupling's ``at_deg`` measures: by default the
+        rotation about :meth:`coupling_axis` (:func:`models.quaternion.twist_angle`, a
+        hinge's angle)."""
+        return Q.twist_angle(q, self.coupling_axis(constraint))
+
+    def coupling_range(self, constraint: Any) -> tuple[float, float]:
+        """The interval (radians) the coupling angle of a valid orientation lies in (a
+        hinge's interval, a forearm's flexion)."""
+        raise NotImplementedError(f"a {self.words} does not drive couplings")
+
+    def at_coupling_angle(self, constraint: Any, angle: np.ndarray,
+                          rng: np.random.Generator) -> np.ndarray:
+        """Valid orientations (N, 4) whose coupling angle is ``angle`` (N,) (radians, inside
+        :meth:`coupling_range`), the joint's other angles (if any) drawn from ``rng`` within
+        their limits; a kind without other angles draws nothing."""
+        raise NotImplementedError(f"a {self.words} does not drive couplings")
 
     def flexion_axis(self, constraint: Any) -> np.ndarray | None:
         """The axis (3,, parent frame) a joint of this kind flexes about — what tells an

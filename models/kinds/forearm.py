@@ -12,6 +12,11 @@ File block (see :mod:`models.constraint` for the whole format)::
 A forearm joint has no ``swing`` or ``twist`` (its two intervals are the whole limit). The
 flexion axis must not be parallel to the limb axis (that would be one rotation, a hinge).
 
+In a limb file (``docs/limb-format.md``) a forearm elbow drives couplings like a hinge: the
+coupling angle is its flexion ``θ`` (:meth:`ForearmKind.coupling_angle`, the ``θ`` of
+:func:`decompose`; on the joint's set, where the limb oracle reads it, it is exactly the ``θ``
+of ``F(θ) ⊗ R(φ)``, and equal to the twist about ``n`` when ``n ⊥ x``).
+
 Parameterisation
 ----------------
 With ``n`` the flexion axis (parent frame; the child's frame coincides with the parent's at
@@ -86,7 +91,8 @@ from models.limits import (
     vector,
 )
 
-__all__ = ["ForearmKind", "ForearmLimits", "ForearmOracle", "decompose", "evaluate_forearm"]
+__all__ = ["ForearmKind", "ForearmLimits", "ForearmOracle", "basis", "decompose",
+           "evaluate_forearm"]
 
 #: Smallest angle (degrees) between the flexion axis and the limb axis.
 MIN_AXIS_ANGLE_DEG = 1.0
@@ -164,6 +170,8 @@ class ForearmKind(JointKind):
     name = "forearm"
     words = "forearm joint"
     file_keys = ("forearm",)
+    drives_couplings = True
+    flexion_rotation = True
 
     def refuse(self, data: dict, source: str | None) -> None:
         for key in ("swing", "twist"):
@@ -193,6 +201,26 @@ class ForearmKind(JointKind):
     def flexion_axis(self, constraint: Any) -> np.ndarray:
         return np.asarray(constraint.limits.axis, dtype=np.float64)
 
+    def coupling_axis(self, constraint: Any) -> np.ndarray:
+        return np.asarray(constraint.limits.axis, dtype=np.float64)
+
+    def coupling_angle(self, constraint: Any, q: np.ndarray) -> np.ndarray:
+        """The flexion ``θ`` of ``q`` (:func:`decompose`): on the joint's set ``F(θ) ⊗ R(φ)``
+        exactly ``θ`` whatever the axes (the twist about ``n`` is ``θ`` too when ``n ⊥ x``,
+        not otherwise)."""
+        return decompose(q, constraint.limits.axis, constraint.limb_axis)[0]
+
+    def coupling_range(self, constraint: Any) -> tuple[float, float]:
+        return constraint.limits.flexion
+
+    def at_coupling_angle(self, constraint: Any, angle: np.ndarray,
+                          rng: np.random.Generator) -> np.ndarray:
+        """``F(angle) ⊗ R(φ)``, ``φ`` uniform over the rotation interval."""
+        lo, hi = constraint.limits.rotation
+        phi = rng.uniform(lo, hi, np.shape(angle))
+        return Q.multiply(Q.from_axis_angle(np.asarray(constraint.limits.axis), angle),
+                          Q.from_axis_angle(np.asarray(constraint.limb_axis), phi))
+
     def check_keyframe(self, c: Any, first: Any, where: str, source: str | None) -> None:
         raise ConstraintError("a forearm joint's limits are not coupled to another joint's "
                               "angle (keyframes are ball, two-axis or hinge joints)",
@@ -200,8 +228,9 @@ class ForearmKind(JointKind):
 
 
 # -- the oracle ---------------------------------------------------------------------------------
-def _basis(n: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(4, 4): rows ``e00 = 1``, ``e01 = x``, ``e10 = n``, ``e11 = n ⊗ x``."""
+def basis(n: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(4, 4): rows ``e00 = 1``, ``e01 = x``, ``e10 = n``, ``e11 = n ⊗ x`` — so that
+    ``F(θ) ⊗ R(φ) = Σ u_i v_j e_ij`` (module docstring); the limb model's graph reads them."""
     nx = np.cross(n, x)
     return np.array([[1.0, 0.0, 0.0, 0.0], [0.0, *x], [0.0, *n],
                      [-float(n @ x), *nx]])
@@ -220,7 +249,7 @@ def decompose(q: np.ndarray, n, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     theta, phi : (N,) float64, radians, in (−π, π]
     sigma : (N,) float64, ``max |<q, F(θ) ⊗ R(φ)>|`` (1 on the set)
     """
-    a = q @ _basis(np.asarray(n, float), np.asarray(x, float)).T  # (N, 4): A00 A01 A10 A11
+    a = q @ basis(np.asarray(n, float), np.asarray(x, float)).T  # (N, 4): A00 A01 A10 A11
     d1 = np.arctan2(0.5 * (a[:, 2] - a[:, 1]), 0.5 * (a[:, 0] + a[:, 3]))
     d2 = np.arctan2(0.5 * (a[:, 1] + a[:, 2]), 0.5 * (a[:, 0] - a[:, 3]))
     r1 = np.hypot(0.5 * (a[:, 2] - a[:, 1]), 0.5 * (a[:, 0] + a[:, 3]))
@@ -253,7 +282,7 @@ def evaluate_forearm(q: np.ndarray, n: np.ndarray, x: np.ndarray, flexion, rotat
     x = np.asarray(x, float)
     (t_lo, t_hi), (p_lo, p_hi) = flexion, rotation
     t_wraps, p_wraps = reaches_seam(t_lo, t_hi), reaches_seam(p_lo, p_hi)
-    a = q @ _basis(n, x).T
+    a = q @ basis(n, x).T
     theta0, phi0, sigma = decompose(q, n, x)
     inside = twist_inside(theta0, t_lo, t_hi, t_wraps) & twist_inside(phi0, p_lo, p_hi, p_wraps)
     cand_t, cand_p, vals = [], [], []
@@ -323,7 +352,7 @@ class ForearmOracle(KindOracle):
         self.x = np.asarray(limb_axis, dtype=np.float64)
         self.flexion = limits.flexion
         self.rotation = limits.rotation
-        self._basis = tuple(tuple(float(v) for v in row) for row in _basis(self.n, self.x))
+        self._basis = tuple(tuple(float(v) for v in row) for row in basis(self.n, self.x))
         self._wraps = (reaches_seam(*self.flexion), reaches_seam(*self.rotation))
         self._n_t = tuple(float(v) for v in self.n)
         self._x_t = tuple(float(v) for v in self.x)

@@ -135,6 +135,13 @@ class HingeKind(JointKind):
     def coupling_axis(self, constraint: Any) -> np.ndarray:
         return np.asarray(constraint.limits.axis)
 
+    def coupling_range(self, constraint: Any) -> tuple[float, float]:
+        return constraint.limits.min, constraint.limits.max
+
+    def at_coupling_angle(self, constraint: Any, angle: np.ndarray,
+                          rng: np.random.Generator) -> np.ndarray:
+        return Q.from_axis_angle(np.asarray(constraint.limits.axis), angle)
+
 
 class HingeOracle(KindOracle):
     """The exact oracle of a hinge (see the module docstring)."""

@@ -115,7 +115,7 @@ def test_a_leg_file_reads_and_writes_back(tmp_path):
     (lambda d: d["joints"][0]["coupled"].update(by="kne"),
      "joints[0].coupled.by: no joint named 'kne' (did you mean 'knee'?)"),
     (lambda d: d["joints"][0]["coupled"].update(by="ankle"),
-     "a coupling follows a hinge's angle; 'ankle' is a two-axis joint"),
+     "a coupling follows a hinge's angle or a forearm's flexion; 'ankle' is a two-axis joint"),
     (lambda d: d["joints"][0]["coupled"].update(by="hip"),
      "a joint's limits cannot depend on its own angle"),
     (lambda d: d["joints"][0]["coupled"]["keyframes"].__delitem__(slice(1, None)),

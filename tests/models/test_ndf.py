@@ -129,6 +129,12 @@ def test_onnx_graph_computes_the_fields_projection(leg, trained, tmp_path):
             e = np.degrees(Q.angle(Q.multiply(got[:, other], Q.conjugate(res.correction[:,
                                                                                          other]))))
             assert e.max() < 0.01
+    # one posture a call (the projection steps skipped where its direction is inside): the
+    # batch's answers
+    one = np.stack([model.correct_one(p) for p in q[:300]]).astype(np.float64)
+    assert not res.valid[:300, j].all() and res.valid[:300, j].any()
+    e = np.degrees(Q.angle(Q.multiply(one.reshape(-1, 4), Q.conjugate(got[:300].reshape(-1, 4)))))
+    assert e.max() < 1e-3
 
 
 def test_small_network_corrects_a_development_limb(leg, trained):
