@@ -417,10 +417,8 @@ class ConstraintOracle:
         judged at (:meth:`evaluate` takes it from the corrected source orientation)."""
         if self._kind is not None:
             raise TypeError("coupling_angle_one: a limb's query")
-        axis = self._coupling_axis[joint]
-        if axis is None:
-            raise ValueError(f"joint {joint} cannot drive a coupling")
-        return float(Q.twist_angle(np.array([[w, x, y, z]]), axis)[0])
+        # its kind's coupling angle (a hinge's twist about its axis, a forearm's flexion)
+        return float(self._coupling_angle[joint](np.array([[w, x, y, z]]))[0])
 
     def coupling_range(self, joint: int) -> tuple[float, float] | None:
         """The coupling angles (radians) over which joint ``joint``'s limits change — its first
