@@ -210,6 +210,24 @@ class ForearmKind(JointKind):
         not otherwise)."""
         return decompose(q, constraint.limits.axis, constraint.limb_axis)[0]
 
+    def coupling_angle_one(self, constraint: Any):
+        """The flexion ``θ`` of one orientation (:func:`decompose`'s formulas in plain
+        floats)."""
+        e = tuple(tuple(float(v) for v in row)
+                  for row in basis(np.asarray(constraint.limits.axis, dtype=np.float64),
+                                        np.asarray(constraint.limb_axis, dtype=np.float64)))
+        e0, e1, e2, e3 = e
+        wrap1 = Q.wrap_angle1
+
+        def angle(w: float, x: float, y: float, z: float) -> float:
+            a0 = e0[0] * w + e0[1] * x + e0[2] * y + e0[3] * z
+            a1 = e1[0] * w + e1[1] * x + e1[2] * y + e1[3] * z
+            a2 = e2[0] * w + e2[1] * x + e2[2] * y + e2[3] * z
+            a3 = e3[0] * w + e3[1] * x + e3[2] * y + e3[3] * z
+            return wrap1(math.atan2(0.5 * (a2 - a1), 0.5 * (a0 + a3))
+                         + math.atan2(0.5 * (a1 + a2), 0.5 * (a0 - a3)))
+        return angle
+
     def coupling_range(self, constraint: Any) -> tuple[float, float]:
         return constraint.limits.flexion
 
