@@ -380,6 +380,18 @@ class ForearmOracle(KindOracle):
 
     def evaluate_one(self, qt: tuple[float, float, float, float]) -> OracleResult:
         """Scalar twin of :meth:`evaluate` (the same formulas, the same tie rules)."""
+        invalid, distance, out, corr, off, phi0 = self._one(qt)
+        return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
+                            projected=np.array(out), correction=np.array(corr),
+                            swing_distance=np.float64(off), twist=np.float64(phi0))
+
+    def distance_projected_one(self, qt):
+        r = self._one(qt)
+        return r[1], r[2]
+
+    def _one(self, qt):
+        """:meth:`evaluate_one`'s answers as plain floats and tuples: ``(invalid, distance,
+        projected, correction, off-set angle, rotation)``."""
         a = [e[0] * qt[0] + e[1] * qt[1] + e[2] * qt[2] + e[3] * qt[3] for e in self._basis]
         (t_lo, t_hi), (p_lo, p_hi) = self.flexion, self.rotation
         t_wraps, p_wraps = self._wraps
@@ -432,6 +444,4 @@ class ForearmOracle(KindOracle):
             distance = -max(min(theta0 - t_lo, t_hi - theta0, phi0 - p_lo, p_hi - phi0), 0.0)
         s = min(sigma, 1.0)
         off = 2.0 * math.atan2(math.sqrt(max(1.0 - s * s, 0.0)), s)
-        return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
-                            projected=np.array(out), correction=np.array(corr),
-                            swing_distance=np.float64(off), twist=np.float64(phi0))
+        return invalid, distance, out, corr, off, phi0
