@@ -12,6 +12,12 @@ moved along the geodesic to the nearest point of the swing region (``Δ``), then
 ``Δ ⊗ q`` is clamped to its limits at the corrected direction by a right-multiplied rotation
 about the limb axis: ``project(q) = Δ ⊗ q ⊗ τ``. :func:`evaluate_ball` is the batched path;
 :func:`_ball_kernel` the compiled single-orientation path with the same maths and tie rules.
+A coupled joint (limits at keyframes of another joint's angle, :mod:`models.limb`):
+:meth:`BallKind.evaluate_coupled` batched, :func:`_coupled_ball_kernel` for one orientation —
+the keyframes located (:func:`locate_k`), the cone or the corresponding polygon vertices and the
+twist interval interpolated inside the kernel, the polygon's nearest edge by
+:func:`lerped_polygon_nearest` (every edge, as :func:`models.geometry.nearest_on_polygons`),
+then :func:`_ball_kernel`'s maths (:func:`_ball_rest`).
 """
 
 from __future__ import annotations
