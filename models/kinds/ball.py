@@ -12,6 +12,12 @@ moved along the geodesic to the nearest point of the swing region (``Δ``), then
 ``Δ ⊗ q`` is clamped to its limits at the corrected direction by a right-multiplied rotation
 about the limb axis: ``project(q) = Δ ⊗ q ⊗ τ``. :func:`evaluate_ball` is the batched path;
 :func:`_ball_kernel` the compiled single-orientation path with the same maths and tie rules.
+A coupled joint (limits at keyframes of another joint's angle, :mod:`models.limb`):
+:meth:`BallKind.evaluate_coupled` batched, :func:`_coupled_ball_kernel` for one orientation —
+the keyframes located (:func:`locate_k`), the cone or the corresponding polygon vertices and the
+twist interval interpolated inside the kernel, the polygon's nearest edge by
+:func:`lerped_polygon_nearest` (every edge, as :func:`models.geometry.nearest_on_polygons`),
+then :func:`_ball_kernel`'s maths (:func:`_ball_rest`).
 """
 
 from __future__ import annotations
@@ -149,6 +155,42 @@ class BallKind(JointKind):
             def twist_limits(e):
                 return lo, hi
         return evaluate_ball(q, axis, nearest, twist_limits, True)
+
+    def coupled_one(self, axis, limits):
+        """Compiled (:func:`_coupled_ball_kernel`): the keyframes' cones, the corresponding
+        polygons of every keyframe interval (one pair of vertex arrays, rows by interval) and
+        the twist intervals are gathered here once; a query interpolates only what its angle
+        needs — O(vertices) for a polygon, every edge tried as the batched path does."""
+        first = limits.keyframes[0]
+        n = len(limits.at)
+        cones = np.zeros((n, 4))
+        ptr = np.zeros(n, dtype=np.int64)
+        va = vb = np.zeros((1, 3))
+        if isinstance(first.swing, ConeSwing):
+            kind = _SWING_CONE
+            cones[:, :3] = [c.swing.centre for c in limits.keyframes]
+            cones[:, 3] = [c.swing.radius for c in limits.keyframes]
+        elif isinstance(first.swing, PolygonSwing):
+            kind = _SWING_POLYGON
+            ptr[1:] = np.cumsum([len(a) for a, _ in limits.polygons])
+            va = np.ascontiguousarray(np.concatenate([a for a, _ in limits.polygons]))
+            vb = np.ascontiguousarray(np.concatenate([b for _, b in limits.polygons]))
+        else:
+            kind = _SWING_NONE
+        tkind, t_lo, t_hi = _TWIST_NONE, np.zeros(n), np.zeros(n)
+        if first.twist is not None:
+            tkind = _TWIST_CONSTANT
+            t_lo[:] = [self.coupled_interval(c)[0] for c in limits.keyframes]
+            t_hi[:] = [self.coupled_interval(c)[1] for c in limits.keyframes]
+        args = (np.ascontiguousarray(limits.at, dtype=np.float64),
+                np.array([float(v) for v in axis]), kind, cones, ptr, va, vb, tkind, t_lo, t_hi)
+        kernel = _coupled_ball_kernel
+
+        def one(w, x, y, z, angle):
+            r = kernel(w, x, y, z, float(angle), *args)
+            return not r[0], r[1], (r[2], r[3], r[4], r[5]), (r[6], r[7], r[8], r[9])
+        one(1.0, 0.0, 0.0, 0.0, float(limits.at[0]))  # compiled or loaded now, not in a cycle
+        return one
 
 
 class BallOracle(KindOracle):
@@ -343,7 +385,7 @@ def evaluate_ball(q: np.ndarray, axis: np.ndarray, nearest, limits, wraps: bool 
 
 
 # -- the compiled ball-joint kernel (the control loop's single-orientation path) -------------
-_SWING_NONE, _SWING_CONE, _SWING_CELLS, _SWING_CANDIDATES = 0, 1, 2, 3
+_SWING_NONE, _SWING_CONE, _SWING_CELLS, _SWING_CANDIDATES, _SWING_POLYGON = 0, 1, 2, 3, 4
 _TWIST_NONE, _TWIST_CONSTANT, _TWIST_TABLE = 0, 1, 2
 _PI = math.pi
 
@@ -394,34 +436,49 @@ def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, tabl
     joint: the same maths and tie rules in compiled plain floats. Returns ``(invalid,
     distance, projected (4), correction (4), swing distance, twist)``."""
     d0, d1, d2 = qk.rotate(w, x, y, z, ax[0], ax[1], ax[2])  # the limb direction
+    n0, n1, n2 = d0, d1, d2
+    if swing_kind == _SWING_NONE:
+        sdist = -math.inf
+    elif swing_kind == _SWING_CONE:  # ConeSolver.nearest's closed form, one direction
+        sdist, n0, n1, n2 = _cone_k(d0, d1, d2, cone[0], cone[1], cone[2], cone[3], cone[4],
+                                    cone[5], cone[6])
+    elif swing_kind == _SWING_CELLS:
+        sdist, n0, n1, n2 = nearest_in_cell(d0, d1, d2, G, cell_ptr, cell_edges, table, v0,
+                                             vn, orient)
+    else:
+        sdist, n0, n1, n2 = rank_one(d0, d1, d2, cell_edges, table, v0, vn, orient)
+    return _ball_rest(w, x, y, z, ax, d0, d1, d2, sdist, n0, n1, n2, twist_kind, lo, hi, wraps,
+                      dirs_k, sums, kappa)
+
+
+@njit(inline="always")
+def _cone_k(d0, d1, d2, c0, c1, c2, r, u0, u1, u2):
+    """:meth:`ConeSolver.nearest` for one unit direction: (signed distance, nearest point);
+    ``u`` the perpendicular taken when ``d`` is on the centre's axis."""
+    cos_t = d0 * c0 + d1 * c1 + d2 * c2
+    g0, g1, g2 = d0 - cos_t * c0, d1 - cos_t * c1, d2 - cos_t * c2
+    sin_t = math.sqrt(g0 ** 2 + g1 ** 2 + g2 ** 2)
+    sdist = math.atan2(sin_t, cos_t) - r
+    if sin_t >= 1e-15:
+        u0, u1, u2 = g0 / sin_t, g1 / sin_t, g2 / sin_t
+    cr, sr = math.cos(r), math.sin(r)
+    return sdist, cr * c0 + sr * u0, cr * c1 + sr * u1, cr * c2 + sr * u2
+
+
+@njit(inline="always")
+def _ball_rest(w, x, y, z, ax, d0, d1, d2, sdist, n0, n1, n2, twist_kind, lo, hi, wraps,
+               dirs_k, sums, kappa):
+    """:func:`evaluate_ball` after the swing's nearest point ``n`` of the limb direction ``d``
+    at signed distance ``sdist`` (``-inf``: no swing limit): the swing correction, the twist,
+    the correction (the returns of :func:`_ball_kernel`)."""
     p0, p1, p2, p3 = w, x, y, z
     swing_out = False
     b0, b1, b2 = d0, d1, d2
-    if swing_kind == _SWING_NONE:
-        sdist = -math.inf
-    else:
-        if swing_kind == _SWING_CONE:  # ConeSolver.nearest's closed form, one direction
-            c0, c1, c2, r = cone[0], cone[1], cone[2], cone[3]
-            cos_t = d0 * c0 + d1 * c1 + d2 * c2
-            g0, g1, g2 = d0 - cos_t * c0, d1 - cos_t * c1, d2 - cos_t * c2
-            sin_t = math.sqrt(g0 ** 2 + g1 ** 2 + g2 ** 2)
-            sdist = math.atan2(sin_t, cos_t) - r
-            if sin_t < 1e-15:
-                u0, u1, u2 = cone[4], cone[5], cone[6]
-            else:
-                u0, u1, u2 = g0 / sin_t, g1 / sin_t, g2 / sin_t
-            cr, sr = math.cos(r), math.sin(r)
-            n0, n1, n2 = cr * c0 + sr * u0, cr * c1 + sr * u1, cr * c2 + sr * u2
-        elif swing_kind == _SWING_CELLS:
-            sdist, n0, n1, n2 = nearest_in_cell(d0, d1, d2, G, cell_ptr, cell_edges, table,
-                                                 v0, vn, orient)
-        else:
-            sdist, n0, n1, n2 = rank_one(d0, d1, d2, cell_edges, table, v0, vn, orient)
-        if sdist > BOUNDARY_TOLERANCE:
-            swing_out = True
-            b0, b1, b2 = n0, n1, n2
-            e0, e1, e2, e3 = _two_vectors_k(d0, d1, d2, n0, n1, n2)
-            p0, p1, p2, p3 = qk.mul(e0, e1, e2, e3, w, x, y, z)
+    if sdist > BOUNDARY_TOLERANCE:
+        swing_out = True
+        b0, b1, b2 = n0, n1, n2
+        e0, e1, e2, e3 = _two_vectors_k(d0, d1, d2, n0, n1, n2)
+        p0, p1, p2, p3 = qk.mul(e0, e1, e2, e3, w, x, y, z)
     phi = _twist_k(w, x, y, z, ax)
     margin = -sdist
     invalid = swing_out
@@ -466,6 +523,152 @@ def _ball_kernel(w, x, y, z, ax, swing_kind, cone, G, cell_ptr, cell_edges, tabl
         k0, k1, k2, k3 = 1.0, 0.0, 0.0, 0.0
         distance = -max(margin, 0.0)
     return invalid, distance, p0, p1, p2, p3, k0, k1, k2, k3, sdist, phi
+
+
+# -- a coupled ball (or two-axis) joint's compiled single-orientation path -------------------
+@njit(inline="always")
+def locate_k(at, angle):
+    """:meth:`models.limb.InterpolatedLimits.locate` of one coupling angle: ``(k, t)``."""
+    n = len(at)
+    a = angle
+    if a < at[0]:
+        a = at[0]
+    if a > at[n - 1]:
+        a = at[n - 1]
+    if a != a:  # NaN sorts last (searchsorted)
+        k = n - 2
+    else:
+        k = -1
+        for i in range(n):
+            if at[i] <= a:
+                k = i
+        k = min(max(k, 0), n - 2)
+    t = (a - at[k]) / (at[k + 1] - at[k])
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    return k, t
+
+
+@njit(inline="always")
+def _lerp_vertex(va, vb, i, t):
+    """Vertex ``i`` of an interpolated polygon: :meth:`InterpolatedLimits.polygon_at`'s
+    normalised ``(1 − t) a_i + t b_i``."""
+    u = 1.0 - t
+    v0 = u * va[i, 0] + t * vb[i, 0]
+    v1 = u * va[i, 1] + t * vb[i, 1]
+    v2 = u * va[i, 2] + t * vb[i, 2]
+    n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    return v0 / n, v1 / n, v2 / n
+
+
+@njit(inline="always")
+def _edge_normal(va, vb, lo, m, i, t):
+    """Unit normal ``v_i × v_{i+1} / |…|`` of edge ``i`` of the interpolated polygon whose
+    ``m`` vertices start at row ``lo``."""
+    a0, a1, a2 = _lerp_vertex(va, vb, lo + i, t)
+    b0, b1, b2 = _lerp_vertex(va, vb, lo + (i + 1) % m, t)
+    g0, g1, g2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    gn = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    return g0 / gn, g1 / gn, g2 / gn
+
+
+@njit
+def lerped_polygon_nearest(px, py, pz, va, vb, lo, m, t):
+    """:func:`models.geometry.nearest_on_polygons` for one unit point and its polygon, the
+    interpolation at ``t`` of the oriented vertex rows ``lo .. lo + m`` of ``va`` and ``vb``
+    (:meth:`models.limb.InterpolatedLimits.polygon_at`): every edge tried, the same keys, the
+    lowest edge index on ties, the same pseudo-normal sign. Returns (signed distance, nearest
+    point)."""
+    best = math.inf
+    win = -1
+    win_in = False
+    win_s = 0.0
+    win_end1 = False
+    w0 = w1 = w2 = 0.0
+    f0, f1, f2 = _lerp_vertex(va, vb, lo, t)
+    a0, a1, a2 = f0, f1, f2
+    for i in range(m):
+        if i + 1 < m:
+            b0, b1, b2 = _lerp_vertex(va, vb, lo + i + 1, t)
+        else:
+            b0, b1, b2 = f0, f1, f2
+        g0, g1, g2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        gn = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        g0, g1, g2 = g0 / gn, g1 / gn, g2 / gn
+        s = g0 * px + g1 * py + g2 * pz
+        # t0 = g × v_i, t1 = v_{i+1} × g (along the edge at its start, back at its end)
+        t00, t01, t02 = g1 * a2 - g2 * a1, g2 * a0 - g0 * a2, g0 * a1 - g1 * a0
+        t10, t11, t12 = b1 * g2 - b2 * g1, b2 * g0 - b0 * g2, b0 * g1 - b1 * g0
+        in_arc = (t00 * px + t01 * py + t02 * pz >= 0.0
+                  and t10 * px + t11 * py + t12 * pz >= 0.0 and abs(s) < 1.0 - 1e-12)
+        e0, e1, e2 = a0 - px, a1 - py, a2 - pz
+        h0, h1, h2 = b0 - px, b1 - py, b2 - pz
+        k0 = e0 * e0 + e1 * e1 + e2 * e2
+        k1 = h0 * h0 + h1 * h1 + h2 * h2
+        if in_arc:
+            s2 = s * s
+            key = 2.0 * s2 / (1.0 + math.sqrt(max(1.0 - s2, 0.0)))
+        else:
+            key = k0 if k0 <= k1 else k1
+        if key < best:
+            best, win, win_in, win_s, win_end1 = key, i, in_arc, s, k1 < k0
+            w0, w1, w2 = g0, g1, g2
+        a0, a1, a2 = b0, b1, b2
+    if win_in:
+        inside = win_s >= 0.0
+        f0, f1, f2 = px - win_s * w0, py - win_s * w1, pz - win_s * w2
+        fn = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        if fn < 1e-300:
+            fn = 1.0
+        n0, n1, n2 = f0 / fn, f1 / fn, f2 / fn
+    else:
+        vi = (win + 1) % m if win_end1 else win
+        n0, n1, n2 = _lerp_vertex(va, vb, lo + vi, t)
+        # the pseudo-normal: the inward normals of the vertex's two edges
+        c0, c1, c2 = _edge_normal(va, vb, lo, m, vi, t)
+        d0, d1, d2 = _edge_normal(va, vb, lo, m, (vi - 1) % m, t)
+        inside = px * (c0 + d0) + py * (c1 + d1) + pz * (c2 + d2) >= 0.0
+    theta = 2.0 * math.asin(min(math.sqrt(best) * 0.5, 1.0))
+    return (-theta if inside else theta), n0, n1, n2
+
+
+@njit
+def _coupled_ball_kernel(w, x, y, z, angle, at, ax, swing_kind, cones, ptr, va, vb,
+                         twist_kind, t_lo, t_hi):
+    """:meth:`BallKind.evaluate_coupled` for one unit orientation at one coupling angle (the
+    keyframes at angles ``at``): the limits interpolated as :class:`~models.limb.InterpolatedLimits`
+    does — ``cones`` (K, 4) each keyframe's centre and radius; a polygon's corresponding vertex
+    rows of keyframe interval ``k`` at ``ptr[k] .. ptr[k + 1]`` of ``va`` and ``vb``; twist
+    intervals ``t_lo``, ``t_hi`` (K,) — then :func:`_ball_kernel`'s maths (returns alike)."""
+    k, t = locate_k(at, angle)
+    d0, d1, d2 = qk.rotate(w, x, y, z, ax[0], ax[1], ax[2])  # the limb direction
+    n0, n1, n2 = d0, d1, d2
+    if swing_kind == _SWING_NONE:
+        sdist = -math.inf
+    elif swing_kind == _SWING_CONE:  # InterpolatedLimits.cones, then _cones_nearest
+        u = 1.0 - t
+        c0 = u * cones[k, 0] + t * cones[k + 1, 0]
+        c1 = u * cones[k, 1] + t * cones[k + 1, 1]
+        c2 = u * cones[k, 2] + t * cones[k + 1, 2]
+        cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        c0, c1, c2 = c0 / cn, c1 / cn, c2 / cn
+        r = u * cones[k, 3] + t * cones[k + 1, 3]
+        # models.quaternion.perpendicular: × the basis axis least aligned (lowest index on ties)
+        m0, m1, m2 = abs(c0), abs(c1), abs(c2)
+        j = 0 if m0 <= m1 and m0 <= m2 else (1 if m1 <= m2 else 2)
+        e0, e1, e2 = (1.0 if j == 0 else 0.0), (1.0 if j == 1 else 0.0), (1.0 if j == 2 else 0.0)
+        q0, q1, q2 = c1 * e2 - c2 * e1, c2 * e0 - c0 * e2, c0 * e1 - c1 * e0
+        qn = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        sdist, n0, n1, n2 = _cone_k(d0, d1, d2, c0, c1, c2, r, q0 / qn, q1 / qn, q2 / qn)
+    else:
+        lo = ptr[k]
+        sdist, n0, n1, n2 = lerped_polygon_nearest(d0, d1, d2, va, vb, lo, ptr[k + 1] - lo, t)
+    lo_t = (1.0 - t) * t_lo[k] + t * t_lo[k + 1]
+    hi_t = (1.0 - t) * t_hi[k] + t * t_hi[k + 1]
+    return _ball_rest(w, x, y, z, ax, d0, d1, d2, sdist, n0, n1, n2, twist_kind, lo_t, hi_t,
+                      True, cones, cones, 0.0)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -32,6 +32,7 @@ __all__ = [
     "OracleResult",
     "across_seam1",
     "correction1",
+    "locate1",
     "reaches_seam",
     "singular",
     "twist_inside",
@@ -191,6 +192,25 @@ class JointKind:
         (N,) the fraction along it at each sample's coupling angle)."""
         raise NotImplementedError
 
+    def coupled_one(self, axis: np.ndarray, limits: Any):
+        """The single-orientation twin of :meth:`evaluate_coupled` for the control loop: a
+        callable ``one(w, x, y, z, angle) -> (valid, distance, projected, correction)`` (plain
+        floats, the quaternions 4-tuples) of one unit orientation with its limits at coupling
+        angle ``angle`` (radians), giving :meth:`evaluate_coupled`'s answers; built once (what
+        can be is prepared here). None when the kind has none (the oracle then evaluates a
+        batch of one)."""
+        return None
+
+    def coupling_angle_one(self, constraint: Any):
+        """The scalar twin of :meth:`coupling_angle`: a callable ``angle(w, x, y, z) -> float``
+        (radians) of one unit orientation, built once."""
+        axis = tuple(float(v) for v in self.coupling_axis(constraint))
+        twist1 = Q.twist_angle1
+
+        def angle(w: float, x: float, y: float, z: float) -> float:
+            return twist1((w, x, y, z), axis)
+        return angle
+
     def coupled_interval(self, constraint: Any) -> tuple[float, float]:
         """The angle interval (radians) a coupling interpolates between keyframes of this
         kind (a twist interval, a hinge interval)."""
@@ -252,6 +272,22 @@ def twist_inside(phi, lo, hi, wraps: bool = True):
     if wraps:
         inside |= (phi - _TWO_PI >= lo - t) | (phi + _TWO_PI <= hi + t)
     return inside
+
+
+def locate1(at: tuple[float, ...], angle: float) -> tuple[int, float]:
+    """:meth:`models.limb.InterpolatedLimits.locate` of one coupling angle (radians), the
+    keyframes' angles ``at`` a tuple: the keyframe interval ``k`` and the fraction ``t``."""
+    n = len(at)
+    a = min(max(angle, at[0]), at[-1]) if angle == angle else angle
+    k = n - 2
+    if a == a:
+        k = -1
+        for i in range(n):
+            if at[i] <= a:
+                k = i
+        k = min(max(k, 0), n - 2)
+    t = (a - at[k]) / (at[k + 1] - at[k])
+    return k, (0.0 if t < 0.0 else 1.0 if t > 1.0 else t)
 
 
 def singular(q: np.ndarray, axis: np.ndarray) -> np.ndarray:

@@ -211,6 +211,24 @@ class ForearmKind(JointKind):
         not otherwise)."""
         return decompose(q, constraint.limits.axis, constraint.limb_axis)[0]
 
+    def coupling_angle_one(self, constraint: Any):
+        """The flexion ``θ`` of one orientation (:func:`decompose`'s formulas in plain
+        floats)."""
+        e = tuple(tuple(float(v) for v in row)
+                  for row in basis(np.asarray(constraint.limits.axis, dtype=np.float64),
+                                        np.asarray(constraint.limb_axis, dtype=np.float64)))
+        e0, e1, e2, e3 = e
+        wrap1 = Q.wrap_angle1
+
+        def angle(w: float, x: float, y: float, z: float) -> float:
+            a0 = e0[0] * w + e0[1] * x + e0[2] * y + e0[3] * z
+            a1 = e1[0] * w + e1[1] * x + e1[2] * y + e1[3] * z
+            a2 = e2[0] * w + e2[1] * x + e2[2] * y + e2[3] * z
+            a3 = e3[0] * w + e3[1] * x + e3[2] * y + e3[3] * z
+            return wrap1(math.atan2(0.5 * (a2 - a1), 0.5 * (a0 + a3))
+                         + math.atan2(0.5 * (a1 + a2), 0.5 * (a0 - a3)))
+        return angle
+
     def coupling_range(self, constraint: Any) -> tuple[float, float]:
         return constraint.limits.flexion
 
@@ -363,6 +381,18 @@ class ForearmOracle(KindOracle):
 
     def evaluate_one(self, qt: tuple[float, float, float, float]) -> OracleResult:
         """Scalar twin of :meth:`evaluate` (the same formulas, the same tie rules)."""
+        invalid, distance, out, corr, off, phi0 = self._one(qt)
+        return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
+                            projected=np.array(out), correction=np.array(corr),
+                            swing_distance=np.float64(off), twist=np.float64(phi0))
+
+    def distance_projected_one(self, qt):
+        r = self._one(qt)
+        return r[1], r[2]
+
+    def _one(self, qt):
+        """:meth:`evaluate_one`'s answers as plain floats and tuples: ``(invalid, distance,
+        projected, correction, off-set angle, rotation)``."""
         a = [e[0] * qt[0] + e[1] * qt[1] + e[2] * qt[2] + e[3] * qt[3] for e in self._basis]
         (t_lo, t_hi), (p_lo, p_hi) = self.flexion, self.rotation
         t_wraps, p_wraps = self._wraps
@@ -415,6 +445,4 @@ class ForearmOracle(KindOracle):
             distance = -max(min(theta0 - t_lo, t_hi - theta0, phi0 - p_lo, p_hi - phi0), 0.0)
         s = min(sigma, 1.0)
         off = 2.0 * math.atan2(math.sqrt(max(1.0 - s * s, 0.0)), s)
-        return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
-                            projected=np.array(out), correction=np.array(corr),
-                            swing_distance=np.float64(off), twist=np.float64(phi0))
+        return invalid, distance, out, corr, off, phi0

@@ -33,6 +33,7 @@ from models.kinds.base import (
     OracleResult,
     across_seam1,
     correction1,
+    locate1,
     reaches_seam,
     twist_inside,
 )
@@ -45,7 +46,8 @@ from models.limits import (
     vector,
 )
 
-__all__ = ["HingeKind", "HingeLimits", "HingeOracle", "evaluate_hinge", "parse_hinge"]
+__all__ = ["HingeKind", "HingeLimits", "HingeOracle", "evaluate_hinge", "hinge_one",
+           "parse_hinge"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,6 +121,21 @@ class HingeKind(JointKind):
         lo, hi = limits.interval(k, t)
         return evaluate_hinge(q, self.coupling_axis(limits.keyframes[0]), lo, hi, True)
 
+    def coupled_one(self, axis, limits):
+        """Plain Python (:func:`hinge_one` at the interval interpolated at the angle)."""
+        at = tuple(float(a) for a in limits.at)
+        los = tuple(float(self.coupled_interval(c)[0]) for c in limits.keyframes)
+        his = tuple(float(self.coupled_interval(c)[1]) for c in limits.keyframes)
+        axis_t = tuple(float(v) for v in self.coupling_axis(limits.keyframes[0]))
+
+        def one(w, x, y, z, angle):
+            k, t = locate1(at, angle)
+            lo = (1.0 - t) * los[k] + t * los[k + 1]
+            hi = (1.0 - t) * his[k] + t * his[k + 1]
+            r = hinge_one((w, x, y, z), axis_t, lo, hi, True)
+            return not r[0], r[1], r[2], r[3]
+        return one
+
     def coupled_interval(self, constraint: Any) -> tuple[float, float]:
         return constraint.limits.min, constraint.limits.max
 
@@ -157,30 +174,43 @@ class HingeOracle(KindOracle):
     def evaluate_one(self, qt: tuple[float, float, float, float]) -> OracleResult:
         """Scalar twin of :meth:`evaluate` (same maths, same tie rules)."""
         axis_t, lo, hi, wraps = self._hinge
-        phi = Q.twist_angle1(qt, axis_t)
-        t = BOUNDARY_TOLERANCE
-        inside = lo - t <= phi <= hi + t or (wraps and across_seam1(phi, lo, hi))
-        if inside:
-            theta = phi
-        else:
-            theta = lo if abs(Q.wrap_angle1(phi - lo)) < abs(Q.wrap_angle1(phi - hi)) else hi
-        ch, sh = math.cos(0.5 * theta), math.sin(0.5 * theta)
-        h = (ch, sh * axis_t[0], sh * axis_t[1], sh * axis_t[2])
-        if h[0] * qt[0] + h[1] * qt[1] + h[2] * qt[2] + h[3] * qt[3] < 0.0:
-            h = (-h[0], -h[1], -h[2], -h[3])
-        c, gap = correction1(h, qt)
-        invalid = gap > t
-        if invalid:
-            corr, proj, distance = c, h, gap
-        else:
-            corr, proj = (1.0, 0.0, 0.0, 0.0), qt
-            distance = -max(min(phi - lo, hi - phi), 0.0)
-        p = qt[1] * axis_t[0] + qt[2] * axis_t[1] + qt[3] * axis_t[2]
-        r2 = qt[0] * qt[0] + p * p
-        off = 2.0 * math.atan2(math.sqrt(max(1.0 - r2, 0.0)), math.sqrt(r2))
+        invalid, distance, proj, corr, off, phi = hinge_one(qt, axis_t, lo, hi, wraps)
         return OracleResult(valid=np.bool_(not invalid), distance=np.float64(distance),
                             projected=np.array(proj), correction=np.array(corr),
                             swing_distance=np.float64(off), twist=np.float64(phi))
+
+    def distance_projected_one(self, qt):
+        axis_t, lo, hi, wraps = self._hinge
+        r = hinge_one(qt, axis_t, lo, hi, wraps)
+        return r[1], r[2]
+
+
+def hinge_one(qt, axis_t, lo: float, hi: float, wraps: bool):
+    """:func:`evaluate_hinge` for one unit orientation ``qt`` (4-tuple) about ``axis_t``
+    (3-tuple), plain floats (same maths, same tie rules): ``(invalid, distance, projected,
+    correction, off-axis angle, twist)``."""
+    phi = Q.twist_angle1(qt, axis_t)
+    t = BOUNDARY_TOLERANCE
+    inside = lo - t <= phi <= hi + t or (wraps and across_seam1(phi, lo, hi))
+    if inside:
+        theta = phi
+    else:
+        theta = lo if abs(Q.wrap_angle1(phi - lo)) < abs(Q.wrap_angle1(phi - hi)) else hi
+    ch, sh = math.cos(0.5 * theta), math.sin(0.5 * theta)
+    h = (ch, sh * axis_t[0], sh * axis_t[1], sh * axis_t[2])
+    if h[0] * qt[0] + h[1] * qt[1] + h[2] * qt[2] + h[3] * qt[3] < 0.0:
+        h = (-h[0], -h[1], -h[2], -h[3])
+    c, gap = correction1(h, qt)
+    invalid = gap > t
+    if invalid:
+        corr, proj, distance = c, h, gap
+    else:
+        corr, proj = (1.0, 0.0, 0.0, 0.0), qt
+        distance = -max(min(phi - lo, hi - phi), 0.0)
+    p = qt[1] * axis_t[0] + qt[2] * axis_t[1] + qt[3] * axis_t[2]
+    r2 = qt[0] * qt[0] + p * p
+    off = 2.0 * math.atan2(math.sqrt(max(1.0 - r2, 0.0)), math.sqrt(r2))
+    return invalid, distance, proj, corr, off, phi
 
 
 def evaluate_hinge(q: np.ndarray, a: np.ndarray, lo, hi, wraps: bool = True) -> OracleResult:

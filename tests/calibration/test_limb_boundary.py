@@ -122,6 +122,36 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     assert ex.limb_.joints[2].coupling is None
 
 
+def test_a_forearm_elbow_is_extracted_and_drives_the_coupling(ideal_arm):
+    """The same arm with its forearm pronating and supinating (−50..60°) while it flexes:
+    extracted with ``kinds={"elbow": "forearm"}`` the elbow is a forearm joint with that
+    rotation and the hinge's flexion interval, and the shoulder is coupled to the flexion at
+    the hinge's keyframes (the hinge's extraction of the same flexion, exactly)."""
+    import numpy as np
+
+    from calibration.extraction import LimbExtractor
+    from models import quaternion as Q
+
+    q, t = ideal_arm
+    turned = q.copy()
+    phi = np.radians(55.0 * np.sin(2 * np.pi * t / 7.3) + 5.0)
+    turned[:, 1] = Q.multiply(q[:, 1], Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), phi))
+    ex = LimbExtractor("arm", kinds={"elbow": "forearm"}).fit(turned, t=t, side="right")
+    hinge = LimbExtractor("arm").fit(q, t=t, side="right")
+    elbow = ex.limb_.joints[1]
+    assert elbow.kind == "forearm" and ex.limb_.name == hinge.limb_.name
+    f, h = elbow.constraint.limits, hinge.limb_.joints[1].constraint.limits
+    assert (f.flexion_min_deg, f.flexion_max_deg) == (h.min_deg, h.max_deg)
+    assert abs(f.rotation_min_deg + 50.0) < 0.5 and abs(f.rotation_max_deg - 60.0) < 0.5
+    assert ex.coupled_ and ex.limb_.joints[0].coupling.by == "elbow"
+    assert ex.limb_.joints[0].coupling.at_deg == hinge.limb_.joints[0].coupling.at_deg
+    assert ex.inside_["elbow"] == 1.0 and ex.inside_["shoulder"] >= 0.99
+    assert ex.limb_.provenance["parameters"]["kinds"] == {"elbow": "forearm"}
+    for bad in ({"wrist": "forearm"}, {"elbow": "ball"}):
+        with pytest.raises(ValueError, match="kinds"):
+            LimbExtractor("arm", kinds=bad)
+
+
 def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_arm, monkeypatch):
     """The refinement of test 3: where postures both bracketing keyframes hold lie outside the
     limits between them, a keyframe is added half-way between the two that leave most out.

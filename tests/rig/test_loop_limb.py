@@ -19,6 +19,7 @@ from rig.devices.dynamixel import DynamixelBus
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.devices.ports import open_port
 from rig.devices.servo_limb import ServoLimb
+from rig.errors import UnreachableError
 from rig.loop import EnforcementLoop, Intervention, LoopConfig, SupervisorConfig
 from rig.loop.backstop import position_limits_from_limb
 from rig.loop.limb_supervisor import LimbSupervisor
@@ -141,6 +142,49 @@ def test_joint_query_answers_as_the_limb_oracle(arm):
             d, proj = query(*p[n, j], a)
             assert d == pytest.approx(r.distance[n, j], abs=1e-12)
             np.testing.assert_allclose(proj, r.projected[n, j], atol=1e-12)
+
+
+def test_the_compiled_coupled_query_leaves_the_limb_cycle_unchanged(arm, monkeypatch):
+    """The coupled shoulder's compiled single path (and the elbow's scalar coupling angle)
+    against its kind's batched evaluation on a batch of one (what the loop used before): 600
+    cycles of held-out (valid and invalid) postures through the supervisor, IK, FK and the final
+    check give the same goal ticks and flags, the goals equal to 1e-12."""
+    from models.kinds.ball import BallKind
+    from models.kinds.base import JointKind
+    limb, _ = arm
+    pool = held_out_postures(limb, 40, np.random.default_rng(9))
+
+    def run():
+        oracle = ConstraintOracle(limb).prepare()
+        kin = _kinematics()
+        sup = LimbSupervisor(oracle, names=NAMES)
+        start = pool[oracle.is_valid(pool).all(axis=1)][0]
+        sup.reset(0.0, start)
+        ticks = kin.inverse(start, kin.zero_ticks)
+        commanded = list(map(tuple, start))
+        goals, out = [], []
+        for k in range(600):
+            t = 0.005 * (k + 1)
+            goal = sup.step(t, sup.admit(t, pool[(k // 15) % len(pool)], t))
+            try:
+                gt = kin.inverse(np.array(goal), ticks)
+                cand = [tuple(q) for q in kin.forward(gt)]
+                if sup.accept(cand):
+                    ticks, commanded = gt, cand
+                else:
+                    sup.revert(commanded)
+            except UnreachableError:
+                sup.revert(commanded)
+            goals.append(np.ravel(goal))
+            out.append((*ticks.tolist(), *sup.joint_flags))
+        return np.array(goals), out
+
+    fast = run()
+    monkeypatch.setattr(BallKind, "coupled_one", lambda self, axis, limits: None)
+    monkeypatch.setattr(JointKind, "coupling_angle_one", lambda self, constraint: None)
+    slow = run()
+    assert fast[1] == slow[1]
+    np.testing.assert_allclose(fast[0], slow[0], rtol=0, atol=1e-12)
 
 
 def test_adversarial_limb_targets_never_commanded_beyond_tolerance(arm):
