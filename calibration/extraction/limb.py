@@ -253,11 +253,14 @@ class LimbExtractor:
             if one:
                 raise ValueError("kinds applies to a whole limb (a limb of one joint: kind)")
             names = [name for name, _, _ in LIMB_CHAINS[limb]]
+            source = names[1]
             for joint, k in self.kinds.items():
                 if joint not in names:
                     raise ValueError(f"kinds: the {limb} has no joint {joint!r}")
+                if joint != source:
+                    raise ValueError(f"kinds: only the {limb}'s {source} (the couplings' "
+                                     f"source) takes another kind, not the {joint}")
                 get_kind(k)  # registered, or ConstraintError naming the kinds
-            source = names[1]
             if not get_kind(self.kinds.get(source, JOINTS[source].kind)).drives_couplings:
                 raise ValueError(f"kinds: the {source} drives the couplings; a "
                                  f"{self.kinds[source]} joint does not")
