@@ -278,7 +278,7 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
     proc, closer, lines = _start_child("servos", url, child_url, 2 if backdriven else 1)
     port = Port(url=url, path=lines[0], simulator=None, kind=kind)
     port.add_closer(closer)
-    if limb is None:
+    if not backdriven:
         return port
     try:
         t0, scale, _ = (float(v) for v in lines[1].split())
