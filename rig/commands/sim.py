@@ -123,7 +123,8 @@ def servos(url: str, stop_on_stdin_eof: bool, realtime: bool) -> None:
     """Simulated Dynamixel Protocol 2.0 servo chain, e.g. 'sim://dynamixel?ids=1,2,3'.
 
     Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, usb_latency_ms,
-    time_scale; patient, chain, speed, excursion (a simulated patient back-drives the chain).
+    time_scale; patient, chain, speed, excursion (a simulated patient back-drives the chain;
+    limb, side: an arm or leg patient, with chain=sim-servo-arm).
     Default: one
     XM430-W350 (ID 1) at 1 000 000 bit/s.
     """
