@@ -133,9 +133,10 @@ class _BackDrive:
     servos' answers must not wait for. A block not ready when asked is computed there and
     then, unless the worker is computing (a burst): the limb then holds its last position for
     that answer (an answer never waits) — but with ``wait`` (a manual clock: no real time,
-    every answer the same whatever the threads do) it waits for the block. A protocol the patient is told to perform starts 2 s
-    later (:meth:`~rig.devices.port.SimulatedPatient.start_protocol`); the blocks computed
-    before it was told still show the motion it replaces.
+    every answer the same whatever the threads do) it waits for the block. A protocol the
+    patient is told to perform starts 2 s later
+    (:meth:`~rig.devices.port.SimulatedPatient.start_protocol`); the blocks computed before it
+    was told still show the motion it replaces.
     """
 
     def __init__(self, limb: Any, kinematics: Any, t0: float, *, wait: bool = False) -> None:
@@ -156,7 +157,7 @@ class _BackDrive:
         self._worker: threading.Thread | None = None  # started by the first ask (ticks)
 
     def ticks(self, now: float) -> np.ndarray:
-        key = max(0, int(now * 1000.0) - int(round(self.t0 * 1000.0)))
+        key = max(0, int(now * 1000.0) - round(self.t0 * 1000.0))
         b = key // _BLOCK_MS
         self._asked = max(self._asked, b)
         block = self._blocks.get(b)

@@ -51,12 +51,12 @@ def test_back_driven_servo_arm_holds_the_patients_posture_within_tick_rounding()
         mech, missed = sp.follow(sp.limb.joints(times))
         assert missed == 0 and mech.shape == (len(times), 3, 4)
         seen, err_truth, err_mech = [], [], []
-        for k in range(1, 7):
+        for _ in range(6):
             port.simulator.clock.advance(0.5)
             ticks = bus.read_ticks()
             seen.append(tuple(ticks))
             q = kin.forward(ticks)
-            i = int(round(sp.now() * 1000))
+            i = round(sp.now() * 1000)
             err_truth.append(_deg(q, sp.limb.joints(sp.now())[0]))
             err_mech.append(_deg(q, mech[i]))
     err_truth, err_mech = np.array(err_truth), np.array(err_mech)
