@@ -68,6 +68,12 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
             # collector's view: a full collection would otherwise hold a reply for milliseconds
             gc.collect()
             gc.freeze()
+            # a back-driving patient's motion is computed by a thread of this process in
+            # bursts (rig.devices._sim_backends._BackDrive); at the default 5 ms switch
+            # interval a reply waited up to 5 ms for the interpreter lock at every step, and
+            # the host's reads timed out (device lost): the simulator's thread takes it back
+            # within 0.2 ms
+            sys.setswitchinterval(SIM_SWITCH_INTERVAL_S)
             click.echo(port.path)
             sp = port.simulated_patient
             if stop_on_stdin_eof and sp is not None:  # the parent's copy of the patient
@@ -84,6 +90,9 @@ def serve(url: str, devices: tuple[str, ...], example: str, what: str | None = N
 #: SCHED_FIFO priority of a simulator standing in for hardware: above the live loop's
 #: (:data:`rig.loop.realtime.RT_PRIORITY`), as a servo answers whatever the host is doing.
 SIM_RT_PRIORITY = 45
+
+#: The interpreter's switch interval in a simulator's own process (``sys.setswitchinterval``).
+SIM_SWITCH_INTERVAL_S = 0.0002
 
 
 def _stop_at_eof(port) -> None:
@@ -114,7 +123,8 @@ def servos(url: str, stop_on_stdin_eof: bool, realtime: bool) -> None:
     """Simulated Dynamixel Protocol 2.0 servo chain, e.g. 'sim://dynamixel?ids=1,2,3'.
 
     Keys: ids, model, baud, return_delay_us, noise, seed, wire_time, usb_latency_ms,
-    time_scale; patient, chain, speed, excursion (a simulated patient back-drives the chain).
+    time_scale; patient, chain, speed, excursion (a simulated patient back-drives the chain;
+    limb, side: an arm or leg patient, with chain=sim-servo-arm).
     Default: one
     XM430-W350 (ID 1) at 1 000 000 bit/s.
     """

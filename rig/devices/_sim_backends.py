@@ -62,7 +62,7 @@ from rig.devices.config import load_rig_config
 from rig.devices.kinematics import JointKinematics, LimbKinematics
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError, UnreachableError
-from rig.sim.clock import ScaledClock
+from rig.sim.clock import ManualClock, ScaledClock
 from rig.sim.dynamixel.url import DEVICES, EXAMPLE, KEYS, bus_from_query
 from rig.sim.imu import StreamImuSimulator, stream_patient, stream_query
 from rig.sim.patients import limb_from_url, patient_from_url
@@ -73,7 +73,7 @@ BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side")
 (``seed`` is the bus's, shared)."""
 
 _BLOCK_MS = 100  # the back-drive's ticks are computed this many milliseconds at a time
-_AHEAD_BLOCKS = 3  # ... and this many blocks ahead of the last one asked for
+_AHEAD_BLOCKS = 10  # ... and this many blocks ahead of the last one asked for
 
 PUSHED_TOLERANCE_DEG = 180.0
 """The IK tolerance of a back-driven joint: any orientation, to the nearest its axes reach."""
@@ -127,22 +127,29 @@ class _BackDrive:
 
     The ticks are computed in blocks of :data:`_BLOCK_MS` milliseconds (the patient's posture
     vectorised over the block), in order from time 0, by a worker thread that keeps
-    :data:`_AHEAD_BLOCKS` blocks ahead of the last one asked for: a whole limb's patient
-    computes its motion's knots in bursts of up to a hundred milliseconds, which the servos'
-    answers must not wait for. A block not ready when asked is computed there and then.
-    A protocol the patient is told to perform starts seconds later
-    (:meth:`~rig.devices.port.SimulatedPatient.start_protocol`), after the blocks computed
-    ahead.
+    :data:`_AHEAD_BLOCKS` blocks (1 s of patient time) ahead of the last one asked for: a
+    whole limb's patient computes its motion's knots in bursts — 70-230 ms every 10 s of
+    motion on arm 3 (the largest where the protocol hands over to free motion) — which the
+    servos' answers must not wait for. A block not ready when asked is computed there and
+    then, unless the worker is computing (a burst): the limb then holds its last position for
+    that answer (an answer never waits) — but with ``wait`` (a manual clock: no real time,
+    every answer the same whatever the threads do) it waits for the block. A protocol the
+    patient is told to perform starts 2 s later
+    (:meth:`~rig.devices.port.SimulatedPatient.start_protocol`); the blocks computed before it
+    was told still show the motion it replaces.
     """
 
-    def __init__(self, limb: Any, kinematics: Any, t0: float) -> None:
+    def __init__(self, limb: Any, kinematics: Any, t0: float, *, wait: bool = False) -> None:
         self.limb = limb
+        self.wait = wait
         self.kin = kinematics
         self.t0 = t0
         self._lock = threading.Lock()  # computing blocks, in order
         self._blocks: dict[int, np.ndarray] = {}
         self._next = 0  # the first block not computed
         self._last = kinematics.zero_ticks.astype(np.float64)
+        self._served = self._last
+        self._asked = 0  # the latest block asked for
         self.unreachable = 0
         self._wanted = 0
         self._wake = threading.Condition()
@@ -150,13 +157,19 @@ class _BackDrive:
         self._worker: threading.Thread | None = None  # started by the first ask (ticks)
 
     def ticks(self, now: float) -> np.ndarray:
-        key = max(0, int(now * 1000.0) - int(round(self.t0 * 1000.0)))
+        key = max(0, int(now * 1000.0) - round(self.t0 * 1000.0))
         b = key // _BLOCK_MS
+        self._asked = max(self._asked, b)
         block = self._blocks.get(b)
         if block is None:
-            with self._lock:
+            if not self._lock.acquire(blocking=self.wait):  # the worker is in a burst: an
+                return self._served                        # answer does not wait, the limb
+                                                           # holds still
+            try:
                 self._compute(b)
                 block = self._blocks[b]
+            finally:
+                self._lock.release()
         if b + _AHEAD_BLOCKS >= self._next:
             with self._wake:
                 if self._worker is None and not self._closed:
@@ -165,10 +178,12 @@ class _BackDrive:
                     self._worker.start()
                 self._wanted = max(self._wanted, b + _AHEAD_BLOCKS)
                 self._wake.notify()
-        return block[key - b * _BLOCK_MS]
+        self._served = block[key - b * _BLOCK_MS]
+        return self._served
 
     def _compute(self, upto: int) -> None:
-        """Blocks ``self._next`` .. ``upto`` (lock held), dropping those long past."""
+        """Blocks ``self._next`` .. ``upto`` (lock held), dropping those long past (two blocks
+        before the latest asked for)."""
         while self._next <= upto:
             b = self._next
             t = (b * _BLOCK_MS + np.arange(_BLOCK_MS)) / 1000.0
@@ -181,7 +196,8 @@ class _BackDrive:
                 out[i] = ticks
             self._last = ticks
             self._blocks[b] = out
-            self._blocks.pop(b - 4, None)
+            for old in [k for k in self._blocks if k < self._asked - 2]:
+                del self._blocks[old]  # long past: the clock does not go back
             self._next = b + 1
 
     def _work(self) -> None:
@@ -278,7 +294,7 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
     proc, closer, lines = _start_child("servos", url, child_url, 2 if backdriven else 1)
     port = Port(url=url, path=lines[0], simulator=None, kind=kind)
     port.add_closer(closer)
-    if limb is None:
+    if not backdriven:
         return port
     try:
         t0, scale, _ = (float(v) for v in lines[1].split())
@@ -401,7 +417,7 @@ def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDriv
         raise RigConfigError(f"{q.url}: chain {q.text('chain', 'sim-shoulder')!r} needs servo "
                              f"IDs {list(kin.ids)}, the simulated bus has no ID {missing[0]}")
     t0 = bus.clock()
-    drive = _BackDrive(limb, kin, t0)
+    drive = _BackDrive(limb, kin, t0, wait=isinstance(bus.clock, ManualClock))
     for k, dxl_id in enumerate(kin.ids):
         bus.set_hand(dxl_id, drive.hand(k))
     return _patient(limb, bus.clock, t0, backdrive=drive), drive

@@ -84,9 +84,9 @@ from rig.errors import RigConfigError
 
 __all__ = [
     "JointInfo",
-    "ServoJoint",
     "RigConfig",
     "SensorsConfig",
+    "ServoJoint",
     "ServosConfig",
     "load_rig_config",
     "loads_rig_config",

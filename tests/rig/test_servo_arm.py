@@ -51,12 +51,12 @@ def test_back_driven_servo_arm_holds_the_patients_posture_within_tick_rounding()
         mech, missed = sp.follow(sp.limb.joints(times))
         assert missed == 0 and mech.shape == (len(times), 3, 4)
         seen, err_truth, err_mech = [], [], []
-        for k in range(1, 7):
+        for _ in range(6):
             port.simulator.clock.advance(0.5)
             ticks = bus.read_ticks()
             seen.append(tuple(ticks))
             q = kin.forward(ticks)
-            i = int(round(sp.now() * 1000))
+            i = round(sp.now() * 1000)
             err_truth.append(_deg(q, sp.limb.joints(sp.now())[0]))
             err_mech.append(_deg(q, mech[i]))
     err_truth, err_mech = np.array(err_truth), np.array(err_mech)
@@ -120,3 +120,30 @@ def test_the_servo_arms_postures_extract_into_a_coupled_limb_with_a_forearm_elbo
     for attr in ("flexion_min_deg", "flexion_max_deg", "rotation_min_deg", "rotation_max_deg"):
         assert getattr(got, attr) == pytest.approx(getattr(want, attr), abs=2.0), attr
     assert ex.params()["kinds"] == {"elbow": "forearm"}
+
+
+@pytest.mark.parametrize(("url", "match"), [
+    ("sim://dynamixel?ids=1,2,3&limb=arm&chain=sim-shoulder",
+     r"chain 'sim-shoulder' has 1 joint \(joint\), the patient 3"),
+    ("sim://dynamixel?ids=1,2,3&patient=original&chain=sim-servo-arm",
+     r"chain 'sim-servo-arm' has 3 joints \(shoulder, elbow, wrist\), the patient 1"),
+    ("sim://dynamixel?ids=1,2,3&limb=arm&chain=sim-servo-arm",
+     r"needs servo IDs \[1, 2, 3, 4, 5, 6, 7\], the simulated bus has no ID 4"),
+    ("sim://dynamixel?ids=1-7&limb=leg&chain=sim-servo-arm", r"kinds: the leg has no joint"),
+])
+def test_a_patient_that_is_not_the_chains_is_a_one_line_error(url, match):
+    from rig.errors import RigConfigError
+
+    with pytest.raises(RigConfigError, match=match):
+        open_port(url + "&clock=manual")
+
+
+def test_limb_extractor_kinds_are_checked():
+    from calibration.extraction import LimbExtractor
+
+    with pytest.raises(ValueError, match="the arm has no joint 'knee'"):
+        LimbExtractor("arm", kinds={"knee": "forearm"})
+    with pytest.raises(ValueError, match="the elbow drives the couplings; a two-axis joint"):
+        LimbExtractor("arm", kinds={"elbow": "two-axis"})
+    with pytest.raises(ValueError, match="kinds applies to a whole limb"):
+        LimbExtractor(("elbow",), kinds={"elbow": "forearm"})

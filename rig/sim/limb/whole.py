@@ -19,7 +19,9 @@ Motion (the shoulder patient's recipe, :mod:`rig.sim.limb.motion`, on every join
   its loosest keyframe's region) with seeded sinusoids as
   :class:`~rig.sim.limb.motion.JointMotion`'s (RMS ``excursion`` times the region's reach, at
   most 90°; twist about the middle of its interval, RMS ``excursion`` times half of it); a
-  hinge turns about its axis, ``mid + excursion · half · x(t)`` over its interval; a hinge's
+  hinge turns about its axis, ``mid + excursion · half · x(t)`` over its interval (a forearm
+  joint likewise about its flexion axis, then about the limb axis over its rotation
+  interval, each from its own sinusoid: ``F(θ(t)) ⊗ R(φ(t))``); a hinge's
   angle and a twist saturate smoothly 170° from the middle (never through the middle of the
   excluded arc, where the clamp would change ends). With ``excursion = 1`` every joint is
   pushed beyond its limits often, independently, so the patient presses into every limit,
