@@ -15,7 +15,9 @@ Method ``network`` (the default of ``rig train`` on a limb file): every coupled 
 by its trained distance field (:mod:`models.nn.ndf`): ``f(d, τ)`` with ``τ`` the source's
 corrected angle mapped to [-1, 1]; ``outside = f(d, τ) > 0``; ``b`` after the field's
 projection steps ``d ← cos(αf⁺) d − sin(αf⁺) ĝ`` (``ĝ`` the unit tangent of the analytic input
-gradient; step fractions ``α`` 0.25, 0.5, 0.5, 1, 1), all in the graph as matrix products;
+gradient; step fractions ``α`` 0.25, 0.5, 0.5, 1, 1), all in the graph as matrix products
+— the steps in the branch of an ``If`` node taken only when some direction is outside (a
+direction inside takes no step, so a valid posture's single call skips them: issue 39);
 the hinges, the twist clamps (intervals interpolated at ``τ``'s angle) and every uncoupled joint
 exactly as below. Metadata ``jointlimits.training`` (JSON) holds the seed, the postures' count
 (and the dataset's hash when trained from one), the network's size and the training time.
