@@ -236,7 +236,8 @@ def main() -> None:
     print(f"a Python loop of 10^7 additions: {loop_seconds():.2f} s (how fast this machine "
           f"ran)")
     tmp = Path(tempfile.mkdtemp(prefix="bench-limb-"))
-    families = [(f"{args.limbs} held-out limbs", held_out_limbs(args.limbs), 1000)]
+    families = [(f"{args.limbs} held-out limbs", held_out_limbs(args.limbs), 1000)
+                ] if args.limbs else []
     if args.forearm:
         families.append((f"{args.forearm} held-out arms with a forearm elbow",
                          held_out_forearm_arms(args.forearm), 2000))

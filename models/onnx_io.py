@@ -457,8 +457,9 @@ def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
     return raw, model
 
 
-def latency_session(raw: bytes):
-    """An onnxruntime session tuned for latency: one thread, sequential, no spinning."""
+def latency_session(raw: bytes, *, single: bool = False):
+    """An onnxruntime session tuned for latency: one thread, sequential, no spinning;
+    ``single``: for one sample a call (no memory-reuse planning)."""
     import onnxruntime as ort  # lazily: exporting a model needs no runtime (models/__init__)
 
     opts = ort.SessionOptions()
@@ -467,11 +468,12 @@ def latency_session(raw: bytes):
     opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    # no memory-reuse planning: a single call of a small graph is per-node overhead, and the
-    # planner's buffer sharing is part of it — a limb model's single call 11 % faster
-    # (network 132 → 117 µs, geometric 95.5 → 85.3 µs, interleaved, 2026-11-28, this 2-core
-    # VM, a Python loop of 10⁷ additions 0.46 s); the answers are the same numbers
-    opts.enable_mem_reuse = False
+    # one sample: no memory-reuse planning — a single call of a small graph is per-node
+    # overhead, and the planner's buffer sharing is part of it: a limb model's single call
+    # 11 % faster (network 132 → 117 µs, geometric 95.5 → 85.3 µs, interleaved, 2026-11-28,
+    # this 2-core VM, a Python loop of 10⁷ additions 0.46 s), the same numbers; batches keep
+    # it (their buffers are large)
+    opts.enable_mem_reuse = not single
     return ort.InferenceSession(raw, sess_options=opts, providers=["CPUExecutionProvider"])
 
 
@@ -519,7 +521,8 @@ class CorrectionModel:
     whose file keeps its ``[N, 4]`` contract (:class:`Contract`).
 
     One sample (:meth:`correct_one`) runs on the calling thread (one onnxruntime thread, no
-    spinning) through a preallocated input buffer; a limb's batch of more than
+    spinning) through a preallocated input buffer, in a session of its own without
+    memory-reuse planning (:func:`latency_session`); a limb's batch of more than
     :attr:`Contract.chunk` postures in chunks on one worker thread per core for the call (the
     session is shared; onnxruntime releases the GIL while it runs, and chunks of this size stay
     in the cache).
@@ -580,6 +583,7 @@ class CorrectionModel:
         if expected_constraint is not None:
             self.check_constraint(expected_constraint)
         self.session = latency_session(raw)
+        self._single = latency_session(raw, single=True)  # correct_one's
         self._sample = sample
         self._one = np.zeros((1, *sample), dtype=np.float32)
         self._outs = [self.contract.output]
@@ -702,7 +706,7 @@ class CorrectionModel:
         one posture (J, 4)), float32, through one preallocated input buffer; the returned
         array is fresh."""
         self._one[0] = orientation
-        return self.session.run(self._outs, self._feed, self._ro)[0][0]
+        return self._single.run(self._outs, self._feed, self._ro)[0][0]
 
     def corrected(self, orientation: np.ndarray) -> np.ndarray:
         """``correction ⊗ orientation`` float64 of the input's shape, keeping its sign."""

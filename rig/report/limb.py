@@ -547,9 +547,17 @@ def _coupling_section(limb, j: int, q: np.ndarray, side: str,
     joint = limb.joints[j]
     cp = joint.coupling
     src = limb.joints[limb.index(cp.by)]
-    sh = src.loosest().hinge
+    sc = src.loosest()
+    if src.joint_kind.single_axis:
+        sh = sc.hinge
+        lo, hi, axis = sh.min_deg, sh.max_deg, sh.axis
+        xs = hinge_angles(q[:, limb.index(cp.by)], sh.axis)
+    else:  # another source kind (a forearm: its flexion)
+        lo, hi = (math.degrees(v) for v in sc.joint_kind.coupling_range(sc))
+        axis = sc.joint_kind.coupling_axis(sc)
+        xs = np.degrees(sc.joint_kind.coupling_angle(sc, q[:, limb.index(cp.by)]))
     at = np.asarray(cp.at_deg, dtype=np.float64)
-    x = np.unique(np.concatenate((np.linspace(min(sh.min_deg, at[0]), max(sh.max_deg, at[-1]),
+    x = np.unique(np.concatenate((np.linspace(min(lo, at[0]), max(hi, at[-1]),
                                               _CURVE_POINTS), at)))
     lim = np.array([_primary_limits(cp.at(a), joint.name, side) for a in x])
     ref_curve = None
@@ -557,10 +565,9 @@ def _coupling_section(limb, j: int, q: np.ndarray, side: str,
     if ref_joint is not None:
         rl = np.array([_primary_limits(_limits_at(ref_joint, a), joint.name, side) for a in x])
         ref_curve = (x, rl[:, 0], rl[:, 1])
-    xs = hinge_angles(q[:, limb.index(cp.by)], sh.axis)
     ys, read = _primary_angles(q[:, j], joint.name, side, joint)
     pos, neg = _movements(joint.name)
-    clinical_src = _clinical_hinge(cp.by, sh.axis)
+    clinical_src = _clinical_hinge(cp.by, axis)
     src_pos, _ = _movements(cp.by)
     xlabel = f"{cp.by} {src_pos} (°)" if clinical_src else f"{cp.by} hinge angle (°)"
     if get_kind(joint.kind).single_axis:

@@ -13,6 +13,7 @@ limb model the same way.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -86,6 +87,11 @@ def describe_limb(path: str, limb, samples: int, seed: int) -> str:
         if joint.joint_kind.single_axis:
             lo = joint.loosest().hinge
             parts.append(f"{joint.name} hinge {lo.min_deg:g}..{lo.max_deg:g} deg")
+        elif not joint.joint_kind.swing_twist and joint.constraint is not None:
+            # a forearm: two intervals (a surface in SO(3): 0 % of all orientations)
+            c = joint.constraint
+            lo, hi = (math.degrees(x) for x in c.joint_kind.coupling_range(c))
+            parts.append(f"{joint.name} {c.kind} flexion {lo:.4g}..{hi:.4g} deg")
         else:
             parts.append(f"{joint.name} {100 * float(valid[:, j].mean()):.2f} %")
     return "\n".join([f"{path}: OK", limb.summary(),

@@ -196,6 +196,10 @@ def test_the_graph_gives_the_oracles_corrections(axis, tmp_path):
     r = evaluate_model(model, limb, q=q, oracle=oracle)
     assert r["frac_invalid_violating_1deg"] == 0.0 and r["max_violation_deg"] < 0.05
     assert r["valid_moved_deg"] < 0.01 and r["end_mean_3d_error_pct"] < 0.005
+    # one posture a call (the edges skipped where the elbow's optimum is within its
+    # intervals): the batch's answers
+    one = np.stack([model.correct_one(p) for p in q[:300]]).astype(np.float64)
+    assert _angles(one, got[:300]).max() < 1e-3
 
 
 @pytest.mark.parametrize("limits", [((0, 140), (-80, 70)), ((-180, 180), (-90, 90)),

@@ -103,3 +103,17 @@ def test_train_refuses_a_dataset_of_another_limb(tmp_path, leg, rig_cli):
     code, _, err = rig_cli(["train", "--data", str(data), "--constraint", str(path), "--out",
                             str(tmp_path / "m.onnx")])
     assert code == 2 and "was made for limb 'arm-323'" in err
+
+
+def test_an_arm_with_a_forearm_elbow_is_checked_and_compiled(tmp_path, rig_cli):
+    """``rig constraint check`` and ``rig train --preset geometric`` on an arm whose elbow is a
+    forearm joint (issue 39): its flexion interval named, the model compiled."""
+    path = tmp_path / "arm.yaml"
+    dump_limb(random_limb(323, "arm", forearm=True), path)  # a development limb
+    code, out, err = rig_cli(["constraint", "check", str(path)])
+    assert code == 0, err
+    assert "elbow forearm flexion" in out
+    code, out, _ = rig_cli(["train", "--constraint", str(path), "--out",
+                            str(tmp_path / "g.onnx"), "--preset", "geometric"])
+    assert code == 0, out
+    assert "warning" not in out

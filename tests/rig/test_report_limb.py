@@ -268,3 +268,16 @@ def test_a_reading_beyond_reach_is_flagged_at_the_top(leg):
     assert knee["Extension"].beyond_reach in far.warnings
     html = render_limb_html(far)
     assert html.index("knee extension 170.0° is beyond what people reach") < html.index("<h2>")
+
+
+def test_an_arm_with_a_forearm_elbow_is_reported(tmp_path):
+    """An arm whose elbow is a forearm joint (flexion and pronation–supination), the shoulder
+    coupled to the flexion (issue 39): the coupling is plotted against the flexion."""
+    from models.limb_evaluation import HELD_OUT_FOREARM_SEED, held_out_postures, random_limb
+
+    limb = random_limb(HELD_OUT_FOREARM_SEED - 1, "arm", forearm=True)  # a tuning seed
+    q = held_out_postures(limb, 900, 3)[-300:]  # the valid third
+    data = limb_report_data(limb, {j.name: q[:, i] for i, j in enumerate(limb.joints)},
+                            side="right", patient="P-1")
+    assert [c.joint for c in data.couplings] == ["shoulder"]
+    assert write_limb_report(data, tmp_path / "arm.html").stat().st_size > 0
