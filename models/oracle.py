@@ -311,6 +311,15 @@ class ConstraintOracle:
         if self._kind is None:
             for oracle in self._joints:
                 oracle.prepare()
+            # every kernel a control loop's cycle calls, compiled or loaded now: each joint's
+            # query (a coupled one inside its coupling range) and each source's angle
+            for j in range(self.n_joints):
+                rng = self.coupling_range(j)
+                angle = 0.0 if rng is None else 0.5 * (rng[0] + rng[1])
+                self.joint_query(j)(1.0, 0.0, 0.0, 0.0, angle)
+                src = self.joint_source(j)
+                if src is not None:
+                    self.coupling_angle_one(src, 1.0, 0.0, 0.0, 0.0)
             return self
         self._kind.prepare()
         self.distance_projected_one(1.0, 0.0, 0.0, 0.0)

@@ -342,6 +342,13 @@ class EnforcementLoop:
         # Before cycle 0's deadline is set: the collection itself takes tens of milliseconds.
         gc.collect()
         gc.freeze()
+        if self.watchdog_ms:
+            # armed again now, not only at setup: a servo that heard nothing since then for
+            # longer than its watchdog (a first run compiling kernels, a slow start) has stopped
+            # and refuses goals until its watchdog is cleared (0) and set again
+            _patiently(lambda: bus.arm_watchdog(0))
+            _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))
+        self._t_bus = clock()
         t0 = sched.start()
         targets.start(t0)
         sup.reset(t0, self._present)
@@ -361,6 +368,7 @@ class EnforcementLoop:
         clock = self.clock
         t_present = t0
         read_attempts = cfg.read_attempts
+        wd_s = 1e-3 * self.watchdog_ms  # 0: no watchdog armed
         period = sched.period
         present = self._present
         commanded = self._commanded
@@ -421,6 +429,10 @@ class EnforcementLoop:
             # -- 2. present positions: one sync read, retried within the cycle budget --------
             fresh = False
             lost = False
+            now = clock()
+            gap = now - self._t_bus
+            if wd_s and gap > wd_s:  # the servos' watchdog fired: goals are refused from now
+                faults |= Fault.WATCHDOG_GAP
             for attempt in range(read_attempts):
                 try:
                     ticks = bus.read_ticks()
@@ -440,6 +452,7 @@ class EnforcementLoop:
                 break
             c1 = perf()
             if fresh:
+                self._t_bus = clock()
                 self._present_ticks = ticks
                 present = [kj.forward_one(ticks[sl]) for kj, sl in zip(kins, slices, strict=True)]
                 t_present = start
@@ -448,6 +461,9 @@ class EnforcementLoop:
             reason = None
             if lost:
                 reason = "the bus adapter went away"
+            elif faults & Fault.WATCHDOG_GAP:
+                reason = (f"no bus traffic for {1e3 * gap:.0f} ms, longer than the servos' Bus "
+                          f"Watchdog ({self.watchdog_ms} ms): they stopped")
             elif bus.alert_pending:
                 try:
                     alerts = bus.poll_alerts()
@@ -483,6 +499,7 @@ class EnforcementLoop:
             if reason is None:
                 try:
                     bus.write_goal_ticks(self._goal_ticks)
+                    self._t_bus = clock()
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST
                     reason = "the bus adapter went away"

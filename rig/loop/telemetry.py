@@ -63,11 +63,12 @@ class Fault(IntFlag):
     OVERRUN = 256         #: the cycle ended after the next deadline
     TARGET_LOST = 512     #: the target source failed (its device vanished)
     SIGNAL = 1024         #: SIGINT / SIGTERM
+    WATCHDOG_GAP = 2048   #: no bus traffic for longer than the servos' Bus Watchdog: it fired
 
 
 #: Faults that send the limb to the safe state at once.
 SAFE_STATE_FAULTS = int(Fault.HARDWARE_ALERT | Fault.CONNECTION_LOST | Fault.STALE_PRESENT
-                        | Fault.SIGNAL)
+                        | Fault.SIGNAL | Fault.WATCHDOG_GAP)
 
 COLUMNS: tuple[str, ...] = (
     "cycle", "t_s",

@@ -288,6 +288,54 @@ def test_stale_servo_data_trips_the_watchdog(models):
     assert failed[50:].all() and not failed[:50].any()
 
 
+def test_a_loop_stalled_past_the_bus_watchdog_enters_the_safe_state(models):
+    """A host that stalls the loop longer than the servos' Bus Watchdog: they stopped and refuse
+    goals, so the loop must not go on as if it commanded them — safe state, named."""
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+
+    def on_cycle(loop, k):
+        if k == 60:
+            loop.clock.advance(0.25)  # the whole host frozen for 250 ms (watchdog 100 ms)
+
+    summary, table, _, _ = _run(constraint, model, ScriptedTargets("slow", oracle),
+                                cycles=200, on_cycle=on_cycle, watchdog_ms=100)
+    assert summary["safe_state_entries"] == 1 and summary["safe_state_cycle"] == 60
+    assert "Bus Watchdog" in summary["safe_state_reason"]
+    gap = (table["faults"] & Fault.WATCHDOG_GAP) > 0
+    assert gap[60] and not gap[:60].any()
+
+
+def test_a_slow_start_does_not_leave_the_servos_stopped_by_their_watchdog(models):
+    """Between setup (torque on, watchdog armed) and the first cycle the host may take longer
+    than the watchdog (a first run loading compiled kernels): the loop arms it again before its
+    first cycle, so the servos follow the goals sent."""
+    constraint, model = models["cone50"]
+    oracle = ConstraintOracle(constraint)
+    with open_port(URL + "&clock=manual&wire_time=off", baud=SERVOS.baud) as port:
+        bus = port.simulator
+        clk = bus.clock
+        limb = prepare_servo_limb(port, SERVOS, oracle)
+        try:
+            cfg = LoopConfig(rate_hz=200.0, watchdog_ms=100)
+            loop = EnforcementLoop(limb, model, oracle, ScriptedTargets("adversarial", oracle), cfg,
+                                   clock=clk, sleep=clk.sleep)
+            loop.setup()
+            clk.advance(0.5)  # nothing on the bus for 500 ms: every servo's watchdog fires
+            assert all(bus.watchdog_tripped(i) for i in SERVOS.ids)
+            summary = loop.run(max_cycles=400)
+            assert not any(bus.watchdog_tripped(i) for i in SERVOS.ids)
+        finally:
+            limb.close()
+    table = loop.telemetry.table()
+    assert summary["safe_state_entries"] == 0
+    # the limb follows its goals: each cycle's present is the last cycle's command
+    present, commanded = _col(table, "present"), _col(table, "commanded")
+    spread = np.degrees(Q.angle_between(commanded[:1], commanded)).max()
+    lag = np.degrees(Q.angle_between(present[1:], commanded[:-1]))  # a frozen limb lags it all
+    assert spread > 5.0 and lag.max() < 3.0
+
+
 def test_stop_request_leaves_the_limb_held(models):
     constraint, model = models["cone50"]
     oracle = ConstraintOracle(constraint)
