@@ -54,6 +54,12 @@ class RunRepository(Repository):
         transaction ``conn``."""
         conn.execute(S.telemetry.insert(), params)
 
+    @staticmethod
+    def insert_joint_telemetry(conn: Connection, params: list[dict]) -> None:
+        """Insert a limb run's per-joint telemetry rows (``run_id``, ``cycle``, ``joint`` and
+        :data:`~rig.store.schema.JOINT_TELEMETRY_COLUMNS`) in the caller's transaction."""
+        conn.execute(S.telemetry_joints.insert(), params)
+
     def telemetry(self, run_id: int) -> dict[str, np.ndarray]:
         """Telemetry of a run in cycle order: one array per column of
         :data:`~rig.store.schema.TELEMETRY_COLUMNS` (float64, NaN for missing; ``fault`` and
@@ -75,12 +81,41 @@ class RunRepository(Repository):
                 out[name] = np.array([-1 if v is None else v for v in col], dtype=np.int64)
             else:
                 out[name] = np.array([np.nan if v is None else v for v in col], dtype=np.float64)
+        out.update(_joint_columns(self.db, int(run_id), out["cycle"]))
         out.update(_extra_columns(out["extra"], out))
         return out
 
     def list(self, session_id: int) -> list[dict]:
         """The runs of a session, oldest first."""
         return self._of_session(session_id)
+
+
+def _joint_columns(db, run_id: int, cycles: np.ndarray) -> dict[str, np.ndarray]:
+    """A limb run's per-joint telemetry as columns ``<joint>_<column>`` (the CSV's names),
+    aligned with the run's cycles (NaN, or -1 for ``intervention``, where a cycle has no row
+    of that joint); the joints in the order they first appear."""
+    t = S.telemetry_joints
+    cols = [t.c.joint, t.c.cycle] + [t.c[c] for c in S.JOINT_TELEMETRY_COLUMNS]
+    q = select(*cols).where(t.c.run_id == run_id).order_by(t.c.id)
+    with db.transaction(write=False) as conn:
+        rows = conn.execute(q).all()
+    if not rows:
+        return {}
+    where = {int(c): i for i, c in enumerate(cycles.tolist())}
+    names = list(dict.fromkeys(r[0] for r in rows))
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        for c in S.JOINT_TELEMETRY_COLUMNS:
+            out[f"{name}_{c}"] = (np.full(len(cycles), -1, dtype=np.int64)
+                                  if c == "intervention" else np.full(len(cycles), np.nan))
+    for r in rows:
+        i = where.get(int(r[1]))
+        if i is None:
+            continue
+        for c, v in zip(S.JOINT_TELEMETRY_COLUMNS, r[2:], strict=True):
+            if v is not None:
+                out[f"{r[0]}_{c}"][i] = v
+    return out
 
 
 def _extra_columns(extra: np.ndarray, have: dict) -> dict[str, np.ndarray]:

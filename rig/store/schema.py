@@ -18,8 +18,12 @@ Layout (current version :data:`SCHEMA_VERSION`)::
           |     +-- models(id, boundary_id NULL, session_id NULL, path, sha256, metrics, created_at)
           +-- runs(id, session_id, status, started_at, ended_at, meta, summary)         (v2)
                 +-- telemetry(id, run_id, cycle, t_s, target_w..z, commanded_w..z,
-                              present_w..z, read_ms, compute_ms, write_ms, cycle_ms,
-                              correction_deg, violation_deg, intervention, fault, extra)
+                |             present_w..z, read_ms, compute_ms, write_ms, cycle_ms,
+                |             correction_deg, violation_deg, intervention, fault, extra)
+                +-- telemetry_joints(id, run_id, cycle, joint, target_w..z, correction_w..z,
+                                     commanded_w..z, present_w..z, correction_deg,
+                                     violation_deg, distance_deg, intervention)        (v6)
+                         index (run_id, joint, cycle)
 
 Units: times ``t``, ``device_t``, ``t_s`` in seconds (``t`` on the recording host's monotonic
 clock, ``started_at``/``ended_at``/``created_at`` Unix time); quaternions scalar-first
@@ -48,6 +52,13 @@ raw reading (every sample written before version 4, joint samples, devices that 
 it). A partial index ``ix_samples_raw`` (session_id, sensor_id) holds only the samples with a
 raw reading (any of the nine not NULL), so "does this session have raw readings?" is an index
 lookup instead of a scan.
+
+Version 6 adds ``telemetry_joints``: a run of a limb of several joints keeps one row per cycle
+and joint (the joint by its name in the limb file), its target, the model's correction, the
+orientation of the goal ticks written, the present orientation, the correction's angle, the
+violation and signed distance of what was commanded (degrees) and the supervisor's
+intervention bits; the cycle's row in ``telemetry`` keeps the whole limb's figures (its
+``target``/``commanded``/``present`` columns NULL). One-joint runs write no row there.
 """
 
 from __future__ import annotations
@@ -284,6 +295,29 @@ def _v5_tables(md: MetaData) -> None:
         md.tables["sensors"].append_column(col)
 
 
+#: One joint's telemetry columns in ``telemetry_joints`` (v6), after ``run_id, cycle, joint``.
+JOINT_TELEMETRY_COLUMNS: tuple[str, ...] = (
+    *(f"{g}_{c}" for g in ("target", "correction", "commanded", "present") for c in "wxyz"),
+    "correction_deg", "violation_deg", "distance_deg", "intervention",
+)
+
+
+def _v6_tables(md: MetaData) -> None:
+    """Version-6 table, frozen: a limb run's per-joint telemetry."""
+    cols = [
+        Column("id", BigId, primary_key=True),
+        Column("run_id", Integer, ForeignKey("runs.id"), nullable=False),
+        Column("cycle", BigInteger, nullable=False),
+        Column("joint", String(64), nullable=False),
+    ]
+    cols += [Column(f"{g}_{c}", Double) for g in ("target", "correction", "commanded",
+                                                  "present") for c in "wxyz"]
+    cols += [Column(n, Double) for n in ("correction_deg", "violation_deg", "distance_deg")]
+    cols += [Column("intervention", Integer, nullable=False, server_default="0")]
+    Table("telemetry_joints", md, *cols,
+          Index("ix_telemetry_joints_run", "run_id", "joint", "cycle"))
+
+
 def _m1(conn: Connection) -> None:
     md = MetaData()
     _v1_tables(md)
@@ -340,6 +374,14 @@ def _m5(conn: Connection) -> None:
     ))
 
 
+def _m6(conn: Connection) -> None:
+    md = MetaData()
+    _v1_tables(md)  # foreign-key targets only; they exist already
+    _v2_tables(md)
+    _v6_tables(md)
+    md.create_all(conn, tables=[md.tables["telemetry_joints"]])
+
+
 #: Ordered, append-only: (version, description, function).
 MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
@@ -348,6 +390,7 @@ MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (3, "sessions: writer (host, pid, process start) and heartbeat", _m3),
     (4, "samples: raw accelerometer, gyroscope, magnetometer (acc_x..mag_z)", _m4),
     (5, "sensors: sample counts and time spans, kept by the writer", _m5),
+    (6, "live loop: per-joint telemetry of a limb's runs (telemetry_joints)", _m6),
 ]
 
 #: The version this code reads and writes.
@@ -361,6 +404,7 @@ _v2_tables(metadata)
 _v3_tables(metadata)
 _v4_tables(metadata)
 _v5_tables(metadata)
+_v6_tables(metadata)
 
 schema_version = metadata.tables["schema_version"]
 patients = metadata.tables["patients"]
@@ -373,6 +417,7 @@ boundaries = metadata.tables["boundaries"]
 models = metadata.tables["models"]
 runs = metadata.tables["runs"]
 telemetry = metadata.tables["telemetry"]
+telemetry_joints = metadata.tables["telemetry_joints"]
 
 #: Telemetry keys stored in their own columns; any other key of a row goes to ``extra`` (JSON).
 TELEMETRY_COLUMNS: tuple[str, ...] = tuple(

@@ -410,14 +410,19 @@ class TelemetryWriter(_BatchWriter):
     def add_many(self, rows: Sequence[Mapping[str, Any]]) -> None:
         self._append(list(rows))
 
-    def _convert(self, row: Mapping[str, Any]) -> dict:
+    def _convert(self, row: Mapping[str, Any], joints: list[dict]) -> dict:
         out: dict[str, Any] = {"run_id": self.run_id}
         extra: dict[str, Any] = {}
+        per_joint: dict[str, dict[str, Any]] = {}
         for k, v in row.items():
             if k in _TELEMETRY_SET:
                 out[k] = _plain(v)
-            else:
+                continue
+            split = _joint_key(k)
+            if split is None:
                 extra[k] = _plain(v)
+            else:
+                per_joint.setdefault(split[0], {})[split[1]] = _plain(v)
         if out.get("t_s") is None:
             raise RigConfigError(f"telemetry row without t_s: {dict(row)!r:.120}")
         if "intervention" in out:
@@ -431,20 +436,46 @@ class TelemetryWriter(_BatchWriter):
         out["extra"] = (
             json.dumps(extra, sort_keys=True, default=_plain, allow_nan=True) if extra else None
         )
+        if per_joint:
+            cycle = out.get("cycle")
+            if cycle is None:
+                raise RigConfigError(f"per-joint telemetry without cycle: {dict(row)!r:.120}")
+            for name, values in per_joint.items():
+                jr = {"run_id": self.run_id, "cycle": int(cycle), "joint": name}
+                for c in S.JOINT_TELEMETRY_COLUMNS:
+                    v = values.get(c)
+                    if c == "intervention":
+                        jr[c] = 0 if v is None else int(v)
+                    else:
+                        jr[c] = None if v is None or not math.isfinite(float(v)) else float(v)
+                joints.append(jr)
         return out
 
     def _write(self, rows: list) -> None:
-        params = [self._convert(r) for r in rows]
+        joints: list[dict] = []
+        params = [self._convert(r, joints) for r in rows]
         keys = set().union(*(p.keys() for p in params))
         for p in params:  # executemany needs the same keys in every row
             for k in keys:
                 p.setdefault(k, 0 if k == "intervention" else None)
         with self._store.transaction() as conn:
             self._store.runs.insert_telemetry(conn, params)
+            if joints:
+                self._store.runs.insert_joint_telemetry(conn, joints)
             self._heartbeat(conn)
 
 
 _TELEMETRY_SET = frozenset(S.TELEMETRY_COLUMNS)
+_JOINT_SUFFIXES = tuple((f"_{c}", c) for c in S.JOINT_TELEMETRY_COLUMNS)
+
+
+def _joint_key(key: str) -> tuple[str, str] | None:
+    """``("elbow", "commanded_w")`` for a limb run's per-joint key ``elbow_commanded_w``; None
+    for any other key."""
+    for suffix, column in _JOINT_SUFFIXES:
+        if key.endswith(suffix) and len(key) > len(suffix):
+            return key[:-len(suffix)], column
+    return None
 _FLOAT_COLUMNS = tuple(
     c for c in S.TELEMETRY_COLUMNS if c not in ("cycle", "intervention", "fault")
 )
