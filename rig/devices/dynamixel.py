@@ -362,7 +362,16 @@ class DynamixelBus(ServoBus):
 
     # -- the cycle ------------------------------------------------------------------------
     def _read_ticks(self, deadline: float) -> np.ndarray:
-        data = self.sync_read(self._a_present, 4)
+        self._begin_read()
+        return self._finish_read()
+
+    def _begin_read(self) -> None:
+        """The sync read request of Present Position (its packet timeout starts now)."""
+        self._sync_read_tx(self._a_present, 4, self._id_param)
+
+    def _finish_read(self) -> np.ndarray:
+        """The reply of :meth:`_begin_read` as ticks, (n,) int64."""
+        data = self._sync_read_rx(4, self._id_param)
         return np.array([int.from_bytes(data[i], "little", signed=True) for i in self.ids],
                         dtype=np.int64)
 
@@ -373,13 +382,22 @@ class DynamixelBus(ServoBus):
         Status error bytes are checked (alert bit noted, error codes raised).
         """
         ids = self._id_param if ids is None else list(ids)
+        self._sync_read_tx(address, length, ids)
+        return self._sync_read_rx(length, ids)
+
+    def _sync_read_tx(self, address: int, length: int, ids: list[int]) -> None:
+        """Send a (fast) sync read request; the SDK starts the reply's packet timeout."""
         port, ph = self._sdk_port, self._ph
         port.is_using = False
+        fast = self.fast
+        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), fast))
+        self._result(result, "fast sync read" if fast else "sync read")
+
+    def _sync_read_rx(self, length: int, ids: list[int]) -> dict[int, bytes]:
+        """Collect the replies of :meth:`_sync_read_tx`: ``{id: bytes}``."""
+        port, ph = self._sdk_port, self._ph
         out: dict[int, bytes] = {}
         if self.fast:
-            result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids),
-                                                       True))
-            self._result(result, "fast sync read")
             raw, result, _ = self._guard(
                 lambda: ph.fastSyncReadRx(port, sdk.BROADCAST_ID, (length + 4) * len(ids)))
             self._result(result, "fast sync read")
@@ -396,8 +414,6 @@ class DynamixelBus(ServoBus):
                 raise RigTimeoutError("fast sync read: no data", port=str(self.port),
                                       dxl_id=missing[0])
             return out
-        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), False))
-        self._result(result, "sync read")
         for dxl_id in ids:
             data, result, err = self._guard(lambda i=dxl_id: ph.readRx(port, i, length))
             self._result(result, "sync read", dxl_id)
