@@ -41,6 +41,7 @@ arrived (POSIX; elsewhere the SDK's own loop runs unchanged).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import select
@@ -123,17 +124,38 @@ class _SdkPort(sdk.PortHandler):
 
     def readPort(self, length):
         """Up to ``length`` bytes; when none is waiting, first wait (``select``, the GIL
-        released) for one to arrive or for the packet's deadline (see the module docstring)."""
+        released) for one to arrive or for the packet's deadline (see the module docstring).
+
+        POSIX: one ``select`` and one ``read`` on the port's (non-blocking) descriptor —
+        pyserial's ``read`` adds an ``ioctl`` and a ``select`` or two per call, and the SDK
+        calls this twice or more per status packet. Its errors as pyserial's: a descriptor
+        that is ready but reads nothing is a disconnected device.
+        """
         ser = self.ser
-        if _CAN_SELECT and not ser.in_waiting:
-            remaining_ms = self.packet_timeout - self.getTimeSinceStart()
-            if remaining_ms > 0.0:
-                select.select((ser.fileno(),), (), (), remaining_ms / 1000.0)
-        return ser.read(length)
+        if not _CAN_SELECT:
+            return ser.read(length)
+        fd = ser.fd
+        remaining_ms = self.packet_timeout - self.getTimeSinceStart()
+        try:
+            ready, _, _ = select.select((fd,), (), (), max(remaining_ms, 0.0) / 1000.0)
+            if not ready:
+                return b""
+            buf = os.read(fd, length)
+        except OSError as err:
+            if err.errno in _RETRY_ERRNOS:
+                return b""
+            raise serial.SerialException(f"read failed: {err}") from err
+        if not buf:
+            raise serial.SerialException("device reports readiness to read but returned no "
+                                         "data (device disconnected?)")
+        return buf
 
 
 #: ``select`` works on serial file descriptors (POSIX); elsewhere the SDK's busy loop stays.
 _CAN_SELECT = os.name == "posix"
+#: ``read`` errors that mean "nothing now" (as pyserial treats them).
+_RETRY_ERRNOS = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS,
+                 errno.EINTR)
 
 
 def _model_name(model_number: int) -> str:
