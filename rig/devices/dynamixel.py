@@ -11,7 +11,10 @@ ran) — and turns SDK result codes into typed errors (:mod:`rig.errors`).
 Per cycle (:meth:`DynamixelBus.read_ticks` / :meth:`DynamixelBus.write_goal_ticks`): one
 SYNC READ of Present Position (132, 4 bytes) — FAST SYNC READ (one status packet for all
 servos) when every servo's firmware supports it (X-series firmware ≥ 45, e-Manual
-"Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply).
+"Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply). The read
+splits into its request (:meth:`DynamixelBus.begin_read`: the SDK's ``syncReadTx``, which starts
+the reply's packet timeout) and its reply (:meth:`DynamixelBus.finish_read`: ``fastSyncReadRx``
+or ``readRx`` per servo, then the error bytes); ``read_ticks`` is the two in a row.
 
 Start-up (:meth:`DynamixelBus.configure`): Operating Mode (11) = position, Return Delay
 Time (9, 2 µs units), Min/Max Position Limit (52/48) from the servos' tick limits — EEPROM, so
