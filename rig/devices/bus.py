@@ -15,6 +15,8 @@ whether it has a method:
 hook                       called by                                     default
 =========================  ============================================  =====================
 ``_read_ticks(deadline)``  :meth:`ServoBus.read_ticks` (retried)          required
+``_begin_read()``          :meth:`ServoBus.begin_read`                   nothing sent
+``_finish_read()``         :meth:`ServoBus.finish_read`                  ``_read_ticks``
 ``_write_goal_ticks(t)``   :meth:`ServoBus.write_goal_ticks` (checked)    required
 ``_read_torque()``         :meth:`ServoBus.torque`                        required
 ``_write_torque(on)``      :meth:`ServoBus.set_torque`                    required
@@ -24,6 +26,12 @@ hook                       called by                                     default
 ``feed_watchdog()``        a loop with nothing else to send               nothing (every
                                                                          transaction feeds it)
 =========================  ============================================  =====================
+
+A split read (:meth:`ServoBus.begin_read` sends the request, :meth:`ServoBus.finish_read`
+collects the reply) lets a caller work while the reply is on its way (the loop computes its
+goal then); a backend that sends and collects in one step inherits the defaults (nothing sent at
+the begin, the whole read at the finish). A backend with a real split makes its
+``_read_ticks`` the begin and the finish in a row, so both paths are one mechanism.
 
 Every bus is a context manager with an idempotent :meth:`~rig.devices.base.Device.close`
 (alias :meth:`ServoBus.shutdown`).
@@ -98,6 +106,7 @@ class ServoBus(Device):
         self.watchdog_ms = int(watchdog_ms)
         self.alert_pending = False
         self.advice: list[str] = []
+        self._reading = False
         super().__init__(port, baud=baud, timeout=timeout, retries=retries)
 
     def _set_servos(self, servos: tuple[Servo, ...]) -> None:
@@ -150,6 +159,46 @@ class ServoBus(Device):
 
     def _read_ticks(self, deadline: float) -> np.ndarray:
         raise NotImplementedError
+
+    def begin_read(self) -> None:
+        """Send the request of a read of present positions and return at once (no reply
+        awaited, no retry); :meth:`finish_read` collects the reply. Nothing else may use the
+        bus in between.
+
+        Raises
+        ------
+        RigConnectionError
+            The adapter is gone (or the request could not be sent).
+        """
+        self._check_open()
+        self._begin_read()
+        self._reading = True
+
+    def finish_read(self) -> np.ndarray:
+        """The reply of the read :meth:`begin_read` sent: present position of every servo,
+        (n,) int64 ticks. One attempt (a caller retries with :meth:`read_ticks`); its timeout
+        counts from the request.
+
+        Raises
+        ------
+        RigTimeoutError, RigProtocolError
+            No reply / a garbled one.
+        RigConnectionError
+            The adapter is gone.
+        RuntimeError
+            No read was begun.
+        """
+        self._check_open()
+        if not self._reading:
+            raise RuntimeError("finish_read() without begin_read()")
+        self._reading = False
+        return self._finish_read()
+
+    def _begin_read(self) -> None:
+        return None
+
+    def _finish_read(self) -> np.ndarray:
+        return self._read_ticks(self.deadline())
 
     def check_goal(self, ticks: Sequence[int]) -> None:
         """Raise :class:`UnreachableError` if a goal is outside its servo's tick limits."""

@@ -11,7 +11,10 @@ ran) — and turns SDK result codes into typed errors (:mod:`rig.errors`).
 Per cycle (:meth:`DynamixelBus.read_ticks` / :meth:`DynamixelBus.write_goal_ticks`): one
 SYNC READ of Present Position (132, 4 bytes) — FAST SYNC READ (one status packet for all
 servos) when every servo's firmware supports it (X-series firmware ≥ 45, e-Manual
-"Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply).
+"Fast Sync Read") — and one SYNC WRITE of Goal Position (116, 4 bytes, no reply). The read
+splits into its request (:meth:`DynamixelBus.begin_read`: the SDK's ``syncReadTx``, which starts
+the reply's packet timeout) and its reply (:meth:`DynamixelBus.finish_read`: ``fastSyncReadRx``
+or ``readRx`` per servo, then the error bytes); ``read_ticks`` is the two in a row.
 
 Start-up (:meth:`DynamixelBus.configure`): Operating Mode (11) = position, Return Delay
 Time (9, 2 µs units), Min/Max Position Limit (52/48) from the servos' tick limits — EEPROM, so
@@ -41,6 +44,7 @@ arrived (POSIX; elsewhere the SDK's own loop runs unchanged).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import select
@@ -123,17 +127,38 @@ class _SdkPort(sdk.PortHandler):
 
     def readPort(self, length):
         """Up to ``length`` bytes; when none is waiting, first wait (``select``, the GIL
-        released) for one to arrive or for the packet's deadline (see the module docstring)."""
+        released) for one to arrive or for the packet's deadline (see the module docstring).
+
+        POSIX: one ``select`` and one ``read`` on the port's (non-blocking) descriptor —
+        pyserial's ``read`` adds an ``ioctl`` and a ``select`` or two per call, and the SDK
+        calls this twice or more per status packet. Its errors as pyserial's: a descriptor
+        that is ready but reads nothing is a disconnected device.
+        """
         ser = self.ser
-        if _CAN_SELECT and not ser.in_waiting:
-            remaining_ms = self.packet_timeout - self.getTimeSinceStart()
-            if remaining_ms > 0.0:
-                select.select((ser.fileno(),), (), (), remaining_ms / 1000.0)
-        return ser.read(length)
+        if not _CAN_SELECT:
+            return ser.read(length)
+        fd = ser.fd
+        remaining_ms = self.packet_timeout - self.getTimeSinceStart()
+        try:
+            ready, _, _ = select.select((fd,), (), (), max(remaining_ms, 0.0) / 1000.0)
+            if not ready:
+                return b""
+            buf = os.read(fd, length)
+        except OSError as err:
+            if err.errno in _RETRY_ERRNOS:
+                return b""
+            raise serial.SerialException(f"read failed: {err}") from err
+        if not buf:
+            raise serial.SerialException("device reports readiness to read but returned no "
+                                         "data (device disconnected?)")
+        return buf
 
 
 #: ``select`` works on serial file descriptors (POSIX); elsewhere the SDK's busy loop stays.
 _CAN_SELECT = os.name == "posix"
+#: ``read`` errors that mean "nothing now" (as pyserial treats them).
+_RETRY_ERRNOS = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS,
+                 errno.EINTR)
 
 
 def _model_name(model_number: int) -> str:
@@ -362,7 +387,16 @@ class DynamixelBus(ServoBus):
 
     # -- the cycle ------------------------------------------------------------------------
     def _read_ticks(self, deadline: float) -> np.ndarray:
-        data = self.sync_read(self._a_present, 4)
+        self._begin_read()
+        return self._finish_read()
+
+    def _begin_read(self) -> None:
+        """The sync read request of Present Position (its packet timeout starts now)."""
+        self._sync_read_tx(self._a_present, 4, self._id_param)
+
+    def _finish_read(self) -> np.ndarray:
+        """The reply of :meth:`_begin_read` as ticks, (n,) int64."""
+        data = self._sync_read_rx(4, self._id_param)
         return np.array([int.from_bytes(data[i], "little", signed=True) for i in self.ids],
                         dtype=np.int64)
 
@@ -373,13 +407,22 @@ class DynamixelBus(ServoBus):
         Status error bytes are checked (alert bit noted, error codes raised).
         """
         ids = self._id_param if ids is None else list(ids)
+        self._sync_read_tx(address, length, ids)
+        return self._sync_read_rx(length, ids)
+
+    def _sync_read_tx(self, address: int, length: int, ids: list[int]) -> None:
+        """Send a (fast) sync read request; the SDK starts the reply's packet timeout."""
         port, ph = self._sdk_port, self._ph
         port.is_using = False
+        fast = self.fast
+        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), fast))
+        self._result(result, "fast sync read" if fast else "sync read")
+
+    def _sync_read_rx(self, length: int, ids: list[int]) -> dict[int, bytes]:
+        """Collect the replies of :meth:`_sync_read_tx`: ``{id: bytes}``."""
+        port, ph = self._sdk_port, self._ph
         out: dict[int, bytes] = {}
         if self.fast:
-            result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids),
-                                                       True))
-            self._result(result, "fast sync read")
             raw, result, _ = self._guard(
                 lambda: ph.fastSyncReadRx(port, sdk.BROADCAST_ID, (length + 4) * len(ids)))
             self._result(result, "fast sync read")
@@ -396,8 +439,6 @@ class DynamixelBus(ServoBus):
                 raise RigTimeoutError("fast sync read: no data", port=str(self.port),
                                       dxl_id=missing[0])
             return out
-        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), False))
-        self._result(result, "sync read")
         for dxl_id in ids:
             data, result, err = self._guard(lambda i=dxl_id: ph.readRx(port, i, length))
             self._result(result, "sync read", dxl_id)

@@ -2,20 +2,24 @@
 
 One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler`)::
 
+    sync read request sent (fast sync read where supported; the reply is on its way)
     latest target (source.latest(t)) → supervisor.admit (NaN / zero / stale → hold)
     model correction (onnxruntime, one session, single-sample path) → supervisor.step
     IK (nearest the previous goal) → goal ticks → FK → supervisor.accept (final exact check)
-    sync read (fast sync read where supported) → present ticks → FK → present orientation
+    the read's reply collected → present ticks → FK → present orientation
     [faults: timeout / garbled → retry while the cycle budget allows; adapter gone → safe state;
      hardware alert on any servo → safe state; servo data older than the watchdog → safe state]
     one sync write of the goal ticks (none when a fault sends the limb to the safe state)
     telemetry row (preallocated chunk; written by another thread)
 
-The goal needs the target and the last goal, not the present position: it is computed first,
-straight after the wait (a busy-waiting loop computes on a hot CPU), and the read follows
-within microseconds, so the cycle's telemetry still pairs the target with the limb's state at
-the cycle's start. A goal computed in a cycle that ends in the safe state is never sent (its
-telemetry row shows the last command sent). Latency columns are measured with
+The goal needs the target and the last goal, not the present position, so it is computed while
+the read's reply travels (:meth:`~rig.devices.bus.ServoBus.begin_read` sends the request,
+:meth:`~rig.devices.bus.ServoBus.finish_read` collects the reply): the compute hides in the
+bus's wait (the wire, the adapter's latency timer) instead of adding to it, and the cycle's
+telemetry still pairs the target with the limb's state at the cycle's start. ``read_ms`` is the
+time the loop spent in the read's calls (the request, what was left of the wait after the
+compute, retries), ``compute_ms`` the compute's. A goal computed in a cycle that ends in the
+safe state is never sent (its telemetry row shows the last command sent). Latency columns are measured with
 ``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
 or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
 While it runs, the objects alive at start are frozen out of the cyclic garbage collector
@@ -400,9 +404,27 @@ class EnforcementLoop:
             if self.on_cycle is not None:
                 self.on_cycle(self, k)
             faults = 0
-            # -- 1. target → model → supervisor → IK (what the goal needs is at hand: the target
-            # and the last goal, not this cycle's read; computed first, straight after the wait,
-            # so a busy-waiting loop computes on a hot CPU) ----------------------------------
+            # -- 1. the sync read's request: its reply travels (wire, the adapter's latency
+            # timer, the servos' return delay) while the goal is computed ---------------------
+            fresh = False
+            lost = False
+            begun = False
+            gap = clock() - self._t_bus
+            if wd_s and gap > wd_s:  # the servos' watchdog fired: goals are refused from now
+                faults |= Fault.WATCHDOG_GAP
+            cb = perf()
+            try:
+                bus.begin_read()
+                begun = True
+            except RigConnectionError:
+                faults |= Fault.CONNECTION_LOST
+                lost = True
+            except RigTimeoutError:
+                faults |= Fault.READ_TIMEOUT
+            except RigProtocolError:
+                faults |= Fault.READ_CORRUPT
+            # -- 2. target → model → supervisor → IK (what the goal needs is at hand: the target
+            # and the last goal, not this cycle's read) --------------------------------------
             c2 = perf()
             target_t, target = targets.latest(start)
             tq = sup.admit(start, target, target_t)
@@ -426,16 +448,14 @@ class EnforcementLoop:
             except UnreachableError:
                 sup.revert(commanded, Intervention.UNREACHABLE)
             c3 = perf()
-            # -- 2. present positions: one sync read, retried within the cycle budget --------
-            fresh = False
-            lost = False
-            now = clock()
-            gap = now - self._t_bus
-            if wd_s and gap > wd_s:  # the servos' watchdog fired: goals are refused from now
-                faults |= Fault.WATCHDOG_GAP
-            for attempt in range(read_attempts):
+            # -- 3. present positions: the reply, retried within the cycle budget -------------
+            for attempt in range(0 if lost else read_attempts):
                 try:
-                    ticks = bus.read_ticks()
+                    if begun:
+                        begun = False
+                        ticks = bus.finish_read()
+                    else:
+                        ticks = bus.read_ticks()
                     fresh = True
                     break
                 except RigTimeoutError:
@@ -537,7 +557,8 @@ class EnforcementLoop:
                     pr[0], pr[1], pr[2], pr[3],
                     math.degrees(s0.last_correction_angle), math.degrees(viol),
                     math.degrees(d),
-                    1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw), 1e3 * (perf() - c0),
+                    1e3 * (c1 - c3 + c2 - cb), 1e3 * (c3 - c2), 1e3 * (c4 - cw),
+                    1e3 * (perf() - c0),
                     1e3 * (start - due),
                     bits, int(faults), 1 if self.safe else 0,
                 ))
@@ -571,7 +592,7 @@ class EnforcementLoop:
                 if limb_bits:
                     ib[limb_bits] += 1
                 row.extend((math.degrees(limb_viol),
-                            1e3 * (c1 - c3), 1e3 * (c3 - c2), 1e3 * (c4 - cw),
+                            1e3 * (c1 - c3 + c2 - cb), 1e3 * (c3 - c2), 1e3 * (c4 - cw),
                             1e3 * (perf() - c0), 1e3 * (start - due),
                             limb_bits, int(faults), 1 if self.safe else 0))
                 tel.record(row)

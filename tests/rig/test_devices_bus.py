@@ -110,3 +110,15 @@ def test_a_hardware_alert_names_the_servo_that_stays_off(port):
         with pytest.raises(HardwareAlertError, match="ID 2: hardware alert overload"):
             bus.set_torque(True)
         assert not bus.alert_pending  # the poll cleared it
+
+
+def test_a_backend_without_a_split_read_reads_at_the_finish(port):
+    """begin_read / finish_read on a backend that only has ``_read_ticks``: nothing is sent at
+    the begin, the whole read happens at the finish."""
+    with MemoryBus(port, [1, 2]) as bus:
+        bus.write_goal_ticks([100, 200])
+        bus.begin_read()
+        bus.write_goal_ticks([300, 400])  # (a caller must not; here: the read is at the finish)
+        np.testing.assert_array_equal(bus.finish_read(), [300, 400])
+        with pytest.raises(RuntimeError, match="without begin_read"):
+            bus.finish_read()

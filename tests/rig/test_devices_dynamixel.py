@@ -25,6 +25,7 @@ from rig.errors import (
     HardwareAlertError,
     RigConnectionError,
     RigError,
+    RigProtocolError,
     RigTimeoutError,
     UnreachableError,
 )
@@ -105,6 +106,22 @@ def test_the_receive_waits_for_bytes_instead_of_spinning(bus, fast):
     assert len(calls) <= 4 * packets, len(calls) / packets  # busy polling: ~300 per packet
 
 
+@pytest.mark.parametrize("fast", [False, True])
+def test_a_split_read_is_the_plain_read(bus, fast):
+    """begin_read sends the request and returns; finish_read collects the reply (other work in
+    between: the loop's compute); read_ticks is the two in a row."""
+    port, ids, baud = bus
+    with DynamixelBus(port, servos(ids), baud=baud, fast=fast) as dxl:
+        whole = dxl.read_ticks()
+        dxl.begin_read()
+        sum(range(10_000))  # work while the reply travels
+        split = dxl.finish_read()
+        assert split.shape == whole.shape and split.dtype == np.int64
+        assert np.abs(split - whole).max() < 50  # the limb may be moving (by hand)
+        with pytest.raises(RuntimeError, match="without begin_read"):
+            dxl.finish_read()
+
+
 def test_bulk_read_and_torque_state(bus):
     port, ids, baud = bus
     with DynamixelBus(port, servos(ids), baud=baud) as dxl:
@@ -165,6 +182,26 @@ def test_persistent_timeout_is_a_typed_error_after_the_retries(sim):
             dxl.read_ticks()
         assert info.value.port == str(sim)
         assert dxl.retried == 2
+
+
+def test_a_split_read_raises_the_typed_errors_once(sim):
+    """finish_read is one attempt (the loop retries with read_ticks): a dropped reply is a
+    timeout, a garbled one a protocol error, an adapter gone a connection error."""
+    with DynamixelBus(sim, servos([1, 2, 3]), retries=2) as dxl:
+        sim.simulator.drop_responses(1)
+        dxl.begin_read()
+        with pytest.raises(RigTimeoutError):
+            dxl.finish_read()
+        sim.simulator.corrupt_responses(1)
+        dxl.begin_read()
+        with pytest.raises(RigProtocolError):
+            dxl.finish_read()
+        assert dxl.retried == 0
+        assert dxl.read_ticks().shape == (3,)
+        sim.simulator.unplug(adapter=True)
+        with pytest.raises(RigConnectionError, match="unplugged"):
+            dxl.begin_read()  # the request may still leave: the reply's wait finds it out
+            dxl.finish_read()
 
 
 def test_garbled_reply_is_retried(sim):
