@@ -68,7 +68,7 @@ from rig.demo.stages import (
 )
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
-from rig.loop import EnforceHooks, EnforceRequest, run_enforce
+from rig.loop import EnforceHooks, EnforceRequest, Intervention, run_enforce
 from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 from rig.readback.sessions import read_session
 from rig.record import RecordOptions, record_session
@@ -170,11 +170,13 @@ def write_servo_rig(out: Path, limb: str, seed: int, patient_file: Path) -> Path
     return path
 
 
-def commanded_beyond(table: dict, limb, tol_deg: float = 1.0) -> tuple[int, int, dict]:
+def commanded_beyond(table: dict, limb, tol_deg: float = 1.0) -> dict[str, Any]:
     """How many commanded postures of a limb run lie beyond ``tol_deg`` of ``limb``'s limits
     in any joint, by the exact limb oracle (:class:`models.oracle.ConstraintOracle`) on the
     telemetry's ``<joint>_commanded_w..z`` columns (hierarchical: a coupled joint judged at
-    its source joint's commanded angle).
+    its source joint's commanded angle). A cycle the supervisor flagged ``RECOVERY`` (the limb
+    outside, its goal steered back towards the valid range under the monotone rule: motion
+    back is always allowed) is counted apart.
 
     Parameters
     ----------
@@ -185,22 +187,32 @@ def commanded_beyond(table: dict, limb, tol_deg: float = 1.0) -> tuple[int, int,
 
     Returns
     -------
-    beyond : int
-        Commanded postures with a joint more than ``tol_deg`` outside.
-    judged : int
-        Cycles with a commanded posture (finite in every joint).
-    worst_deg : dict
-        Each joint's largest distance outside (degrees; 0 inside), over the judged cycles.
+    dict
+        ``beyond``: commanded postures with a joint more than ``tol_deg`` outside, recovery
+        cycles left out; ``recovering``: recovery cycles beyond it (steered back);
+        ``judged``: cycles with a commanded posture (finite in every joint); ``worst_deg``:
+        each joint's largest distance outside (degrees; 0 inside) over the judged cycles that
+        are not recovery cycles.
     """
+    names = limb.joint_names
     q = np.stack([np.stack([np.asarray(table[f"{n}_commanded_{c}"], dtype=np.float64)
-                            for c in "wxyz"], axis=-1) for n in limb.joint_names], axis=1)
+                            for c in "wxyz"], axis=-1) for n in names], axis=1)
+    flags = np.asarray(table["intervention"], dtype=np.float64)
     ok = np.isfinite(q).all(axis=(1, 2)) & (np.linalg.norm(q, axis=-1) > 0.5).all(axis=1)
-    q = q[ok]
+    q, flags = q[ok], flags[ok]
+    out: dict[str, Any] = {"beyond": 0, "recovering": 0, "judged": int(len(q)),
+                           "worst_deg": {n: 0.0 for n in names}}
     if not len(q):
-        return 0, 0, {n: 0.0 for n in limb.joint_names}
+        return out
     d = np.degrees(ConstraintOracle(limb).evaluate(q, normalize=True).distance)
-    worst = {n: float(max(0.0, d[:, j].max())) for j, n in enumerate(limb.joint_names)}
-    return int(np.count_nonzero((d > tol_deg).any(axis=1))), len(q), worst
+    recovery = (np.nan_to_num(flags).astype(np.int64) & int(Intervention.RECOVERY)) != 0
+    far = (d > tol_deg).any(axis=1)
+    out["beyond"] = int(np.count_nonzero(far & ~recovery))
+    out["recovering"] = int(np.count_nonzero(far & recovery))
+    if (~recovery).any():
+        out["worst_deg"] = {n: float(max(0.0, d[~recovery, j].max()))
+                            for j, n in enumerate(names)}
+    return out
 
 
 class LimbDemo:
@@ -399,7 +411,10 @@ class _LimbCtx:
         s = res.summary
         self.result.sessions["live"] = s.get("session_id")
         limb = load_limb(self.limb_file)
-        beyond, judged, worst = commanded_beyond(res.telemetry.table(), limb, 1.0)
+        judged_cmd = commanded_beyond(res.telemetry.table(), limb, 1.0)
+        beyond, judged, worst = (judged_cmd["beyond"], judged_cmd["judged"],
+                                 judged_cmd["worst_deg"])
+        recovering = judged_cmd["recovering"]
         joints = s.get("joints") or {}
         st.figures.update({k: s.get(k) for k in (
             "achieved_hz", "cycles", "p99_cycle_ms", "p50_compute_us", "overruns",
@@ -408,6 +423,7 @@ class _LimbCtx:
             "end_reason", "session_id", "run_id")})
         st.figures.update({"exit_status": res.exit_status, "commanded_beyond_1deg": beyond,
                            "commanded_judged": judged, "commanded_worst_deg": worst,
+                           "recovery_cycles_beyond_1deg": recovering,
                            "joints": joints, "telemetry": str(telemetry)})
         cycles = s.get("cycles") or 0
         overruns = s.get("overruns") or 0
@@ -424,6 +440,8 @@ class _LimbCtx:
                      f"with coupled segments: {beyond} of {judged:,} commanded postures beyond "
                      f"1° in any joint (exact limb oracle; worst "
                      + ", ".join(f"{n} {w:.2f}°" for n, w in worst.items())
+                     + (f"; {recovering} more on the way back from a start outside"
+                        if recovering else "")
                      + f"); safe states {s.get('safe_state_entries')}; overruns {overruns} "
                      f"({100 * overruns / max(cycles, 1):.1f} %); compute p50 "
                      f"{s.get('p50_compute_us') or 0:.0f} µs; tracking of valid targets "

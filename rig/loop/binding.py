@@ -213,7 +213,7 @@ def _rig_mismatch(enforced, rig) -> str | None:
         if lj.kind != sj.kind and not hinge_on_forearm(lj, sj):
             return (f"joint {lj.name!r} of {_limits_words(enforced)} holds {lj.kind} limits, "
                     f"but rig {rig.name!r} drives its {sj.name} as a {sj.kind} joint "
-                    f"({len(sj.axes)} servos)")
+                    f"({len(sj.axes)} servos)" + _hinge_axis_words(lj, sj))
     return None
 
 
@@ -250,6 +250,17 @@ def hinge_on_forearm(limb_joint, servo_joint) -> bool:
     s = np.asarray(servo_joint.axes[0].axis, dtype=np.float64)
     cos = abs(float(a @ s)) / (float(np.linalg.norm(a)) * float(np.linalg.norm(s)))
     return cos >= math.cos(math.radians(HINGE_AXIS_DEG))
+
+
+def _hinge_axis_words(limb_joint, servo_joint) -> str:
+    """Why a hinge is not held by a forearm joint's servos when only its axis is wrong."""
+    if not (limb_joint.joint_kind.single_axis
+            and get_kind(servo_joint.kind).flexion_rotation and servo_joint.axes):
+        return ""
+    a = limb_joint.joint_kind.flexion_axis(limb_joint.loosest())
+    s = servo_joint.axes[0].axis
+    return (f" whose flexion servo turns about ({', '.join(f'{v:g}' for v in s)}), not the "
+            f"hinge's axis ({', '.join(f'{v:.3g}' for v in a)})")
 
 
 def _model_shape_mismatch(path, embedded, rig) -> str:
