@@ -435,9 +435,14 @@ class _LimbCtx:
                 return f"{name} no valid target tracked"
             return f"{name} {p50:.2f}° / {p95:.2f}°"
 
+        coupled = [f"the {j.name} by the {j.coupling.by}" for j in limb.joints
+                   if j.coupling is not None]
+        st.figures["coupled"] = coupled
         st.detail = (f"{self.servo_rig.stem}, {cycles:,} cycles at "
                      f"{s.get('achieved_hz') or 0:.0f} Hz (asked 200) on script:adversarial "
-                     f"with coupled segments: {beyond} of {judged:,} commanded postures beyond "
+                     + (f"with coupled segments ({', '.join(coupled)})" if coupled else
+                        "(no coupling in the limb file: no coupled segments)")
+                     + f": {beyond} of {judged:,} commanded postures beyond "
                      f"1° in any joint (exact limb oracle; worst "
                      + ", ".join(f"{n} {w:.2f}°" for n, w in worst.items())
                      + (f"; {recovering} more on the way back from a start outside"
