@@ -29,7 +29,7 @@ Stages (each calls the library function behind the corresponding ``rig`` command
 7. **live** (the arm) — ``rig enforce`` (:func:`rig.loop.run_enforce`) on the simulated
    7-servo arm ``sim-servo-arm`` (``rigs/sim-servo-arm.yaml``: its patient the recording's
    seeded arm, ``patient=patient-arm.yaml``) with the trained limb model and the extracted limb
-   file, ``live_s`` seconds at 200 Hz on ``script:adversarial`` targets (far outside postures,
+   file, :data:`LIVE_S` seconds at 200 Hz on ``script:adversarial`` targets (far outside postures,
    discontinuities, invalid and stale targets, and the coupled segments: the elbow moved to an
    angle at which the held shoulder is outside, the shoulder moved to a reach valid only at
    another elbow angle). The IMU-recorded elbow is a hinge; the servo arm's elbow is a forearm
@@ -84,12 +84,15 @@ from rig.training.verdict import (
     targets_for,
 )
 
-__all__ = ["LIMB_SIZES", "LIVE_RIGS", "LimbDemo", "LimbDemoSize", "commanded_beyond",
+__all__ = ["LIMB_SIZES", "LIVE_RIGS", "LIVE_S", "LimbDemo", "LimbDemoSize", "commanded_beyond",
            "compare_limbs", "write_limb_rig", "write_servo_rig"]
 
 #: The shipped servo rig of each limb the live stage drives (a limb without one has no live
 #: stage).
 LIVE_RIGS = {"arm": "sim-servo-arm"}
+
+#: Seconds of live enforcement on the servo limb (the ``live`` stage), by size.
+LIVE_S = {"full": 15.0, "quick": 3.0}
 
 #: Verdict targets of the boundary stage (issue 21), degrees or shares.
 HINGE_DEG = 2.0
@@ -114,8 +117,6 @@ class LimbDemoSize:
         ``rig train`` preset for the limb.
     eval_n : int
         Held-out postures for ``rig evaluate``.
-    live_s : float
-        Seconds of live enforcement on the servo limb (the ``live`` stage).
     """
 
     motion_s: float
@@ -123,14 +124,13 @@ class LimbDemoSize:
     rate_hz: int
     preset: str
     eval_n: int
-    live_s: float = 15.0
 
 
 LIMB_SIZES = {
     "full": LimbDemoSize(motion_s=600.0, time_scale=20.0, rate_hz=100, preset="network",
-                         eval_n=6000, live_s=15.0),
+                         eval_n=6000),
     "quick": LimbDemoSize(motion_s=150.0, time_scale=20.0, rate_hz=100, preset="geometric",
-                          eval_n=1500, live_s=3.0),
+                          eval_n=1500),
 }
 
 
@@ -240,6 +240,7 @@ class LimbDemo:
                                  "apply to the shoulder demo")
         self.options, self.limb = options, limb
         self.size = LIMB_SIZES["quick" if options.quick else "full"]
+        self.live_s = LIVE_S["quick" if options.quick else "full"]
 
     def check(self, log: Callable[[str], None]) -> list[StageResult]:
         """No stage before the patient: the limb demo opens no hardware."""
@@ -266,6 +267,7 @@ class LimbDemo:
                  ("evaluate", ctx.evaluate), ("report", ctx.report))
         if limb in LIVE_RIGS:
             ctx.servo_rig = write_servo_rig(out, limb, options.seed, patient_file)
+            ctx.live_s = self.live_s
             named += (("live", ctx.live),)
         return ctx, named
 
@@ -285,6 +287,7 @@ class _LimbCtx:
         self.calibration: dict | None = None
         self.metrics: dict | None = None
         self.servo_rig: Path | None = None
+        self.live_s = 0.0
 
     def record(self, st: StageResult) -> None:
         display = RecordingDisplay(self.progress, self.task, f"IMUs on the {self.limb}",
@@ -392,7 +395,7 @@ class _LimbCtx:
                      self.size.eval_n)
 
     def live(self, st: StageResult) -> None:
-        live_s = self.size.live_s
+        live_s = self.live_s
         self.progress.update(self.task, total=live_s,
                              description=f"live: adversarial targets on {self.servo_rig.stem}")
         t0 = time.perf_counter()

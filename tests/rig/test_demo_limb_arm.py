@@ -27,9 +27,10 @@ pytestmark = pytest.mark.xdist_group("test_demo_limb_arm")
 @pytest.fixture(scope="module")
 def arm_demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("arm-demo")
-    sizes = dict(limb_demo.LIMB_SIZES)
+    sizes, live = dict(limb_demo.LIMB_SIZES), dict(limb_demo.LIVE_S)
     limb_demo.LIMB_SIZES["quick"] = replace(sizes["quick"], motion_s=60.0, eval_n=400,
-                                            time_scale=10.0, live_s=2.0)
+                                            time_scale=10.0)
+    limb_demo.LIVE_S["quick"] = 2.0
     try:
         console = Console(file=io.StringIO(), width=200)
         result = run_demo(DemoOptions(out=out, seed=5, quick=True, limb="arm"), console=console)
@@ -37,6 +38,7 @@ def arm_demo(tmp_path_factory):
         text = console.file.getvalue()
     finally:
         limb_demo.LIMB_SIZES.update(sizes)
+        limb_demo.LIVE_S.update(live)
     return {"out": out, "result": result, "text": text}
 
 
