@@ -26,6 +26,18 @@ Stages (each calls the library function behind the corresponding ``rig`` command
    issue 20's targets (:func:`rig.training.verdict.targets_for`). The model is registered with
    the session with this evaluation, which the report shows (one evaluation, one verdict).
 6. **report** — the clinician's report of the limb (:mod:`rig.report.limb`): ``report.html``.
+7. **live** (the arm) — ``rig enforce`` (:func:`rig.loop.run_enforce`) on the simulated
+   7-servo arm ``sim-servo-arm`` (``rigs/sim-servo-arm.yaml``: its patient the recording's
+   seeded arm, ``patient=patient-arm.yaml``) with the trained limb model and the extracted limb
+   file, :data:`LIVE_S` seconds at 200 Hz on ``script:adversarial`` targets (far outside postures,
+   discontinuities, invalid and stale targets, and the coupled segments: the elbow moved to an
+   angle at which the held shoulder is outside, the shoulder moved to a reach valid only at
+   another elbow angle). The IMU-recorded elbow is a hinge; the servo arm's elbow is a forearm
+   joint whose flexion servo turns about the hinge's axis, so the hinge's limits hold its
+   pronation servo at zero (:func:`rig.loop.binding.hinge_on_forearm`). PASS: 0 commanded
+   postures beyond 1° in any joint (the exact limb oracle on the telemetry's
+   ``<joint>_commanded_*`` columns), 0 safe states; overruns and each joint's tracking of
+   valid targets reported.
 
 Everything goes into one store, ``<out>/rig.db``.
 """
@@ -56,11 +68,12 @@ from rig.demo.stages import (
 )
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
+from rig.loop import EnforceHooks, EnforceRequest, Intervention, run_enforce
 from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 from rig.readback.sessions import read_session
 from rig.record import RecordOptions, record_session
 from rig.sim.patients import anatomical_limb
-from rig.sim.urls import with_keys
+from rig.sim.urls import with_keys, without_keys
 from rig.store import open_store
 from rig.training import TrainRequest, run_train
 from rig.training.limb import evaluate_limb
@@ -71,7 +84,15 @@ from rig.training.verdict import (
     targets_for,
 )
 
-__all__ = ["LIMB_SIZES", "LimbDemo", "LimbDemoSize", "compare_limbs", "write_limb_rig"]
+__all__ = ["LIMB_SIZES", "LIVE_RIGS", "LIVE_S", "LimbDemo", "LimbDemoSize", "commanded_beyond",
+           "compare_limbs", "write_limb_rig", "write_servo_rig"]
+
+#: The shipped servo rig of each limb the live stage drives (a limb without one has no live
+#: stage).
+LIVE_RIGS = {"arm": "sim-servo-arm"}
+
+#: Seconds of live enforcement on the servo limb (the ``live`` stage), by size.
+LIVE_S = {"full": 15.0, "quick": 3.0}
 
 #: Verdict targets of the boundary stage (issue 21), degrees or shares.
 HINGE_DEG = 2.0
@@ -129,6 +150,71 @@ def write_limb_rig(out: Path, limb: str, seed: int, size: LimbDemoSize) -> Path:
     return path
 
 
+def write_servo_rig(out: Path, limb: str, seed: int, patient_file: Path) -> Path:
+    """The shipped servo limb configuration (:data:`LIVE_RIGS`) back-driven by the demo's
+    patient: its port's ``patient=`` the patient's limb file (the seeded limb the IMUs
+    recorded, its joints' kinds its own), ``seed`` the demo's; validated like any
+    ``--rig FILE``."""
+    name = LIVE_RIGS[limb]
+    cfg = shipped_config(name)
+    port = without_keys(cfg["servos"]["port"], "limb", "side")
+    cfg["servos"]["port"] = with_keys(port, patient=str(Path(patient_file).resolve()),
+                                      seed=seed)
+    cfg["description"] = (f"demo: {name} back-driven by the demo's simulated {limb} "
+                          f"({patient_file.name}, seed {seed})")
+    rigs = out / "rigs"
+    rigs.mkdir(parents=True, exist_ok=True)
+    path = rigs / f"{name}.yaml"
+    path.write_text("# written by `rig demo --limb`\n" + yaml.safe_dump(cfg, sort_keys=False))
+    load_rig_config(str(path))
+    return path
+
+
+def commanded_beyond(table: dict, limb, tol_deg: float = 1.0) -> dict[str, Any]:
+    """How many commanded postures of a limb run lie beyond ``tol_deg`` of ``limb``'s limits
+    in any joint, by the exact limb oracle (:class:`models.oracle.ConstraintOracle`) on the
+    telemetry's ``<joint>_commanded_w..z`` columns (hierarchical: a coupled joint judged at
+    its source joint's commanded angle). A cycle the supervisor flagged ``RECOVERY`` (the limb
+    outside, its goal steered back towards the valid range under the monotone rule: motion
+    back is always allowed) is counted apart.
+
+    Parameters
+    ----------
+    table : dict
+        Telemetry columns (:meth:`rig.loop.telemetry.Telemetry.table` or a CSV read back).
+    limb : models.limb.Limb
+    tol_deg : float
+
+    Returns
+    -------
+    dict
+        ``beyond``: commanded postures with a joint more than ``tol_deg`` outside, recovery
+        cycles left out; ``recovering``: recovery cycles beyond it (steered back);
+        ``judged``: cycles with a commanded posture (finite in every joint); ``worst_deg``:
+        each joint's largest distance outside (degrees; 0 inside) over the judged cycles that
+        are not recovery cycles.
+    """
+    names = limb.joint_names
+    q = np.stack([np.stack([np.asarray(table[f"{n}_commanded_{c}"], dtype=np.float64)
+                            for c in "wxyz"], axis=-1) for n in names], axis=1)
+    flags = np.asarray(table["intervention"], dtype=np.float64)
+    ok = np.isfinite(q).all(axis=(1, 2)) & (np.linalg.norm(q, axis=-1) > 0.5).all(axis=1)
+    q, flags = q[ok], flags[ok]
+    out: dict[str, Any] = {"beyond": 0, "recovering": 0, "judged": int(len(q)),
+                           "worst_deg": {n: 0.0 for n in names}}
+    if not len(q):
+        return out
+    d = np.degrees(ConstraintOracle(limb).evaluate(q, normalize=True).distance)
+    recovery = (np.nan_to_num(flags).astype(np.int64) & int(Intervention.RECOVERY)) != 0
+    far = (d > tol_deg).any(axis=1)
+    out["beyond"] = int(np.count_nonzero(far & ~recovery))
+    out["recovering"] = int(np.count_nonzero(far & recovery))
+    if (~recovery).any():
+        out["worst_deg"] = {n: float(max(0.0, d[~recovery, j].max()))
+                            for j, n in enumerate(names)}
+    return out
+
+
 class LimbDemo:
     """The limb demo (module docstring) as :func:`rig.demo.pipeline.run_demo` runs it: the
     options checked at once, then the patient and the stages that follow.
@@ -154,6 +240,7 @@ class LimbDemo:
                                  "apply to the shoulder demo")
         self.options, self.limb = options, limb
         self.size = LIMB_SIZES["quick" if options.quick else "full"]
+        self.live_s = LIVE_S["quick" if options.quick else "full"]
 
     def check(self, log: Callable[[str], None]) -> list[StageResult]:
         """No stage before the patient: the limb demo opens no hardware."""
@@ -176,8 +263,13 @@ class LimbDemo:
                    f"{', '.join(f'{j.name} {j.kind}' for j in truth.joints)}; coupled: "
                    f"{', '.join(coupled) or 'none'}: {patient_file}"))
         ctx = _LimbCtx(options, self.size, limb, out, result, rig, truth, log)
-        return ctx, (("record", ctx.record), ("boundary", ctx.boundary), ("train", ctx.train),
-                     ("evaluate", ctx.evaluate), ("report", ctx.report))
+        named = (("record", ctx.record), ("boundary", ctx.boundary), ("train", ctx.train),
+                 ("evaluate", ctx.evaluate), ("report", ctx.report))
+        if limb in LIVE_RIGS:
+            ctx.servo_rig = write_servo_rig(out, limb, options.seed, patient_file)
+            ctx.live_s = self.live_s
+            named += (("live", ctx.live),)
+        return ctx, named
 
 
 class _LimbCtx:
@@ -194,6 +286,8 @@ class _LimbCtx:
         self.limb_boundary: int | None = None  # the limb file's id in the store
         self.calibration: dict | None = None
         self.metrics: dict | None = None
+        self.servo_rig: Path | None = None
+        self.live_s = 0.0
 
     def record(self, st: StageResult) -> None:
         display = RecordingDisplay(self.progress, self.task, f"IMUs on the {self.limb}",
@@ -299,6 +393,75 @@ class _LimbCtx:
     def report(self, st: StageResult) -> None:
         report_stage(st, self.result, self.session, self.model_file, self.truth,
                      self.size.eval_n)
+
+    def live(self, st: StageResult) -> None:
+        live_s = self.live_s
+        self.progress.update(self.task, total=live_s,
+                             description=f"live: adversarial targets on {self.servo_rig.stem}")
+        t0 = time.perf_counter()
+
+        def on_cycle(loop, k: int) -> None:
+            if k % 50 == 0:
+                self.progress.update(self.task, completed=min(live_s, time.perf_counter() - t0))
+
+        telemetry = self.out / "live-telemetry.csv"
+        res = run_enforce(EnforceRequest(
+            rig=str(self.servo_rig), model=str(self.model_file), targets="script:adversarial",
+            constraint=str(self.limb_file), rate_hz=200.0, duration_s=live_s,
+            telemetry=str(telemetry), summary_json=str(self.out / "live-summary.json"),
+            db=str(self.result.db), session_id=self.session, seed=self.options.seed),
+            hooks=EnforceHooks(on_cycle=on_cycle, keep_telemetry=True))
+        s = res.summary
+        self.result.sessions["live"] = s.get("session_id")
+        limb = load_limb(self.limb_file)
+        judged_cmd = commanded_beyond(res.telemetry.table(), limb, 1.0)
+        beyond, judged, worst = (judged_cmd["beyond"], judged_cmd["judged"],
+                                 judged_cmd["worst_deg"])
+        recovering = judged_cmd["recovering"]
+        joints = s.get("joints") or {}
+        st.figures.update({k: s.get(k) for k in (
+            "achieved_hz", "cycles", "p99_cycle_ms", "p50_compute_us", "overruns",
+            "overruns_by_cause", "max_violation_deg", "tolerance_deg", "interventions",
+            "interventions_by_kind", "faults", "safe_state_entries", "safe_state_reason",
+            "end_reason", "session_id", "run_id")})
+        st.figures.update({"exit_status": res.exit_status, "commanded_beyond_1deg": beyond,
+                           "commanded_judged": judged, "commanded_worst_deg": worst,
+                           "recovery_cycles_beyond_1deg": recovering,
+                           "joints": joints, "telemetry": str(telemetry)})
+        cycles = s.get("cycles") or 0
+        overruns = s.get("overruns") or 0
+
+        def tracking(name: str) -> str:
+            f = joints.get(name, {})
+            p50, p95 = f.get("tracking_p50_deg"), f.get("tracking_p95_deg")
+            if p50 is None:
+                return f"{name} no valid target tracked"
+            return f"{name} {p50:.2f}° / {p95:.2f}°"
+
+        coupled = [f"the {j.name} by the {j.coupling.by}" for j in limb.joints
+                   if j.coupling is not None]
+        st.figures["coupled"] = coupled
+        st.detail = (f"{self.servo_rig.stem}, {cycles:,} cycles at "
+                     f"{s.get('achieved_hz') or 0:.0f} Hz (asked 200) on script:adversarial "
+                     + (f"with coupled segments ({', '.join(coupled)})" if coupled else
+                        "(no coupling in the limb file: no coupled segments)")
+                     + f": {beyond} of {judged:,} commanded postures beyond "
+                     f"1° in any joint (exact limb oracle; worst "
+                     + ", ".join(f"{n} {w:.2f}°" for n, w in worst.items())
+                     + (f"; {recovering} more on the way back from a start outside"
+                        if recovering else "")
+                     + f"); safe states {s.get('safe_state_entries')}; overruns {overruns} "
+                     f"({100 * overruns / max(cycles, 1):.1f} %); compute p50 "
+                     f"{s.get('p50_compute_us') or 0:.0f} µs; tracking of valid targets "
+                     f"p50 / p95: " + ", ".join(tracking(n) for n in limb.joint_names)
+                     + f"; {telemetry}")
+        if beyond or res.exit_status not in (0, 1):
+            st.verdict = "FAIL"
+        elif s.get("safe_state_entries") or res.exit_status:
+            st.verdict = "WARN"
+            st.detail += f"; safe state entered ({s.get('safe_state_reason')})"
+        else:
+            st.verdict = "PASS"
 
 
 def _inside_within(limb, db: Path, session: int, tol_deg: float = 1.0) -> float:

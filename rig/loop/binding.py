@@ -27,21 +27,33 @@ limb file, the model's embedded limb) and the model a limb model. Always refused
 ``force``: a one-joint constraint or model on a limb rig or a limb file or model on a one-joint
 rig; a limb file or model of another limb (a leg's on an arm rig), another side, or whose
 joints are not the rig's servo joints in the same order; a limb joint whose kind is not the one
-the rig's servos drive (a hinge elbow's limits on a forearm elbow's two servos). The limits
+the rig's servos drive (a forearm elbow's limits on a hinge elbow's one servo, a ball's on two
+servos) — except a hinge's limits on a forearm joint's two servos whose flexion servo turns
+about the hinge's axis (:func:`hinge_on_forearm`: a hinge is a forearm whose rotation interval is
+[0, 0], so the servos reach every allowed posture and the hinge's oracle holds the rotation servo
+at its zero; an elbow recorded as a hinge by IMUs enforced on a servo arm's forearm elbow). The limits
 (content hash: names, side, patient left out), side and patient as above (forceable).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from calibration.joints import joint_mismatch
 from models.constraint import loads_constraint
 from models.errors import ModelsError
+from models.kinds import get_kind
 from models.limb import Limb, loads_limb
 from rig.errors import RigConfigError
 
-__all__ = ["Binding", "ModelBindingError", "bind_model"]
+__all__ = ["HINGE_AXIS_DEG", "Binding", "ModelBindingError", "bind_model", "hinge_on_forearm"]
+
+#: A hinge's limits are enforced on a forearm joint's servos when its axis is the flexion
+#: servo's within this angle (degrees; the kinematics' IK tolerance).
+HINGE_AXIS_DEG = 0.1
 
 
 class ModelBindingError(RigConfigError):
@@ -198,11 +210,57 @@ def _rig_mismatch(enforced, rig) -> str | None:
         return (f"the joints of {_limits_words(enforced)} are not the rig's: {_drives(rig)}, "
                 "in that order")
     for lj, sj in zip(enforced.joints, joints, strict=True):
-        if lj.kind != sj.kind:
+        if lj.kind != sj.kind and not hinge_on_forearm(lj, sj):
             return (f"joint {lj.name!r} of {_limits_words(enforced)} holds {lj.kind} limits, "
                     f"but rig {rig.name!r} drives its {sj.name} as a {sj.kind} joint "
-                    f"({len(sj.axes)} servos)")
+                    f"({len(sj.axes)} servos)" + _hinge_axis_words(lj, sj))
     return None
+
+
+def hinge_on_forearm(limb_joint, servo_joint) -> bool:
+    """Whether a servo limb's joint drives ``limb_joint``'s hinge limits: a forearm joint's
+    two servos (flexion, then pronation–supination about the limb axis) whose flexion servo
+    turns about the hinge's axis. A hinge is the forearm whose rotation interval is [0, 0]:
+    its allowed rotations ``h(θ)`` about the axis are the forearm's ``F(θ) ⊗ R(0)``, which
+    those servos reach exactly (the rotation servo at its zero), and the hinge's exact oracle
+    judges any pronation as a distance from that arc — so the supervisor holds the rotation
+    servo within the tolerance of its zero.
+
+    Parameters
+    ----------
+    limb_joint : models.limb.LimbJoint
+        A joint of the enforced limb file.
+    servo_joint : rig.devices.config.ServoJoint
+        The rig's joint at the same place.
+
+    Returns
+    -------
+    bool
+        True when the limb joint is a single-axis (hinge) joint, the servos' kind is a
+        flexion-rotation (forearm) kind, and the first servo's axis is the hinge's (either
+        sign) within 0.1°.
+    """
+    servo_kind = get_kind(servo_joint.kind)
+    if not (limb_joint.joint_kind.single_axis and servo_kind.flexion_rotation):
+        return False
+    hinge_axis = limb_joint.joint_kind.flexion_axis(limb_joint.loosest())
+    if hinge_axis is None or not servo_joint.axes:
+        return False
+    a = np.asarray(hinge_axis, dtype=np.float64)
+    s = np.asarray(servo_joint.axes[0].axis, dtype=np.float64)
+    cos = abs(float(a @ s)) / (float(np.linalg.norm(a)) * float(np.linalg.norm(s)))
+    return cos >= math.cos(math.radians(HINGE_AXIS_DEG))
+
+
+def _hinge_axis_words(limb_joint, servo_joint) -> str:
+    """Why a hinge is not held by a forearm joint's servos when only its axis is wrong."""
+    if not (limb_joint.joint_kind.single_axis
+            and get_kind(servo_joint.kind).flexion_rotation and servo_joint.axes):
+        return ""
+    a = limb_joint.joint_kind.flexion_axis(limb_joint.loosest())
+    s = servo_joint.axes[0].axis
+    return (f" whose flexion servo turns about ({', '.join(f'{v:g}' for v in s)}), not the "
+            f"hinge's axis ({', '.join(f'{v:.3g}' for v in a)})")
 
 
 def _model_shape_mismatch(path, embedded, rig) -> str:

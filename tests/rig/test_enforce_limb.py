@@ -15,7 +15,7 @@ import pytest
 
 from models import quaternion as Q
 from models.constraint import JointConstraint, dump_constraint
-from models.limb import dump_limb, load_limb
+from models.limb import Limb, dump_limb, load_limb
 from models.limb_model import export_limb_model
 from models.oracle import ConstraintOracle
 from rig.devices.config import load_rig_config
@@ -50,8 +50,11 @@ def files(tmp_path_factory, arm):
     limb, _ = arm
     dump_limb(limb, d / "arm.yaml")
     export_limb_model(limb, d / "arm.onnx")  # the exact geometric graph: no training
-    hinge = anatomical_limb(3, "arm")  # a hinge elbow: not what the rig's two servos drive
-    dump_limb(hinge, d / "hinge-arm.yaml")
+    # a hinge elbow about another axis than the forearm elbow's flexion servo: not what the
+    # rig's two servos drive (about +Z it is: rig.loop.binding.hinge_on_forearm)
+    hinge = anatomical_limb(3, "arm").to_dict()
+    hinge["joints"][1]["constraint"]["hinge"]["axis"] = [0.0, 0.6, 0.8]
+    dump_limb(Limb.from_dict(hinge), d / "hinge-arm.yaml")
     dump_limb(anatomical_limb(3, "arm", "left", kinds={"elbow": "forearm"}), d / "left.yaml")
     dump_limb(anatomical_limb(3, "leg"), d / "leg.yaml")
     export_limb_model(anatomical_limb(5, "arm", kinds={"elbow": "forearm"}), d / "other.onnx")
@@ -284,7 +287,8 @@ def _argv(files, *extra, model="arm.onnx", targets="script:adversarial", rig="si
     ("left-on-right", "is for the left side"),
     ("hinge-elbow", "joint 'elbow' of limb file 'sim-arm-3' (right arm: shoulder, elbow, "
                     "wrist) holds hinge limits, but rig 'sim-servo-arm' drives its elbow as a "
-                    "forearm joint (2 servos)"),
+                    "forearm joint (2 servos) whose flexion servo turns about (0, 0, 1), not "
+                    "the hinge's axis (0, 0.6, 0.8)"),
     ("other-limb-model", "model trained for limb 'sim-arm-5', which differs from --constraint"),
     ("one-joint-csv", "a one-joint targets file (t_s,w,x,y,z) for a limb of 3 joints"),
 ])
