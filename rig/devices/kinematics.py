@@ -324,6 +324,20 @@ def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
     return False
 
 
+@njit
+def _nearest_batch_kernel(axes, zero, direction, lo, hi, n, q, near, out):
+    """Per row of unit ``q`` (N, 4): the orientation of the IK solution nearest it (any
+    residual) within the tick limits, ``w ≥ 0``, written to ``out`` (NaN: none)."""
+    ticks = np.empty(n)
+    for r in range(q.shape[0]):
+        if _ik_kernel(axes, zero, direction, lo, hi, n, q[r, 0], q[r, 1], q[r, 2], q[r, 3],
+                      near, math.pi + 1e-9, ticks):
+            w, x, y, z = _forward_kernel(axes, zero, direction, n, ticks)
+            out[r, 0], out[r, 1], out[r, 2], out[r, 3] = w, x, y, z
+        else:
+            out[r, :] = math.nan
+
+
 def _kernel_array(values) -> np.ndarray:
     """``values`` as the kernels take them: a contiguous int64 array as it is (the drivers'
     ticks), anything else as contiguous float64 — two compiled signatures in all, both built
@@ -545,6 +559,37 @@ class JointKinematics:
         return out
 
 
+    def nearest_batch(self, q: np.ndarray, near_ticks: Sequence[float] | None = None
+                      ) -> np.ndarray:
+        """The orientations the servos reach nearest each target, whatever the tolerance.
+
+        Parameters
+        ----------
+        q : (N, 4) array_like
+            Targets (either sign); rows not finite or not of unit norm (within 0.5) give NaN.
+        near_ticks : (n,) array_like, optional
+            Chooses among solutions and whole-turn branches (default: the servos' zeros).
+
+        Returns
+        -------
+        (N, 4) float64
+            Forward kinematics of the (unrounded) IK solution nearest each target within the
+            tick limits, ``w ≥ 0``; NaN rows where the tick limits leave none. A 3-servo
+            joint's is the target itself (up to round-off).
+        """
+        q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        ok = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0.5)
+        unit = np.where(ok[:, None], q / np.where(ok[:, None], norm, 1.0), 1.0)
+        unit = np.ascontiguousarray(unit)
+        near = self._zero_c if near_ticks is None else _kernel_array(near_ticks)
+        out = np.empty((len(q), 4))
+        _nearest_batch_kernel(self.axes, self._zero_c, self.direction, self._lo_c, self._hi_c,
+                              self.n, unit, near, out)
+        out[~ok] = np.nan
+        return out
+
+
 class LimbKinematics:
     """The joints of a limb in order, each with its :class:`JointKinematics`: the servo bus's
     whole tick vector ↔ ``(J, 4)`` joint orientations.
@@ -652,6 +697,12 @@ class LimbKinematics:
         parts = self.split(t)
         return np.stack([j.forward_batch(p) for j, p in zip(self.joints, parts, strict=True)],
                         axis=1)
+
+    def nearest_batch(self, postures: np.ndarray) -> np.ndarray:
+        """Postures (N, J, 4) → the postures the servos reach nearest them (N, J, 4): each
+        joint's :meth:`JointKinematics.nearest_batch` (NaN where its tick limits leave none)."""
+        p = np.asarray(postures, dtype=np.float64).reshape(-1, len(self.joints), 4)
+        return np.stack([j.nearest_batch(p[:, k]) for k, j in enumerate(self.joints)], axis=1)
 
     def inverse(self, q: np.ndarray, near_ticks: Sequence[float]) -> np.ndarray:
         """Goal ticks (n,) int64 for joint orientations ``q`` (J, 4), each joint's solution
