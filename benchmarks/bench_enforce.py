@@ -59,9 +59,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
-
 import urllib.parse
+from pathlib import Path
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
@@ -100,6 +99,12 @@ def _train(constraint_path: Path, out: Path, preset: str | None = None) -> Path:
     return out
 
 
+def _preset(model) -> str:
+    """A model's training preset (a joint's) or method (a limb's: network, geometric)."""
+    return str(model.network_info.get("preset")
+               or model.metadata.get("jointlimits.method", "?"))
+
+
 def additions_s() -> float:
     """The machine's speed that day: a Python loop of 10^7 additions, seconds."""
     t = time.perf_counter()
@@ -113,10 +118,10 @@ RIG = "sim-shoulder"  # --rig
 CONSTRAINT: Path | None = None  # a limb's limb file, passed to rig enforce
 
 
-def _scripted(name, oracle, rig, seed):
+def _scripted(name, oracle, rig, seed, **kw):
     """A scripted target source; for a limb, with the rig's kinematics (reachable postures)."""
     kin = rig.servos.limb_kinematics() if rig.limb else None
-    return ScriptedTargets(name, oracle, seed=seed, kinematics=kin)
+    return ScriptedTargets(name, oracle, seed=seed, kinematics=kin, **kw)
 
 
 def _limb_sim_url(rig) -> str:
@@ -238,7 +243,14 @@ def main() -> None:
     ap.add_argument("--constraint", default=None,
                     help="a limb's limb file (default: the simulated patient's true arm)")
     ap.add_argument("--settle-s", type=float, default=0.3,
-                    help="a valid target held this long counts in the tracking figures")
+                    help="the servos' settling time added to the time a goal needs to reach a "
+                         "valid target before it counts in the tracking figures")
+    ap.add_argument("--hold-s", type=float, default=1.0,
+                    help="a limb's adversarial section: each target held this long (the "
+                         "script's hold_s; its default 0.4 s is shorter than a large valid "
+                         "jump takes at the supervisor's 120°/s)")
+    ap.add_argument("--segment-s", type=float, default=2.0,
+                    help="a limb's adversarial section: the script's segment_s")
     ap.add_argument("--busy-wait", action="store_true",
                     help="the supervised loops spin between cycles (rig enforce --busy-wait)")
     ap.add_argument("--no-warm-up", action="store_true",
@@ -291,7 +303,7 @@ def main() -> None:
             model_path = Path(args.model)
         model = load_model(model_path)
     print(f"rig {rig.name}: constraint {constraint.name!r} ({source}), model {model_path} "
-          f"(preset {model.network_info.get('preset', '?')}); "
+          f"(preset {_preset(model)}); "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; supervised loops "
           f"{'busy-wait' if BUSY_WAIT else 'sleep'} between cycles"
           f"{', warm-up before each deadline' if WARM_UP else ', no warm-up'}"
@@ -611,14 +623,16 @@ def limb_adversarial(args, rig, oracle, models: dict) -> None:
     servos = dataclasses.replace(rig.servos, port=_limb_sim_url(rig))
     settle = max(1, round(args.settle_s * 200.0))
     print(f"\nadversarial: {args.cycles} cycles at 200 Hz on the simulator's manual clock "
-          f"(real bus, in-process sim; valid targets the rig's servos reach); tracking: valid "
+          f"(real bus, in-process sim; valid targets the rig's servos reach; script:adversarial"
+          f"?seed=6&hold_s={args.hold_s:g}&segment_s={args.segment_s:g}); tracking: valid "
           f"fresh targets held long enough for the goal's velocity and acceleration limits "
           f"plus {args.settle_s:g} s")
     names = rig.servos.joint_names
     for label, m in models.items():
         if m is None:
             continue
-        src = _scripted("adversarial", oracle, rig, 6)
+        src = _scripted("adversarial", oracle, rig, 6, hold_s=args.hold_s,
+                        segment_s=args.segment_s)
         s5, t5 = run_loop(servos, oracle, m, src, rate=200.0, cycles=args.cycles, clock="sim")
         cmd = _postures(t5, names, "commanded")
         tgt = _postures(t5, names, "target")
@@ -630,7 +644,7 @@ def limb_adversarial(args, rig, oracle, models: dict) -> None:
                                   settle)
         ok = valid_targets(oracle, tgt)
         err = _angle(tgt[tracked], pres[tracked]) if tracked.any() else np.zeros((0, len(names)))
-        print(f"  {label} (preset {m.network_info.get('preset', '?')}): cycles {s5['cycles']}, "
+        print(f"  {label} ({_preset(m)}): cycles {s5['cycles']}, "
               f"safe states {s5['safe_state_entries']}, interventions "
               f"{s5['interventions_by_kind']}; invalid/NaN targets {int((~ok).sum())}")
         for j, n in enumerate(names):
@@ -638,8 +652,12 @@ def limb_adversarial(args, rig, oracle, models: dict) -> None:
             e = err[:, j]
             track = (f"median {np.median(e):.2f}° p95 {np.percentile(e, 95):.2f}° over "
                      f"{len(e)} cycles" if len(e) else "no cycle")
+            f = s5["joints"][n]
+            ours = (f"; the summary's own: p50 {f['tracking_p50_deg']:.2f}° p95 "
+                    f"{f['tracking_p95_deg']:.2f}° over {f['tracked_cycles']}"
+                    if f.get("tracked_cycles") else "")
             print(f"    {n:<9} commanded beyond 1°: {int((dj > 1.0).sum())} (max "
-                  f"{np.nanmax(dj):.3f}°); tracking of valid held targets {track}")
+                  f"{np.nanmax(dj):.3f}°); tracking of valid held targets {track}{ours}")
 
 
 if __name__ == "__main__":

@@ -79,8 +79,12 @@ from models.errors import ModelsError
 from models.kinds import KINDS, get_kind
 from models.shapes import SHAPES, load_shape
 from models.yamlio import safe_load_yaml
-from rig.devices.kinematics import (JointKinematics, LimbKinematics, ServoAxis,
-                                    default_tolerance_deg)
+from rig.devices.kinematics import (
+    JointKinematics,
+    LimbKinematics,
+    ServoAxis,
+    default_tolerance_deg,
+)
 from rig.devices.servo import Servo
 from rig.errors import RigConfigError
 

@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
-from rig.devices.kinematics import (EXACT_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG, JointKinematics,
-                                    LimbKinematics, ServoAxis, default_tolerance_deg)
+from rig.devices.kinematics import (
+    EXACT_TOLERANCE_DEG,
+    NEAREST_TOLERANCE_DEG,
+    JointKinematics,
+    LimbKinematics,
+    ServoAxis,
+    default_tolerance_deg,
+)
 from rig.errors import RigConfigError, UnreachableError
 
 ZYX = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]

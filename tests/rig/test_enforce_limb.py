@@ -330,7 +330,7 @@ def test_scripted_limb_targets_a_servo_rig_can_take(arm, script):
     """Given the servo arm, a script's valid postures are ones its servos reach (the elbow's and
     wrist's two servos included) and the exact oracle still finds valid; the adversarial
     script keeps its coupled segments and its invalid postures."""
-    limb, oracle = arm
+    _, oracle = arm
     rig = load_rig_config("sim-servo-arm")
     kin = rig.servos.limb_kinematics()
     src = open_targets(f"script:{script}", oracle=oracle, rig=rig, seed=2)
