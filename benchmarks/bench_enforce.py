@@ -351,6 +351,8 @@ def main() -> None:
               f"supervised loop vs the raw SDK loop on the same bus")
         plans = ((0.0, (200, 300, 400, 500, 600, 700, 800, 1000)),
                  (1.0, (200, 300, 400, 450, 500, 550)))
+        if rig.limb:  # 7 servos: a longer sync read and write; and lower rates too
+            plans = tuple(((lat, (100, 150, *rates)) for lat, rates in plans))
         ids = rig.servos.ids
         url = SIM_URL if not rig.limb else rig.servos.port
         for latency_ms, rates in plans:
