@@ -26,11 +26,12 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
   ⟂ ω (``p' = p − ω(ω·p)``), ``θ = atan2(ω·(p'×q'), p'·q')``; it exists iff ``ω·p = ω·q``.
 * **1 servo** — ``θ_1 = 2 atan2(v·a_1, w)`` for ``q = (w, v)``.
 * **2 servos** — ``R_1 R_2 a_2 = R_1 a_2 = R a_2`` gives θ_1 by subproblem 1, then
-  ``q_2 = q_1* ⊗ q`` must be a rotation about ``a_2``. A target off the servos' surface gets
-  the **nearest** orientation they reach instead: with ``u_i = (cos θ_i/2, sin θ_i/2)``,
-  ``⟨exp(θ_1 a_1/2) ⊗ exp(θ_2 a_2/2), q⟩ = u_1ᵀ M u_2``, ``M = [[w, v·a_2], [v·a_1,
-  −(a_1·a_2) w + v·(a_1×a_2)]]``, maximal at M's top singular pair (closed form for 2×2;
-  residual ``2 acos σ_max``). One servo's ``2 atan2(v·a_1, w)`` is already the nearest.
+  ``q_2 = q_1* ⊗ q`` must be a rotation about ``a_2``. For a target off the servos' surface
+  the same closed form (θ_1 turning ``a_2`` nearest ``R a_2``, then the twist about ``a_2``)
+  gives the **nearest** orientation they reach (checked against the top singular pair of
+  ``M = [[w, v·a_2], [v·a_1, −(a_1·a_2) w + v·(a_1×a_2)]]``, where
+  ``⟨exp(θ_1 a_1/2) ⊗ exp(θ_2 a_2/2), q⟩ = u_1ᵀ M u_2``, ``u_i = (cos θ_i/2, sin θ_i/2)``: the
+  same residual to 1e-9°), as one servo's ``2 atan2(v·a_1, w)`` is.
 * **3 servos** — ``R_1 R_2 a_3 = R a_3`` is **subproblem 2**: ``c = R_2 a_3 = R_1ᵀ R a_3``
   satisfies ``a_1·c = a_1·R a_3`` and ``a_2·c = a_2·a_3``, so with ``k = a_1·a_2``
   ``c = α a_1 + β a_2 ± γ (a_1 × a_2)``, ``α = (a_1·Ra_3 − k a_2·a_3)/(1−k²)``,
@@ -178,36 +179,6 @@ def _forward_kernel(axes, zero, direction, n, ticks):
     return w, x, y, z
 
 
-_EXACT = 1e-5  # rad: a 2-servo subproblem solution farther than this is replaced by the nearest
-
-
-@njit
-def _nearest2(axes, w, x, y, z, near2, out):
-    """The angles (θ1, θ2) of a 2-servo joint whose orientation is nearest unit ``q``, written to
-    ``out[0, :2]`` (see the module docstring): the top singular pair of ``M``; when both
-    singular values are equal (a circle of nearest solutions), θ2 is kept at ``near2``."""
-    a10, a11, a12 = axes[0, 0], axes[0, 1], axes[0, 2]
-    a20, a21, a22 = axes[1, 0], axes[1, 1], axes[1, 2]
-    k = a10 * a20 + a11 * a21 + a12 * a22
-    cr0, cr1, cr2 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
-    m00 = w
-    m01 = x * a20 + y * a21 + z * a22
-    m10 = x * a10 + y * a11 + z * a12
-    m11 = -k * w + x * cr0 + y * cr1 + z * cr2
-    # MᵀM = [[a, b], [b, c]]; its top eigenvector (cos φ, sin φ) is the right singular vector
-    a = m00 * m00 + m10 * m10
-    b = m00 * m01 + m10 * m11
-    c = m01 * m01 + m11 * m11
-    if abs(a - c) + abs(b) < 1e-12:
-        phi = 0.5 * near2
-    else:
-        phi = 0.5 * math.atan2(2.0 * b, a - c)
-    u0, u1 = math.cos(phi), math.sin(phi)
-    l0, l1 = m00 * u0 + m01 * u1, m10 * u0 + m11 * u1  # M u2 = σ u1
-    out[0, 0] = 2.0 * math.atan2(l1, l0)
-    out[0, 1] = 2.0 * phi
-
-
 @njit
 def _solutions_kernel(axes, n, w, x, y, z, near1, near2):
     """The (up to two) joint-angle solutions for unit ``q``: ``(count, θ (2, 3))``; joints
@@ -227,8 +198,6 @@ def _solutions_kernel(axes, n, w, x, y, z, near1, near2):
         v0, v1, v2, v3 = qk.mul(c0, -c1, -c2, -c3, w, x, y, z)
         out[0, 0] = t1
         out[0, 1] = _twist_about(v0, v1, v2, v3, axes, 1)
-        if _residual_kernel(axes, 2, out[0], w, x, y, z) > _EXACT:
-            _nearest2(axes, w, x, y, z, near2, out)
         return 1, out
     a10, a11, a12 = axes[0, 0], axes[0, 1], axes[0, 2]
     a20, a21, a22 = axes[1, 0], axes[1, 1], axes[1, 2]
