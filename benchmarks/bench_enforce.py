@@ -245,11 +245,11 @@ def main() -> None:
     ap.add_argument("--settle-s", type=float, default=0.3,
                     help="the servos' settling time added to the time a goal needs to reach a "
                          "valid target before it counts in the tracking figures")
-    ap.add_argument("--hold-s", type=float, default=1.0,
+    ap.add_argument("--hold-s", type=float, default=2.0,
                     help="a limb's adversarial section: each target held this long (the "
                          "script's hold_s; its default 0.4 s is shorter than a large valid "
                          "jump takes at the supervisor's 120°/s)")
-    ap.add_argument("--segment-s", type=float, default=2.0,
+    ap.add_argument("--segment-s", type=float, default=4.0,
                     help="a limb's adversarial section: the script's segment_s")
     ap.add_argument("--busy-wait", action="store_true",
                     help="the supervised loops spin between cycles (rig enforce --busy-wait)")
