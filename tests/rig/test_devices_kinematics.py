@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
+from rig.devices.config import load_rig_config
 from rig.devices.kinematics import (
     EXACT_TOLERANCE_DEG,
     NEAREST_TOLERANCE_DEG,
@@ -221,3 +222,8 @@ def test_a_joint_of_fewer_servos_goes_to_the_nearest_orientation_it_reaches(axes
 def test_rig_joints_of_fewer_than_three_servos_take_the_nearest_by_default():
     assert default_tolerance_deg(3) == EXACT_TOLERANCE_DEG
     assert default_tolerance_deg(2) == default_tolerance_deg(1) == NEAREST_TOLERANCE_DEG
+    arm = load_rig_config("sim-servo-arm").servos
+    assert arm.ik_tolerance_deg is None
+    assert [j.tolerance_deg for j in arm.limb_kinematics().joints] == [
+        EXACT_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG]
+    assert load_rig_config("sim-shoulder").servos.kinematics().tolerance_deg == 0.1
