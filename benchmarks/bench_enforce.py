@@ -465,7 +465,9 @@ def _usable_adversarial(rig, oracle, n: int = 4000) -> np.ndarray:
     kin = rig.servos.kinematics()
     sup = Supervisor(oracle, SupervisorConfig(), period_s=0.005)
     sup.reset(0.0, kin.forward(kin.zero_ticks))
-    targets = [src.latest(k * 0.005)[1] for k in range(1, n + 1)]
+    # one joint's orientation (4,) of each (1, 4) posture the source returns
+    targets = [np.asarray(src.latest(k * 0.005)[1], dtype=np.float64).reshape(-1, 4)[0]
+               for k in range(1, n + 1)]
     return np.array([q for q in targets if sup.admit(0.0, q, 0.0) is not None])
 
 
