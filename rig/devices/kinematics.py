@@ -42,7 +42,8 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
   the present position's value.
 
 Each θ is then moved by whole turns to the tick value nearest the present position inside
-``[min_ticks, max_ticks]``, and of the (up to two) solutions the one nearest the present position
+``[min_ticks, max_ticks]`` (an angle less than half a tick beyond a limit is the limit: the
+tick it rounds to), and of the (up to two) solutions the one nearest the present position
 (least squared tick distance) is returned. If no solution lies within the tick limits, or the
 target is off the joint's reachable set by more than ``tolerance_deg`` (joints of 1-2
 servos reach only a subset of SO(3)), :class:`~rig.errors.UnreachableError` names the servo,
@@ -100,6 +101,7 @@ def default_tolerance_deg(n_servos: int) -> float:
     return EXACT_TOLERANCE_DEG if n_servos >= 3 else NEAREST_TOLERANCE_DEG
 
 _FREE = 1e-7  # |projection| below which a subproblem-1 angle is free (gimbal lock)
+_HALF_TICK = 0.5  # an angle less than this beyond a tick limit rounds onto it
 
 Vec = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -248,8 +250,9 @@ def _placed_kernel(zero, direction, lo, hi, n, theta, near, ticks):
     cost = 0.0
     for i in range(n):
         base = zero[i] + direction[i] * theta[i] / RAD_PER_TICK
-        k_lo = math.ceil((lo[i] - base) / TICKS_PER_REV - 1e-9)
-        k_hi = math.floor((hi[i] - base) / TICKS_PER_REV + 1e-9)
+        # within half a tick of a limit is the limit (what rounding to a tick gives)
+        k_lo = math.ceil((lo[i] - _HALF_TICK - base) / TICKS_PER_REV - 1e-9)
+        k_hi = math.floor((hi[i] + _HALF_TICK - base) / TICKS_PER_REV + 1e-9)
         if k_lo > k_hi:
             return i, 0.0
         k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)

@@ -13,6 +13,7 @@ from rig.devices.config import load_rig_config
 from rig.devices.kinematics import (
     EXACT_TOLERANCE_DEG,
     NEAREST_TOLERANCE_DEG,
+    RAD_PER_TICK,
     JointKinematics,
     LimbKinematics,
     ServoAxis,
@@ -227,3 +228,16 @@ def test_rig_joints_of_fewer_than_three_servos_take_the_nearest_by_default():
     assert [j.tolerance_deg for j in arm.limb_kinematics().joints] == [
         EXACT_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG]
     assert load_rig_config("sim-shoulder").servos.kinematics().tolerance_deg == 0.1
+
+
+def test_less_than_half_a_tick_beyond_a_limit_is_the_limit():
+    """An angle a fraction of a tick beyond a tick limit is the tick it rounds to (the limit);
+    more than half a tick beyond stays unreachable."""
+    kin = joint([(0, 0, 1)], lo=1000, hi=3000)
+    for off, ok in ((0.3, True), (0.7, False)):
+        q = Q.from_axis_angle(np.array([0.0, 0, 1]), (1000 - off - 2048) * RAD_PER_TICK)
+        if ok:
+            assert kin.inverse(q, [1100]).tolist() == [1000]
+        else:
+            with pytest.raises(UnreachableError, match="outside its limits"):
+                kin.inverse(q, [1100])
