@@ -73,8 +73,9 @@ def single_latencies_ns(model, qs, warmup: int = 2000) -> list[int]:
 
 
 @contextlib.contextmanager
-def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
-    """The raw SDK on ``port_name``: torque on for :data:`IDS`; yields (reader, writer) — a
+def _raw_bus(port_name: str, waiting: bool = False, ids=IDS) -> Iterator[tuple]:
+    """The raw SDK on ``port_name``: torque on for ``ids`` (default :data:`IDS`); yields
+    (reader, writer) — a
     GroupSyncRead of Present Position and a GroupSyncWrite of Goal Position. ``waiting``: the
     SDK on the driver's ``PortHandler`` subclass, which waits in ``select`` for a reply instead
     of polling (everything else the stock SDK)."""
@@ -97,13 +98,13 @@ def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
         raise RuntimeError(f"cannot open {port_name}")
     try:
         ph = PacketHandler(2.0)
-        for i in IDS:
+        for i in ids:
             result, error = ph.write1ByteTxRx(port, i, _TORQUE, 1)
             if result != COMM_SUCCESS or error:
                 raise RuntimeError(f"torque on id {i}: {ph.getTxRxResult(result)} error {error}")
         reader = GroupSyncRead(port, ph, _PRESENT_POS, 4)
         writer = GroupSyncWrite(port, ph, _GOAL_POS, 4)
-        for i in IDS:
+        for i in ids:
             reader.addParam(i)
             writer.addParam(i, [0, 8, 0, 0])
         yield reader, writer
@@ -115,12 +116,12 @@ def _raw_bus(port_name: str, waiting: bool = False) -> Iterator[tuple]:
 _COMM_SUCCESS = 0
 
 
-def _raw_cycle(reader, writer, k: int, fast: bool) -> bool:
+def _raw_cycle(reader, writer, k: int, fast: bool, ids=IDS) -> bool:
     """One raw control cycle (read, then write a goal); False when the read failed."""
     result = reader.fastSyncRead() if fast else reader.txRxPacket()
-    positions = [reader.getData(i, _PRESENT_POS, 4) for i in IDS]
+    positions = [reader.getData(i, _PRESENT_POS, 4) for i in ids]
     goal = 2048 + (k % 200) - 100
-    for i, _ in zip(IDS, positions, strict=True):
+    for i, _ in zip(ids, positions, strict=True):
         writer.changeParam(i, list(goal.to_bytes(4, "little")))
     writer.txPacket()
     return result == _COMM_SUCCESS
@@ -143,14 +144,15 @@ def raw_sync_loop(port_name: str, cycles: int, fast: bool) -> list[float]:
 
 
 def raw_paced_loop(port_name: str, rate_hz: float, duration_s: float,
-                   fast: bool = True, waiting: bool = False) -> dict:
+                   fast: bool = True, waiting: bool = False, ids=IDS) -> dict:
     """The raw SDK control cycle (as :func:`raw_sync_loop`) paced at ``rate_hz`` for
     ``duration_s`` by the live loop's own scheduler (absolute deadlines, no catch-up): the peer
     of the supervised loop at the same rate. Returns cycles, overruns, failed reads and the
-    lateness (ms) of every cycle. ``waiting``: see :func:`_raw_bus`."""
+    lateness (ms) of every cycle. ``waiting``: see :func:`_raw_bus`; ``ids``: the servos
+    (default :data:`IDS`)."""
     from rig.loop.scheduler import Scheduler
 
-    with _raw_bus(port_name, waiting) as (reader, writer):
+    with _raw_bus(port_name, waiting, ids) as (reader, writer):
         sched = Scheduler(rate_hz)
         t0 = sched.start()
         late = []
@@ -159,7 +161,7 @@ def raw_paced_loop(port_name: str, rate_hz: float, duration_s: float,
         while True:
             k, due, start = sched.wait()
             late.append(1e3 * (start - due))
-            failures += not _raw_cycle(reader, writer, k, fast)
+            failures += not _raw_cycle(reader, writer, k, fast, ids)
             sched.finish()
             if start - t0 + sched.period > duration_s - 1e-9:  # as the supervised loop ends
                 break

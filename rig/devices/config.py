@@ -37,7 +37,8 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       return_delay_us: 0                   #   0..508, even (default 0), EEPROM
       status_return_level: 2               #   0..2 (default 2)
       watchdog_ms: 100                     #   0 (off) or 20..2540 (default 100)
-      ik_tolerance_deg: 0.1                #   > 0 (default 0.1)
+      ik_tolerance_deg: 0.1                #   > 0 (default: 0.1 for a joint of 3 servos,
+                                           #   180 — the nearest reachable — for 1-2)
       latency_ms: null                     #   SDK packet-timeout latency; default: detected
       chain:                               #   the joint's servos, parent -> child, 1..3
         - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
@@ -78,7 +79,12 @@ from models.errors import ModelsError
 from models.kinds import KINDS, get_kind
 from models.shapes import SHAPES, load_shape
 from models.yamlio import safe_load_yaml
-from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
+from rig.devices.kinematics import (
+    JointKinematics,
+    LimbKinematics,
+    ServoAxis,
+    default_tolerance_deg,
+)
 from rig.devices.servo import Servo
 from rig.errors import RigConfigError
 
@@ -152,8 +158,10 @@ class ServosConfig:
         ``chain``), or the limb's joints' concatenated in the limb's order.
     baud, model, return_delay_us, status_return_level, watchdog_ms, latency_ms
         The bus's settings (see the module docstring).
-    ik_tolerance_deg : float
-        The joint kinematics' IK tolerance.
+    ik_tolerance_deg : float or None
+        The joint kinematics' IK tolerance; None: each joint's
+        :func:`~rig.devices.kinematics.default_tolerance_deg` (exact for 3 servos, the nearest
+        reachable orientation for 1-2).
     joints : tuple of ServoJoint
         A servo limb's joints (YAML key ``joints``); empty for a rig of one joint (``chain``).
     """
@@ -165,7 +173,7 @@ class ServosConfig:
     return_delay_us: int = 0
     status_return_level: int = 2
     watchdog_ms: int = 100
-    ik_tolerance_deg: float = 0.1
+    ik_tolerance_deg: float | None = None
     latency_ms: float | None = None
     joints: tuple[ServoJoint, ...] = ()
 
@@ -195,7 +203,14 @@ class ServosConfig:
             raise RigConfigError(f"a servo limb of {len(self.joints)} joints "
                                  f"({', '.join(self.joint_names)}) has no single joint's "
                                  f"kinematics: use its limb kinematics")
-        return JointKinematics(self.axes, tolerance_deg=self.ik_tolerance_deg)
+        return JointKinematics(self.axes, tolerance_deg=self.tolerance_deg(len(self.axes)))
+
+    def tolerance_deg(self, n_servos: int) -> float:
+        """The IK tolerance of a joint of ``n_servos`` servos: ``ik_tolerance_deg`` when set,
+        else :func:`~rig.devices.kinematics.default_tolerance_deg`."""
+        if self.ik_tolerance_deg is not None:
+            return self.ik_tolerance_deg
+        return default_tolerance_deg(n_servos)
 
     def limb_kinematics(self, joint: str | None = None) -> LimbKinematics:
         """Every joint's kinematics: the bus's tick vector ↔ (J, 4) joint orientations.
@@ -208,7 +223,8 @@ class ServosConfig:
         """
         if not self.joints:
             return LimbKinematics([self.kinematics()], [joint or "joint"])
-        return LimbKinematics([JointKinematics(j.axes, tolerance_deg=self.ik_tolerance_deg)
+        return LimbKinematics([JointKinematics(j.axes,
+                                               tolerance_deg=self.tolerance_deg(len(j.axes)))
                                for j in self.joints], self.joint_names)
 
 
@@ -437,7 +453,8 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
     wd = ctx.integer(d.get("watchdog_ms", 100), "servos.watchdog_ms", 0, 2540)
     if 0 < wd < 20:
         raise ctx.fail("servos.watchdog_ms", f"0 (off) or 20..2540 ms, got {wd}")
-    tol = ctx.number(d.get("ik_tolerance_deg", 0.1), "servos.ik_tolerance_deg", 0.0)
+    tol = None if d.get("ik_tolerance_deg") is None else \
+        ctx.number(d["ik_tolerance_deg"], "servos.ik_tolerance_deg", 0.0)
     lat = d.get("latency_ms")
     latency = None if lat is None else ctx.number(lat, "servos.latency_ms", 0.0)
     cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints)
@@ -446,7 +463,7 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
             if j is None:
                 cfg.kinematics()
             else:
-                JointKinematics(j.axes, tolerance_deg=tol)
+                JointKinematics(j.axes, tolerance_deg=cfg.tolerance_deg(len(j.axes)))
         except RigConfigError as err:
             at = where if j is None else f"{where}[{cfg.joint_names.index(j.name)}].chain"
             raise ctx.fail(at, str(err).removeprefix("joint kinematics: ")) from None

@@ -26,7 +26,12 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
   ⟂ ω (``p' = p − ω(ω·p)``), ``θ = atan2(ω·(p'×q'), p'·q')``; it exists iff ``ω·p = ω·q``.
 * **1 servo** — ``θ_1 = 2 atan2(v·a_1, w)`` for ``q = (w, v)``.
 * **2 servos** — ``R_1 R_2 a_2 = R_1 a_2 = R a_2`` gives θ_1 by subproblem 1, then
-  ``q_2 = q_1* ⊗ q`` must be a rotation about ``a_2``.
+  ``q_2 = q_1* ⊗ q`` must be a rotation about ``a_2``. For a target off the servos' surface
+  the same closed form (θ_1 turning ``a_2`` nearest ``R a_2``, then the twist about ``a_2``)
+  gives the **nearest** orientation they reach (checked against the top singular pair of
+  ``M = [[w, v·a_2], [v·a_1, −(a_1·a_2) w + v·(a_1×a_2)]]``, where
+  ``⟨exp(θ_1 a_1/2) ⊗ exp(θ_2 a_2/2), q⟩ = u_1ᵀ M u_2``, ``u_i = (cos θ_i/2, sin θ_i/2)``: the
+  same residual to 1e-9°), as one servo's ``2 atan2(v·a_1, w)`` is.
 * **3 servos** — ``R_1 R_2 a_3 = R a_3`` is **subproblem 2**: ``c = R_2 a_3 = R_1ᵀ R a_3``
   satisfies ``a_1·c = a_1·R a_3`` and ``a_2·c = a_2·a_3``, so with ``k = a_1·a_2``
   ``c = α a_1 + β a_2 ± γ (a_1 × a_2)``, ``α = (a_1·Ra_3 − k a_2·a_3)/(1−k²)``,
@@ -37,11 +42,15 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
   the present position's value.
 
 Each θ is then moved by whole turns to the tick value nearest the present position inside
-``[min_ticks, max_ticks]``, and of the (up to two) solutions the one nearest the present position
+``[min_ticks, max_ticks]`` (an angle less than half a tick beyond a limit is the limit: the
+tick it rounds to), and of the (up to two) solutions the one nearest the present position
 (least squared tick distance) is returned. If no solution lies within the tick limits, or the
 target is off the joint's reachable set by more than ``tolerance_deg`` (joints of 1-2
 servos reach only a subset of SO(3)), :class:`~rig.errors.UnreachableError` names the servo,
-the value and the limits — goals are never clipped.
+the value and the limits — goals are never clipped. A rig's joint of 1-2 servos has the
+tolerance :data:`NEAREST_TOLERANCE_DEG` by default (:func:`default_tolerance_deg`): any target
+becomes the nearest orientation its axes reach (within its tick limits), and the loop's
+supervisor judges the forward kinematics of those ticks, not the target.
 
 The per-sample paths (:meth:`JointKinematics.forward`, :meth:`JointKinematics.inverse`) run
 in kernels compiled by numba (``_forward_kernel``, ``_ik_kernel``: about 1 µs and 2 µs, where
@@ -67,13 +76,32 @@ from models.jit import njit
 from models.quaternion import normalize_rows
 from rig.errors import RigConfigError, UnreachableError
 
-__all__ = ["RAD_PER_TICK", "TICKS_PER_REV", "JointKinematics", "LimbKinematics", "ServoAxis"]
+__all__ = ["EXACT_TOLERANCE_DEG", "NEAREST_TOLERANCE_DEG", "RAD_PER_TICK", "TICKS_PER_REV",
+           "JointKinematics", "LimbKinematics", "ServoAxis", "default_tolerance_deg"]
 
 TICKS_PER_REV = 4096
 """Encoder ticks per revolution of an X-series servo (0.088° per tick)."""
 RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_REV
+EXACT_TOLERANCE_DEG = 0.1
+"""The IK tolerance of a joint of 3 servos (its residual is round-off): a target is reached."""
+NEAREST_TOLERANCE_DEG = 180.0
+"""The IK tolerance that accepts any orientation: the goal is the nearest one the axes reach."""
+
+
+def default_tolerance_deg(n_servos: int) -> float:
+    """The IK tolerance a rig's joint gets by default: :data:`EXACT_TOLERANCE_DEG` for 3
+    servos, :data:`NEAREST_TOLERANCE_DEG` for 1-2 (they reach a 1-2-D subset of SO(3): a
+    target off it becomes the nearest orientation they reach).
+
+    Parameters
+    ----------
+    n_servos : int
+        The joint's servos, 1 to 3.
+    """
+    return EXACT_TOLERANCE_DEG if n_servos >= 3 else NEAREST_TOLERANCE_DEG
 
 _FREE = 1e-7  # |projection| below which a subproblem-1 angle is free (gimbal lock)
+_HALF_TICK = 0.5  # an angle less than this beyond a tick limit rounds onto it
 
 Vec = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -222,8 +250,9 @@ def _placed_kernel(zero, direction, lo, hi, n, theta, near, ticks):
     cost = 0.0
     for i in range(n):
         base = zero[i] + direction[i] * theta[i] / RAD_PER_TICK
-        k_lo = math.ceil((lo[i] - base) / TICKS_PER_REV - 1e-9)
-        k_hi = math.floor((hi[i] - base) / TICKS_PER_REV + 1e-9)
+        # within half a tick of a limit is the limit (what rounding to a tick gives)
+        k_lo = math.ceil((lo[i] - _HALF_TICK - base) / TICKS_PER_REV - 1e-9)
+        k_hi = math.floor((hi[i] + _HALF_TICK - base) / TICKS_PER_REV + 1e-9)
         if k_lo > k_hi:
             return i, 0.0
         k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)
@@ -265,6 +294,20 @@ def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
                 ticks[i] = placed[j, i]
             return True
     return False
+
+
+@njit
+def _nearest_batch_kernel(axes, zero, direction, lo, hi, n, q, near, out):
+    """Per row of unit ``q`` (N, 4): the orientation of the IK solution nearest it (any
+    residual) within the tick limits, ``w ≥ 0``, written to ``out`` (NaN: none)."""
+    ticks = np.empty(n)
+    for r in range(q.shape[0]):
+        if _ik_kernel(axes, zero, direction, lo, hi, n, q[r, 0], q[r, 1], q[r, 2], q[r, 3],
+                      near, math.pi + 1e-9, ticks):
+            w, x, y, z = _forward_kernel(axes, zero, direction, n, ticks)
+            out[r, 0], out[r, 1], out[r, 2], out[r, 3] = w, x, y, z
+        else:
+            out[r, :] = math.nan
 
 
 def _kernel_array(values) -> np.ndarray:
@@ -488,6 +531,37 @@ class JointKinematics:
         return out
 
 
+    def nearest_batch(self, q: np.ndarray, near_ticks: Sequence[float] | None = None
+                      ) -> np.ndarray:
+        """The orientations the servos reach nearest each target, whatever the tolerance.
+
+        Parameters
+        ----------
+        q : (N, 4) array_like
+            Targets (either sign); rows not finite or not of unit norm (within 0.5) give NaN.
+        near_ticks : (n,) array_like, optional
+            Chooses among solutions and whole-turn branches (default: the servos' zeros).
+
+        Returns
+        -------
+        (N, 4) float64
+            Forward kinematics of the (unrounded) IK solution nearest each target within the
+            tick limits, ``w ≥ 0``; NaN rows where the tick limits leave none. A 3-servo
+            joint's is the target itself (up to round-off).
+        """
+        q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        ok = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0.5)
+        unit = np.where(ok[:, None], q / np.where(ok[:, None], norm, 1.0), 1.0)
+        unit = np.ascontiguousarray(unit)
+        near = self._zero_c if near_ticks is None else _kernel_array(near_ticks)
+        out = np.empty((len(q), 4))
+        _nearest_batch_kernel(self.axes, self._zero_c, self.direction, self._lo_c, self._hi_c,
+                              self.n, unit, near, out)
+        out[~ok] = np.nan
+        return out
+
+
 class LimbKinematics:
     """The joints of a limb in order, each with its :class:`JointKinematics`: the servo bus's
     whole tick vector ↔ ``(J, 4)`` joint orientations.
@@ -595,6 +669,12 @@ class LimbKinematics:
         parts = self.split(t)
         return np.stack([j.forward_batch(p) for j, p in zip(self.joints, parts, strict=True)],
                         axis=1)
+
+    def nearest_batch(self, postures: np.ndarray) -> np.ndarray:
+        """Postures (N, J, 4) → the postures the servos reach nearest them (N, J, 4): each
+        joint's :meth:`JointKinematics.nearest_batch` (NaN where its tick limits leave none)."""
+        p = np.asarray(postures, dtype=np.float64).reshape(-1, len(self.joints), 4)
+        return np.stack([j.nearest_batch(p[:, k]) for k, j in enumerate(self.joints)], axis=1)
 
     def inverse(self, q: np.ndarray, near_ticks: Sequence[float]) -> np.ndarray:
         """Goal ticks (n,) int64 for joint orientations ``q`` (J, 4), each joint's solution

@@ -342,15 +342,24 @@ class ScriptedTargets(TargetSource):
         which the coupled joint's (the shoulder's) held orientation is outside its limits, and
         ``coupled_dependent`` holds the source at such an angle while the coupled joint moves
         to an orientation valid only at another angle of its source.
+        With ``kinematics`` (the driven rig's servo limb), every valid posture of a limb's
+        scripts is one its servos reach: the oracle's projections are taken to the nearest
+        orientation each joint's servos reach within their tick limits
+        (:meth:`rig.devices.kinematics.LimbKinematics.nearest_batch`) and kept only when the
+        oracle still finds them valid with the script's margin; invalid postures are as
+        adversarial as without.
     oracle : models.oracle.ConstraintOracle
         A joint's constraint's or a limb file's.
     seed : int
     period_s, segment_s, hold_s : float
     alternate_hz : float
+    kinematics : rig.devices.kinematics.LimbKinematics, optional
+        The rig's joints, in the limb file's order (a limb's scripts only).
     """
 
     def __init__(self, name: str, oracle, *, seed: int = 0, period_s: float = 8.0,
-                 segment_s: float = 1.0, hold_s: float = 0.4, alternate_hz: float = 200.0):
+                 segment_s: float = 1.0, hold_s: float = 0.4, alternate_hz: float = 200.0,
+                 kinematics=None):
         if name not in SCRIPTS:
             raise RigConfigError(f"--targets script:{name}: unknown script; known: "
                                  f"{', '.join(SCRIPTS)}")
@@ -365,7 +374,9 @@ class ScriptedTargets(TargetSource):
             self.segment_s = float(segment_s)
             self.hold_s = float(hold_s)
             self.alternate_hz = float(alternate_hz)
-            self.description = f"script:{name} (seed {seed}, limb {limb.name})"
+            self.kinematics = kinematics
+            self.description = f"script:{name} (seed {seed}, limb {limb.name}" + \
+                (", reachable by the rig's servos)" if kinematics is not None else ")")
             self.t0 = 0.0
             self.duration_s = None
             self._limb = _LimbMotions(oracle, self.rng, self)
@@ -686,14 +697,27 @@ class _LimbMotions:
         """Projections of ``n`` random postures: valid, most of them on the boundary."""
         return self.o.project(self._random(n))
 
+    def _reachable(self, p: np.ndarray) -> np.ndarray:
+        """``p`` (N, J, 4) as the rig's servos reach it nearest (as it is without a rig); a
+        posture they cannot reach within their tick limits becomes the centre."""
+        kin = self.s.kinematics
+        if kin is None:
+            return p
+        r = kin.nearest_batch(p)
+        bad = ~np.isfinite(r).all(axis=(1, 2))
+        r[bad] = self.centre
+        return r
+
     def _towards(self, b: np.ndarray, f) -> np.ndarray:
-        """The projections of postures a fraction ``f`` of the way from the centre to ``b``."""
-        return self.o.project(_slerp(self.centre[None], b, f))
+        """The projections of postures a fraction ``f`` of the way from the centre to ``b``
+        (with a rig: reachable by its servos)."""
+        return self._reachable(self.o.project(_slerp(self.centre[None], b, f)))
 
     def _find_centre(self) -> np.ndarray:
         ident = np.zeros((1, self.J, 4))
         ident[..., 0] = 1.0
         self.centre = self.o.project(ident)[0]
+        self.centre = self._reachable(self.centre[None])[0]
         best = float(self._depth(self.centre[None])[0])
         for _ in range(4):
             b = self._boundary(1000)
@@ -822,7 +846,7 @@ class _LimbMotions:
                     ramp = np.repeat(start[k][None], len(s), axis=0)
                     ramp[:, moving] = _slerp(start[k][moving], end[k][moving], s[:, 0])
                     if moving == src:  # the source's own way: its projection
-                        ramp[:, moving] = o.project(ramp)[:, moving]
+                        ramp[:, moving] = self._reachable(o.project(ramp))[:, moving]
                     out.append(_Path(ramp))
         return src_list, dep_list
 
@@ -1034,7 +1058,7 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
                 raise RigConfigError(f"--targets {spec!r}: {k}: not a number: {v[-1]!r}") \
                     from None
         kw.setdefault("seed", seed)
-        return ScriptedTargets(name, oracle, **kw)
+        return ScriptedTargets(name, oracle, kinematics=_rig_limb_kinematics(rig, oracle), **kw)
     if spec == "mirror" or spec.startswith("mirror:"):
         if oracle.limb is not None:
             return _open_limb_mirror(spec, rig, oracle.limb)
@@ -1050,6 +1074,18 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
                              segments=[(j.parent, j.child) for j in limb.joints])
     raise RigConfigError(f"--targets {spec!r}: expected PATH.csv, script:NAME "
                          f"({'|'.join(SCRIPTS)}) or mirror")
+
+
+def _rig_limb_kinematics(rig, oracle):
+    """The rig's servo joints' kinematics when they are the limb file's joints (by name, in
+    order), else None (a joint's constraint, a rig of sensors only, other joints)."""
+    limb = oracle.limb
+    servos = getattr(rig, "servos", None)
+    if limb is None or servos is None or not servos.joints:
+        return None
+    if tuple(servos.joint_names) != tuple(limb.joint_names):
+        return None
+    return servos.limb_kinematics().compile()
 
 
 def _open_mirror(spec: str, rig) -> MirrorTargets:

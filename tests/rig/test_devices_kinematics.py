@@ -9,7 +9,16 @@ import numpy as np
 import pytest
 
 from models import quaternion as Q
-from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
+from rig.devices.config import load_rig_config
+from rig.devices.kinematics import (
+    EXACT_TOLERANCE_DEG,
+    NEAREST_TOLERANCE_DEG,
+    RAD_PER_TICK,
+    JointKinematics,
+    LimbKinematics,
+    ServoAxis,
+    default_tolerance_deg,
+)
 from rig.errors import RigConfigError, UnreachableError
 
 ZYX = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]
@@ -185,3 +194,50 @@ def test_bad_limbs(names, match):
         LimbKinematics([joint([(0, 0, 1)]), joint([(0, 1, 0)])])
     with pytest.raises(RigConfigError, match="at least one joint"):
         LimbKinematics([])
+
+
+@pytest.mark.parametrize("axes", [[(0, 0, 1), (1, 0, 0)], [(1, 0, 0), (0, 0.6, 0.8)],
+                                  [(0, 1, 0)]])
+def test_a_joint_of_fewer_servos_goes_to_the_nearest_orientation_it_reaches(axes):
+    """With the nearest tolerance, IK of any target gives the orientation its axes reach that is
+    nearest the target (no point of a fine grid of the servos' angles is nearer); a target it
+    reaches is solved exactly as with the exact tolerance."""
+    kin = joint(axes, tolerance_deg=NEAREST_TOLERANCE_DEG)
+    exact = joint(axes)
+    th = np.linspace(-np.pi, np.pi, 361)
+    grids = np.meshgrid(*([th] * kin.n), indexing="ij")
+    grid = np.tile([1.0, 0, 0, 0], (grids[0].size, 1))
+    for k in range(kin.n):
+        grid = Q.multiply(grid, Q.from_axis_angle(kin.axes[k], grids[k].ravel()))
+    rng = np.random.default_rng(5)
+    qs = rng.standard_normal((60, 4))
+    for q in qs / np.linalg.norm(qs, axis=1, keepdims=True):
+        reached = kin.forward(kin.inverse_float(q, [2048] * kin.n))
+        best = 2 * np.degrees(np.arccos(min(1.0, np.abs(grid @ q).max())))
+        assert angle_deg(reached, q) <= best + 1e-6
+    for t in rng.integers(1024, 3072, size=(20, kin.n)):
+        q = kin.forward(t)
+        assert np.array_equal(kin.inverse(q, t + 30), exact.inverse(q, t + 30))
+
+
+def test_rig_joints_of_fewer_than_three_servos_take_the_nearest_by_default():
+    assert default_tolerance_deg(3) == EXACT_TOLERANCE_DEG
+    assert default_tolerance_deg(2) == default_tolerance_deg(1) == NEAREST_TOLERANCE_DEG
+    arm = load_rig_config("sim-servo-arm").servos
+    assert arm.ik_tolerance_deg is None
+    assert [j.tolerance_deg for j in arm.limb_kinematics().joints] == [
+        EXACT_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG, NEAREST_TOLERANCE_DEG]
+    assert load_rig_config("sim-shoulder").servos.kinematics().tolerance_deg == 0.1
+
+
+def test_less_than_half_a_tick_beyond_a_limit_is_the_limit():
+    """An angle a fraction of a tick beyond a tick limit is the tick it rounds to (the limit);
+    more than half a tick beyond stays unreachable."""
+    kin = joint([(0, 0, 1)], lo=1000, hi=3000)
+    for off, ok in ((0.3, True), (0.7, False)):
+        q = Q.from_axis_angle(np.array([0.0, 0, 1]), (1000 - off - 2048) * RAD_PER_TICK)
+        if ok:
+            assert kin.inverse(q, [1100]).tolist() == [1000]
+        else:
+            with pytest.raises(UnreachableError, match="outside its limits"):
+                kin.inverse(q, [1100])

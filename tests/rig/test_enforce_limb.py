@@ -327,3 +327,24 @@ def test_a_short_run_of_the_simulated_arm(files, tmp_path, rig_cli):
     assert s["safe_state_entries"] == 0, s["safe_state_reason"]
     header = tel.read_text().splitlines()[0].split(",")
     assert "elbow_target_w" in header and "wrist_commanded_z" in header
+
+
+@pytest.mark.parametrize("script", ["slow", "adversarial"])
+def test_scripted_limb_targets_a_servo_rig_can_take(arm, script):
+    """Given the servo arm, a script's valid postures are ones its servos reach (the elbow's and
+    wrist's two servos included) and the exact oracle still finds valid; the adversarial
+    script keeps its coupled segments and its invalid postures."""
+    _, oracle = arm
+    rig = load_rig_config("sim-servo-arm")
+    kin = rig.servos.limb_kinematics()
+    src = open_targets(f"script:{script}", oracle=oracle, rig=rig, seed=2)
+    assert "reachable by the rig's servos" in src.description
+    src.start(0.0)
+    p = np.array([src.latest(t)[1] for t in np.arange(0.0, 16.0, 0.02)])
+    ok = valid_targets(oracle, p)
+    assert ok.sum() > 100
+    reached = kin.nearest_batch(p[ok])
+    assert np.degrees(Q.angle(Q.multiply(reached, Q.conjugate(p[ok])))).max() < 1e-3
+    if script == "adversarial":
+        assert {"coupled_source", "coupled_dependent"} <= set(src.kinds)
+        assert (~ok).sum() > 100

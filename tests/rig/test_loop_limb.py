@@ -15,6 +15,7 @@ from models.limb_evaluation import held_out_postures, random_limb
 from models.limb_model import export_limb_model
 from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
+from rig.devices.config import load_rig_config
 from rig.devices.dynamixel import DynamixelBus
 from rig.devices.kinematics import JointKinematics, LimbKinematics, ServoAxis
 from rig.devices.ports import open_port
@@ -23,8 +24,9 @@ from rig.errors import UnreachableError
 from rig.loop import EnforcementLoop, Intervention, LoopConfig, SupervisorConfig
 from rig.loop.backstop import position_limits_from_limb
 from rig.loop.limb_supervisor import LimbSupervisor
-from rig.loop.targets import TargetSource
+from rig.loop.targets import ScriptedTargets, TargetSource
 from rig.loop.telemetry import telemetry_columns
+from rig.sim.patients import anatomical_limb
 
 URL = "sim://dynamixel?ids=1-7&model=XM430-W350&return_delay_us=0&clock=manual&wire_time=off"
 NAMES = ("shoulder", "elbow", "wrist")
@@ -377,3 +379,45 @@ def test_the_limb_model_in_the_loop(arm, tmp_path):
     assert np.degrees(d).max() < 0.05
     assert not (table["intervention"] & Intervention.MODEL_INVALID).any()
     assert table["shoulder_correction_deg"].max() > 1.0
+
+
+def test_a_target_two_servos_cannot_reach_becomes_the_nearest_they_reach():
+    """The servo arm (sim-servo-arm's joints: a forearm elbow and a wrist of two servos each):
+    a valid posture whose wrist is twisted 4° about its long axis — which its flexion and
+    deviation servos cannot turn — is driven to the nearest orientation they reach, never
+    flagged unreachable; every commanded posture stays within tolerance."""
+    limb = anatomical_limb(3, "arm", kinds={"elbow": "forearm"})
+    oracle = ConstraintOracle(limb).prepare()
+    kin = load_rig_config("sim-servo-arm").servos.limb_kinematics()
+    hold = ScriptedTargets("hold", oracle, kinematics=kin)
+    hold.start(0.0)
+    start = hold.latest(0.0)[1]
+    target = start.copy()
+    target[2] = Q.multiply(start[2], Q.from_axis_angle(np.array([1.0, 0, 0]), math.radians(4)))
+    nearest = kin.nearest_batch(target[None])[0]
+    assert _qangle(nearest[2], target[2]) > math.radians(0.5)  # off the wrist's surface
+    assert oracle.is_valid(nearest[None]).all()
+    with pytest.raises(UnreachableError):  # what the exact tolerance said of it
+        JointKinematics(kin.joint(2).servos).inverse(target[2], kin.joint(2).zero_ticks)
+    with open_port(URL, baud=1_000_000) as port:
+        sim = port.simulator
+        for i, t in zip(kin.ids, kin.inverse(start, kin.zero_ticks), strict=True):
+            sim.set_hand(i, float(t))
+        sim.clock.advance(0.01)
+        sl = ServoLimb(DynamixelBus(port, list(kin.ids)), kin)
+        try:
+            sl.bus.configure()
+            loop = EnforcementLoop(sl, None, oracle, PostureTargets(lambda k: target),
+                                   LoopConfig(rate_hz=200.0, watchdog_ms=1000),
+                                   clock=sim.clock, sleep=sim.clock.sleep)
+            loop.setup()
+            loop.run(max_cycles=200)
+        finally:
+            sl.close()
+    table = loop.telemetry.table()
+    for n in NAMES:
+        assert not (table[f"{n}_intervention"] & Intervention.UNREACHABLE).any()
+    assert _commanded_distance_deg(oracle, table).max() <= 1.0 + 1e-9
+    cmd = _posture(table, "commanded")
+    assert _qangle(cmd[-1, 2], nearest[2]) < math.radians(0.2)
+    assert _qangle(_posture(table, "present")[-1, 2], nearest[2]) < math.radians(0.3)
