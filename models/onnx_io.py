@@ -457,9 +457,10 @@ def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
     return raw, model
 
 
-def latency_session(raw: bytes, *, single: bool = False):
+def latency_session(raw: bytes, *, single: bool = False, profile: str | None = None):
     """An onnxruntime session tuned for latency: one thread, sequential, no spinning;
-    ``single``: for one sample a call (no memory-reuse planning)."""
+    ``single``: for one sample a call (no memory-reuse planning); ``profile``: onnxruntime's
+    profiler on, its JSON file named from this prefix (``end_profiling`` returns the path)."""
     import onnxruntime as ort  # lazily: exporting a model needs no runtime (models/__init__)
 
     opts = ort.SessionOptions()
@@ -474,6 +475,9 @@ def latency_session(raw: bytes, *, single: bool = False):
     # this 2-core VM, a Python loop of 10⁷ additions 0.46 s), the same numbers; batches keep
     # it (their buffers are large)
     opts.enable_mem_reuse = not single
+    if profile is not None:
+        opts.enable_profiling = True
+        opts.profile_file_prefix = profile
     return ort.InferenceSession(raw, sess_options=opts, providers=["CPUExecutionProvider"])
 
 
