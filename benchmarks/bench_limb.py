@@ -35,6 +35,13 @@ same run, interleaved, and their ratio printed (issue 39: network ≤ 50 µs and
 geometric), with the time a Python loop of 10⁷ additions took (how fast the machine was).
 Node counts include the ``If`` branch's nodes (the top level's in brackets).
 
+``--profile``: after each limb's single calls, each model's onnxruntime profile
+(``SessionOptions.enable_profiling``) over 1000 single calls of the one-sample session: the
+run's median (``model_run``) beside the kernels' sum (its nodes, ``If`` branches' included, the
+``If`` nodes themselves not), their difference the per-run overhead, and the time by op type.
+The profiler adds its own cost to every node (the unprofiled median is printed beside it), so
+the shares by op type are the figures to read, not the sums.
+
 ``--single K``: instead, the same network family on K held-out single ball joints (concave
 stars with twist, ``bench_accuracy``'s held-out set) beside today's default, the tabulated
 field.
@@ -45,7 +52,10 @@ Prints one row per limb and method and the mean over limbs against the issue's t
 from __future__ import annotations
 
 import argparse
+import bisect
+import collections
 import dataclasses
+import json
 import os
 import statistics
 import tempfile
@@ -65,7 +75,7 @@ from models.limb_evaluation import (
 )
 from models.limb_model import export_limb_model
 from models.nn.ndf import fit_limb_fields, fit_swing_field
-from models.onnx_io import load_model
+from models.onnx_io import latency_session, load_model, one_sample
 from models.oracle import ConstraintOracle
 
 TARGETS = (("end_mean_3d_error_pct", "end-point mean 3-D error %", "<= 0.5"),
@@ -158,6 +168,65 @@ def single_calls(models: dict, q, valid) -> dict[str, dict[str, float]]:
     return out
 
 
+def profile(name: str, model, q, calls: int = 1000) -> None:
+    """Print an onnxruntime profile of ``model``'s one-sample session (module docstring)."""
+    q32 = np.ascontiguousarray(q, dtype=np.float32)
+    sess = latency_session(one_sample(onnx.load(str(model.path))), single=True,
+                           profile=str(Path(tempfile.gettempdir()) / "bench-limb-profile"))
+    feed = np.zeros((1, *q32.shape[1:]), dtype=np.float32)
+    inp, out = model.contract.input, model.contract.output
+    for i in range(calls + 200):
+        feed[0] = q32[i % len(q32)]
+        sess.run([out], {inp: feed})
+    path = sess.end_profiling()
+    events = json.loads(Path(path).read_text())
+    Path(path).unlink()
+    runs = sorted((e for e in events if e.get("cat") == "Session" and e["name"] == "model_run"),
+                  key=lambda e: e["ts"])[200:]  # the warm-up's left out
+    starts = [e["ts"] for e in runs]
+    kernels = collections.defaultdict(float)
+    by_op: dict[str, list[float]] = collections.defaultdict(lambda: [0.0, 0.0])
+    for e in events:
+        if e.get("cat") != "Node" or not e["name"].endswith("_kernel_time"):
+            continue
+        k = bisect.bisect_right(starts, e["ts"]) - 1
+        op = e["args"].get("op_name", "?")
+        if k < 0 or op == "If":  # an If's time is its branch's nodes, counted apart
+            continue
+        kernels[k] += e["dur"]
+        by_op[op][0] += 1 / len(runs)
+        by_op[op][1] += e["dur"] / len(runs)
+    run = statistics.median(e["dur"] for e in runs)
+    kern = statistics.median(kernels.values())
+    total = sum(t for _, t in by_op.values())
+    ops = sorted(by_op.items(), key=lambda kv: -kv[1][1])
+    # unprofiled: the model's single call, and a one-node graph's (the per-run floor)
+    ident = onnx.helper.make_model(onnx.helper.make_graph(
+        [onnx.helper.make_node("Identity", [inp], [out])], "floor",
+        [onnx.helper.make_tensor_value_info(inp, onnx.TensorProto.FLOAT, feed.shape)],
+        [onnx.helper.make_tensor_value_info(out, onnx.TensorProto.FLOAT, feed.shape)]),
+        opset_imports=[onnx.helper.make_opsetid("", 17)])
+    ident.ir_version = 8
+    floor = latency_session(ident.SerializeToString(), single=True)
+    unprofiled: dict[str, list[int]] = {"model": [], "floor": []}
+    for i in range(calls):
+        p = q32[i % len(q32)]
+        t0 = time.perf_counter_ns()
+        model.correct_one(p)
+        t1 = time.perf_counter_ns()
+        floor.run([out], {inp: feed})
+        unprofiled["model"].append(t1 - t0)
+        unprofiled["floor"].append(time.perf_counter_ns() - t1)
+    one, base = (statistics.median(unprofiled[k]) / 1e3 for k in ("model", "floor"))
+    nodes = sum(n for n, _ in by_op.values())
+    print(f"  profile {name}: unprofiled single call {one:.1f} µs, a one-node graph's "
+          f"{base:.1f} µs (the per-run overhead), so {(one - base) / nodes:.2f} µs a node over "
+          f"{nodes:.0f} nodes a run. Under the profiler: model_run {run:.0f} µs, its kernels "
+          f"{kern:.0f} µs, the gap {run - kern:.0f} µs (the profiler's own cost dominates "
+          f"both); by op type (nodes a run, share of the kernels' time): "
+          + ", ".join(f"{op} {n:.0f} {t / total:.0%}" for op, (n, t) in ops[:12]))
+
+
 def speed(model, q) -> dict:
     q32 = np.ascontiguousarray(q, dtype=np.float32)
     big = np.resize(q32, (10_000, *q32.shape[1:]))
@@ -225,6 +294,8 @@ def main() -> None:
     ap.add_argument("--methods", default="exact,uncoupled,geometric,network")
     ap.add_argument("--forearm", type=int, default=0, metavar="K",
                     help="also K held-out arms whose elbow is a forearm joint")
+    ap.add_argument("--profile", action="store_true",
+                    help="also each model's onnxruntime profile (module docstring)")
     ap.add_argument("--single", type=int, default=0, metavar="K",
                     help="instead: the network family on K held-out single ball joints "
                          "(concave stars with twist) beside the tabulated field")
@@ -242,7 +313,7 @@ def main() -> None:
         families.append((f"{args.forearm} held-out arms with a forearm elbow",
                          held_out_forearm_arms(args.forearm), 2000))
     for title, limbs, seed in families:
-        score(title, limbs, seed, names, args.n, tmp)
+        score(title, limbs, seed, names, args.n, tmp, args.profile)
 
 
 def loop_seconds() -> float:
@@ -254,7 +325,8 @@ def loop_seconds() -> float:
     return time.perf_counter() - t0
 
 
-def score(title: str, limbs: dict, seed: int, names: list[str], n: int, tmp: Path) -> None:
+def score(title: str, limbs: dict, seed: int, names: list[str], n: int, tmp: Path,
+          profiled: bool = False) -> None:
     """One family of limbs: a row per limb and method, the means, the models' figures."""
     for runs in SPEED.values():
         runs.clear()
@@ -284,6 +356,9 @@ def score(title: str, limbs: dict, seed: int, names: list[str], n: int, tmp: Pat
                       f"valid postures {nw['single_valid_us']:.1f} / "
                       f"{g['single_valid_us']:.1f} µs, the others "
                       f"{nw['single_invalid_us']:.1f} / {g['single_invalid_us']:.1f} µs")
+            if profiled:
+                for name, model in LOADED.items():
+                    profile(name, model, q)
     print(f"\nmean over {title} ({n} postures each)")
     print(f"{'target':<36} {'goal':>8} " + " ".join(f"{m:>10}" for m in names))
     for key, label, goal in TARGETS:

@@ -457,9 +457,13 @@ def read_onnx(path: Path) -> tuple[bytes, onnx.ModelProto]:
     return raw, model
 
 
-def latency_session(raw: bytes, *, single: bool = False):
+def latency_session(raw: bytes, *, single: bool = False, prepack: bool = True,
+                    profile: str | None = None):
     """An onnxruntime session tuned for latency: one thread, sequential, no spinning;
-    ``single``: for one sample a call (no memory-reuse planning)."""
+    ``single``: for one sample a call (no memory-reuse planning); ``prepack``: False leaves
+    the products' constant matrices as they are (onnxruntime's ``session.disable_prepacking``:
+    see :func:`large_products`); ``profile``: onnxruntime's profiler on, its JSON file named
+    from this prefix (``end_profiling`` returns the path)."""
     import onnxruntime as ort  # lazily: exporting a model needs no runtime (models/__init__)
 
     opts = ort.SessionOptions()
@@ -474,7 +478,60 @@ def latency_session(raw: bytes, *, single: bool = False):
     # this 2-core VM, a Python loop of 10⁷ additions 0.46 s), the same numbers; batches keep
     # it (their buffers are large)
     opts.enable_mem_reuse = not single
+    if not prepack:
+        opts.add_session_config_entry("session.disable_prepacking", "1")
+    if profile is not None:
+        opts.enable_profiling = True
+        opts.profile_file_prefix = profile
     return ort.InferenceSession(raw, sess_options=opts, providers=["CPUExecutionProvider"])
+
+
+#: a constant matrix of at least this many numbers makes a model's products "large"
+LARGE_PRODUCT = 4096
+
+
+def large_products(model: onnx.ModelProto) -> bool:
+    """Whether a ``MatMul`` or ``Gemm`` of ``model`` (its ``If`` branches included) multiplies
+    by a constant of at least :data:`LARGE_PRODUCT` numbers (a limb network's field: 195 × 128,
+    128 × 128, …).
+
+    One sample a call, such a model runs faster with its matrices as they are than prepacked
+    for onnxruntime's blocked products (``session.disable_prepacking``): a held-out arm's
+    network single call 137.3 → 122.9 µs where its field's projection steps run (forearm arm
+    9200: 147.4 → 132.5 µs), while a model of small matrices loses 1.5-2 % (``geometric``
+    84.2 → 85.8 µs); interleaved, 2026-11-28, this 2-core VM. So :class:`CorrectionModel`'s
+    single-call session leaves them unpacked only when they are large."""
+    sizes: dict[str, int] = {}
+    factors: set[str] = set()
+
+    def walk(graph) -> None:
+        sizes.update((t.name, int(np.prod(t.dims))) for t in graph.initializer)
+        for node in graph.node:
+            if node.op_type in ("MatMul", "Gemm"):
+                factors.add(node.input[1])
+            for a in node.attribute:
+                if a.type == onnx.AttributeProto.GRAPH:
+                    walk(a.g)
+
+    walk(model.graph)
+    return any(sizes.get(f, 0) >= LARGE_PRODUCT for f in factors)
+
+
+def one_sample(model: onnx.ModelProto) -> bytes:
+    """``model`` with the batch axis of its inputs and outputs fixed to one sample (the graph
+    unchanged): the session of :meth:`CorrectionModel.correct_one` knows every shape when it
+    is built, so onnxruntime folds the shape arithmetic (``Shape``, ``Expand``) and plans each
+    node's output once — 1-5 % off a limb model's single call (network 153.5 → 145.6 µs,
+    geometric 91.7 → 90.4 µs, leg network 78.1 → 77.3 µs; interleaved, 2026-11-28, this 2-core
+    VM beside a benchmark), the same answers bit for bit."""
+    fixed = onnx.ModelProto()
+    fixed.CopyFrom(model)
+    for v in (*fixed.graph.input, *fixed.graph.output):
+        dims = v.type.tensor_type.shape.dim
+        if dims:
+            dims[0].Clear()
+            dims[0].dim_value = 1
+    return fixed.SerializeToString()
 
 
 @dataclass(frozen=True)
@@ -522,10 +579,11 @@ class CorrectionModel:
 
     One sample (:meth:`correct_one`) runs on the calling thread (one onnxruntime thread, no
     spinning) through a preallocated input buffer, in a session of its own without
-    memory-reuse planning (:func:`latency_session`); a limb's batch of more than
-    :attr:`Contract.chunk` postures in chunks on one worker thread per core for the call (the
-    session is shared; onnxruntime releases the GIL while it runs, and chunks of this size stay
-    in the cache).
+    memory-reuse planning (:func:`latency_session`) whose shapes are fixed to one sample
+    (:func:`one_sample`), large constant matrices not prepacked (:func:`large_products`); a
+    limb's batch of more than :attr:`Contract.chunk` postures in chunks on one worker thread
+    per core for the call (the session is shared; onnxruntime releases the GIL while it runs,
+    and chunks of this size stay in the cache).
 
     Parameters
     ----------
@@ -583,7 +641,8 @@ class CorrectionModel:
         if expected_constraint is not None:
             self.check_constraint(expected_constraint)
         self.session = latency_session(raw)
-        self._single = latency_session(raw, single=True)  # correct_one's
+        self._single = latency_session(one_sample(model), single=True,  # correct_one's
+                                       prepack=not large_products(model))
         self._sample = sample
         self._one = np.zeros((1, *sample), dtype=np.float32)
         self._outs = [self.contract.output]

@@ -130,11 +130,14 @@ def test_onnx_graph_computes_the_fields_projection(leg, trained, tmp_path):
                                                                                          other]))))
             assert e.max() < 0.01
     # one posture a call (the projection steps skipped where its direction is inside): the
-    # batch's answers
+    # batch's answers, to float32 rounding — the single call's products run on the field's
+    # matrices unpacked (onnx_io.large_products), the batch's prepacked, and five steps carry
+    # a last-bit difference to a few thousandths of a degree on one posture of 300
     one = np.stack([model.correct_one(p) for p in q[:300]]).astype(np.float64)
     assert not res.valid[:300, j].all() and res.valid[:300, j].any()
     e = np.degrees(Q.angle(Q.multiply(one.reshape(-1, 4), Q.conjugate(got[:300].reshape(-1, 4)))))
-    assert e.max() < 1e-3
+    assert e.max() < 0.01
+    assert np.median(e) < 1e-4
 
 
 def test_small_network_corrects_a_development_limb(leg, trained):

@@ -12,7 +12,7 @@ from onnx import TensorProto, helper
 from models import quaternion as quat
 from models.errors import ModelFileError
 from models.nn.gmlp import GMLP, PopulationSpec, init_params
-from models.onnx_io import export_onnx, load_model, to_onnx
+from models.onnx_io import export_onnx, load_model, one_sample, to_onnx
 
 CONSTRAINT = "name: c45\nswing:\n  cone: {centre: [1, 0, 0], radius_deg: 45}\n"
 
@@ -90,6 +90,22 @@ def test_metadata(tmp_path):
     assert m.metadata["jointlimits.version"]
     corrected = m.corrected(quat.random_quaternions(5, np.random.default_rng(1)))
     np.testing.assert_allclose(np.linalg.norm(corrected, axis=1), 1.0, atol=1e-6)
+
+
+def test_the_single_call_session_knows_its_shapes_and_gives_the_batchs_answers(tmp_path):
+    net = _net(np.random.default_rng(0), [2], [0])
+    path = export_onnx(net, tmp_path / "m.onnx", constraint_yaml=CONSTRAINT)
+    model = onnx.load(str(path))
+    fixed = onnx.load_model_from_string(one_sample(model))
+    for v in (*fixed.graph.input, *fixed.graph.output):
+        assert [d.dim_value for d in v.type.tensor_type.shape.dim] == [1, 4]
+    assert fixed.graph.node == model.graph.node  # the graph itself unchanged
+    assert model.graph.input[0].type.tensor_type.shape.dim[0].dim_param  # the copy's, not it
+    m = load_model(path)
+    q = quat.random_quaternions(20, np.random.default_rng(2))
+    batch = m.correction(q)
+    for i in range(len(q)):
+        np.testing.assert_allclose(m.correct_one(q[i]), batch[i], atol=1e-6)
 
 
 def test_refuses_non_onnx(tmp_path):
