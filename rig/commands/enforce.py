@@ -67,6 +67,10 @@ from rig.commands._options import finite_seconds
               help="Goal angular acceleration limit.")
 @click.option("--stale-servo-ms", type=float, default=100.0, show_default=True,
               help="Servo data older than this (reads failing) puts the limb in the safe state.")
+@click.option("--watchdog-ms", type=int, default=None, metavar="MS",
+              help="The servos' Bus Watchdog: a servo that hears nothing from the loop for "
+                   "this long stops, and the loop enters its safe state (0-2540 ms, 20 ms "
+                   "steps; 0: off; default: the rig configuration's).")
 @click.option("--stale-target-ms", type=float, default=100.0, show_default=True,
               help="A target older than this holds the last safe goal.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of scripted targets.")
@@ -86,7 +90,7 @@ from rig.commands._options import finite_seconds
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_path,
             summary_path, db, session_id, patient, constraint_path, force_model, safe_state,
-            tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms,
+            tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, watchdog_ms,
             stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.loop import EnforceHooks, EnforceRequest, run_enforce
@@ -101,7 +105,8 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             session_id=session_id, patient=patient, constraint=constraint_path,
             force_model=force_model, safe_state=safe_state, tolerance_deg=tolerance_deg,
             max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2,
-            stale_servo_ms=stale_servo_ms, stale_target_ms=stale_target_ms, seed=seed,
+            stale_servo_ms=stale_servo_ms, watchdog_ms=watchdog_ms,
+            stale_target_ms=stale_target_ms, seed=seed,
             realtime=realtime, cpu=cpu, busy_wait=busy_wait, warm_up=not no_warm_up),
         echo=(lambda m: None) if quiet else click.echo,
         hooks=EnforceHooks(install_signals=True))

@@ -105,6 +105,7 @@ class EnforceRequest:
     max_velocity_deg_s: float = 120.0
     max_accel_deg_s2: float = 1200.0
     stale_servo_ms: float = 100.0
+    watchdog_ms: int | None = None
     stale_target_ms: float = 100.0
     seed: int = 0
     realtime: bool = False
@@ -122,6 +123,9 @@ class EnforceRequest:
                         ("--stale-target-ms", self.stale_target_ms)):
             if v is not None and not (math.isfinite(v) and v > 0):
                 raise RigConfigError(f"{name} {v}: expected a positive number")
+        if self.watchdog_ms is not None and not 0 <= self.watchdog_ms <= 2540:
+            raise RigConfigError(f"--watchdog-ms {self.watchdog_ms}: expected 0-2540 ms (the "
+                                 "Bus Watchdog's range; 0: off)")
         if self.rate_hz > 5000:
             raise RigConfigError(f"--rate {self.rate_hz}: at most 5000 Hz")
         if self.tolerance_deg <= 0.25:
@@ -144,6 +148,7 @@ class EnforceRequest:
         check_cpu(self.cpu)
         return LoopConfig(
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
+            watchdog_ms=self.watchdog_ms,
             busy_wait=bool(self.busy_wait), warm_up=bool(self.warm_up),
             supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
                                         max_velocity_deg_s=float(self.max_velocity_deg_s),

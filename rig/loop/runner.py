@@ -350,8 +350,7 @@ class EnforcementLoop:
             # armed again now, not only at setup: a servo that heard nothing since then for
             # longer than its watchdog (a first run compiling kernels, a slow start) has stopped
             # and refuses goals until its watchdog is cleared (0) and set again
-            _patiently(lambda: bus.arm_watchdog(0))
-            _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))
+            _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))  # clears a fired one first
         self._t_bus = clock()
         t0 = sched.start()
         targets.start(t0)

@@ -39,10 +39,11 @@ def files(tmp_path_factory):
 
 
 def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="sim-shoulder"):
-    # runs in real time: a generous servo-data watchdog, so that a loaded test machine stalling
-    # the loop for 50 ms does not end a run in the safe state (tests/rig/test_loop.py checks it)
+    # runs in real time: generous servo-data and Bus Watchdog limits, so that a loaded test
+    # machine stalling the loop for 100 ms does not end a run in the safe state
+    # (tests/rig/test_loop.py checks both on a manual clock)
     return ["enforce", "--rig", rig, "--model", str(files / model), "--targets", targets,
-            "--stale-servo-ms", "1000", *extra]
+            "--stale-servo-ms", "1000", "--watchdog-ms", "1000", *extra]
 
 
 @pytest.mark.parametrize(("case", "message"), [
@@ -51,6 +52,7 @@ def _argv(files, *extra, model="orig.onnx", targets="script:adversarial", rig="s
     ("imu-rig", "has no servo chain"),
     ("rate", "--rate 0.0: expected a positive number"),
     ("duration", "--duration -1.0"),
+    ("watchdog", "--watchdog-ms 3000: expected 0-2540 ms"),
     ("session-no-db", "--session needs --db"),
     ("wrong-model", "trained for constraint 'cone50', which differs from rig 'sim-shoulder'"),
     ("wrong-joint", "model is for joint 'elbow'"),
@@ -73,6 +75,7 @@ def test_user_mistakes_are_one_line(files, tmp_path, case, message, rig_cli):
         "imu-rig": _argv(files, rig="sim-imu"),
         "rate": _argv(files, "--rate", "0"),
         "duration": _argv(files, "--duration", "-1"),
+        "watchdog": _argv(files, "--watchdog-ms", "3000"),
         "session-no-db": _argv(files, "--session", "1"),
         "wrong-model": _argv(files, model="cone.onnx"),
         "wrong-joint": _argv(files, "--constraint", str(files / "cone.yaml"),
@@ -116,7 +119,7 @@ def test_a_run_writes_telemetry_summary_and_store(files, tmp_path, rig_cli):
     code, out, err = rig_cli(_argv(files, "--duration", "1", "--telemetry", str(tel),
                                   "--summary-json", str(summ), "--db", str(db),
                                   "--patient", "P-0042"))
-    assert code == 0, err
+    assert code == 0, (out, err)
     assert "enforcing 'original'" in out and "max violation" in out
     s = json.loads(summ.read_text())
     for key in ("rate_hz", "cycles", "p50_cycle_ms", "p99_cycle_ms", "overruns",
@@ -155,7 +158,7 @@ def test_csv_targets_and_force_model(files, tmp_path, rig_cli):
     summ = tmp_path / "s.json"
     code, out, err = rig_cli(_argv(files, "--summary-json", str(summ), "--force-model",
                                   model="cone.onnx", targets=str(tmp_path / "traj.csv")))
-    assert code == 0, err
+    assert code == 0, (out, err)
     assert "warning:" in out and "--force-model" in out
     s = json.loads(summ.read_text())
     assert s["constraint"] == "original"  # the rig's constraint is still the one enforced
@@ -235,7 +238,7 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
     summ = tmp_path / "s.json"
     code, _, err = rig_cli(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
                                 str(sid), "--summary-json", str(summ)))
-    assert code == 0, err
+    assert code == 0, (out, err)
     s = json.loads(summ.read_text())
     assert s["constraint_source"] == f"session {sid}"
     with open_store(db) as store:
@@ -260,7 +263,7 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
 
 def test_quiet_prints_only_the_summary_line(files, rig_cli):
     code, out, err = rig_cli(_argv(files, "--duration", "0.3", "--quiet"))
-    assert code == 0, err
+    assert code == 0, (out, err)
     lines = out.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("cycles ") and "max violation" in lines[0]
     assert "safe-state entries 0" in lines[0] and "end completed" in lines[0]

@@ -272,7 +272,7 @@ def test_a_limb_mirror_needs_a_rig_worn_on_that_limb(arm, files):
 # --------------------------------------------------------------------------- the CLI
 def _argv(files, *extra, model="arm.onnx", targets="script:adversarial", rig="sim-servo-arm"):
     return ["enforce", "--rig", rig, "--model", str(files / model), "--targets", targets,
-            "--stale-servo-ms", "1000", *extra]
+            "--stale-servo-ms", "1000", "--watchdog-ms", "1000", *extra]
 
 
 @pytest.mark.parametrize(("case", "message"), [

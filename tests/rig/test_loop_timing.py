@@ -260,6 +260,6 @@ def test_rig_enforce_serves_a_simulated_bus_from_its_own_process(tmp_path, rig_c
     assert code == 0, err
     result = run_enforce(EnforceRequest(rig="sim-shoulder", model=str(tmp_path / "m.onnx"),
                                         targets="script:slow", duration_s=0.3,
-                                        stale_servo_ms=1000.0))
+                                        stale_servo_ms=1000.0, watchdog_ms=1000))
     assert result.exit_status == 0 and result.summary["cycles"] > 0
     assert result.port.simulator is None and result.port.is_simulated and result.port.closed

@@ -55,7 +55,7 @@ def test_patient_files_are_owner_only(tmp_path, capsys, open_umask):
     # a short enforcement run with telemetry and summary
     _ok(["enforce", "--rig", "sim-shoulder", "--model", str(tmp_path / "p.onnx"),
          "--constraint", str(tmp_path / "p.yaml"), "--force-model", "--targets",
-         "script:hold", "--duration", "0.2", "--stale-servo-ms", "1000",
+         "script:hold", "--duration", "0.2", "--stale-servo-ms", "1000", "--watchdog-ms", "1000",
          "--telemetry", str(tmp_path / "t.csv"), "--summary-json", str(tmp_path / "s.json")],
         capsys)
     for name in ("p.yaml", "p.onnx", "b.yaml", "r.html", "t.csv", "s.json", "s.db"):
