@@ -712,20 +712,30 @@ class EnforcementLoop:
 
     def _joint_summary(self) -> dict:
         """Per-joint figures of a limb's run: tolerance, largest violation, interventions by
-        kind; with the rows kept (``Telemetry(keep=True)``), the tracking error of valid
-        targets (median / p95 of the angle between target and present, degrees, over the
-        cycles whose target posture the exact limb oracle finds valid in that joint)."""
+        kind; with the rows kept (``Telemetry(keep=True)``), the tracking of valid targets held
+        still: median / p95 of the angle between each joint's target and present orientation,
+        degrees, over the cycles whose target posture the exact limb oracle finds valid in
+        every joint and that posture has been held unchanged long enough for the goal to get
+        there (:func:`settled_rows`). A target that keeps moving is never counted: its error is
+        the rate limits' lag, not how well the limb is held."""
         out: dict = {}
         table = self.telemetry.table() if self.telemetry.keep else None
-        valid = None
+        settled = None
         if table is not None and self.telemetry.rows:
             tq = np.stack([np.stack([table[f"{n}_target_{c}"] for c in "wxyz"], axis=-1)
                            for n in self.joint_names], axis=1)
+            pq = np.stack([np.stack([table[f"{n}_present_{c}"] for c in "wxyz"], axis=-1)
+                           for n in self.joint_names], axis=1)
             ok = np.isfinite(tq).all(axis=(1, 2))
             ok &= (np.abs(np.linalg.norm(tq, axis=-1) - 1.0) < 1e-6).all(axis=1)
-            valid = np.zeros(tq.shape[:2], dtype=bool)
+            valid = np.zeros(len(tq), dtype=bool)
             if ok.any():
-                valid[ok] = self.oracle.is_valid(tq[ok])
+                valid[ok] = self.oracle.is_valid(tq[ok]).all(axis=1)
+            cfgs = [s.config for s in self.supervisor.joints]
+            settled = valid & settled_rows(
+                table["t_s"], tq, pq,
+                vmax_deg_s=np.array([c.max_velocity_deg_s for c in cfgs]),
+                amax_deg_s2=np.array([c.max_accel_deg_s2 for c in cfgs]))
         for j, name in enumerate(self.joint_names):
             cfg = self.supervisor.joints[j].config
             bits = dict(self.joint_intervention_bits[j])
@@ -736,17 +746,54 @@ class EnforcementLoop:
                 "interventions_by_kind": intervention_counts(bits),
                 "rate_limited": rate_limited_count(bits),
             }
-            if valid is not None:
-                t = np.stack([table[f"{name}_target_{c}"] for c in "wxyz"], axis=-1)
-                p = np.stack([table[f"{name}_present_{c}"] for c in "wxyz"], axis=-1)
-                dot = np.abs(np.einsum("ij,ij->i", t, p))
-                err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
-                e = err[valid[:, j] & np.isfinite(err)]
+            if settled is not None:
+                err = _angles_deg(tq[:, j], pq[:, j])
+                e = err[settled & np.isfinite(err)]
                 fig["tracked_cycles"] = len(e)
                 fig["tracking_p50_deg"] = None if not len(e) else float(np.median(e))
                 fig["tracking_p95_deg"] = None if not len(e) else float(np.percentile(e, 95))
             out[name] = fig
         return out
+
+
+#: Time a held target is given beyond what the rate limits need before its tracking counts, s.
+SETTLE_S = 0.3
+
+
+def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    dot = np.abs(np.einsum("...i,...i->...", a, b))
+    return np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
+
+
+def settled_rows(t_s: np.ndarray, target: np.ndarray, present: np.ndarray, *,
+                 vmax_deg_s: np.ndarray, amax_deg_s2: np.ndarray,
+                 settle_s: float = SETTLE_S) -> np.ndarray:
+    """The telemetry rows whose target posture has been held unchanged long enough to be
+    reached: since the row where it appeared, at least ``max_j (a_j / v_j + v_j / α_j)`` plus
+    ``settle_s`` seconds, ``a_j`` the angle from joint j's present orientation to its target on
+    that row and ``v_j``, ``α_j`` the joint's velocity and acceleration limits (a trapezoid's
+    time, bounded above).
+
+    Parameters
+    ----------
+    t_s : (N,) float
+    target, present : (N, J, 4) float
+    vmax_deg_s, amax_deg_s2 : (J,) float
+
+    Returns
+    -------
+    (N,) bool
+    """
+    n = len(t_s)
+    if n == 0:
+        return np.zeros(0, dtype=bool)
+    flat = np.nan_to_num(target.reshape(n, -1), nan=np.inf)
+    new = np.ones(n, dtype=bool)
+    new[1:] = (flat[1:] != flat[:-1]).any(axis=1)
+    start = np.maximum.accumulate(np.where(new, np.arange(n), 0))
+    jump = _angles_deg(target[start], present[start])  # (N, J)
+    need = np.nanmax(jump / vmax_deg_s + vmax_deg_s / amax_deg_s2, axis=1) + settle_s
+    return (t_s - t_s[start]) >= need
 
 
 def _posture_rows(target, n: int) -> list:

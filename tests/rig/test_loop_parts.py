@@ -23,6 +23,7 @@ from rig.loop import (
     bind_model,
     open_targets,
 )
+from rig.loop.runner import SETTLE_S, settled_rows
 from rig.loop.targets import load_trajectory
 from rig.sim.clock import ManualClock
 
@@ -323,3 +324,31 @@ def test_a_constraint_for_another_joint_is_refused_even_with_force_model():
     # with nothing else given, the model's own constraint is the one enforced: checked alike
     with pytest.raises(ModelBindingError, match="is for the knee"):
         bind_model(_FakeModel(knee), rig=_rig(constraint=None), force=True)
+
+
+def test_tracking_counts_a_held_target_once_the_rate_limits_let_it_arrive():
+    """A limb's summary tracks valid targets held still: a row counts once the target has been
+    held the trapezoid's time from where the joint stood plus the settle time, never while the
+    target moves."""
+    t = np.arange(400) * 0.005
+    target = np.zeros((400, 2, 4))
+    target[..., 0] = 1.0
+    # a 60° jump of joint 0 at row 100, held to the end; joint 1 still
+    jumped = Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(60.0))
+    target[100:, 0] = jumped
+    present = target.copy()
+    present[100:, 0] = [1.0, 0.0, 0.0, 0.0]  # where it stood when the target appeared
+    ok = settled_rows(t, target, present, vmax_deg_s=np.array([120.0, 120.0]),
+                      amax_deg_s2=np.array([1200.0, 1200.0]))
+    need = 60.0 / 120.0 + 120.0 / 1200.0 + SETTLE_S  # 0.9 s after row 100
+    first = int(np.argmax(ok[100:])) + 100
+    assert abs((t[first] - t[100]) - need) < 0.0051
+    assert not ok[100:first].any() and ok[first:].all()
+    # before the jump the posture was held from row 0 at no distance: counted after SETTLE_S
+    assert ok[int(np.ceil((SETTLE_S + 0.1) / 0.005)):100].all() and not ok[:50].any()
+    # a target that changes every row is never settled
+    moving = target.copy()
+    moving[:, 1, 0] = np.cos(np.linspace(0, 1, 400))
+    moving[:, 1, 3] = np.sin(np.linspace(0, 1, 400))
+    assert not settled_rows(t, moving, present, vmax_deg_s=np.array([120.0, 120.0]),
+                            amax_deg_s2=np.array([1200.0, 1200.0])).any()
