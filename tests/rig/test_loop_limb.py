@@ -236,7 +236,10 @@ def test_adversarial_limb_targets_never_commanded_beyond_tolerance(arm):
     assert (ored == bits).all()
     j = summary["joints"]
     assert set(j) == set(NAMES) and j["shoulder"]["max_violation_deg"] <= 1.0
-    assert j["elbow"]["tracked_cycles"] > 0
+    # tracking counts valid targets held still long enough to be reached (settled_rows, tested
+    # in test_loop_parts); this script's valid targets are not held that long
+    for n in NAMES:
+        assert (j[n]["tracking_p50_deg"] is None) == (j[n]["tracked_cycles"] == 0)
 
 
 def test_elbow_moves_and_the_shoulder_follows(arm):
