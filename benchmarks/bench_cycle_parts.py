@@ -20,7 +20,7 @@ import time
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from common import child_servos
+from common import additions_s, child_servos
 
 from rig.devices.dynamixel import DynamixelBus
 
@@ -46,11 +46,7 @@ def main() -> None:
     url = (f"sim://dynamixel?ids={','.join(map(str, ids))}&model=XM430-W350&return_delay_us=0"
            + ("&wire_time=off" if args.no_wire_time
               else f"&usb_latency_ms={args.usb_latency_ms:g}"))
-    t = time.perf_counter()
-    s = 0
-    for i in range(10**7):
-        s += i
-    add_s = time.perf_counter() - t
+    add_s = additions_s()
     print(f"{args.servos} servos, "
           f"{'no wire time' if args.no_wire_time else f'USB latency {args.usb_latency_ms:g} ms'}"
           f", {args.cycles} cycles at "

@@ -64,7 +64,7 @@ from pathlib import Path
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
-from common import child_env, child_servos, raw_paced_loop
+from common import additions_s, child_env, child_servos, raw_paced_loop
 
 from models import quaternion as Q
 from models.limb import dump_limb, load_limb
@@ -105,13 +105,6 @@ def _preset(model) -> str:
                or model.metadata.get("jointlimits.method", "?"))
 
 
-def additions_s() -> float:
-    """The machine's speed that day: a Python loop of 10^7 additions, seconds."""
-    t = time.perf_counter()
-    s = 0
-    for i in range(10 ** 7):
-        s += i
-    return time.perf_counter() - t
 
 
 RIG = "sim-shoulder"  # --rig

@@ -22,19 +22,12 @@ import time
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
+from common import additions_s
 
 from models import quaternion as Q
 from models.limb import Limb
 from models.limb_evaluation import held_out_postures, random_limb
 from models.oracle import ConstraintOracle
-
-
-def additions() -> float:
-    t = time.perf_counter()
-    s = 0
-    for i in range(10 ** 7):
-        s += i
-    return time.perf_counter() - t
 
 
 def per_call(fn, args) -> float:
@@ -76,7 +69,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=2000, help="calls per figure")
     args = ap.parse_args()
-    print(f"10^7 additions: {additions():.2f} s")
+    print(f"10^7 additions: {additions_s():.2f} s")
     rng = np.random.default_rng(3)
     for title, limb in (("hinge elbow", random_limb(20261128, "arm")),
                         ("forearm elbow", random_limb(20261128, "arm", forearm=True))):

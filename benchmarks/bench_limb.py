@@ -65,6 +65,7 @@ from pathlib import Path
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 import onnx
+from common import additions_s
 
 from models.evaluation import evaluate_model
 from models.limb_evaluation import (
@@ -304,7 +305,7 @@ def main() -> None:
         single(args.single, args.n)
         return
     names = args.methods.split(",")
-    print(f"a Python loop of 10^7 additions: {loop_seconds():.2f} s (how fast this machine "
+    print(f"a Python loop of 10^7 additions: {additions_s():.2f} s (how fast this machine "
           f"ran)")
     tmp = Path(tempfile.mkdtemp(prefix="bench-limb-"))
     families = [(f"{args.limbs} held-out limbs", held_out_limbs(args.limbs), 1000)
@@ -316,13 +317,6 @@ def main() -> None:
         score(title, limbs, seed, names, args.n, tmp, args.profile)
 
 
-def loop_seconds() -> float:
-    """How long a Python loop of 10⁷ additions takes (the machine's speed that day)."""
-    t0 = time.perf_counter()
-    s = 0
-    for i in range(10**7):
-        s += i
-    return time.perf_counter() - t0
 
 
 def score(title: str, limbs: dict, seed: int, names: list[str], n: int, tmp: Path,

@@ -28,11 +28,11 @@ from __future__ import annotations
 import argparse
 import csv
 import tempfile
-import time
 from pathlib import Path
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
+from common import additions_s
 
 from models import quaternion as Q
 from models.limb_model import export_limb_model
@@ -41,15 +41,6 @@ from models.oracle import ConstraintOracle
 from rig.loop import EnforceRequest, run_enforce
 from rig.loop.targets import ScriptedTargets, valid_targets
 from rig.sim.patients import anatomical_limb
-
-
-def additions_s() -> float:
-    """Seconds of a Python loop of 10⁷ additions (how fast the machine is today)."""
-    t = time.perf_counter()
-    x = 0
-    for _ in range(10_000_000):
-        x += 1
-    return time.perf_counter() - t
 
 
 def read_columns(path: Path) -> dict[str, np.ndarray]:
@@ -98,7 +89,8 @@ def main() -> None:
     d = np.degrees(oracle.signed_distance(Q.canonical(commanded)))
     beyond = (d > 1.0).any(axis=1)
     print(f"commanded postures beyond 1° in any joint: {int(beyond.sum())} of {len(t)} "
-          f"(max per joint: {', '.join(f'{n} {v:.3f}°' for n, v in zip(names, d.max(0)))})")
+          f"(max per joint: "
+          f"{', '.join(f'{n} {v:.3f}°' for n, v in zip(names, d.max(0), strict=True))})")
     src = ScriptedTargets(args.script, oracle, seed=args.seed)
     src.start(0.0)
     targets = np.array([src.latest(x)[1] for x in t])

@@ -23,6 +23,7 @@ import time
 
 import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
+from common import additions_s
 
 from models.limb_evaluation import held_out_postures, random_limb
 from models.onnx_io import load_model
@@ -84,12 +85,6 @@ def slerp(a: np.ndarray, b: np.ndarray, f: float) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def additions() -> float:
-    t = time.perf_counter()
-    s = 0
-    for i in range(10 ** 7):
-        s += i
-    return time.perf_counter() - t
 
 
 def main() -> None:
@@ -110,7 +105,7 @@ def main() -> None:
                    smooth=smooth)
     model = None if args.model is None else load_model(args.model, limb=True)
     kin = kinematics()
-    t10 = additions()
+    t10 = additions_s()
     with open_port(URL, baud=1_000_000) as port:
         sim = port.simulator
         for i, t in zip(kin.ids, kin.inverse(start, kin.zero_ticks), strict=True):

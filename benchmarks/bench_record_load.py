@@ -38,15 +38,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import common
-
-
-def loop_speed_s() -> float:
-    """Seconds for a plain Python loop of 10**7 additions (the day's machine speed)."""
-    t0 = time.perf_counter()
-    x = 0
-    for i in range(10**7):
-        x += i
-    return time.perf_counter() - t0
+from common import additions_s
 
 
 @contextlib.contextmanager
@@ -97,7 +89,7 @@ def main(argv=None) -> None:
     ap.add_argument("--nice", type=int, default=0, help="run rig record at this nice level")
     ap.add_argument("--json", type=Path, help="also write every run's outcome here")
     args = ap.parse_args(argv)
-    speed = loop_speed_s()
+    speed = additions_s()
     print(f"machine: {os.cpu_count()} CPUs, a Python loop of 10**7 additions {speed:.2f} s "
           f"(before the busy processes); {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(f"{args.runs} runs per rig beside {args.busy} busy processes (yes > /dev/null), "

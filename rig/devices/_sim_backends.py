@@ -59,7 +59,7 @@ import numpy as np
 
 from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
 from rig.devices.config import load_rig_config
-from rig.devices.kinematics import JointKinematics, LimbKinematics
+from rig.devices.kinematics import NEAREST_TOLERANCE_DEG, JointKinematics, LimbKinematics
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError, UnreachableError
 from rig.sim.clock import ManualClock, ScaledClock
@@ -74,9 +74,6 @@ BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side")
 
 _BLOCK_MS = 100  # the back-drive's ticks are computed this many milliseconds at a time
 _AHEAD_BLOCKS = 10  # ... and this many blocks ahead of the last one asked for
-
-PUSHED_TOLERANCE_DEG = 180.0
-"""The IK tolerance of a back-driven joint: any orientation, to the nearest its axes reach."""
 
 PROCESS_KEY = "process"
 """``process=on``: serve the servos from a child process (see the module docstring)."""
@@ -393,7 +390,7 @@ def _back_driven_limb(q: Any) -> tuple[Any, Any]:
     # pushed by the patient, a joint of fewer than three servos takes the nearest orientation
     # its axes reach (the closed-form decomposition; a two-servo wrist cannot twist): the IK's
     # tolerance is no limit here, the tick limits still are
-    kin = LimbKinematics([JointKinematics(j.servos, tolerance_deg=PUSHED_TOLERANCE_DEG)
+    kin = LimbKinematics([JointKinematics(j.servos, tolerance_deg=NEAREST_TOLERANCE_DEG)
                           for j in cfg.servos.limb_kinematics().joints], cfg.servos.joint_names)
     # a servo limb wears no IMU: the default straps (the motion does not depend on them)
     kinds = {j.name: j.kind for j in cfg.servos.joints}
