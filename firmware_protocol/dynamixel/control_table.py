@@ -94,6 +94,48 @@ _INDIRECT_DATA_SLOTS = 28
 
 
 @dataclass(frozen=True, slots=True)
+class ServoUnits:
+    """Physical units and motor constants of one model (e-Manual "Specifications" and the
+    unit column of each control-table item). Defaults: the XM430-W350.
+
+    Attributes
+    ----------
+    ticks_per_rev : float
+        Position resolution, ticks per revolution (X-series 4096; P-series 1,003,846 for
+        ±180° = ±501,923; XL-320 / AX 1024 ticks over 300°, i.e. 1228.8 per turn).
+    velocity_rpm : float
+        rev/min per unit of Goal/Present Velocity and Profile Velocity (X 0.229).
+    accel_rpm2 : float
+        rev/min² per unit of Profile Acceleration (X 214.577).
+    current_ma : float or None
+        mA per unit of Goal/Present Current; None: the model has no current sensing.
+    pwm_max : int
+        Goal/Present PWM at 100 % duty (X 885).
+    stall_torque_nm, stall_current_a, no_load_rpm : float
+        Motor constants at the nominal voltage (the torque model of the simulator).
+    """
+
+    ticks_per_rev: float = 4096.0
+    velocity_rpm: float = 0.229
+    accel_rpm2: float = 214.577
+    current_ma: float | None = 2.69
+    pwm_max: int = 885
+    stall_torque_nm: float = 4.1
+    stall_current_a: float = 2.3
+    no_load_rpm: float = 46.0
+
+
+@dataclass(frozen=True, slots=True)
+class IndirectBlock:
+    """One block of indirect addressing: ``count`` 2-byte Indirect Address slots from
+    ``address_start``; slot k maps data byte ``data_start + k`` onto the address it holds."""
+
+    address_start: int
+    data_start: int
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
 class ControlItem:
     """One item of a control table.
 
@@ -154,6 +196,22 @@ class ControlTable:
         Inclusive valid range of writable items that have one.
     source : pathlib.Path
         The .model file the layout was read from.
+    protocol : float
+        The protocol the model speaks when it leaves the factory (1.0 or 2.0).
+    eeprom_end : int
+        Addresses below this are EEPROM (writable only with torque off).
+    baud_rates : dict of int to int
+        Baud Rate item value -> bit/s.
+    operating_modes : frozenset of int
+        Valid values of the Operating Mode item (or the model's role for it).
+    read_only : frozenset of str
+        Items the e-Manual marks "R".
+    units : ServoUnits
+    roles : dict of str to str
+        X-series item name -> this model's item name, for the items whose name differs
+        (XL-320 "Control Mode" for "Operating Mode", AX "CW Angle Limit" for "Min Position
+        Limit", ...); :meth:`resolve` looks names up through it.
+    indirect : tuple of IndirectBlock
     """
 
     model: str
@@ -163,6 +221,14 @@ class ControlTable:
     defaults: dict[str, int] = field(default_factory=dict)
     ranges: dict[str, tuple[int, int]] = field(default_factory=dict)
     source: Path | None = None
+    protocol: float = 2.0
+    eeprom_end: int = EEPROM_END
+    baud_rates: dict[int, int] = field(default_factory=lambda: dict(BAUD_RATES))
+    operating_modes: frozenset[int] = OPERATING_MODES
+    read_only: frozenset[str] = READ_ONLY
+    units: ServoUnits = field(default_factory=ServoUnits)
+    roles: dict[str, str] = field(default_factory=dict)
+    indirect: tuple[IndirectBlock, ...] = ()
 
     def __post_init__(self) -> None:
         self._at: dict[int, ControlItem] = {}
@@ -184,6 +250,14 @@ class ControlTable:
 
     def __contains__(self, name: object) -> bool:
         return name in self.items
+
+    def resolve(self, name: str) -> ControlItem | None:
+        """The item playing the role of X-series item ``name`` in this model (its own name
+        first, then :attr:`roles`), or None when the model has none."""
+        item = self.items.get(name)
+        if item is None and name in self.roles:
+            item = self.items.get(self.roles[name])
+        return item
 
     def item_covering(self, address: int) -> ControlItem | None:
         """The item that contains byte ``address``, or None for a reserved gap."""
@@ -312,5 +386,9 @@ def load_control_table(model: str | int) -> ControlTable:
     defaults["Goal Current"] = defaults["Current Limit"]
     defaults = {k: v for k, v in defaults.items() if k in items}
     ranges = {k: v for k, v in _RANGES.items() if k in items}
+    indirect = ()
+    if "Indirect Address 1" in items and "Indirect Data 1" in items:
+        indirect = (IndirectBlock(items["Indirect Address 1"].address,
+                                  items["Indirect Data 1"].address, _INDIRECT_DATA_SLOTS),)
     return ControlTable(model=key, model_number=numbers[key], items=items, size=size,
-                        defaults=defaults, ranges=ranges, source=path)
+                        defaults=defaults, ranges=ranges, source=path, indirect=indirect)
