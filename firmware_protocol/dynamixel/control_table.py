@@ -339,13 +339,17 @@ def _parse_model_file(text: str) -> tuple[list[tuple[int, int, str]], set[str]]:
 
 
 @functools.cache
-def load_control_table(model: str | int) -> ControlTable:
+def load_control_table(model: str | int, protocol: float | None = None) -> ControlTable:
     """Load the control table of ``model`` from the SDK's data files.
 
     Parameters
     ----------
     model : str or int
         e-Manual name (``"XM430-W350"``), file stem (``"xc330_m288"``) or model number (1020).
+    protocol : float, optional
+        1.0: the model's Protocol 1.0 table (AX-12A, AX-18A, MX-28 on 1.0 firmware: typed from
+        the e-Manual in :mod:`firmware_protocol.dynamixel.tables_protocol1`; an X-series model
+        keeps its table, switched by its Protocol Type item). None or 2.0: the SDK's table.
 
     Returns
     -------
@@ -356,6 +360,11 @@ def load_control_table(model: str | int) -> ControlTable:
     ValueError
         Unknown model (the message lists the known ones).
     """
+    if protocol is not None and float(protocol) == 1.0:
+        from firmware_protocol.dynamixel import tables_protocol1
+        table = tables_protocol1.load(model)
+        if table is not None:
+            return table
     numbers = model_numbers()
     if isinstance(model, int):
         by_number = {v: k for k, v in numbers.items()}
