@@ -24,6 +24,7 @@ Layout of a ``.model`` file (tab-separated)::
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib.util
 import re
@@ -56,41 +57,6 @@ BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000
 OPERATING_MODES = frozenset({0, 1, 3, 4, 5, 16})
 """Operating Mode values: current, velocity, position, extended position, current-based
 position, PWM."""
-
-# e-Manual defaults common to the X series
-_DEFAULTS = {
-    "ID": 1, "Baud Rate": 1, "Return Delay Time": 250, "Drive Mode": 0, "Operating Mode": 3,
-    "Secondary(Shadow) ID": 255, "Protocol Type": 2, "Homing Offset": 0,
-    "Moving Threshold": 10, "Temperature Limit": 80, "Max Voltage Limit": 160,
-    "Min Voltage Limit": 95, "PWM Limit": 885, "Current Limit": 1193, "Velocity Limit": 200,
-    "Max Position Limit": 4095, "Min Position Limit": 0, "Shutdown": 52, "Torque Enable": 0,
-    "LED": 0, "Status Return Level": 2, "Velocity I Gain": 1920, "Velocity P Gain": 100,
-    "Position D Gain": 0, "Position I Gain": 0, "Position P Gain": 800, "Bus Watchdog": 0,
-    "Profile Acceleration": 0, "Profile Velocity": 0, "Present Input Voltage": 120,
-    "Present Temperature": 30, "Firmware Version": 48, "PWM Slope": 140,
-}
-_MODEL_DEFAULTS = {
-    "xl430_w250": {"Temperature Limit": 72, "Max Voltage Limit": 140, "Min Voltage Limit": 60,
-                   "Velocity Limit": 265, "Position P Gain": 640, "Velocity I Gain": 1000},
-    "xc330_m288": {"Temperature Limit": 70, "Max Voltage Limit": 70, "Min Voltage Limit": 35,
-                   "Current Limit": 1750, "Velocity Limit": 445, "Position P Gain": 400,
-                   "Present Input Voltage": 50},
-}
-
-# value ranges (inclusive) from the e-Manual; writing outside -> data range error
-_RANGES = {
-    "ID": (0, 252), "Baud Rate": (0, 7), "Return Delay Time": (0, 254), "Drive Mode": (0, 13),
-    "Secondary(Shadow) ID": (0, 255), "Protocol Type": (1, 2),
-    "Homing Offset": (-1_044_479, 1_044_479), "Moving Threshold": (0, 1023),
-    "Temperature Limit": (0, 100), "PWM Limit": (0, 885), "Velocity Limit": (0, 1023),
-    "Max Position Limit": (0, 4095), "Min Position Limit": (0, 4095), "Torque Enable": (0, 1),
-    "LED": (0, 1), "Status Return Level": (0, 2), "Profile Acceleration": (0, 32767),
-    "Profile Velocity": (0, 32767), "Goal Position": (-1_048_575, 1_048_575),
-    "Velocity I Gain": (0, 16383), "Velocity P Gain": (0, 16383), "Position D Gain": (0, 16383),
-    "Position I Gain": (0, 16383), "Position P Gain": (0, 16383), "Bus Watchdog": (0, 127),
-}
-
-_INDIRECT_DATA_SLOTS = 28
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,6 +178,14 @@ class ControlTable:
         (XL-320 "Control Mode" for "Operating Mode", AX "CW Angle Limit" for "Min Position
         Limit", ...); :meth:`resolve` looks names up through it.
     indirect : tuple of IndirectBlock
+        Indirect Address/Data blocks (the X430/540 and MX two of 28 slots, X330 one of 20 or
+        28, P-series / PRO(A) one of 128).
+    home_ticks : float
+        Shaft position at power-on the simulator starts a servo at, ticks (X series 2048, the
+        middle of 0..4095; P-series / PRO(A) 0, the middle of ±max; XL-320 512).
+    family : str
+        Which family table the defaults and ranges came from (``"x430"``, ``"x330"``,
+        ``"xl320"``, ``"mx2"``, ``"p"``, ``"pro_a"``).
     """
 
     model: str
@@ -229,6 +203,8 @@ class ControlTable:
     units: ServoUnits = field(default_factory=ServoUnits)
     roles: dict[str, str] = field(default_factory=dict)
     indirect: tuple[IndirectBlock, ...] = ()
+    home_ticks: float = 2048.0
+    family: str = "x430"
 
     def __post_init__(self) -> None:
         self._at: dict[int, ControlItem] = {}
@@ -272,12 +248,317 @@ class ControlTable:
     def default_memory(self) -> bytearray:
         """A fresh memory image holding the default value of every item."""
         mem = bytearray(self.size)
+        for block in self.indirect:  # e-Manual: slot k's address defaults to its own data byte
+            for k in range(block.count):
+                a = block.address_start + 2 * k
+                mem[a:a + 2] = (block.data_start + k).to_bytes(2, "little")
         for name, value in self.defaults.items():
             item = self.items.get(name)
             if item is not None:
                 mem[item.address:item.end] = item.encode(value)
         return mem
 
+
+# ---------------------------------------------------------------------------- family data
+# Defaults, ranges and units per family, typed from the e-Manual control-table pages named in
+# each family's comment; per-model values the pages give differently are in _MODEL_OVERRIDES.
+# Addresses and sizes stay in the SDK's .model files.
+
+_X_DEFAULTS = {
+    "ID": 1, "Baud Rate": 1, "Return Delay Time": 250, "Drive Mode": 0, "Operating Mode": 3,
+    "Secondary(Shadow) ID": 255, "Protocol Type": 2, "Homing Offset": 0,
+    "Moving Threshold": 10, "Temperature Limit": 80, "Max Voltage Limit": 160,
+    "Min Voltage Limit": 95, "PWM Limit": 885, "Current Limit": 1193, "Velocity Limit": 200,
+    "Max Position Limit": 4095, "Min Position Limit": 0, "Shutdown": 52, "Torque Enable": 0,
+    "LED": 0, "Status Return Level": 2, "Velocity I Gain": 1920, "Velocity P Gain": 100,
+    "Position D Gain": 0, "Position I Gain": 0, "Position P Gain": 800, "Bus Watchdog": 0,
+    "Profile Acceleration": 0, "Profile Velocity": 0, "Present Input Voltage": 120,
+    "Present Temperature": 30, "Firmware Version": 48, "PWM Slope": 140,
+    "Feedforward 1st Gain": 0, "Feedforward 2nd Gain": 0, "Acceleration Limit": 32767,
+    "Startup Configuration": 0,
+}
+"""X430/X540 family, from emanual.robotis.com/docs/en/dxl/x/xm430-w350/ (Control Table of
+EEPROM / RAM Area, "Default Value" column)."""
+
+_X_RANGES = {
+    "ID": (0, 252), "Baud Rate": (0, 7), "Return Delay Time": (0, 254), "Drive Mode": (0, 13),
+    "Secondary(Shadow) ID": (0, 255), "Protocol Type": (1, 2),
+    "Homing Offset": (-1_044_479, 1_044_479), "Moving Threshold": (0, 1023),
+    "Temperature Limit": (0, 100), "Max Voltage Limit": (95, 160),
+    "Min Voltage Limit": (95, 160), "PWM Limit": (0, 885), "Current Limit": (0, 1193),
+    "Velocity Limit": (0, 1023), "Acceleration Limit": (0, 32767),
+    "Max Position Limit": (0, 4095), "Min Position Limit": (0, 4095), "Torque Enable": (0, 1),
+    "LED": (0, 1), "Status Return Level": (0, 2), "Profile Acceleration": (0, 32767),
+    "Profile Velocity": (0, 32767), "Goal Position": (-1_048_575, 1_048_575),
+    "Velocity I Gain": (0, 16383), "Velocity P Gain": (0, 16383), "Position D Gain": (0, 16383),
+    "Position I Gain": (0, 16383), "Position P Gain": (0, 16383),
+    "Feedforward 1st Gain": (0, 16383), "Feedforward 2nd Gain": (0, 16383),
+    "Bus Watchdog": (0, 127), "PWM Slope": (1, 255), "Startup Configuration": (0, 3),
+}
+"""X-series ranges (xm430-w350 page "Range" column). Secondary ID: 0..252 names a secondary
+ID, 253..255 switch it off (255 the default), so the writable range is 0..255. Goal Position:
+the extended-position range; position mode clamps to the position limits. Goal PWM / Current /
+Velocity are bounded by their limit items (a Data Limit error), not by a fixed range."""
+
+_X330_DEFAULTS = {**_X_DEFAULTS, "Temperature Limit": 70, "Max Voltage Limit": 70,
+                  "Min Voltage Limit": 35, "Current Limit": 1750, "Velocity Limit": 445,
+                  "Velocity I Gain": 1600, "Velocity P Gain": 180, "Position P Gain": 400,
+                  "Shutdown": 53, "Present Input Voltage": 50, "Firmware Version": 46}
+"""XL330 / XC330 (5 V), from emanual.robotis.com/docs/en/dxl/x/xl330-m288/ (and xc330-m288).
+Firmware Version 46 goes with the SDK's pre-v52 layout (indirect data at 224); the
+``*_fw52`` tables report 52."""
+
+_X330_RANGES = {**_X_RANGES, "Baud Rate": (0, 6), "Protocol Type": (2, 22),
+                "Max Voltage Limit": (31, 70), "Min Voltage Limit": (31, 70),
+                "Current Limit": (0, 1750), "Velocity Limit": (0, 2047)}
+"""xl330-m288 page: baud up to 4 Mbit/s (value 6), Protocol Type 2 (DYNAMIXEL 2.0) to 22,
+Velocity Limit 0..2,047."""
+
+_MX2_DEFAULTS = {**_X_DEFAULTS, "Velocity Limit": 380, "Position P Gain": 850,
+                 "Firmware Version": 46}
+"""MX-28/64/106 on Protocol 2.0 firmware, from emanual.robotis.com/docs/en/dxl/mx/mx-28-2/
+(Velocity Limit 380, Acceleration Limit 32,767, Position P Gain 850)."""
+
+_P_DEFAULTS = {
+    "ID": 1, "Baud Rate": 1, "Return Delay Time": 250, "Drive Mode": 0, "Operating Mode": 3,
+    "Secondary ID": 255, "Protocol Type": 2, "Homing Offset": 0, "Moving Threshold": 20,
+    "Temperature Limit": 80, "Max Voltage Limit": 350, "Min Voltage Limit": 150,
+    "PWM Limit": 2009, "Current Limit": 22740, "Acceleration Limit": 3_992_644,
+    "Velocity Limit": 2900, "Max Position Limit": 501_433, "Min Position Limit": -501_433,
+    "External Port Mode 1": 3, "External Port Mode 2": 3, "External Port Mode 3": 3,
+    "External Port Mode 4": 3, "Startup Configuration": 0, "Shutdown": 52, "Torque Enable": 0,
+    "LED Red": 0, "LED Green": 0, "LED Blue": 0, "Status Return Level": 2,
+    "Velocity I Gain": 2209, "Velocity P Gain": 6153, "Position D Gain": 0,
+    "Position I Gain": 0, "Position P Gain": 314, "Feedforward 1st Gain": 0,
+    "Feedforward 2nd Gain": 0, "Bus Watchdog": 0, "Profile Acceleration": 0,
+    "Profile Velocity": 0, "Present Input Voltage": 240, "Present Temperature": 30,
+    "Firmware Version": 12,
+}
+"""P-series, from emanual.robotis.com/docs/en/dxl/p/ph54-200-s500-r/ (PH54-200-S500-R); other
+models override what their page gives differently (:data:`_MODEL_OVERRIDES`)."""
+
+_P_RANGES = {
+    "ID": (0, 252), "Baud Rate": (0, 9), "Return Delay Time": (0, 254), "Drive Mode": (0, 13),
+    "Secondary ID": (0, 255), "Protocol Type": (2, 10),
+    "Homing Offset": (-2_147_483_648, 2_147_483_647), "Moving Threshold": (0, 2900),
+    "Temperature Limit": (0, 100), "Max Voltage Limit": (150, 350),
+    "Min Voltage Limit": (150, 350), "PWM Limit": (0, 2009), "Current Limit": (0, 22740),
+    "Acceleration Limit": (0, 3_992_644), "Velocity Limit": (0, 2900),
+    "Max Position Limit": (-501_923, 501_923), "Min Position Limit": (-501_923, 501_923),
+    "External Port Mode 1": (0, 3), "External Port Mode 2": (0, 3),
+    "External Port Mode 3": (0, 3), "External Port Mode 4": (0, 3),
+    "Startup Configuration": (0, 3), "Shutdown": (0, 63), "Torque Enable": (0, 1),
+    "LED Red": (0, 255), "LED Green": (0, 255), "LED Blue": (0, 255),
+    "Status Return Level": (0, 2), "Velocity I Gain": (0, 32767),
+    "Velocity P Gain": (0, 32767), "Position D Gain": (0, 32767),
+    "Position I Gain": (0, 32767), "Position P Gain": (0, 32767),
+    "Feedforward 1st Gain": (0, 32767), "Feedforward 2nd Gain": (0, 32767),
+    "Bus Watchdog": (0, 127), "Profile Acceleration": (0, 3_992_644),
+    "Profile Velocity": (0, 2900), "Goal Position": (-501_923, 501_923),
+}
+"""ph54-200-s500-r page "Range" column. Protocol Type holds 2 (DYNAMIXEL 2.0) or 10 (Modbus);
+the range check is 2..10. Profile Acceleration / Velocity are bounded by the Acceleration /
+Velocity Limit, typed here as each model's maximum."""
+
+_PRO_A_DEFAULTS = {k: v for k, v in _P_DEFAULTS.items()
+                   if k not in ("Protocol Type", "Startup Configuration")}
+_PRO_A_DEFAULTS.update({"Acceleration Limit": 9982})
+"""PRO(A) (Advanced firmware of DYNAMIXEL PRO), from
+emanual.robotis.com/docs/en/dxl/pro/h54-200-s500-ra/: the P-series table without Protocol Type
+and Startup Configuration, Acceleration Limit 9,982 by default."""
+
+_PRO_A_RANGES = {**{k: v for k, v in _P_RANGES.items()
+                    if k not in ("Protocol Type", "Startup Configuration")},
+                 "Return Delay Time": (0, 255), "Shutdown": (0, 255)}
+
+_XL320_DEFAULTS = {
+    "ID": 1, "Baud Rate": 3, "Return Delay Time": 250, "CW Angle Limit": 0,
+    "CCW Angle Limit": 1023, "Control Mode": 2, "Temperature Limit": 65,
+    "Min Voltage Limit": 60, "Max Voltage Limit": 90, "Max Torque": 1023,
+    "Status Return Level": 2, "Shutdown": 3, "Torque Enable": 0, "LED": 0, "D Gain": 0,
+    "I Gain": 0, "P Gain": 32, "Moving Speed": 0, "Torque Limit": 1023, "Punch": 32,
+    "Present Voltage": 74, "Present Temperature": 30, "Firmware Version": 29,
+}
+"""XL-320 (Protocol 2.0), from emanual.robotis.com/docs/en/dxl/x/xl320/. Torque Limit starts as
+a copy of Max Torque (the e-Manual leaves its initial value "-")."""
+
+_XL320_RANGES = {
+    "ID": (0, 252), "Baud Rate": (0, 3), "Return Delay Time": (0, 254),
+    "CW Angle Limit": (0, 1023), "CCW Angle Limit": (0, 1023), "Control Mode": (1, 2),
+    "Temperature Limit": (0, 150), "Min Voltage Limit": (50, 250),
+    "Max Voltage Limit": (50, 250), "Max Torque": (0, 1023), "Status Return Level": (0, 2),
+    "Shutdown": (0, 7), "Torque Enable": (0, 1), "LED": (0, 7), "D Gain": (0, 254),
+    "I Gain": (0, 254), "P Gain": (0, 254), "Goal Position": (0, 1023),
+    "Moving Speed": (0, 2047), "Torque Limit": (0, 1023), "Punch": (0, 1023),
+}
+
+_XL320_ROLES = {
+    "Operating Mode": "Control Mode", "Min Position Limit": "CW Angle Limit",
+    "Max Position Limit": "CCW Angle Limit", "Present Velocity": "Present Speed",
+    "Present Input Voltage": "Present Voltage", "Goal Velocity": "Moving Speed",
+    "Profile Velocity": "Moving Speed", "PWM Limit": "Max Torque", "Goal PWM": "Torque Limit",
+    "Position P Gain": "P Gain", "Position I Gain": "I Gain", "Position D Gain": "D Gain",
+}
+"""X-series item -> XL-320 item. Moving Speed is the speed to the goal in joint mode (the role
+of Profile Velocity) and the signed-magnitude speed in wheel mode (Goal Velocity); Max Torque
+and Torque Limit bound the output as PWM Limit and Goal PWM do. No Velocity Limit, Current
+items, Homing Offset, Drive Mode, Secondary ID, Bus Watchdog or Profile Acceleration."""
+
+_P_ROLES = {"Secondary(Shadow) ID": "Secondary ID", "LED": "LED Red"}
+_X_ROLES = {"Secondary ID": "Secondary(Shadow) ID", "Bus Watchdog": "BUS Watchdog"}
+
+_X_READ_ONLY = READ_ONLY
+_P_READ_ONLY = READ_ONLY
+_XL320_READ_ONLY = frozenset({
+    "Model Number", "Firmware Version", "Present Position", "Present Speed", "Present Load",
+    "Present Voltage", "Present Temperature", "Registered Instruction", "Moving",
+    "Hardware Error Status",
+})
+"""Items marked "R" on the xl320 page."""
+
+_P_BAUD_RATES = {**BAUD_RATES, 8: 6_000_000, 9: 10_500_000}
+"""P-series / PRO(A) Baud Rate values (e-Manual p/ "Baud Rate(8)": up to 10.5 Mbit/s)."""
+
+_X330_BAUD_RATES = {k: v for k, v in BAUD_RATES.items() if k <= 6}
+_XL320_BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000}
+
+_NO_CURRENT_MODE = frozenset({1, 3, 4, 16})
+_P_MODES = frozenset({0, 1, 3, 4, 16})
+
+_EXTRA_ITEMS = {
+    "x330": ((60, 1, "Startup Configuration"), (147, 1, "Backup Ready")),
+}
+"""Items the e-Manual page lists and the SDK's .model file leaves out (xl330-m288 page:
+Startup Configuration 60, Backup Ready 147)."""
+
+
+@dataclass(frozen=True)
+class _Family:
+    defaults: dict
+    ranges: dict
+    modes: frozenset
+    baud_rates: dict
+    units: ServoUnits
+    eeprom_end: int = EEPROM_END
+    read_only: frozenset = READ_ONLY
+    roles: dict = field(default_factory=dict)
+    home_ticks: float = 2048.0
+    second_block: tuple[int, int] | None = None  # (address start, data start) of slots 29..56
+    slots: int | None = None  # first block's slot count when not (data - address) / 2
+
+
+_FAMILIES = {
+    "x430": _Family(_X_DEFAULTS, _X_RANGES, OPERATING_MODES, BAUD_RATES, ServoUnits(),
+                    roles=_X_ROLES, second_block=(578, 634)),
+    "x330": _Family(_X330_DEFAULTS, _X330_RANGES, OPERATING_MODES, _X330_BAUD_RATES,
+                    ServoUnits(current_ma=1.0, stall_torque_nm=0.52, stall_current_a=1.47,
+                               no_load_rpm=103.0), roles=_X_ROLES),
+    "mx2": _Family(_MX2_DEFAULTS, _X_RANGES, OPERATING_MODES, BAUD_RATES,
+                   ServoUnits(current_ma=3.36, stall_torque_nm=2.5, stall_current_a=1.4,
+                              no_load_rpm=55.0), roles=_X_ROLES, second_block=(578, 634)),
+    "p": _Family(_P_DEFAULTS, _P_RANGES, _P_MODES, _P_BAUD_RATES,
+                 ServoUnits(ticks_per_rev=1_003_846.0, velocity_rpm=0.01, accel_rpm2=1.0,
+                            current_ma=1.0, pwm_max=2009, stall_torque_nm=44.7,
+                            stall_current_a=9.3, no_load_rpm=33.1),
+                 eeprom_end=512, roles=_P_ROLES, home_ticks=0.0, slots=128),
+    "pro_a": _Family(_PRO_A_DEFAULTS, _PRO_A_RANGES, _P_MODES, _P_BAUD_RATES,
+                     ServoUnits(ticks_per_rev=1_003_846.0, velocity_rpm=0.01, accel_rpm2=1.0,
+                                current_ma=1.0, pwm_max=2009, stall_torque_nm=44.7,
+                                stall_current_a=9.3, no_load_rpm=33.1),
+                     eeprom_end=512, roles=_P_ROLES, home_ticks=0.0, slots=128),
+    "xl320": _Family(_XL320_DEFAULTS, _XL320_RANGES, frozenset({1, 2}), _XL320_BAUD_RATES,
+                     ServoUnits(ticks_per_rev=1228.8, velocity_rpm=0.111, accel_rpm2=0.0,
+                                current_ma=None, pwm_max=1023, stall_torque_nm=0.39,
+                                stall_current_a=1.1, no_load_rpm=114.0),
+                     eeprom_end=24, read_only=_XL320_READ_ONLY, roles=_XL320_ROLES,
+                     home_ticks=512.0),
+}
+"""Family tables. P-series / PRO(A) motor constants: their pages give continuous (not stall)
+torque and current; those stand in for the torque model's stall figures."""
+
+
+def _family_of(key: str) -> str:
+    base = key.removesuffix("_fw52")
+    if base == "xl320":
+        return "xl320"
+    if base.startswith(("xl330", "xc330")):
+        return "x330"
+    if base.startswith("mx_"):
+        return "mx2"
+    if base.startswith(("ph", "pm")):
+        return "p"
+    if base[:1] in ("h", "m") and base.endswith("_ra"):
+        return "pro_a"
+    return "x430"
+
+
+def _p(ticks_half: int, limit: int, velocity: int, current: int, accel: int,
+       accel_max: int, torque: float, amps: float, rpm: float, **more: int) -> dict:
+    """Per-model P-series / PRO(A) values: position range ±ticks_half (also the .model's
+    value_of_max_radian_position), default position limits ±limit, Velocity Limit, Current
+    Limit, Acceleration Limit default and maximum, continuous torque / current, no-load speed."""
+    return {"defaults": {"Max Position Limit": limit, "Min Position Limit": -limit,
+                         "Velocity Limit": velocity, "Current Limit": current,
+                         "Acceleration Limit": accel, **more},
+            "ranges": {"Max Position Limit": (-ticks_half, ticks_half),
+                       "Min Position Limit": (-ticks_half, ticks_half),
+                       "Goal Position": (-ticks_half, ticks_half),
+                       "Velocity Limit": (0, velocity), "Moving Threshold": (0, velocity),
+                       "Profile Velocity": (0, velocity), "Current Limit": (0, current),
+                       "Acceleration Limit": (0, accel_max),
+                       "Profile Acceleration": (0, accel_max)},
+            "units": {"ticks_per_rev": 2.0 * ticks_half, "stall_torque_nm": torque,
+                      "stall_current_a": amps, "no_load_rpm": rpm}}
+
+
+def _x(defaults: dict | None = None, ranges: dict | None = None, **units: float) -> dict:
+    return {"defaults": defaults or {}, "ranges": ranges or {}, "units": units}
+
+
+_NO_CURRENT = {"current_ma": None}
+_MODEL_OVERRIDES: dict[str, dict] = {
+    # X series -------------------------------------------------------------------------------
+    # xm430-w350 page: the family defaults; motor constants at 12 V (4.1 N·m, 2.3 A, 46 rpm)
+    "xm430_w350": _x(),
+    # xl430-w250 / 2xl430-w250 pages: 72 °C, 6.0..14.0 V, Velocity Limit 265, no current
+    # sensing (Present Load), 1.4 N·m / 1.3 A / 57 rpm at 11.1 V
+    "xl430_w250": _x({"Temperature Limit": 72, "Max Voltage Limit": 140,
+                      "Min Voltage Limit": 60, "Velocity Limit": 265, "Position P Gain": 640,
+                      "Velocity I Gain": 1000, "Present Input Voltage": 111,
+                      "Firmware Version": 46},
+                     {"Max Voltage Limit": (60, 140), "Min Voltage Limit": (60, 140)},
+                     stall_torque_nm=1.4, stall_current_a=1.3, no_load_rpm=57.0, **_NO_CURRENT),
+    # xl330-m288 page: the x330 family values; 0.52 N·m / 1.47 A / 103 rpm at 5 V
+    "xl330_m288": _x(),
+    # xl330-m077 page: 0.215 N·m / 1.47 A / 383 rpm at 5 V
+    "xl330_m077": _x(stall_torque_nm=0.215, stall_current_a=1.47, no_load_rpm=383.0),
+    # xc330-m288 page: 0.93 N·m / 1.80 A / 81 rpm at 5 V
+    "xc330_m288": _x(stall_torque_nm=0.93, stall_current_a=1.80, no_load_rpm=81.0),
+    # MX (2.0) -------------------------------------------------------------------------------
+    # mx-28-2 page: no current sensing (Present Load), no current mode; 2.5 N·m / 1.4 A /
+    # 55 rpm at 12 V
+    "mx_28": _x(**_NO_CURRENT),
+    # P-series -------------------------------------------------------------------------------
+    # ph54-200-s500-r page: the p family values
+    "ph54_200_s500": _p(501_923, 501_433, 2900, 22740, 3_992_644, 3_992_644, 44.7, 9.3, 33.1),
+    # ph42-020-s300-r page: ±303,750 (607,500 pulse/rev), limits ±303,454, 2,920 ×0.01 rpm,
+    # 4,500 mA, Acceleration Limit 10,765 (max 4,306,173), Shutdown 58; 5.1 N·m, 1.5 A, 32.7 rpm
+    "ph42_020_s300": _p(303_750, 303_454, 2920, 4500, 10_765, 4_306_173, 5.1, 1.5, 32.7,
+                        Shutdown=58),
+    # pm54-060-s250-r page: ±251,417 (502,834 pulse/rev), limits ±251,173, 2,830 ×0.01 rpm,
+    # 7,980 mA, Acceleration Limit 11,145 (max 4,457,932), Shutdown 58
+    "pm54_060_s250": _p(251_417, 251_173, 2830, 7980, 11_145, 4_457_932, 10.1, 3.0, 33.1,
+                        Shutdown=58),
+    # PRO(A) ---------------------------------------------------------------------------------
+    # h54-200-s500-ra page: the pro_a family values
+    "h54_200_s500_ra": _p(501_923, 501_433, 2900, 22740, 9982, 3_992_644, 44.7, 9.3, 33.1),
+    # m42-10-s260-ra page: ±263,187 (526,375 pulse/rev), limits ±262,931, 2,600 ×0.01 rpm,
+    # 1,461 mA, Acceleration Limit 10,867 (max 4,346,756); 1.7 N·m, 0.6 A, 28.0 rpm
+    "m42_10_s260_ra": _p(263_187, 262_931, 2600, 1461, 10_867, 4_346_756, 1.7, 0.6, 28.0),
+}
+"""Per-model values typed from each model's own e-Manual page (the comment names it). Models
+absent here take their family's values: see ``docs/sim.md`` for which pages are not yet
+checked model by model."""
 
 def _data_dir() -> Path:
     spec = importlib.util.find_spec("dynamixel_easy_sdk")
@@ -307,6 +588,10 @@ def model_numbers() -> dict[str, int]:
         parts = line.strip().split("\t")
         if len(parts) >= 2 and parts[0].isdigit():
             out[model_key(parts[1])] = int(parts[0])
+    for path in sorted(_data_dir().glob("*_fw52.model")):  # same servo, firmware v52 layout
+        base = path.stem.removesuffix("_fw52")
+        if base in out:
+            out[path.stem] = out[base]
     return out
 
 
@@ -367,7 +652,7 @@ def load_control_table(model: str | int, protocol: float | None = None) -> Contr
             return table
     numbers = model_numbers()
     if isinstance(model, int):
-        by_number = {v: k for k, v in numbers.items()}
+        by_number = {v: k for k, v in numbers.items() if not k.endswith("_fw52")}
         if model not in by_number:
             raise ValueError(f"unknown Dynamixel model number {model}")
         key = by_number[model]
@@ -376,28 +661,60 @@ def load_control_table(model: str | int, protocol: float | None = None) -> Contr
         if key not in numbers:
             raise ValueError(f"unknown Dynamixel model {model!r}; known models: "
                              f"{', '.join(available_models())}")
+    return _build(key, numbers[key])
+
+
+def _build(key: str, number: int) -> ControlTable:
     path = _data_dir() / f"{key}.model"
     rows, signed = _parse_model_file(path.read_text(encoding="utf-8"))
     if not rows:
         raise ValueError(f"{path}: no [control table] section")
+    name = _family_of(key)
+    fam = _FAMILIES[name]
+    known = {n for _, _, n in rows}
+    rows += [r for r in _EXTRA_ITEMS.get(name, ()) if r[2] not in known]
+    read_only = fam.read_only | {"Backup Ready", "Model Information"}
     items: dict[str, ControlItem] = {}
-    for address, size, name in rows:
-        items[name] = ControlItem(name=name, address=address, size=size,
-                                  writable=name not in READ_ONLY, eeprom=address < EEPROM_END,
-                                  signed=name in signed or name in SIGNED)
+    for address, size, item_name in rows:
+        items[item_name] = ControlItem(
+            name=item_name, address=address, size=size, writable=item_name not in read_only,
+            eeprom=address < fam.eeprom_end, signed=item_name in signed or item_name in SIGNED)
     size = max(a + s for a, s, _ in rows)
-    if "Indirect Data Read" in items:
-        size = max(size, items["Indirect Data Read"].address + _INDIRECT_DATA_SLOTS)
-    defaults = dict(_DEFAULTS)
-    defaults.update(_MODEL_DEFAULTS.get(key, {}))
-    defaults["Model Number"] = numbers[key]
-    defaults["Goal PWM"] = defaults["PWM Limit"]
-    defaults["Goal Current"] = defaults["Current Limit"]
-    defaults = {k: v for k, v in defaults.items() if k in items}
-    ranges = {k: v for k, v in _RANGES.items() if k in items}
-    indirect = ()
+    indirect: list[IndirectBlock] = []
     if "Indirect Address 1" in items and "Indirect Data 1" in items:
-        indirect = (IndirectBlock(items["Indirect Address 1"].address,
-                                  items["Indirect Data 1"].address, _INDIRECT_DATA_SLOTS),)
-    return ControlTable(model=key, model_number=numbers[key], items=items, size=size,
-                        defaults=defaults, ranges=ranges, source=path, indirect=indirect)
+        # the first block's slots run from Indirect Address 1 up to Indirect Data 1
+        start, data = items["Indirect Address 1"].address, items["Indirect Data 1"].address
+        indirect.append(IndirectBlock(start, data, fam.slots or (data - start) // 2))
+        if fam.second_block is not None:
+            start, data = fam.second_block
+            indirect.append(IndirectBlock(start, data, (data - start) // 2))
+    for block in indirect:
+        size = max(size, block.data_start + block.count)
+    override = _MODEL_OVERRIDES.get(key.removesuffix("_fw52"), {})
+    defaults = {**fam.defaults, **override.get("defaults", {})}
+    if key.endswith("_fw52"):
+        defaults["Firmware Version"] = 52
+    defaults["Model Number"] = number
+    if "PWM Limit" in defaults:
+        defaults["Goal PWM"] = defaults["PWM Limit"]
+    if "Current Limit" in defaults:
+        defaults["Goal Current"] = defaults["Current Limit"]
+    defaults = {k: v for k, v in defaults.items() if k in items}
+    ranges = {**fam.ranges, **override.get("ranges", {})}
+    if "Current Limit" in defaults:  # e-Manual: 0 ~ the model's own default
+        ranges["Current Limit"] = (0, defaults["Current Limit"])
+    ranges = {k: v for k, v in ranges.items() if k in items}
+    unit_values = override.get("units", {})
+    if "Present Current" not in items:  # no current sensing: Present Load instead
+        unit_values = {**unit_values, "current_ma": None}
+    units = dataclasses.replace(fam.units, **unit_values) if unit_values else fam.units
+    modes = fam.modes
+    if "Goal Current" not in items:  # no current control: no current / current-based modes
+        modes = modes - {0, 5}
+    return ControlTable(model=key, model_number=number, items=items, size=size,
+                        defaults=defaults, ranges=ranges, source=path, protocol=2.0,
+                        eeprom_end=fam.eeprom_end, baud_rates=dict(fam.baud_rates),
+                        operating_modes=frozenset(modes),
+                        read_only=frozenset(read_only & set(items)),
+                        units=units, roles=dict(fam.roles), indirect=tuple(indirect),
+                        home_ticks=fam.home_ticks, family=name)
