@@ -699,11 +699,14 @@ def _build(key: str, number: int) -> ControlTable:
         defaults["Goal PWM"] = defaults["PWM Limit"]
     if "Current Limit" in defaults:
         defaults["Goal Current"] = defaults["Current Limit"]
-    defaults = {k: v for k, v in defaults.items() if k in items}
+    def own(name: str) -> str:  # the family's spelling -> this model's (MX "BUS Watchdog")
+        return name if name in items else fam.roles.get(name, name)
+
+    defaults = {own(k): v for k, v in defaults.items() if own(k) in items}
     ranges = {**fam.ranges, **override.get("ranges", {})}
     if "Current Limit" in defaults:  # e-Manual: 0 ~ the model's own default
         ranges["Current Limit"] = (0, defaults["Current Limit"])
-    ranges = {k: v for k, v in ranges.items() if k in items}
+    ranges = {own(k): v for k, v in ranges.items() if own(k) in items}
     unit_values = override.get("units", {})
     if "Present Current" not in items:  # no current sensing: Present Load instead
         unit_values = {**unit_values, "current_ma": None}
