@@ -1,4 +1,4 @@
-"""Control tables of X-series servos, loaded from the data that the ROBOTIS SDK ships.
+"""Control tables of Protocol 2.0 servos, loaded from the data that the ROBOTIS SDK ships.
 
 Source of each fact
 -------------------
@@ -8,12 +8,12 @@ Source of each fact
 * **Model number**: ``dynamixel_easy_sdk/control_table/dynamixel.model`` (number -> file name).
 * **Signedness**: the ``[unit info]`` "Sign Type" column where present, plus the X-series
   e-Manual for the items it does not list (offsets, goals, present values, trajectories).
-* **EEPROM / RAM**: X-series e-Manual rule "addresses 0-63 are EEPROM, 64 and above RAM".
-* **Read-only items, default values, value ranges**: the X-series e-Manual control-table pages
-  (XM430-W350, XL430-W250, XC330-M288), recalled and typed below; they are not in the .model
-  files. Defaults that differ between models are in :data:`_MODEL_DEFAULTS`.
-* **Table end**: last item of the .model file; the indirect data block that follows "Indirect
-  Data Read" (28 one-byte slots on the X430 family) is counted as plain RAM.
+* **EEPROM end, read-only items, defaults, ranges, operating modes, baud rates, units,
+  indirect blocks, power-on position**: one family table each (X430/540, X330, MX 2.0,
+  P-series, PRO(A), XL-320), typed from the family's e-Manual reference page, plus per-model
+  overrides typed from that model's own page (:data:`_MODEL_OVERRIDES`, each with its page).
+  Two X330 items the .model files omit (Startup Configuration, Backup Ready) are added.
+* **Table end**: the last item of the .model file or the end of the last indirect data block.
 
 Layout of a ``.model`` file (tab-separated)::
 
