@@ -524,8 +524,7 @@ _MODEL_OVERRIDES: dict[str, dict] = {
     # sensing (Present Load), 1.4 N·m / 1.3 A / 57 rpm at 11.1 V
     "xl430_w250": _x({"Temperature Limit": 72, "Max Voltage Limit": 140,
                       "Min Voltage Limit": 60, "Velocity Limit": 265, "Position P Gain": 640,
-                      "Velocity I Gain": 1000, "Present Input Voltage": 111,
-                      "Firmware Version": 46},
+                      "Velocity I Gain": 1000, "Present Input Voltage": 111},
                      {"Max Voltage Limit": (60, 140), "Min Voltage Limit": (60, 140)},
                      stall_torque_nm=1.4, stall_current_a=1.3, no_load_rpm=57.0, **_NO_CURRENT),
     # xl330-m288 page: the x330 family values; 0.52 N·m / 1.47 A / 103 rpm at 5 V
