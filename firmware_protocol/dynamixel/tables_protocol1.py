@@ -157,8 +157,8 @@ MODELS: dict[int, dict] = {
                               current_ma=4.5, pwm_max=1023, stall_torque_nm=6.0,
                               stall_current_a=4.1, no_load_rpm=63.0)},
     320: {"key": "mx_106",
-          "rows": _HEAD + [(10, 1, "Drive Mode", "RW", 0, (0, 3))] + _MX_EEPROM + _MX_RAM
-          + _MX_CURRENT, "mx": True,
+          "rows": [*_HEAD, (10, 1, "Drive Mode", "RW", 0, (0, 3)), *_MX_EEPROM, *_MX_RAM,
+                   *_MX_CURRENT], "mx": True,
           "defaults": {"Baud Rate": 34, "CCW Angle Limit": 4095, "Temperature Limit": 80,
                        "Max Voltage Limit": 160},
           "units": ServoUnits(ticks_per_rev=4096.0, velocity_rpm=0.114, accel_rpm2=85.83,

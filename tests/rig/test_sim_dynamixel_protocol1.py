@@ -68,7 +68,7 @@ def test_each_servo_answers_only_its_protocol(mixed):
 
 
 def test_read_write_angle_limit_and_range_errors(mixed, clock):
-    bus, port = mixed
+    _, port = mixed
     ph = PacketHandler(1.0)
     assert ph.read2ByteTxRx(port, 1, PRESENT) == (512, COMM_SUCCESS, 0)
     assert ph.read2ByteTxRx(port, 2, PRESENT) == (2048, COMM_SUCCESS, 0)
@@ -101,7 +101,7 @@ def test_ax_wheel_mode_sign_magnitude(mixed, clock):
 
 
 def test_sync_write_bulk_read_and_the_ax_that_ignores_it(mixed):
-    bus, port = mixed
+    _, port = mixed
     ph = PacketHandler(1.0)
     for i in (1, 2, 3):
         assert ph.write1ByteTxRx(port, i, TORQUE if i < 3 else 64, 1) == (COMM_SUCCESS, 0)
@@ -121,7 +121,7 @@ def test_sync_write_bulk_read_and_the_ax_that_ignores_it(mixed):
 
 
 def test_status_return_level_reg_write_action_broadcast(mixed):
-    bus, port = mixed
+    _, port = mixed
     ph = PacketHandler(1.0)
     assert ph.write1ByteTxRx(port, 1, SRL, 1) == (COMM_SUCCESS, 0)  # acknowledged at level 2
     assert ph.write1ByteTxRx(port, 1, 25, 1)[0] == COMM_RX_TIMEOUT  # level 1: no write status
@@ -171,7 +171,7 @@ def test_bad_checksum_is_ignored(mixed):
 def test_url_keys_and_errors():
     with start_servo_bus([1], "AX-12A", baud_rate=57600, model_wire_time=False) as bus:
         assert bus.servo(1).baud_rate == 57142 and bus.servo(1).get("Baud Rate") == 34
-    with pytest.raises(RigConfigError, match="only Protocol 1.0"):
+    with pytest.raises(RigConfigError, match=r"only Protocol 1\.0"):
         bus_from_url("sim://dynamixel?model=AX-12A&protocol=2")
     with pytest.raises(RigConfigError, match="ID:MODEL"):
         bus_from_url("sim://dynamixel?ids=1:AX-12A:3")

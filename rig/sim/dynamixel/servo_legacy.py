@@ -270,8 +270,9 @@ class LegacyServo(SimServo):
         rpm = self.vel / self._tick_s
         self._set("Present Speed", _sign_magnitude(rpm / self.table.units.velocity_rpm))
         self._set("Present Load", 0)
-        self._set("Moving", int(abs(self.vel) > 0 or abs(self.target - self.pos) >= 1.0
-                                and self.torque and self.mode() == "joint"))
+        self._set("Moving", int(abs(self.vel) > 0 or (abs(self.target - self.pos) >= 1.0
+                                                      and self.torque
+                                                      and self.mode() == "joint")))
         self._set("Present Temperature", round(self.temperature))
         self._set("Registered", int(self.registered is not None))
         self._set("Registered Instruction", int(self.registered is not None))
