@@ -650,6 +650,13 @@ def load_control_table(model: str | int, protocol: float | None = None) -> Contr
         if table is not None:
             return table
     numbers = model_numbers()
+    if isinstance(model, int) and model not in numbers.values() or \
+            isinstance(model, str) and model_key(model) not in numbers:
+        # a model the SDK has no table for may be a Protocol 1.0 one (AX-12A, model 29, ...)
+        from firmware_protocol.dynamixel import tables_protocol1
+        table = tables_protocol1.load(model)
+        if table is not None:
+            return table
     if isinstance(model, int):
         by_number = {v: k for k, v in numbers.items() if not k.endswith("_fw52")}
         if model not in by_number:

@@ -1,8 +1,12 @@
 """``rig scan PORT [--baud B]``: which Dynamixel servos answer on a bus, at which baud rate.
 
 Per-ID PINGs through ``dynamixel_sdk`` (:func:`rig.devices.dynamixel.find_servos`); every X-series
-rate the SDK can set when no ``--baud`` is given, fastest first. The model name comes from the
-SDK's control-table files. Nothing answering is an error (exit 2), with the rates tried.
+rate the SDK can set when no ``--baud`` is given, fastest first. At each rate Protocol 2.0
+PINGs, then Protocol 1.0 PINGs of the IDs still silent (AX, MX on 1.0 firmware; ``--protocol``:
+by default both for at most 24 IDs, 2.0 alone for more — 1.0 has no broadcast PING). The model
+name comes from the SDK's control-table files (1.0 models: the e-Manual's, typed in
+:mod:`firmware_protocol.dynamixel.tables_protocol1`). Nothing answering is an error (exit 2),
+with the rates tried.
 """
 
 from __future__ import annotations
@@ -41,7 +45,10 @@ def parse_id_ranges(text: str) -> list[int]:
 @click.option("--latency-ms", type=float, default=None,
               help="Latency in the SDK's timeout formula (default: the adapter's USB latency "
                    "timer; 50 ms on a simulator).")
-def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None) -> None:
+@click.option("--protocol", "protocol", type=click.Choice(["1", "2", "both"]), default=None,
+              help="Protocols to ping in (default: both for at most 24 IDs, else 2).")
+def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None,
+         protocol: str | None) -> None:
     """List the servos answering on PORT (/dev/ttyUSB0, COM3 or sim://dynamixel?...)."""
     from rig.devices.dynamixel import find_servos
 
@@ -50,9 +57,12 @@ def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None) -
     def show(info) -> None:
         nonlocal header
         if not header:
-            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}")
+            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}  protocol")
             header = True
-        click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}")
+        click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}  "
+                   f"{info.protocol:.1f}")
 
+    protocols = {None: None, "1": (1.0,), "2": (2.0,), "both": (2.0, 1.0)}[protocol]
     find_servos(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms,
-                on_found=show, on_note=lambda tip: click.echo(f"rig: note: {tip}", err=True))
+                on_found=show, on_note=lambda tip: click.echo(f"rig: note: {tip}", err=True),
+                protocols=protocols)

@@ -101,13 +101,20 @@ _ITEMS = ("Return Delay Time", "Operating Mode", "Max Position Limit", "Min Posi
 
 @dataclass(frozen=True)
 class ServoInfo:
-    """What a PING found: ID, model number and name, firmware version, baud rate."""
+    """What a PING found: ID, model number and name, firmware version, baud rate, and the
+    protocol it answered (2.0, or 1.0: AX, MX on 1.0 firmware, X series on Protocol Type 1)."""
 
     id: int
     model_number: int
     model: str
     firmware: int
     baud: int
+    protocol: float = 2.0
+
+    def __repr__(self) -> str:  # the protocol shown only when it is not the default 2.0
+        extra = f", protocol={self.protocol}" if self.protocol != 2.0 else ""
+        return (f"ServoInfo(id={self.id}, model_number={self.model_number}, "
+                f"model={self.model!r}, firmware={self.firmware}, baud={self.baud}{extra})")
 
 
 class _SdkPort(sdk.PortHandler):
@@ -166,6 +173,38 @@ def _model_name(model_number: int) -> str:
         return load_control_table(model_number).display_name
     except (ValueError, FileNotFoundError):
         return f"model {model_number}"
+
+
+def _model_name1(model_number: int) -> str:
+    try:
+        return load_control_table(model_number, protocol=1.0).display_name
+    except (ValueError, FileNotFoundError):
+        return f"model {model_number}"
+
+
+def _ping1(port: _SdkPort, ph1, dxl_id: int) -> tuple[int, int, int] | None:
+    """Protocol 1.0 PING (no model in its status): then READ of Model Number (0, 2 bytes) and
+    of the model's Firmware Version; (model number, firmware, error byte) or None."""
+    tx = [0] * 6  # FF FF ID LEN INST CHK (the SDK's PKT_* constants are 2.0's offsets)
+    tx[2], tx[3], tx[4] = dxl_id, 2, sdk.INST_PING
+    port.is_using = False
+    _, result, error = ph1.txRxPacket(port, tx)
+    if result != sdk.COMM_SUCCESS:
+        return None
+    port.is_using = False
+    model, result, _ = ph1.read2ByteTxRx(port, dxl_id, 0)
+    if result != sdk.COMM_SUCCESS:
+        return None
+    firmware = 0
+    try:
+        item = load_control_table(model, protocol=1.0).resolve("Firmware Version")
+    except (ValueError, FileNotFoundError):
+        item = None
+    if item is not None:
+        port.is_using = False
+        fw, result, _ = ph1.read1ByteTxRx(port, dxl_id, item.address)
+        firmware = fw if result == sdk.COMM_SUCCESS else 0
+    return model, firmware, error
 
 
 def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPort, object]:
@@ -625,8 +664,8 @@ BROADCAST_SCAN_ABOVE = 24
 
 def scan(port: str | Port, bauds: Iterable[int] | None = None,
          ids: Iterable[int] = range(253), *, latency_ms: float | None = None,
-         on_found=None) -> list[ServoInfo]:
-    """PING every ID at every baud rate: what answers.
+         on_found=None, protocols: Sequence[float] | None = None) -> list[ServoInfo]:
+    """PING every ID at every baud rate, in each protocol: what answers.
 
     A few IDs: per-ID pings with the SDK's timeout formula at ``latency_ms`` (default: the
     adapter's detected latency timer, 50 ms on a simulator). More than
@@ -642,6 +681,10 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
     ids : iterable of int
     on_found : callable, optional
         Called with each :class:`ServoInfo` as it is found.
+    protocols : sequence of float, optional
+        At each rate, 2.0 PINGs then 1.0 PINGs of the IDs still silent (one bus carries
+        both). Protocol 1.0 has no broadcast PING, so each silent ID costs a timeout: default
+        ``(2.0, 1.0)`` for at most :data:`BROADCAST_SCAN_ABOVE` IDs, ``(2.0,)`` above.
 
     Raises
     ------
@@ -650,6 +693,8 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
     """
     bauds = list(bauds) if bauds is not None else sorted(SCAN_BAUDS, reverse=True)
     ids = list(ids)
+    if protocols is None:
+        protocols = (2.0, 1.0) if len(ids) <= BROADCAST_SCAN_ABOVE else (2.0,)
     own = not isinstance(port, Port)
     p = open_port(port, baud=bauds[0]) if own else port
     try:
@@ -664,7 +709,9 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
                     raise RigConfigError(f"dynamixel_sdk cannot set {baud} bit/s", port=str(p))
                 seen = {s.id for s in found}
                 todo = [i for i in ids if i not in seen]
-                if len(todo) > BROADCAST_SCAN_ABOVE:
+                if 2.0 not in protocols:
+                    todo = []
+                elif len(todo) > BROADCAST_SCAN_ABOVE:
                     # one broadcast PING (~0.8 s at 1 Mbit/s, whatever answers) instead of a
                     # timeout per silent ID (253 x ~34 ms with the SDK's default latency)
                     try:
@@ -684,6 +731,21 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
                         found.append(info)
                         if on_found is not None:
                             on_found(info)
+                if 1.0 in protocols:
+                    seen = {s.id for s in found}
+                    ph1 = sdk.PacketHandler(1.0)
+                    for dxl_id in (i for i in ids if i not in seen and i <= 253):
+                        try:
+                            got = _ping1(sdk_port, ph1, dxl_id)
+                        except _CONNECTION_ERRORS as err:
+                            raise RigConnectionError(f"the adapter stopped working ({err})",
+                                                     port=str(p)) from err
+                        if got is not None:
+                            info = ServoInfo(dxl_id, got[0], _model_name1(got[0]), got[1],
+                                             baud, 1.0)
+                            found.append(info)
+                            if on_found is not None:
+                                on_found(info)
         finally:
             if sdk_port is not None and sdk_port.is_open:
                 try:
@@ -698,10 +760,11 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
 
 def find_servos(port: str, *, baud: int | None = None, ids: Sequence[int] = range(253),
                 latency_ms: float | None = None, on_found=None,
-                on_note=None) -> list[ServoInfo]:
+                on_note=None, protocols: Sequence[float] | None = None) -> list[ServoInfo]:
     """``rig scan`` as a library: :func:`scan` of ``port`` at ``baud`` (default: every rate of
     :data:`SCAN_BAUDS`, fastest first), with the adapter's latency advice passed to
-    ``on_note`` (hardware only) and an error when nothing answers.
+    ``on_note`` (hardware only) and an error when nothing answers; ``protocols`` as
+    :func:`scan`.
 
     Raises
     ------
@@ -720,7 +783,8 @@ def find_servos(port: str, *, baud: int | None = None, ids: Sequence[int] = rang
             tip = latency_advice(p.path)
             if tip:
                 on_note(tip)
-        found = scan(p, bauds, ids, latency_ms=latency_ms, on_found=on_found)
+        found = scan(p, bauds, ids, latency_ms=latency_ms, on_found=on_found,
+                     protocols=protocols)
     if not found:
         raise RigConnectionError(f"no servo answered (IDs {ids[0]}..{ids[-1]} at "
                                  f"{', '.join(map(str, bauds))} bit/s); check power, wiring "

@@ -7,10 +7,22 @@ import pytest
 
 def test_scan_finds_servos_at_their_baud_rate(rig_cli):
     code, out, err = rig_cli(["scan", "sim://dynamixel?ids=1,3&baud=57600&model=XL430-W250",
-                              "--ids", "0-3", "--latency-ms", "50"])
+                              "--ids", "0-3", "--latency-ms", "50", "--protocol", "2"])
     assert code == 0, err
     rows = [line.split() for line in out.splitlines()[1:]]
-    assert rows == [["1", "XL430-W250", "48", "57600"], ["3", "XL430-W250", "48", "57600"]]
+    assert rows == [["1", "XL430-W250", "48", "57600", "2.0"],
+                    ["3", "XL430-W250", "48", "57600", "2.0"]]
+
+
+def test_scan_finds_both_protocols_on_one_bus(rig_cli):
+    code, out, err = rig_cli(["scan", "sim://dynamixel?ids=1:AX-12A,2:MX-28:1,3:XM430-W350:1,"
+                              "4:XM430-W350&wire_time=off", "--baud", "1000000", "--ids", "1-4",
+                              "--latency-ms", "50"])
+    assert code == 0, err
+    rows = sorted(line.split() for line in out.splitlines()[1:])
+    assert [(r[0], r[1], r[-1]) for r in rows] == [
+        ("1", "AX-12A", "1.0"), ("2", "MX-28", "1.0"), ("3", "XM430-W350", "1.0"),
+        ("4", "XM430-W350", "2.0")]
 
 
 def test_scan_one_baud(rig_cli):

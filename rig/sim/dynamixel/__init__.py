@@ -18,10 +18,14 @@ bus
 faults
     :class:`FaultInjection` — dropped, corrupted, truncated, late replies; corrupted
     instructions; random fault rates; hardware errors; unplugged servos, bus and adapter.
+servo_legacy
+    :class:`LegacyServo` — AX / MX-on-1.0 / XL-320 style tables (angle limits, Moving Speed).
+protocol1
+    Protocol 1.0 on the bus: which servo speaks what, the 1.0 instructions.
 url
     :func:`bus_from_url` — the ``sim://dynamixel`` port string.
 
-Not modelled: Protocol 1.0, indirect address mapping (the indirect block is plain RAM),
+Not modelled: indirect address mapping (the indirect block is plain RAM),
 Secondary ID, reverse direction (Drive Mode bit 0), Homing Offset, current and PWM control
 (the shaft stays put), the control-table backup instruction, the USB adapter's latency timer.
 """

@@ -37,14 +37,16 @@ from firmware_protocol.dynamixel.packets import (
     ErrorCode,
     Instruction,
     InstructionPacket,
-    StreamDecoder,
     encode_status,
 )
+from firmware_protocol.dynamixel.protocol1 import InstructionPacket1, MixedStreamDecoder
 from firmware_protocol.errors import ChecksumError, ProtocolError
 from rig.errors import RigConfigError
 from rig.sim.clock import Clock
+from rig.sim.dynamixel import protocol1 as proto1
 from rig.sim.dynamixel.faults import FaultInjection, Faults
 from rig.sim.dynamixel.servo import TICKS_PER_REV, SimServo
+from rig.sim.dynamixel.servo_legacy import LegacyServo, is_legacy_table
 from rig.sim.pty_server import PtyServer
 
 __all__ = ["PACKET_TIMEOUT", "DynamixelBus", "latency_timer_tick", "start_servo_bus"]
@@ -120,7 +122,7 @@ class DynamixelBus(FaultInjection, PtyServer):
         self.usb_latency_s = float(usb_latency_s)
         self._usb_epoch = time.monotonic()  # the adapter's free-running latency timer
         self._faults = Faults()
-        self._decoder = StreamDecoder()
+        self._decoder = MixedStreamDecoder()  # Protocol 2.0 and 1.0 share the wire
         self._last_rx = 0.0
         self._outbox: list[tuple[float, bytes]] = []
         self.replies_sent = 0
@@ -217,28 +219,35 @@ class DynamixelBus(FaultInjection, PtyServer):
         while True:
             try:
                 packet = self._decoder.next_packet()
-            except ChecksumError:
+            except ChecksumError:  # 1.0 checksum too (docs/sim.md)
                 self.crc_errors += 1  # a servo cannot trust any field: it stays silent
                 continue
             except ProtocolError:
                 continue  # framing: resynchronise on the next header
             if packet is None:
                 return
-            if isinstance(packet, InstructionPacket):
+            if isinstance(packet, InstructionPacket | InstructionPacket1):
                 if self._faults.spoil_instruction():
                     self.crc_errors += 1
                     continue
                 self._outbox.clear()  # a new instruction pre-empts unsent replies
                 self.instructions_seen += 1
-                self._dispatch(packet, t_rx)
+                if isinstance(packet, InstructionPacket1):
+                    proto1.dispatch(self, packet, t_rx)
+                else:
+                    self._dispatch(packet, t_rx)
 
     # ------------------------------------------------------------------ instruction handling
-    def _listeners(self) -> list[SimServo]:
+    def _listeners(self, protocol: float = 2.0) -> list[SimServo]:
+        """Servos that hear the host and speak ``protocol`` (:func:`proto1.speaks`). A UART
+        hears a host whose rate is within ±3 % of its own (a 1.0 servo at 57,142 bit/s, a host
+        at 57,600)."""
         if self._faults.bus_unplugged:
             return []
         client = self.line_speed
         return [s for s in self.servos.values()
-                if s.plugged and (client is None or client == s.baud_rate)]
+                if s.plugged and proto1.speaks(s) == protocol
+                and (client is None or abs(client - s.baud_rate) <= 0.03 * s.baud_rate)]
 
     def _schedule(self, servo: SimServo, packet: bytes, start_after: float) -> float:
         """Queue ``packet`` to be sent; returns the time its last byte is on the wire."""
@@ -398,8 +407,9 @@ class DynamixelBus(FaultInjection, PtyServer):
 
 
 
-def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
-                    model: str = "XM430-W350", *, baud_rate: int = 1_000_000,
+def start_servo_bus(ids: Iterable[int] | Sequence[tuple] = (1,),
+                    model: str = "XM430-W350", *, protocol: float | None = None,
+                    baud_rate: int = 1_000_000,
                     return_delay_us: int | None = None, noise_ticks: float = 0.0,
                     seed: int = 0, positions: Sequence[float] | None = None,
                     clock: Clock = time.monotonic,
@@ -409,10 +419,15 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
 
     Parameters
     ----------
-    ids : iterable of int, or of (id, model)
-        Servo IDs (all of ``model``), or ``(id, model)`` pairs for a mixed bus.
+    ids : iterable of int, or of (id, model) or (id, model, protocol)
+        Servo IDs (all of ``model``), or ``(id, model[, protocol])`` for a mixed bus.
     model : str
-        e-Manual model name, e.g. ``"XM430-W350"``, ``"XL430-W250"``, ``"XC330-M288"``.
+        e-Manual model name, e.g. ``"XM430-W350"``, ``"XL430-W250"``, ``"XC330-M288"``,
+        ``"AX-12A"`` (a Protocol 1.0 servo, :class:`LegacyServo`).
+    protocol : float, optional
+        1.0: models with a Protocol 1.0 table of their own (MX-28 on 1.0 firmware) get it;
+        others (X series) are switched to 1.0 by their Protocol Type item. None: each model's
+        factory protocol (AX: 1.0, X series and MX: 2.0).
     baud_rate : int
         Line speed of every servo, bit/s.
     return_delay_us : int or None
@@ -440,17 +455,46 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
     RigConfigError
         Unknown model, bad ID, duplicate IDs or unsupported baud rate.
     """
-    specs = [(i, model) if isinstance(i, int) else (int(i[0]), str(i[1])) for i in ids]
+    specs = [(i, model, protocol) if isinstance(i, int)
+             else (int(i[0]), str(i[1]), i[2] if len(i) > 2 else protocol) for i in ids]
     if not specs:
         raise RigConfigError("a servo bus needs at least one servo id")
     try:
-        servos = [SimServo(i, m, baud_rate=baud_rate, return_delay_us=return_delay_us,
-                           position=positions[k] if positions is not None else 2048.0,
-                           noise_ticks=noise_ticks, rng=random.Random(seed + i))
-                  for k, (i, m) in enumerate(specs)]
+        servos = [make_servo(i, m, protocol=p, baud_rate=baud_rate,
+                             return_delay_us=return_delay_us,
+                             position=positions[k] if positions is not None else None,
+                             noise_ticks=noise_ticks, rng=random.Random(seed + i))
+                  for k, (i, m, p) in enumerate(specs)]
         return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time,
                             usb_latency_s=float(usb_latency_ms) / 1e3)
     except ValueError as err:
         raise RigConfigError(str(err)) from err
 
 
+def make_servo(dxl_id: int, model: str | int, *, protocol: float | None = None,
+               position: float | None = None, **kwargs) -> SimServo:
+    """One simulated servo of ``model``: a :class:`LegacyServo` for a Protocol 1.0 or
+    angle-limit table (AX, MX on 1.0, XL-320), else a :class:`SimServo`; ``protocol=1.0`` on
+    a model without a 1.0 table of its own sets its Protocol Type item to 1. ``position``
+    None: mid-range (2048 on the X series). Other keywords go to the servo class.
+
+    Raises
+    ------
+    ValueError
+        Unknown model, bad ID, baud rate not one of the model's.
+    """
+    from firmware_protocol.dynamixel.control_table import load_control_table
+    table = load_control_table(model, protocol)
+    if protocol is not None and float(protocol) == 2.0 and table.protocol == 1.0:
+        raise ValueError(f"{table.display_name} speaks only Protocol 1.0")
+    if is_legacy_table(table):
+        return LegacyServo(dxl_id, table, position=position, **kwargs)
+    servo = SimServo(dxl_id, model, position=2048.0 if position is None else position, **kwargs)
+    if protocol is not None and float(protocol) == 1.0:
+        if "Protocol Type" not in servo.table:
+            raise ValueError(f"{servo.table.display_name} has no Protocol Type item: it "
+                             f"cannot speak Protocol 1.0")
+        servo.set_item("Protocol Type", 1)
+        if hasattr(servo, "_creation"):  # restore() brings the servo back to this state
+            servo._creation = (bytes(servo.mem), *servo._creation[1:])
+    return servo

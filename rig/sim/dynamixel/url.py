@@ -5,8 +5,13 @@
 ==================  ==============================================  =====================
 key                 meaning                                         default
 ==================  ==============================================  =====================
-``ids``             servo IDs, ``1,2,3`` or ``1-3``                 ``1``
-``model``           e-Manual model name of every servo              ``XM430-W350``
+``ids``             servo IDs, ``1,2,3`` or ``1-3``; for a mixed    ``1``
+                    bus ``ID:MODEL`` or ``ID:MODEL:PROTOCOL``
+                    entries (``1:AX-12A,2:XM430-W350,3:MX-28:1``)
+``model``           e-Manual model name of every servo (AX-12A,     ``XM430-W350``
+                    AX-18A speak Protocol 1.0)
+``protocol``        1: MX-28/64/106 get their 1.0 firmware's        each model's own
+                    table, X-series servos Protocol Type 1; 2: 2.0  (AX 1, others 2)
 ``baud``            line speed of every servo, bit/s                ``1000000``
 ``return_delay_us`` Return Delay Time, µs (even, 0..508)            500 (e-Manual)
 ``noise``           encoder noise standard deviation, ticks         0
@@ -34,7 +39,7 @@ __all__ = ["DEVICES", "EXAMPLE", "KEYS", "bus_from_query", "bus_from_url"]
 
 DEVICES = ("dynamixel", "dxl")
 EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
-KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time",
+KEYS = ("ids", "model", "protocol", "baud", "return_delay_us", "noise", "seed", "wire_time",
         "usb_latency_ms")
 """The bus's own keys (:data:`rig.sim.urls.TIME_KEYS` too)."""
 
@@ -71,9 +76,11 @@ def bus_from_url(url: str, *, also_known: tuple[str, ...] = (),
 def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
     """Start the simulated servo bus of a parsed ``sim://dynamixel`` URL (its bus keys, above;
     other keys the URL may carry are the caller's). ``overrides`` as :func:`bus_from_url`."""
+    protocol = q.choice("protocol", "", ("", "1", "2", "1.0", "2.0"))
     kwargs: dict[str, object] = {
-        "ids": q.int_list("ids", [1]),
+        "ids": _ids(q),
         "model": q.text("model", "XM430-W350"),
+        "protocol": float(protocol) if protocol else None,
         "baud_rate": q.integer("baud", 1_000_000, 1),
         "return_delay_us": q.integer("return_delay_us", None, 0, 508),
         "noise_ticks": q.number("noise", 0.0, 0.0),
@@ -89,3 +96,27 @@ def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
     kwargs["usb_latency_ms"] = latency
     kwargs.update(overrides)
     return start_servo_bus(**kwargs)  # type: ignore[arg-type]
+
+
+def _ids(q: SimUrl) -> list:
+    """``ids``: plain IDs (``1,2,3``, ``1-3``) or ``ID:MODEL[:PROTOCOL]`` entries."""
+    raw = q.text("ids")
+    if raw is None or ":" not in raw:
+        return q.int_list("ids", [1])
+    out: list = []
+    for part in raw.split(","):
+        pieces = part.strip().split(":")
+        try:
+            dxl_id = int(pieces[0])
+            if len(pieces) == 1:
+                out.append(dxl_id)
+            elif len(pieces) == 2 and pieces[1]:
+                out.append((dxl_id, pieces[1]))
+            elif len(pieces) == 3 and pieces[1] and pieces[2] in ("1", "2", "1.0", "2.0"):
+                out.append((dxl_id, pieces[1], float(pieces[2])))
+            else:
+                raise ValueError(part)
+        except ValueError:
+            raise RigConfigError(f"{q.url}: ids={raw!r}: entry {part.strip()!r} must be ID, "
+                                 f"ID:MODEL or ID:MODEL:PROTOCOL (protocol 1 or 2)") from None
+    return out
