@@ -545,6 +545,8 @@ class SimServo:
                                                              vmax, amax, h)
             self._note_motion_current((self.vel - v0) / h)
             if arrived:
+                if dt > 0:  # standing at the goal for the rest of the interval
+                    self._note_motion_current(0.0)
                 break
 
     def _note_motion_current(self, accel_ticks: float) -> None:
@@ -627,6 +629,47 @@ class SimServo:
             # back on the profile: the exact trapezoid takes over again
             self.pos, self.vel, self._off_profile = self.ref_pos, self.ref_vel, False
             self._integral = 0.0
+
+    def current_mode_equilibrium(self, push_nm: float) -> tuple[float, float]:
+        """Analytic steady state of Current Control Mode under a constant push.
+
+        Solves ``kt·i(ω) + τ_push − b·ω = 0`` with ``i(ω)`` = Goal Current (≤ Current Limit)
+        bounded by what the PWM allows at speed ω (module docstring), by bisection; the
+        reference the integrated model is checked against.
+
+        Parameters
+        ----------
+        push_nm : float
+            External torque, N·m, ACTUAL frame.
+
+        Returns
+        -------
+        (float, float)
+            Shaft speed (rad/s) and motor current (A), both ACTUAL frame.
+        """
+        i_stall = self.table.units.stall_current_a
+        cap = self._pwm_cap()
+        goal = self.direction() * self._current_amps(self.get("Goal Current"))
+        lim = self._current_amps(self._get_or("Current Limit", 0)) \
+            if "Current Limit" in self._fields else math.inf
+        goal = max(-lim, min(lim, goal))
+
+        def current(w: float) -> float:
+            back = w / self.no_load_w
+            return max(i_stall * (-cap - back), min(i_stall * (cap - back), goal))
+
+        def net(w: float) -> float:
+            return self.kt * current(w) + push_nm - self.friction * w
+
+        lo, hi = -1e4, 1e4  # rad/s; net() decreases with w
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if net(mid) > 0:
+                lo = mid
+            else:
+                hi = mid
+        w = 0.5 * (lo + hi)
+        return w, current(w)
 
     def refresh(self, now: float) -> None:
         """Advance to ``now`` and write the present values into the control table."""
@@ -776,7 +819,7 @@ class SimServo:
                 return ErrorCode.ACCESS
             if item.address < table.eeprom_end and (self.torque or ram_only):
                 return ErrorCode.ACCESS
-        for slot, value in slots.items():
+        for value in slots.values():
             if not table.eeprom_end <= value < table.size:
                 return ErrorCode.DATA_RANGE
         error = self._validate(values)
