@@ -16,6 +16,7 @@ from firmware_protocol.dynamixel import protocol1 as p1
 from rig.errors import RigConfigError
 from rig.sim.clock import ManualClock
 from rig.sim.dynamixel import bus_from_url, start_servo_bus
+from rig.sim.dynamixel.servo import BOOT_TIME_S
 from rig.sim.dynamixel.servo_legacy import LegacyServo
 
 ID_, BAUD, CW, CCW, SRL = 3, 4, 6, 8, 16
@@ -135,22 +136,26 @@ def test_status_return_level_reg_write_action_broadcast(mixed):
     assert raw(port, ph, 2, p1.Instruction1.ACTION)[2] == INSTRUCTION
 
 
-def test_reboot_and_factory_reset(mixed):
+def test_reboot_and_factory_reset(mixed, clock):
     bus, port = mixed
     ph = PacketHandler(1.0)
     ph.write1ByteTxRx(port, 2, TORQUE, 1)
     bus.raise_hardware_error(2, "overload")
     assert ph.read1ByteTxRx(port, 2, TORQUE) == (0, COMM_SUCCESS, 0x20)  # Shutdown 36
     assert raw(port, ph, 2, p1.Instruction1.REBOOT)[1:] == (COMM_SUCCESS, 0x20)
+    assert ph.ping(port, 2)[1] == COMM_RX_TIMEOUT  # silent while it boots
+    clock.advance(BOOT_TIME_S)
     assert ph.read1ByteTxRx(port, 2, TORQUE) == (0, COMM_SUCCESS, 0)
     assert ph.write1ByteTxOnly(port, 2, ID_, 7) == COMM_SUCCESS  # the status comes from ID 7
     assert ph.factoryReset(port, 7) == (COMM_SUCCESS, 0)
+    clock.advance(BOOT_TIME_S)
     assert ph.ping(port, 7)[1] == COMM_RX_TIMEOUT  # ID 1 and 57,142 bit/s now
     port.setBaudRate(57600)  # within 1 % of 57,142: heard
     assert ph.ping(port, 1) == (29, COMM_SUCCESS, 0)
     # the XM430 on Protocol Type 1: a RESET puts it back to Protocol 2.0
     port.setBaudRate(1_000_000)
     assert ph.factoryReset(port, 3) == (COMM_SUCCESS, 0)
+    clock.advance(BOOT_TIME_S)
     port.setBaudRate(57600)
     assert PacketHandler(2.0).ping(port, 1) == (1020, COMM_SUCCESS, 0)
 

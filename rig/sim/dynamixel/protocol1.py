@@ -86,7 +86,7 @@ def _answers(servo: SimServo, inst: int) -> bool:
 def dispatch(bus: DynamixelBus, pkt: p1.InstructionPacket1, t_rx: float) -> None:
     """Run one 1.0 instruction packet on the servos that hear it and speak 1.0."""
     now = bus.clock()
-    listeners = bus._listeners(1.0)
+    listeners = bus._listeners(now, 1.0)
     if not listeners:
         return
     size = 6 + len(pkt.params)

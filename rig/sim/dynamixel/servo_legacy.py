@@ -88,7 +88,8 @@ class LegacyServo(SimServo):
     def __init__(self, dxl_id: int, model: str | int | ControlTable = "AX-12A", *,
                  protocol: float | None = None, baud_rate: int = 1_000_000,
                  return_delay_us: int | None = None, position: float | None = None,
-                 noise_ticks: float = 0.0, rng: random.Random | None = None):
+                 noise_ticks: float = 0.0, rng: random.Random | None = None,
+                 boot: bool = False):
         table = model if isinstance(model, ControlTable) else load_control_table(model, protocol)
         max_id = 253 if table.protocol == 1.0 else 252
         if not 0 <= dxl_id <= max_id:
@@ -96,6 +97,8 @@ class LegacyServo(SimServo):
         self.table = table
         self._fields = {n: (it.address, it.end, it.signed, it.size)
                         for n, it in table.items.items()}
+        self._setup_indirect()  # what SimServo.read expects (these tables have no blocks)
+        self.push = None
         self.mem = table.default_memory()
         self._set("ID", dxl_id)
         self._set("Baud Rate", nearest_baud_index(table, baud_rate))
@@ -114,6 +117,8 @@ class LegacyServo(SimServo):
         self._set("Goal Position", round(self.pos))
         self.hand: float | Callable[[float], float] | None = None
         self.hardware_error = 0
+        self.boot_at_power_on = bool(boot)
+        self.booting_until: float | None = None
         self.temperature = float(self.get("Present Temperature"))
         self.registered: tuple[int, bytes] | None = None
         self.plugged = True
@@ -183,6 +188,7 @@ class LegacyServo(SimServo):
         self.plugged = True
         self.temperature = float(self.table.defaults.get("Present Temperature", 30))
         self.last_instruction_t = None
+        self.booting_until = None
 
     # ------------------------------------------------------------------ physics
     def _vmax(self) -> float:
@@ -291,9 +297,10 @@ class LegacyServo(SimServo):
         return self.hardware_error & _HW_TO_1
 
     # ------------------------------------------------------------------ instructions
-    def write(self, address: int, data: bytes, now: float) -> int:
+    def write(self, address: int, data: bytes, now: float, *, ram_only: bool = False) -> int:
         """WRITE all-or-nothing: a 2.0 result code, or :data:`ANGLE_LIMIT` (a 1.0 servo; a 2.0
-        one reports a goal outside its angle limits as a data limit error)."""
+        one reports a goal outside its angle limits as a data limit error). ``ram_only``: sent
+        to the servo's Secondary ID (EEPROM refused)."""
         table = self.table
         end = address + len(data)
         if not data:
@@ -314,7 +321,8 @@ class LegacyServo(SimServo):
         if not items:
             return ErrorCode.ACCESS
         for item in items:
-            if not item.writable or (item.address < table.eeprom_end and self.torque):
+            if not item.writable or (item.address < table.eeprom_end
+                                     and (self.torque or ram_only)):
                 return ErrorCode.ACCESS
         values = {it.name: it.decode(data[it.address - address:it.end - address])
                   for it in items}
@@ -358,6 +366,7 @@ class LegacyServo(SimServo):
         if self.temperature > self.get("Temperature Limit"):
             self.temperature = float(self.table.defaults.get("Present Temperature", 30))
         self.boot_t = self.last_t or 0.0
+        self.booting_until = self.boot_t + self.boot_time_s
 
     def factory_reset(self, option: int = 0xFF) -> None:
         """RESET (1.0: everything, ID and baud rate included) / FACTORY_RESET (2.0 options
