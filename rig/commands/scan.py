@@ -2,7 +2,10 @@
 
 Per-ID PINGs through ``dynamixel_sdk`` (:func:`rig.devices.dynamixel.find_servos`); every X-series
 rate the SDK can set when no ``--baud`` is given, fastest first. The model name comes from the
-SDK's control-table files. Nothing answering is an error (exit 2), with the rates tried.
+SDK's control-table files. Each servo's Homing Offset (ticks) and direction (Drive Mode bit 0:
+normal / reverse) are read after its PING and shown beside it ("-" for a model without the
+item), so a servo calibrated by another tool stands out. Nothing answering is an error
+(exit 2), with the rates tried.
 """
 
 from __future__ import annotations
@@ -50,9 +53,13 @@ def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None) -
     def show(info) -> None:
         nonlocal header
         if not header:
-            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}")
+            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}  "
+                       f"{'homing':>8}  direction")
             header = True
-        click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}")
+        offset = "-" if info.homing_offset is None else str(info.homing_offset)
+        direction = "-" if info.reverse is None else ("reverse" if info.reverse else "normal")
+        click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}  "
+                   f"{offset:>8}  {direction}")
 
     find_servos(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms,
                 on_found=show, on_note=lambda tip: click.echo(f"rig: note: {tip}", err=True))

@@ -10,7 +10,10 @@ def test_scan_finds_servos_at_their_baud_rate(rig_cli):
                               "--ids", "0-3", "--latency-ms", "50"])
     assert code == 0, err
     rows = [line.split() for line in out.splitlines()[1:]]
-    assert rows == [["1", "XL430-W250", "48", "57600"], ["3", "XL430-W250", "48", "57600"]]
+    assert out.splitlines()[0].split() == ["ID", "model", "firmware", "baud", "homing",
+                                           "direction"]
+    assert rows == [["1", "XL430-W250", "48", "57600", "0", "normal"],
+                    ["3", "XL430-W250", "48", "57600", "0", "normal"]]
 
 
 def test_scan_one_baud(rig_cli):
