@@ -237,6 +237,9 @@ def test_hardware_error_is_an_event_with_the_reported_torque(sim):
         with pytest.raises(HardwareAlertError, match="ID 2: hardware alert overload"):
             dxl.set_torque(True)
         dxl.reboot(2)
+        # a real servo is silent while it boots: wait until the simulated one listens again
+        servo = sim.simulator.servo(2)
+        assert sim.simulator.wait_for(lambda: servo.listening(sim.simulator.clock()))
         assert dxl.poll_alerts() == []
 
 

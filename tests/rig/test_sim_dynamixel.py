@@ -32,6 +32,7 @@ from rig.errors import RigConfigError
 from rig.sim.clock import ManualClock
 from rig.sim.dynamixel import (
     ACCEL_UNIT,
+    BOOT_TIME_S,
     VELOCITY_UNIT,
     DynamixelBus,
     bus_from_url,
@@ -245,10 +246,11 @@ def _raw(packet: bytes) -> list[int]:
     return list(packet)
 
 
-def test_factory_reset_keeps_id_and_baud_with_option_2(sdk):
+def test_factory_reset_keeps_id_and_baud_with_option_2(sdk, clock):
     port, ph = sdk
     assert ph.write1ByteTxRx(port, 3, RETURN_DELAY, 100) == (COMM_SUCCESS, 0)
     assert ph.factoryReset(port, 3, 0x02) == (COMM_SUCCESS, 0)
+    clock.advance(BOOT_TIME_S)  # the reset reboots the servo: silent while it boots
     assert ph.read1ByteTxRx(port, 3, RETURN_DELAY) == (250, COMM_SUCCESS, 0)
 
 
@@ -282,7 +284,7 @@ def test_error_codes(sdk):
     assert ph.write1ByteTxRx(port, 1, OPERATING_MODE, 4) == (COMM_SUCCESS, 0)
 
 
-def test_hardware_error_sets_alert_drops_torque_and_reboot_clears_it(sdk, bus):
+def test_hardware_error_sets_alert_drops_torque_and_reboot_clears_it(sdk, bus, clock):
     port, ph = sdk
     assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
     bus.raise_hardware_error(2, "overload")
@@ -293,6 +295,7 @@ def test_hardware_error_sets_alert_drops_torque_and_reboot_clears_it(sdk, bus):
     assert ph.read1ByteTxRx(port, 2, TORQUE)[0] == 0  # refused until reboot
     assert ph.ping(port, 1) == (1020, COMM_SUCCESS, 0)  # other servos unaffected
     assert ph.reboot(port, 2) == (COMM_SUCCESS, ALERT)  # the reply precedes the reboot
+    clock.advance(BOOT_TIME_S)  # a real servo is silent while it boots
     assert ph.read1ByteTxRx(port, 2, HW_ERROR) == (0, COMM_SUCCESS, 0)
     assert ph.write1ByteTxRx(port, 2, TORQUE, 1) == (COMM_SUCCESS, 0)
 

@@ -9,8 +9,10 @@ Modules
 -------
 servo
     :class:`SimServo` — control table per model (from the SDK's ``.model`` files), access
-    rules and error codes, motion profiles, back-driving, encoder noise, hardware errors,
-    REBOOT / FACTORY_RESET, the Bus Watchdog.
+    rules and error codes, motion profiles, Homing Offset and Drive Mode (reverse, time-based
+    profile, torque on by goal update), current / current-based position / PWM control with a
+    torque model and an external push, indirect addressing, Secondary ID, boot time,
+    back-driving, encoder noise, hardware errors, REBOOT / FACTORY_RESET, the Bus Watchdog.
 bus
     :class:`DynamixelBus` on :class:`rig.sim.pty_server.PtyServer` — Protocol 2.0 decoding,
     unicast / broadcast / sync / bulk / fast instructions, Status Return Level, baud-rate
@@ -21,15 +23,16 @@ faults
 url
     :func:`bus_from_url` — the ``sim://dynamixel`` port string.
 
-Not modelled: Protocol 1.0, indirect address mapping (the indirect block is plain RAM),
-Secondary ID, reverse direction (Drive Mode bit 0), Homing Offset, current and PWM control
-(the shaft stays put), the control-table backup instruction, the USB adapter's latency timer.
+Not modelled: Protocol 1.0 (see ``servo_legacy`` when present), the control-table backup
+instruction, Feedforward gains, the velocity loop's gains (velocity mode follows its profile
+exactly), an external push in velocity mode.
 """
 
 from rig.sim.dynamixel.bus import PACKET_TIMEOUT, DynamixelBus, start_servo_bus
 from rig.sim.dynamixel.faults import FaultInjection
 from rig.sim.dynamixel.servo import (
     ACCEL_UNIT,
+    BOOT_TIME_S,
     HARDWARE_ERRORS,
     TICKS_PER_REV,
     VELOCITY_UNIT,
@@ -41,6 +44,7 @@ from rig.sim.dynamixel.url import bus_from_url
 
 __all__ = [
     "ACCEL_UNIT",
+    "BOOT_TIME_S",
     "HARDWARE_ERRORS",
     "PACKET_TIMEOUT",
     "TICKS_PER_REV",

@@ -44,7 +44,7 @@ from firmware_protocol.errors import ChecksumError, ProtocolError
 from rig.errors import RigConfigError
 from rig.sim.clock import Clock
 from rig.sim.dynamixel.faults import FaultInjection, Faults
-from rig.sim.dynamixel.servo import TICKS_PER_REV, SimServo
+from rig.sim.dynamixel.servo import SimServo
 from rig.sim.pty_server import PtyServer
 
 __all__ = ["PACKET_TIMEOUT", "DynamixelBus", "latency_timer_tick", "start_servo_bus"]
@@ -129,6 +129,9 @@ class DynamixelBus(FaultInjection, PtyServer):
         self.packet_timeout = PACKET_TIMEOUT
         # the line starts at the servos' rate, as an adapter left configured for them
         super().__init__(clock=clock, line_speed=servos[0].baud_rate)
+        now = clock()
+        for servo in servos:
+            servo.power_on(now)  # a servo created with boot=True starts booting now
         self._start()
 
     # ------------------------------------------------------------------ python API
@@ -145,14 +148,16 @@ class DynamixelBus(FaultInjection, PtyServer):
 
     def set_hand(self, dxl_id: int,
                  position: float | Callable[[float], float] | None) -> None:
-        """Move the limb by hand: with torque off, Present Position follows ``position``.
+        """Move the limb by hand: with torque off, the shaft follows ``position`` exactly.
 
         Parameters
         ----------
         dxl_id : int
             Servo ID.
         position : float, callable or None
-            Ticks; or a function of the simulated time (s) returning ticks, for a continuous
+            ACTUAL shaft ticks (the physical world: Present Position is this through Homing
+            Offset and Drive Mode); or a function of the simulated time (s) returning them, for a
+            continuous
             movement (a clinician sweeping the limb while it records); ``None`` lets go (the
             shaft stays where it is).
         """
@@ -161,8 +166,27 @@ class DynamixelBus(FaultInjection, PtyServer):
             servo.advance(self.clock())
             servo.hand = position if position is None or callable(position) else float(position)
 
+    def push(self, dxl_id: int, torque: float | Callable[[float], float] | None) -> None:
+        """Push the shaft with an external torque (a hand or a patient), torque on or off.
+
+        Parameters
+        ----------
+        dxl_id : int
+            Servo ID.
+        torque : float, callable or None
+            N·m at the output shaft, in the ACTUAL (physical) frame: positive pushes towards
+            increasing encoder ticks whatever the servo's Drive Mode; or a function of the
+            simulated time (s) returning N·m; ``None`` lets go. See
+            :mod:`rig.sim.dynamixel.servo` for the torque model it acts on.
+        """
+        with self.lock:
+            servo = self.servo(dxl_id)
+            servo.advance(self.clock())
+            servo.push = torque if torque is None or callable(torque) else float(torque)
+
     def position(self, dxl_id: int) -> float:
-        """True (noise-free) shaft position in ticks, advanced to now (watchdog included)."""
+        """True (noise-free) shaft position in ACTUAL ticks (the encoder, before Homing Offset
+        and Drive Mode), advanced to now (watchdog included)."""
         with self.lock:
             servo = self.servo(dxl_id)
             servo.advance(self.clock())
@@ -233,12 +257,12 @@ class DynamixelBus(FaultInjection, PtyServer):
                 self._dispatch(packet, t_rx)
 
     # ------------------------------------------------------------------ instruction handling
-    def _listeners(self) -> list[SimServo]:
+    def _listeners(self, now: float) -> list[SimServo]:
         if self._faults.bus_unplugged:
             return []
         client = self.line_speed
         return [s for s in self.servos.values()
-                if s.plugged and (client is None or client == s.baud_rate)]
+                if s.plugged and (client is None or client == s.baud_rate) and s.listening(now)]
 
     def _schedule(self, servo: SimServo, packet: bytes, start_after: float) -> float:
         """Queue ``packet`` to be sent; returns the time its last byte is on the wire."""
@@ -256,7 +280,7 @@ class DynamixelBus(FaultInjection, PtyServer):
 
     def _dispatch(self, pkt: InstructionPacket, t_rx: float) -> None:
         now = self.clock()
-        listeners = self._listeners()
+        listeners = self._listeners(now)
         if not listeners:
             return
         size = 10 + len(pkt.params)  # header, id, length, instruction, CRC (stuffing ignored)
@@ -271,16 +295,19 @@ class DynamixelBus(FaultInjection, PtyServer):
             if pkt.id == BROADCAST_ID:
                 self._group_write(pkt, listeners, now)
             return
-        targets = listeners if pkt.id == BROADCAST_ID else [s for s in listeners
-                                                             if s.id == pkt.id]
+        if pkt.id == BROADCAST_ID:
+            targets = {s: True for s in listeners}
+        else:  # its ID, or its Secondary ID (executed without a status packet)
+            targets = {s: hit[1] for s in listeners if (hit := s.addressed(pkt.id))[0]}
         for servo in targets:
             servo.note_instruction(now)
         for servo in sorted(targets, key=lambda s: s.id):
             # the level in force when the instruction arrived decides (a write that changes
             # Status Return Level is still acknowledged under the old level)
-            answer = inst == Instruction.PING or (pkt.id != BROADCAST_ID
-                                                  and self._srl_allows(servo, inst))
-            error, params, after = self._execute(servo, pkt, now)
+            answer = targets[servo] and (inst == Instruction.PING or (
+                pkt.id != BROADCAST_ID and self._srl_allows(servo, inst)))
+            error, params, after = self._execute(servo, pkt, now,
+                                                 ram_only=not targets[servo])
             # a broadcast PING is answered by every servo, one after another in ID order
             if answer:
                 status = encode_status(servo.id, error | servo.error_byte, params)
@@ -297,9 +324,10 @@ class DynamixelBus(FaultInjection, PtyServer):
             return level >= 1
         return level >= 2
 
-    def _execute(self, servo: SimServo, pkt: InstructionPacket,
-                 now: float) -> tuple[int, bytes, Callable[[], None] | None]:
-        """Run a unicast/broadcast instruction on one servo: (error, reply params, after)."""
+    def _execute(self, servo: SimServo, pkt: InstructionPacket, now: float, *,
+                 ram_only: bool = False) -> tuple[int, bytes, Callable[[], None] | None]:
+        """Run a unicast/broadcast instruction on one servo: (error, reply params, after);
+        ``ram_only``: sent to its Secondary ID (EEPROM refused)."""
         inst = pkt.instruction
         try:
             if inst == Instruction.PING:
@@ -311,7 +339,7 @@ class DynamixelBus(FaultInjection, PtyServer):
                 return error, data, None
             if inst == Instruction.WRITE:
                 address, data = ins.parse_write(pkt.params)
-                return servo.write(address, data, now), b"", None
+                return servo.write(address, data, now, ram_only=ram_only), b"", None
             if inst == Instruction.REG_WRITE:
                 address, data = ins.parse_write(pkt.params)
                 if address + len(data) > servo.table.size or not data:
@@ -323,7 +351,7 @@ class DynamixelBus(FaultInjection, PtyServer):
                     return ErrorCode.INSTRUCTION, b"", None
                 address, data = servo.registered
                 servo.registered = None
-                return servo.write(address, data, now), b"", None
+                return servo.write(address, data, now, ram_only=ram_only), b"", None
             if inst == Instruction.REBOOT:
                 return 0, b"", servo.reboot
             if inst == Instruction.FACTORY_RESET:
@@ -336,12 +364,7 @@ class DynamixelBus(FaultInjection, PtyServer):
             if inst == Instruction.CLEAR:
                 if pkt.params != ins.CLEAR_MULTI_TURN:
                     return ErrorCode.DATA_RANGE, b"", None
-                servo.advance(now)
-                if servo.vel != 0:
-                    return ErrorCode.RESULT_FAIL, b"", None
-                servo.pos %= TICKS_PER_REV
-                servo.target = servo.pos
-                return 0, b"", None
+                return servo.clear_multi_turn(now), b"", None
         except ProtocolError:
             return ErrorCode.DATA_LENGTH, b"", None
         return ErrorCode.INSTRUCTION, b"", None
@@ -404,7 +427,7 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
                     seed: int = 0, positions: Sequence[float] | None = None,
                     clock: Clock = time.monotonic,
                     model_wire_time: bool = True,
-                    usb_latency_ms: float = 0.0) -> DynamixelBus:
+                    usb_latency_ms: float = 0.0, boot: bool = False) -> DynamixelBus:
     """Start a simulated servo bus on a new pty.
 
     Parameters
@@ -422,13 +445,16 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
     seed : int
         Seed of the encoder noise (servo ``k`` uses ``seed + id``).
     positions : sequence of float, optional
-        Initial shaft positions in ticks (default 2048, mid-range).
+        Initial ACTUAL shaft positions in ticks (default: each model's power-on position,
+        2048 on the X series).
     clock : callable
         Simulated clock, seconds.
     model_wire_time : bool
         Model the time bytes take on the wire.
     usb_latency_ms : float
         The USB adapter's latency timer, ms (0: none; see :class:`DynamixelBus`).
+    boot : bool
+        Power the servos on booting (silent for their boot time) instead of already booted.
 
     Returns
     -------
@@ -445,8 +471,8 @@ def start_servo_bus(ids: Iterable[int] | Sequence[tuple[int, str]] = (1,),
         raise RigConfigError("a servo bus needs at least one servo id")
     try:
         servos = [SimServo(i, m, baud_rate=baud_rate, return_delay_us=return_delay_us,
-                           position=positions[k] if positions is not None else 2048.0,
-                           noise_ticks=noise_ticks, rng=random.Random(seed + i))
+                           position=positions[k] if positions is not None else None,
+                           noise_ticks=noise_ticks, rng=random.Random(seed + i), boot=boot)
                   for k, (i, m) in enumerate(specs)]
         return DynamixelBus(servos, clock=clock, model_wire_time=model_wire_time,
                             usb_latency_s=float(usb_latency_ms) / 1e3)

@@ -14,6 +14,8 @@ key                 meaning                                         default
 ``wire_time``       model the time bytes take on the wire (on/off)  on
 ``usb_latency_ms``  the USB adapter's latency timer, ms: replies    1 (0 with
                     reach the host at its ticks (0: at once)        ``wire_time=off``)
+``boot``            servos power on booting: silent for their boot  off
+                    time (0.4 s; off: already booted)
 ``process``         serve the bus from a process of its own         off
                     (``on``: as hardware is, outside the host
                     process; :mod:`rig.devices._sim_backends`)
@@ -35,7 +37,7 @@ __all__ = ["DEVICES", "EXAMPLE", "KEYS", "bus_from_query", "bus_from_url"]
 DEVICES = ("dynamixel", "dxl")
 EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
 KEYS = ("ids", "model", "baud", "return_delay_us", "noise", "seed", "wire_time",
-        "usb_latency_ms")
+        "usb_latency_ms", "boot")
 """The bus's own keys (:data:`rig.sim.urls.TIME_KEYS` too)."""
 
 
@@ -79,6 +81,7 @@ def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
         "noise_ticks": q.number("noise", 0.0, 0.0),
         "seed": q.integer("seed", 0),
         "model_wire_time": q.flag("wire_time", True),
+        "boot": q.flag("boot", False),
         "clock": q.clock(),
     }
     wire = kwargs["model_wire_time"]
