@@ -69,7 +69,7 @@ import select
 import termios
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -131,8 +131,9 @@ class ServoInfo:
     model: str
     firmware: int
     baud: int
-    homing_offset: int | None = None
-    reverse: bool | None = None
+    # not in the repr: what a PING found reads as before (the golden outputs compare it)
+    homing_offset: int | None = field(default=None, repr=False)
+    reverse: bool | None = field(default=None, repr=False)
 
 
 class _SdkPort(sdk.PortHandler):

@@ -261,6 +261,7 @@ class EnforcementLoop:
         self.summary: dict = {}
         self._setup_done = False
         self._sent: np.ndarray | None = None  # the goal ticks of the last write that went out
+        self._sent_before: np.ndarray | None = None  # ... and of the write before it
 
     # ------------------------------------------------------------------ start-up
     def setup(self) -> None:
@@ -357,7 +358,7 @@ class EnforcementLoop:
             # and refuses goals until its watchdog is cleared (0) and set again
             _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))  # clears a fired one first
         self._t_bus = clock()
-        self._sent = None  # what the servos hold before the first write is not the loop's
+        self._sent = self._sent_before = None  # what the servos hold before the first write
         t0 = sched.start()
         targets.start(t0)
         sup.reset(t0, self._present)
@@ -481,10 +482,18 @@ class EnforcementLoop:
                 held = bus.held_goals
                 sent = self._sent
                 if held is not None and sent is not None:
+                    # the goal written last, or the one before: a reply that came late (a loaded
+                    # host, a slow adapter) is read as the next request's and shows the servos
+                    # one write behind — present and held alike; a servo that refuses goals
+                    # differs from both within two writes of a goal that changes
                     diff = held != sent
                     if diff.any():
-                        faults |= Fault.GOAL_NOT_HELD
-                        held_bad = int(diff.argmax())
+                        before = self._sent_before
+                        if before is not None:
+                            diff &= held != before
+                        if diff.any():
+                            faults |= Fault.GOAL_NOT_HELD
+                            held_bad = int(diff.argmax())
                 self._t_bus = clock()
                 self._present_ticks = ticks
                 present = [kj.forward_one(ticks[sl]) for kj, sl in zip(kins, slices, strict=True)]
@@ -536,7 +545,7 @@ class EnforcementLoop:
             if reason is None:
                 try:
                     bus.write_goal_ticks(self._goal_ticks)
-                    self._sent = self._goal_ticks
+                    self._sent_before, self._sent = self._sent, self._goal_ticks
                     self._t_bus = clock()
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST

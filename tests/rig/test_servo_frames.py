@@ -20,12 +20,12 @@ from pathlib import Path
 import pytest
 
 import rig
-
 from rig.devices.config import ServoFrame, load_rig_config, loads_rig_config
 from rig.devices.dynamixel import DynamixelBus, scan
 from rig.devices.ports import open_port
 from rig.errors import RigConfigError, RigError
 from rig.loop.runner import prepare_servo_limb
+from rig.loop.telemetry import Fault
 
 URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
 RIG = load_rig_config("sim-shoulder")
@@ -172,3 +172,63 @@ def test_scan_shows_a_dash_for_a_model_without_the_items(rig_cli):
     assert code == 0, err
     row = out.splitlines()[1].split()
     assert row[:2] == ["4", "XL320"] and row[-2:] == ["-", "-"]
+
+
+# ------------------------------------------------------------------------------- goal not held
+def _loop_run(on_cycle, *, cycles=120, watchdog_ms=1000):
+    """The loop on the simulated shoulder (manual clock, no model: the supervisor alone),
+    ``cycles`` cycles of sweeping targets; (summary, telemetry table, bus)."""
+    from models.constraint import JointConstraint
+    from models.oracle import ConstraintOracle
+    from rig.loop import EnforcementLoop, LoopConfig, ScriptedTargets
+
+    oracle = ConstraintOracle(JointConstraint.cone((1, 0, 0), 50.0, twist=(-40, 40)))
+    cfg = LoopConfig(rate_hz=200.0, watchdog_ms=watchdog_ms)
+    with open_port(URL + "&clock=manual&wire_time=off", baud=SERVOS.baud) as port:
+        sim = port.simulator
+        limb = prepare_servo_limb(port, SERVOS, oracle)
+        try:
+            assert limb.bus.read_back  # the simulated X-series honour indirect addressing
+            loop = EnforcementLoop(limb, None, oracle, ScriptedTargets("sweep", oracle), cfg,
+                                   clock=sim.clock, sleep=sim.clock.sleep,
+                                   on_cycle=lambda lp, k: on_cycle(sim, lp, k))
+            loop.setup()
+            summary = loop.run(max_cycles=cycles)
+        finally:
+            limb.close()
+    return summary, loop.telemetry.table(), limb.bus
+
+
+def test_the_read_returns_the_goals_written_and_no_fault_without_one():
+    held, sent = [], []
+
+    def on_cycle(sim, loop, k):  # at cycle k: the read of cycle k - 1, the write of k - 1
+        if k >= 1:
+            held.append(loop.bus.held_goals.copy())
+            sent.append(loop._sent.copy())
+
+    summary, table, _ = _loop_run(on_cycle, cycles=60)
+    assert summary["safe_state_entries"] == 0 and summary["cycles"] == 60
+    assert not (table["faults"] & Fault.GOAL_NOT_HELD).any()
+    # the read of cycle k returns the goal written at the end of cycle k - 1
+    assert all((h == s).all() for h, s in zip(held[1:], sent[:-1], strict=True))
+    assert len({tuple(s) for s in sent}) > 10  # the goals did change
+
+
+def test_a_servo_refusing_goals_after_its_watchdog_fired_is_goal_not_held():
+    """Servo 1's Bus Watchdog flagged (as when it alone heard nothing for too long: a flaky
+    cable to it), the host's own gap measure sees nothing: the first goal it refuses (the sweep
+    moves servo 1 a tick every few cycles) is seen in the next read; the safe state follows."""
+    def on_cycle(sim, loop, k):
+        if k == 50:
+            sim.servo(1).set_item("Bus Watchdog", 0xFF)
+
+    summary, table, _ = _loop_run(on_cycle)
+    assert summary["safe_state_entries"] == 1
+    assert 51 <= summary["safe_state_cycle"] <= 60
+    reason = summary["safe_state_reason"]
+    assert "servo ID 1 holds goal" in reason and "written the cycle before" in reason
+    bits = table["faults"]
+    assert bits[-1] & Fault.GOAL_NOT_HELD and not (bits[:-1] & Fault.GOAL_NOT_HELD).any()
+    assert table["safe_state"][-1] == 1 and summary["faults"].get("goal_not_held") == 1
+
