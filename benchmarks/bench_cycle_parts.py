@@ -38,6 +38,10 @@ def main() -> None:
     ap.add_argument("--usb-latency-ms", type=float, default=1.0)
     ap.add_argument("--compute-us", type=float, default=220.0)
     ap.add_argument("--slow", type=float, default=4.0)
+    ap.add_argument("--read-back", action="store_true",
+                    help="configure() the servos first, as the loop does: on servos with "
+                         "indirect addressing the read then also returns the goal each holds "
+                         "(8 bytes per servo instead of 4)")
     ap.add_argument("--no-wire-time", action="store_true",
                     help="the simulator answers at once (no wire time, no USB latency): the "
                          "reply's flight is then the simulator's own work and the pty")
@@ -59,6 +63,9 @@ def main() -> None:
     with child_servos(url) as path:
         bus = DynamixelBus(path, ids, latency_ms=4.0)
         try:
+            if args.read_back:
+                bus.configure()
+                print(f"  read-back of the goal: {'on' if bus.read_back else 'off'}")
             goal = bus.read_ticks()
             nxt = time.monotonic()
             for k in range(args.cycles):

@@ -6,7 +6,9 @@ PINGs, then Protocol 1.0 PINGs of the IDs still silent (AX, MX on 1.0 firmware; 
 by default both for at most 24 IDs, 2.0 alone for more — 1.0 has no broadcast PING). The model
 name comes from the SDK's control-table files (1.0 models: the e-Manual's, typed in
 :mod:`firmware_protocol.dynamixel.tables_protocol1`). Nothing answering is an error (exit 2),
-with the rates tried.
+with the rates tried. Each servo's Homing Offset (ticks) and direction (Drive Mode bit 0:
+normal / reverse) are read after its PING and shown beside it ("-" for a model without the
+item), so a servo calibrated by another tool stands out.
 """
 
 from __future__ import annotations
@@ -57,10 +59,13 @@ def scan(port: str, baud: int | None, ids_text: str, latency_ms: float | None,
     def show(info) -> None:
         nonlocal header
         if not header:
-            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}  protocol")
+            click.echo(f"{'ID':>3}  {'model':<14} {'firmware':>8}  {'baud':>8}  protocol  "
+                       f"{'homing':>8}  direction")
             header = True
+        offset = "-" if info.homing_offset is None else str(info.homing_offset)
+        direction = "-" if info.reverse is None else ("reverse" if info.reverse else "normal")
         click.echo(f"{info.id:>3}  {info.model:<14} {info.firmware:>8}  {info.baud:>8}  "
-                   f"{info.protocol:.1f}")
+                   f"{info.protocol:>8.1f}  {offset:>8}  {direction}")
 
     protocols = {None: None, "1": (1.0,), "2": (2.0,), "both": (2.0, 1.0)}[protocol]
     find_servos(port, baud=baud, ids=parse_id_ranges(ids_text), latency_ms=latency_ms,

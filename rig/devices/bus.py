@@ -27,6 +27,10 @@ hook                       called by                                     default
                                                                          transaction feeds it)
 =========================  ============================================  =====================
 
+A backend whose read also returns the Goal Position each servo holds (the Dynamixel bus with
+indirect addressing) sets :attr:`ServoBus.held_goals` in its read; the others leave it None (the
+loop then cannot check that its goals landed).
+
 A split read (:meth:`ServoBus.begin_read` sends the request, :meth:`ServoBus.finish_read`
 collects the reply) lets a caller work while the reply is on its way (the loop computes its
 goal then); a backend that sends and collects in one step inherits the defaults (nothing sent at
@@ -89,6 +93,9 @@ class ServoBus(Device):
     watchdog_ms : int
     advice : list of str
         One-line hints found at open (e.g. the adapter's USB latency timer).
+    held_goals : (n,) int64 ndarray or None
+        The goal each servo held at the last successful read of present positions (tick-vector
+        order), as the servos report it; None when the backend does not read it back.
     """
 
     kind = "servo bus"
@@ -106,6 +113,7 @@ class ServoBus(Device):
         self.watchdog_ms = int(watchdog_ms)
         self.alert_pending = False
         self.advice: list[str] = []
+        self.held_goals: np.ndarray | None = None
         self._reading = False
         super().__init__(port, baud=baud, timeout=timeout, retries=retries)
 

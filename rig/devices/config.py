@@ -40,9 +40,20 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       ik_tolerance_deg: 0.1                #   > 0 (default: 0.1 for a joint of 3 servos,
                                            #   180 — the nearest reachable — for 1-2)
       latency_ms: null                     #   SDK packet-timeout latency; default: detected
+      homing: check                        #   check | write (default check): the servos'
+                                           #   Homing Offset / Drive Mode reverse bit must
+                                           #   hold each servo's homing_offset / reverse
+                                           #   (check refuses a servo that differs; write
+                                           #   writes them, torque off only)
       chain:                               #   the joint's servos, parent -> child, 1..3
         - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
            max_ticks: 4095, name: j1}      #   zero/direction/min/max/name optional
+        - {id: 2, axis: [0, 1, 0], homing_offset: -1024, reverse: true}
+                                           #   homing_offset: int ticks, ±1,044,479
+                                           #   (default 0); reverse: true | false (default
+                                           #   false): the frame the servo's own registers
+                                           #   hold, in which zero/direction/min/max were
+                                           #   measured
       joints:                              #   instead of chain, with limb: a servo limb —
         - name: shoulder                   #   every joint of the limb, in its order
           kind: ball                       #   optional: default the joint's (calibration.
@@ -57,6 +68,14 @@ unchanged); ``joints`` (a rig with ``limb:``) lists each joint of the limb with 
 the bus's tick vector being the joints' servos concatenated in that order
 (:class:`~rig.devices.kinematics.LimbKinematics`). A servo limb needs no sensors: ``limb``
 then checks ``servos.joints`` against the limb's joints instead of ``sensors.segments``.
+
+Each servo's ``homing_offset`` and ``reverse`` (:class:`ServoFrame`) are the values of its
+Homing Offset (20) and Drive Mode bit 0 (reverse direction) items, e-Manual "Homing Offset" /
+"Drive Mode" of the X series: Present Position = (reverse ? −1 : 1) × actual + Homing Offset.
+The rig's ticks (``zero_ticks``, ``min_ticks``, ...) are in that frame, so a servo calibrated by
+another tool (its own offset, a reversed direction) would move the joint elsewhere; the bus
+refuses it at open (``homing: check``) or writes the configured values (``homing: write``),
+see :class:`rig.devices.dynamixel.DynamixelBus`.
 
 At least one of ``sensors`` / ``servos`` is required.
 """
@@ -89,9 +108,12 @@ from rig.devices.servo import Servo
 from rig.errors import RigConfigError
 
 __all__ = [
+    "HOMING_MODES",
+    "HOMING_OFFSET_RANGE",
     "JointInfo",
     "RigConfig",
     "SensorsConfig",
+    "ServoFrame",
     "ServoJoint",
     "ServosConfig",
     "load_rig_config",
@@ -100,6 +122,22 @@ __all__ = [
 ]
 
 _X_BAUDS = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
+
+HOMING_MODES = ("check", "write")
+"""``servos.homing``: refuse servos whose Homing Offset / reverse bit differ, or write them."""
+
+HOMING_OFFSET_RANGE = (-1_044_479, 1_044_479)
+"""Homing Offset's range, ticks (X-series e-Manual, control table item 20)."""
+
+
+@dataclass(frozen=True)
+class ServoFrame:
+    """The frame a servo's own registers must hold: its Homing Offset (item 20, ticks) and
+    Drive Mode bit 0 (reverse direction), X-series e-Manual. Defaults: the factory's (0, normal).
+    """
+
+    homing_offset: int = 0
+    reverse: bool = False
 
 
 @dataclass(frozen=True)
@@ -164,6 +202,11 @@ class ServosConfig:
         reachable orientation for 1-2).
     joints : tuple of ServoJoint
         A servo limb's joints (YAML key ``joints``); empty for a rig of one joint (``chain``).
+    frames : tuple of ServoFrame
+        Each servo's Homing Offset / reverse, in tick-vector order (empty: every servo the
+        factory's 0 / normal).
+    homing : {"check", "write"}
+        What opening the bus does when a servo's registers differ from :attr:`frames`.
     """
 
     port: str
@@ -176,6 +219,12 @@ class ServosConfig:
     ik_tolerance_deg: float | None = None
     latency_ms: float | None = None
     joints: tuple[ServoJoint, ...] = ()
+    frames: tuple[ServoFrame, ...] = ()
+    homing: str = "check"
+
+    def frame(self, k: int) -> ServoFrame:
+        """The frame of the ``k``-th servo in tick-vector order."""
+        return self.frames[k] if self.frames else ServoFrame()
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -350,9 +399,10 @@ def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
     return SensorsConfig(ports, protocol, rate, baud, segments, raw)
 
 
-def _servo_axis(ctx: _Ctx, value: Any, where: str) -> ServoAxis:
+def _servo_axis(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ServoFrame]:
     d = ctx.mapping(value, where, {"id", "axis"},
-                    {"zero_ticks", "direction", "min_ticks", "max_ticks", "name"})
+                    {"zero_ticks", "direction", "min_ticks", "max_ticks", "name",
+                     "homing_offset", "reverse"})
     dxl_id = ctx.integer(d["id"], f"{where}.id", 0, 252)
     axis = d["axis"]
     if not isinstance(axis, list) or len(axis) != 3:
@@ -369,19 +419,29 @@ def _servo_axis(ctx: _Ctx, value: Any, where: str) -> ServoAxis:
     if not lo <= zero <= hi:
         raise ctx.fail(where, f"need min_ticks <= zero_ticks <= max_ticks, got {lo}, {zero}, {hi}")
     name = ctx.string(d["name"], f"{where}.name") if "name" in d else None
-    return ServoAxis(dxl_id, vec, zero, direction, lo, hi, name)  # type: ignore[arg-type]
+    offset = ctx.integer(d.get("homing_offset", 0), f"{where}.homing_offset",
+                         *HOMING_OFFSET_RANGE)
+    reverse = d.get("reverse", False)
+    if not isinstance(reverse, bool):
+        raise ctx.fail(f"{where}.reverse", f"expected true or false, got {reverse!r}")
+    return (ServoAxis(dxl_id, vec, zero, direction, lo, hi, name),  # type: ignore[arg-type]
+            ServoFrame(offset, reverse))
 
 
-def _chain(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ...]:
+def _chain(ctx: _Ctx, value: Any, where: str
+           ) -> tuple[tuple[ServoAxis, ...], tuple[ServoFrame, ...]]:
+    """A chain's servos: their kinematics and their registers' frames."""
     if not isinstance(value, list) or not 1 <= len(value) <= 3:
         raise ctx.fail(where, "expected a list of 1 to 3 servos (parent -> child)")
-    return tuple(_servo_axis(ctx, j, f"{where}[{i}]") for i, j in enumerate(value))
+    pairs = [_servo_axis(ctx, j, f"{where}[{i}]") for i, j in enumerate(value)]
+    return tuple(a for a, _ in pairs), tuple(f for _, f in pairs)
 
 
 def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
-                  ) -> tuple[ServoJoint, ...]:
+                  ) -> tuple[tuple[ServoJoint, ...], tuple[ServoFrame, ...]]:
     """``servos.joints``: the ``limb``'s joints ``names`` in its order, each its kind's number
-    of servos (none named: the file has no ``limb:`` to check them against)."""
+    of servos (none named: the file has no ``limb:`` to check them against); with every
+    servo's frame, in tick-vector order."""
     if not names:
         raise ctx.fail("servos.joints", "a servo limb needs 'limb: arm' or 'limb: leg' "
                                         "(one joint: servos.chain)")
@@ -389,6 +449,7 @@ def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
         raise ctx.fail("servos.joints", f"expected a list of the {limb}'s joints "
                                         f"({', '.join(names)})")
     joints = []
+    frames: list[ServoFrame] = []
     for i, raw in enumerate(value):
         where = f"servos.joints[{i}]"
         d = ctx.mapping(raw, where, {"name", "chain"}, {"kind"})
@@ -405,7 +466,8 @@ def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
         if kind.swing_twist != own.swing_twist:
             raise ctx.fail(f"{where}.kind", f"the {name} cannot be a {kind.words} (it is a "
                                             f"{own.words})")
-        axes = _chain(ctx, d["chain"], f"{where}.chain")
+        axes, chain_frames = _chain(ctx, d["chain"], f"{where}.chain")
+        frames.extend(chain_frames)
         if len(axes) != kind.servo_axes:
             raise ctx.fail(f"{where}.chain", f"a {kind.words} has {kind.servo_axes} servo"
                                              f"{'s' if kind.servo_axes > 1 else ''}, "
@@ -414,7 +476,7 @@ def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
     if len(joints) != len(names):
         raise ctx.fail("servos.joints", f"the {limb} has {len(names)} joints "
                                         f"({', '.join(names)}), got {len(joints)}")
-    return tuple(joints)
+    return tuple(joints), tuple(frames)
 
 
 def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
@@ -422,7 +484,8 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
     names = tuple(name for name, _, _ in LIMB_CHAINS.get(limb, ()))
     d = ctx.mapping(value, "servos", {"port"},
                     {"chain", "joints", "baud", "model", "return_delay_us",
-                     "status_return_level", "watchdog_ms", "ik_tolerance_deg", "latency_ms"})
+                     "status_return_level", "watchdog_ms", "ik_tolerance_deg", "latency_ms",
+                     "homing"})
     port = ctx.string(d["port"], "servos.port")
     baud = ctx.integer(d.get("baud", 1_000_000), "servos.baud")
     if baud not in _X_BAUDS:
@@ -432,14 +495,14 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
         raise ctx.fail("servos", "needs either 'chain' (one joint) or 'joints' (a limb)")
     joints: tuple[ServoJoint, ...] = ()
     if "joints" in d:
-        joints = _servo_joints(ctx, d["joints"], limb, names)
+        joints, frames = _servo_joints(ctx, d["joints"], limb, names)
         axes = tuple(a for j in joints for a in j.axes)
         where = "servos.joints"
     else:
         if names:
             raise ctx.fail("servos.chain", f"the {limb} rig's servos are listed per joint "
                                            f"(servos.joints)")
-        axes = _chain(ctx, d["chain"], "servos.chain")
+        axes, frames = _chain(ctx, d["chain"], "servos.chain")
         where = "servos.chain"
     ids = [j.id for j in axes]
     for i in ids:
@@ -457,7 +520,13 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
         ctx.number(d["ik_tolerance_deg"], "servos.ik_tolerance_deg", 0.0)
     lat = d.get("latency_ms")
     latency = None if lat is None else ctx.number(lat, "servos.latency_ms", 0.0)
-    cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints)
+    homing = ctx.string(d.get("homing", "check"), "servos.homing")
+    if homing not in HOMING_MODES:
+        raise ctx.fail("servos.homing", f"expected {' or '.join(HOMING_MODES)}, got {homing!r}")
+    if all(f == ServoFrame() for f in frames):
+        frames = ()  # every servo the factory's frame (as a config without the keys)
+    cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints, frames,
+                       homing)
     for j in joints or (None,):
         try:
             if j is None:

@@ -23,6 +23,24 @@ limited write life) — then Status Return Level (68, RAM). :meth:`DynamixelBus.
 writes Bus Watchdog (98, 20 ms units): with torque on, a servo that hears nothing from the host
 for that long stops and flags ``Bus Watchdog = -1`` (255) until 0 is written.
 
+Frame (:meth:`DynamixelBus.apply_homing`): a bus opened from a rig config's ``servos`` section
+reads every servo's Homing Offset (20) and Drive Mode (10) before anything reads a position:
+Present Position = (Drive Mode bit 0 ? −1 : 1) × actual + Homing Offset (X-series e-Manual,
+"Homing Offset" and "Drive Mode"), so a servo whose values differ from the config's
+``homing_offset`` / ``reverse`` reports ticks in another frame than the one its zero and limits
+were measured in. ``servos.homing: check`` refuses it (:class:`~rig.errors.RigConfigError`
+naming the servo, the register, both values and the two ways out); ``write`` writes the
+config's values (EEPROM: torque off only; the other Drive Mode bits kept) and reads them back.
+:meth:`DynamixelBus.configure` does the same first, and reads back every register it writes.
+
+Read-back of the goal (:meth:`DynamixelBus.map_read_back`, called by ``configure``): on servos
+with indirect addressing (e-Manual "Indirect Address / Indirect Data": Indirect Address k at
+168 + 2(k−1) holds the address whose byte Indirect Data k at 224 + (k−1) stands for), Indirect
+Address 1-4 are set to Present Position (132-135) and 5-8 to Goal Position (116-119); the
+cycle's one sync read then reads Indirect Data 1-8 (8 bytes per servo): the present position
+and the goal each servo holds (:attr:`~rig.devices.bus.ServoBus.held_goals`). Servos without
+it keep the 4-byte read of Present Position (``held_goals`` None, a line of advice).
+
 Hardware errors are events: a status packet with the alert bit marks its servo;
 :meth:`DynamixelBus.poll_alerts` reads Torque Enable (64), Hardware Error Status (70) and Bus
 Watchdog (98) and returns :class:`~rig.errors.HardwareAlert` records with the torque state as
@@ -51,7 +69,7 @@ import select
 import termios
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -64,7 +82,7 @@ from firmware_protocol.dynamixel.control_table import (
 )
 from rig.devices.base import describe_open_error
 from rig.devices.bus import ServoBus
-from rig.devices.config import ServosConfig
+from rig.devices.config import HOMING_MODES, ServoFrame, ServosConfig
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
 from rig.devices.ports import Port, open_port
 from rig.devices.servo import Servo
@@ -77,8 +95,8 @@ from rig.errors import (
     RigTimeoutError,
 )
 
-__all__ = ["FAST_SYNC_READ_FIRMWARE", "SCAN_BAUDS", "DynamixelBus", "ServoInfo", "find_servos",
-           "scan"]
+__all__ = ["FAST_SYNC_READ_FIRMWARE", "REVERSE_BIT", "SCAN_BAUDS", "DynamixelBus", "ServoInfo",
+           "find_servos", "scan"]
 
 ALERT_BIT = 0x80
 FAST_SYNC_READ_FIRMWARE = 45
@@ -93,6 +111,9 @@ _ERROR_NAMES = {1: "result fail", 2: "instruction error", 3: "CRC error", 4: "da
                 5: "data length error", 6: "data limit error", 7: "access error"}
 _CONNECTION_ERRORS = (OSError, serial.SerialException, termios.error)
 
+REVERSE_BIT = 0x01
+"""Drive Mode bit 0: reverse direction (X-series e-Manual, "Drive Mode (10)")."""
+
 # X-series addresses (checked against the control table of every model found)
 _ITEMS = ("Return Delay Time", "Operating Mode", "Max Position Limit", "Min Position Limit",
           "Torque Enable", "Status Return Level", "Hardware Error Status", "Bus Watchdog",
@@ -102,7 +123,9 @@ _ITEMS = ("Return Delay Time", "Operating Mode", "Max Position Limit", "Min Posi
 @dataclass(frozen=True)
 class ServoInfo:
     """What a PING found: ID, model number and name, firmware version, baud rate, and the
-    protocol it answered (2.0, or 1.0: AX, MX on 1.0 firmware, X series on Protocol Type 1)."""
+    protocol it answered (2.0, or 1.0: AX, MX on 1.0 firmware, X series on Protocol Type 1);
+    what :func:`scan` read after it: Homing Offset (ticks) and the Drive Mode reverse bit
+    (None: the model has no such item, or it was not read)."""
 
     id: int
     model_number: int
@@ -110,6 +133,8 @@ class ServoInfo:
     firmware: int
     baud: int
     protocol: float = 2.0
+    homing_offset: int | None = None
+    reverse: bool | None = None
 
     def __repr__(self) -> str:  # the protocol shown only when it is not the default 2.0
         extra = f", protocol={self.protocol}" if self.protocol != 2.0 else ""
@@ -243,6 +268,28 @@ def _ping(port: _SdkPort, ph, dxl_id: int) -> tuple[int, int, int] | None:
     return rx[p0] | rx[p0 + 1] << 8, rx[p0 + 2], error
 
 
+def _read_frame(port: _SdkPort, ph, dxl_id: int, model_number: int,
+                protocol: float | None = None) -> tuple[int | None, bool | None]:
+    """Homing Offset (ticks) and the Drive Mode reverse bit of one servo that answered a PING;
+    None for an item its model lacks (or a read that got no clean answer)."""
+    try:
+        table = load_control_table(model_number, protocol)
+    except (ValueError, FileNotFoundError):
+        return None, None
+    out: list[int | None] = []
+    for name in ("Homing Offset", "Drive Mode"):
+        item = table.resolve(name)
+        if item is None:
+            out.append(None)
+            continue
+        port.is_using = False
+        data, result, err = ph.readTxRx(port, dxl_id, item.address, item.size)
+        out.append(item.decode(bytes(data)) if result == sdk.COMM_SUCCESS and not err & 0x7F
+                   else None)
+    offset, mode = out
+    return offset, None if mode is None else bool(mode & REVERSE_BIT)
+
+
 class DynamixelBus(ServoBus):
     """X-series servos on one bus: open, check, read, write, registers, alerts, watchdog.
 
@@ -266,6 +313,9 @@ class DynamixelBus(ServoBus):
         (≥ 1 ms) on hardware, 50 ms on a simulator's pty (a loaded machine).
     fast : bool, optional
         Force FAST SYNC READ on/off; default: when every servo's firmware supports it.
+    homing : {"check", "write"}, optional
+        What :meth:`apply_homing` does at open and in :meth:`configure`; default
+        ``servos.homing`` of a rig config, None (no frame check) for a bus of bare servos.
 
     Attributes
     ----------
@@ -279,6 +329,11 @@ class DynamixelBus(ServoBus):
         The model every servo must report (``servos.model``).
     return_delay_us, status_return_level : int
         What :meth:`configure` writes.
+    homing : str or None
+    frames : tuple of ServoFrame
+        Each servo's Homing Offset / reverse bit the bus requires (tick-vector order).
+    read_back : bool
+        The cycle's read also reads the goal each servo holds (:meth:`map_read_back`).
 
     Raises
     ------
@@ -296,7 +351,7 @@ class DynamixelBus(ServoBus):
     def __init__(self, port: str | Port | None, servos: ServosConfig | Sequence[Servo | int], *,
                  baud: int | None = None, timeout: float | None = None,
                  retries: int | None = None, latency_ms: float | None = None,
-                 fast: bool | None = None) -> None:
+                 fast: bool | None = None, homing: str | None = None) -> None:
         config = servos if isinstance(servos, ServosConfig) else None
         settings = config if config is not None else ServosConfig  # its defaults
         self.config = config
@@ -311,6 +366,14 @@ class DynamixelBus(ServoBus):
         self._fast_wanted = fast
         baud = int(baud if baud is not None else settings.baud)
         self._alert_ids: set[int] = set()
+        if homing is None and config is not None:
+            homing = config.homing
+        if homing is not None and homing not in HOMING_MODES:
+            raise RigConfigError(f"homing must be {' or '.join(HOMING_MODES)}, got {homing!r}")
+        self.homing = homing
+        n = len(config.axes) if config is not None else len(servos)
+        self.frames: tuple[ServoFrame, ...] = tuple(
+            config.frame(k) if config is not None else ServoFrame() for k in range(n))
         super().__init__(port, config.bus_servos() if config is not None else servos,
                          baud=baud, timeout=timeout, retries=retries,
                          watchdog_ms=settings.watchdog_ms)
@@ -327,6 +390,9 @@ class DynamixelBus(ServoBus):
         self._sdk_port, self._ph = _open_sdk(self.path, url, self.baud, latency)
         try:
             self._check_servos()
+            self._plain_read()
+            if self.homing is not None:
+                self.apply_homing()
         except BaseException:
             self._close()
             raise
@@ -430,14 +496,18 @@ class DynamixelBus(ServoBus):
         return self._finish_read()
 
     def _begin_read(self) -> None:
-        """The sync read request of Present Position (its packet timeout starts now)."""
-        self._sync_read_tx(self._a_present, 4, self._id_param)
+        """The sync read request of Present Position (its packet timeout starts now), and of
+        the goal held when :meth:`map_read_back` mapped both into the indirect data."""
+        self._sync_read_tx(self._read_at, self._read_len, self._id_param)
 
     def _finish_read(self) -> np.ndarray:
-        """The reply of :meth:`_begin_read` as ticks, (n,) int64."""
-        data = self._sync_read_rx(4, self._id_param)
-        return np.array([int.from_bytes(data[i], "little", signed=True) for i in self.ids],
-                        dtype=np.int64)
+        """The reply of :meth:`_begin_read` as ticks, (n,) int64 (and :attr:`held_goals`)."""
+        data = self._sync_read_rx(self._read_len, self._id_param)
+        v = np.frombuffer(b"".join([data[i] for i in self.ids]), dtype="<i4").astype(np.int64)
+        if self._read_len == 8:
+            self.held_goals = v[1::2]
+            return v[0::2]
+        return v
 
     def sync_read(self, address: int, length: int,
                   ids: Sequence[int] | None = None) -> dict[int, bytes]:
@@ -583,12 +653,22 @@ class DynamixelBus(ServoBus):
     def configure(self) -> None:
         """Set the registers the loop depends on (see the module docstring).
 
+        First the servos' frame (:meth:`apply_homing`, when :attr:`homing` is set); every
+        register written is read back (a value the servo did not keep is an error naming it);
+        last the read-back of the goal (:meth:`map_read_back`).
+
         Raises
         ------
         RigError
             An EEPROM value must change while a servo's torque is on (turn torque off first;
             this method never does that by itself: the limb could fall).
+        RigConfigError
+            ``homing: check`` and a servo's Homing Offset / reverse bit differ from the config.
+        RigProtocolError
+            A servo did not keep a value written.
         """
+        if self.homing is not None:
+            self.apply_homing()
         lo, hi = self.min_ticks, self.max_ticks
         multi_turn = bool((lo < 0).any() or (hi > 4095).any())
         for k, dxl_id in enumerate(self.ids):
@@ -605,10 +685,197 @@ class DynamixelBus(ServoBus):
                                f"off first (set_torque(False))", port=str(self.port),
                                dxl_id=dxl_id, actual=have[n], expected=v)
             for name, value in change.items():
-                self.write_register(dxl_id, name, value)
+                self._write_verified(dxl_id, name, value)
         for dxl_id in self.ids:
-            self.write_register(dxl_id, "Status Return Level", self.status_return_level)
+            if self.status_return_level >= 1:  # 0: no status to a READ (only PING answers)
+                self._write_verified(dxl_id, "Status Return Level", self.status_return_level)
+            else:
+                self.write_register(dxl_id, "Status Return Level", self.status_return_level)
         self._srl = self.status_return_level
+        if self.status_return_level >= 1:
+            self.map_read_back()
+
+    # -- frame (Homing Offset, Drive Mode) and the goal's read-back -------------------------
+    def _table_of(self, dxl_id: int) -> ControlTable:
+        """The control table of servo ``dxl_id``'s model."""
+        info = self.found[dxl_id]
+        protocol = getattr(info, "protocol", None)
+        return load_control_table(info.model_number, protocol)
+
+    def _write_verified(self, dxl_id: int, name: str, value: int) -> None:
+        """Write ``name`` and read it back: the servo must hold ``value``."""
+        self.write_register(dxl_id, name, value)
+        held = self.read_register(dxl_id, name)
+        if held != value:
+            raise RigProtocolError(f"{name} was written but the servo did not keep it",
+                                   port=str(self.port), dxl_id=dxl_id, actual=held,
+                                   expected=value)
+
+    def read_frames(self) -> dict[int, tuple[int | None, int | None]]:
+        """Each servo's Homing Offset (ticks) and Drive Mode byte; None where its model has no
+        such item."""
+        out: dict[int, tuple[int | None, int | None]] = {}
+        for dxl_id in self.ids:
+            table = self._table_of(dxl_id)
+            off = self.read_register(dxl_id, "Homing Offset") \
+                if table.resolve("Homing Offset") is not None else None
+            mode = self.read_register(dxl_id, "Drive Mode") \
+                if table.resolve("Drive Mode") is not None else None
+            out[dxl_id] = (off, mode)
+        return out
+
+    def apply_homing(self) -> None:
+        """Every servo's Homing Offset and reverse bit as :attr:`frames` says: checked
+        (``homing = "check"``) or written and read back (``"write"``; EEPROM, so torque off
+        only; the other Drive Mode bits kept).
+
+        Raises
+        ------
+        RigConfigError
+            ``check``: a servo's value differs (the message names the servo, the register, what
+            it holds, what the config says and the two ways out); or the config asks for a
+            frame on a model without the item.
+        RigError
+            ``write``: a value must change while the servo's torque is on.
+        RigProtocolError
+            ``write``: the servo did not keep a value written.
+        """
+        url = str(self.port)
+        write = self.homing == "write"
+        for (dxl_id, (off, mode)), want in zip(self.read_frames().items(), self.frames,
+                                               strict=True):
+            name = self.names[self.index(dxl_id)]
+            change: dict[str, int] = {}
+            for item, have, need, key, shown in (
+                    ("Homing Offset", off, want.homing_offset, "homing_offset",
+                     lambda v: str(v)),
+                    ("Drive Mode", None if mode is None else bool(mode & REVERSE_BIT),
+                     want.reverse, "reverse", lambda v: "true" if v else "false")):
+                if have is None:
+                    if need != type(need)():
+                        raise RigConfigError(
+                            f"servo {name} ({self.found[dxl_id].model}) has no {item} item: "
+                            f"the rig config's {key}: {shown(need)} cannot hold; remove it",
+                            port=url, dxl_id=dxl_id)
+                    continue
+                if have == need:
+                    continue
+                what = "reverse bit (Drive Mode bit 0)" if key == "reverse" else item
+                if not write:
+                    raise RigConfigError(
+                        f"servo {name}: {what} holds {shown(have)}, the rig config says "
+                        f"{shown(need)}; if the servo was calibrated so on purpose put "
+                        f"'{key}: {shown(have)}' on servo {name} in the config, otherwise set "
+                        f"'servos.homing: write' to write the config's value",
+                        port=url, dxl_id=dxl_id)
+                change[item] = need if key == "homing_offset" else \
+                    (mode & ~REVERSE_BIT) | (REVERSE_BIT if need else 0)
+            if not change:
+                continue
+            if self.read_register(dxl_id, "Torque Enable"):
+                item, value = next(iter(change.items()))
+                raise RigError(f"EEPROM item {item!r} must change (servos.homing: write) but "
+                               f"torque is on; turn torque off first (set_torque(False))",
+                               port=url, dxl_id=dxl_id, expected=value)
+            for item, value in change.items():
+                self._write_verified(dxl_id, item, value)
+
+    def _plain_read(self) -> None:
+        """The cycle reads Present Position alone (no goal read back)."""
+        self._read_at, self._read_len = self._a_present, 4
+        self.read_back = False
+        self.held_goals = None
+
+    def map_read_back(self) -> bool:
+        """Map Present Position, then Goal Position, into the first indirect data block of
+        every servo (8 bytes; e-Manual "Indirect Address") so that the cycle's one sync read
+        also returns the goal each servo holds (:attr:`held_goals`). Indirect Address items
+        already holding the mapping are not written again; those written are read back. Before
+        it is used, one read of the indirect data is checked against direct reads of Goal
+        Position (equal) and Present Position (between two reads around it).
+
+        Returns
+        -------
+        bool
+            True when the cycle reads back the goal; False (and a line in :attr:`advice`) when
+            a servo has no indirect addressing, refuses the mapping or does not honour it: the
+            cycle then reads Present Position alone.
+        """
+        self._plain_read()
+        tables = [self._table_of(i) for i in self.ids]
+        blocks = {t.indirect[0] if t.indirect and t.protocol == 2.0 else None for t in tables}
+        block = next(iter(blocks))
+        t = self.table
+        if len(blocks) != 1 or block is None or block.count < 8 \
+                or "Goal Position" not in t or "Present Position" not in t:
+            no = [i for i, tb in zip(self.ids, tables, strict=True) if not tb.indirect]
+            why = (f"servo ID {no[0]} ({self.found[no[0]].model}) has no indirect addressing"
+                   if no else "the servos' indirect blocks differ")
+            self.advice.append(f"{why}: the loop reads Present Position only and does not "
+                               f"check that each servo holds the goal written")
+            return False
+        a_p, a_g = t["Present Position"].address, t["Goal Position"].address
+        want = [a_p + j for j in range(4)] + [a_g + j for j in range(4)]
+        raw = b"".join(a.to_bytes(2, "little") for a in want)
+        url = str(self.port)
+        try:
+            for dxl_id in self.ids:
+                if self._read_raw(dxl_id, block.address_start, len(raw)) == raw:
+                    continue
+                self._write_raw(dxl_id, block.address_start, raw)
+                held = self._read_raw(dxl_id, block.address_start, len(raw))
+                if held != raw:
+                    raise RigProtocolError("Indirect Address 1-8 were written but the servo "
+                                           "did not keep them", port=url, dxl_id=dxl_id,
+                                           actual=held.hex(), expected=raw.hex())
+        except RigProtocolError as err:
+            if "did not keep" in str(err):
+                raise
+            self.advice.append(f"{err}: the loop reads Present Position only and does not "
+                               f"check that each servo holds the goal written")
+            return False
+        before = self.transact(lambda d: self.sync_read(a_p, 4), "sync read of Present Position")
+        mapped = self.transact(lambda d: self.sync_read(block.data_start, 8),
+                               "sync read of Indirect Data")
+        after = self.transact(lambda d: self.sync_read(a_p, 4), "sync read of Present Position")
+        goals = self.transact(lambda d: self.sync_read(a_g, 4), "sync read of Goal Position")
+        for dxl_id in self.ids:
+            p0, p1 = (int.from_bytes(x[dxl_id], "little", signed=True) for x in (before, after))
+            p = int.from_bytes(mapped[dxl_id][:4], "little", signed=True)
+            if mapped[dxl_id][4:] != goals[dxl_id] or not min(p0, p1) - 2 <= p <= max(p0, p1) + 2:
+                self.advice.append(
+                    f"servo ID {dxl_id} does not honour its indirect addressing (Indirect Data "
+                    f"reads {p} for Present Position {p0}): the loop reads Present Position "
+                    f"only and does not check that each servo holds the goal written")
+                return False
+        self._read_at, self._read_len = block.data_start, 8
+        self.read_back = True
+        return True
+
+    def _read_raw(self, dxl_id: int, address: int, length: int) -> bytes:
+        """``length`` bytes of one servo from ``address`` (retried)."""
+        def once(deadline: float) -> bytes:
+            port = self._sdk_port
+            port.is_using = False
+            data, result, err = self._guard(
+                lambda: self._ph.readTxRx(port, dxl_id, address, length))
+            self._result(result, f"read of {length} bytes at {address}", dxl_id)
+            self._status_error(dxl_id, err, f"read of {length} bytes at {address}")
+            return bytes(data)
+
+        return self.transact(once, f"read at {address}", dxl_id=dxl_id)
+
+    def _write_raw(self, dxl_id: int, address: int, data: bytes) -> None:
+        """Write ``data`` to one servo at ``address`` (acknowledged, retried)."""
+        def once(deadline: float) -> None:
+            port = self._sdk_port
+            port.is_using = False
+            result, err = self._guard(lambda: self._ph.writeTxRx(port, dxl_id, address,
+                                                                 len(data), list(data)))
+            self._result(result, f"write of {len(data)} bytes at {address}", dxl_id)
+            self._status_error(dxl_id, err, f"write of {len(data)} bytes at {address}")
+
+        self.transact(once, f"write at {address}", dxl_id=dxl_id)
 
     def _arm_watchdog(self, ms: int) -> int:
         """Bus Watchdog on every servo, ``ms`` rounded up to 20 ms units (0 disarms and clears
@@ -665,7 +932,8 @@ BROADCAST_SCAN_ABOVE = 24
 def scan(port: str | Port, bauds: Iterable[int] | None = None,
          ids: Iterable[int] = range(253), *, latency_ms: float | None = None,
          on_found=None, protocols: Sequence[float] | None = None) -> list[ServoInfo]:
-    """PING every ID at every baud rate, in each protocol: what answers.
+    """PING every ID at every baud rate, in each protocol: what answers, with each
+    servo's Homing Offset and reverse bit read after its PING (:class:`ServoInfo`).
 
     A few IDs: per-ID pings with the SDK's timeout formula at ``latency_ms`` (default: the
     adapter's detected latency timer, 50 ms on a simulator). More than
@@ -727,7 +995,13 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
                         raise RigConnectionError(f"the adapter stopped working ({err})",
                                                  port=str(p)) from err
                     if got is not None:
-                        info = ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], baud)
+                        try:
+                            frame = _read_frame(sdk_port, ph, dxl_id, got[0])
+                        except _CONNECTION_ERRORS as err:
+                            raise RigConnectionError(f"the adapter stopped working ({err})",
+                                                     port=str(p)) from err
+                        info = ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], baud,
+                                         2.0, *frame)
                         found.append(info)
                         if on_found is not None:
                             on_found(info)
@@ -741,8 +1015,13 @@ def scan(port: str | Port, bauds: Iterable[int] | None = None,
                             raise RigConnectionError(f"the adapter stopped working ({err})",
                                                      port=str(p)) from err
                         if got is not None:
+                            try:
+                                frame = _read_frame(sdk_port, ph1, dxl_id, got[0], 1.0)
+                            except _CONNECTION_ERRORS as err:
+                                raise RigConnectionError(f"the adapter stopped working "
+                                                         f"({err})", port=str(p)) from err
                             info = ServoInfo(dxl_id, got[0], _model_name1(got[0]), got[1],
-                                             baud, 1.0)
+                                             baud, 1.0, *frame)
                             found.append(info)
                             if on_found is not None:
                                 on_found(info)

@@ -8,7 +8,8 @@ One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler
     IK (nearest the previous goal) → goal ticks → FK → supervisor.accept (final exact check)
     the read's reply collected → present ticks → FK → present orientation
     [faults: timeout / garbled → retry while the cycle budget allows; adapter gone → safe state;
-     hardware alert on any servo → safe state; servo data older than the watchdog → safe state]
+     hardware alert on any servo → safe state; a servo not holding the goal written the cycle
+     before → safe state; servo data older than the watchdog → safe state]
     one sync write of the goal ticks (none when a fault sends the limb to the safe state)
     telemetry row (preallocated chunk; written by another thread)
 
@@ -27,7 +28,10 @@ While it runs, the objects alive at start are frozen out of the cyclic garbage c
 
 Safe state (``safe_state="hold"``, the default, or ``"torque-off"``)
 --------------------------------------------------------------------
-Entered at once on: the adapter going away, a hardware alert on any servo of the limb, servo
+Entered at once on: the adapter going away, a hardware alert on any servo of the limb, a servo
+that does not hold the goal written the cycle before (``GOAL_NOT_HELD``: on a bus that reads
+the goals back, :attr:`~rig.devices.bus.ServoBus.held_goals` — its Bus Watchdog fired and it
+refuses goals, it refused or clamped the goal, another servo answers for its ID), servo
 data older than ``stale_present_s`` (reads failing beyond the retries), a failed write, a
 stop request (SIGINT / SIGTERM), a target source whose device vanished (after its target went
 stale: the goal already holds). ``hold`` writes Goal Position = Present Position, within the
@@ -256,6 +260,8 @@ class EnforcementLoop:
         self._warm_s = 0.0  # a running estimate of how long a warm-up takes, s
         self.summary: dict = {}
         self._setup_done = False
+        self._sent: np.ndarray | None = None  # the goal ticks of the last write that went out
+        self._sent_before: np.ndarray | None = None  # ... and of the write before it
 
     # ------------------------------------------------------------------ start-up
     def setup(self) -> None:
@@ -352,6 +358,7 @@ class EnforcementLoop:
             # and refuses goals until its watchdog is cleared (0) and set again
             _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))  # clears a fired one first
         self._t_bus = clock()
+        self._sent = self._sent_before = None  # what the servos hold before the first write
         t0 = sched.start()
         targets.start(t0)
         sup.reset(t0, self._present)
@@ -470,7 +477,23 @@ class EnforcementLoop:
                     continue
                 break
             c1 = perf()
+            held_bad = -1
             if fresh:
+                held = bus.held_goals
+                sent = self._sent
+                if held is not None and sent is not None:
+                    # the goal written last, or the one before: a reply that came late (a loaded
+                    # host, a slow adapter) is read as the next request's and shows the servos
+                    # one write behind — present and held alike; a servo that refuses goals
+                    # differs from both within two writes of a goal that changes
+                    diff = held != sent
+                    if diff.any():
+                        before = self._sent_before
+                        if before is not None:
+                            diff &= held != before
+                        if diff.any():
+                            faults |= Fault.GOAL_NOT_HELD
+                            held_bad = int(diff.argmax())
                 self._t_bus = clock()
                 self._present_ticks = ticks
                 present = [kj.forward_one(ticks[sl]) for kj, sl in zip(kins, slices, strict=True)]
@@ -495,6 +518,10 @@ class EnforcementLoop:
                     faults |= Fault.HARDWARE_ALERT
                     a = alerts[0]
                     reason = a.message
+            if reason is None and held_bad >= 0:
+                reason = (f"servo ID {bus.ids[held_bad]} holds goal {int(held[held_bad])} "
+                          f"ticks, not the {int(sent[held_bad])} written the cycle before (its "
+                          f"Bus Watchdog fired, or it refused or clamped the goal)")
             if reason is None and sup.present_stale(start, t_present):
                 faults |= Fault.STALE_PRESENT
                 reason = (f"servo data stale for {1e3 * (start - t_present):.0f} ms (limit "
@@ -518,6 +545,7 @@ class EnforcementLoop:
             if reason is None:
                 try:
                     bus.write_goal_ticks(self._goal_ticks)
+                    self._sent_before, self._sent = self._sent, self._goal_ticks
                     self._t_bus = clock()
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST
@@ -901,6 +929,8 @@ def prepare_servo_limb(port, servos: ServosConfig, oracle=None, *, backstop: boo
             log(f"backstop position limits: {describe_limits(kin, lo, hi)}")
         if not torque_on:
             bus.configure()
+        else:  # the goal's read-back is RAM: mapped whatever the torque
+            bus.map_read_back()
         if latency_ms is not None:
             bus.set_latency(latency_ms)
     except BaseException:

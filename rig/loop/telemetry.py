@@ -64,11 +64,12 @@ class Fault(IntFlag):
     TARGET_LOST = 512     #: the target source failed (its device vanished)
     SIGNAL = 1024         #: SIGINT / SIGTERM
     WATCHDOG_GAP = 2048   #: no bus traffic for longer than the servos' Bus Watchdog: it fired
+    GOAL_NOT_HELD = 4096  #: a servo does not hold the goal written the cycle before
 
 
 #: Faults that send the limb to the safe state at once.
 SAFE_STATE_FAULTS = int(Fault.HARDWARE_ALERT | Fault.CONNECTION_LOST | Fault.STALE_PRESENT
-                        | Fault.SIGNAL | Fault.WATCHDOG_GAP)
+                        | Fault.SIGNAL | Fault.WATCHDOG_GAP | Fault.GOAL_NOT_HELD)
 
 COLUMNS: tuple[str, ...] = (
     "cycle", "t_s",

@@ -10,8 +10,10 @@ def test_scan_finds_servos_at_their_baud_rate(rig_cli):
                               "--ids", "0-3", "--latency-ms", "50", "--protocol", "2"])
     assert code == 0, err
     rows = [line.split() for line in out.splitlines()[1:]]
-    assert rows == [["1", "XL430-W250", "48", "57600", "2.0"],
-                    ["3", "XL430-W250", "48", "57600", "2.0"]]
+    assert out.splitlines()[0].split() == ["ID", "model", "firmware", "baud", "protocol",
+                                           "homing", "direction"]
+    assert rows == [["1", "XL430-W250", "48", "57600", "2.0", "0", "normal"],
+                    ["3", "XL430-W250", "48", "57600", "2.0", "0", "normal"]]
 
 
 def test_scan_finds_both_protocols_on_one_bus(rig_cli):
@@ -20,7 +22,7 @@ def test_scan_finds_both_protocols_on_one_bus(rig_cli):
                               "--latency-ms", "50"])
     assert code == 0, err
     rows = sorted(line.split() for line in out.splitlines()[1:])
-    assert [(r[0], r[1], r[-1]) for r in rows] == [
+    assert [(r[0], r[1], r[4]) for r in rows] == [
         ("1", "AX-12A", "1.0"), ("2", "MX-28", "1.0"), ("3", "XM430-W350", "1.0"),
         ("4", "XM430-W350", "2.0")]
 
