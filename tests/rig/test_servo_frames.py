@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import rig
@@ -232,3 +233,38 @@ def test_a_servo_refusing_goals_after_its_watchdog_fired_is_goal_not_held():
     assert bits[-1] & Fault.GOAL_NOT_HELD and not (bits[:-1] & Fault.GOAL_NOT_HELD).any()
     assert table["safe_state"][-1] == 1 and summary["faults"].get("goal_not_held") == 1
 
+
+
+# ------------------------------------------------------------------------------- the same arm
+def test_a_reversed_servo_with_a_homing_offset_reads_the_same_joint():
+    """The back-driven simulated shoulder seen twice at the same patient time: through servos in
+    the factory frame, and with servo 2 reversed and offset by 300 ticks (written at start-up by
+    ``homing: write``, the chain's zero, direction and limits stated in that frame). The ticks
+    differ (Present = −actual + 300); the joint orientations are the same."""
+    back = "&patient=original&chain=sim-shoulder&seed=1&wire_time=off&clock=manual"
+    plain_cfg = RIG.servos
+    axes = list(plain_cfg.axes)
+    # θ = −(present − zero'): zero' = −2048 + 300, limits mirrored and offset
+    axes[1] = dataclasses.replace(axes[1], zero_ticks=-2048 + 300, direction=-1,
+                                  min_ticks=-3072 + 300, max_ticks=-1024 + 300)
+    turned_cfg = dataclasses.replace(plain_cfg, axes=tuple(axes), homing="write",
+                                     frames=(ServoFrame(), ServoFrame(300, True), ServoFrame()))
+    seen = {}
+    for name, cfg in (("plain", plain_cfg), ("turned", turned_cfg)):
+        with open_port(URL + back, baud=cfg.baud) as port:
+            clock = port.simulator.clock
+            bus = DynamixelBus(port, cfg)
+            try:
+                ticks, quats = [], []
+                for t in (0.5, 1.0, 1.5):
+                    clock.advance(t - clock.t)
+                    tk = bus.read_ticks()
+                    ticks.append(tk)
+                    quats.append(cfg.kinematics().forward(tk))
+                seen[name] = (np.array(ticks), np.array(quats))
+            finally:
+                bus.close()
+    (t0, q0), (t1, q1) = seen["plain"], seen["turned"]
+    assert (t1[:, 1] == -t0[:, 1] + 300).all() and (t1[:, [0, 2]] == t0[:, [0, 2]]).all()
+    assert np.allclose(q0, q1, atol=1e-12)
+    assert np.degrees(2 * np.arccos(np.clip(np.abs(q0[:, 0]), 0, 1))).max() > 5  # it moved
