@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import functools
 
-from firmware_protocol.dynamixel.control_table import (
+from firmware_protocol.dynamixel.table_model import (
     ControlItem,
     ControlTable,
     ServoUnits,

@@ -32,6 +32,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 
 from firmware_protocol.dynamixel import instructions as ins
+from firmware_protocol.dynamixel.control_table import load_control_table
 from firmware_protocol.dynamixel.framing import BROADCAST_ID
 from firmware_protocol.dynamixel.packets import (
     ErrorCode,
@@ -510,7 +511,6 @@ def make_servo(dxl_id: int, model: str | int, *, protocol: float | None = None,
     ValueError
         Unknown model, bad ID, baud rate not one of the model's.
     """
-    from firmware_protocol.dynamixel.control_table import load_control_table
     table = load_control_table(model, protocol)
     if protocol is not None and float(protocol) == 2.0 and table.protocol == 1.0:
         raise ValueError(f"{table.display_name} speaks only Protocol 1.0")

@@ -28,16 +28,26 @@ items of the control-table pages):
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from firmware_protocol.dynamixel import protocol1 as p1
 from firmware_protocol.dynamixel.packets import ErrorCode
 from firmware_protocol.dynamixel.tables_protocol1 import PROTOCOL1_ONLY
 from firmware_protocol.errors import ProtocolError
+from rig.sim.dynamixel.servo import SimServo
 
-if TYPE_CHECKING:
-    from rig.sim.dynamixel.bus import DynamixelBus
-    from rig.sim.dynamixel.servo import SimServo
+
+class DynamixelBus(Protocol):
+    """What a 1.0 instruction needs of :class:`rig.sim.dynamixel.bus.DynamixelBus` (which
+    imports this module: the bus is described here, not imported)."""
+
+    model_wire_time: bool
+
+    def clock(self) -> float: ...
+
+    def _listeners(self, now: float, protocol: float = 2.0) -> list[SimServo]: ...
+
+    def _schedule(self, servo: SimServo, packet: bytes, start_after: float) -> float: ...
 
 __all__ = ["dispatch", "error1_of", "hardware_bits", "speaks"]
 
