@@ -120,6 +120,8 @@ PROMPT_CONTINUE = "Press any key to continue"
 PROMPTS_ANY_KEY = ("Press any key to terminate", "Press any key to reboot")
 PROMPT_SPACE = "Press SPACE key"
 NO_STATUS = "[TxRxResult] There is no status packet!"
+STUCK_LINES = 20
+"""A progress line printed this many times unchanged: the servo does not move (HANG)."""
 PORT_NAMES = ("DEVICENAME", "DEVICENAME1", "DEVICENAME2", "SERIAL_PORT")
 MOVING_EXAMPLES = {"read_write", "sync_read_write", "bulk_read_write", "fast_sync_read",
                    "fast_bulk_read", "indirect_address", "multi_port", "sync_write",
@@ -475,12 +477,24 @@ def judge(ex: Example, model: Model, run: Run, moves: int, bugs: list[tuple[str,
                 model.selection in ex.selections():
             last += (f" — the example lists {model.selection} but has no branch for it "
                      f"(example bug)")
+        if last.startswith("IndexError") and NO_STATUS in errors:
+            last += (" in the SDK's readTxRx after late replies: a status packet of an "
+                     "earlier instruction taken for this read's is shorter than asked")
+        if errors:
+            last += f"; errors {_error_summary(errors)}"
         return "FAIL", last
     timeouts = errors.get(NO_STATUS, 0)
     reads = len(re.findall(r"PresPos|Present Position", text))
     sporadic = set(errors) == {NO_STATUS} and timeouts <= max(2, 0.05 * reads)
     if errors and not sporadic:
-        return "FAIL", _error_summary(errors, text) + _negative_goal_note(ex, model)
+        summary = _error_summary(errors, text)
+        stuck = re.search(r'first after "(.*(PresPos|Present Position).*)" \(printed (\d+)',
+                          summary)
+        if stuck and int(stuck[3]) >= STUCK_LINES:  # no motion at all, ended by an error
+            return "HANG", (f'stuck printing "{stuck[1]}" ({stuck[3]} times) until '
+                            f'{summary.split(", first after")[0]} ended it'
+                            + _negative_goal_note(ex, model))
+        return "FAIL", summary + _negative_goal_note(ex, model)
     outcome, reason = _checks(ex, model, text, lines, run, moves)
     if sporadic and outcome == "PASS":
         reason += (f"; {timeouts} sporadic \"{NO_STATUS}\" in {reads} reads (the host's load: "
