@@ -108,9 +108,11 @@ MODELS: dict[str, Model] = {
     "MX-28(1.0)": Model("sim://dynamixel?model=MX-28&protocol=1", 1.0, None, 57600, 34, 29),
     "XM430-W350(1.0)": Model("sim://dynamixel?model=XM430-W350&protocol=1", 1.0, None, 57600, 1,
                              1020),
-    # protocol_combined.py: ID 1 on Protocol 1.0 and ID 2 on 2.0 on one port. No sim URL
-    # expresses a bus of mixed protocols yet (one model and one protocol per URL).
-    "mixed 1.0+2.0": Model(None, 0.0, None, 57600, 1, 1020),
+    # protocol_combined.py: ID 1 on Protocol 1.0 and ID 2 on 2.0 on one port, both with the
+    # X-series addresses (64/116/132, 4-byte goals): an XM430 set to Protocol Type 1 beside one
+    # on 2.0 (the URL names the IDs itself)
+    "mixed 1.0+2.0": Model("sim://dynamixel?ids=1:XM430-W350:1,2:XM430-W350", 0.0, None,
+                           57600, 1, 1020),
 }
 
 DEFAULT_MODELS = tuple(MODELS)
@@ -577,6 +579,8 @@ def sim_urls(ex: Example, model: Model) -> list[str]:
     """The simulator URL(s) a run needs: one per port, with the IDs the example uses."""
     ids = ex.ids()
     base = f"{model.url}&baud={model.baud}"
+    if "ids=" in model.url:  # a mixed bus names its IDs and their models
+        return [base]
     if "DEVICENAME2" in ex.source:
         return [f"{base}&ids={ids.get('DXL1_ID', 1)}", f"{base}&ids={ids.get('DXL2_ID', 2)}"]
     id_list = sorted(set(ids.values())) or [1, 2]
