@@ -446,9 +446,10 @@ def servo_position_defaults(model: str | int | None, protocol: float | None = No
     """A chain servo's defaults from its model's control table.
 
     Values: the table's ``units.ticks_per_rev`` and the valid range of its Max Position Limit
-    item (X-series e-Manual: 0..4095 over 360°; AX-12A / AX-18A e-Manual: CW/CCW Angle Limit
-    0..1023 over 300°, so 1024 / 300 × 360 = 1228.8 ticks per turn; P-series e-Manual, e.g.
-    PH54-200-S500: ±501,923 over ±180°, 1,003,846 ticks per turn), see
+    item (e-Manual emanual.robotis.com/docs/en/dxl/x/xm430-w350/: 0..4095 over 360°;
+    .../dxl/ax/ax-12a/: CW/CCW Angle Limit 0..1023 over 300°, so 1024 / 300 × 360 = 1228.8
+    ticks per turn; .../dxl/p/ph54-200-s500-r/: resolution 1,003,846 pulse/rev, Min/Max
+    Position Limit ±501,923), see
     :mod:`firmware_protocol.dynamixel.control_table` and
     :mod:`firmware_protocol.dynamixel.tables_protocol1`.
 
