@@ -136,8 +136,10 @@ class _BackDrive:
     was told still show the motion it replaces.
     """
 
-    def __init__(self, limb: Any, kinematics: Any, t0: float, *, wait: bool = False) -> None:
+    def __init__(self, limb: Any, kinematics: Any, t0: float, *, wait: bool = False,
+                 frames: Any = ()) -> None:
         self.limb = limb
+        self.frames = tuple(frames)  # each servo's ServoFrame (empty: the factory's)
         self.wait = wait
         self.kin = kinematics
         self.t0 = t0
@@ -245,7 +247,17 @@ class _BackDrive:
         return self.kin.forward_batch(out), missed
 
     def hand(self, index: int):
-        return lambda now: float(self.ticks(now)[index])
+        """Servo ``index``'s hand position, a function of the simulator's time: ACTUAL shaft
+        ticks (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`), the IK's ticks — in the frame
+        the rig config gives the servo's registers (Present Position = (reverse ? −1 : 1) ×
+        actual + Homing Offset, e-Manual "Homing Offset" / "Drive Mode") — taken back through
+        its frame."""
+        frame = self.frames[index] if self.frames else None
+        if frame is None or (frame.homing_offset == 0 and not frame.reverse):
+            return lambda now: float(self.ticks(now)[index])
+        sign = -1.0 if frame.reverse else 1.0
+        offset = float(frame.homing_offset)
+        return lambda now: sign * (float(self.ticks(now)[index]) - offset)
 
 
 def _open_dynamixel(url: str, baud: int | None, kind: str, separate_process: bool) -> Port:
@@ -287,7 +299,7 @@ def _open_dynamixel_process(q: Any, baud: int | None, kind: str) -> Port:
         child_url = with_keys(child_url, baud=int(baud))
     backdriven = "patient" in q or "limb" in q
     # first: a bad patient fails here, before a child starts; this process's copy of it
-    limb, kin = _back_driven_limb(q) if backdriven else (None, None)
+    limb, kin, _ = _back_driven_limb(q) if backdriven else (None, None, ())
     proc, closer, lines = _start_child("servos", url, child_url, 2 if backdriven else 1)
     port = Port(url=url, path=lines[0], simulator=None, kind=kind)
     port.add_closer(closer)
@@ -377,11 +389,13 @@ class _ChildCloser:
             self.err.close()
 
 
-def _back_driven_limb(q: Any) -> tuple[Any, Any]:
-    """The patient of ``q`` and the kinematics it moves the servos through (the ``chain=``
-    rig's): a servo limb's (``chain=sim-servo-arm``) by an arm or leg patient (``limb=``, or
-    ``patient=`` a limb file: :func:`~rig.sim.patients.limb_from_url`, its joints' kinds the
-    rig's — a forearm elbow turns about its long axis too), a joint's by a joint's patient."""
+def _back_driven_limb(q: Any) -> tuple[Any, Any, tuple]:
+    """The patient of ``q``, the kinematics it moves the servos through (the ``chain=``
+    rig's, each servo with its own resolution) and the servos' frames (their registers' Homing
+    Offset / reverse in that rig config): a servo limb's (``chain=sim-servo-arm``) by an arm
+    or leg patient (``limb=``, or ``patient=`` a limb file:
+    :func:`~rig.sim.patients.limb_from_url`, its joints' kinds the rig's — a forearm elbow
+    turns about its long axis too), a joint's by a joint's patient."""
     url = q.url
     chain_name = q.text("chain", "sim-shoulder")
     cfg = load_rig_config(chain_name)
@@ -401,20 +415,20 @@ def _back_driven_limb(q: Any) -> tuple[Any, Any]:
         raise RigConfigError(f"{url}: chain {chain_name!r} has {len(kin)} joint"
                              f"{'s' if len(kin) > 1 else ''} ({', '.join(kin.names)}), the "
                              f"patient {n}")
-    return limb, kin
+    return limb, kin, tuple(cfg.servos.frames)
 
 
 def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDrive]:
     """The patient of ``q`` (:func:`_back_driven_limb`) moving ``bus``'s servos; and what
     moves them (closed with the port)."""
-    limb, kin = _back_driven_limb(q)
+    limb, kin, frames = _back_driven_limb(q)
     kin.compile()  # before the bus answers: no stall at a first read
     missing = [i for i in kin.ids if i not in bus.servos]
     if missing:
         raise RigConfigError(f"{q.url}: chain {q.text('chain', 'sim-shoulder')!r} needs servo "
                              f"IDs {list(kin.ids)}, the simulated bus has no ID {missing[0]}")
     t0 = bus.clock()
-    drive = _BackDrive(limb, kin, t0, wait=isinstance(bus.clock, ManualClock))
+    drive = _BackDrive(limb, kin, t0, wait=isinstance(bus.clock, ManualClock), frames=frames)
     for k, dxl_id in enumerate(kin.ids):
         bus.set_hand(dxl_id, drive.hand(k))
     return _patient(limb, bus.clock, t0, backdrive=drive), drive

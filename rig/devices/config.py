@@ -33,7 +33,9 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
     servos:                                # optional (servo rigs)
       port: "sim://dynamixel?ids=1,2,3&return_delay_us=0"
       baud: 1000000                        #   int, an X-series rate (default 1000000)
-      model: XM430-W350                    #   optional: every servo must report this model
+      model: XM430-W350                    #   optional: every servo must report this model;
+                                           #   its e-Manual table gives each servo's default
+                                           #   ticks_per_rev, min/max_ticks and zero_ticks
       return_delay_us: 0                   #   0..508, even (default 0), EEPROM
       status_return_level: 2               #   0..2 (default 2)
       watchdog_ms: 100                     #   0 (off) or 20..2540 (default 100)
@@ -48,6 +50,13 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       chain:                               #   the joint's servos, parent -> child, 1..3
         - {id: 1, axis: [0, 0, 1], zero_ticks: 2048, direction: 1, min_ticks: 0,
            max_ticks: 4095, name: j1}      #   zero/direction/min/max/name optional
+                                           #   (defaults: the model's position range and its
+                                           #   centre, X series 0..4095 and 2048, AX 0..1023
+                                           #   and 512, P-series ±its range and 0)
+        - {id: 3, axis: [1, 0, 0], ticks_per_rev: 4096}
+                                           #   ticks_per_rev: optional, the model's (X 4096,
+                                           #   AX-12A 1228.8, PH54-200-S500 1003846); one
+                                           #   that differs from servos.model's is an error
         - {id: 2, axis: [0, 1, 0], homing_offset: -1024, reverse: true}
                                            #   homing_offset: int ticks, ±1,044,479
                                            #   (default 0); reverse: true | false (default
@@ -77,6 +86,11 @@ another tool (its own offset, a reversed direction) would move the joint elsewhe
 refuses it at open (``homing: check``) or writes the configured values (``homing: write``),
 see :class:`rig.devices.dynamixel.DynamixelBus`.
 
+Each servo's resolution (``ticks_per_rev``) and the defaults of its tick range and zero come
+from the control table of ``servos.model`` (:func:`servo_position_defaults`; no model: the X
+series' 4096 ticks per turn, 0..4095, 2048). :func:`resolution_mismatch` compares a config's
+resolutions with the models a bus found.
+
 At least one of ``sensors`` / ``servos`` is required.
 """
 
@@ -92,6 +106,7 @@ from typing import Any
 import yaml
 
 from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_mismatch
+from firmware_protocol.dynamixel import load_control_table
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from models.constraint import load_constraint
 from models.errors import ModelsError
@@ -115,10 +130,13 @@ __all__ = [
     "SensorsConfig",
     "ServoFrame",
     "ServoJoint",
+    "ServoPositionDefaults",
     "ServosConfig",
     "load_rig_config",
     "loads_rig_config",
+    "resolution_mismatch",
     "rig_config_names",
+    "servo_position_defaults",
 ]
 
 _X_BAUDS = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
@@ -399,10 +417,118 @@ def _sensors(ctx: _Ctx, value: Any, joint: JointInfo) -> SensorsConfig:
     return SensorsConfig(ports, protocol, rate, baud, segments, raw)
 
 
-def _servo_axis(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ServoFrame]:
+@dataclass(frozen=True)
+class ServoPositionDefaults:
+    """What a servo model gives each servo of a chain by default (:func:`servo_position_defaults`).
+
+    Attributes
+    ----------
+    ticks_per_rev : float
+        Position resolution, ticks per revolution.
+    min_ticks, max_ticks : int
+        The model's position range (its Min/Max Position Limit's, or the AX's CW/CCW Angle
+        Limit's, valid values).
+    zero_ticks : int
+        Its centre, ``(min + max + 1) // 2``: X series 2048, AX 512, P-series 0.
+    model : str or None
+        The e-Manual name of the model (None: no ``servos.model``, the X series' values).
+    """
+
+    ticks_per_rev: float = 4096.0
+    min_ticks: int = 0
+    max_ticks: int = 4095
+    zero_ticks: int = 2048
+    model: str | None = None
+
+
+def servo_position_defaults(model: str | int | None, protocol: float | None = None
+                            ) -> ServoPositionDefaults:
+    """A chain servo's defaults from its model's control table.
+
+    Values: the table's ``units.ticks_per_rev`` and the valid range of its Max Position Limit
+    item (e-Manual emanual.robotis.com/docs/en/dxl/x/xm430-w350/: 0..4095 over 360°;
+    .../dxl/ax/ax-12a/: CW/CCW Angle Limit 0..1023 over 300°, so 1024 / 300 × 360 = 1228.8
+    ticks per turn; .../dxl/p/ph54-200-s500-r/: resolution 1,003,846 pulse/rev, Min/Max
+    Position Limit ±501,923), see
+    :mod:`firmware_protocol.dynamixel.control_table` and
+    :mod:`firmware_protocol.dynamixel.tables_protocol1`.
+
+    Parameters
+    ----------
+    model : str, int or None
+        ``servos.model`` (e-Manual name or model number); None: the X series' 4096, 0..4095,
+        2048.
+    protocol : float, optional
+        1.0 for a model's Protocol 1.0 table (``servos.protocol``); None or 2.0 the SDK's.
+
+    Raises
+    ------
+    ValueError
+        Unknown model (the message lists the known ones).
+    """
+    if model is None:
+        return ServoPositionDefaults()
+    table = load_control_table(model, protocol)
+    item = table.resolve("Max Position Limit")
+    lo, hi = table.ranges.get(item.name, (0, 4095)) if item is not None else (0, 4095)
+    return ServoPositionDefaults(float(table.units.ticks_per_rev), int(lo), int(hi),
+                                 (int(lo) + int(hi) + 1) // 2, table.display_name)
+
+
+def _same_resolution(a: float, b: float) -> bool:
+    return math.isclose(a, b, rel_tol=1e-9, abs_tol=0.0)
+
+
+def resolution_mismatch(servos: ServosConfig, found: Mapping[int, Any]) -> str | None:
+    """Why the servos a bus found do not have the resolutions a config gives them, or None.
+
+    For the check at bus open (:class:`rig.devices.dynamixel.DynamixelBus` knows each found
+    servo's model): a config whose ``ticks_per_rev`` (given, or defaulted from
+    ``servos.model``) differs from a found servo's model would turn every angle wrong.
+
+    Parameters
+    ----------
+    servos : ServosConfig
+        The rig config's servos.
+    found : mapping of int to model
+        Servo ID -> what was found: a :class:`rig.devices.dynamixel.ServoInfo` (its
+        ``model_number`` and ``protocol``), a
+        :class:`~firmware_protocol.dynamixel.control_table.ControlTable`, a model number or an
+        e-Manual model name. IDs the config does not list, and configured IDs not found, are
+        not this function's business.
+
+    Returns
+    -------
+    str or None
+        One line naming the first servo whose resolution differs, its model and both values.
+    """
+    for axis in servos.axes:
+        if axis.id not in found:
+            continue
+        what = found[axis.id]
+        if hasattr(what, "units") and hasattr(what, "display_name"):
+            table = what
+        else:
+            protocol = getattr(what, "protocol", None)
+            model = getattr(what, "model_number", what)
+            try:
+                table = load_control_table(model, protocol)
+            except ValueError:
+                continue  # a model without a table: the bus's model check names it
+        have = float(table.units.ticks_per_rev)
+        if not _same_resolution(have, float(axis.ticks_per_rev)):
+            return (f"servo ID {axis.id} is an {table.display_name} ({have:g} ticks per "
+                    f"revolution) but the rig config gives it {axis.ticks_per_rev:g}: set "
+                    f"servos.model (or its ticks_per_rev) to the servos' model")
+    return None
+
+
+def _servo_axis(ctx: _Ctx, value: Any, where: str,
+                defaults: ServoPositionDefaults = ServoPositionDefaults()
+                ) -> tuple[ServoAxis, ServoFrame]:
     d = ctx.mapping(value, where, {"id", "axis"},
                     {"zero_ticks", "direction", "min_ticks", "max_ticks", "name",
-                     "homing_offset", "reverse"})
+                     "homing_offset", "reverse", "ticks_per_rev"})
     dxl_id = ctx.integer(d["id"], f"{where}.id", 0, 252)
     axis = d["axis"]
     if not isinstance(axis, list) or len(axis) != 3:
@@ -413,9 +539,20 @@ def _servo_axis(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ServoFram
     direction = ctx.integer(d.get("direction", 1), f"{where}.direction")
     if direction not in (1, -1):
         raise ctx.fail(f"{where}.direction", f"expected 1 or -1, got {direction}")
-    lo = ctx.integer(d.get("min_ticks", 0), f"{where}.min_ticks", -1_048_575, 1_048_575)
-    hi = ctx.integer(d.get("max_ticks", 4095), f"{where}.max_ticks", -1_048_575, 1_048_575)
-    zero = ctx.integer(d.get("zero_ticks", 2048), f"{where}.zero_ticks", -1_048_575, 1_048_575)
+    tpr = defaults.ticks_per_rev
+    if "ticks_per_rev" in d:
+        tpr = ctx.number(d["ticks_per_rev"], f"{where}.ticks_per_rev", 0.0)
+        if defaults.model is not None and not _same_resolution(tpr, defaults.ticks_per_rev):
+            raise ctx.fail(f"{where}.ticks_per_rev",
+                           f"{tpr:g} differs from the {defaults.model}'s "
+                           f"{defaults.ticks_per_rev:g} ticks per revolution (servos.model); "
+                           f"leave it out or fix servos.model")
+    lo = ctx.integer(d.get("min_ticks", defaults.min_ticks), f"{where}.min_ticks",
+                     -1_048_575, 1_048_575)
+    hi = ctx.integer(d.get("max_ticks", defaults.max_ticks), f"{where}.max_ticks",
+                     -1_048_575, 1_048_575)
+    zero = ctx.integer(d.get("zero_ticks", defaults.zero_ticks), f"{where}.zero_ticks",
+                       -1_048_575, 1_048_575)
     if not lo <= zero <= hi:
         raise ctx.fail(where, f"need min_ticks <= zero_ticks <= max_ticks, got {lo}, {zero}, {hi}")
     name = ctx.string(d["name"], f"{where}.name") if "name" in d else None
@@ -424,20 +561,24 @@ def _servo_axis(ctx: _Ctx, value: Any, where: str) -> tuple[ServoAxis, ServoFram
     reverse = d.get("reverse", False)
     if not isinstance(reverse, bool):
         raise ctx.fail(f"{where}.reverse", f"expected true or false, got {reverse!r}")
-    return (ServoAxis(dxl_id, vec, zero, direction, lo, hi, name),  # type: ignore[arg-type]
+    return (ServoAxis(dxl_id, vec, zero, direction, lo, hi, name,  # type: ignore[arg-type]
+                      float(tpr)),
             ServoFrame(offset, reverse))
 
 
-def _chain(ctx: _Ctx, value: Any, where: str
+def _chain(ctx: _Ctx, value: Any, where: str,
+           defaults: ServoPositionDefaults = ServoPositionDefaults()
            ) -> tuple[tuple[ServoAxis, ...], tuple[ServoFrame, ...]]:
-    """A chain's servos: their kinematics and their registers' frames."""
+    """A chain's servos: their kinematics and their registers' frames (``defaults``: the
+    model's resolution, range and centre)."""
     if not isinstance(value, list) or not 1 <= len(value) <= 3:
         raise ctx.fail(where, "expected a list of 1 to 3 servos (parent -> child)")
-    pairs = [_servo_axis(ctx, j, f"{where}[{i}]") for i, j in enumerate(value)]
+    pairs = [_servo_axis(ctx, j, f"{where}[{i}]", defaults) for i, j in enumerate(value)]
     return tuple(a for a, _ in pairs), tuple(f for _, f in pairs)
 
 
-def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
+def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...],
+                  defaults: ServoPositionDefaults = ServoPositionDefaults()
                   ) -> tuple[tuple[ServoJoint, ...], tuple[ServoFrame, ...]]:
     """``servos.joints``: the ``limb``'s joints ``names`` in its order, each its kind's number
     of servos (none named: the file has no ``limb:`` to check them against); with every
@@ -466,7 +607,7 @@ def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
         if kind.swing_twist != own.swing_twist:
             raise ctx.fail(f"{where}.kind", f"the {name} cannot be a {kind.words} (it is a "
                                             f"{own.words})")
-        axes, chain_frames = _chain(ctx, d["chain"], f"{where}.chain")
+        axes, chain_frames = _chain(ctx, d["chain"], f"{where}.chain", defaults)
         frames.extend(chain_frames)
         if len(axes) != kind.servo_axes:
             raise ctx.fail(f"{where}.chain", f"a {kind.words} has {kind.servo_axes} servo"
@@ -477,6 +618,16 @@ def _servo_joints(ctx: _Ctx, value: Any, limb: str, names: tuple[str, ...]
         raise ctx.fail("servos.joints", f"the {limb} has {len(names)} joints "
                                         f"({', '.join(names)}), got {len(joints)}")
     return tuple(joints), tuple(frames)
+
+
+def _model_defaults(ctx: _Ctx, model: str | None, protocol: Any) -> ServoPositionDefaults:
+    """The chain servos' defaults of ``servos.model`` (``protocol``: ``servos.protocol``'s raw
+    value where the key exists; anything but 1 / 1.0 reads the model's factory table)."""
+    proto = 1.0 if str(protocol).strip() in ("1", "1.0") else None
+    try:
+        return servo_position_defaults(model, proto)
+    except ValueError as err:
+        raise ctx.fail("servos.model", str(err)) from None
 
 
 def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
@@ -493,22 +644,23 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
                                       f"({', '.join(map(str, _X_BAUDS))})")
     if ("chain" in d) == ("joints" in d):
         raise ctx.fail("servos", "needs either 'chain' (one joint) or 'joints' (a limb)")
+    model = ctx.string(d["model"], "servos.model") if d.get("model") is not None else None
+    defaults = _model_defaults(ctx, model, d.get("protocol"))
     joints: tuple[ServoJoint, ...] = ()
     if "joints" in d:
-        joints, frames = _servo_joints(ctx, d["joints"], limb, names)
+        joints, frames = _servo_joints(ctx, d["joints"], limb, names, defaults)
         axes = tuple(a for j in joints for a in j.axes)
         where = "servos.joints"
     else:
         if names:
             raise ctx.fail("servos.chain", f"the {limb} rig's servos are listed per joint "
                                            f"(servos.joints)")
-        axes, frames = _chain(ctx, d["chain"], "servos.chain")
+        axes, frames = _chain(ctx, d["chain"], "servos.chain", defaults)
         where = "servos.chain"
     ids = [j.id for j in axes]
     for i in ids:
         if ids.count(i) > 1:
             raise ctx.fail(where, f"duplicate ID {i}")
-    model = ctx.string(d["model"], "servos.model") if d.get("model") is not None else None
     rd = ctx.integer(d.get("return_delay_us", 0), "servos.return_delay_us", 0, 508)
     if rd % 2:
         raise ctx.fail("servos.return_delay_us", f"must be even (2 µs units), got {rd}")

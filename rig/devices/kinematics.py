@@ -12,7 +12,12 @@ Model of one joint
 Servo ``i`` of a joint (parent → child order) turns about a fixed unit axis ``a_i`` expressed in
 the frame of the link before it (servo 1: the parent segment, e.g. the thorax). Its angle is
 
-    θ_i = direction_i · (ticks_i − zero_i) · 2π / 4096                (X-series: 4096 ticks/rev)
+    θ_i = direction_i · (ticks_i − zero_i) · 2π / T_i
+
+with ``T_i`` servo ``i``'s ticks per revolution (:attr:`ServoAxis.ticks_per_rev`, its model's
+``units.ticks_per_rev``: X series 4096; AX-12A, AX-18A and XL-320 1228.8, 1024 ticks over
+300°; P-series e.g. PH54-200-S500 1,003,846, ±501,923 over ±180°; see
+:func:`rig.devices.config.servo_position_defaults`)
 
 and the limb orientation relative to the parent (scalar-first Hamilton quaternion, limb long
 axis +X) is the product of axis-angle rotations parent → child (intrinsic composition)
@@ -41,11 +46,13 @@ Introduction to Robotic Manipulation*, 1994, §3.3)
   decomposition (e.g. Z-Y'-X''); at its gimbal lock (``R a_3 ∥ a_1``) θ_1 is free and is kept at
   the present position's value.
 
-Each θ is then moved by whole turns to the tick value nearest the present position inside
-``[min_ticks, max_ticks]`` (an angle less than half a tick beyond a limit is the limit: the
-tick it rounds to), and of the (up to two) solutions the one nearest the present position
-(least squared tick distance) is returned. If no solution lies within the tick limits, or the
-target is off the joint's reachable set by more than ``tolerance_deg`` (joints of 1-2
+Each θ is then moved by whole turns (``T_i`` ticks each) to the tick value nearest the present
+position inside ``[min_ticks, max_ticks]`` (an angle less than half a tick beyond a limit is
+the limit: the tick it rounds to; a servo whose range is less than a turn, an AX's 300°, may
+have no such value: the angle is then unreachable, never a tick outside its range), and of the
+(up to two) solutions the one nearest the present position (least squared tick distance) is
+returned. If no solution lies within the tick limits, or the target is off the joint's
+reachable set by more than ``tolerance_deg`` (joints of 1-2
 servos reach only a subset of SO(3)), :class:`~rig.errors.UnreachableError` names the servo,
 the value and the limits — goals are never clipped. A rig's joint of 1-2 servos has the
 tolerance :data:`NEAREST_TOLERANCE_DEG` by default (:func:`default_tolerance_deg`): any target
@@ -77,15 +84,33 @@ from models.quaternion import normalize_rows
 from rig.errors import RigConfigError, UnreachableError
 
 __all__ = ["EXACT_TOLERANCE_DEG", "NEAREST_TOLERANCE_DEG", "RAD_PER_TICK", "TICKS_PER_REV",
-           "JointKinematics", "LimbKinematics", "ServoAxis", "default_tolerance_deg"]
+           "JointKinematics", "LimbKinematics", "ServoAxis", "default_tolerance_deg",
+           "rad_per_tick"]
 
 TICKS_PER_REV = 4096
-"""Encoder ticks per revolution of an X-series servo (0.088° per tick)."""
+"""Encoder ticks per revolution of an X-series servo (0.088° per tick): the default of
+:attr:`ServoAxis.ticks_per_rev`; each axis converts with its own."""
 RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_REV
+"""Radians per tick at :data:`TICKS_PER_REV`; :func:`rad_per_tick` of each axis's own
+resolution is computed the same way (``2π / T``), so an X-series axis gives exactly this."""
 EXACT_TOLERANCE_DEG = 0.1
 """The IK tolerance of a joint of 3 servos (its residual is round-off): a target is reached."""
 NEAREST_TOLERANCE_DEG = 180.0
 """The IK tolerance that accepts any orientation: the goal is the nearest one the axes reach."""
+
+
+def rad_per_tick(ticks_per_rev):
+    """Radians per tick of a resolution (scalar or array): ``2π / ticks_per_rev``, computed as
+    :data:`RAD_PER_TICK` is, so that 4096 gives exactly that float.
+
+    Parameters
+    ----------
+    ticks_per_rev : float or (n,) array_like of float
+        Ticks per revolution (X series 4096, AX-12A 1228.8, PH54-200-S500 1,003,846).
+    """
+    if np.ndim(ticks_per_rev) == 0:
+        return 2.0 * math.pi / float(ticks_per_rev)
+    return 2.0 * math.pi / np.asarray(ticks_per_rev, dtype=np.float64)
 
 
 def default_tolerance_deg(n_servos: int) -> float:
@@ -125,6 +150,10 @@ class ServoAxis:
         Allowed goal range, ticks (also written to the servo's position-limit registers).
     name : str or None
         Optional label (e.g. ``"elevation"``).
+    ticks_per_rev : float
+        The servo's position resolution, ticks per revolution (X series 4096, the default;
+        AX-12A / AX-18A / XL-320 1228.8; P-series e.g. 1,003,846): its model's
+        ``units.ticks_per_rev`` (:func:`firmware_protocol.dynamixel.load_control_table`).
     """
 
     id: int
@@ -134,10 +163,11 @@ class ServoAxis:
     min_ticks: int = 0
     max_ticks: int = 4095
     name: str | None = None
+    ticks_per_rev: float = float(TICKS_PER_REV)
 
     def angle(self, ticks: float) -> float:
         """Joint angle (rad) at ``ticks``."""
-        return self.direction * (ticks - self.zero_ticks) * RAD_PER_TICK
+        return self.direction * (ticks - self.zero_ticks) * rad_per_tick(self.ticks_per_rev)
 
 
 _FREE2 = _FREE * _FREE
@@ -169,11 +199,12 @@ def _twist_about(w, x, y, z, axes, i):
 
 
 @njit
-def _forward_kernel(axes, zero, direction, n, ticks):
-    """Limb orientation (w, x, y, z), ``w ≥ 0``, of ``ticks`` (n,)."""
+def _forward_kernel(axes, zero, direction, rpt, n, ticks):
+    """Limb orientation (w, x, y, z), ``w ≥ 0``, of ``ticks`` (n,); ``rpt`` (n,) radians per
+    tick."""
     w, x, y, z = 1.0, 0.0, 0.0, 0.0
     for i in range(n):
-        theta = direction[i] * (float(ticks[i]) - zero[i]) * RAD_PER_TICK
+        theta = direction[i] * (float(ticks[i]) - zero[i]) * rpt[i]
         a0, a1, a2, a3 = _axis_angle(axes, i, theta)
         w, x, y, z = qk.mul(w, x, y, z, a0, a1, a2, a3)
     if w < 0.0:
@@ -243,20 +274,22 @@ def _solutions_kernel(axes, n, w, x, y, z, near1, near2):
 
 
 @njit
-def _placed_kernel(zero, direction, lo, hi, n, theta, near, ticks):
+def _placed_kernel(zero, direction, rpt, tpr, lo, hi, n, theta, near, ticks):
     """Joint angles ``theta`` placed nearest ``near`` within the tick limits, written to
     ``ticks``: ``(-1, cost)``, or ``(i, 0)`` with ``i`` the first joint that cannot reach its
-    angle."""
+    angle. ``rpt``, ``tpr`` (n,): each servo's radians per tick and ticks per turn."""
     cost = 0.0
     for i in range(n):
-        base = zero[i] + direction[i] * theta[i] / RAD_PER_TICK
-        # within half a tick of a limit is the limit (what rounding to a tick gives)
-        k_lo = math.ceil((lo[i] - _HALF_TICK - base) / TICKS_PER_REV - 1e-9)
-        k_hi = math.floor((hi[i] + _HALF_TICK - base) / TICKS_PER_REV + 1e-9)
+        base = zero[i] + direction[i] * theta[i] / rpt[i]
+        # within half a tick of a limit is the limit (what rounding to a tick gives); the
+        # whole turns k that land inside [lo, hi] (none: a servo whose range is less than a
+        # turn, an AX's 300°, cannot take this angle)
+        k_lo = math.ceil((lo[i] - _HALF_TICK - base) / tpr[i] - 1e-9)
+        k_hi = math.floor((hi[i] + _HALF_TICK - base) / tpr[i] + 1e-9)
         if k_lo > k_hi:
             return i, 0.0
-        k = min(max(round((near[i] - base) / TICKS_PER_REV), k_lo), k_hi)
-        tick = min(max(base + k * TICKS_PER_REV, lo[i]), hi[i])
+        k = min(max(round((near[i] - base) / tpr[i]), k_lo), k_hi)
+        tick = min(max(base + k * tpr[i], lo[i]), hi[i])
         ticks[i] = tick
         cost += (tick - near[i]) ** 2
     return -1, cost
@@ -274,17 +307,17 @@ def _residual_kernel(axes, n, theta, w, x, y, z):
 
 
 @njit
-def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
+def _ik_kernel(axes, zero, direction, rpt, tpr, lo, hi, n, w, x, y, z, near, tol, ticks):
     """Closed-form IK of unit ``q`` nearest ``near`` (ticks, n): the cheapest solution within
     the limits whose residual is at most ``tol``, the first on ties, written to ``ticks``;
     True if there is one."""
-    near1 = direction[0] * (near[0] - zero[0]) * RAD_PER_TICK
-    near2 = direction[1] * (near[1] - zero[1]) * RAD_PER_TICK if n > 1 else 0.0
+    near1 = direction[0] * (near[0] - zero[0]) * rpt[0]
+    near2 = direction[1] * (near[1] - zero[1]) * rpt[1] if n > 1 else 0.0
     count, sols = _solutions_kernel(axes, n, w, x, y, z, near1, near2)
     placed = np.empty((2, 3))
     costs = np.full(2, np.inf)
     for j in range(count):
-        i, c = _placed_kernel(zero, direction, lo, hi, n, sols[j], near, placed[j])
+        i, c = _placed_kernel(zero, direction, rpt, tpr, lo, hi, n, sols[j], near, placed[j])
         if i < 0:
             costs[j] = c
     first = 1 if costs[1] < costs[0] else 0  # the cheaper first, the first on ties
@@ -297,14 +330,14 @@ def _ik_kernel(axes, zero, direction, lo, hi, n, w, x, y, z, near, tol, ticks):
 
 
 @njit
-def _nearest_batch_kernel(axes, zero, direction, lo, hi, n, q, near, out):
+def _nearest_batch_kernel(axes, zero, direction, rpt, tpr, lo, hi, n, q, near, out):
     """Per row of unit ``q`` (N, 4): the orientation of the IK solution nearest it (any
     residual) within the tick limits, ``w ≥ 0``, written to ``out`` (NaN: none)."""
     ticks = np.empty(n)
     for r in range(q.shape[0]):
-        if _ik_kernel(axes, zero, direction, lo, hi, n, q[r, 0], q[r, 1], q[r, 2], q[r, 3],
-                      near, math.pi + 1e-9, ticks):
-            w, x, y, z = _forward_kernel(axes, zero, direction, n, ticks)
+        if _ik_kernel(axes, zero, direction, rpt, tpr, lo, hi, n, q[r, 0], q[r, 1], q[r, 2],
+                      q[r, 3], near, math.pi + 1e-9, ticks):
+            w, x, y, z = _forward_kernel(axes, zero, direction, rpt, n, ticks)
             out[r, 0], out[r, 1], out[r, 2], out[r, 3] = w, x, y, z
         else:
             out[r, :] = math.nan
@@ -341,6 +374,10 @@ class JointKinematics:
     axes : (n, 3) float64
     zero_ticks, min_ticks, max_ticks : (n,) int64
     direction : (n,) float64
+    ticks_per_rev : (n,) float64
+        Each servo's resolution (:attr:`ServoAxis.ticks_per_rev`).
+    rad_per_tick : (n,) float64
+        ``2π / ticks_per_rev`` (:func:`rad_per_tick`).
     """
 
     def __init__(self, servos: Sequence[ServoAxis], *, tolerance_deg: float = 0.1) -> None:
@@ -363,6 +400,9 @@ class JointKinematics:
             if j.direction not in (1, -1):
                 raise RigConfigError(f"joint kinematics: ID {j.id}: direction must be 1 or -1",
                                      actual=j.direction)
+            if not (math.isfinite(j.ticks_per_rev) and j.ticks_per_rev > 0):
+                raise RigConfigError(f"joint kinematics: ID {j.id}: ticks_per_rev must be a "
+                                     f"positive number", actual=j.ticks_per_rev)
             if not j.min_ticks <= j.zero_ticks <= j.max_ticks:
                 raise RigConfigError(f"joint kinematics: ID {j.id}: zero_ticks outside "
                                      f"[min_ticks, max_ticks]", actual=j.zero_ticks,
@@ -380,6 +420,9 @@ class JointKinematics:
         self.min_ticks = np.array([j.min_ticks for j in servos], dtype=np.int64)
         self.max_ticks = np.array([j.max_ticks for j in servos], dtype=np.int64)
         self.direction = np.array([j.direction for j in servos], dtype=np.float64)
+        self.ticks_per_rev = np.array([j.ticks_per_rev for j in servos], dtype=np.float64)
+        self.rad_per_tick = rad_per_tick(self.ticks_per_rev)
+        self._rpt = tuple(float(r) for r in self.rad_per_tick)
         self._zero = tuple(float(j.zero_ticks) for j in servos)
         self._dir = tuple(float(j.direction) for j in servos)
         self._lo = tuple(float(j.min_ticks) for j in servos)
@@ -415,8 +458,8 @@ class JointKinematics:
     # -- forward --------------------------------------------------------------------------
     def angles(self, ticks: Sequence[float]) -> tuple[float, ...]:
         """Joint angles (rad) of ``ticks`` (n,)."""
-        return tuple(d * (float(t) - z) * RAD_PER_TICK
-                     for t, z, d in zip(ticks, self._zero, self._dir, strict=True))
+        return tuple(d * (float(t) - z) * r
+                     for t, z, d, r in zip(ticks, self._zero, self._dir, self._rpt, strict=True))
 
     def forward(self, ticks: Sequence[float]) -> np.ndarray:
         """Joint orientation (child segment relative to the parent), (4,) float64 (w, x, y, z),
@@ -434,7 +477,8 @@ class JointKinematics:
         t = _kernel_array(ticks)
         if t.shape != (self.n,):
             raise ValueError(f"ticks must have {self.n} values, got shape {t.shape}")
-        return _forward_kernel(self.axes, self._zero_c, self.direction, self.n, t)
+        return _forward_kernel(self.axes, self._zero_c, self.direction, self.rad_per_tick,
+                               self.n, t)
 
     def compile(self) -> JointKinematics:
         """Compile (or load from numba's on-disk cache) the per-sample kernels now, so the
@@ -454,7 +498,7 @@ class JointKinematics:
         t = np.asarray(ticks, dtype=np.float64)
         if t.ndim != 2 or t.shape[1] != self.n:
             raise ValueError(f"ticks must have shape (N, {self.n}), got {t.shape}")
-        theta = self.direction * (t - self.zero_ticks) * RAD_PER_TICK
+        theta = self.direction * (t - self.zero_ticks) * self.rad_per_tick
         q = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (len(t), 1))
         for k in range(self.n):
             q = Q.multiply(q, Q.from_axis_angle(self.axes[k], theta[:, k]))
@@ -472,8 +516,9 @@ class JointKinematics:
         if near.shape != (self.n,):
             raise ValueError(f"near_ticks must have {self.n} values, got {near.size}")
         ticks = np.empty(self.n)
-        if _ik_kernel(self.axes, self._zero_c, self.direction, self._lo_c, self._hi_c, self.n,
-                      w, x, y, z, near, self.tolerance, ticks):
+        if _ik_kernel(self.axes, self._zero_c, self.direction, self.rad_per_tick,
+                      self.ticks_per_rev, self._lo_c, self._hi_c, self.n, w, x, y, z, near,
+                      self.tolerance, ticks):
             return ticks
         return self._unreachable((w, x, y, z), near)
 
@@ -491,12 +536,14 @@ class JointKinematics:
             if res > self.tolerance:
                 residual_deg = math.degrees(res)
                 continue
-            i, _ = _placed_kernel(self._zero_c, self.direction, self._lo_c, self._hi_c, self.n,
-                                  theta, near, scratch)
+            i, _ = _placed_kernel(self._zero_c, self.direction, self.rad_per_tick,
+                                  self.ticks_per_rev, self._lo_c, self._hi_c, self.n, theta,
+                                  near, scratch)
             if i >= 0:
-                base = self._zero[i] + self._dir[i] * theta[i] / RAD_PER_TICK
-                why = (f"ID {self.ids[i]} would need {base % TICKS_PER_REV:.0f} ticks "
-                       f"(mod 4096), outside its limits {self._lo[i]:.0f}..{self._hi[i]:.0f}")
+                base = self._zero[i] + self._dir[i] * theta[i] / self._rpt[i]
+                turn = float(self.ticks_per_rev[i])
+                why = (f"ID {self.ids[i]} would need {base % turn:.0f} ticks "
+                       f"(mod {turn:g}), outside its limits {self._lo[i]:.0f}..{self._hi[i]:.0f}")
         if residual_deg is not None and why.startswith("the chain"):
             why = f"{residual_deg:.2f}° from the nearest orientation the axes reach"
         raise UnreachableError(f"IK target {np.round(qq, 4).tolist()} unreachable: {why}")
@@ -556,8 +603,8 @@ class JointKinematics:
         unit = np.ascontiguousarray(unit)
         near = self._zero_c if near_ticks is None else _kernel_array(near_ticks)
         out = np.empty((len(q), 4))
-        _nearest_batch_kernel(self.axes, self._zero_c, self.direction, self._lo_c, self._hi_c,
-                              self.n, unit, near, out)
+        _nearest_batch_kernel(self.axes, self._zero_c, self.direction, self.rad_per_tick,
+                              self.ticks_per_rev, self._lo_c, self._hi_c, self.n, unit, near, out)
         out[~ok] = np.nan
         return out
 
@@ -591,6 +638,8 @@ class LimbKinematics:
         Each joint's part of the tick vector.
     min_ticks, max_ticks, zero_ticks : (n,) int64
         Concatenated over the joints.
+    ticks_per_rev, rad_per_tick : (n,) float64
+        Each servo's resolution and ``2π / ticks_per_rev``, tick-vector order.
 
     Raises
     ------
@@ -620,6 +669,8 @@ class LimbKinematics:
         self.min_ticks = np.concatenate([j.min_ticks for j in joints])
         self.max_ticks = np.concatenate([j.max_ticks for j in joints])
         self.zero_ticks = np.concatenate([j.zero_ticks for j in joints])
+        self.ticks_per_rev = np.concatenate([j.ticks_per_rev for j in joints])
+        self.rad_per_tick = np.concatenate([j.rad_per_tick for j in joints])
 
     def __len__(self) -> int:
         return len(self.joints)

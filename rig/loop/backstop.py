@@ -11,7 +11,9 @@ tick interval containing them, widened by ``margin_deg`` and by the start postur
 starting outside must be able to come back), then intersected with the configured
 ``min_ticks..max_ticks``. The result is a box in joint space containing the valid region: a
 coarse outer bound (a 3-DOF region is not a box), never the primary limit — the supervisor is.
-An interval that would cover the whole turn is left at the configured limits.
+An interval that would cover the whole turn is left at the configured limits. Margins and whole
+turns are in each servo's own ticks (:attr:`~rig.devices.kinematics.ServoAxis.ticks_per_rev`:
+X series 4096, AX-12A 1228.8, P-series e.g. 1,003,846).
 """
 
 from __future__ import annotations
@@ -19,7 +21,6 @@ from __future__ import annotations
 import numpy as np
 
 from models import quaternion as Q
-from rig.devices.kinematics import TICKS_PER_REV
 from rig.errors import UnreachableError
 
 __all__ = ["position_limits_from_boundary", "position_limits_from_limb"]
@@ -61,10 +62,11 @@ def position_limits_from_boundary(kinematics, oracle, near_ticks, *, n: int = 60
     if not ticks:
         return lo_cfg.copy(), hi_cfg.copy()
     t = np.array(ticks)
-    margin = margin_deg / 360.0 * TICKS_PER_REV
+    turn = np.asarray(kinematics.ticks_per_rev, dtype=np.float64)  # per servo
+    margin = margin_deg / 360.0 * turn
     lo = np.floor(np.minimum(t.min(0), near) - margin).astype(np.int64)
     hi = np.ceil(np.maximum(t.max(0), near) + margin).astype(np.int64)
-    whole = (hi - lo) >= TICKS_PER_REV - 1
+    whole = (hi - lo) >= turn - 1
     lo = np.where(whole, lo_cfg, np.maximum(lo, lo_cfg))
     hi = np.where(whole, hi_cfg, np.minimum(hi, hi_cfg))
     return lo, hi
@@ -118,8 +120,8 @@ def position_limits_from_limb(kinematics, oracle, near_ticks, *, n: int = 6000,
 def describe_limits(kinematics, lo, hi) -> str:
     """``"ID 1 1024..3072 (180.0°), ..."`` for logs."""
     parts = []
-    for i, a, b in zip(kinematics.ids, lo, hi, strict=True):
-        parts.append(f"ID {i} {int(a)}..{int(b)} ({(int(b) - int(a)) * 360 / TICKS_PER_REV:.1f}°)")
+    for i, a, b, turn in zip(kinematics.ids, lo, hi, kinematics.ticks_per_rev, strict=True):
+        parts.append(f"ID {i} {int(a)}..{int(b)} ({(int(b) - int(a)) * 360 / turn:.1f}°)")
     return ", ".join(parts)
 
 

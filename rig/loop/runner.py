@@ -56,7 +56,6 @@ import numpy as np
 from rig.devices.bus import ServoBus
 from rig.devices.config import ServosConfig
 from rig.devices.dynamixel import DynamixelBus
-from rig.devices.kinematics import RAD_PER_TICK
 from rig.devices.servo_limb import ServoLimb
 from rig.errors import (
     RigConnectionError,
@@ -228,8 +227,10 @@ class EnforcementLoop:
         self.kins = self.kin.joints
         self.slices = self.kin.slices
         v = self.config.servo_max_velocity_deg_s
-        self._max_step = None if v is None else max(
-            1, int(math.radians(v) * self.scheduler.period / RAD_PER_TICK))
+        # per servo, in its own ticks (an AX's 1228.8 a turn, an X's 4096: the same angle)
+        self._max_step = None if v is None else np.array(
+            [max(1, int(math.radians(v) * self.scheduler.period / r))
+             for r in self.kin.rad_per_tick.tolist()], dtype=np.int64)
         t_compile = time.perf_counter() - t_compile
         if t_compile > 1.0:
             self.log(f"note: compiled the loop's kernels in {t_compile:.1f} s (numba; kept in "
@@ -654,10 +655,10 @@ class EnforcementLoop:
         m = self._max_step
         if m is not None:
             step = gt - near
-            if np.abs(step).max() > m:
+            if (np.abs(step) > m).any():
                 gt = near + np.clip(step, -m, m)
                 for j, sl in enumerate(self.slices):
-                    if np.abs(step[sl]).max() > m:
+                    if (np.abs(step[sl]) > m[sl]).any():
                         (sup or self.supervisor).joints[j].flags |= Intervention.RATE_LIMITED
         return gt
 

@@ -32,8 +32,9 @@ and the end-to-end accuracy check of ``rig record`` (``benchmarks/record_accurac
 - :func:`record_imu` / :func:`record_servo`: offline recordings (no pty, no driver) for fast
   tests and benchmarks — the two IMUs through the sensor error model (noise, drift, magnetic
   disturbances, misplaced straps; :meth:`~rig.sim.limb.SimulatedLimb.measure_many`), or the
-  back-driven servo joint (the true joint read through three encoders of 4096 ticks per turn,
-  no drift). A :class:`Recording` holds the samples and the protocol's phase windows;
+  back-driven servo joint (the true joint read through three encoders, 4096 ticks per turn by
+  default — an X series' — or each its own, no drift). A :class:`Recording` holds the samples
+  and the protocol's phase windows;
   :func:`record_limb_imu` / :class:`LimbRecording` the same for an arm or leg.
 """
 
@@ -71,7 +72,7 @@ __all__ = ["LIMB_KEYS", "PATIENT_KEYS", "LimbRecording", "Recording", "anatomica
            "record_limb_imu", "record_servo", "resolve_patient", "seeded_patient",
            "star_constraint"]
 
-_ENCODER_TICKS = 4096  # per turn: rig.sim.dynamixel.servo.TICKS_PER_REV (X-series)
+_ENCODER_TICKS = 4096.0  # per turn, by default: an X series' (rig.devices.kinematics.TICKS_PER_REV)
 
 PATIENT_KEYS = ("patient", "seed", "noise", "misplace_deg", "excursion", "speed", "calibrate",
                 "neutral", "neutral_sd")
@@ -263,14 +264,23 @@ def record_imu(limb: SimulatedJoint, duration_s: float, rate_hz: float = 100.0,
                      np.concatenate(truth), limb.calibration_protocol, limb.protocol_start_s)
 
 
-def record_servo(limb: SimulatedJoint, duration_s: float, rate_hz: float = 100.0) -> Recording:
-    """The back-driven servo limb: the true joint read through 3 encoders of 4096 ticks per turn
-    (Z-Y-X axes), i.e. quantised to 0.088° per joint; no drift, no straps. ``thorax`` is the
-    identity, ``limb`` the servos' forward kinematics."""
+def record_servo(limb: SimulatedJoint, duration_s: float, rate_hz: float = 100.0, *,
+                 ticks_per_rev=_ENCODER_TICKS) -> Recording:
+    """The back-driven servo limb: the true joint read through 3 encoders (Z-Y-X axes) of
+    ``ticks_per_rev`` ticks per turn, i.e. quantised to 0.088° per joint at an X series' 4096
+    (0.29° at an AX-12A's 1228.8); no drift, no straps, no tick range. ``thorax`` is the
+    identity, ``limb`` the servos' forward kinematics.
+
+    Parameters
+    ----------
+    ticks_per_rev : float or (3,) array_like of float
+        Each encoder's resolution (the servo model's ``units.ticks_per_rev``), Z, Y, X.
+    """
     t = _times(limb, duration_s, rate_hz)
     n = len(t)
     truth = limb.joint(t)
-    step = 2 * math.pi / _ENCODER_TICKS
+    step = 2 * math.pi / (float(ticks_per_rev) if np.ndim(ticks_per_rev) == 0 else
+                          np.asarray(ticks_per_rev, dtype=np.float64).reshape(3))
     ticks = np.round(Q.to_rotation(truth).as_euler("ZYX") / step)
     fk = Q.from_rotation(Rotation.from_euler("ZYX", ticks * step))
     return Recording(t, np.tile(Q.IDENTITY, (n, 1)), fk, np.full(n, 0xFF), truth,
