@@ -83,6 +83,22 @@ def test_ax12_has_no_bulk_read_one_read_per_servo_and_a_one_turn_joint_mode():
             bus.configure()
 
 
+def test_an_x_series_on_protocol_type_1_keeps_its_watchdog_and_4_byte_goals():
+    url = "sim://dynamixel?ids=1,2&model=XM430-W350&protocol=1&return_delay_us=0&wire_time=off"
+    with open_port(url) as port, \
+            DynamixelBus(port, _servos([1, 2]), protocol=1.0, latency_ms=4.0) as bus:
+        sim = port.simulator
+        assert [s.protocol for s in bus.found.values()] == [1.0, 1.0]
+        assert bus.read_what == "bulk read of Present Position"
+        bus.configure()
+        assert bus.held_goals is None and any("Protocol 1.0" in a for a in bus.advice)
+        assert bus.arm_watchdog(100) == 100  # Bus Watchdog (98) answers on 1.0 too
+        bus.set_torque(True)
+        bus.write_goal_ticks([1500, 2500])  # SYNC_WRITE of 4-byte Goal Position (116)
+        assert sim.wait_for(lambda: [sim.servo(i).target for i in (1, 2)] == [1500, 2500])
+        assert bus.poll_alerts() == []
+
+
 def test_a_bus_of_the_other_protocol_is_one_line_naming_both():
     with open_port("sim://dynamixel?ids=1&model=MX-28&protocol=1&wire_time=off") as port:
         with pytest.raises(RigConfigError, match=r"servo ID 1 answers Protocol 1.0, the rig "
