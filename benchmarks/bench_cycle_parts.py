@@ -9,7 +9,12 @@ compute per cycle given by ``--compute-us`` (the telemetry's ``compute_ms`` p50 
 in a row (compute, then the read) and overlapped (the request, the compute while the reply
 travels, the rest of the reply).
 
-Run: ``python benchmarks/bench_cycle_parts.py [--servos 7] [--cycles 2000] [--usb-latency-ms 1]``
+``--rig NAME`` takes the servos (IDs, model, protocol) of a rig configuration instead of
+``--servos`` X-series ones: ``--rig sim-shoulder-mx28`` measures the Protocol 1.0 cycle (one
+BULK_READ, one SYNC_WRITE of 2-byte goals) beside ``--rig sim-shoulder``'s 2.0 one.
+
+Run: ``python benchmarks/bench_cycle_parts.py [--servos 7 | --rig NAME] [--cycles 2000]
+[--usb-latency-ms 1]``
 """
 
 from __future__ import annotations
@@ -22,7 +27,9 @@ import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
 import numpy as np
 from common import additions_s, child_servos
 
+from rig.devices.config import load_rig_config
 from rig.devices.dynamixel import DynamixelBus
+from rig.errors import RigProtocolError, RigTimeoutError
 
 
 def _stats(ns) -> str:
@@ -30,9 +37,21 @@ def _stats(ns) -> str:
     return f"p50 {np.median(a):7.1f}  p99 {np.percentile(a, 99):7.1f} µs"
 
 
+def _finish(bus: DynamixelBus) -> bool:
+    """The reply of the read begun; False when it timed out (or came garbled)."""
+    try:
+        bus.finish_read()
+    except (RigTimeoutError, RigProtocolError):
+        return False
+    return True
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--servos", type=int, default=7)
+    ap.add_argument("--rig", default=None,
+                    help="the servos (IDs, model, protocol) of this rig configuration instead "
+                         "of --servos XM430-W350 on Protocol 2.0")
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--rate", type=float, default=200.0)
     ap.add_argument("--usb-latency-ms", type=float, default=1.0)
@@ -46,12 +65,18 @@ def main() -> None:
                     help="the simulator answers at once (no wire time, no USB latency): the "
                          "reply's flight is then the simulator's own work and the pty")
     args = ap.parse_args()
-    ids = list(range(1, args.servos + 1))
-    url = (f"sim://dynamixel?ids={','.join(map(str, ids))}&model=XM430-W350&return_delay_us=0"
+    ids, model, protocol = list(range(1, args.servos + 1)), "XM430-W350", 2.0
+    if args.rig is not None:
+        servos = load_rig_config(args.rig).servos
+        ids, model, protocol = list(servos.ids), servos.model or model, servos.protocol
+        args.servos = len(ids)
+    url = (f"sim://dynamixel?ids={','.join(map(str, ids))}&model={model}&protocol="
+           f"{protocol:g}&return_delay_us=0"
            + ("&wire_time=off" if args.no_wire_time
               else f"&usb_latency_ms={args.usb_latency_ms:g}"))
     add_s = additions_s()
-    print(f"{args.servos} servos, "
+    print(f"{args.servos} {model} on Protocol {protocol:.1f}"
+          f"{f' (rig {args.rig})' if args.rig else ''}, "
           f"{'no wire time' if args.no_wire_time else f'USB latency {args.usb_latency_ms:g} ms'}"
           f", {args.cycles} cycles at "
           f"{args.rate:g} Hz; 10^7 additions {add_s:.2f} s; load average "
@@ -60,12 +85,14 @@ def main() -> None:
     cpu = {k: [] for k in wall}
     period = 1.0 / args.rate
     pc, tt = time.perf_counter_ns, time.thread_time_ns
+    lost = 0
     with child_servos(url) as path:
-        bus = DynamixelBus(path, ids, latency_ms=4.0)
+        bus = DynamixelBus(path, ids, latency_ms=4.0, protocol=protocol)
         try:
             if args.read_back:
                 bus.configure()
                 print(f"  read-back of the goal: {'on' if bus.read_back else 'off'}")
+            print(f"  the read: {'fast ' if bus.fast else ''}{bus.read_what}")
             goal = bus.read_ticks()
             nxt = time.monotonic()
             for k in range(args.cycles):
@@ -78,7 +105,9 @@ def main() -> None:
                     w1, c1 = pc(), tt()
                     time.sleep(0.003)
                     w2, c2 = pc(), tt()
-                    bus.finish_read()
+                    if not _finish(bus):
+                        lost += 1
+                        continue
                     w3, c3 = pc(), tt()
                     wall["request"].append(w1 - w0)
                     cpu["request"].append(c1 - c0)
@@ -89,7 +118,9 @@ def main() -> None:
                     w0, c0 = pc(), tt()
                     bus.begin_read()
                     w1 = pc()
-                    bus.finish_read()
+                    if not _finish(bus):
+                        lost += 1
+                        continue
                     w3, c3 = pc(), tt()
                     wall["read in a row"].append(w3 - w0)
                     cpu["read in a row"].append(c3 - c0)
@@ -101,6 +132,7 @@ def main() -> None:
                 cpu["write"].append(tt() - c4)
         finally:
             bus.close()
+    print(f"  replies lost (a timeout on a loaded host; not counted above): {lost}")
     print(f"  {'part':<16}{'wall':>32}   {'CPU (this thread)':>32}")
     for k in wall:
         if wall[k]:

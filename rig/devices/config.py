@@ -42,6 +42,10 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
       ik_tolerance_deg: 0.1                #   > 0 (default: 0.1 for a joint of 3 servos,
                                            #   180 — the nearest reachable — for 1-2)
       latency_ms: null                     #   SDK packet-timeout latency; default: detected
+      protocol: 2.0                        #   1.0 | 2.0 (default 2.0): the servos' wire
+                                           #   protocol (AX, MX on 1.0 firmware, X series on
+                                           #   Protocol Type 1: 1.0); a sim:// port serving
+                                           #   the other one is refused
       homing: check                        #   check | write (default check): the servos'
                                            #   Homing Offset / Drive Mode reverse bit must
                                            #   hold each servo's homing_offset / reverse
@@ -102,11 +106,12 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import yaml
 
 from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_mismatch
-from firmware_protocol.dynamixel import load_control_table
+from firmware_protocol.dynamixel import load_control_table, tables_protocol1
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
 from models.constraint import load_constraint
 from models.errors import ModelsError
@@ -125,6 +130,7 @@ from rig.errors import RigConfigError
 __all__ = [
     "HOMING_MODES",
     "HOMING_OFFSET_RANGE",
+    "PROTOCOLS",
     "JointInfo",
     "RigConfig",
     "SensorsConfig",
@@ -143,6 +149,9 @@ _X_BAUDS = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_5
 
 HOMING_MODES = ("check", "write")
 """``servos.homing``: refuse servos whose Homing Offset / reverse bit differ, or write them."""
+
+PROTOCOLS = (1.0, 2.0)
+"""``servos.protocol``: DYNAMIXEL Protocol 1.0 or 2.0 (e-Manual "Protocol 1.0" / "Protocol 2.0")."""
 
 HOMING_OFFSET_RANGE = (-1_044_479, 1_044_479)
 """Homing Offset's range, ticks (X-series e-Manual, control table item 20)."""
@@ -225,6 +234,8 @@ class ServosConfig:
         factory's 0 / normal).
     homing : {"check", "write"}
         What opening the bus does when a servo's registers differ from :attr:`frames`.
+    protocol : float
+        The wire protocol the bus speaks, 1.0 or 2.0 (:data:`PROTOCOLS`).
     """
 
     port: str
@@ -239,6 +250,7 @@ class ServosConfig:
     joints: tuple[ServoJoint, ...] = ()
     frames: tuple[ServoFrame, ...] = ()
     homing: str = "check"
+    protocol: float = 2.0
 
     def frame(self, k: int) -> ServoFrame:
         """The frame of the ``k``-th servo in tick-vector order."""
@@ -636,8 +648,9 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
     d = ctx.mapping(value, "servos", {"port"},
                     {"chain", "joints", "baud", "model", "return_delay_us",
                      "status_return_level", "watchdog_ms", "ik_tolerance_deg", "latency_ms",
-                     "homing"})
+                     "homing", "protocol"})
     port = ctx.string(d["port"], "servos.port")
+    protocol = _protocol(ctx, d.get("protocol", 2.0), port)
     baud = ctx.integer(d.get("baud", 1_000_000), "servos.baud")
     if baud not in _X_BAUDS:
         raise ctx.fail("servos.baud", f"{baud} is not an X-series rate "
@@ -678,7 +691,7 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
     if all(f == ServoFrame() for f in frames):
         frames = ()  # every servo the factory's frame (as a config without the keys)
     cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints, frames,
-                       homing)
+                       homing, protocol)
     for j in joints or (None,):
         try:
             if j is None:
@@ -689,6 +702,50 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
             at = where if j is None else f"{where}[{cfg.joint_names.index(j.name)}].chain"
             raise ctx.fail(at, str(err).removeprefix("joint kinematics: ")) from None
     return cfg
+
+
+def _protocol(ctx: _Ctx, value: Any, port: str) -> float:
+    """``servos.protocol`` (1.0 or 2.0); a ``sim://dynamixel`` port must serve it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or float(value) not in PROTOCOLS:
+        raise ctx.fail("servos.protocol", f"expected 1.0 or 2.0, got {value!r}")
+    protocol = float(value)
+    served = _sim_protocols(port)
+    other = {p: who for p, who in served.items() if p != protocol}
+    if other:
+        p, who = next(iter(other.items()))
+        raise ctx.fail("servos.protocol", f"{protocol:.1f}, but the port {port!r} serves "
+                                          f"{who} on Protocol {p:.1f}; make the two agree")
+    return protocol
+
+
+def _sim_protocols(port: str) -> dict[float, str]:
+    """The protocols a ``sim://dynamixel`` port's servos speak -> which servos (words), from its
+    ``ids`` (``ID:MODEL[:PROTOCOL]``), ``model`` and ``protocol`` keys (see
+    :mod:`rig.sim.dynamixel.url`); empty for any other port (hardware: found at open)."""
+    parts = urlsplit(port)
+    if parts.scheme != "sim" or parts.netloc not in ("dynamixel", "dxl"):
+        return {}
+    q = {k: v[-1] for k, v in parse_qs(parts.query).items()}
+
+    def speaks(model: str, protocol: str | None) -> float:
+        if protocol:
+            try:
+                return float(protocol)
+            except ValueError:
+                return 2.0  # not ours to judge: the simulator names the bad value
+        table = tables_protocol1.load(model)  # a 1.0-only model (AX) speaks 1.0 by default
+        return 1.0 if table is not None and table.model_number in \
+            tables_protocol1.PROTOCOL1_ONLY else 2.0
+
+    model, protocol = q.get("model", "XM430-W350"), q.get("protocol")
+    out: dict[float, str] = {}
+    entries = [e.strip().split(":") for e in q.get("ids", "1").split(",")]
+    for e in entries:
+        m = e[1] if len(e) > 1 and e[1] else model
+        p = speaks(m, e[2] if len(e) > 2 else protocol)
+        out.setdefault(p, f"{m} (ID {e[0]})" if len(entries) > 1 and len(e) > 1 else m)
+    return out
 
 
 def loads_rig_config(text: str, source: str = "<rig config>",

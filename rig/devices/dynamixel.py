@@ -1,4 +1,4 @@
-"""A bus of Dynamixel X-series servos (Protocol 2.0) over the official ``dynamixel_sdk``.
+"""A bus of Dynamixel servos (Protocol 2.0, or 1.0) over the official ``dynamixel_sdk``.
 
 :class:`DynamixelBus` is a :class:`~rig.devices.bus.ServoBus`: servos by ID and register, no
 kinematics (those sit above it, :mod:`rig.devices.kinematics`).
@@ -51,6 +51,24 @@ module constant ``LATENCY_TIMER = 16`` measured on ``time.time()``; the port cla
 same formula with a per-bus latency (the adapter's detected USB latency timer, see
 :mod:`rig.devices.latency`) and the monotonic clock.
 
+Protocol 1.0 (``servos.protocol: 1.0``; AX, MX on 1.0 firmware, X series on Protocol Type 1;
+e-Manual "DYNAMIXEL Protocol 1.0", emanual.robotis.com/docs/en/dxl/protocol1/): what differs on
+the wire is behind one small strategy chosen at open (:class:`_Wire2` / :class:`_Wire1`); every
+address and size comes from each model's control table through ``table.resolve`` (AX / MX "CW
+Angle Limit" for Min Position Limit, ...). Open: a 1.0 PING of every servo, then a READ of its
+Model Number (0) and Firmware Version (1.0 has no model in its PING status). The cycle: one
+BULK_READ of Present Position (``0x92``, "available only on MX / X series" — the SDK's
+``bulkReadTx``; the request through ``PacketHandler`` directly, as the SDK's
+``GroupBulkRead`` passes ``bulkReadTx`` one argument too many on 1.0) when no servo is an AX,
+else one READ per servo; goals by one SYNC_WRITE of each table's Goal Position (2 bytes on AX and
+MX). The status error byte has no alert bit: its hardware bits (input voltage 0x01, overheating
+0x04, overload 0x20) mark the servo (the instruction still ran) and :meth:`poll_alerts` reports
+them with Torque Enable; the others (angle limit 0x02, range 0x08, checksum 0x10, instruction
+0x40) are errors, named. No Bus Watchdog on AX / MX (:meth:`arm_watchdog` returns 0: servos
+whose host stops hold their last goal), no indirect addressing (no goal read-back), Homing
+Offset / Drive Mode only where the table has them (MX-106's Drive Mode; a rig config asking for
+a frame on a servo without the item is refused).
+
 Receiving: the SDK's receive loops (``rxPacket``, ``fastSyncRead``, ``broadcastPing``) call
 ``PortHandler.readPort`` on a port opened with ``timeout=0`` until the packet is complete or
 its deadline passes — a busy loop that takes a whole core (and, with a simulator in the same
@@ -69,7 +87,7 @@ import select
 import termios
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -77,12 +95,15 @@ import serial
 
 from firmware_protocol.dynamixel.control_table import (
     BAUD_RATES,
+    ControlItem,
     ControlTable,
     load_control_table,
 )
+from firmware_protocol.dynamixel.protocol1 import error_names as error_names1
+from firmware_protocol.dynamixel.tables_protocol1 import PROTOCOL1_ONLY
 from rig.devices.base import describe_open_error
 from rig.devices.bus import ServoBus
-from rig.devices.config import HOMING_MODES, ServoFrame, ServosConfig
+from rig.devices.config import HOMING_MODES, PROTOCOLS, ServoFrame, ServosConfig
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
 from rig.devices.ports import Port, open_port
 from rig.devices.servo import Servo
@@ -110,14 +131,19 @@ _HW_BITS = {0x01: "input_voltage", 0x04: "overheating", 0x08: "encoder",
 _ERROR_NAMES = {1: "result fail", 2: "instruction error", 3: "CRC error", 4: "data range error",
                 5: "data length error", 6: "data limit error", 7: "access error"}
 _CONNECTION_ERRORS = (OSError, serial.SerialException, termios.error)
+_HW1_MASK = 0x01 | 0x04 | 0x20
+"""Protocol 1.0 error-byte bits that are hardware errors (input voltage, overheating, overload;
+the same bit values as the X series' Hardware Error Status)."""
 
 REVERSE_BIT = 0x01
 """Drive Mode bit 0: reverse direction (X-series e-Manual, "Drive Mode (10)")."""
 
-# X-series addresses (checked against the control table of every model found)
-_ITEMS = ("Return Delay Time", "Operating Mode", "Max Position Limit", "Min Position Limit",
-          "Torque Enable", "Status Return Level", "Hardware Error Status", "Bus Watchdog",
-          "Goal Position", "Present Position", "Firmware Version")
+# X-series item names (resolved in, and checked against, the control table of every model
+# found): a 2.0 bus needs them all; a 1.0 bus the first (_ITEMS1), the others where every servo
+# has them alike (AX / MX on 1.0 have no Operating Mode, Hardware Error Status, Bus Watchdog)
+_ITEMS1 = ("Return Delay Time", "Max Position Limit", "Min Position Limit", "Torque Enable",
+           "Status Return Level", "Goal Position", "Present Position", "Firmware Version")
+_ITEMS = (*_ITEMS1, "Operating Mode", "Hardware Error Status", "Bus Watchdog")
 
 
 @dataclass(frozen=True)
@@ -232,7 +258,8 @@ def _ping1(port: _SdkPort, ph1, dxl_id: int) -> tuple[int, int, int] | None:
     return model, firmware, error
 
 
-def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPort, object]:
+def _open_sdk(path: str, url: str, baud: int, latency_ms: float,
+              protocol: float = 2.0) -> tuple[_SdkPort, object]:
     port = _SdkPort(path, latency_ms)
     try:
         ok = port.setBaudRate(baud)
@@ -242,7 +269,7 @@ def _open_sdk(path: str, url: str, baud: int, latency_ms: float) -> tuple[_SdkPo
     if not ok:
         raise RigConfigError(f"dynamixel_sdk cannot set {baud} bit/s", port=url,
                              expected=", ".join(map(str, SCAN_BAUDS)))
-    return port, sdk.PacketHandler(2.0)
+    return port, sdk.PacketHandler(protocol)
 
 
 def _default_latency(port: Port) -> float:
@@ -290,8 +317,246 @@ def _read_frame(port: _SdkPort, ph, dxl_id: int, model_number: int,
     return offset, None if mode is None else bool(mode & REVERSE_BIT)
 
 
+class _Wire2:
+    """What Protocol 2.0 does on a :class:`DynamixelBus` (see the module docstring): PING with
+    the model in its status, SYNC READ (FAST SYNC READ when every firmware supports it), the
+    alert bit (7) of the error byte and its error codes, Hardware Error Status and Bus Watchdog
+    for the alerts. Chosen once, at open; holds no state but the bus's."""
+
+    protocol = 2.0
+    needs = "the bus needs X-series servos"
+    items = _ITEMS
+
+    def __init__(self, bus: DynamixelBus) -> None:
+        self.bus = bus
+
+    def ping(self, dxl_id: int) -> ServoInfo | None:
+        bus = self.bus
+        got = _ping(bus._sdk_port, bus._ph, dxl_id)
+        if got is None:
+            return None
+        return ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], bus.baud)
+
+    def table(self, info: ServoInfo) -> ControlTable:
+        return load_control_table(info.model_number)
+
+    def setup(self, found: Mapping[int, ServoInfo]) -> None:
+        """The read the cycle uses, once the servos are known."""
+        bus = self.bus
+        supported = all(s.firmware >= FAST_SYNC_READ_FIRMWARE for s in found.values())
+        bus.fast = supported if bus._fast_wanted is None else bool(bus._fast_wanted)
+
+    def status_error(self, dxl_id: int, error: int, what: str) -> None:
+        bus = self.bus
+        if error & ALERT_BIT:
+            bus._alert_ids.add(dxl_id)
+            bus.alert_pending = True
+        code = error & 0x7F
+        if code:
+            raise RigProtocolError(f"{what}: servo answered {_ERROR_NAMES.get(code, code)}",
+                                   port=str(bus.port), dxl_id=dxl_id, actual=code)
+
+    def read_tx(self, address: int, length: int, ids: list[int]) -> None:
+        """Send a (fast) sync read request; the SDK starts the reply's packet timeout."""
+        bus = self.bus
+        port, ph = bus._sdk_port, bus._ph
+        port.is_using = False
+        fast = bus.fast
+        result = bus._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), fast))
+        bus._result(result, "fast sync read" if fast else "sync read")
+
+    def read_rx(self, address: int, length: int, ids: list[int]) -> dict[int, bytes]:
+        """Collect the replies of :meth:`read_tx`: ``{id: bytes}``."""
+        bus = self.bus
+        port, ph = bus._sdk_port, bus._ph
+        out: dict[int, bytes] = {}
+        if bus.fast:
+            raw, result, _ = bus._guard(
+                lambda: ph.fastSyncReadRx(port, sdk.BROADCAST_ID, (length + 4) * len(ids)))
+            bus._result(result, "fast sync read")
+            off = 0
+            for _ in ids:
+                if off + 2 + length > len(raw):
+                    break
+                err, dxl_id = raw[off], raw[off + 1]
+                out[dxl_id] = bytes(raw[off + 2:off + 2 + length])
+                self.status_error(dxl_id, err, "fast sync read")
+                off += length + 4
+            missing = [i for i in ids if i not in out]
+            if missing:
+                raise RigTimeoutError("fast sync read: no data", port=str(bus.port),
+                                      dxl_id=missing[0])
+            return out
+        for dxl_id in ids:
+            data, result, err = bus._guard(lambda i=dxl_id: ph.readRx(port, i, length))
+            bus._result(result, "sync read", dxl_id)
+            self.status_error(dxl_id, err, "sync read")
+            out[dxl_id] = bytes(data)
+        return out
+
+    def bulk_tx(self, requests: Mapping[int, tuple[int, int]]) -> None:
+        """A BULK READ request: ``ID ADDR_L ADDR_H LEN_L LEN_H`` per servo."""
+        bus = self.bus
+        port = bus._sdk_port
+        port.is_using = False
+        param: list[int] = []
+        for dxl_id, (address, length) in requests.items():
+            param += (dxl_id, address & 0xFF, address >> 8, length & 0xFF, length >> 8)
+        result = bus._guard(lambda: bus._ph.bulkReadTx(port, param, len(param), False))
+        bus._result(result, "bulk read")
+
+    def poll_alerts(self) -> list[HardwareAlert]:
+        """Torque Enable .. Bus Watchdog of every servo in one sync read."""
+        bus = self.bus
+        t = bus.table
+        a0 = t["Torque Enable"].address
+        a_hw, a_wd = t["Hardware Error Status"].address, t["Bus Watchdog"].address
+        length = a_wd + 1 - a0
+        data = bus.transact(lambda d: bus.group_read(a0, length), "alert poll")
+        now = time.monotonic()
+        alerts = []
+        for dxl_id in bus.ids:
+            b = data[dxl_id]
+            hw, wd = b[a_hw - a0], b[a_wd - a0]
+            names = tuple(n for bit, n in _HW_BITS.items() if hw & bit)
+            if wd == 0xFF:
+                names += ("bus_watchdog",)
+            if names or dxl_id in bus._alert_ids:
+                alerts.append(HardwareAlert(str(bus.port), dxl_id, now, hw, names,
+                                            bool(b[0])))
+        bus._alert_ids.clear()
+        return alerts
+
+    def reboot(self, dxl_id: int) -> None:
+        bus = self.bus
+        port = bus._sdk_port
+        port.is_using = False
+        result, _ = bus._guard(lambda: bus._ph.reboot(port, dxl_id))
+        bus._result(result, "reboot", dxl_id)
+
+
+class _Wire1(_Wire2):
+    """What Protocol 1.0 does on a :class:`DynamixelBus` (see the module docstring): PING then
+    a READ of Model Number and Firmware Version, BULK_READ (MX / X series) or one READ per
+    servo (AX), the error byte's bits (hardware bits mark the servo, the others are errors)."""
+
+    protocol = 1.0
+    needs = "the bus needs servos whose control tables agree on it"
+    items = _ITEMS1
+
+    def __init__(self, bus: DynamixelBus) -> None:
+        super().__init__(bus)
+        self.bulk = True
+
+    def ping(self, dxl_id: int) -> ServoInfo | None:
+        bus = self.bus
+        got = _ping1(bus._sdk_port, bus._ph, dxl_id)
+        if got is None:
+            return None
+        return ServoInfo(dxl_id, got[0], _model_name1(got[0]), got[1], bus.baud, 1.0)
+
+    def table(self, info: ServoInfo) -> ControlTable:
+        return load_control_table(info.model_number, 1.0)
+
+    def setup(self, found: Mapping[int, ServoInfo]) -> None:
+        bus = self.bus
+        bus.fast = False
+        self.bulk = all(s.model_number not in PROTOCOL1_ONLY for s in found.values())
+        bus.read_what = ("bulk read" if self.bulk else "read") + " of Present Position"
+
+    def status_error(self, dxl_id: int, error: int, what: str) -> None:
+        bus = self.bus
+        hw = error & _HW1_MASK
+        if hw:
+            bus._hw_bits[dxl_id] = hw
+            bus._alert_ids.add(dxl_id)
+            bus.alert_pending = True
+        else:
+            bus._hw_bits.pop(dxl_id, None)
+        code = error & 0x7F & ~_HW1_MASK
+        if code:
+            names = ", ".join(n.replace("_", " ") for n in error_names1(code))
+            raise RigProtocolError(f"{what}: servo answered {names} error", port=str(bus.port),
+                                   dxl_id=dxl_id, actual=code)
+
+    def read_tx(self, address: int, length: int, ids: list[int]) -> None:
+        """One BULK_READ request (every servo's status follows the one before it), or the READ
+        of the first servo (an AX ignores BULK_READ)."""
+        bus = self.bus
+        if self.bulk:
+            self.bulk_tx({i: (address, length) for i in ids})
+            return
+        port = bus._sdk_port
+        port.is_using = False
+        result = bus._guard(lambda: bus._ph.readTx(port, ids[0], address, length))
+        bus._result(result, "read", ids[0])
+
+    def read_rx(self, address: int, length: int, ids: list[int]) -> dict[int, bytes]:
+        bus = self.bus
+        port, ph = bus._sdk_port, bus._ph
+        what = "bulk read" if self.bulk else "read"
+        out: dict[int, bytes] = {}
+        for k, dxl_id in enumerate(ids):
+            if self.bulk or k == 0:
+                data, result, err = bus._guard(lambda i=dxl_id: ph.readRx(port, i, length))
+            else:
+                port.is_using = False
+                data, result, err = bus._guard(
+                    lambda i=dxl_id: ph.readTxRx(port, i, address, length))
+            bus._result(result, what, dxl_id)
+            self.status_error(dxl_id, err, what)
+            out[dxl_id] = bytes(data)
+        return out
+
+    def bulk_tx(self, requests: Mapping[int, tuple[int, int]]) -> None:
+        """A 1.0 BULK_READ request: ``0x00 [LEN ID ADDR] ...`` (the SDK adds the 0x00)."""
+        bus = self.bus
+        if not self.bulk:
+            raise RigProtocolError("an AX servo does not answer BULK_READ (MX / X series only)",
+                                   port=str(bus.port))
+        port = bus._sdk_port
+        port.is_using = False
+        param: list[int] = []
+        for dxl_id, (address, length) in requests.items():
+            param += (length, dxl_id, address)
+        result = bus._guard(lambda: bus._ph.bulkReadTx(port, param, len(param)))
+        bus._result(result, "bulk read")
+
+    def poll_alerts(self) -> list[HardwareAlert]:
+        """Torque Enable of every servo; the hardware bits are those of its status (and Bus
+        Watchdog where the table has one: an X series on Protocol Type 1)."""
+        bus = self.bus
+        a_te = bus._item("Torque Enable").address
+        torque = bus.transact(lambda d: bus.group_read(a_te, 1), "alert poll")
+        wd_item = bus.table.resolve("Bus Watchdog")
+        wd = None if wd_item is None else \
+            bus.transact(lambda d: bus.group_read(wd_item.address, 1), "alert poll")
+        now = time.monotonic()
+        alerts = []
+        for dxl_id in bus.ids:
+            hw = bus._hw_bits.get(dxl_id, 0)
+            names = tuple(n for bit, n in _HW_BITS.items() if hw & bit)
+            if wd is not None and wd[dxl_id][0] == 0xFF:
+                names += ("bus_watchdog",)
+            if names or dxl_id in bus._alert_ids:
+                alerts.append(HardwareAlert(str(bus.port), dxl_id, now, hw, names,
+                                            bool(torque[dxl_id][0])))
+        bus._alert_ids.clear()
+        return alerts
+
+    def reboot(self, dxl_id: int) -> None:
+        """REBOOT (0x08; the SDK's 1.0 ``reboot`` says "not available", the servos have it)."""
+        bus = self.bus
+        port = bus._sdk_port
+        tx = [0] * 6  # FF FF ID LEN INST CHK
+        tx[2], tx[3], tx[4] = dxl_id, 2, sdk.INST_REBOOT
+        port.is_using = False
+        _, result, _ = bus._guard(lambda: bus._ph.txRxPacket(port, tx))
+        bus._result(result, "reboot", dxl_id)
+
+
 class DynamixelBus(ServoBus):
-    """X-series servos on one bus: open, check, read, write, registers, alerts, watchdog.
+    """Dynamixel servos on one bus: open, check, read, write, registers, alerts, watchdog.
 
     Parameters
     ----------
@@ -316,6 +581,8 @@ class DynamixelBus(ServoBus):
     homing : {"check", "write"}, optional
         What :meth:`apply_homing` does at open and in :meth:`configure`; default
         ``servos.homing`` of a rig config, None (no frame check) for a bus of bare servos.
+    protocol : {2.0, 1.0}, optional
+        The wire protocol; default ``servos.protocol`` of a rig config, 2.0 for bare servos.
 
     Attributes
     ----------
@@ -334,6 +601,8 @@ class DynamixelBus(ServoBus):
         Each servo's Homing Offset / reverse bit the bus requires (tick-vector order).
     read_back : bool
         The cycle's read also reads the goal each servo holds (:meth:`map_read_back`).
+    protocol : float
+        2.0 or 1.0.
 
     Raises
     ------
@@ -351,7 +620,8 @@ class DynamixelBus(ServoBus):
     def __init__(self, port: str | Port | None, servos: ServosConfig | Sequence[Servo | int], *,
                  baud: int | None = None, timeout: float | None = None,
                  retries: int | None = None, latency_ms: float | None = None,
-                 fast: bool | None = None, homing: str | None = None) -> None:
+                 fast: bool | None = None, homing: str | None = None,
+                 protocol: float | None = None) -> None:
         config = servos if isinstance(servos, ServosConfig) else None
         settings = config if config is not None else ServosConfig  # its defaults
         self.config = config
@@ -366,6 +636,11 @@ class DynamixelBus(ServoBus):
         self._fast_wanted = fast
         baud = int(baud if baud is not None else settings.baud)
         self._alert_ids: set[int] = set()
+        self._hw_bits: dict[int, int] = {}  # 1.0: each servo's hardware bits, last status
+        protocol = settings.protocol if protocol is None else protocol
+        if protocol not in PROTOCOLS:
+            raise RigConfigError(f"protocol must be 1.0 or 2.0, got {protocol!r}")
+        self.protocol = float(protocol)
         if homing is None and config is not None:
             homing = config.homing
         if homing is not None and homing not in HOMING_MODES:
@@ -387,7 +662,8 @@ class DynamixelBus(ServoBus):
     def _open(self) -> None:
         url = str(self.port)
         latency = self._latency if self._latency is not None else _default_latency(self.port)
-        self._sdk_port, self._ph = _open_sdk(self.path, url, self.baud, latency)
+        self._wire = (_Wire1 if self.protocol == 1.0 else _Wire2)(self)
+        self._sdk_port, self._ph = _open_sdk(self.path, url, self.baud, latency, self.protocol)
         try:
             self._check_servos()
             self._plain_read()
@@ -419,13 +695,13 @@ class DynamixelBus(ServoBus):
             for dxl_id in self.ids:
                 if dxl_id in found:
                     continue
-                got = self._guard(lambda i=dxl_id: _ping(self._sdk_port, self._ph, i))
+                got = self._guard(lambda i=dxl_id: self._wire.ping(i))
                 if got is not None:
-                    model, fw, _err = got
-                    found[dxl_id] = ServoInfo(dxl_id, model, _model_name(model), fw, self.baud)
+                    found[dxl_id] = got
             if len(found) == len(self.ids):
                 break
         if not found:
+            self._other_protocol(url)
             raise RigConnectionError(
                 f"no servo answered at {self.baud} bit/s (wrong baud rate or port? try "
                 f"`rig scan {url}`)", port=url, actual=[], expected=list(self.ids))
@@ -439,21 +715,25 @@ class DynamixelBus(ServoBus):
                 if info.model.upper() != want.upper():
                     raise RigConfigError("servo model differs from the rig config", port=url,
                                          dxl_id=info.id, actual=info.model, expected=want)
-        tables = {i: load_control_table(s.model_number) for i, s in found.items()}
+        wire = self._wire
+        tables = {i: wire.table(s) for i, s in found.items()}
         first = next(iter(tables.values()))
+
+        def where(table: ControlTable, name: str) -> tuple[int, int] | None:
+            item = table.resolve(name)
+            return None if item is None else (item.address, item.size)
+
         for dxl_id, table in tables.items():
             for item in _ITEMS:
-                if item not in table or (table[item].address, table[item].size) != \
-                        (first[item].address, first[item].size):
+                at = where(table, item)
+                if (at is None and item in wire.items) or at != where(first, item):
                     raise RigConfigError(f"control table of {table.display_name} lacks or moves "
-                                         f"{item!r}; the bus needs X-series servos",
-                                         port=url, dxl_id=dxl_id)
+                                         f"{item!r}; {wire.needs}", port=url, dxl_id=dxl_id)
         self.found = found
         self.table: ControlTable = first
-        t = first
-        self._a_present, self._a_goal = t["Present Position"].address, t["Goal Position"].address
-        supported = all(s.firmware >= FAST_SYNC_READ_FIRMWARE for s in found.values())
-        self.fast = supported if self._fast_wanted is None else bool(self._fast_wanted)
+        self._present_item = self._item("Present Position")
+        self._goal_item = self._item("Goal Position")
+        wire.setup(found)
         self._id_param = list(self.ids)
         self._id_index = {i: k for k, i in enumerate(self.ids)}
 
@@ -482,13 +762,26 @@ class DynamixelBus(ServoBus):
                                dxl_id=dxl_id)
 
     def _status_error(self, dxl_id: int, error: int, what: str) -> None:
-        if error & ALERT_BIT:
-            self._alert_ids.add(dxl_id)
-            self.alert_pending = True
-        code = error & 0x7F
-        if code:
-            raise RigProtocolError(f"{what}: servo answered {_ERROR_NAMES.get(code, code)}",
-                                   port=str(self.port), dxl_id=dxl_id, actual=code)
+        """A status packet's error byte: alerts noted, errors raised (per protocol)."""
+        self._wire.status_error(dxl_id, error, what)
+
+    def _item(self, name: str) -> ControlItem:
+        """The item playing X-series item ``name``'s role in the servos' table."""
+        item = self.table.resolve(name)
+        if item is None:
+            raise RigConfigError(f"{self.table.display_name} has no {name!r} item",
+                                 port=str(self.port))
+        return item
+
+    def _other_protocol(self, url: str) -> None:
+        """Nobody answered: if the first servo answers the other protocol, say so (one line)."""
+        other = 1.0 if self.protocol == 2.0 else 2.0
+        ping = _ping1 if other == 1.0 else _ping
+        got = self._guard(lambda: ping(self._sdk_port, sdk.PacketHandler(other), self.ids[0]))
+        if got is not None:
+            raise RigConfigError(f"servo ID {self.ids[0]} answers Protocol {other:.1f}, the rig "
+                                 f"config says {self.protocol:.1f}: set servos.protocol: "
+                                 f"{other:.1f}", port=url)
 
     # -- the cycle ------------------------------------------------------------------------
     def _read_ticks(self, deadline: float) -> np.ndarray:
@@ -496,81 +789,50 @@ class DynamixelBus(ServoBus):
         return self._finish_read()
 
     def _begin_read(self) -> None:
-        """The sync read request of Present Position (its packet timeout starts now), and of
-        the goal held when :meth:`map_read_back` mapped both into the indirect data."""
-        self._sync_read_tx(self._read_at, self._read_len, self._id_param)
+        """The read request of Present Position (its packet timeout starts now), and of the
+        goal held when :meth:`map_read_back` mapped both into the indirect data."""
+        self._wire.read_tx(self._read_at, self._read_len, self._id_param)
 
     def _finish_read(self) -> np.ndarray:
         """The reply of :meth:`_begin_read` as ticks, (n,) int64 (and :attr:`held_goals`)."""
-        data = self._sync_read_rx(self._read_len, self._id_param)
-        v = np.frombuffer(b"".join([data[i] for i in self.ids]), dtype="<i4").astype(np.int64)
+        data = self._wire.read_rx(self._read_at, self._read_len, self._id_param)
+        v = np.frombuffer(b"".join([data[i] for i in self.ids]),
+                          dtype=self._read_dtype).astype(np.int64)
         if self._read_len == 8:
             self.held_goals = v[1::2]
             return v[0::2]
         return v
 
-    def sync_read(self, address: int, length: int,
-                  ids: Sequence[int] | None = None) -> dict[int, bytes]:
-        """One SYNC READ (FAST SYNC READ when in use): ``{id: bytes}``; no retries.
+    def group_read(self, address: int, length: int,
+                   ids: Sequence[int] | None = None) -> dict[int, bytes]:
+        """``length`` bytes at ``address`` of every servo in one exchange: ``{id: bytes}``; no
+        retries. Protocol 2.0: one SYNC READ (FAST SYNC READ when in use); 1.0: one BULK_READ,
+        or one READ per servo on a bus with an AX.
 
-        Status error bytes are checked (alert bit noted, error codes raised).
+        Status error bytes are checked (alerts noted, errors raised).
         """
         ids = self._id_param if ids is None else list(ids)
-        self._sync_read_tx(address, length, ids)
-        return self._sync_read_rx(length, ids)
-
-    def _sync_read_tx(self, address: int, length: int, ids: list[int]) -> None:
-        """Send a (fast) sync read request; the SDK starts the reply's packet timeout."""
-        port, ph = self._sdk_port, self._ph
-        port.is_using = False
-        fast = self.fast
-        result = self._guard(lambda: ph.syncReadTx(port, address, length, ids, len(ids), fast))
-        self._result(result, "fast sync read" if fast else "sync read")
-
-    def _sync_read_rx(self, length: int, ids: list[int]) -> dict[int, bytes]:
-        """Collect the replies of :meth:`_sync_read_tx`: ``{id: bytes}``."""
-        port, ph = self._sdk_port, self._ph
-        out: dict[int, bytes] = {}
-        if self.fast:
-            raw, result, _ = self._guard(
-                lambda: ph.fastSyncReadRx(port, sdk.BROADCAST_ID, (length + 4) * len(ids)))
-            self._result(result, "fast sync read")
-            off = 0
-            for _ in ids:
-                if off + 2 + length > len(raw):
-                    break
-                err, dxl_id = raw[off], raw[off + 1]
-                out[dxl_id] = bytes(raw[off + 2:off + 2 + length])
-                self._status_error(dxl_id, err, "fast sync read")
-                off += length + 4
-            missing = [i for i in ids if i not in out]
-            if missing:
-                raise RigTimeoutError("fast sync read: no data", port=str(self.port),
-                                      dxl_id=missing[0])
-            return out
-        for dxl_id in ids:
-            data, result, err = self._guard(lambda i=dxl_id: ph.readRx(port, i, length))
-            self._result(result, "sync read", dxl_id)
-            self._status_error(dxl_id, err, "sync read")
-            out[dxl_id] = bytes(data)
-        return out
+        self._wire.read_tx(address, length, ids)
+        return self._wire.read_rx(address, length, ids)
 
     def _write_goal_ticks(self, ticks: list[int]) -> None:
-        """Goal Position of every servo by one SYNC WRITE (no reply, no retry)."""
+        """Goal Position of every servo by one SYNC WRITE (no reply, no retry), its table's
+        size (4 bytes on the X series, 2 on AX / MX on 1.0)."""
+        goal = self._goal_item
         param: list[int] = []
         for dxl_id, t in zip(self.ids, ticks, strict=True):
-            v = int(t) & 0xFFFFFFFF
-            param += (dxl_id, v & 0xFF, v >> 8 & 0xFF, v >> 16 & 0xFF, v >> 24 & 0xFF)
+            param += (dxl_id, *goal.encode(int(t)))
         port = self._sdk_port
         port.is_using = False
-        result = self._guard(lambda: self._ph.syncWriteTxOnly(port, self._a_goal, 4, param,
-                                                              len(param)))
+        result = self._guard(lambda: self._ph.syncWriteTxOnly(port, goal.address, goal.size,
+                                                              param, len(param)))
         self._result(result, "sync write of Goal Position")
 
     # -- register access ------------------------------------------------------------------
     def read_register(self, dxl_id: int, name: str) -> int:
-        """One control-table item of one servo (retried)."""
-        item = self.table[name]
+        """One control-table item of one servo (retried); ``name`` an X-series name or the
+        model's own (resolved in its table)."""
+        item = self._item(name)
 
         def once(deadline: float) -> int:
             port = self._sdk_port
@@ -586,7 +848,7 @@ class DynamixelBus(ServoBus):
     def write_register(self, dxl_id: int, name: str, value: int) -> None:
         """Write one control-table item of one servo (acknowledged when Status Return Level is
         2, then retried; otherwise sent once)."""
-        item = self.table[name]
+        item = self._item(name)
         data = list(item.encode(int(value)))
         acked = getattr(self, "_srl", 2) >= 2
 
@@ -606,15 +868,11 @@ class DynamixelBus(ServoBus):
         self.transact(once, f"write of {name}", dxl_id=dxl_id)
 
     def bulk_read(self, requests: Mapping[int, tuple[int, int]]) -> dict[int, bytes]:
-        """One BULK READ: ``{id: (address, length)}`` → ``{id: bytes}`` (retried)."""
+        """One BULK READ: ``{id: (address, length)}`` → ``{id: bytes}`` (retried; on 1.0 not
+        with AX servos)."""
         def once(deadline: float) -> dict[int, bytes]:
             port = self._sdk_port
-            port.is_using = False
-            param: list[int] = []
-            for dxl_id, (address, length) in requests.items():
-                param += (dxl_id, address & 0xFF, address >> 8, length & 0xFF, length >> 8)
-            result = self._guard(lambda: self._ph.bulkReadTx(port, param, len(param), False))
-            self._result(result, "bulk read")
+            self._wire.bulk_tx(requests)
             out = {}
             for dxl_id, (_, length) in requests.items():
                 data, result, err = self._guard(lambda i=dxl_id, n=length:
@@ -629,16 +887,14 @@ class DynamixelBus(ServoBus):
     def ping(self, dxl_id: int) -> ServoInfo | None:
         """PING one ID: what answered, or None."""
         self._check_open()
-        got = self._guard(lambda: _ping(self._sdk_port, self._ph, dxl_id))
-        if got is None:
-            return None
-        return ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], self.baud)
+        return self._guard(lambda: self._wire.ping(dxl_id))
 
     # -- torque, configuration, watchdog --------------------------------------------------
     def _read_torque(self) -> np.ndarray:
         """Torque Enable as each servo reports it, (n,) bool."""
-        a = self.table["Torque Enable"].address
-        data = self.transact(lambda d: self.sync_read(a, 1), "sync read of Torque Enable")
+        a = self._item("Torque Enable").address
+        data = self.transact(lambda d: self.group_read(a, 1),
+                             self.read_what.replace("Present Position", "Torque Enable"))
         return np.array([bool(data[i][0]) for i in self.ids])
 
     def _write_torque(self, on: bool) -> None:
@@ -671,9 +927,21 @@ class DynamixelBus(ServoBus):
             self.apply_homing()
         lo, hi = self.min_ticks, self.max_ticks
         multi_turn = bool((lo < 0).any() or (hi > 4095).any())
+        has_mode = self.table.resolve("Operating Mode") is not None
+        if not has_mode:  # AX / MX on 1.0: joint mode by the angle limits, within one turn
+            top = self.table.ranges.get(self._goal_item.name, (0, 4095))[1]
+            bad = [k for k in range(len(self.ids)) if lo[k] < 0 or hi[k] > top]
+            if bad:
+                k = bad[0]
+                raise RigConfigError(
+                    f"servo {self.names[k]} ({self.found[self.ids[k]].model}): min_ticks/"
+                    f"max_ticks {lo[k]}..{hi[k]} beyond its joint mode's 0..{top}",
+                    port=str(self.port), dxl_id=self.ids[k])
+            multi_turn = False
         for k, dxl_id in enumerate(self.ids):
-            want = {"Operating Mode": 4 if multi_turn else 3,
-                    "Return Delay Time": self.return_delay_us // 2}
+            want = {"Return Delay Time": self.return_delay_us // 2}
+            if has_mode:
+                want = {"Operating Mode": 4 if multi_turn else 3, **want}
             if not multi_turn:
                 want["Min Position Limit"] = int(lo[k])
                 want["Max Position Limit"] = int(hi[k])
@@ -782,7 +1050,9 @@ class DynamixelBus(ServoBus):
 
     def _plain_read(self) -> None:
         """The cycle reads Present Position alone (no goal read back)."""
-        self._read_at, self._read_len = self._a_present, 4
+        item = self._present_item
+        self._read_at, self._read_len = item.address, item.size
+        self._read_dtype = f"<{'i' if item.signed else 'u'}{item.size}"
         self.read_back = False
         self.held_goals = None
 
@@ -806,11 +1076,12 @@ class DynamixelBus(ServoBus):
         blocks = {t.indirect[0] if t.indirect and t.protocol == 2.0 else None for t in tables}
         block = next(iter(blocks))
         t = self.table
-        if len(blocks) != 1 or block is None or block.count < 8 \
+        if len(blocks) != 1 or block is None or block.count < 8 or self.protocol != 2.0 \
                 or "Goal Position" not in t or "Present Position" not in t:
             no = [i for i, tb in zip(self.ids, tables, strict=True) if not tb.indirect]
             why = (f"servo ID {no[0]} ({self.found[no[0]].model}) has no indirect addressing"
-                   if no else "the servos' indirect blocks differ")
+                   if no else "the servos' indirect blocks differ" if self.protocol == 2.0
+                   else "the bus speaks Protocol 1.0 (the goal's read-back is 2.0's)")
             self.advice.append(f"{why}: the loop reads Present Position only and does not "
                                f"check that each servo holds the goal written")
             return False
@@ -834,11 +1105,11 @@ class DynamixelBus(ServoBus):
             self.advice.append(f"{err}: the loop reads Present Position only and does not "
                                f"check that each servo holds the goal written")
             return False
-        before = self.transact(lambda d: self.sync_read(a_p, 4), "sync read of Present Position")
-        mapped = self.transact(lambda d: self.sync_read(block.data_start, 8),
+        before = self.transact(lambda d: self.group_read(a_p, 4), "sync read of Present Position")
+        mapped = self.transact(lambda d: self.group_read(block.data_start, 8),
                                "sync read of Indirect Data")
-        after = self.transact(lambda d: self.sync_read(a_p, 4), "sync read of Present Position")
-        goals = self.transact(lambda d: self.sync_read(a_g, 4), "sync read of Goal Position")
+        after = self.transact(lambda d: self.group_read(a_p, 4), "sync read of Present Position")
+        goals = self.transact(lambda d: self.group_read(a_g, 4), "sync read of Goal Position")
         for dxl_id in self.ids:
             p0, p1 = (int.from_bytes(x[dxl_id], "little", signed=True) for x in (before, after))
             p = int.from_bytes(mapped[dxl_id][:4], "little", signed=True)
@@ -848,7 +1119,7 @@ class DynamixelBus(ServoBus):
                     f"reads {p} for Present Position {p0}): the loop reads Present Position "
                     f"only and does not check that each servo holds the goal written")
                 return False
-        self._read_at, self._read_len = block.data_start, 8
+        self._read_at, self._read_len, self._read_dtype = block.data_start, 8, "<i4"
         self.read_back = True
         return True
 
@@ -879,7 +1150,10 @@ class DynamixelBus(ServoBus):
 
     def _arm_watchdog(self, ms: int) -> int:
         """Bus Watchdog on every servo, ``ms`` rounded up to 20 ms units (0 disarms and clears
-        a watchdog error); the ms set."""
+        a watchdog error); the ms set: 0 on servos without one (AX, MX on 1.0: they hold their
+        last goal when the host stops)."""
+        if self.table.resolve("Bus Watchdog") is None:
+            return 0
         if ms < 0 or ms > 2540:
             raise RigConfigError("Bus Watchdog must be 0..2540 ms", port=str(self.port),
                                  actual=ms)
@@ -896,32 +1170,13 @@ class DynamixelBus(ServoBus):
         Level-triggered: a servo in error is reported at every poll until it is rebooted
         (hardware error) or its watchdog is cleared.
         """
-        t = self.table
-        a0 = t["Torque Enable"].address
-        a_hw, a_wd = t["Hardware Error Status"].address, t["Bus Watchdog"].address
-        length = a_wd + 1 - a0
-        data = self.transact(lambda d: self.sync_read(a0, length), "alert poll")
-        now = time.monotonic()
-        alerts = []
-        for dxl_id in self.ids:
-            b = data[dxl_id]
-            hw, wd = b[a_hw - a0], b[a_wd - a0]
-            names = tuple(n for bit, n in _HW_BITS.items() if hw & bit)
-            if wd == 0xFF:
-                names += ("bus_watchdog",)
-            if names or dxl_id in self._alert_ids:
-                alerts.append(HardwareAlert(str(self.port), dxl_id, now, hw, names,
-                                            bool(b[0])))
-        self._alert_ids.clear()
-        return alerts
+        return self._wire.poll_alerts()
 
     def reboot(self, dxl_id: int) -> None:
         """REBOOT one servo (clears its hardware error; torque comes back off)."""
-        port = self._sdk_port
-        port.is_using = False
-        result, _ = self._guard(lambda: self._ph.reboot(port, dxl_id))
-        self._result(result, "reboot", dxl_id)
+        self._wire.reboot(dxl_id)
         self._alert_ids.discard(dxl_id)
+        self._hw_bits.pop(dxl_id, None)
 
 
 #: Above this many IDs to try at one baud rate, :func:`scan` sends one broadcast PING first and

@@ -283,6 +283,9 @@ class EnforcementLoop:
         if wd is None:
             wd = bus.watchdog_ms
         self.watchdog_ms = _patiently(lambda: bus.arm_watchdog(int(wd))) if wd else 0
+        if wd and not self.watchdog_ms:
+            self.log(f"note: the servos have no Bus Watchdog (watchdog {int(wd)} ms not armed): "
+                     f"if this host stops, they hold their last goal")
         ticks = _read_retrying(bus)
         self._present_ticks = ticks
         self._goal_ticks = ticks.copy()
@@ -321,8 +324,9 @@ class EnforcementLoop:
                 bus.write_goal_ticks(ticks)
                 self._goal_ticks = ticks
         except RigError as err:
-            self.safe_state_note = (f"could not command the safe state ({err}); the servos' "
-                                    f"Bus Watchdog ({self.watchdog_ms} ms) stops them")
+            self.safe_state_note = (f"could not command the safe state ({err}); " + (
+                f"the servos' Bus Watchdog ({self.watchdog_ms} ms) stops them"
+                if self.watchdog_ms else "the servos hold their last goal (no Bus Watchdog)"))
         self.log(f"safe state ({self.config.safe_state}): {reason}"
                  + (f"; {self.safe_state_note}" if self.safe_state_note else ""))
 
