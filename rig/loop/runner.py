@@ -20,9 +20,9 @@ bus's wait (the wire, the adapter's latency timer) instead of adding to it, and 
 telemetry still pairs the target with the limb's state at the cycle's start. ``read_ms`` is the
 time the loop spent in the read's calls (the request, what was left of the wait after the
 compute, retries), ``compute_ms`` the compute's. A goal computed in a cycle that ends in the
-safe state is never sent (its telemetry row shows the last command sent). Latency columns are measured with
-``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock (monotonic,
-or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
+safe state is never sent (its telemetry row shows the last command sent). Latency columns are
+measured with ``time.perf_counter`` (real work time) whatever the loop clock is; the loop
+clock (monotonic, or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and ``t_s``.
 While it runs, the objects alive at start are frozen out of the cyclic garbage collector
 (``gc.freeze``), so a collection during a cycle has little to scan.
 

@@ -318,9 +318,9 @@ def late_causes(late_ms, bus_ms, compute_ms, overrun) -> np.ndarray:
     the model + supervisor + kinematics (``compute``). The loop computes while the read's reply
     travels (:mod:`rig.loop.runner`): ``read_ms`` is the time it was blocked on the read — the
     request, the wait left after the compute, the parse, retries — so a slow reply shows as
-    ``bus`` and a compute longer than the reply's flight as ``compute``. A cycle that **started late**
-    (> :data:`LATE_START_MS`) without overrunning inherits the cause of the overrun before it,
-    if any, else ``scheduler`` (the host woke the loop late).
+    ``bus`` and a compute longer than the reply's flight as ``compute``. A cycle that **started
+    late** (> :data:`LATE_START_MS`) without overrunning inherits the cause of the overrun
+    before it, if any, else ``scheduler`` (the host woke the loop late).
 
     Parameters
     ----------
