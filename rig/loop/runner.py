@@ -21,10 +21,10 @@ telemetry still pairs the target with the limb's state at the cycle's start. ``r
 time the loop spent in the read's calls (the request, what was left of the wait after the
 compute, retries), ``compute_ms`` the compute's. A goal computed in a cycle that ends in the
 safe state is never sent (its telemetry row shows the last command sent). Latency columns are
-measured with ``time.perf_counter`` (real work time) whatever the loop clock is; the loop
-clock (monotonic, or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines,
-staleness and ``t_s``. While it runs, the objects alive at start are frozen out of the cyclic garbage collector
-(``gc.freeze``), so a collection during a cycle has little to scan.
+measured with ``time.perf_counter`` (real work time) whatever the loop clock is; the loop clock
+(monotonic, or a :class:`~rig.sim.clock.ManualClock` in tests) drives deadlines, staleness and
+``t_s``. While it runs, the objects alive at start are frozen out of the cyclic garbage
+collector (``gc.freeze``), so a collection during a cycle has little to scan.
 
 Safe state (``safe_state="hold"``, the default, or ``"torque-off"``)
 --------------------------------------------------------------------
