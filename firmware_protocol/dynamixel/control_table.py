@@ -485,6 +485,9 @@ def _build(key: str, number: int) -> ControlTable:
     if "Current Limit" in defaults:  # e-Manual: 0 ~ the model's own default
         ranges["Current Limit"] = (0, defaults["Current Limit"])
     ranges = {own(k): v for k, v in ranges.items() if own(k) in items}
+    for name, (lo, _) in ranges.items():  # a range with negatives: a two's-complement item
+        if lo < 0 and not items[name].signed:  # (P-series Min/Max Position Limit)
+            items[name] = dataclasses.replace(items[name], signed=True)
     unit_values = override.get("units", {})
     if "Present Current" not in items:  # no current sensing: Present Load instead
         unit_values = {**unit_values, "current_ma": None}

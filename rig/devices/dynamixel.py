@@ -103,7 +103,13 @@ from firmware_protocol.dynamixel.protocol1 import error_names as error_names1
 from firmware_protocol.dynamixel.tables_protocol1 import PROTOCOL1_ONLY
 from rig.devices.base import describe_open_error
 from rig.devices.bus import ServoBus
-from rig.devices.config import HOMING_MODES, PROTOCOLS, ServoFrame, ServosConfig
+from rig.devices.config import (
+    HOMING_MODES,
+    PROTOCOLS,
+    ServoFrame,
+    ServosConfig,
+    resolution_mismatch,
+)
 from rig.devices.latency import SDK_LATENCY_MS, latency_advice, usb_latency_timer_ms
 from rig.devices.ports import Port, open_port
 from rig.devices.servo import Servo
@@ -729,6 +735,10 @@ class DynamixelBus(ServoBus):
                 if (at is None and item in wire.items) or at != where(first, item):
                     raise RigConfigError(f"control table of {table.display_name} lacks or moves "
                                          f"{item!r}; {wire.needs}", port=url, dxl_id=dxl_id)
+        if self.config is not None:
+            why = resolution_mismatch(self.config, found)
+            if why:
+                raise RigConfigError(why, port=url)
         self.found = found
         self.table: ControlTable = first
         self._present_item = self._item("Present Position")
@@ -926,7 +936,11 @@ class DynamixelBus(ServoBus):
         if self.homing is not None:
             self.apply_homing()
         lo, hi = self.min_ticks, self.max_ticks
-        multi_turn = bool((lo < 0).any() or (hi > 4095).any())
+        # beyond what the position-limit items can hold (X 0..4095, P-series ±501,923):
+        # extended position mode, no limits written
+        limit_lo, limit_hi = self.table.ranges.get(self._item("Max Position Limit").name,
+                                                   (0, 4095))
+        multi_turn = bool((lo < limit_lo).any() or (hi > limit_hi).any())
         has_mode = self.table.resolve("Operating Mode") is not None
         if not has_mode:  # AX / MX on 1.0: joint mode by the angle limits, within one turn
             top = self.table.ranges.get(self._goal_item.name, (0, 4095))[1]

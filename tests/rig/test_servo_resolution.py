@@ -264,3 +264,57 @@ def test_the_hand_writes_actual_ticks_through_the_configured_frame(tmp_path):
         truth = sp.limb.joint(np.array([sp.now()]))[0]
         q = kin.forward(present)
         assert float(np.degrees(Q.angle(Q.multiply(q, Q.conjugate(truth))))) < 1e-6
+
+
+def test_the_rig_bus_on_an_ax_chain_and_a_config_that_forgets_the_model(tmp_path):
+    """The rig's servo bus on three AX-12A (Protocol 1.0, 1228.8 ticks per turn): with
+    ``model: AX-12A`` it opens and reads ticks within the AX's 0..1023; without a model the
+    chain defaults to the X series' 4096 ticks per turn, which would turn every angle wrong:
+    refused at open, one line naming the servo, its model and both resolutions."""
+    from rig.devices.config import loads_rig_config
+    from rig.devices.dynamixel import DynamixelBus
+    from rig.devices.ports import open_port
+
+    url = "sim://dynamixel?ids=1,2,3&model=AX-12A"
+    head = ("name: t\njoint: {name: shoulder, side: right, parent: thorax, child: humerus}\n"
+            f"servos:\n  port: \"{url}\"\n  protocol: 1.0\n")
+    good = loads_rig_config(head + "  model: AX-12A\n  chain:\n" + CHAIN3).servos
+    bad = loads_rig_config(head + "  chain:\n" + CHAIN3).servos
+    with open_port(url + "&clock=manual&wire_time=off", baud=good.baud) as port:
+        bus = DynamixelBus(port, good)
+        try:
+            ticks = bus.read_ticks()
+            assert ticks.tolist() == [512, 512, 512]  # the AX's centre (150°)
+            assert good.kinematics().forward(ticks).tolist() == pytest.approx([1, 0, 0, 0])
+        finally:
+            bus.close()
+        with pytest.raises(RigConfigError) as exc:
+            DynamixelBus(port, bad)
+    msg = str(exc.value)
+    assert "\n" not in msg and "AX-12A (1228.8 ticks per revolution)" in msg
+    assert "gives it 4096" in msg
+
+
+def test_configure_writes_a_p_series_servos_signed_position_limits():
+    """A PH54-200-S500 chain at its default tick range (±501,923, its own position-limit
+    items' range): position mode and the limits written and read back, not the extended
+    position mode an X-series range test would pick."""
+    from rig.devices.config import loads_rig_config
+    from rig.devices.dynamixel import DynamixelBus
+    from rig.devices.ports import open_port
+
+    url = "sim://dynamixel?ids=1,2,3&model=PH54-200-S500"
+    servos = loads_rig_config(
+        "name: t\njoint: {name: shoulder, side: right, parent: thorax, child: humerus}\n"
+        f"servos:\n  port: \"{url}\"\n  model: PH54-200-S500\n  chain:\n" + CHAIN3).servos
+    with open_port(url + "&clock=manual&wire_time=off", baud=servos.baud) as port:
+        bus = DynamixelBus(port, servos)
+        try:
+            bus.configure()
+            for i in (1, 2, 3):
+                assert bus.read_register(i, "Operating Mode") == 3
+                assert bus.read_register(i, "Min Position Limit") == -501_923
+                assert bus.read_register(i, "Max Position Limit") == 501_923
+            assert bus.read_ticks().tolist() == [0, 0, 0]  # P-series power on at 0
+        finally:
+            bus.close()

@@ -516,7 +516,7 @@ def make_servo(dxl_id: int, model: str | int, *, protocol: float | None = None,
         raise ValueError(f"{table.display_name} speaks only Protocol 1.0")
     if is_legacy_table(table):
         return LegacyServo(dxl_id, table, position=position, **kwargs)
-    servo = SimServo(dxl_id, model, position=2048.0 if position is None else position, **kwargs)
+    servo = SimServo(dxl_id, model, position=position, **kwargs)  # None: the table's home
     if protocol is not None and float(protocol) == 1.0:
         if "Protocol Type" not in servo.table:
             raise ValueError(f"{servo.table.display_name} has no Protocol Type item: it "
