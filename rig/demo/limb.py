@@ -200,7 +200,7 @@ def commanded_beyond(table: dict, limb, tol_deg: float = 1.0) -> dict[str, Any]:
     flags = np.asarray(table["intervention"], dtype=np.float64)
     ok = np.isfinite(q).all(axis=(1, 2)) & (np.linalg.norm(q, axis=-1) > 0.5).all(axis=1)
     q, flags = q[ok], flags[ok]
-    out: dict[str, Any] = {"beyond": 0, "recovering": 0, "judged": int(len(q)),
+    out: dict[str, Any] = {"beyond": 0, "recovering": 0, "judged": len(q),
                            "worst_deg": {n: 0.0 for n in names}}
     if not len(q):
         return out

@@ -31,8 +31,8 @@ the rig's servos drive (a forearm elbow's limits on a hinge elbow's one servo, a
 servos) — except a hinge's limits on a forearm joint's two servos whose flexion servo turns
 about the hinge's axis (:func:`hinge_on_forearm`: a hinge is a forearm whose rotation interval is
 [0, 0], so the servos reach every allowed posture and the hinge's oracle holds the rotation servo
-at its zero; an elbow recorded as a hinge by IMUs enforced on a servo arm's forearm elbow). The limits
-(content hash: names, side, patient left out), side and patient as above (forceable).
+at its zero; an elbow recorded as a hinge by IMUs enforced on a servo arm's forearm elbow). The
+limits (content hash: names, side, patient left out), side and patient as above (forceable).
 """
 
 from __future__ import annotations

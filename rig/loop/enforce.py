@@ -25,8 +25,8 @@ from typing import Any
 
 from models import quaternion as Q
 from models.constraint import load_constraint, loads_constraint
-from models.limb import load_limits, loads_limb
 from models.fileio import check_output, write_owner_only
+from models.limb import load_limits, loads_limb
 from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
 from rig.devices.config import load_rig_config

@@ -217,7 +217,7 @@ def _read_trajectory(path: Path, fh, joint_names) -> tuple[np.ndarray, np.ndarra
         want = expected_header(joint_names if joint_names and len(joint_names) > 1 else None)
         raise RigConfigError(f"{path}:1: missing column(s) t_s; expected a header "
                              f"{','.join(want)} (got {','.join(header)})")
-    idx = [header.index("t_s")] + _header_columns(path, header, joint_names)
+    idx = [header.index("t_s"), *_header_columns(path, header, joint_names)]
     rows = []
     last_t = -math.inf
     for line_no, row in enumerate(reader, start=2):
@@ -614,7 +614,7 @@ class _Path:
     axes by a rounding error, which the oracle counts as outside) — and past its end the last
     step continued, in plain floats."""
 
-    __slots__ = ("table", "last", "step_angles", "step_axes", "end")
+    __slots__ = ("end", "last", "step_angles", "step_axes", "table")
 
     def __init__(self, table: np.ndarray):
         self.table = np.ascontiguousarray(table, dtype=np.float64)
