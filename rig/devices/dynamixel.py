@@ -561,6 +561,10 @@ class _Wire1(_Wire2):
         bus._result(result, "reboot", dxl_id)
 
 
+REBOOT_WAIT_S = 2.0
+"""How long :meth:`DynamixelBus.reboot` waits for a rebooted servo to answer again, s."""
+
+
 class DynamixelBus(ServoBus):
     """Dynamixel servos on one bus: open, check, read, write, registers, alerts, watchdog.
 
@@ -1186,11 +1190,24 @@ class DynamixelBus(ServoBus):
         """
         return self._wire.poll_alerts()
 
-    def reboot(self, dxl_id: int) -> None:
-        """REBOOT one servo (clears its hardware error; torque comes back off)."""
+    def reboot(self, dxl_id: int, *, wait_s: float = REBOOT_WAIT_S) -> None:
+        """REBOOT one servo (clears its hardware error; torque comes back off) and wait until
+        it answers a PING again: a servo is silent while it boots (an XC330 ~0.4 s), and a
+        packet sent to it meanwhile is lost.
+
+        Raises
+        ------
+        RigTimeoutError
+            It did not answer within ``wait_s`` seconds.
+        """
         self._wire.reboot(dxl_id)
         self._alert_ids.discard(dxl_id)
         self._hw_bits.pop(dxl_id, None)
+        deadline = time.monotonic() + wait_s
+        while self._guard(lambda: self._wire.ping(dxl_id)) is None:
+            if time.monotonic() >= deadline:
+                raise RigTimeoutError(f"servo did not answer within {wait_s:g} s of its reboot",
+                                      port=str(self.port), dxl_id=dxl_id)
 
 
 #: Above this many IDs to try at one baud rate, :func:`scan` sends one broadcast PING first and

@@ -236,10 +236,8 @@ def test_hardware_error_is_an_event_with_the_reported_torque(sim):
         assert dxl.alert_pending  # every status of servo 2 carries the alert bit until reboot
         with pytest.raises(HardwareAlertError, match="ID 2: hardware alert overload"):
             dxl.set_torque(True)
-        dxl.reboot(2)
-        # a real servo is silent while it boots: wait until the simulated one listens again
-        servo = sim.simulator.servo(2)
-        assert sim.simulator.wait_for(lambda: servo.listening(sim.simulator.clock()))
+        dxl.reboot(2)  # returns once the servo answers again (silent while it boots)
+        assert sim.simulator.servo(2).listening(sim.simulator.clock())
         assert dxl.poll_alerts() == []
 
 
