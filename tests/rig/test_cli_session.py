@@ -346,12 +346,15 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
         assert r.returncode == 0 and "P-RO" in r.stdout, r.stderr
         r = rig("rom", "--db", db, "--session", sid, "--json")
         assert r.returncode == 0 and json.loads(r.stdout)["flexion"] is not None, r.stderr
-        r = rig("export", "--db", db, "--session", sid, "--out", out / "s.csv")
-        assert r.returncode == 0 and read_samples_csv(out / "s.csv")["t"].size > 1000, r.stderr
-        r = rig("boundary", "--db", db, "--session", sid, "--no-store", "--out", out / "b.yaml")
-        assert r.returncode == 0 and (out / "b.yaml").is_file(), r.stderr
-        r = rig("report", "--db", db, "--session", sid, "--out", out / "r.html")
-        assert r.returncode == 0 and (out / "r.html").is_file(), r.stderr
+        if protected != "folder":  # the same read-only connection as "file and folder"
+            r = rig("export", "--db", db, "--session", sid, "--out", out / "s.csv")
+            assert r.returncode == 0 and read_samples_csv(out / "s.csv")["t"].size > 1000, \
+                r.stderr
+            r = rig("boundary", "--db", db, "--session", sid, "--no-store", "--out",
+                    out / "b.yaml")
+            assert r.returncode == 0 and (out / "b.yaml").is_file(), r.stderr
+            r = rig("report", "--db", db, "--session", sid, "--out", out / "r.html")
+            assert r.returncode == 0 and (out / "r.html").is_file(), r.stderr
         # what must write says so in one line, before any work
         for args in (("boundary", "--db", db, "--session", sid, "--out", out / "b2.yaml"),
                      ("boundary", "--db", db, "--session", sid, "--limb", "arm",
