@@ -55,6 +55,42 @@ def test_homing_offset_and_reverse_in_present_goal_and_velocity():
     assert servo.pos == 500.0  # actual = -(2500 - 3000)
 
 
+def test_present_position_comes_back_within_one_turn_as_the_e_manual_says():
+    """e-Manual "Present Position(132)": multi-turn while torque is off or in extended
+    position mode; back within one turn when the Operating Mode becomes Position Control
+    Mode, when torque is turned on in it, and after REBOOT (Homing Offset still on top)."""
+    servo = SimServo(1, position=2048.0)
+    servo.advance(0.0)
+    assert write(servo, "Homing Offset", 100) == 0
+    servo.hand = 2048.0 + 2 * 4096 + 10  # turned by hand two turns further, torque off
+    assert present(servo, "Present Position", 0.01) == 2048 + 8192 + 10 + 100
+    servo.hand = None
+    assert write(servo, "Torque Enable", 1, 0.02) == 0  # torque on in Position Control Mode
+    assert present(servo, "Present Position", 0.03) == 2058 + 100
+    assert write(servo, "Torque Enable", 0, 0.04) == 0
+    assert write(servo, "Operating Mode", 4, 0.05) == 0
+    servo.hand = 5000.0
+    assert present(servo, "Present Position", 0.06) == 5100
+    servo.hand = None
+    assert write(servo, "Torque Enable", 1, 0.07) == 0  # extended position: no reset
+    assert present(servo, "Present Position", 0.08) == 5100
+    assert write(servo, "Torque Enable", 0, 0.09) == 0
+    assert write(servo, "Operating Mode", 3, 0.1) == 0  # back to Position Control Mode
+    assert present(servo, "Present Position", 0.11) == 5000 - 4096 + 100
+    servo.hand = -300.0
+    assert present(servo, "Present Position", 0.12) == -200
+    servo.hand = None
+    servo.reboot()
+    assert present(servo, "Present Position", 0.5) == 4096 - 300 + 100
+    p_series = SimServo(1, "PH54-200-S500", position=0.0)  # one turn is ±501,923 about 0
+    p_series.advance(0.0)
+    p_series.hand = -600_000.0
+    p_series.advance(0.01)
+    p_series.hand = None
+    p_series.reboot()
+    assert p_series.pos == pytest.approx(-600_000 + 1_003_846)
+
+
 def test_position_limits_are_in_the_servo_frame():
     servo = SimServo(1, position=500.0)
     servo.advance(0.0)

@@ -887,10 +887,15 @@ class SimServo:
             elif values["Torque Enable"] and not was_torque:
                 self.vel = 0.0
                 self.hand = None
+                if self._get_or("Operating Mode", 3) == 3:
+                    self._wrap_one_turn()  # e-Manual: torque on in Position Control Mode
                 self._reset_dynamics()
                 if "Goal Position" not in values:
                     self._set("Goal Position", round(self.to_frame(self.pos)))
                 self.target = self.pos
+        if values.get("Operating Mode") == 3 and "Torque Enable" not in values:
+            self._wrap_one_turn()  # e-Manual: Operating Mode changed to Position Control Mode
+            self.target = self.ref_pos = self.pos
         if "Goal Position" in values or "Torque Enable" in values or any(
                 n in values for n in ("Min Position Limit", "Max Position Limit")):
             self._update_target()
@@ -917,9 +922,17 @@ class SimServo:
         self.advance(now)
         if self.vel != 0:
             return ErrorCode.RESULT_FAIL
-        self.pos %= self.ticks_per_rev
+        self._wrap_one_turn()
         self.target = self.ref_pos = self.pos
         return ErrorCode.NONE
+
+    def _wrap_one_turn(self) -> None:
+        """The shaft's count back within one turn about the power-on position (X series
+        0..4095, P-series ±half a turn): e-Manual "Present Position(132)" — when torque is
+        turned on or the Operating Mode changed to Position Control Mode, at power-on and after
+        REBOOT (Homing Offset still applies on top)."""
+        lo = float(self.table.home_ticks) - self.ticks_per_rev / 2.0
+        self.pos = lo + (self.pos - lo) % self.ticks_per_rev
 
     def reboot(self) -> None:
         """REBOOT: RAM back to defaults, hardware errors cleared, torque off; silent for
@@ -931,6 +944,7 @@ class SimServo:
         self.hardware_error = 0
         self.registered = None
         self.vel = 0.0
+        self._wrap_one_turn()  # e-Manual: at power-on and after REBOOT
         self.target = self.pos
         self._reset_dynamics()
         if self.temperature > self.get("Temperature Limit"):
