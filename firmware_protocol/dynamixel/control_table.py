@@ -318,10 +318,100 @@ _MODEL_OVERRIDES: dict[str, dict] = {
     "xl330_m077": _x(stall_torque_nm=0.215, stall_current_a=1.47, no_load_rpm=383.0),
     # xc330-m288 page: 0.93 N·m / 1.80 A / 81 rpm at 5 V
     "xc330_m288": _x(stall_torque_nm=0.93, stall_current_a=1.80, no_load_rpm=81.0),
+    # Pages read from the e-Manual's source, github.com/ROBOTIS-GIT/emanual (file @ commit);
+    # motor constants from its _data/dxl_x_info.yml @00280385 (bold = nominal voltage).
+    # xm430-w210: docs/en/dxl/x/xm430-w210.md @8bb7656a: Velocity Limit 330; 3.0 N·m, 2.3 A,
+    # 77 rpm at 12 V
+    "xm430_w210": _x({"Velocity Limit": 330}, stall_torque_nm=3.0, stall_current_a=2.3,
+                     no_load_rpm=77.0),
+    # xh430-w210.md @1cf2abe6: Current Limit 648, Velocity Limit 210, Position P Gain 900;
+    # 2.5 N·m, 1.3 A, 50 rpm at 12 V
+    "xh430_w210": _x({"Current Limit": 648, "Velocity Limit": 210, "Position P Gain": 900},
+                     stall_torque_nm=2.5, stall_current_a=1.3, no_load_rpm=50.0),
+    # xh430-w350.md @6aca77e9: Current Limit 648, Velocity Limit 130, Position P Gain 900;
+    # 3.4 N·m, 1.3 A, 30 rpm at 12 V
+    "xh430_w350": _x({"Current Limit": 648, "Velocity Limit": 130, "Position P Gain": 900},
+                     stall_torque_nm=3.4, stall_current_a=1.3, no_load_rpm=30.0),
+    # xh430-v210.md @b6bee155 (the page's older layout, no Range column): 24 V model, Max / Min
+    # Voltage Limit 300 / 110, Current Limit 689 in 1.34 mA, Velocity Limit 380; 2.6 N·m,
+    # 0.7 A, 52 rpm at 24 V. The voltage range 110 ~ 300 is xh430-v350's.
+    "xh430_v210": _x({"Max Voltage Limit": 300, "Min Voltage Limit": 110, "Current Limit": 689,
+                      "Velocity Limit": 380, "Present Input Voltage": 240},
+                     {"Max Voltage Limit": (110, 300), "Min Voltage Limit": (110, 300)},
+                     current_ma=1.34, stall_torque_nm=2.6, stall_current_a=0.7,
+                     no_load_rpm=52.0),
+    # xh430-v350.md @6058d277: Voltage Limits 110 ~ 300 (300 / 110), Current Limit 689 in
+    # 1.34 mA, Velocity Limit 135; 3.3 N·m, 0.7 A, 31 rpm at 24 V
+    "xh430_v350": _x({"Max Voltage Limit": 300, "Min Voltage Limit": 110, "Current Limit": 689,
+                      "Velocity Limit": 135, "Present Input Voltage": 240},
+                     {"Max Voltage Limit": (110, 300), "Min Voltage Limit": (110, 300)},
+                     current_ma=1.34, stall_torque_nm=3.3, stall_current_a=0.7,
+                     no_load_rpm=31.0),
+    # xd430-t210.md / xd430-t350.md @a75ff4a3: the XH430-W210 / -W350 tables ("control tables
+    # are identical"); their motor constants are not in dxl_x_info.yml @00280385 (unchecked)
+    "xd430_t210": _x({"Current Limit": 648, "Velocity Limit": 210, "Position P Gain": 900}),
+    "xd430_t350": _x({"Current Limit": 648, "Velocity Limit": 130, "Position P Gain": 900}),
+    # xc430-w150.md @e187952c: Voltage Limits 60 ~ 160 (160 / 60), Velocity Limit 460,
+    # Position P Gain 460, no current sensing; 1.6 N·m, 1.4 A, 106 rpm at 12 V
+    "xc430_w150": _x({"Min Voltage Limit": 60, "Velocity Limit": 460, "Position P Gain": 460},
+                     {"Max Voltage Limit": (60, 160), "Min Voltage Limit": (60, 160)},
+                     stall_torque_nm=1.6, stall_current_a=1.4, no_load_rpm=106.0,
+                     **_NO_CURRENT),
+    # xc430-w240.md @d33bc5f9: Voltage Limits 60 ~ 160, Velocity Limit 306, Position P Gain
+    # 700; 1.9 N·m, 1.4 A, 70 rpm at 12 V
+    "xc430_w240": _x({"Min Voltage Limit": 60, "Velocity Limit": 306, "Position P Gain": 700},
+                     {"Max Voltage Limit": (60, 160), "Min Voltage Limit": (60, 160)},
+                     stall_torque_nm=1.9, stall_current_a=1.4, no_load_rpm=70.0,
+                     **_NO_CURRENT),
+    # 2xl430-w250.md @4103eaba: 72 °C, Voltage Limits 60 ~ 140 (140 / 60), Velocity Limit 250,
+    # Velocity I Gain 1,800, Position D / P Gain 2,000 / 640; 1.4 N·m, 1.3 A, 57 rpm at 11.1 V
+    "2xl430_w250": _x({"Temperature Limit": 72, "Max Voltage Limit": 140,
+                       "Min Voltage Limit": 60, "Velocity Limit": 250, "Velocity I Gain": 1800,
+                       "Position D Gain": 2000, "Position P Gain": 640,
+                       "Present Input Voltage": 111},
+                      {"Max Voltage Limit": (60, 140), "Min Voltage Limit": (60, 140)},
+                      stall_torque_nm=1.4, stall_current_a=1.3, no_load_rpm=57.0,
+                      **_NO_CURRENT),
+    # 2xc430-w250.md @2a91568e: Voltage Limits 60 ~ 160 (160 / 60), Velocity Limit 275,
+    # Position P Gain 700; 1.8 N·m, 1.4 A, 64 rpm at 12 V
+    "2xc430_w250": _x({"Min Voltage Limit": 60, "Velocity Limit": 275, "Position P Gain": 700},
+                      {"Max Voltage Limit": (60, 160), "Min Voltage Limit": (60, 160)},
+                      stall_torque_nm=1.8, stall_current_a=1.4, no_load_rpm=64.0,
+                      **_NO_CURRENT),
+    # xm540-w150.md @486d85b1 (older layout): Current Limit 2,047, Velocity Limit 380;
+    # 7.3 N·m, 4.4 A, 53 rpm at 12 V
+    "xm540_w150": _x({"Current Limit": 2047, "Velocity Limit": 380},
+                     stall_torque_nm=7.3, stall_current_a=4.4, no_load_rpm=53.0),
+    # xm540-w270.md @7d10aced: Current Limit 2,047, Velocity Limit 128; 10.6 N·m, 4.4 A,
+    # 30 rpm at 12 V
+    "xm540_w270": _x({"Current Limit": 2047, "Velocity Limit": 128},
+                     stall_torque_nm=10.6, stall_current_a=4.4, no_load_rpm=30.0),
+    # X540 models whose control-table page was not read: motor constants only
+    # (dxl_x_info.yml @00280385); Current / Velocity Limit etc. stay the family's (unchecked)
+    "xh540_w150": _x(stall_torque_nm=7.1, stall_current_a=4.9, no_load_rpm=70.0),
+    "xh540_w270": _x(stall_torque_nm=9.9, stall_current_a=4.9, no_load_rpm=39.0),
+    "xh540_v150": _x(stall_torque_nm=6.4, stall_current_a=2.4, no_load_rpm=60.0),  # 24 V
+    "xh540_v270": _x(stall_torque_nm=9.2, stall_current_a=2.4, no_load_rpm=34.0),  # 24 V
+    "xw540_t140": _x(stall_torque_nm=6.9, stall_current_a=4.9, no_load_rpm=72.0),
+    "xw540_t260": _x(stall_torque_nm=9.5, stall_current_a=4.9, no_load_rpm=40.0),
+    # XC330 models whose control-table page was not read: motor constants only
+    # (dxl_x_info.yml @00280385); the T models are 11.1 V servos (6.5 ~ 12.0 V input), so
+    # the family's 5 V voltage limits are certainly not theirs (unchecked)
+    "xc330_m181": _x(stall_torque_nm=0.60, stall_current_a=1.80, no_load_rpm=129.0),
+    "xc330_t181": _x(stall_torque_nm=0.76, stall_current_a=0.80, no_load_rpm=104.0),
+    "xc330_t288": _x(stall_torque_nm=0.92, stall_current_a=0.80, no_load_rpm=65.0),
     # MX (2.0) -------------------------------------------------------------------------------
     # mx-28-2 page: no current sensing (Present Load), no current mode; 2.5 N·m / 1.4 A /
     # 55 rpm at 12 V
     "mx_28": _x(**_NO_CURRENT),
+    # mx-64-2.md @1b03e234: Current Limit 1,941 (3.36 mA), Velocity Limit 435, Position P Gain
+    # 850; 6.0 N·m, 4.1 A, 63 rpm at 12 V (also _data/dxl_mx_info.yml @5d02e95a)
+    "mx_64": _x({"Current Limit": 1941, "Velocity Limit": 435},
+                stall_torque_nm=6.0, stall_current_a=4.1, no_load_rpm=63.0),
+    # mx-106-2.md @79c049e3: Current Limit 2,047, Velocity Limit 360, Position P Gain 850;
+    # 8.4 N·m, 5.2 A, 45 rpm at 12 V
+    "mx_106": _x({"Current Limit": 2047, "Velocity Limit": 360},
+                 stall_torque_nm=8.4, stall_current_a=5.2, no_load_rpm=45.0),
     # P-series -------------------------------------------------------------------------------
     # ph54-200-s500-r page: the p family values
     "ph54_200_s500": _p(501_923, 501_433, 2900, 22740, 3_992_644, 3_992_644, 44.7, 9.3, 33.1),

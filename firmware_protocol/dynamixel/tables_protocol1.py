@@ -48,7 +48,7 @@ _HEAD = [
     (5, 1, "Return Delay Time", "RW", 250, (0, 254)),
     (6, 2, "CW Angle Limit", "RW", 0, (0, 1023)),
     (8, 2, "CCW Angle Limit", "RW", 1023, (0, 1023)),
-    (11, 1, "Temperature Limit", "RW", 70, (0, 150)),
+    (11, 1, "Temperature Limit", "RW", 70, (0, 100)),
     (12, 1, "Min Voltage Limit", "RW", 60, (50, 250)),
     (13, 1, "Max Voltage Limit", "RW", 140, (50, 250)),
     (14, 2, "Max Torque", "RW", 1023, (0, 1023)),
@@ -77,7 +77,7 @@ _AX_RAM = [
     (48, 2, "Punch", "RW", 32, (32, 1023)),
 ]
 _MX_EEPROM = [
-    (20, 2, "Multi Turn Offset", "RW", 0, (-28672, 28672)),
+    (20, 2, "Multi Turn Offset", "RW", 0, (-24576, 24576)),
     (22, 1, "Resolution Divider", "RW", 1, (1, 4)),
 ]
 _MX_RAM = [
@@ -132,7 +132,23 @@ def baud_rates_1(mx: bool) -> dict[int, int]:
     return rates
 
 
-# model number -> (key, number, rows, defaults overriding the rows', units, mx)
+_MX_VOLTS = {"Min Voltage Limit": (50, 160), "Max Voltage Limit": (50, 160)}
+"""MX pages include control_table_volt_limit.md: 50 ~ 160 (5.0 ~ 16.0 V)."""
+
+# model number -> key, rows, mx, defaults and ranges overriding the rows', units.
+# Pages read from the e-Manual's source (github.com/ROBOTIS-GIT/emanual, file @ commit):
+#   AX-12A  docs/en/dxl/ax/ax-12a.md @486d85b1 (its voltage-range include,
+#           control_table_volt_limit_high.md, was not readable: 50..250 is unchecked)
+#   AX-18A  docs/en/dxl/ax/ax-18a.md @2ac64e5f (Max Torque 983, Temperature Limit 75 in
+#           0 ~ 99, voltage via control_table_volt_limit.md 50 ~ 160)
+#   MX-28   docs/en/dxl/mx/mx-28.md @1b03e234; MX-64 docs/en/dxl/mx/mx-64.md @b942e2d6;
+#   MX-106  docs/en/dxl/mx/mx-106.md @78f3b8be
+#   shared includes: _includes/en/dxl/control_table_temp_limit.md @187f56cd (0 ~ 100),
+#   control_table_volt_limit.md @187f56cd (50 ~ 160), control_table_multiturn_offset.md
+#   @24e68fc8 (-24,576 ~ 24,576), control_table_mx_pid.md @0a1cc01d (gains 0 ~ 254),
+#   control_table_goal_acceleration.md @7758f426 (0 ~ 254, 8.583 deg/s^2),
+#   control_table_baudrate.md @3a6f8fed; specifications: _data/dxl_mx_info.yml @5d02e95a
+#   (MX stall torque / current / no-load speed at 12 V).
 MODELS: dict[int, dict] = {
     12: {"key": "ax_12a", "rows": _HEAD + _AX_RAM, "mx": False,
          "defaults": {},
@@ -140,19 +156,25 @@ MODELS: dict[int, dict] = {
                              current_ma=None, pwm_max=1023, stall_torque_nm=1.5,
                              stall_current_a=1.5, no_load_rpm=59.0)},
     18: {"key": "ax_18a", "rows": _HEAD + _AX_RAM, "mx": False,
-         "defaults": {"Temperature Limit": 75},
+         "defaults": {"Temperature Limit": 75, "Max Torque": 983},
+         "ranges": {"Temperature Limit": (0, 99), "Min Voltage Limit": (50, 160),
+                    "Max Voltage Limit": (50, 160)},
          "units": ServoUnits(ticks_per_rev=1228.8, velocity_rpm=0.111, accel_rpm2=0.0,
                              current_ma=None, pwm_max=1023, stall_torque_nm=1.8,
                              stall_current_a=2.2, no_load_rpm=97.0)},
     29: {"key": "mx_28", "rows": _HEAD + _MX_EEPROM + _MX_RAM, "mx": True,
          "defaults": {"Baud Rate": 34, "CCW Angle Limit": 4095, "Temperature Limit": 80,
                       "Max Voltage Limit": 160},
+         "ranges": _MX_VOLTS,
          "units": ServoUnits(ticks_per_rev=4096.0, velocity_rpm=0.114, accel_rpm2=85.83,
                              current_ma=None, pwm_max=1023, stall_torque_nm=2.5,
                              stall_current_a=1.4, no_load_rpm=55.0)},
+    # mx-64.md @b942e2d6 prints Max Voltage Limit 240, outside its own 50 ~ 160 range and
+    # the 10 ~ 14.8 V input: kept at 160 (MX-28 / MX-106 pages) until the lead decides
     310: {"key": "mx_64", "rows": _HEAD + _MX_EEPROM + _MX_RAM + _MX_CURRENT, "mx": True,
           "defaults": {"Baud Rate": 34, "CCW Angle Limit": 4095, "Temperature Limit": 80,
                        "Max Voltage Limit": 160},
+          "ranges": _MX_VOLTS,
           "units": ServoUnits(ticks_per_rev=4096.0, velocity_rpm=0.114, accel_rpm2=85.83,
                               current_ma=4.5, pwm_max=1023, stall_torque_nm=6.0,
                               stall_current_a=4.1, no_load_rpm=63.0)},
@@ -161,6 +183,7 @@ MODELS: dict[int, dict] = {
                    *_MX_CURRENT], "mx": True,
           "defaults": {"Baud Rate": 34, "CCW Angle Limit": 4095, "Temperature Limit": 80,
                        "Max Voltage Limit": 160},
+          "ranges": _MX_VOLTS,
           "units": ServoUnits(ticks_per_rev=4096.0, velocity_rpm=0.114, accel_rpm2=85.83,
                               current_ma=4.5, pwm_max=1023, stall_torque_nm=8.4,
                               stall_current_a=5.2, no_load_rpm=45.0)},
@@ -211,6 +234,7 @@ def _build(number: int) -> ControlTable:
         ranges["CW Angle Limit"] = ranges["CCW Angle Limit"] = (0, 4095)
         defaults["Baud Rate"] = 34
     defaults.update(spec["defaults"])
+    ranges.update(spec.get("ranges", {}))
     # power-on copies of EEPROM values; measured values at rest and the firmware version are
     # values of our choosing (the e-Manual gives none)
     defaults.update({"Torque Limit": defaults["Max Torque"], "Present Voltage": 120,

@@ -65,6 +65,44 @@ X_MODEL = {
     "xm430_w350": (200, 1193, 80, (95, 160)),
     "xl430_w250": (265, None, 72, (60, 140)),
     "xl330_m288": (445, 1750, 70, (35, 70)),
+    # read in github.com/ROBOTIS-GIT/emanual docs/en/dxl/<series>/<model>.md
+    "xm430_w210": (330, 1193, 80, (95, 160)),
+    "xh430_w210": (210, 648, 80, (95, 160)), "xh430_w350": (130, 648, 80, (95, 160)),
+    "xd430_t210": (210, 648, 80, (95, 160)), "xd430_t350": (130, 648, 80, (95, 160)),
+    "xh430_v210": (380, 689, 80, (110, 300)), "xh430_v350": (135, 689, 80, (110, 300)),
+    "xc430_w150": (460, None, 80, (60, 160)), "xc430_w240": (306, None, 80, (60, 160)),
+    "2xl430_w250": (250, None, 72, (60, 140)), "2xc430_w250": (275, None, 80, (60, 160)),
+    "xm540_w150": (380, 2047, 80, (95, 160)), "xm540_w270": (128, 2047, 80, (95, 160)),
+    "mx_64": (435, 1941, 80, (95, 160)), "mx_106": (360, 2047, 80, (95, 160)),
+}
+# per model: Velocity I, Velocity P, Position D, Position P default gains (the same pages)
+GAINS = {
+    "xm430_w350": (1920, 100, 0, 800), "xm430_w210": (1920, 100, 0, 800),
+    "xh430_w210": (1920, 100, 0, 900), "xh430_w350": (1920, 100, 0, 900),
+    "xd430_t210": (1920, 100, 0, 900), "xd430_t350": (1920, 100, 0, 900),
+    "xh430_v210": (1920, 100, 0, 800), "xh430_v350": (1920, 100, 0, 800),
+    "xc430_w150": (1920, 100, 0, 460), "xc430_w240": (1920, 100, 0, 700),
+    "2xl430_w250": (1800, 100, 2000, 640), "2xc430_w250": (1920, 100, 0, 700),
+    "xm540_w150": (1920, 100, 0, 800), "xm540_w270": (1920, 100, 0, 800),
+    "mx_64": (1920, 100, 0, 850), "mx_106": (1920, 100, 0, 850),
+}
+# per model: stall torque N·m, stall current A, no-load rpm at the nominal voltage, current
+# unit mA (None: no current sensing) -- Specifications of each page (_data/dxl_x_info.yml,
+# _data/dxl_mx_info.yml in the e-Manual's source)
+MOTOR = {
+    "xm430_w350": (4.1, 2.3, 46.0, 2.69), "xm430_w210": (3.0, 2.3, 77.0, 2.69),
+    "xh430_w210": (2.5, 1.3, 50.0, 2.69), "xh430_w350": (3.4, 1.3, 30.0, 2.69),
+    "xh430_v210": (2.6, 0.7, 52.0, 1.34), "xh430_v350": (3.3, 0.7, 31.0, 1.34),
+    "xc430_w150": (1.6, 1.4, 106.0, None), "xc430_w240": (1.9, 1.4, 70.0, None),
+    "2xl430_w250": (1.4, 1.3, 57.0, None), "2xc430_w250": (1.8, 1.4, 64.0, None),
+    "xm540_w150": (7.3, 4.4, 53.0, 2.69), "xm540_w270": (10.6, 4.4, 30.0, 2.69),
+    "xh540_w150": (7.1, 4.9, 70.0, 2.69), "xh540_w270": (9.9, 4.9, 39.0, 2.69),
+    "xh540_v150": (6.4, 2.4, 60.0, 2.69), "xh540_v270": (9.2, 2.4, 34.0, 2.69),
+    "xw540_t140": (6.9, 4.9, 72.0, 2.69), "xw540_t260": (9.5, 4.9, 40.0, 2.69),
+    "xc330_m181": (0.60, 1.80, 129.0, 1.0), "xc330_m288": (0.93, 1.80, 81.0, 1.0),
+    "xc330_t181": (0.76, 0.80, 104.0, 1.0), "xc330_t288": (0.92, 0.80, 65.0, 1.0),
+    "mx_28": (2.5, 1.4, 55.0, None), "mx_64": (6.0, 4.1, 63.0, 3.36),
+    "mx_106": (8.4, 5.2, 45.0, 3.36),
 }
 
 
@@ -201,6 +239,19 @@ def test_x_models_own_values(key):
     assert t.ranges["Max Voltage Limit"] == t.ranges["Min Voltage Limit"]
     lo, hi = t.ranges["Max Voltage Limit"]
     assert lo <= vmin <= vmax <= hi
+
+
+@pytest.mark.parametrize("key", sorted(GAINS))
+def test_x_models_gains(key):
+    t = load_control_table(key)
+    names = ("Velocity I Gain", "Velocity P Gain", "Position D Gain", "Position P Gain")
+    assert tuple(t.defaults[n] for n in names) == GAINS[key]
+
+
+@pytest.mark.parametrize("key", sorted(MOTOR))
+def test_x_models_motor_constants(key):
+    u = load_control_table(key).units
+    assert (u.stall_torque_nm, u.stall_current_a, u.no_load_rpm, u.current_ma) == MOTOR[key]
 
 
 def test_xm430_w350_defaults_unchanged():

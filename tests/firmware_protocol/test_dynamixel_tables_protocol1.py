@@ -1,5 +1,8 @@
 """Protocol 1.0 control tables against the e-Manual control-table pages (values typed here
-from emanual.robotis.com/docs/en/dxl/ax/ax-12a/, .../ax/ax-18a/, .../mx/mx-28/)."""
+from emanual.robotis.com/docs/en/dxl/ax/ax-12a/, .../ax/ax-18a/, .../mx/mx-28/, .../mx/mx-64/,
+.../mx/mx-106/, read in the e-Manual's source github.com/ROBOTIS-GIT/emanual: the pages'
+tables plus the shared includes for ranges: temperature 0 ~ 100, MX voltage 50 ~ 160,
+Multi Turn Offset -24,576 ~ 24,576)."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ AX_12A = {
     "Model Number": (0, 2, "R", 12, None), "ID": (3, 1, "RW", 1, (0, 253)),
     "Baud Rate": (4, 1, "RW", 1, (0, 254)), "Return Delay Time": (5, 1, "RW", 250, (0, 254)),
     "CW Angle Limit": (6, 2, "RW", 0, (0, 1023)), "CCW Angle Limit": (8, 2, "RW", 1023, (0, 1023)),
-    "Temperature Limit": (11, 1, "RW", 70, (0, 150)),
+    "Temperature Limit": (11, 1, "RW", 70, (0, 100)),
     "Min Voltage Limit": (12, 1, "RW", 60, (50, 250)),
     "Max Voltage Limit": (13, 1, "RW", 140, (50, 250)),
     "Max Torque": (14, 2, "RW", 1023, (0, 1023)), "Status Return Level": (16, 1, "RW", 2, (0, 2)),
@@ -29,24 +32,37 @@ AX_12A = {
     "Lock": (47, 1, "RW", 0, (0, 1)), "Punch": (48, 2, "RW", 32, (32, 1023)),
 }
 AX_18A = {**AX_12A, "Model Number": (0, 2, "R", 18, None),
-          "Temperature Limit": (11, 1, "RW", 75, (0, 150))}
+          "Temperature Limit": (11, 1, "RW", 75, (0, 99)),
+          "Min Voltage Limit": (12, 1, "RW", 60, (50, 160)),
+          "Max Voltage Limit": (13, 1, "RW", 140, (50, 160)),
+          "Max Torque": (14, 2, "RW", 983, (0, 1023)),
+          "Torque Limit": (34, 2, "RW", 983, (0, 1023))}
 MX_28 = {k: v for k, v in AX_12A.items() if "Compliance" not in k}
 MX_28.update({
     "Model Number": (0, 2, "R", 29, None), "Baud Rate": (4, 1, "RW", 34, (0, 254)),
     "CW Angle Limit": (6, 2, "RW", 0, (0, 4095)), "CCW Angle Limit": (8, 2, "RW", 4095, (0, 4095)),
-    "Temperature Limit": (11, 1, "RW", 80, (0, 150)),
-    "Max Voltage Limit": (13, 1, "RW", 160, (50, 250)),
-    "Multi Turn Offset": (20, 2, "RW", 0, (-28672, 28672)),
+    "Temperature Limit": (11, 1, "RW", 80, (0, 100)),
+    "Min Voltage Limit": (12, 1, "RW", 60, (50, 160)),
+    "Max Voltage Limit": (13, 1, "RW", 160, (50, 160)),
+    "Multi Turn Offset": (20, 2, "RW", 0, (-24576, 24576)),
     "Resolution Divider": (22, 1, "RW", 1, (1, 4)),
     "D Gain": (26, 1, "RW", 0, (0, 254)), "I Gain": (27, 1, "RW", 0, (0, 254)),
     "P Gain": (28, 1, "RW", 32, (0, 254)), "Goal Position": (30, 2, "RW", None, (0, 4095)),
     "Punch": (48, 2, "RW", 0, (0, 1023)), "Realtime Tick": (50, 2, "R", None, None),
     "Goal Acceleration": (73, 1, "RW", 0, (0, 254)),
 })
+MX_64 = {**MX_28, "Model Number": (0, 2, "R", 310, None),
+         "Current": (68, 2, "RW", 0, (0, 4095)),
+         "Torque Control Mode Enable": (70, 1, "RW", 0, (0, 1)),
+         "Goal Torque": (71, 2, "RW", 0, (0, 2047))}
+MX_106 = {**MX_64, "Model Number": (0, 2, "R", 320, None), "Drive Mode": (10, 1, "RW", 0, (0, 3))}
+# stall torque N·m, stall current A, no-load rpm at 12 V (each page's Specifications)
+MOTOR = {"AX-12A": (1.5, 1.5, 59.0), "AX-18A": (1.8, 2.2, 97.0), 29: (2.5, 1.4, 55.0),
+         310: (6.0, 4.1, 63.0), 320: (8.4, 5.2, 45.0)}
 
 
 @pytest.mark.parametrize(("model", "expect"), [("AX-12A", AX_12A), ("AX-18A", AX_18A),
-                                                (29, MX_28)])
+                                                (29, MX_28), (310, MX_64), (320, MX_106)])
 def test_items_defaults_and_ranges(model, expect):
     t = load_control_table(model, protocol=1.0)
     assert t.protocol == 1.0 and t.eeprom_end == 24
@@ -88,3 +104,9 @@ def test_baud_rates_units_roles():
     assert ax.resolve("Bus Watchdog") is None and ax.resolve("Operating Mode") is None
     mem = ax.default_memory()
     assert mem[0] == 12 and mem[4] == 1 and mem[34] | mem[35] << 8 == 1023
+
+
+@pytest.mark.parametrize("model", sorted(MOTOR, key=str))
+def test_motor_constants(model):
+    units = load_control_table(model, protocol=1.0).units
+    assert (units.stall_torque_nm, units.stall_current_a, units.no_load_rpm) == MOTOR[model]
