@@ -139,9 +139,12 @@ _P_RANGES = {
     "Position I Gain": (0, 32767), "Position P Gain": (0, 32767),
     "Feedforward 1st Gain": (0, 32767), "Feedforward 2nd Gain": (0, 32767),
     "Bus Watchdog": (0, 127), "Profile Acceleration": (0, 3_992_644),
-    "Profile Velocity": (0, 2900), "Goal Position": (-501_923, 501_923),
+    "Profile Velocity": (0, 2900), "Goal Position": (-2**31, 2**31 - 1),
 }
-"""ph54-200-s500-r page "Range" column. Protocol Type holds 2 (DYNAMIXEL 2.0) or 10 (Modbus);
+"""ph54-200-s500-r page "Range" column; Goal Position: the int32 range of Extended Position
+Control Mode (`_includes/en/dxl/p/control_table_564_goal_position.md`: in Position Control
+Mode it must lie within Min/Max Position Limit — a Data Limit Error beyond, the servo model's
+rule). Protocol Type holds 2 (DYNAMIXEL 2.0) or 10 (Modbus);
 the range check is 2..10. Profile Acceleration / Velocity are bounded by the Acceleration /
 Velocity Limit, typed here as each model's maximum."""
 
@@ -287,7 +290,6 @@ def _p(ticks_half: int, limit: int, velocity: int, current: int, accel: int,
                          "Acceleration Limit": accel, **more},
             "ranges": {"Max Position Limit": (-ticks_half, ticks_half),
                        "Min Position Limit": (-ticks_half, ticks_half),
-                       "Goal Position": (-ticks_half, ticks_half),
                        "Velocity Limit": (0, velocity), "Moving Threshold": (0, velocity),
                        "Profile Velocity": (0, velocity), "Current Limit": (0, current),
                        "Acceleration Limit": (0, accel_max),

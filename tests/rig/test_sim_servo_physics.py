@@ -227,3 +227,27 @@ def test_units_come_from_the_table():
     assert servo.velocity_unit == u.velocity_rpm * u.ticks_per_rev / 60.0
     assert servo.kt == pytest.approx(u.stall_torque_nm / u.stall_current_a)
     assert servo.pos == u.ticks_per_rev / 2
+
+
+def test_p_series_goal_range_per_mode_and_its_quarter_turn_homing_rule():
+    """PH54-200-S500 (ph54-200-s500-r page and its Goal Position include): Position Control
+    Mode refuses a goal beyond Min/Max Position Limit (Data Limit Error), Extended Position
+    Control Mode takes the int32 range; a Homing Offset beyond ±90° (a quarter turn, 250,961
+    pulses) is ignored in Position Control Mode only."""
+    servo = SimServo(1, "PH54-200-S500")
+    servo.advance(0.0)
+    assert write(servo, "Homing Offset", 300_000) == 0
+    assert present(servo, "Present Position", 0.0) == 0  # ignored in position mode
+    assert write(servo, "Homing Offset", 200_000) == 0
+    assert present(servo, "Present Position", 0.0) == 200_000
+    assert write(servo, "Homing Offset", 0) == 0
+    assert write(servo, "Torque Enable", 1) == 0
+    assert write(servo, "Goal Position", 501_434) == ErrorCode.DATA_LIMIT  # limit 501,433
+    assert write(servo, "Goal Position", 1_048_575) == ErrorCode.DATA_LIMIT
+    assert write(servo, "Torque Enable", 0) == 0
+    assert write(servo, "Operating Mode", 4) == 0
+    assert write(servo, "Homing Offset", 300_000) == 0
+    assert present(servo, "Present Position", 0.0) == 300_000  # honoured in extended mode
+    assert write(servo, "Torque Enable", 1) == 0
+    assert write(servo, "Goal Position", 1_048_575 + 300_000) == 0
+    assert present(servo, "Present Position", 60.0) == 1_048_575 + 300_000

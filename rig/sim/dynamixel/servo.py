@@ -122,7 +122,8 @@ FRICTION_RATIO = 0.02
 SECONDARY_ID_MAX = 252
 """Secondary ID 0..252 is active, 253..255 off (e-Manual Secondary(Shadow) ID(12))."""
 HOMING_OFFSET_JOINT_MODE = 1024
-"""In Position Control Mode a Homing Offset beyond ±1,024 is ignored (e-Manual note)."""
+"""In Position Control Mode a Homing Offset beyond ±90° (±1,024 ticks on the X series; a
+quarter of each model's turn: P-series ±250,961) is ignored (e-Manual notes on Homing Offset)."""
 
 HARDWARE_ERRORS = {
     "input_voltage": 0x01,
@@ -340,7 +341,7 @@ class SimServo:
     def homing_offset(self) -> int:
         """Homing Offset in force (0 in Position Control Mode when beyond ±1,024)."""
         offset = self._get_or("Homing Offset", 0)
-        if self._get_or("Operating Mode", 3) == 3 and abs(offset) > HOMING_OFFSET_JOINT_MODE:
+        if self._get_or("Operating Mode", 3) == 3 and abs(offset) > self.ticks_per_rev / 4.0:
             return 0
         return offset
 
