@@ -346,7 +346,8 @@ def run_example(script: Path, moves: int, timeout: float, model: Model) -> Run:
     space_sent = False
     last_progress = time.monotonic()
     spin_goal = 1_048_575       # clear_multi_turn.py's MAX_POSITION_VALUE
-    space_at = min(int(1.25 * model.ticks_per_rev), int(0.9 * spin_goal))
+    # past a turn (X: 1.25 turns); a P-series turn (1,003,846) is nearly the example's goal
+    space_at = min(int(1.25 * model.ticks_per_rev), int(0.98 * spin_goal))
     killed = False
 
     def send(key: str) -> None:
@@ -545,12 +546,16 @@ def _checks(ex: Example, model: Model, text: str, lines: list[str], run: Run, mo
             return "FAIL", "no 'Present Position has been reset' line"
         b = int(before[-1]) if before else None
         after, tpr = int(m[1]), model.ticks_per_rev
-        if b is None or b < tpr:
+        if after >= 2**31:  # the SDK reads 4 bytes unsigned: a negative position
+            after -= 2**32
+        # one turn: X / MX 0..4095; P-series / PRO(A) ±half a turn about 0 (their pages)
+        lo = 0 if tpr <= 4096 else -tpr // 2
+        if b is None or b < 0.9 * tpr:
             return "FAIL", f"present position {b} -> {after}: not a turn before CLEAR"
         off = (after - b) % tpr
-        if not 0 <= after < tpr or min(off, tpr - off) > 0.05 * tpr:
+        if not lo <= after < lo + tpr or min(off, tpr - off) > 0.05 * tpr:
             return "FAIL", (f"present position {b} -> {after} after CLEAR; one turn of the "
-                            f"model is {tpr} ticks: expected ~{b % tpr}")
+                            f"model is {tpr} ticks: expected ~{lo + (b - lo) % tpr}")
         return "PASS", f"present position {b} -> {after} after CLEAR ({tpr} ticks a turn)"
     if stem in MOVING_EXAMPLES:
         done = text.count(PROMPT_CONTINUE) - 1
