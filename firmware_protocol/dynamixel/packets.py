@@ -251,7 +251,36 @@ def decode_packet(data: bytes | bytearray, *, max_length: int = MAX_LENGTH) -> P
     return _parse_checked(data)
 
 
-class StreamDecoder:
+class ByteBuffer:
+    """The received bytes an incremental decoder holds (:class:`StreamDecoder`, and the mixed
+    1.0/2.0 decoder of :mod:`firmware_protocol.dynamixel.protocol1`).
+
+    Attributes
+    ----------
+    dropped : int
+        Number of bytes discarded so far as garbage or as parts of bad frames.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.dropped = 0
+
+    def feed(self, data: bytes | bytearray | memoryview) -> None:
+        """Append received bytes."""
+        self._buf += data
+
+    @property
+    def pending(self) -> int:
+        """Number of buffered bytes not yet decoded."""
+        return len(self._buf)
+
+    def clear(self) -> None:
+        """Forget buffered bytes (e.g. after a port flush)."""
+        self.dropped += len(self._buf)
+        self._buf.clear()
+
+
+class StreamDecoder(ByteBuffer):
     """Incremental decoder for a byte stream (a serial port in either direction).
 
     Feed it bytes as they arrive; take packets out with :meth:`next_packet` or by iterating.
@@ -272,23 +301,8 @@ class StreamDecoder:
     """
 
     def __init__(self, max_length: int = MAX_LENGTH):
+        super().__init__()
         self.max_length = max_length
-        self._buf = bytearray()
-        self.dropped = 0
-
-    def feed(self, data: bytes | bytearray | memoryview) -> None:
-        """Append received bytes."""
-        self._buf += data
-
-    @property
-    def pending(self) -> int:
-        """Number of buffered bytes not yet decoded."""
-        return len(self._buf)
-
-    def clear(self) -> None:
-        """Forget buffered bytes (e.g. after a port flush)."""
-        self.dropped += len(self._buf)
-        self._buf.clear()
 
     def skip_frame(self) -> None:
         """Give up on the incomplete frame at the front and resynchronise on the next header.

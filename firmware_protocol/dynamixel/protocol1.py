@@ -285,7 +285,7 @@ def parse_bulk_read(params: bytes) -> list[tuple[int, int, int]]:
 
 
 # -- a stream that carries both protocols ------------------------------------------------
-class MixedStreamDecoder:
+class MixedStreamDecoder(p2.ByteBuffer):
     """Incremental decoder of a bus on which Protocol 1.0 and 2.0 packets share the wire.
 
     Yields :class:`~firmware_protocol.dynamixel.packets.InstructionPacket` /
@@ -308,24 +308,9 @@ class MixedStreamDecoder:
     def __init__(self, direction: str = "instruction", max_length: int = p2.MAX_LENGTH):
         if direction not in ("instruction", "status"):
             raise ValueError(f"direction must be 'instruction' or 'status', got {direction!r}")
+        super().__init__()
         self.direction = direction
         self._v2 = p2.StreamDecoder(max_length)
-        self._buf = bytearray()
-        self.dropped = 0
-
-    def feed(self, data: bytes | bytearray | memoryview) -> None:
-        """Append received bytes."""
-        self._buf += data
-
-    @property
-    def pending(self) -> int:
-        """Buffered bytes not yet decoded."""
-        return len(self._buf)
-
-    def clear(self) -> None:
-        """Forget buffered bytes."""
-        self.dropped += len(self._buf)
-        self._buf.clear()
 
     def _discard(self, n: int) -> None:
         del self._buf[:n]

@@ -501,6 +501,13 @@ class SimServo:
     def _velocity_mode(self, dt: float) -> None:
         _, amax = self._profile()
         goal_v = self.direction() * self.get("Goal Velocity") * self.velocity_unit
+        self._ramp_velocity(goal_v, amax, dt, self._note_motion_current)
+
+    def _ramp_velocity(self, goal_v: float, amax: float, dt: float,
+                       on_step: Callable[[float], None] | None = None) -> None:
+        """Integrate ``dt`` s towards shaft speed ``goal_v`` (ticks/s) at acceleration at most
+        ``amax`` (ticks/s², inf: at once), in :data:`STEP` steps; ``on_step(acceleration)``
+        after each (velocity mode, wheel mode)."""
         while dt > 0:
             h = min(dt, STEP)
             dv = goal_v - self.vel
@@ -509,7 +516,8 @@ class SimServo:
             self.vel += dv
             self.pos += self.vel * h
             dt -= h
-            self._note_motion_current(dv / h)
+            if on_step is not None:
+                on_step(dv / h)
             if self.vel == goal_v and goal_v == 0:
                 break
 

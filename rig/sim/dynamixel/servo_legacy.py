@@ -236,14 +236,7 @@ class LegacyServo(SimServo):
             raw = self.get("Moving Speed")
             frac = (raw & 0x3FF) / 1023.0 * (-1.0 if raw & 0x400 else 1.0)
             goal_v = frac * self.table.units.no_load_rpm * self._tick_s
-            while dt > 0:
-                h = min(dt, STEP)
-                dv = goal_v - self.vel
-                if math.isfinite(amax):
-                    dv = max(-amax * h, min(amax * h, dv))
-                self.vel += dv
-                self.pos += self.vel * h
-                dt -= h
+            self._ramp_velocity(goal_v, amax, dt)
             return
         if mode == "multi-turn":
             self.vel = 0.0
