@@ -238,7 +238,7 @@ def test_a_recorded_session_binds_constraint_and_patient(files, tmp_path, capsys
     summ = tmp_path / "s.json"
     code, _, err = rig_cli(_argv(files, "--duration", "0.3", "--db", str(db), "--session",
                                 str(sid), "--summary-json", str(summ)))
-    assert code == 0, (out, err)
+    assert code == 0, err
     s = json.loads(summ.read_text())
     assert s["constraint_source"] == f"session {sid}"
     with open_store(db) as store:

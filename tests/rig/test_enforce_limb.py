@@ -19,6 +19,7 @@ from models.constraint import JointConstraint, dump_constraint
 from models.limb import Limb, dump_limb, load_limb
 from models.limb_model import export_limb_model
 from models.oracle import ConstraintOracle
+from rig.cli import main
 from rig.devices.config import load_rig_config
 from rig.devices.sources import OrientationSample
 from rig.errors import RigConfigError
@@ -31,7 +32,6 @@ from rig.loop.targets import (
     open_targets,
     valid_targets,
 )
-from rig.cli import main
 from rig.sim.patients import anatomical_limb
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -13,7 +13,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import dynamixel_sdk.port_handler
 import pytest
 from dynamixel_sdk import (
     COMM_RX_CORRUPT,
@@ -40,6 +39,8 @@ from rig.sim.dynamixel import (
 )
 from tests.rig.rigs import reap
 
+pytestmark = pytest.mark.usefixtures("tolerant_sdk_timeouts")
+
 # X-series control table addresses (e-Manual)
 RETURN_DELAY, OPERATING_MODE, MAX_POS, MIN_POS = 9, 11, 48, 52
 TORQUE, LED, SRL, HW_ERROR = 64, 65, 68, 70
@@ -55,37 +56,6 @@ def le(value: int, size: int) -> list[int]:
 
 def signed32(value: int) -> int:
     return value - (1 << 32) if value & 0x80000000 else value
-
-
-@pytest.fixture(autouse=True)
-def tolerant_sdk_timeouts(monkeypatch):
-    """Packet timeout ~100 ms instead of ~34 ms: the suite shares a loaded 2-CPU machine.
-
-    ``LATENCY_TIMER`` is the SDK's knob for the USB adapter's latency (16 ms by default);
-    replies that should come are not then lost to scheduling jitter, and timeout tests stay
-    quick.
-    """
-    monkeypatch.setattr(dynamixel_sdk.port_handler, "LATENCY_TIMER", 50)
-
-
-@pytest.fixture
-def clock():
-    return ManualClock(100.0)
-
-
-@pytest.fixture
-def bus(clock):
-    with start_servo_bus([1, 2, 3], "XM430-W350", return_delay_us=0, clock=clock) as b:
-        yield b
-        assert b.server_error is None
-
-
-@pytest.fixture
-def sdk(bus):
-    port = PortHandler(bus.port)
-    assert port.openPort()
-    yield port, PacketHandler(2.0)
-    port.closePort()
 
 
 # ---------------------------------------------------------------------------- basics

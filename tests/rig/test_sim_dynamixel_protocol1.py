@@ -8,32 +8,22 @@ No sleeps; motion on a manual clock.
 
 from __future__ import annotations
 
-import dynamixel_sdk.port_handler
 import pytest
 from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS, GroupSyncWrite, PacketHandler, PortHandler
 
 from firmware_protocol.dynamixel import protocol1 as p1
 from rig.errors import RigConfigError
-from rig.sim.clock import ManualClock
 from rig.sim.dynamixel import bus_from_url, start_servo_bus
 from rig.sim.dynamixel.servo import BOOT_TIME_S
 from rig.sim.dynamixel.servo_legacy import LegacyServo
+
+pytestmark = pytest.mark.usefixtures("tolerant_sdk_timeouts")
 
 ID_, BAUD, CW, CCW, SRL = 3, 4, 6, 8, 16
 TORQUE, GOAL, SPEED, PRESENT, PRESENT_SPEED = 24, 30, 32, 36, 38
 XM_PRESENT = 132
 RANGE, ANGLE, INSTRUCTION = 0x08, 0x02, 0x40
 MIXED = "sim://dynamixel?ids=1:AX-12A,2:MX-28:1,3:XM430-W350:1,4:XM430-W350&wire_time=off"
-
-
-@pytest.fixture(autouse=True)
-def tolerant_sdk_timeouts(monkeypatch):
-    monkeypatch.setattr(dynamixel_sdk.port_handler, "LATENCY_TIMER", 50)
-
-
-@pytest.fixture
-def clock():
-    return ManualClock(100.0)
 
 
 @pytest.fixture

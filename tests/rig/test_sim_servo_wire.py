@@ -5,51 +5,24 @@ The simulator runs on a ManualClock: motion and boot time move only when the tes
 
 from __future__ import annotations
 
-import dynamixel_sdk.port_handler
 import pytest
 from dynamixel_sdk import (
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
     GroupSyncRead,
-    PacketHandler,
-    PortHandler,
 )
 
 from firmware_protocol.dynamixel import ErrorCode
 from firmware_protocol.dynamixel.control_table import load_control_table
 from rig.sim.clock import ManualClock
-from rig.sim.dynamixel import BOOT_TIME_S, bus_from_url, start_servo_bus
+from rig.sim.dynamixel import BOOT_TIME_S, bus_from_url
+
+pytestmark = pytest.mark.usefixtures("tolerant_sdk_timeouts")
 
 RETURN_DELAY, SECONDARY_ID, TORQUE, LED = 9, 12, 64, 65
 GOAL_POS, PRESENT_POS = 116, 132
 INDIRECT_ADDR_1, INDIRECT_DATA_1 = 168, 224
 INDIRECT_ADDR_29, INDIRECT_DATA_29 = 578, 634
-
-
-@pytest.fixture(autouse=True)
-def tolerant_sdk_timeouts(monkeypatch):
-    """Packet timeout ~100 ms (see tests/rig/test_sim_dynamixel.py)."""
-    monkeypatch.setattr(dynamixel_sdk.port_handler, "LATENCY_TIMER", 50)
-
-
-@pytest.fixture
-def clock():
-    return ManualClock(100.0)
-
-
-@pytest.fixture
-def bus(clock):
-    with start_servo_bus([1, 2, 3], "XM430-W350", return_delay_us=0, clock=clock) as b:
-        yield b
-        assert b.server_error is None
-
-
-@pytest.fixture
-def sdk(bus):
-    port = PortHandler(bus.port)
-    assert port.openPort()
-    yield port, PacketHandler(2.0)
-    port.closePort()
 
 
 def map_indirect(port, ph, dxl_id, slot_address, first_target, count):
