@@ -41,6 +41,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "enforce",
         "Enforce a patient's joint limits on a servo limb in real time.",
     ),
+    "calibrate": (
+        "rig.commands.calibrate",
+        "calibrate",
+        "Calibrate a leader or follower servo arm (zero, directions, ranges) into a file.",
+    ),
     "session": (
         "rig.commands.session",
         "session",

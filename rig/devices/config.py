@@ -46,6 +46,11 @@ Named configurations ship in ``rig/configs/<name>.yaml`` and are found by name
                                            #   protocol (AX, MX on 1.0 firmware, X series on
                                            #   Protocol Type 1: 1.0); a sim:// port serving
                                            #   the other one is refused
+      calibration: arm-cal.yaml            #   optional: a `rig calibrate` file (relative to
+                                           #   this file): its zero and ranges override the
+                                           #   servos' below, its directions must equal
+                                           #   theirs, and the bus checks the arm against it
+                                           #   at start-up (docs/devices.md)
       homing: check                        #   check | write (default check): the servos'
                                            #   Homing Offset / Drive Mode reverse bit must
                                            #   hold each servo's homing_offset / reverse
@@ -102,7 +107,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -110,6 +115,8 @@ from urllib.parse import parse_qs, urlsplit
 
 import yaml
 
+from calibration.arm import ArmCalibration, ExpectedServo, load_arm_calibration
+from calibration.errors import CalibrationError
 from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_mismatch
 from firmware_protocol.dynamixel import load_control_table, tables_protocol1
 from firmware_protocol.imu.stream import MAX_RAW_SENSORS
@@ -236,6 +243,12 @@ class ServosConfig:
         What opening the bus does when a servo's registers differ from :attr:`frames`.
     protocol : float
         The wire protocol the bus speaks, 1.0 or 2.0 (:data:`PROTOCOLS`).
+    calibration : calibration.arm.ArmCalibration or None
+        ``servos.calibration``: its zeros and ranges are already in :attr:`axes`; the bus
+        checks the arm against it at open (:meth:`rig.devices.dynamixel.DynamixelBus.
+        check_calibration`).
+    configured_axes : tuple of ServoAxis
+        With a calibration: the servos as the rig file gives them (empty without).
     """
 
     port: str
@@ -251,6 +264,16 @@ class ServosConfig:
     frames: tuple[ServoFrame, ...] = ()
     homing: str = "check"
     protocol: float = 2.0
+    calibration: ArmCalibration | None = None
+    configured_axes: tuple[ServoAxis, ...] = ()
+
+    def without_calibration(self) -> ServosConfig:
+        """This section with the rig file's own zeros and ranges (no ``calibration``): what
+        ``rig calibrate`` measures against."""
+        if self.calibration is None:
+            return self
+        return _with_axes(replace(self, calibration=None, configured_axes=()),
+                          self.configured_axes)
 
     def frame(self, k: int) -> ServoFrame:
         """The frame of the ``k``-th servo in tick-vector order."""
@@ -642,13 +665,15 @@ def _model_defaults(ctx: _Ctx, model: str | None, protocol: Any) -> ServoPositio
         raise ctx.fail("servos.model", str(err)) from None
 
 
-def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
-    """``servos``; ``limb`` the file's ``limb:`` (empty: none), whose joints ``joints`` lists."""
+def _servos(ctx: _Ctx, value: Any, limb: str = "", name: str = "",
+            base_dir: Path | None = None) -> ServosConfig:
+    """``servos``; ``limb`` the file's ``limb:`` (empty: none), whose joints ``joints`` lists;
+    ``name`` the rig's (a calibration must name it), ``base_dir`` the file's folder."""
     names = tuple(name for name, _, _ in LIMB_CHAINS.get(limb, ()))
     d = ctx.mapping(value, "servos", {"port"},
                     {"chain", "joints", "baud", "model", "return_delay_us",
                      "status_return_level", "watchdog_ms", "ik_tolerance_deg", "latency_ms",
-                     "homing", "protocol"})
+                     "homing", "protocol", "calibration"})
     port = ctx.string(d["port"], "servos.port")
     protocol = _protocol(ctx, d.get("protocol", 2.0), port)
     baud = ctx.integer(d.get("baud", 1_000_000), "servos.baud")
@@ -692,6 +717,9 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
         frames = ()  # every servo the factory's frame (as a config without the keys)
     cfg = ServosConfig(port, axes, baud, model, rd, srl, wd, tol, latency, joints, frames,
                        homing, protocol)
+    if d.get("calibration") is not None:
+        cfg = _calibrated(ctx, cfg, ctx.string(d["calibration"], "servos.calibration"), name,
+                          base_dir)
     for j in joints or (None,):
         try:
             if j is None:
@@ -702,6 +730,43 @@ def _servos(ctx: _Ctx, value: Any, limb: str = "") -> ServosConfig:
             at = where if j is None else f"{where}[{cfg.joint_names.index(j.name)}].chain"
             raise ctx.fail(at, str(err).removeprefix("joint kinematics: ")) from None
     return cfg
+
+
+def _with_axes(cfg: ServosConfig, axes: tuple[ServoAxis, ...]) -> ServosConfig:
+    """``cfg`` with its servos (tick-vector order) replaced, its joints' too."""
+    joints, k = [], 0
+    for j in cfg.joints:
+        joints.append(replace(j, axes=tuple(axes[k:k + len(j.axes)])))
+        k += len(j.axes)
+    return replace(cfg, axes=tuple(axes), joints=tuple(joints))
+
+
+def _calibrated(ctx: _Ctx, cfg: ServosConfig, file: str, rig: str,
+                base_dir: Path | None) -> ServosConfig:
+    """``servos.calibration``: the file (relative to the rig file) checked against the servos
+    (:meth:`calibration.arm.ArmCalibration.check`) and its zeros and ranges put in them."""
+    path = Path(file)
+    if not path.is_absolute() and base_dir is not None:
+        path = base_dir / path
+    try:
+        cal = load_arm_calibration(path)
+        expected = [ExpectedServo(a.id, a.direction, cfg.model, cfg.frame(k).homing_offset,
+                                  cfg.frame(k).reverse, a.name)
+                    for k, a in enumerate(cfg.axes)]
+
+        def model_range(model: str) -> tuple[int, int]:
+            d = servo_position_defaults(model, 1.0 if cfg.protocol == 1.0 else None)
+            return d.min_ticks, d.max_ticks
+
+        cal.check(rig, expected, model_range)
+    except CalibrationError as err:
+        raise ctx.fail("servos.calibration", str(err)) from None
+    axes = []
+    for a in cfg.axes:
+        s = cal.servo(a.id)
+        axes.append(replace(a, zero_ticks=s.zero_ticks, min_ticks=s.min_ticks,
+                            max_ticks=s.max_ticks))
+    return replace(_with_axes(cfg, tuple(axes)), calibration=cal, configured_axes=cfg.axes)
 
 
 def _protocol(ctx: _Ctx, value: Any, port: str) -> float:
@@ -775,7 +840,8 @@ def loads_rig_config(text: str, source: str = "<rig config>",
             constraint = str(path)
         _check_constraint_joint(ctx, constraint, joint)
     sensors = _sensors(ctx, d["sensors"], joint) if d.get("sensors") is not None else None
-    servos = _servos(ctx, d["servos"], limb or "") if d.get("servos") is not None else None
+    servos = _servos(ctx, d["servos"], limb or "", name, base_dir) \
+        if d.get("servos") is not None else None
     if sensors is None and servos is None:
         raise ctx.fail("top level", "needs 'sensors' or 'servos' (or both)")
     desc = ctx.string(d["description"], "description") if d.get("description") else ""

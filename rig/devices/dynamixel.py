@@ -677,8 +677,13 @@ class DynamixelBus(ServoBus):
         try:
             self._check_servos()
             self._plain_read()
+            calibrated = self.config is not None and self.config.calibration is not None
+            if calibrated and self.homing != "write":
+                self.check_calibration()
             if self.homing is not None:
                 self.apply_homing()
+            if calibrated and self.homing == "write":
+                self.check_calibration()
         except BaseException:
             self._close()
             raise
@@ -1065,6 +1070,26 @@ class DynamixelBus(ServoBus):
                                port=url, dxl_id=dxl_id, expected=value)
             for item, value in change.items():
                 self._write_verified(dxl_id, item, value)
+
+    def check_calibration(self) -> None:
+        """The arm still matches ``servos.calibration`` (:class:`calibration.arm.ArmCalibration`):
+        each servo's model as found, its Homing Offset / reverse bit as stored, its Present
+        Position within the calibrated range ± the file's margin. Called at open (before
+        :meth:`apply_homing` with ``homing: check``, after it with ``write``).
+
+        Raises
+        ------
+        RigConfigError
+            One line naming the first servo that differs.
+        """
+        cal = self.config.calibration
+        frames = {i: (off, None if mode is None else bool(mode & REVERSE_BIT))
+                  for i, (off, mode) in self.read_frames().items()}
+        ticks = {i: self.read_register(i, "Present Position") for i in self.ids}
+        why = cal.startup_mismatch({i: s.model for i, s in self.found.items()}, frames, ticks,
+                                   {a.id: a.ticks_per_rev for a in self.config.axes})
+        if why:
+            raise RigConfigError(why, port=str(self.port))
 
     def _plain_read(self) -> None:
         """The cycle reads Present Position alone (no goal read back)."""
