@@ -43,6 +43,7 @@ normal end (duration reached) leaves the limb holding its last goal with the wat
 
 from __future__ import annotations
 
+import collections
 import copy
 import gc
 import math
@@ -84,6 +85,11 @@ from rig.loop.telemetry import (
 __all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_servo_limb"]
 
 SAFE_STATES = ("hold", "torque-off")
+
+GOAL_HISTORY = 4
+"""A servo's goal read back may be any of the last this many written (late replies)."""
+GOAL_NOT_HELD_CYCLES = 2
+"""Reads in a row holding none of them before :attr:`Fault.GOAL_NOT_HELD`."""
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
 
 
@@ -261,8 +267,10 @@ class EnforcementLoop:
         self._warm_s = 0.0  # a running estimate of how long a warm-up takes, s
         self.summary: dict = {}
         self._setup_done = False
-        self._sent: np.ndarray | None = None  # the goal ticks of the last write that went out
-        self._sent_before: np.ndarray | None = None  # ... and of the write before it
+        # the goal ticks of the last GOAL_HISTORY writes that went out, newest last
+        self._sent_history: collections.deque[np.ndarray] = collections.deque(
+            maxlen=GOAL_HISTORY)
+        self._not_held = np.zeros(0, dtype=np.int64)  # reads in a row holding none of them
 
     # ------------------------------------------------------------------ start-up
     def setup(self) -> None:
@@ -363,7 +371,8 @@ class EnforcementLoop:
             # and refuses goals until its watchdog is cleared (0) and set again
             _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))  # clears a fired one first
         self._t_bus = clock()
-        self._sent = self._sent_before = None  # what the servos hold before the first write
+        self._sent_history.clear()  # what the servos hold before the first write: unknown
+        self._not_held = np.zeros(len(self.kin.min_ticks), dtype=np.int64)
         t0 = sched.start()
         targets.start(t0)
         sup.reset(t0, self._present)
@@ -485,20 +494,20 @@ class EnforcementLoop:
             held_bad = -1
             if fresh:
                 held = bus.held_goals
-                sent = self._sent
-                if held is not None and sent is not None:
-                    # the goal written last, or the one before: a reply that came late (a loaded
-                    # host, a slow adapter) is read as the next request's and shows the servos
-                    # one write behind — present and held alike; a servo that refuses goals
-                    # differs from both within two writes of a goal that changes
-                    diff = held != sent
-                    if diff.any():
-                        before = self._sent_before
-                        if before is not None:
-                            diff &= held != before
-                        if diff.any():
-                            faults |= Fault.GOAL_NOT_HELD
-                            held_bad = int(diff.argmax())
+                if held is not None and self._sent_history:
+                    # one of the last GOAL_HISTORY goals written: a reply that came late (a
+                    # loaded host, a slow adapter, a retried read) is read as a later request's
+                    # and shows the servos a write or two behind — present and held alike. A
+                    # servo that refuses goals holds none of them once the goal moves, cycle
+                    # after cycle: a fault when that lasts GOAL_NOT_HELD_CYCLES reads
+                    diff = np.ones(len(held), dtype=bool)
+                    for sent in self._sent_history:
+                        diff &= held != sent
+                    self._not_held = np.where(diff, self._not_held + 1, 0)
+                    bad = self._not_held >= GOAL_NOT_HELD_CYCLES
+                    if bad.any():
+                        faults |= Fault.GOAL_NOT_HELD
+                        held_bad = int(bad.argmax())
                 self._t_bus = clock()
                 self._present_ticks = ticks
                 present = [kj.forward_one(ticks[sl]) for kj, sl in zip(kins, slices, strict=True)]
@@ -524,9 +533,11 @@ class EnforcementLoop:
                     a = alerts[0]
                     reason = a.message
             if reason is None and held_bad >= 0:
+                sent = self._sent_history[-1]
                 reason = (f"servo ID {bus.ids[held_bad]} holds goal {int(held[held_bad])} "
-                          f"ticks, not the {int(sent[held_bad])} written the cycle before (its "
-                          f"Bus Watchdog fired, or it refused or clamped the goal)")
+                          f"ticks, none of the last {len(self._sent_history)} written (the "
+                          f"last {int(sent[held_bad])}) for {GOAL_NOT_HELD_CYCLES} reads in a "
+                          f"row (its Bus Watchdog fired, or it refused or clamped the goal)")
             if reason is None and sup.present_stale(start, t_present):
                 faults |= Fault.STALE_PRESENT
                 reason = (f"servo data stale for {1e3 * (start - t_present):.0f} ms (limit "
@@ -550,7 +561,7 @@ class EnforcementLoop:
             if reason is None:
                 try:
                     bus.write_goal_ticks(self._goal_ticks)
-                    self._sent_before, self._sent = self._sent, self._goal_ticks
+                    self._sent_history.append(self._goal_ticks)
                     self._t_bus = clock()
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST

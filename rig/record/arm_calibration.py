@@ -43,6 +43,7 @@ from calibration.errors import CalibrationError
 from rig.devices.config import RigConfig, load_rig_config
 from rig.devices.dynamixel import REVERSE_BIT, DynamixelBus
 from rig.devices.kinematics import JointKinematics
+from rig.devices.ports import open_port
 from rig.errors import RigConfigError
 from rig.record.procedures import NEUTRAL_WORDS, procedure_for
 
@@ -149,8 +150,6 @@ def run_calibrate(request: CalibrateRequest, *, echo: Callable[[str], None] = pr
     procedure = procedure_for(config.limb)
     protocol = request.protocol or procedure.default_protocol()
     wait = wait or time.sleep
-    from rig.devices.ports import open_port
-
     own_port = port is None
     if own_port:
         port = open_port(request.port or servos.port, baud=servos.baud)
