@@ -449,7 +449,7 @@ class EnforcementLoop:
         self._next_started = False
         self.rest_reached = False
         self.log(f"end of run: sliding to the rest pose (at most {need + 1.0:.1f} s)")
-        return k + int(math.ceil((need + 1.0) / self.scheduler.period))
+        return k + math.ceil((need + 1.0) / self.scheduler.period)
 
     def _end_rest(self, commanded, stopped: bool) -> None:
         rest = self.targets.posture
@@ -573,6 +573,7 @@ class EnforcementLoop:
         self._warm_s = 0.0
         rest_until = None  # at_end "rest": the last cycle of the slide to the rest pose
         still = 0  # cycles the goal ticks have not changed (the slide's end)
+        prev_ticks = None
         while True:
             if warm is not None and self._warm_input is not None:
                 # the warm-up ends about when the spin before the deadline begins

@@ -138,7 +138,7 @@ def test_start_90_degrees_away_in_two_joints_ramps_at_the_velocity_limit(arm):
 
 
 def test_a_per_servo_velocity_limit_caps_every_servos_step(arm):
-    _limb, _oracle, kin, start, far = arm
+    _limb, _oracle, kin, _start, far = arm
     target = kin.forward(far)
     _loop, sent, _, error, _ = _run(arm, Posture(lambda k: target), 80,
                                     servo_max_velocity_deg_s=45.0)
@@ -151,7 +151,7 @@ def test_refused_start_moves_nothing(arm):
     _limb, _oracle, kin, start, far = arm
     target = kin.forward(far)
     # the target appears at cycle 5 (a leader read late): the limb holds until then
-    loop, sent, _logs, error, present = _run(
+    _loop, sent, _logs, error, present = _run(
         arm, Posture(lambda k: target if k >= 5 else (1.0, target)), 50,
         on_start_mismatch="refuse")
     assert isinstance(error, RigConfigError)
