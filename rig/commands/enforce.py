@@ -4,7 +4,8 @@ code over :func:`rig.loop.run_enforce`).
 ``rig enforce --rig NAME|FILE --model M.onnx --targets SOURCE [--rate HZ] [--duration S]
 [--telemetry T.csv] [--summary-json S.json] [--db DB [--session ID | --patient P]]
 [--constraint C.yaml] [--force-model] [--safe-state hold|torque-off] [--realtime] [--cpu N]
-[--busy-wait] [--no-warm-up]``
+[--busy-wait] [--no-warm-up] [--start-mismatch-deg D] [--on-start-mismatch ramp|refuse]
+[--at-end hold|rest] [--servo-max-velocity-deg-s V]``
 
 Exit status: 2 for a user mistake (one line, before anything moves), 0 when the loop ran to its
 end, 1 when a fault put the limb in the safe state, 130 / 143 after SIGINT / SIGTERM (the limb
@@ -87,11 +88,27 @@ from rig.commands._options import finite_seconds
               help="Do not run the compute once on the last target shortly before each "
                    "deadline (the warm-up keeps the real compute's caches warm; it costs that "
                    "compute again in CPU time per cycle).")
+@click.option("--start-mismatch-deg", type=float, default=20.0, show_default=True,
+              metavar="D", help="The first target further than this from the limb's present "
+                               "posture in any joint is a start-up mismatch.")
+@click.option("--on-start-mismatch", type=click.Choice(["ramp", "refuse"]), default="ramp",
+              show_default=True,
+              help="ramp: move to the first target at the velocity limits (always so); refuse: "
+                   "end before anything moves (one line, exit 2).")
+@click.option("--at-end", type=click.Choice(["hold", "rest"]), default="hold",
+              show_default=True,
+              help="At a normal end (duration, the targets' end): hold the last goal, or slide "
+                   "to the rest pose (the servos' zero pose, nearest admissible) at the velocity "
+                   "limits first. Faults and Ctrl-C: --safe-state.")
+@click.option("--servo-max-velocity-deg-s", type=float, default=None, metavar="V",
+              help="Per-servo velocity limit: no servo's goal moves more than V × period a "
+                   "cycle (default: off; the joints' --max-velocity-deg-s still applies).")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_path,
             summary_path, db, session_id, patient, constraint_path, force_model, safe_state,
             tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, watchdog_ms,
-            stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, quiet) -> None:
+            stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, start_mismatch_deg,
+            on_start_mismatch, at_end, servo_max_velocity_deg_s, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.loop import EnforceHooks, EnforceRequest, run_enforce
     from rig.store.pseudonyms import pseudonym_warning
@@ -107,7 +124,9 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             max_velocity_deg_s=max_velocity_deg_s, max_accel_deg_s2=max_accel_deg_s2,
             stale_servo_ms=stale_servo_ms, watchdog_ms=watchdog_ms,
             stale_target_ms=stale_target_ms, seed=seed,
-            realtime=realtime, cpu=cpu, busy_wait=busy_wait, warm_up=not no_warm_up),
+            realtime=realtime, cpu=cpu, busy_wait=busy_wait, warm_up=not no_warm_up,
+            start_mismatch_deg=start_mismatch_deg, on_start_mismatch=on_start_mismatch,
+            at_end=at_end, servo_max_velocity_deg_s=servo_max_velocity_deg_s),
         echo=(lambda m: None) if quiet else click.echo,
         hooks=EnforceHooks(install_signals=True))
     if quiet:

@@ -35,7 +35,14 @@ from rig.errors import RigConfigError
 from rig.loop import realtime
 from rig.loop.binding import bind_model
 from rig.loop.realtime import check_cpu
-from rig.loop.runner import SAFE_STATES, EnforcementLoop, LoopConfig, prepare_servo_limb
+from rig.loop.runner import (
+    AT_END,
+    SAFE_STATES,
+    START_MISMATCH,
+    EnforcementLoop,
+    LoopConfig,
+    prepare_servo_limb,
+)
 from rig.loop.supervisor import SupervisorConfig
 from rig.loop.targets import open_targets
 from rig.loop.telemetry import Telemetry, telemetry_columns
@@ -83,6 +90,10 @@ class EnforceRequest:
         Pin the loop's thread to this CPU.
     busy_wait : bool
         Spin between cycles instead of sleeping (:class:`~rig.loop.LoopConfig`).
+    start_mismatch_deg, on_start_mismatch, at_end, servo_max_velocity_deg_s
+        Start-up mismatch threshold (degrees, any joint) and what it does (``ramp`` /
+        ``refuse``), what a normal end does (``hold`` / ``rest``), the per-servo velocity limit
+        (None: off) (:class:`~rig.loop.LoopConfig`).
     warm_up : bool
         Warm the compute path before each deadline (:class:`~rig.loop.LoopConfig`).
     """
@@ -112,6 +123,10 @@ class EnforceRequest:
     cpu: int | None = None
     busy_wait: bool = False
     warm_up: bool = True
+    start_mismatch_deg: float = 20.0
+    on_start_mismatch: str = "ramp"
+    at_end: str = "hold"
+    servo_max_velocity_deg_s: float | None = None
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
@@ -120,7 +135,9 @@ class EnforceRequest:
                         ("--max-velocity-deg-s", self.max_velocity_deg_s),
                         ("--max-accel-deg-s2", self.max_accel_deg_s2),
                         ("--stale-servo-ms", self.stale_servo_ms),
-                        ("--stale-target-ms", self.stale_target_ms)):
+                        ("--stale-target-ms", self.stale_target_ms),
+                        ("--start-mismatch-deg", self.start_mismatch_deg),
+                        ("--servo-max-velocity-deg-s", self.servo_max_velocity_deg_s)):
             if v is not None and not (math.isfinite(v) and v > 0):
                 raise RigConfigError(f"{name} {v}: expected a positive number")
         if self.watchdog_ms is not None and not 0 <= self.watchdog_ms <= 2540:
@@ -138,6 +155,15 @@ class EnforceRequest:
         if self.safe_state not in SAFE_STATES:
             raise RigConfigError(f"--safe-state {self.safe_state!r}: expected one of "
                                  f"{', '.join(SAFE_STATES)}")
+        if self.start_mismatch_deg > 180:
+            raise RigConfigError(f"--start-mismatch-deg {self.start_mismatch_deg}: at most 180° "
+                                 "(no two orientations are further apart)")
+        if self.on_start_mismatch not in START_MISMATCH:
+            raise RigConfigError(f"--on-start-mismatch {self.on_start_mismatch!r}: expected one "
+                                 f"of {', '.join(START_MISMATCH)}")
+        if self.at_end not in AT_END:
+            raise RigConfigError(f"--at-end {self.at_end!r}: expected one of "
+                                 f"{', '.join(AT_END)}")
         if self.session_id is not None and self.db is None:
             raise RigConfigError("--session needs --db")
         if self.patient is not None and self.db is None:
@@ -150,6 +176,10 @@ class EnforceRequest:
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
             watchdog_ms=self.watchdog_ms,
             busy_wait=bool(self.busy_wait), warm_up=bool(self.warm_up),
+            start_mismatch_deg=float(self.start_mismatch_deg),
+            on_start_mismatch=self.on_start_mismatch, at_end=self.at_end,
+            servo_max_velocity_deg_s=None if self.servo_max_velocity_deg_s is None
+            else float(self.servo_max_velocity_deg_s),
             supervisor=SupervisorConfig(tolerance_deg=float(self.tolerance_deg),
                                         max_velocity_deg_s=float(self.max_velocity_deg_s),
                                         max_accel_deg_s2=float(self.max_accel_deg_s2),
@@ -383,6 +413,11 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
             summary["constraint"] = binding.constraint.name
             summary["constraint_source"] = binding.source
             summary["targets"] = src.description
+            if loop.start_mismatch is not None:
+                summary["start_mismatch_deg"] = {n: round(a, 3) for n, a in
+                                                 loop.start_mismatch.items()}
+            if loop.rest_reached is not None:
+                summary["rest_reached"] = loop.rest_reached
             if hasattr(src, "dropped"):
                 summary["target_samples_dropped"] = int(src.dropped)
             if store is not None:

@@ -246,6 +246,11 @@ class LimbSupervisor:
             self._set_angle(j, goals)
             self.joints[j].revert(goals[j], flag)
 
+    def new_source(self) -> None:
+        """A hand-over between target sources (:meth:`Supervisor.new_source` on every joint)."""
+        for s in self.joints:
+            s.new_source()
+
     def present_stale(self, t: float, t_present: float | None) -> bool:
         """True if the servo data (read at loop time ``t_present``) are too old at ``t``."""
         return self.joints[0].present_stale(t, t_present)

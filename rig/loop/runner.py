@@ -59,6 +59,7 @@ from rig.devices.config import ServosConfig
 from rig.devices.dynamixel import DynamixelBus
 from rig.devices.servo_limb import ServoLimb
 from rig.errors import (
+    RigConfigError,
     RigConnectionError,
     RigError,
     RigProtocolError,
@@ -73,6 +74,7 @@ from rig.loop.backstop import (
 from rig.loop.limb_supervisor import LimbSupervisor
 from rig.loop.scheduler import Scheduler
 from rig.loop.supervisor import SAFETY_FLAGS, Intervention, SupervisorConfig
+from rig.loop.targets import TargetSource
 from rig.loop.telemetry import (
     Fault,
     Telemetry,
@@ -82,7 +84,8 @@ from rig.loop.telemetry import (
     telemetry_columns,
 )
 
-__all__ = ["SAFE_STATES", "EnforcementLoop", "LoopConfig", "prepare_servo_limb"]
+__all__ = ["AT_END", "SAFE_STATES", "START_MISMATCH", "EnforcementLoop", "HoldTargets",
+           "LoopConfig", "prepare_servo_limb"]
 
 SAFE_STATES = ("hold", "torque-off")
 
@@ -90,6 +93,11 @@ GOAL_HISTORY = 4
 """A servo's goal read back may be any of the last this many written (late replies)."""
 GOAL_NOT_HELD_CYCLES = 2
 """Reads in a row holding none of them before :attr:`Fault.GOAL_NOT_HELD`."""
+_NO_SWITCH = object()  # EnforcementLoop._next_targets: no hand-over pending
+#: What a start-up mismatch beyond ``start_mismatch_deg`` does (:class:`LoopConfig`).
+START_MISMATCH = ("ramp", "refuse")
+#: What a normal end of the run does (:class:`LoopConfig`).
+AT_END = ("hold", "rest")
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
 
 
@@ -126,6 +134,23 @@ class LoopConfig:
         Per-servo velocity limit: a goal's step of any servo beyond ``limit × period`` is cut to
         it (every servo of the limb, in ticks), and the cut ticks' posture goes through the
         final check as any goal does (flag ``RATE_LIMITED`` on the joint). None: off.
+    start_mismatch_deg : float
+        The start-up check: the first admitted target further than this from the limb's
+        present posture in any joint (angle between the two orientations, degrees) is a
+        mismatch (a leader far from the follower).
+    on_start_mismatch : {"ramp", "refuse"}
+        ``ramp`` (default): one line is logged and the goal moves from the present posture to
+        the first admissible goal under the rate limits, as it always does; ``refuse``: the run
+        ends before any goal moves (:class:`~rig.errors.RigConfigError`, one line; torque is
+        on, holding the present posture).
+    at_end : {"hold", "rest"}
+        A normal end (duration reached, the target source's end, ``max_cycles``): ``hold``
+        (default) leaves the limb holding its last goal; ``rest`` first slides it to the rest
+        pose (``rest_ticks``) under the rate limits and the supervisor (the nearest admissible
+        posture to it), then ends. A fault or a stop request is the safe state, never this.
+    rest_ticks : sequence of int, optional
+        The rest pose as goal ticks, tick-vector order (default: each servo's ``zero_ticks``,
+        the joints' zero pose).
     warm_up : bool
         Shortly before each deadline, run the cycle's compute once on the last cycle's
         target with throw-away copies (the supervisor's, nothing sent, nothing recorded), so
@@ -145,6 +170,10 @@ class LoopConfig:
     warm_up: bool = True
     joint_supervisors: dict | None = None
     servo_max_velocity_deg_s: float | None = None
+    start_mismatch_deg: float = 20.0
+    on_start_mismatch: str = "ramp"
+    at_end: str = "hold"
+    rest_ticks: tuple | None = None
 
     def __post_init__(self):
         if not (isinstance(self.rate_hz, (int, float)) and math.isfinite(self.rate_hz)
@@ -162,6 +191,36 @@ class LoopConfig:
         v = self.servo_max_velocity_deg_s
         if v is not None and not (math.isfinite(v) and v > 0):
             raise ValueError(f"servo_max_velocity_deg_s: expected a positive number, got {v!r}")
+        m = self.start_mismatch_deg
+        if not (isinstance(m, (int, float)) and math.isfinite(m) and 0 < m <= 180):
+            raise ValueError(f"--start-mismatch-deg: expected 0 < degrees <= 180, got {m!r}")
+        if self.on_start_mismatch not in START_MISMATCH:
+            raise ValueError(f"--on-start-mismatch: expected one of {', '.join(START_MISMATCH)}"
+                             f", got {self.on_start_mismatch!r}")
+        if self.at_end not in AT_END:
+            raise ValueError(f"--at-end: expected one of {', '.join(AT_END)}, got "
+                             f"{self.at_end!r}")
+
+
+class HoldTargets(TargetSource):
+    """A target source that holds one posture (fresh at every cycle): the loop's hand-over to
+    "hold" (:meth:`EnforcementLoop.set_targets` with None) and its slide to the rest pose.
+
+    Parameters
+    ----------
+    posture : (J, 4) array-like
+        Joint orientations, scalar-first, the limb file's order.
+    description : str
+    """
+
+    def __init__(self, posture, description: str = "hold"):
+        p = np.asarray(posture, dtype=np.float64).reshape(-1, 4)
+        self.posture = p
+        self.n_joints = len(p)
+        self.description = description
+
+    def latest(self, t: float):
+        return t, self.posture
 
 
 class EnforcementLoop:
@@ -271,6 +330,22 @@ class EnforcementLoop:
         self._sent_history: collections.deque[np.ndarray] = collections.deque(
             maxlen=GOAL_HISTORY)
         self._not_held = np.zeros(0, dtype=np.int64)  # reads in a row holding none of them
+        self._next_targets = _NO_SWITCH  # a hand-over asked for (set_targets), not yet done
+        self._next_started = False
+        self.handovers = 0
+        #: joint name -> degrees between the first admitted target and the present posture
+        self.start_mismatch: dict[str, float] | None = None
+        self._start_pending = True
+        #: at_end "rest": True once the rest pose's admissible goal was reached (None: not asked)
+        self.rest_reached: bool | None = None
+        self.rest_error_deg: float | None = None  # largest joint angle from it at the end
+        kin_all = limb.kinematics
+        rt = self.config.rest_ticks
+        rest = np.asarray(kin_all.zero_ticks if rt is None else rt, dtype=np.int64).reshape(-1)
+        if rest.shape != (len(self.kin.ids),):
+            raise RigConfigError(f"rest_ticks: expected {len(self.kin.ids)} ticks (one per "
+                                 f"servo, IDs {list(self.kin.ids)}), got {rest.size}")
+        self._rest_ticks = rest
 
     # ------------------------------------------------------------------ start-up
     def setup(self) -> None:
@@ -301,6 +376,100 @@ class EnforcementLoop:
                                                                        strict=True)]
         self._commanded = list(self._present)
         self._setup_done = True
+
+    def set_targets(self, source, *, started: bool = False) -> None:
+        """Hand the loop over to another target source, at the next cycle's start (bumpless).
+
+        The goal is not reset: it goes on from where it is, its velocity continuous, towards the
+        new source's targets under the same rate limits and checks (the jump between the two
+        sources is a lag the rate limiter closes, never a step). Safe to call from another
+        thread or from ``on_cycle``; the last call before a cycle wins. The loop does not close
+        the old source (its owner does), and no start-up mismatch check is made on a hand-over.
+
+        Parameters
+        ----------
+        source : rig.loop.targets.TargetSource or None
+            The new source (the limb's joints in its order); None holds the goal where it is
+            at the switch (:class:`HoldTargets`).
+        started : bool
+            The source is already running (its :meth:`~rig.loop.targets.TargetSource.start`
+            was called); otherwise the loop calls ``start`` with the switch's loop-clock time.
+        """
+        if source is not None and getattr(source, "n_joints", self.n_joints) != self.n_joints:
+            raise ValueError(f"set_targets: the source gives postures of {source.n_joints} "
+                             f"joint(s); the limb has {self.n_joints}")
+        self._next_started = bool(started)
+        self._next_targets = source
+
+    def _switch_targets(self, now: float):
+        """Make the pending hand-over (at a cycle's start); returns the new source."""
+        src, self._next_targets = self._next_targets, _NO_SWITCH
+        if src is None:
+            src = HoldTargets([s.goal for s in self.supervisor.joints], "hold (hand-over)")
+            self._next_started = False
+        if not self._next_started:
+            src.start(now)
+        self.supervisor.new_source()
+        self.targets = src
+        self.handovers += 1
+        return src
+
+    def _check_start(self, tq, k: int) -> None:
+        """The first admitted target against the posture the goal holds (the present one):
+        log a mismatch beyond ``start_mismatch_deg`` (ramp), or refuse the run (refuse)."""
+        self._start_pending = False
+        cfg = self.config
+        angles = {n: math.degrees(2.0 * math.acos(min(1.0, abs(
+            sum(a * b for a, b in zip(q, s.goal, strict=True))))))
+            for n, q, s in zip(self.joint_names, tq, self.supervisor.joints, strict=True)}
+        self.start_mismatch = angles
+        far = {n: a for n, a in angles.items() if a > cfg.start_mismatch_deg}
+        if not far:
+            return
+        what = ", ".join(f"{n} {a:.1f}°" for n, a in far.items())
+        if cfg.on_start_mismatch == "refuse":
+            self.end_reason = "refused at start-up: target too far"
+            raise RigConfigError(
+                f"start-up: the first target is beyond --start-mismatch-deg "
+                f"{cfg.start_mismatch_deg:g} from the limb's present posture ({what}); refused "
+                f"(--on-start-mismatch refuse): nothing moved, torque on holding the present "
+                f"posture")
+        self.log(f"start-up: the first target is beyond --start-mismatch-deg "
+                 f"{cfg.start_mismatch_deg:g} from the present posture ({what}): ramping to it "
+                 f"at the velocity limits (cycle {k})")
+
+    def _start_rest(self, k: int) -> int:
+        """Hand over to the rest pose (at_end "rest"); returns the last cycle allowed for the
+        slide (the time the rate limits need for the longest joint, plus 1 s)."""
+        ticks = np.clip(self._rest_ticks, self.kin.min_ticks, self.kin.max_ticks)
+        rest = [kj.forward_one(ticks[sl]) for kj, sl in zip(self.kins, self.slices,
+                                                            strict=True)]
+        need = 0.0
+        for s, q in zip(self.supervisor.joints, rest, strict=True):
+            a = 2.0 * math.acos(min(1.0, abs(sum(x * y for x, y in zip(q, s.goal,
+                                                                         strict=True)))))
+            need = max(need, a / s.vmax + 2.0 * s.vmax / s.amax)
+        v = self.config.servo_max_velocity_deg_s
+        if v is not None:
+            step = np.abs(ticks - self._goal_ticks) / np.maximum(self._max_step, 1)
+            need = max(need, float(step.max()) * self.scheduler.period)
+        self._next_targets = HoldTargets(rest, "rest pose")
+        self._next_started = False
+        self.rest_reached = False
+        self.log(f"end of run: sliding to the rest pose (at most {need + 1.0:.1f} s)")
+        return k + math.ceil((need + 1.0) / self.scheduler.period)
+
+    def _end_rest(self, commanded, stopped: bool) -> None:
+        rest = self.targets.posture
+        self.rest_error_deg = max(math.degrees(2.0 * math.acos(min(1.0, abs(
+            sum(a * b for a, b in zip(c, r, strict=True)))))) for c, r in zip(commanded, rest,
+                                                                             strict=True))
+        self.rest_reached = stopped
+        self.end_reason = ("completed (at rest)" if stopped else
+                           "completed (rest pose not reached in time: holding)")
+        self.log(f"end of run: {'stopped' if stopped else 'holding'} "
+                 f"{self.rest_error_deg:.2f}° from the rest pose (the nearest admissible goal "
+                 f"the supervisor reached)")
 
     def request_stop(self, reason: str) -> None:
         """Ask the loop to enter the safe state and end (signal handlers call this)."""
@@ -411,6 +580,9 @@ class EnforcementLoop:
         warm = self._warm if cfg.warm_up else None
         self._warm_input = None
         self._warm_s = 0.0
+        rest_until = None  # at_end "rest": the last cycle of the slide to the rest pose
+        still = 0  # cycles the goal ticks have not changed (the slide's end)
+        prev_ticks = None
         while True:
             if warm is not None and self._warm_input is not None:
                 # the warm-up ends about when the spin before the deadline begins
@@ -423,6 +595,8 @@ class EnforcementLoop:
             t = start - t0
             if self.on_cycle is not None:
                 self.on_cycle(self, k)
+            if self._next_targets is not _NO_SWITCH:  # a hand-over, at the cycle's start
+                targets = self._switch_targets(start)
             faults = 0
             # -- 1. the sync read's request: its reply travels (wire, the adapter's latency
             # timer, the servos' return delay) while the goal is computed ---------------------
@@ -448,6 +622,8 @@ class EnforcementLoop:
             c2 = perf()
             target_t, target = targets.latest(start)
             tq = sup.admit(start, target, target_t)
+            if self._start_pending and tq is not None:
+                self._check_start(tq, k)
             prev_commanded = commanded
             prev_d = [s.last_commanded_distance for s in subs]
             goal_ticks = self._goal_ticks
@@ -642,10 +818,21 @@ class EnforcementLoop:
             if self.safe:
                 self.end_reason = "safe state: " + (self.safe_state_reason or "?")
                 break
-            if duration is not None and t + period > duration - 1e-9:
-                break
-            if max_cycles is not None and k + 1 >= max_cycles:
-                break
+            if rest_until is not None:  # sliding to the rest pose: until the goal stops
+                # stopped: the goal ticks unchanged for 5 cycles (a goal still slowing down
+                # moves less than a tick in 5 cycles only within 0.01° of its end)
+                still = still + 1 if np.array_equal(self._goal_ticks, prev_ticks) else 0
+                prev_ticks = self._goal_ticks
+                if still >= 5 or k >= rest_until:
+                    self._end_rest(commanded, still >= 5)
+                    break
+                continue
+            if (duration is not None and t + period > duration - 1e-9) or (
+                    max_cycles is not None and k + 1 >= max_cycles):
+                if cfg.at_end != "rest":
+                    break
+                rest_until = self._start_rest(k)
+                prev_ticks = self._goal_ticks
         self.max_violation = max_viol
         if one:
             jmax[0] = max_viol

@@ -386,6 +386,12 @@ class Supervisor:
         self._c_prev = None
         self.flags |= int(flag)
 
+    def new_source(self) -> None:
+        """The targets now come from another source (a hand-over): the last candidate is
+        forgotten, so the jump between the two sources is never fed forward as the target's
+        velocity; the goal keeps its velocity and closes the gap under the rate limits."""
+        self._c_prev = None
+
     def present_stale(self, t: float, t_present: float | None) -> bool:
         """True if the servo data (read at loop time ``t_present``) are too old at ``t``."""
         return t_present is None or t - t_present > self.config.stale_present_s
