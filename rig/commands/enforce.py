@@ -72,8 +72,9 @@ from rig.commands._options import finite_seconds
               help="The servos' Bus Watchdog: a servo that hears nothing from the loop for "
                    "this long stops, and the loop enters its safe state (0-2540 ms, 20 ms "
                    "steps; 0: off; default: the rig configuration's).")
-@click.option("--stale-target-ms", type=float, default=100.0, show_default=True,
-              help="A target older than this holds the last safe goal.")
+@click.option("--stale-target-ms", type=float, default=None,
+              help="A target older than this holds the last safe goal (default 100 ms; with "
+                   "--targets leader:... 1.5 loop periods).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of scripted targets.")
 @click.option("--realtime", is_flag=True,
               help="Run the loop's thread with real-time priority (SCHED_FIFO) and hold idle "

@@ -14,6 +14,7 @@ names one) and its patient must be the model's.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import signal
@@ -34,6 +35,7 @@ from rig.devices.ports import open_port
 from rig.errors import RigConfigError
 from rig.loop import realtime
 from rig.loop.binding import bind_model
+from rig.loop.leader import LEADER_COLUMNS, LEADER_STALE_PERIODS, LeaderTargets
 from rig.loop.realtime import check_cpu
 from rig.loop.runner import (
     AT_END,
@@ -81,7 +83,9 @@ class EnforceRequest:
         Run a model made for another constraint / joint / side / patient.
     safe_state : {"hold", "torque-off"}
     tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, stale_target_ms
-        The supervisor's limits.
+        The supervisor's limits (``stale_target_ms`` None: 100 ms, or with a leader arm
+        :data:`rig.loop.leader.LEADER_STALE_PERIODS` loop periods, so that a leader that stops
+        answering holds the follower from the next cycle).
     seed : int
         Seed of scripted targets.
     realtime : bool
@@ -117,7 +121,7 @@ class EnforceRequest:
     max_accel_deg_s2: float = 1200.0
     stale_servo_ms: float = 100.0
     watchdog_ms: int | None = None
-    stale_target_ms: float = 100.0
+    stale_target_ms: float | None = None
     seed: int = 0
     realtime: bool = False
     cpu: int | None = None
@@ -184,7 +188,9 @@ class EnforceRequest:
                                         max_velocity_deg_s=float(self.max_velocity_deg_s),
                                         max_accel_deg_s2=float(self.max_accel_deg_s2),
                                         stale_present_s=float(self.stale_servo_ms) / 1e3,
-                                        stale_target_s=float(self.stale_target_ms) / 1e3))
+                                        stale_target_s=float(
+                                            100.0 if self.stale_target_ms is None
+                                            else self.stale_target_ms) / 1e3))
 
 
 @dataclass
@@ -333,7 +339,10 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
                                  "--session ID")
         oracle = ConstraintOracle(binding.constraint)
         src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
-                           frames=request.frames)
+                           frames=request.frames, separate_process=hooks.clock is None)
+        if isinstance(src, LeaderTargets) and request.stale_target_ms is None:
+            cfg.supervisor = dataclasses.replace(
+                cfg.supervisor, stale_target_s=LEADER_STALE_PERIODS / cfg.rate_hz)
         if alignment is not None and hasattr(src, "alignment") and src.n_joints == 1:
             src.alignment = {
                 rig_cfg.joint.parent: tuple(Q.conjugate(alignment["thorax_mount"]).tolist()),
@@ -385,9 +394,12 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 from rig.store import TelemetryWriter  # lazy like open_store: --db is optional
 
                 store_writer = TelemetryWriter(store, run_id)
+            leader = src if isinstance(src, LeaderTargets) else None
             telemetry = Telemetry(_out_path("--telemetry", req.telemetry), store_writer,
-                                  keep=hooks.keep_telemetry,
-                                  columns=telemetry_columns(limb.kinematics.names))
+                                  keep=hooks.keep_telemetry or leader is not None,
+                                  columns=telemetry_columns(limb.kinematics.names)
+                                  + (LEADER_COLUMNS if leader is not None else ()),
+                                  extra=None if leader is None else leader.telemetry_values)
             opened.callback(telemetry.close)
             kw = {} if hooks.clock is None else {"clock": hooks.clock,
                                                  "sleep": hooks.clock.sleep}
@@ -420,6 +432,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                 summary["rest_reached"] = loop.rest_reached
             if hasattr(src, "dropped"):
                 summary["target_samples_dropped"] = int(src.dropped)
+            if leader is not None:
+                summary["leader"] = leader.summary(telemetry.table(), prep.oracle)
             if store is not None:
                 status = ("completed" if loop.safe_state_entries == 0 else
                           "interrupted" if loop.stop_reason else "safe_state")

@@ -303,7 +303,7 @@ class EnforcementLoop:
         columns = telemetry_columns(self.joint_names)
         self.telemetry = telemetry if telemetry is not None else Telemetry(keep=True,
                                                                            columns=columns)
-        if self.telemetry.columns != columns:
+        if self.telemetry.columns[:len(columns)] != columns:  # a source's extras follow
             raise ValueError("the telemetry's columns are not this limb's (Telemetry(..., "
                              "columns=telemetry_columns(joint names)))")
         self.on_cycle = on_cycle

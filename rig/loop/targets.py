@@ -17,6 +17,8 @@ what to do with bad or stale targets; sources never filter. Every source has ``n
   and back) and ``adversarial`` (far outside, jumps across the correctional discontinuity,
   twist excursions, reaches that become invalid only because another joint moved, NaN / zero /
   infinite / non-unit and stale inputs).
+- :class:`rig.loop.leader.LeaderTargets` — a leader arm (``leader:RIG|PORT``), read once a
+  cycle (:mod:`rig.loop.leader`).
 - :class:`MirrorTargets` — mirror an IMU-worn limb through the orientation-source interface
   (:mod:`rig.devices.sources`): each joint's orientation ``q_parent⁻¹ ⊗ q_child`` from its two
   segments' sensors, or a ``kind="joint"`` sample as it is; a reader thread keeps the latest.
@@ -1007,7 +1009,7 @@ class MirrorTargets(TargetSource):
 
 # ---------------------------------------------------------------------------------------------
 def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
-                 frames: str | None = None) -> TargetSource:
+                 frames: str | None = None, separate_process: bool = True) -> TargetSource:
     """A target source from a ``--targets`` string.
 
     ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory` (its joint orientations in
@@ -1015,7 +1017,9 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
     ``script:NAME[?seed=N&period_s=S&segment_s=S&hold_s=S]`` → :class:`ScriptedTargets`;
     ``mirror`` (the rig configuration's sensors) or ``mirror:RIG`` → :class:`MirrorTargets`
     (for a limb's oracle, every joint of the limb, from a rig wearing a sensor on each of its
-    segments: ``mirror:sim-arm``).
+    segments: ``mirror:sim-arm``); ``leader:RIG`` or ``leader:PORT`` →
+    :class:`rig.loop.leader.LeaderTargets` (a leader arm: the servos of rig configuration RIG,
+    or a twin of the driven rig's servos on PORT; :func:`rig.loop.leader.open_leader`).
 
     Parameters
     ----------
@@ -1026,17 +1030,21 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
         The driven rig.
     seed : int
     frames : {"rig", "isb"}, optional
+    separate_process : bool
+        A simulated leader's bus served from a process of its own (as the follower's is;
+        ``False`` with a manual clock).
 
     Raises
     ------
     RigConfigError
-        Unknown form, script or key; ``mirror`` on a rig without sensors.
+        Unknown form, script or key; ``mirror`` on a rig without sensors; a leader that is no
+        servo rig or lacks a joint of the follower.
     """
     if not isinstance(spec, str) or not spec.strip():
-        raise RigConfigError("--targets: expected PATH.csv, script:NAME or mirror")
+        raise RigConfigError("--targets: expected PATH.csv, script:NAME, mirror or leader:RIG")
     spec = spec.strip()
-    is_file = not spec.startswith("script:") and not (spec == "mirror"
-                                                      or spec.startswith("mirror:"))
+    is_file = not spec.startswith(("script:", "leader:")) and not (spec == "mirror"
+                                                                   or spec.startswith("mirror:"))
     if frames is not None and not is_file:
         raise RigConfigError(f"--frames applies to a targets file, not to --targets {spec}")
     if spec.startswith("script:"):
@@ -1059,6 +1067,10 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
                     from None
         kw.setdefault("seed", seed)
         return ScriptedTargets(name, oracle, kinematics=_rig_limb_kinematics(rig, oracle), **kw)
+    if spec.startswith("leader:"):
+        from rig.loop.leader import open_leader  # lazy: leader imports this module
+
+        return open_leader(spec, oracle=oracle, rig=rig, separate_process=separate_process)
     if spec == "mirror" or spec.startswith("mirror:"):
         if oracle.limb is not None:
             return _open_limb_mirror(spec, rig, oracle.limb)
@@ -1073,7 +1085,7 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
         return CsvTrajectory(path, frames or "rig", joint_names=limb.joint_names,
                              segments=[(j.parent, j.child) for j in limb.joints])
     raise RigConfigError(f"--targets {spec!r}: expected PATH.csv, script:NAME "
-                         f"({'|'.join(SCRIPTS)}) or mirror")
+                         f"({'|'.join(SCRIPTS)}), mirror or leader:RIG|PORT")
 
 
 def _rig_limb_kinematics(rig, oracle):

@@ -27,6 +27,11 @@ Columns (:data:`COLUMNS`; orientations scalar-first joint orientations, parent f
 ``faults``             :class:`Fault` bits
 ``safe_state``         1 from the cycle the safe state was entered
 =====================  =========================================================================
+
+A run driven by a leader arm (``--targets leader:...``) adds, after these,
+:data:`rig.loop.leader.LEADER_COLUMNS`: ``leader_ms`` (the leader's sync read, ms) and
+``target_age_ms`` (the target's age when the cycle's goal was written: from the leader's sample
+to the end of the sync write, ms). Other runs' columns are unchanged.
 """
 
 from __future__ import annotations
@@ -143,10 +148,18 @@ class Telemetry:
         :class:`rig.store.TelemetryWriter`.
     keep : bool
         Keep every row in memory as well (tests and short runs: :meth:`table`).
+    columns : tuple of str, optional
+        :func:`telemetry_columns` of the run's joints (default :data:`COLUMNS`), then the
+        names of ``extra``'s values.
+    extra : callable(t_s, cycle_ms) -> tuple of float, optional
+        Values a target source adds to each row, after the loop's own (a leader arm's
+        ``leader_ms``, ``target_age_ms``: :meth:`rig.loop.leader.LeaderTargets.
+        telemetry_values`); called with the row's ``t_s`` and ``cycle_ms``.
     """
 
     def __init__(self, csv_path=None, store_writer=None, *, keep: bool = False,
-                 columns: tuple[str, ...] | None = None):
+                 columns: tuple[str, ...] | None = None, extra=None):
+        self.extra = extra
         self.columns = COLUMNS if columns is None else tuple(columns)
         cols = self.columns
         self.n_col = len(cols)
@@ -185,12 +198,14 @@ class Telemetry:
     # ------------------------------------------------------------------ hot path
     def record(self, row: tuple) -> None:
         """Append one cycle's row (a tuple in :data:`COLUMNS` order)."""
+        ix = self._ix
+        if self.extra is not None:
+            row = (*row, *self.extra(row[1], row[ix[0]]))
         i = self._i
         self._chunk[i] = row
         n = self.rows
         if n >= len(self._cycle_ms):
             self._grow()
-        ix = self._ix
         self._cycle_ms[n] = row[ix[0]]
         self._late_ms[n] = row[ix[1]]
         self._compute_ms[n] = row[ix[2]]

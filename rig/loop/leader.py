@@ -1,0 +1,342 @@
+"""The leader arm as a target source: a second servo chain, torque off, moved by a person.
+
+A leader arm is a servo limb read instead of written (:class:`rig.devices.servo_limb.ServoLimb`:
+a bus and its joints' kinematics). Each cycle :meth:`LeaderTargets.latest` does **one sync read**
+of the leader's present positions (FAST SYNC READ where its servos support it), synchronously:
+the loop calls it between sending the follower's read request and collecting its reply
+(:mod:`rig.loop.runner`), so the leader's exchange on its own port overlaps the follower's
+reply in flight. The ticks go through the leader's **own** calibration — its servos' models and
+resolutions (``ticks_per_rev``), ``zero_ticks`` / ``direction``, Homing Offset / reverse frames,
+its joints' kinematics (:meth:`~rig.devices.kinematics.LimbKinematics.forward`) — so a leader of
+another servo model, other zeros or another number of servos per joint gives the same joint
+orientations. The leader's joints are then taken **by name** in the follower limb file's order.
+
+Mirroring (a patient's other arm)
+---------------------------------
+When the leader's side differs from the follower's, each joint's orientation is reflected
+through the sagittal plane. Joint orientations are in the rig's segment frames (+X distal, +Y
+anterior, +Z to the body's right: :mod:`calibration.joints`), the same frames for either side;
+a reflection ``Z → −Z`` maps a rotation ``(w, x, y, z)`` to ``(w, −x, −y, z)``
+(:func:`calibration.clinical.mirror_quaternions`, Wu et al. 2005 §2: left-side data mirrored
+so that one set of definitions serves both sides). The left arm's posture and the right arm's
+that mirrors it then give the same target, and mirroring twice is the identity.
+
+Failures
+--------
+A failed read (a timeout, a garbled reply) or a posture with a non-finite value returns the
+last good posture with its **old** time, so the target ages: with ``stale_target_s`` under two
+periods (``rig enforce`` sets 1.5 periods for a leader unless ``--stale-target-ms`` is given)
+the supervisor holds the follower from the cycle after the first failed read. An adapter that
+went away (:class:`~rig.errors.RigConnectionError`) also sets :attr:`LeaderTargets.error`: once
+the target is stale the loop ends in its safe state (``target source failed``). Every failure is
+counted (:attr:`LeaderTargets.failures`).
+
+Figures
+-------
+:meth:`LeaderTargets.telemetry_values` gives each telemetry row ``leader_ms`` (the leader read's
+time, ms) and ``target_age_ms`` (from the leader's sample — the cycle's start of the read that
+produced the target — to the end of the cycle's sync write of the follower's goal, ms);
+:meth:`LeaderTargets.summary` the run's ``leader`` figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from calibration.clinical import mirror_quaternions
+from rig.devices.config import load_rig_config
+from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
+from rig.loop.targets import TargetSource
+
+__all__ = ["LEADER_COLUMNS", "LEADER_STALE_PERIODS", "LeaderTargets", "leader_mapping",
+           "mirror_posture", "open_leader"]
+
+#: Telemetry columns a leader adds after the loop's own (:meth:`LeaderTargets.telemetry_values`).
+LEADER_COLUMNS = ("leader_ms", "target_age_ms")
+
+#: ``stale_target_s`` of a run driven by a leader, in loop periods: a target one period old
+#: (the first failed read) is still used; two periods old (the second) holds.
+LEADER_STALE_PERIODS = 1.5
+
+#: SDK latency (ms) of a simulated leader's bus: packet timeout 2 × 2 + 2 = 6 ms, so a lost
+#: leader reply costs a little more than one 200 Hz cycle.
+SIM_LEADER_LATENCY_MS = 2.0
+
+
+def mirror_posture(q) -> np.ndarray:
+    """A posture's joint orientations reflected through the sagittal plane (left ↔ right).
+
+    Parameters
+    ----------
+    q : (..., 4) array_like, scalar-first, rig segment frames
+
+    Returns
+    -------
+    (..., 4) float64 ``(w, −x, −y, z)``: its own inverse.
+    """
+    return mirror_quaternions(q)
+
+
+def leader_mapping(follower_joints, leader_joints, *, what: str = "the leader") -> list[int]:
+    """For each follower joint, the index of the leader joint of the same name.
+
+    Raises
+    ------
+    RigConfigError
+        A follower joint the leader does not have (one line naming both joint lists).
+    """
+    leader_joints = tuple(leader_joints)
+    missing = [n for n in follower_joints if n not in leader_joints]
+    if missing:
+        raise RigConfigError(f"{what} has no joint{'s' if len(missing) > 1 else ''} "
+                             f"{', '.join(missing)} (its joints: {', '.join(leader_joints)}; the "
+                             f"follower's: {', '.join(follower_joints)})")
+    return [leader_joints.index(n) for n in follower_joints]
+
+
+class LeaderTargets(TargetSource):
+    """Targets read from a leader arm, one synchronous sync read per cycle.
+
+    Parameters
+    ----------
+    limb : rig.devices.servo_limb.ServoLimb
+        The leader: its bus opened (torque is turned off here) and its joints' kinematics.
+        Closed by :meth:`close`.
+    joint_names : sequence of str
+        The follower's joints, in its limb file's order; each must be a leader joint's name.
+    mirror : bool
+        Reflect every joint left ↔ right (:func:`mirror_posture`): the leader is the other side.
+    port : rig.devices.ports.Port, optional
+        The leader's port, closed after the bus by :meth:`close`.
+    description : str
+
+    Attributes
+    ----------
+    reads, failures : int
+        Reads attempted; failed or dropped (timeout, garbled, adapter gone, non-finite).
+    error : BaseException or None
+        Set when the leader's adapter went away (the loop then ends in its safe state once the
+        target is stale).
+    """
+
+    def __init__(self, limb, joint_names, *, mirror: bool = False, port=None,
+                 description: str = "leader"):
+        self.limb = limb
+        self.bus = limb.bus
+        self.port = port
+        names = tuple(limb.kinematics.names)
+        self.joint_names = tuple(joint_names)
+        self.n_joints = len(self.joint_names)
+        self._index = leader_mapping(self.joint_names, names)
+        self.mirror = bool(mirror)
+        kin = limb.kinematics.compile()
+        self._fk = [(kin.joints[i], kin.slices[i]) for i in self._index]
+        self.description = description
+        self.reads = 0
+        self.failures = 0
+        self.error: BaseException | None = None
+        self.t0 = 0.0
+        self._last: np.ndarray | None = None
+        self._last_t: float | None = None
+        self._leader_ms = math.nan
+        self.bus.set_torque(False)  # the person moves it
+        self.bus.retries = 0  # one attempt a cycle: a failure ages the target instead
+
+    def posture(self, ticks) -> np.ndarray:
+        """The follower-ordered posture ``(n_joints, 4)`` of the leader's tick vector."""
+        q = np.array([kj.forward_one(ticks[sl]) for kj, sl in self._fk], dtype=np.float64)
+        return mirror_posture(q) if self.mirror else q
+
+    def latest(self, t):
+        c0 = time.perf_counter()
+        self.reads += 1
+        q = None
+        try:
+            ticks = self.bus.read_ticks()
+            q = self.posture(ticks)
+        except (RigTimeoutError, RigProtocolError):
+            pass
+        except RigConnectionError as err:
+            if self.error is None:
+                self.error = err
+        except Exception as err:  # a bus closed under us: the same as an adapter gone
+            if self.error is None:
+                self.error = err
+        self._leader_ms = 1e3 * (time.perf_counter() - c0)
+        if q is None or not np.isfinite(q).all():
+            self.failures += 1
+            return self._last_t, self._last
+        self._last, self._last_t = q, float(t)
+        return self._last_t, q
+
+    # -- figures --------------------------------------------------------------------------
+    def telemetry_values(self, t_s: float, cycle_ms: float) -> tuple[float, float]:
+        """``(leader_ms, target_age_ms)`` of the cycle that started at loop time ``t_s``
+        (relative to :meth:`start`'s ``t0``) and whose work took ``cycle_ms`` up to its row:
+        the target's age when the cycle's goal was written (NaN: no target yet)."""
+        st = self._last_t
+        age = math.nan if st is None else 1e3 * (self.t0 + t_s - st) + cycle_ms
+        return self._leader_ms, age
+
+    def summary(self, table=None, oracle=None) -> dict:
+        """The run's ``leader`` figures.
+
+        Parameters
+        ----------
+        table : dict of column → (N,) array, optional
+            The run's telemetry (:meth:`rig.loop.telemetry.Telemetry.table`) with
+            :data:`LEADER_COLUMNS` and the follower's target / present columns.
+        oracle : models.oracle.ConstraintOracle, optional
+            The enforced limits: tracking counts the cycles whose target is valid in every
+            joint (admissible leader motion).
+
+        Returns
+        -------
+        dict
+            ``reads``, ``failures``, ``mirrored``, ``latency_ms`` ``{p50, p99}`` (target age at
+            the goal's write), ``leader_ms`` ``{p50, p99}``, ``tracking_deg`` ``{median, p95,
+            cycles}``: per cycle the largest joint's angle between the target and the present
+            orientation read at the cycle's start, over admissible targets.
+        """
+        out: dict = {"reads": int(self.reads), "failures": int(self.failures),
+                     "mirrored": self.mirror, "latency_ms": None, "leader_ms": None,
+                     "tracking_deg": None}
+        if not table or "target_age_ms" not in table or not len(table["target_age_ms"]):
+            return out
+
+        def pct(a, p):
+            a = a[np.isfinite(a)]
+            return None if not len(a) else float(np.percentile(a, p))
+
+        age = np.asarray(table["target_age_ms"], dtype=np.float64)
+        lead = np.asarray(table["leader_ms"], dtype=np.float64)
+        out["latency_ms"] = {"p50": pct(age, 50), "p99": pct(age, 99)}
+        out["leader_ms"] = {"p50": pct(lead, 50), "p99": pct(lead, 99)}
+        if oracle is None:
+            return out
+        names = self.joint_names
+        one = self.n_joints == 1 and "target_w" in table
+
+        def posture(what):
+            if one:
+                return np.stack([table[f"{what}_{c}"] for c in "wxyz"], axis=-1)[:, None]
+            return np.stack([np.stack([table[f"{n}_{what}_{c}"] for c in "wxyz"], axis=-1)
+                             for n in names], axis=1)
+
+        tq, pq = posture("target"), posture("present")
+        from rig.loop.targets import valid_targets  # the supervisor's judgement of targets
+
+        ok = valid_targets(oracle, tq if not one else tq[:, 0])
+        if ok.any():
+            dot = np.abs(np.einsum("nji,nji->nj", tq[ok], pq[ok]))
+            err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0))).max(axis=1)
+            out["tracking_deg"] = {"median": float(np.median(err)),
+                                   "p95": float(np.percentile(err, 95)),
+                                   "cycles": int(ok.sum())}
+        return out
+
+    def close(self) -> None:
+        """Close the leader's bus and port (idempotent); its torque stays off."""
+        limb, self.limb = self.limb, None
+        if limb is not None:
+            try:
+                limb.close()
+            finally:
+                port, self.port = self.port, None
+                if port is not None:
+                    port.close()
+
+
+# ---------------------------------------------------------------------------------------------
+def _looks_like_port(text: str) -> bool:
+    return "://" in text or text.startswith("/dev/") or (
+        text.upper().startswith("COM") and text[3:].isdigit())
+
+
+def _follower(oracle, rig) -> tuple[tuple[str, ...], str | None]:
+    """The follower's joint names (the limb file's order) and side."""
+    limb = getattr(oracle, "limb", None)
+    if limb is not None:
+        return tuple(limb.joint_names), limb.side or getattr(getattr(rig, "joint", None),
+                                                             "side", None)
+    joint = getattr(rig, "joint", None)
+    return ((joint.name if joint is not None else "joint"),), getattr(joint, "side", None)
+
+
+def open_leader(spec: str, *, oracle, rig, separate_process: bool = True) -> LeaderTargets:
+    """``--targets leader:RIG|PORT``: check the leader against the follower, then open it.
+
+    ``leader:RIG`` — a rig configuration (shipped name or file) whose ``servos`` section is the
+    leader (its own port, models, calibration and joints; its ``joint.side`` its side).
+    ``leader:PORT`` (``/dev/...``, ``COMn``, ``sim://...``) — a twin of the follower: the
+    follower's own ``servos`` section on that port.
+
+    Raises
+    ------
+    RigConfigError
+        (one line, before anything moves) no such rig, a rig without servos, a follower joint
+        the leader lacks, the leader on the follower's own port, or no driven rig for a twin.
+    RigConnectionError
+        The leader's servos do not answer.
+    """
+    body = spec[len("leader:"):].strip()
+    if not body:
+        raise RigConfigError(f"--targets {spec}: expected leader:RIG (a rig configuration "
+                             "describing the leader's servos) or leader:PORT (a twin of the "
+                             "follower on that port)")
+    follower_servos = getattr(rig, "servos", None)
+    follower_names, follower_side = _follower(oracle, rig)
+    if _looks_like_port(body):
+        if follower_servos is None:
+            raise RigConfigError(f"--targets {spec}: a twin leader needs the follower's servos "
+                                 "configuration (--rig with servos)")
+        servos = dataclasses.replace(follower_servos, port=body)
+        leader_rig = rig
+        name = f"twin of {rig.name} on {body}"
+    else:
+        try:
+            leader_rig = load_rig_config(body)
+        except RigConfigError as err:
+            msg = str(err)
+            msg = msg[len("--rig "):] if msg.startswith("--rig ") else msg
+            raise RigConfigError(f"--targets {spec}: {msg}") from None
+        servos = leader_rig.servos
+        if servos is None:
+            raise RigConfigError(f"--targets {spec}: rig {leader_rig.name!r} has no servos to "
+                                 "read a leader arm from (a leader is a servo chain: e.g. "
+                                 "leader:sim-leader-arm)")
+        name = f"leader {leader_rig.name}"
+    if follower_servos is not None and servos.port == follower_servos.port:
+        raise RigConfigError(f"--targets {spec}: the leader's port is the follower's "
+                             f"({servos.port}); a leader is a second chain on its own port")
+    leader_names = servos.joint_names if servos.joints else (leader_rig.joint.name,)
+    leader_mapping(follower_names, leader_names,
+                   what=f"--targets {spec}: the leader ({name})")
+    leader_side = leader_rig.joint.side
+    mirror = bool(follower_side and leader_side and leader_side != follower_side)
+    from rig.devices.dynamixel import DynamixelBus  # lazy: opening devices
+    from rig.devices.ports import open_port
+    from rig.devices.servo_limb import ServoLimb
+
+    port = open_port(servos.port, baud=servos.baud, separate_process=separate_process)
+    limb = None
+    try:
+        kin = servos.limb_kinematics(None if servos.joints else leader_rig.joint.name)
+        limb = ServoLimb(DynamixelBus(port, servos, latency_ms=servos.latency_ms), kin)
+        latency = servos.latency_ms
+        if latency is None and port.is_simulated:
+            latency = SIM_LEADER_LATENCY_MS
+        if latency is not None:  # the cycle's packet timeout, after the open's generous one
+            limb.bus.set_latency(latency)
+        desc = (f"{name} ({len(limb.bus.ids)} servos"
+                + (f", mirrored {leader_side} → {follower_side}" if mirror else "") + ")")
+        return LeaderTargets(limb, follower_names, mirror=mirror, port=port, description=desc)
+    except BaseException:
+        if limb is not None:
+            limb.close()
+        port.close()
+        raise
