@@ -46,7 +46,7 @@ from rig.loop.runner import (
     prepare_servo_limb,
 )
 from rig.loop.supervisor import SupervisorConfig
-from rig.loop.targets import open_targets
+from rig.loop.targets import open_targets, valid_targets
 from rig.loop.telemetry import Telemetry, telemetry_columns
 
 __all__ = ["MAX_TOLERANCE_DEG", "EnforceHooks", "EnforceRequest", "EnforceResult",
@@ -433,7 +433,7 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
             if hasattr(src, "dropped"):
                 summary["target_samples_dropped"] = int(src.dropped)
             if leader is not None:
-                summary["leader"] = leader.summary(telemetry.table(), prep.oracle)
+                summary["leader"] = leader.summary(telemetry.table(), prep.oracle, valid_targets)
             if store is not None:
                 status = ("completed" if loop.safe_state_entries == 0 else
                           "interrupted" if loop.stop_reason else "safe_state")

@@ -49,8 +49,11 @@ import numpy as np
 
 from calibration.clinical import mirror_quaternions
 from rig.devices.config import load_rig_config
+from rig.devices.dynamixel import DynamixelBus
+from rig.devices.ports import open_port
+from rig.devices.servo_limb import ServoLimb
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
-from rig.loop.targets import TargetSource
+from rig.loop.target_source import TargetSource
 
 __all__ = ["LEADER_COLUMNS", "LEADER_STALE_PERIODS", "LeaderTargets", "leader_mapping",
            "mirror_posture", "open_leader"]
@@ -182,7 +185,7 @@ class LeaderTargets(TargetSource):
         age = math.nan if st is None else 1e3 * (self.t0 + t_s - st) + cycle_ms
         return self._leader_ms, age
 
-    def summary(self, table=None, oracle=None) -> dict:
+    def summary(self, table=None, oracle=None, is_valid=None) -> dict:
         """The run's ``leader`` figures.
 
         Parameters
@@ -193,6 +196,9 @@ class LeaderTargets(TargetSource):
         oracle : models.oracle.ConstraintOracle, optional
             The enforced limits: tracking counts the cycles whose target is valid in every
             joint (admissible leader motion).
+        is_valid : callable, optional
+            ``is_valid(oracle, postures) -> (N,) bool``, the supervisor's judgement of targets
+            (:func:`rig.loop.targets.valid_targets`); without it no tracking figure.
 
         Returns
         -------
@@ -216,7 +222,7 @@ class LeaderTargets(TargetSource):
         lead = np.asarray(table["leader_ms"], dtype=np.float64)
         out["latency_ms"] = {"p50": pct(age, 50), "p99": pct(age, 99)}
         out["leader_ms"] = {"p50": pct(lead, 50), "p99": pct(lead, 99)}
-        if oracle is None:
+        if oracle is None or is_valid is None:
             return out
         names = self.joint_names
         one = self.n_joints == 1 and "target_w" in table
@@ -228,9 +234,7 @@ class LeaderTargets(TargetSource):
                              for n in names], axis=1)
 
         tq, pq = posture("target"), posture("present")
-        from rig.loop.targets import valid_targets  # the supervisor's judgement of targets
-
-        ok = valid_targets(oracle, tq if not one else tq[:, 0])
+        ok = is_valid(oracle, tq if not one else tq[:, 0])
         if ok.any():
             dot = np.abs(np.einsum("nji,nji->nj", tq[ok], pq[ok]))
             err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0))).max(axis=1)
@@ -241,10 +245,10 @@ class LeaderTargets(TargetSource):
 
     def close(self) -> None:
         """Close the leader's bus and port (idempotent); its torque stays off."""
-        limb, self.limb = self.limb, None
-        if limb is not None:
+        arm, self.limb = self.limb, None
+        if arm is not None:
             try:
-                limb.close()
+                arm.close()
             finally:
                 port, self.port = self.port, None
                 if port is not None:
@@ -257,17 +261,7 @@ def _looks_like_port(text: str) -> bool:
         text.upper().startswith("COM") and text[3:].isdigit())
 
 
-def _follower(oracle, rig) -> tuple[tuple[str, ...], str | None]:
-    """The follower's joint names (the limb file's order) and side."""
-    limb = getattr(oracle, "limb", None)
-    if limb is not None:
-        return tuple(limb.joint_names), limb.side or getattr(getattr(rig, "joint", None),
-                                                             "side", None)
-    joint = getattr(rig, "joint", None)
-    return ((joint.name if joint is not None else "joint"),), getattr(joint, "side", None)
-
-
-def open_leader(spec: str, *, oracle, rig, separate_process: bool = True) -> LeaderTargets:
+def open_leader(spec: str, *, names, side, rig, separate_process: bool = True) -> LeaderTargets:
     """``--targets leader:RIG|PORT``: check the leader against the follower, then open it.
 
     ``leader:RIG`` — a rig configuration (shipped name or file) whose ``servos`` section is the
@@ -289,7 +283,7 @@ def open_leader(spec: str, *, oracle, rig, separate_process: bool = True) -> Lea
                              "describing the leader's servos) or leader:PORT (a twin of the "
                              "follower on that port)")
     follower_servos = getattr(rig, "servos", None)
-    follower_names, follower_side = _follower(oracle, rig)
+    follower_names, follower_side = tuple(names), side
     if _looks_like_port(body):
         if follower_servos is None:
             raise RigConfigError(f"--targets {spec}: a twin leader needs the follower's servos "
@@ -318,25 +312,21 @@ def open_leader(spec: str, *, oracle, rig, separate_process: bool = True) -> Lea
                    what=f"--targets {spec}: the leader ({name})")
     leader_side = leader_rig.joint.side
     mirror = bool(follower_side and leader_side and leader_side != follower_side)
-    from rig.devices.dynamixel import DynamixelBus  # lazy: opening devices
-    from rig.devices.ports import open_port
-    from rig.devices.servo_limb import ServoLimb
-
     port = open_port(servos.port, baud=servos.baud, separate_process=separate_process)
-    limb = None
+    arm = None
     try:
         kin = servos.limb_kinematics(None if servos.joints else leader_rig.joint.name)
-        limb = ServoLimb(DynamixelBus(port, servos, latency_ms=servos.latency_ms), kin)
+        arm = ServoLimb(DynamixelBus(port, servos, latency_ms=servos.latency_ms), kin)
         latency = servos.latency_ms
         if latency is None and port.is_simulated:
             latency = SIM_LEADER_LATENCY_MS
         if latency is not None:  # the cycle's packet timeout, after the open's generous one
-            limb.bus.set_latency(latency)
-        desc = (f"{name} ({len(limb.bus.ids)} servos"
+            arm.bus.set_latency(latency)
+        desc = (f"{name} ({len(arm.bus.ids)} servos"
                 + (f", mirrored {leader_side} → {follower_side}" if mirror else "") + ")")
-        return LeaderTargets(limb, follower_names, mirror=mirror, port=port, description=desc)
+        return LeaderTargets(arm, follower_names, mirror=mirror, port=port, description=desc)
     except BaseException:
-        if limb is not None:
-            limb.close()
+        if arm is not None:
+            arm.close()
         port.close()
         raise

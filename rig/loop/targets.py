@@ -44,6 +44,8 @@ from models import quaternion as Q
 from rig.devices import sources
 from rig.devices.config import load_rig_config
 from rig.errors import RigConfigError
+from rig.loop.leader import open_leader
+from rig.loop.target_source import TargetSource
 
 __all__ = ["SCRIPTS", "CsvTrajectory", "MirrorTargets", "ScriptedTargets", "TargetSource",
            "expected_header", "load_trajectory", "open_targets", "valid_targets"]
@@ -51,45 +53,6 @@ __all__ = ["SCRIPTS", "CsvTrajectory", "MirrorTargets", "ScriptedTargets", "Targ
 SCRIPTS = ("slow", "sweep", "adversarial", "hold")
 
 _NAN4 = (math.nan, math.nan, math.nan, math.nan)
-
-
-class TargetSource:
-    """Base class: a context manager answering :meth:`latest` once per cycle.
-
-    Attributes
-    ----------
-    duration_s : float or None
-        Natural length of the motion (None: endless).
-    description : str
-        One line for logs and run metadata.
-    n_joints : int
-        Joints of every posture :meth:`latest` returns.
-    joint_names : tuple of str or None
-        Their names, in the limb file's order (None: one joint, unnamed).
-    """
-
-    duration_s: float | None = None
-    description = "targets"
-    n_joints: int = 1
-    joint_names: tuple[str, ...] | None = None
-
-    def start(self, t0: float) -> None:
-        """The loop starts: loop-clock time ``t0`` is the motion's time 0."""
-        self.t0 = float(t0)
-
-    def latest(self, t: float) -> tuple[float | None, np.ndarray | None]:
-        """``(target_t, posture (n_joints, 4))`` at loop time ``t``; ``(None, None)`` when there
-        is no target yet."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Release resources (idempotent)."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def valid_targets(oracle, postures) -> np.ndarray:
@@ -1068,9 +1031,9 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
         kw.setdefault("seed", seed)
         return ScriptedTargets(name, oracle, kinematics=_rig_limb_kinematics(rig, oracle), **kw)
     if spec.startswith("leader:"):
-        from rig.loop.leader import open_leader  # lazy: leader imports this module
-
-        return open_leader(spec, oracle=oracle, rig=rig, separate_process=separate_process)
+        names, side = _follower_joints(oracle, rig)
+        return open_leader(spec, names=names, side=side, rig=rig,
+                           separate_process=separate_process)
     if spec == "mirror" or spec.startswith("mirror:"):
         if oracle.limb is not None:
             return _open_limb_mirror(spec, rig, oracle.limb)
@@ -1086,6 +1049,17 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
                              segments=[(j.parent, j.child) for j in limb.joints])
     raise RigConfigError(f"--targets {spec!r}: expected PATH.csv, script:NAME "
                          f"({'|'.join(SCRIPTS)}), mirror or leader:RIG|PORT")
+
+
+def _follower_joints(oracle, rig) -> tuple[tuple[str, ...], str | None]:
+    """The driven joints' names (a limb file's, in its order; or the rig's one joint) and side:
+    what a leader arm's joints are mapped onto."""
+    limb = oracle.limb
+    joint = getattr(rig, "joint", None)
+    rig_side = getattr(joint, "side", None)
+    if limb is not None:
+        return tuple(limb.joint_names), limb.side or rig_side
+    return ((joint.name if joint is not None else "joint"),), rig_side
 
 
 def _rig_limb_kinematics(rig, oracle):

@@ -28,6 +28,7 @@ from rig.loop.leader import (
     open_leader,
 )
 from rig.loop.runner import prepare_servo_limb
+from rig.loop.targets import valid_targets
 from rig.loop.telemetry import Telemetry, telemetry_columns
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
@@ -103,10 +104,10 @@ def test_the_leaders_own_calibration_gives_the_same_joints_as_the_followers(tmp_
     lrig = _manual_leader_rig(tmp_path)
     twin_url = with_keys(load_rig_config(lrig).servos.port, chain="sim-servo-arm",
                          model="XM430-W350")
-    with open_leader(f"leader:{lrig}", oracle=oracle, rig=follower,
-                     separate_process=False) as lead, \
-            open_leader(f"leader:{twin_url}", oracle=oracle, rig=follower,
-                        separate_process=False) as twin:
+    who = {"names": oracle.limb.joint_names, "side": oracle.limb.side, "rig": follower,
+           "separate_process": False}
+    with open_leader(f"leader:{lrig}", **who) as lead, \
+            open_leader(f"leader:{twin_url}", **who) as twin:
         assert lead.description.startswith("leader sim-leader-arm (7 servos")
         assert twin.description.startswith("twin of sim-servo-arm")
         for src in (lead, twin):  # a loaded host's reply may wait for the patient's motion
@@ -140,7 +141,8 @@ def test_a_leader_that_stops_answering_holds_the_follower_within_two_cycles(tmp_
     cut, cycles = 20, 30
     url = "sim://dynamixel?ids=1-7&model=XM430-W350&return_delay_us=0&" \
           "clock=manual&wire_time=off"
-    lead = open_leader(f"leader:{_manual_leader_rig(tmp_path)}", oracle=oracle, rig=follower,
+    lead = open_leader(f"leader:{_manual_leader_rig(tmp_path)}",
+                       names=oracle.limb.joint_names, side=oracle.limb.side, rig=follower,
                        separate_process=False)
     lsim = lead.port.simulator
     lead.bus.set_latency(50.0)  # no timeout of a loaded host's before the cut
@@ -179,7 +181,7 @@ def test_a_leader_that_stops_answering_holds_the_follower_within_two_cycles(tmp_
     want = 1e3 * period * np.maximum(0, np.arange(cycles) - cut + 1)
     np.testing.assert_allclose(age, want, atol=1e-6)
     assert np.isfinite(t["leader_ms"]).all()
-    fig = lead.summary(t, oracle)
+    fig = lead.summary(t, oracle, valid_targets)
     assert fig["reads"] == cycles and fig["failures"] == cycles - cut
     assert fig["latency_ms"]["p50"] is not None
 
