@@ -105,6 +105,7 @@ def test_arm_update_disarm_on_the_wire():
             assert not current.any() and sim.get("Goal Current") == 0
             admitted = KINEMATICS.forward([2048 + 4096 * 5 / 360])[None]  # 5° away
             current = spring.update(lq, admitted, ticks)
+            dxl.read_ticks()  # a round trip: the sync writes (no reply) were served before it
             assert current[0] == pytest.approx(50.0, abs=1.0)
             assert sim.get("Goal Current") == round(current[0])
             assert abs(sim.get("Goal Position") - (2048 + 4096 * 5 / 360)) <= 1
