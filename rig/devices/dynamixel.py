@@ -837,15 +837,41 @@ class DynamixelBus(ServoBus):
     def _write_goal_ticks(self, ticks: list[int]) -> None:
         """Goal Position of every servo by one SYNC WRITE (no reply, no retry), its table's
         size (4 bytes on the X series, 2 on AX / MX on 1.0)."""
-        goal = self._goal_item
+        self._sync_write(self._goal_item, ticks, "Goal Position")
+
+    def write_items(self, name: str, values: Sequence[int]) -> None:
+        """One control-table item of every servo by one SYNC WRITE (no reply, no retry).
+
+        Parameters
+        ----------
+        name : str
+            An X-series item name or the model's own (resolved in the servos' table), e.g.
+            ``"Goal Current"``.
+        values : (n,) sequence of int
+            Raw item values in tick-vector order (the item's own units).
+
+        Raises
+        ------
+        RigConfigError
+            The servos' table has no such item.
+        ValueError
+            Not one value per servo.
+        """
+        self._check_open()
+        if len(values) != len(self.ids):
+            raise ValueError(f"write_items({name!r}): need {len(self.ids)} values, got "
+                             f"{len(values)}")
+        self._sync_write(self._item(name), values, name)
+
+    def _sync_write(self, item: ControlItem, values: Sequence[int], what: str) -> None:
         param: list[int] = []
-        for dxl_id, t in zip(self.ids, ticks, strict=True):
-            param += (dxl_id, *goal.encode(int(t)))
+        for dxl_id, v in zip(self.ids, values, strict=True):
+            param += (dxl_id, *item.encode(int(v)))
         port = self._sdk_port
         port.is_using = False
-        result = self._guard(lambda: self._ph.syncWriteTxOnly(port, goal.address, goal.size,
+        result = self._guard(lambda: self._ph.syncWriteTxOnly(port, item.address, item.size,
                                                               param, len(param)))
-        self._result(result, "sync write of Goal Position")
+        self._result(result, f"sync write of {what}")
 
     # -- register access ------------------------------------------------------------------
     def read_register(self, dxl_id: int, name: str) -> int:

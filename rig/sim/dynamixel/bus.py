@@ -150,8 +150,10 @@ class DynamixelBus(FaultInjection, PtyServer):
                 from None
 
     def set_hand(self, dxl_id: int,
-                 position: float | Callable[[float], float] | None) -> None:
-        """Move the limb by hand: with torque off, the shaft follows ``position`` exactly.
+                 position: float | Callable[[float], float] | None,
+                 stiffness: float | None = None, damping: float | None = None) -> None:
+        """Move the limb by hand: rigidly (torque off, the shaft follows ``position`` exactly),
+        or through an impedance (a person pushing through the spring of their arm).
 
         Parameters
         ----------
@@ -163,11 +165,28 @@ class DynamixelBus(FaultInjection, PtyServer):
             continuous
             movement (a clinician sweeping the limb while it records); ``None`` lets go (the
             shaft stays where it is).
+        stiffness : float or None
+            None (default): the rigid hand above, acting with torque off only. A number,
+            N·m/rad: the hand is an impedance acting as a push ``K (θ_hand − θ) − B θ'`` on the
+            shaft, torque on or off (:meth:`SimServo.set_hand
+            <rig.sim.dynamixel.servo.SimServo.set_hand>`); it keeps holding when torque is
+            turned on.
+        damping : float or None
+            N·m·s/rad, with a stiffness only (None: 0).
+
+        Raises
+        ------
+        ValueError
+            An impedance on a servo without the torque model (Protocol 1.0 / XL-320
+            tables), or a stiffness / damping :meth:`SimServo.set_hand` refuses.
         """
         with self.lock:
             servo = self.servo(dxl_id)
+            if stiffness is not None and isinstance(servo, LegacyServo):
+                raise ValueError(f"servo {dxl_id} ({servo.table.display_name}) has no torque "
+                                 f"model: an impedance hand needs an X-series-style servo")
             servo.advance(self.clock())
-            servo.hand = position if position is None or callable(position) else float(position)
+            servo.set_hand(position, stiffness, damping)
 
     def push(self, dxl_id: int, torque: float | Callable[[float], float] | None) -> None:
         """Push the shaft with an external torque (a hand or a patient), torque on or off.

@@ -29,7 +29,7 @@ Integrated lazily, in :data:`STEP` steps, whenever the servo is observed, on the
 Torque model (modes 0, 5, 16, and modes 3/4 while an external torque acts or until the shaft
 is back on its profile): the output shaft is one rigid body,
 
-    J dω/dt = kt·i + τ_push − b·ω
+    J dω/dt = kt·i + τ_push + τ_hand − b·ω
 
 * ``kt = stall_torque / stall_current`` (output-shaft N·m/A, the table's ``units``);
 * the motor at duty ``d`` (Goal/Present PWM ÷ ``pwm_max``) draws
@@ -41,6 +41,12 @@ is back on its profile): the output shaft is one rigid body,
   publishes no inertia), plus an optional load inertia (kg·m²);
 * ``b = FRICTION_RATIO · stall_torque / ω_no_load``: viscous friction, 2 % of the motor's own
   back-EMF damping (modelling choice).
+* ``τ_hand = K (θ_hand − θ) − B ω``: an impedance hand (:meth:`SimServo.set_hand` with a
+  stiffness ``K`` N·m/rad and damping ``B`` N·m·s/rad), a person holding the shaft through the
+  spring of their arm, torque on or off; 0 without one. The damping term is integrated
+  implicitly (any ``B`` is stable); the stiffness explicitly, stable for ``K h² / J <`` 4
+  (``h`` = :data:`STEP`), which :meth:`set_hand` checks. A hand without a stiffness (the
+  default) is rigid instead: with torque off the shaft follows it exactly, as it always did.
 
 Current mode (0): an ideal current loop holds ``Goal Current`` (≤ Current Limit) while the PWM
 allows it. PWM mode (16): ``Goal PWM`` drives the motor directly. Position modes (3, 4, 5): a
@@ -182,6 +188,11 @@ class SimServo:
     push : float, callable or None
         External torque on the shaft, N·m, ACTUAL frame (positive pushes towards increasing
         encoder ticks); a callable of the simulated time (s) for a torque that varies.
+    hand : float, callable or None
+        Where a hand holds the shaft, ACTUAL ticks (or a function of the simulated time).
+    hand_stiffness, hand_damping : float or None, float
+        The hand's impedance, N·m/rad and N·m·s/rad; stiffness None: a rigid hand (torque off
+        only; torque on lets go of it).
     current : float
         Motor current, A, actual frame (Present Current is this × direction).
     boot_time_s : float
@@ -224,6 +235,8 @@ class SimServo:
         self.vel = 0.0  # ticks/s
         self.target = float(position)
         self.hand: float | Callable[[float], float] | None = None
+        self.hand_stiffness: float | None = None
+        self.hand_damping = 0.0
         self.push: float | Callable[[float], float] | None = None
         self._reset_dynamics()
         self.hardware_error = 0
@@ -390,6 +403,8 @@ class SimServo:
         self.pos = self.target = position
         self.vel = 0.0
         self.hand = None
+        self.hand_stiffness = None
+        self.hand_damping = 0.0
         self.push = None
         self._reset_dynamics()
         self.hardware_error = 0
@@ -414,6 +429,61 @@ class SimServo:
         vmax = (pv if pv else vlim) * self.velocity_unit
         amax = pa * self.accel_unit if pa else math.inf
         return vmax, amax
+
+    @property
+    def _external(self) -> bool:
+        """An external torque acts: a push, or an impedance hand (a rigid one acts only with
+        torque off, and not through the torque model)."""
+        return self.push is not None or (self.hand is not None
+                                         and self.hand_stiffness is not None)
+
+    def set_hand(self, position: float | Callable[[float], float] | None,
+                 stiffness: float | None = None, damping: float | None = None) -> None:
+        """Hold the shaft by hand: rigidly (``stiffness`` None) or through an impedance.
+
+        Parameters
+        ----------
+        position : float, callable or None
+            ACTUAL shaft ticks, or a function of the simulated time (s) returning them; None
+            lets go.
+        stiffness : float or None
+            N·m/rad: the hand pushes ``K (θ_hand − θ) − B ω`` on the shaft, torque on or off
+            (module docstring). None: the rigid hand (torque off: the shaft is where the hand
+            is; turning torque on lets go).
+        damping : float or None
+            N·m·s/rad (``B``), with a stiffness only; None is 0.
+
+        Raises
+        ------
+        ValueError
+            A negative or non-finite stiffness or damping, a damping without a stiffness, or
+            a stiffness too stiff for the 1 ms integration step (``K h² / J ≥ 4``).
+        """
+        if stiffness is None:
+            if damping is not None:
+                raise ValueError("a hand's damping needs a stiffness (an impedance hand)")
+        else:
+            stiffness = float(stiffness)
+            damping = 0.0 if damping is None else float(damping)
+            for what, v in (("stiffness", stiffness), ("damping", damping)):
+                if not (math.isfinite(v) and v >= 0.0):
+                    raise ValueError(f"hand {what} must be a finite number >= 0, got {v}")
+            top = 4.0 * self.inertia / STEP ** 2
+            if stiffness >= top:
+                raise ValueError(f"hand stiffness {stiffness:g} N·m/rad too stiff for the "
+                                 f"{STEP * 1e3:g} ms step on this shaft (< {top:.4g})")
+        self.hand = position if position is None or callable(position) else float(position)
+        self.hand_stiffness = None if position is None else stiffness
+        self.hand_damping = 0.0 if position is None or damping is None else damping
+
+    def hand_torque(self, now: float) -> float:
+        """The impedance hand's torque on the shaft at ``now`` (N·m, ACTUAL frame; 0 for no
+        hand or a rigid one): ``K (θ_hand − θ) − B ω`` at the present state."""
+        if self.hand is None or self.hand_stiffness is None:
+            return 0.0
+        hand = float(self.hand(now)) if callable(self.hand) else self.hand
+        k = self._rad_per_tick
+        return self.hand_stiffness * (hand - self.pos) * k - self.hand_damping * self.vel * k
 
     def _push_torque(self, now: float) -> float:
         push = self.push
@@ -476,11 +546,11 @@ class SimServo:
         if not self.torque:
             self.current = self.duty = 0.0
             self._integral = 0.0
-            if self.hand is not None:
+            if self.hand is not None and self.hand_stiffness is None:
                 hand = float(self.hand(now)) if callable(self.hand) else self.hand
                 self.vel = (hand - self.pos) / dt if dt > 1e-4 else 0.0
                 self.pos = hand
-            elif self.push is not None:
+            elif self._external:
                 self._dynamics(t0, dt, None)
             else:
                 self.vel = 0.0
@@ -489,7 +559,7 @@ class SimServo:
         mode = self.get("Operating Mode")
         if mode == 1:
             self._velocity_mode(dt)
-        elif mode in (3, 4) and self.push is None and not self._off_profile:
+        elif mode in (3, 4) and not self._external and not self._off_profile:
             self._profile_mode(dt)
         elif mode in (0, 3, 4, 5, 16):
             if mode in (3, 4) and not self._off_profile:
@@ -629,10 +699,17 @@ class SimServo:
                     i = math.copysign(limit, i)
                     duty = i / i_stall + back
             tau = self.kt * i + self._push_torque(t) - self.friction * w
-            self.vel += tau / self.inertia / k * h
+            if self.hand is not None and self.hand_stiffness is not None:  # impedance hand
+                hand = float(self.hand(t)) if callable(self.hand) else self.hand
+                tau += self.hand_stiffness * (hand - self.pos) * k
+                # the damping implicitly: ω' = (ω + τ h / J) / (1 + B h / J)
+                self.vel = (self.vel + tau / self.inertia / k * h) \
+                    / (1.0 + self.hand_damping * h / self.inertia)
+            else:
+                self.vel += tau / self.inertia / k * h
             self.pos += self.vel * h
             self.current, self.duty = i, duty
-        if mode in (3, 4) and self.push is None and self._off_profile \
+        if mode in (3, 4) and not self._external and self._off_profile \
                 and abs(self.ref_pos - self.pos) < 0.5 and abs(self.vel - self.ref_vel) < 1.0 \
                 and self.ref_pos == self.target:
             # back on the profile: the exact trapezoid takes over again
@@ -895,7 +972,8 @@ class SimServo:
                 self._set("Torque Enable", 0)  # shut down until reboot
             elif values["Torque Enable"] and not was_torque:
                 self.vel = 0.0
-                self.hand = None
+                if self.hand_stiffness is None:
+                    self.hand = None  # a rigid hand lets go; an impedance hand keeps holding
                 if self._get_or("Operating Mode", 3) == 3:
                     self._wrap_one_turn()  # e-Manual: torque on in Position Control Mode
                 self._reset_dynamics()

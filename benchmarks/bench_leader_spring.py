@@ -1,0 +1,133 @@
+"""The limit felt at the leader: a therapist pushes a leader joint past the patient's limit.
+
+A simulated leader of one joint — one XL330-M288 (current control available) turning about
+z, zero at 2048 — on ``sim://dynamixel`` with a manual clock, driven through the rig's bus
+(:class:`~rig.devices.dynamixel.DynamixelBus`, the real ``dynamixel_sdk`` on the pty). The
+patient's admitted range is ±30°: each cycle the admitted pose is the leader's angle clamped
+to it (what the follower is allowed to do). A simulated therapist holds the leader through an
+impedance hand (``bus.set_hand(1, f(t), stiffness=K, damping=B)``) moving 0 → 60° in 1 s,
+then holding 60°: at the limit the hand pushes with ``K × 30°``.
+
+Spring off: the leader's servos are as today (torque off), the hand takes the leader to 60°
+(30° beyond the limit). Spring on (:class:`~rig.loop.leader_spring.LeaderSpring`, a few gains
+and caps): the leader's deviation beyond the limit and the current drawn. Steady state: the
+last cycle's deviation (3 s simulated); peak: the largest over the run. The analytic
+equilibrium, ``K (60° − θ) = kt · min(g (θ − 30° − 0), I_max)`` in consistent units, is
+printed beside it.
+
+Figures only, never assertions. Run: ``.venv/bin/python benchmarks/bench_leader_spring.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from models import quaternion as Q
+from rig.devices.dynamixel import DynamixelBus
+from rig.devices.kinematics import JointKinematics, ServoAxis
+from rig.devices.servo import Servo
+from rig.loop.leader_spring import LeaderSpring, SpringSettings
+
+URL = "sim://dynamixel?ids=1&model=XL330-M288&clock=manual&return_delay_us=0"
+LIMIT_DEG = 30.0
+TARGET_DEG = 60.0
+TICKS_PER_DEG = 4096 / 360.0
+Z = np.array([0.0, 0.0, 1.0])
+KINEMATICS = JointKinematics([ServoAxis(1, (0.0, 0.0, 1.0), 2048, 1, 0, 4095)])
+
+
+@dataclass(frozen=True)
+class Push:
+    """One run: the leader's deviation beyond the limit (deg) and the spring's current (mA)."""
+
+    final_deg: float
+    peak_deg: float
+    current_ma: float
+
+
+def therapist_push(settings: SpringSettings | None, *, stiffness: float = 0.2,
+                   damping: float = 0.002, seconds: float = 3.0, period: float = 0.005,
+                   ramp_s: float = 1.0) -> Push:
+    """Run the scenario of the module docstring; ``settings`` None: the spring off.
+
+    Parameters
+    ----------
+    settings : SpringSettings or None
+    stiffness, damping : float
+        The therapist's hand, N·m/rad and N·m·s/rad.
+    seconds, period : float
+        Simulated length and the cycle's period, s.
+    ramp_s : float
+        Time the hand takes from 0 to 60°, s.
+    """
+    with DynamixelBus(URL, [Servo(1)]) as dxl:
+        sim = dxl.port.simulator
+        clock = sim.clock
+        spring = LeaderSpring(dxl, KINEMATICS, settings) if settings is not None else None
+        if spring is not None:
+            spring.arm()
+        start = clock()
+
+        def hand(t: float) -> float:
+            return 2048.0 + TICKS_PER_DEG * TARGET_DEG * min(1.0, (t - start) / ramp_s)
+
+        sim.set_hand(1, hand, stiffness=stiffness, damping=damping)
+        peak = deviation = current = 0.0
+        for _ in range(round(seconds / period)):
+            ticks = dxl.read_ticks()
+            angle = (float(ticks[0]) - 2048.0) / TICKS_PER_DEG
+            if spring is not None:
+                admitted = max(-LIMIT_DEG, min(LIMIT_DEG, angle))
+                aq = Q.from_axis_angle(Z, math.radians(admitted))[None]
+                current = float(spring.update(KINEMATICS.forward(ticks)[None], aq, ticks)[0])
+            deviation = max(0.0, abs(angle) - LIMIT_DEG)
+            peak = max(peak, deviation)
+            clock.advance(period)
+        if spring is not None:
+            spring.disarm()
+        return Push(deviation, peak, current)
+
+
+def equilibrium_deg(settings: SpringSettings | None, stiffness: float,
+                    kt: float = 0.52 / 1.47) -> float:
+    """Analytic steady deviation beyond the limit (deg): the hand's torque against the
+    spring's ``kt × current`` (the servo's loop saturated at Goal Current), by bisection."""
+    span = TARGET_DEG - LIMIT_DEG
+    if settings is None:
+        return span
+    k_deg = stiffness * math.pi / 180.0
+
+    def net(x: float) -> float:
+        amps = min(settings.gain_ma_per_deg * x, settings.max_current_ma) / 1000.0
+        return k_deg * (span - x) - kt * amps
+
+    lo, hi = 0.0, span
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if net(mid) > 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def main() -> None:
+    stiffness = 0.2
+    print(f"XL330-M288 leader, admitted ±{LIMIT_DEG:g}°, therapist hand {stiffness} N·m/rad "
+          f"towards {TARGET_DEG:g}° (pushes {stiffness * math.radians(30):.3f} N·m at the "
+          f"limit); 200 Hz, 3 s simulated")
+    print(f"{'spring':>28} | {'beyond limit, steady':>20} | {'peak':>6} | {'analytic':>8} "
+          f"| {'current':>8}")
+    cases: list[SpringSettings | None] = [None]
+    cases += [SpringSettings(True, g, m, 1.0) for g, m in
+              ((5.0, 300.0), (10.0, 300.0), (20.0, 300.0), (40.0, 300.0), (40.0, 100.0),
+               (80.0, 600.0))]
+    for s in cases:
+        r = therapist_push(s, stiffness=stiffness)
+        name = "off" if s is None else f"{s.gain_ma_per_deg:g} mA/° ≤ {s.max_current_ma:g} mA"
+        print(f"{name:>28} | {r.final_deg:19.2f}° | {r.peak_deg:5.2f}° | "
+              f"{equilibrium_deg(s, stiffness):7.2f}° | {r.current_ma:5.0f} mA")
+
+
+if __name__ == "__main__":
+    main()
