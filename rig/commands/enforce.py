@@ -5,7 +5,8 @@ code over :func:`rig.loop.run_enforce`).
 [--telemetry T.csv] [--summary-json S.json] [--db DB [--session ID | --patient P]]
 [--constraint C.yaml] [--force-model] [--safe-state hold|torque-off] [--realtime] [--cpu N]
 [--busy-wait] [--no-warm-up] [--start-mismatch-deg D] [--on-start-mismatch ramp|refuse]
-[--at-end hold|rest] [--servo-max-velocity-deg-s V]``
+[--at-end hold|rest] [--servo-max-velocity-deg-s V]
+[--leader-spring GAIN_MA_PER_DEG[,MAX_MA[,DEAD_BAND_DEG]]]``
 
 Exit status: 2 for a user mistake (one line, before anything moves), 0 when the loop ran to its
 end, 1 when a fault put the limb in the safe state, 130 / 143 after SIGINT / SIGTERM (the limb
@@ -104,12 +105,18 @@ from rig.commands._options import finite_seconds
 @click.option("--servo-max-velocity-deg-s", type=float, default=None, metavar="V",
               help="Per-servo velocity limit: no servo's goal moves more than V × period a "
                    "cycle (default: off; the joints' --max-velocity-deg-s still applies).")
+@click.option("--leader-spring", default=None, metavar="GAIN[,MAX_MA[,DEAD_BAND_DEG]]",
+              help="With --targets leader:...: the limit felt at the leader — while the "
+                   "patient's limit binds, each leader servo is pulled towards the follower's "
+                   "commanded pose with GAIN mA per degree, at most MAX_MA (default 150), "
+                   "free within DEAD_BAND_DEG (default 1) (current-based position mode; "
+                   "default: off).")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_path,
             summary_path, db, session_id, patient, constraint_path, force_model, safe_state,
             tolerance_deg, max_velocity_deg_s, max_accel_deg_s2, stale_servo_ms, watchdog_ms,
             stale_target_ms, seed, realtime, cpu, busy_wait, no_warm_up, start_mismatch_deg,
-            on_start_mismatch, at_end, servo_max_velocity_deg_s, quiet) -> None:
+            on_start_mismatch, at_end, servo_max_velocity_deg_s, leader_spring, quiet) -> None:
     """Enforce a patient's joint limits on a servo limb in real time."""
     from rig.loop import EnforceHooks, EnforceRequest, run_enforce
     from rig.store.pseudonyms import pseudonym_warning
@@ -127,7 +134,8 @@ def enforce(rig_name, model_path, targets, frames, rate, duration, telemetry_pat
             stale_target_ms=stale_target_ms, seed=seed,
             realtime=realtime, cpu=cpu, busy_wait=busy_wait, warm_up=not no_warm_up,
             start_mismatch_deg=start_mismatch_deg, on_start_mismatch=on_start_mismatch,
-            at_end=at_end, servo_max_velocity_deg_s=servo_max_velocity_deg_s),
+            at_end=at_end, servo_max_velocity_deg_s=servo_max_velocity_deg_s,
+            leader_spring=leader_spring),
         echo=(lambda m: None) if quiet else click.echo,
         hooks=EnforceHooks(install_signals=True))
     if quiet:

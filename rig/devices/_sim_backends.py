@@ -13,6 +13,9 @@ inverse kinematics (:class:`rig.devices.kinematics.JointKinematics`), evaluated 
 millisecond of simulated time and shared by the servos; the IK solution nearest the previous one
 keeps the joint angles continuous. While torque is off, Present Position follows it
 (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`), as a clinician moving a back-drivable limb.
+With ``hand_stiffness=K`` (N·m/rad; ``hand_damping=B``, N·m·s/rad, default ``0.01 K``) the hand
+is an impedance instead: it pushes ``K (θ_hand − θ) − B ω`` on each shaft, torque on or off — a
+therapist pushing a leader arm that may push back (:mod:`rig.loop.leader_spring`).
 
 A bus of its own (``sim://dynamixel?...&process=on``): the servos are served by ``rig sim servos``
 in a child process, as hardware is outside the host process — the simulator's thread then takes
@@ -68,9 +71,34 @@ from rig.sim.imu import StreamImuSimulator, stream_patient, stream_query
 from rig.sim.patients import limb_from_url, patient_from_url
 from rig.sim.urls import SimUrl, query_keys, sim_device_of, with_keys, without_keys
 
-BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side")
+BACKDRIVE_KEYS = ("patient", "chain", "speed", "excursion", "limb", "side", "hand_stiffness",
+                  "hand_damping")
 """The keys a ``sim://dynamixel`` URL takes besides the bus's: the back-driving patient's
-(``seed`` is the bus's, shared)."""
+(``seed`` is the bus's, shared) and its hand's (:func:`hand_impedance`)."""
+
+#: ``hand_damping`` when only ``hand_stiffness`` is given, seconds × K: a 10 ms time constant.
+HAND_DAMPING_S = 0.01
+
+
+def hand_impedance(q: Any) -> tuple[float | None, float | None]:
+    """``(stiffness N·m/rad, damping N·m·s/rad)`` of the back-driver's hand from ``q``'s
+    ``hand_stiffness`` / ``hand_damping`` (:meth:`rig.sim.dynamixel.DynamixelBus.set_hand`):
+    ``(None, None)`` without ``hand_stiffness`` — the rigid hand, exactly as before; damping
+    defaults to :data:`HAND_DAMPING_S` × stiffness.
+
+    Raises
+    ------
+    RigConfigError
+        A value out of range, or ``hand_damping`` without ``hand_stiffness`` (naming the URL).
+    """
+    k = q.number("hand_stiffness", None, 0.0, open_lo=True)
+    b = q.number("hand_damping", None, 0.0)
+    if k is None:
+        if b is not None:
+            raise RigConfigError(f"{q.url}: hand_damping needs hand_stiffness (an impedance "
+                                 "hand)")
+        return None, None
+    return k, (HAND_DAMPING_S * k if b is None else b)
 
 _BLOCK_MS = 100  # the back-drive's ticks are computed this many milliseconds at a time
 _AHEAD_BLOCKS = 10  # ... and this many blocks ahead of the last one asked for
@@ -429,8 +457,16 @@ def _back_driving_patient(q: Any, bus: Any) -> tuple[SimulatedPatient, _BackDriv
                              f"IDs {list(kin.ids)}, the simulated bus has no ID {missing[0]}")
     t0 = bus.clock()
     drive = _BackDrive(limb, kin, t0, wait=isinstance(bus.clock, ManualClock), frames=frames)
+    stiffness, damping = hand_impedance(q)
     for k, dxl_id in enumerate(kin.ids):
-        bus.set_hand(dxl_id, drive.hand(k))
+        if stiffness is None:  # the rigid hand (torque off), as always
+            bus.set_hand(dxl_id, drive.hand(k))
+            continue
+        try:
+            bus.set_hand(dxl_id, drive.hand(k), stiffness=stiffness, damping=damping)
+        except ValueError as err:
+            drive.close()
+            raise RigConfigError(f"{q.url}: hand_stiffness={stiffness:g}: {err}") from None
     return _patient(limb, bus.clock, t0, backdrive=drive), drive
 
 

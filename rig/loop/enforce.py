@@ -36,6 +36,7 @@ from rig.errors import RigConfigError
 from rig.loop import realtime
 from rig.loop.binding import bind_model
 from rig.loop.leader import LEADER_COLUMNS, LEADER_STALE_PERIODS, LeaderTargets
+from rig.loop.leader_spring import SpringSettings
 from rig.loop.realtime import check_cpu
 from rig.loop.runner import (
     AT_END,
@@ -100,6 +101,10 @@ class EnforceRequest:
         (None: off) (:class:`~rig.loop.LoopConfig`).
     warm_up : bool
         Warm the compute path before each deadline (:class:`~rig.loop.LoopConfig`).
+    leader_spring : str, optional
+        ``GAIN_MA_PER_DEG[,MAX_MA[,DEAD_BAND_DEG]]``: the limit felt at a leader arm
+        (:class:`rig.loop.leader_spring.SpringSettings.from_option`); only with
+        ``targets`` ``leader:...`` (None: off).
     """
 
     rig: str
@@ -131,6 +136,22 @@ class EnforceRequest:
     on_start_mismatch: str = "ramp"
     at_end: str = "hold"
     servo_max_velocity_deg_s: float | None = None
+    leader_spring: str | None = None
+
+    def spring_settings(self) -> SpringSettings | None:
+        """The ``--leader-spring`` settings, checked (None: off).
+
+        Raises
+        ------
+        RigConfigError
+            A spring without ``--targets leader:...``, or a malformed value (one line).
+        """
+        if self.leader_spring is None:
+            return None
+        if not str(self.targets).strip().startswith("leader:"):
+            raise RigConfigError(f"--leader-spring {self.leader_spring}: needs --targets "
+                                 "leader:RIG|PORT (the spring pulls a leader arm)")
+        return SpringSettings.from_option(self.leader_spring)
 
     def loop_config(self):
         """The :class:`~rig.loop.LoopConfig` of these options, checked (one-line errors)."""
@@ -174,6 +195,7 @@ class EnforceRequest:
             raise RigConfigError("--patient needs --db")
         _out_path("--telemetry", self.telemetry)
         _out_path("--summary-json", self.summary_json)
+        self.spring_settings()
 
         check_cpu(self.cpu)
         return LoopConfig(
@@ -338,8 +360,10 @@ def run_enforce(request: EnforceRequest, *, echo: Callable[[str], None] = _silen
             raise RigConfigError("--db: say whose run this is: --patient PSEUDONYM or "
                                  "--session ID")
         oracle = ConstraintOracle(binding.constraint)
+        spring = request.spring_settings()
         src = open_targets(request.targets, oracle=oracle, rig=rig_cfg, seed=request.seed,
-                           frames=request.frames, separate_process=hooks.clock is None)
+                           frames=request.frames, separate_process=hooks.clock is None,
+                           **({} if spring is None else {"spring": spring, "log": echo}))
         if isinstance(src, LeaderTargets) and request.stale_target_ms is None:
             cfg.supervisor = dataclasses.replace(
                 cfg.supervisor, stale_target_s=LEADER_STALE_PERIODS / cfg.rate_hz)
@@ -409,6 +433,8 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
                  f"{prep.rig_cfg.name!r} at {cfg.rate_hz:g} Hz; model {prep.model.path}; "
                  f"targets {src.description}; safe state {cfg.safe_state}")
             loop.setup()
+            if leader is not None:  # the spring's register writes before the schedule starts
+                leader.arm_spring()
             restore = _install_signals(loop) if hooks.install_signals else None
 
             unpin, notes = realtime.apply(realtime=req.realtime, cpu=req.cpu)

@@ -31,6 +31,20 @@ went away (:class:`~rig.errors.RigConnectionError`) also sets :attr:`LeaderTarge
 the target is stale the loop ends in its safe state (``target source failed``). Every failure is
 counted (:attr:`LeaderTargets.failures`).
 
+The limit felt at the leader
+----------------------------
+With a spring (``open_leader(..., spring=SpringSettings(...))``, ``rig enforce
+--leader-spring``) the loop hands every cycle's commanded posture back
+(:meth:`LeaderTargets.feedback`, called by :class:`rig.loop.runner.EnforcementLoop` after the
+follower's goal is written): the follower's joints are mapped back onto the leader's (the
+inverse of the name mapping, mirrored back when mirrored; a leader joint the follower lacks
+stays free) and :meth:`rig.loop.leader_spring.LeaderSpring.update` pulls the leader towards
+them, from the ticks the cycle's read gave. The spring is armed by :meth:`LeaderTargets.arm_spring`
+(``rig enforce`` calls it just before the loop starts; :meth:`LeaderTargets.start` arms it
+otherwise) and disarmed by :meth:`LeaderTargets.close` (torque off: the leader is free again).
+A spring that fails (a bus error on the leader's writes) never stops the follower: it is
+counted, disarmed, and said once.
+
 Figures
 -------
 :meth:`LeaderTargets.telemetry_values` gives each telemetry row ``leader_ms`` (the leader read's
@@ -53,10 +67,11 @@ from rig.devices.dynamixel import DynamixelBus
 from rig.devices.ports import open_port
 from rig.devices.servo_limb import ServoLimb
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
+from rig.loop.leader_spring import LeaderSpring
 from rig.loop.target_source import TargetSource
 
 __all__ = ["LEADER_COLUMNS", "LEADER_STALE_PERIODS", "LeaderTargets", "leader_mapping",
-           "mirror_posture", "open_leader"]
+           "mirror_posture", "open_leader", "posture_to_leader"]
 
 #: Telemetry columns a leader adds after the loop's own (:meth:`LeaderTargets.telemetry_values`).
 LEADER_COLUMNS = ("leader_ms", "target_age_ms")
@@ -101,6 +116,30 @@ def leader_mapping(follower_joints, leader_joints, *, what: str = "the leader") 
     return [leader_joints.index(n) for n in follower_joints]
 
 
+def posture_to_leader(commanded, index, n_leader: int, *, mirror: bool = False) -> np.ndarray:
+    """A follower-ordered posture mapped back onto the leader's joints.
+
+    Parameters
+    ----------
+    commanded : (J_f, 4) array_like, scalar-first
+        The follower's joints, in its order.
+    index : sequence of int
+        For each follower joint the leader joint of its name (:func:`leader_mapping`).
+    n_leader : int
+        The leader's joints.
+    mirror : bool
+        Reflect back (:func:`mirror_posture`: its own inverse).
+
+    Returns
+    -------
+    (n_leader, 4) float64
+        Leader-ordered; a leader joint no follower joint maps to is NaN (left free).
+    """
+    out = np.full((n_leader, 4), np.nan)
+    out[list(index)] = np.asarray(commanded, dtype=np.float64).reshape(len(index), 4)
+    return mirror_posture(out) if mirror else out
+
+
 class LeaderTargets(TargetSource):
     """Targets read from a leader arm, one synchronous sync read per cycle.
 
@@ -116,18 +155,26 @@ class LeaderTargets(TargetSource):
     port : rig.devices.ports.Port, optional
         The leader's port, closed after the bus by :meth:`close`.
     description : str
+    spring : rig.loop.leader_spring.LeaderSpring, optional
+        The limit felt at the leader (module docstring); None: the leader stays free.
+    log : callable, optional
+        ``log(line)``: the one line said when the spring fails.
 
     Attributes
     ----------
     reads, failures : int
         Reads attempted; failed or dropped (timeout, garbled, adapter gone, non-finite).
+    spring_armed : bool
+        The spring was armed for the run.
+    spring_failures : int
+        Spring updates or arming that failed (the spring is then disarmed).
     error : BaseException or None
         Set when the leader's adapter went away (the loop then ends in its safe state once the
         target is stale).
     """
 
     def __init__(self, limb, joint_names, *, mirror: bool = False, port=None,
-                 description: str = "leader"):
+                 description: str = "leader", spring=None, log=None):
         self.limb = limb
         self.bus = limb.bus
         self.port = port
@@ -138,6 +185,8 @@ class LeaderTargets(TargetSource):
         self.mirror = bool(mirror)
         kin = limb.kinematics.compile()
         self._fk = [(kin.joints[i], kin.slices[i]) for i in self._index]
+        self._fk_all = list(zip(kin.joints, kin.slices, strict=True))
+        self.n_leader = len(names)
         self.description = description
         self.reads = 0
         self.failures = 0
@@ -146,6 +195,15 @@ class LeaderTargets(TargetSource):
         self._last: np.ndarray | None = None
         self._last_t: float | None = None
         self._leader_ms = math.nan
+        self.spring = spring
+        self.log = log or (lambda line: None)
+        self.spring_armed = False
+        self.spring_failures = 0
+        self._spring_ok = spring is not None
+        self._spring_binding = 0
+        self._spring_ma: list[float] = []
+        self._ticks = None  # this cycle's leader ticks (None: the read failed)
+        self._leader_q = None  # the leader's own posture (its joints, unmirrored)
         self.bus.set_torque(False)  # the person moves it
         self.bus.retries = 0  # one attempt a cycle: a failure ages the target instead
 
@@ -158,9 +216,17 @@ class LeaderTargets(TargetSource):
         c0 = time.perf_counter()
         self.reads += 1
         q = None
+        self._ticks = None
         try:
             ticks = self.bus.read_ticks()
-            q = self.posture(ticks)
+            if self.spring is not None:  # the leader's own posture, for the spring's feedback
+                own = np.array([kj.forward_one(ticks[sl]) for kj, sl in self._fk_all],
+                               dtype=np.float64)
+                q = own[self._index]
+                q = mirror_posture(q) if self.mirror else q
+                self._ticks, self._leader_q = ticks, own
+            else:
+                q = self.posture(ticks)
         except (RigTimeoutError, RigProtocolError):
             pass
         except RigConnectionError as err:
@@ -175,6 +241,72 @@ class LeaderTargets(TargetSource):
             return self._last_t, self._last
         self._last, self._last_t = q, float(t)
         return self._last_t, q
+
+    # -- the spring -------------------------------------------------------------------------
+    def start(self, t0: float) -> None:
+        super().start(t0)
+        if self.spring is not None and not self.spring_armed:
+            self.arm_spring()
+
+    def arm_spring(self) -> None:
+        """Arm the spring (:meth:`~rig.loop.leader_spring.LeaderSpring.arm`); no-op without one
+        or when already armed.
+
+        Raises
+        ------
+        RigConfigError
+            The spring's cap above a leader servo's Current Limit (before the follower moves).
+        """
+        if self.spring is None or self.spring_armed:
+            return
+        try:
+            self.spring.arm()
+        except RigConfigError:
+            raise
+        except Exception as err:
+            self._spring_failed(err)
+            return
+        self.spring_armed = True
+
+    def feedback(self, t: float, commanded) -> None:
+        """The cycle's commanded posture (follower-ordered ``(J_f, 4)``, scalar-first) back to
+        the leader: its spring pulls towards it (module docstring). Nothing without an armed
+        spring, or when this cycle's leader read failed (the ticks would be stale)."""
+        ticks = self._ticks
+        if not self._spring_ok or ticks is None or not self.spring_armed:
+            return
+        spring = self.spring
+        try:
+            admitted = posture_to_leader(commanded, self._index, self.n_leader,
+                                         mirror=self.mirror)
+            current = spring.update(self._leader_q, admitted, ticks)
+        except Exception as err:  # the follower goes on; the leader is let go
+            self._spring_failed(err)
+            return
+        if spring.binding_.any():
+            self._spring_binding += 1
+        self._spring_ma.append(float(np.max(current)) if len(current) else 0.0)
+
+    def _spring_failed(self, err: BaseException) -> None:
+        self.spring_failures += 1
+        self._spring_ok = False
+        try:
+            self.spring.disarm()
+        except Exception:  # the bus that failed may fail again: the leader's torque off later
+            pass
+        self.log(f"leader spring off: {err} (the follower goes on; the leader is free)")
+
+    def spring_summary(self) -> dict | None:
+        """The run's ``leader.spring`` figures (None without a spring): ``armed``,
+        ``binding_cycles`` (updates with a binding joint), ``current_ma`` ``{p95, max}`` (per
+        update the largest servo current, mA), ``failures``."""
+        if self.spring is None:
+            return None
+        ma = np.asarray(self._spring_ma, dtype=np.float64)
+        return {"armed": bool(self.spring_armed), "binding_cycles": int(self._spring_binding),
+                "current_ma": None if not len(ma) else {"p95": float(np.percentile(ma, 95)),
+                                                        "max": float(ma.max())},
+                "failures": int(self.spring_failures)}
 
     # -- figures --------------------------------------------------------------------------
     def telemetry_values(self, t_s: float, cycle_ms: float) -> tuple[float, float]:
@@ -211,6 +343,8 @@ class LeaderTargets(TargetSource):
         out: dict = {"reads": int(self.reads), "failures": int(self.failures),
                      "mirrored": self.mirror, "latency_ms": None, "leader_ms": None,
                      "tracking_deg": None}
+        if self.spring is not None:
+            out["spring"] = self.spring_summary()
         if not table or "target_age_ms" not in table or not len(table["target_age_ms"]):
             return out
 
@@ -244,8 +378,14 @@ class LeaderTargets(TargetSource):
         return out
 
     def close(self) -> None:
-        """Close the leader's bus and port (idempotent); its torque stays off."""
+        """Disarm the spring (torque off: the leader is free again), close the leader's bus and
+        port (idempotent)."""
         arm, self.limb = self.limb, None
+        if arm is not None and self.spring is not None and self.spring.armed:
+            try:
+                self.spring.disarm()
+            except Exception as err:  # closing goes on; the port's close lets go too
+                self.log(f"leader spring: disarming failed: {err}")
         if arm is not None:
             try:
                 arm.close()
@@ -261,13 +401,19 @@ def _looks_like_port(text: str) -> bool:
         text.upper().startswith("COM") and text[3:].isdigit())
 
 
-def open_leader(spec: str, *, names, side, rig, separate_process: bool = True) -> LeaderTargets:
+def open_leader(spec: str, *, names, side, rig, separate_process: bool = True,
+                spring=None, log=None) -> LeaderTargets:
     """``--targets leader:RIG|PORT``: check the leader against the follower, then open it.
 
     ``leader:RIG`` — a rig configuration (shipped name or file) whose ``servos`` section is the
     leader (its own port, models, calibration and joints; its ``joint.side`` its side).
     ``leader:PORT`` (``/dev/...``, ``COMn``, ``sim://...``) — a twin of the follower: the
     follower's own ``servos`` section on that port.
+
+    ``spring`` (:class:`rig.loop.leader_spring.SpringSettings`, ``enabled``; None or disabled:
+    none) builds the leader's :class:`~rig.loop.leader_spring.LeaderSpring` — a leader servo
+    without current control is refused here, in one line — armed when the loop starts;
+    ``log`` receives its one line if it fails.
 
     Raises
     ------
@@ -322,9 +468,18 @@ def open_leader(spec: str, *, names, side, rig, separate_process: bool = True) -
             latency = SIM_LEADER_LATENCY_MS
         if latency is not None:  # the cycle's packet timeout, after the open's generous one
             arm.bus.set_latency(latency)
+        feel = None
+        if spring is not None and spring.enabled:
+            try:
+                feel = LeaderSpring(arm.bus, kin, spring)
+            except RigConfigError as err:
+                raise RigConfigError(f"--targets {spec}: {err}") from None
         desc = (f"{name} ({len(arm.bus.ids)} servos"
-                + (f", mirrored {leader_side} → {follower_side}" if mirror else "") + ")")
-        return LeaderTargets(arm, follower_names, mirror=mirror, port=port, description=desc)
+                + (f", mirrored {leader_side} → {follower_side}" if mirror else "")
+                + (f", spring {spring.gain_ma_per_deg:g} mA/°, max {spring.max_current_ma:g} "
+                   f"mA" if feel is not None else "") + ")")
+        return LeaderTargets(arm, follower_names, mirror=mirror, port=port, description=desc,
+                             spring=feel, log=log)
     except BaseException:
         if arm is not None:
             arm.close()

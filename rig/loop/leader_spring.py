@@ -90,6 +90,32 @@ class SpringSettings:
                                      f"{'>' if strict else '>='} {low:g}, got {v!r}")
 
     @classmethod
+    def from_option(cls, text: str, option: str = "--leader-spring") -> SpringSettings:
+        """Settings from ``GAIN_MA_PER_DEG[,MAX_MA[,DEAD_BAND_DEG]]`` (enabled; the omitted
+        ones the defaults).
+
+        Raises
+        ------
+        RigConfigError
+            Not one to three numbers, or a value out of range (one line naming ``option``).
+        """
+        parts = [p.strip() for p in str(text).split(",")]
+        if not 1 <= len(parts) <= 3 or not all(parts):
+            raise RigConfigError(f"{option} {text!r}: expected GAIN_MA_PER_DEG[,MAX_MA"
+                                 f"[,DEAD_BAND_DEG]], e.g. 10,150,1")
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            raise RigConfigError(f"{option} {text!r}: expected numbers: GAIN_MA_PER_DEG"
+                                 f"[,MAX_MA[,DEAD_BAND_DEG]]") from None
+        names = ("gain_ma_per_deg", "max_current_ma", "dead_band_deg")
+        try:
+            return cls(enabled=True, **dict(zip(names, values, strict=False)))
+        except RigConfigError as err:
+            raise RigConfigError(f"{option} {text!r}: {str(err).removeprefix('leader spring: ')}"
+                                 ) from None
+
+    @classmethod
     def from_mapping(cls, data: Mapping[str, object] | None,
                      where: str = "leader spring") -> SpringSettings:
         """Settings from a YAML mapping (unknown keys refused, in one line naming ``where``)."""

@@ -11,6 +11,7 @@ One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler
      hardware alert on any servo → safe state; a servo not holding the goal written the cycle
      before → safe state; servo data older than the watchdog → safe state]
     one sync write of the goal ticks (none when a fault sends the limb to the safe state)
+    source.feedback(t, commanded) when the source has one (a leader's spring: rig.loop.leader)
     telemetry row (preallocated chunk; written by another thread)
 
 The goal needs the target and the last goal, not the present position, so it is computed while
@@ -581,6 +582,7 @@ class EnforcementLoop:
         self._warm_input = None
         self._warm_s = 0.0
         rest_until = None  # at_end "rest": the last cycle of the slide to the rest pose
+        feedback = getattr(targets, "feedback", None)  # the commanded posture back (a leader)
         still = 0  # cycles the goal ticks have not changed (the slide's end)
         prev_ticks = None
         while True:
@@ -597,6 +599,7 @@ class EnforcementLoop:
                 self.on_cycle(self, k)
             if self._next_targets is not _NO_SWITCH:  # a hand-over, at the cycle's start
                 targets = self._switch_targets(start)
+                feedback = getattr(targets, "feedback", None)
             faults = 0
             # -- 1. the sync read's request: its reply travels (wire, the adapter's latency
             # timer, the servos' return delay) while the goal is computed ---------------------
@@ -748,6 +751,8 @@ class EnforcementLoop:
             if reason is not None:
                 self.enter_safe_state(reason, k)
             c4 = perf()
+            if feedback is not None and reason is None:  # after the write: the goal never waits
+                feedback(start, commanded)
             # -- 4. telemetry ---------------------------------------------------------------
             over = sched.finish()
             if over:

@@ -972,7 +972,8 @@ class MirrorTargets(TargetSource):
 
 # ---------------------------------------------------------------------------------------------
 def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
-                 frames: str | None = None, separate_process: bool = True) -> TargetSource:
+                 frames: str | None = None, separate_process: bool = True,
+                 spring=None, log=None) -> TargetSource:
     """A target source from a ``--targets`` string.
 
     ``PATH.csv`` (or any existing file) → :class:`CsvTrajectory` (its joint orientations in
@@ -996,6 +997,10 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
     separate_process : bool
         A simulated leader's bus served from a process of its own (as the follower's is;
         ``False`` with a manual clock).
+    spring : rig.loop.leader_spring.SpringSettings, optional
+        A leader's spring (the limit felt at the leader); refused for any other source.
+    log : callable, optional
+        Where a leader's spring says it failed.
 
     Raises
     ------
@@ -1030,10 +1035,12 @@ def open_targets(spec: str, *, oracle, rig=None, seed: int = 0,
                     from None
         kw.setdefault("seed", seed)
         return ScriptedTargets(name, oracle, kinematics=_rig_limb_kinematics(rig, oracle), **kw)
+    if spring is not None and not spec.startswith("leader:"):
+        raise RigConfigError(f"--leader-spring needs --targets leader:RIG|PORT, not {spec}")
     if spec.startswith("leader:"):
         names, side = _follower_joints(oracle, rig)
         return open_leader(spec, names=names, side=side, rig=rig,
-                           separate_process=separate_process)
+                           separate_process=separate_process, spring=spring, log=log)
     if spec == "mirror" or spec.startswith("mirror:"):
         if oracle.limb is not None:
             return _open_limb_mirror(spec, rig, oracle.limb)
