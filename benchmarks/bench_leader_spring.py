@@ -15,7 +15,17 @@ last cycle's deviation (3 s simulated); peak: the largest over the run. The anal
 equilibrium, ``K (60° − θ) = kt · min(g (θ − 30° − 0), I_max)`` in consistent units, is
 printed beside it.
 
-Figures only, never assertions. Run: ``.venv/bin/python benchmarks/bench_leader_spring.py``.
+``--arm``: the whole arm through ``rig enforce`` (:func:`rig.loop.run_enforce`): the follower
+``sim-servo-arm`` with the exact limb model of its patient (arm 3), ``--targets
+leader:<sim-leader-arm whose therapist holds it through an impedance hand,
+hand_stiffness=K>``, ``--duration 20``, at 200 Hz on manual clocks (the simulators in this process, their time advanced a period a
+cycle: the figure does not depend on a loaded host), the spring off and on
+(``--leader-spring``). Per joint: the p95 and largest angle between the leader's posture (the
+target) and the commanded posture over the cycles where that joint's target is outside the
+limits (the limit binds), after the first 2 s (the start-up ramp), and the run's ``leader.spring`` summary.
+
+Figures only, never assertions. Run: ``.venv/bin/python benchmarks/bench_leader_spring.py
+[--arm [--seconds S] [--stiffness K] [--spring GAIN,MAX,DEAD_BAND]]``.
 """
 
 from __future__ import annotations
@@ -111,7 +121,113 @@ def equilibrium_deg(settings: SpringSettings | None, stiffness: float,
     return 0.5 * (lo + hi)
 
 
+#: ``--arm``: seconds left out of the figure at the start (the follower's start-up ramp).
+SETTLE_S = 2.0
+
+
+def arm_run(spring: str | None, *, stiffness: float, seconds: float, workdir) -> dict:
+    """One ``rig enforce`` run of the ``--arm`` section; per joint ``{p95, max, cycles}`` of
+    the leader's deviation beyond the commanded posture where the limit binds, deg, and the
+    run's ``leader.spring``."""
+    from pathlib import Path
+
+    import yaml
+
+    from models.limb import dump_limb
+    from models.limb_model import export_limb_model
+    from models.oracle import ConstraintOracle
+    from rig.demo.stages import shipped_config
+    from rig.loop import EnforceHooks, EnforceRequest, run_enforce
+    from rig.sim.patients import anatomical_limb
+    from rig.sim.urls import with_keys
+
+    d = Path(workdir)
+    limb = anatomical_limb(3, "arm", kinds={"elbow": "forearm"})
+    model = d / "arm.onnx"
+    if not model.exists():
+        dump_limb(limb, d / "arm.yaml")
+        export_limb_model(limb, model)  # the exact geometric graph
+    cfg = shipped_config("sim-leader-arm")
+    manual = {"clock": "manual", "process": "off", "wire_time": "off"}
+    cfg["servos"]["port"] = with_keys(cfg["servos"]["port"], hand_stiffness=f"{stiffness:g}",
+                                      **manual)
+    rig = d / "leader.yaml"
+    rig.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    from rig.devices.config import load_rig_config
+    from rig.devices.ports import open_port
+
+    f_url = load_rig_config("sim-servo-arm").servos.port
+    port = open_port(with_keys(f_url, **manual), baud=1_000_000)
+    period = 1.0 / 200.0
+
+    def on_cycle(loop, k):  # the leader's simulated time keeps pace with the loop's
+        if k == 0:
+            loop.targets.bus.set_latency(50.0)
+        loop.targets.port.simulator.clock.advance(period)
+
+    try:
+        res = run_enforce(EnforceRequest(rig="sim-servo-arm", model=str(model),
+                                         targets=f"leader:{rig}", duration_s=seconds,
+                                         stale_servo_ms=1000.0, watchdog_ms=0,
+                                         leader_spring=spring),
+                          hooks=EnforceHooks(keep_telemetry=True, clock=port.simulator.clock,
+                                             ports={f_url: port}, on_cycle=on_cycle))
+    finally:
+        port.close()
+    table = res.telemetry.table()
+    oracle = ConstraintOracle(limb)
+    names = limb.joint_names
+
+    def posture(what):
+        return np.stack([np.stack([table[f"{n}_{what}_{c}"] for c in "wxyz"], axis=-1)
+                         for n in names], axis=1)
+
+    tq, cq = posture("target"), posture("commanded")
+    ok = np.isfinite(tq).all(axis=(1, 2))
+    out: dict = {"cycles": int(len(tq)), "leader": res.summary.get("leader", {}).get("spring"),
+                 "exit": res.exit_status}
+    ok &= np.asarray(table["t_s"]) >= SETTLE_S  # past the start-up ramp
+    bind = np.zeros(tq.shape[:2], dtype=bool)
+    bind[ok] = ~oracle.is_valid(tq[ok])
+    dev = np.degrees(2.0 * np.arccos(np.clip(np.abs(np.einsum("nji,nji->nj", tq, cq)), 0, 1)))
+    for j, n in enumerate(names):
+        e = dev[bind[:, j], j]
+        out[n] = {"cycles": int(len(e)),
+                  "p95": None if not len(e) else float(np.percentile(e, 95)),
+                  "max": None if not len(e) else float(e.max())}
+    return out
+
+
+def arm_main(seconds: float, stiffness: float, spring: str) -> None:
+    import tempfile
+
+    print(f"sim-servo-arm led by sim-leader-arm (7 XL330-M288), therapist hand_stiffness="
+          f"{stiffness:g} N·m/rad, {seconds:g} s at 200 Hz; deviation of the leader beyond "
+          f"the commanded posture where the limit binds (deg)")
+    with tempfile.TemporaryDirectory() as d:
+        for label, opt in (("off", None), (f"on {spring}", spring)):
+            r = arm_run(opt, stiffness=stiffness, seconds=seconds, workdir=d)
+            joints = "; ".join(
+                f"{n} p95 {r[n]['p95']:.1f} max {r[n]['max']:.1f} ({r[n]['cycles']} cycles)"
+                if r[n]["p95"] is not None else f"{n}: never binding"
+                for n in ("shoulder", "elbow", "wrist"))
+            print(f"spring {label:>14}: {joints}; cycles {r['cycles']}, exit {r['exit']}")
+            if r["leader"] is not None:
+                print(f"{'':>22}leader.spring {r['leader']}")
+
+
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--arm", action="store_true", help="the whole arm through rig enforce")
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--stiffness", type=float, default=0.2, help="hand, N·m/rad")
+    ap.add_argument("--spring", default="10,150,1", help="GAIN,MAX_MA,DEAD_BAND_DEG")
+    args = ap.parse_args()
+    if args.arm:
+        arm_main(args.seconds, args.stiffness, args.spring)
+        return
     stiffness = 0.2
     print(f"XL330-M288 leader, admitted ±{LIMIT_DEG:g}°, therapist hand {stiffness} N·m/rad "
           f"towards {TARGET_DEG:g}° (pushes {stiffness * math.radians(30):.3f} N·m at the "
