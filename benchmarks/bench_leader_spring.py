@@ -184,7 +184,7 @@ def arm_run(spring: str | None, *, stiffness: float, seconds: float, workdir) ->
 
     tq, cq = posture("target"), posture("commanded")
     ok = np.isfinite(tq).all(axis=(1, 2))
-    out: dict = {"cycles": int(len(tq)), "leader": res.summary.get("leader", {}).get("spring"),
+    out: dict = {"cycles": len(tq), "leader": res.summary.get("leader", {}).get("spring"),
                  "exit": res.exit_status}
     ok &= np.asarray(table["t_s"]) >= SETTLE_S  # past the start-up ramp
     bind = np.zeros(tq.shape[:2], dtype=bool)
@@ -192,7 +192,7 @@ def arm_run(spring: str | None, *, stiffness: float, seconds: float, workdir) ->
     dev = np.degrees(2.0 * np.arccos(np.clip(np.abs(np.einsum("nji,nji->nj", tq, cq)), 0, 1)))
     for j, n in enumerate(names):
         e = dev[bind[:, j], j]
-        out[n] = {"cycles": int(len(e)),
+        out[n] = {"cycles": len(e),
                   "p95": None if not len(e) else float(np.percentile(e, 95)),
                   "max": None if not len(e) else float(e.max())}
     return out
