@@ -16,13 +16,13 @@ equilibrium, ``K (60° − θ) = kt · min(g (θ − 30° − 0), I_max)`` in co
 printed beside it.
 
 ``--arm``: the whole arm through ``rig enforce`` (:func:`rig.loop.run_enforce`): the follower
-``sim-servo-arm`` with the exact limb model of its patient (arm 3), ``--targets
-leader:<sim-leader-arm whose therapist holds it through an impedance hand,
-hand_stiffness=K>``, ``--duration 20``, at 200 Hz on manual clocks (the simulators in this process, their time advanced a period a
-cycle: the figure does not depend on a loaded host), the spring off and on
-(``--leader-spring``). Per joint: the p95 and largest angle between the leader's posture (the
-target) and the commanded posture over the cycles where that joint's target is outside the
-limits (the limit binds), after the first 2 s (the start-up ramp), and the run's ``leader.spring`` summary.
+``sim-servo-arm`` with the exact limb model of its patient (arm 3), ``--targets leader:<sim-
+leader-arm whose therapist holds it through an impedance hand, hand_stiffness=K>``, ``--duration
+20``, at 200 Hz on manual clocks (the simulators in this process, their time advanced a period a
+cycle: the figure does not depend on a loaded host), the spring off and on (``--leader-
+spring``). Per joint: the p95 and largest angle between the leader's posture (the target) and
+the commanded posture over the cycles where that joint's target is outside the limits (the limit
+binds), after the first 2 s (the start-up ramp), and the run's ``leader.spring`` summary.
 
 Figures only, never assertions. Run: ``.venv/bin/python benchmarks/bench_leader_spring.py
 [--arm [--seconds S] [--stiffness K] [--spring GAIN,MAX,DEAD_BAND]]``.

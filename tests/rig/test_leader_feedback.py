@@ -110,7 +110,7 @@ def test_feedback_hands_the_leaders_spring_the_mapped_back_posture(tmp_path, mir
         lead.spring_armed = True
         lead.bus.set_latency(50.0)
         lead.port.simulator.clock.advance(0.5)
-        t, q = lead.latest(0.5)
+        _, q = lead.latest(0.5)
         ticks = np.asarray(lead.bus.read_ticks())
         commanded = _unit(np.random.default_rng(3), (2,))
         lead.feedback(0.5, [tuple(r) for r in commanded])
