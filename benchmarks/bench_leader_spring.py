@@ -16,13 +16,14 @@ equilibrium, ``K (60° − θ) = kt · min(g (θ − 30° − 0), I_max)`` in co
 printed beside it.
 
 ``--arm``: the whole arm through ``rig enforce`` (:func:`rig.loop.run_enforce`): the follower
-``sim-servo-arm`` with the exact limb model of its patient (arm 3), ``--targets leader:<sim-
-leader-arm whose therapist holds it through an impedance hand, hand_stiffness=K>``, ``--duration
-20``, at 200 Hz on manual clocks (the simulators in this process, their time advanced a period a
-cycle: the figure does not depend on a loaded host), the spring off and on (``--leader-
-spring``). Per joint: the p95 and largest angle between the leader's posture (the target) and
-the commanded posture over the cycles where that joint's target is outside the limits (the limit
-binds), after the first 2 s (the start-up ramp), and the run's ``leader.spring`` summary.
+``sim-servo-arm`` with the exact limb model of its patient (arm 3), ``--targets
+leader:<sim-leader-arm whose therapist holds it through an impedance hand, hand_stiffness=K>``,
+``--duration 20``, at 200 Hz on manual clocks (the simulators in this process, their time
+advanced a period a cycle: the figure does not depend on a loaded host), the spring off and on
+(``--leader-spring``). Per joint, how far the leader is beyond the patient's limits (the angle
+from its pose to the nearest valid posture: the exact oracle's correction): p95 and largest over
+the cycles where that joint is beyond, the mean over all cycles, after the first 2 s (the
+start-up ramp); and the run's ``leader.spring`` summary.
 
 Figures only, never assertions. Run: ``.venv/bin/python benchmarks/bench_leader_spring.py
 [--arm [--seconds S] [--stiffness K] [--spring GAIN,MAX,DEAD_BAND]]``.
@@ -182,19 +183,25 @@ def arm_run(spring: str | None, *, stiffness: float, seconds: float, workdir) ->
         return np.stack([np.stack([table[f"{n}_{what}_{c}"] for c in "wxyz"], axis=-1)
                          for n in names], axis=1)
 
-    tq, cq = posture("target"), posture("commanded")
+    tq = posture("target")
     ok = np.isfinite(tq).all(axis=(1, 2))
     out: dict = {"cycles": len(tq), "leader": res.summary.get("leader", {}).get("spring"),
                  "exit": res.exit_status}
     ok &= np.asarray(table["t_s"]) >= SETTLE_S  # past the start-up ramp
     bind = np.zeros(tq.shape[:2], dtype=bool)
     bind[ok] = ~oracle.is_valid(tq[ok])
-    dev = np.degrees(2.0 * np.arccos(np.clip(np.abs(np.einsum("nji,nji->nj", tq, cq)), 0, 1)))
+    # how far the leader is beyond the patient's limits: each joint's angle to the nearest valid
+    # posture (the exact oracle's correction of the leader's pose)
+    beyond = np.zeros(tq.shape[:2])
+    if ok.any():
+        corr = np.asarray(oracle.correction(tq[ok], normalize=True))
+        beyond[ok] = np.degrees(2.0 * np.arccos(np.clip(np.abs(corr[..., 0]), 0.0, 1.0)))
     for j, n in enumerate(names):
-        e = dev[bind[:, j], j]
+        e = beyond[bind[:, j], j]
         out[n] = {"cycles": len(e),
                   "p95": None if not len(e) else float(np.percentile(e, 95)),
-                  "max": None if not len(e) else float(e.max())}
+                  "max": None if not len(e) else float(e.max()),
+                  "mean_all": float(beyond[ok, j].mean()) if ok.any() else None}
     return out
 
 
@@ -202,13 +209,15 @@ def arm_main(seconds: float, stiffness: float, spring: str) -> None:
     import tempfile
 
     print(f"sim-servo-arm led by sim-leader-arm (7 XL330-M288), therapist hand_stiffness="
-          f"{stiffness:g} N·m/rad, {seconds:g} s at 200 Hz; deviation of the leader beyond "
-          f"the commanded posture where the limit binds (deg)")
+          f"{stiffness:g} N·m/rad, {seconds:g} s at 200 Hz; how far the leader is beyond the "
+          f"patient's limits (each joint's angle to its nearest valid posture, deg): p95 and "
+          f"max over the cycles beyond, mean over all")
     with tempfile.TemporaryDirectory() as d:
         for label, opt in (("off", None), (f"on {spring}", spring)):
             r = arm_run(opt, stiffness=stiffness, seconds=seconds, workdir=d)
             joints = "; ".join(
-                f"{n} p95 {r[n]['p95']:.1f} max {r[n]['max']:.1f} ({r[n]['cycles']} cycles)"
+                f"{n} p95 {r[n]['p95']:.1f} max {r[n]['max']:.1f} ({r[n]['cycles']} cycles, "
+                f"mean {r[n]['mean_all']:.2f})"
                 if r[n]["p95"] is not None else f"{n}: never binding"
                 for n in ("shoulder", "elbow", "wrist"))
             print(f"spring {label:>14}: {joints}; cycles {r['cycles']}, exit {r['exit']}")

@@ -269,9 +269,11 @@ class LeaderTargets(TargetSource):
         self.spring_armed = True
 
     def feedback(self, t: float, commanded) -> None:
-        """The cycle's commanded posture (follower-ordered ``(J_f, 4)``, scalar-first) back to
-        the leader: its spring pulls towards it (module docstring). Nothing without an armed
-        spring, or when this cycle's leader read failed (the ticks would be stale)."""
+        """The cycle's admitted posture (follower-ordered ``(J_f, 4)``, scalar-first: each
+        joint's target brought into the limits, before the rate limits; the commanded goal where
+        a joint holds) back to the leader: its spring pulls towards it (module docstring).
+        Nothing without an armed spring, or when this cycle's leader read failed (the ticks
+        would be stale)."""
         ticks = self._ticks
         if not self._spring_ok or ticks is None or not self.spring_armed:
             return

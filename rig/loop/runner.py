@@ -11,7 +11,8 @@ One cycle (``k``, due at ``t₀ + k/rate``, :class:`rig.loop.scheduler.Scheduler
      hardware alert on any servo → safe state; a servo not holding the goal written the cycle
      before → safe state; servo data older than the watchdog → safe state]
     one sync write of the goal ticks (none when a fault sends the limb to the safe state)
-    source.feedback(t, commanded) when the source has one (a leader's spring: rig.loop.leader)
+    source.feedback(t, aimed) when the source has one (a leader's spring: rig.loop.leader;
+    aimed: each joint's target brought into the limits, before the rate limits)
     telemetry row (preallocated chunk; written by another thread)
 
 The goal needs the target and the last goal, not the present position, so it is computed while
@@ -752,7 +753,11 @@ class EnforcementLoop:
                 self.enter_safe_state(reason, k)
             c4 = perf()
             if feedback is not None and reason is None:  # after the write: the goal never waits
-                feedback(start, commanded)
+                # where each joint's goal is heading (its target brought into the limits), not the
+                # rate-limited goal that lags a fast leader: a spring pulls only at the limit
+                aimed = np.array([s_.aimed if s_.aimed is not None else commanded[j]
+                                  for j, s_ in enumerate(subs)], dtype=np.float64)
+                feedback(start, aimed)
             # -- 4. telemetry ---------------------------------------------------------------
             over = sched.finish()
             if over:

@@ -233,6 +233,12 @@ class Supervisor:
         return self.goal_distance > self.tol_eff
 
     # ------------------------------------------------------------------ one cycle
+    @property
+    def aimed(self) -> qs.Quat | None:
+        """This cycle's target as corrected and brought into the limits (projected), before the
+        rate limits: where the goal is heading. None while holding or recovering."""
+        return self._c_prev
+
     def admit(self, t: float, target, target_t: float | None) -> qs.Quat | None:
         """Check a target; returns it normalised, or None (the goal will hold).
 
