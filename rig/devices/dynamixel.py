@@ -336,12 +336,16 @@ class _Wire2:
     def __init__(self, bus: DynamixelBus) -> None:
         self.bus = bus
 
+    _ping = staticmethod(_ping)
+    _model_name = staticmethod(_model_name)
+
     def ping(self, dxl_id: int) -> ServoInfo | None:
         bus = self.bus
-        got = _ping(bus._sdk_port, bus._ph, dxl_id)
+        got = self._ping(bus._sdk_port, bus._ph, dxl_id)
         if got is None:
             return None
-        return ServoInfo(dxl_id, got[0], _model_name(got[0]), got[1], bus.baud)
+        return ServoInfo(dxl_id, got[0], self._model_name(got[0]), got[1], bus.baud,
+                         self.protocol)
 
     def table(self, info: ServoInfo) -> ControlTable:
         return load_control_table(info.model_number)
@@ -454,12 +458,8 @@ class _Wire1(_Wire2):
         super().__init__(bus)
         self.bulk = True
 
-    def ping(self, dxl_id: int) -> ServoInfo | None:
-        bus = self.bus
-        got = _ping1(bus._sdk_port, bus._ph, dxl_id)
-        if got is None:
-            return None
-        return ServoInfo(dxl_id, got[0], _model_name1(got[0]), got[1], bus.baud, 1.0)
+    _ping = staticmethod(_ping1)
+    _model_name = staticmethod(_model_name1)
 
     def table(self, info: ServoInfo) -> ControlTable:
         return load_control_table(info.model_number, 1.0)

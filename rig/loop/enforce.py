@@ -39,9 +39,7 @@ from rig.loop.leader import LEADER_COLUMNS, LEADER_STALE_PERIODS, LeaderTargets
 from rig.loop.leader_spring import SpringSettings
 from rig.loop.realtime import check_cpu
 from rig.loop.runner import (
-    AT_END,
     SAFE_STATES,
-    START_MISMATCH,
     EnforcementLoop,
     LoopConfig,
     prepare_servo_limb,
@@ -180,15 +178,6 @@ class EnforceRequest:
         if self.safe_state not in SAFE_STATES:
             raise RigConfigError(f"--safe-state {self.safe_state!r}: expected one of "
                                  f"{', '.join(SAFE_STATES)}")
-        if self.start_mismatch_deg > 180:
-            raise RigConfigError(f"--start-mismatch-deg {self.start_mismatch_deg}: at most 180° "
-                                 "(no two orientations are further apart)")
-        if self.on_start_mismatch not in START_MISMATCH:
-            raise RigConfigError(f"--on-start-mismatch {self.on_start_mismatch!r}: expected one "
-                                 f"of {', '.join(START_MISMATCH)}")
-        if self.at_end not in AT_END:
-            raise RigConfigError(f"--at-end {self.at_end!r}: expected one of "
-                                 f"{', '.join(AT_END)}")
         if self.session_id is not None and self.db is None:
             raise RigConfigError("--session needs --db")
         if self.patient is not None and self.db is None:
@@ -198,6 +187,12 @@ class EnforceRequest:
         self.spring_settings()
 
         check_cpu(self.cpu)
+        try:  # LoopConfig checks its own settings (start-up, end), naming the option
+            return self._loop_config()
+        except ValueError as err:
+            raise RigConfigError(str(err)) from None
+
+    def _loop_config(self):
         return LoopConfig(
             rate_hz=float(self.rate_hz), duration_s=self.duration_s, safe_state=self.safe_state,
             watchdog_ms=self.watchdog_ms,

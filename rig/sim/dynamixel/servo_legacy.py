@@ -175,21 +175,6 @@ class LegacyServo(SimServo):
             return Error1.INSTRUCTION
         return Error1.RANGE if code else 0
 
-    # ------------------------------------------------------------------ bench tools
-    def restore(self) -> None:
-        """Back to the state at creation."""
-        mem, position = self._creation
-        self.mem = bytearray(mem)
-        self.pos = self.target = position
-        self.vel = 0.0
-        self.hand = None
-        self.hardware_error = 0
-        self.registered = None
-        self.plugged = True
-        self.temperature = float(self.table.defaults.get("Present Temperature", 30))
-        self.last_instruction_t = None
-        self.booting_until = None
-
     # ------------------------------------------------------------------ physics
     def _vmax(self) -> float:
         """Joint-mode speed of a move, ticks/s (Moving Speed; 0 = no-load maximum)."""
