@@ -206,12 +206,13 @@ class SimServo:
                  position: float | None = None, noise_ticks: float = 0.0,
                  rng: random.Random | None = None, boot: bool = False,
                  load_inertia: float = 0.0, table: ControlTable | None = None):
-        if not 0 <= dxl_id <= 252:
-            raise ValueError(f"servo id must be 0..252, got {dxl_id}")
         if not (math.isfinite(load_inertia) and load_inertia >= 0.0):
             raise ValueError(f"load inertia must be a finite number >= 0 kg·m², got "
                              f"{load_inertia}")
         self.table: ControlTable = table if table is not None else load_control_table(model)
+        max_id = 253 if self.table.protocol == 1.0 else 252  # 1.0: 254 is its broadcast ID
+        if not 0 <= dxl_id <= max_id:
+            raise ValueError(f"servo id must be 0..{max_id}, got {dxl_id}")
         # name -> (first byte, one past last, signed, size): the hot path of get/_set
         self._fields = {n: (it.address, it.end, it.signed, it.size)
                         for n, it in self.table.items.items()}

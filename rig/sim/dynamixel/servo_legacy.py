@@ -32,8 +32,6 @@ which speaks 2.0, runs through the same bus code); :meth:`error1_of` maps them t
 from __future__ import annotations
 
 import math
-import random
-from collections.abc import Callable
 
 from firmware_protocol.dynamixel.control_table import ControlTable, load_control_table
 from firmware_protocol.dynamixel.packets import ALERT, ErrorCode
@@ -86,47 +84,20 @@ class LegacyServo(SimServo):
     """
 
     def __init__(self, dxl_id: int, model: str | int | ControlTable = "AX-12A", *,
-                 protocol: float | None = None, baud_rate: int = 1_000_000,
-                 return_delay_us: int | None = None, position: float | None = None,
-                 noise_ticks: float = 0.0, rng: random.Random | None = None,
-                 boot: bool = False):
+                 protocol: float | None = None, **kwargs):
         table = model if isinstance(model, ControlTable) else load_control_table(model, protocol)
-        max_id = 253 if table.protocol == 1.0 else 252
-        if not 0 <= dxl_id <= max_id:
-            raise ValueError(f"servo id must be 0..{max_id}, got {dxl_id}")
-        self.table = table
-        self._fields = {n: (it.address, it.end, it.signed, it.size)
-                        for n, it in table.items.items()}
-        self._setup_indirect()  # what SimServo.read expects (these tables have no blocks)
-        self.push = None
-        self.mem = table.default_memory()
-        self._set("ID", dxl_id)
-        self._set("Baud Rate", nearest_baud_index(table, baud_rate))
-        if return_delay_us is not None:
-            if not 0 <= return_delay_us <= 508:
-                raise ValueError(f"return delay must be 0..508 µs, got {return_delay_us}")
-            self._set("Return Delay Time", return_delay_us // 2)
-        units = table.units
-        if position is None:
-            position = float((self._max_tick() + 1) // 2)  # 512 (150°) on AX, 2048 on MX
-        self._tick_s = units.ticks_per_rev / 60.0  # ticks/s per rpm
-        self.noise_ticks = float(noise_ticks)
-        self.rng = rng or random.Random(dxl_id)
-        self.pos = self.target = float(position)
-        self.vel = 0.0
+        super().__init__(dxl_id, table=table, **kwargs)
+        self._tick_s = table.units.ticks_per_rev / 60.0  # ticks/s per rpm
         self._set("Goal Position", round(self.pos))
-        self.hand: float | Callable[[float], float] | None = None
-        self.hardware_error = 0
-        self.boot_at_power_on = bool(boot)
-        self.booting_until: float | None = None
-        self.temperature = float(self.get("Present Temperature"))
-        self.registered: tuple[int, bytes] | None = None
-        self.plugged = True
-        self.last_t: float | None = None
-        self.boot_t = 0.0
-        self.last_instruction_t: float | None = None
-        self.watchdog_trips = 0
-        self._creation = (bytes(self.mem), float(position))
+        self._creation = (bytes(self.mem), self._creation[1])
+
+    def _baud_index_of(self, baud_rate: int) -> int:
+        """The table's rate nearest ``baud_rate`` (1.0 rates: 2,000,000 / (n + 1))."""
+        return nearest_baud_index(self.table, baud_rate)
+
+    def _start_position(self) -> float:
+        """Mid-range: 512 (150°) on an AX, 2048 on an MX."""
+        return float((self._max_tick() + 1) // 2)
 
     # ------------------------------------------------------------------ per-model facts
     def _max_tick(self) -> int:
