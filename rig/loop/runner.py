@@ -45,7 +45,6 @@ normal end (duration reached) leaves the limb holding its last goal with the wat
 
 from __future__ import annotations
 
-import collections
 import copy
 import gc
 import math
@@ -91,8 +90,11 @@ __all__ = ["AT_END", "SAFE_STATES", "START_MISMATCH", "EnforcementLoop", "HoldTa
 
 SAFE_STATES = ("hold", "torque-off")
 
-GOAL_HISTORY = 4
-"""A servo's goal read back may be any of the last this many written (late replies)."""
+GOAL_HISTORY = 40
+"""A servo's goal read back may be any of the last this many written: a reply that comes late
+(a loaded host, a stalled simulator, a retried read) answers a request sent writes earlier — a
+fresh-clone run saw a 55 ms stall bring back a goal more than 4 writes old (0.2 s at 200 Hz). A
+servo that refuses goals holds a value that leaves this window once the goal moves on."""
 GOAL_NOT_HELD_CYCLES = 2
 """Reads in a row holding none of them before :attr:`Fault.GOAL_NOT_HELD`."""
 _NO_SWITCH = object()  # EnforcementLoop._next_targets: no hand-over pending
@@ -329,8 +331,9 @@ class EnforcementLoop:
         self.summary: dict = {}
         self._setup_done = False
         # the goal ticks of the last GOAL_HISTORY writes that went out, newest last
-        self._sent_history: collections.deque[np.ndarray] = collections.deque(
-            maxlen=GOAL_HISTORY)
+        self._sent_ring = np.zeros((GOAL_HISTORY, 0), dtype=np.int64)  # a ring, one row a write
+        self._sent_n = 0  # rows of it filled
+        self._sent_i = 0  # the row the next write goes to
         self._not_held = np.zeros(0, dtype=np.int64)  # reads in a row holding none of them
         self._next_targets = _NO_SWITCH  # a hand-over asked for (set_targets), not yet done
         self._next_started = False
@@ -473,6 +476,13 @@ class EnforcementLoop:
                  f"{self.rest_error_deg:.2f}° from the rest pose (the nearest admissible goal "
                  f"the supervisor reached)")
 
+    @property
+    def last_sent(self) -> np.ndarray | None:
+        """The goal ticks of the last sync write that went out (None before the first)."""
+        if not self._sent_n:
+            return None
+        return self._sent_ring[(self._sent_i - 1) % GOAL_HISTORY]
+
     def request_stop(self, reason: str) -> None:
         """Ask the loop to enter the safe state and end (signal handlers call this)."""
         if self.stop_reason is None:
@@ -542,8 +552,10 @@ class EnforcementLoop:
             # and refuses goals until its watchdog is cleared (0) and set again
             _patiently(lambda: bus.arm_watchdog(self.watchdog_ms))  # clears a fired one first
         self._t_bus = clock()
-        self._sent_history.clear()  # what the servos hold before the first write: unknown
-        self._not_held = np.zeros(len(self.kin.min_ticks), dtype=np.int64)
+        n_servos = len(self.kin.min_ticks)  # before the first write what they hold is unknown
+        self._sent_ring = np.zeros((GOAL_HISTORY, n_servos), dtype=np.int64)
+        self._sent_n = self._sent_i = 0
+        self._not_held = np.zeros(n_servos, dtype=np.int64)
         t0 = sched.start()
         targets.start(t0)
         sup.reset(t0, self._present)
@@ -674,15 +686,13 @@ class EnforcementLoop:
             held_bad = -1
             if fresh:
                 held = bus.held_goals
-                if held is not None and self._sent_history:
+                if held is not None and self._sent_n:
                     # one of the last GOAL_HISTORY goals written: a reply that came late (a
-                    # loaded host, a slow adapter, a retried read) is read as a later request's
-                    # and shows the servos a write or two behind — present and held alike. A
-                    # servo that refuses goals holds none of them once the goal moves, cycle
-                    # after cycle: a fault when that lasts GOAL_NOT_HELD_CYCLES reads
-                    diff = np.ones(len(held), dtype=bool)
-                    for sent in self._sent_history:
-                        diff &= held != sent
+                    # loaded host, a stalled simulator, a retried read) is read as a later
+                    # request's and shows the servos writes behind — present and held alike. A
+                    # servo that refuses goals holds none of them once the goal moves on,
+                    # cycle after cycle: a fault when that lasts GOAL_NOT_HELD_CYCLES reads
+                    diff = ~(self._sent_ring[:self._sent_n] == held).any(axis=0)
                     self._not_held = np.where(diff, self._not_held + 1, 0)
                     bad = self._not_held >= GOAL_NOT_HELD_CYCLES
                     if bad.any():
@@ -713,9 +723,9 @@ class EnforcementLoop:
                     a = alerts[0]
                     reason = a.message
             if reason is None and held_bad >= 0:
-                sent = self._sent_history[-1]
+                sent = self.last_sent
                 reason = (f"servo ID {bus.ids[held_bad]} holds goal {int(held[held_bad])} "
-                          f"ticks, none of the last {len(self._sent_history)} written (the "
+                          f"ticks, none of the last {self._sent_n} written (the "
                           f"last {int(sent[held_bad])}) for {GOAL_NOT_HELD_CYCLES} reads in a "
                           f"row (its Bus Watchdog fired, or it refused or clamped the goal)")
             if reason is None and sup.present_stale(start, t_present):
@@ -741,7 +751,9 @@ class EnforcementLoop:
             if reason is None:
                 try:
                     bus.write_goal_ticks(self._goal_ticks)
-                    self._sent_history.append(self._goal_ticks)
+                    self._sent_ring[self._sent_i] = self._goal_ticks
+                    self._sent_i = (self._sent_i + 1) % GOAL_HISTORY
+                    self._sent_n = min(self._sent_n + 1, GOAL_HISTORY)
                     self._t_bus = clock()
                 except RigConnectionError:
                     faults |= Fault.CONNECTION_LOST
