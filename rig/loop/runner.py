@@ -1045,7 +1045,8 @@ def settled_rows(t_s: np.ndarray, target: np.ndarray, present: np.ndarray, *,
     new[1:] = (flat[1:] != flat[:-1]).any(axis=1)
     start = np.maximum.accumulate(np.where(new, np.arange(n), 0))
     jump = _angles_deg(target[start], present[start])  # (N, J)
-    need = np.nanmax(jump / vmax_deg_s + vmax_deg_s / amax_deg_s2, axis=1) + settle_s
+    # fmax ignores a joint without a target; a row with none stays NaN (never settled)
+    need = np.fmax.reduce(jump / vmax_deg_s + vmax_deg_s / amax_deg_s2, axis=1) + settle_s
     return (t_s - t_s[start]) >= need
 
 

@@ -24,6 +24,10 @@ from rig.loop.runner import prepare_servo_limb
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys, without_keys
 
+# the SDK's packet timeout is wall-clock: generous, so a stalled, loaded host (a CI run with
+# both cores busy) never turns a read these tests expect to succeed into a timeout
+LOADED_HOST_MS = 1000.0
+
 MANUAL = {"clock": "manual", "process": "off", "wire_time": "off"}
 PATIENT_KEYS = ("limb", "side", "chain", "seed", "excursion")
 TICKS_PER_DEG = 4096 / 360.0
@@ -108,7 +112,7 @@ def test_feedback_hands_the_leaders_spring_the_mapped_back_posture(tmp_path, mir
         assert lead.mirror is mirrored
         spy = lead.spring = _Spy()
         lead.spring_armed = True
-        lead.bus.set_latency(50.0)
+        lead.bus.set_latency(LOADED_HOST_MS)
         lead.port.simulator.clock.advance(0.5)
         _, q = lead.latest(0.5)
         ticks = np.asarray(lead.bus.read_ticks())
@@ -203,7 +207,7 @@ def test_goal_current_zero_inside_the_limits_and_pulling_beyond(tmp_path, oracle
                        separate_process=False,
                        spring=SpringSettings(True, 10.0, 120.0, 1.0))
     lsim = lead.port.simulator
-    lead.bus.set_latency(50.0)
+    lead.bus.set_latency(LOADED_HOST_MS)
     elbow = lsim.servo(4)
     seen = {}
 
