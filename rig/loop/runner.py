@@ -652,6 +652,7 @@ class EnforcementLoop:
             try:
                 gt = self._inverse(goal, goal_ticks)
                 cand = [kj.forward_one(gt[sl]) for kj, sl in zip(kins, slices, strict=True)]
+                self._rounded_within_rate(gt, goal_ticks, cand, commanded, goal)
                 if sup.accept(cand):
                     goal_ticks = gt
                     commanded = cand
@@ -724,10 +725,13 @@ class EnforcementLoop:
                     reason = a.message
             if reason is None and held_bad >= 0:
                 sent = self.last_sent
+                window = self._sent_ring[:self._sent_n, held_bad]
                 reason = (f"servo ID {bus.ids[held_bad]} holds goal {int(held[held_bad])} "
                           f"ticks, none of the last {self._sent_n} written (the "
-                          f"last {int(sent[held_bad])}) for {GOAL_NOT_HELD_CYCLES} reads in a "
-                          f"row (its Bus Watchdog fired, or it refused or clamped the goal)")
+                          f"last {int(sent[held_bad])}, all within {int(window.min())}.."
+                          f"{int(window.max())}; present {int(ticks[held_bad])}) for "
+                          f"{GOAL_NOT_HELD_CYCLES} reads in a row (its Bus Watchdog fired, or "
+                          f"it refused or clamped the goal)")
             if reason is None and sup.present_stale(start, t_present):
                 faults |= Fault.STALE_PRESENT
                 reason = (f"servo data stale for {1e3 * (start - t_present):.0f} ms (limit "
@@ -886,6 +890,54 @@ class EnforcementLoop:
                         (sup or self.supervisor).joints[j].flags |= Intervention.RATE_LIMITED
         return gt
 
+    def _rounded_within_rate(self, gt: np.ndarray, near: np.ndarray, cand: list,
+                             commanded: list, goal) -> None:
+        """Hold the rounded goal's step within each joint's velocity limit × the step's time.
+
+        The supervisor limits the step of its (unrounded) goal; the IK rounds each servo to the
+        nearest tick, from a previous goal that was rounded too, so a rate-limited step could
+        come out up to a tick longer (0.615° against 0.600° at 120°/s and 200 Hz). Where it
+        does, the joint's servos take, among the ticks either side of the unrounded solution
+        (each servo's floor or ceiling: 2ⁿ postures), the one nearest the supervisor's goal
+        whose step from ``commanded`` (what ``near``, the previous goal ticks, encode) is
+        within the limit; failing any, the tick step from ``near`` is scaled down and
+        truncated towards it until it is (each pass shortens every non-zero servo step: at
+        worst the previous goal, a hold). ``gt`` and ``cand`` change in place, the joint is
+        flagged ``RATE_LIMITED``, and its supervisor goes on from the posture sent
+        (:meth:`~rig.loop.supervisor.Supervisor.settle_on`)."""
+        m = self._max_step
+        for j, (kj, sl, s) in enumerate(zip(self.kins, self.slices, self.supervisor.joints,
+                                            strict=True)):
+            cap = s.vmax * s.dt
+            prev = commanded[j]
+            if _angle_rad(cand[j], prev) <= cap:
+                continue
+            base = near[sl]
+            lo = np.floor(kj.inverse_float(goal[j], base)).astype(np.int64)
+            best, best_q, best_err = None, None, math.inf
+            for bits in range(1 << len(lo)):
+                t = lo + np.array([(bits >> i) & 1 for i in range(len(lo))], dtype=np.int64)
+                if m is not None:
+                    t = np.clip(t, base - m[sl], base + m[sl])
+                q = kj.forward_one(t)
+                if _angle_rad(q, prev) > cap:
+                    continue
+                err = _angle_rad(q, goal[j])
+                if err < best_err:
+                    best, best_q, best_err = t, q, err
+            if best is None:
+                d = gt[sl] - base
+                a = _angle_rad(cand[j], prev)
+                while a > cap:
+                    d = np.trunc(d * (cap / a)).astype(np.int64)
+                    best_q = kj.forward_one(base + d)
+                    a = _angle_rad(best_q, prev)
+                best = base + d
+            gt[sl] = best
+            cand[j] = best_q
+            s.settle_on(best_q)
+            s.flags |= Intervention.RATE_LIMITED
+
     def _warm(self) -> None:
         """The cycle's compute on the last usable target, on a copy of the supervisor (its
         state is plain values: a shallow copy of each joint's supervisor changes nothing of the
@@ -1011,6 +1063,12 @@ class EnforcementLoop:
 
 #: Time a held target is given beyond what the rate limits need before its tracking counts, s.
 SETTLE_S = 0.3
+
+
+def _angle_rad(a, b) -> float:
+    """The angle between two orientations (4 floats each, either sign), radians."""
+    dot = abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
+    return 2.0 * math.acos(min(1.0, dot))
 
 
 def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

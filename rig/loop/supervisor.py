@@ -188,6 +188,7 @@ class Supervisor:
         self.last_correction_angle = 0.0
         self.last_commanded_distance = 0.0
         self._t: float | None = None
+        self.dt = self.period_s  # the last step's time, s
         self._c_prev: qs.Quat | None = None
         self._cache_c: qs.Quat | None = None
         self._cache_c_result = (0.0, qs.IDENTITY)
@@ -290,6 +291,7 @@ class Supervisor:
         if not (dt > 1e-6):
             dt = self.period_s
         self._t = t
+        self.dt = dt  # the step's time: the runner holds the rounded goal's step to vmax · dt
         g0 = self.goal
         if target is None:  # hold the last safe goal, stop its motion
             self.velocity = (0.0, 0.0, 0.0)
@@ -391,6 +393,15 @@ class Supervisor:
         self.velocity = (0.0, 0.0, 0.0)
         self._c_prev = None
         self.flags |= int(flag)
+
+    def settle_on(self, goal) -> None:
+        """The goal becomes ``goal`` (what the rounded goal ticks encode, cut to this cycle's
+        step: :meth:`rig.loop.runner.EnforcementLoop._rounded_within_rate`); its velocity is
+        kept, so the next step starts from what was sent, not from an unrounded goal that ran
+        ahead of it (and a hold holds what was sent)."""
+        g = qs.normalize(tuple(float(v) for v in goal))
+        self.goal = g
+        self.goal_distance = self.commanded_distance(g)
 
     def new_source(self) -> None:
         """The targets now come from another source (a hand-over): the last candidate is

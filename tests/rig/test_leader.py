@@ -22,6 +22,7 @@ from rig.errors import RigConfigError
 from rig.loop import EnforcementLoop, Intervention, LoopConfig, SupervisorConfig
 from rig.loop.leader import (
     LEADER_COLUMNS,
+    LEADER_STALE_PERIODS,
     LeaderTargets,
     leader_mapping,
     mirror_posture,
@@ -32,6 +33,7 @@ from rig.loop.targets import valid_targets
 from rig.loop.telemetry import Telemetry, telemetry_columns
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
+from rig.store import open_store
 
 # the SDK's packet timeout is wall-clock: generous, so a stalled, loaded host (a CI run with
 # both cores busy) never turns a read these tests expect to succeed into a timeout
@@ -220,14 +222,25 @@ def test_a_wrong_leader_is_one_line_before_anything_moves(model, targets, messag
     assert "enforcing" not in out and "backstop" not in out, out
 
 
-def test_rig_enforce_follows_the_simulated_leader(model, tmp_path, rig_cli):
-    summ, tel = tmp_path / "s.json", tmp_path / "t.csv"
+def test_a_leader_unplugged_mid_run_holds_resumes_by_a_ramp_and_the_session_keeps_it_all(
+        model, tmp_path, rig_cli):
+    """``rig enforce`` follows the simulated leader (summary, telemetry columns); the leader's bus cable pulled mid-run by the simulator's own fault injection
+    (``unplug_after=`` / ``unplug_for=``, in its own process: ~300 cycles in) during a CLI run into a
+    store: every cycle whose target is two reads old holds (the read before it failed too:
+    the hold comes within 2 cycles of the cut), the follower's commanded posture does not move
+    while held, it resumes at the velocity limit, and the stored run has every cycle."""
+    cfg = shipped_config("sim-leader-arm")
+    cfg["servos"]["port"] = with_keys(cfg["servos"]["port"], unplug_after=300, unplug_for=0.5)
+    lrig = tmp_path / "leader.yaml"
+    lrig.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    db, tel, summ = tmp_path / "lead.db", tmp_path / "t.csv", tmp_path / "s.json"
     code, out, err = rig_cli(["enforce", "--rig", "sim-servo-arm", "--model", model,
-                              "--targets", "leader:sim-leader-arm", "--duration", "1",
+                              "--targets", f"leader:{lrig}", "--duration", "3.5",
                               "--stale-servo-ms", "1000", "--watchdog-ms", "1000",
+                              "--db", db, "--patient", "P-LEAD-01",
                               "--summary-json", summ, "--telemetry", tel])
     assert code == 0, err
-    assert "targets leader sim-leader-arm (7 servos)" in out
+    assert f"targets leader {lrig.stem}" in out or "targets leader" in out, out
     s = json.loads(summ.read_text())
     assert s["safe_state_entries"] == 0, s["safe_state_reason"]
     lead = s["leader"]
@@ -235,6 +248,43 @@ def test_rig_enforce_follows_the_simulated_leader(model, tmp_path, rig_cli):
     assert lead["latency_ms"]["p50"] > 0 and not lead["mirrored"]
     header = tel.read_text().splitlines()[0].split(",")
     assert header[-2:] == list(LEADER_COLUMNS) and "wrist_target_w" in header
+    rows = np.genfromtxt(tel, delimiter=",", names=True)
+    period = 1.0 / s["rate_hz"]
+    names = ("shoulder", "elbow", "wrist")
+    # the target's age at the cycle's start (the row's age is at its goal's write): 0 when
+    # this cycle's read came, a period or more when it failed (the last good read's time)
+    age = rows["target_age_ms"] - rows["cycle_ms"]
+    failed = age > 0.5e3 * period
+    stale = np.zeros_like(failed)
+    stale[1:] = failed[1:] & failed[:-1]  # the second failed read in a row: held from it
+    # the cut: the longest run of failed reads (a loaded host may time out a read elsewhere)
+    edges = np.flatnonzero(np.diff(np.r_[0, failed.astype(np.int8), 0]))
+    first, end = max(zip(edges[::2], edges[1::2], strict=True), key=lambda e: e[1] - e[0])
+    span = rows["t_s"][end - 1] - rows["t_s"][first]
+    assert 0.4 <= span <= 0.7, span  # the 0.5 s cut, whatever the cycles took
+    assert s["leader"]["failures"] >= failed.sum()
+    assert (age[stale] > 1e3 * LEADER_STALE_PERIODS * period).all()
+    for j in names:
+        bits = rows[f"{j}_intervention"].astype(np.int64)
+        assert (bits[stale] & int(Intervention.HOLD_STALE)).all(), j
+        c = np.stack([rows[f"{j}_commanded_{a}"] for a in "wxyz"], axis=1)
+        step = np.degrees(2 * np.arccos(np.clip(np.abs(np.sum(c[1:] * c[:-1], axis=1)), 0, 1)))
+        # not a tick while held (a tick is 0.088°; the CSV's 9 digits: components to 1e-8)
+        moved = np.abs(np.diff(c, axis=0)).max(axis=1)
+        held = np.flatnonzero(stale[1:]) + 1
+        assert moved[held - 1].max() < 1e-8, (j, held[moved[held - 1] >= 1e-8][:5])
+        dt = np.diff(rows["t_s"])  # the cycle's own step time (a late cycle: a longer step)
+        vmax = s["joints"][j].get("max_velocity_deg_s", 120.0)
+        assert (step <= vmax * np.maximum(dt, period) * 1.05 + 1e-9).all(), j
+    assert end < len(rows) - 50  # resumed: the leader read again
+    with open_store(db, create=False) as store:
+        (sess,) = [x for x in store.sessions.list() if x["kind"] == "enforce"]
+        (run,) = store.runs.list(sess["id"])
+        assert run["status"] == "completed"
+        stored = store.runs.telemetry(run["id"])
+        assert len(stored["cycle"]) == s["cycles"] == len(rows)
+        np.testing.assert_array_equal(stored["cycle"], rows["cycle"].astype(np.int64))
+        assert run["summary"]["leader"]["failures"] == s["leader"]["failures"]
 
 
 def test_a_leader_source_is_a_target_source():

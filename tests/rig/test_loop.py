@@ -107,8 +107,9 @@ def test_adversarial_targets_never_commanded_beyond_tolerance(models, which):
     if which == "wrong-model":  # a model trained for another constraint (as --force-model)
         model = models["cone50"][1]
     oracle = ConstraintOracle(constraint)
-    # every kind of segment once (8 × 0.5 s), each target held long enough to reach the boundary
-    src = ScriptedTargets("adversarial", oracle, seed=7, segment_s=0.5, hold_s=0.25)
+    # every kind of segment once (8 × 0.5 s), each target held long enough to reach the
+    # boundary (at whole ticks within 120°/s: 0.55-0.60° a cycle on this 3-servo shoulder)
+    src = ScriptedTargets("adversarial", oracle, seed=7, segment_s=0.5, hold_s=0.35)
     summary, table, _, _ = _run(constraint, model, src, cycles=800)
     assert summary["cycles"] == 800 and summary["end_reason"] == "completed"
     commanded = _col(table, "commanded")

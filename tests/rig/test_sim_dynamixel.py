@@ -819,6 +819,30 @@ def test_url_clock_and_named_key_errors():
             bus_from_url(url)
 
 
+def test_a_scheduled_unplug_pulls_the_cable_after_so_many_instructions():
+    """``unplug_after=`` / ``unplug_for=``: the cable out from the 4th instruction heard on,
+    for 0.25 s of simulated time, whatever process drives the bus (a leader arm unplugged
+    mid-run)."""
+    url = "sim://dynamixel?ids=1-2&clock=manual&wire_time=off&unplug_after=3&unplug_for=0.25"
+    with bus_from_url(url) as bus:
+        port = PortHandler(bus.port)
+        assert port.openPort()
+        ph = PacketHandler(2.0)
+        try:
+            seen = []
+            for t in (0.1, 0.2, 0.3, 0.4, 0.5, 0.64, 0.65, 2.0):
+                bus.clock.advance(t - bus.clock())
+                seen.append(ph.ping(port, 2)[1])
+            assert seen == [COMM_SUCCESS] * 3 + [COMM_RX_TIMEOUT] * 3 + [COMM_SUCCESS] * 2
+        finally:
+            port.closePort()
+    for url, message in (("sim://dynamixel?unplug_for=1", "unplug_for needs unplug_after"),
+                         ("sim://dynamixel?unplug_after=-1", "unplug_after"),
+                         ("sim://dynamixel?unplug_after=1&unplug_for=0", "unplug_for")):
+        with pytest.raises(RigConfigError, match=message):
+            bus_from_url(url)
+
+
 def test_from_url_dispatches_on_the_device():
     from rig.sim import from_url
     from rig.sim.imu import Bno055Simulator, StreamImuSimulator

@@ -276,6 +276,7 @@ class DynamixelBus(FaultInjection, PtyServer):
                     continue
                 self._outbox.clear()  # a new instruction pre-empts unsent replies
                 self.instructions_seen += 1
+                self._faults.heard(self.instructions_seen, self.clock())
                 if isinstance(packet, InstructionPacket1):
                     proto1.dispatch(self, packet, t_rx)
                 else:
@@ -286,7 +287,7 @@ class DynamixelBus(FaultInjection, PtyServer):
         """Servos that hear the host, speak ``protocol`` (:func:`proto1.speaks`) and are not
         booting at ``now``. A UART hears a host whose rate is within ±3 % of its own (a 1.0
         servo at 57,142 bit/s, a host at 57,600)."""
-        if self._faults.bus_unplugged:
+        if self._faults.cable_out(now):
             return []
         client = self.line_speed
         return [s for s in self.servos.values()

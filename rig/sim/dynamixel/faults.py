@@ -22,6 +22,9 @@ method                                 what the host sees
 ``unplug()`` / ``replug()``            the bus cable between adapter and servos
 ``unplug(adapter=True)`` /             the USB adapter itself (:meth:`disconnect` /
 ``replug(adapter=True)``               :meth:`reconnect`): the port fails with EIO; a new pty
+``schedule_unplug(after, for_s)``      the bus cable pulled once the bus has heard ``after``
+                                       instruction packets (for ``for_s`` s of simulated
+                                       time, or for good): the URL's ``unplug_after=``
 =====================================  =========================================================
 
 :attr:`FaultInjection.fault_counts` counts what was injected (``dropped``, ``corrupted``,
@@ -30,6 +33,7 @@ method                                 what the host sees
 
 from __future__ import annotations
 
+import math
 import random
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -54,6 +58,9 @@ class Faults:
     corrupt_rate: float = 0.0
     rng: random.Random = field(default_factory=lambda: random.Random(0))
     bus_unplugged: bool = False
+    unplug_window: tuple[float, float] | None = None  # [from, until) on the bus's clock, s
+    unplug_after: int | None = None  # instructions heard before a scheduled unplug
+    unplug_for: float = math.inf
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("dropped", "corrupted", "truncated", "delayed", "instructions_corrupted"), 0))
 
@@ -79,6 +86,18 @@ class Faults:
             c["delayed"] += 1
             extra = self.delay
         return packet, extra
+
+    def heard(self, count: int, now: float) -> None:
+        """The bus has heard its ``count``-th instruction at bus time ``now``: a scheduled
+        unplug (:meth:`FaultInjection.schedule_unplug`) pulls the cable from this one on."""
+        if self.unplug_after is not None and count > self.unplug_after:
+            self.unplug_window = (now, now + self.unplug_for)
+            self.unplug_after = None
+
+    def cable_out(self, now: float) -> bool:
+        """True while the bus cable is out at bus time ``now`` (pulled, or scheduled out)."""
+        w = self.unplug_window
+        return self.bus_unplugged or (w is not None and w[0] <= now < w[1])
 
     def spoil_instruction(self) -> bool:
         """True if the instruction packet just decoded is to be taken as arriving with a bad
@@ -186,6 +205,19 @@ class FaultInjection:
                 for i in ids:
                     self.servo(i).plugged = False  # type: ignore[attr-defined]
 
+    def schedule_unplug(self, after: int, for_s: float | None = None) -> None:
+        """Pull the bus cable once the bus has heard ``after`` more instruction packets (the
+        next one goes unheard) and plug it back ``for_s`` seconds of simulated time later
+        (None: never): a leader arm's cable pulled mid-run, at a point of the host's own
+        sequence (a loop reading once a cycle: ``after`` cycles plus its set-up), whatever
+        process drives the bus and however long the host took to start (``unplug_after=`` /
+        ``unplug_for=`` of a ``sim://dynamixel`` URL)."""
+        with self.lock:  # type: ignore[attr-defined]
+            f = self._faults
+            f.unplug_after = self.instructions_seen + int(after)  # type: ignore[attr-defined]
+            f.unplug_for = math.inf if for_s is None else float(for_s)
+            f.unplug_window = None
+
     def replug(self, ids: Iterable[int] | None = None, *, adapter: bool = False) -> str:
         """Undo :meth:`unplug` (``ids`` None: the bus cable and every servo).
 
@@ -197,6 +229,8 @@ class FaultInjection:
         with self.lock:  # type: ignore[attr-defined]
             if ids is None:
                 self._faults.bus_unplugged = False
+                self._faults.unplug_window = None
+                self._faults.unplug_after = None
                 ids = [s.id for s in self.servos.values()]  # type: ignore[attr-defined]
                 for s in self.servos.values():  # type: ignore[attr-defined]
                     s.plugged = True

@@ -21,6 +21,14 @@ key                 meaning                                         default
                     reach the host at its ticks (0: at once)        ``wire_time=off``)
 ``boot``            servos power on booting: silent for their boot  off
                     time (0.4 s; off: already booted)
+``unplug_after``    the bus cable pulled once the bus has heard     never
+                    this many instruction packets: no servo answers
+                    or hears from the next one on (fault injection
+                    in a run the host cannot reach into, e.g.
+                    ``process=on``: a loop reading once a cycle
+                    loses the bus about this many cycles in)
+``unplug_for``      ... and plugged back after this many seconds    for good
+                    of simulated time
 ``process``         serve the bus from a process of its own         off
                     (``on``: as hardware is, outside the host
                     process; :mod:`rig.devices._sim_backends`)
@@ -42,7 +50,7 @@ __all__ = ["DEVICES", "EXAMPLE", "KEYS", "bus_from_query", "bus_from_url"]
 DEVICES = ("dynamixel", "dxl")
 EXAMPLE = "sim://dynamixel?ids=1,2,3&model=XM430-W350"
 KEYS = ("ids", "model", "protocol", "baud", "return_delay_us", "noise", "seed", "wire_time",
-        "usb_latency_ms", "boot")
+        "usb_latency_ms", "boot", "unplug_after", "unplug_for")
 """The bus's own keys (:data:`rig.sim.urls.TIME_KEYS` too)."""
 
 
@@ -97,8 +105,16 @@ def bus_from_query(q: SimUrl, **overrides: object) -> DynamixelBus:
         raise RigConfigError(f"{q.url}: usb_latency_ms={latency:g} needs wire_time=on (without "
                              f"wire time, replies reach the host at once)")
     kwargs["usb_latency_ms"] = latency
+    unplug_after = q.integer("unplug_after", None, 0)
+    unplug_for = q.number("unplug_for", None, 0.0, open_lo=True)
+    if unplug_for is not None and unplug_after is None:
+        raise RigConfigError(f"{q.url}: unplug_for needs unplug_after (when the cable is "
+                             f"pulled)")
     kwargs.update(overrides)
-    return start_servo_bus(**kwargs)  # type: ignore[arg-type]
+    bus = start_servo_bus(**kwargs)  # type: ignore[arg-type]
+    if unplug_after is not None:
+        bus.schedule_unplug(unplug_after, unplug_for)
+    return bus
 
 
 def _ids(q: SimUrl) -> list:
