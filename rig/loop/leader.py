@@ -48,9 +48,11 @@ counted, disarmed, and said once.
 Figures
 -------
 :meth:`LeaderTargets.telemetry_values` gives each telemetry row ``leader_ms`` (the leader read's
-time, ms) and ``target_age_ms`` (from the leader's sample — the cycle's start of the read that
-produced the target — to the end of the cycle's sync write of the follower's goal, ms);
-:meth:`LeaderTargets.summary` the run's ``leader`` figures.
+time, ms), ``target_age_ms`` (from the leader's sample — the cycle's start of the read that
+produced the target — to the end of the cycle's sync write of the follower's goal, ms) and
+``leader_read`` (1: this cycle's read gave the target; 0: it failed, the target is an older
+one); :meth:`LeaderTargets.summary` the run's ``leader`` figures, its latency over the cycles
+whose read came (a failed read is a stale target, counted apart, not a latency).
 """
 
 from __future__ import annotations
@@ -74,7 +76,11 @@ __all__ = ["LEADER_COLUMNS", "LEADER_STALE_PERIODS", "LeaderTargets", "leader_ma
            "mirror_posture", "open_leader", "posture_to_leader"]
 
 #: Telemetry columns a leader adds after the loop's own (:meth:`LeaderTargets.telemetry_values`).
-LEADER_COLUMNS = ("leader_ms", "target_age_ms")
+LEADER_COLUMNS = ("leader_ms", "target_age_ms", "leader_read")
+
+#: The follower is taken to have caught up with the leader (a start-up ramp over) once every
+#: joint is within this angle of its target, degrees (the tracking figure starts there).
+CAUGHT_UP_DEG = 5.0
 
 #: ``stale_target_s`` of a run driven by a leader, in loop periods: a target one period old
 #: (the first failed read) is still used; two periods old (the second) holds.
@@ -195,6 +201,7 @@ class LeaderTargets(TargetSource):
         self._last: np.ndarray | None = None
         self._last_t: float | None = None
         self._leader_ms = math.nan
+        self._read_ok = False  # this cycle's read gave the target
         self.spring = spring
         self.log = log or (lambda line: None)
         self.spring_armed = False
@@ -238,8 +245,10 @@ class LeaderTargets(TargetSource):
         self._leader_ms = 1e3 * (time.perf_counter() - c0)
         if q is None or not np.isfinite(q).all():
             self.failures += 1
+            self._read_ok = False
             return self._last_t, self._last
         self._last, self._last_t = q, float(t)
+        self._read_ok = True
         return self._last_t, q
 
     # -- the spring -------------------------------------------------------------------------
@@ -311,13 +320,14 @@ class LeaderTargets(TargetSource):
                 "failures": int(self.spring_failures)}
 
     # -- figures --------------------------------------------------------------------------
-    def telemetry_values(self, t_s: float, cycle_ms: float) -> tuple[float, float]:
-        """``(leader_ms, target_age_ms)`` of the cycle that started at loop time ``t_s``
-        (relative to :meth:`start`'s ``t0``) and whose work took ``cycle_ms`` up to its row:
-        the target's age when the cycle's goal was written (NaN: no target yet)."""
+    def telemetry_values(self, t_s: float, cycle_ms: float) -> tuple[float, float, float]:
+        """``(leader_ms, target_age_ms, leader_read)`` of the cycle that started at loop time
+        ``t_s`` (relative to :meth:`start`'s ``t0``) and whose work took ``cycle_ms`` up to its
+        row: the target's age when the cycle's goal was written (NaN: no target yet), and
+        whether this cycle's read gave it (1.0 / 0.0)."""
         st = self._last_t
         age = math.nan if st is None else 1e3 * (self.t0 + t_s - st) + cycle_ms
-        return self._leader_ms, age
+        return self._leader_ms, age, 1.0 if self._read_ok else 0.0
 
     def summary(self, table=None, oracle=None, is_valid=None) -> dict:
         """The run's ``leader`` figures.
@@ -338,9 +348,13 @@ class LeaderTargets(TargetSource):
         -------
         dict
             ``reads``, ``failures``, ``mirrored``, ``latency_ms`` ``{p50, p99}`` (target age at
-            the goal's write), ``leader_ms`` ``{p50, p99}``, ``tracking_deg`` ``{median, p95,
-            cycles}``: per cycle the largest joint's angle between the target and the present
-            orientation read at the cycle's start, over admissible targets.
+            the goal's write, over the cycles whose read came), ``stale_cycles`` (cycles whose
+            read failed: an older target, held from the second in a row), ``leader_ms``
+            ``{p50, p99}``, ``tracking_deg`` ``{median, p95, cycles, from_cycle}``: per cycle
+            the largest joint's angle between the target and the present orientation read at
+            the cycle's start, over the cycles whose read came and whose target is admissible,
+            from the first cycle the follower was within :data:`CAUGHT_UP_DEG` of the leader
+            in every joint (None before it ever was).
         """
         out: dict = {"reads": int(self.reads), "failures": int(self.failures),
                      "mirrored": self.mirror, "latency_ms": None, "leader_ms": None,
@@ -356,7 +370,9 @@ class LeaderTargets(TargetSource):
 
         age = np.asarray(table["target_age_ms"], dtype=np.float64)
         lead = np.asarray(table["leader_ms"], dtype=np.float64)
-        out["latency_ms"] = {"p50": pct(age, 50), "p99": pct(age, 99)}
+        fresh = np.asarray(table.get("leader_read", np.ones_like(age)), dtype=np.float64) > 0.5
+        out["latency_ms"] = {"p50": pct(age[fresh], 50), "p99": pct(age[fresh], 99)}
+        out["stale_cycles"] = int((~fresh).sum())
         out["leader_ms"] = {"p50": pct(lead, 50), "p99": pct(lead, 99)}
         if oracle is None or is_valid is None:
             return out
@@ -371,12 +387,19 @@ class LeaderTargets(TargetSource):
 
         tq, pq = posture("target"), posture("present")
         ok = is_valid(oracle, tq if not one else tq[:, 0])
-        if ok.any():
-            dot = np.abs(np.einsum("nji,nji->nj", tq[ok], pq[ok]))
+        with np.errstate(invalid="ignore"):
+            dot = np.abs(np.einsum("nji,nji->nj", tq, pq))
             err = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0))).max(axis=1)
-            out["tracking_deg"] = {"median": float(np.median(err)),
-                                   "p95": float(np.percentile(err, 95)),
-                                   "cycles": int(ok.sum())}
+        # from the first cycle the follower was within CAUGHT_UP_DEG of the leader in every
+        # joint: before it, a start-up ramp (a start mismatch) is not tracking
+        near = np.flatnonzero(err < CAUGHT_UP_DEG)
+        if len(near):
+            ok[:near[0]] = False
+            ok &= fresh
+            if ok.any():
+                out["tracking_deg"] = {"median": float(np.median(err[ok])),
+                                       "p95": float(np.percentile(err[ok], 95)),
+                                       "cycles": int(ok.sum()), "from_cycle": int(near[0])}
         return out
 
     def close(self) -> None:

@@ -1012,6 +1012,7 @@ class EnforcementLoop:
         }
         if self.n_joints > 1:
             counters["joints"] = self._joint_summary()
+            counters["joint_names"] = list(self.joint_names)  # the limb's order (JSON sorts)
         return summarise(rate_hz=self.config.rate_hz, telemetry=self.telemetry,
                          counters=counters, duration_s=duration_s)
 

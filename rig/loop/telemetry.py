@@ -29,9 +29,10 @@ Columns (:data:`COLUMNS`; orientations scalar-first joint orientations, parent f
 =====================  =========================================================================
 
 A run driven by a leader arm (``--targets leader:...``) adds, after these,
-:data:`rig.loop.leader.LEADER_COLUMNS`: ``leader_ms`` (the leader's sync read, ms) and
+:data:`rig.loop.leader.LEADER_COLUMNS`: ``leader_ms`` (the leader's sync read, ms),
 ``target_age_ms`` (the target's age when the cycle's goal was written: from the leader's sample
-to the end of the sync write, ms). Other runs' columns are unchanged.
+to the end of the sync write, ms) and ``leader_read`` (1 when this cycle's read gave the target,
+0 when it failed). Other runs' columns are unchanged.
 """
 
 from __future__ import annotations
@@ -153,7 +154,7 @@ class Telemetry:
         names of ``extra``'s values.
     extra : callable(t_s, cycle_ms) -> tuple of float, optional
         Values a target source adds to each row, after the loop's own (a leader arm's
-        ``leader_ms``, ``target_age_ms``: :meth:`rig.loop.leader.LeaderTargets.
+        ``leader_ms``, ``target_age_ms``, ``leader_read``: :meth:`rig.loop.leader.LeaderTargets.
         telemetry_values`); called with the row's ``t_s`` and ``cycle_ms``.
     """
 

@@ -78,6 +78,8 @@ class ReportData:
     error_map_png: bytes | None = None
     enforcement: dict[str, Any] = field(default_factory=dict)
     enforcement_verdict: str | None = None
+    enforcement_joints: list[dict[str, Any]] = field(default_factory=list)  # a limb's joints
+    leader: dict[str, Any] = field(default_factory=dict)  # a run driven by a leader arm
     software: str | None = None
 
 
@@ -128,6 +130,17 @@ def kv_table(rows: dict[str, Any], digits: int = 2) -> str:
     body = "".join(f"<tr><th>{_e(k)}</th><td>{fmt(v, digits)}</td></tr>"
                    for k, v in rows.items())
     return f"<table>{body}</table>"
+
+
+def rows_table(rows: list[dict[str, Any]], digits: int = 2) -> str:
+    """A table with one row per dict (the first's keys as the header)."""
+    if not rows:
+        return ""
+    keys = list(rows[0])
+    head = "".join(f"<th>{_e(k)}</th>" for k in keys)
+    body = "".join("<tr>" + "".join(f"<td>{fmt(r.get(k), digits)}</td>" for k in keys)
+                   + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
 
 
 def verdict_html(text: str | None) -> str:
@@ -242,8 +255,10 @@ def render_html(data: ReportData) -> str:
             ("Recorded", _recorded_words(data)),
             ("Samples", fmt(data.samples) if data.samples is not None else None),
             ("Dropped samples", fmt(data.dropped) if data.dropped is not None else None)]
-    out = page_head(f"Range of motion report: {data.patient}, session {data.session_id}",
-                    f"Range of motion report — {data.joint}"
+    what = ("Live enforcement report" if data.enforcement and not data.rom_rows
+            and not data.boundary_facts else "Range of motion report")
+    out = page_head(f"{what}: {data.patient}, session {data.session_id}",
+                    f"{what} — {data.joint}"
                     f"{' (' + data.side + ')' if data.side else ''}", meta)
     out += warnings_html(data.warnings, data.simulated)
 
@@ -293,6 +308,18 @@ def render_html(data: ReportData) -> str:
         out.append("<h2>Live enforcement</h2>")
         out.append(verdict_html(data.enforcement_verdict))
         out.append(kv_table(data.enforcement, 2))
+    if data.enforcement_joints:
+        out.append("<h3>Per joint</h3>")
+        out.append(rows_table(data.enforcement_joints, 2))
+        out.append("<p class='small'>Limit binding: cycles whose target the supervisor brought "
+                   "into the patient's limits. Held: cycles whose target was stale or invalid "
+                   "(the last safe goal kept), or a joint kept still while a coupled joint "
+                   "recovered. Tracking: the angle between each admissible target and the "
+                   "servos' present orientation once the target was held long enough to be "
+                   "reached.</p>")
+    if data.leader:
+        out.append("<h3>Leader arm</h3>")
+        out.append(kv_table(data.leader, 2))
 
     out += page_foot(data.software, "Angles follow the ISB recommendation (Wu et al. 2005) "
                      "for the humerus relative to the thorax.")

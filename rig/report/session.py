@@ -154,6 +154,71 @@ def enforcement_facts(summary: dict) -> tuple[dict[str, Any], str]:
     return facts, verdict
 
 
+#: Interventions that mean the patient's limit was binding on a joint (its target left the
+#: limits, or the goal was brought back into them), by their summary names.
+LIMIT_KINDS = ("projected", "reprojected", "recovery")
+
+
+def enforcement_joint_rows(summary: dict) -> list[dict[str, Any]]:
+    """One row per joint of a limb run's summary (``joints``): the largest violation, how often
+    the patient's limit was binding (:data:`LIMIT_KINDS`), held cycles (a stale or invalid
+    target, a coupled joint recovering), rate-limited cycles and the tracking of admissible
+    targets; empty for a run of one joint."""
+    joints = summary.get("joints") or {}
+    if len(joints) < 2:
+        return []
+    order = [n for n in summary.get("joint_names") or () if n in joints]
+    order += [n for n in joints if n not in order]
+    rows = []
+    for name in order:
+        j = joints[name]
+        kinds = j.get("interventions_by_kind") or {}
+        rows.append({
+            "joint": name,
+            "max violation (°)": j.get("max_violation_deg"),
+            "limit binding (cycles)": sum(int(kinds.get(k, 0)) for k in LIMIT_KINDS),
+            "held (cycles)": sum(int(v) for k, v in kinds.items() if k.startswith("hold")
+                                 or k == "held_for_coupled"),
+            "rate-limited (cycles)": j.get("rate_limited"),
+            "tracking p50 (°)": j.get("tracking_p50_deg"),
+            "tracking p95 (°)": j.get("tracking_p95_deg"),
+        })
+    return rows
+
+
+def leader_facts(summary: dict) -> dict[str, Any]:
+    """Report rows of a run driven by a leader arm (its summary's ``leader``); empty
+    otherwise."""
+    lead = summary.get("leader")
+    if not lead:
+        return {}
+
+    def pair(d, a="p50", b="p99", digits=1):
+        if not d or d.get(a) is None:
+            return None
+        return f"{d[a]:.{digits}f} / {d[b]:.{digits}f}"
+
+    track = lead.get("tracking_deg") or {}
+    facts = {
+        "leader reads": lead.get("reads"),
+        "failed reads (an older target; held from the second in a row)": lead.get("failures"),
+        "leader → follower latency p50 / p99 (ms)": pair(lead.get("latency_ms")),
+        "leader read p50 / p99 (ms)": pair(lead.get("leader_ms")),
+        "tracking of admissible leader motion, median / p95 (°)":
+            pair(track, "median", "p95") if track else None,
+        "cycles with an admissible leader posture": track.get("cycles") if track else None,
+        "mirrored (the patient's other arm leads)": lead.get("mirrored"),
+    }
+    spring = lead.get("spring")
+    if spring:
+        facts["spring at the leader"] = "armed" if spring.get("armed") else "not armed"
+        facts["spring binding (cycles)"] = spring.get("binding_cycles")
+        facts["spring current p95 / max (mA)"] = pair(spring.get("current_ma"), "p95", "max",
+                                                      0)
+        facts["spring failures"] = spring.get("failures")
+    return {k: v for k, v in facts.items() if v is not None}
+
+
 def evaluate_for_report(model_path, *, n: int = 4000, seed: int = 12_345):
     """(constraint, metrics, limb directions (n, 3), 3-D error % (n,)) of a model on held-out
     orientations of the constraint embedded in it."""
@@ -310,6 +375,10 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
                 float(r["summary"].get("max_violation_deg") or 0.0) for r in done)
         data.enforcement = facts
         data.enforcement_verdict = verdict
+        data.enforcement_joints = enforcement_joint_rows(last["summary"])
+        data.leader = leader_facts(last["summary"])
+        if sess.get("kind") == "enforce" and len(data.enforcement_joints) > 1:
+            data.joint = ", ".join(r["joint"] for r in data.enforcement_joints)
     return data
 
 
