@@ -32,8 +32,10 @@ from rig.commands._options import finite_seconds
 @click.option("--targets", required=True, metavar="SOURCE",
               help="PATH.csv (t_s,w,x,y,z; a servo limb: t_s then <joint>_w,<joint>_x,"
                    "<joint>_y,<joint>_z per joint in the limb file's order), "
-                   "script:slow|sweep|adversarial|hold[?seed=N], or mirror / mirror:RIG (an "
-                   "IMU-worn limb through the orientation sources).")
+                   "script:slow|sweep|adversarial|hold[?seed=N], mirror / mirror:RIG (an "
+                   "IMU-worn limb through the orientation sources), or leader:RIG|PORT (a "
+                   "leader arm moved by a person: a rig configuration whose servos are the "
+                   "leader, or a twin of the follower's servos on PORT).")
 @click.option("--frames", type=click.Choice(["rig", "isb"]), default=None,
               help="Segment frames of a targets file's joint orientations: rig (default) or "
                    "isb (+Y proximal, +X anterior, +Z right).")
@@ -107,8 +109,8 @@ from rig.commands._options import finite_seconds
                    "cycle (default: off; the joints' --max-velocity-deg-s still applies).")
 @click.option("--leader-spring", default=None, metavar="GAIN[,MAX_MA[,DEAD_BAND_DEG]]",
               help="With --targets leader:...: the limit felt at the leader — while the "
-                   "patient's limit binds, each leader servo is pulled towards the follower's "
-                   "commanded pose with GAIN mA per degree, at most MAX_MA (default 150), "
+                   "patient's limit binds, each leader servo is pulled towards the posture "
+                   "the limits admit with GAIN mA per degree, at most MAX_MA (default 150), "
                    "free within DEAD_BAND_DEG (default 1) (current-based position mode; "
                    "default: off).")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
