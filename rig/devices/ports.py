@@ -48,9 +48,9 @@ import stat
 
 from rig.devices.port import Port, SimulatedPatient
 from rig.errors import RigConfigError, RigConnectionError
-from rig.sim.urls import SIM_DEVICES
+from rig.sim.urls import SIM_DEVICES, query_keys, without_keys
 
-__all__ = ["Port", "SimulatedPatient", "check_hardware_path", "open_port"]
+__all__ = ["Port", "SimulatedPatient", "check_hardware_path", "open_port", "real_time_port"]
 
 
 def open_port(url: str, *, baud: int | None = None, separate_process: bool = False) -> Port:
@@ -96,6 +96,23 @@ def open_port(url: str, *, baud: int | None = None, separate_process: bool = Fal
         return open_sim_port(url, baud=baud, separate_process=separate_process)
     check_hardware_path(url)
     return Port(url=url, path=url)
+
+
+def real_time_port(url: str) -> tuple[str, str | None]:
+    """The port string a live loop opens for ``url``, and a note when it differs.
+
+    A simulator's ``time_scale=`` runs its time — its servos' motion and Bus Watchdog, its
+    patient — that many times faster than the host's: right for recording a long motion in a
+    short test, wrong under a live loop, whose deadlines and watchdog checks are in the host's
+    time (at ``time_scale=20`` a 1 s Bus Watchdog trips after 50 ms of the host's: a short
+    stall of a loaded host stops the servos and the loop's goals are refused). The key is
+    dropped, and the note says so; any other port string is returned as it is.
+    """
+    if not url.startswith("sim://") or "time_scale" not in query_keys(url):
+        return url, None
+    return without_keys(url, "time_scale"), (
+        f"the simulated servos' time_scale is not used under the live loop: their time (motion, "
+        f"Bus Watchdog) runs at the loop's ({url})")
 
 
 def check_hardware_path(path: str) -> None:

@@ -31,7 +31,7 @@ from models.limb import load_limits, loads_limb
 from models.onnx_io import load_model
 from models.oracle import ConstraintOracle
 from rig.devices.config import load_rig_config
-from rig.devices.ports import open_port
+from rig.devices.ports import open_port, real_time_port
 from rig.errors import RigConfigError
 from rig.loop import realtime
 from rig.loop.binding import bind_model
@@ -386,8 +386,10 @@ def _run_with_devices(prep: _Prepared, echo: Callable[[str], None],
     try:
         with src:
             if own_port:  # a simulated bus in a process of its own, as hardware is
-                port = open_port(servos.port, baud=servos.baud,
-                                 separate_process=hooks.clock is None)
+                url, note = real_time_port(servos.port)
+                if note:
+                    echo(f"note: {note}")
+                port = open_port(url, baud=servos.baud, separate_process=hooks.clock is None)
                 opened.callback(port.close)
             limb = prepare_servo_limb(port, servos, prep.oracle, log=echo)
             opened.callback(limb.close)

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from rig.devices.ports import open_port
+from rig.devices.ports import open_port, real_time_port
 from rig.errors import RigConfigError, RigConnectionError
 
 
@@ -156,3 +156,13 @@ def test_port_closers_run_once_in_reverse_order():
     port.close()
     port.close()
     assert calls == [2, 1] and port.closed
+
+
+def test_a_live_loop_runs_a_simulator_in_its_own_time():
+    """``time_scale`` of a simulated bus is dropped under the live loop (its Bus Watchdog and
+    motion in the loop's time), with a note naming the port; other ports are left alone."""
+    url, note = real_time_port("sim://dynamixel?ids=1-3&time_scale=20&seed=2")
+    assert url == "sim://dynamixel?ids=1-3&seed=2"
+    assert "time_scale" in note and "sim://dynamixel?ids=1-3&time_scale=20&seed=2" in note
+    for same in ("sim://dynamixel?ids=1-3&seed=2", "/dev/ttyUSB0", "sim://dynamixel"):
+        assert real_time_port(same) == (same, None)
