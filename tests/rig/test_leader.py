@@ -136,10 +136,18 @@ def test_the_leaders_own_calibration_gives_the_same_joints_as_the_followers(tmp_
 
 
 # --------------------------------------------------------------------------- the loop
-def test_a_leader_that_stops_answering_holds_the_follower_within_two_cycles(tmp_path, arm):
-    """Cycle 20 pulls the leader's bus cable (nobody answers): that cycle still steers to the
-    last posture read (one period old), the next holds in every joint (HOLD_STALE, the goal
-    unchanged from then on); every failure is counted."""
+FAULTS = {  # what the leader's simulator does from the cut on (on the wire, rig.sim faults)
+    "unplugged": lambda sim: sim.unplug(),  # the bus cable: nobody answers
+    "garbage": lambda sim: sim.set_fault_rates(corrupt=1.0),  # every reply's CRC wrong
+    "stalled": lambda sim: sim.delay_responses(10.0, 1000),  # replies 10 s late
+}
+
+
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+def test_a_leader_that_fails_holds_the_follower_within_two_cycles(tmp_path, arm, fault):
+    """Cycle 20 the leader stops answering, answers garbage or stalls: that cycle still steers
+    to the last posture read (one period old), the next holds in every joint (HOLD_STALE, the
+    goal unchanged from then on); every failure is counted."""
     _, oracle = arm
     follower = load_rig_config("sim-servo-arm")
     rate = 200.0
@@ -156,7 +164,7 @@ def test_a_leader_that_stops_answering_holds_the_follower_within_two_cycles(tmp_
     def on_cycle(loop, k):
         lsim.clock.advance(period)
         if k == cut:
-            lsim.unplug()
+            FAULTS[fault](lsim)
             lead.bus.set_latency(1.0)  # each failed read costs its packet timeout
 
     cfg = LoopConfig(rate_hz=rate, watchdog_ms=1000, supervisor=SupervisorConfig(
