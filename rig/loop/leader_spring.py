@@ -190,6 +190,14 @@ class LeaderSpring:
             self._units_ma[k] = load_control_table(info.model_number,
                                                    protocol).units.current_ma
         self._deg_per_tick = np.degrees(kinematics.rad_per_tick)
+        # axes whose range is a whole turn: in Current-based Position Control Mode their
+        # Present Position is multi-turn (e-Manual Operating Mode(11): ±256 revolutions), so a
+        # hand taking one through 4095 → 0 reads 4100, not 4; their goal is taken in the turn
+        # of the present position, not a turn away within 0..4095
+        self._tpr = np.asarray(kinematics.ticks_per_rev, dtype=np.float64)
+        self._lo = np.asarray(kinematics.min_ticks, dtype=np.float64)
+        self._free_turn = (np.asarray(kinematics.max_ticks, dtype=np.float64) - self._lo
+                           + 1.0) >= self._tpr
         self.armed = False
         self._modes: dict[int, int] = {}
         self._sent_zero = True
@@ -287,11 +295,14 @@ class LeaderSpring:
             if not binding[j]:
                 continue
             sl = kin.slices[j]
+            p, free, tpr, lo = present[sl], self._free_turn[sl], self._tpr[sl], self._lo[sl]
+            one_turn = np.where(free, lo + np.mod(p - lo, tpr), p)
             try:
-                g = joint.inverse_float(aq[j], present[sl])
+                g = joint.inverse_float(aq[j], one_turn)
             except UnreachableError:
                 binding[j] = False
                 continue
+            g = np.where(free, g + tpr * np.round((p - g) / tpr), g)  # the nearest turn
             goal[sl] = g
             current[sl] = np.minimum(s.gain_ma_per_deg * np.abs(g - present[sl])
                                      * self._deg_per_tick[sl], s.max_current_ma)

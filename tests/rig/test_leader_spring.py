@@ -116,6 +116,25 @@ def test_arm_update_disarm_on_the_wire():
         assert sim.get("Goal Current") == 0
 
 
+def test_a_leader_turned_through_the_wrap_is_pulled_the_short_way():
+    """In Current-based Position Control Mode a whole-turn axis reads multi-turn (a hand that
+    took it through 4095 → 0 reads 4146, not 50): the spring's goal is the admitted pose in
+    that turn — 5° on, not 355° back to its equivalent inside 0..4095."""
+    url = "sim://dynamixel?ids=1&model=XL330-M288&clock=manual&return_delay_us=0"
+    kin = JointKinematics([ServoAxis(1, (0.0, 0.0, 1.0), 2048, 1, 0, 4095)])
+    with DynamixelBus(url, [Servo(1)]) as dxl:
+        spring = LeaderSpring(dxl, kin, SpringSettings(True, 10.0, 100.0, 1.0))
+        with spring:
+            ticks = np.array([4096 + 50])  # 4.4° past the wrap, one turn up
+            lq = kin.forward(ticks)[None]
+            admitted = kin.forward([4096 + 50 + 4096 * 5 / 360])[None]  # 5° further on
+            current = spring.update(lq, admitted, ticks)
+            dxl.read_ticks()
+            goal = dxl.port.simulator.servo(1).get("Goal Position")
+            assert abs(goal - (4096 + 50 + 4096 * 5 / 360)) <= 1, goal
+            assert current[0] == pytest.approx(50.0, abs=1.0)  # 5°, not 355°
+
+
 def test_spring_on_a_leader_without_current_control_is_one_line():
     url = "sim://dynamixel?ids=1&model=XL430-W250"
     with DynamixelBus(url, [Servo(1)]) as dxl:
