@@ -503,12 +503,11 @@ def direction_from_servo_move(k: int, asked_rad: np.ndarray, ticks: np.ndarray,
     others = [j for j in range(len(tpr)) if j != k and moved[j] > limit]
     if others:
         j = max(others, key=lambda i: moved[i])
-        itself = (f", and {labels[k]} did not follow it ({moved[k]:.1f}°)"
-                  if moved[k] < asked / 3.0 else "")
+        itself = ", which did not follow it" if moved[k] < asked / 3.0 else ""
         raise CalibrationError(
-            f"{labels[j]} turned {moved[j]:.0f}° during the move of {labels[k]}, which turns "
-            f"{labels[k]} alone{itself}: are the two servos' IDs or cables swapped? check the "
-            f"wiring against rig {rig}, then calibrate again")
+            f"{labels[j]} turned {moved[j]:.0f}° during the move of {labels[k]}{itself}: "
+            f"are the two servos' IDs or cables swapped? check the wiring against rig {rig}, "
+            f"then calibrate again")
     if moved[k] < asked / 3.0:
         raise CalibrationError(
             f"{labels[k]} did not follow its move: it turned {moved[k]:.1f}° of the "
