@@ -18,7 +18,8 @@ Public API
 - :class:`HeadingCorrection` — relative heading drift of the two IMUs removed at neutral-pose
   checkpoints (:mod:`calibration.heading`).
 - :class:`CalibrationProtocol`, :class:`LimbCalibrationProtocol` — the guided calibration
-  movements of the shoulder and of a whole arm or leg (:mod:`calibration.protocol`).
+  movements of the shoulder and of a whole arm or leg; :class:`ServoMoveProtocol` — a servo
+  arm's, one single-axis move per servo (:mod:`calibration.protocol`).
 - :class:`ServoChainCalibration` — servo zero offsets and directions (:mod:`calibration.servo`).
 - :class:`BoundaryExtractor`, :func:`boundary_distance`, :func:`outside_fraction` —
   recording → constraint, and its accuracy measures (:mod:`calibration.boundary`).
@@ -34,7 +35,7 @@ from calibration.errors import CalibrationError
 from calibration.fusion import FusionResult, fuse_vqf
 from calibration.heading import HeadingCorrection
 from calibration.limb_calibration import LimbImuCalibration
-from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol, ServoMoveProtocol
 from calibration.servo import ServoChainCalibration
 
 __all__ = [
@@ -48,6 +49,7 @@ __all__ = [
     "LimbCalibrationProtocol",
     "LimbImuCalibration",
     "ServoChainCalibration",
+    "ServoMoveProtocol",
     "boundary_distance",
     "format_rom_table",
     "fuse_vqf",

@@ -11,18 +11,21 @@ follows the prompts of a calibration protocol, :mod:`calibration.protocol`):
 - **zero** (the static window: every joint at the kinematics' zero, the identity): each servo's
   median ticks, refused if the servo moved more than ``still_deg`` (peak to peak) meanwhile
   (:func:`zero_from_static`);
-- **direction** (each joint's guided movement, scripted as joint orientations ``q(u)``): the
-  servo angles ``θ_k(u)`` the script asks of the joint's chain (its inverse kinematics with
-  direction +1 and zero 0), and the ticks' change from the zero ``m_k = t_k − z_k``; the servo
-  turns the way the rig says when ``d_k Σ θ_k m_k > 0`` (``d_k`` the configured direction).
-  Only servos the movement turns by at least ``min_move_deg`` are judged; a judged servo that
-  moved less than a third of what was asked did not follow the move
-  (:func:`direction_from_move`);
+- **direction** (one move per servo, :class:`calibration.protocol.ServoMoveProtocol`: from the
+  zero pose, the servo's joint turned about that servo's axis alone, held, and back): the turn
+  ``θ(u)`` the move asks of servo ``k`` (direction +1, from its zero) and every servo's change
+  of ticks from its zero ``m_j = (t_j − z_j) · 2π / T_j``. Servo ``k`` turns the way the rig
+  says when ``d_k Σ θ m_k > 0`` (``d_k`` its configured direction), and must turn by at least a
+  third of what was asked ("did not follow its move" otherwise); every other servo must stay
+  within ``max(other_deg, a third of the turn asked)`` of its zero — one that turns is named
+  with servo ``k``: two swapped IDs or cables turn each other's servo
+  (:func:`direction_from_servo_move`);
 - **ranges**: the least and greatest ticks read over the whole session (:func:`ranges_from`).
 
 A direction flip cannot be seen without motion: at start-up the file's directions are checked
-against the rig configuration's (they must agree: :meth:`ArmCalibration.check`) and the guided
-move at calibration is what confirmed them (``direction_confirmed``).
+against the rig configuration's (they must agree: :meth:`ArmCalibration.check`) and each servo's
+guided move at calibration is what confirmed them (``direction_confirmed``: true for every servo
+of a file ``rig calibrate`` wrote with the ``directions`` step).
 
 File (YAML, :meth:`ArmCalibration.to_yaml` / :func:`load_arm_calibration`; unknown keys are
 refused naming the key)::
@@ -53,7 +56,7 @@ from calibration.errors import CalibrationError
 from models.yamlio import safe_load_yaml
 
 __all__ = ["STEPS", "ArmCalibration", "ExpectedServo", "ServoCalibration",
-           "direction_from_move", "load_arm_calibration", "loads_arm_calibration",
+           "direction_from_servo_move", "load_arm_calibration", "loads_arm_calibration",
            "ranges_from", "zero_from_static"]
 
 STEPS = ("zero", "directions", "ranges")
@@ -432,51 +435,90 @@ def zero_from_static(ticks: np.ndarray, ticks_per_rev: np.ndarray, labels: Seque
 
 @dataclass(frozen=True)
 class DirectionFinding:
-    """One servo's finding in a guided move (:func:`direction_from_move`).
+    """One servo's finding in its own guided move (:func:`direction_from_servo_move`).
 
-    ``judged`` False: the move did not turn it enough to tell (``direction`` is then 0).
+    Attributes
+    ----------
+    direction : int
+        ±1: the direction measured (``d`` of the module docstring).
+    asked_deg, moved_deg : float
+        The largest turn asked of the servo and the largest it made (from its zero), degrees.
     """
 
-    judged: bool
     direction: int
     asked_deg: float
     moved_deg: float
 
 
-def direction_from_move(asked_rad: np.ndarray, ticks: np.ndarray, zero_ticks: np.ndarray,
-                        ticks_per_rev: np.ndarray, min_move_deg: float = 10.0
-                        ) -> list[DirectionFinding]:
-    """Each servo's direction in a guided move (module docstring).
+def direction_from_servo_move(k: int, asked_rad: np.ndarray, ticks: np.ndarray,
+                              zero_ticks: np.ndarray, ticks_per_rev: np.ndarray,
+                              directions: Sequence[int], labels: Sequence[str], *,
+                              what: str = "its move", rig: str = "the rig",
+                              other_deg: float = 5.0) -> DirectionFinding:
+    """Servo ``k``'s direction from its own move, every other servo held still (module
+    docstring).
 
     Parameters
     ----------
-    asked_rad : (M, n) array_like
-        The servo angles the scripted move asks of the joint (direction +1, zero 0), radians.
+    k : int
+        The servo the move turns (its column).
+    asked_rad : (M,) array_like
+        The turn the move asks of servo ``k`` (direction +1, from its zero), radians.
     ticks : (M, n) array_like
-        Ticks read at the same instants.
+        Every servo's ticks read at the same instants.
     zero_ticks, ticks_per_rev : (n,) array_like
-    min_move_deg : float
-        Servos asked to turn less than this (peak) are not judged.
+    directions : sequence of int
+        The rig configuration's direction of each servo (±1).
+    labels : sequence of str
+        How messages name each servo.
+    what : str
+        How messages name the move (e.g. ``its move (raise the arm sideways (abduction))``).
+    rig : str
+        How messages name the rig configuration.
+    other_deg : float
+        Another servo may turn up to ``max(other_deg, a third of the turn asked)`` during the
+        move.
 
     Returns
     -------
-    list of DirectionFinding
-        One per servo: ``direction`` = sign of ``Σ θ m`` — the servo's own direction, to be
-        compared with the configured one.
+    DirectionFinding
+        Servo ``k``'s, its direction equal to ``directions[k]``.
+
+    Raises
+    ------
+    CalibrationError
+        One line: another servo turned during the move (both named: a swapped ID or cable);
+        servo ``k`` turned less than a third of what was asked ("did not follow its move");
+        it turned the other way than ``directions[k]``.
     """
-    a = np.asarray(asked_rad, dtype=np.float64)
+    a = np.asarray(asked_rad, dtype=np.float64).reshape(-1)
+    t = np.asarray(ticks, dtype=np.float64)
     tpr = np.asarray(ticks_per_rev, dtype=np.float64)
-    m = (np.asarray(ticks, dtype=np.float64) - np.asarray(zero_ticks, float)) * 2 * math.pi / tpr
-    out = []
-    for k in range(a.shape[1]):
-        asked = float(np.degrees(np.max(np.abs(a[:, k])))) if len(a) else 0.0
-        moved = float(np.degrees(np.max(np.abs(m[:, k])))) if len(m) else 0.0
-        if asked < min_move_deg:
-            out.append(DirectionFinding(False, 0, asked, moved))
-            continue
-        s = float(np.sum(a[:, k] * m[:, k]))
-        out.append(DirectionFinding(True, 1 if s > 0 else -1, asked, moved))
-    return out
+    if len(a) < 3 or t.shape != (len(a), len(tpr)):
+        raise CalibrationError(f"too few readings during the move of {labels[k]} (need 3)")
+    m = (t - np.asarray(zero_ticks, dtype=np.float64)) * 2.0 * math.pi / tpr  # rad, as read
+    moved = np.degrees(np.max(np.abs(m), axis=0))
+    asked = float(np.degrees(np.max(np.abs(a))))
+    limit = max(other_deg, asked / 3.0)
+    others = [j for j in range(len(tpr)) if j != k and moved[j] > limit]
+    if others:
+        j = max(others, key=lambda i: moved[i])
+        itself = ", which did not follow it" if moved[k] < asked / 3.0 else ""
+        raise CalibrationError(
+            f"{labels[j]} turned {moved[j]:.0f}° during the move of {labels[k]}{itself}: "
+            f"are the two servos' IDs or cables swapped? check the wiring against rig {rig}, "
+            f"then calibrate again")
+    if moved[k] < asked / 3.0:
+        raise CalibrationError(
+            f"{labels[k]} did not follow its move: it turned {moved[k]:.1f}° of the "
+            f"{asked:.0f}° asked; check its horn and cable, then calibrate again")
+    direction = 1 if float(np.sum(a * m[:, k])) > 0 else -1  # sign of Σ θ m
+    if direction != directions[k]:
+        raise CalibrationError(
+            f"{labels[k]} turned the other way during {what}: direction {direction} "
+            f"measured, {directions[k]} in rig {rig}; set the servo's reverse bit or the "
+            f"rig's direction, then calibrate again")
+    return DirectionFinding(direction, asked, float(moved[k]))
 
 
 def ranges_from(ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

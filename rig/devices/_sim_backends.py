@@ -60,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol
+from calibration.protocol import CalibrationProtocol, LimbCalibrationProtocol, ServoMoveProtocol
 from rig.devices.config import load_rig_config
 from rig.devices.kinematics import NEAREST_TOLERANCE_DEG, JointKinematics, LimbKinematics
 from rig.devices.port import Port, SimulatedPatient
@@ -504,9 +504,12 @@ def _protocol_json(protocol: Any) -> str:
 
 
 def _protocol_from_json(text: str) -> Any:
-    """The protocol :func:`_protocol_json` wrote (JSON only: no code crosses the pipe)."""
+    """The protocol :func:`_protocol_json` wrote (JSON only: no code crosses the pipe; a
+    :class:`~calibration.protocol.ServoMoveProtocol` turns its moves' mappings back into
+    moves itself)."""
     d = json.loads(text)
-    cls = {c.__name__: c for c in (CalibrationProtocol, LimbCalibrationProtocol)}[d.pop("kind")]
+    cls = {c.__name__: c for c in (CalibrationProtocol, LimbCalibrationProtocol,
+                                   ServoMoveProtocol)}[d.pop("kind")]
     if d.get("amplitudes") is not None:  # JSON lists back to the dataclass's tuples
         d["amplitudes"] = tuple(tuple(a) for a in d["amplitudes"])
     return cls(**d)

@@ -2,22 +2,25 @@
 the bus; the maths and the file are :mod:`calibration.arm`.
 
 The person (on the simulator: the back-driven patient, who performs the same protocol by
-itself) follows the rig's calibration protocol — the one ``rig record`` prompts for
-(:func:`rig.record.procedures.procedure_for`: :class:`calibration.protocol.CalibrationProtocol`
-for a rig of one joint, :class:`~calibration.protocol.LimbCalibrationProtocol` for a limb): the
-zero pose (every joint at the kinematics' zero), then each joint's flexion/extension, then
-(``ranges``) every joint moved through its whole range. Torque stays off; the bus's Present
-Position is read at ``rate_hz`` throughout. Then:
+itself) follows the prompts of a :class:`calibration.protocol.ServoMoveProtocol` built from the
+rig configuration (:func:`servo_move_protocol`): the zero pose (every joint at the kinematics'
+zero), then one move per servo, in chain order — from the zero pose, that servo's joint turned
+about that servo's axis alone (e.g. ``shoulder: raise the arm sideways (abduction) by about
+25°, turning servo ID 2 (shoulder-elevation) alone``), by ``amplitude_deg`` or less where the
+servo's configured tick range is narrow, held, and back — then (``ranges``) every joint moved
+through its whole range. Torque stays off; the bus's Present Position is read at ``rate_hz``
+throughout. Then:
 
 - zero: each servo's median ticks in the static window (still within ``still_deg``);
-- directions: in each joint's movement window, each servo the scripted movement turns by at
-  least ``min_move_deg`` must turn the way the rig configuration's ``direction`` says, and by
-  at least a third of what was asked; a servo the movement does not turn (a flexion moves no
-  abduction or axial servo) keeps the configured direction, marked unconfirmed;
+- directions: in each servo's move, that servo must turn the way the rig configuration's
+  ``direction`` says and by at least a third of what was asked, and every other servo must
+  stay still (:func:`calibration.arm.direction_from_servo_move`): every servo's direction is
+  confirmed by its own move;
 - ranges: the least and greatest ticks over the whole session, within the configured limits.
 
 The file is refused (:class:`~calibration.errors.CalibrationError`, one line naming the servo)
-when a servo turned the other way, moved while it should be still, or did not follow a move.
+when a servo turned the other way, did not follow its move, moved during the zero pose, or
+turned during another servo's move (both named: swapped IDs or cables).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import datetime as _dt
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,19 +38,18 @@ from calibration.arm import (
     STEPS,
     ArmCalibration,
     ServoCalibration,
-    direction_from_move,
+    direction_from_servo_move,
     ranges_from,
     zero_from_static,
 )
-from calibration.errors import CalibrationError
-from rig.devices.config import RigConfig, load_rig_config
+from calibration.protocol import ServoMoveProtocol, servo_moves
+from rig.devices.config import RigConfig, ServosConfig, load_rig_config
 from rig.devices.dynamixel import REVERSE_BIT, DynamixelBus
-from rig.devices.kinematics import JointKinematics
 from rig.devices.ports import open_port
 from rig.errors import RigConfigError
-from rig.record.procedures import NEUTRAL_WORDS, procedure_for
+from rig.record.procedures import NEUTRAL_WORDS
 
-__all__ = ["CalibrateRequest", "CalibrateResult", "run_calibrate"]
+__all__ = ["CalibrateRequest", "CalibrateResult", "run_calibrate", "servo_move_protocol"]
 
 
 @dataclass
@@ -72,11 +74,17 @@ class CalibrateRequest:
         How long the person moves every joint through its range (step ``ranges``).
     lead_s : float
         Seconds to get ready before the zero pose.
-    still_deg, min_move_deg, margin_deg : float
-        :func:`calibration.arm.zero_from_static`, :func:`calibration.arm.direction_from_move`,
-        and the file's start-up margin.
-    protocol : object, optional
-        The calibration protocol (default: the rig's, as ``rig record`` prompts it).
+    still_deg : float
+        :func:`calibration.arm.zero_from_static`.
+    other_deg : float
+        :func:`calibration.arm.direction_from_servo_move`: how far another servo may turn
+        during a servo's move (at least; a third of the turn asked where that is more).
+    margin_deg : float
+        The file's start-up margin.
+    amplitude_deg : float
+        The turn each servo's move asks where its range allows (:func:`servo_move_protocol`).
+    protocol : ServoMoveProtocol, optional
+        The protocol (default: :func:`servo_move_protocol` of the rig with ``amplitude_deg``).
     """
 
     rig: str | Path | RigConfig
@@ -88,9 +96,10 @@ class CalibrateRequest:
     ranges_s: float = 20.0
     lead_s: float = 3.0
     still_deg: float = 2.0
-    min_move_deg: float = 10.0
+    other_deg: float = 5.0
     margin_deg: float = 10.0
-    protocol: object | None = None
+    amplitude_deg: float = 25.0
+    protocol: ServoMoveProtocol | None = None
 
 
 @dataclass
@@ -106,7 +115,12 @@ class CalibrateResult:
     lines : list of str
         One line per servo, for people.
     unconfirmed : list of str
-        Servos no guided move turned (their direction is the configuration's).
+        Servos whose direction no move confirmed (the configuration's is kept): all of them
+        without the ``directions`` step, none with it.
+    prompts : list of str
+        What the person was asked, in order.
+    guided_s : float
+        How long the person was guided (the protocol, plus the ranges).
     """
 
     calibration: ArmCalibration
@@ -114,6 +128,52 @@ class CalibrateResult:
     readings: int
     lines: list[str] = field(default_factory=list)
     unconfirmed: list[str] = field(default_factory=list)
+    prompts: list[str] = field(default_factory=list)
+    guided_s: float = 0.0
+
+
+def servo_move_protocol(config: RigConfig, servos: ServosConfig | None = None, *,
+                        amplitude_deg: float = 25.0, **durations) -> ServoMoveProtocol:
+    """The rig's servo-move protocol: one move per servo of ``servos`` (default the rig's,
+    without a calibration), in chain order.
+
+    Parameters
+    ----------
+    config : RigConfig
+    servos : ServosConfig, optional
+    amplitude_deg : float
+        :func:`calibration.protocol.servo_moves`: the turn asked, less where a servo's
+        configured tick range is narrow (its angles ``direction · (ticks − zero) · 2π / T``
+        over ``min_ticks..max_ticks``).
+    **durations
+        ``static_s``, ``move_s``, ``hold_s``, ``rest_s``, ``settle_s`` of
+        :class:`~calibration.protocol.ServoMoveProtocol`.
+
+    Raises
+    ------
+    RigConfigError
+        A servo's tick range leaves no room to turn it (named).
+    """
+    servos = servos or config.servos.without_calibration()
+    joints = [(j.name, j.axes) for j in servos.joints] or [(config.joint.name, servos.axes)]
+    side = config.joint.side if config.joint.side in ("left", "right") else "right"
+    chain = []
+    for name, axes in joints:
+        rows = []
+        for a in axes:
+            ends = [math.degrees(a.angle(t)) for t in (a.min_ticks, a.max_ticks)]
+            rows.append((_label(a), a.axis, min(ends), max(ends)))
+        chain.append((name, rows))
+    try:
+        moves = servo_moves(chain, side, amplitude_deg=amplitude_deg)
+        return ServoMoveProtocol(moves, tuple(n for n, _ in joints),
+                                 config.limb if len(joints) > 1 else None, **durations)
+    except ValueError as err:
+        raise RigConfigError(f"rig {config.name!r}: {err}") from None
+
+
+def _label(a) -> str:
+    return f"servo ID {a.id}" + (f" ({a.name})" if a.name else "")
 
 
 def run_calibrate(request: CalibrateRequest, *, echo: Callable[[str], None] = print,
@@ -147,8 +207,8 @@ def run_calibrate(request: CalibrateRequest, *, echo: Callable[[str], None] = pr
     if config.servos is None:
         raise RigConfigError(f"rig {config.name!r} has no servos to calibrate")
     servos = config.servos.without_calibration()
-    procedure = procedure_for(config.limb)
-    protocol = request.protocol or procedure.default_protocol()
+    protocol = request.protocol or servo_move_protocol(config, servos,
+                                                       amplitude_deg=request.amplitude_deg)
     wait = wait or time.sleep
     own_port = port is None
     if own_port:
@@ -159,24 +219,35 @@ def run_calibrate(request: CalibrateRequest, *, echo: Callable[[str], None] = pr
         with DynamixelBus(port, servos, retries=5,
                           latency_ms=200.0 if port.is_simulated else None) as bus:
             bus.set_torque(False)
-            times, ticks, protocol = _session(bus, port, protocol, procedure, config, steps,
-                                              request, echo, wait)
+            times, ticks, protocol, prompts = _session(bus, port, protocol, config, steps,
+                                                       request, echo, wait)
             models = {i: bus.found[i].model for i in bus.ids}
             frames = {i: (off or 0, bool((mode or 0) & REVERSE_BIT))
                       for i, (off, mode) in bus.read_frames().items()}
     finally:
         if own_port:
             port.close()
-    return _solve(times, ticks, protocol, config, servos, steps, request, models, frames, echo)
+    result = _solve(times, ticks, protocol, config, servos, steps, request, models, frames,
+                    echo)
+    result.prompts = prompts
+    result.guided_s = _end(protocol, steps, request)
+    return result
 
 
-def _session(bus, port, protocol, procedure, config, steps, request, echo, wait):
+def _end(protocol, steps, request) -> float:
+    """How long the session reads, seconds from the protocol's start."""
+    if "directions" in steps or "ranges" in steps:
+        return protocol.duration_s + (request.ranges_s if "ranges" in steps else 0.0)
+    return protocol.static_s
+
+
+def _session(bus, port, protocol, config, steps, request, echo, wait):
     """Prompts on the protocol's timeline and the readings: times (s from the protocol's
-    start) and ticks (M, n)."""
+    start), ticks (M, n), the protocol followed and the prompts said."""
     sp = getattr(port, "simulated_patient", None)
     if sp is not None:
         now = sp.now
-        if sp.limb.calibration_protocol is not None:  # the port string made it perform one
+        if isinstance(sp.limb.calibration_protocol, ServoMoveProtocol):  # already told to
             protocol = sp.limb.calibration_protocol
             t0 = float(sp.limb.protocol_start_s)
         else:
@@ -185,18 +256,16 @@ def _session(bus, port, protocol, procedure, config, steps, request, echo, wait)
     else:
         now = time.monotonic
         t0 = now() + request.lead_s
-    moving = "directions" in steps or "ranges" in steps
-    end = protocol.duration_s + (request.ranges_s if "ranges" in steps else 0.0) if moving \
-        else protocol.static_s
-    limb = config.limb
-    phases = [(0.0, f"zero pose: {NEUTRAL_WORDS[limb]}; hold still "
+    end = _end(protocol, steps, request)
+    phases = [(0.0, f"zero pose: {NEUTRAL_WORDS[config.limb]}; hold still "
                     f"{protocol.static_s:g} s")]
-    if moving:
-        phases += [(start, words) for start, words, _ in procedure.phases(protocol)]
+    if "directions" in steps or "ranges" in steps:
+        phases += [(protocol.start_of(k), m.prompt(protocol.hold_s))
+                   for k, m in enumerate(protocol.moves)]
     if "ranges" in steps:
         phases.append((protocol.duration_s, f"now move every joint slowly through its whole "
                                              f"range ({request.ranges_s:g} s)"))
-    echo(f"calibration of rig {config.name!r} ({', '.join(steps)}): get ready, "
+    echo(f"calibration of rig {config.name!r} ({', '.join(steps)}, {end:.0f} s): get ready, "
          f"{max(0.0, t0 - now()):.0f} s")
     period = 1.0 / request.rate_hz
     times, rows, k = [], [], 0
@@ -212,8 +281,8 @@ def _session(bus, port, protocol, procedure, config, steps, request, echo, wait)
             times.append(t)
         wait(period)
     echo("done: the arm may rest")
-    return np.asarray(times), np.asarray(rows, dtype=np.float64).reshape(-1, len(bus.ids)), \
-        protocol
+    return (np.asarray(times), np.asarray(rows, dtype=np.float64).reshape(-1, len(bus.ids)),
+            protocol, [p for _, p in phases[:k]])
 
 
 def _window(times, protocol, name):
@@ -226,7 +295,7 @@ def _solve(times, ticks, protocol, config, servos, steps, request, models, frame
     axes = servos.axes
     n = len(axes)
     tpr = np.array([a.ticks_per_rev for a in axes])
-    labels = [f"servo ID {a.id}" + (f" ({a.name})" if a.name else "") for a in axes]
+    labels = [_label(a) for a in axes]
     zero = np.array([a.zero_ticks for a in axes], dtype=np.int64)
     if "zero" in steps:
         zero = zero_from_static(ticks[_window(times, protocol, "static")], tpr, labels,
@@ -234,34 +303,21 @@ def _solve(times, ticks, protocol, config, servos, steps, request, models, frame
     confirmed = [False] * n
     notes = [""] * n
     if "directions" in steps:
-        joints = servos.joints or ()
-        groups = [(j.name, j.axes) for j in joints] or [(config.joint.name, axes)]
-        start = 0
-        for ji, (joint, jaxes) in enumerate(groups):
-            idx = list(range(start, start + len(jaxes)))
-            start += len(jaxes)
-            key = joint if joint in protocol.windows() else "functional"
-            sel = _window(times, protocol, key)
-            asked = _asked(protocol, times[sel], ji, config, jaxes)
-            found = direction_from_move(asked, ticks[sel][:, idx], zero[idx], tpr[idx],
-                                        request.min_move_deg)
-            for k, f in zip(idx, found, strict=True):
-                if not f.judged:
-                    continue
-                want = axes[k].direction
-                if f.direction != want:
-                    raise CalibrationError(
-                        f"{labels[k]} turned the other way during the {joint} move: direction "
-                        f"{f.direction} measured, {want} in rig {config.name!r}; set the "
-                        f"servo's reverse bit or the rig's direction, then calibrate again")
-                if f.moved_deg < f.asked_deg / 3.0:
-                    raise CalibrationError(
-                        f"{labels[k]} did not follow the {joint} move: it turned "
-                        f"{f.moved_deg:.1f}° of the {f.asked_deg:.0f}° asked; check the horn "
-                        f"and calibrate again")
-                confirmed[k] = True
-                notes[k] = (f"direction {want} confirmed by the {joint} move "
-                            f"({f.moved_deg:.0f}° of {f.asked_deg:.0f}° asked)")
+        column = {label: k for k, label in enumerate(labels)}
+        asked = np.radians(protocol.angles(times))
+        for i, move in enumerate(protocol.moves):
+            k = column.get(move.servo)
+            if k is None:
+                raise RigConfigError(f"the protocol moves {move.servo}, not a servo of rig "
+                                     f"{config.name!r}")
+            sel = _window(times, protocol, move.servo)
+            found = direction_from_servo_move(
+                k, asked[sel, i], ticks[sel], zero, tpr, [a.direction for a in axes], labels,
+                what=f"its move ({move.words})", rig=repr(config.name),
+                other_deg=request.other_deg)
+            confirmed[k] = True
+            notes[k] = (f"direction {found.direction} confirmed by its move, {move.words} "
+                        f"({found.moved_deg:.0f}° of {found.asked_deg:.0f}° asked)")
     lo = np.array([a.min_ticks for a in axes], dtype=np.int64)
     hi = np.array([a.max_ticks for a in axes], dtype=np.int64)
     if "ranges" in steps:
@@ -276,8 +332,8 @@ def _solve(times, ticks, protocol, config, servos, steps, request, models, frame
         dz = (int(zero[k]) - a.zero_ticks) * 360.0 / tpr[k]
         if not confirmed[k]:
             unconfirmed.append(labels[k])
-        lines.append(f"{labels[k]}: zero {int(zero[k])} ({dz:+.1f}° from the rig's), "
-                     f"{notes[k] or f'direction {a.direction} (no guided move turned it)'}, "
+        said = notes[k] or f"direction {a.direction} (not confirmed: no directions step)"
+        lines.append(f"{labels[k]}: zero {int(zero[k])} ({dz:+.1f}° from the rig's), {said}, "
                      f"range {int(lo[k])}..{int(hi[k])}")
     cal = ArmCalibration(config.name, tuple(out_servos),
                          _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
@@ -288,24 +344,3 @@ def _solve(times, ticks, protocol, config, servos, steps, request, models, frame
         echo(line)
     echo(f"wrote {path} ({len(times)} readings)")
     return CalibrateResult(cal, path, len(times), lines, unconfirmed)
-
-
-def _asked(protocol, t, joint_index, config, jaxes) -> np.ndarray:
-    """The servo angles (M, n) the scripted movement asks of a joint's chain: its inverse
-    kinematics with direction +1, zero 0 and no tick limits, each solution nearest the one
-    before (radians)."""
-    if hasattr(protocol, "joint_orientations"):
-        side = config.joint.side if config.joint.side in ("left", "right") else "right"
-        q = protocol.joint_orientations(t, side)[:, joint_index]
-    else:
-        q = np.asarray(protocol.joint(t), dtype=np.float64).reshape(-1, 4)
-    plain = [replace(a, zero_ticks=0, direction=1, min_ticks=-10 * round(a.ticks_per_rev),
-                     max_ticks=10 * round(a.ticks_per_rev)) for a in jaxes]
-    kin = JointKinematics(plain, tolerance_deg=180.0)
-    tpr = np.array([a.ticks_per_rev for a in jaxes])
-    out = np.zeros((len(q), len(jaxes)))
-    near = np.zeros(len(jaxes))
-    for i, qi in enumerate(q):
-        near = kin.inverse_float(qi, near)
-        out[i] = near
-    return out * 2.0 * math.pi / tpr
