@@ -247,7 +247,7 @@ def test_a_leader_unplugged_mid_run_holds_resumes_by_a_ramp_and_the_session_keep
                               "--stale-servo-ms", "1000", "--watchdog-ms", "1000",
                               "--db", db, "--patient", "P-LEAD-01",
                               "--summary-json", summ, "--telemetry", tel])
-    assert code == 0, err
+    assert code == 0, (err, out[-1500:])
     assert f"targets leader {lrig.stem}" in out or "targets leader" in out, out
     s = json.loads(summ.read_text())
     assert s["safe_state_entries"] == 0, s["safe_state_reason"]
