@@ -16,6 +16,7 @@ source's import statements, every one of them — at module level, inside functi
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -39,10 +40,20 @@ def _modules() -> dict[str, Path]:
 
 MODULES = _modules()
 
+# the module's tests walk the same sources' trees (reading them only): each parsed once, on
+# one xdist worker, when a test first asks (not at collection)
+pytestmark = pytest.mark.xdist_group("test_architecture")
+
+
+@functools.cache
+def _parse(text: str) -> ast.Module:
+    """The syntax tree of a module's source ``text`` (cached: do not change it)."""
+    return ast.parse(text)
+
 
 def _imports(name: str, path: Path) -> set[str]:
     """The modules of ours that ``name`` imports (each resolved to the longest module name)."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = _parse(path.read_text(encoding="utf-8"))
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     found: set[str] = set()
     for node in ast.walk(tree):
@@ -72,7 +83,10 @@ def _imports(name: str, path: Path) -> set[str]:
     return found
 
 
-GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+@functools.cache
+def _graph() -> dict[str, set[str]]:
+    """Each of our modules' imports of our modules (:func:`_imports`)."""
+    return {name: _imports(name, path) for name, path in MODULES.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -122,17 +136,17 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_graph_sees_the_imports_it_should():
     # a known arrow of each kind: module level, inside a function, relative, a package's init
-    assert "rig.errors" in GRAPH["rig.cli"]
-    assert "rig.readback" in GRAPH["rig.record.procedures"]
-    assert "rig.errors" in GRAPH["rig.commands.boundary"]  # imported inside a function
-    assert "rig.readback.boundary" in GRAPH["rig.commands.boundary"]
-    assert "rig.readback" in GRAPH["rig.commands.boundary"]  # the package's __init__ runs too
-    assert "models.quaternion" in GRAPH["calibration.coverage"]
+    assert "rig.errors" in _graph()["rig.cli"]
+    assert "rig.readback" in _graph()["rig.record.procedures"]
+    assert "rig.errors" in _graph()["rig.commands.boundary"]  # imported inside a function
+    assert "rig.readback.boundary" in _graph()["rig.commands.boundary"]
+    assert "rig.readback" in _graph()["rig.commands.boundary"]  # the package's __init__ runs too
+    assert "models.quaternion" in _graph()["calibration.coverage"]
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
 def test_no_import_cycles():
-    cycles = _cycles(GRAPH)
+    cycles = _cycles(_graph())
     assert not cycles, "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
 
 
@@ -142,7 +156,7 @@ def test_no_import_cycles():
     ("calibration", {"calibration", "models"}),
 ])
 def test_library_packages_import_only_downwards(package, allowed):
-    wrong = sorted(f"{m} imports {t}" for m, ts in GRAPH.items()
+    wrong = sorted(f"{m} imports {t}" for m, ts in _graph().items()
                    if m.split(".")[0] == package for t in ts if t.split(".")[0] not in allowed)
     assert not wrong, wrong
 
@@ -151,7 +165,7 @@ def test_nothing_in_rig_imports_the_cli():
     def is_cli(m: str) -> bool:
         return m in ("rig.cli", "rig.commands") or m.startswith("rig.commands.")
 
-    wrong = sorted(f"{m} imports {t}" for m, ts in GRAPH.items()
+    wrong = sorted(f"{m} imports {t}" for m, ts in _graph().items()
                    if m.startswith("rig.") and not is_cli(m) and m != "rig.__main__"
                    for t in ts if is_cli(t))
     assert not wrong, wrong
@@ -161,10 +175,10 @@ def test_the_servo_bus_knows_no_kinematics():
     """Issue 38: a servo bus knows servos by ID, name and register; the joint and limb
     kinematics sit above it (``rig.devices.servo_limb`` composes the two)."""
     bus_side = ("rig.devices.servo", "rig.devices.bus", "rig.devices.dynamixel")
-    wrong = sorted(f"{m} imports {t}" for m in bus_side for t in GRAPH[m]
+    wrong = sorted(f"{m} imports {t}" for m in bus_side for t in _graph()[m]
                    if t in ("rig.devices.kinematics", "rig.devices.servo_limb"))
     assert not wrong, wrong
-    assert "rig.devices.kinematics" in GRAPH["rig.devices.servo_limb"]
+    assert "rig.devices.kinematics" in _graph()["rig.devices.servo_limb"]
 
 
 # --- issue 38: what the graph above does not say -------------------------------------------
@@ -187,7 +201,7 @@ def _function_imports(path: Path) -> list[tuple[int, str, bool]]:
     consecutive imports shares the comment above its first one."""
     text = path.read_text(encoding="utf-8")
     lines = text.splitlines()
-    tree = ast.parse(text)
+    tree = _parse(text)
     out = []
     for fn in ast.walk(tree):
         if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -236,7 +250,7 @@ def test_our_modules_are_imported_at_the_top():
 def test_no_private_name_is_imported_from_another_module():
     wrong = []
     for path in MODULES.values():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and (node.level or _ours(node.module or "")):
                 for a in node.names:
@@ -251,7 +265,7 @@ def test_no_private_attribute_of_a_library_object_is_used():
     their next release."""
     wrong = []
     for path in MODULES.values():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and node.attr in ("_sess", "_session")
                     and isinstance(node.value, ast.Attribute)):
@@ -293,7 +307,7 @@ def _limb_or_joint_sites(path: Path) -> list[str]:
     """Tests of "limb or joint" in a module: ``isinstance(x, Limb | JointConstraint)``, ``limb
     is None`` / ``is not None`` (a name or attribute called ``limb``), ``is_limb``, and
     ``session_limb(...)`` used as a condition."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = _parse(path.read_text(encoding="utf-8"))
     out = []
     for node in ast.walk(tree):
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
@@ -373,7 +387,7 @@ def test_no_kind_name_comparisons_outside_the_kinds_modules():
         rel = path.relative_to(ROOT).as_posix()
         if rel.startswith(KINDS_MODULES):
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(_parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.Compare) and any(
                     s in names for o in (node.left, *node.comparators) for s in _strings(o)):
                 found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")

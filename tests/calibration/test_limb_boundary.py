@@ -73,8 +73,12 @@ def test_the_old_spelling_chain_still_reads_a_whole_limb(tmp_path, capsys):
     assert out_old.replace(str(old), "F") == out_new.replace(str(new), "F")
 
 
-# the module-scoped fixtures are built once: this module's tests run on one xdist worker
-pytestmark = pytest.mark.xdist_group("test_limb_boundary")
+# A fixture built once per module (or session) is built on each xdist worker that runs a test
+# using it: the tests sharing one are one group (the arm's: ideal_arm, ideal_arm_fit; the
+# leg's: sim_leg_motion, drifting_leg, drifting_leg_chain); the others run on any worker (the
+# 14-19 s test_keyframes_are_not_smoothed_as_far_as_the_coupling beside the arm's group).
+ARM = pytest.mark.xdist_group("test_limb_boundary_arm")
+LEG = pytest.mark.xdist_group("test_limb_boundary_leg")
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +95,18 @@ def ideal_arm():
     return chain.joints(t), t
 
 
-def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
+@pytest.fixture(scope="module")
+def ideal_arm_fit(ideal_arm):
+    """``LimbExtractor("arm")`` fitted to :func:`ideal_arm` (right side), by default: what two
+    tests read (only read)."""
+    from calibration.extraction import LimbExtractor
+
+    q, t = ideal_arm
+    return LimbExtractor("arm").fit(q, t=t, side="right")
+
+
+@ARM
+def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm, ideal_arm_fit):
     """A simulated arm whose shoulder's extension depends on the elbow's angle (the biceps'
     long head, ``rig.sim.patients.anatomical_limb``), pressed into every limit at every elbow
     angle: the coupling is written, each keyframe within 3° of the true limits at its angle.
@@ -102,12 +117,11 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     import numpy as np
 
     from calibration.boundary import boundary_distance
-    from calibration.extraction import LimbExtractor
     from models.oracle import ConstraintOracle
     from rig.sim.patients import anatomical_limb
 
-    q, t = ideal_arm
-    ex = LimbExtractor("arm").fit(q, t=t, side="right")
+    q, _ = ideal_arm
+    ex = ideal_arm_fit
     assert ex.coupled_, ex.coupling_note_
     truth = anatomical_limb(1, "arm").joints[0].coupling
     got = ex.limb_.joints[0].coupling
@@ -122,7 +136,8 @@ def test_a_simulated_range_of_motion_test_is_coupled(ideal_arm):
     assert ex.limb_.joints[2].coupling is None
 
 
-def test_a_forearm_elbow_is_extracted_and_drives_the_coupling(ideal_arm):
+@ARM
+def test_a_forearm_elbow_is_extracted_and_drives_the_coupling(ideal_arm, ideal_arm_fit):
     """The same arm with its forearm pronating and supinating (−50..60°) while it flexes:
     extracted with ``kinds={"elbow": "forearm"}`` the elbow is a forearm joint with that
     rotation and the hinge's flexion interval, and the shoulder is coupled to the flexion at
@@ -137,7 +152,7 @@ def test_a_forearm_elbow_is_extracted_and_drives_the_coupling(ideal_arm):
     phi = np.radians(55.0 * np.sin(2 * np.pi * t / 7.3) + 5.0)
     turned[:, 1] = Q.multiply(q[:, 1], Q.from_axis_angle(np.array([1.0, 0.0, 0.0]), phi))
     ex = LimbExtractor("arm", kinds={"elbow": "forearm"}).fit(turned, t=t, side="right")
-    hinge = LimbExtractor("arm").fit(q, t=t, side="right")
+    hinge = ideal_arm_fit
     elbow = ex.limb_.joints[1]
     assert elbow.kind == "forearm" and ex.limb_.name == hinge.limb_.name
     f, h = elbow.constraint.limits, hinge.limb_.joints[1].constraint.limits
@@ -152,6 +167,7 @@ def test_a_forearm_elbow_is_extracted_and_drives_the_coupling(ideal_arm):
             LimbExtractor("arm", kinds=bad)
 
 
+@ARM
 def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_arm, monkeypatch):
     """The refinement of test 3: where postures both bracketing keyframes hold lie outside the
     limits between them, a keyframe is added half-way between the two that leave most out.
@@ -186,6 +202,7 @@ def test_keyframes_are_added_where_the_interpolation_leaves_postures_out(ideal_a
     assert np.mean(dist[:, 0] <= np.radians(1.0)) >= 0.99
 
 
+@ARM
 def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(ideal_arm,
                                                                           monkeypatch):
     """When the limb file would not read because the interpolation between two keyframes
@@ -233,6 +250,7 @@ def test_a_keyframe_is_added_between_two_whose_interpolation_touches_itself(idea
     assert np.isfinite(ex.inside_["shoulder"])
 
 
+@LEG
 def test_the_ankle_is_coupled_to_the_knee(sim_leg, sim_leg_motion):
     """The gastrocnemius: a simulated ankle with 5-8° more dorsiflexion with the knee bent,
     the rest of its boundary the same (about 1° apart on average, under the 3° the mean test
@@ -348,6 +366,7 @@ def _rotated(q, deg: float):
     return Q.multiply(Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), math.radians(deg)), q)
 
 
+@ARM
 def test_twist_limits_from_well_conditioned_samples_with_a_measured_error(ideal_arm):
     """The swing-twist twist is singular at the limb axis's antipode: a direction error ε turns
     it by up to ε tan(s/2) at swing s. A constant 2° error put the shoulder's twist envelope
@@ -385,6 +404,7 @@ def test_twist_limits_from_well_conditioned_samples_with_a_measured_error(ideal_
     assert abs(env.min_deg - wrist.min_deg) < 0.5 and abs(env.max_deg - wrist.max_deg) < 0.5
 
 
+@ARM
 @pytest.mark.parametrize("slow_insets", [False, True])
 def test_a_measured_slow_error_in_a_limb(ideal_arm, slow_insets):
     """With each joint's measured slow error (the read path's heading-correction uncertainty)
@@ -454,6 +474,7 @@ def drifting_leg_chain(drifting_leg):
     return LimbExtractor("leg").fit(q, t=t, side="right", slow_error_deg=slow)
 
 
+@LEG
 def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain):
     """Issue 37, item 3: every joint of the limb file holds ≥ 99.5 % of the recorded postures
     within their measured error (the coupled hip held 99.2 %, its interpolation between
@@ -485,6 +506,7 @@ def test_a_coupled_limb_keeps_what_was_reached(drifting_leg, drifting_leg_chain)
             assert np.mean(d <= 0.0) >= 0.995, (joint.name, c.name)
 
 
+@LEG
 def test_a_limb_joint_is_extracted_as_the_joint_alone(drifting_leg, drifting_leg_chain):
     """``--joint`` and ``--limb`` on the same recording run one per-joint extraction
     (calibration.extraction.joint): a joint the chain leaves uncoupled is written with the same

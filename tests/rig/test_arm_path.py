@@ -29,6 +29,10 @@ from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
 from rig.store import open_store
 
+# the module-scoped path is run once: its tests run on one xdist worker (apart, the workers
+# that drew its tests each ran the whole path, 9 s)
+pytestmark = pytest.mark.xdist_group("test_arm_path")
+
 
 @pytest.fixture(scope="module")
 def path_run(tmp_path_factory):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -213,8 +214,8 @@ def test_close_on_postgresql(pg_server, rig_cli):
         assert store.sessions.get(2)["status"] == "interrupted"
 
 
-def _servo_db(path):
-    """A small servo-limb recording (joint samples), ended, in a new store."""
+def _new_servo_db(path):
+    """A small servo-limb recording (joint samples), ended, in a new store; its session id."""
     from rig.sim.patients import record_servo, seeded_patient, star_constraint
 
     rec = record_servo(seeded_patient(7, star_constraint(7)), 40.0, 50.0)
@@ -230,8 +231,31 @@ def _servo_db(path):
     return sid
 
 
-def test_a_read_only_store_reads_and_refuses_writes_in_one_line(tmp_path):
-    sid = _servo_db(tmp_path / "a.db")
+@pytest.fixture(scope="module")
+def _servo_template(tmp_path_factory):
+    """:func:`_new_servo_db` built once for the module: ``(path, session id)``. Closed, the
+    store is the one file (its WAL checkpointed into it)."""
+    path = tmp_path_factory.mktemp("servo") / "template.db"
+    sid = _new_servo_db(path)
+    assert sorted(p.name for p in path.parent.iterdir()) == ["template.db"]
+    return path, sid
+
+
+@pytest.fixture
+def servo_db(_servo_template):
+    """``servo_db(path)``: a copy of the module's servo-limb recording at ``path`` (a new
+    file, as :func:`_new_servo_db` would write it); returns the recorded session's id."""
+    template, sid = _servo_template
+
+    def make(path):
+        shutil.copyfile(template, path)
+        return sid
+
+    return make
+
+
+def test_a_read_only_store_reads_and_refuses_writes_in_one_line(tmp_path, servo_db):
+    sid = servo_db(tmp_path / "a.db")
     with open_store(tmp_path / "a.db", create=False, readonly=True) as store:
         assert store.readonly and store.sessions.list()[0]["samples"] > 1000
         assert store.samples.read(sid)["q"].shape[1] == 4
@@ -240,12 +264,55 @@ def test_a_read_only_store_reads_and_refuses_writes_in_one_line(tmp_path):
         assert "\n" not in str(err.value)
 
 
-def test_an_archived_file_we_may_not_write_is_read_read_only(tmp_path):
+# ``rig`` runs each list of arguments given in argv[1] (JSON) in turn, in this one process, as
+# it would in a process of its own: its exit status, stdout and stderr (warnings shown afresh,
+# an uncaught exception's traceback) go into the one JSON line printed at the end.
+_BATCH = """
+import contextlib, io, json, sys, traceback, warnings
+from rig.cli import main
+results = []
+for args in json.loads(sys.argv[1]):
+    out, err = io.StringIO(), io.StringIO()
+    with warnings.catch_warnings(), contextlib.redirect_stdout(out), \\
+            contextlib.redirect_stderr(err):
+        try:
+            main(args)
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+            if code is None:
+                code = 0
+            elif not isinstance(code, int):
+                print(code, file=sys.stderr)
+                code = 1
+        except BaseException:
+            traceback.print_exc()
+            code = 1
+    results.append([code, out.getvalue(), err.getvalue()])
+print(json.dumps(results))
+"""
+
+
+def _rig_batch(commands, cwd, prefix=()):
+    """Each of ``commands`` (argument lists) as ``rig`` runs it, all in ONE new Python process
+    (under ``prefix``: a mount namespace of its own), in turn: a
+    :class:`subprocess.CompletedProcess` each (exit status, stdout, stderr). The same files
+    and permissions as a process per command, the interpreter's start-up (about 1 s) paid
+    once; nothing written past the commands' own streams."""
+    args = json.dumps([[str(a) for a in c] for c in commands])
+    r = subprocess.run([*prefix, sys.executable, "-c", _BATCH, args], capture_output=True,
+                       text=True, cwd=cwd, timeout=300)
+    assert r.returncode == 0 and r.stderr == "" and r.stdout.count("\n") == 1, r
+    return [subprocess.CompletedProcess(c, *res)
+            for c, res in zip(commands, json.loads(r.stdout), strict=True)]
+
+
+def test_an_archived_file_we_may_not_write_is_read_read_only(tmp_path, servo_db):
     # the user can read the file but not write it (as root, that takes another user)
     share = tmp_path / "share"
     share.mkdir()
     db = share / "archive.db"
-    sid = _servo_db(db)
+    sid = servo_db(db)
     os.chmod(db, 0o444)
     immutable = False
     if os.geteuid() == 0:  # root writes any file it may read: make it immutable instead
@@ -255,31 +322,24 @@ def test_an_archived_file_we_may_not_write_is_read_read_only(tmp_path):
         immutable = True
     assert not os.access(db, os.W_OK)
     before = db.read_bytes()
-
-    def rig(*args):
-        return subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True,
-                              text=True, cwd=share, timeout=120)
-
     try:
-        _read_only_commands(rig, db, sid, share)
+        listed, rom, boundary, close = _rig_batch([
+            ("session", "list", "--db", db),
+            ("rom", "--db", db, "--session", sid, "--json"),
+            ("boundary", "--db", db, "--session", sid, "--out", share / "b.yaml"),
+            ("session", "close", "--db", db, "--session", sid + 1, "--force")], cwd=share)
+        assert listed.returncode == 0, listed.stderr
+        assert "P-RO" in listed.stdout
+        assert rom.returncode == 0, rom.stderr
+        assert json.loads(rom.stdout)["flexion"] is not None
+        assert boundary.returncode == 2 and "is read-only" in boundary.stderr
+        assert "add --no-store" in boundary.stderr and boundary.stderr.count("\n") == 1
+        assert close.returncode == 2 and "read-only" in close.stderr
+        assert close.stderr.count("\n") == 1
         assert db.read_bytes() == before  # nothing changed
     finally:
         if immutable:
             subprocess.run(["chattr", "-i", str(db)], check=True)
-
-
-def _read_only_commands(rig, db, sid, share):
-    r = rig("session", "list", "--db", str(db))
-    assert r.returncode == 0, r.stderr
-    assert "P-RO" in r.stdout
-    r = rig("rom", "--db", str(db), "--session", str(sid), "--json")
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["flexion"] is not None
-    r = rig("boundary", "--db", str(db), "--session", str(sid), "--out", str(share / "b.yaml"))
-    assert r.returncode == 2 and "is read-only" in r.stderr and "add --no-store" in r.stderr
-    assert r.stderr.count("\n") == 1
-    r = rig("session", "close", "--db", str(db), "--session", str(sid + 1), "--force")
-    assert r.returncode == 2 and "read-only" in r.stderr and r.stderr.count("\n") == 1
 
 
 @contextlib.contextmanager
@@ -311,17 +371,17 @@ _RO_MOUNT = 'mount --bind "$0" "$0" && mount -o remount,ro,bind "$0" && exec "$@
 
 
 @pytest.mark.parametrize("protected", ["file and folder", "folder", "read-only mount"])
-def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
+def test_an_archive_on_write_protected_media_is_read(tmp_path, protected, servo_db):
     # the folder too: SQLite cannot create the WAL database's -shm (mode=ro alone fails)
     share, out = tmp_path / "share", tmp_path / "out"
     share.mkdir()
     out.mkdir()
     db = share / "archive.db"
-    sid = _servo_db(db)
+    sid = servo_db(db)
     before = db.read_bytes()
     root = os.geteuid() == 0
     prefix: list[str] = []
-    if protected == "read-only mount":  # each command in a mount namespace of its own
+    if protected == "read-only mount":  # the commands in a mount namespace of their own
         if not root:
             pytest.skip("a read-only bind mount needs root (the chmod variants run here)")
         prefix = ["unshare", "--mount", "sh", "-c", _RO_MOUNT, str(share)]
@@ -337,32 +397,34 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
         protect = _write_protected(share)
         reason = "its folder does not take the -wal and -shm files"
 
-    def rig(*args):
-        return subprocess.run([*prefix, sys.executable, "-m", "rig", *map(str, args)],
-                              capture_output=True, text=True, cwd=out, timeout=300)
-
+    reads = [("session", "list", "--db", db), ("rom", "--db", db, "--session", sid, "--json")]
+    if protected == "file and folder":  # the other cases open the same read-only way
+        reads += [("export", "--db", db, "--session", sid, "--out", out / "s.csv"),
+                  ("boundary", "--db", db, "--session", sid, "--no-store", "--out",
+                   out / "b.yaml"),
+                  ("report", "--db", db, "--session", sid, "--out", out / "r.html")]
+    # what must write says so in one line, before any work
+    writes = [("boundary", "--db", db, "--session", sid, "--out", out / "b2.yaml"),
+              ("boundary", "--db", db, "--session", sid, "--limb", "arm",
+               "--out", out / "limb.yaml"),
+              ("session", "close", "--db", db, "--session", sid + 1, "--force"),
+              ("record", "--rig", "sim-shoulder", "--db", db, "--patient", "P-2",
+               "--duration", "1")]
     with protect:
-        r = rig("session", "list", "--db", db)
+        done = _rig_batch([*reads, *writes], cwd=out, prefix=prefix)
+        r = done[0]
         assert r.returncode == 0 and "P-RO" in r.stdout, r.stderr
-        r = rig("rom", "--db", db, "--session", sid, "--json")
+        r = done[1]
         assert r.returncode == 0 and json.loads(r.stdout)["flexion"] is not None, r.stderr
-        if protected == "file and folder":  # the other cases open the same read-only way
-            r = rig("export", "--db", db, "--session", sid, "--out", out / "s.csv")
+        if protected == "file and folder":
+            r = done[2]
             assert r.returncode == 0 and read_samples_csv(out / "s.csv")["t"].size > 1000, \
                 r.stderr
-            r = rig("boundary", "--db", db, "--session", sid, "--no-store", "--out",
-                    out / "b.yaml")
+            r = done[3]
             assert r.returncode == 0 and (out / "b.yaml").is_file(), r.stderr
-            r = rig("report", "--db", db, "--session", sid, "--out", out / "r.html")
+            r = done[4]
             assert r.returncode == 0 and (out / "r.html").is_file(), r.stderr
-        # what must write says so in one line, before any work
-        for args in (("boundary", "--db", db, "--session", sid, "--out", out / "b2.yaml"),
-                     ("boundary", "--db", db, "--session", sid, "--limb", "arm",
-                      "--out", out / "limb.yaml"),
-                     ("session", "close", "--db", db, "--session", sid + 1, "--force"),
-                     ("record", "--rig", "sim-shoulder", "--db", db, "--patient", "P-2",
-                      "--duration", "1")):
-            r = rig(*args)
+        for args, r in zip(writes, done[len(reads):], strict=True):
             assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
             assert f"is read-only ({reason}" in r.stderr, r.stderr
             assert "Traceback" not in r.stderr and "unable to open" not in r.stderr
@@ -375,14 +437,14 @@ def test_an_archive_on_write_protected_media_is_read(tmp_path, protected):
         assert store.sessions.get(sid + 1)["status"] == "running"
 
 
-def test_a_wal_left_beside_a_write_protected_archive_is_not_silently_left_out(tmp_path):
-    import shutil
+def test_a_wal_left_beside_a_write_protected_archive_is_not_silently_left_out(tmp_path,
+                                                                              servo_db):
     import sqlite3
 
     work, share = tmp_path / "work", tmp_path / "share"
     work.mkdir()
     share.mkdir()
-    _servo_db(work / "a.db")
+    servo_db(work / "a.db")
     # a change still in the -wal when the files were archived (the writer never checkpointed)
     conn = sqlite3.connect(work / "a.db")
     conn.execute("PRAGMA wal_autocheckpoint=0")
