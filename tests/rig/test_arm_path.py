@@ -55,8 +55,8 @@ def path_run(tmp_path_factory):
                   d / "arm.onnx"],
         "enforce": ["enforce", "--rig", rig, "--model", d / "arm.onnx", "--db", db,
                     "--session", "1", "--targets", "script:adversarial", "--duration", "1.5",
-                    "--stale-servo-ms", "1000", "--watchdog-ms", "1000", "--telemetry", d / "t.csv", "--summary-json",
-                    d / "s.json"],
+                    "--stale-servo-ms", "1000", "--watchdog-ms", "1000", "--telemetry",
+                    d / "t.csv", "--summary-json", d / "s.json"],
     }
     codes = {}
     for name, argv in steps.items():
