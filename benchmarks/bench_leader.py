@@ -34,7 +34,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+import common  # first: one BLAS thread, this checkout on sys.path
 import numpy as np
 import yaml
 

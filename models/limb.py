@@ -1,12 +1,12 @@
 """Limb files: a chain of joints (arm, leg), each with its limits, and couplings between them.
 
 A *limb file* describes one patient's limb as a chain of joints from the trunk outwards —
-shoulder → elbow → wrist, hip → knee → ankle — each joint with its kind (``ball``, ``hinge``,
-``two-axis``, ``forearm``: :mod:`models.constraint`), the segments it joins, and its limits. A joint's limits
-may depend on another joint's angle (**a coupling**: muscles that cross two joints — the
-hamstrings limit hip flexion when the knee is straight): they are then given at two or more
-values of that angle (**keyframes**) and interpolated between them. Reference:
-``docs/limb-format.md``.
+shoulder → elbow → wrist, hip → knee → ankle — each joint with its kind (``ball``,
+``hinge``, ``two-axis``, ``forearm``: :mod:`models.constraint`), the segments it joins, and
+its limits. A joint's limits may depend on another joint's angle (**a coupling**: muscles
+that cross two joints — the hamstrings limit hip flexion when the knee is straight): they are
+then given at two or more values of that angle (**keyframes**) and interpolated between them.
+Reference: ``docs/limb-format.md``.
 
 Conventions as everywhere: scalar-first quaternions, Hamilton product; joint ``j``'s
 orientation is its child segment's frame relative to its parent segment's (the previous joint's

@@ -132,9 +132,9 @@ def training_postures(limb, n: int, rng: np.random.Generator, uniform: float = U
 
     Each hinge that drives a coupling on its axis at an angle uniform over its loosest
     interval (so its corrected angle is its own; a forearm likewise on its own set, the flexion
-    uniform, then its rotation uniform over its interval); each :func:`field_joints` joint's direction
-    from :func:`coupled_directions` at that angle, its twist uniform within its interval there (so
-    its validity is its swing's); every other joint uniform on SO(3).
+    uniform, then its rotation uniform over its interval); each :func:`field_joints` joint's
+    direction from :func:`coupled_directions` at that angle, its twist uniform within its
+    interval there (so its validity is its swing's); every other joint uniform on SO(3).
     """
     jn = len(limb.joints)
     q = quat.random_quaternions(n * jn, rng).reshape(n, jn, 4)

@@ -77,7 +77,7 @@ def _csv(path, header, rows):
 
 # --------------------------------------------------------------------------- CSV
 def test_a_limb_csv_has_a_column_group_per_joint_in_the_limb_files_order(tmp_path, arm):
-    limb, oracle = arm
+    _limb, oracle = arm
     header = expected_header(NAMES)
     assert header[:5] == ["t_s", "shoulder_w", "shoulder_x", "shoulder_y", "shoulder_z"]
     assert header[-1] == "wrist_z" and len(header) == 13
@@ -98,9 +98,9 @@ def test_a_limb_csv_has_a_column_group_per_joint_in_the_limb_files_order(tmp_pat
 @pytest.mark.parametrize(("header", "message"), [
     (["t_s", "w", "x", "y", "z"], "a one-joint targets file (t_s,w,x,y,z) for a limb of 3"),
     (expected_header(NAMES)[:9], "missing column(s) wrist_w, wrist_x, wrist_y, wrist_z"),
-    (expected_header(NAMES) + ["knee_w"], "unknown column(s) knee_w"),
-    (["t_s"] + expected_header(NAMES)[5:9] + expected_header(NAMES)[1:5]
-     + expected_header(NAMES)[9:], "columns out of order (joints elbow, shoulder, wrist"),
+    ([*expected_header(NAMES), "knee_w"], "unknown column(s) knee_w"),
+    (["t_s", *expected_header(NAMES)[5:9], *expected_header(NAMES)[1:5],
+      *expected_header(NAMES)[9:]], "columns out of order (joints elbow, shoulder, wrist"),
     (expected_header(NAMES)[:5] * 2 + expected_header(NAMES)[5:], "repeated column(s)"),
 ])
 def test_a_bad_limb_csv_header_names_the_expected_one(tmp_path, header, message):
@@ -122,7 +122,7 @@ def test_a_limb_csv_going_back_in_time_names_the_line(tmp_path):
 def test_one_joint_may_be_named_or_plain(tmp_path):
     p = _csv(tmp_path / "named.csv", ["t_s", "elbow_w", "elbow_x", "elbow_y", "elbow_z"],
              [[0.0, 1, 0, 0, 0]])
-    t, q = load_trajectory(p, ("elbow",))
+    _, q = load_trajectory(p, ("elbow",))
     assert q.shape == (1, 1, 4)
     _, q = load_trajectory(_csv(tmp_path / "plain.csv", ["t_s", "w", "x", "y", "z"],
                                 [[0.0, 1, 0, 0, 0]]), ("elbow",))

@@ -232,11 +232,12 @@ def test_a_wrong_leader_is_one_line_before_anything_moves(model, targets, messag
 
 def test_a_leader_unplugged_mid_run_holds_resumes_by_a_ramp_and_the_session_keeps_it_all(
         model, tmp_path, rig_cli):
-    """``rig enforce`` follows the simulated leader (summary, telemetry columns); the leader's bus cable pulled mid-run by the simulator's own fault injection
-    (``unplug_after=`` / ``unplug_for=``, in its own process: ~300 cycles in) during a CLI run into a
-    store: every cycle whose target is two reads old holds (the read before it failed too:
-    the hold comes within 2 cycles of the cut), the follower's commanded posture does not move
-    while held, it resumes at the velocity limit, and the stored run has every cycle."""
+    """``rig enforce`` follows the simulated leader (summary, telemetry columns); the leader's
+    bus cable pulled mid-run by the simulator's own fault injection (``unplug_after=`` /
+    ``unplug_for=``, in its own process: ~300 cycles in) during a CLI run into a store: every
+    cycle whose target is older than 1.5 periods holds (from the second failed read), the
+    follower's commanded posture does not move while held, it resumes under the velocity
+    limit, every cycle is stored, and the session's report shows the leader's figures."""
     cfg = shipped_config("sim-leader-arm")
     cfg["servos"]["port"] = with_keys(cfg["servos"]["port"], unplug_after=300, unplug_for=0.5)
     lrig = tmp_path / "leader.yaml"
