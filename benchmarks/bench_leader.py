@@ -46,7 +46,7 @@ from rig.demo.stages import shipped_config
 from rig.loop import EnforceHooks, EnforceRequest, run_enforce
 from rig.loop.leader import LEADER_STALE_PERIODS
 from rig.sim.patients import anatomical_limb
-from rig.sim.urls import with_keys
+from rig.sim.urls import with_keys, without_keys
 from rig.store import open_store
 
 RATE_HZ = 200.0
@@ -55,7 +55,10 @@ VMAX_DEG_S = 120.0
 
 def _leader_rig(d: Path, name: str, **keys) -> Path:
     cfg = shipped_config("sim-leader-arm")
-    cfg["servos"]["port"] = with_keys(cfg["servos"]["port"], **keys)
+    url = cfg["servos"]["port"]
+    if "patient" in keys:  # a limb file's patient instead of the anatomical arm's
+        url = without_keys(url, "limb")
+    cfg["servos"]["port"] = with_keys(url, **keys)
     path = d / f"{name}.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
