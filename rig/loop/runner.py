@@ -897,45 +897,20 @@ class EnforcementLoop:
         The supervisor limits the step of its (unrounded) goal; the IK rounds each servo to the
         nearest tick, from a previous goal that was rounded too, so a rate-limited step could
         come out up to a tick longer (0.615° against 0.600° at 120°/s and 200 Hz). Where it
-        does, the joint's servos take, among the ticks either side of the unrounded solution
-        (each servo's floor or ceiling: 2ⁿ postures), the one nearest the supervisor's goal
-        whose step from ``commanded`` (what ``near``, the previous goal ticks, encode) is
-        within the limit; failing any, the tick step from ``near`` is scaled down and
-        truncated towards it until it is (each pass shortens every non-zero servo step: at
-        worst the previous goal, a hold). ``gt`` and ``cand`` change in place, the joint is
-        flagged ``RATE_LIMITED``, and its supervisor goes on from the posture sent
-        (:meth:`~rig.loop.supervisor.Supervisor.settle_on`)."""
+        does, the joint's ticks become :func:`whole_ticks_within`'s, ``gt`` and ``cand`` change
+        in place, the joint is flagged ``RATE_LIMITED``, and its supervisor goes on from the
+        posture sent (:meth:`~rig.loop.supervisor.Supervisor.settle_on`)."""
         m = self._max_step
         for j, (kj, sl, s) in enumerate(zip(self.kins, self.slices, self.supervisor.joints,
                                             strict=True)):
             cap = s.vmax * s.dt
-            prev = commanded[j]
-            if _angle_rad(cand[j], prev) <= cap:
+            if _angle_rad(cand[j], commanded[j]) <= cap:
                 continue
-            base = near[sl]
-            lo = np.floor(kj.inverse_float(goal[j], base)).astype(np.int64)
-            best, best_q, best_err = None, None, math.inf
-            for bits in range(1 << len(lo)):
-                t = lo + np.array([(bits >> i) & 1 for i in range(len(lo))], dtype=np.int64)
-                if m is not None:
-                    t = np.clip(t, base - m[sl], base + m[sl])
-                q = kj.forward_one(t)
-                if _angle_rad(q, prev) > cap:
-                    continue
-                err = _angle_rad(q, goal[j])
-                if err < best_err:
-                    best, best_q, best_err = t, q, err
-            if best is None:
-                d = gt[sl] - base
-                a = _angle_rad(cand[j], prev)
-                while a > cap:
-                    d = np.trunc(d * (cap / a)).astype(np.int64)
-                    best_q = kj.forward_one(base + d)
-                    a = _angle_rad(best_q, prev)
-                best = base + d
-            gt[sl] = best
-            cand[j] = best_q
-            s.settle_on(best_q)
+            t, q = whole_ticks_within(kj, goal[j], near[sl], commanded[j], cap,
+                                      None if m is None else m[sl])
+            gt[sl] = t
+            cand[j] = q
+            s.settle_on(q)
             s.flags |= Intervention.RATE_LIMITED
 
     def _warm(self) -> None:
@@ -1064,6 +1039,65 @@ class EnforcementLoop:
 
 #: Time a held target is given beyond what the rate limits need before its tracking counts, s.
 SETTLE_S = 0.3
+
+
+def whole_ticks_within(kj, goal, near: np.ndarray, prev, cap: float,
+                       max_step: np.ndarray | None = None) -> tuple[np.ndarray, tuple]:
+    """A joint's goal ticks whose orientation is within ``cap`` radians of ``prev``.
+
+    Among the ticks either side of the unrounded IK solution of ``goal`` nearest ``near`` (each
+    servo's floor or ceiling: 2ⁿ candidates), each cut to the per-servo step ``max_step`` from
+    ``near`` when given and to the servo's tick limits, the one nearest ``goal`` whose angle from
+    ``prev`` (what ``near`` encodes) is within ``cap``; failing any, the tick step from ``near``
+    scaled down and truncated towards it until it is (each pass shortens every non-zero step: at
+    worst ``near`` itself, a hold).
+
+    Parameters
+    ----------
+    kj : rig.devices.kinematics.JointKinematics
+    goal, prev : (4,) float
+        Scalar-first orientations: the supervisor's goal, the previous goal's (``near``'s).
+    near : (n,) int64
+        The previous goal ticks (within the limits).
+    cap : float
+        The step allowed, radians (velocity limit × the step's time).
+    max_step : (n,) int64, optional
+        The per-servo step limit, ticks.
+
+    Returns
+    -------
+    ticks : (n,) int64
+    q : tuple of 4 float
+        What ``ticks`` encode.
+    """
+    lo_t, hi_t = kj.min_ticks, kj.max_ticks
+    base = np.asarray(near, dtype=np.int64)
+    floor = np.floor(kj.inverse_float(goal, base)).astype(np.int64)
+    n = len(floor)
+    best, best_q, best_err = None, None, math.inf
+    for bits in range(1 << n):
+        t = floor + np.array([(bits >> i) & 1 for i in range(n)], dtype=np.int64)
+        if max_step is not None:
+            t = np.clip(t, base - max_step, base + max_step)
+        t = np.clip(t, lo_t, hi_t)
+        q = kj.forward_one(t)
+        if _angle_rad(q, prev) > cap:
+            continue
+        err = _angle_rad(q, goal)
+        if err < best_err:
+            best, best_q, best_err = t, q, err
+    if best is not None:
+        return best, best_q
+    d = np.rint(kj.inverse_float(goal, base)).astype(np.int64) - base
+    if max_step is not None:
+        d = np.clip(d, -max_step, max_step)
+    q = kj.forward_one(np.clip(base + d, lo_t, hi_t))
+    a = _angle_rad(q, prev)
+    while a > cap:
+        d = np.trunc(d * (cap / a)).astype(np.int64)
+        q = kj.forward_one(base + d)
+        a = _angle_rad(q, prev)
+    return base + d, q
 
 
 def _angle_rad(a, b) -> float:
