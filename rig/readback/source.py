@@ -70,8 +70,7 @@ class RecordingSource:
         if file is not None and (self.db is not None or self.session_id is not None):
             raise RigConfigError("give either FILE or --db/--session, not both")
         if file is None and (self.db is None or self.session_id is None):
-            raise RigConfigError("give a recording: FILE.sto|.csv|.c3d|.bvh, or --db DB "
-                                 "--session ID")
+            raise RigConfigError("give a recording: FILE.sto|FILE.csv, or --db DB --session ID")
         if file is not None:
             if self.child is None:
                 raise RigConfigError(f"{file}: --child COLUMN is required with a file")

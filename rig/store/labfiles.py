@@ -21,6 +21,7 @@ Both tables say ``meta["frames"] = "isb"`` and carry per column the segment(s) i
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -130,7 +131,9 @@ def _tip(joint) -> np.ndarray:
 
 def read_bvh(path: str | os.PathLike) -> LabTable:
     """A BVH file's segment orientations (module doc)."""
-    import bvhio  # optional pure-Python dependency, loaded when a BVH file is read
+    with warnings.catch_warnings():  # pyglm's notice about its own import name, not ours
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        import bvhio  # pure-Python dependency, loaded when a BVH file is read
 
     try:
         bvh = bvhio.readAsBvh(str(path))

@@ -70,6 +70,18 @@ def test_c3d_rom_at_the_cli_reads_markers_and_model_alike(capsys):
     assert abs(arcs[0] - arcs[1]) <= 3.0, arcs
 
 
+@pytest.mark.parametrize("s, S, side", [("r", "R", "right"), ("l", "L", "left")])
+def test_c3d_markers_and_plug_in_gait_give_the_same_knee_boundary(s, S, side):
+    """The knee's hinge interval from the markers and from the file's ``KneeAngles``: the same
+    recording in two forms (measured: 0.2° and 0.7° apart at the ends, right; 0.1° and 0.8°,
+    left)."""
+    hinges = [extract(RecordingSource(PIG, parent=p, child=c, joint="knee").load(),
+                      side=side).constraint_.hinge
+              for p, c in ((f"femur_{s}", f"tibia_{s}"), (None, f"{S}KneeAngles"))]
+    assert abs(hinges[0].min_deg - hinges[1].min_deg) <= 1.0
+    assert abs(hinges[0].max_deg - hinges[1].max_deg) <= 1.0
+
+
 def test_c3d_isb_landmarks_build_every_leg_segment():
     t = read_c3d(QUALISYS)
     assert t.meta["has"] == "marker set isb-landmarks" and not t.missing
