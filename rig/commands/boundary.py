@@ -2,8 +2,9 @@
 :func:`rig.readback.run_boundary`).
 
 Input is a recorded session (``--db DB --session ID``) or an imported orientation file
-(``FILE.sto`` / ``FILE.csv`` with ``--parent COLUMN --child COLUMN``: joint orientation =
-parent⁻¹ ⊗ child; with ``--child`` alone the column already holds joint orientations).
+(``FILE.sto`` / ``FILE.csv``, or a motion lab's ``FILE.c3d`` / ``FILE.bvh`` read into segment
+columns by :mod:`rig.store.labfiles`, with ``--parent COLUMN --child COLUMN``: joint orientation
+= parent⁻¹ ⊗ child; with ``--child`` alone the column already holds joint orientations).
 
 A whole arm or leg is ``--limb arm|leg``, as in ``rig demo --limb``: a whole-limb session
 (``--db --session``) or a file's ``--segments``; ``--limb`` means nothing else (a column named
@@ -78,7 +79,8 @@ def boundary(file, db, session_id, parent, child, reference, limb, limb_axis, jo
              store_result, fusion) -> None:
     """Extract a patient-specific constraint (swing polygon + twist range) from a recording.
 
-    FILE is an OpenSim .sto or a CSV of orientations; or use --db DB --session ID.
+    FILE is an OpenSim .sto or a CSV of orientations, or a motion lab's C3D or BVH (segment
+    columns pelvis, femur_r, tibia_r, calcn_r, ...); or use --db DB --session ID.
     """
     from rig.errors import RigConfigError
     from rig.readback import BoundaryRequest, RecordingSource, run_boundary

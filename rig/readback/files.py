@@ -1,6 +1,9 @@
-"""Joint orientations from an orientation file (OpenSim ``.sto`` or CSV, :mod:`rig.store.io`):
-one column, or a parent and a child segment's columns (joint orientation = parent⁻¹ ⊗ child), in
-rig or ISB segment frames (:mod:`calibration.frames`)."""
+"""Joint orientations from an orientation file (OpenSim ``.sto`` or CSV, :mod:`rig.store.io`; a
+motion lab's C3D or BVH, :mod:`rig.store.labfiles`): one column, or a parent and a child
+segment's columns (joint orientation = parent⁻¹ ⊗ child), in rig or ISB segment frames
+(:mod:`calibration.frames`). A lab file's segment frames are built by its reader (ISB, turned
+into the rig's here), so ``frames`` does not apply to it: ``--frames rig`` and ``--frames isb``
+read the same joints."""
 
 from __future__ import annotations
 
@@ -13,9 +16,24 @@ from calibration.frames import joint_to_rig, segment_to_rig
 from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch, joint_of_columns
 from rig.errors import RigConfigError
 from rig.readback.data import JointData, parse_axis
-from rig.store.io import read_orientations
+from rig.store.io import OrientationTable, read_orientations
+from rig.store.labfiles import LAB_SUFFIXES, read_lab_file, to_frames
 
-__all__ = ["check_columns", "joint_orientations_from_file", "limb_orientations_from_file"]
+__all__ = ["check_columns", "is_lab_file", "joint_orientations_from_file",
+           "limb_orientations_from_file", "read_table"]
+
+
+def is_lab_file(file: str) -> bool:
+    """A C3D or BVH file (by suffix), read by :mod:`rig.store.labfiles`."""
+    return Path(file).suffix.lower() in LAB_SUFFIXES
+
+
+def read_table(file: str, frames: str) -> tuple[OrientationTable, str]:
+    """``file``'s table and the frames its columns are in: a lab file's turned into rig frames
+    (its reader knows them), else as ``frames`` says."""
+    if is_lab_file(file):
+        return to_frames(read_lab_file(file), "rig"), "rig"
+    return read_orientations(file), frames
 
 
 def check_columns(file: str, parent: str | None, child: str, joint: str | None,
@@ -48,7 +66,7 @@ def joint_orientations_from_file(file: str, parent: str | None, child: str, axis
     ``frames`` is the file's segment-frame convention, ``axis`` the limb axis in rig frames,
     ``joint`` the joint (:data:`calibration.joints.JOINTS`; None: the file's, else the
     shoulder) whose segments the columns are."""
-    table = read_orientations(file)
+    table, frames = read_table(file, frames)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
     child_q = table.get(child)
@@ -79,7 +97,7 @@ def limb_orientations_from_file(file: str, columns: list[str], limb: str,
     segments of :data:`calibration.joints.LIMB_CHAINS` ``[limb]``): the joint orientations
     (N, 3, 4), rig frames, each child relative to its parent, with the file's times, side
     and patient."""
-    table = read_orientations(file)
+    table, frames = read_table(file, frames)
     if len(table) < 1:
         raise RigConfigError(f"{file}: no samples")
     order = LIMB_CHAINS[limb]
