@@ -80,10 +80,15 @@ shoulder's are Gill et al. 2020, :mod:`calibration.clinical`):
   per sex, as tabulated side by side (TABLE A.1 "Shoulder, Elbow, Forearm, and Wrist Motion:
   Mean Values in Degrees", F.A. Davis PT collection; its bands, 1-54 and 18-59, are shown).
 
-Where each number was read is recorded beside it (:class:`PopulationValue` ``where``). The
-selection (:func:`population_band`): the band of the patient's sex containing the age; past the
-oldest adult band, the oldest; age unknown, the band containing an adult of
-:data:`UNKNOWN_AGE` years (the text names the band, so the choice shows).
+The values, their sources, methods and where each number was read are one cited table,
+``calibration/norms.yaml`` (:mod:`calibration.norms`); :data:`POPULATION` is built from the
+sources its ``report`` section names per joint (above), and :func:`population_band` is
+:func:`calibration.norms.norm_band` over them: the band of the patient's sex containing the
+age; past the oldest adult band, the oldest; age unknown, the band containing an adult of
+:data:`UNKNOWN_AGE` years (the text names the band, so the choice shows). The table also holds
+Soucie 2011's arm values (shoulder flexion, elbow flexion and extension, pronation and
+supination, by sex for 2-8, 20-44 and 45-69 as far as found), available through
+:func:`calibration.norms.norm_band` with ``sources=["soucie2011"]``.
 
 Movements a joint's kind does not measure (:func:`not_measured`)
 -----------------------------------------------------------------
@@ -105,7 +110,6 @@ gives (the shoulder's adduction) is not judged.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,7 +221,8 @@ class PopulationValue:
 #: How each joint's population column was measured, as its table's note says it.
 _MEASURED = {"soucie2011": "passive, goniometer",
              "boone1979+macedo2008": "goniometer; Boone & Azen active motion"}
-_SHORT = {"soucie2011": "Soucie 2011", "boone1979+macedo2008": "Boone 1979 (men) / Macedo 2008 (women)"}
+_SHORT = {"soucie2011": "Soucie 2011",
+          "boone1979+macedo2008": "Boone 1979 (men) / Macedo 2008 (women)"}
 
 
 def _population() -> dict[str, dict]:

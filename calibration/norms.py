@@ -21,10 +21,15 @@ Sources (``norms.yaml`` ``sources``):
 - Boone DC, Azen SP. *J Bone Joint Surg Am* 1979;61:756-759 (109 men, 1-54, active,
   goniometer) and Macedo LG, Magee DJ. *J Manipulative Physiol Ther* 2008;31:577-582 (90 women,
   18-59, goniometer): elbow, forearm and wrist, one band per sex.
+- Walker JM et al. Active mobility of the extremities in older subjects. *Phys Ther*
+  1984;64:919-923 (60 people aged 60-69 and 75-84, active, goniometer): elbow, forearm and
+  wrist, one value for both sexes.
 
 Choosing the band (:func:`norm_band`)
 -------------------------------------
-Per sex (women then men when the sex is unknown), the first of the given sources with a value:
+Per sex (women then men when the sex is unknown), the first of the given sources whose band
+contains the age; failing that, the first with a fallback value, as below (a source that
+publishes no value of that sex gives its value for both sexes together, if any, listed once):
 
 - **age known**: the band containing the age in whole years (44.9 is in 20-44); past the
   oldest band, the oldest when it is an adult band (``age_hi ≥ 18``); otherwise the source's
@@ -93,9 +98,10 @@ class NormSource:
 
 @dataclass(frozen=True)
 class Norm:
-    """One published value (degrees): ``stat`` (mean or median) of one sex in one age band
-    (years, inclusive; both None for the source's overall value), its sd and 95 % CI where
-    published, its source and where it was read."""
+    """One published value (degrees): ``stat`` (mean or median) of one sex (``"both"``: one
+    value for women and men together) in one age band (years, inclusive; both None for the
+    source's overall value), its sd and 95 % CI where published, its source and where it was
+    read."""
 
     joint: str
     movement: str
@@ -199,8 +205,8 @@ def _rows(path, i: int, d, sources: dict[str, NormSource], wheres: dict[str, str
     if d["source"] not in sources:
         _fail(path, where, f"source {d['source']!r} is not among the sources "
                            f"({', '.join(sources)})")
-    if d["sex"] not in SEXES:
-        _fail(path, where, f"sex must be 'female' or 'male', got {d['sex']!r}")
+    if d["sex"] not in (*SEXES, "both"):
+        _fail(path, where, f"sex must be 'female', 'male' or 'both', got {d['sex']!r}")
     if d["where"] not in wheres:
         _fail(path, where, f"where {d['where']!r} is not among the 'where' entries")
     stat = d.get("stat", "mean")
@@ -303,7 +309,8 @@ def norms_for(joint: str, movement: str, *, table: NormTable = NORMS) -> list[No
     return [r for r in table.rows if r.joint == joint and r.movement == movement]
 
 
-def _pick(rows: list[Norm], age, unknown_age: int | None) -> Norm | None:
+def _pick(rows: list[Norm], age, unknown_age: int | None, *, exact: bool) -> Norm | None:
+    """One source's value for one sex (module doc); ``exact``: only a band containing the age."""
     bands = sorted((r for r in rows if not r.overall), key=lambda r: r.age_lo)
     overall = next((r for r in rows if r.overall), None)
     if age is None:
@@ -313,6 +320,8 @@ def _pick(rows: list[Norm], age, unknown_age: int | None) -> Norm | None:
     else:
         years = math.floor(age)
     hit = next((r for r in bands if r.contains(years)), None)
+    if exact:
+        return hit
     if hit is None and bands and years > bands[-1].age_hi and bands[-1].age_hi >= 18:
         hit = bands[-1]
     if hit is None and age is not None:
@@ -347,18 +356,25 @@ def norm_band(joint: str, movement: str, *, age: float | None = None, sex: str |
     if sources is None:
         sources = table.report.get(joint, tuple(table.sources))
     rows = norms_for(joint, movement, table=table)
-    out = []
+    out: list[Norm] = []
     for sx in (sex,) if sex is not None else SEXES:
-        for key in sources:
-            hit = _pick([r for r in rows if r.sex == sx and r.source.key == key], age,
-                        unknown_age)
+        hit = None
+        for exact in (True, False):  # a band containing the age first, from any source
+            for key in sources:
+                mine = [r for r in rows if r.source.key == key and r.sex == sx]
+                if not mine:  # the source's value for both sexes together, if any
+                    mine = [r for r in rows if r.source.key == key and r.sex == "both"]
+                hit = _pick(mine, age, unknown_age, exact=exact)
+                if hit is not None:
+                    break
             if hit is not None:
-                out.append(hit)
                 break
+        if hit is not None and hit not in out:  # one value for both sexes is listed once
+            out.append(hit)
     return out
 
 
-_WORD = {"female": "women", "male": "men"}
+_WORD = {"female": "women", "male": "men", "both": "women and men"}
 
 
 def norm_text(norms: list[Norm]) -> str | None:
