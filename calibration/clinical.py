@@ -97,6 +97,7 @@ from typing import Any
 import numpy as np
 
 from calibration.frames import RIG_TO_ISB
+from calibration.norms import NORMS, norm_band, norm_text
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.oracle import ConstraintOracle
@@ -349,58 +350,55 @@ def range_of_motion(constraint: JointConstraint, side: str = "right", *,
 _AAOS = "AAOS 1965 (as quoted by Gill H et al. 2006)"
 _GILL = "Gill TK et al. 2020, BMC Musculoskelet Disord 21:676"
 
+def _gill() -> tuple[dict, dict]:
+    """Gill 2020's sex means and 5-year band medians from the norms table
+    (:data:`calibration.norms.NORMS`), in the shapes of :data:`NORMATIVE`."""
+    means: dict = {}
+    bands: dict = {}
+    for n in NORMS.rows:
+        if n.joint != "shoulder" or n.source.key != "gill2020":
+            continue
+        if n.overall:
+            means.setdefault(n.movement, {})[n.sex] = n.value
+        else:
+            bands.setdefault(n.movement, {}).setdefault(n.sex, []).append(
+                (n.age_lo, n.age_hi, n.value))
+    for by_sex in bands.values():
+        for rows in by_sex.values():
+            rows.sort()
+    return means, bands
+
+
 #: Normative values (degrees). ``aaos``: movement → value; ``gill2020_mean``: movement → sex →
-#: mean; ``gill2020_band_median``: movement → sex → list of (age_lo, age_hi, median).
+#: mean; ``gill2020_band_median``: movement → sex → list of (age_lo, age_hi, median). The Gill
+#: 2020 values come from the norms table, calibration/norms.yaml.
 NORMATIVE: dict[str, Any] = {
     "sources": {"aaos": _AAOS, "gill2020": _GILL},
     "aaos": {"flexion": 180.0, "extension": 60.0, "abduction": 180.0,
              "internal_rotation": 70.0, "external_rotation": 90.0},
-    "gill2020_mean": {
-        "flexion": {"male": 161.5, "female": 158.5},
-        "abduction": {"male": 151.5, "female": 149.7},
-    },
-    "gill2020_band_median": {
-        "abduction": {
-            "male": [(20, 24, 164.0), (25, 29, 160.0), (30, 34, 160.0), (35, 39, 160.0),
-                     (40, 44, 158.0), (45, 49, 156.0), (50, 54, 160.0), (55, 59, 150.0),
-                     (60, 64, 148.0), (65, 69, 142.0), (70, 74, 141.3), (75, 79, 140.0),
-                     (80, 84, 132.0)],
-            "female": [(20, 24, 160.0), (25, 29, 158.4), (30, 34, 156.0), (35, 39, 160.0),
-                       (40, 44, 158.0), (45, 49, 152.0), (50, 54, 154.0), (55, 59, 150.0),
-                       (60, 64, 142.0), (65, 69, 144.0), (70, 74, 141.8), (75, 79, 140.0),
-                       (80, 84, 124.5)],
-        },
-        "external_rotation": {
-            "male": [(20, 24, 65.0), (25, 29, 65.0), (30, 34, 60.0), (35, 39, 55.0),
-                     (40, 44, 50.0), (45, 49, 50.0), (50, 54, 56.3), (55, 59, 50.0),
-                     (60, 64, 50.0), (65, 69, 50.0), (70, 74, 50.0), (75, 79, 45.0),
-                     (80, 84, 50.0)],
-            "female": [(20, 24, 80.0), (25, 29, 75.0), (30, 34, 70.0), (35, 39, 65.0),
-                       (40, 44, 55.0), (45, 49, 50.0), (50, 54, 60.0), (55, 59, 51.2),
-                       (60, 64, 55.0), (65, 69, 55.0), (70, 74, 53.5), (75, 79, 50.0),
-                       (80, 84, 50.0)],
-        },
-    },
 }
+NORMATIVE["gill2020_mean"], NORMATIVE["gill2020_band_median"] = _gill()
+
+
+def _gill_band(movement: str, age, sex: str | None):
+    """Gill 2020's values for a patient (:func:`calibration.norms.norm_band`): per sex, the
+    band median at ``age`` (past the oldest band, the oldest), else the sex mean; no band of
+    an unknown age."""
+    if sex is not None and sex not in ("male", "female"):
+        raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
+    if movement not in RangeOfMotion.MOVEMENTS:
+        return []
+    return norm_band("shoulder", movement, age=age, sex=sex, sources=("gill2020",),
+                     unknown_age=None)
 
 
 def normative_band(movement: str, *, age: int | None = None, sex: str | None = None):
     """Population reference for one movement: the Gill 2020 age/sex-band median when age and
     sex are given and tabulated, else the Gill 2020 sex mean, else None."""
-    if sex is not None and sex not in ("male", "female"):
-        raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
-    bands = NORMATIVE["gill2020_band_median"].get(movement)
-    if bands is not None and age is not None and sex is not None:
-        for lo, hi, med in bands[sex]:
-            if lo <= age <= hi:
-                return med
-        last = bands[sex][-1]
-        if age > last[1]:
-            return last[2]
-    means = NORMATIVE["gill2020_mean"].get(movement)
-    if means is not None and sex is not None:
-        return means[sex]
-    return None
+    if sex is None:
+        return None
+    got = _gill_band(movement, age, sex)
+    return got[0].value if got else None
 
 
 #: Movements whose AAOS value was measured in another position than ours (rotations: AAOS at
@@ -409,39 +407,16 @@ AAOS_NOT_COMPARABLE = {"internal_rotation": "AAOS measures it at 90° abduction"
                        "external_rotation": "AAOS measures it at 90° abduction"}
 
 
-def _band_of(movement: str, age: int, sex: str) -> tuple[int, int, float] | None:
-    bands = NORMATIVE["gill2020_band_median"].get(movement)
-    if bands is None:
-        return None
-    for lo, hi, med in bands[sex]:
-        if lo <= age <= hi:
-            return lo, hi, med
-    last = bands[sex][-1]
-    return last if age > last[1] else None
-
-
 def population_reference(movement: str, *, age: int | None = None,
                          sex: str | None = None) -> str | None:
     """The population reference of one movement as text (Gill et al. 2020): the median of the
     patient's 5-year age band and sex when both are known, e.g. ``"152 (women, 45-49)"``; with
     one of them unknown, women and men apart (band medians at that age, else the sex means,
     ``"158 (women, all ages) / 162 (men, all ages)"``); None when not tabulated."""
-    if sex is not None and sex not in ("male", "female"):
-        raise ValueError(f"sex must be 'male' or 'female', got {sex!r}")
-    word = {"female": "women", "male": "men"}
-    sexes = (sex,) if sex is not None else ("female", "male")
-    parts = []
-    for sx in sexes:
-        band = _band_of(movement, age, sx) if age is not None else None
-        if band is not None:
-            parts.append(f"{band[2]:.0f} ({word[sx]}, {band[0]}-{band[1]})")
-            continue
-        mean = (NORMATIVE["gill2020_mean"].get(movement) or {}).get(sx)
-        if mean is not None:
-            parts.append(f"{mean:.0f} ({word[sx]}, all ages)")
-    if len(parts) != len(sexes):
+    got = _gill_band(movement, age, sex)
+    if len(got) != (1 if sex is not None else 2):
         return None
-    return " / ".join(parts)
+    return norm_text(got)
 
 
 _LABELS = {

@@ -80,10 +80,15 @@ shoulder's are Gill et al. 2020, :mod:`calibration.clinical`):
   per sex, as tabulated side by side (TABLE A.1 "Shoulder, Elbow, Forearm, and Wrist Motion:
   Mean Values in Degrees", F.A. Davis PT collection; its bands, 1-54 and 18-59, are shown).
 
-Where each number was read is recorded beside it (:class:`PopulationValue` ``where``). The
-selection (:func:`population_band`): the band of the patient's sex containing the age; past the
-oldest adult band, the oldest; age unknown, the band containing an adult of
-:data:`UNKNOWN_AGE` years (the text names the band, so the choice shows).
+The values, their sources, methods and where each number was read are one cited table,
+``calibration/norms.yaml`` (:mod:`calibration.norms`); :data:`POPULATION` is built from the
+sources its ``report`` section names per joint (above), and :func:`population_band` is
+:func:`calibration.norms.norm_band` over them: the band of the patient's sex containing the
+age; past the oldest adult band, the oldest; age unknown, the band containing an adult of
+:data:`UNKNOWN_AGE` years (the text names the band, so the choice shows). The table also holds
+Soucie 2011's arm values (shoulder flexion, elbow flexion and extension, pronation and
+supination, by sex for 2-8, 20-44 and 45-69 as far as found), available through
+:func:`calibration.norms.norm_band` with ``sources=["soucie2011"]``.
 
 Movements a joint's kind does not measure (:func:`not_measured`)
 -----------------------------------------------------------------
@@ -105,7 +110,6 @@ gives (the shoulder's adduction) is not judged.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,6 +120,7 @@ from calibration.clinical import check_side, mirror_quaternions, range_of_motion
 from calibration.frames import SEGMENT_TO_ISB
 from calibration.joints import JOINTS, joint_spec
 from calibration.kinds import calibration_kind, registered
+from calibration.norms import JOINT_MOVEMENTS, NORMS, REPORT_SOURCES, UNKNOWN_AGE, Norm, norm_band
 from models import quaternion as Q
 from models.constraint import JointConstraint
 
@@ -184,45 +189,9 @@ NORMATIVE: dict = {
 
 
 # -- population values --------------------------------------------------------------------------
-_SOUCIE = ("Soucie JM, Wang C, Forsyth A, Funk S, Denny M, Roach KE, Boone D; Hemophilia "
-           "Treatment Center Network. Range of motion measurements: reference values and a "
-           "database for comparison studies. Haemophilia 2011;17(3):500-507 "
-           "(doi:10.1111/j.1365-2516.2010.02399.x)")
-_BOONE_MACEDO = ("men: Boone DC, Azen SP. Normal range of motion of joints in male subjects. "
-                 "J Bone Joint Surg Am 1979;61(5):756-759; women: Macedo LG, Magee DJ. "
-                 "Differences in range of motion between dominant and nondominant sides of upper "
-                 "and lower extremities. J Manipulative Physiol Ther 2008;31(8):577-582")
-_SOUCIE_CITE = "Soucie JM et al. 2011, Haemophilia 17:500-507"
-_BOONE_MACEDO_CITE = ("Boone DC & Azen SP 1979, J Bone Joint Surg Am 61:756-759 (men); Macedo LG "
-                      "& Magee DJ 2008, J Manipulative Physiol Ther 31:577-582 (women)")
-
-# Where the numbers were read (the stored public text, not recalled):
-#: the CDC study page; its stored copy holds the 2-8 band (the 9-19, 20-44 and 45-69 bands
-#: follow on the page but were not in the copy read here)
-_CDC = "https://archive.cdc.gov/www_cdc_gov/ncbddd/jointrom/index.html (age 2-8 table)"
-#: the 20-44 and 45-69 bands as quoted from the CDC page or data in public repository notes (each
-#: value read in the note named, which names the CDC study as its source; the notes agree where
-#: they overlap)
-_CDC_Q_TRACE = ("CDC table, age 20-44, as quoted in the note \"Biological Joint Range Reference "
-                "Trace\" (mfbailey91/Function_Generators_in_Open_Chains, docs/research/literature/"
-                "BIOLOGICAL_JOINT_RANGE_REFERENCE_TRACE.md); the same values in a public "
-                "exercise-figure note (\"28 — Figury ruchu\")")
-_CDC_Q_FIG = ("CDC table, age 20-44, as quoted in a public exercise-figure note (\"28 — "
-              "Figury ruchu\", joint-range test limits) citing "
-              "archive.cdc.gov/www_cdc_gov/ncbddd/jointrom")
-_CDC_Q_REHAB = ("CDC data, age 45-69, mean (95 % CI) as tabulated in a public "
-                "stroke-rehabilitation design note (\"Layer 2a: normal range of motion\", "
-                "SOUCIE2011 rows)")
-_CDC_Q_AGE = ("Soucie 2011 values quoted in a public research note (\"Joint range of motion by "
-              "age and sex\"), citing the CDC page (hip extension 45-69) and PMC9517286 (ankle "
-              "dorsiflexion)")
-#: TABLE A.1 "Shoulder, Elbow, Forearm, and Wrist Motion: Mean Values in Degrees" (columns Boone
-#: and Azen, 1-54 yr, n = 109 M; Macedo and Magee, 18-59 yr, n = 90 F)
-_TABLE_A1 = "http://fadavispt.mhmedical.com/downloadCitation.aspx?sectionid=158980269 (TABLE A.1)"
-
-#: With the age unknown, the band containing an adult of this age (years) is shown.
-UNKNOWN_AGE = 30
-
+# The values, their sources and where each was read live in one cited table,
+# calibration/norms.yaml (:mod:`calibration.norms`); the report's population column takes the
+# sources its ``report`` section names per joint.
 
 @dataclass(frozen=True)
 class PopulationValue:
@@ -237,116 +206,55 @@ class PopulationValue:
     ci95: tuple[float, float] | None = None
     where: str = ""
 
+    @classmethod
+    def from_norm(cls, n: Norm) -> PopulationValue:
+        """The value of one row of :data:`calibration.norms.NORMS` (a band, not an overall
+        value: the columns of these joints have only bands)."""
+        return cls(n.sex, n.age_lo, n.age_hi, n.value, n.sd, n.ci95, n.where)
+
     def to_json(self) -> dict:
         """Plain types: sex, age band, mean, sd and ci95 (None where not published)."""
         return {"sex": self.sex, "age": [self.age_lo, self.age_hi], "mean": self.mean,
                 "sd": self.sd, "ci95": None if self.ci95 is None else list(self.ci95)}
 
 
-def _pv(sex: str, band: tuple[int, int], mean: float, ci95=None,
-        where: str = "") -> PopulationValue:
-    return PopulationValue(sex, band[0], band[1], mean, None, ci95, where)
+#: How each joint's population column was measured, as its table's note says it.
+_MEASURED = {"soucie2011": "passive, goniometer",
+             "boone1979+macedo2008": "goniometer; Boone & Azen active motion"}
+_SHORT = {"soucie2011": "Soucie 2011",
+          "boone1979+macedo2008": "Boone 1979 (men) / Macedo 2008 (women)"}
 
 
-_F, _M = "female", "male"
-_A2_8, _A20_44, _A45_69 = (2, 8), (20, 44), (45, 69)
-_BOONE_BAND, _MACEDO_BAND = (1, 54), (18, 59)
+def _population() -> dict[str, dict]:
+    """:data:`POPULATION` from the norms table (its report sources, the shoulder apart)."""
+    out: dict[str, dict] = {}
+    for joint, keys in REPORT_SOURCES.items():
+        if joint == "shoulder":
+            continue
+        srcs = [NORMS.sources[k] for k in keys]
+        key = "+".join(keys)
+        if len(srcs) == 1:
+            source, cite = srcs[0].reference, srcs[0].cite
+        else:  # one source per sex (Boone & Azen men, Macedo & Magee women)
+            sexes = [{n.sex for n in NORMS.rows if n.source.key == k} for k in keys]
+            who = [{"male": "men", "female": "women"}[next(iter(s))] for s in sexes]
+            source = "; ".join(f"{w}: {s.reference}" for w, s in zip(who, srcs, strict=True))
+            cite = "; ".join(f"{s.cite} ({w})" for w, s in zip(who, srcs, strict=True))
+        movements: dict[str, list[PopulationValue]] = {}
+        for n in NORMS.rows:
+            if n.joint == joint and n.source.key in keys:
+                movements.setdefault(n.movement, []).append(PopulationValue.from_norm(n))
+        out[joint] = {"source": source, "cite": cite, "short": _SHORT.get(key, key),
+                      "measured": _MEASURED.get(key, srcs[0].method), "movements": movements}
+    return out
+
 
 #: Population values per joint: ``source`` (full reference), ``cite`` (short, for the table),
 #: ``short`` (name), ``measured`` (how), ``movements``:
 #: movement → list of :class:`PopulationValue`. A movement absent here has no published value in
-#: the joint's source; a joint absent has no source (its table column shows "—").
-POPULATION: dict[str, dict] = {
-    "hip": {
-        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
-        "measured": "passive, goniometer",
-        "movements": {
-            "flexion": [
-                _pv(_F, _A2_8, 140.8, (139.2, 142.4), _CDC),
-                _pv(_M, _A2_8, 131.1, (129.4, 132.8), _CDC),
-                _pv(_F, _A20_44, 133.8, None, _CDC_Q_FIG),
-                _pv(_M, _A20_44, 130.4, None, _CDC_Q_FIG),
-                _pv(_F, _A45_69, 130.8, (129.2, 132.4), _CDC_Q_REHAB),
-                _pv(_M, _A45_69, 127.2, (125.7, 128.7), _CDC_Q_REHAB),
-            ],
-            "extension": [
-                _pv(_F, _A2_8, 26.2, (23.9, 28.5), _CDC),
-                _pv(_M, _A2_8, 28.3, (27.2, 29.4), _CDC),
-                _pv(_F, _A20_44, 18.1, None, _CDC_Q_FIG),
-                _pv(_M, _A20_44, 17.4, None, _CDC_Q_FIG),
-                _pv(_F, _A45_69, 16.7, None, _CDC_Q_AGE),
-                _pv(_M, _A45_69, 13.5, None, _CDC_Q_AGE),
-            ],
-        },
-    },
-    "knee": {
-        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
-        "measured": "passive, goniometer",
-        "movements": {
-            "flexion": [
-                _pv(_F, _A2_8, 152.6, (151.2, 154.0), _CDC),
-                _pv(_M, _A2_8, 147.8, (146.6, 149.0), _CDC),
-                _pv(_F, _A20_44, 141.9, None, _CDC_Q_TRACE),
-                _pv(_M, _A20_44, 137.7, None, _CDC_Q_TRACE),
-                _pv(_F, _A45_69, 137.8, (136.5, 139.1), _CDC_Q_REHAB),
-                _pv(_M, _A45_69, 132.9, (131.6, 134.2), _CDC_Q_REHAB),
-            ],
-            "extension": [
-                _pv(_F, _A2_8, 5.4, (3.9, 6.9), _CDC),
-                _pv(_M, _A2_8, 1.6, (0.9, 2.3), _CDC),
-            ],
-        },
-    },
-    "ankle": {
-        "source": _SOUCIE, "cite": _SOUCIE_CITE, "short": "Soucie 2011",
-        "measured": "passive, goniometer",
-        "movements": {
-            "dorsiflexion": [
-                _pv(_F, _A2_8, 24.8, (22.5, 27.1), _CDC),
-                # the stored page copy breaks off inside this interval ("21.3 – 24"): no CI kept
-                _pv(_M, _A2_8, 22.8, None, _CDC),
-                _pv(_F, _A20_44, 13.8, None, _CDC_Q_AGE),
-                _pv(_M, _A20_44, 12.7, None, _CDC_Q_AGE),
-                _pv(_F, _A45_69, 11.6, None, _CDC_Q_AGE),
-                _pv(_M, _A45_69, 11.9, None, _CDC_Q_AGE),
-            ],
-            "plantarflexion": [
-                _pv(_F, _A20_44, 62.1, None, _CDC_Q_FIG),
-                _pv(_M, _A20_44, 54.6, None, _CDC_Q_FIG),
-            ],
-        },
-    },
-    "elbow": {
-        "source": _BOONE_MACEDO, "cite": _BOONE_MACEDO_CITE,
-        "short": "Boone 1979 (men) / Macedo 2008 (women)",
-        "measured": "goniometer; Boone & Azen active motion",
-        "movements": {
-            "flexion": [_pv(_M, _BOONE_BAND, 143.0, None, _TABLE_A1),
-                        _pv(_F, _MACEDO_BAND, 149.0, None, _TABLE_A1)],
-            "extension": [_pv(_M, _BOONE_BAND, 1.0, None, _TABLE_A1),
-                          _pv(_F, _MACEDO_BAND, 2.0, None, _TABLE_A1)],
-            "pronation": [_pv(_M, _BOONE_BAND, 76.0, None, _TABLE_A1),
-                          _pv(_F, _MACEDO_BAND, 92.0, None, _TABLE_A1)],
-            "supination": [_pv(_M, _BOONE_BAND, 82.0, None, _TABLE_A1),
-                           _pv(_F, _MACEDO_BAND, 96.0, None, _TABLE_A1)],
-        },
-    },
-    "wrist": {
-        "source": _BOONE_MACEDO, "cite": _BOONE_MACEDO_CITE,
-        "short": "Boone 1979 (men) / Macedo 2008 (women)",
-        "measured": "goniometer; Boone & Azen active motion",
-        "movements": {
-            "flexion": [_pv(_M, _BOONE_BAND, 76.0, None, _TABLE_A1),
-                        _pv(_F, _MACEDO_BAND, 93.0, None, _TABLE_A1)],
-            "extension": [_pv(_M, _BOONE_BAND, 75.0, None, _TABLE_A1),
-                          _pv(_F, _MACEDO_BAND, 86.0, None, _TABLE_A1)],
-            "radial_deviation": [_pv(_M, _BOONE_BAND, 22.0, None, _TABLE_A1),
-                                 _pv(_F, _MACEDO_BAND, 18.0, None, _TABLE_A1)],
-            "ulnar_deviation": [_pv(_M, _BOONE_BAND, 36.0, None, _TABLE_A1),
-                                _pv(_F, _MACEDO_BAND, 41.0, None, _TABLE_A1)],
-        },
-    },
-}
+#: the joint's source; a joint absent has no source (its table column shows "—"). Built from
+#: :data:`calibration.norms.NORMS` (the report's sources per joint).
+POPULATION: dict[str, dict] = _population()
 
 _WORD = {"female": "women", "male": "men"}
 
@@ -360,23 +268,18 @@ def _check_who(age, sex) -> None:
 
 def population_band(joint: str, movement: str, *, age: float | None = None,
                     sex: str | None = None) -> list[PopulationValue]:
-    """The published values that apply to a patient (:data:`POPULATION`): per sex (both, women
-    first, when ``sex`` is None) the band containing ``age``; past the oldest band, the oldest
-    when it is an adult band; age unknown, the band containing :data:`UNKNOWN_AGE`. Empty when
-    the joint has no source or the movement no value for that age."""
+    """The published values that apply to a patient (:func:`calibration.norms.norm_band` over
+    the joint's report sources): per sex (both, women first, when ``sex`` is None) the band
+    containing ``age``; past the oldest band, the oldest when it is an adult band; age unknown,
+    the band containing :data:`UNKNOWN_AGE`. Empty when the joint has no source or the
+    movement no value for that age."""
     _joint(joint)
     _check_who(age, sex)
-    values = (POPULATION.get(joint) or {}).get("movements", {}).get(movement, [])
-    years = math.floor(UNKNOWN_AGE if age is None else age)  # 44.5 is in the 20-44 band
-    out = []
-    for sx in (sex,) if sex is not None else ("female", "male"):
-        bands = sorted((v for v in values if v.sex == sx), key=lambda v: v.age_lo)
-        hit = next((v for v in bands if v.age_lo <= years <= v.age_hi), None)
-        if hit is None and bands and years > bands[-1].age_hi and bands[-1].age_hi >= 18:
-            hit = bands[-1]
-        if hit is not None:
-            out.append(hit)
-    return out
+    if joint not in POPULATION or movement not in JOINT_MOVEMENTS.get(joint, ()):
+        return []
+    return [PopulationValue.from_norm(n)
+            for n in norm_band(joint, movement, age=age, sex=sex,
+                               sources=REPORT_SOURCES[joint], unknown_age=UNKNOWN_AGE)]
 
 
 def population_reference(joint: str, movement: str, *, age: float | None = None,
