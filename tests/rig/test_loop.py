@@ -62,9 +62,16 @@ def models(tmp_path_factory):
     return out
 
 
+#: The SDK's packet timeout is wall-clock: a generous one where every read is to succeed, so a
+#: loaded host (a CI run with both cores busy) never turns a read into a timeout and the
+#: manual-clock run into another one (a retried read, an older present).
+LOADED_HOST_MS = 1000.0
+
+
 def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
-         safe_state="hold", before=None, warm_up=True, **sup):
-    """Open the simulated servos, run ``cycles`` cycles on a manual clock, close everything.
+         safe_state="hold", before=None, warm_up=True, faults=False, **sup):
+    """Open the simulated servos, run ``cycles`` cycles on a manual clock, close everything;
+    ``faults``: the test injects faults that time reads out (the SDK's own packet timeout).
 
     Returns (summary, telemetry table, bus, loop).
     """
@@ -80,6 +87,8 @@ def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
             before(bus)
             clk.advance(0.01)  # let what ``before`` did to the limb take effect
         limb = prepare_servo_limb(port, SERVOS, oracle)
+        if not faults:
+            limb.bus.set_latency(LOADED_HOST_MS)
         try:
             loop = EnforcementLoop(limb, model, oracle, targets, cfg, clock=clk,
                                    sleep=clk.sleep, on_cycle=on_cycle)
@@ -208,7 +217,7 @@ def test_one_percent_dropped_and_corrupted_packets(models):
 
     src = ScriptedTargets("slow", oracle)
     summary, table, _, _ = _run(constraint, model, src, cycles=1000, on_cycle=on_cycle,
-                                before=keep)
+                                before=keep, faults=True)
     assert summary["cycles"] == 1000 and summary["safe_state_entries"] == 0
     faults = summary["faults"]
     assert faults.get("read_timeout", 0) > 0 and faults.get("read_corrupt", 0) > 0
@@ -231,7 +240,7 @@ def test_unplugged_adapter_reaches_the_safe_state_within_two_cycles(models):
             bus_ref["bus"].unplug(adapter=True)
 
     summary, table, _, _ = _run(constraint, model, ScriptedTargets("slow", oracle),
-                                cycles=200, on_cycle=on_cycle,
+                                cycles=200, on_cycle=on_cycle, faults=True,
                                 before=lambda b: bus_ref.setdefault("bus", b))
     assert summary["safe_state_entries"] == 1
     assert 100 <= summary["safe_state_cycle"] <= 102
@@ -280,7 +289,7 @@ def test_stale_servo_data_trips_the_watchdog(models):
 
     summary, table, _, _ = _run(constraint, model, ScriptedTargets("slow", oracle),
                                 cycles=200, on_cycle=on_cycle, stale_present_s=0.03,
-                                before=lambda b: bus_ref.setdefault("bus", b))
+                                faults=True, before=lambda b: bus_ref.setdefault("bus", b))
     assert summary["safe_state_entries"] == 1
     assert "stale" in summary["safe_state_reason"]
     # 30 ms at 5 ms per cycle: the 7th cycle without fresh data
@@ -317,6 +326,7 @@ def test_a_slow_start_does_not_leave_the_servos_stopped_by_their_watchdog(models
         bus = port.simulator
         clk = bus.clock
         limb = prepare_servo_limb(port, SERVOS, oracle)
+        limb.bus.set_latency(LOADED_HOST_MS)
         try:
             cfg = LoopConfig(rate_hz=200.0, watchdog_ms=100)
             loop = EnforcementLoop(limb, model, oracle, ScriptedTargets("adversarial", oracle), cfg,

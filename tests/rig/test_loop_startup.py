@@ -74,6 +74,7 @@ def _run(arm, targets, cycles, *, on_cycle=None, **cfg):
             sim.set_hand(i, float(t))
         clk.advance(0.01)
         sl = ServoLimb(DynamixelBus(port, list(kin.ids)), kin)
+        sl.bus.set_latency(1000.0)  # the SDK's wall-clock timeout: no read lost on a loaded host
         write = sl.bus.write_goal_ticks
 
         def observed(ticks):
