@@ -316,7 +316,7 @@ def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
     method = entry.get("method") or _method(store, sess)
     if entry.get("method") != method:
         entry["method"], dirty = method, True
-    if limb is not None and "coupled" not in entry:
+    if "coupled" not in entry:  # a limb file's keyframes; {} without one
         entry["coupled"], dirty = coupled_limits(store, int(sess["id"]), sess.get("side")), True
     visits = []
     for j in joints:

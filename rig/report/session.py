@@ -58,10 +58,12 @@ from rig import __version__
 from rig.errors import RigConfigError, user_errors
 from rig.readback import extract, joint_orientations_from_store
 from rig.readback.boundary import stored_limb
+from rig.readback.progress import ProgressRequest, run_progress
 from rig.readback.sessions import latest_calibration, session_limb
 from rig.report.figures import boundary_figure, error_map_figure
 from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
+from rig.report.progress import progress_section_html
 from rig.store import file_sha256, open_store
 from rig.training.limb import evaluate_limb
 from rig.training.verdict import (  # the one verdict, re-exported
@@ -383,7 +385,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto",
+                       db: str | Path | None = None) -> Path:
     """Write the HTML report of a session in an opened store — one joint or a whole limb (a
     session of one joint is a limb of one joint; each has its page); returns its path.
 
@@ -409,6 +412,10 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         Held-out inputs of a model scored for the report (no evaluation stored with it).
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from.
+    db : path or URL, optional
+        The store's path or URL: with it, a recording of one joint whose patient has more
+        than one visit of that joint gets the progress section
+        (:mod:`rig.report.progress`).
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
@@ -422,6 +429,9 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         reference = load_constraint(reference)
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n, fusion=fusion)
+    if db is not None and sess.get("pseudonym") and sess.get("kind") == "record":
+        data.progress_html = progress_section_html(run_progress(ProgressRequest(
+            str(db), sess["pseudonym"], sess.get("joint") or "shoulder")))
     return write_report(data, out_path)
 
 
@@ -595,7 +605,7 @@ def run_report(request: ReportRequest) -> ReportResult:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=request.reference, eval_n=request.eval_n,
-            fusion=request.fusion))
+            fusion=request.fusion, db=request.db))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:

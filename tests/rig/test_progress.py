@@ -19,6 +19,7 @@ from calibration.joint_angles import from_angles
 from calibration.mdc import MDC_TABLE, mdc_for, verdict
 from rig.cli import main
 from rig.readback.progress import ProgressRequest, coupled_measures, run_progress
+from rig.report.session import ReportRequest, run_report
 from rig.store import SampleWriter, open_store
 
 DAY = 86_400.0
@@ -157,3 +158,10 @@ def test_mdc_table_is_cited_and_verdicts_three_way():
     assert [verdict(d, v) for d in (5, 10, 20)] == ["within", "uncertain", "exceeds"]
     assert mdc_for("hip", "flexion", "servo")[0] is None
     assert mdc_for("wrist", "flexion", "file")[0].instrument == "motion-capture"
+
+
+def test_report_has_the_progress_section(clinic, tmp_path):
+    out = run_report(ReportRequest(clinic, 11, tmp_path / "r.html")).path
+    page = out.read_text()
+    assert "Progress across visits" in page and "interrupted" in page
+    assert page.count("data:image/png") >= 1 and "exceeds" in page
