@@ -29,7 +29,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
-import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+import common  # first: one BLAS thread, this checkout on sys.path
 import numpy as np
 
 from rig import __version__
