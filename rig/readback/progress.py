@@ -47,7 +47,8 @@ from rig.readback.source import RecordingSource, check_joint
 from rig.store import open_store
 
 __all__ = ["ROM_CACHE_VERSION", "ProgressRequest", "ProgressResult", "Visit",
-           "coupled_limits", "coupled_measures", "movements_of", "run_progress"]
+           "coupled_limits", "coupled_measures", "merged_progress", "movements_of",
+           "run_progress", "sessions_of"]
 
 #: Bumped when what the cache holds, or how a visit's range of motion is computed, changes;
 #: a cached entry of another version (or another rig version) is recomputed.
@@ -230,6 +231,16 @@ class ProgressResult:
         return "\n".join(lines)
 
 
+def merged_progress(results: list[ProgressResult]) -> ProgressResult:
+    """Several joints' progress of one patient (a limb's, one :func:`run_progress` per
+    joint) as one: the visits in date order, every series."""
+    visits = sorted((v for r in results for v in r.visits),
+                    key=lambda v: (v.started_at, v.session_id))
+    series = {k: v for r in results for k, v in r.series.items()}
+    return ProgressResult(results[0].patient if results else "", visits, series,
+                          sum(r.computed for r in results), sum(r.cached for r in results))
+
+
 def _delta(d: float | None, v: str | None) -> str:
     if d is None:
         return "-"
@@ -275,17 +286,19 @@ def _rom_entry(db: str, sess: dict, joint: str, limb: str | None) -> dict:
     return {"values": values, "facts": facts}
 
 
-def coupled_limits(store, session_id: int, side: str | None) -> dict[str, Any]:
-    """Per coupled joint of the session's latest stored limb boundary: ``by`` (the joint it
-    depends on), ``at_deg`` (its keyframe angles) and ``rom`` (angle text → movement → the
-    range of motion that keyframe allows, degrees). Empty without a limb boundary."""
+def coupled_limits(store, session_id: int, side: str | None,
+                   joints: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Per coupled joint (of ``joints``; default every one) of the session's latest stored
+    limb boundary: ``by`` (the joint it depends on), ``at_deg`` (its keyframe angles) and
+    ``rom`` (angle text → movement → the range of motion that keyframe allows, degrees).
+    Empty without a limb boundary."""
     rows = store.boundaries.list(session_id, limb=True)
     if not rows:
         return {}
     limb = loads_limb(rows[-1]["constraint_yaml"], source=f"session {session_id}")
     out: dict[str, Any] = {}
     for lj in limb.joints:
-        if lj.coupling is None:
+        if lj.coupling is None or (joints is not None and lj.name not in joints):
             continue
         per = {}
         for a, kf in zip(lj.coupling.at_deg, lj.coupling.keyframes, strict=True):
@@ -296,6 +309,13 @@ def coupled_limits(store, session_id: int, side: str | None) -> dict[str, Any]:
         out[lj.name] = {"by": lj.coupling.by, "at_deg": [float(a) for a in lj.coupling.at_deg],
                         "rom": per}
     return out
+
+
+def sessions_of(store, patient: str, joints: tuple[str, ...]) -> int:
+    """How many recording sessions of patient ``patient`` recorded any of ``joints`` (a
+    cheap count before :func:`run_progress`: the report shows progress from two on)."""
+    return sum(1 for s in store.sessions.list(patient=patient)
+               if s.get("kind") == "record" and set(_joints_of(s)[1]) & set(joints))
 
 
 def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
@@ -316,8 +336,12 @@ def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
     method = entry.get("method") or _method(store, sess)
     if entry.get("method") != method:
         entry["method"], dirty = method, True
-    if "coupled" not in entry:  # a limb file's keyframes; {} without one
-        entry["coupled"], dirty = coupled_limits(store, int(sess["id"]), sess.get("side")), True
+    coupled = entry.setdefault("coupled", {})  # joint → a limb file's keyframes ({}: none)
+    todo = tuple(j for j in joints if j not in coupled)
+    if todo:  # only the joints asked for: a coupled joint's ranges cost ~0.1-0.3 s a keyframe
+        found = coupled_limits(store, int(sess["id"]), sess.get("side"), todo)
+        coupled.update({j: found.get(j, {}) for j in todo})
+        dirty = True
     visits = []
     for j in joints:
         got = entry["joints"].get(j)
@@ -347,8 +371,8 @@ def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
         visits.append(Visit(int(sess["id"]), float(sess["started_at"]), j, sess.get("side"),
                             limb, method, status, interrupted, facts.get("coverage"),
                             facts.get("coverage_sufficient"), dict(got.get("values") or {}),
-                            excluded, (entry.get("coupled") or {}).get(j, {}) and
-                            {j: entry["coupled"][j]}, coupled_measures(sess)))
+                            excluded, {j: coupled[j]} if coupled.get(j) else {},
+                            coupled_measures(sess)))
     if dirty and status != "running" and not store.readonly:
         store.sessions.merge_meta(int(sess["id"]), {"rom_cache": entry})
     return visits

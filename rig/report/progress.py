@@ -80,6 +80,21 @@ def progress_section_html(result: ProgressResult) -> list[str]:
             f"MDC {escape(m.replace('_', ' '))}: "
             + escape(" | ".join(dict.fromkeys(p.mdc_text for p in pts)))
             for m, pts in mv.items()) + "</p>")
+    coupled = [(v, j, c) for v in result.visits for j, c in v.coupled.items()]
+    if coupled:
+        out.append("<h3>Coupled limits across visits</h3><table><tr><th>Session</th>"
+                   "<th>Date (UTC)</th><th>Joint</th><th>At</th><th>Range allowed (°)</th>"
+                   "</tr>")
+        for v, j, c in coupled:
+            for at, vals in c["rom"].items():
+                text = ", ".join(f"{m.replace('_', ' ')} {x:.1f}" for m, x in vals.items()
+                                 if x is not None)
+                out.append(f"<tr><td>{v.session_id}</td><td>{escape(v.date)}</td>"
+                           f"<td>{escape(j)}</td><td>{escape(c['by'])} {escape(at)}°</td>"
+                           f"<td>{escape(text)}</td></tr>")
+        out.append("</table><p class='small'>Each visit's limb file (rig boundary --limb): "
+                   "the coupled joint's range at each keyframe angle of the joint it depends "
+                   "on, so visits compare at the same coupling angles.</p>")
     out.append("<p class='small'>'exceeds': a change larger than the minimal detectable "
                "change of the joint, movement and method (a real change); 'within': not "
                "distinguishable from measurement error; 'uncertain': inside a published MDC "

@@ -19,7 +19,9 @@ from calibration.joint_angles import from_angles
 from calibration.mdc import MDC_TABLE, mdc_for, verdict
 from rig.cli import main
 from rig.readback.progress import ProgressRequest, coupled_measures, run_progress
+from rig.report.progress import progress_section_html
 from rig.report.session import ReportRequest, run_report
+from rig.sim.patients import anatomical_limb
 from rig.store import SampleWriter, open_store
 
 DAY = 86_400.0
@@ -165,3 +167,34 @@ def test_report_has_the_progress_section(clinic, tmp_path):
     page = out.read_text()
     assert "Progress across visits" in page and "interrupted" in page
     assert page.count("data:image/png") >= 1 and "exceeds" in page
+
+
+def test_coupled_limits_compare_across_visits(tmp_path):
+    """Two leg visits with stored limb files: each coupled joint's range at the same keyframe
+    angles of the knee, from each visit's own limb file; the visits without samples are listed
+    with why, never evidence."""
+    db = tmp_path / "leg.db"
+    limbs = [anatomical_limb(seed, "leg", "right") for seed in (3, 4)]
+    with open_store(db) as store:
+        pid = store.patients.add("P-LEG")
+        for i, limb in enumerate(limbs):
+            sid = store.sessions.start(pid, rig_name="sim-leg", side="right",
+                                       meta={"limb": "leg"}, started_at=T0 + i * DAY)
+            store.boundaries.add(sid, limb.to_yaml(), {"kind": "limb"})
+            store.sessions.end(sid, status="completed")
+    res = run_progress(ProgressRequest(str(db), "P-LEG", joint="ankle"))
+    assert [v.usable for v in res.visits] == [False, False]
+    assert "calibration" in res.visits[0].excluded[0]
+    for v, limb in zip(res.visits, limbs, strict=True):
+        c = v.coupled["ankle"]
+        lj = limb.joints[limb.index("ankle")]
+        assert c["by"] == "knee" and c["at_deg"] == [float(a) for a in lj.coupling.at_deg]
+        # more dorsiflexion with the knee bent (the gastrocnemius slack), as the file says
+        at = [f"{a:g}" for a in lj.coupling.at_deg]
+        assert c["rom"][at[-1]]["dorsiflexion"] > c["rom"][at[0]]["dorsiflexion"]
+    a, b = (v.coupled["ankle"]["rom"] for v in res.visits)
+    assert a.keys() == b.keys() and a["0"]["dorsiflexion"] != b["0"]["dorsiflexion"]
+    page = "\n".join(progress_section_html(res))
+    assert "Coupled limits across visits" in page and "knee 90°" in page
+    again = run_progress(ProgressRequest(str(db), "P-LEG", joint="ankle"))
+    assert [v.coupled for v in again.visits] == [v.coupled for v in res.visits]
