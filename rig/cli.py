@@ -71,6 +71,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "rom",
         "Print the clinical range of motion of a session, a file or a constraint.",
     ),
+    "progress": (
+        "rig.commands.progress",
+        "progress",
+        "A patient's range of motion across visits, each change against the MDC.",
+    ),
     "report": (
         "rig.commands.report",
         "report",

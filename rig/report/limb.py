@@ -190,6 +190,8 @@ class LimbReportData:
     evaluation_facts: dict[str, Any] = field(default_factory=dict)
     evaluation_verdict: str | None = None
     software: str | None = None
+    #: the progress section's HTML (:func:`rig.report.progress.progress_section_html`)
+    progress_html: list[str] = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -857,6 +859,7 @@ def render_limb_html(data: LimbReportData) -> str:
         if c.caption:
             out.append(f"<p class='small'>{escape(c.caption)}</p>")
         out.append("</section>")
+    out += data.progress_html
     if data.calibration:
         out.append("<h2>Calibration</h2>")
         out += _calibration_html(data.calibration)

@@ -81,6 +81,9 @@ class ReportData:
     enforcement_joints: list[dict[str, Any]] = field(default_factory=list)  # a limb's joints
     leader: dict[str, Any] = field(default_factory=dict)  # a run driven by a leader arm
     software: str | None = None
+    #: the progress section's HTML (:func:`rig.report.progress.progress_section_html`): the
+    #: patient's visits of this joint, when there is more than one
+    progress_html: list[str] = field(default_factory=list)
 
 
 _CSS = """
@@ -268,6 +271,8 @@ def render_html(data: ReportData) -> str:
     if data.rom_rows:
         out.append("<h2>Range of motion</h2>")
         out += rom_table_html(data.rom_rows, data.rom_note)
+
+    out += data.progress_html
 
     if data.boundary_png is not None or data.boundary_facts:
         out.append("<h2>Recorded boundary</h2><div class='figs'>")

@@ -58,10 +58,17 @@ from rig import __version__
 from rig.errors import RigConfigError, user_errors
 from rig.readback import extract, joint_orientations_from_store
 from rig.readback.boundary import stored_limb
+from rig.readback.progress import (
+    ProgressRequest,
+    merged_progress,
+    run_progress,
+    sessions_of,
+)
 from rig.readback.sessions import latest_calibration, session_limb
 from rig.report.figures import boundary_figure, error_map_figure
 from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
+from rig.report.progress import progress_section_html
 from rig.store import file_sha256, open_store
 from rig.training.limb import evaluate_limb
 from rig.training.verdict import (  # the one verdict, re-exported
@@ -383,7 +390,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto",
+                       db: str | Path | None = None) -> Path:
     """Write the HTML report of a session in an opened store — one joint or a whole limb (a
     session of one joint is a limb of one joint; each has its page); returns its path.
 
@@ -409,19 +417,28 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         Held-out inputs of a model scored for the report (no evaluation stored with it).
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from.
+    db : path or URL, optional
+        The store's path or URL: with it, a recording whose patient has more than one visit
+        of its joint (a limb's: of its joints) gets the progress section
+        (:mod:`rig.report.progress`).
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
         if isinstance(reference, (str, Path)):
             reference = load_limb(reference)
         return _write_limb_report(store, session_id, out_path, model=model, age=age, sex=sex,
-                                  reference=reference, eval_n=eval_n, fusion=fusion)
+                                  reference=reference, eval_n=eval_n, fusion=fusion, db=db)
     if model is not None:
         _check_model_for_session(model, sess, session_id)
     if isinstance(reference, (str, Path)):
         reference = load_constraint(reference)
     data = report_data_for_session(store, session_id, model=model, age=age, sex=sex,
                                    reference=reference, eval_n=eval_n, fusion=fusion)
+    joint = sess.get("joint") or "shoulder"
+    if (db is not None and sess.get("pseudonym") and sess.get("kind") == "record"
+            and sessions_of(store, sess["pseudonym"], (joint,)) > 1):
+        data.progress_html = progress_section_html(run_progress(ProgressRequest(
+            str(db), sess["pseudonym"], joint)))
     return write_report(data, out_path)
 
 
@@ -479,7 +496,8 @@ def _is_limb_model_of(joints):
 
 
 def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto",
+                       db: str | Path | None = None) -> Path:
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
@@ -552,6 +570,11 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
         evaluation=evaluation, age=age, sex=sex, limits_source=source,
         evaluation_note=evaluation_note)
     data.simulated = bool(chain.recording.simulated)
+    if db is not None and sess.get("pseudonym") and sessions_of(
+            store, sess["pseudonym"], tuple(chain.joints)) > 1:
+        data.progress_html = progress_section_html(merged_progress(
+            [run_progress(ProgressRequest(str(db), sess["pseudonym"], j))
+             for j in chain.joints]))
     return write_limb_report(data, out_path)
 
 
@@ -595,7 +618,7 @@ def run_report(request: ReportRequest) -> ReportResult:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=request.reference, eval_n=request.eval_n,
-            fusion=request.fusion))
+            fusion=request.fusion, db=request.db))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:

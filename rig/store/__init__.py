@@ -13,7 +13,7 @@ The rooms of the store (each module the only one writing its tables' SQL; arrows
       |   store.patients      patients.py      PatientRepository   add ensure find get list
       |   store.sessions      sessions.py      SessionRepository   start end get list liveness
       |                                        close_interrupted claim_writer set_dropped
-      |                                        heartbeat
+      |                                        heartbeat merge_meta
       |   store.samples       samples.py       SampleRepository    add_sensor sensors read raw
       |                                        complete_raw_count span count t_range
       |                                        sensor_id insert_sensor insert

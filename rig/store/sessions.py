@@ -20,7 +20,15 @@ from rig.errors import RigConfigError
 from rig.store import schema as S
 from rig.store.liveness import STALE_AFTER_S, Liveness, Probe, judge, probe_process, this_writer
 from rig.store.patients import PatientRepository
-from rig.store.rows import SIDES, Database, Repository, check_choice, dumps, loads
+from rig.store.rows import (
+    SIDES,
+    Database,
+    Repository,
+    check_choice,
+    dumps,
+    finite,
+    loads,
+)
 from rig.store.runs import interrupt_runs, run_counts
 from rig.store.samples import SampleRepository, recording_span, sensor_spans
 
@@ -60,11 +68,13 @@ class SessionRepository(Repository):
         side: str | None = None,
         kind: str = "record",
         meta: Mapping[str, Any] | None = None,
+        started_at: float | None = None,
     ) -> int:
         """Open a session (status ``running``) and return its id.
 
         The calling process is recorded as the session's writer (host name, pid, process
-        start; :mod:`rig.store.liveness`) until a sample writer claims it.
+        start; :mod:`rig.store.liveness`) until a sample writer claims it. ``started_at``
+        (Unix time; default now) dates a session entered after the fact (a past visit).
         """
         kind = check_choice("kind", kind, SESSION_KINDS)
         side = check_choice("side", side, SIDES)
@@ -74,7 +84,10 @@ class SessionRepository(Repository):
             res = conn.execute(
                 S.sessions.insert().values(
                     patient_id=int(patient_id), rig_name=rig_name, joint=joint, side=side,
-                    kind=kind, status="running", started_at=time.time(), meta=dumps(meta),
+                    kind=kind, status="running",
+                    started_at=time.time() if started_at is None else finite(
+                        "started_at", started_at),
+                    meta=dumps(meta),
                     writer_host=me.host, writer_pid=me.pid, writer_start=me.start,
                 )
             )
@@ -111,6 +124,20 @@ class SessionRepository(Repository):
             conn.execute(
                 S.sessions.update().where(S.sessions.c.id == int(session_id)).values(**values)
             )
+
+    def merge_meta(self, session_id: int, meta: Mapping[str, Any]) -> None:
+        """Merge ``meta`` into the session's metadata (top-level keys replaced), e.g. a
+        reader's cached results (``rig progress`` keeps each session's range of motion under
+        ``rom_cache``)."""
+        sc = S.sessions.c
+        with self.db.transaction() as conn:  # read and write in one transaction
+            row = conn.execute(select(sc.meta).where(sc.id == int(session_id))).first()
+            if row is None:
+                raise RigConfigError(f"no session {session_id} in {self.db.url}")
+            merged = dict(loads(row[0]) or {})
+            merged.update(meta)
+            conn.execute(S.sessions.update().where(sc.id == int(session_id))
+                         .values(meta=dumps(merged)))
 
     def set_dropped(self, session_id: int, dropped: int) -> None:
         """Record how many samples were lost before reaching the store (sequence gaps, full
