@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from calibration.clinical import format_rom_table, range_of_motion
+from calibration.clinical_tests import coupled_measures, format_coupled_tests
 from calibration.joint_angles import (
     JOINT_ANGLES,
     JointRangeOfMotion,
@@ -45,6 +46,8 @@ class RomRequest:
     constraint: str | None = None
     side: str | None = None
     joint: str | None = None
+    #: a limb file: add its coupled clinical tests (:mod:`calibration.clinical_tests`)
+    coupled_tests: bool = False
 
     def check(self) -> None:
         """Option combinations and files, before any work (one-line errors)."""
@@ -73,6 +76,9 @@ class RomResult:
     joint: str | None
     source: str
     facts: RecordingFacts | None = None
+    #: the limb's coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`),
+    #: when asked for (``rig rom --coupled-tests``)
+    coupled: list | None = None
 
     @property
     def warnings(self) -> list[str]:
@@ -96,6 +102,8 @@ class RomResult:
             lines.append(format_rom_table(self.rom, age=age, sex=sex))
         else:
             lines.append(self.rom.table(age=age, sex=sex))
+        if self.coupled is not None:
+            lines.append(format_coupled_tests(self.coupled))
         return "\n".join(lines)
 
     @property
@@ -128,6 +136,8 @@ class RomResult:
                                for m, b in self.beyond_reach.items()}
         out["warnings"] = self.warnings
         out["source"] = self.source
+        if self.coupled is not None:
+            out["coupled_tests"] = [m.to_json() for m in self.coupled]
         return out
 
 
@@ -174,7 +184,13 @@ def _limits_rom(request: RomRequest) -> RomResult:
     else:
         for c in constraints:
             c.require_swing_twist("rig rom")
-    return RomResult(allowed_rom(constraints, joint, side), named, source)
+    coupled = None
+    if request.coupled_tests:
+        if not isinstance(limits, Limb):
+            raise RigConfigError(f"{path}: --coupled-tests reads a limb file (an arm or a "
+                                 "leg), not one joint's constraint")
+        coupled = coupled_measures(limits, side=side)
+    return RomResult(allowed_rom(constraints, joint, side), named, source, coupled=coupled)
 
 
 def run_rom(request: RomRequest) -> RomResult:
@@ -183,6 +199,9 @@ def run_rom(request: RomRequest) -> RomResult:
     request.check()
     if request.constraint is not None:
         return _limits_rom(request)
+    if request.coupled_tests:
+        raise RigConfigError("--coupled-tests reads a limb file (--constraint LIMB.yaml); a "
+                             "limb session's are in its report (rig report --coupled-tests)")
     src = request.source
     data = src.load()
     side = request.side or data.side or "right"

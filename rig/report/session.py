@@ -383,7 +383,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto",
+                       coupled_tests: bool = False) -> Path:
     """Write the HTML report of a session in an opened store — one joint or a whole limb (a
     session of one joint is a limb of one joint; each has its page); returns its path.
 
@@ -409,13 +410,17 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         Held-out inputs of a model scored for the report (no evaluation stored with it).
     fusion : {"auto", "device", "vqf"}
         Where an IMU recording's orientations come from.
+    coupled_tests : bool
+        A whole arm or leg: add the section "Coupled clinical tests"
+        (:mod:`calibration.clinical_tests`).
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
         if isinstance(reference, (str, Path)):
             reference = load_limb(reference)
         return _write_limb_report(store, session_id, out_path, model=model, age=age, sex=sex,
-                                  reference=reference, eval_n=eval_n, fusion=fusion)
+                                  reference=reference, eval_n=eval_n, fusion=fusion,
+                                  coupled_tests=coupled_tests)
     if model is not None:
         _check_model_for_session(model, sess, session_id)
     if isinstance(reference, (str, Path)):
@@ -479,7 +484,8 @@ def _is_limb_model_of(joints):
 
 
 def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
-                       reference=None, eval_n: int = 4000, fusion: str = "auto") -> Path:
+                       reference=None, eval_n: int = 4000, fusion: str = "auto",
+                       coupled_tests: bool = False) -> Path:
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
@@ -550,7 +556,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
         warnings=chain.recording.warnings(), reference=reference,
         calibration=residuals, calibration_note=note,
         evaluation=evaluation, age=age, sex=sex, limits_source=source,
-        evaluation_note=evaluation_note)
+        evaluation_note=evaluation_note, coupled_tests=coupled_tests)
     data.simulated = bool(chain.recording.simulated)
     return write_limb_report(data, out_path)
 
@@ -572,6 +578,7 @@ class ReportRequest:
     reference: Any = None
     eval_n: int = 4000
     fusion: str = "auto"
+    coupled_tests: bool = False
 
     def check(self) -> None:
         """The files given, before anything is drawn (one-line errors)."""
@@ -595,7 +602,7 @@ def run_report(request: ReportRequest) -> ReportResult:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=request.reference, eval_n=request.eval_n,
-            fusion=request.fusion))
+            fusion=request.fusion, coupled_tests=request.coupled_tests))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:

@@ -3,6 +3,8 @@ limb itself, and the real recordings (the value or "not reached", never an inven
 
 from __future__ import annotations
 
+import itertools
+import json
 import math
 from pathlib import Path
 
@@ -11,8 +13,12 @@ import pytest
 
 from calibration.clinical_tests import coupled_measures, format_coupled_tests
 from calibration.joint_angles import from_angles
-from models.limb import Limb
+from models import quaternion as Q
+from models.limb import Limb, dump_limb
+from models.shapes import shape_path
+from rig.cli import main
 from rig.readback import load_joint_orientations
+from rig.report.limb import LimbReportData, render_limb_html
 from rig.sim.patients import anatomical_limb
 
 REAL = Path(__file__).parent / "data" / "real"
@@ -22,7 +28,8 @@ def _crossing(at: list[float], f: list[float], target: float) -> float:
     """The coupling angle at which the interpolated flexion limit reaches ``target`` (degrees):
     the limb file's normalised linear interpolation of a vertex on one great circle
     (docs/limb-format.md), solved exactly per keyframe interval."""
-    for (a0, f0), (a1, f1) in zip(zip(at, f), zip(at[1:], f[1:]), strict=False):
+    pairs = list(zip(at, f, strict=True))
+    for (a0, f0), (a1, f1) in itertools.pairwise(pairs):
         if f0 <= target <= f1:
             c0, s0, c1, s1 = (math.cos(math.radians(f0)), math.sin(math.radians(f0)),
                               math.cos(math.radians(f1)), math.sin(math.radians(f1)))
@@ -145,3 +152,50 @@ def test_real_recordings_give_the_value_or_not_reached(file, letter, side, limb)
         assert by["popliteal_angle"].value is None
         assert by["straight_leg_raise"].value is not None
     assert statuses <= {"recording", "not reached in this recording"}
+
+
+def _run(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
+def test_rig_rom_coupled_tests_of_a_limb_file(tmp_path, capsys):
+    f = tmp_path / "leg.yaml"
+    dump_limb(anatomical_limb(3, "leg"), f)
+    code, out, _ = _run(["rom", "--constraint", str(f), "--joint", "knee", "--coupled-tests",
+                         "--json"], capsys)
+    assert code == 0
+    tests = {m["measure"]: m for m in json.loads(out)["coupled_tests"]}
+    assert tests["silfverskiold_bent"]["status"] == "limits"
+    assert "short gastrocnemius" in tests["silfverskiold_bent"]["verdict"]
+    assert "s13102-021-00242-y" in tests["popliteal_angle"]["source"]
+    code, out, _ = _run(["rom", "--constraint", str(f), "--joint", "knee"], capsys)
+    assert code == 0 and "coupled clinical tests" not in out  # asked for only
+    code, _, err = _run(["rom", "--constraint", shape_path("original"), "--coupled-tests"],
+                        capsys)
+    assert code == 2 and "--coupled-tests reads a limb file" in err
+    assert "Traceback" not in err
+
+
+def test_the_limb_report_section(tmp_path):
+    limb = anatomical_limb(6, "arm")
+    n = 30
+    elbow = np.linspace(0.0, 100.0, n)
+    q = {"shoulder": Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(np.full(n, 40.0))),
+         "elbow": from_angles(elbow, 0.0, 0.0, "elbow"),
+         "wrist": np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))}
+    postures = np.stack([q[j] for j in limb.joint_names], axis=1)
+    # the page alone (limb_report_data, seconds of figures, adds the same list when asked)
+    data = LimbReportData(patient="P-1", side="right", limb="arm", limb_name=limb.name,
+                          joint_order=limb.joint_names, samples=n,
+                          coupled_tests=coupled_measures(limb, postures, side="right"))
+    html = render_limb_html(data)
+    assert "<h2>Coupled clinical tests</h2>" in html and "Shoulder flexion, elbow bent" in html
+    by = {m.spec.key: m for m in data.coupled_tests}
+    assert by["shoulder_flexion_straight"].reached and by["shoulder_flexion_bent"].reached
+    assert abs(by["shoulder_flexion_bent"].recorded - 40.0) < 1e-6
+    assert by["shoulder_extension_bent"].value == by["shoulder_extension_bent"].from_limits
+    data.coupled_tests = None
+    assert "Coupled clinical tests" not in render_limb_html(data)
