@@ -49,9 +49,9 @@ JOINT_NAMES = tuple(JOINTS)
               show_default=True, help="IMU sessions: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
 @click.option("--coupled-tests", is_flag=True,
-              help="A limb file (--constraint LIMB.yaml): add its coupled clinical tests "
-              "(straight-leg raise, popliteal angle, Silfverskiöld, Thomas test; the "
-              "shoulder's reach with the elbow straight vs bent).")
+              help="A limb file (--constraint LIMB.yaml) or a whole-limb session: add its "
+              "coupled clinical tests (straight-leg raise, popliteal angle, Silfverskiöld, "
+              "Thomas test; the shoulder's reach with the elbow straight vs bent).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object: movement -> degrees or null, plus joint, side, "
               "coverage, interrupted.")

@@ -177,6 +177,10 @@ def test_rig_rom_coupled_tests_of_a_limb_file(tmp_path, capsys):
                         capsys)
     assert code == 2 and "--coupled-tests reads a limb file" in err
     assert "Traceback" not in err
+    code, _, err = _run(["rom", str(REAL / "xio_ximu3_lower_body.sto"), "--joint", "knee",
+                         "--parent", "femur_r", "--child", "tibia_r", "--frames", "isb",
+                         "--coupled-tests"], capsys)
+    assert code == 2 and "not an orientation file" in err
 
 
 def test_the_limb_report_section(tmp_path):
