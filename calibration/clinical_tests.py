@@ -50,15 +50,22 @@ Thresholds and norms (:data:`REFERENCES`)
   modified Thomas test: hip angle > 0° (the thigh above the table: no hip extension) = short
   one-joint hip flexors, knee angle < 67° = short two-joint hip flexors. BMC Sports Science,
   Medicine and Rehabilitation 2021, doi:10.1186/s13102-021-00242-y, Table 4.
-- The modified Thomas test's goniometric standard error of measurement, 7° (J Athl Train
-  2008;43(5):470, as cited in issue 42): a reading within it of the threshold is borderline.
+- Standard errors of measurement of the Thomas test by goniometer: the knee angle (rectus
+  femoris) 7° — Peeler JD, Anderson JE. Reliability limits of the modified Thomas test for
+  assessing rectus femoris muscle flexibility about the knee joint. J Athl Train
+  2008;43(5):470-476, doi:10.4085/1062-6050-43.5.470 (54 adults aged 18-45, three athletic
+  therapists); the hip angle 11° — Peeler J, Anderson JE. Reliability of the Thomas test for
+  assessing range of motion about the hip. Phys Ther Sport 2007;8:14-21 (the same 54). A
+  reading within its SEM of the threshold is called borderline.
 - Straight-leg raise: 61° ± 6.7° (passive, pelvis and opposite thigh strapped) and passive
   knee extension at 90° hip flexion 31° ± 7.5°, 30 healthy men (Comparison of four clinical
   tests for assessing hamstring muscle length, J Orthop Sports Phys Ther 1993;18(5):614-618,
   doi:10.2519/jospt.1993.18.5.614): a norm, not a threshold.
 - The shoulder: full elbow flexion limits shoulder flexion (triceps' long head) and full elbow
-  extension limits shoulder extension (biceps' long head), measured on 30 men ("Passive
-  insufficiency of two-joint shoulder muscles", abstract); no published threshold was found:
+  extension limits shoulder extension (biceps' long head), measured on 30 men from lateral
+  photographs ("Passive insufficiency of two-joint shoulder muscles", abstract read at
+  discovery.researcher.life; its authors and journal not verified here); no published
+  threshold was found:
   the AAOS 1965 values (flexion 180°, extension 60°, :data:`calibration.clinical.NORMATIVE`)
   are shown as the norm.
 """
@@ -73,14 +80,14 @@ import numpy as np
 
 from calibration.clinical import NORMATIVE as SHOULDER_NORMS
 from calibration.clinical import check_side, mirror_quaternions, text_table
-from calibration.joint_angles import from_angles, joint_angles
+from calibration.joint_angles import JOINT_ANGLES, from_angles, joint_angles
 from models import quaternion as Q
 from models.kinds import get_kind
 from models.limb import Limb
 from models.oracle import ConstraintOracle
 
 __all__ = ["MEASURES", "REFERENCES", "TOLERANCE_DEG", "CoupledMeasure", "MeasureSpec",
-           "coupled_measures", "format_coupled_tests", "limits_value"]
+           "coupled_measures", "format_coupled_tests", "limits_value", "measure_sources"]
 
 #: How near the other joint must be to the test position (degrees) for a recorded sample to
 #: count as "at the test position" (module doc).
@@ -93,7 +100,10 @@ _FINE_DEG = 0.01
 _TABLE4 = ("BMC Sports Sci Med Rehabil 2021, doi:10.1186/s13102-021-00242-y, Table 4")
 _JOSPT1993 = ("J Orthop Sports Phys Ther 1993;18(5):614-618, doi:10.2519/jospt.1993.18.5.614 "
               "(30 healthy men)")
-_JAT2008 = "J Athl Train 2008;43(5):470 (goniometric SEM of the modified Thomas test)"
+_JAT2008 = ("Peeler & Anderson, J Athl Train 2008;43(5):470-476 (goniometric SEM of the "
+            "modified Thomas test's knee angle, 7°)")
+_PTS2007 = ("Peeler & Anderson, Phys Ther Sport 2007;8:14-21 (goniometric SEM of the Thomas "
+            "test's hip angle, 11°)")
 _SHOULDER_SRC = ("'Passive insufficiency of two-joint shoulder muscles' (30 men, lateral "
                  "photographs; the coupling); norm AAOS 1965")
 
@@ -107,7 +117,7 @@ REFERENCES: dict[str, dict[str, Any]] = {
                       "threshold": "< 18° straight, > 18° bent = short gastrocnemius",
                       "source": _TABLE4},
     "thomas_hip": {"norm": None, "threshold": "hip angle > 0° (no extension) = short one-joint "
-                   "hip flexors", "source": _TABLE4, "sem_deg": 7.0, "sem_source": _JAT2008},
+                   "hip flexors", "source": _TABLE4, "sem_deg": 11.0, "sem_source": _PTS2007},
     "thomas_knee": {"norm": None, "threshold": "knee angle < 67° = short two-joint hip "
                     "flexors", "source": _TABLE4, "sem_deg": 7.0, "sem_source": _JAT2008},
     "shoulder_flexion": {"norm": f"{SHOULDER_NORMS['aaos']['flexion']:g}° (AAOS)",
@@ -146,6 +156,16 @@ class MeasureSpec:
             return (f"{self.other} {what} with the {self.joint} at {self.fixed_deg:g}° "
                     f"{self.movement}")
         return f"{self.joint} {self.movement} with the {self.other} at {self.other_deg:g}°"
+
+    @property
+    def angles(self) -> str:
+        """The angles read and where their definitions come from."""
+        def one(joint: str) -> str:
+            if joint == "shoulder":
+                return ("shoulder: the humerus's angle from the arm at the side within 5° of "
+                        "the sagittal plane, thorax frame (Wu et al. 2005, J Biomech 38:981)")
+            return f"{joint}: the first Cardan angle α (Z-X'-Y''), {JOINT_ANGLES[joint].source}"
+        return "; ".join(one(j) for j in (self.joint, self.other))
 
 
 _LEG = (
@@ -199,7 +219,8 @@ class CoupledMeasure:
         def r(v):
             return None if v is None else round(float(v), 2)
         return {"measure": self.spec.key, "test": self.spec.test, "label": self.spec.label,
-                "definition": self.spec.definition, "joint": self.spec.joint,
+                "definition": self.spec.definition, "angles": self.spec.angles,
+                "joint": self.spec.joint,
                 "movement": self.spec.movement, "other_joint": self.spec.other,
                 "other_deg": None if self.spec.scan == "other" else self.spec.other_deg,
                 "value": r(self.value), "status": self.status,
@@ -207,7 +228,8 @@ class CoupledMeasure:
                 "reached": self.reached, "samples_at_position": int(self.samples_at_position),
                 "coupled": self.coupled, "norm": ref.get("norm"),
                 "threshold": ref.get("threshold"), "sem_deg": ref.get("sem_deg"),
-                "source": ref["source"], "verdict": self.verdict, "notes": list(self.notes)}
+                "sem_source": ref.get("sem_source"), "source": ref["source"],
+                "verdict": self.verdict, "notes": list(self.notes)}
 
 
 # -- postures of a test position --------------------------------------------------------------
@@ -223,7 +245,9 @@ def _posture(joint: str, deg: np.ndarray, side: str) -> np.ndarray:
 
 
 class _Pair:
-    """The measured joint and the other joint of one limb: their oracle queries."""
+    """The measured joint and the other joint of one limb: their oracle queries. The other
+    joint's range is its constraint's coupling range (a coupled hinge's: the hull of its
+    keyframes); a joint that cannot drive couplings (no single angle) restricts nothing."""
 
     def __init__(self, limb: Limb, oracle: ConstraintOracle, joint: str, other: str,
                  side: str):
@@ -234,13 +258,11 @@ class _Pair:
         lj = limb.joints[self.j]
         self.coupled = lj.coupling is not None and lj.coupling.by == other
         self.oracle = oracle
-        src = limb.joints[limb.index(lj.coupling.by if lj.coupling is not None else other)]
-        self.src_constraint = src.constraint if src.constraint is not None else src.loosest()
-        self.src_kind = get_kind(self.src_constraint.kind) if self.src_constraint else None
         o = limb.joints[limb.index(other)]
         oc = o.constraint if o.constraint is not None else o.loosest()
+        kind = None if oc is None else get_kind(oc.kind)
         self.other_constraint = oc
-        self.other_kind = get_kind(oc.kind) if oc is not None else None
+        self.other_kind = kind if kind is not None and kind.drives_couplings else None
 
     def other_angle(self, deg: np.ndarray) -> np.ndarray:
         """The other joint's coupling angle (radians) at its clinical angles ``deg``."""
@@ -248,6 +270,8 @@ class _Pair:
         return np.asarray(self.other_kind.coupling_angle(self.other_constraint, q), float)
 
     def other_allowed(self, deg: np.ndarray) -> np.ndarray:
+        if self.other_kind is None:
+            return np.ones(np.shape(deg), bool)
         lo, hi = self.other_kind.coupling_range(self.other_constraint)
         a = self.other_angle(deg)
         return (a >= lo - 1e-9) & (a <= hi + 1e-9)
@@ -500,6 +524,13 @@ def coupled_measures(limb: Limb | None = None, postures=None, *, joint_names=Non
     return out
 
 
+def measure_sources(measures: list[CoupledMeasure]) -> list[str]:
+    """The sources the measures' thresholds, norms and SEMs come from, each once, sorted."""
+    refs = [REFERENCES[m.spec.reference] for m in measures]
+    return sorted({r["source"] for r in refs} | {r["sem_source"] for r in refs
+                                                   if "sem_source" in r})
+
+
 def format_coupled_tests(measures: list[CoupledMeasure]) -> str:
     """The measures as a plain-text table with their verdicts, notes and sources."""
     rows = [("test", "value", "limits", "recorded", "norm / threshold")]
@@ -518,9 +549,7 @@ def format_coupled_tests(measures: list[CoupledMeasure]) -> str:
             lines.append(f"{m.spec.label}: {m.verdict}")
         for n in m.notes:
             lines.append(f"note ({m.spec.label}): {n}")
-    sources = sorted({REFERENCES[m.spec.reference]["source"] for m in measures}
-                     | {REFERENCES[m.spec.reference]["sem_source"] for m in measures
-                        if "sem_source" in REFERENCES[m.spec.reference]})
+    sources = measure_sources(measures)
     if sources:
         lines.append("sources: " + "; ".join(sources))
     return "\n".join(lines)

@@ -64,7 +64,7 @@ import numpy as np
 
 from calibration.boundary import boundary_distance
 from calibration.clinical import range_of_motion
-from calibration.clinical_tests import REFERENCES, coupled_measures
+from calibration.clinical_tests import REFERENCES, coupled_measures, measure_sources
 from calibration.joint_angles import (
     CLINICAL_MOVEMENTS,
     JOINT_ANGLES,
@@ -906,13 +906,14 @@ def _coupled_tests_html(measures: list) -> list[str]:
         value = ("not reached in this recording" if m.status.startswith("not reached")
                  else fmt(m.value))
         reading = "; ".join(x for x in (m.verdict, *m.notes) if x)
-        out.append(f"<tr><td>{escape(m.spec.label)}</td><td>{escape(m.spec.definition)}</td>"
+        out.append(f"<tr><td>{escape(m.spec.label)}</td><td>{escape(m.spec.definition)}"
+                   f"<br><span class='small'>{escape(m.spec.angles)}</span></td>"
                    f"<td>{escape(value)}</td><td>{fmt(m.from_limits)}</td>"
                    f"<td>{fmt(m.recorded)}</td>"
                    f"<td>{escape(ref.get('threshold') or ref.get('norm') or '-')}</td>"
                    f"<td>{escape(reading)}</td></tr>")
     out.append("</table>")
-    sources = sorted({REFERENCES[m.spec.reference]["source"] for m in measures})
+    sources = measure_sources(measures)
     out.append("<p class='small'>Sources: " + escape("; ".join(sources)) + ".</p>")
     return out
 
