@@ -34,8 +34,10 @@ coupled to the other, the uncoupled limits answer and the measure says so.
 ``tolerance_deg`` (default :data:`TOLERANCE_DEG`, 10°: a clinician's "knee straight" or
 "hip at 90°" position as a goniometer reads it) of the test position; the farthest (least)
 reading of the measured angle among them, after the running median of
-:func:`calibration.joint_angles.recorded_rom` (5 samples). The shoulder's samples must lie
-within 5° of the sagittal plane as well (:func:`calibration.clinical.range_of_motion`'s band).
+:func:`calibration.joint_angles.recorded_rom` (5 samples). A swing joint's samples must lie
+within :data:`BAND_DEG` (5°) of the movement's plane as well (β, the ab/adduction or
+inversion; the shoulder's sagittal plane, :func:`calibration.clinical.range_of_motion`'s
+band); the limits are read in the plane itself.
 **No sample at the test position: "not reached in this recording"** — the value is then None
 even when limits are given (their limits there are interpolation or a clamped keyframe, not a
 position the patient was seen in). A recording of free movement (walking, dancing) is not the
@@ -72,6 +74,7 @@ Thresholds and norms (:data:`REFERENCES`)
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -81,18 +84,24 @@ import numpy as np
 from calibration.clinical import NORMATIVE as SHOULDER_NORMS
 from calibration.clinical import check_side, mirror_quaternions, text_table
 from calibration.joint_angles import JOINT_ANGLES, from_angles, joint_angles
+from calibration.joints import JOINTS
+from calibration.kinds import calibration_kind
 from models import quaternion as Q
 from models.kinds import get_kind
 from models.limb import Limb
 from models.oracle import ConstraintOracle
 
-__all__ = ["MEASURES", "REFERENCES", "TOLERANCE_DEG", "CoupledMeasure", "MeasureSpec",
+__all__ = ["BAND_DEG", "MEASURES", "REFERENCES", "TOLERANCE_DEG", "CoupledMeasure", "MeasureSpec",
            "coupled_measures", "format_coupled_tests", "limits_value", "measure_sources"]
 
 #: How near the other joint must be to the test position (degrees) for a recorded sample to
 #: count as "at the test position" (module doc).
 TOLERANCE_DEG = 10.0
-_SAGITTAL_BAND_DEG = 5.0  # the shoulder's samples: within this of the sagittal plane
+#: A goniometer's alignment tolerance (degrees): a recording's samples of a swing joint count
+#: within this of the movement's plane (out-of-plane angle β; the shoulder: of the sagittal
+#: plane), as :func:`calibration.clinical.range_of_motion` reads the shoulder's; the limits
+#: are read in the plane itself.
+BAND_DEG = 5.0
 _WINDOW = 5  # running median over samples, as calibration.joint_angles.recorded_rom
 _COARSE_DEG = 0.5
 _FINE_DEG = 0.01
@@ -236,12 +245,20 @@ class CoupledMeasure:
 def _posture(joint: str, deg: np.ndarray, side: str) -> np.ndarray:
     """Joint orientations (M, 4) (rig frames) at clinical angle ``deg`` (M,) of the primary
     movement (flexion, dorsiflexion; the shoulder: flexion in the sagittal plane), the other
-    angles zero."""
+    angles zero: the position itself, in its plane."""
     deg = np.atleast_1d(np.asarray(deg, dtype=np.float64))
     if joint == "shoulder":  # the arm hanging along +X, flexion towards +Y about +Z
         q = Q.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(deg))
         return mirror_quaternions(q) if side == "left" else q
     return from_angles(deg, 0.0, 0.0, joint, side)
+
+
+@functools.cache
+def _reads_in_band(joint: str) -> bool:
+    """Does a goniometer read this joint's primary angle within a band about its plane (a
+    swing joint), or wherever it is (a hinge: its other angles are out-of-axis motion)?"""
+    return joint == "shoulder" or calibration_kind(JOINTS[joint].kind).reads_in_band
+
 
 
 class _Pair:
@@ -277,16 +294,18 @@ class _Pair:
         return (a >= lo - 1e-9) & (a <= hi + 1e-9)
 
     def valid(self, deg: np.ndarray, other_deg: np.ndarray) -> np.ndarray:
-        """Is the measured joint at clinical angles ``deg`` within its limits with the other
-        joint at ``other_deg`` (clamped into its range, as the limb oracle judges)?"""
+        """Is the measured joint at clinical angles ``deg`` (in its plane) within its limits
+        with the other joint at ``other_deg`` (clamped into its range, as the limb oracle
+        judges)?"""
         deg, other_deg = np.broadcast_arrays(np.atleast_1d(np.asarray(deg, float)),
                                              np.atleast_1d(np.asarray(other_deg, float)))
         q = _posture(self.joint, deg, self.side)
         if self.coupled:
             lo, hi = self.other_kind.coupling_range(self.other_constraint)
             angle = np.clip(self.other_angle(other_deg), lo, hi)
-            return np.asarray(self.oracle.evaluate_joint(self.j, q, angle).valid, bool)
-        return np.asarray(self.oracle.evaluate_joint(self.j, q, np.zeros(len(q))).valid, bool)
+        else:
+            angle = np.zeros(len(q))
+        return np.asarray(self.oracle.evaluate_joint(self.j, q, angle).valid, bool)
 
 
 def _extreme(ok_fn, lo: float, hi: float, pick: str) -> float | None:
@@ -362,14 +381,18 @@ def _smooth(a: np.ndarray) -> np.ndarray:
 
 
 def _primary_angle(q: np.ndarray, joint: str, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """The primary clinical angle (degrees, (N,)) of joint orientations and where it is read
-    (the shoulder: within the sagittal band; the others: everywhere)."""
+    """The primary clinical angle (degrees, (N,)) of joint orientations and where a goniometer
+    reads it (:func:`_reads_in_band`: within :data:`BAND_DEG` of its plane; a hinge
+    everywhere), after the running median."""
     if joint == "shoulder":
         qq = mirror_quaternions(q) if side == "left" else q
         d = Q.rotate(qq, np.array([1.0, 0.0, 0.0]))
         psi = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
-        return _smooth(psi), np.abs(d[:, 2]) <= math.sin(math.radians(_SAGITTAL_BAND_DEG))
-    return _smooth(joint_angles(q, joint, side)["alpha"]), np.ones(len(q), bool)
+        return _smooth(psi), np.abs(d[:, 2]) <= math.sin(math.radians(BAND_DEG))
+    ang = joint_angles(q, joint, side)
+    band = (np.abs(_smooth(ang["beta"])) <= BAND_DEG if _reads_in_band(joint)
+            else np.ones(len(q), bool))
+    return _smooth(ang["alpha"]), band
 
 
 def _recorded(angles: dict[str, tuple[np.ndarray, np.ndarray]], spec: MeasureSpec,
@@ -518,9 +541,14 @@ def coupled_measures(limb: Limb | None = None, postures=None, *, joint_names=Non
     by_key = {m.spec.key: m.value for m in out}
     for m in out:
         m.verdict = _verdict(m.spec, m.value, by_key, m.status == "recording")
-        if m.status == "recording" and REFERENCES[m.spec.reference].get("threshold"):
+        if not REFERENCES[m.spec.reference].get("threshold"):
+            continue
+        if m.status == "recording":
             m.notes.append("no verdict: a recording's reading is the farthest the patient went "
                            "at the test position, not the passive end-range test")
+        elif m.status == "limits" and m.reached:
+            m.notes.append("limits extracted from a recording hold what it explored: the "
+                           "verdict stands for an end-range (passive) exploration")
     return out
 
 

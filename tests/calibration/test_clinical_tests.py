@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from calibration.clinical_tests import coupled_measures, format_coupled_tests
+from calibration.extraction import LimbExtractor
 from calibration.joint_angles import from_angles
 from models import quaternion as Q
 from models.limb import Limb, dump_limb
@@ -203,3 +204,22 @@ def test_the_limb_report_section(tmp_path):
     assert by["shoulder_extension_bent"].value == by["shoulder_extension_bent"].from_limits
     data.coupled_tests = None
     assert "Coupled clinical tests" not in render_limb_html(data)
+
+
+@pytest.mark.parametrize("file,letter,side", [("xio_ximu3_lower_body.sto", "r", "right"),
+                                              ("opensense_xsens_walking.sto", "l", "left")])
+def test_real_recordings_with_the_limits_extracted_from_them(file, letter, side):
+    q = _chain(file, ["pelvis", f"femur_{letter}", f"tibia_{letter}", f"calcn_{letter}"],
+               ["hip", "knee", "ankle"])
+    limb = LimbExtractor("leg").fit(q, side=side).limb_
+    got = coupled_measures(limb, q, side=side)
+    print(file, {m.spec.key: (m.status, None if m.value is None else round(m.value, 1))
+                 for m in got})
+    for m in got:
+        if not m.reached:  # the limits may have a value there; the test has none
+            assert m.value is None and m.status == "not reached in this recording"
+        else:
+            assert m.value == m.from_limits
+            assert m.status == ("limits" if m.value is not None else "not possible")
+    if file == "opensense_xsens_walking.sto":
+        assert {m.spec.key: m for m in got}["popliteal_angle"].value is None
