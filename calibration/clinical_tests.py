@@ -57,7 +57,8 @@ Thresholds and norms (:data:`REFERENCES`)
   assessing rectus femoris muscle flexibility about the knee joint. J Athl Train
   2008;43(5):470-476, doi:10.4085/1062-6050-43.5.470 (54 adults aged 18-45, three athletic
   therapists); the hip angle 11° — Peeler J, Anderson JE. Reliability of the Thomas test for
-  assessing range of motion about the hip. Phys Ther Sport 2007;8:14-21 (the same 54). A
+  assessing range of motion about the hip. Phys Ther Sport 2007;8:14-21 (54 adults aged
+  18-45). A
   reading within its SEM of the threshold is called borderline.
 - Straight-leg raise: 61° ± 6.7° (passive, pelvis and opposite thigh strapped) and passive
   knee extension at 90° hip flexion 31° ± 7.5°, 30 healthy men (Comparison of four clinical
@@ -167,6 +168,13 @@ class MeasureSpec:
         return f"{self.joint} {self.movement} with the {self.other} at {self.other_deg:g}°"
 
     @property
+    def position(self) -> dict[str, Any]:
+        """The joint held at the test position and its clinical angle (degrees)."""
+        if self.scan == "other":
+            return {"joint": self.joint, "movement": self.movement, "deg": self.fixed_deg}
+        return {"joint": self.other, "movement": "flexion", "deg": self.other_deg}
+
+    @property
     def angles(self) -> str:
         """The angles read and where their definitions come from."""
         def one(joint: str) -> str:
@@ -232,6 +240,7 @@ class CoupledMeasure:
                 "joint": self.spec.joint,
                 "movement": self.spec.movement, "other_joint": self.spec.other,
                 "other_deg": None if self.spec.scan == "other" else self.spec.other_deg,
+                "position": self.spec.position,
                 "value": r(self.value), "status": self.status,
                 "from_limits": r(self.from_limits), "recorded": r(self.recorded),
                 "reached": self.reached, "samples_at_position": int(self.samples_at_position),
