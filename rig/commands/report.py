@@ -34,10 +34,16 @@ from rig.readback.data import FUSION_CHOICES
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto",
               show_default=True, help="IMU recordings: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
-def report(db, session_id, model_path, out_path, age, sex, reference_path, fusion) -> None:
+@click.option("--coupled-tests", is_flag=True,
+              help="A whole arm or leg: add the coupled clinical tests (straight-leg raise, "
+              "popliteal angle, Silfverskiöld, Thomas test; the shoulder's reach with the "
+              "elbow straight vs bent).")
+def report(db, session_id, model_path, out_path, age, sex, reference_path, fusion,
+           coupled_tests) -> None:
     """Write the clinician's HTML report of a session."""
     from rig.report import ReportRequest, run_report
 
     result = run_report(ReportRequest(db, session_id, out_path, model=model_path, age=age,
-                                      sex=sex, reference=reference_path, fusion=fusion))
+                                      sex=sex, reference=reference_path, fusion=fusion,
+                                      coupled_tests=coupled_tests))
     click.echo(f"wrote {result.path}")

@@ -48,11 +48,15 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto",
               show_default=True, help="IMU sessions: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
+@click.option("--coupled-tests", is_flag=True,
+              help="A limb file (--constraint LIMB.yaml) or a whole-limb session: add its "
+              "coupled clinical tests (straight-leg raise, popliteal angle, Silfverskiöld, "
+              "Thomas test; the shoulder's reach with the elbow straight vs bent).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object: movement -> degrees or null, plus joint, side, "
               "coverage, interrupted.")
 def rom(file, db, session_id, parent, child, reference, limb, limb_axis, joint, frames,
-        constraint_path, side, age, sex, fusion, as_json) -> None:
+        constraint_path, side, age, sex, fusion, coupled_tests, as_json) -> None:
     """Print the clinical range of motion (ISB angles, peaks, normative values)."""
     from rig.errors import RigConfigError
     from rig.readback import RecordingSource, RomRequest, run_rom
@@ -63,6 +67,7 @@ def rom(file, db, session_id, parent, child, reference, limb, limb_axis, joint, 
                              f"file's column named {whole} is --child {whole}")
     source = RecordingSource(file, db, session_id, parent, child, limb_axis, frames, fusion,
                              joint)
-    result = run_rom(RomRequest(source, constraint=constraint_path, side=side, joint=joint))
+    result = run_rom(RomRequest(source, constraint=constraint_path, side=side, joint=joint,
+                                coupled_tests=coupled_tests))
     click.echo(json.dumps(result.to_json(age=age, sex=sex)) if as_json
                else result.table(age=age, sex=sex))

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from calibration.alignment import trusted_samples
 from calibration.clinical import format_rom_table, range_of_motion
+from calibration.clinical_tests import coupled_measures, format_coupled_tests
 from calibration.joint_angles import (
     JOINT_ANGLES,
     JointRangeOfMotion,
@@ -28,9 +30,11 @@ from calibration.joint_angles import (
 from calibration.joints import joint_mismatch
 from models.limb import Limb, load_limits
 from rig.errors import RigConfigError
-from rig.readback.boundary import extract
+from rig.readback.boundary import extract, stored_limb
 from rig.readback.data import RecordingFacts
+from rig.readback.sessions import joint_orientations_from_store, session_limb
 from rig.readback.source import RecordingSource, check_joint
+from rig.store import open_store
 
 __all__ = ["RomRequest", "RomResult", "run_rom"]
 
@@ -45,6 +49,9 @@ class RomRequest:
     constraint: str | None = None
     side: str | None = None
     joint: str | None = None
+    #: a limb file or a whole-limb session: add its coupled clinical tests
+    #: (:mod:`calibration.clinical_tests`)
+    coupled_tests: bool = False
 
     def check(self) -> None:
         """Option combinations and files, before any work (one-line errors)."""
@@ -73,6 +80,9 @@ class RomResult:
     joint: str | None
     source: str
     facts: RecordingFacts | None = None
+    #: the limb's coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`),
+    #: when asked for (``rig rom --coupled-tests``)
+    coupled: list | None = None
 
     @property
     def warnings(self) -> list[str]:
@@ -96,6 +106,8 @@ class RomResult:
             lines.append(format_rom_table(self.rom, age=age, sex=sex))
         else:
             lines.append(self.rom.table(age=age, sex=sex))
+        if self.coupled is not None:
+            lines.append(format_coupled_tests(self.coupled))
         return "\n".join(lines)
 
     @property
@@ -128,6 +140,8 @@ class RomResult:
                                for m, b in self.beyond_reach.items()}
         out["warnings"] = self.warnings
         out["source"] = self.source
+        if self.coupled is not None:
+            out["coupled_tests"] = [m.to_json() for m in self.coupled]
         return out
 
 
@@ -174,7 +188,13 @@ def _limits_rom(request: RomRequest) -> RomResult:
     else:
         for c in constraints:
             c.require_swing_twist("rig rom")
-    return RomResult(allowed_rom(constraints, joint, side), named, source)
+    coupled = None
+    if request.coupled_tests:
+        if not isinstance(limits, Limb):
+            raise RigConfigError(f"{path}: --coupled-tests reads a limb file (an arm or a "
+                                 "leg), not one joint's constraint")
+        coupled = coupled_measures(limits, side=side)
+    return RomResult(allowed_rom(constraints, joint, side), named, source, coupled=coupled)
 
 
 def run_rom(request: RomRequest) -> RomResult:
@@ -183,6 +203,35 @@ def run_rom(request: RomRequest) -> RomResult:
     request.check()
     if request.constraint is not None:
         return _limits_rom(request)
+    coupled = _session_coupled(request) if request.coupled_tests else None
+    result = _recording_rom(request)
+    result.coupled = coupled
+    return result
+
+
+def _session_coupled(request: RomRequest) -> list:
+    """The coupled clinical tests of a whole-limb session: the last limb file stored with it
+    (``rig boundary --limb --db``) and its recorded postures (those the sensors vouch for), or
+    the postures alone when no limb file is stored."""
+    src = request.source
+    if src.file is not None:
+        raise RigConfigError("--coupled-tests reads a limb file (--constraint LIMB.yaml) or a "
+                             "whole-limb session (--db --session), not an orientation file")
+    with open_store(src.db, create=False) as store:
+        sess = store.sessions.get(src.session_id)
+        if session_limb(sess) is None:
+            raise RigConfigError(f"--coupled-tests: session {src.session_id} recorded one "
+                                 "joint; the coupled tests need a whole arm or leg")
+        chain = joint_orientations_from_store(store, src.session_id, fusion=src.fusion)
+        found = stored_limb(store, src.session_id)
+    limb = found[0] if found is not None and found[0].joint_names == chain.joints else None
+    ok = trusted_samples(chain.status, len(chain.joint_q))
+    side = request.side or chain.side or "right"
+    return coupled_measures(limb, chain.joint_q[ok], joint_names=chain.joints, side=side)
+
+
+def _recording_rom(request: RomRequest) -> RomResult:
+    """The range of motion of the recording ``request.source`` names."""
     src = request.source
     data = src.load()
     side = request.side or data.side or "right"

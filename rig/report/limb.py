@@ -64,6 +64,7 @@ import numpy as np
 
 from calibration.boundary import boundary_distance
 from calibration.clinical import range_of_motion
+from calibration.clinical_tests import REFERENCES, coupled_measures, measure_sources
 from calibration.joint_angles import (
     CLINICAL_MOVEMENTS,
     JOINT_ANGLES,
@@ -192,6 +193,9 @@ class LimbReportData:
     software: str | None = None
     #: the progress section's HTML (:func:`rig.report.progress.progress_section_html`)
     progress_html: list[str] = field(default_factory=list)
+    #: the coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`), when
+    #: asked for; None: the section is left out
+    coupled_tests: list | None = None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -691,7 +695,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      evaluation: Mapping[str, Any] | None = None, age: float | None = None,
                      sex: str | None = None, limits_source: str | None = None,
                      calibration_note: str | None = None,
-                     evaluation_note: str | None = None) -> LimbReportData:
+                     evaluation_note: str | None = None,
+                     coupled_tests: bool = False) -> LimbReportData:
     """Everything the report of one arm or leg shows (module doc).
 
     Parameters
@@ -733,6 +738,10 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         The patient's, for the population reference column
         (:func:`calibration.joint_angles.population_reference`; the shoulder's
         :func:`calibration.clinical.population_reference`).
+    coupled_tests : bool
+        Add the section "Coupled clinical tests": the limits' value at each test position
+        and the recording's, "not reached in this recording" where the postures never came
+        there (:func:`calibration.clinical_tests.coupled_measures`).
 
     Raises
     ------
@@ -775,6 +784,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         data.couplings.append(_coupling_section(limb, j, q, side, reference))
     if not data.couplings:
         data.coupling_note = NO_COUPLING
+    if coupled_tests:
+        data.coupled_tests = coupled_measures(limb, q, side=side)
     if calibration:
         data.calibration = {str(k): {str(a): float(b) for a, b in v.items()}
                             for k, v in calibration.items()}
@@ -860,6 +871,8 @@ def render_limb_html(data: LimbReportData) -> str:
             out.append(f"<p class='small'>{escape(c.caption)}</p>")
         out.append("</section>")
     out += data.progress_html
+    if data.coupled_tests is not None:
+        out += _coupled_tests_html(data.coupled_tests)
     if data.calibration:
         out.append("<h2>Calibration</h2>")
         out += _calibration_html(data.calibration)
@@ -880,6 +893,32 @@ def render_limb_html(data: LimbReportData) -> str:
             out.append(kv_table(data.evaluation_facts, 3))
     out += page_foot(data.software, _angles_sentence(data.joint_order))
     return "\n".join(out)
+
+
+def _coupled_tests_html(measures: list) -> list[str]:
+    """The section "Coupled clinical tests": one row per measure (its definition, the value,
+    the limits' and the recording's readings, the norm or threshold, the verdict)."""
+    out = ["<h2>Coupled clinical tests</h2>"]
+    if not measures:
+        return [*out, "<p>No test applies to these joints.</p>"]
+    out.append("<table><tr><th>Test</th><th>Definition</th><th>Value (°)</th>"
+               "<th>Limits (°)</th><th>Recorded (°)</th><th>Norm or threshold</th>"
+               "<th>Reading</th></tr>")
+    for m in measures:
+        ref = REFERENCES[m.spec.reference]
+        value = ("not reached in this recording" if m.status.startswith("not reached")
+                 else fmt(m.value))
+        reading = "; ".join(x for x in (m.verdict, *m.notes) if x)
+        out.append(f"<tr><td>{escape(m.spec.label)}</td><td>{escape(m.spec.definition)}"
+                   f"<br><span class='small'>{escape(m.spec.angles)}</span></td>"
+                   f"<td>{escape(value)}</td><td>{fmt(m.from_limits)}</td>"
+                   f"<td>{fmt(m.recorded)}</td>"
+                   f"<td>{escape(ref.get('threshold') or ref.get('norm') or '-')}</td>"
+                   f"<td>{escape(reading)}</td></tr>")
+    out.append("</table>")
+    sources = measure_sources(measures)
+    out.append("<p class='small'>Sources: " + escape("; ".join(sources)) + ".</p>")
+    return out
 
 
 def _angles_sentence(joints: Sequence[str]) -> str:

@@ -391,7 +391,8 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto",
-                       db: str | Path | None = None) -> Path:
+                       db: str | Path | None = None,
+                       coupled_tests: bool = False) -> Path:
     """Write the HTML report of a session in an opened store — one joint or a whole limb (a
     session of one joint is a limb of one joint; each has its page); returns its path.
 
@@ -421,13 +422,17 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         The store's path or URL: with it, a recording whose patient has more than one visit
         of its joint (a limb's: of its joints) gets the progress section
         (:mod:`rig.report.progress`).
+    coupled_tests : bool
+        A whole arm or leg: add the section "Coupled clinical tests"
+        (:mod:`calibration.clinical_tests`).
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
         if isinstance(reference, (str, Path)):
             reference = load_limb(reference)
         return _write_limb_report(store, session_id, out_path, model=model, age=age, sex=sex,
-                                  reference=reference, eval_n=eval_n, fusion=fusion, db=db)
+                                  reference=reference, eval_n=eval_n, fusion=fusion, db=db,
+                                  coupled_tests=coupled_tests)
     if model is not None:
         _check_model_for_session(model, sess, session_id)
     if isinstance(reference, (str, Path)):
@@ -497,7 +502,8 @@ def _is_limb_model_of(joints):
 
 def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto",
-                       db: str | Path | None = None) -> Path:
+                       db: str | Path | None = None,
+                       coupled_tests: bool = False) -> Path:
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
@@ -568,7 +574,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
         warnings=chain.recording.warnings(), reference=reference,
         calibration=residuals, calibration_note=note,
         evaluation=evaluation, age=age, sex=sex, limits_source=source,
-        evaluation_note=evaluation_note)
+        evaluation_note=evaluation_note, coupled_tests=coupled_tests)
     data.simulated = bool(chain.recording.simulated)
     if db is not None and sess.get("pseudonym") and sessions_of(
             store, sess["pseudonym"], tuple(chain.joints)) > 1:
@@ -595,6 +601,7 @@ class ReportRequest:
     reference: Any = None
     eval_n: int = 4000
     fusion: str = "auto"
+    coupled_tests: bool = False
 
     def check(self) -> None:
         """The files given, before anything is drawn (one-line errors)."""
@@ -618,7 +625,7 @@ def run_report(request: ReportRequest) -> ReportResult:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,
             sex=request.sex, reference=request.reference, eval_n=request.eval_n,
-            fusion=request.fusion, db=request.db))
+            fusion=request.fusion, db=request.db, coupled_tests=request.coupled_tests))
 
 
 def _check_model_for_session(model, sess: dict, session_id: int) -> None:
