@@ -24,8 +24,10 @@ session's samples may still grow), and nothing is written to a read-only store.
 **Couplings.** A whole-limb session with a stored limb boundary (``rig boundary --limb``) has
 coupled limits: per visit, each coupled joint's range of motion at each keyframe angle of the
 joint it depends on (:func:`coupled_limits`), so visits compare at the same coupling angles.
-:func:`coupled_measures` is the hook for the named coupled clinical tests (straight-leg raise,
-popliteal angle, ...): it returns ``{}`` until those tests exist.
+A whole-limb session's visits also carry the named coupled clinical tests (straight-leg raise,
+popliteal angle, Silfverskiöld, Thomas test, the shoulder's reach with the elbow straight vs
+bent: :func:`coupled_tests_of`, cached with the visit's range of motion), each under the joint
+its definition names, with a value or "not reached in this recording".
 """
 
 from __future__ import annotations
@@ -42,12 +44,12 @@ from models.limb import loads_limb
 from rig import __version__
 from rig.errors import RigConfigError
 from rig.readback.data import CUT_SHORT
-from rig.readback.rom import RomRequest, run_rom
+from rig.readback.rom import RomRequest, run_rom, session_coupled_tests
 from rig.readback.source import RecordingSource, check_joint
 from rig.store import open_store
 
 __all__ = ["ROM_CACHE_VERSION", "ProgressRequest", "ProgressResult", "Visit",
-           "coupled_limits", "coupled_measures", "merged_progress", "movements_of",
+           "coupled_limits", "coupled_tests_of", "merged_progress", "movements_of",
            "run_progress", "sessions_of"]
 
 #: Bumped when what the cache holds, or how a visit's range of motion is computed, changes;
@@ -60,12 +62,26 @@ def movements_of(joint: str) -> tuple[str, ...]:
     return RangeOfMotion.MOVEMENTS if joint == "shoulder" else CLINICAL_MOVEMENTS[joint]
 
 
-def coupled_measures(session: dict) -> dict:
-    """The named coupled clinical tests of one session (straight-leg raise, popliteal angle,
-    Silfverskiöld, Thomas test, the shoulder's reach with the elbow straight vs bent): test
-    name → result dict. A hook for the coupled-tests service (issue 42, item 2): empty until
-    it is filled; progress lists whatever it returns per visit."""
-    return {}
+def coupled_tests_of(store, sess: dict, entry: dict) -> dict[str, list[dict]]:
+    """The named coupled clinical tests of a whole-limb session (straight-leg raise, popliteal
+    angle, Silfverskiöld, Thomas test, the shoulder's reach with the elbow straight vs bent:
+    :func:`rig.readback.rom.session_coupled_tests`), by the joint each measures: joint → the
+    tests' JSON (``measure``, ``value``, ``status`` — "not reached in this recording" where the
+    session never came to the test position —, norm, source, ...). Cached in the session's
+    ROM cache ``entry`` (key ``coupled_tests``); empty for a session of one joint or one whose
+    postures cannot be read."""
+    got = entry.get("coupled_tests")
+    if got is not None:
+        return got
+    got: dict[str, list[dict]] = {}
+    try:
+        for m in session_coupled_tests(store, int(sess["id"]), side=sess.get("side")):
+            js = m.to_json()
+            got.setdefault(js["joint"], []).append(js)
+    except RigConfigError:  # a session of one joint, postures that cannot be read
+        got = {}
+    entry["coupled_tests"] = got
+    return got
 
 
 @dataclass(frozen=True)
@@ -342,6 +358,9 @@ def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
         found = coupled_limits(store, int(sess["id"]), sess.get("side"), todo)
         coupled.update({j: found.get(j, {}) for j in todo})
         dirty = True
+    had_tests = "coupled_tests" in entry
+    tests = coupled_tests_of(store, sess, entry) if limb else {}
+    dirty = dirty or (bool(limb) and not had_tests)
     visits = []
     for j in joints:
         got = entry["joints"].get(j)
@@ -372,7 +391,7 @@ def _visits_of(store, db: str, sess: dict, joint_filter: str | None,
                             limb, method, status, interrupted, facts.get("coverage"),
                             facts.get("coverage_sufficient"), dict(got.get("values") or {}),
                             excluded, {j: coupled[j]} if coupled.get(j) else {},
-                            coupled_measures(sess)))
+                            {m["measure"]: m for m in tests.get(j, [])}))
     if dirty and status != "running" and not store.readonly:
         store.sessions.merge_meta(int(sess["id"]), {"rom_cache": entry})
     return visits

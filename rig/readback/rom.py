@@ -210,23 +210,38 @@ def run_rom(request: RomRequest) -> RomResult:
 
 
 def _session_coupled(request: RomRequest) -> list:
-    """The coupled clinical tests of a whole-limb session: the last limb file stored with it
-    (``rig boundary --limb --db``) and its recorded postures (those the sensors vouch for), or
-    the postures alone when no limb file is stored."""
+    """The coupled clinical tests of the request's whole-limb session
+    (:func:`session_coupled_tests`)."""
     src = request.source
     if src.file is not None:
         raise RigConfigError("--coupled-tests reads a limb file (--constraint LIMB.yaml) or a "
                              "whole-limb session (--db --session), not an orientation file")
     with open_store(src.db, create=False) as store:
-        sess = store.sessions.get(src.session_id)
-        if session_limb(sess) is None:
-            raise RigConfigError(f"--coupled-tests: session {src.session_id} recorded one "
-                                 "joint; the coupled tests need a whole arm or leg")
-        chain = joint_orientations_from_store(store, src.session_id, fusion=src.fusion)
-        found = stored_limb(store, src.session_id)
+        return session_coupled_tests(store, src.session_id, side=request.side,
+                                     fusion=src.fusion)
+
+
+def session_coupled_tests(store, session_id: int, *, side: str | None = None,
+                          fusion: str = "auto") -> list:
+    """The coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`) of a
+    whole-limb session in an opened store: the last limb file stored with it (``rig boundary
+    --limb --db``) and its recorded postures (those the sensors vouch for), or the postures
+    alone when no limb file is stored.
+
+    Raises
+    ------
+    RigConfigError
+        A session of one joint (one line).
+    """
+    sess = store.sessions.get(session_id)
+    if session_limb(sess) is None:
+        raise RigConfigError(f"--coupled-tests: session {session_id} recorded one "
+                             "joint; the coupled tests need a whole arm or leg")
+    chain = joint_orientations_from_store(store, session_id, fusion=fusion)
+    found = stored_limb(store, session_id)
     limb = found[0] if found is not None and found[0].joint_names == chain.joints else None
     ok = trusted_samples(chain.status, len(chain.joint_q))
-    side = request.side or chain.side or "right"
+    side = side or chain.side or "right"
     return coupled_measures(limb, chain.joint_q[ok], joint_names=chain.joints, side=side)
 
 

@@ -307,3 +307,34 @@ def test_the_report_shows_the_evaluate_stages_evaluation_and_words_fit_the_leg(l
     foot = page[page.index("Generated"):]
     assert "shoulder" not in foot and "knee Grood &amp; Suntay 1983" in foot
     assert " right leg " in listing.splitlines()[1]
+
+
+def test_progress_lists_a_leg_sessions_coupled_clinical_tests(leg_demo, tmp_path):
+    """``rig progress`` on the demo's leg session (a copy of its store: progress caches each
+    visit's results in it): the session's visits carry the named coupled tests — straight-leg
+    raise, popliteal angle, Silfverskiöld, Thomas test — each once, under the joint its
+    definition names, each with a value or "not reached in this recording", never an invented
+    one; the second call reads them from the cache."""
+    import shutil
+
+    from rig.readback.progress import ProgressRequest, run_progress
+
+    db = tmp_path / "rig.db"
+    shutil.copy(leg_demo["db"], db)
+    with open_store(db, create=False) as store:
+        patient = store.sessions.get(leg_demo["session"])["pseudonym"]
+    res = run_progress(ProgressRequest(str(db), patient))
+    visits = {v.joint: v for v in res.visits if v.session_id == leg_demo["session"]}
+    assert set(visits) == {"hip", "knee", "ankle"}
+    tests = [(j, m) for j, v in visits.items() for m in v.tests.values()]
+    assert all(m["joint"] == j for j, m in tests)
+    names = sorted(m["measure"] for _, m in tests)
+    assert names == ["popliteal_angle", "silfverskiold_bent", "silfverskiold_straight",
+                     "straight_leg_raise", "thomas_hip", "thomas_knee"], names
+    for _, m in tests:
+        assert (m["value"] is None) == (m["status"] in ("not reached in this recording",
+                                                        "not possible")), m
+    again = run_progress(ProgressRequest(str(db), patient))
+    assert again.computed == 0
+    assert {v.joint: v.tests for v in again.visits
+            if v.session_id == leg_demo["session"]} == {j: v.tests for j, v in visits.items()}

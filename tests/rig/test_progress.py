@@ -18,7 +18,7 @@ import pytest
 from calibration.joint_angles import from_angles
 from calibration.mdc import MDC_TABLE, mdc_for, verdict
 from rig.cli import main
-from rig.readback.progress import ProgressRequest, coupled_measures, run_progress
+from rig.readback.progress import ProgressRequest, run_progress
 from rig.report.progress import progress_section_html
 from rig.report.session import ReportRequest, run_report
 from rig.sim.patients import anatomical_limb
@@ -129,7 +129,7 @@ def test_progress_recovers_every_change_and_verdict(clinic):
     assert again.computed == 0 and again.cached == 6
     assert [p.value for p in again.series[("elbow", "right")]["flexion"]] == \
         [p.value for p in fl]
-    assert coupled_measures({}) == {}
+    assert all(v.tests == {} for v in again.visits)  # sessions of one joint: no coupled tests
 
 
 def test_progress_cli_table_json_and_errors(clinic, capsys):
