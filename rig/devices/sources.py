@@ -132,6 +132,12 @@ class _SourceBase:
                 yield batch
 
 
+#: A servo chain that answers nothing for this long is lost (``RigConnectionError``); a shorter
+#: silence — a USB adapter's hiccup, a host stalled by other work — costs the readings it
+#: spans only (:attr:`ServoLimbSource.missed`), not the recording.
+LOST_AFTER_S = 0.5
+
+
 class ServoLimbSource(_SourceBase):
     """Joint orientations of a servo limb by its kinematics, at ``rate_hz``.
 
@@ -149,6 +155,9 @@ class ServoLimbSource(_SourceBase):
     ----------
     ticks : (n,) int64 or None
         The last ticks read.
+    missed : int
+        Readings that failed (every attempt timed out or came garbled) within
+        :data:`LOST_AFTER_S` of the last good one: no sample for them, the recording goes on.
     """
 
     def __init__(self, limb: ServoLimb, *, rate_hz: float = 100.0, own: bool = True) -> None:
@@ -159,6 +168,8 @@ class ServoLimbSource(_SourceBase):
         self.period = 1.0 / float(rate_hz)
         self._own = own
         self._next = time.monotonic()
+        self._last_ok = self._next
+        self.missed = 0
         self.ticks: np.ndarray | None = None
 
     @property
@@ -176,10 +187,14 @@ class ServoLimbSource(_SourceBase):
         try:
             ticks = bus.read_ticks()
         except (RigTimeoutError, RigProtocolError) as err:
+            if time.monotonic() - self._last_ok < LOST_AFTER_S:
+                self.missed += 1
+                return []
             # the message's wording is kept (CLI output unchanged)
             raise RigConnectionError(f"the servo chain stopped answering ({err})",
                                      port=str(bus.port)) from err
         t = time.monotonic()
+        self._last_ok = t
         self.ticks = ticks
         kin = self.limb.kinematics
         return [OrientationSample(t, None, name, "joint", joint.forward(part), 0)

@@ -40,13 +40,22 @@ def test_servo_limb_source_reports_the_patient_joint():
 
 
 def test_servo_source_turns_a_silent_bus_into_a_connection_error():
+    """A reading that fails every attempt (a hiccup: the next status packets dropped) costs
+    that reading only; a bus that stays silent (the cable pulled) is lost once
+    LOST_AFTER_S has passed without a good reading."""
     cfg = load_rig_config("sim-shoulder")
     with open_port(cfg.servos.port) as port, \
             open_source(cfg, ports={cfg.servos.port: port}) as src:
-        src.read(1.0)
+        assert src.read(1.0)
+        bus = src.limb.bus
+        port.simulator.drop_responses(bus.retries + 1)  # every attempt of one reading
+        assert src.read(1.0) == [] and src.missed == 1
+        assert src.read(1.0)  # the next reading comes: the recording goes on
         port.simulator.unplug()  # the bus cable: nobody answers, the adapter stays
         with pytest.raises(RigConnectionError, match="stopped answering"):
-            src.read(1.0)
+            for _ in range(10_000):  # each failed reading takes its attempts' timeouts
+                src.read(1.0)
+        assert src.missed > 1
 
 
 def test_imu_set_source_names_segments():
