@@ -205,17 +205,22 @@ class PopulationValue:
     sd: float | None = None
     ci95: tuple[float, float] | None = None
     where: str = ""
+    source: str = ""  # the publication (its short citation)
+    method: str = ""  # how it measured (active or passive, instrument, position)
 
     @classmethod
     def from_norm(cls, n: Norm) -> PopulationValue:
         """The value of one row of :data:`calibration.norms.NORMS` (a band, not an overall
         value: the columns of these joints have only bands)."""
-        return cls(n.sex, n.age_lo, n.age_hi, n.value, n.sd, n.ci95, n.where)
+        return cls(n.sex, n.age_lo, n.age_hi, n.value, n.sd, n.ci95, n.where, n.source.cite,
+                   n.source.method)
 
     def to_json(self) -> dict:
-        """Plain types: sex, age band, mean, sd and ci95 (None where not published)."""
+        """Plain types: sex, age band, mean, sd and ci95 (None where not published), and the
+        value's source and measurement method."""
         return {"sex": self.sex, "age": [self.age_lo, self.age_hi], "mean": self.mean,
-                "sd": self.sd, "ci95": None if self.ci95 is None else list(self.ci95)}
+                "sd": self.sd, "ci95": None if self.ci95 is None else list(self.ci95),
+                "source": self.source, "method": self.method}
 
 
 #: How each joint's population column was measured, as its table's note says it.

@@ -203,7 +203,9 @@ def test_json_keeps_its_keys_adds_the_population_and_round_trips():
     assert {k: out[k] for k in old} == {k: plain[k] for k in old}
     assert out["population"]["flexion"] == "143 (men, 1-54)"
     assert out["population_values"]["flexion"] == [
-        {"sex": "male", "age": [1, 54], "mean": 143.0, "sd": None, "ci95": None}]
+        {"sex": "male", "age": [1, 54], "mean": 143.0, "sd": None, "ci95": None,
+         "source": "Boone DC & Azen SP 1979, J Bone Joint Surg Am 61:756-759",
+         "method": "active motion, universal goniometer (men only)"}]
     # a hinge has no forearm rotation: no value, no population to compare with (issue 37)
     assert out["supination"] is None and out["population_values"]["supination"] == []
     assert out["not_measured"] == {"pronation": "not measured by a hinge",
