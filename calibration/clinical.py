@@ -97,7 +97,7 @@ from typing import Any
 import numpy as np
 
 from calibration.frames import RIG_TO_ISB
-from calibration.norms import NORMS, norm_band, norm_text
+from calibration.norms import JOINT_MOVEMENTS, NORMS, norm_band, norm_text
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.oracle import ConstraintOracle
@@ -280,8 +280,7 @@ class RangeOfMotion:
     when > 0, the swing peaks are where the range ends along each clinical plane (module doc)
     and the rotations are the twist limits there, a position the patient did not reach."""
 
-    MOVEMENTS = ("flexion", "extension", "abduction", "adduction", "horizontal_adduction",
-                 "internal_rotation", "external_rotation")
+    MOVEMENTS = JOINT_MOVEMENTS["shoulder"]
 
     def to_dict(self) -> dict[str, Any]:
         return {"side": self.side, **{m: getattr(self, m) for m in self.MOVEMENTS}}

@@ -386,14 +386,10 @@ def angle_peaks(angles: dict[str, np.ndarray], joint: str, window: int = 5,
 
 #: The movements a clinic reports per joint (the others' Cardan angles are computed, not
 #: tabulated: an elbow's varus/valgus or a knee's ab/adduction is not a range of motion).
+#: The one list is :data:`calibration.norms.JOINT_MOVEMENTS` (the shoulder's is
+#: :class:`calibration.clinical.RangeOfMotion`'s).
 CLINICAL_MOVEMENTS: dict[str, tuple[str, ...]] = {
-    "elbow": ("flexion", "extension", "pronation", "supination"),
-    "wrist": ("flexion", "extension", "radial_deviation", "ulnar_deviation"),
-    "hip": ("flexion", "extension", "abduction", "adduction", "internal_rotation",
-            "external_rotation"),
-    "knee": ("flexion", "extension"),
-    "ankle": ("dorsiflexion", "plantarflexion", "inversion", "eversion"),
-}
+    j: m for j, m in JOINT_MOVEMENTS.items() if j != "shoulder"}
 
 #: The Cardan angles (0 = α, 1 = β, 2 = γ) each joint kind (:data:`calibration.joints.JOINTS`)
 #: measures: a hinge its angle about its axis alone (its other angles are out-of-axis motion:

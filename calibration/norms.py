@@ -57,9 +57,9 @@ __all__ = ["JOINT_MOVEMENTS", "NORMS", "NORMS_PATH", "REPORT_SOURCES", "SEXES", 
 NORMS_PATH = Path(__file__).with_name("norms.yaml")
 
 #: The movements a norm may be given for, per joint (the clinical movements the reports show:
-#: :data:`calibration.clinical.RangeOfMotion.MOVEMENTS` and
-#: :data:`calibration.joint_angles.CLINICAL_MOVEMENTS`; pronation and supination are the
-#: forearm's, listed under the elbow as the reports list them).
+#: the one list, which :data:`calibration.clinical.RangeOfMotion.MOVEMENTS` and
+#: :data:`calibration.joint_angles.CLINICAL_MOVEMENTS` are made from; pronation and
+#: supination are the forearm's, listed under the elbow as the reports list them).
 JOINT_MOVEMENTS: dict[str, tuple[str, ...]] = {
     "shoulder": ("flexion", "extension", "abduction", "adduction", "horizontal_adduction",
                  "internal_rotation", "external_rotation"),
