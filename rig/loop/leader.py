@@ -66,7 +66,7 @@ import numpy as np
 from calibration.clinical import mirror_quaternions
 from rig.devices.config import load_rig_config
 from rig.devices.dynamixel import DynamixelBus
-from rig.devices.ports import open_port
+from rig.devices.ports import open_port, real_time_port
 from rig.devices.servo_limb import ServoLimb
 from rig.errors import RigConfigError, RigConnectionError, RigProtocolError, RigTimeoutError
 from rig.loop.leader_spring import LeaderSpring
@@ -483,7 +483,10 @@ def open_leader(spec: str, *, names, side, rig, separate_process: bool = True,
                    what=f"--targets {spec}: the leader ({name})")
     leader_side = leader_rig.joint.side
     mirror = bool(follower_side and leader_side and leader_side != follower_side)
-    port = open_port(servos.port, baud=servos.baud, separate_process=separate_process)
+    url, note = real_time_port(servos.port)  # the leader read in the loop's time too
+    if note and log is not None:
+        log(f"note: {note}")
+    port = open_port(url, baud=servos.baud, separate_process=separate_process)
     arm = None
     try:
         kin = servos.limb_kinematics(None if servos.joints else leader_rig.joint.name)

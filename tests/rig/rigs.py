@@ -6,6 +6,11 @@ from pathlib import Path
 
 from rig.record.rigio import load_config
 
+#: A manual-clock test's packet timeout where every read is to succeed, ms (the SDK's timeout is
+#: wall-clock: generous, so a stalled, loaded host — a CI run with both cores busy — never turns
+#: such a read into a timeout, and the run into another one).
+LOADED_HOST_MS = 1000.0
+
 
 def sim_imu_yaml(tmp_path: Path, *, port: str | None = None, port_suffix: str = "",
                  extra: str = "", name: str = "test-imu") -> Path:

@@ -34,10 +34,7 @@ from rig.loop.telemetry import Telemetry, telemetry_columns
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys
 from rig.store import open_store
-
-# the SDK's packet timeout is wall-clock: generous, so a stalled, loaded host (a CI run with
-# both cores busy) never turns a read these tests expect to succeed into a timeout
-LOADED_HOST_MS = 1000.0
+from tests.rig.rigs import LOADED_HOST_MS
 
 NAMES = ("shoulder", "elbow", "wrist")
 MANUAL = {"clock": "manual", "process": "off", "wire_time": "off"}

@@ -23,10 +23,7 @@ from rig.loop.leader_spring import SpringSettings
 from rig.loop.runner import prepare_servo_limb
 from rig.sim.patients import anatomical_limb
 from rig.sim.urls import with_keys, without_keys
-
-# the SDK's packet timeout is wall-clock: generous, so a stalled, loaded host (a CI run with
-# both cores busy) never turns a read these tests expect to succeed into a timeout
-LOADED_HOST_MS = 1000.0
+from tests.rig.rigs import LOADED_HOST_MS
 
 MANUAL = {"clock": "manual", "process": "off", "wire_time": "off"}
 PATIENT_KEYS = ("limb", "side", "chain", "seed", "excursion")

@@ -33,6 +33,7 @@ from rig.loop import (
 from rig.loop.runner import prepare_servo_limb
 from rig.loop.supervisor import SAFETY_FLAGS
 from rig.sim.clock import ManualClock
+from tests.rig.rigs import LOADED_HOST_MS
 
 URL = "sim://dynamixel?ids=1,2,3&model=XM430-W350&return_delay_us=0"
 RIG = load_rig_config("sim-shoulder")
@@ -60,12 +61,6 @@ def models(tmp_path_factory):
         dump_constraint(c, path)
         out[c.name] = (c, load_model(_train(path, d / f"{c.name}.onnx")))
     return out
-
-
-#: The SDK's packet timeout is wall-clock: a generous one where every read is to succeed, so a
-#: loaded host (a CI run with both cores busy) never turns a read into a timeout and the
-#: manual-clock run into another one (a retried read, an older present).
-LOADED_HOST_MS = 1000.0
 
 
 def _run(constraint, model, targets, *, cycles, on_cycle=None, watchdog_ms=1000,
@@ -342,8 +337,10 @@ def test_a_slow_start_does_not_leave_the_servos_stopped_by_their_watchdog(models
     assert summary["safe_state_entries"] == 0
     # the limb follows its goals: each cycle's present is the last cycle's command
     present, commanded = _col(table, "present"), _col(table, "commanded")
-    spread = np.degrees(Q.angle_between(commanded[:1], commanded)).max()
-    lag = np.degrees(Q.angle_between(present[1:], commanded[:-1]))  # a frozen limb lags it all
+    # rotation angles between orientations (either sign); Q.angle_between is for 3-vectors: on
+    # quaternions it read one fresh CI run's present posture as 90° off the last goal
+    spread = np.degrees(Q.angle(Q.multiply(Q.conjugate(commanded[:1]), commanded))).max()
+    lag = np.degrees(Q.angle(Q.multiply(Q.conjugate(present[1:]), commanded[:-1])))
     assert spread > 5.0 and lag.max() < 3.0
 
 

@@ -22,6 +22,7 @@ from rig.loop import EnforcementLoop, Intervention, LoopConfig, SupervisorConfig
 from rig.loop.runner import whole_ticks_within
 from rig.loop.targets import ScriptedTargets, TargetSource
 from rig.sim.patients import anatomical_limb
+from tests.rig.rigs import LOADED_HOST_MS
 
 URL = "sim://dynamixel?ids=1-7&model=XM430-W350&return_delay_us=0&clock=manual&wire_time=off"
 PERIOD = 0.005
@@ -74,7 +75,7 @@ def _run(arm, targets, cycles, *, on_cycle=None, **cfg):
             sim.set_hand(i, float(t))
         clk.advance(0.01)
         sl = ServoLimb(DynamixelBus(port, list(kin.ids)), kin)
-        sl.bus.set_latency(1000.0)  # the SDK's wall-clock timeout: no read lost on a loaded host
+        sl.bus.set_latency(LOADED_HOST_MS)
         write = sl.bus.write_goal_ticks
 
         def observed(ticks):
