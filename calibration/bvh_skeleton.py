@@ -41,7 +41,8 @@ import numpy as np
 
 from models import quaternion as Q
 
-__all__ = ["SEGMENT_KINDS", "SKELETONS", "segment_orientations", "skeleton_of"]
+__all__ = ["LACKS", "SEGMENT_KINDS", "SIGNATURES", "SKELETONS", "segment_orientations",
+           "skeleton_of"]
 
 _SEGS = ("pelvis", "thorax", "humerus", "ulna", "hand", "femur", "tibia", "calcn")
 
@@ -55,6 +56,26 @@ SKELETONS: dict[str, dict[str, tuple[str, ...]]] = {
            **{f"{seg}_{s}": (f"{S}{j}",) for s, S in (("r", "Right"), ("l", "Left"))
               for seg, j in zip(_SEGS[2:], ("Arm", "ForeArm", "Hand", "UpLeg", "Leg", "Foot"),
                                 strict=True)}},
+    "arena": {"pelvis": ("Hips",), "thorax": ("Chest",),
+              **{f"{seg}_{s}": (f"{S}{j}",) for s, S in (("r", "Right"), ("l", "Left"))
+                 for seg, j in zip(_SEGS[2:], ("Shoulder", "Elbow", "", "Hip", "Knee", "Ankle"),
+                                   strict=True) if j}},
+}
+
+#: Joints a skeleton must have besides its pelvis and thorax to be recognised (its signature:
+#: Arena names a joint where the next bone starts, so its ``LeftShoulder`` is the glenohumeral
+#: joint, while MotionBuilder's ``LeftShoulder`` is the clavicle).
+SIGNATURES: dict[str, tuple[str, ...]] = {
+    "daz": (), "mb": (),
+    "arena": ("LeftCollar", "RightCollar", "LeftShoulder", "RightShoulder", "LeftElbow",
+              "RightElbow", "LeftWrist", "RightWrist", "LeftHip", "RightHip", "LeftKnee",
+              "RightKnee", "LeftAnkle", "RightAnkle"),
+}
+
+#: Columns a skeleton does not give, and why.
+LACKS: dict[str, dict[str, str]] = {
+    "arena": {f"hand_{s}": "a hand bone (Arena's wrist End Site is not along the hand: its rest "
+                           "pose has it at 90° to the forearm)" for s in ("r", "l")},
 }
 
 #: Column → the segment's name in :data:`calibration.frames.SEGMENT_TO_ISB`.
@@ -78,7 +99,8 @@ def skeleton_of(names) -> str | None:
     """The skeleton whose pelvis and thorax joints ``names`` hold (None: none known)."""
     have = {_clean(n) for n in names}
     for sk, cols in SKELETONS.items():
-        if any(n in have for n in cols["pelvis"]) and any(n in have for n in cols["thorax"]):
+        if any(n in have for n in cols["pelvis"]) and any(n in have for n in cols["thorax"]) \
+                and all(n in have for n in SIGNATURES[sk]):
             return sk
     return None
 
@@ -131,7 +153,7 @@ def segment_orientations(names: list[str], parents: list[int], offsets: np.ndarr
     if found["femur_r"] is not None and found["femur_l"] is not None:
         right = rest[found["femur_r"]] - rest[found["femur_l"]]
         forward = _unit(np.cross(up, right - np.dot(right, up) * up))
-    out, missing = {}, {}
+    out, missing = {}, dict(LACKS.get(sk, {}))
     for col, i in found.items():
         if i is None:
             missing[col] = " or ".join(cols[col])
