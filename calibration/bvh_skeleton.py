@@ -29,10 +29,26 @@ name      source                pelvis, thorax, humerus, ulna, hand, femur, tibi
           (MotionBuilder;       RightLeg, RightFoot``
           Mixamo names too,
           ``mixamorig:`` cut)
+``arena``  NaturalPoint Arena     ``Hips, Chest, RightShoulder, RightElbow, (none), RightHip,
+          (OptiTrack) export    RightKnee, RightAnkle``
 ========  ====================  ==================================================================
 
 Left: ``l…`` / ``Left…``. The thorax of ``mb`` falls back to ``Spine2`` / ``Spine`` when there is
-no ``Spine1``.
+no ``Spine1``. A skeleton is recognised by its pelvis and thorax joints and, for ``arena``, its
+:data:`SIGNATURES` (every limb joint by name), never by a partial guess.
+
+The ``arena`` skeleton is described by its own HIERARCHY (e.g. the University of Adelaide's
+``louise.bvh``): ``Hips`` (6 channels) → ``Chest`` → ``Neck`` → ``Head``; ``Chest`` →
+``LeftCollar`` → ``LeftShoulder`` → ``LeftElbow`` → ``LeftWrist`` (End Site); ``Hips`` →
+``LeftHip`` → ``LeftKnee`` → ``LeftAnkle`` (End Site), every joint ``CHANNELS 3 Zrotation
+Xrotation Yrotation``. Its joints are named where a bone starts, as the BVH format defines a
+joint (its rotation turns the bone from it to its child; Meredith M, Maddock S. *Motion capture
+file formats explained*, University of Sheffield, CS-01-11, 2001): ``LeftShoulder`` is the
+glenohumeral joint and turns the upper arm (→ ``humerus_l``), ``LeftElbow`` the forearm,
+``LeftHip`` the thigh, ``LeftKnee`` the shank, ``LeftAnkle`` the foot; ``LeftCollar`` (the
+clavicle) has no column. Its rest pose is a T-pose facing +Z (the foot's End Site points
+forward) except the wrist's End Site, 14 units *below* the wrist, at 90° to the forearm: not a
+hand direction, so this skeleton gives no ``hand`` column (:data:`LACKS` says why).
 """
 
 from __future__ import annotations

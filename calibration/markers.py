@@ -27,6 +27,41 @@ The foot is Plug-in Gait's uncorrected foot (its long axis AJC → TOE); Plug-in
 trial offsets (``StaticPlantFlex``, ``StaticRotOff``) are not applied, so dorsiflexion differs
 from its ``AnkleAngles`` by a constant (its range does not).
 
+Plug-in Gait's upper body (the same set's arm and trunk markers, names as Vicon's Plug-in Gait
+reference guide; frames per Wu G, van der Helm FCT, Veeger HEJ, et al. ISB recommendation on
+definitions of joint coordinate systems of various joints ... Part II: shoulder, elbow, wrist and
+hand. *J Biomech* 2005;38:981-992, the markers standing in for its landmarks):
+
+=========  ======================================  ==========================================
+segment    points                                  frame
+=========  ======================================  ==========================================
+thorax     CLAV (≈ IJ), STRN (≈ PX), C7, T10       Y: mid(STRN, T10) → mid(CLAV, C7); Z ⊥ the
+           (≈ T8)                                  plane of CLAV, C7, mid(STRN, T10), to the
+                                                   right (Wu 2005: thorax)
+humerus    SJC, EJC, WJC (xSHO, xELB, xWRA, xWRB)  Y: EJC → SJC; Z ⊥ the plane of the upper
+                                                   arm and forearm, to the right (Wu 2005:
+                                                   humerus, its second option)
+ulna       EJC, WJC, xWRA, xWRB                    Y: WJC → EJC; Z: ulnar (xWRB) → radial
+(forearm)                                          (xWRA) styloid marker on the right arm,
+                                                   the reverse on the left (Wu 2005: forearm)
+hand       WJC, xFIN, xWRA, xWRB                   Y: hand centre → WJC; Z as the forearm's
+=========  ======================================  ==========================================
+
+Joint centres of the arm, Plug-in Gait's constructions (its "chord function", as for the knee):
+the shoulder's (SJC) ``ShoulderOffset`` + marker radius from xSHO, perpendicular to the line to
+the thorax origin, in the plane that holds that line and the thorax's vertical, downwards; the
+wrist's (WJC) ``WristWidth``/2 + radius anterior of the wrist bar's midpoint (the forearm
+frame's +X); the elbow's (EJC) ``ElbowWidth``/2 + radius medial of xELB along the elbow's
+flexion axis (⊥ the plane of SJC, xELB, WJC; the two centres iterated twice); the hand's
+``HandThickness``/2 + radius palmar of xFIN. Measurements from the C3D's ``PROCESSING``
+(``LShoulderOffset``, ``RElbowWidth``, ``LWristWidth``, ``RHandThickness``, …), else
+:data:`DEFAULT_WIDTHS_MM`. On pyCGM's Vicon trial the SJC and WJC are Plug-in Gait's own
+(its stored ``LCLO``, ``LRAO``) within 0.6 mm; its EJC (``LHUO``) is 17-19 mm from ours, the
+same distance from xELB but turned in the arm's plane, which shifts its elbow flexion by a
+near-constant 6-7° (its range by 1.3°). Upper-body columns: ``thorax``, ``humerus_r``,
+``ulna_r``, ``hand_r`` (and ``_l``); an upper-body trial needs no pelvis markers. The humerus
+frame needs the elbow flexed: near full extension its Z (and the EJC) is ill-defined.
+
 ``isb-landmarks`` — anatomical landmarks named as Van Sint Jan's atlas (Van Sint Jan S, *Color
 Atlas of Skeletal Landmark Definitions*, Churchill Livingstone 2007; e.g. Qualisys' files):
 pelvis ``L_IAS, R_IAS, L_IPS, R_IPS``; femur HJC with ``x_FLE, x_FME`` (epicondyles, KJC their
@@ -58,8 +93,10 @@ Joint centres
 Model outputs (:func:`model_joint_angles`)
 ------------------------------------------
 Plug-in Gait stores its joint angles as points named ``LHipAngles``, ``LKneeAngles``,
-``LAnkleAngles`` (and ``R…``): x flexion (ankle: dorsiflexion), y adduction (knee: varus;
-ankle: inversion), z internal rotation, degrees, each side signed anatomically; the same
+``LAnkleAngles``, ``LElbowAngles`` (and ``R…``): x flexion (ankle: dorsiflexion), y
+adduction (knee: varus; ankle: inversion), z internal rotation, degrees, each side signed
+anatomically (Plug-in Gait's elbow carries flexion only: its forearm frame shares the
+humerus's flexion axis, its y and z are 0); the same
 sequence and signs as :func:`calibration.joint_angles.joint_angles` (flexion about the proximal
 segment's medio-lateral axis, rotation about the distal long axis, ab/adduction about the
 floating axis). They become joint orientations (ISB frames) so the rig reads them as it reads a
