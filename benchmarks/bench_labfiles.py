@@ -10,7 +10,7 @@ principal movement's range (flexion; ankle: dorsiflexion; the hinge's own axis f
   ``ElbowAngles``): the range from each, the largest absolute difference between them frame by
   frame, and the hinge boundary ``rig boundary`` writes from each (its two ends). For the elbow
   also the flexion from Plug-in Gait's own joint centres (the file's ``CLO``, ``HUO``, ``RAO``
-  points): the difference is where it puts the elbow centre.
+  points) against its ``ElbowAngles``: what its angles are.
 - **ezc3d's Qualisys gait, C3D** (ISB landmarks): the knee's range (no model outputs in the
   file: the README's plausibility, a walking stride's 55-75°).
 - **CMU 61_07 (Daz skeleton), BVH** against the ``.sto`` made from it: the boundary from each.
@@ -108,8 +108,8 @@ def pig_own_elbow_centres() -> None:
         pig = flexion(ARMS, "elbow", side, None, f"{S}ElbowAngles")
         mine = flexion(ARMS, "elbow", side, f"humerus_{s}", f"ulna_{s}")
         print(f"    {side}: max|centres - ElbowAngles| {np.max(np.abs(geo - pig)):.3f}°; "
-              f"ours - theirs: mean {np.mean(mine - pig):.1f}°, spread "
-              f"{np.ptp(mine - pig):.1f}° (a near-constant offset)")
+              f"ours - theirs: mean {np.mean(mine - pig):.3f}°, spread "
+              f"{np.ptp(mine - pig):.2f}°")
 
 
 def qualisys() -> None:

@@ -47,20 +47,23 @@ ulna       EJC, WJC, xWRA, xWRB                    Y: WJC → EJC; Z: ulnar (xWR
 hand       WJC, xFIN, xWRA, xWRB                   Y: hand centre → WJC; Z as the forearm's
 =========  ======================================  ==========================================
 
-Joint centres of the arm, Plug-in Gait's constructions (its "chord function", as for the knee):
-the shoulder's (SJC) ``ShoulderOffset`` + marker radius from xSHO, perpendicular to the line to
-the thorax origin, in the plane that holds that line and the thorax's vertical, downwards; the
-wrist's (WJC) ``WristWidth``/2 + radius anterior of the wrist bar's midpoint (the forearm
-frame's +X); the elbow's (EJC) ``ElbowWidth``/2 + radius medial of xELB along the elbow's
-flexion axis (⊥ the plane of SJC, xELB, WJC; the two centres iterated twice); the hand's
-``HandThickness``/2 + radius palmar of xFIN. Measurements from the C3D's ``PROCESSING``
-(``LShoulderOffset``, ``RElbowWidth``, ``LWristWidth``, ``RHandThickness``, …), else
-:data:`DEFAULT_WIDTHS_MM`. On pyCGM's Vicon trial the SJC and WJC are Plug-in Gait's own
-(its stored ``LCLO``, ``LRAO``) within 0.6 mm; its EJC (``LHUO``) is 17-19 mm from ours, the
-same distance from xELB but turned in the arm's plane, which shifts its elbow flexion by a
-near-constant 6-7° (its range by 1.3°). Upper-body columns: ``thorax``, ``humerus_r``,
-``ulna_r``, ``hand_r`` (and ``_l``); an upper-body trial needs no pelvis markers. The humerus
-frame needs the elbow flexed: near full extension its Z (and the EJC) is ill-defined.
+Joint centres of the arm, Plug-in Gait's constructions (its "chord function", as for the knee;
+as pyCGM reproduces Vicon's, cadop/pyCGM ``pyCGM_Single/pyCGM.py``): the thorax origin a marker
+radius behind CLAV; the shoulder's (SJC) ``ShoulderOffset`` + marker radius from xSHO,
+perpendicular to the line to the thorax origin, in the plane that holds that line and the
+thorax's vertical, downwards; the elbow's (EJC) ``ElbowWidth``/2 + radius from xELB,
+perpendicular to the line to the SJC, in the plane that holds that line and the normal of the
+plane of SJC, xELB and the wrist bar's midpoint, medially; the wrist's (WJC) ``WristWidth``/2 +
+radius from the bar's midpoint, perpendicular to the line to the EJC and to the bar (anterior);
+the hand's ``HandThickness``/2 + radius palmar of xFIN. Measurements from the C3D's
+``PROCESSING`` (``LShoulderOffset``, ``RElbowWidth``, ``LWristWidth``, ``RHandThickness``, …),
+else :data:`DEFAULT_WIDTHS_MM`. On pyCGM's Vicon trial the elbow flexion this gives is Plug-in
+Gait's stored ``ElbowAngles`` within 0.01° RMS. A property of the elbow construction, not of
+the markers: its flexion axis is normal to a plane through the *lateral* marker, so on an ideal
+arm (xELB exactly on the flexion axis, 55 mm lateral of the centre) it reads flexion high near
+extension — by 30° at 5°, 10° at 35°, 2-4° at 80°, under 1° beyond 110° — as Plug-in Gait
+does. Upper-body columns: ``thorax``, ``humerus_r``, ``ulna_r``, ``hand_r`` (and ``_l``); an
+upper-body trial needs no pelvis markers.
 
 ``isb-landmarks`` — anatomical landmarks named as Van Sint Jan's atlas (Van Sint Jan S, *Color
 Atlas of Skeletal Landmark Definitions*, Churchill Livingstone 2007; e.g. Qualisys' files):
@@ -303,24 +306,24 @@ def _upper(markers: Mapping[str, np.ndarray], params: Mapping[str, float]
     thorax = _frame_y_z((clav + c7) / 2 - low, np.cross(c7 - clav, low - clav))
     out = {"thorax": thorax}
     r = params.get("MarkerDiameter", DEFAULT_WIDTHS_MM["MarkerDiameter"]) / 2
+    origin = clav - r * thorax[..., 0]  # the thorax origin: a marker radius behind CLAV
     for s, S, sign in (("r", "R", 1.0), ("l", "L", -1.0)):
         try:
             sho, elb, wra, wrb = (markers[f"{S}{n}"] for n in ("SHO", "ELB", "WRA", "WRB"))
         except KeyError:
             continue
         off = params.get(f"{S}ShoulderOffset", DEFAULT_WIDTHS_MM["ShoulderOffset"]) + r
-        wand = clav + _unit(sign * np.cross(sho - clav, thorax[..., 0]))
-        sjc = _centre(sho, clav, wand, off, -thorax[..., 1])
+        wand = origin + _unit(sign * np.cross(sho - origin, thorax[..., 0]))
+        sjc = _centre(sho, origin, wand, off, -thorax[..., 1])
         bar = sign * (wra - wrb)  # ulnar → radial styloid: the subject's right, either side
         half = params.get(f"{S}ElbowWidth", DEFAULT_WIDTHS_MM["ElbowWidth"]) / 2 + r
         wrist = params.get(f"{S}WristWidth", DEFAULT_WIDTHS_MM["WristWidth"]) / 2 + r
-        wjc = ejc = (wra + wrb) / 2
-        for _ in range(2):  # the elbow centre from the wrist's, the wrist's from the elbow's
-            # the flexion axis ⊥ the plane of the shoulder, elbow and wrist, towards the
-            # subject's right on either side (for an elbow flexing forwards)
-            right = _unit(np.cross(wjc - elb, sjc - elb))
-            ejc = elb - half * sign * right
-            wjc = (wra + wrb) / 2 + wrist * _frame_y_z(ejc - (wra + wrb) / 2, bar)[..., 0]
+        mid = (wra + wrb) / 2
+        # the elbow centre: `half` from xELB, ⊥ the line to the SJC, in the plane that holds
+        # that line and the normal of the plane of SJC, xELB and the wrist bar's midpoint
+        normal = _unit(np.cross(sjc - elb, mid - elb))
+        ejc = _centre(elb, sjc, elb + 500.0 * normal, half, sign * normal)
+        wjc = mid + wrist * _frame_y_z(ejc - mid, bar)[..., 0]
         right = _unit(np.cross(wjc - ejc, sjc - ejc))
         out[f"humerus_{s}"] = _frame_y_z(sjc - ejc, right)
         out[f"ulna_{s}"] = _frame_y_z(ejc - wjc, bar)
