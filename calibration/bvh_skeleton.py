@@ -29,10 +29,26 @@ name      source                pelvis, thorax, humerus, ulna, hand, femur, tibi
           (MotionBuilder;       RightLeg, RightFoot``
           Mixamo names too,
           ``mixamorig:`` cut)
+``arena``  NaturalPoint Arena     ``Hips, Chest, RightShoulder, RightElbow, (none), RightHip,
+          (OptiTrack) export    RightKnee, RightAnkle``
 ========  ====================  ==================================================================
 
 Left: ``l…`` / ``Left…``. The thorax of ``mb`` falls back to ``Spine2`` / ``Spine`` when there is
-no ``Spine1``.
+no ``Spine1``. A skeleton is recognised by its pelvis and thorax joints and, for ``arena``, its
+:data:`SIGNATURES` (every limb joint by name), never by a partial guess.
+
+The ``arena`` skeleton is described by its own HIERARCHY (e.g. the University of Adelaide's
+``louise.bvh``): ``Hips`` (6 channels) → ``Chest`` → ``Neck`` → ``Head``; ``Chest`` →
+``LeftCollar`` → ``LeftShoulder`` → ``LeftElbow`` → ``LeftWrist`` (End Site); ``Hips`` →
+``LeftHip`` → ``LeftKnee`` → ``LeftAnkle`` (End Site), every joint ``CHANNELS 3 Zrotation
+Xrotation Yrotation``. Its joints are named where a bone starts, as the BVH format defines a
+joint (its rotation turns the bone from it to its child; Meredith M, Maddock S. *Motion capture
+file formats explained*, University of Sheffield, CS-01-11, 2001): ``LeftShoulder`` is the
+glenohumeral joint and turns the upper arm (→ ``humerus_l``), ``LeftElbow`` the forearm,
+``LeftHip`` the thigh, ``LeftKnee`` the shank, ``LeftAnkle`` the foot; ``LeftCollar`` (the
+clavicle) has no column. Its rest pose is a T-pose facing +Z (the foot's End Site points
+forward) except the wrist's End Site, 14 units *below* the wrist, at 90° to the forearm: not a
+hand direction, so this skeleton gives no ``hand`` column (:data:`LACKS` says why).
 """
 
 from __future__ import annotations
@@ -41,7 +57,8 @@ import numpy as np
 
 from models import quaternion as Q
 
-__all__ = ["SEGMENT_KINDS", "SKELETONS", "segment_orientations", "skeleton_of"]
+__all__ = ["LACKS", "SEGMENT_KINDS", "SIGNATURES", "SKELETONS", "segment_orientations",
+           "skeleton_of"]
 
 _SEGS = ("pelvis", "thorax", "humerus", "ulna", "hand", "femur", "tibia", "calcn")
 
@@ -55,6 +72,26 @@ SKELETONS: dict[str, dict[str, tuple[str, ...]]] = {
            **{f"{seg}_{s}": (f"{S}{j}",) for s, S in (("r", "Right"), ("l", "Left"))
               for seg, j in zip(_SEGS[2:], ("Arm", "ForeArm", "Hand", "UpLeg", "Leg", "Foot"),
                                 strict=True)}},
+    "arena": {"pelvis": ("Hips",), "thorax": ("Chest",),
+              **{f"{seg}_{s}": (f"{S}{j}",) for s, S in (("r", "Right"), ("l", "Left"))
+                 for seg, j in zip(_SEGS[2:], ("Shoulder", "Elbow", "", "Hip", "Knee", "Ankle"),
+                                   strict=True) if j}},
+}
+
+#: Joints a skeleton must have besides its pelvis and thorax to be recognised (its signature:
+#: Arena names a joint where the next bone starts, so its ``LeftShoulder`` is the glenohumeral
+#: joint, while MotionBuilder's ``LeftShoulder`` is the clavicle).
+SIGNATURES: dict[str, tuple[str, ...]] = {
+    "daz": (), "mb": (),
+    "arena": ("LeftCollar", "RightCollar", "LeftShoulder", "RightShoulder", "LeftElbow",
+              "RightElbow", "LeftWrist", "RightWrist", "LeftHip", "RightHip", "LeftKnee",
+              "RightKnee", "LeftAnkle", "RightAnkle"),
+}
+
+#: Columns a skeleton does not give, and why.
+LACKS: dict[str, dict[str, str]] = {
+    "arena": {f"hand_{s}": "a hand bone (Arena's wrist End Site is not along the hand: its rest "
+                           "pose has it at 90° to the forearm)" for s in ("r", "l")},
 }
 
 #: Column → the segment's name in :data:`calibration.frames.SEGMENT_TO_ISB`.
@@ -78,7 +115,8 @@ def skeleton_of(names) -> str | None:
     """The skeleton whose pelvis and thorax joints ``names`` hold (None: none known)."""
     have = {_clean(n) for n in names}
     for sk, cols in SKELETONS.items():
-        if any(n in have for n in cols["pelvis"]) and any(n in have for n in cols["thorax"]):
+        if any(n in have for n in cols["pelvis"]) and any(n in have for n in cols["thorax"]) \
+                and all(n in have for n in SIGNATURES[sk]):
             return sk
     return None
 
@@ -131,7 +169,7 @@ def segment_orientations(names: list[str], parents: list[int], offsets: np.ndarr
     if found["femur_r"] is not None and found["femur_l"] is not None:
         right = rest[found["femur_r"]] - rest[found["femur_l"]]
         forward = _unit(np.cross(up, right - np.dot(right, up) * up))
-    out, missing = {}, {}
+    out, missing = {}, dict(LACKS.get(sk, {}))
     for col, i in found.items():
         if i is None:
             missing[col] = " or ".join(cols[col])

@@ -27,6 +27,44 @@ The foot is Plug-in Gait's uncorrected foot (its long axis AJC → TOE); Plug-in
 trial offsets (``StaticPlantFlex``, ``StaticRotOff``) are not applied, so dorsiflexion differs
 from its ``AnkleAngles`` by a constant (its range does not).
 
+Plug-in Gait's upper body (the same set's arm and trunk markers, names as Vicon's Plug-in Gait
+reference guide; frames per Wu G, van der Helm FCT, Veeger HEJ, et al. ISB recommendation on
+definitions of joint coordinate systems of various joints ... Part II: shoulder, elbow, wrist and
+hand. *J Biomech* 2005;38:981-992, the markers standing in for its landmarks):
+
+=========  ======================================  ==========================================
+segment    points                                  frame
+=========  ======================================  ==========================================
+thorax     CLAV (≈ IJ), STRN (≈ PX), C7, T10       Y: mid(STRN, T10) → mid(CLAV, C7); Z ⊥ the
+           (≈ T8)                                  plane of CLAV, C7, mid(STRN, T10), to the
+                                                   right (Wu 2005: thorax)
+humerus    SJC, EJC, WJC (xSHO, xELB, xWRA, xWRB)  Y: EJC → SJC; Z ⊥ the plane of the upper
+                                                   arm and forearm, to the right (Wu 2005:
+                                                   humerus, its second option)
+ulna       EJC, WJC, xWRA, xWRB                    Y: WJC → EJC; Z: ulnar (xWRB) → radial
+(forearm)                                          (xWRA) styloid marker on the right arm,
+                                                   the reverse on the left (Wu 2005: forearm)
+hand       WJC, xFIN, xWRA, xWRB                   Y: hand centre → WJC; Z as the forearm's
+=========  ======================================  ==========================================
+
+Joint centres of the arm, Plug-in Gait's constructions (its "chord function", as for the knee;
+as pyCGM reproduces Vicon's, cadop/pyCGM ``pyCGM_Single/pyCGM.py``): the thorax origin a marker
+radius behind CLAV; the shoulder's (SJC) ``ShoulderOffset`` + marker radius from xSHO,
+perpendicular to the line to the thorax origin, in the plane that holds that line and the
+thorax's vertical, downwards; the elbow's (EJC) ``ElbowWidth``/2 + radius from xELB,
+perpendicular to the line to the SJC, in the plane that holds that line and the normal of the
+plane of SJC, xELB and the wrist bar's midpoint, medially; the wrist's (WJC) ``WristWidth``/2 +
+radius from the bar's midpoint, perpendicular to the line to the EJC and to the bar (anterior);
+the hand's ``HandThickness``/2 + radius palmar of xFIN. Measurements from the C3D's
+``PROCESSING`` (``LShoulderOffset``, ``RElbowWidth``, ``LWristWidth``, ``RHandThickness``, …),
+else :data:`DEFAULT_WIDTHS_MM`. On pyCGM's Vicon trial the elbow flexion this gives is Plug-in
+Gait's stored ``ElbowAngles`` within 0.01° RMS. A property of the elbow construction, not of
+the markers: its flexion axis is normal to a plane through the *lateral* marker, so on an ideal
+arm (xELB exactly on the flexion axis, 55 mm lateral of the centre) it reads flexion high near
+extension — by 30° at 5°, 10° at 35°, 2-4° at 80°, under 1° beyond 110° — as Plug-in Gait
+does. Upper-body columns: ``thorax``, ``humerus_r``, ``ulna_r``, ``hand_r`` (and ``_l``); an
+upper-body trial needs no pelvis markers.
+
 ``isb-landmarks`` — anatomical landmarks named as Van Sint Jan's atlas (Van Sint Jan S, *Color
 Atlas of Skeletal Landmark Definitions*, Churchill Livingstone 2007; e.g. Qualisys' files):
 pelvis ``L_IAS, R_IAS, L_IPS, R_IPS``; femur HJC with ``x_FLE, x_FME`` (epicondyles, KJC their
@@ -58,8 +96,10 @@ Joint centres
 Model outputs (:func:`model_joint_angles`)
 ------------------------------------------
 Plug-in Gait stores its joint angles as points named ``LHipAngles``, ``LKneeAngles``,
-``LAnkleAngles`` (and ``R…``): x flexion (ankle: dorsiflexion), y adduction (knee: varus;
-ankle: inversion), z internal rotation, degrees, each side signed anatomically; the same
+``LAnkleAngles``, ``LElbowAngles`` (and ``R…``): x flexion (ankle: dorsiflexion), y
+adduction (knee: varus; ankle: inversion), z internal rotation, degrees, each side signed
+anatomically (Plug-in Gait's elbow carries flexion only: its forearm frame shares the
+humerus's flexion axis, its y and z are 0); the same
 sequence and signs as :func:`calibration.joint_angles.joint_angles` (flexion about the proximal
 segment's medio-lateral axis, rotation about the distal long axis, ab/adduction about the
 floating axis). They become joint orientations (ISB frames) so the rig reads them as it reads a
@@ -81,6 +121,7 @@ __all__ = [
     "MARKER_SETS",
     "MODEL_OUTPUTS",
     "SEGMENT_KINDS",
+    "THORAX_MARKERS",
     "davis_hip_joint_centres",
     "hip_joint_centres",
     "marker_set_of",
@@ -90,7 +131,12 @@ __all__ = [
 
 #: Columns this module builds → the segment's name in :data:`calibration.frames.SEGMENT_TO_ISB`.
 SEGMENT_KINDS = {"pelvis": "pelvis", "femur_r": "thigh", "femur_l": "thigh",
-                 "tibia_r": "shank", "tibia_l": "shank", "calcn_r": "foot", "calcn_l": "foot"}
+                 "tibia_r": "shank", "tibia_l": "shank", "calcn_r": "foot", "calcn_l": "foot",
+                 "thorax": "thorax", "humerus_r": "upper-arm", "humerus_l": "upper-arm",
+                 "ulna_r": "forearm", "ulna_l": "forearm", "hand_r": "hand", "hand_l": "hand"}
+
+#: The thorax markers of Plug-in Gait's upper body (:data:`MARKER_SETS`).
+THORAX_MARKERS = ("CLAV", "STRN", "C7", "T10")
 
 #: Marker set → segment column → the markers it needs (``a|b``: either). The femur needs the
 #: pelvis's markers too (its hip joint centre), the tibia the femur's (its knee joint centre).
@@ -102,6 +148,10 @@ MARKER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
            for s, S in (("r", "R"), ("l", "L"))},
         **{f"calcn_{s}": (f"{S}KNE", f"{S}THI", f"{S}ANK", f"{S}TIB", f"{S}TOE")
            for s, S in (("r", "R"), ("l", "L"))},
+        "thorax": THORAX_MARKERS,
+        **{f"{seg}_{s}": (*THORAX_MARKERS, f"{S}SHO", f"{S}ELB", f"{S}WRA", f"{S}WRB", *extra)
+           for s, S in (("r", "R"), ("l", "L"))
+           for seg, extra in (("humerus", ()), ("ulna", ()), ("hand", (f"{S}FIN",)))},
     },
     "isb-landmarks": {
         "pelvis": ("L_IAS", "R_IAS", "L_IPS", "R_IPS"),
@@ -116,11 +166,16 @@ MARKER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
 #: Plug-in Gait's joint-angle outputs → (joint, side).
 MODEL_OUTPUTS = {f"{S}{name}Angles": (joint, side)
                  for S, side in (("L", "left"), ("R", "right"))
-                 for name, joint in (("Hip", "hip"), ("Knee", "knee"), ("Ankle", "ankle"))}
+                 for name, joint in (("Hip", "hip"), ("Knee", "knee"), ("Ankle", "ankle"),
+                                     ("Elbow", "elbow"))}
 
-#: Knee and ankle widths and the marker diameter (mm) when the file does not give them: an
-#: adult's typical values (knee 100 mm, ankle 70 mm; Plug-in Gait's 14 mm markers).
-DEFAULT_WIDTHS_MM = {"KneeWidth": 100.0, "AnkleWidth": 70.0, "MarkerDiameter": 14.0}
+#: Knee and ankle widths, the marker diameter and the arm's measurements (mm) when the file does
+#: not give them: an adult's typical values (knee 100 mm, ankle 70 mm; Plug-in Gait's 14 mm
+#: markers; shoulder offset 50 mm, elbow width 90 mm, wrist thickness 60 mm, hand thickness
+#: 30 mm — the pyCGM subject's own values are 50, 92-96, 61-65 and 30).
+DEFAULT_WIDTHS_MM = {"KneeWidth": 100.0, "AnkleWidth": 70.0, "MarkerDiameter": 14.0,
+                     "ShoulderOffset": 50.0, "ElbowWidth": 90.0, "WristWidth": 60.0,
+                     "HandThickness": 30.0}
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -155,12 +210,13 @@ def _pick(markers: Mapping[str, np.ndarray], name: str) -> np.ndarray:
 
 
 def marker_set_of(labels) -> str | None:
-    """The marker set whose pelvis markers ``labels`` hold (None: neither)."""
+    """The marker set whose pelvis markers ``labels`` hold, or ``plug-in-gait`` for its thorax
+    markers alone (an upper-body trial; None: neither)."""
     have = set(labels)
     for name, segs in MARKER_SETS.items():
         if all(any(n in have for n in m.split("|")) for m in segs["pelvis"]):
             return name
-    return None
+    return "plug-in-gait" if all(n in have for n in THORAX_MARKERS) else None
 
 
 def hip_joint_centres(lasi, rasi, lpsi, rpsi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -240,6 +296,46 @@ def _pig(markers: Mapping[str, np.ndarray], params: Mapping[str, float],
     return out
 
 
+def _upper(markers: Mapping[str, np.ndarray], params: Mapping[str, float]
+           ) -> dict[str, np.ndarray]:
+    """Plug-in Gait's upper-body markers to ISB frames (Wu 2005; module doc)."""
+    if not all(n in markers for n in THORAX_MARKERS):
+        return {}
+    clav, strn, c7, t10 = (markers[n] for n in THORAX_MARKERS)
+    low = (strn + t10) / 2
+    thorax = _frame_y_z((clav + c7) / 2 - low, np.cross(c7 - clav, low - clav))
+    out = {"thorax": thorax}
+    r = params.get("MarkerDiameter", DEFAULT_WIDTHS_MM["MarkerDiameter"]) / 2
+    origin = clav - r * thorax[..., 0]  # the thorax origin: a marker radius behind CLAV
+    for s, S, sign in (("r", "R", 1.0), ("l", "L", -1.0)):
+        try:
+            sho, elb, wra, wrb = (markers[f"{S}{n}"] for n in ("SHO", "ELB", "WRA", "WRB"))
+        except KeyError:
+            continue
+        off = params.get(f"{S}ShoulderOffset", DEFAULT_WIDTHS_MM["ShoulderOffset"]) + r
+        wand = origin + _unit(sign * np.cross(sho - origin, thorax[..., 0]))
+        sjc = _centre(sho, origin, wand, off, -thorax[..., 1])
+        bar = sign * (wra - wrb)  # ulnar → radial styloid: the subject's right, either side
+        half = params.get(f"{S}ElbowWidth", DEFAULT_WIDTHS_MM["ElbowWidth"]) / 2 + r
+        wrist = params.get(f"{S}WristWidth", DEFAULT_WIDTHS_MM["WristWidth"]) / 2 + r
+        mid = (wra + wrb) / 2
+        # the elbow centre: `half` from xELB, ⊥ the line to the SJC, in the plane that holds
+        # that line and the normal of the plane of SJC, xELB and the wrist bar's midpoint
+        normal = _unit(np.cross(sjc - elb, mid - elb))
+        ejc = _centre(elb, sjc, elb + 500.0 * normal, half, sign * normal)
+        wjc = mid + wrist * _frame_y_z(ejc - mid, bar)[..., 0]
+        right = _unit(np.cross(wjc - ejc, sjc - ejc))
+        out[f"humerus_{s}"] = _frame_y_z(sjc - ejc, right)
+        out[f"ulna_{s}"] = _frame_y_z(ejc - wjc, bar)
+        if f"{S}FIN" not in markers:
+            continue
+        fin = markers[f"{S}FIN"]
+        palmar = _frame_y_z(wjc - fin, bar)[..., 0]
+        t = params.get(f"{S}HandThickness", DEFAULT_WIDTHS_MM["HandThickness"]) / 2 + r
+        out[f"hand_{s}"] = _frame_y_z(wjc - (fin + t * palmar), bar)
+    return out
+
+
 def _isb(markers: Mapping[str, np.ndarray], hjc: dict[str, np.ndarray]
          ) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
@@ -278,13 +374,17 @@ def segment_frames(markers: Mapping[str, np.ndarray], params: Mapping[str, float
                           for seg in MARKER_SETS["plug-in-gait"]}
     spec = MARKER_SETS[name]
     m = {k: np.asarray(v, dtype=np.float64) * scale_to_mm for k, v in markers.items()}
-    pel = [_pick(m, n) for n in spec["pelvis"]]
-    pelvis, hjc_l, hjc_r = hip_joint_centres(*pel)
-    if name == "plug-in-gait" and "LLegLength" in params and "RLegLength" in params:
-        hjc_l, hjc_r = davis_hip_joint_centres(pelvis, pel[0], pel[1], params)
-    mats = {"pelvis": pelvis}
-    hjc = {"l": hjc_l, "r": hjc_r}
-    mats.update(_pig(m, params, hjc, pelvis) if name == "plug-in-gait" else _isb(m, hjc))
+    mats: dict[str, np.ndarray] = {}
+    if all(any(x in m for x in n.split("|")) for n in spec["pelvis"]):
+        pel = [_pick(m, n) for n in spec["pelvis"]]
+        pelvis, hjc_l, hjc_r = hip_joint_centres(*pel)
+        if name == "plug-in-gait" and "LLegLength" in params and "RLegLength" in params:
+            hjc_l, hjc_r = davis_hip_joint_centres(pelvis, pel[0], pel[1], params)
+        mats["pelvis"] = pelvis
+        hjc = {"l": hjc_l, "r": hjc_r}
+        mats.update(_pig(m, params, hjc, pelvis) if name == "plug-in-gait" else _isb(m, hjc))
+    if name == "plug-in-gait":
+        mats.update(_upper(m, params))
     missing = {seg: ", ".join(n for n in need if not any(x in m for x in n.split("|")))
                for seg, need in spec.items() if seg not in mats}
     return name, {seg: _quat(r) for seg, r in mats.items()}, missing
@@ -302,7 +402,7 @@ def model_joint_angles(angles_deg: np.ndarray, name: str) -> np.ndarray:
     a = np.asarray(angles_deg, dtype=np.float64)
     rig = from_angles(a[:, 0], a[:, 1], a[:, 2], joint, side)
     parent, child = {"hip": ("pelvis", "thigh"), "knee": ("thigh", "shank"),
-                     "ankle": ("shank", "foot")}[joint]
+                     "ankle": ("shank", "foot"), "elbow": ("upper-arm", "forearm")}[joint]
     # J_isb = m_p ⊗ J_rig ⊗ m_c*  (the inverse of calibration.frames.joint_to_rig)
     mp = np.broadcast_to(_isb_q(parent), rig.shape)
     mc = np.broadcast_to(_isb_q(child), rig.shape)

@@ -41,7 +41,7 @@ __all__ = ["LAB_SUFFIXES", "LabTable", "read_bvh", "read_c3d", "read_lab_file", 
 LAB_SUFFIXES = (".c3d", ".bvh")
 
 _JOINT_SEGMENTS = {"hip": ("pelvis", "thigh"), "knee": ("thigh", "shank"),
-                   "ankle": ("shank", "foot")}
+                   "ankle": ("shank", "foot"), "elbow": ("upper-arm", "forearm")}
 
 
 @dataclass
@@ -159,7 +159,7 @@ def read_bvh(path: str | os.PathLike) -> LabTable:
     names = [j.Name for j in joints]
     sk, cols, missing = segment_orientations(names, parents, offsets, tips, local)
     if not cols:
-        raise _fail(path, f"no joint of a known skeleton (daz, mb): joints "
+        raise _fail(path, f"no joint of a known skeleton (daz, mb, arena): joints "
                           f"{', '.join(names[:30])}")
     dt = float(bvh.FrameTime)
     return LabTable(np.arange(n) * dt, cols, 1.0 / dt if dt > 0 else None,

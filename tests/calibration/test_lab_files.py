@@ -16,7 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calibration import markers
+from calibration.frames import joint_to_rig
 from calibration.joint_angles import joint_angles
+from models import quaternion as Q
 from rig.cli import main
 from rig.errors import RigConfigError
 from rig.readback import RecordingSource, extract
@@ -212,3 +215,187 @@ def test_unreadable_lab_files_are_config_errors(tmp_path):
     bad.write_text("HIERARCHY\nnothing\n")
     with pytest.raises(RigConfigError, match="not a readable BVH"):
         read_bvh(bad)
+
+
+# --- upper body (Plug-in Gait's arm markers) and a second BVH source (NaturalPoint Arena) ---
+
+ARMS = str(DATA / "pycgm_vicon_movement_trial_arms.c3d")
+ARENA = str(DATA / "arena_louise_cycling.bvh")
+
+
+@pytest.mark.parametrize("s, S, side", [("r", "R", "right"), ("l", "L", "left")])
+def test_c3d_arm_markers_give_plug_in_gaits_elbow(s, S, side):
+    """Elbow flexion from the arm markers' ISB frames (Wu 2005, Plug-in Gait's joint centres)
+    against Plug-in Gait's own ``ElbowAngles`` of the same frames: every frame within 0.1°
+    (measured 0.01° RMS), and the hinge ``rig boundary`` writes from each within 1° at both
+    ends (measured 0.01°) — one recording in two forms."""
+    mine = _flexion(ARMS, "elbow", side, f"humerus_{s}", f"ulna_{s}")
+    pig = _flexion(ARMS, "elbow", side, None, f"{S}ElbowAngles")
+    assert np.max(np.abs(mine - pig)) <= 0.1
+    assert np.ptp(pig) > 5.0
+    hinges = [extract(RecordingSource(ARMS, parent=p, child=c, joint="elbow").load(),
+                      side=side).constraint_.hinge
+              for p, c in ((f"humerus_{s}", f"ulna_{s}"), (None, f"{S}ElbowAngles"))]
+    assert abs(hinges[0].min_deg - hinges[1].min_deg) <= 1.0
+    assert abs(hinges[0].max_deg - hinges[1].max_deg) <= 1.0
+
+
+@pytest.mark.parametrize("s, S, side", [("r", "R", "right"), ("l", "L", "left")])
+def test_plug_in_gaits_elbow_angles_are_its_own_centres_angle(s, S, side):
+    """The file's ``ElbowAngles`` read as an ISB elbow (sign and side) equal the angle between
+    Plug-in Gait's own humerus (SJC → EJC) and forearm (EJC → WJC) axes from the centres the
+    file stores (``CLO``, ``HUO``, ``RAO``): our reading of its angles is its geometry."""
+    import ezc3d  # the test reads the file's stored joint centres
+
+    c = ezc3d.c3d(ARMS)
+    labels = [str(x) for x in c["parameters"]["POINT"]["LABELS"]["value"]]
+    p = {k: c["data"]["points"][:3, labels.index(f"{S}{k}"), :].T for k in ("CLO", "HUO", "RAO")}
+    a = p["CLO"] - p["HUO"]
+    b = p["HUO"] - p["RAO"]
+    cos = np.sum(a * b, axis=1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+    geometric = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    pig = _flexion(ARMS, "elbow", side, None, f"{S}ElbowAngles")
+    np.testing.assert_allclose(pig, geometric, atol=0.05)
+
+
+def test_c3d_arm_segments_are_isb_frames_of_every_arm_segment():
+    t = read_c3d(ARMS)
+    assert {"thorax", "humerus_r", "ulna_r", "hand_r", "humerus_l", "ulna_l", "hand_l"} <= \
+        set(t.labels)
+    assert "pelvis" in t.missing and "thorax" not in t.missing
+
+
+def test_a_c3d_without_the_hand_marker_is_one_line(tmp_path, capsys):
+    import ezc3d  # the test rewrites the excerpt without a marker
+
+    c = ezc3d.c3d(ARMS)
+    labels = [str(x) for x in c["parameters"]["POINT"]["LABELS"]["value"]]
+    keep = [i for i, lab in enumerate(labels) if lab != "LFIN"]
+    out = ezc3d.c3d()
+    out["parameters"]["POINT"]["RATE"]["value"] = [120.0]
+    out["parameters"]["POINT"]["LABELS"]["value"] = [labels[i] for i in keep]
+    out["data"]["points"] = c["data"]["points"][:, keep, :]
+    f = tmp_path / "no_lfin.c3d"
+    out.write(str(f))
+    code, _, err = _run(["rom", str(f), "--joint", "wrist", "--parent", "ulna_l", "--child",
+                         "hand_l", "--side", "left"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "LFIN" in err and "hand_l" in err
+
+
+def _bvh_channels(path: str, joint: str) -> np.ndarray:
+    """One joint's rotation channels (N, 3) as the file writes them, read from its text."""
+    text = Path(path).read_text().split("\n")
+    order, cols, k = [], [], 0
+    for line in text:
+        w = line.split()
+        if w[:1] in (["ROOT"], ["JOINT"]):
+            order.append(w[1])
+        if w[:1] == ["CHANNELS"]:
+            if order[-1] == joint:
+                cols = list(range(k + int(w[1]) - 3, k + int(w[1])))
+                names = w[-3:]
+            k += int(w[1])
+        if w[:1] == ["MOTION"]:
+            break
+    start = text.index("MOTION") + 3
+    rows = np.array([[float(x) for x in ln.split()] for ln in text[start:] if ln.strip()])
+    assert names == ["Zrotation", "Xrotation", "Yrotation"]  # this file's order, every joint
+    return rows[:, cols]
+
+
+@pytest.mark.parametrize("joint, parent, child", [("RightKnee", "femur_r", "tibia_r"),
+                                                  ("LeftElbow", "humerus_l", "ulna_l")])
+def test_arena_bvh_joint_is_the_files_own_rotation(joint, parent, child):
+    """The Arena skeleton's knee (elbow) — the tibia relative to the femur as read — turns by
+    the angle of the file's own ``RightKnee`` channels (Z, X, Y intrinsic, degrees), read here
+    from the text: the hierarchy and channel order are the file's, mapped by its joint names."""
+    from scipy.spatial.transform import Rotation  # the reference reading, independent of bvhio
+
+    t = read_bvh(ARENA)
+    rel = Q.multiply(Q.conjugate(t.get(parent)), t.get(child))
+    mine = np.degrees(2 * np.arccos(np.clip(np.abs(rel[:, 0]), 0.0, 1.0)))
+    ref = Rotation.from_euler("ZXY", _bvh_channels(ARENA, joint), degrees=True).magnitude()
+    np.testing.assert_allclose(mine, np.degrees(ref), atol=0.01)  # bvhio computes in float32
+
+
+def test_arena_bvh_cycling_is_plausible():
+    """No second format of this recording is public: the plausibility checks of the data
+    README — knee flexion at the bottom of the pedal stroke within the 20-40° of saddle-height
+    studies (Priego Quesada et al. 2016), every peak within AAOS's normal range, the legs in
+    antiphase."""
+    t = read_bvh(ARENA)
+    assert t.meta["has"] == "skeleton arena" and len(t) == 300 and t.rate_hz == 100.0
+    knees = [_flexion(ARENA, "knee", side, f"femur_{s}", f"tibia_{s}")
+             for s, side in (("r", "right"), ("l", "left"))]
+    for k in knees:
+        assert 20.0 <= k.min() <= 40.0 and k.max() <= 135.0
+        assert 70.0 < np.ptp(k) < 100.0
+    assert np.corrcoef(knees[0], knees[1])[0, 1] < -0.8
+    hip = _flexion(ARENA, "hip", "right", "pelvis", "femur_r")
+    assert hip.max() <= 120.0
+
+
+def test_arena_bvh_has_no_hands_and_says_why(capsys):
+    code, _, err = _run(["rom", ARENA, "--joint", "wrist", "--parent", "ulna_r", "--child",
+                         "hand_r", "--side", "right"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "hand bone" in err and "skeleton arena" in err
+
+
+def _ideal_arm(flexion_deg: np.ndarray, side: str, pronation_deg: float) -> dict:
+    """Plug-in Gait's upper-body markers on an ideal arm, by its own model (default subject
+    measurements): lab = thorax frame (X forward, Y up, Z right); the upper arm 20° abducted;
+    xELB on the flexion axis; the wrist bar turned ``pronation_deg`` about the forearm."""
+    sign = 1.0 if side == "right" else -1.0
+    S = "R" if side == "right" else "L"
+    d = markers.DEFAULT_WIDTHS_MM
+    r = d["MarkerDiameter"] / 2
+    n = len(flexion_deg)
+    fixed = {"CLAV": [0.0, 0, 0], "C7": [-120.0, 0, 0], "STRN": [40.0, -160, 0],
+             "T10": [-160.0, -160, 0]}
+    out = {k: np.tile(v, (n, 1)) for k, v in fixed.items()}
+    sjc = np.array([-r, 0.0, sign * 180.0])  # level with the thorax origin (r behind CLAV)
+    out[f"{S}SHO"] = np.tile(sjc + np.array([0.0, d["ShoulderOffset"] + r, 0.0]), (n, 1))
+    a = np.radians(20.0)
+    down = np.array([0.0, -np.cos(a), sign * np.sin(a)])
+    axis = np.array([0.0, np.sin(a) * sign, np.cos(a)])  # the flexion axis, towards the right
+    ejc = sjc + 300.0 * down
+    out[f"{S}ELB"] = np.tile(ejc + sign * (d["ElbowWidth"] / 2 + r) * axis, (n, 1))
+    forward = np.cross(-down, axis)
+    rows = {"WRA": [], "WRB": [], "FIN": []}
+    for f in np.radians(flexion_deg):
+        fd = np.cos(f) * down + np.sin(f) * forward
+        wjc = ejc + 250.0 * fd
+        x0 = np.cross(-fd, axis)
+        p = np.radians(pronation_deg)
+        zf = np.cos(p) * axis + sign * np.sin(p) * x0
+        mid = wjc.copy()
+        for _ in range(30):  # Plug-in Gait's wrist centre, anterior of the bar's midpoint
+            y = (ejc - mid) / np.linalg.norm(ejc - mid)
+            z = zf - np.dot(zf, y) * y
+            mid = wjc - (d["WristWidth"] / 2 + r) * np.cross(y, z / np.linalg.norm(z))
+        rows["WRA"].append(mid + sign * 30.0 * zf)
+        rows["WRB"].append(mid - sign * 30.0 * zf)
+        rows["FIN"].append(wjc + 80.0 * fd - (d["HandThickness"] / 2 + r) * np.cross(-fd, zf))
+    out.update({f"{S}{k}": np.array(v) for k, v in rows.items()})
+    return out
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_an_ideal_arm_reads_its_flexion_and_pronation(side):
+    """On an ideal arm the thorax is the lab frame, and flexion and pronation (the forearm's
+    rotation) are exact where Plug-in Gait's elbow centre is (from 110°; near extension it
+    reads flexion high by construction, module doc: 30° at 5°)."""
+    s = side[0]
+    flexion = np.array([5.0, 35.0, 80.0, 110.0, 140.0])
+    name, segs, _ = markers.segment_frames(_ideal_arm(flexion, side, 30.0))
+    assert name == "plug-in-gait"
+    np.testing.assert_allclose(segs["thorax"], np.tile([1.0, 0, 0, 0], (5, 1)), atol=1e-9)
+    q = joint_to_rig(Q.multiply(Q.conjugate(segs[f"humerus_{s}"]), segs[f"ulna_{s}"]), "isb",
+                     "upper-arm", "forearm")
+    got = joint_angles(q, "elbow", side)
+    assert np.all(np.abs(got["alpha"][3:] - flexion[3:]) < 1.0), got["alpha"]
+    assert np.all(got["alpha"][:3] > flexion[:3])  # high near extension, as Plug-in Gait
+    np.testing.assert_allclose(got["gamma"][3:], 30.0, atol=0.1)
+    np.testing.assert_allclose(got["beta"], 0.0, atol=1e-6)
