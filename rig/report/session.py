@@ -444,7 +444,7 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     if (db is not None and sess.get("pseudonym") and sess.get("kind") == "record"
             and sessions_of(store, sess["pseudonym"], (joint,)) > 1):
         data.progress_html = progress_section_html(run_progress(ProgressRequest(
-            str(db), sess["pseudonym"], joint)))
+            str(db), sess["pseudonym"], joint, age=age, sex=sex)))
     return write_report(data, out_path)
 
 
@@ -580,7 +580,7 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
     if db is not None and sess.get("pseudonym") and sessions_of(
             store, sess["pseudonym"], tuple(chain.joints)) > 1:
         data.progress_html = progress_section_html(merged_progress(
-            [run_progress(ProgressRequest(str(db), sess["pseudonym"], j))
+            [run_progress(ProgressRequest(str(db), sess["pseudonym"], j, age=age, sex=sex))
              for j in chain.joints]))
     return write_limb_report(data, out_path)
 
