@@ -88,9 +88,14 @@ def test_a_c3d_knee_from_its_markers(tmp_path, capsys):
 
 
 def test_a_bvh_elbow_its_side_from_the_columns(tmp_path, capsys):
-    page = _report([BVH, "--joint", "elbow", "--parent", "humerus_l", "--child", "ulna_l"],
-                   tmp_path, capsys)
+    cols = ["--joint", "elbow", "--parent", "humerus_l", "--child", "ulna_l"]
+    ref = tmp_path / "elbow.yaml"  # the same file's boundary, drawn dashed
+    code, _, err = _run(["boundary", BVH, *cols, "--side", "left", "--name", "truth",
+                         "--out", str(ref)], capsys)
+    assert code == 0, err
+    page = _report([BVH, *cols, "--reference", str(ref)], tmp_path, capsys)
     assert _joints(page) == ["elbow"] and "— left elbow" in page
+    assert "Reference (dashed)</td><td>truth" in page
     assert "BVH (skeleton and joint rotations)" in page and "skeleton daz" in page
     assert "400 at 60 Hz" in page and "no side given" not in page
 
