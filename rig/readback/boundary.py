@@ -19,22 +19,22 @@ from pathlib import Path
 from typing import Any
 
 from calibration.extraction import LimbExtractor
-from calibration.joints import LIMB_CHAINS, columns_mismatch
+from calibration.joints import JOINTS, LIMB_CHAINS, columns_mismatch
 from calibration.kinds import calibration_kind
-from models.constraint import JointConstraint, dump_constraint
+from models.constraint import JointConstraint, dump_constraint, load_constraint
 from models.fileio import check_output
 from models.kinds import DEFAULT_KIND, KINDS, get_kind
-from models.limb import dump_limb, loads_limb
+from models.limb import Limb, dump_limb, inline_constraint, load_limb, loads_limb
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData
 from rig.readback.files import limb_orientations_from_file
 from rig.readback.sessions import joint_orientations_from_store, session_shape
-from rig.readback.source import RecordingSource, check_session_side
+from rig.readback.source import RecordingSource, check_file, check_session_side
 from rig.store import LIMB_BOUNDARY, open_store
 
 __all__ = ["BY_SWING_CHOICES", "BoundaryRequest", "BoundaryResult", "OneJointBoundary",
            "WholeLimbBoundary", "default_name", "describe", "extract", "extract_limb",
-           "run_boundary", "stored_limb"]
+           "one_joint_limb", "run_boundary", "stored_limb"]
 
 #: ``--by-swing``: swing-dependent twist limits when the data supports them, always, never.
 BY_SWING_CHOICES = ("auto", "on", "off")
@@ -106,6 +106,12 @@ class BoundaryRequest:
         """Everything that can be checked before reading the recording (one-line errors)."""
         self.work.check(self)
 
+    def load(self) -> JointData:
+        """The recording the request names, read (after :meth:`check`): one joint's
+        orientations (J = 1, :meth:`RecordingSource.load`), or every joint of the whole
+        ``limb`` (J = 3) — what ``rig report FILE`` reads as ``rig boundary`` does."""
+        return self.source.load() if self.limb is None else _load_limb(self)
+
 
 class OneJointBoundary:
     """``rig boundary`` of one joint: a constraint file (:func:`extract`)."""
@@ -132,6 +138,25 @@ class OneJointBoundary:
         dump_constraint(ex.constraint_, path)
         result = BoundaryResult(ex, data, path, warnings=data.facts().warnings())
         return result, ex.constraint_.to_yaml(), {"path": str(path), **ex.report()}
+
+    def limits(self, request: BoundaryRequest, data: JointData, side: str) -> tuple[Limb, str]:
+        """The limits of the loaded recording as a limb of its one joint
+        (:func:`one_joint_limb` of :func:`extract`'s constraint), for a report, and how they
+        were made (the command)."""
+        ex = extract(data, side=side, alpha_deg=request.alpha_deg,
+                     max_vertices=request.max_vertices, by_swing=request.by_swing,
+                     kind=request.kind)
+        limb = one_joint_limb(ex.constraint_, data.joint or "shoulder",
+                              name=request.name or default_name(data), side=side)
+        return limb, "rig boundary"
+
+    def reference(self, reference, data: JointData, side: str) -> Limb:
+        """Limits drawn dashed beside the recording's: a constraint (or its file) as a limb
+        of the recording's joint."""
+        if isinstance(reference, (str, Path)):
+            reference = load_constraint(reference)
+        return one_joint_limb(reference, data.joint or "shoulder", name=reference.name,
+                              side=side)
 
 
 class WholeLimbBoundary:
@@ -174,8 +199,7 @@ class WholeLimbBoundary:
             if why is not None:
                 raise RigConfigError(f"{src.file}: {why} (reading the {request.limb}: --limb "
                                      f"{request.limb})")
-            if not Path(src.file).is_file():
-                raise RigConfigError(f"{src.file}: no such file")
+            check_file(src.file, src.frames)
         _check_side_and_out(request.side, request.out)
 
     def run(self, request: BoundaryRequest, path: Path) -> tuple[BoundaryResult, str, dict]:
@@ -188,6 +212,17 @@ class WholeLimbBoundary:
         meta = {"kind": LIMB_BOUNDARY, "limb": request.limb, "path": str(path),
                 "coupled": {k: bool(v["coupled"]) for k, v in ex.report()["couplings"].items()}}
         return BoundaryResult(ex, data, path), ex.limb_.to_yaml(), meta
+
+    def limits(self, request: BoundaryRequest, data: JointData, side: str) -> tuple[Limb, str]:
+        """The whole limb's limits (:func:`extract_limb`, its couplings where the recording
+        supports them), for a report, and how they were made (the command)."""
+        limb = extract_limb(data, name=request.name, side=side, alpha_deg=request.alpha_deg,
+                            max_vertices=request.max_vertices).limb_
+        return limb, f"rig boundary --limb {request.limb}"
+
+    def reference(self, reference, data: JointData, side: str) -> Limb:
+        """Limits drawn dashed beside the recording's: a limb (or its file)."""
+        return load_limb(reference) if isinstance(reference, (str, Path)) else reference
 
 
 @dataclass
@@ -302,6 +337,19 @@ def extract(data: JointData, *, name: str | None = None, side: str | None = None
             d.setdefault("provenance", {}).update(binding)
             ex.constraint_ = JointConstraint.from_dict(d)
     return ex
+
+
+def one_joint_limb(constraint: JointConstraint, joint: str, *, name: str,
+                   side: str | None = None) -> Limb:
+    """A limb of one joint whose limits are ``constraint`` (the joint's segments from
+    :data:`calibration.joints.JOINTS`): what a limb's report takes."""
+    spec = JOINTS[joint]
+    doc: dict[str, Any] = {"name": name, "joints": [{
+        "name": joint, "parent": spec.parent, "child": spec.child,
+        "constraint": inline_constraint(constraint)}]}
+    if side is not None:
+        doc["side"] = side
+    return Limb.from_dict(doc, source=name)
 
 
 def _of_a_limb(data: JointData) -> bool:

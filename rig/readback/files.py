@@ -19,13 +19,37 @@ from rig.readback.data import JointData, parse_axis
 from rig.store.io import OrientationTable, read_orientations
 from rig.store.labfiles import LAB_SUFFIXES, read_lab_file, to_frames
 
-__all__ = ["check_columns", "is_lab_file", "joint_orientations_from_file",
-           "limb_orientations_from_file", "read_table"]
+__all__ = ["FILE_SUFFIXES", "check_columns", "file_format", "is_lab_file",
+           "joint_orientations_from_file", "limb_orientations_from_file", "read_table"]
+
+#: The suffixes of the orientation files read (:func:`read_table`): OpenSim ``.sto``, CSV
+#: (``.csv``, ``.txt``), and a motion lab's C3D and BVH.
+FILE_SUFFIXES = (".sto", ".csv", ".txt", *LAB_SUFFIXES)
+
+_FORMATS = {".sto": "OpenSim orientations (.sto)", ".csv": "CSV of orientations",
+            ".txt": "CSV of orientations", ".c3d": "C3D (markers and model outputs)",
+            ".bvh": "BVH (skeleton and joint rotations)"}
 
 
 def is_lab_file(file: str) -> bool:
     """A C3D or BVH file (by suffix), read by :mod:`rig.store.labfiles`."""
     return Path(file).suffix.lower() in LAB_SUFFIXES
+
+
+def file_format(file: str) -> str:
+    """The format of an orientation file, for people (by its suffix)."""
+    return _FORMATS.get(Path(file).suffix.lower(), Path(file).suffix or "unknown")
+
+
+def _read_facts(table: OrientationTable) -> dict[str, str]:
+    """What a lab file's reader built the columns from (``read``: its marker set or skeleton)
+    and the frames it dropped for a marker gap, for the provenance (empty for a ``.sto``)."""
+    out = {}
+    if table.meta.get("has"):
+        out["read"] = str(table.meta["has"])
+    if table.meta.get("dropped_frames"):
+        out["dropped_frames"] = str(table.meta["dropped_frames"])
+    return out
 
 
 def read_table(file: str, frames: str) -> tuple[OrientationTable, str]:
@@ -82,7 +106,8 @@ def joint_orientations_from_file(file: str, parent: str | None, child: str, axis
     else:
         q = joint_to_rig(child_q, frames, spec.parent, spec.child)
     # the provenance keys stay "limb" and "reference": constraint files already carry them
-    prov = {"file": str(Path(file).name), "limb": child, "frames": frames}
+    prov = {"file": str(Path(file).name), "limb": child, "frames": frames,
+            **_read_facts(table)}
     if parent is not None:
         prov["reference"] = parent
     side = table.meta.get("rig_side")
@@ -108,5 +133,6 @@ def limb_orientations_from_file(file: str, columns: list[str], limb: str,
     return JointData(q, tuple(name for name, _, _ in order),
                      np.asarray(table.time, dtype=np.float64), None, parse_axis(None),
                      side if side in ("left", "right") else None,
-                     {"file": Path(file).name, "segments": list(columns), "frames": frames},
+                     {"file": Path(file).name, "segments": list(columns), "frames": frames,
+                      **_read_facts(table)},
                      table.meta.get("rig_patient"), limb)

@@ -28,6 +28,13 @@ A whole-limb session's visits also carry the named coupled clinical tests (strai
 popliteal angle, Silfverskiöld, Thomas test, the shoulder's reach with the elbow straight vs
 bent: :func:`coupled_tests_of`, cached with the visit's range of motion), each under the joint
 its definition names, with a value or "not reached in this recording".
+
+**Norms for the patient.** Given the patient's age and/or sex (``rig progress --age --sex``,
+``rig report --age --sex``), each movement's series carries the published norm for them
+(:func:`norms_of`: :func:`calibration.norms.norm_band` from the report's sources for the
+joint — Soucie et al. 2011 for the hip, knee and ankle, Gill et al. 2020 for the shoulder,
+Boone & Azen 1979 and Macedo & Magee 2008 for the elbow and wrist), with its source and
+measurement method; a movement no source publishes has none.
 """
 
 from __future__ import annotations
@@ -40,6 +47,7 @@ from calibration.clinical import RangeOfMotion
 from calibration.joint_angles import CLINICAL_MOVEMENTS, allowed_rom
 from calibration.joints import LIMB_CHAINS
 from calibration.mdc import METHODS, MdcValue, mdc_for, verdict
+from calibration.norms import JOINT_MOVEMENTS, SEXES, Norm, norm_band, norm_text
 from models.limb import loads_limb
 from rig import __version__
 from rig.errors import RigConfigError
@@ -50,7 +58,7 @@ from rig.store import open_store
 
 __all__ = ["ROM_CACHE_VERSION", "ProgressRequest", "ProgressResult", "Visit",
            "coupled_limits", "coupled_tests_of", "merged_progress", "movements_of",
-           "run_progress", "sessions_of"]
+           "norm_words", "norms_of", "run_progress", "sessions_of"]
 
 #: Bumped when what the cache holds, or how a visit's range of motion is computed, changes;
 #: a cached entry of another version (or another rig version) is recomputed.
@@ -86,17 +94,56 @@ def coupled_tests_of(store, sess: dict, entry: dict) -> dict[str, list[dict]]:
 
 @dataclass(frozen=True)
 class ProgressRequest:
-    """A store (``db``: path or URL), a patient's pseudonym, and optionally one joint."""
+    """A store (``db``: path or URL), a patient's pseudonym, optionally one joint, and the
+    patient's age (years) and sex when known: with either, each movement's published norm for
+    them comes with its series (:func:`norms_of`)."""
 
     db: str
     patient: str
     joint: str | None = None
+    age: float | None = None
+    sex: str | None = None
 
     def check(self) -> None:
-        """The joint's name, before any work (one-line error)."""
+        """The joint's name, the age and the sex, before any work (one-line errors)."""
         if not isinstance(self.patient, str) or not self.patient.strip():
             raise RigConfigError("--patient: give the patient's pseudonym")
         check_joint(self.joint)
+        if self.sex is not None and self.sex not in SEXES:
+            raise RigConfigError(f"--sex {self.sex!r}: expected one of {', '.join(SEXES)}")
+        if self.age is not None and (isinstance(self.age, bool)
+                                     or not isinstance(self.age, int | float)
+                                     or not 0 <= self.age < 150):
+            raise RigConfigError(f"--age {self.age!r}: expected years (0-149)")
+
+    @property
+    def with_norms(self) -> bool:
+        """Whether the norms for the patient are asked for (an age or a sex given)."""
+        return self.age is not None or self.sex is not None
+
+
+def norms_of(joint: str, movements, *, age: float | None = None,
+             sex: str | None = None) -> dict[str, list[Norm]]:
+    """Each movement's published norm for a patient of ``age`` and ``sex`` (either None when
+    unknown): :func:`calibration.norms.norm_band` from the report's sources for the joint,
+    one value per sex when the sex is unknown; a movement with no published value is left
+    out."""
+    out = {}
+    for m in movements:
+        if m not in JOINT_MOVEMENTS.get(joint, ()):
+            continue
+        got = norm_band(joint, m, age=age, sex=sex)
+        if got:
+            out[m] = got
+    return out
+
+
+def norm_words(norms: list[Norm]) -> str:
+    """One movement's norms for people: the values with their sex and age band, the source
+    and how it measured (``"138 (women, 45-69): Soucie JM et al. 2011, Haemophilia
+    17:500-507; passive motion, universal goniometer, ..."``)."""
+    cites = dict.fromkeys(f"{n.source.cite}; {n.source.method}" for n in norms)
+    return f"{norm_text(norms)}: {' | '.join(cites)}"
 
 
 @dataclass
@@ -190,18 +237,33 @@ class ProgressResult:
     series: dict[tuple[str, str | None], dict[str, list[Point]]]
     computed: int = 0
     cached: int = 0
+    #: joint → movement → the published norms for the patient's age and sex
+    #: (:func:`norms_of`), when an age or a sex was given; None otherwise
+    norms: dict[str, dict[str, list[Norm]]] | None = None
+    age: float | None = None
+    sex: str | None = None
 
     def to_json(self) -> dict:
         """``rig progress --json``: ``patient``, ``visits`` (:meth:`Visit.to_json`),
         ``series`` (one per joint and side: ``joint``, ``side``, ``movements``: movement →
-        list of :meth:`Point.to_json`), ``rom`` (``computed`` from samples this call,
-        ``cached``)."""
-        return {"patient": self.patient, "visits": [v.to_json() for v in self.visits],
-                "series": [{"joint": j, "side": s,
-                            "movements": {m: [p.to_json() for p in pts]
-                                          for m, pts in mv.items()}}
-                           for (j, s), mv in self.series.items()],
-                "rom": {"computed": self.computed, "cached": self.cached}}
+        list of :meth:`Point.to_json`; with an age or a sex, ``norms``: movement → the
+        published values for the patient, :meth:`calibration.norms.Norm.to_json`, with their
+        source and method), ``rom`` (``computed`` from samples this call, ``cached``) and,
+        with an age or a sex, ``norms_for`` (``age``, ``sex``)."""
+        series = []
+        for (j, s), mv in self.series.items():
+            one: dict[str, Any] = {"joint": j, "side": s,
+                                   "movements": {m: [p.to_json() for p in pts]
+                                                 for m, pts in mv.items()}}
+            if self.norms is not None:
+                one["norms"] = {m: [n.to_json() for n in ns]
+                                for m, ns in self.norms.get(j, {}).items()}
+            series.append(one)
+        out = {"patient": self.patient, "visits": [v.to_json() for v in self.visits],
+               "series": series, "rom": {"computed": self.computed, "cached": self.cached}}
+        if self.norms is not None:
+            out["norms_for"] = {"age": self.age, "sex": self.sex}
+        return out
 
     def table(self) -> str:
         """What ``rig progress`` prints: the visits, then per joint and side each movement's
@@ -210,6 +272,8 @@ class ProgressResult:
         lines = [f"patient {self.patient}: {len({v.session_id for v in self.visits})} "
                  f"session(s), {len(self.visits)} joint visit(s), {n_bad} not used as evidence",
                  "", "visits"]
+        if self.norms is not None:
+            lines[1:1] = [f"norms for: {_patient_words(self.age, self.sex)}"]
         rows = [("session", "date (UTC)", "joint", "side", "method", "coverage", "status",
                  "evidence")]
         for v in self.visits:
@@ -231,6 +295,9 @@ class ProgressResult:
             for m, pts in mv.items():
                 texts = dict.fromkeys(p.mdc_text for p in pts)
                 lines.append(f"MDC {m.replace('_', ' ')}: {' | '.join(texts)}")
+            for m, ns in (self.norms or {}).get(joint, {}).items():
+                if m in mv:
+                    lines.append(f"norm {m.replace('_', ' ')}: {norm_words(ns)}")
         coupled = [v for v in self.visits if v.coupled]
         for v in coupled:
             for joint, c in v.coupled.items():
@@ -247,14 +314,24 @@ class ProgressResult:
         return "\n".join(lines)
 
 
+def _patient_words(age: float | None, sex: str | None) -> str:
+    """The patient the norms are for, for people: ``"age 50, female"``."""
+    return ", ".join(x for x in (None if age is None else f"age {age:g}",
+                                 sex, None if age is not None else "age unknown") if x)
+
+
 def merged_progress(results: list[ProgressResult]) -> ProgressResult:
     """Several joints' progress of one patient (a limb's, one :func:`run_progress` per
     joint) as one: the visits in date order, every series."""
     visits = sorted((v for r in results for v in r.visits),
                     key=lambda v: (v.started_at, v.session_id))
     series = {k: v for r in results for k, v in r.series.items()}
+    asked = [r for r in results if r.norms is not None]
+    norms = {j: mv for r in asked for j, mv in r.norms.items()} if asked else None
     return ProgressResult(results[0].patient if results else "", visits, series,
-                          sum(r.computed for r in results), sum(r.cached for r in results))
+                          sum(r.computed for r in results), sum(r.cached for r in results),
+                          norms, asked[0].age if asked else None,
+                          asked[0].sex if asked else None)
 
 
 def _delta(d: float | None, v: str | None) -> str:
@@ -450,5 +527,12 @@ def run_progress(request: ProgressRequest) -> ProgressResult:
         counts = {"computed": 0, "cached": 0}
         visits = [v for s in sessions
                   for v in _visits_of(store, request.db, s, request.joint, counts)]
-    return ProgressResult(request.patient, visits, _series(visits), counts["computed"],
-                          counts["cached"])
+    series = _series(visits)
+    norms = None
+    if request.with_norms:
+        norms = {}
+        for joint, _side in series:
+            norms.setdefault(joint, norms_of(joint, movements_of(joint), age=request.age,
+                                             sex=request.sex))
+    return ProgressResult(request.patient, visits, series, counts["computed"],
+                          counts["cached"], norms, request.age, request.sex)

@@ -11,11 +11,17 @@ from calibration.frames import direction_to_rig
 from calibration.joints import JOINTS
 from rig.errors import RigConfigError
 from rig.readback.data import FUSION_CHOICES, JointData, parse_axis
-from rig.readback.files import check_columns, joint_orientations_from_file
+from rig.readback.files import (
+    FILE_SUFFIXES,
+    check_columns,
+    is_lab_file,
+    joint_orientations_from_file,
+)
 from rig.readback.sessions import read_session, session_shape
 from rig.store import open_store
 
-__all__ = ["FUSION_CHOICES", "RecordingSource", "check_joint", "load_joint_orientations"]
+__all__ = ["FUSION_CHOICES", "RecordingSource", "check_file", "check_joint",
+           "load_joint_orientations"]
 
 
 def check_joint(joint: str | None) -> None:
@@ -23,6 +29,26 @@ def check_joint(joint: str | None) -> None:
     if joint is not None:
         if joint not in JOINTS:
             raise RigConfigError(f"--joint {joint!r}: expected one of {', '.join(JOINTS)}")
+
+
+def check_file(file: str, frames: str | None) -> None:
+    """An orientation file as ``rig boundary`` / ``rig rom`` / ``rig report`` take it, before
+    any work (one-line errors): it exists, its suffix is a format read
+    (:data:`~rig.readback.files.FILE_SUFFIXES`), and ``--frames`` is not given with a C3D or
+    BVH file, whose segment frames its reader builds (ISB, from the marker set or the
+    skeleton's rest pose), so that the option could only mislead."""
+    path = Path(file)
+    suffix = path.suffix.lower()
+    if suffix not in FILE_SUFFIXES:
+        raise RigConfigError(f"{file}: unknown format {suffix or '(no suffix)'!r} (expected "
+                             f"{', '.join(FILE_SUFFIXES[:-1])} or {FILE_SUFFIXES[-1]})")
+    if not path.is_file():
+        raise RigConfigError(f"{file}: no such file")
+    if frames is not None and is_lab_file(file):
+        made = "marker set" if suffix == ".c3d" else "skeleton's rest pose"
+        raise RigConfigError(f"{file}: --frames does not apply to a {suffix[1:].upper()} file: "
+                             f"its segment frames come from its {made} (ISB); leave "
+                             "--frames out")
 
 
 def check_session_side(db, session_id: int | None, side: str | None) -> None:
@@ -74,8 +100,7 @@ class RecordingSource:
         if file is not None:
             if self.child is None:
                 raise RigConfigError(f"{file}: --child COLUMN is required with a file")
-            if not Path(file).is_file():
-                raise RigConfigError(f"{file}: no such file")
+            check_file(file, self.frames)
         elif self.parent is not None or self.child is not None:
             raise RigConfigError("--parent/--child apply to files; a session knows its "
                                  "segments")

@@ -196,6 +196,10 @@ class LimbReportData:
     #: the coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`), when
     #: asked for; None: the section is left out
     coupled_tests: list | None = None
+    #: a report from a file (``rig report FILE``): what was read, label → text (the file, its
+    #: format, what it was read from, frames, rate, duration), shown in the header instead of
+    #: the patient and the session (a file names no patient: none is invented)
+    from_file: dict[str, str] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -821,15 +825,21 @@ def _calibration_html(res: dict[str, dict[str, float]]) -> list[str]:
 
 def render_limb_html(data: LimbReportData) -> str:
     """The whole limb report as one HTML string (the shoulder report's page mechanism)."""
-    what = f"{data.side} {data.limb or 'limb'}"
-    meta = [("Patient (pseudonym)", f"<b>{escape(data.patient)}</b>"),
-            ("Session", escape(data.session_label) if data.session_label else None),
-            ("Limb", f"{escape(what)} ({escape(data.limb_name)})"),
+    one = data.joint_order[0] if len(data.joint_order) == 1 else None
+    what = f"{data.side} {data.limb or one or 'limb'}"
+    if data.from_file:  # a file: what was read, and no patient
+        meta = [(k, escape(v)) for k, v in data.from_file.items()]
+        whose = f"from file {next(iter(data.from_file.values()))}"
+    else:
+        meta = [("Patient (pseudonym)", f"<b>{escape(data.patient)}</b>"),
+                ("Session", escape(data.session_label) if data.session_label else None)]
+        whose = data.patient
+    meta += [("Limb" if one is None else "Joint", f"{escape(what)} ({escape(data.limb_name)})"),
             ("Limits", escape(data.limits_source) if data.limits_source else None),
-            ("Joints", escape(" → ".join(data.joint_order))),
+            ("Joints", None if one else escape(" → ".join(data.joint_order))),
             ("Recorded postures", fmt(data.samples)),
             ("Reference (dashed)", escape(data.reference_name) if data.reference_name else None)]
-    out = page_head(f"Range of motion report: {data.patient}, {what}",
+    out = page_head(f"Range of motion report: {whose}, {what}",
                     f"Range of motion report — {what}", meta)
     out += warnings_html(data.warnings, data.simulated)
     for sec in data.joints:
@@ -851,8 +861,9 @@ def render_limb_html(data: LimbReportData) -> str:
         if sec.caption:
             out.append(f"<p class='small'>{escape(sec.caption)}</p>")
         out.append("</section>")
-    out.append("<h2>Couplings</h2>")
-    if not data.couplings:
+    if one is None or data.couplings:  # one joint: nothing to couple
+        out.append("<h2>Couplings</h2>")
+    if not data.couplings and one is None:
         out.append(f"<p>{escape(data.coupling_note or NO_COUPLING)}</p>")
     for c in data.couplings:
         out.append(f"<section class='coupling' data-joint='{escape(c.joint)}' "

@@ -1,7 +1,9 @@
 """The report's progress section: a patient's range of motion across visits
 (:func:`rig.readback.progress.run_progress`), one figure per joint and side — each movement over
 the usable visits with the band of the minimal detectable change around the first — and the
-table of values, changes and verdicts; the visits not used as evidence are listed with why.
+table of values, changes and verdicts; the visits not used as evidence are listed with why;
+with the patient's age or sex (``rig report --age --sex``), each movement's published norm for
+them, with its source and method (:func:`rig.readback.progress.norms_of`).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from rig.readback.progress import ProgressResult
+from rig.readback.progress import ProgressResult, norm_words
 from rig.report.figures import to_png
 from rig.report.page import escape, img_tag
 
@@ -80,6 +82,11 @@ def progress_section_html(result: ProgressResult) -> list[str]:
             f"MDC {escape(m.replace('_', ' '))}: "
             + escape(" | ".join(dict.fromkeys(p.mdc_text for p in pts)))
             for m, pts in mv.items()) + "</p>")
+        norms = {m: ns for m, ns in (result.norms or {}).get(joint, {}).items() if m in mv}
+        if norms:
+            out.append("<p class='small'>Norms for the patient: " + "<br>".join(
+                f"{escape(m.replace('_', ' '))}: {escape(norm_words(ns))}"
+                for m, ns in norms.items()) + "</p>")
     coupled = [(v, j, c) for v in result.visits for j, c in v.coupled.items()]
     if coupled:
         out.append("<h3>Coupled limits across visits</h3><table><tr><th>Session</th>"

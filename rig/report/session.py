@@ -57,7 +57,7 @@ from models.oracle import ConstraintOracle
 from rig import __version__
 from rig.errors import RigConfigError, user_errors
 from rig.readback import extract, joint_orientations_from_store
-from rig.readback.boundary import stored_limb
+from rig.readback.boundary import BoundaryRequest, stored_limb
 from rig.readback.progress import (
     ProgressRequest,
     merged_progress,
@@ -66,6 +66,7 @@ from rig.readback.progress import (
 )
 from rig.readback.sessions import latest_calibration, session_limb
 from rig.report.figures import boundary_figure, error_map_figure
+from rig.report.files import report_for_file
 from rig.report.limb import limb_report_data, write_limb_report
 from rig.report.page import ReportData, rom_rows, write_report
 from rig.report.progress import progress_section_html
@@ -443,7 +444,7 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
     if (db is not None and sess.get("pseudonym") and sess.get("kind") == "record"
             and sessions_of(store, sess["pseudonym"], (joint,)) > 1):
         data.progress_html = progress_section_html(run_progress(ProgressRequest(
-            str(db), sess["pseudonym"], joint)))
+            str(db), sess["pseudonym"], joint, age=age, sex=sex)))
     return write_report(data, out_path)
 
 
@@ -579,21 +580,23 @@ def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None
     if db is not None and sess.get("pseudonym") and sessions_of(
             store, sess["pseudonym"], tuple(chain.joints)) > 1:
         data.progress_html = progress_section_html(merged_progress(
-            [run_progress(ProgressRequest(str(db), sess["pseudonym"], j))
+            [run_progress(ProgressRequest(str(db), sess["pseudonym"], j, age=age, sex=sex))
              for j in chain.joints]))
     return write_limb_report(data, out_path)
 
 
 @dataclass(frozen=True)
 class ReportRequest:
-    """What ``rig report`` is asked: the store and session, the HTML file to write, a model to
-    evaluate (default: the last registered with the session), the patient's age and sex (the
-    population reference band), a constraint drawn dashed for comparison (a file path or a
-    :class:`~models.constraint.JointConstraint`), the held-out orientations of the model
-    section and where an IMU recording's orientations come from."""
+    """What ``rig report`` is asked: the store and session — or a file (``file``: the
+    recording and which joint or whole limb to read from it, as ``rig boundary`` takes them,
+    :mod:`rig.report.files`) —, the HTML file to write, a model to evaluate (default: the last
+    registered with the session), the patient's age and sex (the population reference band),
+    a constraint drawn dashed for comparison (a file path or a
+    :class:`~models.constraint.JointConstraint`; a file's report: a limb too), the held-out
+    orientations of the model section and where an IMU recording's orientations come from."""
 
-    db: str | Path
-    session_id: int
+    db: str | Path | None = None
+    session_id: int | None = None
     out: str | Path = "report.html"
     model: str | Path | None = None
     age: int | None = None
@@ -602,9 +605,23 @@ class ReportRequest:
     eval_n: int = 4000
     fusion: str = "auto"
     coupled_tests: bool = False
+    #: a file's report: its recording, one joint or a whole limb (``out`` is the page's);
+    #: None: the session ``db`` / ``session_id``
+    file: BoundaryRequest | None = None
 
     def check(self) -> None:
-        """The files given, before anything is drawn (one-line errors)."""
+        """A recording, session or file, and the files given, before anything is drawn
+        (one-line errors)."""
+        if self.file is not None:
+            if self.db is not None or self.session_id is not None:
+                raise RigConfigError("give either FILE or --db/--session, not both")
+            if self.model is not None:
+                raise RigConfigError("--model applies to a session's report (the model "
+                                     "registered with it), not to a file's")
+            self.file.check()
+        elif self.db is None or self.session_id is None:
+            raise RigConfigError("give a recording: FILE (.sto, .csv, .c3d, .bvh), or --db DB "
+                                 "--session ID")
         check_output(self.out, "--out")
         if self.model is not None and not Path(self.model).is_file():
             raise RigConfigError(f"--model {self.model}: no such file")
@@ -618,9 +635,13 @@ class ReportResult:
 
 
 def run_report(request: ReportRequest) -> ReportResult:
-    """Check the request and the session (``no session N`` before any work), then write the
-    report."""
+    """Check the request and the session (``no session N`` before any work) or the file (its
+    format, columns, markers or joints: before any extraction), then write the report."""
     request.check()
+    if request.file is not None:
+        return ReportResult(report_for_file(
+            request.file, Path(request.out), age=request.age, sex=request.sex,
+            reference=request.reference, coupled_tests=request.coupled_tests))
     with open_store(request.db, create=False) as store:
         return ReportResult(report_for_session(
             store, request.session_id, Path(request.out), model=request.model, age=request.age,

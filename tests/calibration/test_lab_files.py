@@ -97,10 +97,15 @@ def test_c3d_isb_landmarks_build_every_leg_segment():
         assert 55.0 < np.ptp(knee) < 75.0 and knee.min() < 10.0
 
 
-def test_lab_files_read_the_same_joints_in_either_frames_option():
-    a = RecordingSource(PIG, parent="tibia_l", child="calcn_l", joint="ankle", frames="rig")
-    b = RecordingSource(PIG, parent="tibia_l", child="calcn_l", joint="ankle", frames="isb")
-    np.testing.assert_array_equal(a.load().q, b.load().q)
+@pytest.mark.parametrize("file", [PIG, BVH])
+@pytest.mark.parametrize("frames", ["rig", "isb"])
+def test_frames_on_a_lab_file_is_one_line(file, frames):
+    """A C3D's or BVH's segment frames come from its markers or skeleton: ``--frames`` is
+    refused before the file is read, rather than silently ignored."""
+    src = RecordingSource(file, parent="tibia_l", child="calcn_l", joint="ankle",
+                          frames=frames)
+    with pytest.raises(RigConfigError, match="--frames does not apply"):
+        src.load()
 
 
 def test_bvh_segments_are_the_sto_made_from_the_same_file():

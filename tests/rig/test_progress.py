@@ -17,6 +17,7 @@ import pytest
 
 from calibration.joint_angles import from_angles
 from calibration.mdc import MDC_TABLE, mdc_for, verdict
+from calibration.norms import norm_band
 from rig.cli import main
 from rig.readback.progress import ProgressRequest, run_progress
 from rig.report.progress import progress_section_html
@@ -162,11 +163,49 @@ def test_mdc_table_is_cited_and_verdicts_three_way():
     assert mdc_for("wrist", "flexion", "file")[0].instrument == "motion-capture"
 
 
+def test_progress_with_age_and_sex_gives_each_movements_norm(clinic, capsys):
+    """``--age 50 --sex female``: each movement's published norm for a woman of 50
+    (:func:`calibration.norms.norm_band`), with its source and method, in the series, the JSON,
+    the table and the report's section; none is asked without them."""
+    res = run_progress(ProgressRequest(clinic, "P-0042", age=50, sex="female"))
+    for joint, moves in (("elbow", ("flexion", "extension")),
+                         ("ankle", ("dorsiflexion", "plantarflexion"))):
+        for m in moves:
+            want = norm_band(joint, m, age=50, sex="female")
+            assert res.norms[joint].get(m, []) == want
+    dorsi = res.norms["ankle"]["dorsiflexion"][0]
+    assert dorsi.sex == "female" and dorsi.contains(50)
+    assert dorsi.source.key == "soucie2011"
+    assert run_progress(ProgressRequest(clinic, "P-0042")).norms is None
+    with pytest.raises(SystemExit) as e:
+        main(["progress", "--db", clinic, "--patient", "P-0042", "--age", "50", "--sex",
+              "female", "--json"])
+    assert e.value.code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["norms_for"] == {"age": 50, "sex": "female"}
+    ankle = next(x for x in out["series"] if x["joint"] == "ankle")
+    got = ankle["norms"]["dorsiflexion"][0]
+    assert got["value"] == dorsi.value and got["age"] == [45, 69]
+    assert "Soucie" in got["cite"] and "goniometer" in got["method"]
+    with pytest.raises(SystemExit):
+        main(["progress", "--db", clinic, "--patient", "P-0042", "--sex", "male"])
+    text = capsys.readouterr().out
+    assert "norms for: male, age unknown" in text and "norm dorsiflexion:" in text
+    assert "(men," in text
+    page = "\n".join(progress_section_html(res))
+    assert "Norms for the patient" in page and "women, 45-69" in page
+    with pytest.raises(SystemExit) as e:
+        main(["progress", "--db", clinic, "--patient", "P-0042", "--age", "5"])
+    assert e.value.code == 2
+
+
 def test_report_has_the_progress_section(clinic, tmp_path):
-    out = run_report(ReportRequest(clinic, 11, tmp_path / "r.html")).path
+    out = run_report(ReportRequest(clinic, 11, tmp_path / "r.html", age=50,
+                                   sex="female")).path
     page = out.read_text()
     assert "Progress across visits" in page and "interrupted" in page
     assert page.count("data:image/png") >= 1 and "exceeds" in page
+    assert "Norms for the patient" in page and "149 (women, 18-59)" in page  # Macedo 2008
 
 
 def test_coupled_limits_compare_across_visits(tmp_path):
