@@ -118,7 +118,7 @@ def _bad_cases(tmp_path: Path) -> list[tuple[list[str], str]]:
         ([str(tmp_path / "missing.c3d"), "--child", "tibia_r"], "no such file"),
         ([str(tmp_path / "notes.md"), "--child", "tibia_r"], "unknown format '.md'"),
         ([PIG, "--joint", "elbow", "--parent", "humerus_r", "--child", "ulna_r"],
-         "no column 'ulna_r'"),
+         "no 'ulna_r': it needs CLAV"),
         ([str(legs), "--joint", "elbow", "--parent", "humerus_r", "--child", "ulna_r"],
          "RightForeArm"),
         ([PIG, "--joint", "knee", "--parent", "femur_r", "--child", "tibia_r", "--frames",
