@@ -75,10 +75,11 @@ def test_the_old_spelling_chain_still_reads_a_whole_limb(tmp_path, capsys):
 
 # A fixture built once per module (or session) is built on each xdist worker that runs a test
 # using it: the tests sharing one are one group (the arm's: ideal_arm, ideal_arm_fit; the
-# leg's: sim_leg_motion, drifting_leg, drifting_leg_chain); the others run on any worker (the
-# 14-19 s test_keyframes_are_not_smoothed_as_far_as_the_coupling beside the arm's group).
+# leg's: sim_leg_motion, drifting_leg, drifting_leg_chain, with tests/rig/sim/test_chain.py's
+# two on sim_leg_motion); the others run on any worker (the 14-19 s
+# test_keyframes_are_not_smoothed_as_far_as_the_coupling beside the arm's group).
 ARM = pytest.mark.xdist_group("test_limb_boundary_arm")
-LEG = pytest.mark.xdist_group("test_limb_boundary_leg")
+LEG = pytest.mark.xdist_group("sim_leg")
 
 
 @pytest.fixture(scope="module")

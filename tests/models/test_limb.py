@@ -293,7 +293,11 @@ def test_the_limits_change_continuously_with_the_coupling_angle():
     lim = limb.joints[0].coupling.limits
     q0 = _postures(200, seed=5)
     angles = np.arange(-10.0, 130.0, 0.05)
-    dist = np.array([oracle.evaluate(_with_knee(q0, a)).distance[:, 0] for a in angles])
+    # 100 knee angles to one evaluation (the same distances as one call per angle, bit for
+    # bit; a third less time)
+    dist = np.concatenate([
+        oracle.evaluate(np.concatenate([_with_knee(q0, a) for a in angles[k:k + 100]]))
+        .distance[:, 0].reshape(-1, len(q0)) for k in range(0, len(angles), 100)])
     # a vertex moving from a to b (angle θ apart) by normalised linear interpolation moves at
     # most 2 tan(θ/2) per unit of t (its speed at the midpoint); t moves 0.05/60 per step
     theta = max(float(np.max(Q.angle_between(a, b))) for a, b in lim.polygons)

@@ -146,6 +146,13 @@ def test_arm_clinical_ranges(side):
 
 
 # -- the chain's motion -----------------------------------------------------------------------
+# The session fixtures sim_leg / sim_leg_motion (tests/conftest.py) are built on each xdist
+# worker that runs a test using them: these tests join the group of the others that read them
+# (tests/calibration/test_limb_boundary.py), so the leg's motion is simulated once.
+SIM_LEG = pytest.mark.xdist_group("sim_leg")
+
+
+@SIM_LEG
 def test_chain_motion_is_valid_and_reaches_every_limit(sim_leg, sim_leg_motion):
     leg = sim_leg
     _, q = sim_leg_motion
@@ -173,6 +180,7 @@ def test_chain_motion_is_valid_and_reaches_every_limit(sim_leg, sim_leg_motion):
     assert len(np.unique(np.clip(knee_there, 0, 135) // 15)) >= 6
 
 
+@SIM_LEG
 def test_chain_motion_is_smooth(sim_leg_motion):
     t, q = sim_leg_motion
     rel = Q.multiply(Q.conjugate(q[:-1]), q[1:])
