@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from calibration.clinical import RangeOfMotion
+from calibration.clinical_tests import MEASURES
 from calibration.joint_angles import CLINICAL_MOVEMENTS, allowed_rom
 from calibration.joints import LIMB_CHAINS
 from calibration.mdc import METHODS, MdcValue, mdc_for, verdict
@@ -49,8 +50,8 @@ from rig.readback.source import RecordingSource, check_joint
 from rig.store import open_store
 
 __all__ = ["ROM_CACHE_VERSION", "ProgressRequest", "ProgressResult", "Visit",
-           "coupled_limits", "coupled_tests_of", "merged_progress", "movements_of",
-           "run_progress", "sessions_of"]
+           "coupled_limits", "coupled_test_rows", "coupled_tests_of", "merged_progress",
+           "movements_of", "run_progress", "sessions_of"]
 
 #: Bumped when what the cache holds, or how a visit's range of motion is computed, changes;
 #: a cached entry of another version (or another rig version) is recomputed.
@@ -239,12 +240,38 @@ class ProgressResult:
                              + "; ".join(f"{a}: " + ", ".join(
                                  f"{m.replace('_', ' ')} {x:.1f}°" for m, x in vals.items()
                                  if x is not None) for a, vals in c["rom"].items()))
+        rows = coupled_test_rows(self.visits)
+        if rows:
+            lines += ["", "coupled clinical tests across visits"]
+            lines += _text_table([("test", "session", "date (UTC)", "value", "evidence"),
+                                  *((r["label"], str(r["session"]), r["date"], r["text"],
+                                     "yes" if r["usable"] else "no") for r in rows)])
         lines.append("")
         lines.append("verdicts: 'exceeds' = larger than the MDC (a real change); 'within' = "
                      "not distinguishable from measurement error; 'uncertain' = inside a "
                      "published MDC range; none across methods. Visits not used as evidence "
                      "are neither a reference nor a change.")
         return "\n".join(lines)
+
+
+def coupled_test_rows(visits: list[Visit]) -> list[dict[str, Any]]:
+    """The coupled clinical tests of every visit (:attr:`Visit.tests`), test by test in
+    :data:`calibration.clinical_tests.MEASURES` order, then by date: ``label``, ``measure``,
+    ``session``, ``date``, ``value`` (degrees or None), ``text`` (``"61.2°"``, or the status:
+    "not reached in this recording", ...), ``usable`` (the visit is evidence)."""
+    order = {s.key: i for specs in MEASURES.values() for i, s in enumerate(specs)}
+    rows = []
+    for v in visits:
+        for key, m in v.tests.items():
+            value = m.get("value")
+            rows.append({"label": m.get("label") or key, "measure": key,
+                         "session": v.session_id, "date": v.date, "value": value,
+                         "text": f"{value:.1f}°" if value is not None else m.get("status", "-"),
+                         "usable": v.usable, "_k": (order.get(key, 99), v.started_at)})
+    rows.sort(key=lambda r: r["_k"])
+    for r in rows:
+        del r["_k"]
+    return rows
 
 
 def merged_progress(results: list[ProgressResult]) -> ProgressResult:
@@ -294,7 +321,7 @@ def _cache_ok(entry: Any) -> bool:
 def _rom_entry(db: str, sess: dict, joint: str, limb: str | None) -> dict:
     """One joint's range of motion of a session (:func:`run_rom`) as the cache keeps it."""
     src = RecordingSource(db=db, session_id=int(sess["id"]), joint=joint if limb else None)
-    res = run_rom(RomRequest(src))
+    res = run_rom(RomRequest(src, coupled_tests=False))  # the tests: coupled_tests_of
     out = res.to_json()
     values = {m: out.get(m) for m in movements_of(joint)
               if m not in (out.get("not_measured") or {})}
