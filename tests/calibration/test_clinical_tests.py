@@ -66,6 +66,13 @@ def test_an_uncoupled_pair_is_computed_from_the_uncoupled_limits_and_says_so():
     assert s.coupled is False and "uncoupled limits" in s.notes[0]
     assert abs(s.value - b.value) < 1e-9  # the knee changes nothing without a coupling
     assert by["straight_leg_raise"].coupled is True
+    # with a recording at the position, the uncoupled limits are not the test's reading
+    q = np.zeros((20, 3, 4))
+    q[..., 0] = 1.0
+    q[:, 2] = from_angles(np.full(20, 5.0), 0.0, 0.0, "ankle")
+    s = {m.spec.key: m for m in coupled_measures(limb, q)}["silfverskiold_straight"]
+    assert s.status == "recording" and abs(s.value - 5.0) < 1e-6 and s.verdict is None
+    assert s.from_limits == by["silfverskiold_straight"].value
 
 
 def test_a_recording_that_never_reaches_the_position_gives_no_value():
@@ -191,6 +198,9 @@ def test_real_recordings_with_the_limits_extracted_from_them(file, letter, side)
     for m in got:
         if not m.reached:  # the limits may have a value there; the test has none
             assert m.value is None and m.status == "not reached in this recording"
+        elif m.coupled is False:  # uncoupled limits are not the test's: the recording's
+            assert m.value == m.recorded and m.status == "recording" and m.verdict is None
+            assert "recording's own reading" in m.notes[0]
         else:
             assert m.value == m.from_limits
             assert m.status == ("limits" if m.value is not None else "not possible")
