@@ -44,8 +44,8 @@ position the patient was seen in). **Limits that do not couple the two joints, w
 recording**: the value is the recording's reading (status ``"recording"``, no verdict), not
 the limits' — uncoupled limits hold the joint's range at every angle of the other joint (a
 limb file extracted from a recording that showed no coupling), which no test position
-restricts; ``from_limits`` still gives it. A recording of free movement (walking, dancing) is not the
-passive end-range test: its reading is the farthest the patient went there, a lower bound,
+restricts; ``from_limits`` still gives it. A recording of free movement (walking, dancing) is
+not the passive end-range test: its reading is the farthest the patient went there, a lower bound,
 and no verdict is drawn from it alone.
 
 Thresholds and norms (:data:`REFERENCES`)
@@ -217,11 +217,12 @@ MEASURES: dict[str, tuple[MeasureSpec, ...]] = {"leg": _LEG, "arm": _ARM}
 class CoupledMeasure:
     """One measure's result (degrees). ``value``: what the test reads — the limits' value
     when limits coupling the two joints are given (None where a recording given never reached
-    the test position), else the recording's; ``from_limits``, ``recorded`` both readings (None when not
-    available); ``reached``: whether the recording came to the test position (None without a
-    recording); ``coupled``: whether the limb couples the two joints (False: the uncoupled
-    limits answered); ``status``: ``"limits"``, ``"recording"``, ``"not reached in this
-    recording"`` or ``"not possible"`` (no angle within the limits)."""
+    the test position), else the recording's; ``from_limits``, ``recorded`` both readings (None
+    when not available); ``reached``: whether the recording came to the test position (None
+    without a recording); ``coupled``: whether the limb couples the two joints (False: the
+    uncoupled limits answered, or the recording did where it reached the position);
+    ``status``: ``"limits"``, ``"recording"``, ``"not reached in this recording"`` or ``"not
+    possible"`` (no angle within the limits)."""
 
     spec: MeasureSpec
     value: float | None
