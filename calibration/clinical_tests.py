@@ -40,8 +40,12 @@ inversion; the shoulder's sagittal plane, :func:`calibration.clinical.range_of_m
 band); the limits are read in the plane itself.
 **No sample at the test position: "not reached in this recording"** — the value is then None
 even when limits are given (their limits there are interpolation or a clamped keyframe, not a
-position the patient was seen in). A recording of free movement (walking, dancing) is not the
-passive end-range test: its reading is the farthest the patient went there, a lower bound,
+position the patient was seen in). **Limits that do not couple the two joints, with a
+recording**: the value is the recording's reading (status ``"recording"``, no verdict), not
+the limits' — uncoupled limits hold the joint's range at every angle of the other joint (a
+limb file extracted from a recording that showed no coupling), which no test position
+restricts; ``from_limits`` still gives it. A recording of free movement (walking, dancing) is
+not the passive end-range test: its reading is the farthest the patient went there, a lower bound,
 and no verdict is drawn from it alone.
 
 Thresholds and norms (:data:`REFERENCES`)
@@ -212,12 +216,13 @@ MEASURES: dict[str, tuple[MeasureSpec, ...]] = {"leg": _LEG, "arm": _ARM}
 @dataclass
 class CoupledMeasure:
     """One measure's result (degrees). ``value``: what the test reads — the limits' value
-    when limits are given (None where a recording given never reached the test position),
-    else the recording's; ``from_limits``, ``recorded`` both readings (None when not
-    available); ``reached``: whether the recording came to the test position (None without a
-    recording); ``coupled``: whether the limb couples the two joints (False: the uncoupled
-    limits answered); ``status``: ``"limits"``, ``"recording"``, ``"not reached in this
-    recording"`` or ``"not possible"`` (no angle within the limits)."""
+    when limits coupling the two joints are given (None where a recording given never reached
+    the test position), else the recording's; ``from_limits``, ``recorded`` both readings (None
+    when not available); ``reached``: whether the recording came to the test position (None
+    without a recording); ``coupled``: whether the limb couples the two joints (False: the
+    uncoupled limits answered, or the recording did where it reached the position);
+    ``status``: ``"limits"``, ``"recording"``, ``"not reached in this recording"`` or ``"not
+    possible"`` (no angle within the limits)."""
 
     spec: MeasureSpec
     value: float | None
@@ -540,6 +545,13 @@ def coupled_measures(limb: Limb | None = None, postures=None, *, joint_names=Non
             held = spec.joint if spec.scan == "other" else spec.other
             notes.append(f"no recorded posture had the {held} within {tolerance_deg:g}° of "
                          "the test position")
+        elif limb is not None and angles is not None and coupled is False:
+            # uncoupled limits hold the joint's range at every angle of the other joint: not
+            # the test's reading. The recording's own, at the test position, is.
+            value, status = rec, "recording"
+            notes = [f"the limb has no coupling of the {spec.joint} to the {spec.other}: its "
+                     f"limits ({_deg(lim)}) do not depend on the {spec.other}'s angle, so the "
+                     "recording's own reading at the test position is shown"]
         elif limb is not None:
             value, status = lim, "limits" if lim is not None else "not possible"
         else:
@@ -559,6 +571,10 @@ def coupled_measures(limb: Limb | None = None, postures=None, *, joint_names=Non
             m.notes.append("limits extracted from a recording hold what it explored: the "
                            "verdict stands for an end-range (passive) exploration")
     return out
+
+
+def _deg(v: float | None) -> str:
+    return "none within them" if v is None else f"{v:.1f}°"
 
 
 def measure_sources(measures: list[CoupledMeasure]) -> list[str]:

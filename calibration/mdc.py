@@ -14,7 +14,7 @@ Instruments (:data:`INSTRUMENTS`): ``goniometer`` (universal goniometer), ``incl
 sensors). The rig's own measurement methods (:data:`METHODS`: ``imu``, ``servo``, ``file``) map
 to the instrument whose published values apply (:data:`METHOD_INSTRUMENT`); no published
 study gives a test-retest MDC of a back-driven servo limb, and this table holds no IMU value
-for the joints the rig measures. For a method without its own published value,
+(the search is described below). For a method without its own published value,
 :func:`mdc_for` says ``"no published MDC"`` for that method and gives, marked as such
 (``reference=True``), the clinical instruments' value (goniometer, else inclinometer): what a
 clinician's own re-measurement could resolve — a conservative bar, since a patient's
@@ -44,8 +44,33 @@ Sources (each entry names its own):
   2011;27(2):176-184 (interrater MDC90: flexion 8°, abduction 4°, internal rotation 8°,
   external rotation 9°).
 
-No entry for the hip: the goniometric studies found (Nussbaumer S et al., BMC Musculoskelet
-Disord 2010;11:194) report reliability coefficients, not an MDC in degrees.
+* Wilken JM, Rodriguez KM, Brawner M, Darter BJ. Reliability and minimal detectible change
+  values for gait kinematics and kinetics in healthy adults. Gait Posture 2012;35(2):301-307,
+  PMID 22041096 (29 healthy adults, two marker-based gait assessments 5.6 ± 2.2 days apart,
+  two raters: "changes in gait kinematics of greater than approximately 5° can be identified
+  when comparing between sessions" — the abstract; its per-angle tables were not read here).
+  Used for the ``motion-capture`` instrument (a lab's file, method ``file``) in the sagittal
+  plane of the hip, knee and ankle only: McGinley JL, Baker R, Wolfe R, Morris ME. The
+  reliability of three-dimensional kinematic gait measurements: a systematic review. Gait
+  Posture 2009;29(3):360-369 found the highest reliability in the hip and knee sagittal
+  plane and the largest errors in the hip and knee transverse plane, so the 5° is not carried
+  to rotations or to the frontal plane. These are peaks during gait, not end-range positions:
+  a lab's gait file measures the former.
+
+No entry for the hip by goniometer: the goniometric studies found (Nussbaumer S et al., BMC
+Musculoskelet Disord 2010;11:194) report reliability coefficients, not an MDC in degrees.
+
+**IMU** (issue 42: "per measurement method"): no per-movement MDC or SEM of IMU-measured range
+of motion could be read and cited here. Studies that report one, whose tables were not
+readable through the sources available: Yoon T-L, J Korean Phys Ther 2017;29(3):145-151
+(MyoMotion IMU, shoulder flexion, abduction and rotations, 33 participants: "small SEM and MDC
+values", numbers in its tables); an inter-session study of IMU knee angles in gait (15
+healthy volunteers, three test administrators; SEM 1.21-3.32°, MDC 3.37-9.21° in its
+abstract) whose authors and journal could not be established. Studies read that give limits
+of agreement or ICCs only (no MDC): Stołowski Ł et al., Sensors 2023;23:8782 (hip, RSQ
+Motion IMU), Rigoni M et al., Sensors 2019;19:1781 (shoulder, Biokin IMU), Sacco G et al.,
+Clin Interv Aging 2015;10:491-497 (elbow, MotionPod; ICC 0.15-0.50). IMU sessions therefore
+keep the goniometer's (else the inclinometer's) value, marked ``reference``.
 """
 
 from __future__ import annotations
@@ -72,7 +97,8 @@ CLINICAL_REFERENCE = ("goniometer", "inclinometer")
 @dataclass(frozen=True)
 class MdcValue:
     """One published MDC: degrees (``low``..``high``; one value: equal), its confidence
-    (``"MDC95"``, ``"MDC90"``, ``"SDD"``, ``"MSD"``: minimum significant difference), the
+    (``"MDC95"``, ``"MDC90"``, ``"SDD"``, ``"MSD"``: minimum significant difference,
+    ``"MDD"``, ``"MDC"``: confidence not stated where it was read), the
     instrument, the source, and whether it stands in for a method without its own
     (``reference``)."""
 
@@ -108,6 +134,9 @@ _POWDEN = ("Powden CJ, Hoch JM, Hoch MC, Man Ther 2015;20(4):524-532 (weight-bea
            "systematic review: 4.6° inter-, 4.7° intra-clinician)")
 _HANCOCK_G = "Hancock GE et al., J Exp Orthop 2018;5:46 (long-arm goniometer)"
 _HANCOCK_I = "Hancock GE et al., J Exp Orthop 2018;5:46 (digital inclinometer)"
+_WILKEN = ("Wilken JM et al., Gait Posture 2012;35(2):301-307 (marker-based gait kinematics "
+           "between sessions, about 5°; sagittal plane per McGinley JL et al., Gait Posture "
+           "2009;29:360-369)")
 _KOLBER = ("Kolber MJ et al., Physiother Theory Pract 2011;27(2):176-184 (digital "
            "inclinometer, interrater)")
 
@@ -136,6 +165,9 @@ MDC_TABLE: dict[tuple[str, str, str], MdcValue] = {
         _v("shoulder", "abduction", "inclinometer", 4, 4, "MDC90", _KOLBER),
         _v("shoulder", "internal_rotation", "inclinometer", 8, 8, "MDC90", _KOLBER),
         _v("shoulder", "external_rotation", "inclinometer", 9, 9, "MDC90", _KOLBER),
+        *(_v(j, m, "motion-capture", 5, 5, "MDC", _WILKEN)
+          for j, ms in (("hip", ("flexion", "extension")), ("knee", ("flexion", "extension")),
+                        ("ankle", ("dorsiflexion", "plantarflexion"))) for m in ms),
     )
 }
 

@@ -66,10 +66,10 @@ LIMBS = tuple(LIMB_CHAINS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto",
               show_default=True, help="IMU recordings: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
-@click.option("--coupled-tests", is_flag=True,
-              help="A whole arm or leg: add the coupled clinical tests (straight-leg raise, "
-              "popliteal angle, Silfverskiöld, Thomas test; the shoulder's reach with the "
-              "elbow straight vs bent).")
+@click.option("--coupled-tests/--no-coupled-tests", default=True, show_default=True,
+              help="A whole arm or leg: the section of coupled clinical tests (straight-leg "
+              "raise, popliteal angle, Silfverskiöld, Thomas test; the shoulder's reach with "
+              "the elbow straight vs bent). A session of one joint has none.")
 def report(file, db, session_id, parent, child, joint, limb, segments, chain, limb_axis,
            frames, side, model_path, out_path, age, sex, reference_path, fusion,
            coupled_tests) -> None:

@@ -48,10 +48,12 @@ JOINT_NAMES = tuple(JOINTS)
 @click.option("--fusion", type=click.Choice(FUSION_CHOICES), default="auto",
               show_default=True, help="IMU sessions: orientations fused by the devices, or by "
               "VQF on the host from the raw samples (auto: VQF when every sample has raw data).")
-@click.option("--coupled-tests", is_flag=True,
-              help="A limb file (--constraint LIMB.yaml) or a whole-limb session: add its "
-              "coupled clinical tests (straight-leg raise, popliteal angle, Silfverskiöld, "
-              "Thomas test; the shoulder's reach with the elbow straight vs bent).")
+@click.option("--coupled-tests/--no-coupled-tests", default=None,
+              help="The coupled clinical tests (straight-leg raise, popliteal angle, "
+              "Silfverskiöld, Thomas test; the shoulder's reach with the elbow straight vs "
+              "bent): shown by default for a limb file (--constraint LIMB.yaml --joint J) or a "
+              "whole-limb session; --coupled-tests requires them, --no-coupled-tests leaves "
+              "them out.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object: movement -> degrees or null, plus joint, side, "
               "coverage, interrupted.")

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from calibration.clinical import RangeOfMotion
+from calibration.clinical_tests import MEASURES
 from calibration.joint_angles import CLINICAL_MOVEMENTS, allowed_rom
 from calibration.joints import LIMB_CHAINS
 from calibration.mdc import METHODS, MdcValue, mdc_for, verdict
@@ -57,12 +58,12 @@ from rig.readback.source import RecordingSource, check_joint
 from rig.store import open_store
 
 __all__ = ["ROM_CACHE_VERSION", "ProgressRequest", "ProgressResult", "Visit",
-           "coupled_limits", "coupled_tests_of", "merged_progress", "movements_of",
-           "norm_words", "norms_of", "run_progress", "sessions_of"]
+           "coupled_limits", "coupled_test_rows", "coupled_tests_of", "merged_progress",
+           "movements_of", "norm_words", "norms_of", "run_progress", "sessions_of"]
 
 #: Bumped when what the cache holds, or how a visit's range of motion is computed, changes;
 #: a cached entry of another version (or another rig version) is recomputed.
-ROM_CACHE_VERSION = 1
+ROM_CACHE_VERSION = 2  # 2: coupled tests of uncoupled limits read the recording
 
 
 def movements_of(joint: str) -> tuple[str, ...]:
@@ -306,6 +307,12 @@ class ProgressResult:
                              + "; ".join(f"{a}: " + ", ".join(
                                  f"{m.replace('_', ' ')} {x:.1f}°" for m, x in vals.items()
                                  if x is not None) for a, vals in c["rom"].items()))
+        rows = coupled_test_rows(self.visits)
+        if rows:
+            lines += ["", "coupled clinical tests across visits"]
+            lines += _text_table([("test", "session", "date (UTC)", "value", "evidence"),
+                                  *((r["label"], str(r["session"]), r["date"], r["text"],
+                                     "yes" if r["usable"] else "no") for r in rows)])
         lines.append("")
         lines.append("verdicts: 'exceeds' = larger than the MDC (a real change); 'within' = "
                      "not distinguishable from measurement error; 'uncertain' = inside a "
@@ -318,6 +325,26 @@ def _patient_words(age: float | None, sex: str | None) -> str:
     """The patient the norms are for, for people: ``"age 50, female"``."""
     return ", ".join(x for x in (None if age is None else f"age {age:g}",
                                  sex, None if age is not None else "age unknown") if x)
+
+
+def coupled_test_rows(visits: list[Visit]) -> list[dict[str, Any]]:
+    """The coupled clinical tests of every visit (:attr:`Visit.tests`), test by test in
+    :data:`calibration.clinical_tests.MEASURES` order, then by date: ``label``, ``measure``,
+    ``session``, ``date``, ``value`` (degrees or None), ``text`` (``"61.2°"``, or the status:
+    "not reached in this recording", ...), ``usable`` (the visit is evidence)."""
+    order = {s.key: i for specs in MEASURES.values() for i, s in enumerate(specs)}
+    rows = []
+    for v in visits:
+        for key, m in v.tests.items():
+            value = m.get("value")
+            rows.append({"label": m.get("label") or key, "measure": key,
+                         "session": v.session_id, "date": v.date, "value": value,
+                         "text": f"{value:.1f}°" if value is not None else m.get("status", "-"),
+                         "usable": v.usable, "_k": (order.get(key, 99), v.started_at)})
+    rows.sort(key=lambda r: r["_k"])
+    for r in rows:
+        del r["_k"]
+    return rows
 
 
 def merged_progress(results: list[ProgressResult]) -> ProgressResult:
@@ -371,7 +398,7 @@ def _cache_ok(entry: Any) -> bool:
 def _rom_entry(db: str, sess: dict, joint: str, limb: str | None) -> dict:
     """One joint's range of motion of a session (:func:`run_rom`) as the cache keeps it."""
     src = RecordingSource(db=db, session_id=int(sess["id"]), joint=joint if limb else None)
-    res = run_rom(RomRequest(src))
+    res = run_rom(RomRequest(src, coupled_tests=False))  # the tests: coupled_tests_of
     out = res.to_json()
     values = {m: out.get(m) for m in movements_of(joint)
               if m not in (out.get("not_measured") or {})}

@@ -49,9 +49,11 @@ class RomRequest:
     constraint: str | None = None
     side: str | None = None
     joint: str | None = None
-    #: a limb file or a whole-limb session: add its coupled clinical tests
-    #: (:mod:`calibration.clinical_tests`)
-    coupled_tests: bool = False
+    #: the coupled clinical tests (:mod:`calibration.clinical_tests`): None (default) adds
+    #: them wherever the source is a limb file or a whole-limb session and says nothing
+    #: otherwise; True requires them (one line when the source has none: one joint's
+    #: constraint, an orientation file, a session of one joint); False leaves them out
+    coupled_tests: bool | None = None
 
     def check(self) -> None:
         """Option combinations and files, before any work (one-line errors)."""
@@ -80,8 +82,9 @@ class RomResult:
     joint: str | None
     source: str
     facts: RecordingFacts | None = None
-    #: the limb's coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`),
-    #: when asked for (``rig rom --coupled-tests``)
+    #: the limb's coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`):
+    #: a limb file's or a whole-limb session's unless left out (``--no-coupled-tests``);
+    #: None for one joint
     coupled: list | None = None
 
     @property
@@ -189,7 +192,7 @@ def _limits_rom(request: RomRequest) -> RomResult:
         for c in constraints:
             c.require_swing_twist("rig rom")
     coupled = None
-    if request.coupled_tests:
+    if request.coupled_tests or (request.coupled_tests is None and isinstance(limits, Limb)):
         if not isinstance(limits, Limb):
             raise RigConfigError(f"{path}: --coupled-tests reads a limb file (an arm or a "
                                  "leg), not one joint's constraint")
@@ -203,20 +206,28 @@ def run_rom(request: RomRequest) -> RomResult:
     request.check()
     if request.constraint is not None:
         return _limits_rom(request)
-    coupled = _session_coupled(request) if request.coupled_tests else None
+    coupled = _session_coupled(request) if request.coupled_tests else None  # fail fast
     result = _recording_rom(request)
+    if request.coupled_tests is None:  # after the recording's own errors, as before
+        coupled = _session_coupled(request)
     result.coupled = coupled
     return result
 
 
-def _session_coupled(request: RomRequest) -> list:
+def _session_coupled(request: RomRequest) -> list | None:
     """The coupled clinical tests of the request's whole-limb session
-    (:func:`session_coupled_tests`)."""
+    (:func:`session_coupled_tests`); None for an orientation file or a session of one joint
+    unless required (``coupled_tests=True``: one line)."""
     src = request.source
+    required = request.coupled_tests is True
     if src.file is not None:
+        if not required:
+            return None
         raise RigConfigError("--coupled-tests reads a limb file (--constraint LIMB.yaml) or a "
                              "whole-limb session (--db --session), not an orientation file")
     with open_store(src.db, create=False) as store:
+        if not required and session_limb(store.sessions.get(src.session_id)) is None:
+            return None
         return session_coupled_tests(store, src.session_id, side=request.side,
                                      fusion=src.fusion)
 

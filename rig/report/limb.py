@@ -193,8 +193,8 @@ class LimbReportData:
     software: str | None = None
     #: the progress section's HTML (:func:`rig.report.progress.progress_section_html`)
     progress_html: list[str] = field(default_factory=list)
-    #: the coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`), when
-    #: asked for; None: the section is left out
+    #: the coupled clinical tests (:func:`calibration.clinical_tests.coupled_measures`), shown
+    #: by default; None: the section is left out (``rig report --no-coupled-tests``)
     coupled_tests: list | None = None
     #: a report from a file (``rig report FILE``): what was read, label → text (the file, its
     #: format, what it was read from, frames, rate, duration), shown in the header instead of
@@ -700,7 +700,7 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                      sex: str | None = None, limits_source: str | None = None,
                      calibration_note: str | None = None,
                      evaluation_note: str | None = None,
-                     coupled_tests: bool = False) -> LimbReportData:
+                     coupled_tests: bool = True) -> LimbReportData:
     """Everything the report of one arm or leg shows (module doc).
 
     Parameters
@@ -743,9 +743,9 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         (:func:`calibration.joint_angles.population_reference`; the shoulder's
         :func:`calibration.clinical.population_reference`).
     coupled_tests : bool
-        Add the section "Coupled clinical tests": the limits' value at each test position
-        and the recording's, "not reached in this recording" where the postures never came
-        there (:func:`calibration.clinical_tests.coupled_measures`).
+        The section "Coupled clinical tests" (default; False leaves it out): the limits'
+        value at each test position and the recording's, "not reached in this recording"
+        where the postures never came there (:func:`calibration.clinical_tests.coupled_measures`).
 
     Raises
     ------

@@ -13,7 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from rig.readback.progress import ProgressResult, norm_words
+from rig.readback.progress import ProgressResult, coupled_test_rows, norm_words
 from rig.report.figures import to_png
 from rig.report.page import escape, img_tag
 
@@ -102,6 +102,20 @@ def progress_section_html(result: ProgressResult) -> list[str]:
         out.append("</table><p class='small'>Each visit's limb file (rig boundary --limb): "
                    "the coupled joint's range at each keyframe angle of the joint it depends "
                    "on, so visits compare at the same coupling angles.</p>")
+    tests = coupled_test_rows(result.visits)
+    if tests:
+        out.append("<h3>Coupled clinical tests across visits</h3><table><tr><th>Test</th>"
+                   "<th>Session</th><th>Date (UTC)</th><th>Value</th><th>Evidence</th>"
+                   "</tr>")
+        for r in tests:
+            out.append(f"<tr><td>{escape(r['label'])}</td><td>{r['session']}</td>"
+                       f"<td>{escape(r['date'])}</td><td>{escape(r['text'])}</td>"
+                       f"<td>{'yes' if r['usable'] else 'no'}</td></tr>")
+        out.append("</table><p class='small'>Each visit's straight-leg raise, popliteal angle, "
+                   "Silfverskiöld and Thomas tests (the arm: the shoulder's reach with the elbow "
+                   "straight and bent), read as <code>rig rom</code> reads a whole-limb session; "
+                   "'not reached in this recording' where the visit never came to the test "
+                   "position.</p>")
     out.append("<p class='small'>'exceeds': a change larger than the minimal detectable "
                "change of the joint, movement and method (a real change); 'within': not "
                "distinguishable from measurement error; 'uncertain': inside a published MDC "

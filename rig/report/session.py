@@ -393,7 +393,7 @@ def report_data_for_session(store, session_id: int, *, model=None, age: int | No
 def report_for_session(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto",
                        db: str | Path | None = None,
-                       coupled_tests: bool = False) -> Path:
+                       coupled_tests: bool = True) -> Path:
     """Write the HTML report of a session in an opened store — one joint or a whole limb (a
     session of one joint is a limb of one joint; each has its page); returns its path.
 
@@ -424,8 +424,9 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         of its joint (a limb's: of its joints) gets the progress section
         (:mod:`rig.report.progress`).
     coupled_tests : bool
-        A whole arm or leg: add the section "Coupled clinical tests"
-        (:mod:`calibration.clinical_tests`).
+        A whole arm or leg: the section "Coupled clinical tests"
+        (:mod:`calibration.clinical_tests`), shown unless False (``rig report
+        --no-coupled-tests``); a session of one joint has none.
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
     if session_limb(sess) is not None:
@@ -504,7 +505,7 @@ def _is_limb_model_of(joints):
 def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
                        reference=None, eval_n: int = 4000, fusion: str = "auto",
                        db: str | Path | None = None,
-                       coupled_tests: bool = False) -> Path:
+                       coupled_tests: bool = True) -> Path:
     """Write the report of a whole-limb session (:mod:`rig.report.limb`); returns its path.
 
     The joints' orientations come from :func:`rig.readback.sessions.
@@ -604,7 +605,7 @@ class ReportRequest:
     reference: Any = None
     eval_n: int = 4000
     fusion: str = "auto"
-    coupled_tests: bool = False
+    coupled_tests: bool = True
     #: a file's report: its recording, one joint or a whole limb (``out`` is the page's);
     #: None: the session ``db`` / ``session_id``
     file: BoundaryRequest | None = None

@@ -3,9 +3,7 @@ limb itself, and the real recordings (the value or "not reached", never an inven
 
 from __future__ import annotations
 
-import itertools
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -19,44 +17,13 @@ from models.limb import Limb, dump_limb
 from models.shapes import shape_path
 from rig.cli import main
 from rig.readback import load_joint_orientations
+from rig.readback.progress import ProgressResult, Visit, coupled_test_rows
 from rig.report.limb import LimbReportData, render_limb_html
+from rig.report.progress import progress_section_html
+from rig.sim.clinical_truth import coupled_test_truth
 from rig.sim.patients import anatomical_limb
 
 REAL = Path(__file__).parent / "data" / "real"
-
-
-def _crossing(at: list[float], f: list[float], target: float) -> float:
-    """The coupling angle at which the interpolated flexion limit reaches ``target`` (degrees):
-    the limb file's normalised linear interpolation of a vertex on one great circle
-    (docs/limb-format.md), solved exactly per keyframe interval."""
-    pairs = list(zip(at, f, strict=True))
-    for (a0, f0), (a1, f1) in itertools.pairwise(pairs):
-        if f0 <= target <= f1:
-            c0, s0, c1, s1 = (math.cos(math.radians(f0)), math.sin(math.radians(f0)),
-                              math.cos(math.radians(f1)), math.sin(math.radians(f1)))
-            tt, ct = math.tan(math.radians(target)), math.cos(math.radians(target))
-            # angle(t) = atan2((1-t) s0 + t s1, (1-t) c0 + t c1) = target
-            t = (c0 / (c0 - c1) if abs(ct) < 1e-12
-                 else (s0 - tt * c0) / ((s0 - tt * c0) - (s1 - tt * c1)))
-            return a0 + t * (a1 - a0)
-    raise AssertionError("no crossing")
-
-
-def _truth(limb: Limb) -> dict[str, float]:
-    """The tests' values from the simulated limb's own drawn limits (its provenance)."""
-    c = limb.provenance["clinical"]
-    if limb.limb == "leg":
-        h, k, a = c["hip"], c["knee"], c["ankle"]
-        slr, flex = h["flexion_knee_straight"], h["flexion"]
-        return {"straight_leg_raise": slr,
-                "popliteal_angle": _crossing([0, 45, 90], [slr, 0.5 * (slr + flex), flex], 90),
-                "silfverskiold_straight": a["dorsiflexion"],
-                "silfverskiold_bent": a["dorsiflexion_knee_bent"],
-                "thomas_hip": h["extension"], "thomas_knee": k["flexion"]}
-    s = c["shoulder"]
-    return {"shoulder_flexion_straight": s["flexion"], "shoulder_flexion_bent": s["flexion"],
-            "shoulder_extension_straight": s["extension_elbow_straight"],
-            "shoulder_extension_bent": s["extension"]}
 
 
 def test_ten_simulated_legs_and_arms_within_3_degrees_of_their_own_limits():
@@ -65,7 +32,7 @@ def test_ten_simulated_legs_and_arms_within_3_degrees_of_their_own_limits():
         side = "left" if seed % 2 else "right"
         for kind in ("leg", "arm"):
             limb = anatomical_limb(200 + seed, kind, side)
-            truth = _truth(limb)
+            truth = coupled_test_truth(limb)
             got = coupled_measures(limb)
             assert {m.spec.key for m in got} == set(truth)
             for m in got:
@@ -99,6 +66,13 @@ def test_an_uncoupled_pair_is_computed_from_the_uncoupled_limits_and_says_so():
     assert s.coupled is False and "uncoupled limits" in s.notes[0]
     assert abs(s.value - b.value) < 1e-9  # the knee changes nothing without a coupling
     assert by["straight_leg_raise"].coupled is True
+    # with a recording at the position, the uncoupled limits are not the test's reading
+    q = np.zeros((20, 3, 4))
+    q[..., 0] = 1.0
+    q[:, 2] = from_angles(np.full(20, 5.0), 0.0, 0.0, "ankle")
+    s = {m.spec.key: m for m in coupled_measures(limb, q)}["silfverskiold_straight"]
+    assert s.status == "recording" and abs(s.value - 5.0) < 1e-6 and s.verdict is None
+    assert s.from_limits == by["silfverskiold_straight"].value
 
 
 def test_a_recording_that_never_reaches_the_position_gives_no_value():
@@ -173,7 +147,13 @@ def test_rig_rom_coupled_tests_of_a_limb_file(tmp_path, capsys):
     assert "short gastrocnemius" in tests["silfverskiold_bent"]["verdict"]
     assert "s13102-021-00242-y" in tests["popliteal_angle"]["source"]
     code, out, _ = _run(["rom", "--constraint", str(f), "--joint", "knee"], capsys)
-    assert code == 0 and "coupled clinical tests" not in out  # asked for only
+    assert code == 0 and "coupled clinical tests" in out  # on by default for a limb file
+    code, out, _ = _run(["rom", "--constraint", str(f), "--joint", "knee",
+                         "--no-coupled-tests", "--json"], capsys)
+    assert code == 0 and "coupled_tests" not in json.loads(out)
+    code, out, _ = _run(["rom", "--constraint", str(shape_path("original")), "--json"],
+                        capsys)
+    assert code == 0 and "coupled_tests" not in json.loads(out)  # one joint: says nothing
     code, _, err = _run(["rom", "--constraint", shape_path("original"), "--coupled-tests"],
                         capsys)
     assert code == 2 and "--coupled-tests reads a limb file" in err
@@ -218,8 +198,30 @@ def test_real_recordings_with_the_limits_extracted_from_them(file, letter, side)
     for m in got:
         if not m.reached:  # the limits may have a value there; the test has none
             assert m.value is None and m.status == "not reached in this recording"
+        elif m.coupled is False:  # uncoupled limits are not the test's: the recording's
+            assert m.value == m.recorded and m.status == "recording" and m.verdict is None
+            assert "recording's own reading" in m.notes[0]
         else:
             assert m.value == m.from_limits
             assert m.status == ("limits" if m.value is not None else "not possible")
     if file == "opensense_xsens_walking.sto":
         assert {m.spec.key: m for m in got}["popliteal_angle"].value is None
+
+
+def test_progress_shows_each_visits_coupled_tests():
+    """``rig progress`` (table) and the report's progress section list every visit's coupled
+    tests without a flag: the value, or the status where a visit never reached the position."""
+    def visit(sid, day, value, usable=True):
+        m = {"label": "Straight-leg raise", "value": value,
+             "status": "recording" if value is not None else "not reached in this recording"}
+        return Visit(sid, 1.8e9 + day * 86400.0, "hip", "right", "leg", "imu", "ended", False,
+                     0.5, True, {"flexion": 100.0}, [] if usable else ["interrupted"],
+                     tests={"straight_leg_raise": m})
+    res = ProgressResult("P-1", [visit(1, 0, 61.24), visit(2, 7, None, usable=False)], {})
+    rows = coupled_test_rows(res.visits)
+    assert [r["text"] for r in rows] == ["61.2°", "not reached in this recording"]
+    text = res.table()
+    assert "coupled clinical tests across visits" in text and "61.2°" in text
+    html = "\n".join(progress_section_html(res))
+    assert "Coupled clinical tests across visits" in html and "not reached in this" in html
+    assert "coupled" not in ProgressResult("P-2", [], {}).table()

@@ -226,7 +226,7 @@ def test_a_limb_without_coupling_says_so(leg):
 
 def test_limb_report_renders_in_headless_chromium(leg, tmp_path):
     page = write_limb_report(leg[2], tmp_path / "leg.html")
-    img = screenshot(page, tmp_path, height=6600)
+    img = screenshot(page, tmp_path, height=7400)  # incl. the coupled clinical tests
     assert dark_fraction(img) > 0.002  # text, tables, outlines
     assert pixels_near(img, "#4477aa", 0.12) > 200  # recorded samples and hinge angles
     assert pixels_near(img, "#762a83", 0.06) > 30  # the maps' anatomical labels
