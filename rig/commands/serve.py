@@ -25,7 +25,9 @@ from rig.web.settings import DEFAULT_HOST, DEFAULT_PORT
 @click.option("--add-user", "add_user", default=None, metavar="NAME",
               help="Add a user (or change its password) and exit; the password is prompted.")
 @click.option("--no-access-log", is_flag=True, help="Do not log each request.")
-def serve(db, host, port, users, login, add_user, no_access_log) -> None:
+@click.option("--cache", default=None, metavar="DIR", help="Folder for the rendered reports "
+              "and exports (default: a private temporary folder, removed at the end).")
+def serve(db, host, port, users, login, add_user, no_access_log, cache) -> None:
     """Serve the clinic's web app: patients, sessions, reports, progress."""
     from rig.errors import RigConfigError
     from rig.web.security import UserFile
@@ -41,5 +43,6 @@ def serve(db, host, port, users, login, add_user, no_access_log) -> None:
         UserFile(path).add(add_user, password)
         click.echo(f"user {add_user} saved in {path}")
         return
-    run_server(ServeRequest(db, host, port, users, login, access_log=not no_access_log),
+    run_server(ServeRequest(db, host, port, users, login, access_log=not no_access_log,
+                            cache=cache),
                on_ready=click.echo)

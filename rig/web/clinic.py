@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from rig import __version__
-from rig.errors import RigConfigError
+from rig.errors import RigConfigError, user_errors
 from rig.readback.progress import ProgressRequest, ProgressResult, run_progress
 from rig.readback.sessions import session_limb
 from rig.report import ReportRequest, run_report
@@ -283,12 +283,13 @@ def render_report(store: Store, settings_db: str, cache_dir: Path, patient_id: i
                 run_report(ReportRequest(settings_db, int(session_id), out, age=options.age,
                                          sex=options.sex, reference=ref,
                                          coupled_tests=options.coupled_tests))
-        except RigConfigError as err:
+        except user_errors() as err:
             out.unlink(missing_ok=True)
-            msg = str(err)
-            if ref is not None:
-                msg = msg.replace(str(ref), options.reference_name or "reference")
-            raise type(err)(msg) from err
+            if ref is None or str(ref) not in str(err):
+                raise
+            # the upload's name, not the server's temporary file
+            raise RigConfigError(str(err).replace(str(ref), options.reference_name or
+                                                  "reference")) from err
         except BaseException:
             out.unlink(missing_ok=True)
             raise

@@ -44,6 +44,8 @@ from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError
 from asgi_csrf import asgi_csrf
 from fastapi import APIRouter, Form, Request
+from python_multipart.exceptions import FormParserError
+from python_multipart.multipart import FormParser, parse_options_header
 from starlette.responses import RedirectResponse
 
 from models.fileio import write_owner_only
@@ -189,7 +191,7 @@ class _Everywhere:
 
 async def _csrf_failed(scope: dict, send: Callable, message_id: Any) -> None:
     request = Request(scope)
-    why = getattr(message_id, "name", "")
+    why = getattr(message_id, "name", message_id)
     msg = ("the form's csrftoken field must come before any file" if why == "FILE_BEFORE_TOKEN"
            else "missing or wrong CSRF token: reload the page and send the form again "
                 "(API: send the csrftoken cookie's value as the x-csrftoken header)")
@@ -200,9 +202,78 @@ async def _no_body() -> dict:
     return {"type": "http.request", "body": b"", "more_body": False}
 
 
+def _is_multipart(scope: dict) -> bool:
+    ctype = dict(scope.get("headers") or []).get(b"content-type", b"")
+    return ctype.split(b";", 1)[0].strip().lower() == b"multipart/form-data"
+
+
+class _MultipartToken:
+    """The form-field check of a ``multipart/form-data`` request, which asgi-csrf 0.11 cannot
+    make with python-multipart >= 0.0.13 (its parser's ``FileClass`` argument is gone): the
+    same rule — the first part is the ``csrftoken`` field, equal to the cookie's token (the
+    value asgi-csrf verified, ``scope["csrftoken"]``); a file before it is refused. The
+    body (at most ``max_upload_bytes``, :class:`BodyLimit`) is parsed in memory and
+    replayed."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict, receive: Callable, send: Callable) -> None:
+        if scope["type"] != "http" or scope["method"] in SAFE_METHODS or not _is_multipart(
+                scope) or _header_token_ok(scope):
+            await self.app(scope, receive, send)
+            return
+        messages, body = [], b""
+        while True:
+            message = await receive()
+            messages.append(message)
+            body += message.get("body", b"")
+            if message["type"] != "http.request" or not message.get("more_body", False):
+                break
+        ctype = dict(scope.get("headers") or []).get(b"content-type", b"")
+        parts: list[tuple[str, bytes | None, bytes | None]] = []
+        try:
+            _, params = parse_options_header(ctype)
+            parser = FormParser("multipart/form-data",
+                                lambda f: parts.append(("field", f.field_name, f.value)),
+                                lambda f: parts.append(("file", f.field_name, None)),
+                                boundary=params.get(b"boundary"))
+            parser.write(body)
+            parser.finalize()
+        except (FormParserError, ValueError):
+            parts = []
+        expected = scope["csrftoken"]() if callable(scope.get("csrftoken")) else ""
+        first = parts[0] if parts else ("none", None, None)
+        if first[0] == "file":
+            await _csrf_failed(scope, send, "FILE_BEFORE_TOKEN")
+            return
+        got = (first[2] or b"").decode("utf-8", "replace") if first[1] == b"csrftoken" else ""
+        if not expected or not secrets.compare_digest(got, expected):
+            await _csrf_failed(scope, send, "MULTIPART_MISMATCH")
+            return
+
+        async def replay() -> dict:
+            return messages.pop(0) if messages else await receive()
+
+        await self.app(scope, replay, send)
+
+
+SAFE_METHODS = ("GET", "HEAD", "OPTIONS", "TRACE")
+
+
+def _header_token_ok(scope: dict) -> bool:
+    """The ``x-csrftoken`` header matched (asgi-csrf let the request through for it)."""
+    headers = dict(scope.get("headers") or [])
+    got = headers.get(b"x-csrftoken", b"").decode("latin-1")
+    expected = scope["csrftoken"]() if callable(scope.get("csrftoken")) else ""
+    return bool(got) and bool(expected) and secrets.compare_digest(got, expected)
+
+
 def csrf_middleware(app: ASGIApp, settings: WebSettings) -> ASGIApp:
-    """``app`` behind asgi-csrf and a same-origin check on unsafe requests."""
-    guarded = asgi_csrf(app, signing_secret=settings.secret, always_protect=_Everywhere(),
+    """``app`` behind asgi-csrf (and :class:`_MultipartToken` for multipart forms) and a
+    same-origin check on unsafe requests."""
+    guarded = asgi_csrf(_MultipartToken(app), signing_secret=settings.secret,
+                        always_protect=_Everywhere(), skip_if_scope=_is_multipart,
                         send_csrf_failed=_csrf_failed, cookie_samesite="Strict")
 
     async def wrapped(scope: dict, receive: Callable, send: Callable) -> None:

@@ -55,7 +55,8 @@ def bind(host: str, port: int) -> socket.socket:
 @dataclass(frozen=True)
 class ServeRequest:
     """What ``rig serve`` is asked: the store, the address, the users file (default beside a
-    SQLite store), a login even on the loopback."""
+    SQLite store), a login even on the loopback, the access log, the cache folder (default: a
+    private temporary folder removed at the end)."""
 
     db: str
     host: str = DEFAULT_HOST
@@ -63,6 +64,7 @@ class ServeRequest:
     users: str | None = None
     login: bool = False
     access_log: bool = True
+    cache: str | None = None
 
 
 def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -> None:
@@ -71,7 +73,8 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
     if not (0 <= request.port <= 65535):
         raise RigConfigError(f"--port must be 0-65535, got {request.port}")
     users = Path(request.users) if request.users else default_users_path(request.db)
-    cache = Path(tempfile.mkdtemp(prefix="rig-web-"))  # 0700
+    own_cache = request.cache is None
+    cache = Path(tempfile.mkdtemp(prefix="rig-web-")) if own_cache else Path(request.cache)
     try:
         settings = WebSettings(db=request.db, cache_dir=cache, users_path=users,
                                host=request.host, login=request.login)
@@ -89,5 +92,6 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
             on_ready(f"rig serve: http://{shown}:{port}/ ({login}; store {request.db})")
             server.run(sockets=[sock])
     finally:
-        shutil.rmtree(cache, ignore_errors=True)
+        if own_cache:
+            shutil.rmtree(cache, ignore_errors=True)
 
