@@ -19,17 +19,16 @@ import threading
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rig import __version__
 from rig.errors import RigConfigError, user_errors
-from rig.readback.progress import ProgressRequest, ProgressResult, run_progress
-from rig.readback.sessions import session_limb
-from rig.report import ReportRequest, run_report
-from rig.report.progress import progress_section_html
-from rig.store import LIMB_BOUNDARY, Store, open_store
+from rig.store import Store
 from rig.store.io import export_session
 from rig.store.pseudonyms import pseudonym_concerns
+
+if TYPE_CHECKING:
+    from rig.readback.progress import ProgressResult
 
 __all__ = ["DOWNLOADS", "NotFound", "PseudonymConcern", "ReportOptions", "create_patient",
            "download", "find_patients", "patient", "patient_sessions", "progress",
@@ -128,6 +127,17 @@ def session_of(store: Store, patient_id: int, session_id: int) -> dict:
     raise NotFound(f"patient {patient_id} has no session {session_id}")
 
 
+def _services():
+    """The report and progress services and the session-shape reader — imported lazily, on the
+    first page that needs them: they bring matplotlib, scipy and numba (~2 s), which the
+    server's start and its lists do without."""
+    from rig.readback import progress as _progress  # lazy: see the docstring
+    from rig.readback import sessions as _sessions  # lazy
+    from rig.report import progress as _report_progress  # lazy
+    from rig.report import session as _report  # lazy
+    return _progress, _sessions, _report, _report_progress
+
+
 def _latest_boundary(store: Store, session_id: int, limb: bool) -> dict | None:
     rows = store.boundaries.list(session_id, limb=limb)
     return rows[-1] if rows else None
@@ -153,7 +163,7 @@ def session_summary(store: Store, patient_id: int, session_id: int) -> dict:
             "limb": _latest_boundary(store, session_id, True) is not None,
             "model": _latest_model(store, session_id) is not None,
             "export": s["samples"] > 0}
-    return {"session": s, "limb": session_limb(s),
+    return {"session": s, "limb": _services()[1].session_limb(s),
             "downloads": {k: DOWNLOADS[k][0] for k, ok in have.items() if ok}}
 
 
@@ -279,10 +289,11 @@ def render_report(store: Store, settings_db: str, cache_dir: Path, patient_id: i
             ref.write_bytes(options.reference)
             os.chmod(ref, 0o600)
         try:
+            report = _services()[2]
             with _RENDER:
-                run_report(ReportRequest(settings_db, int(session_id), out, age=options.age,
-                                         sex=options.sex, reference=ref,
-                                         coupled_tests=options.coupled_tests))
+                report.run_report(report.ReportRequest(
+                    settings_db, int(session_id), out, age=options.age, sex=options.sex,
+                    reference=ref, coupled_tests=options.coupled_tests))
         except user_errors() as err:
             out.unlink(missing_ok=True)
             if ref is None or str(ref) not in str(err):
@@ -306,16 +317,11 @@ def progress(db: str, store: Store, patient_id: int, joint: str | None = None
     p = patient(store, patient_id)
     if joint in ("", None):
         joint = None
-    return run_progress(ProgressRequest(db, p["pseudonym"], joint))
+    prog = _services()[0]
+    return prog.run_progress(prog.ProgressRequest(db, p["pseudonym"], joint))
 
 
 def progress_html(result: ProgressResult) -> str:
     """The report's progress section (figures and tables) for a page."""
     with _RENDER:
-        return "\n".join(progress_section_html(result))
-
-
-def open_clinic_store(db: str) -> Store:
-    """The store the server reads its lists from (it must exist: ``rig record`` creates
-    one)."""
-    return open_store(db, create=False)
+        return "\n".join(_services()[3].progress_section_html(result))

@@ -12,7 +12,6 @@ from fastapi import APIRouter, File, Form, Request, UploadFile
 from starlette.background import BackgroundTask
 from starlette.responses import FileResponse, RedirectResponse, Response
 
-from calibration.joints import JOINTS
 from rig.errors import RigConfigError
 from rig.web import clinic
 from rig.web.render import page
@@ -22,6 +21,7 @@ from rig.web.settings import WebSettings
 __all__ = ["router"]
 
 router = APIRouter()
+_NO_FILE = File(None)
 
 
 def _store(request: Request):
@@ -104,7 +104,7 @@ def report(request: Request, patient_id: int, session_id: int) -> Response:
 def report_with_options(request: Request, patient_id: int, session_id: int,
                         age: str = Form(""), sex: str = Form(""),
                         coupled_tests: str = Form(""),
-                        reference: UploadFile | None = File(None)) -> Response:
+                        reference: UploadFile | None = _NO_FILE) -> Response:
     s = _settings(request)
     ref, ref_name = None, None
     if reference is not None and reference.filename:
@@ -147,5 +147,5 @@ def progress(request: Request, patient_id: int, joint: str = "") -> Response:
     result = clinic.progress(_settings(request).db, store, patient_id, joint or None)
     return page(request, "progress.html", {
         "patient": p, "result": result, "joint": joint or "",
-        "joints": ["", *sorted({v.joint for v in result.visits} | ({joint} & set(JOINTS)))],
+        "joints": ["", *sorted({v.joint for v in result.visits})],
         "section": clinic.progress_html(result)})

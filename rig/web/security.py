@@ -30,6 +30,7 @@ an access log that shows no query strings.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import re
@@ -64,8 +65,13 @@ SESSION_MAX_AGE_S = 8 * 3600
 OPEN_PATHS = ("/login", "/static/")
 
 _HASHER = PasswordHasher()
-# a hash to verify against when the user does not exist, so that both answers take as long
-_DUMMY_HASH = _HASHER.hash(secrets.token_hex(16))
+
+
+@functools.cache
+def _dummy_hash() -> str:
+    """A hash to verify against when the user does not exist, so that both answers take as
+    long (made once, when first needed)."""
+    return _HASHER.hash(secrets.token_hex(16))
 
 ASGIApp = Callable[[dict, Callable, Callable], Awaitable[None]]
 
@@ -107,7 +113,7 @@ class UserFile:
         exists)."""
         rec = self.users().get(name)
         try:
-            return _HASHER.verify(rec["hash"] if rec else _DUMMY_HASH, password) and bool(rec)
+            return _HASHER.verify(rec["hash"] if rec else _dummy_hash(), password) and bool(rec)
         except (VerificationError, InvalidHashError):
             return False
 
@@ -136,7 +142,7 @@ def login_form(request: Request):
 
 @router.post("/login")
 def login(request: Request, username: str = Form(""), password: str = Form(""),
-          next: str = Form("/")):  # noqa: A002 (the form's field name)
+          next: str = Form("/")):
     settings: WebSettings = request.app.state.settings
     users = UserFile(settings.users_path) if settings.users_path else None
     if not username or not password:

@@ -84,9 +84,9 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
             host, port = sock.getsockname()[:2]
             shown = f"[{host}]" if ":" in host else host
             logging.getLogger("uvicorn.access").addFilter(QueryFreeAccessLog())
-            config = uvicorn.Config(app, log_level="info" if request.access_log else "warning", access_log=request.access_log,
-                                    proxy_headers=False, server_header=False,
-                                    timeout_graceful_shutdown=5)
+            config = uvicorn.Config(app, log_level="info" if request.access_log else "warning",
+                                    access_log=request.access_log, proxy_headers=False,
+                                    server_header=False, timeout_graceful_shutdown=5)
             server = uvicorn.Server(config)
             login = "login required" if settings.require_login else "no login (loopback)"
             on_ready(f"rig serve: http://{shown}:{port}/ ({login}; store {request.db})")

@@ -10,6 +10,7 @@ import hashlib
 import re
 import sqlite3
 import stat
+from types import SimpleNamespace
 
 import pytest
 
@@ -27,7 +28,7 @@ def web(clinic):
     with running(["--db", str(tmp / "clinic.db"), "--cache", str(cache)], tmp) as server:
         c = client(server)
         try:
-            yield server, c, ids, tmp, cache
+            yield SimpleNamespace(server=server, c=c, ids=ids, tmp=tmp, cache=cache)
         finally:
             c.close()
 
@@ -45,7 +46,7 @@ def snapshot(tmp, cache) -> tuple:
 
 
 def test_patients_search_and_create(web):
-    server, c, ids, tmp, cache = web
+    c = web.c
     page = c.get("/patients").text
     assert "P-0042" in page and "P-0043" in page
     found = c.post("/patients/search", data={"csrftoken": c.cookies["csrftoken"], "q": "0043"})
@@ -64,7 +65,7 @@ def test_patients_search_and_create(web):
 
 
 def test_session_report_progress_and_files(web):
-    server, c, ids, tmp, cache = web
+    c, ids, cache = web.c, web.ids, web.cache
     p42, (s1, s2) = ids["p42"], ids["p42_visits"]
     page = c.get(f"/patients/{p42}/sessions/{s2}")
     assert page.status_code == 200 and "Open the report" in page.text
@@ -97,7 +98,7 @@ def test_session_report_progress_and_files(web):
 
 
 def test_headers_and_log_hold_no_pseudonym(web):
-    server, c, ids, tmp, cache = web
+    server, c, ids = web.server, web.c, web.ids
     r = c.get("/patients")
     h = r.headers
     assert "'unsafe-inline'" not in h["content-security-policy"]
@@ -143,7 +144,7 @@ BAD_API = [
 @pytest.mark.parametrize("method, path, body, status, words", BAD_API,
                          ids=[f"{i}-{c[1]}" for i, c in enumerate(BAD_API)])
 def test_bad_api_input(web, method, path, body, status, words):
-    server, c, ids, tmp, cache = web
+    c, ids, tmp, cache = web.c, web.ids, web.tmp, web.cache
     path = path.format(p42=ids["p42"], p43=ids["p43"], s3=ids["p43_session"])
     before = snapshot(tmp, cache)
     kw = {"content": body} if isinstance(body, str) else (
@@ -215,7 +216,7 @@ def _bad_forms(ids, token):
 def test_bad_form_input(web):
     """Each refused with its one line on the error page (or the form again), nothing
     written."""
-    server, c, ids, tmp, cache = web
+    c, ids, tmp, cache = web.c, web.ids, web.tmp, web.cache
     for name, method, path, kw, status, words in _bad_forms(ids, c.cookies["csrftoken"]):
         before = snapshot(tmp, cache)
         headers = {"x-csrftoken": "", **kw.pop("headers", {})}
