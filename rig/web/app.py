@@ -6,7 +6,7 @@ Layers, outermost first (each a middleware over the next)::
     BodyLimit            413 for a body over settings.max_upload_bytes
     CSRF                 asgi-csrf double-submit token + same-origin check (unsafe methods)
     SessionMiddleware    the signed login-session cookie (itsdangerous)
-    login_gate           a login when the server needs one (rig.web.security)
+    LoginGate            a login when the server needs one (rig.web.security)
     routes               security.router (login), pages.router (HTML), api.router (/api/),
                          /static (rig/web/static: every asset shipped, no CDN)
 
@@ -139,7 +139,7 @@ def create_app(settings: WebSettings) -> FastAPI:
         return error_response(request, "internal error (the server's log has the details)",
                               500)
 
-    app.middleware("http")(security.login_gate)
+    app.add_middleware(security.LoginGate, settings=settings)
     app.add_middleware(SessionMiddleware, secret_key=settings.secret,
                        session_cookie="rig_session", max_age=security.SESSION_MAX_AGE_S,
                        same_site="lax", https_only=False)

@@ -3,7 +3,7 @@ an access log that shows no query strings.
 
 - **Binding.** ``rig serve`` listens on 127.0.0.1 unless told otherwise. Bound to any other
   address it refuses to start until a user exists (:func:`check_binding`), and then every page
-  and API call needs a logged-in user (:func:`login_gate`; ``--login`` asks for it on the
+  and API call needs a logged-in user (:class:`LoginGate`; ``--login`` asks for it on the
   loopback too).
 - **Users** live in a users file (JSON, owner-only 0600, beside the SQLite store by default):
   name → Argon2id hash (``argon2-cffi``, its default parameters: RFC 9106's second
@@ -54,8 +54,17 @@ from rig.errors import RigConfigError
 from rig.web.render import error_response, page, wants_json
 from rig.web.settings import WebSettings, is_loopback
 
-__all__ = ["MIN_PASSWORD", "BodyLimit", "QueryFreeAccessLog", "SecurityHeaders", "UserFile",
-           "check_binding", "csrf_middleware", "login_gate", "router"]
+__all__ = [
+    "MIN_PASSWORD",
+    "BodyLimit",
+    "LoginGate",
+    "QueryFreeAccessLog",
+    "SecurityHeaders",
+    "UserFile",
+    "check_binding",
+    "csrf_middleware",
+    "router",
+]
 
 #: the shortest password accepted (NIST SP 800-63B, 5.1.1.2: at least 8 characters)
 MIN_PASSWORD = 8
@@ -171,20 +180,34 @@ def _safe_next(target: str | None) -> str:
     return target
 
 
-async def login_gate(request: Request, call_next):
-    """HTTP middleware: when the server needs a login, a request without a logged-in user is
-    sent to the login page (a page) or refused with 401 (the API)."""
-    settings: WebSettings = request.app.state.settings
-    user = request.session.get("user") if "session" in request.scope else None
-    request.scope["rig_user"] = user
-    request.scope["rig_require_login"] = settings.require_login
-    if settings.require_login and user is None and not request.url.path.startswith(OPEN_PATHS):
-        if wants_json(request):
-            return error_response(request, "log in first (POST /login)", 401)
-        if request.method in ("GET", "HEAD"):
-            return RedirectResponse(f"/login?next={request.url.path}", status_code=303)
-        return error_response(request, "log in first", 401)
-    return await call_next(request)
+class LoginGate:
+    """ASGI middleware (inside the session's): when the server needs a login, a request
+    without a logged-in user is sent to the login page (a page) or refused with 401 (the API,
+    and any other method). Puts ``rig_user`` and ``rig_require_login`` in the scope for the
+    pages."""
+
+    def __init__(self, app: ASGIApp, settings: WebSettings) -> None:
+        self.app = app
+        self.settings = settings
+
+    async def __call__(self, scope: dict, receive: Callable, send: Callable) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        user = (scope.get("session") or {}).get("user")
+        scope["rig_user"] = user
+        scope["rig_require_login"] = self.settings.require_login
+        path = scope["path"]
+        if self.settings.require_login and user is None and not path.startswith(OPEN_PATHS):
+            request = Request(scope)
+            if wants_json(request) or scope["method"] not in ("GET", "HEAD"):
+                answer = error_response(request, "log in first" + (
+                    " (POST /login)" if wants_json(request) else ""), 401)
+            else:
+                answer = RedirectResponse(f"/login?next={path}", status_code=303)
+            await answer(scope, _no_body, send)
+            return
+        await self.app(scope, receive, send)
 
 
 # --------------------------------------------------------------------------- CSRF
