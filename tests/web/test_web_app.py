@@ -7,6 +7,7 @@ nothing written (the store's rows and the server's files compared before and aft
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import sqlite3
 import stat
@@ -230,3 +231,62 @@ def test_bad_form_input(web):
                 r'id="pseudonym-warning">\s*<p>([^<]*)<', r.text)
             assert msg and words in msg.group(1).replace("&#39;", "'"), (name, r.text[-600:])
         assert snapshot(tmp, cache) == before, name
+
+
+def test_in_the_browser(web, tmp_path):
+    """Chromium: a patient created past the pseudonym warning, a session and its report, the
+    progress page, and mistakes shown as one line on the error page. With RIG_WEB_SHOTS=DIR
+    each page is saved there as a PNG (docs/web/ holds them)."""
+    from selenium.webdriver.common.by import By
+
+    from tests.web.browser import chrome
+
+    shots = os.environ.get("RIG_WEB_SHOTS")
+    b = chrome(tmp_path)
+
+    def shot(name: str) -> None:
+        if shots:
+            b.save_screenshot(os.path.join(shots, f"{name}.png"))
+
+    try:
+        ids = web.ids
+        b.get(web.server.url + "/patients")
+        assert b.find_element(By.ID, "patients").text.count("P-004") == 2
+        shot("patients")
+        b.find_element(By.ID, "pseudonym").send_keys("Maria Lopez")
+        b.find_element(By.ID, "create").click()
+        warning = b.find_element(By.ID, "pseudonym-warning").text
+        assert "a person's name" in warning
+        shot("pseudonym-warning")
+        b.find_element(By.ID, "confirm-create").click()
+        assert b.find_element(By.ID, "pseudonym").text == "Maria Lopez"
+        assert "/patients/" in b.current_url and "Maria" not in b.current_url
+        p42, (s1, s2) = ids["p42"], ids["p42_visits"]
+        b.get(f"{web.server.url}/patients/{p42}")
+        shot("patient")
+        b.find_element(By.LINK_TEXT, str(s2)).click()
+        shot("session")
+        b.find_element(By.ID, "report-link").click()
+        assert "Progress across visits" in b.page_source
+        assert b.execute_script("return document.images.length") >= 1  # the report's figures
+        shot("report")
+        b.get(f"{web.server.url}/patients/{p42}/progress")
+        assert "Progress across visits" in b.find_element(By.ID, "progress").text
+        shot("progress")
+        # mistakes: one line on the error page, no traceback
+        b.get(f"{web.server.url}/patients/{p42}/sessions/{ids['p43_session']}")
+        assert b.find_element(By.ID, "error-message").text == (
+            f"patient {p42} has no session {ids['p43_session']}")
+        shot("error-other-patients-session")
+        b.get(f"{web.server.url}/patients/{p42}/sessions/{s1}")
+        b.find_element(By.ID, "age").send_keys("forty")
+        b.find_element(By.CSS_SELECTOR, "#report-options button").click()
+        assert b.find_element(By.ID, "error-message").text == (
+            "age must be a whole number, got 'forty'")
+        shot("error-age")
+        assert "Traceback" not in b.page_source
+        errors = [e for e in b.get_log("browser") if e["level"] == "SEVERE"
+                  and "Content Security Policy" in e["message"]]
+        assert errors == []  # nothing the page needs is refused by its own policy
+    finally:
+        b.quit()
