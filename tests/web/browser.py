@@ -33,3 +33,13 @@ def chrome(tmp: Path, width: int = 1200, height: int = 900):
         opts.add_argument(arg)
     service = Service(executable_path=driver, env={**os.environ, "HOME": str(tmp)})
     return webdriver.Chrome(options=opts, service=service)
+
+
+def click_and_wait(browser, element, timeout: float = 60.0) -> None:
+    """Click ``element`` and wait until the page it was on is gone (the next one loads)."""
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    page = browser.find_element("tag name", "html")
+    element.click()
+    WebDriverWait(browser, timeout).until(ec.staleness_of(page))

@@ -239,7 +239,7 @@ def test_in_the_browser(web, tmp_path):
     each page is saved there as a PNG (docs/web/ holds them)."""
     from selenium.webdriver.common.by import By
 
-    from tests.web.browser import chrome
+    from tests.web.browser import chrome, click_and_wait
 
     shots = os.environ.get("RIG_WEB_SHOTS")
     b = chrome(tmp_path)
@@ -254,19 +254,19 @@ def test_in_the_browser(web, tmp_path):
         assert b.find_element(By.ID, "patients").text.count("P-004") == 2
         shot("patients")
         b.find_element(By.ID, "pseudonym").send_keys("Maria Lopez")
-        b.find_element(By.ID, "create").click()
+        click_and_wait(b, b.find_element(By.ID, "create"))
         warning = b.find_element(By.ID, "pseudonym-warning").text
         assert "a person's name" in warning
         shot("pseudonym-warning")
-        b.find_element(By.ID, "confirm-create").click()
-        assert b.find_element(By.ID, "pseudonym").text == "Maria Lopez"
+        click_and_wait(b, b.find_element(By.ID, "confirm-create"))
+        assert b.find_element(By.ID, "patient-pseudonym").text == "Maria Lopez"
         assert "/patients/" in b.current_url and "Maria" not in b.current_url
         p42, (s1, s2) = ids["p42"], ids["p42_visits"]
         b.get(f"{web.server.url}/patients/{p42}")
         shot("patient")
-        b.find_element(By.LINK_TEXT, str(s2)).click()
+        click_and_wait(b, b.find_element(By.LINK_TEXT, str(s2)))
         shot("session")
-        b.find_element(By.ID, "report-link").click()
+        click_and_wait(b, b.find_element(By.ID, "report-link"))
         assert "Progress across visits" in b.page_source
         assert b.execute_script("return document.images.length") >= 1  # the report's figures
         shot("report")
@@ -280,7 +280,7 @@ def test_in_the_browser(web, tmp_path):
         shot("error-other-patients-session")
         b.get(f"{web.server.url}/patients/{p42}/sessions/{s1}")
         b.find_element(By.ID, "age").send_keys("forty")
-        b.find_element(By.CSS_SELECTOR, "#report-options button").click()
+        click_and_wait(b, b.find_element(By.CSS_SELECTOR, "#report-options button"))
         assert b.find_element(By.ID, "error-message").text == (
             "age must be a whole number, got 'forty'")
         shot("error-age")
