@@ -17,7 +17,7 @@ import uvicorn
 
 from rig.errors import RigConfigError
 from rig.web.app import create_app
-from rig.web.security import QueryFreeAccessLog
+from rig.web.security import QueryFreeAccessLog, check_binding
 from rig.web.settings import DEFAULT_HOST, DEFAULT_PORT, WebSettings
 
 __all__ = ["ServeRequest", "bind", "default_users_path", "run_server"]
@@ -73,25 +73,27 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
     if not (0 <= request.port <= 65535):
         raise RigConfigError(f"--port must be 0-65535, got {request.port}")
     users = Path(request.users) if request.users else default_users_path(request.db)
+    settings_args = {"db": request.db, "users_path": users, "host": request.host,
+                     "login": request.login}
+    # the binding's rule first (no store opened, no socket taken), then the address
+    check_binding(WebSettings(cache_dir=Path("."), **settings_args))
     own_cache = request.cache is None
-    cache = Path(tempfile.mkdtemp(prefix="rig-web-")) if own_cache else Path(request.cache)
-    try:
-        settings = WebSettings(db=request.db, cache_dir=cache, users_path=users,
-                               host=request.host, login=request.login)
-        app = create_app(settings)
-        sock = bind(request.host, request.port)
-        with sock:
+    with bind(request.host, request.port) as sock:
+        cache = Path(tempfile.mkdtemp(prefix="rig-web-")) if own_cache else Path(request.cache)
+        try:
+            settings = WebSettings(cache_dir=cache, **settings_args)
+            app = create_app(settings)
             host, port = sock.getsockname()[:2]
             shown = f"[{host}]" if ":" in host else host
-            logging.getLogger("uvicorn.access").addFilter(QueryFreeAccessLog())
             config = uvicorn.Config(app, log_level="info" if request.access_log else "warning",
                                     access_log=request.access_log, proxy_headers=False,
                                     server_header=False, timeout_graceful_shutdown=5)
+            # after the Config: it sets uvicorn's loggers up
+            logging.getLogger("uvicorn.access").addFilter(QueryFreeAccessLog())
             server = uvicorn.Server(config)
             login = "login required" if settings.require_login else "no login (loopback)"
             on_ready(f"rig serve: http://{shown}:{port}/ ({login}; store {request.db})")
             server.run(sockets=[sock])
-    finally:
-        if own_cache:
-            shutil.rmtree(cache, ignore_errors=True)
-
+        finally:
+            if own_cache:
+                shutil.rmtree(cache, ignore_errors=True)

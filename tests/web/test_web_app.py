@@ -108,6 +108,7 @@ def test_headers_and_log_hold_no_pseudonym(web):
     c.get(f"/patients/{ids['p42']}/progress?joint=elbow")
     log = server.log()
     assert "GET /patients" in log and "P-00" not in log and "Anna" not in log
+    assert f"GET /patients/{ids['p42']}/progress HTTP" in log and "joint=" not in log
 
 
 def _multipart(c, fields: list[tuple[str, object]]):

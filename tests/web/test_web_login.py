@@ -7,6 +7,7 @@ this site.
 from __future__ import annotations
 
 import contextlib
+import socket
 import stat
 from types import SimpleNamespace
 
@@ -43,6 +44,16 @@ def test_add_user_command_and_refusal_without_users(tmp_path, rig_cli):
     code, _, err = rig_cli(["serve", "--db", db, "--host", "0.0.0.0", "--port", "0"])
     assert code == 2 and "needs a login and there is no user yet" in err
     assert len(err.strip().splitlines()) == 1 and not db.exists()
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        for args, words in ((["--port", "70000"], "--port must be 0-65535, got 70000"),
+                            (["--port", "0", "--login"], "needs a login and there is no user"),
+                            (["--port", str(port)], f"--port {port}: cannot listen there")):
+            code, _, err = rig_cli(["serve", "--db", db, *args])
+            assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert not db.exists()
     r = CliRunner().invoke(serve, ["--db", str(db), "--add-user", "clin.1"],
                            input=f"{PASSWORD}\n{PASSWORD}\n")
     assert r.exit_code == 0, r.output
