@@ -89,8 +89,11 @@ class UserFile:
     """The users of a server: a JSON file ``{"users": {name: {"hash", "created_at"}}}``,
     owner-only. A missing file has no users."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, hasher: PasswordHasher | None = None) -> None:
         self.path = Path(path)
+        # a new hash's parameters (argon2-cffi's defaults); a stored hash is checked with the
+        # parameters written in it
+        self.hasher = hasher or _HASHER
 
     def users(self) -> dict[str, dict]:
         """name → record (``hash``, ``created_at``)."""
@@ -114,7 +117,7 @@ class UserFile:
         if len(password) < MIN_PASSWORD:
             raise RigConfigError(f"password: at least {MIN_PASSWORD} characters")
         users = self.users()
-        users[name] = {"hash": _HASHER.hash(password), "created_at": time.time()}
+        users[name] = {"hash": self.hasher.hash(password), "created_at": time.time()}
         write_owner_only(self.path, json.dumps({"users": users}, indent=1) + "\n")
 
     def verify(self, name: str, password: str) -> bool:
