@@ -1,6 +1,7 @@
 """``rig serve`` under load on the loopback: 50 concurrent clients browsing reports and sessions.
 
     python benchmarks/bench_web_load.py [--clients 50] [--duration 60] [--patients 20]
+                                        [--record 20]
 
 A clinic store is written (``--patients`` patients, two servo visits of the right elbow each:
 joint samples sweeping to known peaks, as tests/web/conftest.py writes them), the real
@@ -12,6 +13,10 @@ random among the patients list, a patient, a session, a session's report, and th
 patient — the way a clinic's screens would. Printed: requests, requests per second,
 latency p50 / p99 / max (ms) overall and per kind of page, and errors (any answer but 200, or
 a failed connection). The server and the clients share this machine's cores.
+
+With ``--record S`` a recording runs meanwhile: ``rig record --rig sim-shoulder --duration S``
+into the same store, started with the clients; printed are its samples, the samples its
+writer dropped (the session's ``dropped``), its status, and whether it ended within the load.
 
 Never asserts; figures depend on the machine and on what else runs on it.
 """
@@ -135,6 +140,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--patients", type=int, default=20)
     ap.add_argument("--seed", type=int, default=43)
+    ap.add_argument("--record", type=float, default=0.0,
+                    help="a recording of this many seconds runs meanwhile (0: none)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench-web-") as tmpdir:
         tmp = Path(tmpdir)
@@ -154,7 +161,25 @@ def main() -> None:
                 print(f"reports rendered once into the cache: {len(pairs)} in "
                       f"{time.perf_counter() - t:.1f} s (median {statistics.median(firsts):.2f} "
                       "s each)")
+            rec = None
+            if a.record:
+                rec = subprocess.Popen(
+                    [sys.executable, "-m", "rig", "record", "--rig", "sim-shoulder", "--db",
+                     str(tmp / "clinic.db"), "--patient", "P-REC", "--duration",
+                     f"{a.record:g}"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                    stderr=(tmp / "record.err").open("wb"), cwd=ROOT, env=common.child_env())
+            t_load = time.monotonic()
             out, errors, wall = asyncio.run(load(url, pairs, a.clients, a.duration))
+            if rec is not None:
+                within = rec.poll() is not None
+                rc = rec.wait()
+                took = time.monotonic() - t_load
+                with open_store(tmp / "clinic.db", create=False) as store:
+                    s = store.sessions.list(patient="P-REC")[-1]
+                print(f"recording meanwhile (rig record --rig sim-shoulder --duration "
+                      f"{a.record:g}): exit {rc}, {s['samples']} samples, dropped "
+                      f"{s['dropped']}, status {s['status']}, took {took:.1f} s "
+                      f"({'within' if within else 'beyond'} the load)")
         finally:
             proc.terminate()
             proc.wait(30)

@@ -4,7 +4,7 @@ line, ``{"error": ...}``, 4xx); writes carry the ``x-csrftoken`` header (the ``c
 cookie's value, :mod:`rig.web.security`).
 
 ====================================  =======================================================
-``GET  /api/patients``                every patient (id, pseudonym, side, sessions)
+``GET  /api/patients``                every patient (id, pseudonym, side), newest first
 ``POST /api/patients``                ``{"pseudonym", "side"?, "confirm"?}`` → 201 ``{"id"}``
 ``POST /api/patients/search``         ``{"q"}`` → the patients whose pseudonym contains it
 ``GET  /api/patients/{id}``           the patient and its sessions

@@ -41,6 +41,8 @@ DOWNLOADS = {"constraint": ("the joint's constraint (YAML)", ".yaml"),
              "export": ("the orientations as an OpenSim .sto", ".sto")}
 #: the longest search text accepted (a pseudonym is at most 64 characters)
 MAX_SEARCH = 64
+#: the most patients a list page shows (the newest; a search narrows it)
+PAGE_ROWS = 200
 
 # matplotlib's pyplot (the report's and the progress section's figures) is not thread-safe:
 # one rendering at a time
@@ -61,20 +63,18 @@ class PseudonymConcern(RigConfigError):
 
 # --------------------------------------------------------------------------- patients
 def find_patients(store: Store, text: str | None = None) -> list[dict]:
-    """Every patient (``id``, ``pseudonym``, ``side``, ``created_at``, ``sessions``), or those
-    whose pseudonym contains ``text`` (case-insensitive)."""
+    """Every patient (``id``, ``pseudonym``, ``side``, ``created_at``), newest first, or those
+    whose pseudonym contains ``text`` (case-insensitive). One query on the patients table: a
+    patient's sessions are on its own page (counting them here would read every session)."""
     if text is not None:
         if not isinstance(text, str):
             raise RigConfigError(f"search: give text, got {type(text).__name__}")
         if len(text) > MAX_SEARCH:
             raise RigConfigError(f"search: at most {MAX_SEARCH} characters")
         text = text.strip().lower()
-    counts: dict[int, int] = {}
-    for s in store.sessions.list():
-        counts[int(s["patient_id"])] = counts.get(int(s["patient_id"]), 0) + 1
     return [{"id": int(p["id"]), "pseudonym": p["pseudonym"], "side": p["side"],
-             "created_at": p["created_at"], "sessions": counts.get(int(p["id"]), 0)}
-            for p in store.patients.list()
+             "created_at": p["created_at"]}
+            for p in reversed(store.patients.list())
             if not text or text in p["pseudonym"].lower()]
 
 

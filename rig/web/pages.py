@@ -39,13 +39,18 @@ def home() -> Response:
 
 @router.get("/patients")
 def patients(request: Request) -> Response:
-    return page(request, "patients.html", {"patients": clinic.find_patients(_store(request))})
+    return _patients_page(request, clinic.find_patients(_store(request)))
 
 
 @router.post("/patients/search")
 def search(request: Request, q: str = Form("")) -> Response:
-    return page(request, "patients.html",
-                {"patients": clinic.find_patients(_store(request), q), "q": q})
+    return _patients_page(request, clinic.find_patients(_store(request), q), q=q)
+
+
+def _patients_page(request: Request, found: list[dict], status: int = 200, **ctx) -> Response:
+    """The patients page: the newest :data:`clinic.PAGE_ROWS` of ``found``."""
+    return page(request, "patients.html", {"patients": found[:clinic.PAGE_ROWS],
+                                           "total": len(found), **ctx}, status=status)
 
 
 @router.post("/patients")
@@ -56,13 +61,11 @@ def create(request: Request, pseudonym: str = Form(""), side: str = Form(""),
         pid, warning = clinic.create_patient(store, pseudonym, side or None,
                                              confirm=confirm == "yes")
     except clinic.PseudonymConcern as err:
-        return page(request, "patients.html", {
-            "patients": clinic.find_patients(store), "warning": str(err),
-            "pseudonym": pseudonym, "side": side}, status=409)
+        return _patients_page(request, clinic.find_patients(store), 409, warning=str(err),
+                              pseudonym=pseudonym, side=side)
     except RigConfigError as err:
-        return page(request, "patients.html", {
-            "patients": clinic.find_patients(store), "error": str(err),
-            "pseudonym": pseudonym}, status=400)
+        return _patients_page(request, clinic.find_patients(store), 400, error=str(err),
+                              pseudonym=pseudonym)
     if warning:
         request.session["warning"] = warning
     return RedirectResponse(f"/patients/{pid}", status_code=303)
