@@ -6,25 +6,22 @@ nothing written (the store's rows and the server's files compared before and aft
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
-import sqlite3
 import stat
 from types import SimpleNamespace
 
 import pytest
 
-from tests.web.conftest import CONSTRAINT, client, running
+from tests.web.clinic import CONSTRAINT, client, clinic_store, running, snapshot
 
 pytestmark = pytest.mark.xdist_group("web_app")
 
-TABLES = ("patients", "sessions", "boundaries", "models", "samples")
-
 
 @pytest.fixture(scope="module")
-def web(clinic):
-    tmp, ids = clinic
+def web(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("web")
+    ids = clinic_store(tmp / "clinic.db")
     cache = tmp / "cache"
     with running(["--db", str(tmp / "clinic.db"), "--cache", str(cache)], tmp) as server:
         c = client(server)
@@ -32,18 +29,6 @@ def web(clinic):
             yield SimpleNamespace(server=server, c=c, ids=ids, tmp=tmp, cache=cache)
         finally:
             c.close()
-
-
-def snapshot(tmp, cache) -> tuple:
-    """The store's rows (hashed per table) and every file of the server's cache."""
-    con = sqlite3.connect(f"file:{tmp / 'clinic.db'}?mode=ro", uri=True)
-    try:
-        rows = {t: hashlib.sha256(repr(con.execute(f"SELECT * FROM {t} ORDER BY id")
-                                       .fetchall()).encode()).hexdigest() for t in TABLES}
-    finally:
-        con.close()
-    files = sorted(str(p.relative_to(cache)) for p in cache.rglob("*") if p.is_file())
-    return rows, files
 
 
 def test_patients_search_and_create(web):
@@ -234,17 +219,18 @@ def test_bad_form_input(web):
         assert snapshot(tmp, cache) == before, name
 
 
-def test_in_the_browser(web, tmp_path):
+def test_in_the_browser(web):
     """Chromium: a patient created past the pseudonym warning, a patient and a session, and
     mistakes shown as one line on the error page; no page's own Content-Security-Policy
     refuses what it needs. With RIG_WEB_SHOTS=DIR each page, and the report and the progress
     page too, is saved there as a PNG (docs/web/ holds them)."""
     from selenium.webdriver.common.by import By
 
-    from tests.web.browser import chrome, click_and_wait
+    from tests.web.browser import quit_chromium, require_driver, start_chromium
 
+    require_driver()
     shots = os.environ.get("RIG_WEB_SHOTS")
-    b = chrome(tmp_path)
+    b = start_chromium(height=900)
 
     def shot(name: str) -> None:
         if shots:
@@ -291,4 +277,14 @@ def test_in_the_browser(web, tmp_path):
                   and "Content Security Policy" in e["message"]]
         assert errors == []  # nothing the page needs is refused by its own policy
     finally:
-        b.quit()
+        quit_chromium(b)
+
+
+def click_and_wait(browser, element, timeout: float = 60.0) -> None:
+    """Click ``element`` and wait until the page it was on is gone (the next one loads)."""
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    page = browser.find_element("tag name", "html")
+    element.click()
+    WebDriverWait(browser, timeout).until(ec.staleness_of(page))

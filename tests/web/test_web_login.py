@@ -19,8 +19,7 @@ from click.testing import CliRunner
 from rig.commands.serve import serve
 from rig.errors import RigConfigError
 from rig.web.security import UserFile
-from tests.web.conftest import running
-from tests.web.test_web_app import snapshot
+from tests.web.clinic import clinic_store, running, snapshot
 
 pytestmark = pytest.mark.xdist_group("web_login")
 PASSWORD = "correct horse battery"
@@ -66,8 +65,9 @@ def test_add_user_command_and_refusal_without_users(tmp_path, rig_cli):
 
 
 @pytest.fixture(scope="module")
-def remote(clinic):
-    tmp, ids = clinic
+def remote(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("web-login")
+    ids = clinic_store(tmp / "clinic.db")
     db = tmp / "clinic.db"
     users = tmp / "users.json"
     UserFile(users, CHEAP).add("clin.1", PASSWORD)

@@ -1,5 +1,6 @@
-"""The web app's fixtures: a small clinic store, and the real ``rig serve`` started as a child
-process on 127.0.0.1, port 0 (a free port, read from its first line), talked to over HTTP.
+"""What the web app's HTTP tests share: a small clinic store, and the real ``rig serve`` started
+as a child process on 127.0.0.1, port 0 (a free port, read from its first line), talked to over
+HTTP.
 
 ``clinic_store(path)`` writes two patients: P-0042 with two servo sessions of the right elbow
 (two visits: a progress), P-0043 with one session that has a stored boundary, a limb file and
@@ -12,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import sqlite3
 import subprocess
 import sys
 import time
@@ -19,7 +21,6 @@ from pathlib import Path
 
 import httpx
 import numpy as np
-import pytest
 
 from calibration.joint_angles import from_angles
 from rig.store import SampleWriter, open_store
@@ -63,6 +64,22 @@ def clinic_store(db: Path) -> dict:
         store.models.add(model, sha256=hashlib.sha256(model.read_bytes()).hexdigest(),
                          boundary_id=bid, session_id=s3)
     return {"p42": a, "p43": b, "p42_visits": (s1, s2), "p43_session": s3, "model": model}
+
+
+#: the tables a refused request must leave as they were
+TABLES = ("patients", "sessions", "boundaries", "models", "samples")
+
+
+def snapshot(tmp, cache) -> tuple:
+    """The store's rows (hashed per table) and every file of the server's cache."""
+    con = sqlite3.connect(f"file:{tmp / 'clinic.db'}?mode=ro", uri=True)
+    try:
+        rows = {t: hashlib.sha256(repr(con.execute(f"SELECT * FROM {t} ORDER BY id")
+                                       .fetchall()).encode()).hexdigest() for t in TABLES}
+    finally:
+        con.close()
+    files = sorted(str(p.relative_to(cache)) for p in cache.rglob("*") if p.is_file())
+    return rows, files
 
 
 class Server:
@@ -118,9 +135,3 @@ def client(server: Server) -> httpx.Client:
     c.headers["x-csrftoken"] = c.cookies["csrftoken"]
     return c
 
-
-@pytest.fixture(scope="module")
-def clinic(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("web")
-    ids = clinic_store(tmp / "clinic.db")
-    return tmp, ids
