@@ -82,6 +82,7 @@ def _dummy_hash() -> str:
     long (made once, when first needed)."""
     return _HASHER.hash(secrets.token_hex(16))
 
+
 ASGIApp = Callable[[dict, Callable, Callable], Awaitable[None]]
 
 
@@ -124,8 +125,9 @@ class UserFile:
         """Whether ``password`` is ``name``'s (the same work whether or not the user
         exists)."""
         rec = self.users().get(name)
+        stored = rec.get("hash") if isinstance(rec, dict) else None
         try:
-            return _HASHER.verify(rec["hash"] if rec else _dummy_hash(), password) and bool(rec)
+            return _HASHER.verify(stored or _dummy_hash(), password) and bool(stored)
         except (VerificationError, InvalidHashError):
             return False
 
