@@ -12,10 +12,12 @@ outside the server's cache folder, and every file there is owner-only.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import threading
+import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DOWNLOADS", "NotFound", "PseudonymConcern", "ReportOptions", "create_patient",
            "download", "find_patients", "patient", "patient_sessions", "progress",
-           "progress_html", "render_report", "session_of", "session_summary"]
+           "progress_html", "prune_reports", "render_report", "session_of", "session_summary"]
 
 #: the files a session offers: name → (what, file suffix)
 DOWNLOADS = {"constraint": ("the joint's constraint (YAML)", ".yaml"),
@@ -43,6 +45,9 @@ DOWNLOADS = {"constraint": ("the joint's constraint (YAML)", ".yaml"),
 MAX_SEARCH = 64
 #: the most patients a list page shows (the newest; a search narrows it)
 PAGE_ROWS = 200
+#: a cached report replaced by a newer one is deleted once it is this old (s): a request that
+#: is sending it has long finished
+PRUNE_GRACE_S = 600.0
 
 # matplotlib's pyplot (the report's and the progress section's figures) is not thread-safe:
 # one rendering at a time
@@ -307,7 +312,23 @@ def render_report(store: Store, settings_db: str, cache_dir: Path, patient_id: i
         finally:
             if ref is not None:
                 ref.unlink(missing_ok=True)
+    prune_reports(out)
     return out
+
+
+def prune_reports(newest: Path, *, grace_s: float = PRUNE_GRACE_S,
+                  now: float | None = None) -> list[Path]:
+    """Delete the session's other cached reports (older data or other options) last written
+    more than ``grace_s`` ago — one being sent now is left alone; returns those deleted."""
+    now = time.time() if now is None else now
+    sid = newest.name.split("-")[1]
+    gone = []
+    for old in newest.parent.glob(f"session-{sid}-*.html"):
+        with contextlib.suppress(FileNotFoundError):
+            if old != newest and now - old.stat().st_mtime > grace_s:
+                old.unlink()
+                gone.append(old)
+    return gone
 
 
 # --------------------------------------------------------------------------- progress

@@ -139,3 +139,4 @@ def test_login_then_pages_then_logout(remote):
         assert c.get("/api/patients").status_code == 200
         assert c.post("/logout", data={"csrftoken": token}).status_code == 303
         assert c.get("/api/patients").status_code == 401
+
