@@ -81,6 +81,11 @@ _COMMANDS: dict[str, tuple[str, str, str]] = {
         "report",
         "Write the clinician's HTML report of a session.",
     ),
+    "serve": (
+        "rig.commands.serve",
+        "serve",
+        "Serve the clinic's local web app (patients, sessions, reports, progress).",
+    ),
 }
 
 
