@@ -109,7 +109,7 @@ from rig.report.page import (
     warnings_html,
     write_page,
 )
-from rig.training.verdict import evaluation_verdict, targets_for
+from rig.training.verdict import evaluation_verdict, judging
 
 __all__ = ["NO_COUPLING", "CouplingSection", "JointSection", "LimbReportData",
            "limb_model_verdict", "limb_report_data", "render_limb_html", "write_limb_report"]
@@ -127,6 +127,10 @@ _TARGET_LABELS: dict[str, tuple[str, str, float]] = {
     "frac_invalid_violating_1deg": ("invalid inputs left > 1° outside (%)", " %", 100.0),
     "valid_moved_deg": ("valid inputs moved, mean (°)", "°", 1.0),
     "end_p99_direction_error_deg": ("p99 end-point direction error (°)", "°", 1.0),
+    # a one-joint model's (the page of a recording of one joint)
+    "mean_3d_error_pct": ("mean 3-D error (%)", " %", 1.0),
+    "mean_identity_error_deg": ("valid inputs moved, mean (°)", "°", 1.0),
+    "p99_angular_error_deg": ("p99 direction error (°)", "°", 1.0),
 }
 
 #: Calibration residuals in the order the table shows them; others follow.
@@ -621,22 +625,25 @@ def _reference_joint(reference, name: str, kind: str):
 # ---------------------------------------------------------------------------------------------
 # Calibration and evaluation
 # ---------------------------------------------------------------------------------------------
-def limb_model_verdict(metrics: Mapping[str, Any]) -> tuple[bool, str, list[dict[str, Any]]]:
+def limb_model_verdict(metrics: Mapping[str, Any], *,
+                       limb: bool | None = True) -> tuple[bool, str, list[dict[str, Any]]]:
     """(all targets met, one-line verdict, one row per target) of a limb model's held-out
     metrics (:func:`models.evaluation.evaluate_model`) against issue 20's targets
     (:func:`rig.training.verdict.targets_for` a limb: end-point mean 3-D error ≤ 0.5 % of the limb's
     length, invalid inputs left > 1° outside ≤ 1 %, valid inputs moved ≤ 0.1° mean, p99
-    end-point direction error ≤ 3°). A metric absent from ``metrics`` is shown, not judged."""
+    end-point direction error ≤ 3°) — or, ``limb`` None, whose targets the metrics tell
+    (:func:`rig.training.verdict.judging`: a one-joint model's on the page of a recording of
+    one joint). A metric absent from ``metrics`` is shown, not judged."""
     metrics = current_metric_names(dict(metrics))
     rows = []
-    for key, (limit, *_) in targets_for(limb=True).items():
+    for key, (limit, *_) in judging(metrics, limb=limb).targets().items():
         label, unit, scale = _TARGET_LABELS.get(key, (key, "", 1.0))
         v = metrics.get(key)
         rows.append({"metric": label, "key": key,
                      "value": None if v is None else scale * float(v),
                      "target": f"≤ {scale * limit:g}{unit}",
                      "met": None if v is None else bool(float(v) <= limit)})
-    ok, verdict = evaluation_verdict(metrics, limb=True)
+    ok, verdict = evaluation_verdict(metrics, limb=limb)
     return ok, verdict, rows
 
 
@@ -734,7 +741,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
         what it measured beyond them (the root's lean), shown beneath them.
     evaluation : mapping, optional
         A limb model's metrics (:func:`models.evaluation.evaluate_model`), judged
-        against issue 20's targets (:func:`limb_model_verdict`).
+        against issue 20's targets (:func:`limb_model_verdict`); for a limb of one joint (no
+        ``limb.limb``), that joint's model's, against a single joint's targets.
     evaluation_note : str, optional
         Which evaluation those metrics are (stored with the model, or drawn for the report),
         shown beside them.
@@ -795,7 +803,8 @@ def limb_report_data(limb, joints: Mapping[str, Any], *, side: str, patient: str
                             for k, v in calibration.items()}
         data.calibration_note = calibration_note
     if evaluation:
-        _, data.evaluation_verdict, data.evaluation_rows = limb_model_verdict(evaluation)
+        _, data.evaluation_verdict, data.evaluation_rows = limb_model_verdict(
+            evaluation, limb=None)  # told by the metrics: a limb of one joint, its joint's
         data.evaluation_facts = _evaluation_facts(evaluation, limb.joint_names)
         if evaluation_note:
             data.evaluation_facts = {"evaluation": evaluation_note, **data.evaluation_facts}

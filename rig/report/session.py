@@ -57,7 +57,7 @@ from models.oracle import ConstraintOracle
 from rig import __version__
 from rig.errors import RigConfigError, user_errors
 from rig.readback import extract, joint_orientations_from_store
-from rig.readback.boundary import BoundaryRequest, stored_limb
+from rig.readback.boundary import BoundaryRequest, one_joint_limb, stored_limb
 from rig.readback.progress import (
     ProgressRequest,
     merged_progress,
@@ -429,6 +429,13 @@ def report_for_session(store, session_id: int, out_path, *, model=None, age=None
         --no-coupled-tests``); a session of one joint has none.
     """
     sess = store.sessions.get(session_id)  # no session N: before any work
+    if session_limb(sess) is None and (sess.get("joint") or "shoulder") != "shoulder":
+        if model is not None:
+            _check_model_for_session(model, sess, session_id)
+        if isinstance(reference, (str, Path)):
+            reference = load_constraint(reference)
+        return _write_joint_report(store, sess, out_path, model=model, age=age, sex=sex,
+                                   reference=reference, eval_n=eval_n, fusion=fusion, db=db)
     if session_limb(sess) is not None:
         if isinstance(reference, (str, Path)):
             reference = load_limb(reference)
@@ -500,6 +507,75 @@ def _is_limb_model_of(joints):
         except (ModelsError, OSError):
             return False  # a single joint's model, or a file replaced since
     return accept
+
+
+def _write_joint_report(store, sess: dict, out_path, *, model=None, age=None, sex=None,
+                        reference=None, eval_n: int = 4000, fusion: str = "auto",
+                        db: str | Path | None = None) -> Path:
+    """Write the report of a recording of one joint other than the shoulder (an elbow, a
+    knee, an ankle, ...; an ``enforce`` session: its recording's): the page of a limb of one
+    joint (:func:`rig.readback.boundary.one_joint_limb`, :mod:`rig.report.limb`), which reads
+    every joint's clinical movements and draws a hinge's interval or a swing map — as ``rig
+    report FILE`` does for one joint of a file. The shoulder's page
+    (:func:`report_data_for_session`) reads the shoulder's movements only.
+
+    The limits are the boundary stored with the session, else extracted from it as ``rig
+    boundary`` does; the model (``model``, else the last one-joint model registered with the
+    session whose file is there) is scored on ``eval_n`` held-out orientations of its
+    embedded constraint (or the evaluation stored with it) against a single joint's targets;
+    ``reference``: a constraint drawn dashed."""
+    session_id = int(sess["id"])
+    rec_id = _recording_session(store, sess)
+    if rec_id is None:
+        raise RigConfigError(f"session {session_id}: an enforcement run that names no "
+                             "recording session: nothing to report")
+    joint = sess.get("joint")
+    side = sess.get("side") or "right"
+    data_j = joint_orientations_from_store(store, rec_id, fusion=fusion)
+    constraint, _, origin = _boundary(store, rec_id, data_j)
+    limb = one_joint_limb(constraint, joint, name=f"session-{rec_id}-{joint}", side=side)
+    ref = (None if reference is None else
+           one_joint_limb(reference, joint, name=str(getattr(reference, "name", None)
+                                                      or "reference"), side=side))
+    evaluation = evaluation_note = None
+    if model is None:
+        found = _last_registered_model(store, rec_id, _is_joint_model)
+        model = None if found is None else found[1]
+    if model is not None:
+        stored = stored_model_evaluation(store, rec_id, model)
+        if stored is None:
+            _, evaluation, _, _ = evaluate_for_report(model, n=eval_n, seed=REPORT_SEED)
+            evaluation_note = _evaluation_words(None, eval_n, REPORT_SEED)
+        else:
+            evaluation = stored[0]
+            evaluation_note = _evaluation_words(stored, stored[1]["n"], stored[1]["seed"])
+        evaluation_note += f"; model file {Path(model).name}"
+    rec = store.sessions.get(rec_id)
+    facts = data_j.facts()
+    data = limb_report_data(
+        limb, {joint: data_j.joint_q[:, 0]}, side=side, patient=sess.get("pseudonym") or "?",
+        session_label=f"session {rec_id} ({rec.get('rig_name')}, started "
+                      f"{_iso(rec.get('started_at')) or 'at an unknown time'}, "
+                      f"{len(data_j.joint_q):,} orientations)",
+        warnings=facts.warnings(), reference=ref, evaluation=evaluation,
+        evaluation_note=evaluation_note, age=age, sex=sex,
+        limits_source=f"the {origin}" if origin.startswith("boundary") else origin,
+        coupled_tests=False)
+    data.simulated = bool(facts.simulated)
+    if (db is not None and sess.get("pseudonym") and rec.get("kind") == "record"
+            and sessions_of(store, sess["pseudonym"], (joint,)) > 1):
+        data.progress_html = progress_section_html(run_progress(ProgressRequest(
+            str(db), sess["pseudonym"], joint, age=age, sex=sex)))
+    return write_limb_report(data, out_path)
+
+
+def _is_joint_model(path: str) -> bool:
+    """``accept`` for :func:`_last_registered_model`: a one-joint model."""
+    try:
+        load_model(path, limb=False)
+    except (ModelsError, OSError):
+        return False  # a limb's model, or a file replaced since
+    return True
 
 
 def _write_limb_report(store, session_id: int, out_path, *, model=None, age=None, sex=None,
