@@ -18,6 +18,8 @@ import time
 from dataclasses import dataclass, field
 from typing import TextIO
 
+import numpy as np
+
 from calibration.coverage import CoverageSummary
 
 __all__ = ["LiveDisplay", "PlainDisplay", "RecordStatus", "make_display"]
@@ -39,6 +41,15 @@ class RecordStatus:
     annotations: list[tuple[float, str]] = field(default_factory=list)
     duration_s: float | None = None
     checkpoints: int | None = None  # neutral checkpoints marked (None: not marking)
+    enter: str | None = None
+    """What pressing Enter does now (hardware: start the calibration, mark a neutral
+    checkpoint); None when the recorder is not listening for Enter."""
+    last_t: float = math.nan
+    """Host time (``t``, monotonic seconds) of the newest sample written."""
+    reached: np.ndarray | None = None
+    """(M, 2) float64, degrees: azimuth and reach (angle from the centre) of the swing-map
+    cells visited so far (:meth:`calibration.coverage.CoverageMap.reached`), refreshed with
+    :attr:`coverage`; None before the recording proper."""
 
 
 def _fmt(x: float, nd: int = 0) -> str:

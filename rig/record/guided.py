@@ -103,6 +103,13 @@ class GuidedCalibration:
             return "calibration: neutral pose, hold still"
         return f"calibration: {self._phases()[self._said - 1][2]}"
 
+    @property
+    def enter(self) -> str | None:
+        """What pressing Enter does now (hardware, before the protocol starts), else None."""
+        if self._reader is None or self._armed or self._enter.is_set():
+            return None
+        return "start the calibration: the patient is in the neutral pose"
+
     def _phases(self) -> list[tuple[float, str, str]]:
         """The movement phases after the static pose: (start, what to say, short prompt)."""
         return self.procedure.phases(self.protocol)
@@ -317,6 +324,13 @@ class NeutralCheckpoints:
     def prompt(self) -> str | None:
         """What the status line should say while a checkpoint is due or held (else None)."""
         return self._prompt
+
+    @property
+    def enter(self) -> str | None:
+        """What pressing Enter does now (hardware, while listening), else None."""
+        if self._reader is None:
+            return None
+        return "mark a neutral checkpoint: the patient is back in the neutral pose"
 
     def begin(self) -> None:
         """Say what to do; on hardware start reading Enter in the background."""
