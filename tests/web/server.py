@@ -22,10 +22,33 @@ import uvicorn
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
+from rig.record.rigio import OpenRig, open_rig
 from rig.web import live
 from rig.web.jobs import JobRunner
 
 STATIC = Path(live.__file__).resolve().parent / "static"
+
+
+class _AsHardware(OpenRig):
+    """A simulated rig the recorder takes for hardware: no simulated patient it may follow,
+    so it prompts and waits for Enter as ``rig record`` does on hardware."""
+
+    @property
+    def simulated(self) -> bool:
+        return False
+
+
+def opener_as_hardware(*names: str):
+    """A :class:`~rig.web.jobs.JobRunner` ``opener``: the rigs ``names`` (configuration
+    names) open as :func:`~rig.record.rigio.open_rig` opens them, then answer as hardware."""
+
+    def opener(config, *, calibrate: bool):
+        rig = open_rig(config, calibrate=calibrate)
+        if config.name in names:
+            rig.__class__ = _AsHardware
+        return rig
+
+    return opener
 
 
 def live_app(db: str, files_dir: Path, *, rigs: Mapping[str, str] | None = None,

@@ -15,27 +15,11 @@ import urllib.request
 
 import pytest
 
-from rig.record.rigio import OpenRig, open_rig
 from rig.store import open_store
 from tests.rig.rigs import sim_imu_yaml
-from tests.web.server import call, events, live_app, serving
+from tests.web.server import call, events, live_app, opener_as_hardware, serving
 
 pytestmark = pytest.mark.xdist_group("web-live")
-
-
-class _AsHardware(OpenRig):
-    """A simulated rig the recorder takes for hardware: the clinician is prompted."""
-
-    @property
-    def simulated(self) -> bool:
-        return False
-
-
-def _opener(config, *, calibrate):
-    rig = open_rig(config, calibrate=calibrate)
-    if config.name == "sim-shoulder":
-        rig.__class__ = _AsHardware
-    return rig
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +29,7 @@ def web(tmp_path_factory):
     db = str(tmp / "rig.db")
     with open_store(db) as store:
         patient = store.patients.ensure("P-0042")
-    app = live_app(db, tmp / "files", opener=_opener,
+    app = live_app(db, tmp / "files", opener=opener_as_hardware("sim-shoulder"),
                    rigs={"test-imu": str(cfg), "sim-shoulder": "sim-shoulder",
                          "hardware-template": "hardware-template"})
     with serving(app) as base:
