@@ -268,22 +268,17 @@ def _public(job: dict) -> dict[str, Any]:
 
 
 async def _stored_events(job: dict):
+    """A job not running here: its stored messages, status and coverage, session, then end."""
     prog = job.get("progress") or {}
-    seq = 0
-    for text in prog.get("messages", []):
-        seq += 1
-        yield f"id: {seq}\nevent: message\ndata: {json.dumps({'text': text})}\n\n"
-    for name in ("coverage", "status"):
-        if prog.get(name):
-            seq += 1
-            yield f"id: {seq}\nevent: {name}\ndata: {json.dumps(prog[name])}\n\n"
+    out = [("message", {"text": text}) for text in prog.get("messages", [])]
+    out += [(name, prog[name]) for name in ("coverage", "status") if prog.get(name)]
     if job.get("session_id"):
-        seq += 1
-        yield f"id: {seq}\nevent: session\ndata: {json.dumps({'session_id': job['session_id']})}\n\n"
+        out.append(("session", {"session_id": job["session_id"]}))
     if job["state"] == "running":  # run by another process: it says nothing more here
         message = "this job runs in another server process"
     else:
         message = job.get("message") or ""
-    seq += 1
-    end = {"status": job["state"], "message": message, "result": job.get("result") or {}}
-    yield f"id: {seq}\nevent: end\ndata: {json.dumps(end)}\n\n"
+    out.append(("end", {"status": job["state"], "message": message,
+                        "result": job.get("result") or {}}))
+    for seq, (name, data) in enumerate(out, 1):
+        yield f"id: {seq}\nevent: {name}\ndata: {json.dumps(data)}\n\n"
