@@ -43,7 +43,12 @@ from calibration.coverage import CoverageMap
 from calibration.joints import JOINTS
 from rig.errors import RigConfigError, RigConnectionError, RigError
 from rig.record.display import PlainDisplay, RecordStatus
-from rig.record.guided import GuidedCalibration, NeutralCheckpoints, patient_performs_protocol
+from rig.record.guided import (
+    AnglesReached,
+    GuidedCalibration,
+    NeutralCheckpoints,
+    patient_performs_protocol,
+)
 from rig.record.procedures import CalibrationResult, procedure_for
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
@@ -339,6 +344,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit, stdin=None,
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
     calib = GuidedCalibration(config, rig, display=display, procedure=procedure, stdin=stdin)
     checkpoints = NeutralCheckpoints(rig, display=display, stdin=stdin)
+    reached = AnglesReached(joint.side)  # a whole limb's other joints (elbow, knee...)
     marking = False  # neutral checkpoints are being marked (calibrated IMU rig)
     pending = sorted(options.annotations, key=lambda a: -1.0 if a.at_s is None else a.at_s)
     t_start: float | None = None  # sample time (best clock) when recording proper began
@@ -407,6 +413,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit, stdin=None,
                         joint_q, joint_t = calib.joint_orientations(batch)
                         if len(joint_q):
                             coverage.add(joint_q, joint_t)
+                        reached.add(calib.other_joints(batch))
                         if marking:
                             for cp in checkpoints.feed(batch, joint_q, joint_t):
                                 store.calibrations.add(session_id, "neutral-checkpoint",
@@ -460,6 +467,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit, stdin=None,
                     if rate.due_summary():
                         status.coverage = coverage.summary()
                         status.reached = coverage.reached()
+                        status.angles = reached.peaks()
                 display.update(status)
     except BaseException:
         result.status = "failed"
@@ -486,6 +494,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit, stdin=None,
         result.span_s = final.t_span_s
         status.coverage = final
         status.reached = coverage.reached()
+        status.angles = reached.peaks()
         status.enter = None
         status.last_t = result.last_t
         status.samples = result.samples

@@ -194,11 +194,12 @@ def status_event(st: RecordStatus) -> dict:
 
 def coverage_event(st: RecordStatus) -> dict:
     """The ``coverage`` event: the sectors (azimuth from-to, reach, near-limit samples, all
-    samples, twist extremes, stable, explored), the overall twist, and the visited cells of the
-    swing map (azimuth, reach; degrees)."""
+    samples, twist extremes, stable, explored), the overall twist, the visited cells of the
+    swing map (azimuth, reach; degrees) and a whole limb's other joints' movements reached
+    (``angles``: ``{joint: {movement: degrees}}``, the elbow's or knee's hinge angles)."""
     cov = st.coverage
     out: dict[str, Any] = {"sectors": [], "explored": 0, "sufficient": False,
-                           "need": 0, "twist": [None, None], "reached": []}
+                           "need": 0, "twist": [None, None], "reached": [], "angles": {}}
     if cov is not None:
         out.update(
             explored=int(cov.explored), sufficient=bool(cov.sufficient),
@@ -208,6 +209,8 @@ def coverage_event(st: RecordStatus) -> dict:
                       int(s.boundary_samples), int(s.samples), _num(s.twist_deg[0]),
                       _num(s.twist_deg[1]), bool(s.stable), bool(s.explored)]
                      for s in cov.sectors])
+    out["angles"] = {j: {m: _num(v) for m, v in moves.items()}
+                     for j, moves in (st.angles or {}).items()}
     if st.reached is not None and len(st.reached):
         out["reached"] = np.round(np.asarray(st.reached, dtype=np.float64), 1).tolist()
     return out

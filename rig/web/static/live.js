@@ -210,6 +210,20 @@
         `coverage: ${c.explored}/${n} directions explored — move to the limits in the others`;
       banner.className = "banner " + (c.sufficient ? "ok" : "todo");
     }
+    const angles = $("angles");
+    if (angles && c.angles) {
+      const body = angles.tBodies[0];
+      body.replaceChildren();
+      for (const [joint, moves] of Object.entries(c.angles)) {
+        for (const [movement, deg] of Object.entries(moves)) {
+          const tr = body.insertRow();
+          tr.insertCell().textContent = joint;
+          tr.insertCell().textContent = movement.replace(/_/g, " ");
+          tr.insertCell().textContent = deg === null ? "–" : fmt(deg) + "°";
+        }
+      }
+      $("angles-box").hidden = !body.rows.length;
+    }
     const left = $("left");
     if (left) {
       left.replaceChildren();
