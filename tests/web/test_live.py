@@ -33,7 +33,8 @@ def web(tmp_path_factory):
                    rigs={"test-imu": str(cfg), "sim-shoulder": "sim-shoulder",
                          "hardware-template": "hardware-template"})
     with serving(app) as base:
-        yield {"base": base, "db": db, "patient": patient, "files": tmp / "files", "state": {}}
+        yield {"base": base, "db": db, "patient": patient, "files": tmp / "files", "state": {},
+               "jobs": app.state.jobs}
 
 
 def _counts(db):
@@ -102,6 +103,23 @@ def test_stop_ends_completed_a_second_recording_on_the_rig_is_refused(web):
         assert store.sessions.get(sid)["status"] == "completed"
         assert store.samples.count(sid) == last[1]["result"]["samples"] > 0
     assert _counts(web["db"]) == (before[0] + 1, before[1] + 1)  # the refused one wrote nothing
+
+
+def test_a_recording_goes_on_when_its_page_is_closed(web):
+    base = web["base"]
+    code, started = call(base, "/api/record", {"patient_id": web["patient"], "rig": "test-imu",
+                                               "calibrate": False, "duration_s": 1})
+    job_id = started["job_id"]
+    for name, data in events(base, job_id):  # the viewer leaves after the first counters
+        if name == "status" and data["samples"] > 0:
+            break
+    assert web["jobs"].wait(job_id, 60)
+    code, job = call(base, f"/api/jobs/{job_id}")
+    assert code == 200 and job["state"] == "completed" and not job["live"]
+    assert job["result"]["samples"] > data["samples"]
+    assert "writer_pid" not in job and "resource" not in job
+    with open_store(web["db"], create=False) as store:
+        assert store.samples.count(job["session_id"]) == job["result"]["samples"]
 
 
 def test_continue_is_enter_where_rig_record_waits_for_it_and_interrupt_keeps_everything(web):
