@@ -195,8 +195,9 @@ def status_event(st: RecordStatus) -> dict:
 def coverage_event(st: RecordStatus) -> dict:
     """The ``coverage`` event: the sectors (azimuth from-to, reach, near-limit samples, all
     samples, twist extremes, stable, explored), the overall twist, the visited cells of the
-    swing map (azimuth, reach; degrees) and a whole limb's other joints' movements reached
-    (``angles``: ``{joint: {movement: degrees}}``, the elbow's or knee's hinge angles)."""
+    swing map (azimuth, reach; degrees), a whole limb's other joints' movements reached
+    (``angles``: ``{joint: {movement: degrees}}``, the elbow's or knee's hinge angles) and the
+    newest sample's host time (``sample_ms``, as :func:`status_event`)."""
     cov = st.coverage
     out: dict[str, Any] = {"sectors": [], "explored": 0, "sufficient": False,
                            "need": 0, "twist": [None, None], "reached": [], "angles": {}}
@@ -211,6 +212,7 @@ def coverage_event(st: RecordStatus) -> dict:
                      for s in cov.sectors])
     out["angles"] = {j: {m: _num(v) for m, v in moves.items()}
                      for j, moves in (st.angles or {}).items()}
+    out["sample_ms"] = _num(_epoch_ms(st.last_t), 3)
     if st.reached is not None and len(st.reached):
         out["reached"] = np.round(np.asarray(st.reached, dtype=np.float64), 1).tolist()
     return out
@@ -237,7 +239,7 @@ class WebDisplay:
         self.messages: list[str] = []
         self._last = -math.inf
         self._last_store = -math.inf
-        self._coverage_id: int | None = None
+        self._coverage: object = None  # the summary last published (by identity)
         self.status: dict = {}
         self.coverage: dict = {}
 
@@ -246,8 +248,8 @@ class WebDisplay:
 
     def update(self, st: RecordStatus, *, force: bool = False) -> None:
         now = time.monotonic()
-        if id(st.coverage) != self._coverage_id or force:  # a new summary (or the last)
-            self._coverage_id = id(st.coverage)
+        if st.coverage is not self._coverage or force:  # a new summary (or the last)
+            self._coverage = st.coverage
             if st.coverage is not None:
                 self.coverage = coverage_event(st)
                 self.channel.publish("coverage", self.coverage)
@@ -258,7 +260,10 @@ class WebDisplay:
         self.channel.publish("status", self.status)
         if force or now - self._last_store >= self.store_every_s:
             self._last_store = now
-            self.save(self.progress())
+            try:
+                self.save(self.progress())
+            except Exception:  # the snapshot is for a reload; the samples come first
+                log.warning("job progress not stored (the recording goes on)", exc_info=True)
 
     def message(self, text: str) -> None:
         self.messages.append(text)

@@ -2,9 +2,10 @@
 // Plain JS, no build step, no inline script: the page's data comes in data-* attributes.
 //
 // The live view keeps, for the latency benchmark and the browser tests, window.rigLive:
-//   draws    [{seq, sample_ms, drawn_ms}] — when each status event's newest sample (its host
-//            time on the Unix clock) reached the screen (the animation frame after the DOM
-//            was updated), on this machine's clock; at most 10,000 kept
+//   draws    [{what, seq, sample_ms, drawn_ms}] — when each status (counters) or coverage
+//            (swing map) event's newest sample (its host time on the Unix clock) reached the
+//            screen (the animation frame after the DOM was updated), on this machine's clock;
+//            at most 10,000 kept
 //   events   {name: count} of the events received
 //   coverage the last coverage event drawn
 "use strict";
@@ -119,13 +120,15 @@
       text("prompt-text", s.enter ? "Continue: " + s.enter : "");
     }
     $("dropped") && $("dropped").classList.toggle("bad", s.dropped > 0);
-    if (s.sample_ms !== null && s.sample_ms !== undefined) {
-      const seq = s.seq;
-      requestAnimationFrame(() => {
-        live.draws.push({ seq: seq, sample_ms: s.sample_ms, drawn_ms: now() });
-        if (live.draws.length > 10000) live.draws.shift();
-      });
-    }
+    drawn("status", s);
+  }
+
+  function drawn(what, ev) {
+    if (ev.sample_ms === null || ev.sample_ms === undefined) return;
+    requestAnimationFrame(() => {
+      live.draws.push({ what: what, seq: ev.seq, sample_ms: ev.sample_ms, drawn_ms: now() });
+      if (live.draws.length > 10000) live.draws.shift();
+    });
   }
 
   function sectorState(sec) {
@@ -201,6 +204,7 @@
   function onCoverage(c) {
     live.coverage = c;
     drawMap(c);
+    drawn("coverage", c);
     const n = c.sectors.length;
     text("explored", n ? `${c.explored} / ${n}` : "–");
     text("twist", c.twist[0] === null ? "–" : `${fmt(c.twist[0])}° .. ${fmt(c.twist[1])}°`);
