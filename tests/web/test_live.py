@@ -9,6 +9,8 @@ patient the recorder may follow: it waits for Enter, as ``rig record`` does on h
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
 import stat
 import urllib.request
@@ -16,6 +18,7 @@ import urllib.request
 import pytest
 
 from rig.store import open_store
+from rig.web.jobs import Channel
 from tests.rig.rigs import sim_imu_yaml
 from tests.web.server import call, events, live_app, opener_as_hardware, serving
 
@@ -247,3 +250,25 @@ def test_a_job_of_a_server_that_died_reads_died_and_is_closed_so(tmp_path):
     assert row["status"] == row["state"] == "died"
     assert row["progress"] == {"status": {"samples": 5}}
     assert row["message"].startswith("the server stopped while this job ran")
+
+
+def test_a_slow_viewer_skips_to_the_newest_counters_but_gets_every_step():
+    channel = Channel()
+    channel.publish("message", {"text": "one"})
+    for n in range(5):
+        channel.publish("status", {"samples": n})
+    channel.publish("message", {"text": "two"})
+    channel.publish("coverage", {"explored": 1})
+    channel.close()
+
+    async def read(cursor):
+        return [chunk async for chunk in channel.sse(cursor)]
+
+    text = "".join(asyncio.run(read(0)))
+    got = [(b.split("\nevent: ")[1].split("\n")[0], json.loads(b.split("\ndata: ")[1]))
+           for b in text.split("\n\n") if "\ndata: " in b]
+    assert got == [("message", {"text": "one"}), ("status", {"samples": 4}),
+                   ("message", {"text": "two"}), ("coverage", {"explored": 1})]
+    # a viewer reconnecting with Last-Event-ID gets only what it had not
+    assert "two" not in "".join(asyncio.run(read(7)))
+    assert channel.viewers == 0

@@ -62,7 +62,7 @@ def _start(site, rig, *, duration=None, calibrate=True):
 
 
 def test_the_live_view_fills_while_the_patient_moves(site):
-    drv = _start(site, "test-imu", duration=3, calibrate=False)
+    drv = _start(site, "test-imu", duration=8, calibrate=False)
     snap = ("const c = window.rigLive.events.coverage || 0;"
             "if (c < arguments[0]) return null;"
             "return [c, document.getElementById('samples').textContent,"
