@@ -44,6 +44,8 @@ from starlette.concurrency import run_in_threadpool
 
 from rig.errors import RigConfigError, RigConnectionError, user_errors
 from rig.store import JobBusyError, open_store
+from rig.training import PRESET_NAMES
+from rig.training.limb import LIMB_PRESETS
 from rig.web.jobs import JobRunner, RecordJob
 
 __all__ = ["router"]
@@ -165,7 +167,7 @@ def work_page(request: Request, session_id: int):
                                           status_code=404)
     return templates.TemplateResponse(request, "work.html", {
         "error": None, "session": session, "jobs": jobs, "boundaries": boundaries,
-        "models": models})
+        "models": models, "presets": PRESET_NAMES + LIMB_PRESETS})
 
 
 # -- API -----------------------------------------------------------------------------------

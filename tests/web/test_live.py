@@ -170,6 +170,8 @@ def test_boundary_then_training_from_the_session(web):
     folder = web["files"] / f"session-{sid}"
     assert stat.S_IMODE(os.stat(folder / end["result"]["file"]).st_mode) == 0o600
     assert stat.S_IMODE(os.stat(folder).st_mode) == 0o700
+    code, err = call(base, f"/api/sessions/{sid}/train", {"preset": "nope"})
+    assert code == 400 and err["error"].startswith("preset 'nope': expected one of field, ")
     code, started = call(base, f"/api/sessions/{sid}/train", {})
     assert code == 200
     got = list(events(base, started["job_id"]))
@@ -182,6 +184,7 @@ def test_boundary_then_training_from_the_session(web):
     assert stat.S_IMODE(os.stat(folder / end["result"]["file"]).st_mode) == 0o600
     page = _get_text(base, f"/sessions/{sid}/work")
     assert f"model {model['id']}" in page and "Extract the boundary" in page
+    assert '<option value="compact">compact</option>' in page
 
 
 def _get_text(base, path):

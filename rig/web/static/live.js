@@ -74,8 +74,11 @@
     b.addEventListener("click", async () => {
       showError("");
       b.disabled = true;
+      const body = {};
+      const preset = b.dataset.preset && document.getElementById(b.dataset.preset);
+      if (preset && preset.value) body.preset = preset.value;
       try {
-        const res = await post(b.dataset.action, {});
+        const res = await post(b.dataset.action, body);
         window.location.assign(res.url);
       } catch (e) {
         showError(e.message);
