@@ -58,7 +58,7 @@ def test_a_guided_recording_streams_its_steps_and_coverage_and_keeps_every_sampl
     assert any(s.startswith("calibration stored: imu-alignment, residual") for s in said)
     statuses = [d for n, d in got if n == "status"]
     assert len({s["samples"] for s in statuses}) >= 2  # the counters moved between events
-    assert all(s["sample_ms"] is not None for s in statuses)
+    assert all(s["sample_ms"] is not None for s in statuses if s["samples"])
     cov = [d for n, d in got if n == "coverage"][-1]
     assert len(cov["sectors"]) == 12 and len(cov["reached"]) > 0
     assert names[-1] == "end" and "session" in names
