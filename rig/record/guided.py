@@ -244,7 +244,6 @@ class GuidedCalibration:
             q = Q.multiply(Q.conjugate(parent_q), child_q)
         return q, batch.time()[child_rows]
 
-
     def other_joints(self, batch: SampleBatch) -> dict[str, np.ndarray]:
         """The live orientations of the rig's joints other than the proximal one (a whole
         limb's elbow and wrist, knee and ankle): ``{joint: (M, 4)}``, empty for a rig of one
@@ -263,9 +262,10 @@ class GuidedCalibration:
 class AnglesReached:
     """The clinical movements reached so far by a whole limb's other joints (degrees): for each
     joint of :data:`calibration.joint_angles.CLINICAL_MOVEMENTS`, the running largest peak of
-    each movement, each batch's angles median-filtered first as the recorded range of motion
-    is (:func:`calibration.joint_angles.angle_peaks`, window 5) so that a single noisy sample
-    claims nothing.
+    each movement. Orientations are kept as they come (:meth:`add`, per batch) and turned into
+    angles when asked (:meth:`peaks`, at the display's cadence), median-filtered first as the
+    recorded range of motion is (:func:`calibration.joint_angles.angle_peaks`, window 5) so
+    that a single noisy sample claims nothing.
 
     Parameters
     ----------
@@ -275,21 +275,24 @@ class AnglesReached:
     def __init__(self, side: str) -> None:
         self.side = side if side in ("left", "right") else "right"
         self.peaks_: dict[str, dict[str, float]] = {}
+        self._pending: dict[str, list[np.ndarray]] = {}
 
     def add(self, joints: dict[str, np.ndarray]) -> None:
         """Take each joint's orientations (M, 4) of a batch."""
         for joint, q in joints.items():
-            if joint not in CLINICAL_MOVEMENTS or not len(q):
-                continue
-            got = angle_peaks(joint_angles(q, joint, self.side), joint)
+            if joint in CLINICAL_MOVEMENTS and len(q):
+                self._pending.setdefault(joint, []).append(q)
+
+    def peaks(self) -> dict[str, dict[str, float]]:
+        """``{joint: {movement: degrees}}`` reached so far (a copy)."""
+        pending, self._pending = self._pending, {}
+        for joint, parts in pending.items():
+            got = angle_peaks(joint_angles(np.concatenate(parts), joint, self.side), joint)
             mine = self.peaks_.setdefault(joint, {})
             for movement in CLINICAL_MOVEMENTS[joint]:
                 v = got.get(movement)
                 if v is not None and v > mine.get(movement, -math.inf):
                     mine[movement] = float(v)
-
-    def peaks(self) -> dict[str, dict[str, float]]:
-        """``{joint: {movement: degrees}}`` reached so far (a copy)."""
         return {j: dict(m) for j, m in self.peaks_.items()}
 
 
