@@ -348,6 +348,7 @@ class JobRunner:
         self.status_hz = float(status_hz)
         self._live: dict[int, _Live] = {}
         self._lock = threading.Lock()
+        self._starting = threading.Lock()
         with open_store(db) as store:  # created if new; jobs of a dead server closed
             store.jobs.close_died()
 
@@ -399,7 +400,9 @@ class JobRunner:
                                  "(joint.side of its configuration); choose a rig configured "
                                  f"for the {req.side} side")
         resource = "rig:" + ",".join(_ports(config))
-        with open_store(self.db, create=False) as store:
+        # one start at a time here: a second request for the same rig waits, then is refused
+        # by the check, before it opens the ports (the store's check covers other processes)
+        with self._starting, open_store(self.db, create=False) as store:
             pseudonym = store.patients.get(req.patient_id)["pseudonym"]
             options = RecordOptions(rig=self.rigs[req.rig], db=self.db, patient=pseudonym,
                                     duration_s=req.duration_s, calibrate=req.calibrate)
