@@ -224,6 +224,17 @@ class CoverageMap:
         n = np.linalg.norm(m)
         return m / n if n > 1e-9 else self.grid_[occ][0]
 
+    def reached(self) -> np.ndarray:
+        """The swing-map cells visited (at least ``min_count`` samples) as seen from the
+        centre: (M, 2) float64, degrees — azimuth α in [0, 360) and reach ρ (module
+        docstring), the polar coordinates the sectors are cut in."""
+        c = self.centre()
+        u, v = Q.tangent_basis(c)
+        p = self.grid_[self.counts_ >= self.min_count]
+        rho = np.degrees(Q.angle_between(p, c))
+        az = np.degrees(np.mod(np.arctan2(p @ v, p @ u), 2.0 * math.pi))
+        return np.column_stack([az, rho])
+
     def summary(self) -> CoverageSummary:
         """Current coverage per sector (also records the reaches for the stability test)."""
         c = self.centre()

@@ -27,7 +27,9 @@ from rig.web.settings import DEFAULT_HOST, DEFAULT_PORT
 @click.option("--no-access-log", is_flag=True, help="Do not log each request.")
 @click.option("--cache", default=None, metavar="DIR", help="Folder for the rendered reports "
               "and exports (default: a private temporary folder, removed at the end).")
-def serve(db, host, port, users, login, add_user, no_access_log, cache) -> None:
+@click.option("--files", default=None, metavar="DIR", help="Folder for the boundaries and "
+              "models made in the browser (default: beside a SQLite store, DB.files/).")
+def serve(db, host, port, users, login, add_user, no_access_log, cache, files) -> None:
     """Serve the clinic's web app: patients, sessions, reports, progress."""
     from rig.errors import RigConfigError
     from rig.web.security import UserFile
@@ -44,5 +46,5 @@ def serve(db, host, port, users, login, add_user, no_access_log, cache) -> None:
         click.echo(f"user {add_user} saved in {path}")
         return
     run_server(ServeRequest(db, host, port, users, login, access_log=not no_access_log,
-                            cache=cache),
+                            cache=cache, files=files),
                on_ready=click.echo)

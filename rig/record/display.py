@@ -5,7 +5,8 @@ Two renderers with one interface (``start``, ``update(status)``, ``message(text)
 - :class:`LiveDisplay` — a ``rich`` live panel redrawn a few times a second on a terminal: a
   header (patient, elapsed sample time, samples, rate, dropped), one row per azimuthal sector
   (its direction, reach, a bar of boundary samples, twist extremes, explored or not) and a
-  banner that turns green, **COVERAGE SUFFICIENT**, when every sector is explored.
+  banner that turns green, **COVERAGE SUFFICIENT**, when every sector is explored; on a whole
+  limb, the movements its other joints (elbow, wrist; knee, ankle) have reached.
 - :class:`PlainDisplay` — one progress line every ``interval_s`` seconds, for CI, pipes and logs
   (chosen automatically when stdout is not a terminal).
 """
@@ -17,6 +18,8 @@ import sys
 import time
 from dataclasses import dataclass, field
 from typing import TextIO
+
+import numpy as np
 
 from calibration.coverage import CoverageSummary
 
@@ -39,6 +42,18 @@ class RecordStatus:
     annotations: list[tuple[float, str]] = field(default_factory=list)
     duration_s: float | None = None
     checkpoints: int | None = None  # neutral checkpoints marked (None: not marking)
+    enter: str | None = None
+    """What pressing Enter does now (hardware: start the calibration, mark a neutral
+    checkpoint); None when the recorder is not listening for Enter."""
+    last_t: float = math.nan
+    """Host time (``t``, monotonic seconds) of the newest sample written."""
+    angles: dict = field(default_factory=dict)
+    """A whole limb's other joints: ``{joint: {movement: degrees}}`` reached so far
+    (:class:`rig.record.guided.AnglesReached`), refreshed with :attr:`coverage`."""
+    reached: np.ndarray | None = None
+    """(M, 2) float64, degrees: azimuth and reach (angle from the centre) of the swing-map
+    cells visited so far (:meth:`calibration.coverage.CoverageMap.reached`), refreshed with
+    :attr:`coverage`; None before the recording proper."""
 
 
 def _fmt(x: float, nd: int = 0) -> str:
@@ -182,6 +197,9 @@ def render(st: RecordStatus):
             parts.append(Text(f" coverage: {cov.explored}/{len(cov.sectors)} sectors explored — "
                               "move to the limits in the sectors not yet explored ",
                               style="bold black on yellow"))
+    for joint, moves in (st.angles or {}).items():  # a whole limb's other joints
+        parts.append(Text(f"{joint} reached: " + ", ".join(
+            f"{m.replace('_', ' ')} {v:.0f}°" for m, v in moves.items())))
     if st.annotations:
         last = st.annotations[-3:]
         parts.append(Text("notes: " + "; ".join(f"{t:.1f}s {txt}" for t, txt in last),

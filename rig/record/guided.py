@@ -36,12 +36,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.errors import CalibrationError
+from calibration.joint_angles import CLINICAL_MOVEMENTS, angle_peaks, joint_angles
 from calibration.protocol import LimbCalibrationProtocol
 from models import quaternion as Q
 from rig.record.procedures import NEUTRAL_WORDS, CalibrationResult, procedure_for
 from rig.record.pump import SampleBatch
 
-__all__ = ["GuidedCalibration", "NeutralCheckpoints"]
+__all__ = ["AnglesReached", "GuidedCalibration", "NeutralCheckpoints"]
 
 
 class GuidedCalibration:
@@ -102,6 +103,13 @@ class GuidedCalibration:
         if not self._said:
             return "calibration: neutral pose, hold still"
         return f"calibration: {self._phases()[self._said - 1][2]}"
+
+    @property
+    def enter(self) -> str | None:
+        """What pressing Enter does now (hardware, before the protocol starts), else None."""
+        if self._reader is None or self._armed or self._enter.is_set():
+            return None
+        return "start the calibration: the patient is in the neutral pose"
 
     def _phases(self) -> list[tuple[float, str, str]]:
         """The movement phases after the static pose: (start, what to say, short prompt)."""
@@ -236,6 +244,57 @@ class GuidedCalibration:
             q = Q.multiply(Q.conjugate(parent_q), child_q)
         return q, batch.time()[child_rows]
 
+    def other_joints(self, batch: SampleBatch) -> dict[str, np.ndarray]:
+        """The live orientations of the rig's joints other than the proximal one (a whole
+        limb's elbow and wrist, knee and ankle): ``{joint: (M, 4)}``, empty for a rig of one
+        joint and, on an IMU limb, before the calibration (no anatomical frames yet). A servo
+        limb's are its joint samples as read (forward kinematics)."""
+        if self.rig.kind == "servo":
+            names = [s.name for s in self.rig.sensors[1:]]
+            sel = batch.kind == "joint"
+            return {n: batch.q[sel & (batch.name == n)] for n in names
+                    if (sel & (batch.name == n)).any()}
+        if self._result is None or self._result.model is None:
+            return {}
+        return self.procedure.live_joints(self._result.model, batch, self.protocol)
+
+
+class AnglesReached:
+    """The clinical movements reached so far by a whole limb's other joints (degrees): for each
+    joint of :data:`calibration.joint_angles.CLINICAL_MOVEMENTS`, the running largest peak of
+    each movement. Orientations are kept as they come (:meth:`add`, per batch) and turned into
+    angles when asked (:meth:`peaks`, at the display's cadence), median-filtered first as the
+    recorded range of motion is (:func:`calibration.joint_angles.angle_peaks`, window 5) so
+    that a single noisy sample claims nothing.
+
+    Parameters
+    ----------
+    side : {"left", "right"}
+    """
+
+    def __init__(self, side: str) -> None:
+        self.side = side if side in ("left", "right") else "right"
+        self.peaks_: dict[str, dict[str, float]] = {}
+        self._pending: dict[str, list[np.ndarray]] = {}
+
+    def add(self, joints: dict[str, np.ndarray]) -> None:
+        """Take each joint's orientations (M, 4) of a batch."""
+        for joint, q in joints.items():
+            if joint in CLINICAL_MOVEMENTS and len(q):
+                self._pending.setdefault(joint, []).append(q)
+
+    def peaks(self) -> dict[str, dict[str, float]]:
+        """``{joint: {movement: degrees}}`` reached so far (a copy)."""
+        pending, self._pending = self._pending, {}
+        for joint, parts in pending.items():
+            got = angle_peaks(joint_angles(np.concatenate(parts), joint, self.side), joint)
+            mine = self.peaks_.setdefault(joint, {})
+            for movement in CLINICAL_MOVEMENTS[joint]:
+                v = got.get(movement)
+                if v is not None and v > mine.get(movement, -math.inf):
+                    mine[movement] = float(v)
+        return {j: dict(m) for j, m in self.peaks_.items()}
+
 
 @dataclass
 class Checkpoint:
@@ -317,6 +376,13 @@ class NeutralCheckpoints:
     def prompt(self) -> str | None:
         """What the status line should say while a checkpoint is due or held (else None)."""
         return self._prompt
+
+    @property
+    def enter(self) -> str | None:
+        """What pressing Enter does now (hardware, while listening), else None."""
+        if self._reader is None:
+            return None
+        return "mark a neutral checkpoint: the patient is back in the neutral pose"
 
     def begin(self) -> None:
         """Say what to do; on hardware start reading Enter in the background."""

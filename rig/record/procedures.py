@@ -120,6 +120,10 @@ class JointProcedure:
         applied."""
         return model.transform(parent_q, child_q)
 
+    def live_joints(self, model, batch: SampleBatch, protocol) -> dict[str, np.ndarray]:
+        """The live orientations of the rig's other joints (none: one joint)."""
+        return {}
+
     def session_meta(self) -> dict:
         """What the session's metadata says of the rig's shape (nothing: one joint)."""
         return {}
@@ -195,6 +199,16 @@ class LimbProcedure:
     def live(self, model, parent_q: np.ndarray, child_q: np.ndarray) -> np.ndarray:
         """The live orientations of the limb's proximal joint (coverage, checkpoints)."""
         return _apply_limb(model, parent_q, child_q)
+
+    def live_joints(self, model, batch: SampleBatch, protocol) -> dict[str, np.ndarray]:
+        """The live orientations of every joint of the limb but the proximal one, calibration
+        applied (:meth:`LimbImuCalibration.joints`), at the instants all of the limb's sensors
+        have a sample in ``batch``: ``{joint: (M, 4)}``."""
+        q, _ = _chain_samples(batch, protocol.segments)
+        if not len(q):
+            return {}
+        joints = model.joints(q)
+        return {j: joints[j] for j in protocol.joints[1:] if j in joints}
 
     def session_meta(self) -> dict:
         """What the session's metadata says of the rig's shape: the whole limb, every joint of

@@ -43,7 +43,12 @@ from calibration.coverage import CoverageMap
 from calibration.joints import JOINTS
 from rig.errors import RigConfigError, RigConnectionError, RigError
 from rig.record.display import PlainDisplay, RecordStatus
-from rig.record.guided import GuidedCalibration, NeutralCheckpoints, patient_performs_protocol
+from rig.record.guided import (
+    AnglesReached,
+    GuidedCalibration,
+    NeutralCheckpoints,
+    patient_performs_protocol,
+)
 from rig.record.procedures import CalibrationResult, procedure_for
 from rig.record.pump import SampleBatch, SamplePump
 from rig.record.rigio import OpenRig, load_config, open_rig
@@ -219,6 +224,8 @@ def record(
     stop: threading.Event | None = None,
     on_event: Callable[[str, dict], None] | None = None,
     rig: OpenRig | None = None,
+    stdin=None,
+    complete: threading.Event | None = None,
 ) -> RecordResult:
     """Run one recording session (see the module docstring).
 
@@ -236,6 +243,15 @@ def record(
     rig : OpenRig, optional
         An already opened rig (tests, benchmarks); otherwise opened from ``options.rig``. Either
         way it is closed at the end.
+    complete : threading.Event, optional
+        Set it to end the session as ``completed`` (the clinician's Stop in the web app: the
+        coverage is judged enough), as reaching ``duration_s`` does (``interrupted`` when set
+        before the calibration is done); ``stop`` ends it ``interrupted``.
+    stdin : text stream with a file descriptor, optional
+        Where Enter is read on hardware (default ``sys.stdin``): the calibration's start and
+        the neutral checkpoints. The web app gives a pipe its "continue" button writes a
+        newline to (:mod:`rig.web.jobs`); what Enter does at any moment is
+        :attr:`RecordStatus.enter <rig.record.display.RecordStatus.enter>`.
 
     Returns
     -------
@@ -270,7 +286,7 @@ def record(
     with contextlib.ExitStack() as stack:
         stack.callback(_close, store)
         stack.callback(rig.close)
-        result = _run(options, config, rig, store, display, stop, emit)
+        result = _run(options, config, rig, store, display, stop, emit, stdin, complete)
         rig.close()  # devices first: the range of motion is computed from the store
         if options.rom:
             _range_of_motion(store, result, config)
@@ -303,7 +319,8 @@ def _close(store) -> None:
         close()
 
 
-def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordResult:
+def _run(options, config, rig: OpenRig, store, display, stop, emit, stdin=None,
+         complete: threading.Event | None = None) -> RecordResult:
     joint = config.joint
     patient_id = int(store.patients.ensure(options.patient.strip(), side=joint.side))
     meta = {"rig": config.name, "simulated": rig.simulated,
@@ -325,8 +342,9 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
     coverage = CoverageMap(**{"centre": _range_centre(config), **options.coverage})
     writer = SampleWriter(store, session_id)
     pump = SamplePump(rig.source, maxsize=options.queue_batches)
-    calib = GuidedCalibration(config, rig, display=display, procedure=procedure)
-    checkpoints = NeutralCheckpoints(rig, display=display)
+    calib = GuidedCalibration(config, rig, display=display, procedure=procedure, stdin=stdin)
+    checkpoints = NeutralCheckpoints(rig, display=display, stdin=stdin)
+    reached = AnglesReached(joint.side)  # a whole limb's other joints (elbow, knee...)
     marking = False  # neutral checkpoints are being marked (calibrated IMU rig)
     pending = sorted(options.annotations, key=lambda a: -1.0 if a.at_s is None else a.at_s)
     t_start: float | None = None  # sample time (best clock) when recording proper began
@@ -395,6 +413,7 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                         joint_q, joint_t = calib.joint_orientations(batch)
                         if len(joint_q):
                             coverage.add(joint_q, joint_t)
+                        reached.add(calib.other_joints(batch))
                         if marking:
                             for cp in checkpoints.feed(batch, joint_q, joint_t):
                                 store.calibrations.add(session_id, "neutral-checkpoint",
@@ -410,6 +429,10 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                                 and status.elapsed_s >= options.duration_s):
                             result.status = "completed"
                             break
+                if complete is not None and complete.is_set() and not stop.is_set():
+                    # before the calibration is done nothing usable is recorded: interrupted
+                    result.status = "completed" if phase == "recording" else "interrupted"
+                    break
                 if stop.is_set():
                     result.status = "interrupted"
                     result.signal = stopper.signal
@@ -434,12 +457,17 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
                 if marking and checkpoints.prompt:
                     status.phase = f"recording — {checkpoints.prompt}"
                 status.samples = result.samples
+                status.last_t = result.last_t
+                status.enter = calib.enter if phase == "calibration" else (
+                    checkpoints.enter if marking else None)
                 status.rate_hz = rate.value()
                 status.dropped = pump.dropped
                 writer.set_dropped(pump.dropped)
                 if phase == "recording":
                     if rate.due_summary():
                         status.coverage = coverage.summary()
+                        status.reached = coverage.reached()
+                        status.angles = reached.peaks()
                 display.update(status)
     except BaseException:
         result.status = "failed"
@@ -465,6 +493,10 @@ def _run(options, config, rig: OpenRig, store, display, stop, emit) -> RecordRes
         result.coverage = final.as_dict()
         result.span_s = final.t_span_s
         status.coverage = final
+        status.reached = coverage.reached()
+        status.angles = reached.peaks()
+        status.enter = None
+        status.last_t = result.last_t
         status.samples = result.samples
         status.dropped = result.dropped
         status.phase = result.status

@@ -23,6 +23,8 @@ The rooms of the store (each module the only one writing its tables' SQL; arrows
       |   store.models        trained_models.py  ModelRepository      add get list
       |   store.runs          runs.py          RunRepository       start end get list
       |                                        telemetry insert_telemetry
+      |   store.jobs          jobs.py          JobRepository       start update end get list
+      |                                        close_died (the web app's long work)
     rows.py           Repository base: rows as dicts, JSON columns, add/get/list once
     engine.py         the engine of a SQLite file (WAL, owner-only, read-only media) or a
                       PostgreSQL URL
@@ -43,6 +45,7 @@ The rooms of the store (each module the only one writing its tables' SQL; arrows
 
 from rig.store.boundaries import LIMB_BOUNDARY
 from rig.store.engine import describe_url
+from rig.store.jobs import JOB_KINDS, JOB_STATUSES, JobBusyError
 from rig.store.runs import RUN_STATUSES
 from rig.store.schema import SCHEMA_VERSION, TELEMETRY_COLUMNS
 from rig.store.sessions import SESSION_KINDS, SESSION_STATUSES
@@ -51,12 +54,15 @@ from rig.store.trained_models import file_sha256
 from rig.store.writers import SampleWriter, TelemetryWriter
 
 __all__ = [
+    "JOB_KINDS",
+    "JOB_STATUSES",
     "LIMB_BOUNDARY",
     "RUN_STATUSES",
     "SCHEMA_VERSION",
     "SESSION_KINDS",
     "SESSION_STATUSES",
     "TELEMETRY_COLUMNS",
+    "JobBusyError",
     "SampleWriter",
     "Store",
     "TelemetryWriter",

@@ -24,6 +24,9 @@ Layout (current version :data:`SCHEMA_VERSION`)::
                                      commanded_w..z, present_w..z, correction_deg,
                                      violation_deg, distance_deg, intervention)        (v6)
                          index (run_id, joint, cycle)
+    jobs(id, kind, status, resource, patient_id NULL, session_id NULL, params, progress,
+         result, message, created_at, ended_at, writer_host, writer_pid, writer_start,
+         heartbeat_at)                                                               (v7)
 
 Units: times ``t``, ``device_t``, ``t_s`` in seconds (``t`` on the recording host's monotonic
 clock, ``started_at``/``ended_at``/``created_at`` Unix time); quaternions scalar-first
@@ -59,6 +62,13 @@ orientation of the goal ticks written, the present orientation, the correction's
 violation and signed distance of what was commanded (degrees) and the supervisor's
 intervention bits; the cycle's row in ``telemetry`` keeps the whole limb's figures (its
 ``target``/``commanded``/``present`` columns NULL). One-joint runs write no row there.
+
+Version 7 adds ``jobs``: the web app's long work (a recording, a boundary extraction, a
+training; :mod:`rig.web.jobs`), run by the server process off the request path. ``resource``
+names what the job holds (a rig's ports: one job at a time per port), ``params`` what it was
+asked, ``progress`` its latest progress (phase, counts, coverage, the prompts said so far) so a
+page reloaded later finds it, ``result`` what it made; the writer columns and heartbeat are
+the sessions' (:mod:`rig.store.liveness`), so a job whose server died shows as such.
 """
 
 from __future__ import annotations
@@ -318,6 +328,30 @@ def _v6_tables(md: MetaData) -> None:
           Index("ix_telemetry_joints_run", "run_id", "joint", "cycle"))
 
 
+def _v7_tables(md: MetaData) -> None:
+    """Version-7 table, frozen: the web app's long jobs (recording, boundary, training)."""
+    Table(
+        "jobs",
+        md,
+        Column("id", Integer, primary_key=True),
+        Column("kind", String(16), nullable=False),
+        Column("status", String(16), nullable=False),
+        Column("resource", String(256), nullable=False),
+        Column("patient_id", Integer, ForeignKey("patients.id")),
+        Column("session_id", Integer, ForeignKey("sessions.id"), index=True),
+        Column("params", Text, nullable=False, server_default="{}"),
+        Column("progress", Text, nullable=False, server_default="{}"),
+        Column("result", Text, nullable=False, server_default="{}"),
+        Column("message", Text),
+        Column("created_at", Double, nullable=False),
+        Column("ended_at", Double),
+        Column("writer_host", String(255)),
+        Column("writer_pid", Integer),
+        Column("writer_start", String(128)),
+        Column("heartbeat_at", Double),
+    )
+
+
 def _m1(conn: Connection) -> None:
     md = MetaData()
     _v1_tables(md)
@@ -382,6 +416,13 @@ def _m6(conn: Connection) -> None:
     md.create_all(conn, tables=[md.tables["telemetry_joints"]])
 
 
+def _m7(conn: Connection) -> None:
+    md = MetaData()
+    _v1_tables(md)  # foreign-key targets only; they exist already
+    _v7_tables(md)
+    md.create_all(conn, tables=[md.tables["jobs"]])
+
+
 #: Ordered, append-only: (version, description, function).
 MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (1, "recording: patients, sessions, sensors, samples, calibrations, annotations, "
@@ -391,6 +432,7 @@ MIGRATIONS: list[tuple[int, str, Callable[[Connection], None]]] = [
     (4, "samples: raw accelerometer, gyroscope, magnetometer (acc_x..mag_z)", _m4),
     (5, "sensors: sample counts and time spans, kept by the writer", _m5),
     (6, "live loop: per-joint telemetry of a limb's runs (telemetry_joints)", _m6),
+    (7, "web app: long jobs (recording, boundary, training) and their progress", _m7),
 ]
 
 #: The version this code reads and writes.
@@ -405,6 +447,7 @@ _v3_tables(metadata)
 _v4_tables(metadata)
 _v5_tables(metadata)
 _v6_tables(metadata)
+_v7_tables(metadata)
 
 schema_version = metadata.tables["schema_version"]
 patients = metadata.tables["patients"]
@@ -418,6 +461,7 @@ models = metadata.tables["models"]
 runs = metadata.tables["runs"]
 telemetry = metadata.tables["telemetry"]
 telemetry_joints = metadata.tables["telemetry_joints"]
+jobs = metadata.tables["jobs"]
 
 #: Telemetry keys stored in their own columns; any other key of a row goes to ``extra`` (JSON).
 TELEMETRY_COLUMNS: tuple[str, ...] = tuple(

@@ -31,6 +31,7 @@ from rig.store.annotations import AnnotationRepository
 from rig.store.boundaries import BoundaryRepository
 from rig.store.calibrations import CalibrationRepository
 from rig.store.engine import describe_url, postgres_engine, sqlite_engine, sqlite_path
+from rig.store.jobs import JobRepository
 from rig.store.patients import PatientRepository
 from rig.store.runs import RunRepository
 from rig.store.samples import SampleRepository
@@ -140,6 +141,7 @@ class Store:
         self.annotations = AnnotationRepository(self)
         self.boundaries = BoundaryRepository(self)
         self.models = ModelRepository(self)
+        self.jobs = JobRepository(self)
 
     # -- the database ------------------------------------------------------------------------
     def __enter__(self) -> Store:

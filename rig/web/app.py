@@ -32,8 +32,9 @@ from starlette.middleware.sessions import SessionMiddleware
 from rig import __version__
 from rig.errors import user_errors
 from rig.store import open_store
-from rig.web import api, pages, security
+from rig.web import api, live, pages, security
 from rig.web.clinic import NotFound, PseudonymConcern
+from rig.web.jobs import JobRunner
 from rig.web.render import TEMPLATES, error_response
 from rig.web.settings import WebSettings
 
@@ -87,23 +88,26 @@ def create_app(settings: WebSettings) -> FastAPI:
     security.check_binding(settings)
     settings.cache_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
     store = open_store(settings.db, readonly=False)
+    jobs = JobRunner(settings.db, settings.files_dir)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
         try:
             yield
         finally:
+            jobs.close()  # a recording still running is interrupted, its samples committed
             store.close()
 
     app = FastAPI(title="rig clinic", version=__version__, docs_url=None, redoc_url=None,
                   openapi_url=None, lifespan=lifespan)
     app.state.settings = settings
     app.state.store = store
+    app.state.jobs = jobs
 
     app.include_router(security.router)
     app.include_router(pages.router)
     app.include_router(api.router)
-    # helper F's guided recording and jobs mount here: app.include_router(live.router) ...
+    app.include_router(live.router)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.exception_handler(NotFound)

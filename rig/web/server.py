@@ -32,6 +32,16 @@ def default_users_path(db: str) -> Path | None:
     return Path(path + ".users.json")
 
 
+def default_files_path(db: str) -> Path:
+    """Where the jobs write a session's files (boundaries, models): beside a SQLite store
+    (``clinic.db`` → ``clinic.db.files/``), else ``rig-files/`` in the current folder. Kept
+    after the server stops: the store registers the models by path."""
+    if "://" in db and not db.startswith("sqlite:///"):
+        return Path("rig-files")
+    path = db[len("sqlite:///"):] if db.startswith("sqlite:///") else db
+    return Path(path + ".files")
+
+
 def bind(host: str, port: int) -> socket.socket:
     """A listening TCP socket on ``host:port`` (one line when it cannot be had)."""
     try:
@@ -65,6 +75,9 @@ class ServeRequest:
     login: bool = False
     access_log: bool = True
     cache: str | None = None
+    #: where the jobs write a session's boundaries and models (default
+    #: :func:`default_files_path`)
+    files: str | None = None
 
 
 def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -> None:
@@ -73,8 +86,9 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
     if not (0 <= request.port <= 65535):
         raise RigConfigError(f"--port must be 0-65535, got {request.port}")
     users = Path(request.users) if request.users else default_users_path(request.db)
+    files = Path(request.files) if request.files else default_files_path(request.db)
     settings_args = {"db": request.db, "users_path": users, "host": request.host,
-                     "login": request.login}
+                     "login": request.login, "files_dir": files}
     # the binding's rule first (no store opened, no socket taken), then the address
     check_binding(WebSettings(cache_dir=Path("."), **settings_args))
     own_cache = request.cache is None

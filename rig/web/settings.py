@@ -51,6 +51,9 @@ class WebSettings:
         The largest request body accepted.
     login : bool
         Ask for a login even on the loopback.
+    files_dir : path or None
+        Where the jobs (:class:`rig.web.jobs.JobRunner`) write a session's boundaries and
+        models, kept after the server stops; None: a ``files`` folder in ``cache_dir``.
     """
 
     db: str
@@ -60,11 +63,14 @@ class WebSettings:
     secret: str = ""
     max_upload_bytes: int = MAX_UPLOAD_BYTES
     login: bool = False
+    files_dir: Path | None = None
 
     def __post_init__(self) -> None:
         if not self.secret:
             object.__setattr__(self, "secret", os.urandom(32).hex())
         object.__setattr__(self, "cache_dir", Path(self.cache_dir))
+        object.__setattr__(self, "files_dir", self.cache_dir / "files"
+                           if self.files_dir is None else Path(self.files_dir))
 
     @property
     def require_login(self) -> bool:

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 from calibration.coverage import CoverageMap
+from calibration.joint_angles import from_angles
 from models import quaternion as Q
 from models.constraint import JointConstraint
 from models.geometry import fibonacci_sphere
 from rig.record.display import PlainDisplay, RecordStatus, make_display, progress_line, render
+from rig.record.guided import AnglesReached
 from rig.sim.limb import NoiseModel, SimulatedJoint
 
 
@@ -144,3 +146,37 @@ def test_display_says_what_is_missing():
     console = Console(file=io.StringIO(), width=120, record=True)
     console.print(render(st))
     assert "not visited" in console.export_text()
+
+
+def test_the_swing_map_cells_are_the_sectors_own():
+    # the web app's swing map (CoverageMap.reached) draws the cells the sectors are cut from:
+    # each sector's reach is the farthest of its cells
+    rng = np.random.default_rng(4)
+    axis = Q.LIMB_AXIS
+    ax = rng.normal(size=(3000, 3)) * [0.2, 1.0, 1.0]
+    ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+    q = Q.from_axis_angle(ax, np.radians(rng.uniform(0, 70, 3000)))
+    cov = CoverageMap(centre=axis, min_count=1)
+    cov.add(q, np.linspace(0.0, 30.0, len(q)))
+    summary = cov.summary()
+    cells = cov.reached()
+    assert cells.shape == (int((cov.counts_ >= 1).sum()), 2)
+    k = np.minimum((cells[:, 0] / 360.0 * len(summary.sectors)).astype(int),
+                   len(summary.sectors) - 1)
+    for s in summary.sectors:
+        assert cells[k == s.index, 1].max() == pytest.approx(s.reach_deg)
+
+
+def test_a_limbs_other_joints_report_the_movements_reached():
+    # held at each end (the median filter, as the recorded range of motion's, keeps a hold)
+    flex = np.r_[np.linspace(0.0, 120.0, 40), np.full(10, 120.0), np.linspace(120.0, -5.0, 40),
+                 np.full(10, -5.0)]
+    q = from_angles(flex, np.zeros(100), np.zeros(100), "elbow", "right")
+    got = AnglesReached("right")
+    got.add({"elbow": q[:60]})
+    assert got.peaks()["elbow"]["flexion"] == pytest.approx(120.0, abs=0.5)
+    got.add({"elbow": q[60:], "shoulder": q[:5]})  # the proximal joint is the coverage's
+    peaks = got.peaks()
+    assert set(peaks) == {"elbow"}
+    assert peaks["elbow"]["extension"] == pytest.approx(5.0, abs=0.5)
+    assert peaks["elbow"]["flexion"] == pytest.approx(120.0, abs=0.5)

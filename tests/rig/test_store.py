@@ -369,7 +369,7 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == SCHEMA_VERSION == 6
+        assert store.schema_version() == SCHEMA_VERSION == 7
         [row] = store.sessions.list()
         assert row["pseudonym"] == "OLD-1" and row["samples"] == 10 and row["runs"] == 0
         rid = store.runs.start(row["id"])  # the v2 tables work on the migrated database
@@ -378,8 +378,8 @@ def test_v1_database_is_migrated_with_its_data(db_url):
         assert store.runs.telemetry(rid)["t_s"].tolist() == [0.0]
         _assert_schema_is_current(store)
     with open_store(db_url, create=False) as store:  # a second open migrates nothing
-        assert store.schema_version() == 6
-        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5, 6]
+        assert store.schema_version() == 7
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5, 6, 7]
 
 
 def _assert_schema_is_current(store):
@@ -431,7 +431,7 @@ def test_v2_database_is_migrated_and_its_running_session_closed(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 6
+        assert store.schema_version() == 7
         _assert_schema_is_current(store)
         rows = {r["id"]: r for r in store.sessions.list()}
         assert rows[done]["status"] == "completed" and rows[done]["meta"] == {"a": 1}
@@ -490,12 +490,12 @@ def test_v3_database_gains_raw_columns_with_its_samples_intact(db_url):
         engine.dispose()
 
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 6
+        assert store.schema_version() == 7
         _assert_schema_is_current(store)
         cols = [c for c in inspect(store.engine).get_columns("samples")]
         assert tuple(c["name"] for c in cols) == v3_samples + S.RAW_COLUMNS  # appended
         assert all(c["nullable"] for c in cols[len(v3_samples):])
-        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5, 6]
+        assert [r["version"] for r in _versions(store)] == [1, 2, 3, 4, 5, 6, 7]
         s = store.samples.read(sid)
         np.testing.assert_array_equal(s["q"], q)
         np.testing.assert_array_equal(s["t"], 5.0 + np.arange(12) / 400)
@@ -621,7 +621,7 @@ def test_v4_database_gains_sensor_counts_kept_by_the_writer(db_url):
     finally:
         engine.dispose()
     with open_store(db_url, create=False) as store:
-        assert store.schema_version() == 6
+        assert store.schema_version() == 7
         _assert_schema_is_current(store)
         rows = {r["id"]: r for r in store.sessions.list()}
         assert rows[sid]["samples_by_sensor"] == {"humerus": 10, "thorax": 10}
