@@ -96,6 +96,8 @@ def test_continue_where_rig_record_waits_for_enter_then_interrupt(site):
     drv.find_element(By.ID, "continue").click()
     _wait(drv, "return [...document.querySelectorAll('#log li')].some("
                "li => li.textContent.startsWith('neutral pose: hold still'));")
+    # the prompt goes with the next status event (the step's line may come first)
+    _wait(drv, "return document.getElementById('prompt').hidden;")
     assert not drv.find_element(By.ID, "prompt").is_displayed()
     drv.find_element(By.ID, "interrupt").click()
     end = _wait(drv, "return window.rigLive.ended;")
