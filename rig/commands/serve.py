@@ -29,7 +29,10 @@ from rig.web.settings import DEFAULT_HOST, DEFAULT_PORT
               "and exports (default: a private temporary folder, removed at the end).")
 @click.option("--files", default=None, metavar="DIR", help="Folder for the boundaries and "
               "models made in the browser (default: beside a SQLite store, DB.files/).")
-def serve(db, host, port, users, login, add_user, no_access_log, cache, files) -> None:
+@click.option("--rig", "rigs", multiple=True, metavar="FILE", help="A rig configuration to "
+              "offer for recording besides the shipped ones (the clinic's hardware); "
+              "repeatable; each checked at start.")
+def serve(db, host, port, users, login, add_user, no_access_log, cache, files, rigs) -> None:
     """Serve the clinic's web app: patients, sessions, reports, progress."""
     from rig.errors import RigConfigError
     from rig.web.security import UserFile
@@ -46,5 +49,5 @@ def serve(db, host, port, users, login, add_user, no_access_log, cache, files) -
         click.echo(f"user {add_user} saved in {path}")
         return
     run_server(ServeRequest(db, host, port, users, login, access_log=not no_access_log,
-                            cache=cache, files=files),
+                            cache=cache, files=files, rigs=rigs),
                on_ready=click.echo)

@@ -34,7 +34,7 @@ from rig.errors import user_errors
 from rig.store import open_store
 from rig.web import api, live, pages, security
 from rig.web.clinic import NotFound, PseudonymConcern
-from rig.web.jobs import JobRunner
+from rig.web.jobs import JobRunner, offered_rigs
 from rig.web.render import TEMPLATES, error_response
 from rig.web.settings import WebSettings
 
@@ -88,7 +88,7 @@ def create_app(settings: WebSettings) -> FastAPI:
     security.check_binding(settings)
     settings.cache_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
     store = open_store(settings.db, readonly=False)
-    jobs = JobRunner(settings.db, settings.files_dir)
+    jobs = JobRunner(settings.db, settings.files_dir, rigs=offered_rigs(settings.rigs))
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):

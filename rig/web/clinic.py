@@ -122,6 +122,14 @@ def patient_sessions(store: Store, patient_id: int) -> list[dict]:
     return store.sessions.list(patient=p["pseudonym"])[::-1]
 
 
+def patient_of_session(store: Store, session_id: int) -> int:
+    """The id of the patient session ``session_id`` belongs to (:class:`NotFound`)."""
+    try:
+        return int(store.sessions.get(int(session_id))["patient_id"])
+    except (RigConfigError, KeyError, TypeError) as err:
+        raise NotFound(f"no session {session_id}") from err
+
+
 def session_of(store: Store, patient_id: int, session_id: int) -> dict:
     """Session ``session_id`` of patient ``patient_id`` as ``rig session list`` gives it
     (counts, liveness); :class:`NotFound` when it is not there or is another patient's."""

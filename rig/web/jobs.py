@@ -46,7 +46,7 @@ import math
 import os
 import threading
 import time
-from collections.abc import AsyncIterator, Callable, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,7 +63,7 @@ from rig.store.pseudonyms import pseudonym_warning
 from rig.training import PRESET_NAMES, TrainRequest, run_train
 from rig.training.limb import LIMB_PRESETS
 
-__all__ = ["Channel", "JobRunner", "RecordJob", "WebDisplay", "shipped_rigs"]
+__all__ = ["Channel", "JobRunner", "RecordJob", "WebDisplay", "offered_rigs", "shipped_rigs"]
 
 log = logging.getLogger("rig.web.jobs")
 
@@ -79,6 +79,21 @@ def shipped_rigs() -> dict[str, str]:
     :func:`rig.record.rigio.load_config` takes)."""
     folder = Path(__file__).resolve().parent.parent / "configs"
     return {p.stem: p.stem for p in sorted(folder.glob("*.yaml"))}
+
+
+def offered_rigs(files: Sequence[str] = ()) -> dict[str, str]:
+    """The shipped rigs and the configuration ``files`` (a clinic's own hardware, ``rig serve
+    --rig FILE``), each file read now (:func:`rig.record.rigio.load_config`: a missing file, an
+    unknown key, a name taken twice — one line, before the server starts): name → what
+    ``load_config`` takes."""
+    out = shipped_rigs()
+    for f in files:
+        cfg = load_config(str(f))
+        if cfg.name in out and out[cfg.name] != str(f):
+            raise RigConfigError(f"--rig {f}: a rig named {cfg.name!r} is offered already "
+                                 "(name it otherwise in its file)")
+        out[cfg.name] = str(f)
+    return out
 
 
 def _epoch_ms(t_monotonic: float) -> float | None:

@@ -34,12 +34,10 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, StreamingResponse
-from fastapi.templating import Jinja2Templates
 from starlette.concurrency import run_in_threadpool
 
 from rig.errors import RigConfigError, RigConnectionError, user_errors
@@ -47,11 +45,11 @@ from rig.store import JobBusyError, open_store
 from rig.training import PRESET_NAMES
 from rig.training.limb import LIMB_PRESETS
 from rig.web.jobs import JobRunner, RecordJob
+from rig.web.render import page
 
 __all__ = ["router"]
 
 router = APIRouter()
-templates = Jinja2Templates(directory=str(Path(__file__).resolve().parent / "templates"))
 
 #: Largest JSON body an API route reads (bytes).
 MAX_BODY = 16_384
@@ -136,7 +134,7 @@ def record_page(request: Request, patient: int | None = None):
     runner = _runner(request)
     with open_store(runner.db, create=False) as store:
         patients = store.patients.list()
-    return templates.TemplateResponse(request, "record.html", {
+    return page(request, "record.html", {
         "patients": patients, "chosen": patient, "rigs": runner.rig_choices()})
 
 
@@ -147,9 +145,9 @@ def job_page(request: Request, job_id: int):
     try:
         job = runner.job(job_id)
     except user_errors() as err:
-        return templates.TemplateResponse(request, "job.html", {"error": str(err), "job": None},
-                                          status_code=404)
-    return templates.TemplateResponse(request, "job.html", {"job": job, "error": None})
+        return page(request, "job.html", {"error": str(err), "job": None},
+                                          status=404)
+    return page(request, "job.html", {"job": job, "error": None})
 
 
 @router.get("/sessions/{session_id}/work")
@@ -163,9 +161,9 @@ def work_page(request: Request, session_id: int):
             boundaries = store.boundaries.list(session_id)
             models = store.models.list(session_id=session_id)
     except user_errors() as err:
-        return templates.TemplateResponse(request, "work.html", {"error": str(err)},
-                                          status_code=404)
-    return templates.TemplateResponse(request, "work.html", {
+        return page(request, "work.html", {"error": str(err)},
+                                          status=404)
+    return page(request, "work.html", {
         "error": None, "session": session, "jobs": jobs, "boundaries": boundaries,
         "models": models, "presets": PRESET_NAMES + LIMB_PRESETS})
 

@@ -90,6 +90,14 @@ def session(request: Request, patient_id: int, session_id: int) -> Response:
                                           "downloads": summary["downloads"]})
 
 
+@router.get("/sessions/{session_id}")
+def session_by_id(request: Request, session_id: int) -> Response:
+    """A session's page by its id alone (the live view's and the jobs' links): its patient's
+    session page."""
+    pid = clinic.patient_of_session(_store(request), session_id)
+    return RedirectResponse(f"/patients/{pid}/sessions/{int(session_id)}", status_code=303)
+
+
 def _report_response(path) -> Response:
     return FileResponse(path, media_type="text/html; charset=utf-8",
                         headers={"Content-Security-Policy": REPORT_CSP,

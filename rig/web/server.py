@@ -17,6 +17,7 @@ import uvicorn
 
 from rig.errors import RigConfigError
 from rig.web.app import create_app
+from rig.web.jobs import offered_rigs
 from rig.web.security import QueryFreeAccessLog, check_binding
 from rig.web.settings import DEFAULT_HOST, DEFAULT_PORT, WebSettings
 
@@ -78,6 +79,8 @@ class ServeRequest:
     #: where the jobs write a session's boundaries and models (default
     #: :func:`default_files_path`)
     files: str | None = None
+    #: rig configuration files offered besides the shipped ones (``--rig``)
+    rigs: tuple[str, ...] = ()
 
 
 def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -> None:
@@ -88,9 +91,10 @@ def run_server(request: ServeRequest, on_ready: Callable[[str], None] = print) -
     users = Path(request.users) if request.users else default_users_path(request.db)
     files = Path(request.files) if request.files else default_files_path(request.db)
     settings_args = {"db": request.db, "users_path": users, "host": request.host,
-                     "login": request.login, "files_dir": files}
+                     "login": request.login, "files_dir": files, "rigs": tuple(request.rigs)}
     # the binding's rule first (no store opened, no socket taken), then the address
     check_binding(WebSettings(cache_dir=Path("."), **settings_args))
+    offered_rigs(request.rigs)  # each --rig file read: one line before the socket is taken
     own_cache = request.cache is None
     with bind(request.host, request.port) as sock:
         cache = Path(tempfile.mkdtemp(prefix="rig-web-")) if own_cache else Path(request.cache)

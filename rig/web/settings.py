@@ -51,6 +51,9 @@ class WebSettings:
         The largest request body accepted.
     login : bool
         Ask for a login even on the loopback.
+    rigs : tuple of str
+        Rig configuration files offered besides the shipped ones (``rig serve --rig``),
+        checked when the server starts.
     files_dir : path or None
         Where the jobs (:class:`rig.web.jobs.JobRunner`) write a session's boundaries and
         models, kept after the server stops; None: a ``files`` folder in ``cache_dir``.
@@ -64,6 +67,7 @@ class WebSettings:
     max_upload_bytes: int = MAX_UPLOAD_BYTES
     login: bool = False
     files_dir: Path | None = None
+    rigs: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.secret:
