@@ -107,6 +107,8 @@ def main() -> None:
     ap.add_argument("--sessions", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
+    print(f"machine: a Python loop of 10^7 additions {common.additions_s():.2f} s "
+          f"({time.strftime('%Y-%m-%d %H:%M')})")
     sizes = [int(s) for s in args.patients.split(",")]
     rng = np.random.default_rng(42)
     with tempfile.TemporaryDirectory() as tmp:

@@ -33,7 +33,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-import common  # noqa: F401  (first: one BLAS thread, this checkout on sys.path)
+import common  # first: one BLAS thread, this checkout on sys.path
 import numpy as np
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import Select, WebDriverWait
@@ -110,6 +110,8 @@ def main() -> None:
     ap.add_argument("--viewers", type=int, default=10)
     ap.add_argument("--rig", default="sim-imu")
     args = ap.parse_args()
+    print(f"machine: a Python loop of 10^7 additions {common.additions_s():.2f} s "
+          f"({time.strftime('%Y-%m-%d %H:%M')})")
     tmp = Path(tempfile.mkdtemp(prefix="bench-web-live-"))
     db = str(tmp / "rig.db")
     with open_store(db) as store:
