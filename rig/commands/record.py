@@ -32,8 +32,7 @@ from rig.commands._options import finite_seconds
               help="Seconds to record after calibration (sample time); default: until Ctrl-C.")
 @click.option("--annotate", "annotations", multiple=True, metavar="[T:]TEXT",
               help="A note stored with the session, at T seconds into the recording "
-                   "(default: at its start). Repeatable. On a terminal, typing a line and "
-                   "Enter while recording adds one too.")
+                   "(default: at its start). Repeatable.")
 @click.option("--no-calibration", is_flag=True,
               help="Skip the guided calibration steps (raw samples only).")
 @click.option("--no-rom", is_flag=True,
