@@ -68,7 +68,7 @@ def test_new_patient_two_visits_boundary_report_progress(tmp_path):
     from selenium.webdriver.common.by import By
 
     require_driver()
-    cfg = sim_imu_yaml(tmp_path, port_suffix="&time_scale=4", name="clinic-imu")
+    cfg = sim_imu_yaml(tmp_path, port_suffix="&time_scale=10", name="clinic-imu")
     db = tmp_path / "clinic.db"
     shots = os.environ.get("RIG_WEB_SHOTS")
     with running(["--db", str(db), "--cache", str(tmp_path / "cache"), "--rig", str(cfg)],
