@@ -103,6 +103,7 @@ def create_app(settings: WebSettings) -> FastAPI:
     app.state.settings = settings
     app.state.store = store
     app.state.jobs = jobs
+    app.state.login_throttle = security.LoginThrottle()
 
     app.include_router(security.router)
     app.include_router(pages.router)

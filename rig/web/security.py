@@ -33,6 +33,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import math
 import re
 import secrets
 import time
@@ -58,6 +59,7 @@ __all__ = [
     "MIN_PASSWORD",
     "BodyLimit",
     "LoginGate",
+    "LoginThrottle",
     "QueryFreeAccessLog",
     "SecurityHeaders",
     "UserFile",
@@ -149,6 +151,58 @@ def check_binding(settings: WebSettings) -> None:
 router = APIRouter()
 
 
+#: Failed logins allowed for one user name, and from one client address, within
+#: :data:`LOGIN_WINDOW_S`; beyond them every attempt is refused (429, the password not even
+#: checked) until the oldest failure is older than the window — a password cannot be guessed
+#: at the speed of the loopback (OWASP ASVS 4.0 V2.2.1, anti-automation).
+LOGIN_FAILURES_PER_USER = 5
+LOGIN_FAILURES_PER_ADDRESS = 20
+LOGIN_WINDOW_S = 900.0
+
+
+class LoginThrottle:
+    """Failed logins per user name and per client address over a sliding window.
+
+    Parameters
+    ----------
+    clock : callable
+        Seconds, monotonic (``time.monotonic``; tests give their own).
+    """
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
+        self._failed: dict[tuple[str, str], list[float]] = {}
+
+    def _recent(self, key: tuple[str, str], now: float) -> list[float]:
+        got = [t for t in self._failed.get(key, ()) if now - t < LOGIN_WINDOW_S]
+        if got:
+            self._failed[key] = got
+        else:
+            self._failed.pop(key, None)
+        return got
+
+    def wait_s(self, address: str, user: str) -> float:
+        """Seconds before ``user`` may try again from ``address`` (0: now)."""
+        now = self.clock()
+        wait = 0.0
+        for key, limit in ((("user", user), LOGIN_FAILURES_PER_USER),
+                           (("address", address), LOGIN_FAILURES_PER_ADDRESS)):
+            recent = self._recent(key, now)
+            if len(recent) >= limit:
+                wait = max(wait, LOGIN_WINDOW_S - (now - recent[-limit]))
+        return wait
+
+    def failed(self, address: str, user: str) -> None:
+        """One failed login of ``user`` from ``address``."""
+        now = self.clock()
+        for key in (("user", user), ("address", address)):
+            self._failed.setdefault(key, []).append(now)
+
+    def succeeded(self, user: str) -> None:
+        """``user`` logged in: its own failures are forgotten (the address's are not)."""
+        self._failed.pop(("user", user), None)
+
+
 @router.get("/login")
 def login_form(request: Request):
     return page(request, "login.html", {"next": _safe_next(request.query_params.get("next"))})
@@ -162,9 +216,18 @@ def login(request: Request, username: str = Form(""), password: str = Form(""),
     if not username or not password:
         return page(request, "login.html", {"error": "give a user name and a password",
                                             "next": _safe_next(next)}, status=400)
+    throttle: LoginThrottle = request.app.state.login_throttle
+    address = request.client.host if request.client else "?"
+    wait = throttle.wait_s(address, username)
+    if wait > 0:
+        return page(request, "login.html", {
+            "error": f"too many failed logins: try again in {math.ceil(wait / 60)} min",
+            "next": _safe_next(next)}, status=429)
     if users is None or not users.verify(username, password):
+        throttle.failed(address, username)
         return page(request, "login.html", {"error": "wrong user name or password",
                                             "next": _safe_next(next)}, status=401)
+    throttle.succeeded(username)
     request.session.clear()
     request.session["user"] = username
     request.session["since"] = time.time()

@@ -18,7 +18,13 @@ from click.testing import CliRunner
 
 from rig.commands.serve import serve
 from rig.errors import RigConfigError
-from rig.web.security import UserFile
+from rig.web.security import (
+    LOGIN_FAILURES_PER_ADDRESS,
+    LOGIN_FAILURES_PER_USER,
+    LOGIN_WINDOW_S,
+    LoginThrottle,
+    UserFile,
+)
 from tests.web.clinic import clinic_store, running, snapshot
 
 pytestmark = pytest.mark.xdist_group("web_login")
@@ -140,3 +146,41 @@ def test_login_then_pages_then_logout(remote):
         assert c.post("/logout", data={"csrftoken": token}).status_code == 303
         assert c.get("/api/patients").status_code == 401
 
+
+
+def test_failed_logins_are_throttled_per_user_and_per_address():
+    """A sliding window on a test clock: the 6th failure of one user name waits, another user
+    from the same address does not until the address's own limit, and both clear with time."""
+    now = [1000.0]
+    t = LoginThrottle(clock=lambda: now[0])
+    for _ in range(LOGIN_FAILURES_PER_USER):
+        assert t.wait_s("10.0.0.9", "clin.1") == 0
+        t.failed("10.0.0.9", "clin.1")
+        now[0] += 1.0
+    assert t.wait_s("10.0.0.9", "clin.1") == pytest.approx(LOGIN_WINDOW_S - 5.0)
+    assert t.wait_s("10.0.0.7", "clin.1") > 0  # the user name, from anywhere
+    assert t.wait_s("10.0.0.9", "clin.2") == 0  # another user from that address
+    for _ in range(LOGIN_FAILURES_PER_ADDRESS - LOGIN_FAILURES_PER_USER):
+        t.failed("10.0.0.9", f"u{_}")
+    assert t.wait_s("10.0.0.9", "clin.2") > 0  # the address's own limit
+    assert t.wait_s("10.0.0.8", "clin.2") == 0
+    now[0] += LOGIN_WINDOW_S
+    assert t.wait_s("10.0.0.9", "clin.1") == 0 and t.wait_s("10.0.0.9", "clin.2") == 0
+    t.failed("10.0.0.9", "clin.1")
+    t.succeeded("clin.1")
+    assert t._failed.get(("user", "clin.1")) is None
+
+
+def test_the_server_refuses_a_sixth_guess_and_writes_nothing(remote):
+    with _client(remote.url) as c:
+        token = c.cookies["csrftoken"]
+        guess = {"csrftoken": token, "username": "nobody", "password": "not the password"}
+        before = snapshot(remote.tmp, remote.cache)
+        for _ in range(LOGIN_FAILURES_PER_USER):
+            assert c.post("/login", data=guess).status_code == 401
+        r = c.post("/login", data=guess)
+        assert r.status_code == 429 and "too many failed logins: try again in 15 min" in r.text
+        assert snapshot(remote.tmp, remote.cache) == before
+        r = c.post("/login", data={"csrftoken": token, "username": "clin.1",
+                                   "password": PASSWORD})
+        assert r.status_code == 303  # another user from the same address logs in
