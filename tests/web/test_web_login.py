@@ -174,7 +174,7 @@ def test_failed_logins_are_throttled_per_user_and_per_address():
 def test_the_server_refuses_a_sixth_guess_and_writes_nothing(remote):
     with _client(remote.url) as c:
         token = c.cookies["csrftoken"]
-        guess = {"csrftoken": token, "username": "nobody", "password": "not the password"}
+        guess = {"csrftoken": token, "username": "guesser", "password": "not the password"}
         before = snapshot(remote.tmp, remote.cache)
         for _ in range(LOGIN_FAILURES_PER_USER):
             assert c.post("/login", data=guess).status_code == 401
