@@ -577,9 +577,10 @@ class JobRunner:
     # -- the buttons -------------------------------------------------------------------------
     def press(self, job_id: int) -> None:
         """The "continue" button: Enter, where ``rig record`` waits for it."""
-        live = self._running(job_id, "record")
-        if live.enter_w is not None:
-            os.write(live.enter_w, b"\n")
+        with self._lock:  # not while the job ends and closes the pipe (:meth:`_finish`)
+            live = self._running(job_id, "record")
+            if live.enter_w is not None:
+                os.write(live.enter_w, b"\n")
 
     def stop(self, job_id: int) -> None:
         """End the recording now as ``completed`` (everything recorded is kept)."""
@@ -628,16 +629,19 @@ class JobRunner:
             store.jobs.end(live.job_id, status, result=result, message=message,
                            progress=progress)
         finally:
+            # first the buttons refuse (a viewer that saw "end" and presses gets "not
+            # running"), and Enter's pipe is closed under the lock a press writes under (its
+            # descriptor number is never written after it is closed and reused)
+            with self._lock:
+                self._live.pop(live.job_id, None)
+                if live.enter_w is not None:
+                    os.close(live.enter_w)
+                    live.enter_w = None
             live.channel.publish("end", {"status": status, "message": message,
                                          "result": result})
             live.channel.close()
-            if live.enter_w is not None:
-                os.close(live.enter_w)
-                live.enter_w = None
             if live.stdin is not None:
                 live.stdin.close()
-            with self._lock:
-                self._live.pop(live.job_id, None)
 
     @staticmethod
     def _ended_session(store, session_id: int) -> dict:
