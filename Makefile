@@ -8,12 +8,10 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint bench clean
 
-# --no-compile: no bytecode for every installed package up front (14 s of the install on this
-# machine); each module is compiled once, when first imported
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
 demo: $(STAMP)
