@@ -151,7 +151,8 @@ def test_a_c3d_without_the_markers_asked_for_is_one_line(tmp_path, capsys):
     assert "RTHI" in err and "tibia_r" in err and "plug-in-gait" in err and "femur_l" in err
 
 
-_LEGS_ONLY = """HIERARCHY
+#: a BVH of a spine and a right leg, no arm (tests/rig/test_report_files.py uses it too)
+LEGS_ONLY_BVH = """HIERARCHY
 ROOT Hips
 {
   OFFSET 0 0 0
@@ -190,7 +191,7 @@ Frame Time: 0.01
 
 def test_a_bvh_without_the_joints_asked_for_is_one_line(tmp_path, capsys):
     f = tmp_path / "legs.bvh"
-    f.write_text(_LEGS_ONLY)
+    f.write_text(LEGS_ONLY_BVH)
     code, _, err = _run(["rom", str(f), "--joint", "elbow", "--parent", "humerus_r",
                          "--child", "ulna_r", "--side", "right"], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1
@@ -204,7 +205,7 @@ def test_a_bvh_knee_reads_the_files_rotation():
 
     with tempfile.TemporaryDirectory() as d:
         f = Path(d) / "legs.bvh"
-        f.write_text(_LEGS_ONLY.replace("0 90 0 0 0 0 0 0 0 30 0 0 -45 0 0",
+        f.write_text(LEGS_ONLY_BVH.replace("0 90 0 0 0 0 0 0 0 30 0 0 -45 0 0",
                                             "0 90 0 0 0 0 0 0 0 0 0 0 0 45 0"))
         knee = _flexion(str(f), "knee", "right", "femur_r", "tibia_r")
     assert knee[0] == pytest.approx(0.0, abs=1e-4)

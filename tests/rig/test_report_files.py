@@ -11,47 +11,13 @@ from pathlib import Path
 import pytest
 
 from rig.cli import main
+from tests.calibration.test_lab_files import LEGS_ONLY_BVH
 
 DATA = Path(__file__).parents[1] / "calibration" / "data" / "real"
 PIG = str(DATA / "pycgm_vicon_movement_trial.c3d")
 BVH = str(DATA / "cmu_61_07_salsa_daz.bvh")
 STO = str(DATA / "xio_ximu3_lower_body.sto")
 
-_LEGS_ONLY_BVH = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Spine1
-  {
-    OFFSET 0 10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 10 0
-    }
-  }
-  JOINT RightUpLeg
-  {
-    OFFSET -8 0 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    JOINT RightLeg
-    {
-      OFFSET 0 -40 0
-      CHANNELS 3 Zrotation Xrotation Yrotation
-      End Site
-      {
-        OFFSET 0 -40 0
-      }
-    }
-  }
-}
-MOTION
-Frames: 2
-Frame Time: 0.01
-0 90 0 0 0 0 0 0 0 0 0 0 0 0 0
-0 90 0 0 0 0 0 0 0 0 0 0 0 45 0
-"""
 
 
 def _run(args, capsys) -> tuple[int, str, str]:
@@ -112,7 +78,7 @@ def test_a_sto_whole_leg(tmp_path, capsys):
 
 def _bad_cases(tmp_path: Path) -> list[tuple[list[str], str]]:
     legs = tmp_path / "legs.bvh"
-    legs.write_text(_LEGS_ONLY_BVH)
+    legs.write_text(LEGS_ONLY_BVH)  # a BVH of two legs and no arm
     (tmp_path / "notes.md").write_text("hello")
     return [
         ([str(tmp_path / "missing.c3d"), "--child", "tibia_r"], "no such file"),
