@@ -67,20 +67,7 @@ def record(rig_name, db, patient, duration, annotations, no_calibration, no_rom,
 
     shown = make_display(display, stream=sys.stderr if events else sys.stdout)
     result = record_session(opts, display=shown, on_event=on_event)
-    summary = (f"session {result.session_id}: {result.status}, {result.samples} samples over "
-               f"{result.span_s:.1f} s, dropped {result.dropped} (sequence gaps "
-               f"{result.gaps}, queue overflow {result.overflow})")
-    if result.calibration is not None:
-        summary += f", calibration residual {result.calibration.residual_deg:.2f}°"
-    elif not result.calibrated:
-        summary += ", NOT calibrated (sensor frames)"
-    if getattr(result, "neutral_checkpoints", 0):
-        summary += f", {result.neutral_checkpoints} neutral checkpoints"
-    cov = result.coverage
-    if cov:
-        summary += (", coverage sufficient" if cov.get("sufficient") else
-                    f", coverage {cov.get('explored_sectors', 0)}/{len(cov.get('sectors', []))}"
-                    " sectors")
+    summary = result.summary()
     if events:
         print(json.dumps({"event": "end", "session_id": result.session_id,
                           "status": result.status, "samples": result.samples,

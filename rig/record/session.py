@@ -193,6 +193,26 @@ class RecordResult:
     def dropped(self) -> int:
         return self.gaps + self.overflow
 
+    def summary(self) -> str:
+        """The one line ``rig record`` ends with (and the browser's recording): the session,
+        its status, samples and span, what was dropped, the calibration, the neutral
+        checkpoints and the coverage."""
+        text = (f"session {self.session_id}: {self.status}, {self.samples} samples over "
+                f"{self.span_s:.1f} s, dropped {self.dropped} (sequence gaps "
+                f"{self.gaps}, queue overflow {self.overflow})")
+        if self.calibration is not None:
+            text += f", calibration residual {self.calibration.residual_deg:.2f}°"
+        elif not self.calibrated:
+            text += ", NOT calibrated (sensor frames)"
+        if self.neutral_checkpoints:
+            text += f", {self.neutral_checkpoints} neutral checkpoints"
+        cov = self.coverage
+        if cov:
+            text += (", coverage sufficient" if cov.get("sufficient") else
+                     f", coverage {cov.get('explored_sectors', 0)}/"
+                     f"{len(cov.get('sectors', []))} sectors")
+        return text
+
 
 class _Stop:
     """SIGINT / SIGTERM set a flag instead of raising somewhere inside a store commit."""

@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from models.fileio import write_owner_only
+from rig.devices.config import rig_config_names
 from rig.errors import RigConfigError, RigError, user_errors
 from rig.readback import BoundaryRequest, RecordingSource, run_boundary
 from rig.record import RecordOptions, RecordStatus, record_session
@@ -77,8 +78,7 @@ STORED_MESSAGES = 50
 def shipped_rigs() -> dict[str, str]:
     """The shipped rig configurations (``rig/configs/*.yaml``): name → name (what
     :func:`rig.record.rigio.load_config` takes)."""
-    folder = Path(__file__).resolve().parent.parent / "configs"
-    return {p.stem: p.stem for p in sorted(folder.glob("*.yaml"))}
+    return {name: name for name in rig_config_names()}
 
 
 def offered_rigs(files: Sequence[str] = ()) -> dict[str, str]:
@@ -460,7 +460,8 @@ class JobRunner:
                                      on_event=on_event, rig=rig, stdin=live.stdin,
                                      complete=live.complete)
                 status = res.status if res.status in ("completed", "interrupted") else "failed"
-                message = _record_summary(res)
+                message = res.summary() + (f"; device lost: {res.error}"
+                                            if res.status == "device_lost" else "")
                 result = {"session_id": res.session_id, "status": res.status,
                           "samples": res.samples, "dropped": res.dropped, "gaps": res.gaps,
                           "overflow": res.overflow, "span_s": res.span_s,
@@ -678,15 +679,3 @@ class _sayer:
             self.channel.publish("message", {"text": line})
 
 
-def _record_summary(res) -> str:
-    """One line, as ``rig record`` ends."""
-    text = (f"session {res.session_id}: {res.status}, {res.samples} samples over "
-            f"{res.span_s:.1f} s, dropped {res.dropped} (sequence gaps {res.gaps}, queue "
-            f"overflow {res.overflow})")
-    if res.calibration is not None:
-        text += f", calibration residual {res.calibration.residual_deg:.2f}°"
-    elif not res.calibrated:
-        text += ", NOT calibrated (sensor frames)"
-    if res.status == "device_lost":
-        text += f"; device lost: {res.error}"
-    return text

@@ -158,6 +158,9 @@ router = APIRouter()
 LOGIN_FAILURES_PER_USER = 5
 LOGIN_FAILURES_PER_ADDRESS = 20
 LOGIN_WINDOW_S = 900.0
+#: user names and addresses with failures kept before the stale ones are swept (memory stays
+#: bounded however many names are guessed)
+LOGIN_KEYS_KEPT = 10_000
 
 
 class LoginThrottle:
@@ -195,6 +198,9 @@ class LoginThrottle:
     def failed(self, address: str, user: str) -> None:
         """One failed login of ``user`` from ``address``."""
         now = self.clock()
+        if len(self._failed) > LOGIN_KEYS_KEPT:  # many names guessed: forget the stale ones
+            for key in list(self._failed):
+                self._recent(key, now)
         for key in (("user", user), ("address", address)):
             self._failed.setdefault(key, []).append(now)
 

@@ -198,3 +198,15 @@ def test_a_signal_ends_rig_record_cleanly_and_says_so(tmp_path, sig, code):
         s = store.sessions.get(end["session_id"])
         assert s["status"] == "interrupted"
         assert len(store.samples.read(end["session_id"])["t"]) == end["samples"] > 0
+
+
+def test_the_summary_line_is_one_for_the_terminal_and_the_browser():
+    from rig.record import RecordResult
+
+    res = RecordResult(session_id=3, patient_id=1, status="completed", samples=10, gaps=1,
+                       span_s=2.04, calibrated=False, neutral_checkpoints=2,
+                       coverage={"sufficient": False, "explored_sectors": 5,
+                                 "sectors": list(range(12))})
+    assert res.summary() == ("session 3: completed, 10 samples over 2.0 s, dropped 1 (sequence "
+                             "gaps 1, queue overflow 0), NOT calibrated (sensor frames), 2 "
+                             "neutral checkpoints, coverage 5/12 sectors")
