@@ -531,6 +531,10 @@ def _write_joint_report(store, sess: dict, out_path, *, model=None, age=None, se
                              "recording session: nothing to report")
     joint = sess.get("joint")
     side = sess.get("side") or "right"
+    if reference is not None:  # a knee's limits drawn on an elbow would mislead
+        why = joint_mismatch(reference, for_joint=joint, for_side=side)
+        if why is not None:
+            raise RigConfigError(f"--reference: the constraint {why}")
     data_j = joint_orientations_from_store(store, rec_id, fusion=fusion)
     constraint, _, origin = _boundary(store, rec_id, data_j)
     limb = one_joint_limb(constraint, joint, name=f"session-{rec_id}-{joint}", side=side)

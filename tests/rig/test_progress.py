@@ -19,6 +19,7 @@ from calibration.joint_angles import from_angles
 from calibration.mdc import MDC_TABLE, mdc_for, verdict
 from calibration.norms import norm_band
 from rig.cli import main
+from rig.errors import RigConfigError
 from rig.readback.progress import ProgressRequest, run_progress
 from rig.report.progress import progress_section_html
 from rig.report.session import ReportRequest, run_report
@@ -206,6 +207,15 @@ def test_report_has_the_progress_section(clinic, tmp_path):
     assert "Progress across visits" in page and "interrupted" in page
     assert page.count("data:image/png") >= 1 and "exceeds" in page
     assert "Norms for the patient" in page and "149 (women, 18-59)" in page  # Macedo 2008
+    # an elbow's session: the elbow's own page, movements and norms (was: the shoulder's page,
+    # with the shoulder's abduction, rotations and AAOS 180° flexion)
+    assert "Elbow — hinge" in page and "Abduction" not in page and "Boone 1979" in page
+    knee = tmp_path / "knee.yaml"  # a knee's limits drawn on the elbow's page: refused
+    knee.write_text("name: k\nkind: hinge\njoint: knee\nhinge: {axis: [0, 0, -1], min_deg: 0, "
+                    "max_deg: 140}\n")
+    with pytest.raises(RigConfigError, match="--reference: the constraint is for the knee"):
+        run_report(ReportRequest(clinic, 11, tmp_path / "k.html", reference=str(knee)))
+    assert not (tmp_path / "k.html").exists()
 
 
 def test_coupled_limits_compare_across_visits(tmp_path):
